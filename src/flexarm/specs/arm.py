@@ -1,0 +1,179 @@
+"""Specs of a single-link flexible arm: motor and hub, drive, joint friction, beam.
+
+All values are stored in SI (kg, m, s, rad, A, V, N*m). Equation numbers refer to
+Feliu, Rattan & Brown (1993), "FRB".
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from flexarm.specs.quantity import Q, Spec
+
+
+class CurrentMotor(Spec):
+    """Current-driven DC motor and hub, FRB eq. (1): K i = J θ̈m + V θ̇m + C_t + C_f."""
+
+    drive: Literal["current"] = "current"
+    inertia: Q("kg*m**2", gt=0, what="hub and rotor inertia J")
+    viscous: Q("N*m*s/rad", ge=0) = 0.0
+    torque_constant: Q("N*m/A", gt=0, what="motor constant K")
+    current_limit: Q("A", gt=0, what="amplifier current limit")
+
+    @property
+    def command_limit(self) -> float:
+        return self.current_limit
+
+
+class VoltageMotor(Spec):
+    """Voltage-driven geared DC motor, torque at the output shaft
+    τ = η_g η_m K_g K_m (v − K_g K_m ω) / R  (armature inductance neglected)."""
+
+    drive: Literal["voltage"]
+    inertia: Q("kg*m**2", gt=0, what="equivalent inertia at the output shaft")
+    viscous: Q("N*m*s/rad", ge=0) = 0.0
+    motor_constant: Q("V*s/rad", gt=0, what="back-EMF / torque constant K_m")
+    armature_resistance: Q("ohm", gt=0)
+    gear_ratio: Q("", gt=0) = 1.0
+    gear_efficiency: Q("", gt=0, le=1) = 1.0
+    motor_efficiency: Q("", gt=0, le=1) = 1.0
+    voltage_limit: Q("V", gt=0, what="amplifier voltage limit")
+
+    @property
+    def command_limit(self) -> float:
+        return self.voltage_limit
+
+
+Motor = Annotated[CurrentMotor | VoltageMotor, Field(discriminator="drive")]
+
+
+class Friction(Spec):
+    """Joint friction at the output shaft.
+
+    model: ``none``; ``coulomb`` (Coulomb + stiction, Karnopp: a stuck joint stays
+    stuck while |applied torque| <= ``static``); ``stribeck`` (as coulomb, with the
+    friction falling from ``static`` to ``coulomb`` as exp(-(ω/ω_s)²)); ``lugre``
+    (bristle model with stiffness σ0 and damping σ1). Viscous friction is the motor's V.
+    """
+
+    model: Literal["none", "coulomb", "stribeck", "lugre"] = "coulomb"
+    coulomb: Q("N*m", ge=0) = 0.0
+    static: Q("N*m", ge=0) | None = None
+    stribeck_velocity: Q("rad/s", gt=0) = 0.1
+    velocity_tolerance: Q("rad/s", gt=0) = 1e-3
+    stiffness: Q("N*m/rad", gt=0) = 1e3
+    damping: Q("N*m*s/rad", ge=0) = 1.0
+    bias: Q("N*m") = 0.0
+
+    @property
+    def breakaway(self) -> float:
+        return self.coulomb if self.static is None else self.static
+
+    @model_validator(mode="after")
+    def _static_above_coulomb(self) -> "Friction":
+        if self.static is not None and self.static < self.coulomb:
+            raise ValueError(
+                f"static (breakaway) friction {self.static:g} N*m is below the Coulomb "
+                f"level {self.coulomb:g} N*m; breakaway must be >= coulomb"
+            )
+        return self
+
+
+class PointMass(Spec):
+    """A mass attached to the beam: ``pinned`` (no moment: only its mass counts, as the
+    paper's disks) or ``clamped`` (it turns with the beam's slope; its rotary inertia counts)."""
+
+    mass: Q("kg", gt=0)
+    position: Q("m", gt=0) | None = None
+    rotary_inertia: Q("kg*m**2", ge=0) = 0.0
+    joint: Literal["pinned", "clamped"] = "pinned"
+
+
+class LumpedBeam(Spec):
+    """Massless Euler–Bernoulli beam clamped in the hub, carrying point masses.
+
+    Give the flexural rigidity EI directly or as a round wire (diameter, Young's modulus).
+    ``damping_ratio`` is the modal damping ratio of every mode.
+    """
+
+    model: Literal["lumped"] = "lumped"
+    length: Q("m", gt=0)
+    flexural_rigidity: Q("N*m**2", gt=0) | None = None
+    wire_diameter: Q("m", gt=0) | None = None
+    youngs_modulus: Q("Pa", gt=0) | None = None
+    damping_ratio: Q("", ge=0, le=1) = 0.0
+    masses: list[PointMass] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _stiffness_given_once(self) -> "LumpedBeam":
+        wire = self.wire_diameter is not None or self.youngs_modulus is not None
+        if self.flexural_rigidity is None and not (
+            self.wire_diameter is not None and self.youngs_modulus is not None
+        ):
+            raise ValueError(
+                "give flexural_rigidity (N*m**2), or both wire_diameter and youngs_modulus"
+            )
+        if self.flexural_rigidity is not None and wire:
+            raise ValueError(
+                "give either flexural_rigidity or wire_diameter + youngs_modulus, not both"
+            )
+        for k, m in enumerate(self.masses):
+            if m.position is not None and m.position > self.length * (1 + 1e-12):
+                raise ValueError(
+                    f"masses[{k}].position = {m.position:g} m lies beyond the beam "
+                    f"length {self.length:g} m"
+                )
+        return self
+
+    @property
+    def EI(self) -> float:
+        if self.flexural_rigidity is not None:
+            return self.flexural_rigidity
+        import math
+
+        return self.youngs_modulus * math.pi * self.wire_diameter**4 / 64.0
+
+
+class TransferFunctionBeam(Spec):
+    """A beam known by its transfer functions (e.g. identified), FRB eqs. (13)-(15):
+    θt/θm = G_b(s) = tip_num/tip_den, and C_t = C (θm − θt), or
+    C_t = H(s) (θm − θt) with H = coupling_num/coupling_den when given.
+    Coefficients in descending powers of s."""
+
+    model: Literal["transfer_function"]
+    stiffness: Q("N*m/rad", gt=0, what="coupling stiffness C") | None = None
+    tip_num: list[float] = Field(min_length=1)
+    tip_den: list[float] = Field(min_length=2)
+    coupling_num: list[float] | None = None
+    coupling_den: list[float] | None = None
+    length: Q("m", gt=0) | None = None
+
+    @model_validator(mode="after")
+    def _coupling_given(self) -> "TransferFunctionBeam":
+        if self.stiffness is None and self.coupling_num is None:
+            raise ValueError("give stiffness (C) or coupling_num/coupling_den")
+        if (self.coupling_num is None) != (self.coupling_den is None):
+            raise ValueError("coupling_num and coupling_den go together")
+        return self
+
+
+class RigidBeam(Spec):
+    """A rigid link: its masses only add inertia to the hub."""
+
+    model: Literal["rigid"]
+    length: Q("m", gt=0)
+    masses: list[PointMass] = Field(default_factory=list)
+
+
+Beam = Annotated[LumpedBeam | TransferFunctionBeam | RigidBeam, Field(discriminator="model")]
+
+
+class SingleLinkArm(Spec):
+    """One motor driving one flexible link (FRB Sec. II, VI)."""
+
+    kind: Literal["single_link"] = "single_link"
+    motor: Motor
+    friction: Friction = Friction(model="none")
+    beam: Beam

@@ -1,0 +1,112 @@
+"""Specs of an experiment on an arm: sampling, sensors, actuator, reference, initial state.
+
+Sensor channels are named after the signals of the plant (``motor_angle``, ``tip_angle``,
+``tip_deflection``, ``motor_velocity``); see :mod:`flexarm.sim.sampled`.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from flexarm.specs.quantity import Count, Q, Spec
+
+
+class Sampling(Spec):
+    """Controller sampling: period T (s) and computation delay in whole samples."""
+
+    period: Q("s", gt=0, what="sampling period")
+    delay: Count(ge=0, le=100, what="computation delay in samples") = 0
+
+
+class Sensor(Spec):
+    """One measured channel: y = gain·x + noise, then A/D quantisation, optional pure
+    delay (samples). ``bits = 0`` means no quantisation; ``range`` is the full span
+    of the converter (the count is range / 2**bits); ``noise`` is a standard deviation."""
+
+    bits: Count(ge=0, le=32) = 0
+    range: Q("", gt=0) = 2 * 3.141592653589793
+    noise: Q("", ge=0) = 0.0
+    gain: Q("") = 1.0
+    delay: Count(ge=0, le=1000, what="sensor delay in samples") = 0
+
+
+class Actuator(Spec):
+    """D/A conversion of the command and its saturation. ``limit`` defaults to the
+    motor's current or voltage limit; the D/A spans [-limit, limit] with 2**bits levels."""
+
+    bits: Count(ge=0, le=32) = 0
+    limit: Q("", gt=0) | None = None
+
+
+class Simulation(Spec):
+    """Length of the run, integration substeps per sample, and options."""
+
+    duration: Q("s", gt=0)
+    substeps: Count(ge=1, le=10000) = 10
+    hold_tip: bool = False
+    seed: Count(ge=0) = 0
+
+
+class Initial(Spec):
+    """Initial state: motor angle and velocity, and a static tip deflection (m) of the link."""
+
+    motor_angle: Q("rad") = 0.0
+    motor_velocity: Q("rad/s") = 0.0
+    tip_deflection: Q("m") = 0.0
+
+
+class Reference(Spec):
+    """Reference for the controlled angle.
+
+    type: ``step`` (amplitude after ``start``), ``square`` (between offset and
+    offset + amplitude, period ``period``), ``sine`` (offset + amplitude·sin(2π t/period)),
+    ``constant`` (offset)."""
+
+    type: Literal["step", "square", "sine", "constant"] = "step"
+    amplitude: Q("rad") = 0.0
+    offset: Q("rad") = 0.0
+    start: Q("s", ge=0) = 0.0
+    period: Q("s", gt=0) = 1.0
+
+
+class PDController(Spec):
+    """u = kp·e + kd·(e_k − e_{k−1})/T with e = reference − measured (discrete PD)."""
+
+    type: Literal["pd"]
+    kp: Q("")
+    kd: Q("") = 0.0
+    measured: str = "motor_angle"
+
+
+class PIDController(Spec):
+    """u = kp·e + ki·T·Σe + kd·(e_k − e_{k−1})/T (discrete PID, backward rectangles)."""
+
+    type: Literal["pid"]
+    kp: Q("")
+    ki: Q("") = 0.0
+    kd: Q("") = 0.0
+    measured: str = "motor_angle"
+
+
+class LeadController(Spec):
+    """u = gain·(z − zero)/(z − pole)·e (discrete lead/lag)."""
+
+    type: Literal["lead"]
+    gain: Q("")
+    zero: float
+    pole: float
+    measured: str = "motor_angle"
+
+
+class TFController(Spec):
+    """u = C(z)·e with C(z) = num/den in descending powers of z, at the sampling period."""
+
+    type: Literal["tf"]
+    num: list[float] = Field(min_length=1)
+    den: list[float] = Field(min_length=1)
+    measured: str = "motor_angle"
+
+
+ControllerSpec = PDController | PIDController | LeadController | TFController

@@ -1,0 +1,57 @@
+"""Pydantic field types for physical quantities with units.
+
+``Q("kg*m**2", gt=0)`` is a float field that accepts a bare number (SI) or a string with
+units (``"0.005529 lbf*in*s**2"``), converts to SI, checks the dimension and the bound,
+and says which value and unit were wrong.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, PlainSerializer
+
+from flexarm.units import UnitError, to_si
+
+
+class Spec(BaseModel):
+    """Base of every spec: unknown keys are errors, instances are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+def Q(unit: str, *, gt: float | None = None, ge: float | None = None,
+      le: float | None = None, what: str = "") -> Any:
+    """A float field stored in SI ``unit``; optional bounds ``gt``, ``ge``, ``le`` (SI)."""
+
+    def convert(v: object) -> float:
+        try:
+            x = to_si(v, unit, field="value")
+        except UnitError as exc:
+            raise ValueError(str(exc).removeprefix("value: ")) from None
+        why = f" ({what})" if what else ""
+        if gt is not None and not x > gt:
+            raise ValueError(f"got {v!r} = {x:g} {unit}; must be > {gt:g} {unit}{why}")
+        if ge is not None and not x >= ge:
+            raise ValueError(f"got {v!r} = {x:g} {unit}; must be >= {ge:g} {unit}{why}")
+        if le is not None and not x <= le:
+            raise ValueError(f"got {v!r} = {x:g} {unit}; must be <= {le:g} {unit}{why}")
+        return x
+
+    return Annotated[float, BeforeValidator(convert), PlainSerializer(float)]
+
+
+def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
+    """A non-negative integer field (bits, samples, substeps)."""
+
+    def convert(v: object) -> int:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or int(v) != v:
+            raise ValueError(f"got {v!r}; expected a whole number")
+        n = int(v)
+        why = f" ({what})" if what else ""
+        if n < ge or (le is not None and n > le):
+            hi = f" and <= {le}" if le is not None else ""
+            raise ValueError(f"got {n}; must be >= {ge}{hi}{why}")
+        return n
+
+    return Annotated[int, BeforeValidator(convert)]

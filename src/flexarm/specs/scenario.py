@@ -1,0 +1,134 @@
+"""The scenario: one arm, one experiment, one controller, read from TOML.
+
+:func:`load_scenario` turns every validation problem into a :class:`ScenarioError`
+whose lines name the field, the value given and what is expected.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field, ValidationError, model_validator
+
+from flexarm.specs.arm import SingleLinkArm
+from flexarm.specs.experiment import (
+    Actuator,
+    ControllerSpec,
+    Initial,
+    Reference,
+    Sampling,
+    Sensor,
+    Simulation,
+)
+from flexarm.specs.quantity import Spec
+
+KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be used, with one line per problem."""
+
+
+class Scenario(Spec):
+    """A full scenario. Sections: ``arm``, ``sampling``, ``sensors``, ``actuator``,
+    ``simulation``, ``initial``, ``reference``, ``controller``."""
+
+    name: str = "scenario"
+    description: str = ""
+    notes: dict[str, Any] = Field(default_factory=dict)
+    arm: SingleLinkArm
+    sampling: Sampling
+    sensors: dict[str, Sensor] = Field(default_factory=dict)
+    actuator: Actuator = Actuator()
+    simulation: Simulation
+    initial: Initial = Initial()
+    reference: Reference = Reference()
+    controller: ControllerSpec | None = Field(default=None, discriminator="type")
+
+    @model_validator(mode="after")
+    def _check_names(self) -> "Scenario":
+        for name in self.sensors:
+            if name not in KNOWN_SENSORS:
+                raise ValueError(
+                    f"unknown sensor channel {name!r}; known: {', '.join(KNOWN_SENSORS)}"
+                )
+        if self.controller is not None and self.controller.measured not in KNOWN_SENSORS:
+            raise ValueError(
+                f"controller.measured = {self.controller.measured!r} is not a signal; "
+                f"choose one of {', '.join(KNOWN_SENSORS)}"
+            )
+        return self
+
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = [f"{source}: {err.error_count()} problem(s) in the scenario"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"] if not _is_union_tag(p))
+        kind = e["type"]
+        if kind == "missing":
+            lines.append(f"  {loc}: missing; this field is required")
+        elif kind == "extra_forbidden":
+            lines.append(
+                f"  {loc}: unknown key (value {e.get('input')!r}); "
+                "check its spelling against the documented fields"
+            )
+        elif kind == "union_tag_invalid":
+            ctx = e.get("ctx", {})
+            lines.append(
+                f"  {loc}: {ctx.get('discriminator', 'type')} = {ctx.get('tag')!r} is not "
+                f"known; expected one of {ctx.get('expected_tags')}"
+            )
+        else:
+            msg = e["msg"].removeprefix("Value error, ")
+            given = e.get("input")
+            if isinstance(given, (str, int, float)) and repr(given) not in msg:
+                msg = f"got {given!r}: {msg}"
+            lines.append(f"  {loc}: {msg}")
+    return "\n".join(lines)
+
+
+def _is_union_tag(p: object) -> bool:
+    return isinstance(p, str) and p in {"current", "voltage", "lumped", "transfer_function",
+                                        "rigid", "pd", "pid", "lead", "tf"}
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "scenario") -> Scenario:
+    """Validate a scenario given as a dict (as parsed from TOML)."""
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format_errors(err, source)) from None
+
+
+def builtin_scenarios() -> dict[str, Path]:
+    """Names and paths of the scenarios shipped with flexarm."""
+    folder = resources.files("flexarm") / "scenarios"
+    return {p.name.removesuffix(".toml"): Path(str(p)) for p in folder.iterdir()
+            if p.name.endswith(".toml")}
+
+
+def resolve_scenario_path(name_or_path: str | Path) -> Path:
+    """A file path, or the name of a built-in scenario."""
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    builtin = builtin_scenarios()
+    if str(name_or_path) in builtin:
+        return builtin[str(name_or_path)]
+    raise ScenarioError(
+        f"{name_or_path}: no such file, and not a built-in scenario "
+        f"(built-in: {', '.join(sorted(builtin))})"
+    )
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Read and validate a scenario TOML file (or a built-in scenario by name)."""
+    path = resolve_scenario_path(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    return scenario_from_dict(data, source=str(path))
