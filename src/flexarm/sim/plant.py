@@ -15,6 +15,8 @@ and a command vector ``u`` (shape (m,)), held constant between samples (zero-ord
 
 from __future__ import annotations
 
+import abc
+
 import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
@@ -35,11 +37,13 @@ class Plant(eqx.Module):
     def n_inputs(self) -> int:
         return len(self.input_names)
 
-    def rhs(self, x: Array, u: Array) -> Array:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def rhs(self, x: Array, u: Array) -> Array:
+        """ẋ = f(x, u)."""
 
-    def signals(self, x: Array, u: Array) -> Array:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def signals(self, x: Array, u: Array) -> Array:
+        """The physical signals named by ``signal_names``."""
 
     def project(self, x_prev: Array, x_next: Array, u: Array) -> Array:
         return x_next
