@@ -49,6 +49,7 @@ class BeamBlock:
     length: float | None = None
     mass_dofs: int = 0  # lumped beams: z = (y, ẏ), y of this length
     tip_dof: int | None = None  # index in y of the tip translation (lumped, mass at tip)
+    exact: tuple | None = None  # (G_b, C_t/θm, C_t/(θm−θt)) when known exactly (TF beams)
 
     @property
     def n_states(self) -> int:
@@ -56,7 +57,16 @@ class BeamBlock:
 
     def transfer_functions(self) -> tuple[control.TransferFunction, control.TransferFunction]:
         """G_b(s) = θt/θm and C_t(s)/θm(s) as python-control transfer functions."""
+        if self.exact is not None:
+            return self.exact[0], self.exact[1]
         return _siso(self, 0), _siso(self, 1)
+
+    def coupling_tf(self) -> control.TransferFunction:
+        """C_t(s)/(θm(s) − θt(s))."""
+        if self.exact is not None:
+            return self.exact[2]
+        gb, ct = self.transfer_functions()
+        return _clean(control.minreal(ct / (1 - gb), tol=1e-6, verbose=False))
 
     def held(self) -> "BeamBlock":
         """The block with the tip translation held fixed (FRB Fig. 11 experiment)."""
@@ -96,16 +106,15 @@ def _trim(p: np.ndarray, tol: float = 1e-12) -> np.ndarray:
 
 def _clean(g: control.TransferFunction) -> control.TransferFunction:
     """Zero the round-off coefficients and make the denominator monic."""
+    if len(np.trim_zeros(np.asarray(g.den[0][0], float), "f")) > 1:
+        g = control.minreal(g, tol=1e-7, verbose=False)
     num = np.asarray(g.num[0][0], float)
     den = np.asarray(g.den[0][0], float)
     sc = max(np.max(np.abs(num)), np.max(np.abs(den)))
     num = np.where(np.abs(num) < 1e-11 * sc, 0.0, num)
     den = np.where(np.abs(den) < 1e-11 * sc, 0.0, den)
     num, den = _trim(num), _trim(den)
-    g = control.tf(num / den[0], den / den[0])
-    if len(den) > 1:
-        g = control.minreal(g, tol=1e-7, verbose=False)
-    return g
+    return control.tf(num / den[0], den / den[0], 0)
 
 
 def cantilever_flexibility(positions: np.ndarray, is_slope: np.ndarray, EI: float) -> np.ndarray:
@@ -215,7 +224,9 @@ def transfer_function_block(beam: TransferFunctionBeam) -> BeamBlock:
     if L is not None:  # w_tip = ℓ (θt − θm)
         C[2] = L * C[0]
         D[2, 0] = L * (D[0, 0] - 1.0)
-    return BeamBlock(A, B, C, D, L)
+    exact = (_clean(control.tf(nb, db)), _clean(control.tf(n_ct, d_ct)),
+             _clean(control.tf(nh, dh)))
+    return BeamBlock(A, B, C, D, L, exact=exact)
 
 
 def rigid_beam_inertia(beam: RigidBeam) -> float:
