@@ -1,0 +1,281 @@
+"""Wiener feedforward N(s), FRB (1993) eq. (11): paper result, closed forms, optimality.
+
+ISE values here are computed independently of the Wiener formula: the error
+e(s) = u(s)(1 − G_b(s)N(s)) is formed by exact polynomial arithmetic, its impulse
+response is simulated with scipy.signal.impulse and ∫e² is integrated numerically.
+"""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+import scipy.integrate
+import scipy.optimize
+import scipy.signal
+
+from flexarm.control.trajectories import parabolic, quasi_parabolic
+from flexarm.control.wiener import (
+    cancel_common_roots,
+    discretize_feedforward,
+    feedforward_signal,
+    split_improper,
+    wiener_feedforward,
+)
+
+S = control.tf("s")
+# FRB eq. (14), paper units (rad/rad); the poles are undamped.
+A2 = 1273.3
+G14 = control.tf([-45.475, 0.0, 45.475 * A2], [1.0, 0.0, 1637.1, 0.0, 57903.3175])
+# FRB Sec. VI-C.3: A = 7875 mrad/s², second derivative of acceleration 8 648 646 mrad/s⁴.
+A_PAPER = 7.875  # rad/s²
+SNAP_PAPER = 8648.646  # rad/s⁴
+
+
+def _coeffs(sys):
+    num = np.trim_zeros(np.asarray(sys.num[0][0], float), "f")
+    den = np.trim_zeros(np.asarray(sys.den[0][0], float), "f")
+    return num / den[0], den / den[0]
+
+
+def paper_n():
+    num = np.polymul([1.0, 0.0, 1637.1, 0.0, 57903.7175], [0.00157075, 0.05605, 1.0]) / 45.475
+    den = np.polymul([1.0, 35.68333], [1.0, 35.68333])
+    return num, den
+
+
+# ----------------------------------------------------------------- ISE machinery
+def error_tf(plant, n, u):
+    """e(s) = u (1 − G N), with the exact common factors removed (s^k, plant poles)."""
+    gn, gd = (np.asarray(x[0][0], float) for x in (plant.num, plant.den))
+    nn, nd = (np.asarray(x[0][0], float) for x in (n.num, n.den))
+    un, ud = (np.asarray(x[0][0], float) for x in (u.num, u.den))
+    num = np.polymul(un, np.polysub(np.polymul(nd, gd), np.polymul(nn, gn)))
+    den = np.polymul(ud, np.polymul(nd, gd))
+    # remove the plant denominator when N's zeros cancel it (undamped modes)
+    q, r = np.polydiv(num, gd)
+    if np.max(np.abs(r)) < 1e-9 * np.max(np.abs(num)):
+        num, den = q, np.polydiv(den, gd)[0]
+    # remove the integrators of u: (1 − G N) must vanish to their order at s = 0
+    while abs(den[-1]) < 1e-300 and den.size > 1:
+        assert abs(num[-1]) < 1e-8 * np.max(np.abs(num)), "ISE infinite: steady error"
+        num, den = num[:-1], den[:-1]
+    num = np.trim_zeros(num, "f")
+    scale = np.max(np.abs(num))
+    while num.size > 1 and abs(num[0]) < 1e-12 * scale:
+        num = num[1:]
+    assert num.size < den.size, "ISE infinite: e(s) not strictly proper"
+    return num, den
+
+
+def ise(plant, n, u, horizon=40.0, steps=80001):
+    """∫_0^∞ e(t)² dt by simulating the impulse response of e(s)."""
+    num, den = error_tf(plant, n, u)
+    t = np.linspace(0.0, horizon, steps)
+    _, e = scipy.signal.impulse((num, den), T=t)
+    return float(scipy.integrate.simpson(e**2, x=t))
+
+
+# ------------------------------------------------------------------------ tests
+def test_paper_two_mass_feedforward():
+    """FRB Sec. VI-C.3: N(s) for eq. (14) and the quasi-parabolic reference model."""
+    traj = quasi_parabolic(0.5, A_PAPER, max_snap=SNAP_PAPER)
+    n = wiener_feedforward(G14, traj.laplace_model())
+    num, den = _coeffs(n)
+    pnum, pden = paper_n()
+    assert num.size == pnum.size == 7 and den.size == pden.size == 3
+    np.testing.assert_allclose(num, pnum, rtol=5e-3)
+    np.testing.assert_allclose(den, pden, rtol=5e-3)
+    # the model's gain (the acceleration) does not matter
+    num1, den1 = _coeffs(wiener_feedforward(G14, 1 / S**3))
+    np.testing.assert_allclose(num1, num, rtol=1e-10)
+    np.testing.assert_allclose(den1, den, rtol=1e-10)
+
+
+def test_paper_factor_is_the_reflected_zero_series():
+    """N = D(s)(1 + 2s/a + … + 2(s/a)^(k−1)) / (K (s + a)²) for u = 1/s^k."""
+    a = np.sqrt(A2)
+    d = [1.0, 0.0, 1637.1, 0.0, 57903.3175]
+    for k in (1, 2, 3, 4):
+        phi = np.array([2.0 / a**i for i in range(k - 1, 0, -1)] + [1.0])
+        num, den = _coeffs(wiener_feedforward(G14, 1 / S**k))
+        np.testing.assert_allclose(num, np.polymul(d, phi) / 45.475, rtol=1e-9)
+        np.testing.assert_allclose(den, [1.0, 2 * a, a * a], rtol=1e-12)
+
+
+@pytest.mark.parametrize("u", [1 / S**3, 1 / S**2, 1 / (S * (S + 1)), 1 / (S + 2)])
+def test_minimum_phase_gives_inverse(u):
+    g = control.tf([43.75], [1.0, 0.06, 43.75])  # FRB eq. (13)
+    num, den = _coeffs(wiener_feedforward(g, u))
+    np.testing.assert_allclose(num, np.array([1.0, 0.06, 43.75]) / 43.75, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(den, [1.0], rtol=1e-12)
+    g2 = (S + 3) / ((S + 1) * (S**2 + S + 4))
+    n2 = wiener_feedforward(g2, u)
+    w = 1j * np.array([0.1, 1.0, 10.0])
+    np.testing.assert_allclose(n2(w) * g2(w), 1.0, rtol=1e-9)
+
+
+G_NMP = (1 - S) / ((S + 1) * (S + 2))
+
+
+def test_closed_forms_nmp():
+    """Hand derivation for G = (1 − s)/((s+1)(s+2)):
+    u = 1/s²: N = (2s + 1)(s + 2), e = 2/(s + 1), ISE = 2;
+    u = 1/(s(s+1)): N = (s + 1)(s + 2), e = 1/(s + 1), ISE = 1/2."""
+    num, den = _coeffs(wiener_feedforward(G_NMP, 1 / S**2))
+    np.testing.assert_allclose(num, [2.0, 5.0, 2.0], rtol=1e-10)
+    np.testing.assert_allclose(den, [1.0])
+    num, den = _coeffs(wiener_feedforward(G_NMP, 1 / (S * (S + 1))))
+    np.testing.assert_allclose(num, [1.0, 3.0, 2.0], rtol=1e-10)
+    assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / S**2), 1 / S**2) == pytest.approx(2.0, rel=1e-6)
+    assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / (S * (S + 1))), 1 / (S * (S + 1))) == (
+        pytest.approx(0.5, rel=1e-6)
+    )
+
+
+def test_optimal_against_numerical_minimisation():
+    """u = 1/(s(s+1)): minimise the simulated ISE over N = n2 s² + n1 s + 2 (n0 = 2 is
+    forced by G(0)N(0) = 1, else ISE = ∞) from a poor start; Nelder–Mead must land on
+    the Wiener N = s² + 3s + 2 (ISE 0.5), which beats the naive choices: the inverse of
+    the minimum-phase part, s + 2 (ISE 1), and the static inverse 2."""
+    u = 1 / (S * (S + 1))
+    nw = wiener_feedforward(G_NMP, u)
+    j_w = ise(G_NMP, nw, u, horizon=25.0, steps=2501)
+
+    def cost(p):
+        return ise(G_NMP, control.tf([p[0], p[1], 2.0], [1.0]), u, horizon=25.0, steps=2501)
+
+    res = scipy.optimize.minimize(
+        cost, x0=[0.0, 0.0], method="Nelder-Mead", options={"xatol": 1e-5, "fatol": 1e-10}
+    )
+    np.testing.assert_allclose(res.x, [1.0, 3.0], atol=2e-3)
+    assert j_w <= res.fun + 1e-9
+    assert j_w == pytest.approx(0.5, rel=1e-6)
+    for naive in (S + 2, control.tf([2.0], [1.0])):
+        assert ise(G_NMP, naive, u) > 1.9 * j_w
+
+
+CASES = [
+    # (plant, reference, admissible perturbation direction Δ: keeps ISE finite)
+    (G_NMP, 1 / S**2, S**2 / (S + 1) ** 2),
+    (G_NMP, 1 / (S * (S + 1)), S / (S + 3)),
+    ((S**2 - 2 * S + 5) / ((S + 1) * (S + 2) * (S + 3)), 1 / S**2, S**2 / (S + 2) ** 3),
+    ((S - 1) ** 2 / ((S + 2) ** 3), 1 / S**2, 20 * S**2 / (S + 1) ** 2),
+    ((2 - S) * (S + 4) / ((S**2 + 0.4 * S + 4) * (S + 3)), 1 / (S**2 + 2 * S + 2), 1 / (S + 1)),
+]
+
+
+@pytest.mark.parametrize("plant,u,delta", CASES)
+def test_stationary_and_minimal_under_perturbation(plant, u, delta):
+    """ISE(N + εΔ) ≥ ISE(N) for ε = ±0.3, ±0.05, and the first variation vanishes:
+    |ISE(+ε) − ISE(−ε)| ≤ 1e-4 · (ISE(+ε) + ISE(−ε) − 2 ISE(N)) (orthogonality of the
+    error to every admissible direction, the Wiener–Hopf condition)."""
+    n = wiener_feedforward(plant, u)
+    j0 = ise(plant, n, u)
+    for eps in (0.3, 0.05):
+        jp = ise(plant, n + eps * delta, u)
+        jm = ise(plant, n - eps * delta, u)
+        curv = jp + jm - 2 * j0
+        assert jp > j0 and jm > j0
+        assert curv > 0
+        assert abs(jp - jm) <= 1e-4 * curv
+
+
+def test_paper_case_stationary():
+    """Same check for eq. (14) with u = 1/s³; Δ keeps the undamped poles cancelled."""
+    d = control.tf([1.0, 0.0, 1637.1, 0.0, 57903.3175], [1.0])
+    u = 1 / S**3
+    n = wiener_feedforward(G14, u)
+    delta = S**3 * d / (S + 20) ** 7
+    j0 = ise(G14, n, u, horizon=4.0, steps=40001)
+    # closed form: e(s) = (2/a²)/(s + a), ISE = 2/a⁵
+    assert j0 == pytest.approx(2.0 / A2**2.5, rel=1e-4)
+    eps = 0.5
+    jp = ise(G14, n + eps * delta, u, horizon=4.0, steps=40001)
+    jm = ise(G14, n - eps * delta, u, horizon=4.0, steps=40001)
+    assert jp > j0 and jm > j0
+    assert abs(jp - jm) <= 1e-3 * (jp + jm - 2 * j0)
+
+
+# ------------------------------------------------------------------- bad input
+def test_unstable_plant_rejected():
+    with pytest.raises(ValueError, match=r"unstable.*0\.5"):
+        wiener_feedforward(1 / ((S - 0.5) * (S + 1)), 1 / S**2)
+    with pytest.raises(ValueError, match="imaginary axis"):
+        wiener_feedforward(G14, 1 / S**3, allow_marginal_poles=False)
+
+
+def test_other_bad_inputs():
+    mimo = control.tf([[[1.0], [1.0]]], [[[1.0, 1.0], [1.0, 2.0]]])
+    with pytest.raises(ValueError, match="SISO"):
+        wiener_feedforward(mimo, 1 / S**2)
+    with pytest.raises(ValueError, match="SISO"):
+        wiener_feedforward(G_NMP, mimo)
+    with pytest.raises(TypeError, match="TransferFunction"):
+        wiener_feedforward(lambda s: 1 / (s + 1), 1 / S**2)
+    with pytest.raises(TypeError, match="TransferFunction"):
+        wiener_feedforward(G_NMP, np.array([1.0, 0.0]))
+    with pytest.raises(ValueError, match="continuous-time"):
+        wiener_feedforward(control.tf([1.0], [1.0, -0.5], 0.1), 1 / S**2)
+    with pytest.raises(ValueError, match="right half-plane at 2"):
+        wiener_feedforward(G_NMP, 1 / (S - 2))
+    with pytest.raises(ValueError, match="zeros on the imaginary axis"):
+        wiener_feedforward((S**2 + 4) / (S + 1) ** 3, 1 / S**2)
+
+
+# ------------------------------------------------------------- applying N(s)
+def test_split_improper():
+    poly, proper = split_improper(wiener_feedforward(G14, 1 / S**3))
+    assert poly.size == 5  # degree 4: needs u … u⁗
+    num, den = _coeffs(proper)
+    assert num.size < den.size == 3
+
+
+def test_feedforward_signal_minimum_phase_parabolic():
+    """N = 1/G_b of eq. (13) on a parabolic move: θ̂ = u + (0.06 u̇ + ü)/43.75, and the
+    tip θt = G_b θ̂ tracks u."""
+    g = control.tf([43.75], [1.0, 0.06, 43.75])
+    n = wiener_feedforward(g, 1 / S**3)
+    traj = parabolic(1.0, 8.75)
+    t = traj.time_grid(1e-3, 1.0)
+    th = feedforward_signal(n, traj, t)
+    expect = traj.position(t) + (0.06 * traj.velocity(t) + traj.acceleration(t)) / 43.75
+    np.testing.assert_allclose(th, expect, atol=1e-12)
+    tip = control.forced_response(g, t, th).outputs
+    assert np.max(np.abs(tip - traj.position(t))) < 2e-3  # FOH of a jumping θ̂ only
+
+
+def test_feedforward_signal_paper_arm_tracks():
+    """Eq. (14), quasi-parabolic move: the tip error u − G_b N u is the causal Wiener
+    residual, bounded by 2·(2A/a²) (the middle corner's acceleration change 2A times
+    the 1/s³ residual 2/a² per unit step of acceleration)."""
+    traj = quasi_parabolic(0.5, A_PAPER, max_snap=SNAP_PAPER)
+    n = wiener_feedforward(G14, traj.laplace_model())
+    gn = cancel_common_roots(G14 * n, rtol=1e-6)
+    assert gn.den[0][0].size == 2  # undamped poles cancelled, (s + a) left
+    t = traj.time_grid(2e-4, 0.3)
+    err = traj.position(t) - feedforward_signal(gn, traj, t)
+    assert np.max(np.abs(err)) < 4 * A_PAPER / A2
+    assert abs(err[-1]) < 1e-6
+
+
+def test_discretize_feedforward():
+    traj = quasi_parabolic(0.5, A_PAPER, max_snap=SNAP_PAPER)
+    n = wiener_feedforward(G14, traj.laplace_model())
+    rms = []
+    for dt in (1e-3, 2e-4):
+        nd = discretize_feedforward(n, dt)
+        assert isinstance(nd, control.StateSpace) and nd.dt == dt
+        assert np.all(np.abs(nd.poles()) < 1)
+        t = traj.time_grid(dt, 0.3)
+        y = control.forced_response(nd, t, traj.position(t)).outputs
+        ref = feedforward_signal(n, traj, t)
+        assert abs(y[-1] - ref[-1]) < 1e-4  # static gain kept
+        rms.append(np.sqrt(np.mean((y - ref) ** 2) / np.mean(ref**2)))
+    # the low-pass lag shrinks with the sampling period (ω_f = π/(4 dt))
+    assert rms[0] < 0.25 and rms[1] < 0.6 * rms[0]
+    nm = discretize_feedforward(n, 1e-3, method="matched")
+    y = control.forced_response(nm, t := traj.time_grid(1e-3, 0.3), traj.position(t)).outputs
+    assert abs(y[-1] - 0.5) < 1e-4
+    with pytest.raises(ValueError, match="dt"):
+        discretize_feedforward(n, 0.0)
