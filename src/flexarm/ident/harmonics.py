@@ -7,7 +7,7 @@ different columns of one log share a time origin; ratios of phasors do not depen
 * Excitation frequency ω0 (rad/s): taken from the ``reference`` column, by the peak of a
   Hann-windowed, zero-padded FFT (refined by parabolic interpolation of the log magnitude)
   and then a nonlinear least-squares fit of r(t) ≈ c + A cos ω0 t + B sin ω0 t over
-  (c, A, B, ω0) (Levenberg–Marquardt).
+  (c, A, B, ω0) (Gauss–Newton with step halving).
 * Analysis window: the largest whole number N of periods T = 2π/ω0 at the end of the
   record, after ``discard_periods`` periods at the start are dropped as transient
   (fewer kept only if the record is too short for that; fewer than two whole periods is an
@@ -30,7 +30,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from flexarm.ident.logs import Log
 
@@ -75,30 +74,41 @@ def estimate_frequency(t: np.ndarray, x: np.ndarray, *, name: str = "signal") ->
         delta = 0.0
     w_fft = 2 * math.pi * (k + delta) / (nfft * dt)
 
+    # Gauss-Newton on r(t) ≈ c + A cos ωt + B sin ωt over (c, A, B, ω), time centred.
     tc = t - 0.5 * (t[0] + t[-1])
-    c0 = np.column_stack([np.ones(n), np.cos(w_fft * tc), np.sin(w_fft * tc)])
-    p_lin = np.linalg.solve(c0.T @ c0, c0.T @ x)
-    wscale = w_fft
-
-    def resid(p):
-        c, a, b, u = p
-        w = u * wscale
-        return (c + a * np.cos(w * tc) + b * np.sin(w * tc) - x) / scale
-
-    def jac(p):
-        c, a, b, u = p
-        w = u * wscale
-        co, si = np.cos(w * tc), np.sin(w * tc)
-        dw = (-a * si + b * co) * tc * wscale
-        return np.column_stack([np.ones(n), co, si, dw]) / scale
-
-    sol = least_squares(resid, [*p_lin, 1.0], jac=jac, method="lm", xtol=1e-15, ftol=1e-15,
-                        gtol=1e-15)
-    w = float(sol.x[3] * wscale)
+    w = w_fft
+    co, si = np.cos(w * tc), np.sin(w * tc)
+    basis = np.column_stack([np.ones(n), co, si])
+    p = np.linalg.solve(basis.T @ basis, basis.T @ x)
+    sse = float(np.sum((basis @ p - x) ** 2))
+    for _ in range(30):
+        jw = (-p[1] * si + p[2] * co) * tc
+        jac = np.column_stack([basis, jw])
+        r = x - basis @ p
+        try:
+            step = np.linalg.solve(jac.T @ jac, jac.T @ r)
+        except np.linalg.LinAlgError:
+            break
+        lam = 1.0
+        while lam > 1e-4:
+            w_new = w + lam * step[3]
+            co_n, si_n = np.cos(w_new * tc), np.sin(w_new * tc)
+            b_new = np.column_stack([np.ones(n), co_n, si_n])
+            p_new = p + lam * step[:3]
+            sse_new = float(np.sum((b_new @ p_new - x) ** 2))
+            if sse_new <= sse:
+                break
+            lam /= 2
+        else:
+            break
+        done = abs(w_new - w) <= 1e-14 * abs(w)
+        w, p, sse, co, si, basis = w_new, p_new, sse_new, co_n, si_n, b_new
+        if done or sse == 0.0:
+            break
     bin_w = 2 * math.pi / (n * dt)
     if not np.isfinite(w) or abs(w - w_fft) > 2 * bin_w or w <= 0:
         return float(w_fft)
-    return w
+    return float(w)
 
 
 def whole_periods(t: np.ndarray, omega0: float, *, discard_periods: float = 1.0,

@@ -114,24 +114,30 @@ def _unit_factor(path: Path, column: str, unit: str) -> float:
                        f"({exc})") from None
 
 
-def _parse_header(path: Path, lines: list[str]):
-    """Split comment lines from the header; returns (comments, meta, header_index)."""
+def _parse_header(path: Path, text: str):
+    """Comment lines and header row at the top of ``text``.
+
+    Returns (comments, meta, header line, its 0-based line index, offset of the body).
+    """
     comments: list[str] = []
     meta: dict[str, str] = {}
-    for k, line in enumerate(lines):
+    pos, k = 0, 0
+    while pos < len(text):
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        line, pos = text[pos:end], end + 1
         stripped = line.strip()
         if stripped.startswith("#"):
-            text = stripped[1:]
-            text = text[1:] if text.startswith(" ") else text
-            comments.append(text.rstrip())
-            if ":" in text:
-                key, _, value = text.partition(":")
+            body = stripped[1:]
+            body = body[1:] if body.startswith(" ") else body
+            comments.append(body.rstrip())
+            if ":" in body:
+                key, _, value = body.partition(":")
                 if key.strip() and " " not in key.strip():
                     meta[key.strip()] = value.strip()
-            continue
-        if not stripped:
-            continue
-        return comments, meta, k
+        elif stripped:
+            return comments, meta, line, k, pos
+        k += 1
     raise LogError(f"{path}: no header row; expected a line "
                    f"'{','.join(REQUIRED)}' after any '#' comment lines")
 
@@ -167,9 +173,8 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
         raise LogError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise LogError(f"{path}: cannot read the file ({exc})") from None
-    lines = text.splitlines()
-    comments, meta, h = _parse_header(path, lines)
-    header = [c.strip() for c in next(csv.reader([lines[h]]))]
+    comments, meta, header_line, h, body_start = _parse_header(path, text)
+    header = [c.strip() for c in next(csv.reader([header_line]))]
 
     # Map the file's names to ours.
     file_to_ours = {v: k for k, v in columns.items()}
@@ -195,7 +200,7 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
             + " (read_log(..., columns={'" + missing[0] + "': 'NAME'}))")
         raise LogError("\n".join(lines_msg))
 
-    data = _parse_numbers(path, lines, h, header, names)
+    data = _parse_numbers(path, text, body_start, h, header, names)
     n = data.shape[0]
     if n < min_samples:
         raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} "
@@ -215,10 +220,10 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 
 
-def _parse_numbers(path: Path, lines: list[str], h: int, header: list[str],
+def _parse_numbers(path: Path, text: str, body_start: int, h: int, header: list[str],
                    names: list[str]) -> np.ndarray:
-    """Numbers below the header; on any problem, locate it by column and row."""
-    body = "\n".join(lines[h + 1:])
+    """Numbers below the header (line ``h``); on any problem, locate it by column and row."""
+    body = text[body_start:]
     ncol = len(header)
     try:
         with np.errstate(all="ignore"):
@@ -228,13 +233,13 @@ def _parse_numbers(path: Path, lines: list[str], h: int, header: list[str],
     except ValueError:
         ok = False
     if not ok:
-        _locate_parse_error(path, lines, h, header, names)
+        _locate_parse_error(path, text.splitlines(), h, header, names)
     if data.size == 0:
         data = np.zeros((0, ncol))
     bad = ~np.isfinite(data)
     if bad.any():
         r, c = np.argwhere(bad)[0]
-        file_line = _data_line_numbers(lines, h)[r]
+        file_line = _data_line_numbers(text.splitlines(), h)[r]
         what = "NaN" if math.isnan(data[r, c]) else "infinite"
         raise LogError(f"{path}: column {names[c]!r} ({header[c]!r} in the file), data row "
                        f"{r + 1} (line {file_line}): value is {what}; "
