@@ -1,0 +1,111 @@
+"""Harmonic analysis (flexarm.ident.harmonics) on analytic signals."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from flexarm.ident.harmonics import (
+    IdentificationError,
+    IdentificationWarning,
+    analyse_log,
+    estimate_frequency,
+    fourier_phasors,
+    saturation_level,
+    whole_periods,
+)
+from flexarm.ident.logs import Log, read_log, write_log
+
+W0 = 2.345678  # rad/s: 2678.6... samples per period at 1 kHz, not a whole number
+PHASORS = {0: 0.03, 1: 0.7 * np.exp(0.4j), 2: 0.01j, 3: 0.05 * np.exp(-2.1j),
+           5: 0.02 * np.exp(1.3j)}
+
+
+def _signal(t, w, ph):
+    return sum((np.real(X * np.exp(1j * n * w * t)) if n else np.real(X) * np.ones_like(t))
+               for n, X in ph.items())
+
+
+def _log(t0=0.37, periods=6.4, w=W0, rate=1000.0, path=None, current=None):
+    t = t0 + np.arange(int(periods * 2 * math.pi / w * rate)) / rate
+    sig = {"reference": 0.5 * np.sin(w * t + 0.3), "current": _signal(t, w, PHASORS),
+           "motor_angle": 0.2 * np.sin(w * t), "tip_angle": 0.1 * np.cos(w * t)}
+    if current is not None:
+        sig["current"] = current(t)
+    return Log(path=path, time=t, signals=sig)
+
+
+def test_frequency_exact_on_sinusoid():
+    log = _log()
+    assert estimate_frequency(log.time, log["reference"]) == pytest.approx(W0, rel=1e-10)
+    # with an offset and 1 % white noise
+    noisy = 0.2 + log["reference"] + 0.005 * np.random.default_rng(1).standard_normal(len(log))
+    assert estimate_frequency(log.time, noisy) == pytest.approx(W0, rel=1e-5)
+
+
+def test_phasors_exact_on_analytic_signal():
+    log = _log()
+    a = analyse_log(log, n_max=5)
+    assert a.omega0 == pytest.approx(W0, rel=1e-10)
+    for n, X in PHASORS.items():
+        assert abs(a.phasor("current", n) - X) < 1e-9, n
+    assert abs(a.phasor("current", 4)) < 1e-9
+    # convention x(t) = Re{X e^{jωt}} with the log's own time origin
+    assert abs(a.phasor("motor_angle") - 0.2 * np.exp(-0.5j * np.pi)) < 1e-9
+    assert abs(a.phasor("tip_angle") - 0.1) < 1e-9
+    assert abs(a.phasor("reference") - 0.5 * np.exp(1j * (0.3 - np.pi / 2))) < 1e-9
+
+
+def test_window_is_last_whole_periods():
+    log = _log(periods=6.4)
+    start, stop, N = whole_periods(log.time, W0, discard_periods=1.0)
+    T = 2 * math.pi / W0
+    assert N == 5 and stop == len(log)
+    assert (stop - start) * log.dt == pytest.approx(N * T, abs=log.dt / 2)
+    # a record of 2.5 periods: the discard is given up rather than fall below two
+    short = _log(periods=2.5)
+    assert whole_periods(short.time, W0, discard_periods=1.0)[2] == 2
+
+
+def test_fourier_phasors_of_several_signals():
+    t = np.arange(5000) * 1e-3
+    X = fourier_phasors(t, np.stack([np.cos(3 * t), np.sin(3 * t)]), 3.0, 2)
+    np.testing.assert_allclose(X[:, 1], [1, -1j], atol=1e-12)
+
+
+def test_fewer_than_two_periods_is_an_error_naming_the_file(tmp_path):
+    log = _log(periods=1.8)
+    p = write_log(tmp_path / "short_record.csv", log.time, log.signals)
+    with pytest.raises(IdentificationError) as e:
+        analyse_log(read_log(p))
+    msg = str(e.value)
+    assert str(p) in msg and "fewer than two whole periods" in msg and "1.8" in msg
+
+
+def test_constant_reference_is_an_error(tmp_path):
+    log = _log()
+    log.signals["reference"] = np.zeros(len(log))
+    log.path = tmp_path / "flat_reference.csv"
+    with pytest.raises(IdentificationError, match=r"flat_reference\.csv: the reference is "
+                                                  r"constant"):
+        analyse_log(log)
+
+
+def test_saturated_current_warns_with_file_and_level(tmp_path):
+    clipped = _log(current=lambda t: np.clip(3.0 * np.sin(W0 * t), -2.5, 2.5))
+    p = write_log(tmp_path / "saturated.csv", clipped.time, clipped.signals)
+    with pytest.warns(IdentificationWarning) as rec:
+        a = analyse_log(read_log(p))
+    msg = str(rec[0].message)
+    assert str(p) in msg and "saturated" in msg and "±2.5 A" in msg
+    assert a.saturation == pytest.approx(2.5)
+    assert a.warnings == [msg]
+    # an unclipped sinusoid (and a quantised one) does not warn
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert analyse_log(_log()).saturation is None
+    q = np.round(2048 * np.sin(W0 * clipped.time)) / 2048
+    assert saturation_level(q) is None
