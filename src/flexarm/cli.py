@@ -115,5 +115,121 @@ def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder
     run_demo(out, console)
 
 
+def _pairs(items: list[str] | None, what: str) -> dict[str, str]:
+    out = {}
+    for it in items or []:
+        if "=" not in it:
+            _fail(f"--{what} {it!r}: expected NAME=VALUE, e.g. --{what} current=i_m")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _floats(text: str | None, what: str) -> list[float]:
+    if not text:
+        return []
+    try:
+        return [float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        _fail(f"{what} {text!r}: expected numbers separated by commas (rad/s)")
+
+
+@app.command()
+def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
+               out: Path = typer.Option(..., "--out", help="folder for one CSV per experiment"),
+               frequencies: Optional[str] = typer.Option(
+                   None, help="excitation frequencies in rad/s, comma separated; give ω0 "
+                   "and 3ω0 pairs (default: pairs chosen from the model)"),
+               periods: int = typer.Option(20, help="whole periods recorded per experiment"),
+               kp: Optional[float] = typer.Option(None, help="PD gain, command units per rad"),
+               kd: Optional[float] = typer.Option(None, help="PD gain, command units*s/rad"),
+               overwrite: bool = typer.Option(False, help="replace existing CSV files")) -> None:
+    """Sine experiments on the simulated arm, as FRB Sec. II-A: one CSV per frequency."""
+    _enable_cache()
+    from rich.progress import Progress
+
+    from flexarm.ident.experiments import SineDesign, run_sine_experiments
+
+    sc = _load(scenario)
+    design = SineDesign(frequencies=_floats(frequencies, "--frequencies"), periods=periods,
+                        kp=kp, kd=kd)
+    try:
+        with Progress(console=err) as bar:
+            task = bar.add_task("experiments", total=None)
+            paths = run_sine_experiments(
+                sc, out, design, overwrite=overwrite,
+                progress=lambda label, d, tot: bar.update(task, description=label,
+                                                          completed=d, total=tot))
+    except (ValueError, FileExistsError) as exc:
+        _fail(str(exc))
+    console.print(f"wrote {len(paths)} experiment(s) into {out}/")
+
+
+@app.command()
+def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one folder of them"),
+             motor_constant: str = typer.Option(..., "--motor-constant",
+                                                help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"),
+             json_out: Optional[Path] = typer.Option(None, "--json", help="write the result as JSON"),
+             plots: Optional[Path] = typer.Option(None, help="folder for the Bode figures"),
+             scenario_out: Optional[Path] = typer.Option(
+                 None, "--scenario-out", help="write the identified arm as a scenario TOML"),
+             current_limit: Optional[str] = typer.Option(None, help="amplifier limit for the scenario"),
+             column: Optional[list[str]] = typer.Option(None, help="map a column: current=i_m"),
+             unit: Optional[list[str]] = typer.Option(None, help="a column's unit: current=mA"),
+             motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
+             beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
+             structured: bool = typer.Option(False, help="use the joint fit of J, V, C, C_f as G_m"),
+             overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
+    """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
+    import warnings
+
+    from flexarm.ident.identify import identify as run_identify
+    from flexarm.ident.harmonics import IdentificationError
+
+    for p in (json_out, scenario_out):
+        if p is not None and p.exists() and not overwrite:
+            _fail(f"{p} exists; pass --overwrite to replace it")
+    src = files[0] if len(files) == 1 else files
+    mo = tuple(int(x) for x in motor_orders.split(","))
+    bo = tuple(int(x) for x in beam_orders.split(","))
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = run_identify(src, motor_constant, motor_orders=mo, beam_orders=bo,
+                               columns=_pairs(column, "column") or None,
+                               units=_pairs(unit, "unit") or None, structured=structured)
+    except (IdentificationError, ValueError) as exc:
+        _fail(str(exc))
+    for w in caught:
+        err.print(f"[yellow]warning:[/] {escape(str(w.message))}")
+    d = res.to_dict()
+    if json_out is not None:
+        res.to_json(json_out)
+    if plots is not None:
+        res.bode_figures(plots)
+    if scenario_out is not None:
+        import tomli_w
+
+        scenario_out.write_text(tomli_w.dumps(_scenario_file(res, current_limit)))
+    cf = d["coulomb_current"]
+    console.print(f"Coulomb friction: {cf:.4g} A ({d['coulomb_torque']:.4g} N*m)" if cf is not None
+                  else "Coulomb friction: not estimated (no ω0/3ω0 pair)")
+    console.print(f"G_m num = {_fmt(d['motor_tf']['num'])}\n    den = {_fmt(d['motor_tf']['den'])}"
+                  f"  ({d['motor_tf_method']})")
+    console.print(f"G_b num = {_fmt(d['beam_tf']['num'])}\n    den = {_fmt(d['beam_tf']['den'])}")
+
+
+def _scenario_file(res, current_limit) -> dict:
+    """An identified arm as a complete scenario (the rest from the FRB defaults)."""
+    frag = res.to_scenario_dict(current_limit=current_limit)
+    frag["notes"] = {k: str(v) for k, v in frag.get("notes", {}).items()}
+    frag.update({"sampling": {"period": float(res.logs[0].dt), "delay": 1},
+                 "simulation": {"duration": 2.0, "substeps": 10},
+                 "reference": {"type": "step", "amplitude": 0.2},
+                 "controller": {"type": "pd", "kp": 10.0, "kd": 0.2}})
+    frag["arm"].pop("kind", None)
+    return frag
+
+
 def main() -> None:  # pragma: no cover
     app()

@@ -40,6 +40,8 @@ def to_si(value: object, unit: str, *, field: str = "value") -> float:
         raise UnitError(f"{field}: got {value!r}; expected a number or a quantity in {unit}")
     if isinstance(value, (int, float)):
         x = float(value)
+    elif isinstance(value, str) and _is_number(value):
+        x = float(value)
     elif isinstance(value, str):
         text = value.strip()
         try:
@@ -66,6 +68,14 @@ def to_si(value: object, unit: str, *, field: str = "value") -> float:
     if not math.isfinite(x):
         raise UnitError(f"{field}: got {value!r}, which is not a finite number")
     return x
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _dims(q: pint.Quantity) -> str:

@@ -209,11 +209,28 @@ class HarmonicAnalysis:
         return complex(self.phasors[column][n])
 
 
+HELD_COLUMNS = ("current", "voltage")
+
+
+def zoh_factor(omega: np.ndarray | float, dt: float) -> np.ndarray | complex:
+    """Fundamental of a zero-order-held sequence relative to its samples at ω:
+    e^{−jωT/2}·sin(ωT/2)/(ωT/2). A command logged by a digital controller is the value
+    held from its sample to the next; the continuous signal that drives the motor lags
+    the logged samples by T/2 (2° at 23 rad/s for T = 3 ms, 6° at 69 rad/s)."""
+    x = np.asarray(omega, float) * dt / 2
+    return np.exp(-1j * x) * np.sinc(x / np.pi)
+
+
 def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = None,
                 omega0: float | None = None, discard_periods: float = 1.0,
-                saturation_fraction: float = 0.02) -> HarmonicAnalysis:
+                saturation_fraction: float = 0.02,
+                held: Iterable[str] = HELD_COLUMNS) -> HarmonicAnalysis:
     """Frequency, analysis window, phasors of harmonics 0…``n_max`` of ``columns``
     (default: all but time) and a saturation check of the current (warning).
+
+    Columns named in ``held`` (default: the commands ``current`` and ``voltage``) are
+    logged as zero-order-held samples: their phasors are those of the held, continuous
+    signal (:func:`zoh_factor`). Pass ``held=()`` for a current measured by an A/D.
     """
     name = log.name
     if omega0 is None:
@@ -223,8 +240,11 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
     cols = list(log.signals) if columns is None else list(columns)
     ph = fourier_phasors(log.time, np.stack([log[c] for c in cols]), omega0, n_max,
                          window=(start, stop))
+    held = set(held)
+    hold = zoh_factor(omega0 * np.arange(n_max + 1), log.dt)
     res = HarmonicAnalysis(name=name, omega0=float(omega0), n_periods=N, start=start,
-                           stop=stop, phasors={c: ph[k] for k, c in enumerate(cols)})
+                           stop=stop, phasors={c: ph[k] * (hold if c in held else 1.0)
+                                               for k, c in enumerate(cols)})
     if "current" in log.signals:
         level = saturation_level(log["current"], min_fraction=saturation_fraction)
         if level is not None:

@@ -45,6 +45,7 @@ from flexarm.ident.harmonics import (
     analyse_log,
 )
 from flexarm.ident.logs import Log, LogError, read_log
+from flexarm.ident.physical import PhysicalFit, fit_physical
 from flexarm.ident.tffit import TFFit, fit_tf, tf_coefficients, tf_response
 from flexarm.units import UnitError, to_si
 
@@ -98,6 +99,8 @@ class IdentificationResult:
     parameters: dict[str, float]
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    physical: PhysicalFit | None = None
+    use_physical: bool = False
 
     # -- main numbers ---------------------------------------------------------------
     @property
@@ -113,7 +116,14 @@ class IdentificationResult:
 
     @property
     def motor_tf(self) -> control.TransferFunction:
-        """G_m(s) = θm/i (rad/A) fitted to the corrected data (raw if C_f is unknown)."""
+        """G_m(s) = θm/i (rad/A): the structured physical fit if ``structured=True``
+        (:mod:`flexarm.ident.physical`), else the fit to the corrected data (raw if C_f
+        is unknown)."""
+        return self.physical.motor_tf if self.use_physical else self.motor_fit.tf
+
+    @property
+    def motor_tf_corrected_fit(self) -> control.TransferFunction:
+        """G_m(s) fitted freely to the friction-corrected data (FRB eq. 7 and Sec. VI-B)."""
         return self.motor_fit.tf
 
     @property
@@ -180,7 +190,12 @@ class IdentificationResult:
                                "pairs": len(c.pairs)},
             "motor_constant": self.motor_constant,
             "motor_tf": tf_coefficients(self.motor_tf),
+            "motor_tf_method": "structured physical fit (J, V, C, C_f)" if self.use_physical
+            else ("free fit to the corrected data" if fr.motor_corrected is not None
+                              else "free fit to the raw data"),
+            "motor_tf_corrected_fit": tf_coefficients(self.motor_fit.tf),
             "motor_tf_fitted_to": "corrected" if fr.motor_corrected is not None else "raw",
+            "physical_fit": None if self.physical is None else self.physical.to_dict(),
             "motor_tf_raw": None if self.motor_fit_raw is None
             else tf_coefficients(self.motor_fit_raw.tf),
             "motor_poles": _roots(tf_coefficients(self.motor_tf)["den"]),
@@ -245,6 +260,15 @@ class IdentificationResult:
         cf = self.coulomb_current
         panel(fig, "Motor G_m = θm/i (rad/A)" + (f", C_f = {cf:.4g} A" if cf else ""),
               tf_response(self.motor_tf, wg), data)
+        if self.physical is not None:
+            ax1, ax2 = fig.axes[:2]
+            other = self.motor_fit.tf if self.use_physical else self.physical.motor_tf
+            h = tf_response(other, wg)
+            ax1.semilogx(wg, 20 * np.log10(np.abs(h)), "--", color="0.5", lw=1,
+                         label="free fit to corrected data" if self.use_physical
+                         else "structured fit (J, V, C, C_f)")
+            ax2.semilogx(wg, np.degrees(np.unwrap(np.angle(h))), "--", color="0.5", lw=1)
+            ax1.legend(loc="best", fontsize=8)
         p = out / "motor_bode.png"
         fig.savefig(p, dpi=dpi)
         paths.append(p)
@@ -311,6 +335,18 @@ class IdentificationResult:
         }
 
 
+def _unit_static_gain(fit: TFFit, omega: np.ndarray, H: np.ndarray) -> TFFit:
+    """G_b with G_b(0) = 1 exactly: at rest the tip lines up with the hub (θt = θm). The
+    free fit misses this by ~1e-4, enough to move G_m's integrator off the origin."""
+    num = np.trim_zeros(np.asarray(fit.tf.num[0][0], float), "f")
+    den = np.trim_zeros(np.asarray(fit.tf.den[0][0], float), "f")
+    if num[-1] == 0 or den[-1] == 0:
+        return fit
+    tf = control.tf(num * (den[-1] / num[-1]), den)
+    err = np.abs(tf_response(tf, omega) - H) / np.abs(H)
+    return TFFit(tf, err)
+
+
 def _collect_files(files_or_dir, pattern: str) -> list[Path]:
     if isinstance(files_or_dir, (str, Path)):
         p = Path(files_or_dir)
@@ -340,7 +376,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
              *, motor_integrators: int = 1, beam_integrators: int = 0,
              coulomb_current: float | None = None, partner_tol: float = PARTNER_TOL,
              discard_periods: float = 1.0, pattern: str = "*.csv",
-             n_grid: int = 400) -> IdentificationResult:
+             n_grid: int = 400, structured: bool | None = None) -> IdentificationResult:
     """Identify G_m, G_b, C_f, J, V, C from sinusoidal experiments (see module docstring).
 
     Parameters
@@ -360,6 +396,12 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         Relative tolerance for matching a 3ω0 partner.
     discard_periods:
         Periods dropped at the start of each record before the whole periods analysed.
+    structured:
+        Use the joint fit of J, V, C, C_f (:mod:`flexarm.ident.physical`) as ``motor_tf``
+        and for the parameters. It is always computed and reported (``physical_fit``)
+        when the beam has one mode (``beam_orders == (0, 2)``: C_t = C (θm − θt)); it is
+        the better choice where friction dominates the low-frequency current and the
+        loop's stops at velocity reversals distort the friction square wave.
     """
     try:
         K = to_si(motor_constant, "N*m/A", field="motor_constant")
@@ -409,6 +451,8 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     except ValueError as exc:
         raise IdentificationError(f"cannot fit the transfer functions to the {len(fr.omega)} "
                                   f"experiment(s): {exc}") from None
+    if beam_integrators == 0:
+        bfit = _unit_static_gain(bfit, fr.omega, fr.beam)
     mfit_raw = None
     if cf is not None:
         try:
@@ -417,20 +461,42 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
             _warn(f"no fit to the raw motor response: {exc}", warnings_)
     worst = int(np.argmax(mfit.relative_error))
     if mfit.relative_error[worst] > 0.2:
-        _warn(f"{fr.names[worst]}: the fitted G_m is {100 * mfit.relative_error[worst]:.0f} % "
+        _warn(f"{fr.names[worst]}: the free fit of G_m is {100 * mfit.relative_error[worst]:.0f} % "
               f"off the data at ω = {fr.omega[worst]:.4g} rad/s; check the model orders",
               warnings_)
 
     grid = np.logspace(np.log10(fr.omega.min()), np.log10(fr.omega.max()), n_grid)
-    params = arm_parameters(mfit.tf, bfit.tf, K, grid)
-    params["method"] = ("least squares on the fitted models, G_m = K/(J s^2 + V s + "
-                        f"C (1 - G_b)), {n_grid} frequencies from {grid[0]:.4g} to "
-                        f"{grid[-1]:.4g} rad/s")
+    one_mode = beam_orders == (0, 2) and beam_integrators == 0
+    phys = None
+    if cf is not None and (one_mode or structured):
+        try:
+            phys = fit_physical(analyses, bfit.tf, K)
+        except ValueError as exc:
+            _warn(f"no structured fit: {exc}", warnings_)
+    if phys is not None and not (min(phys.inertia, phys.stiffness) > 0 and phys.viscous >= 0):
+        _warn("the structured fit gave non-physical values (J, V, C = "
+              f"{phys.inertia:.3g}, {phys.viscous:.3g}, {phys.stiffness:.3g})", warnings_)
+        phys = None
+    use_phys = bool(structured) and phys is not None
+    if structured and phys is None:
+        _warn("structured=True but no structured fit is available: using the free fit",
+              warnings_)
+    if use_phys:
+        params = {"inertia": phys.inertia, "viscous": phys.viscous,
+                  "stiffness": phys.stiffness,
+                  "method": "structured physical fit (flexarm.ident.physical)"}
+    else:
+        params = arm_parameters(mfit.tf, bfit.tf, K, grid)
+        params["method"] = ("least squares on the fitted models, G_m = K/(J s^2 + V s + "
+                            f"C (1 - G_b)), {n_grid} frequencies from {grid[0]:.4g} to "
+                            f"{grid[-1]:.4g} rad/s")
     settings = {"motor_orders": list(motor_orders), "motor_integrators": motor_integrators,
                 "beam_orders": list(beam_orders), "beam_integrators": beam_integrators,
                 "partner_tol": partner_tol, "discard_periods": discard_periods,
-                "coulomb_current_given": coulomb_current is not None}
+                "coulomb_current_given": coulomb_current is not None,
+                "structured": use_phys}
     return IdentificationResult(files=files, logs=logs, analyses=analyses, coulomb=coul,
                                 response=fr, motor_fit=mfit, motor_fit_raw=mfit_raw,
                                 beam_fit=bfit, motor_constant=K, parameters=params,
-                                settings=settings, warnings=warnings_)
+                                settings=settings, warnings=warnings_, physical=phys,
+                                use_physical=use_phys)
