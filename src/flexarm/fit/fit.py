@@ -143,7 +143,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         current_limit: float | None = None, mode: str = "closed_loop",
         controller: Any = None, sessions: Sequence[int] | None = None,
         friction: bool = True, encoder_counts: int | None = None,
-        tip_sign: int | None = None, angle_delay: int | None = None,
+        tip_sign: int | None = None, angle_delay: int | None = 0,
         tip_delay: int | None = None, max_delay: int = 5, computation_delay: int = 0,
         bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
@@ -158,7 +158,10 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     or ``"open_loop"`` (replay of the logged ``voltage`` / command column).
     ``friction=False`` fits a model without dry friction (viscous only), for comparison.
     ``encoder_counts`` per revolution (default: detected from the hub-angle steps);
-    ``tip_sign``, ``angle_delay``, ``tip_delay`` fix what is known. The global stage uses
+    ``tip_sign``, ``angle_delay``, ``tip_delay`` fix what is known; ``angle_delay``
+    defaults to 0 (encoder counters are latched at the sample instant, and with sensor
+    noise feeding the loop a hub delay trades off against the hub inertia): pass
+    ``angle_delay=None`` to fit it in 0 ... ``max_delay`` samples. The global stage uses
     the first ``global_seconds`` of each log (None: all), ``popsize`` × dimension members
     for at most ``maxiter`` generations; the local stage at most ``local_nfev`` evaluations.
     """

@@ -78,6 +78,16 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
             else:
                 fp[sig] = None
         traj[2][0] = out["command"][:, 0]
+        lim = float(p.loop.actuator.limit[0])
+        sat = float(np.mean(np.abs(traj[2][0]) >= 0.999 * lim))
+        if fp.get("motor_angle") is not None and fp["motor_angle"] < -100 and sat > 0.3:
+            c = log.controller
+            raise FitInputError(
+                f"{log.path}: field 'controller': with K1={c.k1:g} K2={c.k2:g} K3={c.k3:g} "
+                f"K4={c.k4:g} the simulated loop on {sc.name} runs away (command saturated "
+                f"{100 * sat:.0f} % of the time, hub-angle fit {fp['motor_angle']:.0f} %): "
+                "the gains make the simulated loop unstable; check their signs and units "
+                "(V/rad, V/m, V*s/rad, V*s/m) and the tip sensor's gain sign")
         result["fit_percent"][log.name] = fp
         blogs.append(log)
         trajs.append(traj)
