@@ -46,6 +46,10 @@ def controller_from_spec(spec, dt: float) -> discrete.Controller:
         return discrete.pid(spec.kp, spec.ki, spec.kd, dt, measured=m)
     if spec.type == "lead":
         return discrete.lead(spec.gain, spec.zero, spec.pole, measured=m)
+    if spec.type == "state_feedback":
+        from flexarm.control.state_feedback import from_spec
+
+        return from_spec(spec, dt)
     if spec.type == "tf":
         return discrete.from_transfer_function((spec.num, spec.den), dt, measured=m)
     raise ValueError(f"controller.type = {spec.type!r} is not known")

@@ -10,6 +10,7 @@ from typing import Literal
 
 from pydantic import Field
 
+from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Count, Q, Spec
 
 
@@ -109,4 +110,5 @@ class TFController(Spec):
     measured: str = "motor_angle"
 
 
-ControllerSpec = PDController | PIDController | LeadController | TFController
+ControllerSpec = (PDController | PIDController | LeadController | TFController
+                  | StateFeedbackController)

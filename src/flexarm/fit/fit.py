@@ -1,0 +1,290 @@
+"""``flexarm.fit``: time-domain identification of a bench arm from closed-loop logs.
+
+Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
+resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
+inertia and damping, hub friction (Coulomb, breakaway, viscous, bias) per recording
+session, the sensor delays and the tip sensor's calibration gain and sign, and each log's
+initial link state, by minimising the closed-loop simulation output error
+(:mod:`flexarm.fit.objective`):
+
+1. guesses and bounds from the data (:mod:`flexarm.fit.guesses`);
+2. global stage: differential evolution, whole generations in one batched simulation,
+   on the first ``global_seconds`` of each log (:mod:`flexarm.fit.global_stage`);
+3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
+   weighted residuals over the full logs, with a forward-difference Jacobian whose
+   columns are simulated in one batch; it also refines each log's initial tip state;
+4. uncertainty from the final Jacobian: cov = s² (JᵀJ)⁻¹, s² the residual variance,
+   inflated by the residuals' lag-1 correlation ρ as √((1+ρ)/(1−ρ)) (AR(1)).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from flexarm.fit import guesses
+from flexarm.fit.global_stage import differential_evolution_stage
+from flexarm.fit.logs import FitInputError, as_bench_log, check_closed_loop
+from flexarm.fit.objective import Objective, Rig
+from flexarm.fit.params import FRICTION, ParamDef, ParamSpace, derived
+from flexarm.fit.report import FitResult
+
+
+def detect_quantum(x: np.ndarray) -> float:
+    """The A/D or encoder step of a signal (0 when it does not look quantised)."""
+    d = np.abs(np.diff(x))
+    d = d[d > 0]
+    if d.size < 10:
+        return 0.0
+    q = float(np.min(d))
+    k = x / q
+    if np.max(np.abs(k - np.round(k - 0.0))) < 1e-3 or np.max(
+            np.abs((x - x[0]) / q - np.round((x - x[0]) / q))) < 1e-3:
+        return q
+    return 0.0
+
+
+def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resistance: float,
+             link_length: float, gear_efficiency: float, motor_efficiency: float,
+             limit: float, encoder_quantum: float, tip_quantum: float = 0.0) -> Rig:
+    """Drive gains from the data sheet: voltage drive k_u = η_g η_m K_g K_m / R,
+    k_ω = k_u K_g K_m; current drive k_u = η_g η_m K_g K_m, k_ω = 0."""
+    for name, v in (("gear_ratio", gear_ratio), ("motor_constant", motor_constant),
+                    ("link_length", link_length)):
+        if v is None or not v > 0:
+            raise FitInputError(f"fit: field {name!r} = {v!r}: give the data-sheet value (> 0)")
+    eta = gear_efficiency * motor_efficiency
+    if drive == "voltage":
+        if armature_resistance is None or not armature_resistance > 0:
+            raise FitInputError("fit: field 'armature_resistance' is needed (> 0, ohm) for "
+                                "drive='voltage'")
+        ke = gear_ratio * motor_constant
+        ku = eta * ke / armature_resistance
+        motor = dict(drive="voltage", motor_constant=motor_constant,
+                     armature_resistance=armature_resistance, gear_ratio=gear_ratio,
+                     gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
+                     voltage_limit=limit)
+        return Rig("voltage", ku, ku * ke, limit, link_length, motor, encoder_quantum, tip_quantum)
+    if drive == "current":
+        ku = eta * gear_ratio * motor_constant
+        motor = dict(drive="current", torque_constant=ku, current_limit=limit)
+        return Rig("current", ku, 0.0, limit, link_length, motor, encoder_quantum, tip_quantum)
+    raise FitInputError(f"fit: field 'drive' = {drive!r}: choose 'voltage' or 'current'")
+
+
+def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
+           delays, bounds: dict | None, info: dict) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
+    """Bounds from the data (see :mod:`flexarm.fit.guesses`) and the seed point."""
+    wc, how = guesses.link_frequency(logs)
+    info["link_frequency_guess"] = {"value": wc, "from": how}
+    wc_b = (wc / 1.35, wc * 1.35) if wc else (2 * np.pi * 0.3, 2 * np.pi * 40)
+    wc = wc or math.sqrt(wc_b[0] * wc_b[1])
+    J_est = guesses.hub_inertia(logs, rig.k_u)
+    info["hub_inertia_guess"] = J_est
+    J_b = (J_est / 8, J_est * 2) if J_est else (1e-7, 10.0)
+    J_ref = J_est or 1e-3
+    g, r2 = guesses.tip_gain(logs, wc, rig.length)
+    info["tip_gain_guess"] = {"value": g, "r2": r2}
+    if g is not None and r2 > 0.3:
+        g_b, sign = (abs(g) / 2.5, abs(g) * 2.5), int(np.sign(g))
+    else:
+        g_b, sign = (0.1, 10.0), None
+    if tip_sign is not None:
+        sign = int(tip_sign)
+    tau_f = guesses.stick_torque(logs, rig.k_u)
+    info["stick_torque_guess"] = tau_f
+    tau_f = max(tau_f or 0.0, 0.01 * rig.k_u * rig.limit)
+    speed = max(np.percentile(np.abs(np.gradient(g_.columns["motor_angle"], g_.dt)), 99)
+                for g_ in logs if "motor_angle" in g_.columns)
+    B_hi = max(0.5 * rig.k_u * rig.limit / max(speed, 1e-3), 2 * rig.k_omega, 1e-6)
+    defs = [
+        ParamDef("hub_inertia", "kg*m**2", *J_b, "log"),
+        ParamDef("link_frequency", "rad/s", *wc_b, "log"),
+        ParamDef("link_inertia", "kg*m**2", J_ref / 20, J_ref * 20, "log"),
+        ParamDef("link_damping", "", 0.002, 0.3, "log"),
+        ParamDef("tip_gain", "m/m", *g_b, "log"),
+    ]
+    for s in range(n_sessions):
+        defs.append(ParamDef("viscous", "N*m*s/rad", 0.0, B_hi, "loglin", s))
+        if friction:
+            defs += [ParamDef("coulomb", "N*m", 0.0, 2 * tau_f, "loglin", s),
+                     ParamDef("static_excess", "N*m", 0.0, 2 * tau_f, "loglin", s),
+                     ParamDef("bias", "N*m", -tau_f, tau_f, "lin", s)]
+    for name, (lo, hi) in (bounds or {}).items():
+        hits = [i for i, d in enumerate(defs) if d.name == name]
+        if not hits:
+            raise FitInputError(f"fit: bounds: {name!r} is not a fitted parameter; fitted: "
+                                f"{sorted({d.name for d in defs})}")
+        if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+            raise FitInputError(f"fit: bounds[{name!r}] = ({lo}, {hi}): need finite lo < hi")
+        for i in hits:
+            d = defs[i]
+            if d.scale == "log" and lo <= 0:
+                raise FitInputError(f"fit: bounds[{name!r}]: {name} must be > 0 (got lo = {lo})")
+            defs[i] = ParamDef(d.name, d.unit, float(lo), float(hi), d.scale, d.session)
+    space = ParamSpace(defs, n_sessions, max_delay, sign, friction, tuple(delays))
+    seed = {"hub_inertia": J_est or J_ref, "link_frequency": wc, "link_inertia": J_ref,
+            "link_damping": 0.03, "tip_gain": abs(g) if g else 1.0, "viscous": 0.05 * B_hi,
+            "coulomb": 0.6 * tau_f, "static_excess": 0.2 * tau_f, "bias": 0.0}
+    u0 = np.array([float(np.clip(d.to_unit(np.clip(seed[d.name], d.lo, d.hi)), 0, 1))
+                   for d in defs])
+    d0 = np.array([delays[0] or 0, delays[1] or 0, ((sign or 1) + 1) // 2])
+    return space, u0, d0
+
+
+def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
+        motor_constant: float | None = None, armature_resistance: float | None = None,
+        link_length: float | None = None, gear_efficiency: float = 1.0,
+        motor_efficiency: float = 1.0, voltage_limit: float = 10.0,
+        current_limit: float | None = None, mode: str = "closed_loop",
+        controller: Any = None, sessions: Sequence[int] | None = None,
+        friction: bool = True, encoder_counts: int | None = None,
+        tip_sign: int | None = None, angle_delay: int | None = 0,
+        tip_delay: int | None = None, max_delay: int = 5, computation_delay: int = 0,
+        bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
+        popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
+        local_nfev: int = 30, seed: int = 0, chunk: int = 64,
+        progress: Callable[[str], None] | None = None) -> FitResult:
+    """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
+
+    ``logs``: paths or :class:`~flexarm.fit.logs.BenchLog` s; logs given together are one
+    recording session (shared friction) unless ``sessions`` gives a session index per log
+    (mechanics shared, friction per session). ``mode``: ``"closed_loop"`` (each log's
+    controller closed in simulation; ``controller`` overrides every log's declaration)
+    or ``"open_loop"`` (replay of the logged ``voltage`` / command column).
+    ``friction=False`` fits a model without dry friction (viscous only), for comparison.
+    ``encoder_counts`` per revolution (default: detected from the hub-angle steps);
+    ``tip_sign``, ``angle_delay``, ``tip_delay`` fix what is known; ``angle_delay``
+    defaults to 0 (encoder counters are latched at the sample instant, and with sensor
+    noise feeding the loop a hub delay trades off against the hub inertia): pass
+    ``angle_delay=None`` to fit it in 0 ... ``max_delay`` samples. The global stage uses
+    the first ``global_seconds`` of each log (None: all), ``popsize`` × dimension members
+    for at most ``maxiter`` generations; the local stage at most ``local_nfev`` evaluations.
+    """
+    say = progress or (lambda msg: None)
+    t_start = time.perf_counter()
+    if mode not in ("closed_loop", "open_loop"):
+        raise FitInputError(f"fit: field 'mode' = {mode!r}: choose 'closed_loop' or 'open_loop'")
+    if not logs:
+        raise FitInputError("fit: no logs given")
+    blogs = [as_bench_log(x, controller) for x in logs]
+    dts = [g.dt for g in blogs]
+    for g in blogs:
+        if abs(g.dt - dts[0]) > 1e-6 * dts[0]:
+            raise FitInputError(f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
+                                f"from {blogs[0].path}'s {dts[0]:g} s; resample to one period")
+        if mode == "closed_loop":
+            check_closed_loop(g)
+        elif "voltage" not in g.columns:
+            raise FitInputError(f"{g.path}: field 'voltage': open-loop replay needs the logged "
+                                "command column 'voltage' (V, or A for a current drive)")
+    sess = list(sessions) if sessions is not None else [0] * len(blogs)
+    if len(sess) != len(blogs) or sorted(set(sess)) != list(range(max(sess) + 1)):
+        raise FitInputError(f"fit: field 'sessions' = {sess}: give one index per log, "
+                            "numbered 0, 1, ... without gaps")
+    if encoder_counts:
+        q = 2 * np.pi / encoder_counts
+    else:
+        q = max((detect_quantum(g.columns["motor_angle"]) for g in blogs
+                 if "motor_angle" in g.columns), default=0.0)
+    limit = voltage_limit if drive == "voltage" else (current_limit or voltage_limit)
+    rig = make_rig(drive, gear_ratio, motor_constant, armature_resistance, link_length,
+                   gear_efficiency, motor_efficiency, limit, q)
+    info: dict[str, Any] = {"encoder_quantum": q}
+    space, u0, d0 = _space(blogs, rig, max(sess) + 1, friction, max_delay, tip_sign,
+                           (angle_delay, tip_delay), bounds, info)
+    wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
+    n_full = max(len(g) for g in blogs)
+    n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
+    common = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
+                  wc_guess=wc_guess)
+    obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
+    say(f"global stage: {space.n_cont} continuous + discrete parameters, "
+        f"{len(blogs)} logs x {n_glob} samples")
+    glob = differential_evolution_stage(
+        obj_g, u0, d0, popsize=popsize, maxiter=maxiter, seed=seed,
+        progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"))
+    if not np.isfinite(glob.cost) or glob.cost >= 1e3:
+        bad = [g.name for i, g in enumerate(blogs)]
+        raise FitInputError(
+            f"fit: every simulated loop diverged ({', '.join(bad)}): the logs' controller "
+            "gains make the simulated loop unstable for all parameters tried; check the "
+            "'# controller:' lines (gains, signs, units: V/rad, V/m, V*s/rad, V*s/m), the "
+            "tip sensor's sign (tip_sign=) and the data-sheet values")
+    obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
+    say(f"local stage: least squares on {len(blogs)} logs x {n_full} samples")
+    loc = _local(obj, glob.U, glob.D, local_nfev)
+    tr, e, bad = obj.run(loc["U"][None], glob.D[None], loc["off"][None])
+    fitp = obj.fit_percent(e[0])
+    return FitResult.build(
+        logs=blogs, rig=rig, space=space, U=loc["U"], D=glob.D, offsets=loc["off"],
+        std_u=loc["std_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
+        glob=glob, local=loc, info=info, settings=dict(
+            mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
+            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed),
+        seconds=time.perf_counter() - t_start, objective=obj)
+
+
+def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
+           step: float = 1e-3) -> dict:
+    """least_squares over the unit coordinates and each log's initial tip offsets."""
+    n, L = obj.space.n_cont, obj.L
+    nz = n + 2 * L
+    W = np.sqrt(obj.weights())  # (2, L, N)
+    mask = W > 0
+    y = np.stack([np.asarray(obj.data["y_th"]), np.asarray(obj.data["y_d"])])
+    z0 = np.concatenate([U0, np.zeros(2 * L)])
+    lo = np.concatenate([np.zeros(n), np.full(2 * L, -5.0)])
+    hi = np.concatenate([np.ones(n), np.full(2 * L, 5.0)])
+    Db = np.tile(D, (nz + 1, 1))
+    cache: dict = {}
+
+    def split(Z):
+        return Z[:, :n], Z[:, n:].reshape(-1, L, 2)
+
+    def batch(z):
+        key = z.tobytes()
+        if key in cache:
+            return cache[key]
+        h = np.where(z + step > hi, -step, step)
+        Z = np.tile(z, (nz + 1, 1))
+        Z[1:] += np.diag(h)
+        U, off = split(Z)
+        tr, e, bad = obj.run(U, Db, off)
+        sim = np.stack([tr[0], tr[1]])  # (2, P, L, N)
+        R = (W[:, None] * (sim - y[:, None])).transpose(1, 0, 2, 3).reshape(nz + 1, -1)
+        R = np.where(np.isfinite(R), R, 1e3)
+        R[bad.any(-1)] = 1e3 * W.max()
+        cache.clear()
+        cache[key] = (R[0], ((R[1:] - R[0]) / h[:, None]).T)
+        return cache[key]
+
+    t0 = time.perf_counter()
+    res = least_squares(lambda z: batch(z)[0], z0, jac=lambda z: batch(z)[1],
+                        bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
+                        ftol=1e-6, xtol=1e-6, gtol=1e-8)
+    r, Jac = batch(res.x)
+    keep = mask.ravel()
+    m_eff = int(keep.sum())
+    rr = r[keep]
+    s2 = float(rr @ rr) / max(m_eff - nz, 1)
+    rho = float(np.clip(np.sum(rr[1:] * rr[:-1]) / max(rr @ rr, 1e-300), 0.0, 0.999))
+    try:
+        cov = np.linalg.pinv(Jac[keep].T @ Jac[keep]) * s2 * (1 + rho) / (1 - rho)
+        std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
+    except np.linalg.LinAlgError:
+        std_u = np.full(n, np.nan)
+    U, off = split(res.x[None])
+    return {"U": U[0], "off": off[0], "std_u": std_u, "status": int(res.status),
+            "success": bool(res.status > 0), "message": str(res.message),
+            "nfev": int(res.nfev), "cost": float(2 * res.cost), "rho": rho,
+            "seconds": time.perf_counter() - t0, "at_bounds": [
+                i for i in range(n) if (res.x[i] < 1e-3 or res.x[i] > 1 - 1e-3)
+                and obj.space.defs[i].scale != "loglin"]}
+
+
+__all__ = ["fit", "FitResult", "FRICTION", "derived"]

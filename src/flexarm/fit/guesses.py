@@ -1,0 +1,195 @@
+"""Physically derived guesses and bounds from the logs themselves.
+
+* Stuck intervals: the measured hub angle does not change for >= ``min_stuck`` s.
+* Link frequency ω_c: peak of the summed periodograms of the detrended tip deflection over
+  the stuck intervals (the link rings at its hub-clamped frequency while the hub sticks);
+  without stuck intervals, of the whole tip signal.
+* Tip gain and sign: the link obeys ẅ + 2ζω_c ẇ + ω_c² w = −L θ̈, so the measured
+  d ≈ g · H(s)(−L θ̈) with H = 1/(s² + 2ζω_c s + ω_c²); g by least squares of d on the
+  filtered hub acceleration (θ̈ from the encoder by double differences: H is a strong
+  low-pass, so quantisation noise hardly matters).
+* Hub inertia: after a reference step the hub starts with J θ̈ ≈ k_u u − F (the link has
+  not yet reacted); θ̈ from a parabola fitted to the first 25 ms of motion, u the logged
+  (or replayed) command: J ≈ k_u ū / θ̈ (an upper-biased estimate: friction slows it).
+* Friction: a stuck hub at rest with a settled link holds k_u u + τ_bias within ±F_s, so
+  F_s >= max |k_u u| over the ends of stuck intervals (the steady-state errors).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.signal
+
+from flexarm.fit.logs import BenchLog
+
+
+def controller_command(log: BenchLog) -> np.ndarray:
+    """The command the log's controller computed (replayed on the logged signals), or the
+    logged voltage when present."""
+    if "voltage" in log.columns:
+        return log.columns["voltage"]
+    c = log.controller
+    th = log.columns.get("motor_angle", np.zeros(len(log)))
+    d = log.columns.get("tip_deflection", np.zeros(len(log)))
+    T = log.dt
+    tau = c.rate_time_constant if c.rate == "filtered" else 0.0
+    a, b = tau / (tau + T), 1.0 / (tau + T)
+    dth = scipy.signal.lfilter([b], [1.0, -a], np.diff(th, prepend=th[0]))
+    dd = scipy.signal.lfilter([b], [1.0, -a], np.diff(d, prepend=d[0]))
+    return c.k1 * (log.columns["reference"] - th) - c.k2 * d - c.k3 * dth - c.k4 * dd
+
+
+def stuck_intervals(log: BenchLog, min_stuck: float = 0.25) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) where the measured hub angle stays constant."""
+    th = log.columns.get("motor_angle")
+    if th is None:
+        return []
+    q = max(np.median(np.abs(np.diff(th)[np.diff(th) != 0])) if np.any(np.diff(th)) else 0, 0)
+    still = np.abs(np.diff(th)) <= 0.25 * q if q > 0 else np.diff(th) == 0
+    out, n_min, k = [], int(min_stuck / log.dt), 0
+    n = len(still)
+    while k < n:
+        if still[k]:
+            j = k
+            while j < n and still[j]:
+                j += 1
+            if j - k >= n_min:
+                out.append((k + 1, j + 1))
+            k = j
+        else:
+            k += 1
+    return out
+
+
+def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
+    """(ω_c estimate in rad/s, how: 'stuck' or 'whole') from the tip deflection spectra."""
+    segs, how = [], "stuck"
+    for log in logs:
+        d = log.columns.get("tip_deflection")
+        if d is None or np.ptp(d) == 0:
+            continue
+        for i0, i1 in stuck_intervals(log):
+            segs.append((scipy.signal.detrend(d[i0:i1]), log.dt))
+    if not segs:
+        how = "whole"
+        segs = [(scipy.signal.detrend(log.columns["tip_deflection"]), log.dt) for log in logs
+                if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0]
+    if not segs:
+        return None, "none"
+    T = segs[0][1]
+    nfft = 1 << int(np.ceil(np.log2(max(16384, max(len(s) for s, _ in segs) * 4))))
+    f = np.fft.rfftfreq(nfft, T)
+    P = np.zeros_like(f)
+    for s, _ in segs:
+        P += np.abs(np.fft.rfft(s * np.hanning(len(s)), nfft)) ** 2
+    band = (f >= fmin) & (f <= min(fmax, 0.4 / T))
+    k = np.argmax(np.where(band, P, 0))
+    return 2 * np.pi * f[k], how
+
+
+def tip_gain(logs: list[BenchLog], wc: float, length: float, zeta: float = 0.03):
+    """(g estimate with sign, R²) from d ≈ g H(s)(−L θ̈)."""
+    num = den = 0.0
+    ss = tt = 0.0
+    for log in logs:
+        d = log.columns.get("tip_deflection")
+        th = log.columns.get("motor_angle")
+        if d is None or th is None or np.ptp(d) == 0:
+            continue
+        T = log.dt
+        acc = np.gradient(np.gradient(th, T), T)
+        sysd = scipy.signal.cont2discrete(([1.0], [1.0, 2 * zeta * wc, wc**2]), T, "bilinear")
+        x = scipy.signal.lfilter(np.ravel(sysd[0]), sysd[1], -length * acc)
+        x, dd = x - x.mean(), d - d.mean()
+        num += x @ dd
+        den += x @ x
+        ss += dd @ dd
+    if den == 0 or ss == 0:
+        return None, 0.0
+    g = num / den
+    return g, (num * num / den) / ss
+
+
+def hub_inertia(logs: list[BenchLog], k_u: float, window: float = 0.025):
+    """Median of J ≈ k_u ū / θ̈ over the reference steps (None when no step is usable)."""
+    est = []
+    for log in logs:
+        th = log.columns.get("motor_angle")
+        if th is None or log.controller is None and "voltage" not in log.columns:
+            continue
+        u = controller_command(log)
+        r = log.columns["reference"]
+        T = log.dt
+        steps = np.nonzero(np.abs(np.diff(r)) > 1e-9)[0] + 1
+        n = max(int(window / T), 5)
+        for s in steps:
+            moved = np.nonzero(np.abs(th[s:s + 200] - th[s]) > 0)[0]
+            if not moved.size:
+                continue
+            k0 = s + max(int(moved[0]) - 1, 0)
+            if k0 + n >= len(th):
+                continue
+            t = np.arange(n) * T
+            A = np.column_stack([np.ones(n), t, 0.5 * t * t])
+            c = np.linalg.lstsq(A, th[k0:k0 + n], rcond=None)[0]
+            ubar = np.mean(u[k0:k0 + n])
+            if c[2] * ubar > 0:
+                est.append(k_u * ubar / c[2])
+    return float(np.median(est)) if est else None
+
+
+def stick_torque(logs: list[BenchLog], k_u: float) -> float | None:
+    """Largest |k_u u| held by a stuck, settled hub (N·m), or None."""
+    vals = []
+    for log in logs:
+        if log.controller is None and "voltage" not in log.columns:
+            continue
+        u = controller_command(log)
+        for i0, i1 in stuck_intervals(log, 0.2):
+            k = slice(max(i1 - int(0.05 / log.dt), i0), i1)
+            vals.append(abs(k_u * float(np.median(u[k]))))
+    return max(vals) if vals else None
+
+
+def initial_tip(log: BenchLog, wc: float, zeta: float = 0.03, max_periods: float = 1.5):
+    """Damped sinusoid d(t) = e^{−σt}(a cos ω t + b sin ω t) fitted to the measured tip
+    deflection before the first reference change (at most 1.5 periods): (a, b, σ, ω)."""
+    d = log.columns.get("tip_deflection")
+    if d is None or np.ptp(d) == 0:
+        return (0.0, 0.0, 0.0, wc)
+    r = log.columns["reference"]
+    T = log.dt
+    ch = np.nonzero(np.abs(np.diff(r)) > 1e-9)[0]
+    n = int(max_periods * 2 * np.pi / wc / T)
+    if ch.size:
+        n = min(n, int(ch[0]) + 1)
+    n = max(n, 8)
+    wd = wc * np.sqrt(max(1 - zeta**2, 1e-6))
+    s = zeta * wc
+    t = np.arange(n) * T
+    A = np.column_stack([np.exp(-s * t) * np.cos(wd * t), np.exp(-s * t) * np.sin(wd * t)])
+    a, b = np.linalg.lstsq(A, d[:n], rcond=None)[0]
+    return (float(a), float(b), float(s), float(wd))
+
+
+def initial_hub(log: BenchLog, n: int = 20):
+    """(θ0, ω0) from a line through the first samples of the measured hub angle."""
+    th = log.columns.get("motor_angle")
+    if th is None:
+        return 0.0, 0.0
+    t = np.arange(n) * log.dt
+    if np.ptp(th[:n]) == 0:
+        return float(th[0]), 0.0
+    c = np.polyfit(t, th[:n], 1)
+    return float(c[1]), float(c[0])
+
+
+def initial_tip_at(log: BenchLog, k: int, n: int = 21) -> tuple[float, float]:
+    """Measured tip deflection and rate at sample ``k`` from a parabola through samples
+    k ... k + n − 1 (the state at t = 0 when the tip channel is delayed by k samples)."""
+    d = log.columns.get("tip_deflection")
+    if d is None or np.ptp(d) == 0:
+        return (0.0, 0.0)
+    t = np.arange(n) * log.dt
+    c = np.polyfit(t, d[k:k + n], 2)
+    return (float(c[2]), float(c[1]))

@@ -1,0 +1,181 @@
+"""The output-error objective of a bench fit, evaluated for a whole population at once.
+
+For parameters p the log's loop is closed in simulation (:mod:`flexarm.fit.closed_loop`)
+and compared with the log on the measured hub angle θ and tip deflection d:
+
+    V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
+
+(each signal weighted by its spread; the first ``skip`` samples, where the simulated
+sensor delay lines still hold the initial value, are left out). fit % per log and signal
+is 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
+
+Each log's initial state: hub angle and rate from its first samples; the link's tip
+deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
+delay), from a parabola through samples k ... k + 20, divided by the tip gain g; the local
+stage refines the latter two per log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexarm.fit import guesses
+from flexarm.fit.closed_loop import as_jax, closed_loop_cost, closed_loop_run
+from flexarm.fit.logs import BenchLog
+from flexarm.fit.params import ParamSpace
+
+BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
+
+
+@dataclass
+class Rig:
+    """What the data sheet gives: drive gain k_u (N·m per V or A), back-EMF damping k_ω
+    (N·m·s/rad), command limit, link length (m), and the spec fields to write back."""
+
+    drive: str
+    k_u: float
+    k_omega: float
+    limit: float
+    length: float
+    motor: dict
+    encoder_quantum: float
+    tip_quantum: float = 0.0
+    vel_tol: float = 1e-3
+
+
+class Objective:
+    """Cost of parameter populations on a set of logs (one compiled simulation per shape)."""
+
+    def __init__(self, logs: list[BenchLog], rig: Rig, space: ParamSpace, sessions: list[int],
+                 *, mode: str = "closed_loop", substeps: int = 2, comp_delay: int = 0,
+                 n_samples: int | None = None, chunk: int = 64, wc_guess: float = 20.0):
+        self.logs, self.rig, self.space, self.sessions = logs, rig, space, np.asarray(sessions)
+        self.mode, self.substeps, self.comp_delay, self.chunk = mode, substeps, comp_delay, chunk
+        T = logs[0].dt
+        N = max(len(g) for g in logs) if n_samples is None else n_samples
+        L = len(logs)
+        self.N, self.L, self.T = N, L, T
+        self.skip = space.max_delay + comp_delay + 1
+        z = lambda: np.zeros((L, N))  # noqa: E731
+        ref, yt, yd, wt, wd, volt = z(), z(), z(), z(), z(), z()
+        K, tau = np.zeros((L, 4)), np.zeros(L)
+        self.sst = np.zeros((L, 2))
+        for i, g in enumerate(logs):
+            n = min(len(g), N)
+            pad = lambda a: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
+            ref[i] = pad(g.columns["reference"])
+            if "voltage" in g.columns:
+                volt[i] = pad(g.columns["voltage"])
+            for j, (name, y, w) in enumerate((("motor_angle", yt, wt), ("tip_deflection", yd, wd))):
+                if name in g.outputs:
+                    y[i] = pad(g.columns[name])
+                    seg = g.columns[name][self.skip:n]
+                    sst = float(np.sum((seg - seg.mean()) ** 2))
+                    self.sst[i, j] = sst
+                    w[i, self.skip:n] = 1.0 / sst
+            if g.controller is not None:
+                c = g.controller
+                K[i] = (c.k1, c.k2, c.k3, c.k4)
+                tau[i] = c.rate_time_constant if c.rate == "filtered" else 0.0
+        self.data = as_jax(dict(ref=ref, y_th=yt, y_d=yd, w_th=wt, w_d=wd, volt=volt, K=K, tau=tau))
+        self.const = as_jax(dict(dt=T, length=rig.length, k_u=rig.k_u, k_omega=rig.k_omega,
+                                 q_th=rig.encoder_quantum, q_d=rig.tip_quantum,
+                                 limit=rig.limit, vel_tol=rig.vel_tol))
+        self.hub0 = np.array([guesses.initial_hub(g) for g in logs])  # (L, 2)
+        self.tip0 = np.array([[guesses.initial_tip_at(g, k) for k in range(space.max_delay + 1)]
+                              for g in logs])  # (L, max_delay + 1, 2)
+        self.wc_guess = wc_guess
+        self.tip_scale = np.array([max(np.std(g.columns.get("tip_deflection", [0.0])), 1e-9)
+                                   for g in logs])
+
+    # ------------------------------------------------------------------ mapping
+    def tip_initial(self, dd: np.ndarray, offsets: np.ndarray | None = None):
+        """Measured-unit tip deflection and rate at t = dd·T, (P, L) each."""
+        idx = np.asarray(dd, int)
+        d0 = self.tip0[:, idx, 0].T  # (P, L)
+        v0 = self.tip0[:, idx, 1].T
+        w = self.wc_guess
+        if offsets is not None:
+            d0 = d0 + offsets[..., 0] * self.tip_scale[None]
+            v0 = v0 + offsets[..., 1] * self.tip_scale[None] * w
+        return d0, v0
+
+    def model(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None) -> dict:
+        """Unit coordinates U (P, n_cont), discrete D (P, 3) = (angle delay, tip delay,
+        sign 0/1), optional per-log initial-tip offsets (P, L, 2) → model numbers (L, P)."""
+        sp = self.space
+        P = U.shape[0]
+        ses = self.sessions
+        per = lambda name: sp.session_values(U, name)[:, ses].T  # noqa: E731  (L, P)
+        glob = lambda name: np.broadcast_to(sp.value(U, name)[None], (self.L, P))  # noqa: E731
+        wc = glob("link_frequency")
+        zeta = glob("link_damping")
+        sign = 2.0 * D[:, 2] - 1.0
+        gain = glob("tip_gain") * sign[None]
+        d0, v0 = self.tip_initial(D[:, 1], offsets)
+        if sp.friction:
+            Fc = per("coulomb")
+            Fs = Fc + per("static_excess")
+            bias = per("bias")
+            B = per("viscous")
+        else:
+            Fc = Fs = bias = np.zeros((self.L, P))
+            B = per("viscous")
+        return as_jax(dict(
+            J=glob("hub_inertia"), B=B, wc2=wc**2, c2z=2 * zeta * wc,
+            JlL=glob("link_inertia") / self.rig.length, Fc=Fc, Fs=Fs, bias=bias, gain=gain,
+            dth=np.broadcast_to(D[:, 0][None], (self.L, P)),
+            dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
+            th0=np.broadcast_to(self.hub0[:, :1], (self.L, P)),
+            om0=np.broadcast_to(self.hub0[:, 1:], (self.L, P)),
+            w0=d0.T / gain, wd0=v0.T / gain))
+
+    def _kw(self):
+        return dict(substeps=self.substeps, n_buf=self.space.max_delay + 1,
+                    comp_delay=self.comp_delay, open_loop=self.mode == "open_loop")
+
+    # ------------------------------------------------------------------ evaluation
+    def sse(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None):
+        """Normalised squared errors (P, L, 2) and divergence flags (P, L), in chunks of
+        ``chunk`` parameter vectors (one compile for all chunks)."""
+        P = U.shape[0]
+        c = self.chunk
+        Pp = -(-P // c) * c
+        pad = lambda a: np.concatenate([a, np.repeat(a[-1:], Pp - P, axis=0)])  # noqa: E731
+        U, D = pad(U), pad(D)
+        offsets = None if offsets is None else pad(offsets)
+        out_e, out_b = [], []
+        for k in range(0, Pp, c):
+            m = self.model(U[k:k + c], D[k:k + c], None if offsets is None else offsets[k:k + c])
+            et, ed, bad = closed_loop_cost(m, self.data, self.const, **self._kw())
+            out_e.append(np.stack([np.asarray(et), np.asarray(ed)], -1))
+            out_b.append(np.asarray(bad))
+        e = np.concatenate(out_e, axis=1)[:, :P].transpose(1, 0, 2)
+        b = np.concatenate(out_b, axis=1)[:, :P].T
+        return e, b
+
+    def cost(self, U, D, offsets=None) -> np.ndarray:
+        """V(p) for each of P parameter vectors; diverged rollouts cost ``BIG`` per log."""
+        e, bad = self.sse(U, D, offsets)
+        per_log = np.where(bad | ~np.isfinite(e.sum(-1)), BIG, e.sum(-1))
+        return per_log.sum(-1)
+
+    def run(self, U, D, offsets=None):
+        """Trajectories (P, L, N) of measured θ, measured d, u, true θ, true w; and the
+        normalised errors (P, L, 2), divergence flags (P, L)."""
+        m = self.model(U, D, offsets)
+        out, acc = closed_loop_run(m, self.data, self.const, **self._kw())
+        tr = [np.asarray(a).transpose(2, 1, 0) for a in out]
+        e = np.stack([np.asarray(acc[0]), np.asarray(acc[1])], -1).transpose(1, 0, 2)
+        return tr, e, np.asarray(acc[2]).T
+
+    def weights(self) -> np.ndarray:
+        """Per-sample weights (2, L, N) = 1/‖y − mean y‖² inside the window, else 0."""
+        return np.stack([np.asarray(self.data["w_th"]), np.asarray(self.data["w_d"])])
+
+    def fit_percent(self, e: np.ndarray) -> np.ndarray:
+        """fit % (…, L, 2) from normalised squared errors; NaN where a signal is absent."""
+        fp = 100.0 * (1.0 - np.sqrt(np.maximum(e, 0.0)))
+        return np.where(self.sst > 0, fp, np.nan)

@@ -1,0 +1,335 @@
+"""The result of a bench fit: parameters with uncertainty, fit %, figures, scenario file."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from flexarm.fit.logs import FitInputError
+from flexarm.fit.params import DOCS, UNITS, derived
+
+
+def check_physical(params: dict[str, float], source: str = "fit") -> None:
+    """Raise a clear error for non-physical values (inertia, stiffness, gain <= 0)."""
+    for name, what in (("hub_inertia", "hub inertia J"), ("link_inertia", "link inertia J_l"),
+                       ("link_stiffness", "link stiffness C"), ("link_frequency", "link frequency"),
+                       ("coulomb", "Coulomb friction"), ("viscous", "viscous friction")):
+        v = params.get(name)
+        if v is None:
+            continue
+        strict = name not in ("coulomb", "viscous")
+        if not np.isfinite(v) or (v <= 0 if strict else v < 0):
+            raise FitInputError(
+                f"{source}: non-physical result: {what} ({name}) = {v:.4g} "
+                f"{UNITS.get(name, 'N*m/rad')}; it must be {'> 0' if strict else '>= 0'}. "
+                "The model cannot explain the logs with physical values: check the data-sheet "
+                "values (gear ratio, motor constant, resistance, link length), the units of "
+                "the log columns and the controller declaration, or give bounds=")
+
+
+@dataclass
+class FitResult:
+    """Fitted parameters (SI) with standard errors, fit % per log and signal, and what is
+    needed to plot and to write a scenario. ``converged`` is False when a stage stopped
+    on its iteration budget; ``message`` says what happened, ``warnings`` what to check."""
+
+    params: dict[str, float]
+    std: dict[str, float]
+    derived: dict[str, float]
+    delays: dict[str, int]
+    fit_percent: dict[str, dict[str, float]]
+    converged: bool
+    message: str
+    warnings: list[str]
+    settings: dict[str, Any]
+    stages: dict[str, Any]
+    initial_states: dict[str, dict[str, float]]
+    rig: Any = None
+    logs: list = field(default_factory=list)
+    traj: list = field(default_factory=list)
+    seconds: float = 0.0
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def build(cls, *, logs, rig, space, U, D, offsets, std_u, fit_percent, diverged, traj,
+              glob, local, info, settings, seconds, objective) -> "FitResult":
+        params, std = {}, {}
+        for i, (name, d) in enumerate(zip(space.names, space.defs)):
+            params[name] = float(d.to_phys(U[i]))
+            std[name] = float(abs(d.dphys_du(U[i])) * std_u[i])
+        sign = int(2 * D[2] - 1)
+        params["tip_gain"] *= sign
+        first = lambda n: params.get(n, params.get(f"{n}[0]", 0.0))  # noqa: E731
+        der = derived({k: first(k) for k in ("hub_inertia", "link_frequency", "link_inertia")},
+                      rig.length)
+        if settings["friction"]:
+            for s in range(space.n_sessions):
+                sfx = "" if space.n_sessions == 1 else f"[{s}]"
+                der["static" + sfx] = params["coulomb" + sfx] + params["static_excess" + sfx]
+        check_physical({**params, **der})
+        names = [g.name for g in logs]
+        fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
+              for i, n in enumerate(names)}
+        d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
+        ini = {n: {"motor_angle": float(objective.hub0[i, 0]),
+                   "motor_velocity": float(objective.hub0[i, 1]),
+                   "tip_deflection": float(d0[0, i] / params["tip_gain"]),
+                   "tip_velocity": float(v0[0, i] / params["tip_gain"])}
+               for i, n in enumerate(names)}
+        warn = []
+        converged = bool(local["success"])
+        msg = []
+        if not glob.success:
+            msg.append(f"global stage stopped after {glob.nit} generations without meeting "
+                       f"its tolerance ({glob.message})")
+        if not local["success"]:
+            msg.append(f"local stage did not converge in {local['nfev']} evaluations "
+                       f"({local['message']})")
+        if converged:
+            msg.insert(0, "converged (local stage met its tolerance)")
+        else:
+            msg.insert(0, "NOT CONVERGED: the best parameters found are returned with their "
+                          "fit %; raise maxiter / local_nfev, or narrow the bounds")
+        for i in local["at_bounds"]:
+            warn.append(f"{space.names[i]} = {params[space.names[i]]:.4g} lies at a bound of "
+                        f"[{space.defs[i].lo:.4g}, {space.defs[i].hi:.4g}]; widen it with "
+                        f"bounds={{'{space.defs[i].name}': (lo, hi)}}")
+        for i, n in enumerate(names):
+            if diverged[i]:
+                warn.append(f"{n}: the fitted loop diverges in simulation")
+            for sig, v in fp[n].items():
+                if v is not None and v < 80:
+                    warn.append(f"{n}: fit {v:.1f} % on {sig} is low")
+        dl = {"motor_angle": int(D[0]), "tip_deflection": int(D[1])}
+        stages = {"global": {"cost": glob.cost, "nfev": glob.nfev, "generations": glob.nit,
+                             "success": glob.success, "message": glob.message,
+                             "seconds": glob.seconds},
+                  "local": {k: local[k] for k in ("cost", "nfev", "success", "message",
+                                                  "seconds", "rho")},
+                  "guesses": info}
+        return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
+                   ini, rig, list(logs), traj, seconds)
+
+    # ------------------------------------------------------------------ outputs
+    def to_dict(self) -> dict:
+        return _jsonable({
+            "converged": self.converged, "message": self.message, "warnings": self.warnings,
+            "parameters": {k: {"value": v, "std": self.std.get(k), "unit": UNITS.get(
+                k.split("[")[0], ""), "doc": DOCS.get(k.split("[")[0], "")}
+                for k, v in self.params.items()},
+            "derived": self.derived, "delays_samples": self.delays,
+            "fit_percent": self.fit_percent, "initial_states": self.initial_states,
+            "settings": self.settings, "stages": self.stages, "seconds": self.seconds,
+            "uncertainty_note": "standard errors from the final Jacobian, s^2 (J^T J)^-1 "
+                                "inflated for lag-1 residual correlation (AR(1)); they "
+                                "ignore model error and the jumps of stick-slip",
+        })
+
+    def to_json(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=2))
+        return path
+
+    def summary(self) -> str:
+        lines = [f"flexarm fit ({self.settings['mode']}, friction "
+                 f"{'on' if self.settings['friction'] else 'off'}): {self.message}"]
+        for k, v in self.params.items():
+            s = self.std.get(k, float("nan"))
+            rel = f" ({100 * s / abs(v):.1f} %)" if v else ""
+            lines.append(f"  {k:22s} {v: .5g} ± {s:.2g}{rel} {UNITS.get(k.split('[')[0], '')}")
+        for k, v in self.derived.items():
+            lines.append(f"  {k:22s} {v: .5g}")
+        lines.append(f"  delays (samples): hub angle {self.delays['motor_angle']}, "
+                     f"tip deflection {self.delays['tip_deflection']}")
+        lines.append("  fit %:")
+        for n, d in self.fit_percent.items():
+            lines.append(f"    {n}: " + ", ".join(
+                f"{k} {v:.1f}" if v is not None else f"{k} -" for k, v in d.items()))
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
+        lines.append(f"  time {self.seconds:.1f} s (global {self.stages['global']['seconds']:.1f}"
+                     f" s, {self.stages['global']['generations']} generations; local "
+                     f"{self.stages['local']['seconds']:.1f} s)")
+        return "\n".join(lines)
+
+    def scenario_dict(self) -> dict:
+        """The fitted arm as a scenario dict (SI), for :func:`flexarm.specs.scenario_from_dict`."""
+        return scenario_from_fit(self)[0]
+
+    def scenario(self):
+        from flexarm.specs import scenario_from_dict
+
+        return scenario_from_dict(self.scenario_dict(), source="fitted scenario")
+
+    def write_scenario(self, path: str | Path, overwrite: bool = False) -> Path:
+        """Write the fitted scenario as commented TOML (SI units); refuses to overwrite."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        d, comments = scenario_from_fit(self)
+        self.scenario()  # validates
+        path.write_text(toml_with_comments(d, comments, header=[
+            "Fitted by flexarm.fit from " + ", ".join(g.name for g in self.logs),
+            self.message,
+            "fit %: " + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items()
+                                                       if v is not None)
+                                  for n, d_ in self.fit_percent.items())]))
+        return path
+
+    def plots(self, directory: str | Path) -> list[Path]:
+        """One overlay figure per log (measured vs simulated hub angle, tip deflection,
+        command) as PNG files in ``directory``."""
+        return overlay_plots(directory, self.logs, self.traj, self.fit_percent, "fit")
+
+
+def _r(v) -> float | None:
+    return None if v is None or not np.isfinite(v) else round(float(v), 3)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not math.isfinite(float(x)) else float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
+    """(scenario dict, comments keyed by 'section.key') of a fit result (session 0)."""
+    p = {k.split("[")[0]: v for k, v in reversed(list(res.params.items()))}
+    rig, L = res.rig, res.rig.length
+    der = res.derived
+    motor = {**rig.motor, "inertia": p["hub_inertia"], "viscous": p["viscous"]}
+    if res.settings["friction"]:
+        fr = {"model": "coulomb", "coulomb": p["coulomb"],
+              "static": p["coulomb"] + p["static_excess"], "bias": p["bias"]}
+    else:
+        fr = {"model": "none"}
+    log0 = res.logs[0]
+    T = log0.dt
+    q = rig.encoder_quantum
+    sensors = {"motor_angle": {"delay": res.delays["motor_angle"]},
+               "tip_deflection": {"gain": p["tip_gain"], "delay": res.delays["tip_deflection"]}}
+    if q > 0:
+        counts = 2 * math.pi / q
+        bits = int(math.ceil(math.log2(counts) - 1e-9))
+        sensors["motor_angle"].update(bits=bits, range=q * 2**bits)
+    ctrl = log0.controller.model_dump() if log0.controller is not None else None
+    r = log0.columns["reference"]
+    steps = np.nonzero(np.abs(np.diff(r)) > 1e-9)[0]
+    ref = {"type": "step", "offset": float(r[0]),
+           "amplitude": float(r[steps[0] + 1] - r[0]) if steps.size else 0.0,
+           "start": float((steps[0] + 1) * T) if steps.size else 0.0}
+    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.fit from bench logs",
+         "arm": {"motor": motor, "friction": fr, "beam": {
+             "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
+             "damping_ratio": p["link_damping"],
+             "masses": [{"mass": der["tip_mass"], "joint": "pinned"}]}},
+         "sampling": {"period": float(f"{T:.10g}"), "delay": res.settings["computation_delay"]},
+         "sensors": sensors, "actuator": {"limit": rig.limit},
+         "simulation": {"duration": float(log0.time[-1] - log0.time[0]),
+                        "substeps": res.settings["substeps"]},
+         "reference": ref}
+    if ctrl is not None:
+        d["controller"] = ctrl
+    c = {"arm.motor.inertia": "kg*m^2, J: fitted hub inertia at the output shaft",
+         "arm.motor.viscous": "N*m*s/rad, B: fitted viscous friction",
+         "arm.motor.motor_constant": "V*s/rad, K_m (data sheet)",
+         "arm.motor.armature_resistance": "ohm (data sheet)",
+         "arm.motor.gear_ratio": "K_g (data sheet)",
+         "arm.friction.coulomb": "N*m, fitted Coulomb friction",
+         "arm.friction.static": "N*m, fitted breakaway (static) friction",
+         "arm.friction.bias": "N*m, fitted constant bias torque",
+         "arm.beam.flexural_rigidity": f"N*m^2, EI = C L / 3 with fitted stiffness "
+                                       f"C = {der['link_stiffness']:.5g} N*m/rad",
+         "arm.beam.damping_ratio": "fitted link damping ratio",
+         "arm.beam.length": "m, link length (data sheet)",
+         "sampling.period": "s", "sampling.delay": "samples of computation delay",
+         "sensors.motor_angle.delay": "samples, fitted",
+         "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
+         "sensors.tip_deflection.delay": "samples, fitted",
+         "simulation.duration": "s, length of the first log"}
+    c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
+                                 f"J_l = {p['link_inertia']:.5g} kg*m^2")
+    return d, c
+
+
+def toml_with_comments(d: dict, comments: dict, header: list[str]) -> str:
+    """TOML text of ``d`` (tomli_w values) with ``# comment`` after the commented keys."""
+    lines = [f"# {h}" for h in header] + [""]
+
+    def emit(prefix: str, table: dict, array_item: bool = False):
+        scalars = {k: v for k, v in table.items() if not isinstance(v, (dict, list))
+                   or (isinstance(v, list) and not (v and isinstance(v[0], dict)))}
+        if prefix:
+            lines.append(f"[[{prefix}]]" if array_item else f"[{prefix}]")
+        for k, v in scalars.items():
+            if v is None:
+                continue
+            text = tomli_w.dumps({k: v}).strip()
+            cm = comments.get(f"{prefix}.{k}" if prefix else k)
+            lines.append(f"{text:40s} # {cm}" if cm else text)
+        lines.append("")
+        for k, v in table.items():
+            name = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                emit(name, v)
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for item in v:
+                    emit(name, item, array_item=True)
+
+    emit("", d)
+    return "\n".join(lines)
+
+
+def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
+    """Measured vs simulated θ, d and the command for each log; PNG per log."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, g in enumerate(logs):
+        n = len(g)
+        t = g.time - g.time[0]
+        fig, ax = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
+        ax[0].plot(t, g.columns["reference"], "k:", lw=0.8, label="reference")
+        for a, col, k, unit, sc in ((ax[0], "motor_angle", 0, "rad", 1.0),
+                                    (ax[1], "tip_deflection", 1, "mm", 1e3)):
+            if col in g.columns:
+                a.plot(t, sc * g.columns[col], lw=0.9, label="measured")
+            a.plot(t, sc * traj[k][i, :n], lw=0.9, label="simulated")
+            fp = fit_percent.get(g.name, {}).get(col)
+            a.set_ylabel(f"{col.replace('_', ' ')} [{unit}]")
+            a.set_title(f"{col}: fit {fp:.1f} %" if fp is not None else col, fontsize=9)
+            a.legend(loc="best", fontsize=8)
+            a.grid(alpha=0.3)
+        if "voltage" in g.columns:
+            ax[2].plot(t, g.columns["voltage"], lw=0.8, label="logged")
+        ax[2].plot(t, traj[2][i, :n], lw=0.8, label="simulated")
+        ax[2].set_ylabel("command")
+        ax[2].legend(loc="best", fontsize=8)
+        ax[2].grid(alpha=0.3)
+        ax[2].set_xlabel("time [s]")
+        fig.suptitle(f"{g.name} ({tag})")
+        fig.tight_layout()
+        p = out / f"{Path(g.name).stem}_{tag}.png"
+        fig.savefig(p, dpi=90)
+        plt.close(fig)
+        paths.append(p)
+    return paths

@@ -1,0 +1,149 @@
+"""Bench fit: fast loop = flexarm's simulator; synthetic fit on two gain sets, validation
+on a third; friction-off comparison; bad input messages."""
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from flexarm.fit import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.fit.closed_loop import as_jax, closed_loop_run
+from flexarm.fit.report import check_physical
+from flexarm.fit.synthetic import synthetic_log
+from flexarm.sim.build import prepare
+from flexarm.sim.sampled import simulate_loop
+from flexarm.specs import load_scenario
+
+RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resistance=2.6,
+           link_length=0.42, gear_efficiency=0.9, motor_efficiency=0.69)
+GAINS = [(6, -40, 0.15, 0), (8, -60, 0.2, -0.5), (5, -20, 0.12, 0)]
+TRUE = {"hub_inertia": 2.08e-3, "link_inertia": 3.5e-3, "link_frequency": np.sqrt(1.2 / 3.5e-3),
+        "coulomb": 0.03, "tip_gain": 1.0}
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("bench")
+    sc = load_scenario("rotary-flexible-link")
+    return [synthetic_log(sc, g, d / f"log{i}.csv", duration=4.0, tip0=t0, tip_rate0=v0, seed=i)
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05)))]
+
+
+@pytest.fixture(scope="module")
+def fitted(logs):
+    t = time.perf_counter()
+    res = fit(logs[:2], **RIG, popsize=8, maxiter=25, global_seconds=4.0)
+    res.seconds_wall = time.perf_counter() - t
+    return res
+
+
+def test_fast_loop_equals_flexarm_simulator():
+    sc = load_scenario("rotary-flexible-link")
+    sc = sc.model_copy(update={"simulation": sc.simulation.model_copy(update={"duration": 2.0})})
+    p = prepare(sc)
+    x0 = p.model.initial_state(0.0, 0.0, 0.01)
+    sensors = {k: v.model_copy(update={"noise": 0.0}) for k, v in sc.sensors.items()}
+    p = prepare(sc.model_copy(update={"sensors": sensors}))
+    out = simulate_loop(p.loop, x0, p.references, p.n_samples)
+    L, m, EI = 0.42, 0.019841, 0.168
+    wc2 = 3 * EI / L**3 / m
+    ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
+    n = p.n_samples
+    const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3, q_th=2 * np.pi / 4096,
+                        q_d=0.0, limit=10.0, vel_tol=1e-3))
+    data = as_jax(dict(ref=p.references["reference"][None], y_th=np.zeros((1, n)),
+                       y_d=np.zeros((1, n)), w_th=np.zeros((1, n)), w_d=np.zeros((1, n)),
+                       volt=np.zeros((1, n)), K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
+    model = as_jax({k: np.full((1, 1), v) for k, v in dict(
+        J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04, bias=0.0,
+        gain=1.0, dth=0, dd=2, th0=0.0, om0=0.0, w0=0.01, wd0=0.0).items()})
+    tr, _ = closed_loop_run(model, data, const)
+    names = p.loop.sensors.names
+    for k, sig in enumerate(("motor_angle", "tip_deflection")):
+        np.testing.assert_allclose(np.asarray(tr[k])[:, 0, 0],
+                                   out["measured"][:, names.index(sig)], atol=1e-9)
+    np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], out["command"][:, 0], atol=1e-9)
+
+
+def test_fit_two_logs_validate_third(fitted, logs, tmp_path):
+    res = fitted
+    print(res.summary())
+    allp = {**res.params, **res.derived}
+    errs = {k: 100 * (allp[k] / v - 1) for k, v in TRUE.items()}
+    errs["link_stiffness"] = 100 * (allp["link_stiffness"] / 1.2 - 1)
+    print("parameter errors %:", {k: round(v, 2) for k, v in errs.items()})
+    for k, e in errs.items():
+        assert abs(e) < 5.0, (k, e)
+    for n, d in res.fit_percent.items():
+        assert d["motor_angle"] > 95 and d["tip_deflection"] > 95, (n, d)
+    v = validate(res.scenario(), [logs[2]])
+    fp = v["fit_percent"][logs[2].name]
+    print("held-out fit %:", fp)
+    assert fp["motor_angle"] >= 95 and fp["tip_deflection"] >= 95
+    # outputs: JSON, scenario file that flexarm loads, plots
+    res.to_json(tmp_path / "fit.json")
+    assert json.loads((tmp_path / "fit.json").read_text())["fit_percent"]
+    p = res.write_scenario(tmp_path / "fitted.toml")
+    assert load_scenario(p).arm.beam.masses[0].mass > 0
+    with pytest.raises(FileExistsError):
+        res.write_scenario(p)
+    assert len(res.plots(tmp_path / "plots")) == 2
+
+
+def test_friction_off_fits_clearly_worse(fitted, logs):
+    res0 = fit(logs[:2], **RIG, friction=False, popsize=8, maxiter=15, global_seconds=4.0)
+    with_f = validate(fitted.scenario(), [logs[2]])["fit_percent"][logs[2].name]
+    without = validate(res0.scenario(), [logs[2]])["fit_percent"][logs[2].name]
+    print("held-out fit % with friction", with_f, "without", without)
+    assert without["motor_angle"] < with_f["motor_angle"] - 5
+
+
+def test_not_converged_is_said(logs):
+    res = fit(logs[:1], **RIG, popsize=4, maxiter=1, local_nfev=1, global_seconds=1.0)
+    assert not res.converged and "NOT CONVERGED" in res.message
+    assert "NOT CONVERGED" in res.summary()
+    assert res.fit_percent[logs[0].name]["motor_angle"] is not None
+
+
+def test_controller_declarations(logs):
+    c = parse_controller("state_feedback K1=6 K2=-3 K3=0.213 K4=0")
+    assert (c.k1, c.k2, c.k3, c.k4, c.rate) == (6, -3, 0.213, 0, "backward")
+    c = parse_controller("pd KP=10 KD=0.3 rate=filtered tau=0.02")
+    assert (c.k1, c.k3, c.k2, c.rate, c.rate_time_constant) == (10, 0.3, 0, "filtered", 0.02)
+    assert read_bench_log(logs[0]).controller.k1 == 6
+    assert read_bench_log(logs[0], controller="pd KP=3 KD=0.1").controller.k1 == 3
+    with pytest.raises(FitInputError, match="not known"):
+        parse_controller("lqr K=1")
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_bad_inputs(tmp_path, logs):
+    head = "time,reference,voltage,motor_angle,tip_deflection\n"
+    rows = [f"{k * 1e-3:.3f},0,0,{0.001 * k},{0.0}" for k in range(100)]
+    with pytest.raises(FitInputError, match="no usable output column"):
+        read_bench_log(_write(tmp_path / "a.csv", "time,reference,voltage,tip_deflection\n" +
+                              "\n".join(f"{k * 1e-3:.3f},0,0,0" for k in range(100))))
+    bad = rows.copy()
+    bad[50] = "0.049,0,0,0,0"
+    with pytest.raises(FitInputError, match="b.csv.*time (repeats|decreases)"):
+        read_bench_log(_write(tmp_path / "b.csv", head + "\n".join(bad)))
+    bad = rows.copy()
+    bad[50] = "0.0505,0,0,0,0"
+    with pytest.raises(FitInputError, match="c.csv.*non-uniform"):
+        read_bench_log(_write(tmp_path / "c.csv", head + "\n".join(bad)))
+    bad = rows.copy()
+    bad[50] = "0.050,0,0,nan,0"
+    with pytest.raises(FitInputError, match="d.csv.*'motor_angle'.*NaN"):
+        read_bench_log(_write(tmp_path / "d.csv", head + "\n".join(bad)))
+    with pytest.raises(FitInputError, match="e.csv: field 'controller': no controller declared"):
+        fit([_write(tmp_path / "e.csv", head + "\n".join(rows))], **RIG)
+    with pytest.raises(FitInputError, match="non-physical.*hub inertia"):
+        check_physical({"hub_inertia": -1e-3})
+    sc = load_scenario("rotary-flexible-link")
+    with pytest.raises(FitInputError, match="log0.csv: field 'controller'.*unstable"):
+        validate(sc, [logs[0]], controller="state_feedback K1=-6 K2=0 K3=0 K4=0")
