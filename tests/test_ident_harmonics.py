@@ -48,7 +48,7 @@ def test_frequency_exact_on_sinusoid():
 
 def test_phasors_exact_on_analytic_signal():
     log = _log()
-    a = analyse_log(log, n_max=5)
+    a = analyse_log(log, n_max=5, held=())  # analytic continuous signals
     assert a.omega0 == pytest.approx(W0, rel=1e-10)
     for n, X in PHASORS.items():
         assert abs(a.phasor("current", n) - X) < 1e-9, n
@@ -109,3 +109,23 @@ def test_saturated_current_warns_with_file_and_level(tmp_path):
         assert analyse_log(_log()).saturation is None
     q = np.round(2048 * np.sin(W0 * clipped.time)) / 2048
     assert saturation_level(q) is None
+
+
+def test_held_command_phasor_is_that_of_the_zoh_signal():
+    """A logged command is held from one sample to the next: its corrected phasor equals
+    the Fourier coefficient of the held (staircase) signal, integrated on a fine grid."""
+    from flexarm.ident.harmonics import fourier_phasors, zoh_factor
+
+    T, w, n = 0.003, 23.0, 6000
+    t = np.arange(n) * T
+    x = np.cos(w * t + 0.3)
+    stop = int(np.floor(n * T * w / (2 * np.pi)) * 2 * np.pi / w / T)
+    sampled = fourier_phasors(t, x, w, 1, window=(0, stop))[1] * zoh_factor(w, T)
+    sub = 200  # exact staircase on a fine grid
+    tf = (np.arange(stop * sub) + 0.5) * (T / sub)
+    xs = np.repeat(x[:stop], sub)
+    span = stop * T
+    exact = 2 / span * np.sum(xs * np.exp(-1j * w * tf)) * (T / sub)
+    assert abs(sampled - exact) < 2e-3 * abs(exact)  # window not whole periods of the fine grid
+    assert abs(np.angle(sampled / x[0]) - np.angle(exact / x[0])) < 2e-3
+    assert abs(np.angle(zoh_factor(w, T))) == pytest.approx(w * T / 2, rel=1e-12)
