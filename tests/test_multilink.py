@@ -188,15 +188,18 @@ def test_plant_protocol_and_signals(bench):
     assert isinstance(P, Plant) and P.n_states == 12 and P.n_inputs == 2
     x = bench.state(theta=[-math.pi / 2, 0.0])
     np.testing.assert_allclose(bench.tip_position(x[:6]), [0.0, -1.0], atol=1e-15)
-    sig = np.asarray(jax.jit(lambda x, u: P.signals(x, u))(jnp.asarray(x), jnp.zeros(2)))
-    np.testing.assert_allclose(sig[:6], x[:6])
-    # hanging straight down is an equilibrium with zero torque (ẋ = 0); batches by vmap
     xs = np.tile(x, (4, 1))
-    out = jax.jit(jax.vmap(lambda x, u: P.rhs(x, u), in_axes=(0, None)))(
-        jnp.asarray(xs), jnp.zeros(2))
-    assert out.shape == (4, 12)
-    np.testing.assert_allclose(out, 0.0, atol=1e-12)
+    sig = np.asarray(jax.jit(jax.vmap(lambda x: P.signals(x, jnp.zeros(2))))(jnp.asarray(xs)))
+    assert sig.shape == (4, 8)
+    np.testing.assert_allclose(sig[:, :6], xs[:, :6])
+    np.testing.assert_allclose(sig[:, 6:], [[0.0, -1.0]] * 4, atol=1e-15)
+    # hanging straight down is an equilibrium with zero torque: ẋ = 0
+    np.testing.assert_allclose(bench.rhs(x, np.zeros(2)), 0.0, atol=1e-12)
     assert np.all(np.isinf(np.asarray(P.command_limit)))
+    # gravity along +x: the arm at rest along the x axis is the equilibrium instead
+    sideways = build_multilink(benchmark_arm().model_copy(update={"gravity_direction": (2.0, 0.0)}))
+    np.testing.assert_allclose(sideways.rhs(bench.state(), np.zeros(2)), 0.0, atol=1e-12)
+    assert np.abs(bench.rhs(bench.state(), np.zeros(2))).max() > 1.0
 
 
 @pytest.mark.parametrize("gravity", [0.0, G])

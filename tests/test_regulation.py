@@ -130,6 +130,13 @@ def test_interpolating_trajectory_lowers_the_peak_torque(model, params, x0, run8
     assert eth.max() < 1.0  # the move ends at 1 s; 0.49 deg left at 2 s (step: 0.27 deg)
 
 
+def test_torque_limit_saturates_the_command(params, x0):
+    limited = build_multilink(benchmark_arm().model_copy(update={"torque_limit": [5.0, 2.0]}))
+    run = R.simulate_regulation(limited, R.law_pd_constant, x0, 2.0, 1e-3, params=params)
+    np.testing.assert_allclose(run.u[0], [5.0, params.g_d[1]], rtol=1e-12)
+    assert np.all(np.abs(run.u) <= np.array([5.0, 2.0]) + 1e-12)
+
+
 def test_divergence_is_reported(model, x0):
     p = R.regulation_params(model, [1e5, 1e5], [1e3, 1e3], THETA_D)
     with pytest.raises(R.SimulationDiverged, match=r"t = .* s: \w+ =") as err:
