@@ -461,13 +461,25 @@ class MultiLinkPlant(Plant):
         return jnp.concatenate([u, -elastic]) - h
 
     def acceleration(self, x: Array, u: Array) -> Array:
-        """q̈: unrolled Cholesky solve of B q̈ = generalized_forces. B and the forces pass an
-        optimisation barrier so that XLA computes them once (measured 2x faster)."""
-        nq = self.n_q
-        q, qd = x[:nq], x[nq:]
-        B, h = self._terms(q, qd, self.gamma)
-        B, f = jax.lax.optimization_barrier((B, self._forces(q, qd, u, h)))
-        return chol_solve(B, f)
+        """q̈: unrolled Cholesky solve of B q̈ = generalized_forces, all in scalars. B and the
+        forces pass an optimisation barrier so that XLA computes them once (measured 2x
+        faster than letting it fuse B into every consumer)."""
+        n, nq = self.n_links, self.n_q
+        nd = nq - n
+        ql = [x[k] for k in range(nq)]
+        qdl = [x[nq + k] for k in range(nq)]
+        B, h = self._terms_lists(ql, qdl, (self.gamma[0], self.gamma[1]))
+        el = []  # K δ + D δ̇, link by link (K and D are block diagonal)
+        for sl in self._slices():
+            for i in range(sl.start, sl.stop):
+                el.append(_add(*(_add(_mul(self.K[i, j], ql[n + j]), _mul(self.D[i, j], qdl[n + j]))
+                                 for j in range(sl.start, sl.stop))))
+        f = [_add(u[k], _mul(-1.0, h[k])) for k in range(n)] + \
+            [_add(_mul(-1.0, el[k]), _mul(-1.0, h[n + k])) for k in range(nd)]
+        f = [jnp.zeros(()) + t if _is_zero(t) else t for t in f]
+        Bs, fs = jax.lax.optimization_barrier(
+            (jnp.stack([jnp.stack(r) for r in B]), jnp.stack(f)))
+        return chol_solve(Bs, fs)
 
     # ----------------------------------------------------------------- Plant protocol
     def rhs(self, x: Array, u: Array) -> Array:
