@@ -2,7 +2,7 @@
 
 Model (:mod:`flexarm.models.multilink`): B(q)q̈ + c(q, q̇) + g(q) + [0; Dδ̇ + Kδ] = [u; 0],
 q = (θ, δ), g = (g_θ, g_δ). The paper's equations and data are only partly available; the
-forms below are the project's reconstruction (docs: /shared/reference/deluca-siciliano.md).
+forms below are the project's reconstruction (shared/reference/deluca-siciliano.md).
 
 * Residual deflection at the target, DLS eq. (9):  K δ_d + g_δ(θ_d, δ_d) = 0, solved for δ_d
   by Newton's method with the Jacobian K + ∂g_δ/∂δ from jax (:func:`residual_deflection`).
