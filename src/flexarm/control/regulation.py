@@ -1,0 +1,458 @@
+"""Regulation of flexible arms under gravity: De Luca & Siciliano (IEEE TRA 9(4), 1993), "DLS".
+
+Model (:mod:`flexarm.models.multilink`): B(q)q̈ + c(q, q̇) + g(q) + [0; Dδ̇ + Kδ] = [u; 0],
+q = (θ, δ), g = (g_θ, g_δ). The paper's equations and data are only partly available; the
+forms below are the project's reconstruction (shared/reference/deluca-siciliano.md).
+
+* Residual deflection at the target, DLS eq. (9):  K δ_d + g_δ(θ_d, δ_d) = 0, solved for δ_d
+  by Newton's method with the Jacobian K + ∂g_δ/∂δ from jax (:func:`residual_deflection`).
+* PD law with constant gravity compensation, DLS eq. (8) (no deflection feedback):
+
+      u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d)                       (:func:`law_pd_constant`)
+
+* Law (30), on-line gravity compensation; the exact form is unknown, two variants:
+
+      (30a) u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ, δ)        measured δ    (:func:`law_pd_online`)
+      (30b) u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ, δ̄(θ))    quasi-static δ̄ (:func:`law_pd_quasistatic`)
+
+  with δ̄(θ) solving K δ̄ + g_δ(θ, δ̄) = 0 (a fixed number of Newton steps from δ = 0 inside
+  the loop, default 4). At the target both reduce to eq. (8)'s compensation.
+* Interpolating trajectory (the paper's remedy for large gains and large initial errors):
+  with ``duration`` T > 0 the set point θ_d is replaced by the quintic
+  θ_r(t) = θ_0 + (θ_d − θ_0) s(t/T), s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (s = 1 after T), and the damping
+  acts on θ̇ − θ̇_r.
+* α, DLS eq. (6): a bound ‖∂g/∂q‖₂ ≤ α, over a region of (θ, δ) (:func:`alpha_bound`: random
+  samples, then a bounded local maximisation from the best ones) or a posteriori along a
+  simulated trajectory (:func:`alpha_along`; the paper reports α = 17.67 for its run).
+* Sufficient conditions for global asymptotic stability, DLS eqs. (14)–(15), reconstructed as
+
+      (14) λ_min(K) > α,        (15) λ_min(K_P) > α,
+
+  which together give λ_min(diag(K_P, K)) > α: with V = ½q̇ᵀBq̇ + ½q̃ᵀdiag(K_P, K)q̃ + U_g(q)
+  − U_g(q_d) − q̃ᵀg(q_d) positive definite and V̇ = −θ̇ᵀK_Dθ̇ − δ̇ᵀDδ̇ ≤ 0, LaSalle gives
+  convergence (:func:`stability_conditions` reports which hold and the margins). Note the
+  mixed units: K in N/m (δ in m), K_P in N·m/rad, α the 2-norm of a matrix in SI units.
+
+Laws are pure JAX functions ``u = law(params, x, t)`` with a pytree ``params``
+(:class:`RegulationParams`), usable in any JAX closed loop; gains are traced, so a sweep
+compiles once. :func:`simulate_regulation` integrates the continuous closed loop (fixed-step
+RK4, default 0.1 ms, or diffrax Tsit5 with a PID step-size controller) and raises
+:class:`SimulationDiverged` with the time and the variable when the state blows up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
+
+
+class RegulationError(ValueError):
+    """A regulation problem without a solution (e.g. no residual deflection found)."""
+
+
+class SimulationDiverged(RuntimeError):
+    """The closed-loop state became non-finite or exceeded the bound."""
+
+
+# --------------------------------------------------------------------------- statics
+def _static_residual(plant: MultiLinkPlant, theta: Array, delta: Array) -> Array:
+    """F(δ) = K δ + g_δ(θ, δ) (N)."""
+    n = plant.n_links
+    return plant.K @ delta + plant.gravity(jnp.concatenate([theta, delta]))[n:]
+
+
+def quasi_static_deflection(plant: MultiLinkPlant, theta: Array, iterations: int = 4,
+                            delta0: Array | None = None) -> Array:
+    """δ̄(θ): K δ̄ + g_δ(θ, δ̄) = 0 by ``iterations`` Newton steps from ``delta0`` (default 0);
+    pure JAX (a fori_loop, so the step is compiled once), usable inside a closed loop."""
+    d0 = jnp.zeros(plant.n_delta) if delta0 is None else delta0
+    if plant.n_delta == 0:
+        return d0
+
+    def newton(_, d):
+        F = _static_residual(plant, theta, d)
+        Jm = jax.jacfwd(lambda dd: _static_residual(plant, theta, dd))(d)
+        return d - chol_solve(0.5 * (Jm + Jm.T), F)
+
+    return jax.lax.fori_loop(0, iterations, newton, d0)
+
+
+@eqx.filter_jit
+def _newton_parts(plant: MultiLinkPlant, theta: Array, delta: Array):
+    F = _static_residual(plant, theta, delta)
+    Jm = jax.jacfwd(lambda dd: _static_residual(plant, theta, dd))(delta)
+    return F, Jm
+
+
+def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: float = 1e-12,
+                        max_iter: int = 50) -> np.ndarray:
+    """δ_d solving DLS eq. (9), K δ_d + g_δ(θ_d, δ_d) = 0 (m), by Newton's method.
+
+    Converged when ‖F‖ ≤ tol·(1 + ‖g_δ(θ_d, 0)‖) (N). Raises :class:`RegulationError` if the
+    Jacobian K + ∂g_δ/∂δ is singular or Newton does not converge (gravity too strong for
+    the stiffness)."""
+    plant = model.plant
+    theta = jnp.asarray(theta_d, float).reshape(plant.n_links)
+    d = np.zeros(plant.n_delta) if delta0 is None else np.asarray(delta0, float)
+    if plant.n_delta == 0:
+        return d
+    F0, _ = _newton_parts(plant, theta, jnp.zeros(plant.n_delta))
+    scale = 1.0 + float(np.linalg.norm(F0))
+    for it in range(max_iter):
+        F, Jm = (np.asarray(a) for a in _newton_parts(plant, theta, jnp.asarray(d)))
+        if np.linalg.norm(F) <= tol * scale:
+            return d
+        try:
+            step = np.linalg.solve(Jm, F)
+        except np.linalg.LinAlgError:
+            raise RegulationError(
+                f"K + ∂g_δ/∂δ is singular at δ = {d}; no residual deflection at θ_d = "
+                f"{np.asarray(theta)} rad") from None
+        d = d - step
+        if not np.all(np.isfinite(d)):
+            break
+    raise RegulationError(
+        f"Newton for K δ + g_δ(θ_d, δ) = 0 did not converge in {max_iter} iterations at "
+        f"θ_d = {np.asarray(theta)} rad (last |F| = {np.linalg.norm(F):.3g} N); the links may "
+        "be too flexible for the load"
+    )
+
+
+def gravity_torque(model: MultiLinkModel, theta, delta) -> np.ndarray:
+    """g_θ(θ, δ) (N·m): the joint torques that hold the arm at rest at (θ, δ)."""
+    q = np.concatenate([np.asarray(theta, float).ravel(), np.asarray(delta, float).ravel()])
+    return model.gravity(q)[:model.n_links]
+
+
+# --------------------------------------------------------------------------- laws
+class RegulationParams(eqx.Module):
+    """Parameters of the regulation laws (a pytree: every array is traced).
+
+    KP, KD: (n, n) gains (N·m/rad, N·m·s/rad); theta_d (rad), delta_d (m): the target and its
+    residual deflection (eq. 9); g_d = g_θ(θ_d, δ_d) (N·m); theta_0 (rad), duration (s): the
+    quintic interpolating trajectory (duration 0: step to θ_d); plant: for on-line gravity.
+    """
+
+    plant: MultiLinkPlant
+    KP: Array
+    KD: Array
+    theta_d: Array
+    delta_d: Array
+    g_d: Array
+    theta_0: Array
+    duration: Array
+    newton_iterations: int = eqx.field(static=True, default=4)
+
+
+def _gain(k, n: int, name: str) -> np.ndarray:
+    k = np.asarray(k, float)
+    if k.ndim == 0:
+        k = np.full(n, float(k))
+    if k.ndim == 1:
+        if k.shape != (n,):
+            raise ValueError(f"{name}: expected {n} diagonal values, got {k.shape[0]}")
+        k = np.diag(k)
+    if k.shape != (n, n):
+        raise ValueError(f"{name}: expected an ({n}, {n}) matrix, got shape {k.shape}")
+    return k
+
+
+def regulation_params(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
+                      duration: float = 0.0, newton_iterations: int = 4) -> RegulationParams:
+    """Parameters for the laws: KP, KD as scalars, diagonals or matrices; δ_d from eq. (9)."""
+    n = model.n_links
+    theta_d = np.asarray(theta_d, float).reshape(n)
+    delta_d = residual_deflection(model, theta_d)
+    g_d = gravity_torque(model, theta_d, delta_d)
+    if duration < 0:
+        raise ValueError(f"duration must be >= 0 s; got {duration}")
+    if duration > 0 and theta_0 is None:
+        raise ValueError("an interpolating trajectory (duration > 0) needs theta_0")
+    th0 = theta_d if theta_0 is None else np.asarray(theta_0, float).reshape(n)
+    f = jnp.asarray
+    return RegulationParams(plant=model.plant, KP=f(_gain(KP, n, "KP")), KD=f(_gain(KD, n, "KD")),
+                            theta_d=f(theta_d), delta_d=f(delta_d), g_d=f(g_d), theta_0=f(th0),
+                            duration=f(float(duration)), newton_iterations=newton_iterations)
+
+
+def reference(p: RegulationParams, t) -> tuple[Array, Array]:
+    """θ_r(t), θ̇_r(t): quintic from θ_0 to θ_d over ``duration`` (θ_d, 0 when duration = 0)."""
+    T = p.duration
+    safe_T = jnp.where(T > 0, T, 1.0)
+    tau = jnp.clip(t / safe_T, 0.0, 1.0)
+    s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+    sd = 30.0 * tau**2 * (1.0 - tau) ** 2 / safe_T
+    s = jnp.where(T > 0, s, 1.0)
+    sd = jnp.where(T > 0, sd, 0.0)
+    dth = p.theta_d - p.theta_0
+    return p.theta_0 + dth * s, dth * sd
+
+
+def _pd(p: RegulationParams, x: Array, t) -> Array:
+    n, nq = p.plant.n_links, p.plant.n_q
+    th_r, thd_r = reference(p, t)
+    return p.KP @ (th_r - x[:n]) - p.KD @ (x[nq:nq + n] - thd_r)
+
+
+def law_pd_constant(p: RegulationParams, x: Array, t) -> Array:
+    """DLS eq. (8): u = K_P(θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d) (N·m)."""
+    return _pd(p, x, t) + p.g_d
+
+
+def law_pd_online(p: RegulationParams, x: Array, t) -> Array:
+    """Law (30), variant a: u = K_P(θ_d − θ) − K_D θ̇ + g_θ(θ, δ), measured (θ, δ)."""
+    nq = p.plant.n_q
+    return _pd(p, x, t) + p.plant.gravity(x[:nq])[:p.plant.n_links]
+
+
+def law_pd_quasistatic(p: RegulationParams, x: Array, t) -> Array:
+    """Law (30), variant b: u = K_P(θ_d − θ) − K_D θ̇ + g_θ(θ, δ̄(θ)), δ̄ quasi-static."""
+    n = p.plant.n_links
+    th = x[:n]
+    db = quasi_static_deflection(p.plant, th, p.newton_iterations)
+    return _pd(p, x, t) + p.plant.gravity(jnp.concatenate([th, db]))[:n]
+
+
+def law_zero(p: MultiLinkPlant, x: Array, t) -> Array:
+    """No input (free motion): u = 0; ``p`` is the plant (for the number of joints)."""
+    return jnp.zeros(p.n_links) + 0.0 * x[0]
+
+
+LAWS: dict[str, Callable] = {
+    "pd_constant": law_pd_constant,
+    "pd_online": law_pd_online,
+    "pd_quasistatic": law_pd_quasistatic,
+}
+
+
+# --------------------------------------------------------------------------- α and conditions
+@eqx.filter_jit
+def _gjac_norms(plant: MultiLinkPlant, qs: Array) -> Array:
+    def one(q):
+        return jnp.max(jnp.abs(jnp.linalg.eigvalsh(plant.gravity_jacobian(q))))
+    return jax.vmap(one)(qs)
+
+
+@dataclass(frozen=True)
+class AlphaBound:
+    """α = max ‖∂g/∂q‖₂ found, and the configuration q where it is reached."""
+
+    alpha: float
+    q: np.ndarray
+    n_evaluations: int
+
+
+def alpha_bound(model: MultiLinkModel, theta_low, theta_high, delta_max, *,
+                n_samples: int = 4000, seed: int = 0, refine: int = 5) -> AlphaBound:
+    """α of DLS eq. (6) over the box θ ∈ [θ_low, θ_high] (rad), |δ| ≤ δ_max (m, per mode):
+    the largest ‖∂g/∂q‖₂ over random samples, then a bounded local maximisation
+    (L-BFGS-B) from the ``refine`` best samples. A lower estimate of the true supremum."""
+    from scipy.optimize import minimize
+
+    n, nd = model.n_links, model.n_delta
+    lo = np.concatenate([np.broadcast_to(np.asarray(theta_low, float), (n,)),
+                         -np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,))])
+    hi = np.concatenate([np.broadcast_to(np.asarray(theta_high, float), (n,)),
+                         np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,))])
+    rng = np.random.default_rng(seed)
+    qs = lo + (hi - lo) * rng.random((n_samples, n + nd))
+    vals = np.asarray(_gjac_norms(model.plant, jnp.asarray(qs)))
+    best = int(np.argmax(vals))
+    alpha, qbest, nev = float(vals[best]), qs[best], n_samples
+
+    def neg(q):
+        return -float(_gjac_norms(model.plant, jnp.asarray(q[None, :]))[0])
+
+    for k in np.argsort(vals)[::-1][:refine]:
+        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                       options={"maxiter": 50})
+        nev += res.nfev
+        if -res.fun > alpha:
+            alpha, qbest = float(-res.fun), res.x
+    return AlphaBound(alpha, np.asarray(qbest), nev)
+
+
+def alpha_along(model: MultiLinkModel, states) -> tuple[float, int]:
+    """α a posteriori: max over the samples of a trajectory x(t) of ‖∂g/∂q(q(t))‖₂; returns
+    (α, index of the sample where it is reached)."""
+    x = np.atleast_2d(np.asarray(states, float))
+    vals = np.asarray(_gjac_norms(model.plant, jnp.asarray(x[:, :model.n_q])))
+    k = int(np.argmax(vals))
+    return float(vals[k]), k
+
+
+@dataclass(frozen=True)
+class StabilityConditions:
+    """DLS (14) λ_min(K) > α and (15) λ_min(K_P) > α (reconstructed forms), with margins."""
+
+    alpha: float
+    lambda_min_K: float
+    lambda_min_KP: float
+
+    @property
+    def margin_14(self) -> float:
+        return self.lambda_min_K - self.alpha
+
+    @property
+    def margin_15(self) -> float:
+        return self.lambda_min_KP - self.alpha
+
+    @property
+    def holds_14(self) -> bool:
+        return self.margin_14 > 0
+
+    @property
+    def holds_15(self) -> bool:
+        return self.margin_15 > 0
+
+    @property
+    def holds(self) -> bool:
+        return self.holds_14 and self.holds_15
+
+    def summary(self) -> str:
+        def line(tag, name, lam, margin, ok):
+            return (f"({tag}) {name} = {lam:.4g} {'>' if ok else '<='} α = {self.alpha:.4g}: "
+                    f"{'holds' if ok else 'FAILS'} (margin {margin:+.4g})")
+        return "\n".join([
+            line("14", "λ_min(K)", self.lambda_min_K, self.margin_14, self.holds_14),
+            line("15", "λ_min(K_P)", self.lambda_min_KP, self.margin_15, self.holds_15),
+        ])
+
+
+def stability_conditions(model: MultiLinkModel, KP, alpha: float) -> StabilityConditions:
+    """Check the sufficient conditions (14)–(15) for the gains KP and the bound α."""
+    n = model.n_links
+    KPm = _gain(KP, n, "KP")
+    lk = float(np.linalg.eigvalsh(model.K).min()) if model.n_delta else float("inf")
+    return StabilityConditions(float(alpha), lk, float(np.linalg.eigvalsh(0.5 * (KPm + KPm.T)).min()))
+
+
+# --------------------------------------------------------------------------- simulation
+@dataclass(frozen=True)
+class RegulationRun:
+    """A closed-loop run: times t (s), states x (rad, m, rad/s, m/s), applied torques u (N·m)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    state_names: tuple[str, ...]
+    n_links: int
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.x[:, :self.n_links]
+
+    @property
+    def delta(self) -> np.ndarray:
+        nq = self.x.shape[1] // 2
+        return self.x[:, self.n_links:nq]
+
+
+def _saturate(plant: MultiLinkPlant, u: Array) -> Array:
+    lim = plant.command_limit
+    return jnp.clip(u, -lim, lim)
+
+
+@eqx.filter_jit
+def _run_rk4(plant, law, params, x0, h, n_sub, n_out: int):
+    A = jnp.array([0.0, 0.5, 0.5, 1.0])
+    W = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6.0
+
+    def f(x, t):
+        return plant.rhs(x, _saturate(plant, law(params, x, t)))
+
+    def step(k, carry):
+        x, t = carry
+
+        def stage(c, ab):
+            acc, kk = c
+            kk = f(x + ab[0] * h * kk, t + ab[0] * h)
+            return (acc + ab[1] * kk, kk), None
+
+        (acc, _), _ = jax.lax.scan(stage, (jnp.zeros_like(x), jnp.zeros_like(x)), (A, W))
+        return x + h * acc, t + h
+
+    def sample(carry, _):
+        carry = jax.lax.fori_loop(0, n_sub, step, carry)
+        return carry, carry[0]
+
+    _, xs = jax.lax.scan(sample, (x0, jnp.zeros(())), None, length=n_out)
+    xs = jnp.concatenate([x0[None], xs])
+    ts = jnp.arange(n_out + 1) * (h * n_sub)
+    us = jax.vmap(lambda x, t: _saturate(plant, law(params, x, t)))(xs, ts)
+    return ts, xs, us
+
+
+@eqx.filter_jit
+def _run_tsit5(plant, law, params, x0, ts, rtol, atol, dt0, max_steps: int):
+    import diffrax
+
+    def f(t, x, args):
+        return plant.rhs(x, _saturate(plant, law(params, x, t)))
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(f), diffrax.Tsit5(), ts[0], ts[-1], dt0, x0,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=max_steps, throw=False)
+    xs = sol.ys
+    us = jax.vmap(lambda x, t: _saturate(plant, law(params, x, t)))(xs, ts)
+    return xs, us, sol.result == diffrax.RESULTS.successful, sol.stats["num_steps"]
+
+
+def simulate_regulation(model: MultiLinkModel, law: Callable, x0, t_final: float,
+                        dt: float = 1e-3, *, params=None, method: str = "rk4",
+                        step: float = 1e-4, rtol: float = 1e-8, atol: float = 1e-10,
+                        max_steps: int = 2_000_000, bound: float = 1e4) -> RegulationRun:
+    """Continuous-time closed loop ẋ = f(x, sat(law(params, x, t))) from x0 over [0, t_final].
+
+    Outputs every ``dt`` (s). ``method``: ``rk4`` (fixed step ``step``, default 0.1 ms; dt is
+    rounded to a whole number of steps) or ``tsit5`` (diffrax, adaptive, ``rtol``/``atol``).
+    Raises :class:`SimulationDiverged` naming the first time and state variable that is
+    non-finite or larger than ``bound`` in absolute value (SI units), or the time at which
+    the adaptive solver gave up."""
+    plant = model.plant
+    x0 = jnp.asarray(x0, float).reshape(2 * model.n_q)
+    if not (t_final > 0 and dt > 0):
+        raise ValueError(f"t_final and dt must be > 0; got {t_final}, {dt}")
+    n_out = int(round(t_final / dt))
+    if n_out < 1:
+        raise ValueError(f"dt = {dt} s is longer than t_final = {t_final} s")
+    if method == "rk4":
+        n_sub = max(1, int(round(dt / step)))
+        ts, xs, us = _run_rk4(plant, law, params, x0, jnp.asarray(dt / n_sub),
+                              jnp.asarray(n_sub), n_out)
+        ok, t_fail = True, None
+    elif method == "tsit5":
+        ts = jnp.linspace(0.0, n_out * dt, n_out + 1)
+        xs, us, ok, _ = _run_tsit5(plant, law, params, x0, ts, rtol, atol,
+                                   min(dt, step), max_steps)
+        ok = bool(ok)
+        t_fail = None
+    else:
+        raise ValueError(f"method must be 'rk4' or 'tsit5'; got {method!r}")
+    ts, xs, us = np.asarray(ts), np.asarray(xs), np.asarray(us)
+    bad = ~np.isfinite(xs) | (np.abs(np.nan_to_num(xs, nan=np.inf)) > bound)
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        j = int(np.argmax(bad[k]))
+        raise SimulationDiverged(
+            f"closed loop diverged at t = {ts[k]:.6g} s: {plant.state_names[j]} = {xs[k, j]:.4g} "
+            f"(bound ±{bound:g}); reduce the gains or the step ({method}, step "
+            f"{step if method == 'rk4' else 'adaptive'}), or use an interpolating trajectory"
+        )
+    if not ok:
+        t_fail = ts[-1]
+        raise SimulationDiverged(
+            f"adaptive solver (tsit5) failed before t = {t_fail:.6g} s (step size collapsed "
+            f"or max_steps = {max_steps} reached): the closed loop is stiff or diverging"
+        )
+    return RegulationRun(ts, xs, us, plant.state_names, model.n_links)
