@@ -186,20 +186,28 @@ def regulation_params(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
 def reference(p: RegulationParams, t) -> tuple[Array, Array]:
     """θ_r(t), θ̇_r(t): quintic from θ_0 to θ_d over ``duration`` (θ_d, 0 when duration = 0)."""
     T = p.duration
-    safe_T = jnp.where(T > 0, T, 1.0)
-    tau = jnp.clip(t / safe_T, 0.0, 1.0)
+    inv_T = jnp.where(T > 0, 1.0 / jnp.where(T > 0, T, 1.0), 0.0)  # loop-invariant: hoisted
+    tau = jnp.clip(t * inv_T, 0.0, 1.0)
     s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
-    sd = 30.0 * tau**2 * (1.0 - tau) ** 2 / safe_T
+    sd = 30.0 * tau**2 * (1.0 - tau) ** 2 * inv_T
     s = jnp.where(T > 0, s, 1.0)
-    sd = jnp.where(T > 0, sd, 0.0)
     dth = p.theta_d - p.theta_0
     return p.theta_0 + dth * s, dth * sd
+
+
+def _matvec(M: Array, v: Array) -> Array:
+    """M v for a small (n, n) M as a sum of column products: elementwise arithmetic that XLA
+    fuses with its neighbours (a ``dot`` is a separate library call on CPU)."""
+    out = M[:, 0] * v[0]
+    for j in range(1, v.shape[0]):
+        out = out + M[:, j] * v[j]
+    return out
 
 
 def _pd(p: RegulationParams, x: Array, t) -> Array:
     n, nq = p.plant.n_links, p.plant.n_q
     th_r, thd_r = reference(p, t)
-    return p.KP @ (th_r - x[:n]) - p.KD @ (x[nq:nq + n] - thd_r)
+    return _matvec(p.KP, th_r - x[:n]) - _matvec(p.KD, x[nq:nq + n] - thd_r)
 
 
 def law_pd_constant(p: RegulationParams, x: Array, t) -> Array:
@@ -357,17 +365,18 @@ class RegulationRun:
 
 
 def _saturate(plant: MultiLinkPlant, u: Array) -> Array:
+    """Clip u (shape (n_u, *batch)) to the plant's torque limits."""
     lim = plant.command_limit
+    lim = lim.reshape(lim.shape + (1,) * (jnp.ndim(u) - 1))
     return jnp.clip(u, -lim, lim)
 
 
-@eqx.filter_jit
-def _run_rk4(plant, law, params, x0, h, n_sub, n_out: int):
+def _rk4(f, x0: Array, h, n_sub, n_out: int) -> Array:
+    """Classical RK4 with step h from x0 (shape (n_x, *batch)), n_sub steps per output,
+    n_out outputs: the states at 0, n_sub·h, …, shape (n_out + 1, *x0.shape). The four
+    stages run in a scan (measured as fast as unrolling them, and 2.5x quicker to compile)."""
     A = jnp.array([0.0, 0.5, 0.5, 1.0])
     W = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6.0
-
-    def f(x, t):
-        return plant.rhs(x, _saturate(plant, law(params, x, t)))
 
     def step(k, carry):
         x, t = carry
@@ -385,10 +394,63 @@ def _run_rk4(plant, law, params, x0, h, n_sub, n_out: int):
         return carry, carry[0]
 
     _, xs = jax.lax.scan(sample, (x0, jnp.zeros(())), None, length=n_out)
-    xs = jnp.concatenate([x0[None], xs])
+    return jnp.concatenate([x0[None], xs])
+
+
+@eqx.filter_jit
+def _run_rk4(plant, law, params, x0, h, n_sub, n_out: int):
+    def f(x, t):
+        return plant.rhs(x, _saturate(plant, law(params, x, t)))
+
+    xs = _rk4(f, x0, h, n_sub, n_out)
     ts = jnp.arange(n_out + 1) * (h * n_sub)
     us = jax.vmap(lambda x, t: _saturate(plant, law(params, x, t)))(xs, ts)
     return ts, xs, us
+
+
+@eqx.filter_jit
+def _run_rk4_batch(plant, law, params, axes, x0, h, n_sub, n_out: int, chunk: int):
+    """Rollouts of a batch in chunks of ``chunk``: the leaves of ``params`` batched along
+    axis 0 where the vmap-style prefix ``axes`` says 0, x0 of shape (N, n_x), N a multiple
+    of chunk. Within a chunk the state is carried as (n_x, chunk), batch last: every layer
+    of the plant's right-hand side is then one SIMD kernel over the chunk, and the law is
+    vmapped over it. Chunks run one after the other (lax.map), so that a chunk's working set
+    stays in cache. Returns t (T,), x (N, T, n_x), u (N, T, n_u)."""
+    N = x0.shape[0]
+    leaves, treedef = jax.tree.flatten(params)
+    leaf_axes = _leaf_axes(params, axes)
+    law_b = jax.vmap(law, in_axes=(axes, -1, None), out_axes=-1)
+    ts = jnp.arange(n_out + 1) * (h * n_sub)
+
+    def one_chunk(c):
+        lv = [leaf if ax is None else jax.lax.dynamic_slice_in_dim(leaf, c * chunk, chunk, 0)
+              for leaf, ax in zip(leaves, leaf_axes)]
+        pc = jax.tree.unflatten(treedef, lv)
+        xc = jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T
+
+        def f(x, t):
+            return plant.rhs(x, _saturate(plant, law_b(pc, x, t)))
+
+        xs = _rk4(f, xc, h, n_sub, n_out)  # (T, n_x, chunk)
+        us = jax.vmap(lambda x, t: _saturate(plant, law_b(pc, x, t)))(xs, ts)
+        return jnp.moveaxis(xs, -1, 0), jnp.moveaxis(us, -1, 0)
+
+    xs, us = jax.lax.map(one_chunk, jnp.arange(N // chunk))
+    return ts, xs.reshape((N,) + xs.shape[2:]), us.reshape((N,) + us.shape[2:])
+
+
+class _Axis:
+    """A batch axis (0 or None) as an opaque pytree leaf."""
+
+    def __init__(self, v):
+        self.v = v
+
+
+def _leaf_axes(tree, axes) -> list:
+    """The vmap-style prefix ``axes`` (0 or None per subtree) broadcast to the leaves of tree."""
+    full = jax.tree.map(lambda ax, sub: jax.tree.map(lambda _: _Axis(ax), sub), axes, tree,
+                        is_leaf=lambda a: a is None)
+    return [a.v for a in jax.tree.leaves(full, is_leaf=lambda a: isinstance(a, _Axis))]
 
 
 @eqx.filter_jit
@@ -456,3 +518,120 @@ def simulate_regulation(model: MultiLinkModel, law: Callable, x0, t_final: float
             f"or max_steps = {max_steps} reached): the closed loop is stiff or diverging"
         )
     return RegulationRun(ts, xs, us, plant.state_names, model.n_links)
+
+
+# --------------------------------------------------------------------------- batches
+def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
+                            duration: float = 0.0,
+                            newton_iterations: int = 4) -> tuple[RegulationParams, RegulationParams]:
+    """Parameters for N gain variations around one target, and their vmap-style batch axes.
+
+    KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
+    be a single gain (scalar, (n,) or (n, n)) shared by the batch. Returns ``(params, axes)``
+    for :func:`simulate_regulation_batch`: params with KP, KD of shape (N, n, n), axes with 0
+    on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d) are shared)."""
+    n = model.n_links
+    base = regulation_params(model, np.eye(n), np.eye(n), theta_d, theta_0=theta_0,
+                             duration=duration, newton_iterations=newton_iterations)
+
+    def stack(k, name):
+        k = np.asarray(k, float)
+        if k.ndim == 0 or (k.ndim == 1 and k.shape == (n,)) or (k.ndim == 2 and k.shape == (n, n)
+                                                                and n > 1 and name == "shared"):
+            return None
+        if k.ndim == 2 and k.shape[1] == n:
+            return np.stack([np.diag(r) for r in k])
+        if k.ndim == 3 and k.shape[1:] == (n, n):
+            return k
+        raise ValueError(f"{name}: expected (N, {n}) diagonals or (N, {n}, {n}) matrices, "
+                         f"got shape {k.shape}")
+
+    kp, kd = stack(KP, "KP"), stack(KD, "KD")
+    if kp is None and kd is None:
+        raise ValueError("KP or KD must hold a batch: (N, n) diagonals or (N, n, n) matrices")
+    N = (kp if kp is not None else kd).shape[0]
+    if kp is not None and kd is not None and kd.shape[0] != N:
+        raise ValueError(f"KP holds {N} gains and KD {kd.shape[0]}")
+    kp = np.broadcast_to(_gain(KP, n, "KP"), (N, n, n)) if kp is None else kp
+    kd = np.broadcast_to(_gain(KD, n, "KD"), (N, n, n)) if kd is None else kd
+    params = eqx.tree_at(lambda p: (p.KP, p.KD), base, (jnp.asarray(kp), jnp.asarray(kd)))
+    axes = RegulationParams(plant=None, KP=0, KD=0, theta_d=None, delta_d=None, g_d=None,
+                            theta_0=None, duration=None, newton_iterations=newton_iterations)
+    return params, axes
+
+
+@dataclass(frozen=True)
+class RegulationBatch:
+    """N closed-loop runs: t (T,) s, x (N, T, n_x), u (N, T, n_u); ``diverged[i]`` when run i
+    became non-finite or left the bound (its samples from then on are not meaningful)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    diverged: np.ndarray
+    state_names: tuple[str, ...]
+    n_links: int
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.x[:, :, :self.n_links]
+
+    @property
+    def delta(self) -> np.ndarray:
+        nq = self.x.shape[2] // 2
+        return self.x[:, :, self.n_links:nq]
+
+    def run(self, i: int) -> RegulationRun:
+        """Run i as a :class:`RegulationRun`."""
+        return RegulationRun(self.t, self.x[i], self.u[i], self.state_names, self.n_links)
+
+
+def simulate_regulation_batch(model: MultiLinkModel, law: Callable, x0, t_final: float,
+                              dt: float = 1e-3, *, params, axes, step: float = 1e-4,
+                              chunk: int = 64, bound: float = 1e4) -> RegulationBatch:
+    """N closed loops ẋ = f(x, sat(law(params_i, x, t))) at once, fixed-step RK4 (``step``,
+    default 0.1 ms), outputs every ``dt``: what :func:`simulate_regulation` does for one.
+
+    ``params``/``axes``: a parameter pytree and its vmap-style batch axes (0 on the leaves
+    that hold the batch along their first axis, None on shared ones), e.g. from
+    :func:`regulation_params_batch`. ``x0``: (n_x,) shared or (N, n_x). The batch runs in
+    chunks of ``chunk`` rollouts, state carried batch-last (see ``_run_rk4_batch``); N is
+    padded to a multiple of chunk with copies of the last rollout. Gains are traced: any
+    sweep of the same size compiles once. A run that diverges is flagged in ``diverged``
+    rather than raised."""
+    plant = model.plant
+    nx = 2 * model.n_q
+    if not (t_final > 0 and dt > 0):
+        raise ValueError(f"t_final and dt must be > 0; got {t_final}, {dt}")
+    n_out = int(round(t_final / dt))
+    if n_out < 1:
+        raise ValueError(f"dt = {dt} s is longer than t_final = {t_final} s")
+    n_sub = max(1, int(round(dt / step)))
+    leaf_axes = _leaf_axes(params, axes)
+    sizes = {int(leaf.shape[0]) for leaf, ax in zip(jax.tree.leaves(params), leaf_axes)
+             if ax is not None}
+    if any(ax not in (None, 0) for ax in leaf_axes):
+        raise ValueError("axes must be 0 (batched along the first axis) or None")
+    x0 = np.asarray(x0, float)
+    if x0.ndim == 2:
+        sizes.add(x0.shape[0])
+    if len(sizes) != 1:
+        raise ValueError(f"batched leaves and x0 disagree on the batch size: {sorted(sizes)}")
+    N = sizes.pop()
+    x0 = np.broadcast_to(x0.reshape(-1, nx), (N, nx))
+    chunk = max(1, min(int(chunk), N))
+    pad = -N % chunk
+
+    def padded(a, ax):
+        if ax is None or pad == 0:
+            return a
+        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
+
+    leaves, treedef = jax.tree.flatten(params)
+    params_p = jax.tree.unflatten(treedef, [padded(a, ax) for a, ax in zip(leaves, leaf_axes)])
+    x0_p = padded(jnp.asarray(x0), 0)
+    ts, xs, us = _run_rk4_batch(plant, law, params_p, axes, x0_p, jnp.asarray(dt / n_sub),
+                                jnp.asarray(n_sub), n_out, chunk)
+    ts, xs, us = np.asarray(ts), np.asarray(xs)[:N], np.asarray(us)[:N]
+    bad = ~np.isfinite(xs) | (np.abs(np.nan_to_num(xs, nan=np.inf)) > bound)
+    return RegulationBatch(ts, xs, us, bad.any(axis=(1, 2)), plant.state_names, model.n_links)
