@@ -527,7 +527,7 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     """Parameters for N gain variations around one target, and their vmap-style batch axes.
 
     KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
-    be a single gain (scalar, (n,) or (n, n)) shared by the batch. Returns ``(params, axes)``
+    be a single gain shared by the batch, a scalar or an (n,) diagonal. Returns ``(params, axes)``
     for :func:`simulate_regulation_batch`: params with KP, KD of shape (N, n, n), axes with 0
     on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d) are shared)."""
     n = model.n_links
@@ -536,8 +536,7 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
 
     def stack(k, name):
         k = np.asarray(k, float)
-        if k.ndim == 0 or (k.ndim == 1 and k.shape == (n,)) or (k.ndim == 2 and k.shape == (n, n)
-                                                                and n > 1 and name == "shared"):
+        if k.ndim == 0 or (k.ndim == 1 and k.shape == (n,)):
             return None
         if k.ndim == 2 and k.shape[1] == n:
             return np.stack([np.diag(r) for r in k])
