@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from flexarm.fit import FitInputError, fit, parse_controller, read_bench_log, validate
-from flexarm.fit.closed_loop import as_jax, closed_loop_run
-from flexarm.fit.report import check_physical
-from flexarm.fit.synthetic import synthetic_log
+from flexarm.bench import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.bench.closed_loop import as_jax, closed_loop_run
+from flexarm.bench.report import check_physical
+from flexarm.bench.synthetic import synthetic_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario

@@ -219,6 +219,78 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     console.print(f"G_b num = {_fmt(d['beam_tf']['num'])}\n    den = {_fmt(d['beam_tf']['den'])}")
 
 
+@app.command()
+def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one recording session"),
+        drive: str = typer.Option("voltage", help="voltage or current"),
+        gear_ratio: float = typer.Option(1.0, help="K_g"),
+        motor_constant: Optional[float] = typer.Option(None, help="K_m, V*s/rad (voltage) or N*m/A (current)"),
+        armature_resistance: Optional[float] = typer.Option(None, help="R, ohm"),
+        link_length: Optional[float] = typer.Option(None, help="link length, m"),
+        gear_efficiency: float = typer.Option(1.0), motor_efficiency: float = typer.Option(1.0),
+        voltage_limit: float = typer.Option(10.0, help="amplifier limit, V"),
+        controller: Optional[str] = typer.Option(
+            None, help="overrides the logs' '# controller:' line, e.g. 'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"),
+        mode: str = typer.Option("closed_loop", help="closed_loop, or open_loop (replay the logged voltage)"),
+        no_friction: bool = typer.Option(False, "--no-friction", help="fit without joint friction (for comparison)"),
+        json_out: Optional[Path] = typer.Option(None, "--json", help="write the result as JSON"),
+        scenario_out: Optional[Path] = typer.Option(None, "--scenario-out", help="write the fitted scenario TOML"),
+        plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
+        seconds: float = typer.Option(5.0, help="time budget of the global stage, s"),
+        overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
+    """Fit a physical model with joint friction to closed-loop logs (time domain)."""
+    _enable_cache()
+    from flexarm.bench import FitInputError
+    from flexarm.bench import fit as run_fit
+
+    for p in (json_out, scenario_out):
+        if p is not None and p.exists() and not overwrite:
+            _fail(f"{p} exists; pass --overwrite to replace it")
+    try:
+        with console.status("fitting") as status:
+            res = run_fit([str(x) for x in logs], drive=drive, gear_ratio=gear_ratio,
+                          motor_constant=motor_constant, armature_resistance=armature_resistance,
+                          link_length=link_length, gear_efficiency=gear_efficiency,
+                          motor_efficiency=motor_efficiency, voltage_limit=voltage_limit,
+                          controller=controller, mode=mode, friction=not no_friction,
+                          global_seconds=seconds, progress=lambda m: status.update(m))
+    except (FitInputError, ValueError) as exc:
+        _fail(str(exc))
+    console.print(escape(res.summary()))
+    if json_out is not None:
+        res.to_json(json_out)
+    if scenario_out is not None:
+        res.write_scenario(scenario_out, overwrite=overwrite)
+    if plots is not None:
+        res.plots(plots)
+
+
+@app.command()
+def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
+             logs: list[Path] = typer.Argument(..., help="CSV logs to replay"),
+             json_out: Optional[Path] = typer.Option(None, "--json", help="write the fit % as JSON"),
+             plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
+             controller: Optional[str] = typer.Option(None, help="overrides the logs' controller line"),
+             overwrite: bool = typer.Option(False, help="replace an existing JSON file")) -> None:
+    """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
+    _enable_cache()
+    from flexarm.bench import FitInputError
+    from flexarm.bench import validate as run_validate
+
+    if json_out is not None and json_out.exists() and not overwrite:
+        _fail(f"{json_out} exists; pass --overwrite to replace it")
+    sc = _load(scenario)
+    try:
+        out = run_validate(sc, [str(x) for x in logs], controller=controller, plots=plots)
+    except (FitInputError, ValueError) as exc:
+        _fail(str(exc))
+    t = Table("log", "motor_angle fit %", "tip_deflection fit %")
+    for name, d in out["fit_percent"].items():
+        t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
+    console.print(t)
+    if json_out is not None:
+        json_out.write_text(json.dumps(out, indent=2))
+
+
 def _scenario_file(res, current_limit) -> dict:
     """An identified arm as a complete scenario (the rest from the FRB defaults)."""
     frag = res.to_scenario_dict(current_limit=current_limit)

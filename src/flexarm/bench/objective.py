@@ -1,6 +1,6 @@
 """The output-error objective of a bench fit, evaluated for a whole population at once.
 
-For parameters p the log's loop is closed in simulation (:mod:`flexarm.fit.closed_loop`)
+For parameters p the log's loop is closed in simulation (:mod:`flexarm.bench.closed_loop`)
 and compared with the log on the measured hub angle θ and tip deflection d:
 
     V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexarm.fit import guesses
-from flexarm.fit.closed_loop import as_jax, closed_loop_cost, closed_loop_run
-from flexarm.fit.logs import BenchLog
-from flexarm.fit.params import ParamSpace
+from flexarm.bench import guesses
+from flexarm.bench.closed_loop import as_jax, closed_loop_cost, closed_loop_run
+from flexarm.bench.logs import BenchLog
+from flexarm.bench.params import ParamSpace
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
 

@@ -1,15 +1,15 @@
-"""``flexarm.fit``: time-domain identification of a bench arm from closed-loop logs.
+"""``flexarm.bench``: time-domain identification of a bench arm from closed-loop logs.
 
 Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
 resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
 inertia and damping, hub friction (Coulomb, breakaway, viscous, bias) per recording
 session, the sensor delays and the tip sensor's calibration gain and sign, and each log's
 initial link state, by minimising the closed-loop simulation output error
-(:mod:`flexarm.fit.objective`):
+(:mod:`flexarm.bench.objective`):
 
-1. guesses and bounds from the data (:mod:`flexarm.fit.guesses`);
+1. guesses and bounds from the data (:mod:`flexarm.bench.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (:mod:`flexarm.fit.global_stage`);
+   on the first ``global_seconds`` of each log (:mod:`flexarm.bench.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
    columns are simulated in one batch; it also refines each log's initial tip state;
@@ -26,12 +26,12 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from flexarm.fit import guesses
-from flexarm.fit.global_stage import differential_evolution_stage
-from flexarm.fit.logs import FitInputError, as_bench_log, check_closed_loop
-from flexarm.fit.objective import Objective, Rig
-from flexarm.fit.params import FRICTION, ParamDef, ParamSpace, derived
-from flexarm.fit.report import FitResult
+from flexarm.bench import guesses
+from flexarm.bench.global_stage import differential_evolution_stage
+from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
+from flexarm.bench.objective import Objective, Rig
+from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
+from flexarm.bench.report import FitResult
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -78,7 +78,7 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
 
 def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
            delays, bounds: dict | None, info: dict) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
-    """Bounds from the data (see :mod:`flexarm.fit.guesses`) and the seed point."""
+    """Bounds from the data (see :mod:`flexarm.bench.guesses`) and the seed point."""
     wc, how = guesses.link_frequency(logs)
     info["link_frequency_guess"] = {"value": wc, "from": how}
     wc_b = (wc / 1.35, wc * 1.35) if wc else (2 * np.pi * 0.3, 2 * np.pi * 40)
@@ -151,7 +151,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         progress: Callable[[str], None] | None = None) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
-    ``logs``: paths or :class:`~flexarm.fit.logs.BenchLog` s; logs given together are one
+    ``logs``: paths or :class:`~flexarm.bench.logs.BenchLog` s; logs given together are one
     recording session (shared friction) unless ``sessions`` gives a session index per log
     (mechanics shared, friction per session). ``mode``: ``"closed_loop"`` (each log's
     controller closed in simulation; ``controller`` overrides every log's declaration)
