@@ -66,10 +66,17 @@ def scenarios() -> None:
 def info(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
          as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """The arm's linear model: transfer functions, poles, zeros, frequencies, gains."""
-    from flexarm.analysis.model_info import single_link_info
+    from flexarm.analysis.model_info import multilink_info, single_link_info
     from flexarm.models.single_link import SingleLinkModel
 
     sc = _load(scenario)
+    if sc.arm.kind == "multi_link":
+        data = {"scenario": sc.name, **multilink_info(sc)}
+        if as_json:
+            print(json.dumps(data, indent=2))
+        else:
+            _print_multilink(sc, data)
+        return
     data = {"scenario": sc.name, **single_link_info(SingleLinkModel.from_spec(sc.arm))}
     if as_json:
         print(json.dumps(data, indent=2))
@@ -85,6 +92,24 @@ def info(scenario: str = typer.Argument(..., help="scenario TOML file or built-i
         if tf["right_half_plane_zeros"]:
             console.print(f"  right-half-plane zeros: {[round(z['re'], 5) for z in tf['right_half_plane_zeros']]}")
         console.print(f"  static gain: {tf['static_gain']:.6g} ({tf['static_gain_note']})")
+
+
+def _print_multilink(sc, data: dict) -> None:
+    console.print(f"[bold]{sc.name}[/]: {escape(sc.description)}")
+    for ln in data["links"]:
+        console.print(f"\n[bold]link {ln['link']}[/] ({ln['modes']} {ln['mode_type']} modes)")
+        console.print(f"  frequencies [Hz]: {_fmt(ln['frequencies_hz'])}", markup=False)
+        console.print(f"  phi(l): {_fmt(ln['phi_end'])}   phi'(l) [1/m]: "
+                      f"{_fmt(ln['phi_prime_end_per_m'])}", markup=False)
+        console.print("  k_ij [N/m]: " + ", ".join(_fmt(r) for r in ln["stiffness_k_ij_N_per_m"]),
+                      markup=False)
+    tg = data.get("target")
+    if tg:
+        console.print(f"\ndelta_d [m] (eq. 9): {_fmt(tg['delta_d_m'])}", markup=False)
+        console.print(f"alpha (eq. 6): {tg['alpha']['value']:.5g}")
+        for k, c in tg["conditions"].items():
+            console.print(f"({k}) {c['statement']}: {'holds' if c['holds'] else 'FAILS'} "
+                          f"(margin {c['margin']:+.4g})")
 
 
 def _fmt(c: list[float]) -> str:
