@@ -29,6 +29,18 @@ def simulate_with_progress(scenario: Scenario, progress: bool = False):
     return to_result(p, out)
 
 
+def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
+    """Step metrics for a step reference; tracking errors for other references."""
+    if scenario.reference.type == "step":
+        return {"step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
+                "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict()}
+    e = res["reference"] - res[ctrl]
+    return {"tracking": {"signal": ctrl, "reference": scenario.reference.type,
+                         "rms_error": float(np.sqrt(np.mean(e**2))),
+                         "max_abs_error": float(np.max(np.abs(e))),
+                         "peak_tip_deflection": float(np.max(np.abs(res["tip_deflection"])))}}
+
+
 def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> dict:
     """Simulate and write ``<name>.csv``, ``<name>.png`` and ``<name>.summary.json``."""
     if getattr(scenario.arm, "kind", "single_link") == "multi_link":
@@ -43,6 +55,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     res.to_csv(out / f"{name}.csv", overwrite=True)
     fig = res.plot_arm()
     fig.suptitle(f"{name}: closed-loop response")
+    fig.tight_layout()
     fig.savefig(out / f"{name}.png", dpi=120)
     plt.close(fig)
     ctrl = scenario.controller.measured if scenario.controller else "motor_angle"
@@ -51,8 +64,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
         "samples": len(res.time),
         "sampling_period_s": scenario.sampling.period,
         "controlled_signal": ctrl,
-        "step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
-        "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict(),
+        **_response_metrics(scenario, res, ctrl),
         "peak_command": float(np.max(np.abs(res.command))),
         "command_unit": res.input_names[0],
         "files": [f"{name}.csv", f"{name}.png"],
@@ -134,23 +146,36 @@ def write_regulation(scenario, out: Path) -> dict:
     return summary
 
 
-def run_demo(out: Path, console) -> dict:
-    """Model and closed-loop simulation of every built-in single-link arm."""
+def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
+    """Model and closed-loop simulation of every built-in scenario, then the papers'
+    reproductions (``reproductions``: name → ``run(out_dir)``), into ``out``."""
+    from flexarm.models.single_link import SingleLinkModel
+
     results = {}
     for name, path in sorted(builtin_scenarios().items()):
         sc = load_scenario(path)
-        if sc.arm.kind != "single_link":
-            continue
-        from flexarm.models.single_link import SingleLinkModel
-
-        info = single_link_info(SingleLinkModel.from_spec(sc.arm))
-        (out / f"{name}.model.json").write_text(json.dumps(info, indent=2))
+        if sc.arm.kind == "single_link":
+            info = single_link_info(SingleLinkModel.from_spec(sc.arm))
+            (out / f"{name}.model.json").write_text(json.dumps(info, indent=2))
         s = write_simulation(sc, out)
         results[name] = s
-        m = s["step_metrics"]
-        console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                      f"{m['settling_time']} s, steady-state error {m['steady_state_error']:.3g} rad, "
-                      f"peak command {s['peak_command']:.3g} {s['command_unit']}")
-    (out / "summary.json").write_text(json.dumps(results, indent=2))
+        if "step_metrics" in s:
+            m = s["step_metrics"]
+            console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
+                          f"{m['settling_time']} s, steady-state error {m['steady_state_error']:.3g} "
+                          f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}")
+        elif "tracking" in s:
+            tr = s["tracking"]
+            console.print(f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
+                          f"{tr['rms_error']:.3g} rad, peak tip deflection "
+                          f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
+                          f"{s['command_unit']}")
+        else:
+            console.print(f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
+                          f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m")
+    for rname, run in (reproductions or {}).items():
+        console.print(f"[bold]reproducing {rname}[/] ...")
+        results[f"reproduce_{rname}"] = run(out / rname)
+    (out / "summary.json").write_text(json.dumps(results, indent=2, default=str))
     console.print(f"wrote {out}/")
     return results
