@@ -91,3 +91,31 @@ def test_identify_empty_folder_and_missing_column(tmp_path):
     f.write_text("time,reference,i,motor_angle,tip_angle\n0,0,0,0,0\n")
     r = runner.invoke(app, ["identify", str(f), "--motor-constant", "0.25"])
     assert r.exit_code == 2 and "current" in said(r)
+
+
+def test_info_multilink_reports_modes_deflection_alpha_conditions():
+    r = runner.invoke(app, ["info", "deluca-two-link", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    assert [ln["modes"] for ln in d["links"]] == [2, 2]
+    f = d["links"][0]["frequencies_hz"]
+    assert 0 < f[0] < f[1]
+    k = np.asarray(d["links"][0]["stiffness_k_ij_N_per_m"])
+    assert np.allclose(k, k.T) and np.all(np.linalg.eigvalsh(k) > 0)
+    t = d["target"]
+    # hanging arm raised to -45 deg: the first link sags downwards (negative first mode)
+    assert t["delta_d_m"][0] < 0
+    assert t["alpha"]["value"] > 0
+    for c in ("14", "15"):
+        cond = t["conditions"][c]
+        assert cond["holds"] == (cond["margin"] > 0)
+
+
+def test_multilink_regulation_joint_count_is_checked(tmp_path):
+    from flexarm.specs import builtin_scenarios
+
+    src = builtin_scenarios()["deluca-two-link"].read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(src.replace('kp = [18.0, 18.0]', 'kp = [18.0]'))
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2 and "kp has 1 entries; target has 2" in said(r)
