@@ -55,7 +55,7 @@ import scipy.linalg
 import scipy.optimize
 from jax import Array
 
-from flexarm.control.discrete import Controller, Signals
+from flexarm.control.discrete import Controller, Signals, from_transfer_function
 
 __all__ = [
     "InnerLoop",
@@ -68,19 +68,12 @@ __all__ = [
 
 
 # ------------------------------------------------------------------------ realisations
-def _ss(tf: control.TransferFunction) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(A, B, C, D) of a proper discrete SISO transfer function, at least one state
-    (a static gain gets a dummy state with A = B = C = 0, so that every controller of
-    this module has the same pytree structure and shares one compilation)."""
-    num = np.trim_zeros(np.asarray(tf.num[0][0], float), "f")
-    den = np.trim_zeros(np.asarray(tf.den[0][0], float), "f")
-    if num.size > den.size:
-        raise ValueError(f"{tf} is improper (not causal)")
-    if den.size == 1 or num.size == 0:
-        gain = float(num[0] / den[0]) if num.size else 0.0
-        return np.zeros((1, 1)), np.zeros(1), np.zeros(1), gain
-    ss = control.tf2ss(tf)
-    return ss.A, ss.B[:, 0], ss.C[0], float(ss.D[0, 0])
+def _realise(g: control.TransferFunction) -> tuple:
+    """(A, B, C, D) of a discrete SISO G(z) with at least one state (a static gain gets a
+    dummy one, as :func:`~flexarm.control.discrete.from_transfer_function` builds it), so
+    every :class:`InnerLoop` has the same pytree structure and shares one compilation."""
+    c = from_transfer_function(g)
+    return c.A, c.B, c.C, c.D
 
 
 def _as_discrete(g, dt: float, name: str) -> control.TransferFunction:
@@ -228,8 +221,7 @@ def inner_loop(gcm1, gcm2, *, dt: float, torque_constant: float, coulomb: float 
     if rest_deadband is None:
         rest_deadband = 0.5 * q * abs(float(np.real(control.dcgain(g1))))
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    real = lambda r: tuple(f(a) for a in r)  # noqa: E731
-    return InnerLoop(real(_ss(g1)), real(_ss(g2)), real(_ss(h)), f(torque_constant),
+    return InnerLoop(_realise(g1), _realise(g2), _realise(h), f(torque_constant),
                      f(coulomb), f(float(friction_compensation)),
                      f(float(coupling_compensation)), f(velocity_deadband),
                      f(rest_deadband), f(dt), f(initial_motor_angle), reference)
