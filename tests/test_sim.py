@@ -135,3 +135,24 @@ def test_voltage_drive_pd_reaches_the_step():
     res = simulate(sc)
     assert res.input_names == ("voltage",)
     assert res["motor_angle"][-1] == pytest.approx(0.4, rel=0.01)
+
+
+def test_hold_tip_scenario_runs_and_initial_deflection_is_static():
+    """The Fig. 11 set-up (tip held) simulates; an initial tip deflection puts the link at
+    rest in its static shape with exactly that deflection."""
+    held = simulate(scenario(simulation={"hold_tip": True}))
+    assert np.ptp(held["tip_angle"]) < 1e-12 and np.ptp(held["motor_angle"]) > 0.1  # round-off only
+    from flexarm.models.single_link import SingleLinkModel as M
+
+    sc2 = scenario("feliu-two-mass")
+    m = M.from_spec(sc2.arm)
+    x0 = m.initial_state(motor_angle=0.3, tip_deflection=0.01)
+    p = m.plant()
+    import jax.numpy as jnp
+
+    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1)))))
+    assert sig["motor_angle"] == pytest.approx(0.3)
+    assert sig["tip_deflection"] == pytest.approx(0.01, rel=1e-12)
+    # static: with the hub held by a torque equal to the coupling torque, nothing moves
+    xd = np.asarray(p.rhs(jnp.asarray(x0), jnp.asarray([sig["coupling_torque"] / float(m.drive.k_u)])))
+    assert np.max(np.abs(xd)) < 1e-9
