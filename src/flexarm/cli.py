@@ -130,6 +130,50 @@ def simulate(scenario: str = typer.Argument(..., help="scenario TOML file or bui
     console.print_json(json.dumps(summary))
 
 
+REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
+                 "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example"}
+
+
+def _reproduction(name: str):
+    import importlib
+
+    if name not in REPRODUCTIONS:
+        _fail(f"reproduce {name!r}: choose one of {', '.join(REPRODUCTIONS)}")
+    try:
+        return importlib.import_module(f"flexarm.reproduce.{name}").run
+    except ModuleNotFoundError:
+        _fail(f"reproduce {name!r} is not available in this version")
+
+
+def _run_reproduction(name: str, out: Path) -> dict:
+    from rich.progress import Progress
+
+    run = _reproduction(name)
+    with Progress(console=err) as bar:
+        task = bar.add_task(name, total=None)
+
+        def progress(done, total=None, what=""):
+            bar.update(task, completed=done, total=total, description=f"{name}: {what}")
+
+        return run(out, progress=progress)
+
+
+@app.command()
+def reproduce(paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
+              out: Path = typer.Option(..., "--out", help="folder for figures and the table"),
+              overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+    """Re-run a paper's experiments on the simulated arms: figures, and a table of each
+    reported quantity, the paper's value, ours and the ratio."""
+    _enable_cache()
+    _reproduction(paper)
+    out = _outdir(out, overwrite)
+    res = _run_reproduction(paper, out)
+    md = out / f"{paper}_table.md"
+    if md.exists():
+        console.print(md.read_text(), markup=False)
+    console.print(f"wrote {out}/ ({len(res.get('figures', []))} figures)")
+
+
 @app.command()
 def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder (flexarm's own; rewritten)")) -> None:
     """The main job on the built-in default: model, simulations and figures into --out."""
@@ -137,7 +181,11 @@ def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder
     from flexarm.analysis.summary import run_demo
 
     out.mkdir(parents=True, exist_ok=True)
-    run_demo(out, console)
+    import importlib.util
+
+    reps = {n: (lambda d, n=n: _run_reproduction(n, d)) for n in REPRODUCTIONS
+            if importlib.util.find_spec(f"flexarm.reproduce.{n}") is not None}
+    run_demo(out, console, reproductions=reps)
 
 
 def _pairs(items: list[str] | None, what: str) -> dict[str, str]:
