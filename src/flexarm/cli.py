@@ -251,7 +251,10 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
              unit: Optional[list[str]] = typer.Option(None, help="a column's unit: current=mA"),
              motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
              beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
-             structured: bool = typer.Option(False, help="use the joint fit of J, V, C, C_f as G_m"),
+             structured: Optional[bool] = typer.Option(
+                 None, "--structured/--free",
+                 help="G_m from the joint fit of J, V, C, C_f, or the paper's free fit to the "
+                      "corrected data (default: joint fit for a one-mode beam)"),
              overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
     import warnings
