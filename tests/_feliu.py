@@ -32,10 +32,9 @@ def design():
 
 
 def held_prepared(name: str, controller, duration: float):
-    """A prepared scenario whose plant has the tip held (FRB Fig. 11). ``prepare`` on a
-    ``hold_tip`` scenario fails in ``SingleLinkModel.initial_state`` (singular held
-    block), so the free arm is prepared (state at rest at 0, the same for both) and the
-    held plant swapped in: same state layout, same compiled loop."""
+    """A prepared scenario whose plant has the tip held (FRB Fig. 11): the free arm is
+    prepared (state at rest at 0, the same for both) and the held plant swapped in, so the
+    held and free experiments share one state layout and one compiled loop."""
     p = prepare(scenario(name, duration), controller=controller)
     held = model(name, hold_tip=True)
     p.loop = eqx.tree_at(lambda lp: lp.plant, p.loop, held.plant())
