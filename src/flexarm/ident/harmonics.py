@@ -252,9 +252,11 @@ def measured_friction_shape(t: np.ndarray, theta_phasors: np.ndarray, omega0: fl
     on our simulated arm the ideal square wave biased V by 4-6 % and the measured shape
     brought it within 2 %. Harmonics above n_max are left out: they carry mostly the A/D
     noise, whose sign flips near zero velocity."""
-    n = np.arange(1, n_max + 1)
-    v = np.real((1j * n * omega0 * theta_phasors[1:n_max + 1])[None, :]
-                * np.exp(1j * omega0 * np.outer(t, n))).sum(axis=1)
+    ph = omega0 * np.asarray(t, float)
+    v = np.zeros_like(ph)
+    for n in range(1, n_max + 1):  # Re{jnω X_n e^{jnωt}} = −nω (Re X_n sin + Im X_n cos)
+        x = theta_phasors[n]
+        v -= n * omega0 * (x.real * np.sin(n * ph) + x.imag * np.cos(n * ph))
     return fourier_phasors(t, np.sign(v), omega0, n_max)
 
 
