@@ -230,16 +230,13 @@ def _parse_numbers(path: Path, text: str, body_start: int, h: int, header: list[
     """Numbers below the header (line ``h``); on any problem, locate it by column and row."""
     body = text[body_start:]
     ncol = len(header)
-    data = _fast_numbers(body, ncol)
-    ok = data is not None
-    if data is None:
-        try:
-            with np.errstate(all="ignore"):
-                data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, comments="#",
-                                  dtype=float)
-            ok = data.shape[1] == ncol if data.size else True
-        except ValueError:
-            ok = False
+    try:
+        with np.errstate(all="ignore"):
+            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, comments="#",
+                              dtype=float)
+        ok = data.shape[1] == ncol if data.size else True
+    except ValueError:
+        ok = False
     if not ok:
         _locate_parse_error(path, text.splitlines(), h, header, names)
     if data.size == 0:
@@ -253,26 +250,6 @@ def _parse_numbers(path: Path, text: str, body_start: int, h: int, header: list[
                        f"{r + 1} (line {file_line}): value is {what}; "
                        f"{int(bad.sum())} non-finite value(s) in all")
     return data
-
-
-def _fast_numbers(body: str, ncol: int) -> np.ndarray | None:
-    """The common case in one C call: a plain block of numbers, ``ncol`` per line, no
-    comments, quotes or blank lines (≈10× faster than ``np.loadtxt`` on 1 kHz logs).
-    None when the block is not that simple: the caller then parses line by line and
-    names any problem by column and row."""
-    if "#" in body or '"' in body or "\n\n" in body.strip("\n"):
-        return None
-    lines = body.strip("\n").count("\n") + 1 if body.strip() else 0
-    if lines == 0:
-        return None
-    with np.errstate(all="ignore"):
-        try:
-            flat = np.fromstring(body.replace("\n", ","), dtype=float, sep=",")
-        except (ValueError, DeprecationWarning):
-            return None
-    if flat.size != lines * ncol:
-        return None
-    return flat.reshape(lines, ncol)
 
 
 def _data_line_numbers(lines: list[str], h: int) -> list[int]:
