@@ -77,8 +77,9 @@ class FitResult:
         fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
               for i, n in enumerate(names)}
         d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
-        ini = {n: {"motor_angle": float(objective.hub0[i, 0]),
-                   "motor_velocity": float(objective.hub0[i, 1]),
+        th0, om0 = objective.hub_initial(1, offsets[None])
+        ini = {n: {"motor_angle": float(th0[0, i]),
+                   "motor_velocity": float(om0[0, i]),
                    "tip_deflection": float(d0[0, i] / params["tip_gain"]),
                    "tip_velocity": float(v0[0, i] / params["tip_gain"])}
                for i, n in enumerate(names)}
