@@ -86,6 +86,11 @@ def _quantise(x: Array, q: Array) -> Array:
     return jnp.where(q > 0, jnp.round(x / jnp.where(q > 0, q, 1.0)) * q, x)
 
 
+def _pick(v: Array, index: tuple[int, ...]) -> Array:
+    """v[index] for a static index: slices that fuse, not a gather."""
+    return jnp.stack([v[i] for i in index])
+
+
 def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     """The loop's state at t = 0: plant state, controller state, sensor and command
     buffers (sensors read the initial state; no command before t = 0)."""
@@ -93,28 +98,27 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     n_u = plant.n_inputs
     u0 = jnp.zeros((n_u,))
     dmax = max(sens.delays) if sens.delays else 0
-    y0 = _quantise(sens.gain * plant.signals(x0, u0)[jnp.asarray(sens.index, dtype=int)],
-                   sens.quantum)
+    y0 = _quantise(sens.gain * _pick(plant.signals(x0, u0), sens.index), sens.quantum)
     return (x0, loop.controller.init(), jnp.tile(y0, (dmax + 1, 1)),
             jnp.zeros((loop.delay + 1, n_u)), u0)
 
 
 def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array):
+    """The sample loop: final carry and the records (states, signals, measured, command)
+    at the sample instants. The signals are evaluated after the loop, for all samples at
+    once (one kernel instead of one per sample)."""
     plant, ctrl, sens, act = loop.plant, loop.controller, loop.sensors, loop.actuator
     solver = solver_for(loop.solver)
     h = loop.dt / loop.substeps
-    didx = jnp.asarray(sens.delays, dtype=int)
-    cidx = jnp.arange(len(sens.names))
-    sidx = jnp.asarray(sens.index, dtype=int)
 
     def sample(carry, inp):
         x, cstate, sbuf, ubuf, u_prev = carry
         ref_k, noise_k = inp
         # 1. sensors
         s = plant.signals(x, u_prev)
-        y = _quantise(sens.gain * s[sidx] + sens.noise * noise_k, sens.quantum)
+        y = _quantise(sens.gain * _pick(s, sens.index) + sens.noise * noise_k, sens.quantum)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
-        meas_vec = sbuf[didx, cidx]
+        meas_vec = jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)])
         meas = {n: meas_vec[i] for i, n in enumerate(sens.names)}
         # 2. controller, 3. computation delay, saturation, D/A
         cstate, u_c = ctrl.step(cstate, meas, ref_k)
@@ -122,10 +126,10 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array)
         u = _quantise(jnp.clip(ubuf[-1], -act.limit, act.limit), act.quantum)
         # 4. plant over one period, command held
         x_next = integrate_hold(plant, x, u, h, loop.substeps, solver)
-        rec = (x, plant.signals(x, u), meas_vec, u)
-        return (x_next, cstate, sbuf, ubuf, u), rec
+        return (x_next, cstate, sbuf, ubuf, u), (x, meas_vec, u)
 
-    return jax.lax.scan(sample, carry, (refs, noise))
+    carry, (xs, meas, us) = jax.lax.scan(sample, carry, (refs, noise))
+    return carry, (xs, jax.vmap(plant.signals)(xs, us), meas, us)
 
 
 _run = eqx.filter_jit(_scan)
@@ -134,6 +138,19 @@ _run = eqx.filter_jit(_scan)
 def _run_from_x0(loop: SampledLoop, x0: Array, refs, noise):
     carry, recs = _scan(loop, initial_carry(loop, x0), refs, noise)
     return recs + (carry[0],)
+
+
+def _sensor_noise(seed: Array, n_samples: int, n_channels: int) -> Array:
+    return jax.random.normal(jax.random.PRNGKey(seed), (n_samples, n_channels))
+
+
+def _run_seeded(loop: SampledLoop, x0: Array, refs: dict[str, Array], seed: Array):
+    """A whole run in one compiled call: sensor noise, initial carry, the sample loop."""
+    n = next(iter(refs.values())).shape[0]
+    return _run_from_x0(loop, x0, refs, _sensor_noise(seed, n, len(loop.sensors.names)))
+
+
+_run_all = eqx.filter_jit(_run_seeded)
 
 
 def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
@@ -147,14 +164,16 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
     :class:`SimulationDiverged` when the state blows up.
     """
     refs = _prepare_refs(references, n_samples)
-    noise = jax.random.normal(jax.random.PRNGKey(seed), (n_samples, len(loop.sensors.names)))
-    carry = _init_jit(loop, jnp.asarray(x0, dtype=float))
+    x0 = np.asarray(x0, dtype=float)
     if progress is None or n_samples <= chunk:
-        carry, recs = _run(loop, carry, refs, noise)
+        *recs, xf = _run_all(loop, x0, refs, np.asarray(seed, dtype=np.int64))
         recs = [np.asarray(r) for r in recs]
         if progress is not None:
             progress(n_samples, n_samples)
     else:
+        noise = _sensor_noise(np.asarray(seed, dtype=np.int64), n_samples,
+                              len(loop.sensors.names))
+        carry = _init_jit(loop, jnp.asarray(x0))
         parts = []
         for k0 in range(0, n_samples, chunk):
             k1 = min(k0 + chunk, n_samples)
@@ -173,9 +192,10 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
         if len(recs[0]) < n_samples:  # stopped early on divergence: pad with NaN
             recs = [np.concatenate([r, np.full((n_samples - len(r),) + r.shape[1:], np.nan)])
                     for r in recs]
+        xf = carry[0]
     xs, sig, meas, us = recs
     out = {"states": xs, "signals": sig, "measured": meas, "command": us,
-           "final_state": np.asarray(carry[0]),
+           "final_state": np.asarray(xf),
            "references": {k: np.asarray(v) for k, v in refs.items()}}
     check_divergence(out, loop, float(loop.dt))
     return out
@@ -193,9 +213,9 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     ``eqx.tree_at(lambda l: l.controller.D, jax.tree.map(lambda _: None, loop), 0)``
     to batch only some). ``x0`` is shared."""
     refs = _prepare_refs(references, n_samples)
-    noise = jax.random.normal(jax.random.PRNGKey(seed), (n_samples, len(loop.sensors.names)))
     fn = _batched(in_axes)
-    xs, sig, meas, us, xf = fn(loop, jnp.asarray(x0, dtype=float), refs, noise)
+    xs, sig, meas, us, xf = fn(loop, np.asarray(x0, dtype=float), refs,
+                               np.asarray(seed, dtype=np.int64))
     out = {"states": np.asarray(xs), "signals": np.asarray(sig), "measured": np.asarray(meas),
            "command": np.asarray(us), "final_state": np.asarray(xf),
            "references": {k: np.asarray(v) for k, v in refs.items()}}
@@ -210,20 +230,26 @@ def _batched(in_axes):
     """One compiled vmap per batching pattern (cached so sweeps compile once)."""
     key = str(jax.tree.structure(in_axes)) + str(jax.tree.leaves(in_axes)) if in_axes != 0 else 0
     if key not in _BATCHED:
-        _BATCHED[key] = eqx.filter_jit(eqx.filter_vmap(_run_from_x0, in_axes=(in_axes, None, None, None)))
+        vmapped = eqx.filter_vmap(_run_from_x0, in_axes=(in_axes, None, None, None))
+
+        def run(loop, x0, refs, seed):
+            n = next(iter(refs.values())).shape[0]
+            return vmapped(loop, x0, refs, _sensor_noise(seed, n, len(loop.sensors.names)))
+
+        _BATCHED[key] = eqx.filter_jit(run)
     return _BATCHED[key]
 
 
 def _prepare_refs(references: dict[str, Any], n: int) -> dict[str, Array]:
     refs = {}
     for k, v in references.items():
-        a = jnp.asarray(v, dtype=float)
+        a = np.asarray(v, dtype=float)
         if a.ndim == 0:
-            a = jnp.full((n,), a)
+            a = np.full((n,), a)
         if a.shape != (n,):
             raise ValueError(f"reference {k!r}: expected {n} samples, got shape {a.shape}")
         refs[k] = a
-    refs.setdefault("reference", jnp.zeros((n,)))
+    refs.setdefault("reference", np.zeros((n,)))
     return refs
 
 
