@@ -40,7 +40,7 @@ def _mv(A: Array, x: Array) -> Array:
     ``@`` is a library call per product (~30x slower), and ``jnp.sum(A * x, -1)`` becomes,
     under ``vmap``, separate reduction kernels with a (batch, rows, cols) broadcast of
     ``A`` per RK stage (docs/performance.md). The pairwise order ((t1 + t0) + (t3 + t2))
-    is the one XLA's reduce used, which keeps results bit-identical to that form."""
+    reproduces the results of that ``jnp.sum`` form bit for bit (XLA's reduce order)."""
     terms = [A[..., j] * x[j] for j in range(A.shape[-1])]
     if not terms:
         return jnp.zeros(A.shape[:-1])

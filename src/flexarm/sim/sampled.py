@@ -278,7 +278,7 @@ def _batched(in_axes):
     return _BATCHED[key]
 
 
-def _prepare_refs(references: dict[str, Any], n: int) -> dict[str, Array]:
+def _prepare_refs(references: dict[str, Any], n: int) -> dict[str, np.ndarray]:
     refs = {}
     for k, v in references.items():
         a = np.asarray(v, dtype=float)
