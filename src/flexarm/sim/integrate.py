@@ -61,11 +61,11 @@ def rk4_step(plant: Plant, y: Array, u: Array, h: Array) -> Array:
     """One classical RK4 step, written out (the same method as :class:`RK4`).
 
     diffrax runs the stages of any explicit RK method in an inner while loop, with a
-    dot product of the tableau row and the stage buffer per stage (a library call on
+    dot product of the tableau row and the stage buffer per stage (a separate kernel on
     CPU). For the single-link benchmark (667 samples x 10 substeps) that cost, measured
-    in one run: 2.7 -> 2.2 ms single and 0.50 -> 0.25 ms per rollout in a vmap batch of
-    1000 (docs/performance.md). The results differ from diffrax's by rounding only (XLA
-    fuses, and contracts to FMA, across different kernel boundaries): <= 4e-13 rad."""
+    in one run: 2.58 -> 1.99 ms single and 0.46 -> 0.20 ms per rollout in a vmap batch
+    of 1000 (docs/performance.md). The results differ from diffrax's by rounding only
+    (XLA fuses, and contracts to FMA, across other kernel boundaries): <= 4e-13 rad."""
     k1 = plant.rhs(y, u)
     k2 = plant.rhs(y + (0.5 * h) * k1, u)
     k3 = plant.rhs(y + (0.5 * h) * k2, u)
