@@ -63,7 +63,7 @@ def rk4_step(plant: Plant, y: Array, u: Array, h: Array) -> Array:
     diffrax runs the stages of any explicit RK method in an inner while loop, with a
     dot product of the tableau row and the stage buffer per stage (a separate kernel on
     CPU). For the single-link benchmark (667 samples x 10 substeps) that cost, measured
-    in one run: 2.58 -> 1.99 ms single and 0.46 -> 0.20 ms per rollout in a vmap batch
+    in one run: 2.64 -> 1.97 ms single and 0.45 -> 0.20 ms per rollout in a vmap batch
     of 1000 (docs/performance.md). The results differ from diffrax's by rounding only
     (XLA fuses, and contracts to FMA, across other kernel boundaries): <= 4e-13 rad."""
     k1 = plant.rhs(y, u)

@@ -108,7 +108,7 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
 # them as a dataflow graph, which costs more per kernel than these tiny kernels take. The
 # body of a loop over all samples reads and writes the whole-run input and record arrays,
 # so single runs loop over blocks of samples whose arrays stay within 512 bytes
-# (docs/performance.md: 2.22 -> 1.96 ms for the single-link benchmark).
+# (docs/performance.md: 2.37 -> 2.11 ms for the single-link benchmark).
 _SMALL_BUFFER_BYTES = 512
 
 
