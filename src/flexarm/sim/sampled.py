@@ -285,13 +285,15 @@ def _batched(in_axes, batch_size: int | None):
     def run(loop, x0, refs, seed):
         n = next(iter(refs.values())).shape[0]
         noise = _sensor_noise(seed, n, len(loop.sensors.names))
+        if batch_size is None:
+            return vmapped(loop, x0, refs, noise)
         # each leaf of the loop and its batch axis (None: shared by all rollouts)
         leaves, treedef = jax.tree.flatten(loop, is_leaf=_is_none)
         axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=_is_none),
                                is_leaf=_is_none)
         axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
         sizes = {x.shape[a] for x, a in zip(leaves, axes) if a is not None}
-        if batch_size is None or len(sizes) != 1 or max(sizes) <= batch_size:
+        if len(sizes) != 1 or max(sizes) <= batch_size:
             return vmapped(loop, x0, refs, noise)
         size = sizes.pop()
         n_chunks = -(-size // batch_size)
