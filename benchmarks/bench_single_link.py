@@ -6,6 +6,9 @@ a vmap-ed batch of 1000 gain variations), and the same closed loop written the w
 would without flexarm (NumPy right-hand side, scipy.integrate.solve_ivp between samples),
 with the ratios against the targets (>= 20x single, batch per rollout >= 5x our single).
 
+The machine may be shared: every figure is the best of several runs; compare figures
+from one run only (docs/performance.md has measured figures and what cost what).
+
 Run:  .venv/bin/python benchmarks/bench_single_link.py
 """
 
@@ -21,7 +24,7 @@ from scipy.integrate import solve_ivp
 
 from flexarm.control import discrete
 from flexarm.sim.build import prepare
-from flexarm.sim.sampled import _run_from_x0, simulate_batch, simulate_loop
+from flexarm.sim.sampled import _prepare_refs, _run_all, simulate_batch, simulate_loop
 from flexarm.specs import load_scenario
 
 N_BATCH = 1000
@@ -87,12 +90,11 @@ def main() -> None:
     t0 = time.perf_counter()
     out = simulate_loop(p.loop, p.x0, p.references, n)
     compile_s = time.perf_counter() - t0
-    single = best_of(lambda: simulate_loop(p.loop, p.x0, p.references, n), 20)
-    refs = {k: jnp.asarray(v) for k, v in p.references.items()}
-    noise = jnp.zeros((n, len(p.loop.sensors.names)))
-    core = eqx.filter_jit(_run_from_x0)
-    jax.block_until_ready(core(p.loop, jnp.asarray(p.x0), refs, noise))
-    core_s = best_of(lambda: jax.block_until_ready(core(p.loop, jnp.asarray(p.x0), refs, noise)), 20)
+    single = best_of(lambda: simulate_loop(p.loop, p.x0, p.references, n), 30)
+    # the same compiled call, without the Python around it (references, numpy outputs,
+    # divergence check)
+    refs, x0, seed = _prepare_refs(p.references, n), np.asarray(p.x0), np.asarray(0)
+    core_s = best_of(lambda: jax.block_until_ready(_run_all(p.loop, x0, refs, seed)), 30)
 
     # batch: 1000 PD gain variations (kp 10..20 A/rad, kd 0.2..0.4 A*s/rad)
     kp = np.linspace(10, 20, N_BATCH)
@@ -107,7 +109,7 @@ def main() -> None:
     t0 = time.perf_counter()
     bout = simulate_batch(loop, p.x0, p.references, n, in_axes=axes)
     batch_compile = time.perf_counter() - t0
-    batch = best_of(lambda: simulate_batch(loop, p.x0, p.references, n, in_axes=axes), 3)
+    batch = best_of(lambda: simulate_batch(loop, p.x0, p.references, n, in_axes=axes), 5)
     per_rollout = batch / N_BATCH
     mid = N_BATCH // 2
     check = simulate_loop(eqx.tree_at(lambda lp: lp.controller, p.loop,

@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from flexarm.fit import FitInputError, fit, parse_controller, read_bench_log, validate
-from flexarm.fit.closed_loop import as_jax, closed_loop_run
-from flexarm.fit.report import check_physical
-from flexarm.fit.synthetic import synthetic_log
+from flexarm.bench import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.bench.closed_loop import as_jax, closed_loop_run
+from flexarm.bench.report import check_physical
+from flexarm.bench.synthetic import synthetic_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
@@ -19,14 +19,15 @@ RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resi
            link_length=0.42, gear_efficiency=0.9, motor_efficiency=0.69)
 GAINS = [(6, -40, 0.15, 0), (8, -60, 0.2, -0.5), (5, -20, 0.12, 0)]
 TRUE = {"hub_inertia": 2.08e-3, "link_inertia": 3.5e-3, "link_frequency": np.sqrt(1.2 / 3.5e-3),
-        "coulomb": 0.03, "tip_gain": 1.0}
+        "link_damping": 0.03, "coulomb": 0.03, "tip_gain": 1.0}
 
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
     d = tmp_path_factory.mktemp("bench")
     sc = load_scenario("rotary-flexible-link")
-    return [synthetic_log(sc, g, d / f"log{i}.csv", duration=4.0, tip0=t0, tip_rate0=v0, seed=i)
+    return [synthetic_log(sc, g, d / f"log{i}.csv", duration=6.0, period=3.0,
+                          amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
             for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05)))]
 
 
@@ -67,14 +68,36 @@ def test_fast_loop_equals_flexarm_simulator():
 
 
 def test_fit_two_logs_validate_third(fitted, logs, tmp_path):
+    """Every physical parameter against the truth (scenario rotary-flexible-link).
+
+    Within 5 %: J, J_l, ω_c, C, ζ (the link rings down while the hub is stuck), F_c, tip
+    gain; exact: tip sign +1, tip delay 2 samples, hub delay 0 (fixed by default).
+    Looser, with the reason:
+
+    * breakaway F_s within 20 %: it shows only at the few restarts of a stuck hub (the
+      torque at which it starts), a handful of events per log;
+    * viscous B within 0.003 N·m·s/rad absolute: the voltage drive's back-EMF damping
+      k_ω = k_u K_g K_m = 0.069 N·m·s/rad acts in parallel, B = 0.004 is 5.5 % of the total
+      damping, so B within 5 % would need the total within 0.3 %; 0.003 is 4 % of the total;
+    * bias (true 0) within 0.002 N·m absolute (5 % of F_s): 0 has no relative tolerance,
+      and a bias shows only as the up/down asymmetry of the stuck hub's steady errors,
+      which stick-slip spreads over ± F_s.
+    """
     res = fitted
     print(res.summary())
     allp = {**res.params, **res.derived}
     errs = {k: 100 * (allp[k] / v - 1) for k, v in TRUE.items()}
     errs["link_stiffness"] = 100 * (allp["link_stiffness"] / 1.2 - 1)
     print("parameter errors %:", {k: round(v, 2) for k, v in errs.items()})
+    more = {k: (allp[k], v) for k, v in dict(static=0.04, viscous=4e-3, bias=0.0).items()}
+    print("breakaway, viscous, bias (fitted, true):", more, "delays:", res.delays)
     for k, e in errs.items():
         assert abs(e) < 5.0, (k, e)
+    assert abs(allp["static"] / 0.04 - 1) < 0.20, more
+    assert abs(allp["viscous"] - 4e-3) < 3e-3, more
+    assert abs(allp["bias"]) < 2e-3, more
+    assert allp["tip_gain"] > 0
+    assert res.delays == {"motor_angle": 0, "tip_deflection": 2}
     for n, d in res.fit_percent.items():
         assert d["motor_angle"] > 95 and d["tip_deflection"] > 95, (n, d)
     v = validate(res.scenario(), [logs[2]])

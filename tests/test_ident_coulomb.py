@@ -82,7 +82,7 @@ def test_estimator_exact_on_analytic_time_signals():
             _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
             _analytic_log(1.3, 0.5 * np.exp(-1.2j), 0.001 * np.exp(2.5j), CF, name="c.csv"),
             _analytic_log(3.9, 0.2 * np.exp(0.9j), 0.0, CF, name="d.csv", t0=0.5)]
-    est = estimate_coulomb([analyse_log(lg, held=()) for lg in logs])  # samples of a continuous current, not a held command
+    est = estimate_coulomb([analyse_log(lg, held=(), friction_shape="ideal") for lg in logs])  # samples of a continuous current, not a held command
     assert [e.omega for e in est.pairs] == pytest.approx([2.2, 1.3], rel=1e-9)
     assert [e.partner_name for e in est.pairs] == ["b.csv", "d.csv"]
     for e in est.pairs:
@@ -93,8 +93,8 @@ def test_estimator_exact_on_analytic_time_signals():
 
 def test_partner_matching_tolerance_is_one_percent():
     def logs(factor):
-        return [analyse_log(_analytic_log(2.0, 0.3, 0.0, CF, name="base.csv"), held=()),
-                analyse_log(_analytic_log(6.0 * factor, 0.04, 0.0, CF, name="p.csv"), held=())]
+        return [analyse_log(_analytic_log(2.0, 0.3, 0.0, CF, name="base.csv"), held=(), friction_shape="ideal"),
+                analyse_log(_analytic_log(6.0 * factor, 0.04, 0.0, CF, name="p.csv"), held=(), friction_shape="ideal")]
 
     est = estimate_coulomb(logs(1.009))
     assert len(est.pairs) == 1 and est.pairs[0].partner_omega == pytest.approx(6.054)
@@ -111,7 +111,7 @@ def test_missing_partner_warns_naming_frequency_and_continues():
             _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
             _analytic_log(5.0, 0.1 * np.exp(0.1j), 0.0, CF, name="lonely.csv")]
     with pytest.warns(IdentificationWarning) as rec:
-        est = estimate_coulomb([analyse_log(lg, held=()) for lg in logs])
+        est = estimate_coulomb([analyse_log(lg, held=(), friction_shape="ideal") for lg in logs])
     msgs = [str(r.message) for r in rec]
     assert len(msgs) == 1  # the 6.6 rad/s log is a partner, it needs none itself
     assert "lonely.csv" in msgs[0] and "ω0 = 5 rad/s" in msgs[0] and "15 rad/s" in msgs[0]

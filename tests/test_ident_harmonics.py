@@ -129,3 +129,22 @@ def test_held_command_phasor_is_that_of_the_zoh_signal():
     assert abs(sampled - exact) < 2e-3 * abs(exact)  # window not whole periods of the fine grid
     assert abs(np.angle(sampled / x[0]) - np.angle(exact / x[0])) < 2e-3
     assert abs(np.angle(zoh_factor(w, T))) == pytest.approx(w * T / 2, rel=1e-12)
+
+
+def test_measured_friction_shape():
+    """sign(θ̇m) rebuilt from θm's harmonics: for a pure sinusoid it is eq. (2)'s square
+    wave, 4/(nπ) e^{j(n∠θ1 + π/2)}; a third harmonic in θm shifts its zero crossings and
+    with them the friction's fundamental."""
+    from flexarm.ident.harmonics import ideal_friction_phasor, measured_friction_shape
+
+    w, T = 3.0, 1e-4
+    t = np.arange(int(20 * 2 * np.pi / w / T)) * T  # whole periods up to one sample
+    X = np.zeros(6, complex)
+    X[1] = 0.8 * np.exp(0.4j)
+    S = measured_friction_shape(t, X, w, 5)
+    for n in (1, 3, 5):
+        assert abs(S[n] - ideal_friction_phasor(X[1], n)) < 2e-3 * abs(ideal_friction_phasor(X[1], n))
+    assert abs(S[2]) < 1e-3
+    X[3] = 0.05 * np.exp(1.0j)
+    S3 = measured_friction_shape(t, X, w, 5)
+    assert abs(np.angle(S3[1] / S[1])) > 0.01

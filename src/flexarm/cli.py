@@ -66,10 +66,17 @@ def scenarios() -> None:
 def info(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
          as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """The arm's linear model: transfer functions, poles, zeros, frequencies, gains."""
-    from flexarm.analysis.model_info import single_link_info
+    from flexarm.analysis.model_info import multilink_info, single_link_info
     from flexarm.models.single_link import SingleLinkModel
 
     sc = _load(scenario)
+    if sc.arm.kind == "multi_link":
+        data = {"scenario": sc.name, **multilink_info(sc)}
+        if as_json:
+            print(json.dumps(data, indent=2))
+        else:
+            _print_multilink(sc, data)
+        return
     data = {"scenario": sc.name, **single_link_info(SingleLinkModel.from_spec(sc.arm))}
     if as_json:
         print(json.dumps(data, indent=2))
@@ -85,6 +92,24 @@ def info(scenario: str = typer.Argument(..., help="scenario TOML file or built-i
         if tf["right_half_plane_zeros"]:
             console.print(f"  right-half-plane zeros: {[round(z['re'], 5) for z in tf['right_half_plane_zeros']]}")
         console.print(f"  static gain: {tf['static_gain']:.6g} ({tf['static_gain_note']})")
+
+
+def _print_multilink(sc, data: dict) -> None:
+    console.print(f"[bold]{sc.name}[/]: {escape(sc.description)}")
+    for ln in data["links"]:
+        console.print(f"\n[bold]link {ln['link']}[/] ({ln['modes']} {ln['mode_type']} modes)")
+        console.print(f"  frequencies [Hz]: {_fmt(ln['frequencies_hz'])}", markup=False)
+        console.print(f"  phi(l): {_fmt(ln['phi_end'])}   phi'(l) [1/m]: "
+                      f"{_fmt(ln['phi_prime_end_per_m'])}", markup=False)
+        console.print("  k_ij [N/m]: " + ", ".join(_fmt(r) for r in ln["stiffness_k_ij_N_per_m"]),
+                      markup=False)
+    tg = data.get("target")
+    if tg:
+        console.print(f"\ndelta_d [m] (eq. 9): {_fmt(tg['delta_d_m'])}", markup=False)
+        console.print(f"alpha (eq. 6): {tg['alpha']['value']:.5g}")
+        for k, c in tg["conditions"].items():
+            console.print(f"({k}) {c['statement']}: {'holds' if c['holds'] else 'FAILS'} "
+                          f"(margin {c['margin']:+.4g})")
 
 
 def _fmt(c: list[float]) -> str:
@@ -105,6 +130,50 @@ def simulate(scenario: str = typer.Argument(..., help="scenario TOML file or bui
     console.print_json(json.dumps(summary))
 
 
+REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
+                 "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example"}
+
+
+def _reproduction(name: str):
+    import importlib
+
+    if name not in REPRODUCTIONS:
+        _fail(f"reproduce {name!r}: choose one of {', '.join(REPRODUCTIONS)}")
+    try:
+        return importlib.import_module(f"flexarm.reproduce.{name}").run
+    except ModuleNotFoundError:
+        _fail(f"reproduce {name!r} is not available in this version")
+
+
+def _run_reproduction(name: str, out: Path) -> dict:
+    from rich.progress import Progress
+
+    run = _reproduction(name)
+    with Progress(console=err) as bar:
+        task = bar.add_task(name, total=None)
+
+        def progress(done, total=None, what=""):
+            bar.update(task, completed=done, total=total, description=f"{name}: {what}")
+
+        return run(out, progress=progress)
+
+
+@app.command()
+def reproduce(paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
+              out: Path = typer.Option(..., "--out", help="folder for figures and the table"),
+              overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+    """Re-run a paper's experiments on the simulated arms: figures, and a table of each
+    reported quantity, the paper's value, ours and the ratio."""
+    _enable_cache()
+    _reproduction(paper)
+    out = _outdir(out, overwrite)
+    res = _run_reproduction(paper, out)
+    md = out / f"{paper}_table.md"
+    if md.exists():
+        console.print(md.read_text(), markup=False)
+    console.print(f"wrote {out}/ ({len(res.get('figures', []))} figures)")
+
+
 @app.command()
 def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder (flexarm's own; rewritten)")) -> None:
     """The main job on the built-in default: model, simulations and figures into --out."""
@@ -112,7 +181,11 @@ def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder
     from flexarm.analysis.summary import run_demo
 
     out.mkdir(parents=True, exist_ok=True)
-    run_demo(out, console)
+    import importlib.util
+
+    reps = {n: (lambda d, n=n: _run_reproduction(n, d)) for n in REPRODUCTIONS
+            if importlib.util.find_spec(f"flexarm.reproduce.{n}") is not None}
+    run_demo(out, console, reproductions=reps)
 
 
 def _pairs(items: list[str] | None, what: str) -> dict[str, str]:
@@ -178,7 +251,10 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
              unit: Optional[list[str]] = typer.Option(None, help="a column's unit: current=mA"),
              motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
              beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
-             structured: bool = typer.Option(False, help="use the joint fit of J, V, C, C_f as G_m"),
+             structured: Optional[bool] = typer.Option(
+                 None, "--structured/--free",
+                 help="G_m from the joint fit of J, V, C, C_f, or the paper's free fit to the "
+                      "corrected data (default: joint fit for a one-mode beam)"),
              overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
     import warnings
@@ -217,6 +293,78 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     console.print(f"G_m num = {_fmt(d['motor_tf']['num'])}\n    den = {_fmt(d['motor_tf']['den'])}"
                   f"  ({d['motor_tf_method']})")
     console.print(f"G_b num = {_fmt(d['beam_tf']['num'])}\n    den = {_fmt(d['beam_tf']['den'])}")
+
+
+@app.command()
+def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one recording session"),
+        drive: str = typer.Option("voltage", help="voltage or current"),
+        gear_ratio: float = typer.Option(1.0, help="K_g"),
+        motor_constant: Optional[float] = typer.Option(None, help="K_m, V*s/rad (voltage) or N*m/A (current)"),
+        armature_resistance: Optional[float] = typer.Option(None, help="R, ohm"),
+        link_length: Optional[float] = typer.Option(None, help="link length, m"),
+        gear_efficiency: float = typer.Option(1.0), motor_efficiency: float = typer.Option(1.0),
+        voltage_limit: float = typer.Option(10.0, help="amplifier limit, V"),
+        controller: Optional[str] = typer.Option(
+            None, help="overrides the logs' '# controller:' line, e.g. 'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"),
+        mode: str = typer.Option("closed_loop", help="closed_loop, or open_loop (replay the logged voltage)"),
+        no_friction: bool = typer.Option(False, "--no-friction", help="fit without joint friction (for comparison)"),
+        json_out: Optional[Path] = typer.Option(None, "--json", help="write the result as JSON"),
+        scenario_out: Optional[Path] = typer.Option(None, "--scenario-out", help="write the fitted scenario TOML"),
+        plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
+        seconds: float = typer.Option(5.0, help="time budget of the global stage, s"),
+        overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
+    """Fit a physical model with joint friction to closed-loop logs (time domain)."""
+    _enable_cache()
+    from flexarm.bench import FitInputError
+    from flexarm.bench import fit as run_fit
+
+    for p in (json_out, scenario_out):
+        if p is not None and p.exists() and not overwrite:
+            _fail(f"{p} exists; pass --overwrite to replace it")
+    try:
+        with console.status("fitting") as status:
+            res = run_fit([str(x) for x in logs], drive=drive, gear_ratio=gear_ratio,
+                          motor_constant=motor_constant, armature_resistance=armature_resistance,
+                          link_length=link_length, gear_efficiency=gear_efficiency,
+                          motor_efficiency=motor_efficiency, voltage_limit=voltage_limit,
+                          controller=controller, mode=mode, friction=not no_friction,
+                          global_seconds=seconds, progress=lambda m: status.update(m))
+    except (FitInputError, ValueError) as exc:
+        _fail(str(exc))
+    console.print(escape(res.summary()))
+    if json_out is not None:
+        res.to_json(json_out)
+    if scenario_out is not None:
+        res.write_scenario(scenario_out, overwrite=overwrite)
+    if plots is not None:
+        res.plots(plots)
+
+
+@app.command()
+def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
+             logs: list[Path] = typer.Argument(..., help="CSV logs to replay"),
+             json_out: Optional[Path] = typer.Option(None, "--json", help="write the fit % as JSON"),
+             plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
+             controller: Optional[str] = typer.Option(None, help="overrides the logs' controller line"),
+             overwrite: bool = typer.Option(False, help="replace an existing JSON file")) -> None:
+    """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
+    _enable_cache()
+    from flexarm.bench import FitInputError
+    from flexarm.bench import validate as run_validate
+
+    if json_out is not None and json_out.exists() and not overwrite:
+        _fail(f"{json_out} exists; pass --overwrite to replace it")
+    sc = _load(scenario)
+    try:
+        out = run_validate(sc, [str(x) for x in logs], controller=controller, plots=plots)
+    except (FitInputError, ValueError) as exc:
+        _fail(str(exc))
+    t = Table("log", "motor_angle fit %", "tip_deflection fit %")
+    for name, d in out["fit_percent"].items():
+        t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
+    console.print(t)
+    if json_out is not None:
+        json_out.write_text(json.dumps(out, indent=2))
 
 
 def _scenario_file(res, current_limit) -> dict:

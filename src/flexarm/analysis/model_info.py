@@ -76,3 +76,53 @@ def single_link_info(model: SingleLinkModel) -> dict:
         },
     }
     return info
+
+
+def multilink_info(scenario) -> dict:
+    """Per link: mode frequencies (Hz), φ(ℓ), φ'(ℓ), k_ij; with a regulation target:
+    δ_d (DLS eq. 9), α (eq. 6) over the box spanned by the initial and target angles,
+    and the sufficient conditions (14)-(15) with their margins."""
+    from flexarm.control.regulation import (
+        alpha_bound,
+        gravity_torque,
+        residual_deflection,
+        stability_conditions,
+    )
+    from flexarm.models.multilink import build_multilink
+
+    model = build_multilink(scenario.arm)
+    links = []
+    for i, m in enumerate(model.modes):
+        links.append({
+            "link": i + 1, "modes": len(m.omega), "mode_type": m.mode_type,
+            "frequencies_hz": (np.asarray(m.omega) / (2 * np.pi)).tolist(),
+            "beta_l": np.asarray(m.beta_l).tolist(),
+            "phi_end": np.asarray(m.tip_value).tolist(),
+            "phi_prime_end_per_m": np.asarray(m.tip_slope).tolist(),
+            "stiffness_k_ij_N_per_m": np.asarray(m.K).tolist(),
+            "tip_load": {"mass_kg": m.tip_mass, "inertia_kg_m2": m.tip_inertia},
+        })
+    info = {"kind": "multi_link", "links": links, "gravity_m_s2": scenario.arm.gravity}
+    reg = scenario.regulation
+    if reg is not None:
+        th_d = np.asarray(reg.target)
+        th_0 = np.asarray(reg.initial)
+        d_d = residual_deflection(model, th_d)
+        lo, hi = np.minimum(th_0, th_d), np.maximum(th_0, th_d)
+        dmax = np.maximum(2 * np.abs(d_d), 1e-3)
+        a = alpha_bound(model, lo, hi, dmax)
+        cond = stability_conditions(model, np.diag(reg.kp), a.alpha)
+        info["target"] = {
+            "theta_d_rad": th_d.tolist(), "delta_d_m": np.asarray(d_d).tolist(),
+            "gravity_torque_at_target_N_m": np.asarray(gravity_torque(model, th_d, d_d)).tolist(),
+            "alpha": {"value": a.alpha, "region": {"theta_low": lo.tolist(), "theta_high": hi.tolist(),
+                                                   "delta_max": dmax.tolist()},
+                      "note": "largest ||dg/dq||_2 found over the region (eq. 6)"},
+            "conditions": {
+                "14": {"statement": "lambda_min(K) > alpha", "lambda_min_K": cond.lambda_min_K,
+                       "holds": cond.holds_14, "margin": cond.margin_14},
+                "15": {"statement": "lambda_min(K_P) > alpha", "lambda_min_KP": cond.lambda_min_KP,
+                       "holds": cond.holds_15, "margin": cond.margin_15},
+            },
+        }
+    return info

@@ -29,8 +29,22 @@ def simulate_with_progress(scenario: Scenario, progress: bool = False):
     return to_result(p, out)
 
 
+def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
+    """Step metrics for a step reference; tracking errors for other references."""
+    if scenario.reference.type == "step":
+        return {"step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
+                "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict()}
+    e = res["reference"] - res[ctrl]
+    return {"tracking": {"signal": ctrl, "reference": scenario.reference.type,
+                         "rms_error": float(np.sqrt(np.mean(e**2))),
+                         "max_abs_error": float(np.max(np.abs(e))),
+                         "peak_tip_deflection": float(np.max(np.abs(res["tip_deflection"])))}}
+
+
 def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> dict:
     """Simulate and write ``<name>.csv``, ``<name>.png`` and ``<name>.summary.json``."""
+    if getattr(scenario.arm, "kind", "single_link") == "multi_link":
+        return write_regulation(scenario, out)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -41,6 +55,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     res.to_csv(out / f"{name}.csv", overwrite=True)
     fig = res.plot_arm()
     fig.suptitle(f"{name}: closed-loop response")
+    fig.tight_layout()
     fig.savefig(out / f"{name}.png", dpi=120)
     plt.close(fig)
     ctrl = scenario.controller.measured if scenario.controller else "motor_angle"
@@ -49,8 +64,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
         "samples": len(res.time),
         "sampling_period_s": scenario.sampling.period,
         "controlled_signal": ctrl,
-        "step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
-        "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict(),
+        **_response_metrics(scenario, res, ctrl),
         "peak_command": float(np.max(np.abs(res.command))),
         "command_unit": res.input_names[0],
         "files": [f"{name}.csv", f"{name}.png"],
@@ -59,23 +73,109 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     return summary
 
 
-def run_demo(out: Path, console) -> dict:
-    """Model and closed-loop simulation of every built-in single-link arm."""
+LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
+        "quasistatic": "law_pd_quasistatic"}
+
+
+def run_regulation(scenario):
+    """Simulate a multi-link scenario's regulation (continuous time, RK4)."""
+    from flexarm.control import regulation as R
+    from flexarm.models.multilink import build_multilink
+
+    reg = scenario.regulation
+    if reg is None:
+        raise ValueError(f"{scenario.name}: a multi-link scenario needs a [regulation] "
+                         "section to simulate")
+    model = build_multilink(scenario.arm)
+    params = R.regulation_params(model, np.diag(reg.kp), np.diag(reg.kd), reg.target,
+                                 theta_0=reg.initial, duration=reg.interpolation_time)
+    x0 = np.zeros(2 * model.n_q)
+    x0[:model.n_links] = reg.initial
+    run = R.simulate_regulation(model, getattr(R, LAWS[reg.law]), x0, reg.duration,
+                                reg.output_period, params=params, step=reg.step)
+    return model, params, run
+
+
+def write_regulation(scenario, out: Path) -> dict:
+    """Simulate a multi-link regulation; write CSV, the Fig. 2-style figure, summary."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    model, params, run = run_regulation(scenario)
+    name = scenario.name
+    n = model.n_links
+    cols = {"time": run.t}
+    cols.update({nm: run.x[:, k] for k, nm in enumerate(run.state_names)})
+    cols.update({f"torque_{k + 1}": run.u[:, k] for k in range(n)})
+    path = out / f"{name}.csv"
+    with path.open("w") as f:
+        f.write("# units: s, rad, m, rad/s, m/s, N*m\n" + ",".join(cols) + "\n")
+        np.savetxt(f, np.column_stack(list(cols.values())), delimiter=",", fmt="%.10g")
+    fig, ax = plt.subplots(3, 1, sharex=True, figsize=(7, 8))
+    for k in range(n):
+        ax[0].plot(run.t, np.degrees(run.theta[:, k]), label=f"θ{k + 1}")
+    ax[0].set_ylabel("joint angle [deg]")
+    for k in range(run.delta.shape[1]):
+        ax[1].plot(run.t, run.delta[:, k], label=run.state_names[n + k])
+    ax[1].set_ylabel("deflection [m]")
+    for k in range(n):
+        ax[2].plot(run.t, run.u[:, k], label=f"u{k + 1}")
+    ax[2].set_ylabel("torque [N·m]")
+    ax[2].set_xlabel("time [s]")
+    for a in ax:
+        a.legend(loc="best", fontsize=8)
+        a.grid(True, alpha=0.3)
+    fig.suptitle(f"{name}: law {scenario.regulation.law}")
+    fig.tight_layout()
+    fig.savefig(out / f"{name}.png", dpi=120)
+    plt.close(fig)
+    th_err = np.degrees(np.abs(run.theta[-1] - np.asarray(params.theta_d)))
+    dd = np.asarray(params.delta_d)
+    summary = {
+        "scenario": name, "law": scenario.regulation.law,
+        "final_theta_error_deg": th_err.tolist(),
+        "final_delta_m": run.delta[-1].tolist(), "delta_d_m": dd.tolist(),
+        "final_delta_relative_error": float(np.linalg.norm(run.delta[-1] - dd) / np.linalg.norm(dd)),
+        "initial_torque_N_m": run.u[0].tolist(), "final_torque_N_m": run.u[-1].tolist(),
+        "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
+        "files": [path.name, f"{name}.png"],
+    }
+    (out / f"{name}.summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
+    """Model and closed-loop simulation of every built-in scenario, then the papers'
+    reproductions (``reproductions``: name → ``run(out_dir)``), into ``out``."""
+    from flexarm.models.single_link import SingleLinkModel
+
     results = {}
     for name, path in sorted(builtin_scenarios().items()):
         sc = load_scenario(path)
-        if sc.arm.kind != "single_link":
-            continue
-        from flexarm.models.single_link import SingleLinkModel
-
-        info = single_link_info(SingleLinkModel.from_spec(sc.arm))
-        (out / f"{name}.model.json").write_text(json.dumps(info, indent=2))
+        if sc.arm.kind == "single_link":
+            info = single_link_info(SingleLinkModel.from_spec(sc.arm))
+            (out / f"{name}.model.json").write_text(json.dumps(info, indent=2))
         s = write_simulation(sc, out)
         results[name] = s
-        m = s["step_metrics"]
-        console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                      f"{m['settling_time']} s, steady-state error {m['steady_state_error']:.3g} rad, "
-                      f"peak command {s['peak_command']:.3g} {s['command_unit']}")
-    (out / "summary.json").write_text(json.dumps(results, indent=2))
+        if "step_metrics" in s:
+            m = s["step_metrics"]
+            console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
+                          f"{m['settling_time']} s, steady-state error {m['steady_state_error']:.3g} "
+                          f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}")
+        elif "tracking" in s:
+            tr = s["tracking"]
+            console.print(f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
+                          f"{tr['rms_error']:.3g} rad, peak tip deflection "
+                          f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
+                          f"{s['command_unit']}")
+        else:
+            console.print(f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
+                          f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m")
+    for rname, run in (reproductions or {}).items():
+        console.print(f"[bold]reproducing {rname}[/] ...")
+        results[f"reproduce_{rname}"] = run(out / rname)
+    (out / "summary.json").write_text(json.dumps(results, indent=2, default=str))
     console.print(f"wrote {out}/")
     return results

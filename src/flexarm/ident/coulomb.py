@@ -71,22 +71,26 @@ class PairPhasors:
     current3: complex
     theta1_partner: complex
     current1_partner: complex
+    shape3: complex | None = None  # harmonic 3 of the friction shape, ω0 experiment
+    shape1_partner: complex | None = None  # fundamental of the shape, 3ω0 experiment
 
     @classmethod
     def from_analyses(cls, base: HarmonicAnalysis, partner: HarmonicAnalysis) -> "PairPhasors":
         return cls(base.phasor("motor_angle", 1), base.phasor("motor_angle", 3),
                    base.phasor("current", 3), partner.phasor("motor_angle", 1),
-                   partner.phasor("current", 1))
+                   partner.phasor("current", 1), base.friction(3), partner.friction(1))
 
     def g_inv_3w0(self, cf: float) -> complex:
         """G'⁻¹(3ω0) (A/rad) from eq. (5) for a trial C_f (A)."""
-        f1 = cf * square_wave_phasor(self.theta1_partner, 1)
-        return (self.current1_partner - f1) / self.theta1_partner
+        s1 = (square_wave_phasor(self.theta1_partner, 1) if self.shape1_partner is None
+              else self.shape1_partner)
+        return (self.current1_partner - cf * s1) / self.theta1_partner
 
     def cf_prime(self, cf: float) -> complex:
         """C_f' (complex, A) from eq. (4) (corrected phase) with G' from eq. (5)."""
         lin = self.g_inv_3w0(cf) * self.theta3
-        return (self.current3 - lin) / square_wave_phasor(self.theta1, 3)
+        s3 = square_wave_phasor(self.theta1, 3) if self.shape3 is None else self.shape3
+        return (self.current3 - lin) / s3
 
     def cost(self, cf: float) -> float:
         """FRB eq. (6): (ln|C_f'/C_f|)² + (∠C_f')²."""

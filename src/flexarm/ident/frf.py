@@ -77,15 +77,19 @@ class FrequencyResponse:
 
 def frequency_response(analyses: Sequence[HarmonicAnalysis],
                        coulomb_current: float | None = None) -> FrequencyResponse:
-    """Raw and corrected (eq. (7)) motor responses and beam response of all experiments."""
+    """Raw and corrected (eq. (7)) motor responses and beam response of all experiments.
+
+    The correction subtracts C_f times the friction shape's fundamental of each experiment
+    (:meth:`HarmonicAnalysis.friction`): the measured shape by default; with
+    ``friction_shape="ideal"`` analyses it is eq. (7) as printed."""
     order = np.argsort([a.omega0 for a in analyses], kind="stable")
     an = [analyses[k] for k in order]
     w = np.array([a.omega0 for a in an])
     th = np.array([a.phasor("motor_angle", 1) for a in an])
     tt = np.array([a.phasor("tip_angle", 1) for a in an])
     cur = np.array([a.phasor("current", 1) for a in an])
-    corr = None if coulomb_current is None else corrected_motor_response(th, cur,
-                                                                         coulomb_current)
+    shape = np.array([a.friction(1) for a in an])
+    corr = None if coulomb_current is None else th / (cur - coulomb_current * shape)
     return FrequencyResponse(omega=w, names=[a.name for a in an], theta_m=th, theta_t=tt,
                              current=cur, motor_raw=th / cur, motor_corrected=corr,
                              beam=tt / th, coulomb_current=coulomb_current)

@@ -203,10 +203,21 @@ class HarmonicAnalysis:
     phasors: dict[str, np.ndarray]
     saturation: float | None = None
     warnings: list[str] = field(default_factory=list)
+    friction_shape: np.ndarray | None = None
+    friction_shape_kind: str = "ideal"
 
     def phasor(self, column: str, n: int = 1) -> complex:
         """Phasor of harmonic ``n`` of ``column`` (n = 0: the mean)."""
         return complex(self.phasors[column][n])
+
+    def friction(self, n: int = 1) -> complex:
+        """Phasor of harmonic ``n`` of the Coulomb friction per unit C_f, sign(θ̇m(t)):
+        measured (the sign of the motor velocity rebuilt from θm's harmonics) or, for
+        ``friction_shape_kind == "ideal"``, the square wave in phase with the velocity's
+        fundamental, (4/(nπ)) e^{j(n∠θm + π/2)} for odd n (FRB eq. 2)."""
+        if self.friction_shape is not None:
+            return complex(self.friction_shape[n])
+        return ideal_friction_phasor(self.phasor("motor_angle", 1), n)
 
 
 HELD_COLUMNS = ("current", "voltage")
@@ -221,17 +232,51 @@ def zoh_factor(omega: np.ndarray | float, dt: float) -> np.ndarray | complex:
     return np.exp(-1j * x) * np.sinc(x / np.pi)
 
 
+def ideal_friction_phasor(theta_m1: complex, n: int = 1) -> complex:
+    """Harmonic n of sign(θ̇m) for θm = |θ1| cos(ω0 t + ∠θ1): (4/(nπ)) e^{j(n∠θ1 + π/2)},
+    odd n; 0 for even n (FRB eq. 2, with the phase as derived in docs: eq. (4) prints
+    ∠θm + π/2 where 3∠θm + π/2 is meant)."""
+    if n % 2 == 0:
+        return 0j
+    return complex(4.0 / (n * np.pi) * np.exp(1j * (n * np.angle(theta_m1) + np.pi / 2)))
+
+
+def measured_friction_shape(t: np.ndarray, theta_phasors: np.ndarray, omega0: float,
+                            n_max: int) -> np.ndarray:
+    """Phasors 0…n_max of sign(θ̇m(t)) with θ̇m rebuilt from θm's harmonics 1…n_max.
+
+    FRB Sec. II: the high-gain loop "allows us to determine the velocity of the motor and,
+    hence, the shape of the Coulomb friction". The motor's velocity is not a pure sinusoid
+    (the loop reacts to the friction; the motor stops briefly at reversals), so its zero
+    crossings, and with them the friction square wave, are shifted from the fundamental's:
+    on our simulated arm the ideal square wave biased V by 4-6 % and the measured shape
+    brought it within 2 %. Harmonics above n_max are left out: they carry mostly the A/D
+    noise, whose sign flips near zero velocity."""
+    ph = omega0 * np.asarray(t, float)
+    v = np.zeros_like(ph)
+    for n in range(1, n_max + 1):  # Re{jnω X_n e^{jnωt}} = −nω (Re X_n sin + Im X_n cos)
+        x = theta_phasors[n]
+        v -= n * omega0 * (x.real * np.sin(n * ph) + x.imag * np.cos(n * ph))
+    return fourier_phasors(t, np.sign(v), omega0, n_max)
+
+
 def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = None,
                 omega0: float | None = None, discard_periods: float = 1.0,
                 saturation_fraction: float = 0.02,
-                held: Iterable[str] = HELD_COLUMNS) -> HarmonicAnalysis:
+                held: Iterable[str] = HELD_COLUMNS,
+                friction_shape: str = "measured") -> HarmonicAnalysis:
     """Frequency, analysis window, phasors of harmonics 0…``n_max`` of ``columns``
     (default: all but time) and a saturation check of the current (warning).
 
     Columns named in ``held`` (default: the commands ``current`` and ``voltage``) are
     logged as zero-order-held samples: their phasors are those of the held, continuous
     signal (:func:`zoh_factor`). Pass ``held=()`` for a current measured by an A/D.
+
+    ``friction_shape``: ``"measured"`` (default; :func:`measured_friction_shape`) or
+    ``"ideal"`` (the square wave of FRB eq. 2 in phase with the velocity's fundamental).
     """
+    if friction_shape not in ("measured", "ideal"):
+        raise ValueError(f"friction_shape = {friction_shape!r}; choose 'measured' or 'ideal'")
     name = log.name
     if omega0 is None:
         omega0 = estimate_frequency(log.time, log["reference"], name=name)
@@ -245,6 +290,10 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
     res = HarmonicAnalysis(name=name, omega0=float(omega0), n_periods=N, start=start,
                            stop=stop, phasors={c: ph[k] * (hold if c in held else 1.0)
                                                for k, c in enumerate(cols)})
+    if friction_shape == "measured" and "motor_angle" in res.phasors:
+        res.friction_shape = measured_friction_shape(log.time[start:stop],
+                                                     res.phasors["motor_angle"], omega0, n_max)
+        res.friction_shape_kind = "measured"
     if "current" in log.signals:
         level = saturation_level(log["current"], min_fraction=saturation_fraction)
         if level is not None:

@@ -376,7 +376,8 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
              *, motor_integrators: int = 1, beam_integrators: int = 0,
              coulomb_current: float | None = None, partner_tol: float = PARTNER_TOL,
              discard_periods: float = 1.0, pattern: str = "*.csv",
-             n_grid: int = 400, structured: bool | None = None) -> IdentificationResult:
+             n_grid: int = 400, structured: bool | None = None,
+             friction_shape: str = "measured") -> IdentificationResult:
     """Identify G_m, G_b, C_f, J, V, C from sinusoidal experiments (see module docstring).
 
     Parameters
@@ -396,6 +397,11 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         Relative tolerance for matching a 3ω0 partner.
     discard_periods:
         Periods dropped at the start of each record before the whole periods analysed.
+    friction_shape:
+        ``"measured"`` (default): the Coulomb friction's waveform is sign(θ̇m) with the
+        velocity rebuilt from the logged motor angle (FRB Sec. II: the high-gain loop gives
+        "the velocity of the motor and, hence, the shape of the Coulomb friction");
+        ``"ideal"``: the square wave in phase with the fundamental, as eqs. (3)-(7) print.
     structured:
         Use the joint fit of J, V, C, C_f (:mod:`flexarm.ident.physical`) as ``motor_tf``
         and for the parameters. It is always computed and reported (``physical_fit``)
@@ -419,7 +425,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
             log = read_log(f, columns=columns, units=units)
             an = analyse_log(log, n_max=5, columns=["reference", "current", "motor_angle",
                                                     "tip_angle"],
-                             discard_periods=discard_periods)
+                             discard_periods=discard_periods, friction_shape=friction_shape)
         except (LogError, IdentificationError) as exc:
             problems.append(str(exc))
             continue
@@ -477,10 +483,11 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         _warn("the structured fit gave non-physical values (J, V, C = "
               f"{phys.inertia:.3g}, {phys.viscous:.3g}, {phys.stiffness:.3g})", warnings_)
         phys = None
+    if structured is None:  # auto: the joint fit where its model holds (one-mode beam)
+        structured = one_mode
     use_phys = bool(structured) and phys is not None
-    if structured and phys is None:
-        _warn("structured=True but no structured fit is available: using the free fit",
-              warnings_)
+    if structured and phys is None and cf is not None:
+        _warn("no structured fit is available: using the free fit", warnings_)
     if use_phys:
         params = {"inertia": phys.inertia, "viscous": phys.viscous,
                   "stiffness": phys.stiffness,
@@ -494,7 +501,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
                 "beam_orders": list(beam_orders), "beam_integrators": beam_integrators,
                 "partner_tol": partner_tol, "discard_periods": discard_periods,
                 "coulomb_current_given": coulomb_current is not None,
-                "structured": use_phys}
+                "structured": use_phys, "friction_shape": friction_shape}
     return IdentificationResult(files=files, logs=logs, analyses=analyses, coulomb=coul,
                                 response=fr, motor_fit=mfit, motor_fit_raw=mfit_raw,
                                 beam_fit=bfit, motor_constant=K, parameters=params,

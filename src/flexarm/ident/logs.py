@@ -144,7 +144,8 @@ def _parse_header(path: Path, text: str):
 
 def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
              units: Mapping[str, str] | None = None, *,
-             min_samples: int = MIN_SAMPLES, max_jitter: float = MAX_JITTER) -> Log:
+             min_samples: int = MIN_SAMPLES, max_jitter: float = MAX_JITTER,
+             required: Sequence[str] = tuple(REQUIRED), hint: str = "") -> Log:
     """Read and validate one experiment log (see the module docstring for the format).
 
     Parameters
@@ -159,6 +160,9 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
     min_samples, max_jitter:
         Fewest samples accepted; largest relative deviation of a time step from the
         median step.
+    required, hint:
+        The columns this use needs (default: the frequency experiments' five), and a
+        sentence saying why, added to the message when one is missing.
     """
     path = Path(path)
     columns = dict(columns or {})
@@ -183,12 +187,13 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
     if dup:
         raise LogError(f"{path}: column(s) {', '.join(map(repr, dup))} appear more than once "
                        f"in the header {header}")
-    missing = [c for c in REQUIRED if c not in names]
+    missing = [c for c in required if c not in names]
     if missing:
         lines_msg = [
-            f"{path}: missing column(s) {', '.join(map(repr, missing))}.",
+            f"{path}: missing column(s) {', '.join(map(repr, missing))}." + (f" {hint}" if hint else ""),
             f"  found:    {', '.join(header) if header else '(none)'}",
-            f"  expected: {', '.join(REQUIRED)} (optional: {', '.join(OPTIONAL)})",
+            f"  expected: {', '.join(required)} (optional: "
+            f"{', '.join(c for c in KNOWN if c not in required)})",
         ]
         not_mapped = [c for c in missing if c in columns]
         if not_mapped:
@@ -297,7 +302,8 @@ def _check_time(path: Path, t: np.ndarray, h: int, max_jitter: float) -> None:
 def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
               signals: Mapping[str, Sequence[float] | np.ndarray], *,
               comments: Sequence[str] | Mapping[str, object] = (),
-              overwrite: bool = False, fmt: str = "%.12g") -> Path:
+              overwrite: bool = False, fmt: str = "%.12g",
+              required: Sequence[str] = tuple(REQUIRED)) -> Path:
     """Write a log in the exchange format (SI values).
 
     ``signals`` must hold the required columns other than ``time``; extra columns follow
@@ -307,10 +313,10 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     """
     path = Path(path)
     t = np.asarray(time, dtype=float)
-    missing = [c for c in REQUIRED if c != "time" and c not in signals]
+    missing = [c for c in required if c != "time" and c not in signals]
     if missing:
         raise LogError(f"{path}: cannot write: missing signal(s) {', '.join(missing)}")
-    order = [c for c in REQUIRED if c != "time"] + [c for c in signals if c not in REQUIRED]
+    order = [c for c in required if c != "time"] + [c for c in signals if c not in required]
     cols = [t]
     for c in order:
         x = np.asarray(signals[c], dtype=float)

@@ -9,7 +9,8 @@ one pinned mass, FRB eq. (13) and (16) — eq. (1) at the fundamental of each ex
 
     K i(ω) = (−J ω² + j V ω + C (1 − G_b(jω))) θm(ω) + (4 C_f/π) j e^{j∠θm(ω)},
 
-is linear in (J, V, C, C_f), with G_b identified separately (friction does not distort
+is linear in (J, V, C, C_f) (the last term: the friction shape's fundamental, measured from
+the motor velocity by default, :meth:`HarmonicAnalysis.friction`), with G_b identified separately (friction does not distort
 θt/θm). Stacking real and imaginary parts of all experiments, each row weighted by
 1/|K i(ω)| (relative error), gives them by one least squares; their spread comes from the
 residual and (AᵀA)⁻¹. The implied G_m = K/(J s² + V s + C (1 − G_b)).
@@ -64,8 +65,7 @@ def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunc
         i = an.phasor("current")
         gb = complex(beam_tf(1j * w))
         wt = 1.0 / max(abs(K * i), 1e-300)
-        rows.append(np.array([-w**2 * th, 1j * w * th, (1 - gb) * th,
-                              4 / np.pi * 1j * np.exp(1j * np.angle(th))]) * wt)
+        rows.append(np.array([-w**2 * th, 1j * w * th, (1 - gb) * th, an.friction(1)]) * wt)
         rhs.append(K * i * wt)
     A = np.array(rows)
     b = np.array(rhs)

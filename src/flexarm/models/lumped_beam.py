@@ -50,6 +50,8 @@ class BeamBlock:
     mass_dofs: int = 0  # lumped beams: z = (y, ẏ), y of this length
     tip_dof: int | None = None  # index in y of the tip translation (lumped, mass at tip)
     exact: tuple | None = None  # (G_b, C_t/θm, C_t/(θm−θt)) when known exactly (TF beams)
+    xbar: np.ndarray | None = None  # lumped: y = x̄ θm + w (positions; 1 for slopes)
+    tip_shape: np.ndarray | None = None  # lumped: static w for a unit tip deflection
 
     @property
     def n_states(self) -> int:
@@ -78,7 +80,8 @@ class BeamBlock:
         A, B = self.A.copy(), self.B.copy()
         A[n + self.tip_dof, :] = 0.0
         B[n + self.tip_dof, :] = 0.0
-        return BeamBlock(A, B, self.C, self.D, self.length, self.mass_dofs, self.tip_dof)
+        return BeamBlock(A, B, self.C, self.D, self.length, self.mass_dofs, self.tip_dof,
+                         xbar=self.xbar, tip_shape=self.tip_shape)
 
 
 def _siso(block: BeamBlock, row: int) -> control.TransferFunction:
@@ -189,7 +192,11 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
         [-r_tip @ xbar, 0.0],
     ])
     tip = np.nonzero((np.abs(dof_pos - L) < 1e-12) & ~dof_slope)[0]
-    return BeamBlock(A, B, Cm, Dm, L, n, int(tip[0]) if tip.size else None)
+    # static shape under a tip force: by reciprocity, c_tip (deflections due to a unit tip
+    # force), scaled to a unit tip deflection
+    shape = c_tip / float(r_tip @ c_tip)
+    return BeamBlock(A, B, Cm, Dm, L, n, int(tip[0]) if tip.size else None,
+                     xbar=xbar, tip_shape=shape)
 
 
 def transfer_function_block(beam: TransferFunctionBeam) -> BeamBlock:

@@ -34,9 +34,20 @@ SIGNALS = ("motor_angle", "motor_velocity", "tip_angle", "tip_deflection",
 
 
 def _mv(A: Array, x: Array) -> Array:
-    """A @ x for tiny matrices as a fused multiply-sum: XLA on CPU turns ``@`` into a
-    library call per product, ~30x slower here than the fused elementwise form."""
-    return jnp.sum(A * x, axis=-1)
+    """A @ x for tiny matrices: the column products A[:, j] x[j], summed pairwise.
+
+    Only elementwise operations, which XLA fuses into the right-hand side's kernel. On CPU
+    ``@`` is a library call per product (~30x slower), and ``jnp.sum(A * x, -1)`` becomes,
+    under ``vmap``, separate reduction kernels with a (batch, rows, cols) broadcast of
+    ``A`` per RK stage (docs/performance.md). The pairwise order ((t1 + t0) + (t3 + t2))
+    reproduces the results of that ``jnp.sum`` form bit for bit (XLA's reduce order)."""
+    terms = [A[..., j] * x[j] for j in range(A.shape[-1])]
+    if not terms:
+        return jnp.zeros(A.shape[:-1])
+    while len(terms) > 1:
+        pairs = [terms[i + 1] + terms[i] for i in range(0, len(terms) - 1, 2)]
+        terms = pairs + ([terms[-1]] if len(terms) % 2 else [])
+    return terms[0]
 
 
 class SingleLinkPlant(Plant):
@@ -147,24 +158,10 @@ class SingleLinkModel:
         zb = np.zeros(b.n_states)
         if b.mass_dofs:
             n = b.mass_dofs
-            # y = x̄ θm + w with w the static shape under a tip force; z = (y, ẏ)
-            hub = np.array([motor_angle, motor_velocity])
-            # rest relative to hub: solve static equations for y with tip deflection imposed
-            # static shape: w ∝ flexibility column of the tip; scale to the requested value
-            A21 = b.A[n:, :n]  # −M⁻¹K
-            B2 = b.B[n:, 0]  # M⁻¹K x̄
-            xbar = np.linalg.solve(-A21, B2)  # = x̄
-            if tip_deflection != 0.0:
-                Kinv_col = np.linalg.solve(-A21, np.eye(n))  # (M⁻¹K)⁻¹ = K⁻¹M
-                r = b.C[2, :n]  # w_tip = r · w
-                shapes = Kinv_col  # columns: static responses to unit accelerations
-                col = shapes[:, b.tip_dof if b.tip_dof is not None else n - 1]
-                w = col * (tip_deflection / float(r @ col))
-            else:
-                w = np.zeros(n)
-            zb[:n] = xbar * motor_angle + w
-            zb[n:] = xbar * motor_velocity
-            del hub
+            # absolute coordinates y = x̄ θm + w, w the static shape of the tip deflection;
+            # the link at rest relative to the hub: ẏ = x̄ θ̇m
+            zb[:n] = b.xbar * motor_angle + b.tip_shape * tip_deflection
+            zb[n:] = b.xbar * motor_velocity
         elif b.n_states and (motor_angle != 0.0 or tip_deflection != 0.0):
             raise ValueError(
                 "initial motor_angle / tip_deflection need a lumped (physical) beam; a "

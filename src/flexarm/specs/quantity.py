@@ -7,11 +7,21 @@ and says which value and unit were wrong.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Any
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, PlainSerializer
 
 from flexarm.units import UnitError, to_si
+
+
+@dataclass(frozen=True)
+class Unit:
+    """Metadata on a quantity field: its SI unit and bounds (read by the docs generator)."""
+
+    unit: str
+    bounds: str = ""
+    what: str = ""
 
 
 class Spec(BaseModel):
@@ -38,7 +48,9 @@ def Q(unit: str, *, gt: float | None = None, ge: float | None = None,
             raise ValueError(f"got {v!r} = {x:g} {unit}; must be <= {le:g} {unit}{why}")
         return x
 
-    return Annotated[float, BeforeValidator(convert), PlainSerializer(float)]
+    bounds = ", ".join(f"{op} {v:g}" for op, v in ((">", gt), (">=", ge), ("<=", le)) if v is not None)
+    return Annotated[float, BeforeValidator(convert), PlainSerializer(float),
+                     Unit(unit or "1", bounds, what)]
 
 
 def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
@@ -54,4 +66,5 @@ def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
             raise ValueError(f"got {n}; must be >= {ge}{hi}{why}")
         return n
 
-    return Annotated[int, BeforeValidator(convert)]
+    return Annotated[int, BeforeValidator(convert),
+                     Unit("count", f">= {ge}" + (f", <= {le}" if le is not None else ""), what)]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -23,7 +23,8 @@ from flexarm.specs.experiment import (
     Sensor,
     Simulation,
 )
-from flexarm.specs.quantity import Spec
+from flexarm.specs.multilink import MultiLinkArm
+from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
 
@@ -63,6 +64,51 @@ class Scenario(Spec):
         return self
 
 
+class RegulationSpec(Spec):
+    """Regulation of a multi-link arm (De Luca & Siciliano): PD with gravity compensation.
+
+    ``law``: ``constant`` (eq. 8, g_θ at the target), ``online`` (eq. 30, g_θ at the
+    measured θ, δ) or ``quasistatic`` (eq. 30, g_θ at θ and the quasi-static δ̄(θ)).
+    ``interpolation_time`` > 0 moves the reference from ``initial`` to ``target`` along a
+    quintic in that time (the paper's remedy for large gains and large initial errors)."""
+
+    target: list[Q("rad")]
+    initial: list[Q("rad")]
+    kp: list[Q("N*m/rad", gt=0)]
+    kd: list[Q("N*m*s/rad", ge=0)]
+    law: Literal["constant", "online", "quasistatic"] = "constant"
+    duration: Q("s", gt=0) = 3.0
+    step: Q("s", gt=0) = 1e-4
+    output_period: Q("s", gt=0) = 1e-3
+    interpolation_time: Q("s", ge=0) = 0.0
+
+    @model_validator(mode="after")
+    def _sizes(self) -> "RegulationSpec":
+        n = len(self.target)
+        for name in ("initial", "kp", "kd"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} has {len(getattr(self, name))} entries; target has {n} "
+                                 "(one per joint)")
+        return self
+
+
+class MultiLinkScenario(Spec):
+    """A multi-link arm (``arm.kind = "multi_link"``) and, optionally, its regulation."""
+
+    name: str = "scenario"
+    description: str = ""
+    notes: dict[str, Any] = Field(default_factory=dict)
+    arm: MultiLinkArm
+    regulation: RegulationSpec | None = None
+
+    @model_validator(mode="after")
+    def _joints(self) -> "MultiLinkScenario":
+        if self.regulation is not None and len(self.regulation.target) != len(self.arm.links):
+            raise ValueError(f"regulation.target has {len(self.regulation.target)} joints; the arm "
+                             f"has {len(self.arm.links)} links")
+        return self
+
+
 def _format_errors(err: ValidationError, source: str) -> str:
     lines = [f"{source}: {err.error_count()} problem(s) in the scenario"]
     for e in err.errors():
@@ -95,9 +141,15 @@ def _is_union_tag(p: object) -> bool:
                                         "rigid", "pd", "pid", "lead", "tf"}
 
 
-def scenario_from_dict(data: dict[str, Any], source: str = "scenario") -> Scenario:
-    """Validate a scenario given as a dict (as parsed from TOML)."""
+def scenario_from_dict(data: dict[str, Any], source: str = "scenario"
+                       ) -> Scenario | MultiLinkScenario:
+    """Validate a scenario given as a dict (as parsed from TOML); ``arm.kind`` picks a
+    single-link :class:`Scenario` or a :class:`MultiLinkScenario`."""
+    arm = data.get("arm") if isinstance(data, dict) else None
+    kind = arm.get("kind", "single_link") if isinstance(arm, dict) else "single_link"
     try:
+        if kind == "multi_link":
+            return MultiLinkScenario.model_validate(data)
         return Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(_format_errors(err, source)) from None
@@ -124,7 +176,7 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
     )
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
+def load_scenario(name_or_path: str | Path) -> Scenario | MultiLinkScenario:
     """Read and validate a scenario TOML file (or a built-in scenario by name)."""
     path = resolve_scenario_path(name_or_path)
     try:

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from flexarm.fit.logs import FitInputError
-from flexarm.fit.params import DOCS, UNITS, derived
+from flexarm.bench.logs import FitInputError
+from flexarm.bench.params import DOCS, UNITS, derived
 
 
 def check_physical(params: dict[str, float], source: str = "fit") -> None:
@@ -77,8 +77,9 @@ class FitResult:
         fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
               for i, n in enumerate(names)}
         d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
-        ini = {n: {"motor_angle": float(objective.hub0[i, 0]),
-                   "motor_velocity": float(objective.hub0[i, 1]),
+        th0, om0 = objective.hub_initial(1, offsets[None])
+        ini = {n: {"motor_angle": float(th0[0, i]),
+                   "motor_velocity": float(om0[0, i]),
                    "tip_deflection": float(d0[0, i] / params["tip_gain"]),
                    "tip_velocity": float(v0[0, i] / params["tip_gain"])}
                for i, n in enumerate(names)}
@@ -175,7 +176,7 @@ class FitResult:
         d, comments = scenario_from_fit(self)
         self.scenario()  # validates
         path.write_text(toml_with_comments(d, comments, header=[
-            "Fitted by flexarm.fit from " + ", ".join(g.name for g in self.logs),
+            "Fitted by flexarm.bench from " + ", ".join(g.name for g in self.logs),
             self.message,
             "fit %: " + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items()
                                                        if v is not None)
@@ -232,7 +233,7 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     ref = {"type": "step", "offset": float(r[0]),
            "amplitude": float(r[steps[0] + 1] - r[0]) if steps.size else 0.0,
            "start": float((steps[0] + 1) * T) if steps.size else 0.0}
-    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.fit from bench logs",
+    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.bench from bench logs",
          "arm": {"motor": motor, "friction": fr, "beam": {
              "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
              "damping_ratio": p["link_damping"],

@@ -14,16 +14,18 @@ from typing import Sequence
 import numpy as np
 
 from flexarm.control.state_feedback import state_feedback
-from flexarm.fit.logs import write_bench_log
+from flexarm.bench.logs import write_bench_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 
 
 def synthetic_log(scenario, gains: Sequence[float], path: str | Path, *, duration: float = 4.0,
-                  amplitude: float = 0.5, period: float = 2.0, start: float = 0.3,
+                  amplitude: float | Sequence[float] = 0.5, period: float = 2.0, start: float = 0.3,
                   tip0: float = 0.01, tip_rate0: float = 0.0, seed: int = 0,
                   overwrite: bool = True) -> Path:
-    """Simulate one closed-loop experiment and write it as a bench log."""
+    """Simulate one closed-loop experiment and write it as a bench log. ``amplitude``: the
+    square wave's step (rad), or a sequence of steps used in turn, one per period (moves
+    of several sizes, so that viscous and Coulomb friction act at different speeds)."""
     sc = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
         update={"duration": duration})})
     dt = sc.sampling.period
@@ -31,7 +33,9 @@ def synthetic_log(scenario, gains: Sequence[float], path: str | Path, *, duratio
     p = prepare(sc, controller=ctrl)
     t = p.time
     tau = t - start
-    ref = amplitude * ((np.mod(tau, period) < period / 2) & (tau >= 0))
+    amps = np.atleast_1d(np.asarray(amplitude, float))
+    amp = amps[np.floor(np.maximum(tau, 0.0) / period).astype(int) % len(amps)]
+    ref = amp * ((np.mod(tau, period) < period / 2) & (tau >= 0))
     x0 = p.model.initial_state(0.0, 0.0, tip0)
     shape = p.model.initial_state(0.0, 0.0, 1.0) - p.model.initial_state(0.0, 0.0, 0.0)
     nb = p.model.beam.mass_dofs

@@ -26,14 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexarm.ident.logs import (
-    MAX_JITTER,
-    LogError,
-    _check_time,
-    _parse_header,
-    _parse_numbers,
-    _unit_factor,
-)
+from flexarm.ident.logs import MAX_JITTER, LogError, read_log, write_log
 from flexarm.specs.controllers_bench import StateFeedbackController
 
 OUTPUTS = ("motor_angle", "tip_deflection")
@@ -144,43 +137,15 @@ def read_bench_log(path: str | Path, *, columns: Mapping[str, str] | None = None
     """Read and check one bench log (see the module docstring); ``columns`` maps our names
     to the file's, ``units`` gives the unit of a column's numbers (pint strings)."""
     path = Path(path)
-    columns = dict(columns or {})
-    units = dict(units or {})
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FitInputError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FitInputError(f"{path}: cannot read the file ({exc})") from None
-    try:
-        comments, meta, header_line, h, body_start = _parse_header(path, text)
-        header = [c.strip() for c in header_line.split(",")]
-        back = {v: k for k, v in columns.items()}
-        names = [back.get(c, c) for c in header]
-        for req in ("time", "reference"):
-            if req not in names:
-                raise FitInputError(
-                    f"{path}: no {req!r} column (found: {', '.join(header)}); a bench log "
-                    "needs time (s), reference (rad, the commanded hub angle) and "
-                    "motor_angle and/or tip_deflection; map other names with "
-                    f"columns={{'{req}': 'NAME'}} (--column {req}=NAME)")
-        data = _parse_numbers(path, text, body_start, h, header, names)
-        if data.shape[0] < min_samples:
-            raise FitInputError(f"{path}: too few samples: {data.shape[0]} rows, at least "
-                                f"{min_samples} needed")
-        t = data[:, names.index("time")] * (_unit_factor(path, "time", units["time"])
-                                             if "time" in units else 1.0)
-        _check_time(path, t, h, max_jitter)
-        cols = {}
-        for j, n in enumerate(names):
-            if n == "time":
-                continue
-            x = data[:, j].copy()
-            if n in units:
-                x *= _unit_factor(path, n, units[n])
-            cols[n] = x
+        raw = read_log(path, columns, units, min_samples=min_samples, max_jitter=max_jitter,
+                       required=("time", "reference"),
+                       hint="A bench log needs time (s), reference (rad, the commanded hub "
+                            "angle) and motor_angle and/or tip_deflection.")
     except LogError as exc:
         raise FitInputError(str(exc)) from None
+    t, cols, meta = raw.time, raw.signals, raw.meta
+    header = list(cols)
     ctrl = None
     if controller is not None:
         ctrl = controller_from_any(controller, f"{path}: controller option")
@@ -230,14 +195,8 @@ def write_bench_log(path: str | Path, time: np.ndarray, columns: Mapping[str, np
                     fmt: str = "%.12g") -> Path:
     """Write a bench log (``time`` then ``columns`` in order, SI; ``# comment`` lines
     first, e.g. ``controller: state_feedback K1=..``). Refuses to overwrite unless asked."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FitInputError(f"{path}: exists already; not overwritten (pass overwrite=True)")
-    data = np.column_stack([np.asarray(time, float)] + [np.asarray(v, float)
-                                                         for v in columns.values()])
-    with path.open("w") as f:
-        for c in comments:
-            f.write(f"# {c}\n")
-        f.write(",".join(["time", *columns]) + "\n")
-        np.savetxt(f, data, delimiter=",", fmt=fmt)
-    return path
+    try:
+        return write_log(path, time, columns, comments=list(comments), overwrite=overwrite,
+                         fmt=fmt, required=("time",))
+    except LogError as exc:
+        raise FitInputError(str(exc)) from None

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from flexarm.fit.logs import BenchLog
+from flexarm.bench.logs import BenchLog
 
 
 def controller_command(log: BenchLog) -> np.ndarray:
@@ -173,15 +173,17 @@ def initial_tip(log: BenchLog, wc: float, zeta: float = 0.03, max_periods: float
 
 
 def initial_hub(log: BenchLog, n: int = 20):
-    """(θ0, ω0) from a line through the first samples of the measured hub angle."""
+    """(θ0, ω0) from a parabola through the first samples of the measured hub angle (a
+    line would read a hub that starts from rest and accelerates, e.g. pushed by a ringing
+    link, as already moving at t = 0; the fit's local stage refines both)."""
     th = log.columns.get("motor_angle")
     if th is None:
         return 0.0, 0.0
     t = np.arange(n) * log.dt
     if np.ptp(th[:n]) == 0:
         return float(th[0]), 0.0
-    c = np.polyfit(t, th[:n], 1)
-    return float(c[1]), float(c[0])
+    c = np.polyfit(t, th[:n], 2)
+    return float(c[2]), float(c[1])
 
 
 def initial_tip_at(log: BenchLog, k: int, n: int = 21) -> tuple[float, float]:

@@ -1,6 +1,6 @@
 """The output-error objective of a bench fit, evaluated for a whole population at once.
 
-For parameters p the log's loop is closed in simulation (:mod:`flexarm.fit.closed_loop`)
+For parameters p the log's loop is closed in simulation (:mod:`flexarm.bench.closed_loop`)
 and compared with the log on the measured hub angle θ and tip deflection d:
 
     V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexarm.fit import guesses
-from flexarm.fit.closed_loop import as_jax, closed_loop_cost, closed_loop_run
-from flexarm.fit.logs import BenchLog
-from flexarm.fit.params import ParamSpace
+from flexarm.bench import guesses
+from flexarm.bench.closed_loop import as_jax, closed_loop_cost, closed_loop_run
+from flexarm.bench.logs import BenchLog
+from flexarm.bench.params import ParamSpace
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
 
@@ -89,6 +89,8 @@ class Objective:
         self.wc_guess = wc_guess
         self.tip_scale = np.array([max(np.std(g.columns.get("tip_deflection", [0.0])), 1e-9)
                                    for g in logs])
+        # scale of the hub-angle offsets: one encoder count (or 1 mrad unquantised)
+        self.hub_scale = rig.encoder_quantum or 1e-3
 
     # ------------------------------------------------------------------ mapping
     def tip_initial(self, dd: np.ndarray, offsets: np.ndarray | None = None):
@@ -102,9 +104,20 @@ class Objective:
             v0 = v0 + offsets[..., 1] * self.tip_scale[None] * w
         return d0, v0
 
+    def hub_initial(self, P: int, offsets: np.ndarray | None = None):
+        """Hub angle and rate at t = 0, (P, L) each; offsets[..., 2:4] (when given) shift
+        them in units of ``hub_scale`` (rad) and ``hub_scale`` · ω_guess (rad/s)."""
+        th0 = np.broadcast_to(self.hub0[:, 0][None], (P, self.L))
+        om0 = np.broadcast_to(self.hub0[:, 1][None], (P, self.L))
+        if offsets is not None and offsets.shape[-1] >= 4:
+            th0 = th0 + offsets[..., 2] * self.hub_scale
+            om0 = om0 + offsets[..., 3] * self.hub_scale * self.wc_guess
+        return th0, om0
+
     def model(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None) -> dict:
         """Unit coordinates U (P, n_cont), discrete D (P, 3) = (angle delay, tip delay,
-        sign 0/1), optional per-log initial-tip offsets (P, L, 2) → model numbers (L, P)."""
+        sign 0/1), optional per-log initial-state offsets (P, L, 2) (tip deflection and
+        rate) or (P, L, 4) (and hub angle and rate) → model numbers (L, P)."""
         sp = self.space
         P = U.shape[0]
         ses = self.sessions
@@ -115,6 +128,7 @@ class Objective:
         sign = 2.0 * D[:, 2] - 1.0
         gain = glob("tip_gain") * sign[None]
         d0, v0 = self.tip_initial(D[:, 1], offsets)
+        th0, om0 = self.hub_initial(P, offsets)
         if sp.friction:
             Fc = per("coulomb")
             Fs = Fc + per("static_excess")
@@ -128,8 +142,7 @@ class Objective:
             JlL=glob("link_inertia") / self.rig.length, Fc=Fc, Fs=Fs, bias=bias, gain=gain,
             dth=np.broadcast_to(D[:, 0][None], (self.L, P)),
             dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
-            th0=np.broadcast_to(self.hub0[:, :1], (self.L, P)),
-            om0=np.broadcast_to(self.hub0[:, 1:], (self.L, P)),
+            th0=th0.T, om0=om0.T,
             w0=d0.T / gain, wd0=v0.T / gain))
 
     def _kw(self):

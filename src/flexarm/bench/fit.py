@@ -1,18 +1,23 @@
-"""``flexarm.fit``: time-domain identification of a bench arm from closed-loop logs.
+"""``flexarm.bench``: time-domain identification of a bench arm from closed-loop logs.
 
 Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
 resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
 inertia and damping, hub friction (Coulomb, breakaway, viscous, bias) per recording
 session, the sensor delays and the tip sensor's calibration gain and sign, and each log's
 initial link state, by minimising the closed-loop simulation output error
-(:mod:`flexarm.fit.objective`):
+(:mod:`flexarm.bench.objective`):
 
-1. guesses and bounds from the data (:mod:`flexarm.fit.guesses`);
+1. guesses and bounds from the data (:mod:`flexarm.bench.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (:mod:`flexarm.fit.global_stage`);
+   on the first ``global_seconds`` of each log (:mod:`flexarm.bench.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
-   columns are simulated in one batch; it also refines each log's initial tip state;
+   columns are simulated in one batch; it also refines each log's initial tip and hub
+   state (a wrong initial hub rate alone costs more than all the noise). When the tip
+   delay is fitted, short refinements at the global stage's delay and its neighbours
+   pick it first. Then a friction polish: a short batched differential evolution on the
+   friction coordinates alone (stick-slip makes their finite differences unreliable),
+   and least squares again;
 4. uncertainty from the final Jacobian: cov = s² (JᵀJ)⁻¹, s² the residual variance,
    inflated by the residuals' lag-1 correlation ρ as √((1+ρ)/(1−ρ)) (AR(1)).
 """
@@ -24,14 +29,14 @@ import time
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import differential_evolution, least_squares
 
-from flexarm.fit import guesses
-from flexarm.fit.global_stage import differential_evolution_stage
-from flexarm.fit.logs import FitInputError, as_bench_log, check_closed_loop
-from flexarm.fit.objective import Objective, Rig
-from flexarm.fit.params import FRICTION, ParamDef, ParamSpace, derived
-from flexarm.fit.report import FitResult
+from flexarm.bench import guesses
+from flexarm.bench.global_stage import differential_evolution_stage
+from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
+from flexarm.bench.objective import Objective, Rig
+from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
+from flexarm.bench.report import FitResult
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -78,7 +83,7 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
 
 def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
            delays, bounds: dict | None, info: dict) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
-    """Bounds from the data (see :mod:`flexarm.fit.guesses`) and the seed point."""
+    """Bounds from the data (see :mod:`flexarm.bench.guesses`) and the seed point."""
     wc, how = guesses.link_frequency(logs)
     info["link_frequency_guess"] = {"value": wc, "from": how}
     wc_b = (wc / 1.35, wc * 1.35) if wc else (2 * np.pi * 0.3, 2 * np.pi * 40)
@@ -147,11 +152,11 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         tip_delay: int | None = None, max_delay: int = 5, computation_delay: int = 0,
         bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
-        local_nfev: int = 30, seed: int = 0, chunk: int = 64,
+        local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
         progress: Callable[[str], None] | None = None) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
-    ``logs``: paths or :class:`~flexarm.fit.logs.BenchLog` s; logs given together are one
+    ``logs``: paths or :class:`~flexarm.bench.logs.BenchLog` s; logs given together are one
     recording session (shared friction) unless ``sessions`` gives a session index per log
     (mechanics shared, friction per session). ``mode``: ``"closed_loop"`` (each log's
     controller closed in simulation; ``controller`` overrides every log's declaration)
@@ -163,7 +168,9 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     noise feeding the loop a hub delay trades off against the hub inertia): pass
     ``angle_delay=None`` to fit it in 0 ... ``max_delay`` samples. The global stage uses
     the first ``global_seconds`` of each log (None: all), ``popsize`` × dimension members
-    for at most ``maxiter`` generations; the local stage at most ``local_nfev`` evaluations.
+    for at most ``maxiter`` generations; the local stage at most ``local_nfev`` evaluations
+    (when the tip delay is fitted, first ``delay_nfev`` on the global window at the
+    global stage's tip delay and its two neighbours, keeping the best).
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -216,35 +223,108 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             "'# controller:' lines (gains, signs, units: V/rad, V/m, V*s/rad, V*s/m), the "
             "tip sensor's sign (tip_sign=) and the data-sheet values")
     obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
+    D, U0, off0 = glob.D, glob.U, None
+    if space.fixed_delays[1] is None and local_nfev > 1:
+        # the tip delay is an integer the local stage cannot move, and the global stage's
+        # choice trades off against ζ and the initial tip rate: refine briefly at the
+        # neighbouring delays too (on the global window) and keep the best
+        trials = []
+        for dd in (D[1] - 1, D[1], D[1] + 1):
+            if 0 <= dd <= space.max_delay:
+                Dk = D.copy()
+                Dk[1] = dd
+                r = _local(obj_g, glob.U, Dk, min(delay_nfev, local_nfev))
+                trials.append((r["cost"], int(dd), Dk, r))
+        cost_k, dd, D, r = min(trials, key=lambda t: t[0])
+        info["tip_delay_trials"] = {int(t[1]): t[0] for t in trials}
+        U0, off0 = r["U"], r["off"]
+        say(f"tip delay {dd} samples (short refinements: {info['tip_delay_trials']})")
     say(f"local stage: least squares on {len(blogs)} logs x {n_full} samples")
-    loc = _local(obj, glob.U, glob.D, local_nfev)
-    tr, e, bad = obj.run(loc["U"][None], glob.D[None], loc["off"][None])
+    loc = _local(obj, U0, D, local_nfev, off0=off0)
+    if friction and polish_iter > 0:
+        say("friction polish: batched differential evolution on the friction parameters")
+        loc = _friction_polish(obj, loc, D, polish_iter, seed, local_nfev)
+    tr, e, bad = obj.run(loc["U"][None], D[None], loc["off"][None])
     fitp = obj.fit_percent(e[0])
-    return FitResult.build(
-        logs=blogs, rig=rig, space=space, U=loc["U"], D=glob.D, offsets=loc["off"],
+    res = FitResult.build(
+        logs=blogs, rig=rig, space=space, U=loc["U"], D=D, offsets=loc["off"],
         std_u=loc["std_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
         glob=glob, local=loc, info=info, settings=dict(
             mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
             sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed),
         seconds=time.perf_counter() - t_start, objective=obj)
+    res.warnings.extend(_poorly_determined(res, rig, space))
+    return res
+
+
+def _poorly_determined(res: FitResult, rig: Rig, space: ParamSpace) -> list[str]:
+    """What such logs hardly determine, whatever the standard errors say (they come from a
+    local linearisation of a cost that stick-slip makes jumpy, and are optimistic)."""
+    out = []
+    for s in range(space.n_sessions):
+        sfx = "" if space.n_sessions == 1 else f"[{s}]"
+        B = res.params.get("viscous" + sfx, 0.0)
+        if rig.k_omega > 0 and B < 0.2 * rig.k_omega:
+            out.append(f"viscous{sfx} = {B:.3g} N*m*s/rad is poorly determined: it is "
+                       f"{100 * B / rig.k_omega:.0f} % of the drive's back-EMF damping "
+                       f"k_omega = {rig.k_omega:.3g}, which acts in parallel")
+        if space.friction:
+            out.append(f"static_excess{sfx} (breakaway) and bias{sfx} rest on the restarts "
+                       "of a stuck hub and the up/down asymmetry of its stops: with few "
+                       "restarts (short logs, one move size) expect 10-20 % errors in the "
+                       "breakaway and a bias known to a few % of it only")
+    return out
+
+
+def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, seed: int,
+                     local_nfev: int, width: float = 0.12) -> dict:
+    """Stick-slip makes the cost jump where a stop lands on another encoder count, so the
+    finite-difference Jacobian of the friction parameters is unreliable and least squares
+    stalls there. Re-search the friction coordinates (unit box ± ``width`` around the
+    local optimum) by a short batched differential evolution on the full logs, the
+    mechanics and initial states held, then refine everything by least squares again."""
+    sp = obj.space
+    idx = [i for i, d in enumerate(sp.defs) if d.name in FRICTION]
+    U, off = loc["U"], loc["off"]
+    bounds = [(max(U[i] - width, 0.0), min(U[i] + width, 1.0)) for i in idx]
+
+    def f(x):
+        X = np.atleast_2d(x.T)
+        Us = np.tile(U, (X.shape[0], 1))
+        Us[:, idx] = X
+        return obj.cost(Us, np.tile(D, (X.shape[0], 1)), np.tile(off, (X.shape[0], 1, 1)))
+
+    c0 = float(f(U[idx][:, None])[0])
+    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, seed=seed, tol=0.0,
+                                 updating="deferred", vectorized=True, polish=False,
+                                 x0=U[idx], mutation=(0.5, 1.0), recombination=0.7)
+    if res.fun >= c0:
+        return loc
+    U1 = U.copy()
+    U1[idx] = res.x
+    out = _local(obj, U1, D, max(local_nfev // 2, 2), off0=off)
+    out["nfev"] += loc["nfev"] + int(res.nfev)
+    out["seconds"] += loc["seconds"]
+    return out if out["cost"] <= float(res.fun) + 1e-15 else loc
 
 
 def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
-           step: float = 1e-3) -> dict:
-    """least_squares over the unit coordinates and each log's initial tip offsets."""
+           step: float = 1e-3, off0: np.ndarray | None = None) -> dict:
+    """least_squares over the unit coordinates and each log's initial-state offsets (tip
+    deflection and rate, hub angle and rate)."""
     n, L = obj.space.n_cont, obj.L
-    nz = n + 2 * L
+    nz = n + 4 * L
     W = np.sqrt(obj.weights())  # (2, L, N)
     mask = W > 0
     y = np.stack([np.asarray(obj.data["y_th"]), np.asarray(obj.data["y_d"])])
-    z0 = np.concatenate([U0, np.zeros(2 * L)])
-    lo = np.concatenate([np.zeros(n), np.full(2 * L, -5.0)])
-    hi = np.concatenate([np.ones(n), np.full(2 * L, 5.0)])
+    z0 = np.concatenate([U0, np.zeros(4 * L) if off0 is None else np.ravel(off0)])
+    lo = np.concatenate([np.zeros(n), np.full(4 * L, -5.0)])
+    hi = np.concatenate([np.ones(n), np.full(4 * L, 5.0)])
     Db = np.tile(D, (nz + 1, 1))
     cache: dict = {}
 
     def split(Z):
-        return Z[:, :n], Z[:, n:].reshape(-1, L, 2)
+        return Z[:, :n], Z[:, n:].reshape(-1, L, 4)
 
     def batch(z):
         key = z.tobytes()

@@ -1,0 +1,510 @@
+r"""The motor (inner) loop of Feliu, Rattan & Brown (1993), Sec. IV and Fig. 4.
+
+Control law (one sample k, all angles in rad, currents in A, torques in N·m):
+
+    u_fb = G_cm1(z) [ θ_mr − G_cm2(z) θm ]                               (Fig. 4)
+    i_c  = ( Ĉ_t + C_f · σ ) / K                                          (Sec. IV)
+    u    = u_fb + i_c
+
+* θ_mr: the commanded motor angle (a reference channel); θm, θt: measured motor and
+  tip angles (after the A/D converters).
+* Ĉ_t: coupling-torque estimate from the measured bending θm − θt, either a static gain
+  (FRB eq. (16); C for the single-mass arm, whose C_t = C (θm − θt)) or a stable
+  transfer function Ĉ_t = H(z) (θm − θt). An unstable or undamped H (eq. (15) combined
+  with eq. (14) has poles on the imaginary axis, Sec. VI-C.2) is refused.
+* C_f σ: the Coulomb friction compensation (Sec. III-B), σ the friction sign:
+
+  - moving (|v̂| > ``velocity_deadband``): σ = sgn v̂, v̂ = (θm,k − θm,k−1)/T the
+    backward difference of the measured angle;
+  - at rest (|v̂| <= ``velocity_deadband``): σ = sgn u_fb when |u_fb| > ``rest_deadband``,
+    else 0. A joint at rest feels static friction opposing the applied torque, which
+    (coupling compensated) is K u_fb; compensating in that direction lets a small
+    remaining error break the joint free, which is what makes the steady-state error
+    vanish (FRB Fig. 11). The rest deadband (default: the feedback current of half an
+    A/D count, G_cm1(1) q/2) stops the compensation from chattering when the error is
+    below the converter resolution.
+
+Why this structure (the lead in G_cm2, on the measurement)
+    With the one-sample computation delay, θm has not moved at the sample where θ_mr
+    steps, so the first current is u_0 = G_cm1(∞) Δθ_mr. Later |u_k| <= G_cm1(1) max|e|
+    whenever the impulse response of G_cm1 is non-negative (a static gain or a lag:
+    partial sums of g_j never exceed Σ g_j = G_cm1(1)), and |e| <= Δθ_mr while
+    0 <= G_cm2 θm <= 2 Δθ_mr. So "G_cm1(1) = 15 A/rad limits the peak current, a
+    400 mrad step gives 6 A" (FRB Sec. VI-B.2) holds exactly when G_cm1(∞) <= G_cm1(1):
+    the phase lead the loop needs sits in G_cm2, in the feedback path, where it brakes
+    the motor without kicking the current at the reference step. G_cm2(1) = 1 gives zero
+    steady-state error: at rest u_fb = 0 (friction and coupling compensated, the motor
+    model has an integrator) means θ_mr = G_cm2(1) θm. :func:`design_inner_loop` imposes
+    the peak rule (peak ≤ G_cm1(1)·step) and finds G_cm1 static, G_cm2 a lead.
+
+Design model (FRB eq. (9)): with the coupling and friction compensated,
+Ĝ_m(s) = θm/(i − i_c) = K/(s (J s + V)), sampled with a zero-order hold, plus
+``delay`` samples of computation delay.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import control
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+from jax import Array
+
+from flexarm.control.discrete import Controller, Signals, from_transfer_function
+
+__all__ = [
+    "InnerLoop",
+    "InnerLoopDesign",
+    "design_inner_loop",
+    "inner_loop",
+    "coupling_filter",
+    "motor_design_model",
+]
+
+
+# ------------------------------------------------------------------------ realisations
+def _realise(g: control.TransferFunction) -> tuple:
+    """(A, B, C, D) of a discrete SISO G(z) with at least one state (a static gain gets a
+    dummy one, as :func:`~flexarm.control.discrete.from_transfer_function` builds it), so
+    every :class:`InnerLoop` has the same pytree structure and shares one compilation."""
+    c = from_transfer_function(g)
+    return c.A, c.B, c.C, c.D
+
+
+def _as_discrete(g, dt: float, name: str) -> control.TransferFunction:
+    if isinstance(g, (int, float, np.floating)):
+        return control.tf([float(g)], [1.0], dt)
+    if isinstance(g, control.StateSpace):
+        g = control.ss2tf(g)
+    if not isinstance(g, control.TransferFunction) or not g.issiso():
+        raise TypeError(f"{name} must be a number or a SISO python-control transfer function")
+    if g.isctime():
+        raise ValueError(f"{name} is continuous-time; give G(z) with dt = {dt} s")
+    return g
+
+
+def coupling_filter(coupling, dt: float, *, margin: float = 1e-3) -> control.TransferFunction:
+    r"""The coupling estimate Ĉ_t/(θm − θt) as a discrete transfer function (N·m/rad).
+
+    ``coupling`` is a static gain (N·m/rad, FRB eq. (16)), a discrete H(z), or a
+    continuous H(s) (FRB eq. (15) style), sampled with Tustin's map. Refused (ValueError)
+    when H has a pole with |z| > 1 − ``margin``: a filter with undamped or unstable poles
+    rings on every measurement error ("two imaginary poles that produce undesired
+    oscillations and instability when implemented on a computer", FRB Sec. VI-C.2).
+    """
+    if isinstance(coupling, (int, float, np.floating)):
+        return control.tf([float(coupling)], [1.0], dt)
+    if isinstance(coupling, control.StateSpace):
+        coupling = control.ss2tf(coupling)
+    if not isinstance(coupling, control.TransferFunction) or not coupling.issiso():
+        raise TypeError("coupling must be a gain (N·m/rad) or a SISO transfer function")
+    h = coupling
+    if h.isctime():
+        sp = np.roots(np.asarray(h.den[0][0], float))
+        h = control.sample_system(h, dt, method="tustin")
+    else:
+        sp = None
+    zp = np.roots(np.asarray(h.den[0][0], float))
+    bad = np.abs(zp) > 1.0 - margin
+    if np.any(bad):
+        where = ", ".join(f"{p:.4g}" for p in (sp[bad] if sp is not None and sp.size == zp.size
+                                                 else zp[bad]))
+        raise ValueError(
+            "the coupling transfer function cannot be implemented: poles at "
+            f"{where} ({'s' if sp is not None else 'z'}-plane) give |z| = "
+            f"{', '.join(f'{a:.6f}' for a in np.abs(zp[bad]))} >= 1 − {margin:g} (undamped or "
+            "unstable: the estimate would ring on measurement errors, FRB Sec. VI-C.2); "
+            "use its static gain (FRB eq. (16)), e.g. control.dcgain(H)"
+        )
+    return h
+
+
+# ------------------------------------------------------------------------ the controller
+class InnerLoop(Controller):
+    """The motor loop of FRB Fig. 4 with friction and coupling feedforward (module doc).
+
+    Fields (SI): realisations of G_cm1 (A/rad), G_cm2 (rad/rad) and the coupling filter
+    H (N·m/rad); ``torque_constant`` K (N·m/A), ``coulomb`` C_f (N·m), the switches
+    ``friction_on`` / ``coupling_on`` (1.0 or 0.0, traced: switching does not recompile),
+    ``velocity_deadband`` (rad/s), ``rest_deadband`` (A), ``dt`` (s).
+    Reads ``measured["motor_angle"]``, ``measured["tip_angle"]`` and
+    ``reference[self.reference]`` (θ_mr).
+    """
+
+    g1: tuple
+    g2: tuple
+    coupling: tuple
+    torque_constant: Array
+    coulomb: Array
+    friction_on: Array
+    coupling_on: Array
+    velocity_deadband: Array
+    rest_deadband: Array
+    dt: Array
+    initial_motor_angle: Array
+    reference: str = eqx.field(static=True, default="reference")
+
+    measured_signals = ("motor_angle", "tip_angle")
+
+    def init(self):
+        z = lambda r: jnp.zeros(r[1].shape)  # noqa: E731
+        return z(self.g1), z(self.g2), z(self.coupling), self.initial_motor_angle
+
+    @staticmethod
+    def _lin(r, x, e):
+        A, B, C, D = r
+        return jnp.sum(A * x, axis=-1) + B * e, jnp.sum(C * x) + D * e
+
+    def feedback(self, state, measured: Signals, reference: Signals):
+        """New filter states and u_fb = G_cm1 [θ_mr − G_cm2 θm] (A)."""
+        x1, x2, xc, _ = state
+        th = measured["motor_angle"]
+        x2n, y2 = self._lin(self.g2, x2, th)
+        x1n, u_fb = self._lin(self.g1, x1, reference[self.reference] - y2)
+        return x1n, x2n, u_fb
+
+    def step(self, state, measured: Signals, reference: Signals):
+        _, _, xc, th_prev = state
+        th = measured["motor_angle"]
+        x1n, x2n, u_fb = self.feedback(state, measured, reference)
+        xcn, c_hat = self._lin(self.coupling, xc, th - measured["tip_angle"])
+        v = (th - th_prev) / self.dt
+        rest_sign = jnp.where(jnp.abs(u_fb) > self.rest_deadband, jnp.sign(u_fb), 0.0)
+        sigma = jnp.where(jnp.abs(v) > self.velocity_deadband, jnp.sign(v), rest_sign)
+        i_c = (self.coupling_on * c_hat + self.friction_on * self.coulomb * sigma) / self.torque_constant
+        return (x1n, x2n, xcn, th), jnp.reshape(u_fb + i_c, (1,))
+
+    def with_switches(self, *, friction: bool | None = None,
+                      coupling: bool | None = None) -> "InnerLoop":
+        """A copy with friction and/or coupling compensation turned on or off (FRB Figs.
+        12, 13, 17). Same pytree structure: the compiled loop is reused."""
+        out = self
+        if friction is not None:
+            out = eqx.tree_at(lambda c: c.friction_on, out, jnp.asarray(float(friction)))
+        if coupling is not None:
+            out = eqx.tree_at(lambda c: c.coupling_on, out, jnp.asarray(float(coupling)))
+        return out
+
+
+def inner_loop(gcm1, gcm2, *, dt: float, torque_constant: float, coulomb: float = 0.0,
+               coupling=0.0, friction_compensation: bool = True,
+               coupling_compensation: bool = True, angle_resolution: float = 0.0,
+               velocity_deadband: float | None = None, rest_deadband: float | None = None,
+               reference: str = "reference", initial_motor_angle: float = 0.0) -> InnerLoop:
+    """Build an :class:`InnerLoop`.
+
+    Parameters
+    ----------
+    gcm1, gcm2: G_cm1(z) (A/rad) and G_cm2(z) (rad/rad), discrete transfer functions
+        with sampling period ``dt`` (s), or numbers (static gains).
+    torque_constant: K, N·m/A. coulomb: C_f, N·m (the identified Coulomb level).
+    coupling: Ĉ_t/(θm − θt): a gain (N·m/rad) or a transfer function, see
+        :func:`coupling_filter`.
+    friction_compensation, coupling_compensation: the switches of FRB Figs. 12, 13, 17.
+    angle_resolution: the motor A/D count (rad), used for the default deadbands:
+        ``velocity_deadband`` = q/(2T) (rad/s: below one count per sample the motor is
+        taken to be at rest) and ``rest_deadband`` = G_cm1(1) q/2 (A).
+    reference: the reference channel holding θ_mr.
+    initial_motor_angle: θm at t = 0 (rad), the first velocity estimate's predecessor.
+    """
+    g1 = _as_discrete(gcm1, dt, "gcm1")
+    g2 = _as_discrete(gcm2, dt, "gcm2")
+    h = coupling_filter(coupling, dt)
+    q = float(angle_resolution)
+    if velocity_deadband is None:
+        velocity_deadband = 0.5 * q / dt
+    if rest_deadband is None:
+        rest_deadband = 0.5 * q * abs(float(np.real(control.dcgain(g1))))
+    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    return InnerLoop(_realise(g1), _realise(g2), _realise(h), f(torque_constant),
+                     f(coulomb), f(float(friction_compensation)),
+                     f(float(coupling_compensation)), f(velocity_deadband),
+                     f(rest_deadband), f(dt), f(initial_motor_angle), reference)
+
+
+# ------------------------------------------------------------------------ design
+def motor_design_model(model) -> tuple[float, float, float]:
+    """(J, V, K) of FRB eq. (9) from a :class:`~flexarm.models.single_link.SingleLinkModel`:
+    J the hub inertia (kg·m²), V the viscous coefficient plus a voltage drive's
+    back-EMF term (N·m·s/rad), K the drive gain (N·m per unit command)."""
+    d = model.drive
+    return float(model.J), float(model.V) + float(d.k_omega), float(d.k_u)
+
+
+@dataclass
+class InnerLoopDesign:
+    """Result of :func:`design_inner_loop` (SI units)."""
+
+    gcm1: control.TransferFunction  # A/rad
+    gcm2: control.TransferFunction  # rad/rad
+    dt: float  # s
+    delay: int  # samples
+    dc_gain: float  # G_cm1(1), A/rad
+    settling_time: float  # s, linear design loop, intersample, band of the step
+    band: float
+    overshoot: float  # fraction of the step, linear design loop
+    step: float  # rad, the design step
+    peak_current: float  # A, linear loop, design step (feedback part only)
+    available_current: float  # A, limit − coupling − friction compensation currents
+    current_limit: float  # A
+    coupling_current: float  # A, Ĉ · bending / K
+    friction_current: float  # A, C_f / K
+    params: np.ndarray = field(repr=False)  # (a1, b1, a2, b2): zeros and poles
+    time: np.ndarray = field(repr=False)  # s, fine grid of the design response
+    response: np.ndarray = field(repr=False)  # θm/step on ``time``
+    current: np.ndarray = field(repr=False)  # A per rad of step, at the samples
+
+    @property
+    def peak_current_per_rad(self) -> float:
+        """Peak feedback current of the linear loop per rad of step (A/rad)."""
+        return self.peak_current / self.step
+
+    @property
+    def lag(self) -> float:
+        """Equivalent delay of the design loop θm/θ_mr (s): ∫ (1 − y(t)) dt of its unit
+        step response y (the first moment of its impulse response)."""
+        h = self.time[1] - self.time[0]
+        return float(np.sum(1.0 - self.response) * h)
+
+    def closed_loop(self, model) -> control.TransferFunction:
+        """θm/θ_mr of the linear design loop (discrete, delay included)."""
+        plant = _plant_tf(model, self.dt, self.delay)
+        return control.minreal(
+            control.feedback(self.gcm1 * plant, self.gcm2), tol=1e-9, verbose=False)
+
+    def controller(self, model, **kw) -> InnerLoop:
+        """An :class:`InnerLoop` for ``model`` (K, C_f from the model; coupling gain the
+        static value of the model's C_t/(θm − θt) unless ``coupling=`` is given)."""
+        _, _, k = motor_design_model(model)
+        kw.setdefault("coupling", float(np.real(control.dcgain(model.coupling_tf()))))
+        kw.setdefault("coulomb", float(model.friction.coulomb))
+        return inner_loop(self.gcm1, self.gcm2, dt=self.dt, torque_constant=k, **kw)
+
+
+def _plant_tf(model, dt: float, delay: int) -> control.TransferFunction:
+    J, V, K = motor_design_model(model)
+    g = control.tf([K], [J, V, 0.0])
+    z = control.tf([1.0, 0.0], [1.0], dt)
+    return control.sample_system(g, dt, method="zoh") * (1 / z) ** delay
+
+
+def _comp(a: float, b: float, gain_at_1: float, dt: float) -> control.TransferFunction:
+    k = gain_at_1 * (1.0 - b) / (1.0 - a)
+    if abs(a - b) < 1e-12:
+        return control.tf([gain_at_1], [1.0], dt)
+    return control.tf([k, -k * a], [1.0, -b], dt)
+
+
+class _StepEvaluator:
+    """Linear step response of Fig. 4 on eq. (9), sampled with ZOH, with ``delay``
+    samples of delay; θm also between samples (``sub`` points per period)."""
+
+    def __init__(self, J: float, V: float, K: float, dt: float, delay: int, n: int,
+                 sub: int = 10):
+        A = np.array([[0.0, 1.0], [0.0, -V / J]])
+        B = np.array([0.0, K / J])
+
+        def zoh(h):
+            m = np.zeros((3, 3))
+            m[:2, :2], m[:2, 2] = A * h, B * h
+            e = scipy.linalg.expm(m)
+            return e[:2, :2], e[:2, 2]
+
+        self.Ad, self.Bd = zoh(dt)
+        fine = [zoh(dt * j / sub) for j in range(sub)]
+        self.Phi = np.array([f[0][0] for f in fine])  # (sub, 2): θ row
+        self.Gam = np.array([f[1][0] for f in fine])  # (sub,)
+        self.delay, self.n, self.sub, self.dt = delay, n, sub, dt
+        self.time = np.arange(n * sub) * dt / sub
+
+    def run(self, p: np.ndarray, gain: float):
+        """θm per unit step on the fine grid (n·sub, ...) and the feedback current per
+        unit step at the samples (n, ...), for p = (a1, b1, a2, b2) of shape (4,) or
+        (4, P). The loop is one linear recursion x⁺ = A_cl x + b_cl in
+        x = (θm, ω, s1, s2, u_{k−d}, ..., u_{k−1}); s1, s2 the compensators' states."""
+        p = np.asarray(p, float)
+        single = p.ndim == 1
+        a1, b1, a2, b2 = p[:, None] if single else p
+        P = a1.size
+        k1 = gain * (1 - b1) / (1 - a1)
+        k2 = (1 - b2) / (1 - a2)
+        d = self.delay
+        m = 4 + d
+        # u = k1 (b1 − a1) s1 + k1 e,  e = r − k2 (b2 − a2) s2 − k2 θ  (r = 1)
+        cu = np.zeros((P, m))
+        cu[:, 0] = -k1 * k2
+        cu[:, 2] = k1 * (b1 - a1)
+        cu[:, 3] = -k1 * k2 * (b2 - a2)
+        du = k1
+        ce = np.zeros((P, m))  # e = ce · x + 1
+        ce[:, 0] = -k2
+        ce[:, 3] = -k2 * (b2 - a2)
+        # the applied current: the oldest buffered command (d > 0), else u itself
+        if d:
+            ca, da = np.zeros((P, m)), np.zeros(P)
+            ca[:, 4] = 1.0
+        else:
+            ca, da = cu, du
+        A = np.zeros((P, m, m))
+        b = np.zeros((P, m))
+        A[:, 0:2, 0:2] = self.Ad
+        A[:, 0:2, :] += self.Bd[None, :, None] * ca[:, None, :]
+        b[:, 0:2] = self.Bd[None, :] * np.reshape(da, (-1, 1))
+        A[:, 2, :] = ce
+        A[:, 2, 2] += b1
+        b[:, 2] = 1.0
+        A[:, 3, 0] = 1.0
+        A[:, 3, 3] = b2
+        for j in range(d - 1):
+            A[:, 4 + j, 5 + j] = 1.0
+        if d:
+            A[:, 3 + d, :] = cu
+            b[:, 3 + d] = du
+        xs = np.empty((self.n, P, m, 1))
+        x = np.zeros((P, m, 1))
+        b = b[:, :, None]
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(self.n):
+                xs[k] = x
+                x = A @ x + b
+        xs = np.nan_to_num(xs[..., 0], nan=1e6, posinf=1e6, neginf=-1e6)
+        cs = np.einsum("kpm,pm->kp", xs, cu) + du
+        ua = np.einsum("kpm,pm->kp", xs, ca) + da
+        # θ(t_k + j T/sub) = Φ_j[0] (θ_k, ω_k) + Γ_j[0] u_a,k, all fine points at once
+        theta = (np.einsum("jc,kpc->kjp", self.Phi, xs[:, :, :2])
+                 + np.einsum("j,kp->kjp", self.Gam, ua)).reshape(self.n * self.sub, P)
+        if single:
+            return theta[:, 0], cs[:, 0]
+        return theta, cs
+
+
+def _settling(t: np.ndarray, y: np.ndarray, band: float) -> np.ndarray:
+    """Last time |y − 1| leaves the band (y of shape (n,) or (n, P)), linearly
+    interpolated between grid points; inf where it never settles."""
+    err = np.abs(y - 1.0)
+    if err.ndim == 1:
+        return _settling(t, y[:, None], band)[0]
+    n = err.shape[0]
+    outside = err > band
+    any_out = outside.any(axis=0)
+    last = n - 1 - np.argmax(outside[::-1], axis=0)
+    nxt = np.minimum(last + 1, n - 1)
+    cols = np.arange(err.shape[1])
+    e0, e1 = err[last, cols], err[nxt, cols]
+    frac = np.clip((e0 - band) / np.where(e0 > e1, e0 - e1, 1.0), 0.0, 1.0)
+    ts = t[last] + frac * (t[nxt] - t[last])
+    ts = np.where(last == n - 1, np.inf, ts)
+    return np.where(any_out, ts, 0.0)
+
+
+def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0,
+                      current_limit: float | None = None, step: float = 0.4,
+                      bending: float | None = None, coupling_gain: float | None = None,
+                      coulomb: float | None = None, band: float = 0.02,
+                      max_overshoot: float = 0.0, horizon: float = 0.3, popsize: int = 15,
+                      maxiter: int = 200, seed: int = 0) -> InnerLoopDesign:
+    r"""Minimum-settling-time G_cm1(z), G_cm2(z) for the motor loop (FRB Sec. VI-B.2).
+
+    G_cm1(z) = k1 (z − a1)/(z − b1), G_cm2(z) = k2 (z − a2)/(z − b2), searched over the
+    zeros and poles (a1, b1, a2, b2) ∈ [−0.99, 0.99]⁴ by differential evolution
+    (derivative-free, ``popsize``, ``maxiter``, ``seed``; the cost is piecewise smooth and
+    multimodal) polished by Nelder–Mead, with the gains fixed by the constraints
+
+        G_cm2(1) = 1  (zero steady-state error),  G_cm1(1) = ``dc_gain`` (A/rad),
+
+    minimising the settling time (``band`` of the step, θm evaluated between the
+    samples too) of the linear loop of Fig. 4 on Ĝ_m(s) = K/(s (J s + V)) (eq. (9)),
+    zero-order hold, ``delay`` samples of computation delay, subject to
+
+        peak |u_fb| <= G_cm1(1) · step           (the paper's peak-current rule, module doc)
+        G_cm1(1) · step <= I_avail = I_max − Ĉ·bending/K − C_f/K,
+        overshoot of θm <= ``max_overshoot`` (fraction of the step; FRB Sec. IV: "a very
+        fast response without an overshoot"),
+
+    I_max = ``current_limit`` (A; default the model's amplifier limit), Ĉ the static
+    coupling gain (N·m/rad; default from the model), ``bending`` the largest θm − θt
+    while the loop works (rad; default ``step``: the tip held, FRB Fig. 11), C_f the
+    Coulomb level (N·m; default from the model): the current the feedforward terms drain
+    is not available to the feedback (FRB Sec. IV, last paragraph).
+
+    Raises ValueError, naming the constraint and by how much, when
+    G_cm1(1)·step exceeds I_avail, when the compensation alone exceeds I_max, or when
+    no stable loop meeting the peak rule was found.
+    """
+    J, V, K = motor_design_model(model)
+    for name, val in (("dt", dt), ("dc_gain", dc_gain), ("step", step), ("band", band),
+                      ("horizon", horizon)):
+        if not (math.isfinite(val) and val > 0):
+            raise ValueError(f"{name} must be positive and finite; got {val!r}")
+    if int(delay) != delay or delay < 0:
+        raise ValueError(f"delay must be a whole number of samples >= 0; got {delay!r}")
+    i_max = float(model.drive.limit) if current_limit is None else float(current_limit)
+    c_hat = (float(np.real(control.dcgain(model.coupling_tf()))) if coupling_gain is None
+             else float(coupling_gain))
+    c_f = float(model.friction.coulomb) if coulomb is None else float(coulomb)
+    bend = step if bending is None else float(bending)
+    i_coup = abs(c_hat * bend) / K
+    i_fric = abs(c_f) / K
+    avail = i_max - i_coup - i_fric
+    if avail <= 0:
+        raise ValueError(
+            f"current limit violated by the compensation alone: coupling {i_coup:.4g} A "
+            f"(Ĉ = {c_hat:.4g} N·m/rad × bending {bend:.4g} rad / K) + friction "
+            f"{i_fric:.4g} A exceed current_limit {i_max:.4g} A by {-avail:.4g} A"
+        )
+    need = dc_gain * step
+    if need > avail * (1 + 1e-12):
+        raise ValueError(
+            f"current limit violated: dc_gain G_cm1(1) = {dc_gain:.4g} A/rad × step "
+            f"{step:.4g} rad = {need:.4g} A peak exceeds the available {avail:.4g} A "
+            f"(current_limit {i_max:.4g} A − coupling compensation {i_coup:.4g} A − "
+            f"friction compensation {i_fric:.4g} A) by {need - avail:.4g} A "
+            f"({100 * (need / avail - 1):.3g} %); use dc_gain <= {avail / step:.4g} A/rad "
+            f"or step <= {avail / dc_gain:.4g} rad"
+        )
+    n = int(math.ceil(horizon / dt))
+    ev = _StepEvaluator(J, V, K, dt, int(delay), n)
+
+    def cost(p):
+        """Vectorised over candidates p (4, P): settling time plus penalties."""
+        theta, cs = ev.run(p, dc_gain)
+        ts = _settling(ev.time, theta, band)
+        ts = np.where(np.isfinite(ts), ts, horizon * (1.0 + np.abs(theta[-1] - 1.0)))
+        excess = np.maximum(0.0, np.max(np.abs(cs), axis=0) / dc_gain - 1.0)
+        over = np.maximum(0.0, np.max(theta, axis=0) - 1.0 - max_overshoot)
+        ise = np.mean((theta - 1.0) ** 2, axis=0) * horizon
+        c = ts + horizon * 10.0 * (excess + over) + 1e-3 * np.minimum(ise, 1.0)
+        return np.where(np.isfinite(c), c, 100.0 * horizon)
+
+    bounds = [(-0.99, 0.99)] * 4
+    best = scipy.optimize.differential_evolution(
+        cost, bounds, popsize=popsize, maxiter=maxiter, tol=1e-8, seed=seed,
+        vectorized=True, updating="deferred", polish=False)
+    polish = scipy.optimize.minimize(
+        lambda p: float(cost(np.clip(p, -0.99, 0.99)[:, None])[0]), best.x,
+        method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200})
+    if polish.fun < best.fun:
+        best = polish
+    p = np.clip(best.x, -0.99, 0.99)
+    theta, cs = ev.run(p, dc_gain)
+    ts = _settling(ev.time, theta, band)
+    peak = float(np.max(np.abs(cs)))
+    over = float(np.max(theta) - 1.0)
+    if not math.isfinite(ts) or peak > dc_gain * (1 + 1e-3) or over > max_overshoot + 1e-3:
+        raise ValueError(
+            "no inner-loop design met the constraints: best found settles in "
+            f"{ts:.4g} s (horizon {horizon:g} s) with peak current {peak * step:.4g} A for "
+            f"the {step:g} rad step, G_cm1(1)·step = {need:.4g} A (excess "
+            f"{max(0.0, peak - dc_gain) * step:.3g} A), overshoot {100 * over:.3g} % "
+            f"(allowed {100 * max_overshoot:.3g} %); raise horizon, dc_gain or max_overshoot"
+        )
+    g1 = _comp(p[0], p[1], dc_gain, dt)
+    g2 = _comp(p[2], p[3], 1.0, dt)
+    return InnerLoopDesign(g1, g2, dt, int(delay), float(dc_gain), ts, band, max(over, 0.0),
+                           float(step),
+                           peak * step, avail, i_max, i_coup, i_fric, p, ev.time, theta, cs)

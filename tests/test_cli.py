@@ -1,0 +1,121 @@
+"""The command line: each command's happy path and its refusals."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from flexarm.cli import app
+
+runner = CliRunner()
+
+
+def said(r) -> str:
+    """The output with rich's line wrapping undone."""
+    return " ".join(r.output.split())
+
+
+def test_scenarios_lists_the_builtins():
+    r = runner.invoke(app, ["scenarios"])
+    assert r.exit_code == 0
+    for name in ("feliu-single-mass", "feliu-two-mass", "rotary-flexible-link"):
+        assert name in said(r)
+
+
+def test_info_json_gives_eq_12_from_the_identified_scenario():
+    r = runner.invoke(app, ["info", "feliu-single-mass-identified", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    m = d["transfer_functions"]["motor"]
+    np.testing.assert_allclose(m["num"], 394.94 * np.array([1, 0.06, 43.75]), rtol=5e-3)
+    np.testing.assert_allclose(m["den"][:4], [1, 2.26, 165.7, 103.56], rtol=5e-3)
+    assert m["integrators"] == 1
+    b = d["transfer_functions"]["beam"]
+    assert b["static_gain"] == pytest.approx(1.0)
+    assert b["natural_frequencies_rad_s"][0]["wn_rad_s"] == pytest.approx(np.sqrt(43.75))
+
+
+def test_info_two_mass_reports_the_rhp_zero():
+    r = runner.invoke(app, ["info", "feliu-two-mass", "--json"])
+    d = json.loads(r.output)
+    z = d["transfer_functions"]["beam"]["right_half_plane_zeros"]
+    assert len(z) == 1 and z[0]["re"] == pytest.approx(np.sqrt(1273.3), rel=1e-2)
+
+
+def test_simulate_writes_csv_figure_summary_and_refuses_to_overwrite(tmp_path):
+    out = tmp_path / "sim"
+    r = runner.invoke(app, ["simulate", "feliu-single-mass", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    for f in ("feliu-single-mass.csv", "feliu-single-mass.png", "feliu-single-mass.summary.json"):
+        assert (out / f).stat().st_size > 0
+    s = json.loads((out / "feliu-single-mass.summary.json").read_text())
+    assert s["samples"] == 667 and s["peak_command"] <= 4.12
+    before = (out / "feliu-single-mass.csv").read_bytes()
+    r = runner.invoke(app, ["simulate", "feliu-single-mass", "--out", str(out)])
+    assert r.exit_code == 2 and "--overwrite" in said(r)
+    assert (out / "feliu-single-mass.csv").read_bytes() == before
+
+
+def test_bad_scenario_exits_2_naming_the_field(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[arm.motor]\ndrive = "current"\ninertia = "-1 kg*m**2"\n')
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2
+    assert "arm.motor.inertia" in said(r) and "must be > 0" in said(r)
+
+
+def test_validate_true_model_on_its_own_log_and_fit_without_controller(tmp_path):
+    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.specs import load_scenario
+
+    sc = load_scenario("rotary-flexible-link")
+    log = synthetic_log(sc, [6.0, -3.0, 0.213, 0.0], tmp_path / "a.csv", duration=2.0)
+    j = tmp_path / "v.json"
+    r = runner.invoke(app, ["validate", "rotary-flexible-link", str(log), "--json", str(j)])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(j.read_text())["fit_percent"]["a.csv"]
+    assert fit["motor_angle"] > 99.0 and fit["tip_deflection"] > 98.0  # noise and quantisation
+    lines = [ln for ln in log.read_text().splitlines() if not ln.startswith("# controller")]
+    bare = tmp_path / "bare.csv"
+    bare.write_text("\n".join(lines) + "\n")
+    r = runner.invoke(app, ["fit", str(bare), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
+                            "--armature-resistance", "2.6", "--link-length", "0.42"])
+    assert r.exit_code == 2 and "no controller declared" in said(r) and "bare.csv" in said(r)
+
+
+def test_identify_empty_folder_and_missing_column(tmp_path):
+    r = runner.invoke(app, ["identify", str(tmp_path), "--motor-constant", "0.25"])
+    assert r.exit_code == 2 and "no experiment logs" in said(r)
+    f = tmp_path / "x.csv"
+    f.write_text("time,reference,i,motor_angle,tip_angle\n0,0,0,0,0\n")
+    r = runner.invoke(app, ["identify", str(f), "--motor-constant", "0.25"])
+    assert r.exit_code == 2 and "current" in said(r)
+
+
+def test_info_multilink_reports_modes_deflection_alpha_conditions():
+    r = runner.invoke(app, ["info", "deluca-two-link", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    assert [ln["modes"] for ln in d["links"]] == [2, 2]
+    f = d["links"][0]["frequencies_hz"]
+    assert 0 < f[0] < f[1]
+    k = np.asarray(d["links"][0]["stiffness_k_ij_N_per_m"])
+    assert np.allclose(k, k.T) and np.all(np.linalg.eigvalsh(k) > 0)
+    t = d["target"]
+    # hanging arm raised to -45 deg: the first link sags downwards (negative first mode)
+    assert t["delta_d_m"][0] < 0
+    assert t["alpha"]["value"] > 0
+    for c in ("14", "15"):
+        cond = t["conditions"][c]
+        assert cond["holds"] == (cond["margin"] > 0)
+
+
+def test_multilink_regulation_joint_count_is_checked(tmp_path):
+    from flexarm.specs import builtin_scenarios
+
+    src = builtin_scenarios()["deluca-two-link"].read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(src.replace('kp = [18.0, 18.0]', 'kp = [18.0]'))
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2 and "kp has 1 entries; target has 2" in said(r)
