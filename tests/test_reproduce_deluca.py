@@ -22,8 +22,9 @@ def result(tmp_path_factory):
     msgs = []
     with warnings.catch_warnings():
         warnings.simplefilter("error", D.StabilityConditionWarning)  # the paper's gains pass
-        res = D.run(out, progress=msgs.append, config=D.quick_config())
-    assert msgs, "progress is reported"
+        res = D.run(out, progress=lambda done, total, what: msgs.append((done, total, what)),
+                    config=D.quick_config())
+    assert [m[0] for m in msgs] == list(range(len(msgs))) and msgs[-1][0] < msgs[-1][1]
     return res
 
 
@@ -37,7 +38,8 @@ def test_files_and_table(result):
     for key in ("table_csv", "table_md", "fig2", "laws", "sweep"):
         path = result["files"][key]
         assert open(path, "rb").read(8), key
-    assert open(result["files"]["fig2"], "rb").read(4) == b"\x89PNG"
+    assert len(result["figures"]) == 3
+    assert all(open(f, "rb").read(4) == b"\x89PNG" for f in result["figures"])
     csv_text = open(result["files"]["table_csv"]).read()
     assert csv_text.splitlines()[0] == "quantity,paper,ours,ratio,unit,note"
     assert len(csv_text.splitlines()) == len(result["table"]) + 1

@@ -220,7 +220,7 @@ def _mode_scale(model: MultiLinkModel, norm: str) -> np.ndarray:
     raise ValueError(norm)
 
 
-def convention_study(cfg: DeLucaConfig, progress: Callable[[str], None] | None = None) -> list[dict]:
+def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None) -> list[dict]:
     """δ_d and α under other documented conventions, against the paper's values.
 
     For clamped-mass and clamped-free modes and three normalisations of the mode shapes
@@ -229,10 +229,11 @@ def convention_study(cfg: DeLucaConfig, progress: Callable[[str], None] | None =
     α depends on the δ units), and the EI (both links) for which δ_d,11 equals the paper's,
     with the other components there. A renormalisation φ → sφ maps δ → δ/s and ∂g/∂q →
     S ∂g/∂q S (S = diag(1, 1, s)), exactly; the mode type changes the model (one run each).
-    g does not depend on EI, so α changes with EI only through the trajectory."""
+    g does not depend on EI, so α changes with EI only through the trajectory. ``say(what)``
+    reports progress."""
     from scipy.optimize import brentq
 
-    say = progress or (lambda msg: None)
+    say = say or (lambda msg: None)
     paper = np.asarray(PAPER["delta_d"])
     rows = []
     for mt in ("clamped_mass", "clamped_free"):
@@ -351,18 +352,28 @@ def _fig_sweep(sweep_runs: dict, remedy_runs: dict, theta_d, path: Path) -> None
 
 
 # --------------------------------------------------------------------------- the run
-def run(out_dir, progress: Callable[[str], None] | None = None,
+_STAGES = ("residual deflection δ_d, eq. (9)", "law (8)", "α and conditions (14)–(15)",
+           "laws (30a), (30b)", "gain sweep", "large gains", "conventions", "table and figures")
+
+
+def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         config: DeLucaConfig | None = None) -> dict:
     """Reproduce the paper's simulation section (module docstring) into ``out_dir``.
 
-    Returns a dict: ``table`` (rows: quantity, paper, ours, ratio, unit, note), ``delta_d``,
-    ``g_d``, ``alpha_along``, ``alpha_region``, ``conditions``, ``settling``, ``at_t_final``,
-    ``steady``, ``laws``, ``sweep``, ``remedy``, ``conventions``, ``warnings`` (failed
-    conditions), ``files``, ``config``. Gains failing (14) or (15) raise a
-    :class:`StabilityConditionWarning` that names the condition and the shortfall; the
+    ``progress(done, total, what)`` is called before each stage. Returns a dict: ``table``
+    (rows: quantity, paper, ours, ratio, unit, note), ``figures`` (paths), ``table_csv``,
+    ``table_md``, ``delta_d``, ``g_d``, ``alpha_along``, ``alpha_region``, ``conditions``,
+    ``settling``, ``at_t_final``, ``steady``, ``laws``, ``sweep``, ``remedy``, ``conventions``,
+    ``warnings`` (failed conditions), ``files``, ``config``. Gains failing (14) or (15) raise
+    a :class:`StabilityConditionWarning` that names the condition and the shortfall; the
     simulation still runs."""
     cfg = config or DeLucaConfig()
-    say = progress or (lambda msg: None)
+    stage = iter(range(len(_STAGES)))
+
+    def say(what: str) -> None:
+        if progress is not None:
+            k = next(stage, len(_STAGES) - 1)
+            progress(k, len(_STAGES), what)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = cfg.model()
@@ -478,8 +489,10 @@ def run(out_dir, progress: Callable[[str], None] | None = None,
     remedy["unstable"] = unstable
 
     conventions = []
+    say("conventions: δ_d and α under other mode conventions" if cfg.conventions
+        else "conventions: skipped")
     if cfg.conventions:
-        conventions = convention_study(cfg, say)
+        conventions = convention_study(cfg)
 
     say("table and figures")
     rows = []
@@ -566,6 +579,8 @@ def run(out_dir, progress: Callable[[str], None] | None = None,
                                                         "margin_15": cond_region.margin_15}},
         "settling": settle, "at_t_final": at_final, "steady": steady, "laws": laws,
         "sweep": sweep, "remedy": remedy, "conventions": conventions, "warnings": msgs,
+        "figures": [str(files[k]) for k in ("fig2", "laws", "sweep")],
+        "table_csv": str(files["table_csv"]), "table_md": str(files["table_md"]),
         "files": {k: str(v) for k, v in files.items()}, "config": asdict(cfg),
     }
 
