@@ -1,4 +1,4 @@
-"""Layered scalar programs (flexarm.sim.layered) and the fast multi-link closed loops built on
+"""Layered scalar programs (flexarm.layered) and the fast multi-link closed loops built on
 them: the same numbers as the plain derivation, for one state and for a batch."""
 
 import math
@@ -10,7 +10,7 @@ import pytest
 
 from flexarm.control import regulation as R
 from flexarm.models.multilink import build_multilink
-from flexarm.sim import layered as L
+from flexarm import layered as L
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, benchmark_arm
 
 DEG = math.pi / 180

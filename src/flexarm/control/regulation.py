@@ -52,14 +52,11 @@ import numpy as np
 from jax import Array
 
 from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
+from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
 
 
 class RegulationError(ValueError):
     """A regulation problem without a solution (e.g. no residual deflection found)."""
-
-
-class SimulationDiverged(RuntimeError):
-    """The closed-loop state became non-finite or exceeded the bound."""
 
 
 # --------------------------------------------------------------------------- statics

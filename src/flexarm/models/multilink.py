@@ -55,7 +55,7 @@ R(α_i)ᵀ J_p,i and y_i = d_i a_i + v-row:
 
 (m̄_i = m_i + m_hi, B₀ the constant rotary-inertia, ∫ρxφ and Z terms). The expressions are
 traced as scalars, skipping structural zeros. For the right-hand side they are recorded once
-per arm structure as a :class:`flexarm.sim.layered.Program` together with the solve of
+per arm structure as a :class:`flexarm.layered.Program` together with the solve of
 B q̈ = f (block LDLᵀ with 3×3 pivot blocks in closed form) and emitted as a few fused
 kernels in which every shared value is computed once (7 layers for the benchmark arm;
 measured 2.7x faster per rollout than the scalar trace with an unrolled Cholesky, and the
@@ -75,7 +75,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.models.modes import LinkModes, link_modes
-from flexarm.sim import layered
+from flexarm import layered
 from flexarm.sim.plant import Plant
 from flexarm.specs.multilink import MultiLinkArm
 
@@ -472,9 +472,9 @@ class MultiLinkPlant(Plant):
     def acceleration(self, x: Array, u: Array) -> Array:
         """q̈ solving B q̈ = [u; −Kδ − Dδ̇] − c − g. B, c + g and the forces are recorded once
         per arm structure as a
-        :class:`flexarm.sim.layered.Program` (the explicit particle form of
+        :class:`flexarm.layered.Program` (the explicit particle form of
         :meth:`_terms_lists`, scalar by scalar) with the solve of B q̈ = f by block LDLᵀ
-        elimination (:func:`flexarm.sim.layered.solve_spd`, 3×3 pivot blocks in closed form),
+        elimination (:func:`flexarm.layered.solve_spd`, 3×3 pivot blocks in closed form),
         and emitted as a few fused kernels that compute every shared value once. ``x`` may
         carry trailing batch dimensions, (n_x, *batch) with u (n_u, *batch): one kernel per
         layer then serves the whole batch."""

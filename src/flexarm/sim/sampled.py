@@ -27,10 +27,7 @@ from jax import Array
 from flexarm.control.discrete import Controller
 from flexarm.sim.integrate import integrate_hold, solver_for
 from flexarm.sim.plant import Plant
-
-
-class SimulationDiverged(RuntimeError):
-    """A closed loop whose state became non-finite or left the plausible range."""
+from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
 
 
 class Sensors(eqx.Module):
