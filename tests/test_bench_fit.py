@@ -170,3 +170,41 @@ def test_bad_inputs(tmp_path, logs):
     sc = load_scenario("rotary-flexible-link")
     with pytest.raises(FitInputError, match="log0.csv: field 'controller'.*unstable"):
         validate(sc, [logs[0]], controller="state_feedback K1=-6 K2=0 K3=0 K4=0")
+
+
+def test_acceptance_fit_two_10s_logs_validate_the_third():
+    """The issue's acceptance, with the benchmark's experiment design (square waves of 0.5
+    and 0.15 rad in turn, 1.5 s holds, 10 s at 1 kHz, three state-feedback gain sets, link
+    ringing at t = 0, encoder quantisation, strain-gauge noise and 2-sample delay): fit on
+    two logs, validate on the third. Every physical parameter within 5 % (measured: all
+    within 2 %; viscous B −1.9 %, breakaway −1.0 %); the bias, whose truth is 0, within
+    0.002 N·m (5 % of the breakaway); delays exact; held-out fit >= 95 % (measured 99.7 %
+    hub angle, 98.3 % tip deflection). local_nfev = 80: with the default 30 the viscous B,
+    5.5 % of the total damping beside the back-EMF, stops at −10 %."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_fit import GAINS, RIG, TRUE
+
+    from flexarm.bench import fit, validate
+    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.specs import load_scenario
+
+    import tempfile
+
+    sc = load_scenario("rotary-flexible-link")
+    d = Path(tempfile.mkdtemp())
+    logs = [synthetic_log(sc, g, d / f"log{i}.csv", duration=10.0, period=3.0,
+                          amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05)))]
+    res = fit(logs[:2], **RIG, popsize=8, maxiter=30, global_seconds=4.0, local_nfev=80)
+    got = {**res.params, **res.derived}
+    for name, true in TRUE.items():
+        if true:
+            assert abs(got[name] / true - 1) < 0.05, (name, got[name], true)
+        else:
+            assert abs(got[name]) < 0.002, (name, got[name])
+    assert res.delays == {"motor_angle": 0, "tip_deflection": 2}
+    held_out = validate(res.scenario(), [logs[2]])["fit_percent"]["log2.csv"]
+    assert held_out["motor_angle"] >= 95 and held_out["tip_deflection"] >= 95
