@@ -119,3 +119,24 @@ def test_multilink_regulation_joint_count_is_checked(tmp_path):
     bad.write_text(src.replace('kp = [18.0, 18.0]', 'kp = [18.0]'))
     r = runner.invoke(app, ["info", str(bad)])
     assert r.exit_code == 2 and "kp has 1 entries; target has 2" in said(r)
+
+
+def test_fit_reports_with_and_without_friction(tmp_path):
+    """`flexarm fit --compare-no-friction`: both fits in the table and the JSON, and the
+    friction-free model fits the stick-slip log clearly worse."""
+    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.specs import load_scenario
+
+    log = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
+                        tmp_path / "b.csv", duration=4.0, amplitude=(0.5, 0.15), period=3.0)
+    j = tmp_path / "f.json"
+    r = runner.invoke(app, ["fit", str(log), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
+                            "--armature-resistance", "2.6", "--link-length", "0.42",
+                            "--gear-efficiency", "0.9", "--motor-efficiency", "0.69",
+                            "--seconds", "2", "--compare-no-friction", "--json", str(j)])
+    assert r.exit_code == 0, r.output
+    assert "fit % without" in said(r)
+    d = json.loads(j.read_text())
+    with_f = d["fit_percent"]["b.csv"]
+    without = d["without_friction"]["fit_percent"]["b.csv"]
+    assert with_f["tip_deflection"] > without["tip_deflection"] + 10

@@ -312,6 +312,9 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         scenario_out: Optional[Path] = typer.Option(None, "--scenario-out", help="write the fitted scenario TOML"),
         plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
         seconds: float = typer.Option(5.0, help="time budget of the global stage, s"),
+        compare_no_friction: bool = typer.Option(
+            False, "--compare-no-friction",
+            help="also fit without joint friction and report both fits side by side"),
         overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
@@ -321,19 +324,37 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
     for p in (json_out, scenario_out):
         if p is not None and p.exists() and not overwrite:
             _fail(f"{p} exists; pass --overwrite to replace it")
+    kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
+              armature_resistance=armature_resistance, link_length=link_length,
+              gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
+              voltage_limit=voltage_limit, controller=controller, mode=mode,
+              global_seconds=seconds)
     try:
         with console.status("fitting") as status:
-            res = run_fit([str(x) for x in logs], drive=drive, gear_ratio=gear_ratio,
-                          motor_constant=motor_constant, armature_resistance=armature_resistance,
-                          link_length=link_length, gear_efficiency=gear_efficiency,
-                          motor_efficiency=motor_efficiency, voltage_limit=voltage_limit,
-                          controller=controller, mode=mode, friction=not no_friction,
-                          global_seconds=seconds, progress=lambda m: status.update(m))
+            res = run_fit([str(x) for x in logs], friction=not no_friction,
+                          progress=lambda m: status.update(m), **kw)
+            res0 = None
+            if compare_no_friction and not no_friction:
+                status.update("fitting again without joint friction")
+                res0 = run_fit([str(x) for x in logs], friction=False, **kw)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     console.print(escape(res.summary()))
+    if res0 is not None:
+        t = Table("log", "signal", "fit % with friction", "fit % without")
+        for name, d in res.fit_percent.items():
+            for sig, v in d.items():
+                v0 = res0.fit_percent.get(name, {}).get(sig)
+                t.add_row(name, sig, f"{v:.1f}" if v is not None else "-",
+                          f"{v0:.1f}" if v0 is not None else "-")
+        console.print(t)
     if json_out is not None:
         res.to_json(json_out)
+        if res0 is not None:
+            d = json.loads(json_out.read_text())
+            d["without_friction"] = {"fit_percent": res0.fit_percent, "params": res0.params,
+                                     "message": res0.message}
+            json_out.write_text(json.dumps(d, indent=2))
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
     if plots is not None:
