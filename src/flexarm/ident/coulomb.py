@@ -43,18 +43,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from flexarm.ident.harmonics import ideal_friction_phasor as square_wave_phasor  # noqa: F401 (eq. 2)
 from flexarm.ident.harmonics import HarmonicAnalysis, _warn
 
 #: Relative tolerance for matching a 3ω0 partner experiment.
 PARTNER_TOL = 0.01
-
-
-def square_wave_phasor(theta_m1: complex, n: int = 1) -> complex:
-    """Harmonic ``n`` (odd) of sign(θ̇m) for θm with fundamental phasor ``theta_m1``:
-    (4/(nπ)) e^{j(n∠θm + π/2)}."""
-    if n % 2 == 0:
-        return 0j
-    return 4.0 / (n * math.pi) * np.exp(1j * (n * np.angle(theta_m1) + math.pi / 2))
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,6 @@ Results are returned as arrays sorted by ω and as python-control
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -29,16 +28,13 @@ import numpy as np
 from flexarm.ident.harmonics import HarmonicAnalysis
 
 
-def friction_fundamental(theta_m1: complex | np.ndarray, coulomb_current: float):
-    """Fundamental phasor (A) of C_f sign(θ̇m): (4 C_f/π) e^{j(π/2 + ∠θm)}."""
-    return 4.0 * coulomb_current / math.pi * np.exp(1j * (math.pi / 2 + np.angle(theta_m1)))
-
-
-def corrected_motor_response(theta_m1, current1, coulomb_current: float):
-    """FRB eq. (7): θm / (i − (4 C_f/π) e^{j(π/2 + ∠θm)}) (rad/A), elementwise."""
+def corrected_motor_response(theta_m1, current1, coulomb_current: float, shape1):
+    """FRB eq. (7): θm / (i − C_f S₁) (rad/A), elementwise, with S₁ the fundamental of the
+    friction shape per unit C_f (:meth:`HarmonicAnalysis.friction`; the printed equation's
+    (4/π) e^{j(π/2 + ∠θm)} for the ideal square wave)."""
     theta_m1 = np.asarray(theta_m1, dtype=complex)
     current1 = np.asarray(current1, dtype=complex)
-    return theta_m1 / (current1 - friction_fundamental(theta_m1, coulomb_current))
+    return theta_m1 / (current1 - coulomb_current * np.asarray(shape1, dtype=complex))
 
 
 @dataclass
@@ -89,7 +85,8 @@ def frequency_response(analyses: Sequence[HarmonicAnalysis],
     tt = np.array([a.phasor("tip_angle", 1) for a in an])
     cur = np.array([a.phasor("current", 1) for a in an])
     shape = np.array([a.friction(1) for a in an])
-    corr = None if coulomb_current is None else th / (cur - coulomb_current * shape)
+    corr = (None if coulomb_current is None
+            else corrected_motor_response(th, cur, coulomb_current, shape))
     return FrequencyResponse(omega=w, names=[a.name for a in an], theta_m=th, theta_t=tt,
                              current=cur, motor_raw=th / cur, motor_corrected=corr,
                              beam=tt / th, coulomb_current=coulomb_current)
