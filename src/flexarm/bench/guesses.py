@@ -90,7 +90,7 @@ def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
 def tip_gain(logs: list[BenchLog], wc: float, length: float, zeta: float = 0.03):
     """(g estimate with sign, R²) from d ≈ g H(s)(−L θ̈)."""
     num = den = 0.0
-    ss = tt = 0.0
+    ss = 0.0
     for log in logs:
         d = log.columns.get("tip_deflection")
         th = log.columns.get("motor_angle")

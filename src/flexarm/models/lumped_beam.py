@@ -25,7 +25,6 @@ The block is ``BeamBlock(A, B, C, D)`` with states z, inputs (θm, θ̇m) and ou
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import control

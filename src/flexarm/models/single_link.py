@@ -18,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import control
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
