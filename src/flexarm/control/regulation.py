@@ -368,14 +368,19 @@ def _saturate(plant: MultiLinkPlant, u: Array) -> Array:
     return jnp.clip(u, -lim, lim)
 
 
-def _rk4(f, x0: Array, h, n_sub, n_out: int) -> Array:
+def _rk4(f, x0: Array, h, n_sub, n_out: int, *, unroll: bool = False) -> Array:
     """Classical RK4 with step h from x0 (shape (n_x, *batch)), n_sub steps per output,
-    n_out outputs: the states at 0, n_sub·h, …, shape (n_out + 1, *x0.shape). The four
-    stages run in a scan (measured as fast as unrolling them, and 2.5x quicker to compile)."""
-    A = jnp.array([0.0, 0.5, 0.5, 1.0])
-    W = jnp.array([1.0, 2.0, 2.0, 1.0]) / 6.0
+    n_out outputs: the states at 0, n_sub·h, …, shape (n_out + 1, *x0.shape).
 
-    def step(k, carry):
+    The four stages run in a scan (``unroll=False``: for one rollout as fast as unrolling
+    them, and 2.2x quicker to compile) or written out (``unroll=True``: for a batch carried
+    as (n_x, chunk), 28 % less time per rollout, because XLA then fuses each stage's
+    x + a·h·k into the kernels of the right-hand side instead of running a loop of separate
+    kernels per stage). Both compute the same sums in the same order."""
+    A = (0.0, 0.5, 0.5, 1.0)
+    W = (1.0 / 6.0, 2.0 / 6.0, 2.0 / 6.0, 1.0 / 6.0)
+
+    def step_scan(k, carry):
         x, t = carry
 
         def stage(c, ab):
@@ -383,8 +388,19 @@ def _rk4(f, x0: Array, h, n_sub, n_out: int) -> Array:
             kk = f(x + ab[0] * h * kk, t + ab[0] * h)
             return (acc + ab[1] * kk, kk), None
 
-        (acc, _), _ = jax.lax.scan(stage, (jnp.zeros_like(x), jnp.zeros_like(x)), (A, W))
+        (acc, _), _ = jax.lax.scan(stage, (jnp.zeros_like(x), jnp.zeros_like(x)),
+                                   (jnp.array(A), jnp.array(W)))
         return x + h * acc, t + h
+
+    def step_unrolled(k, carry):
+        x, t = carry
+        acc, kk = jnp.zeros_like(x), jnp.zeros_like(x)
+        for a, w in zip(A, W):
+            kk = f(x + a * h * kk, t + a * h)
+            acc = acc + w * kk
+        return x + h * acc, t + h
+
+    step = step_unrolled if unroll else step_scan
 
     def sample(carry, _):
         carry = jax.lax.fori_loop(0, n_sub, step, carry)
@@ -428,7 +444,7 @@ def _run_rk4_batch(plant, law, params, axes, x0, h, n_sub, n_out: int, chunk: in
         def f(x, t):
             return plant.rhs(x, _saturate(plant, law_b(pc, x, t)))
 
-        xs = _rk4(f, xc, h, n_sub, n_out)  # (T, n_x, chunk)
+        xs = _rk4(f, xc, h, n_sub, n_out, unroll=True)  # (T, n_x, chunk)
         us = jax.vmap(lambda x, t: _saturate(plant, law_b(pc, x, t)))(xs, ts)
         return jnp.moveaxis(xs, -1, 0), jnp.moveaxis(us, -1, 0)
 
@@ -584,7 +600,7 @@ class RegulationBatch:
 
 def simulate_regulation_batch(model: MultiLinkModel, law: Callable, x0, t_final: float,
                               dt: float = 1e-3, *, params, axes, step: float = 1e-4,
-                              chunk: int = 64, bound: float = 1e4) -> RegulationBatch:
+                              chunk: int = 128, bound: float = 1e4) -> RegulationBatch:
     """N closed loops ẋ = f(x, sat(law(params_i, x, t))) at once, fixed-step RK4 (``step``,
     default 0.1 ms), outputs every ``dt``: what :func:`simulate_regulation` does for one.
 
