@@ -2,8 +2,8 @@
 12 states, gravity) under the PD law (8), from θ = (−90°, 0) to (−45°, 0), 2 s, fixed-step
 RK4 at 0.1 ms (20 000 steps, 80 000 right-hand sides).
 
-Prints, in one run: flexarm's compile time, one rollout (the public ``simulate_regulation``
-call and its jit core), a batch of gain variations per rollout (``simulate_regulation_batch``,
+Prints, in one run: flexarm's compile time, one rollout (the public ``simulate_continuous``
+call and its jit core), a batch of gain variations per rollout (``simulate_continuous_batch``,
 K_P and K_D scaled by 0.8…1.25), and the same closed loop written the way a user would
 without flexarm: the same model (B, c + g in the explicit particle form, from the same
 ``MultiLinkModel`` numbers) as a NumPy right-hand side with ``np.linalg.solve``, integrated by
@@ -30,6 +30,7 @@ from scipy.integrate import solve_ivp
 import flexarm  # noqa: F401  (float64)
 from flexarm.control import regulation as R
 from flexarm.models.multilink import build_multilink
+from flexarm.sim import continuous as C
 from flexarm.specs.multilink import benchmark_arm
 
 DEG = math.pi / 180
@@ -160,7 +161,7 @@ def main() -> None:
     x0 = model.state(theta=THETA_0)
 
     def single():
-        return R.simulate_regulation(model, R.law_pd_constant, x0, T_FINAL, DT, params=p, step=STEP)
+        return C.simulate_continuous(model, R.law_pd_constant, x0, T_FINAL, DT, params=p, step=STEP)
 
     t0 = time.perf_counter()
     run = single()
@@ -168,7 +169,7 @@ def main() -> None:
     single_s, single_c = best_of(single, 7)
     core_args = (model.plant, R.law_pd_constant, p, jnp.asarray(x0), jnp.asarray(STEP),
                  jnp.asarray(int(round(DT / STEP))), int(round(T_FINAL / DT)))
-    core_s, _ = best_of(lambda: jax.block_until_ready(R._run_rk4(*core_args)), 7)
+    core_s, _ = best_of(lambda: jax.block_until_ready(C._run_rk4(*core_args)), 7)
 
     N = args.batch
     scale = np.linspace(0.8, 1.25, N)
@@ -176,7 +177,7 @@ def main() -> None:
     dt_batch = 1e-2  # outputs every 10 ms (the integration step stays 0.1 ms)
 
     def batch():
-        return R.simulate_regulation_batch(model, R.law_pd_constant, x0, T_FINAL, dt_batch,
+        return C.simulate_continuous_batch(model, R.law_pd_constant, x0, T_FINAL, dt_batch,
                                            params=pb, axes=axes, step=STEP, chunk=args.chunk)
 
     t0 = time.perf_counter()
@@ -186,8 +187,8 @@ def main() -> None:
     per_rollout, per_rollout_c = batch_s / N, batch_c / N
     mid = N // 2
     pm = R.regulation_params(model, scale[mid] * KP, scale[mid] * KD, THETA_D)
-    check = R.simulate_regulation(model, R.law_pd_constant, x0, T_FINAL, dt_batch, params=pm, step=STEP)
-    batch_err = np.abs(bout.x[mid] - check.x).max()
+    check = C.simulate_continuous(model, R.law_pd_constant, x0, T_FINAL, dt_batch, params=pm, step=STEP)
+    batch_err = np.abs(bout.state_array[mid] - check.state_array).max()
 
     (base_s, base_c), base_theta, nfev = numpy_baseline(model, np.asarray(p.g_d))
     base_s, base_c = min((base_s, base_c), numpy_baseline(model, np.asarray(p.g_d))[0])

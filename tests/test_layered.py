@@ -5,10 +5,12 @@ import math
 
 import jax
 import jax.numpy as jnp
+import control
 import numpy as np
 import pytest
 
 from flexarm.control import regulation as R
+from flexarm.sim.continuous import simulate_continuous, simulate_continuous_batch
 from flexarm.models.multilink import build_multilink
 from flexarm import layered as L
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, benchmark_arm
@@ -94,14 +96,25 @@ def test_batch_of_gain_variations_equals_single_runs():
     scale = np.array([0.8, 1.0, 1.3])
     pb, axes = R.regulation_params_batch(model, np.outer(scale, [18, 18]), [10, 2], theta_d)
     x0 = model.state(theta=[-90 * DEG, 0.0])
-    out = R.simulate_regulation_batch(model, R.law_pd_constant, x0, 0.2, 1e-2, params=pb,
-                                      axes=axes, chunk=2)          # 3 runs: one padded chunk
-    assert out.x.shape == (3, 21, 12) and out.u.shape == (3, 21, 2) and not out.diverged.any()
+    out = simulate_continuous_batch(model, R.law_pd_constant, x0, 0.2, 1e-2, params=pb,
+                                    axes=axes, chunk=2)          # 3 runs: one padded chunk
+    assert out.state_array.shape == (3, 21, 12) and out.torque.shape == (3, 21, 2)
+    assert not out.diverged.any()
+    # python-control's trace layout: (n, traces, T)
+    assert out.states.shape == (12, 3, 21) and out.inputs.shape == (2, 3, 21)
     for k, s in enumerate(scale):
         p = R.regulation_params(model, s * np.array([18, 18]), [10, 2], theta_d)
-        one = R.simulate_regulation(model, R.law_pd_constant, x0, 0.2, 1e-2, params=p)
-        np.testing.assert_allclose(out.x[k], one.x, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(out.u[k], one.u, rtol=0, atol=1e-10)
-    assert out.run(1).theta.shape == (21, 2)
+        one = simulate_continuous(model, R.law_pd_constant, x0, 0.2, 1e-2, params=p)
+        np.testing.assert_allclose(out.state_array[k], one.state_array, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(out.torque[k], one.torque, rtol=0, atol=1e-10)
+    # one rollout is a control.TimeResponseData: (n, T) arrays, labels, named access
+    assert isinstance(one, control.TimeResponseData)
+    assert one.states.shape == (12, 21) and one.inputs.shape == (2, 21)
+    assert one.input_labels == ["torque_1", "torque_2"] and one.state_labels[0] == "theta_1"
+    np.testing.assert_array_equal(one["theta_1"], one.theta[:, 0])
+    np.testing.assert_array_equal(one["torque_2"], one.torque[:, 1])
+    np.testing.assert_array_equal(out.run(2).state_array, out.state_array[2])
+    with pytest.raises(KeyError, match="no such signal"):
+        one["tip_angle"]
     with pytest.raises(ValueError, match="batch"):
         R.regulation_params_batch(model, [18, 18], [10, 2], theta_d)

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from flexarm.control import regulation as R
+from flexarm.errors import SimulationDiverged
+from flexarm.sim.continuous import simulate_continuous
 from flexarm.models.multilink import build_multilink
 from flexarm.specs.multilink import benchmark_arm
 
@@ -38,7 +40,7 @@ def x0(model):
 
 @pytest.fixture(scope="module")
 def run8(model, params, x0):
-    return R.simulate_regulation(model, R.law_pd_constant, x0, 2.0, 1e-3, params=params)
+    return simulate_continuous(model, R.law_pd_constant, x0, 2.0, 1e-3, params=params)
 
 
 def test_residual_deflection_eq9(model, params):
@@ -55,10 +57,10 @@ def test_residual_deflection_eq9(model, params):
 
 
 def test_pd_law_8_reaches_the_target_within_2s(model, params, x0, run8):
-    np.testing.assert_allclose(run8.u[0], 18 * 45 * DEG * np.array([1, 0]) + params.g_d,
+    np.testing.assert_allclose(run8.torque[0], 18 * 45 * DEG * np.array([1, 0]) + params.g_d,
                                rtol=1e-12)
     k = 2000
-    assert run8.t[k] == pytest.approx(2.0)
+    assert run8.time[k] == pytest.approx(2.0)
     eth = np.abs(run8.theta[k] - THETA_D) / DEG
     dd = np.asarray(params.delta_d)
     e_norm = np.linalg.norm(run8.delta[k] - dd) / np.linalg.norm(dd)
@@ -71,10 +73,10 @@ def test_pd_law_8_reaches_the_target_within_2s(model, params, x0, run8):
 def test_pd_law_8_steady_torque_is_gravity_torque(model, params, x0):
     # Without structural damping the 64 rad/s mode of link 2 is damped only through joint 2
     # (closed-loop time constant ≈ 4.7 s): the torque settles to 1e-3 N·m after ≈ 12 s.
-    run = R.simulate_regulation(model, R.law_pd_constant, x0, 15.0, 7.5e-3, params=params)
-    du = np.abs(run.u - np.asarray(params.g_d)).max(axis=1)
-    last = run.t >= 14.5
-    settled = run.t[np.nonzero(du > 1e-3)[0][-1]]
+    run = simulate_continuous(model, R.law_pd_constant, x0, 15.0, 7.5e-3, params=params)
+    du = np.abs(run.torque - np.asarray(params.g_d)).max(axis=1)
+    last = run.time >= 14.5
+    settled = run.time[np.nonzero(du > 1e-3)[0][-1]]
     print(f"\n|u − g_θ(θ_d, δ_d)| over the last 0.5 s: {du[last].max():.2e} N·m; "
           f"within 1e-3 after t = {settled:.2f} s")
     assert du[last].max() < 1e-3
@@ -95,19 +97,19 @@ def test_law_30_smaller_initial_torque_and_converges(model, params, x0):
     assert np.linalg.norm(ub) < np.linalg.norm(u8)
     for e in (e8, ea, eb):  # at the target every law holds the arm with g_θ(θ_d, δ_d)
         np.testing.assert_allclose(e, params.g_d, atol=1e-9)
-    run = R.simulate_regulation(model, R.law_pd_online, x0, 3.0, 1.5e-3, params=params)
+    run = simulate_continuous(model, R.law_pd_online, x0, 3.0, 1.5e-3, params=params)
     eth = np.abs(run.theta[-1] - THETA_D) / DEG
     print(f"(30a) at t = 3 s: |θ − θ_d| = {eth} deg")
     assert eth.max() < 0.5
 
 
 def test_alpha_and_sufficient_conditions(model, params, run8):
-    alpha, k = R.alpha_along(model, run8.x)
-    q = run8.x[:, :model.n_q]
+    alpha, k = R.alpha_along(model, run8.state_array)
+    q = run8.state_array[:, :model.n_q]
     region = R.alpha_bound(model, q[:, :2].min(0), q[:, :2].max(0),
                            np.abs(q[:, 2:]).max(0), n_samples=2000, refine=2)
     cond = R.stability_conditions(model, [18, 18], alpha)
-    print(f"\nα a posteriori = {alpha:.4f} at t = {run8.t[k]:.3f} s (paper: 17.67); over the "
+    print(f"\nα a posteriori = {alpha:.4f} at t = {run8.time[k]:.3f} s (paper: 17.67); over the "
           f"box around the run α = {region.alpha:.4f}\n{cond.summary()}")
     assert region.alpha >= alpha * (1 - 1e-9)
     assert cond.lambda_min_K == pytest.approx(np.diag(model.K).min(), rel=1e-9)
@@ -121,8 +123,8 @@ def test_interpolating_trajectory_lowers_the_peak_torque(model, params, x0, run8
     th, thd = jax.vmap(lambda t: R.reference(p, t))(jnp.asarray([0.0, 0.5, 1.0, 2.0]))
     np.testing.assert_allclose(th[:, 0], [-90 * DEG, -67.5 * DEG, -45 * DEG, -45 * DEG])
     np.testing.assert_allclose(thd[[0, 2, 3], 0], 0.0, atol=1e-15)
-    run = R.simulate_regulation(model, R.law_pd_constant, x0, 2.0, 1e-3, params=p)
-    peak, peak_step = np.abs(run.u).max(), np.abs(run8.u).max()
+    run = simulate_continuous(model, R.law_pd_constant, x0, 2.0, 1e-3, params=p)
+    peak, peak_step = np.abs(run.torque).max(), np.abs(run8.torque).max()
     eth = np.abs(run.theta[-1] - THETA_D) / DEG
     print(f"\npeak |u|: step {peak_step:.3f}, quintic over 1 s {peak:.3f} N·m; "
           f"|θ − θ_d| at 2 s {eth} deg")
@@ -132,15 +134,15 @@ def test_interpolating_trajectory_lowers_the_peak_torque(model, params, x0, run8
 
 def test_torque_limit_saturates_the_command(params, x0):
     limited = build_multilink(benchmark_arm().model_copy(update={"torque_limit": [5.0, 2.0]}))
-    run = R.simulate_regulation(limited, R.law_pd_constant, x0, 2.0, 1e-3, params=params)
-    np.testing.assert_allclose(run.u[0], [5.0, params.g_d[1]], rtol=1e-12)
-    assert np.all(np.abs(run.u) <= np.array([5.0, 2.0]) + 1e-12)
+    run = simulate_continuous(limited, R.law_pd_constant, x0, 2.0, 1e-3, params=params)
+    np.testing.assert_allclose(run.torque[0], [5.0, params.g_d[1]], rtol=1e-12)
+    assert np.all(np.abs(run.torque) <= np.array([5.0, 2.0]) + 1e-12)
 
 
 def test_divergence_is_reported(model, x0):
     p = R.regulation_params(model, [1e5, 1e5], [1e3, 1e3], THETA_D)
-    with pytest.raises(R.SimulationDiverged, match=r"t = .* s: \w+ =") as err:
-        R.simulate_regulation(model, R.law_pd_constant, x0, 10.0, 5e-3, params=p, step=5e-3)
+    with pytest.raises(SimulationDiverged, match=r"t = .* s: \w+ =") as err:
+        simulate_continuous(model, R.law_pd_constant, x0, 10.0, 5e-3, params=p, step=5e-3)
     print("\n" + str(err.value))
 
 
@@ -150,5 +152,5 @@ def test_bad_regulation_input(model):
     with pytest.raises(ValueError, match="theta_0"):
         R.regulation_params(model, 18, 10, THETA_D, duration=1.0)
     with pytest.raises(ValueError, match="method"):
-        R.simulate_regulation(model, R.law_pd_constant, np.zeros(12), 1.0, 1e-3,
+        simulate_continuous(model, R.law_pd_constant, np.zeros(12), 1.0, 1e-3,
                               params=None, method="euler")

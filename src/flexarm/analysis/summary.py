@@ -81,6 +81,7 @@ def run_regulation(scenario):
     """Simulate a multi-link scenario's regulation (continuous time, RK4)."""
     from flexarm.control import regulation as R
     from flexarm.models.multilink import build_multilink
+    from flexarm.sim.continuous import simulate_continuous
 
     reg = scenario.regulation
     if reg is None:
@@ -91,8 +92,8 @@ def run_regulation(scenario):
                                  theta_0=reg.initial, duration=reg.interpolation_time)
     x0 = np.zeros(2 * model.n_q)
     x0[:model.n_links] = reg.initial
-    run = R.simulate_regulation(model, getattr(R, LAWS[reg.law]), x0, reg.duration,
-                                reg.output_period, params=params, step=reg.step)
+    run = simulate_continuous(model, getattr(R, LAWS[reg.law]), x0, reg.duration,
+                              reg.output_period, params=params, step=reg.step)
     return model, params, run
 
 
@@ -106,22 +107,22 @@ def write_regulation(scenario, out: Path) -> dict:
     model, params, run = run_regulation(scenario)
     name = scenario.name
     n = model.n_links
-    cols = {"time": run.t}
-    cols.update({nm: run.x[:, k] for k, nm in enumerate(run.state_names)})
-    cols.update({f"torque_{k + 1}": run.u[:, k] for k in range(n)})
+    cols = {"time": run.time}
+    cols.update({nm: run.state_array[:, k] for k, nm in enumerate(run.state_names)})
+    cols.update({f"torque_{k + 1}": run.torque[:, k] for k in range(n)})
     path = out / f"{name}.csv"
     with path.open("w") as f:
         f.write("# units: s, rad, m, rad/s, m/s, N*m\n" + ",".join(cols) + "\n")
         np.savetxt(f, np.column_stack(list(cols.values())), delimiter=",", fmt="%.10g")
     fig, ax = plt.subplots(3, 1, sharex=True, figsize=(7, 8))
     for k in range(n):
-        ax[0].plot(run.t, np.degrees(run.theta[:, k]), label=f"θ{k + 1}")
+        ax[0].plot(run.time, np.degrees(run.theta[:, k]), label=f"θ{k + 1}")
     ax[0].set_ylabel("joint angle [deg]")
     for k in range(run.delta.shape[1]):
-        ax[1].plot(run.t, run.delta[:, k], label=run.state_names[n + k])
+        ax[1].plot(run.time, run.delta[:, k], label=run.state_names[n + k])
     ax[1].set_ylabel("deflection [m]")
     for k in range(n):
-        ax[2].plot(run.t, run.u[:, k], label=f"u{k + 1}")
+        ax[2].plot(run.time, run.torque[:, k], label=f"u{k + 1}")
     ax[2].set_ylabel("torque [N·m]")
     ax[2].set_xlabel("time [s]")
     for a in ax:
@@ -138,7 +139,7 @@ def write_regulation(scenario, out: Path) -> dict:
         "final_theta_error_deg": th_err.tolist(),
         "final_delta_m": run.delta[-1].tolist(), "delta_d_m": dd.tolist(),
         "final_delta_relative_error": float(np.linalg.norm(run.delta[-1] - dd) / np.linalg.norm(dd)),
-        "initial_torque_N_m": run.u[0].tolist(), "final_torque_N_m": run.u[-1].tolist(),
+        "initial_torque_N_m": run.torque[0].tolist(), "final_torque_N_m": run.torque[-1].tolist(),
         "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
         "files": [path.name, f"{name}.png"],
     }

@@ -35,9 +35,8 @@ forms below are the project's reconstruction (shared/reference/deluca-siciliano.
 
 Laws are pure JAX functions ``u = law(params, x, t)`` with a pytree ``params``
 (:class:`RegulationParams`), usable in any JAX closed loop; gains are traced, so a sweep
-compiles once. :func:`simulate_regulation` integrates the continuous closed loop (fixed-step
-RK4, default 0.1 ms, or diffrax Tsit5 with a PID step-size controller) and raises
-:class:`SimulationDiverged` with the time and the variable when the state blows up.
+compiles once. :mod:`flexarm.sim.continuous` integrates the closed loop (one rollout or a
+batch of gain variations).
 """
 
 from __future__ import annotations
@@ -52,7 +51,6 @@ import numpy as np
 from jax import Array
 
 from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
-from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
 
 
 class RegulationError(ValueError):
@@ -340,200 +338,7 @@ def stability_conditions(model: MultiLinkModel, KP, alpha: float) -> StabilityCo
     return StabilityConditions(float(alpha), lk, float(np.linalg.eigvalsh(0.5 * (KPm + KPm.T)).min()))
 
 
-# --------------------------------------------------------------------------- simulation
-@dataclass(frozen=True)
-class RegulationRun:
-    """A closed-loop run: times t (s), states x (rad, m, rad/s, m/s), applied torques u (N·m)."""
-
-    t: np.ndarray
-    x: np.ndarray
-    u: np.ndarray
-    state_names: tuple[str, ...]
-    n_links: int
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self.x[:, :self.n_links]
-
-    @property
-    def delta(self) -> np.ndarray:
-        nq = self.x.shape[1] // 2
-        return self.x[:, self.n_links:nq]
-
-
-def _saturate(plant: MultiLinkPlant, u: Array) -> Array:
-    """Clip u (shape (n_u, *batch)) to the plant's torque limits."""
-    lim = plant.command_limit
-    lim = lim.reshape(lim.shape + (1,) * (jnp.ndim(u) - 1))
-    return jnp.clip(u, -lim, lim)
-
-
-def _rk4(f, x0: Array, h, n_sub, n_out: int, *, unroll: bool = False) -> Array:
-    """Classical RK4 with step h from x0 (shape (n_x, *batch)), n_sub steps per output,
-    n_out outputs: the states at 0, n_sub·h, …, shape (n_out + 1, *x0.shape).
-
-    The four stages run in a scan (``unroll=False``: for one rollout as fast as unrolling
-    them, and 2.2x quicker to compile) or written out (``unroll=True``: for a batch carried
-    as (n_x, chunk), 28 % less time per rollout, because XLA then fuses each stage's
-    x + a·h·k into the kernels of the right-hand side instead of running a loop of separate
-    kernels per stage). Both compute the same sums in the same order."""
-    A = (0.0, 0.5, 0.5, 1.0)
-    W = (1.0 / 6.0, 2.0 / 6.0, 2.0 / 6.0, 1.0 / 6.0)
-
-    def step_scan(k, carry):
-        x, t = carry
-
-        def stage(c, ab):
-            acc, kk = c
-            kk = f(x + ab[0] * h * kk, t + ab[0] * h)
-            return (acc + ab[1] * kk, kk), None
-
-        (acc, _), _ = jax.lax.scan(stage, (jnp.zeros_like(x), jnp.zeros_like(x)),
-                                   (jnp.array(A), jnp.array(W)))
-        return x + h * acc, t + h
-
-    def step_unrolled(k, carry):
-        x, t = carry
-        acc, kk = jnp.zeros_like(x), jnp.zeros_like(x)
-        for a, w in zip(A, W):
-            kk = f(x + a * h * kk, t + a * h)
-            acc = acc + w * kk
-        return x + h * acc, t + h
-
-    step = step_unrolled if unroll else step_scan
-
-    def sample(carry, _):
-        carry = jax.lax.fori_loop(0, n_sub, step, carry)
-        return carry, carry[0]
-
-    _, xs = jax.lax.scan(sample, (x0, jnp.zeros(())), None, length=n_out)
-    return jnp.concatenate([x0[None], xs])
-
-
-@eqx.filter_jit
-def _run_rk4(plant, law, params, x0, h, n_sub, n_out: int):
-    def f(x, t):
-        return plant.rhs(x, _saturate(plant, law(params, x, t)))
-
-    xs = _rk4(f, x0, h, n_sub, n_out)
-    ts = jnp.arange(n_out + 1) * (h * n_sub)
-    us = jax.vmap(lambda x, t: _saturate(plant, law(params, x, t)))(xs, ts)
-    return ts, xs, us
-
-
-@eqx.filter_jit
-def _run_rk4_batch(plant, law, params, axes, x0, h, n_sub, n_out: int, chunk: int):
-    """Rollouts of a batch in chunks of ``chunk``: the leaves of ``params`` batched along
-    axis 0 where the vmap-style prefix ``axes`` says 0, x0 of shape (N, n_x), N a multiple
-    of chunk. Within a chunk the state is carried as (n_x, chunk), batch last: every layer
-    of the plant's right-hand side is then one SIMD kernel over the chunk, and the law is
-    vmapped over it. Chunks run one after the other (lax.map), so that a chunk's working set
-    stays in cache. Returns t (T,), x (N, T, n_x), u (N, T, n_u)."""
-    N = x0.shape[0]
-    leaves, treedef = jax.tree.flatten(params)
-    leaf_axes = _leaf_axes(params, axes)
-    law_b = jax.vmap(law, in_axes=(axes, -1, None), out_axes=-1)
-    ts = jnp.arange(n_out + 1) * (h * n_sub)
-
-    def one_chunk(c):
-        lv = [leaf if ax is None else jax.lax.dynamic_slice_in_dim(leaf, c * chunk, chunk, 0)
-              for leaf, ax in zip(leaves, leaf_axes)]
-        pc = jax.tree.unflatten(treedef, lv)
-        xc = jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T
-
-        def f(x, t):
-            return plant.rhs(x, _saturate(plant, law_b(pc, x, t)))
-
-        xs = _rk4(f, xc, h, n_sub, n_out, unroll=True)  # (T, n_x, chunk)
-        us = jax.vmap(lambda x, t: _saturate(plant, law_b(pc, x, t)))(xs, ts)
-        return jnp.moveaxis(xs, -1, 0), jnp.moveaxis(us, -1, 0)
-
-    xs, us = jax.lax.map(one_chunk, jnp.arange(N // chunk))
-    return ts, xs.reshape((N,) + xs.shape[2:]), us.reshape((N,) + us.shape[2:])
-
-
-class _Axis:
-    """A batch axis (0 or None) as an opaque pytree leaf."""
-
-    def __init__(self, v):
-        self.v = v
-
-
-def _leaf_axes(tree, axes) -> list:
-    """The vmap-style prefix ``axes`` (0 or None per subtree) broadcast to the leaves of tree."""
-    full = jax.tree.map(lambda ax, sub: jax.tree.map(lambda _: _Axis(ax), sub), axes, tree,
-                        is_leaf=lambda a: a is None)
-    return [a.v for a in jax.tree.leaves(full, is_leaf=lambda a: isinstance(a, _Axis))]
-
-
-@eqx.filter_jit
-def _run_tsit5(plant, law, params, x0, ts, rtol, atol, dt0, max_steps: int):
-    import diffrax
-
-    def f(t, x, args):
-        return plant.rhs(x, _saturate(plant, law(params, x, t)))
-
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(f), diffrax.Tsit5(), ts[0], ts[-1], dt0, x0,
-        saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        max_steps=max_steps, throw=False)
-    xs = sol.ys
-    us = jax.vmap(lambda x, t: _saturate(plant, law(params, x, t)))(xs, ts)
-    return xs, us, sol.result == diffrax.RESULTS.successful, sol.stats["num_steps"]
-
-
-def simulate_regulation(model: MultiLinkModel, law: Callable, x0, t_final: float,
-                        dt: float = 1e-3, *, params=None, method: str = "rk4",
-                        step: float = 1e-4, rtol: float = 1e-8, atol: float = 1e-10,
-                        max_steps: int = 2_000_000, bound: float = 1e4) -> RegulationRun:
-    """Continuous-time closed loop ẋ = f(x, sat(law(params, x, t))) from x0 over [0, t_final].
-
-    Outputs every ``dt`` (s). ``method``: ``rk4`` (fixed step ``step``, default 0.1 ms; dt is
-    rounded to a whole number of steps) or ``tsit5`` (diffrax, adaptive, ``rtol``/``atol``).
-    Raises :class:`SimulationDiverged` naming the first time and state variable that is
-    non-finite or larger than ``bound`` in absolute value (SI units), or the time at which
-    the adaptive solver gave up."""
-    plant = model.plant
-    x0 = jnp.asarray(x0, float).reshape(2 * model.n_q)
-    if not (t_final > 0 and dt > 0):
-        raise ValueError(f"t_final and dt must be > 0; got {t_final}, {dt}")
-    n_out = int(round(t_final / dt))
-    if n_out < 1:
-        raise ValueError(f"dt = {dt} s is longer than t_final = {t_final} s")
-    if method == "rk4":
-        n_sub = max(1, int(round(dt / step)))
-        ts, xs, us = _run_rk4(plant, law, params, x0, jnp.asarray(dt / n_sub),
-                              jnp.asarray(n_sub), n_out)
-        ok, t_fail = True, None
-    elif method == "tsit5":
-        ts = jnp.linspace(0.0, n_out * dt, n_out + 1)
-        xs, us, ok, _ = _run_tsit5(plant, law, params, x0, ts, rtol, atol,
-                                   min(dt, step), max_steps)
-        ok = bool(ok)
-        t_fail = None
-    else:
-        raise ValueError(f"method must be 'rk4' or 'tsit5'; got {method!r}")
-    ts, xs, us = np.asarray(ts), np.asarray(xs), np.asarray(us)
-    bad = ~np.isfinite(xs) | (np.abs(np.nan_to_num(xs, nan=np.inf)) > bound)
-    if bad.any():
-        k = int(np.argmax(bad.any(axis=1)))
-        j = int(np.argmax(bad[k]))
-        raise SimulationDiverged(
-            f"closed loop diverged at t = {ts[k]:.6g} s: {plant.state_names[j]} = {xs[k, j]:.4g} "
-            f"(bound ±{bound:g}); reduce the gains or the step ({method}, step "
-            f"{step if method == 'rk4' else 'adaptive'}), or use an interpolating trajectory"
-        )
-    if not ok:
-        t_fail = ts[-1]
-        raise SimulationDiverged(
-            f"adaptive solver (tsit5) failed before t = {t_fail:.6g} s (step size collapsed "
-            f"or max_steps = {max_steps} reached): the closed loop is stiff or diverging"
-        )
-    return RegulationRun(ts, xs, us, plant.state_names, model.n_links)
-
-
-# --------------------------------------------------------------------------- batches
+# --------------------------------------------------------------------------- batches of parameters
 def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
                             duration: float = 0.0,
                             newton_iterations: int = 4) -> tuple[RegulationParams, RegulationParams]:
@@ -541,7 +346,7 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
 
     KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
     be a single gain shared by the batch, a scalar or an (n,) diagonal. Returns ``(params, axes)``
-    for :func:`simulate_regulation_batch`: params with KP, KD of shape (N, n, n), axes with 0
+    for :func:`flexarm.sim.continuous.simulate_continuous_batch`: params with KP, KD of shape (N, n, n), axes with 0
     on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d) are shared)."""
     n = model.n_links
     base = regulation_params(model, np.eye(n), np.eye(n), theta_d, theta_0=theta_0,
@@ -570,80 +375,3 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     axes = RegulationParams(plant=None, KP=0, KD=0, theta_d=None, delta_d=None, g_d=None,
                             theta_0=None, duration=None, newton_iterations=newton_iterations)
     return params, axes
-
-
-@dataclass(frozen=True)
-class RegulationBatch:
-    """N closed-loop runs: t (T,) s, x (N, T, n_x), u (N, T, n_u); ``diverged[i]`` when run i
-    became non-finite or left the bound (its samples from then on are not meaningful)."""
-
-    t: np.ndarray
-    x: np.ndarray
-    u: np.ndarray
-    diverged: np.ndarray
-    state_names: tuple[str, ...]
-    n_links: int
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self.x[:, :, :self.n_links]
-
-    @property
-    def delta(self) -> np.ndarray:
-        nq = self.x.shape[2] // 2
-        return self.x[:, :, self.n_links:nq]
-
-    def run(self, i: int) -> RegulationRun:
-        """Run i as a :class:`RegulationRun`."""
-        return RegulationRun(self.t, self.x[i], self.u[i], self.state_names, self.n_links)
-
-
-def simulate_regulation_batch(model: MultiLinkModel, law: Callable, x0, t_final: float,
-                              dt: float = 1e-3, *, params, axes, step: float = 1e-4,
-                              chunk: int = 128, bound: float = 1e4) -> RegulationBatch:
-    """N closed loops ẋ = f(x, sat(law(params_i, x, t))) at once, fixed-step RK4 (``step``,
-    default 0.1 ms), outputs every ``dt``: what :func:`simulate_regulation` does for one.
-
-    ``params``/``axes``: a parameter pytree and its vmap-style batch axes (0 on the leaves
-    that hold the batch along their first axis, None on shared ones), e.g. from
-    :func:`regulation_params_batch`. ``x0``: (n_x,) shared or (N, n_x). The batch runs in
-    chunks of ``chunk`` rollouts, state carried batch-last (see ``_run_rk4_batch``); N is
-    padded to a multiple of chunk with copies of the last rollout. Gains are traced: any
-    sweep of the same size compiles once. A run that diverges is flagged in ``diverged``
-    rather than raised."""
-    plant = model.plant
-    nx = 2 * model.n_q
-    if not (t_final > 0 and dt > 0):
-        raise ValueError(f"t_final and dt must be > 0; got {t_final}, {dt}")
-    n_out = int(round(t_final / dt))
-    if n_out < 1:
-        raise ValueError(f"dt = {dt} s is longer than t_final = {t_final} s")
-    n_sub = max(1, int(round(dt / step)))
-    leaf_axes = _leaf_axes(params, axes)
-    sizes = {int(leaf.shape[0]) for leaf, ax in zip(jax.tree.leaves(params), leaf_axes)
-             if ax is not None}
-    if any(ax not in (None, 0) for ax in leaf_axes):
-        raise ValueError("axes must be 0 (batched along the first axis) or None")
-    x0 = np.asarray(x0, float)
-    if x0.ndim == 2:
-        sizes.add(x0.shape[0])
-    if len(sizes) != 1:
-        raise ValueError(f"batched leaves and x0 disagree on the batch size: {sorted(sizes)}")
-    N = sizes.pop()
-    x0 = np.broadcast_to(x0.reshape(-1, nx), (N, nx))
-    chunk = max(1, min(int(chunk), N))
-    pad = -N % chunk
-
-    def padded(a, ax):
-        if ax is None or pad == 0:
-            return a
-        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)])
-
-    leaves, treedef = jax.tree.flatten(params)
-    params_p = jax.tree.unflatten(treedef, [padded(a, ax) for a, ax in zip(leaves, leaf_axes)])
-    x0_p = padded(jnp.asarray(x0), 0)
-    ts, xs, us = _run_rk4_batch(plant, law, params_p, axes, x0_p, jnp.asarray(dt / n_sub),
-                                jnp.asarray(n_sub), n_out, chunk)
-    ts, xs, us = np.asarray(ts), np.asarray(xs)[:N], np.asarray(us)[:N]
-    bad = ~np.isfinite(xs) | (np.abs(np.nan_to_num(xs, nan=np.inf)) > bound)
-    return RegulationBatch(ts, xs, us, bad.any(axis=(1, 2)), plant.state_names, model.n_links)

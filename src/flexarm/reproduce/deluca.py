@@ -42,6 +42,9 @@ from typing import Callable
 import numpy as np
 
 from flexarm.control import regulation as R
+from flexarm.errors import SimulationDiverged
+from flexarm.sim import continuous
+from flexarm.sim.continuous import ContinuousRun, simulate_continuous
 from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.specs.multilink import benchmark_arm
 
@@ -138,15 +141,15 @@ def settling_time(t: np.ndarray, err: np.ndarray, tol: float) -> float:
     return float(t[k]) if k < len(t) else math.inf
 
 
-def _simulate(model, law, cfg: DeLucaConfig, params, t_final: float) -> R.RegulationRun:
+def _simulate(model, law, cfg: DeLucaConfig, params, t_final: float) -> ContinuousRun:
     """A run with the config's step and n_out samples (dt = t_final/n_out)."""
     dt = t_final / cfg.n_out
     n_sub = max(1, int(round(dt / cfg.step)))
-    return R.simulate_regulation(model, law, model.state(theta=cfg.theta_0), t_final, dt,
-                                 params=params, step=dt / n_sub)
+    return simulate_continuous(model, law, model.state(theta=cfg.theta_0), t_final, dt,
+                               params=params, step=dt / n_sub)
 
 
-def _errors(run: R.RegulationRun, theta_d, delta_d):
+def _errors(run: ContinuousRun, theta_d, delta_d):
     e_th = np.abs(run.theta - theta_d).max(axis=1) / DEG
     e_d = np.linalg.norm(run.delta - delta_d, axis=1) / np.linalg.norm(delta_d)
     return e_th, e_d
@@ -241,7 +244,7 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
         model = cfg.model(mode_type=mt)
         p = R.regulation_params(model, np.diag(cfg.KP), np.diag(cfg.KD), cfg.theta_d)
         run = _simulate(model, R.law_pd_constant, cfg, p, cfg.t_final)
-        G = np.stack([model.gravity_jacobian(x[:model.n_q]) for x in run.x[::10]])
+        G = np.stack([model.gravity_jacobian(x[:model.n_q]) for x in run.state_array[::10]])
         for norm in _NORMS:
             s = _mode_scale(model, norm)
             S = np.concatenate([np.ones(model.n_links), s])
@@ -276,12 +279,12 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
 
 
 # --------------------------------------------------------------------------- figures
-def _fig2(run: R.RegulationRun, theta_d, delta_d, g_d, path: Path) -> None:
+def _fig2(run: ContinuousRun, theta_d, delta_d, g_d, path: Path) -> None:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10, 9), layout="constrained")
     ax = fig.subplots(3, 2, sharex=True)
-    t = run.t
+    t = run.time
     for i in range(2):
         ax[0, i].plot(t, run.theta[:, i] / DEG, label=f"θ{i + 1}")
         ax[0, i].axhline(theta_d[i] / DEG, ls="--", c="k", lw=0.8, label="θ_d")
@@ -291,7 +294,7 @@ def _fig2(run: R.RegulationRun, theta_d, delta_d, g_d, path: Path) -> None:
             line, = ax[1, i].plot(t, run.delta[:, k] * 1e3, label=f"δ{i + 1}{j + 1}")
             ax[1, i].axhline(delta_d[k] * 1e3, ls="--", c=line.get_color(), lw=0.8)
         ax[1, i].set_ylabel(f"δ link {i + 1} (mm)")
-        ax[2, i].plot(t, run.u[:, i], label=f"u{i + 1}")
+        ax[2, i].plot(t, run.torque[:, i], label=f"u{i + 1}")
         ax[2, i].axhline(g_d[i], ls="--", c="k", lw=0.8, label="g_θ(θ_d, δ_d)")
         ax[2, i].set_ylabel(f"u{i + 1} (N·m)")
         ax[2, i].set_xlabel("t (s)")
@@ -310,8 +313,8 @@ def _fig_laws(runs: dict, theta_d, path: Path) -> None:
     ax = fig.subplots(2, 2, sharex=True)
     for name, run in runs.items():
         for i in range(2):
-            ax[0, i].plot(run.t, run.theta[:, i] / DEG, label=name)
-            ax[1, i].plot(run.t, run.u[:, i], label=name)
+            ax[0, i].plot(run.time, run.theta[:, i] / DEG, label=name)
+            ax[1, i].plot(run.time, run.torque[:, i], label=name)
     for i in range(2):
         ax[0, i].axhline(theta_d[i] / DEG, ls="--", c="k", lw=0.8)
         ax[0, i].set_ylabel(f"θ{i + 1} (deg)")
@@ -331,11 +334,11 @@ def _fig_sweep(sweep_runs: dict, remedy_runs: dict, theta_d, path: Path) -> None
     fig = Figure(figsize=(11, 7), layout="constrained")
     ax = fig.subplots(2, 2)
     for name, run in sweep_runs.items():
-        ax[0, 0].plot(run.t, run.theta[:, 0] / DEG, label=name)
-        ax[0, 1].plot(run.t, run.u[:, 0], label=name)
+        ax[0, 0].plot(run.time, run.theta[:, 0] / DEG, label=name)
+        ax[0, 1].plot(run.time, run.torque[:, 0], label=name)
     for name, run in remedy_runs.items():
-        ax[1, 0].plot(run.t, run.theta[:, 0] / DEG, label=name)
-        ax[1, 1].plot(run.t, run.u[:, 0], label=name)
+        ax[1, 0].plot(run.time, run.theta[:, 0] / DEG, label=name)
+        ax[1, 1].plot(run.time, run.torque[:, 0], label=name)
     for a in ax[:, 0]:
         a.axhline(theta_d[0] / DEG, ls="--", c="k", lw=0.8)
         a.set_ylabel("θ1 (deg)")
@@ -388,8 +391,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     run8 = _simulate(model, R.law_pd_constant, cfg, p8, cfg.t_final)
     long8 = _simulate(model, R.law_pd_constant, cfg, p8, cfg.t_long)
     # settling on the fine record up to t_final, the long one after it
-    later = long8.t > run8.t[-1]
-    t_all = np.concatenate([run8.t, long8.t[later]])
+    later = long8.time > run8.time[-1]
+    t_all = np.concatenate([run8.time, long8.time[later]])
     eth_f, ed_f = _errors(run8, th_d, dd)
     eth_l, ed_l = _errors(long8, th_d, dd)
     eth_all, ed_all = np.concatenate([eth_f, eth_l[later]]), np.concatenate([ed_f, ed_l[later]])
@@ -399,15 +402,15 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     }
     at_final = {"theta_err_deg": float(eth_f[-1]), "delta_err_frac": float(ed_f[-1]),
                 "theta_err_deg_per_joint": (np.abs(run8.theta[-1] - th_d) / DEG).tolist()}
-    du = np.abs(long8.u - g_d).max(axis=1)
-    steady = {"u_end": long8.u[-1].tolist(), "g_d": g_d.tolist(),
+    du = np.abs(long8.torque - g_d).max(axis=1)
+    steady = {"u_end": long8.torque[-1].tolist(), "g_d": g_d.tolist(),
               "max_abs_diff_end": float(du[-1]),
-              "within_tol_after_s": settling_time(long8.t, du, cfg.torque_tol),
+              "within_tol_after_s": settling_time(long8.time, du, cfg.torque_tol),
               "t_long": cfg.t_long}
 
     say("α along the run and over its region, conditions (14)–(15)")
-    alpha_along, k_alpha = R.alpha_along(model, np.concatenate([run8.x, long8.x]))
-    q = np.concatenate([run8.x, long8.x])[:, :model.n_q]
+    alpha_along, k_alpha = R.alpha_along(model, np.concatenate([run8.state_array, long8.state_array]))
+    q = np.concatenate([run8.state_array, long8.state_array])[:, :model.n_q]
     region = R.alpha_bound(model, q[:, :model.n_links].min(0), q[:, :model.n_links].max(0),
                            np.abs(q[:, model.n_links:]).max(0), n_samples=cfg.alpha_samples,
                            refine=cfg.alpha_refine)
@@ -423,8 +426,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     laws = {}
     for name, r in runs_laws.items():
         e_th, e_d = _errors(r, th_d, dd)
-        laws[name] = {"u0": r.u[0].tolist(), "u0_norm": float(np.linalg.norm(r.u[0])),
-                      "peak_abs_u": float(np.abs(r.u).max()),
+        laws[name] = {"u0": r.torque[0].tolist(), "u0_norm": float(np.linalg.norm(r.torque[0])),
+                      "peak_abs_u": float(np.abs(r.torque).max()),
                       "theta_err_deg_t_final": float(e_th[-1]),
                       "delta_err_frac_t_final": float(e_d[-1])}
 
@@ -438,15 +441,15 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         try:
             r = _simulate(model, R.law_pd_constant, cfg, pf, cfg.sweep_t_final)
             e_th, e_d = _errors(r, th_d, dd)
-            k2 = int(np.argmin(np.abs(r.t - cfg.t_final)))
-            entry.update({"diverged": False, "u0_norm": float(np.linalg.norm(r.u[0])),
-                          "peak_abs_u": float(np.abs(r.u).max()),
+            k2 = int(np.argmin(np.abs(r.time - cfg.t_final)))
+            entry.update({"diverged": False, "u0_norm": float(np.linalg.norm(r.torque[0])),
+                          "peak_abs_u": float(np.abs(r.torque).max()),
                           "theta_err_deg_t_final": float(e_th[k2]),
                           "theta_err_deg_end": float(e_th[-1]),
                           "delta_err_frac_end": float(e_d[-1]),
-                          "theta_settle_s": settling_time(r.t, e_th, cfg.settle_angle_deg)})
+                          "theta_settle_s": settling_time(r.time, e_th, cfg.settle_angle_deg)})
             sweep_runs[f"K_P×{f:g}"] = r
-        except R.SimulationDiverged as exc:
+        except SimulationDiverged as exc:
             entry.update({"diverged": True, "error": str(exc)})
         sweep.append(entry)
 
@@ -457,8 +460,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         pr = R.regulation_params(model, KP * f, KD * fk, th_d, theta_0=cfg.theta_0, duration=dur)
         r = _simulate(model, R.law_pd_constant, cfg, pr, cfg.sweep_t_final)
         e_th, e_d = _errors(r, th_d, dd)
-        k2 = int(np.argmin(np.abs(r.t - cfg.t_final)))
-        remedy[name] = {"duration_s": dur, "peak_abs_u": float(np.abs(r.u).max()),
+        k2 = int(np.argmin(np.abs(r.time - cfg.t_final)))
+        remedy[name] = {"duration_s": dur, "peak_abs_u": float(np.abs(r.torque).max()),
                         "peak_abs_delta_m": float(np.abs(r.delta).max()),
                         "theta_err_deg_t_final": float(e_th[k2]),
                         "delta_err_frac_t_final": float(e_d[k2])}
@@ -471,14 +474,14 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         try:
             _simulate(model, R.law_pd_constant, cfg, pu, cfg.t_final)
             unstable[f"rk4_{name}"] = "converged"
-        except R.SimulationDiverged as exc:
+        except SimulationDiverged as exc:
             unstable[f"rk4_{name}"] = f"diverged: {exc}"
     if cfg.probe_tsit5:
         import jax.numpy as jnp
 
         pu = R.regulation_params(model, KP * fu, KD * fu ** cfg.sweep_kd_exponent, th_d)
         ts = jnp.linspace(0.0, cfg.t_final, 201)
-        xs, _, ok, nsteps = R._run_tsit5(model.plant, R.law_pd_constant, pu,
+        xs, _, ok, nsteps = continuous._run_tsit5(model.plant, R.law_pd_constant, pu,
                                          jnp.asarray(model.state(theta=cfg.theta_0)), ts,
                                          cfg.tsit5_rtol, 1e-3 * cfg.tsit5_rtol, cfg.step,
                                          2_000_000)
@@ -501,7 +504,7 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         rows.append(_row(f"{nm} (eq. 9)", PAPER["delta_d"][k], float(dd[k]), "m",
                          "arm data not in the paper: benchmark arm, see docs/choices.md"))
     rows.append(_row("α a posteriori along the run (eq. 6, 2-norm)", PAPER["alpha"],
-                     alpha_along, "SI", f"max at t = {np.concatenate([run8.t, long8.t])[k_alpha]:.3g} s"))
+                     alpha_along, "SI", f"max at t = {np.concatenate([run8.time, long8.time])[k_alpha]:.3g} s"))
     rows.append(_row("α over the region spanned by the run", "", region.alpha, "SI",
                      f"{region.n_evaluations} evaluations"))
     rows.append(_row("condition (14) λ_min(K) > α", "satisfied", cond.holds_14, "",
