@@ -15,7 +15,7 @@ from flexarm.ident.coulomb import (
     square_wave_phasor,
 )
 from flexarm.ident.harmonics import IdentificationWarning, analyse_log
-from flexarm.ident.logs import Log, read_log
+from flexarm.logs import Log, read_log
 
 CF = 0.132  # A
 GINV = sim.PAPER_ARM.Gm_inv  # i/θm of the linear part, A/rad

@@ -17,7 +17,7 @@ from flexarm.ident.harmonics import (
     saturation_level,
     whole_periods,
 )
-from flexarm.ident.logs import Log, read_log, write_log
+from flexarm.logs import Log, read_log, write_log
 
 W0 = 2.345678  # rad/s: 2678.6... samples per period at 1 kHz, not a whole number
 PHASORS = {0: 0.03, 1: 0.7 * np.exp(0.4j), 2: 0.01j, 3: 0.05 * np.exp(-2.1j),

@@ -1,6 +1,6 @@
 """Bench logs: reading, checking, and the controller a log declares.
 
-A bench log is the CSV exchange format of :mod:`flexarm.ident.logs` with the columns of a
+A bench log is the CSV exchange format of :mod:`flexarm.logs` with the columns of a
 rig with a hub encoder and a strain gauge (SI units)::
 
     # controller: state_feedback K1=6 K2=-3 K3=0.213 K4=0
@@ -26,7 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexarm.ident.logs import MAX_JITTER, LogError, read_log, write_log
+from flexarm.logs import MAX_JITTER, LogError, read_log, write_log
 from flexarm.specs.controllers_bench import StateFeedbackController
 
 OUTPUTS = ("motor_angle", "tip_deflection")

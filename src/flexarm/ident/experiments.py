@@ -154,7 +154,7 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         cols = res.exchange_columns()
         rec = {k: np.asarray(v)[keep] for k, v in cols.items()}
         rec["time"] = rec["time"] - rec["time"][0]
-        from flexarm.ident.logs import write_log
+        from flexarm.logs import write_log
 
         out.mkdir(parents=True, exist_ok=True)
         write_log(path, rec.pop("time"), rec, overwrite=overwrite, comments=[

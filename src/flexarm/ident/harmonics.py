@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.ident.logs import Log
+from flexarm.logs import Log
 
 
 class IdentificationError(ValueError):

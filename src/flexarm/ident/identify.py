@@ -1,6 +1,6 @@
 """Identification of a single-link flexible arm with Coulomb joint friction (FRB Sec. II).
 
-Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.ident.logs`) per sinusoidal
+Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.logs`) per sinusoidal
 experiment of the motor-position loop:
 
 1. harmonics of every log (:mod:`flexarm.ident.harmonics`): ω0 from the reference,
@@ -44,7 +44,7 @@ from flexarm.ident.harmonics import (
     _warn,
     analyse_log,
 )
-from flexarm.ident.logs import Log, LogError, read_log
+from flexarm.logs import Log, LogError, read_log
 from flexarm.ident.physical import PhysicalFit, fit_physical
 from flexarm.ident.tffit import TFFit, fit_tf, tf_coefficients, tf_response
 from flexarm.units import UnitError, to_si
@@ -390,7 +390,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         (zeros, poles) of the fitted G_m (poles include ``motor_integrators`` at s = 0)
         and G_b.
     columns, units:
-        Column-name and unit mapping for :func:`flexarm.ident.logs.read_log`.
+        Column-name and unit mapping for :func:`flexarm.logs.read_log`.
     coulomb_current:
         A known C_f (A) to use instead of estimating it.
     partner_tol:

@@ -14,9 +14,8 @@ from pathlib import Path
 import control
 import numpy as np
 
-EXCHANGE_UNITS = {"time": "s", "reference": "rad", "current": "A", "voltage": "V",
-                  "motor_angle": "rad", "tip_angle": "rad", "tip_deflection": "m",
-                  "motor_velocity": "rad/s", "tip_velocity": "m/s"}
+from flexarm.logs import KNOWN as EXCHANGE_UNITS
+from flexarm.logs import write_log
 
 
 class SimulationResult(control.TimeResponseData):
@@ -66,21 +65,18 @@ class SimulationResult(control.TimeResponseData):
 
     def to_csv(self, path: str | Path, *, overwrite: bool = False,
                comments: dict[str, str] | None = None) -> Path:
-        """Write the exchange format (header ``time,reference,current,motor_angle,...``,
-        SI units, ``# key: value`` comment lines first). Refuses to overwrite unless asked."""
+        """Write the exchange format (:mod:`flexarm.logs`: header ``time,reference,current,
+        motor_angle,...``, SI units, ``# key: value`` comment lines first, then a ``# units:``
+        line). Refuses to overwrite unless asked (:class:`flexarm.logs.LogExistsError`, a
+        ``FileExistsError``)."""
         path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
         cols = self.exchange_columns()
-        lines = [f"# {k}: {v}" for k, v in {**self.meta, **(comments or {})}.items()]
-        lines.append("# units: " + ", ".join(f"{k} [{EXCHANGE_UNITS.get(k, '?')}]" for k in cols))
+        lines = [f"{k}: {v}" for k, v in {**self.meta, **(comments or {})}.items()]
+        lines.append("units: " + ", ".join(f"{k} [{EXCHANGE_UNITS.get(k, '?')}]" for k in cols))
         path.parent.mkdir(parents=True, exist_ok=True)
-        data = np.column_stack([cols[k] for k in cols])
-        with path.open("w") as f:
-            f.write("\n".join(lines) + "\n")
-            f.write(",".join(cols) + "\n")
-            np.savetxt(f, data, delimiter=",", fmt="%.10g")
-        return path
+        t = cols.pop("time")
+        return write_log(path, t, cols, comments=lines, overwrite=overwrite, fmt="%.10g",
+                         required=("time",))
 
     def plot_arm(self, signals=("reference", "motor_angle", "tip_angle"), *, ax=None,
                  command: bool = True):

@@ -1,4 +1,6 @@
-"""Experiment logs: the CSV exchange format of the identification experiments.
+"""Experiment logs: flexarm's CSV exchange format (what a lab log holds, what a simulation
+writes with :meth:`flexarm.sim.result.SimulationResult.to_csv`, what ``identify`` and ``fit``
+read). A bottom-level module: it knows only the unit registry.
 
 Format (one file per sinusoidal experiment, FRB Sec. II-A, Fig. 1)::
 
@@ -62,6 +64,10 @@ MIN_SAMPLES = 16
 
 class LogError(ValueError):
     """A log file that cannot be used; the message names the file and the problem."""
+
+
+class LogExistsError(LogError, FileExistsError):
+    """:func:`write_log` refused to replace an existing file (pass ``overwrite=True``)."""
 
 
 @dataclass
@@ -331,8 +337,8 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     try:
         f = open(path, "w" if overwrite else "x", newline="")
     except FileExistsError:
-        raise LogError(f"{path}: exists already; not overwritten (pass overwrite=True)"
-                       ) from None
+        raise LogExistsError(f"{path}: exists already; not overwritten (pass overwrite=True)"
+                             ) from None
     with f:
         for c in comment_lines:
             for line in str(c).splitlines() or [""]:
