@@ -13,7 +13,7 @@ delays see :mod:`flexarm.sim.sampled`.
   sweeps), vectorised in chunks; diverged rollouts are flagged, not raised.
 
 Results are python-control :class:`control.TimeResponseData` objects (``.time``,
-``.states`` (n_x, T), ``.inputs`` (n_u, T), ``.outputs`` = the states, ``.plot()``), with
+``.states`` (n_x, T), ``.inputs`` (n_u, T), ``.outputs`` = q = (θ, δ), ``.plot()``), with
 time-major named accessors: ``run.theta`` (T, n_links) rad, ``run.delta`` (T, n_δ) m,
 ``run.torque`` (T, n_links) N·m, ``run["theta_1"]``.
 """
@@ -43,8 +43,9 @@ class ContinuousRun(control.TimeResponseData):
         self.n_links = int(n_links)
         self.state_names = tuple(state_names)
         x = np.asarray(states_tx).T
-        super().__init__(np.asarray(time), x, states=x, inputs=np.asarray(torque_tu).T,
-                         output_labels=list(state_names), state_labels=list(state_names),
+        nq = x.shape[0] // 2
+        super().__init__(np.asarray(time), x[:nq], states=x, inputs=np.asarray(torque_tu).T,
+                         output_labels=list(state_names[:nq]), state_labels=list(state_names),
                          input_labels=[f"torque_{k + 1}" for k in range(self.n_links)],
                          title=title, issiso=False)
 
@@ -89,9 +90,10 @@ class ContinuousBatch(control.TimeResponseData):
         self.state_names = tuple(state_names)
         self.diverged = np.asarray(diverged)
         x = np.moveaxis(np.asarray(states_ntx), 2, 0)
-        super().__init__(np.asarray(time), x, states=x,
+        nq = x.shape[0] // 2
+        super().__init__(np.asarray(time), x[:nq], states=x,
                          inputs=np.moveaxis(np.asarray(torque_ntu), 2, 0),
-                         output_labels=list(state_names), state_labels=list(state_names),
+                         output_labels=list(state_names[:nq]), state_labels=list(state_names),
                          input_labels=[f"torque_{k + 1}" for k in range(self.n_links)],
                          title="flexarm continuous closed loops", issiso=False)
 
