@@ -198,6 +198,14 @@ def _pairs(items: list[str] | None, what: str) -> dict[str, str]:
     return out
 
 
+def _bench_logs(paths: list[Path], column, unit, controller):
+    """Bench logs read with the --column / --unit mappings (SI inside) and --controller."""
+    from flexarm.bench.logs import read_bench_log
+
+    cols, units = _pairs(column, "column") or None, _pairs(unit, "unit") or None
+    return [read_bench_log(p, columns=cols, units=units, controller=controller) for p in paths]
+
+
 def _floats(text: str | None, what: str) -> list[float]:
     if not text:
         return []
@@ -315,6 +323,15 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         compare_no_friction: bool = typer.Option(
             False, "--compare-no-friction",
             help="also fit without joint friction and report both fits side by side"),
+        column: Optional[list[str]] = typer.Option(
+            None, help="map a column to the log's name: motor_angle=theta"),
+        unit: Optional[list[str]] = typer.Option(
+            None, help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm"),
+        sessions: Optional[str] = typer.Option(
+            None, help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per session"),
+        tip_sign: Optional[int] = typer.Option(None, help="sign of the strain gauge, +1 or -1, if known"),
+        encoder_counts: Optional[int] = typer.Option(
+            None, help="hub encoder counts per revolution (default: detected from the steps)"),
         overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
@@ -324,19 +341,28 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
     for p in (json_out, scenario_out):
         if p is not None and p.exists() and not overwrite:
             _fail(f"{p} exists; pass --overwrite to replace it")
+    if tip_sign not in (None, 1, -1):
+        _fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
+    sess = None
+    if sessions is not None:
+        try:
+            sess = [int(x) for x in sessions.replace(";", ",").split(",") if x.strip()]
+        except ValueError:
+            _fail(f"--sessions {sessions!r}: expected whole numbers, one per log, e.g. 0,0,1")
     kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
-              voltage_limit=voltage_limit, controller=controller, mode=mode,
-              global_seconds=seconds)
+              voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
+              sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts)
     try:
+        blogs = _bench_logs(logs, column, unit, controller)
         with console.status("fitting") as status:
-            res = run_fit([str(x) for x in logs], friction=not no_friction,
+            res = run_fit(blogs, friction=not no_friction,
                           progress=lambda m: status.update(m), **kw)
             res0 = None
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
-                res0 = run_fit([str(x) for x in logs], friction=False, **kw)
+                res0 = run_fit(blogs, friction=False, **kw)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     console.print(escape(res.summary()))
@@ -367,6 +393,10 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
              json_out: Optional[Path] = typer.Option(None, "--json", help="write the fit % as JSON"),
              plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
              controller: Optional[str] = typer.Option(None, help="overrides the logs' controller line"),
+             column: Optional[list[str]] = typer.Option(
+                 None, help="map a column to the log's name: motor_angle=theta"),
+             unit: Optional[list[str]] = typer.Option(
+                 None, help="unit of a column's numbers: motor_angle=deg"),
              overwrite: bool = typer.Option(False, help="replace an existing JSON file")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
@@ -377,7 +407,7 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         _fail(f"{json_out} exists; pass --overwrite to replace it")
     sc = _load(scenario)
     try:
-        out = run_validate(sc, [str(x) for x in logs], controller=controller, plots=plots)
+        out = run_validate(sc, _bench_logs(logs, column, unit, controller), plots=plots)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
