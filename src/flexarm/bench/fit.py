@@ -18,8 +18,11 @@ initial link state, by minimising the closed-loop simulation output error
    pick it first. Then a friction polish: a short batched differential evolution on the
    friction coordinates alone (stick-slip makes their finite differences unreliable),
    and least squares again;
-4. uncertainty from the final Jacobian: cov = s² (JᵀJ)⁻¹, s² the residual variance,
-   inflated by the residuals' lag-1 correlation ρ as √((1+ρ)/(1−ρ)) (AR(1)).
+4. uncertainty from the final Jacobian J and residuals r: the reported ``std`` is the
+   Newey–West sandwich (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹, Ŝ the Bartlett-weighted autocovariance of the
+   scores Jᵀ_t r_t per log, its bandwidth 10 residual correlation times
+   (:mod:`flexarm.bench.uncertainty`): output-error residuals persist for many samples and
+   the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.objective import Objective, Rig
 from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.bench.report import FitResult
+from flexarm.bench.uncertainty import hac_covariance, iid_covariance
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -248,7 +252,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     fitp = obj.fit_percent(e[0])
     res = FitResult.build(
         logs=blogs, rig=rig, space=space, U=loc["U"], D=D, offsets=loc["off"],
-        std_u=loc["std_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
+        std_u=loc["std_u"], std_iid_u=loc["std_iid_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
         glob=glob, local=loc, info=info, settings=dict(
             mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
             sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed),
@@ -349,17 +353,21 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
                         ftol=1e-6, xtol=1e-6, gtol=1e-8)
     r, Jac = batch(res.x)
     keep = mask.ravel()
-    m_eff = int(keep.sum())
+    r = np.where(keep, r, 0.0)
+    Jac = np.where(keep[:, None], Jac, 0.0)
     rr = r[keep]
-    s2 = float(rr @ rr) / max(m_eff - nz, 1)
     rho = float(np.clip(np.sum(rr[1:] * rr[:-1]) / max(rr @ rr, 1e-300), 0.0, 0.999))
     try:
-        cov = np.linalg.pinv(Jac[keep].T @ Jac[keep]) * s2 * (1 + rho) / (1 - rho)
+        cov_iid = iid_covariance(rr, Jac[keep])
+        cov, bw = hac_covariance(r.reshape(2, L, -1), Jac.reshape(2, L, -1, nz))
         std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
+        std_iid_u = np.sqrt(np.maximum(np.diag(cov_iid)[:n], 0.0))
     except np.linalg.LinAlgError:
-        std_u = np.full(n, np.nan)
+        std_u = std_iid_u = np.full(n, np.nan)
+        bw = []
     U, off = split(res.x[None])
-    return {"U": U[0], "off": off[0], "std_u": std_u, "status": int(res.status),
+    return {"U": U[0], "off": off[0], "std_u": std_u, "std_iid_u": std_iid_u,
+            "bandwidth": [int(m) for m in bw], "status": int(res.status),
             "success": bool(res.status > 0), "message": str(res.message),
             "nfev": int(res.nfev), "cost": float(2 * res.cost), "rho": rho,
             "seconds": time.perf_counter() - t0, "at_bounds": [

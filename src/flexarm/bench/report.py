@@ -37,7 +37,19 @@ def check_physical(params: dict[str, float], source: str = "fit") -> None:
 class FitResult:
     """Fitted parameters (SI) with standard errors, fit % per log and signal, and what is
     needed to plot and to write a scenario. ``converged`` is False when a stage stopped
-    on its iteration budget; ``message`` says what happened, ``warnings`` what to check."""
+    on its iteration budget; ``message`` says what happened, ``warnings`` what to check.
+
+    ``std``: the reported standard errors, from the Newey–West (HAC) sandwich covariance
+    (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹ with Ŝ = Σ_logs Σ_|k|<=M w_k Σ_t g_t g_{t+k}ᵀ, g_t = Σ_channels J_tᵀ r_t
+    and Bartlett weights w_k = 1 − |k|/(M+1), M = 10 residual correlation times per log
+    (:mod:`flexarm.bench.uncertainty`), mapped to physical units by |dp/du|. They are
+    reported because the output-error residuals are strongly autocorrelated (model error,
+    filtered sensors, encoder quantisation of a slow hub), which the textbook estimate
+    ignores. ``std_iid``: that textbook s² (JᵀJ)⁻¹, s² = ‖r‖²/(m − n), kept for
+    comparison (the previous AR(1)-inflated value is ``std_iid`` · √((1+ρ)/(1−ρ)) with
+    ρ = ``stages['local']['rho']``). NaN where the Jacobian is singular or missing. Both
+    are local linearisations: they ignore the jumps of stick-slip in the friction
+    coordinates and any bias from a wrong model structure."""
 
     params: dict[str, float]
     std: dict[str, float]
@@ -54,15 +66,20 @@ class FitResult:
     logs: list = field(default_factory=list)
     traj: list = field(default_factory=list)
     seconds: float = 0.0
+    std_iid: dict[str, float] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def build(cls, *, logs, rig, space, U, D, offsets, std_u, fit_percent, diverged, traj,
-              glob, local, info, settings, seconds, objective) -> "FitResult":
-        params, std = {}, {}
+              glob, local, info, settings, seconds, objective,
+              std_iid_u=None) -> "FitResult":
+        params, std, std_iid = {}, {}, {}
+        if std_iid_u is None:
+            std_iid_u = np.full(len(space.defs), np.nan)
         for i, (name, d) in enumerate(zip(space.names, space.defs)):
             params[name] = float(d.to_phys(U[i]))
             std[name] = float(abs(d.dphys_du(U[i])) * std_u[i])
+            std_iid[name] = float(abs(d.dphys_du(U[i])) * std_iid_u[i])
         sign = int(2 * D[2] - 1)
         params["tip_gain"] *= sign
         first = lambda n: params.get(n, params.get(f"{n}[0]", 0.0))  # noqa: E731
@@ -114,22 +131,29 @@ class FitResult:
                   "local": {k: local[k] for k in ("cost", "nfev", "success", "message",
                                                   "seconds", "rho")},
                   "guesses": info}
+        stages["local"]["hac_bandwidth_samples"] = {
+            n: m for n, m in zip(names, local.get("bandwidth", []))}
         return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
-                   ini, rig, list(logs), traj, seconds)
+                   ini, rig, list(logs), traj, seconds, std_iid)
 
     # ------------------------------------------------------------------ outputs
     def to_dict(self) -> dict:
         return _jsonable({
             "converged": self.converged, "message": self.message, "warnings": self.warnings,
-            "parameters": {k: {"value": v, "std": self.std.get(k), "unit": UNITS.get(
+            "parameters": {k: {"value": v, "std": self.std.get(k),
+                               "std_iid": self.std_iid.get(k), "unit": UNITS.get(
                 k.split("[")[0], ""), "doc": DOCS.get(k.split("[")[0], "")}
                 for k, v in self.params.items()},
             "derived": self.derived, "delays_samples": self.delays,
             "fit_percent": self.fit_percent, "initial_states": self.initial_states,
             "settings": self.settings, "stages": self.stages, "seconds": self.seconds,
-            "uncertainty_note": "standard errors from the final Jacobian, s^2 (J^T J)^-1 "
-                                "inflated for lag-1 residual correlation (AR(1)); they "
-                                "ignore model error and the jumps of stick-slip",
+            "uncertainty_note": "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from "
+                                "the final Jacobian, S the Bartlett-weighted autocovariance "
+                                "of the residual x Jacobian-row products per log, bandwidth "
+                                "10 residual correlation times (stages.local."
+                                "hac_bandwidth_samples); std_iid: s^2 (J^T J)^-1 assuming "
+                                "independent residuals, too small when they are correlated. "
+                                "Both ignore the jumps of stick-slip and structural bias",
         })
 
     def to_json(self, path: str | Path) -> Path:
@@ -140,10 +164,14 @@ class FitResult:
     def summary(self) -> str:
         lines = [f"flexarm fit ({self.settings['mode']}, friction "
                  f"{'on' if self.settings['friction'] else 'off'}): {self.message}"]
+        lines.append("  parameter              value ± std (HAC) [std if residuals were "
+                     "independent]")
         for k, v in self.params.items():
             s = self.std.get(k, float("nan"))
+            si = self.std_iid.get(k, float("nan"))
             rel = f" ({100 * s / abs(v):.1f} %)" if v else ""
-            lines.append(f"  {k:22s} {v: .5g} ± {s:.2g}{rel} {UNITS.get(k.split('[')[0], '')}")
+            lines.append(f"  {k:22s} {v: .5g} ± {s:.2g}{rel} [{si:.2g}] "
+                         f"{UNITS.get(k.split('[')[0], '')}")
         for k, v in self.derived.items():
             lines.append(f"  {k:22s} {v: .5g}")
         lines.append(f"  delays (samples): hub angle {self.delays['motor_angle']}, "
