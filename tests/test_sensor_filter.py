@@ -9,6 +9,7 @@ import pytest
 from pydantic import ValidationError
 from scipy import signal as sps
 
+from flexarm.bench.closed_loop import as_jax, closed_loop_run
 from flexarm.control import discrete
 from flexarm.sim.build import prepare
 from flexarm.sim.plant import Plant
@@ -179,3 +180,44 @@ def test_bad_bandwidths():
     p = prepare(_rotary(duration=0.1, bandwidth=1000.0))  # ω_f h = 0.63 at T/10
     with pytest.raises(ValueError, match=r"'tip_deflection'.*1000 Hz.*substeps to >= 13"):
         simulate_loop(p.loop, p.x0, p.references, p.n_samples)
+
+
+def test_fast_bench_loop_equals_simulator_with_filters():
+    """The bench fitter's batched loop (:mod:`flexarm.bench.closed_loop`) with both channels
+    filtered (hub 50 Hz, tip 20 Hz) equals :func:`simulate_loop` on the same arm, to
+    rounding, as without filters (tests/test_bench_fit.py): 1e-9 rad / m / V."""
+    fth, fd = 50.0, 20.0
+    sc = _rotary()
+    sensors = dict(sc.sensors)
+    sensors["motor_angle"] = sensors["motor_angle"].model_copy(update={"bandwidth": fth})
+    sensors["tip_deflection"] = sensors["tip_deflection"].model_copy(update={"bandwidth": fd})
+    p = prepare(sc.model_copy(update={"sensors": sensors}))
+    x0 = p.model.initial_state(0.0, 0.0, 0.01)
+    out = simulate_loop(p.loop, x0, p.references, p.n_samples)
+    unfiltered = prepare(sc)
+    plain = simulate_loop(unfiltered.loop, x0, unfiltered.references, unfiltered.n_samples)
+    L, m, EI = 0.42, 0.019841, 0.168
+    wc2 = 3 * EI / L**3 / m
+    ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
+    n = p.n_samples
+    const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3,
+                        q_th=2 * np.pi / 4096, q_d=0.0, limit=10.0, vel_tol=1e-3,
+                        omega_th=2 * np.pi * fth, omega_d=2 * np.pi * fd))
+    z = np.zeros((1, n))
+    data = as_jax(dict(ref=p.references["reference"][None], y_th=z, y_d=z, w_th=z, w_d=z,
+                       volt=z, K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
+    model = as_jax({k: np.full((1, 1), v) for k, v in dict(
+        J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04,
+        bias=0.0, gain=1.0, dth=0, dd=2, th0=0.0, om0=0.0, w0=0.01, wd0=0.0).items()})
+    tr, _ = closed_loop_run(model, data, const, substeps=p.loop.substeps,
+                            filters=(True, True))
+    names = p.loop.sensors.names
+    worst = 0.0
+    for k, sig in enumerate(("motor_angle", "tip_deflection")):
+        fast, sim = np.asarray(tr[k])[:, 0, 0], out["measured"][:, names.index(sig)]
+        worst = max(worst, float(np.max(np.abs(fast - sim))))
+        np.testing.assert_allclose(fast, sim, atol=1e-9)
+        # and the filters matter: far from the unfiltered measurement
+        assert np.max(np.abs(sim - plain["measured"][:, names.index(sig)])) > 1e-4
+    np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], out["command"][:, 0], atol=1e-9)
+    print(f"fast loop vs simulator with filters: max |diff| {worst:.2e}")
