@@ -221,3 +221,25 @@ def test_fast_bench_loop_equals_simulator_with_filters():
         assert np.max(np.abs(sim - plain["measured"][:, names.index(sig)])) > 1e-4
     np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], out["command"][:, 0], atol=1e-9)
     print(f"fast loop vs simulator with filters: max |diff| {worst:.2e}")
+
+
+def test_fit_filters_keyword_is_checked(tmp_path):
+    from flexarm.bench import FitInputError, fit
+    from flexarm.bench.objective import check_filters
+
+    assert check_filters({"tip_deflection": 50}, 1e-3, 2) == {"motor_angle": 0.0,
+                                                              "tip_deflection": 50.0}
+    head = "time,reference,voltage,motor_angle,tip_deflection\n"
+    rows = "\n".join(f"{k * 1e-3:.3f},0,0,{0.001 * k},0" for k in range(100))
+    log = tmp_path / "a.csv"
+    log.write_text("# controller: state_feedback K1=6 K2=-40 K3=0.15 K4=0\n" + head + rows)
+    rig = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3,
+               armature_resistance=2.6, link_length=0.42)
+    with pytest.raises(FitInputError, match=r"field 'filters' has channel 'tip_angle'.*"
+                                            r"not known; use 'motor_angle' or 'tip_deflection'"):
+        fit([log], **rig, filters={"tip_angle": 30.0})
+    with pytest.raises(FitInputError, match=r"field 'filters\['tip_deflection'\]' = -5: .*>= 0"):
+        fit([log], **rig, filters={"tip_deflection": -5})
+    with pytest.raises(FitInputError, match=r"'filters\['motor_angle'\]' = 200 Hz is too fast"
+                                            r".*substeps >= 3"):
+        fit([log], **rig, filters={"motor_angle": 200.0})
