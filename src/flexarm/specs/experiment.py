@@ -27,7 +27,8 @@ class Sensor(Spec):
     of the converter (the count is range / 2**bits); ``noise`` is a standard deviation.
     ``bandwidth`` f_c > 0 puts an analog first-order low-pass in front of the A/D,
     y_f' = 2π f_c (gain·x − y_f) integrated with the plant between samples (y_f = gain·x
-    at t = 0), and y = y_f + noise (0: no filter)."""
+    at t = 0), and y = y_f + noise (0: no filter); in Hz (angular units are refused), with
+    2π f_c T / simulation.substeps <= 0.5."""
 
     bits: Count(ge=0, le=32) = 0
     range: Q("", gt=0) = 2 * 3.141592653589793
