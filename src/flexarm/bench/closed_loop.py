@@ -19,6 +19,15 @@ velocity is unchanged). This is the same sampled-data loop as
 delay, controller, computation delay, saturation, zero-order hold): RK4 is invariant
 under the linear change of coordinates (θ, y) → (θ, w), so both agree to rounding.
 
+Sensor low-pass filters (known cutoffs, not fitted; ``filters=(hub, tip)`` static flags,
+ω_θ = ``const["omega_th"]``, ω_d = ``const["omega_d"]`` in rad/s) are analog first-order
+filters in front of the A/D, as in :mod:`flexarm.sim.sampled`: their states join x and
+RK4 integrates them with the arm between samples,
+
+    y_θ' = ω_θ (θ − y_θ),   y_d' = ω_d (g w − y_d),   y_θ(0) = θ(0),  y_d(0) = g w(0),
+
+and the channel reads y_θ (y_d) instead of θ (g w) before quantisation and delay.
+
 The controller is the bench law of :mod:`flexarm.control.state_feedback`,
 u = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ with the filtered rate (τ = 0 gives the backward
 difference), so a hub PD is K2 = K4 = 0. In open-loop replay u is the logged voltage.
@@ -49,9 +58,10 @@ def _quantise(x: Array, q: Array) -> Array:
 
 
 def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_delay: int,
-          open_loop: bool, record: bool):
+          open_loop: bool, record: bool, filters: tuple[bool, bool] = (False, False)):
     """The sampled-data loop over all samples; m: model numbers (L, P); data: per-log
-    arrays (L, N) / (L, 4) / (L,); const: scalars (dt, L, k_u, k_om, q_th, q_d, limit, tol)."""
+    arrays (L, N) / (L, 4) / (L,); const: scalars (dt, L, k_u, k_om, q_th, q_d, limit, tol,
+    and omega_th / omega_d for the filtered channels)."""
     dt, Lk = const["dt"], const["length"]
     ku, kom = const["k_u"], const["k_omega"]
     h = dt / substeps
@@ -76,29 +86,45 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
         wdd = -wc2 * w - c2z * wd - Lk * omd
         return om, omd, wd, wdd
 
+    filt_th, filt_d = filters
+
+    def rhs_all(u, th, om, w, wd, *f):
+        """The arm's derivatives, then the filters' (states f: y_θ if filtered, y_d if)."""
+        out = rhs(u, th, om, w, wd)
+        f = list(f)
+        if filt_th:
+            out += (const["omega_th"] * (th - f.pop(0)),)
+        if filt_d:
+            out += (const["omega_d"] * (gain * w - f.pop(0)),)
+        return out
+
     def rk4(u, s):
-        th, om, w, wd = s
-        k1_ = rhs(u, th, om, w, wd)
+        k1_ = rhs_all(u, *s)
         s2 = [a + 0.5 * h * b for a, b in zip(s, k1_)]
-        k2_ = rhs(u, *s2)
+        k2_ = rhs_all(u, *s2)
         s3 = [a + 0.5 * h * b for a, b in zip(s, k2_)]
-        k3_ = rhs(u, *s3)
+        k3_ = rhs_all(u, *s3)
         s4 = [a + h * b for a, b in zip(s, k3_)]
-        k4_ = rhs(u, *s4)
+        k4_ = rhs_all(u, *s4)
         new = [a + h / 6.0 * (b + 2 * c + 2 * d + e)
                for a, b, c, d, e in zip(s, k1_, k2_, k3_, k4_)]
-        th1, om1, w1, wd1 = new
+        th1, om1, w1, wd1 = new[:4]
         ta = tau_applied(u, om1, w1, wd1)
         stuck = ((s[1] * om1 <= 0.0) | (jnp.abs(om1) < tol)) & (jnp.abs(ta) <= Fs)
         wd1 = jnp.where(stuck, wd1 + Lk * om1, wd1)
         om1 = jnp.where(stuck, 0.0, om1)
-        return (th1, om1, w1, wd1)
+        return (th1, om1, w1, wd1) + tuple(new[4:])
 
-    def sense(th, w):
-        return _quantise(th, const["q_th"]), _quantise(gain * w, const["q_d"])
+    def sense(x):
+        """What the A/D converters read: the filters' outputs where there are filters."""
+        f = list(x[4:])
+        th = f.pop(0) if filt_th else x[0]
+        d = f.pop(0) if filt_d else gain * x[2]
+        return _quantise(th, const["q_th"]), _quantise(d, const["q_d"])
 
     x0 = (m["th0"], m["om0"], m["w0"], m["wd0"])
-    y0t, y0d = sense(x0[0], x0[2])
+    x0 = x0 + ((x0[0],) if filt_th else ()) + ((gain * x0[2],) if filt_d else ())
+    y0t, y0d = sense(x0)
     bt0 = jnp.broadcast_to(y0t, (n_buf,) + shape)
     bd0 = jnp.broadcast_to(y0d, (n_buf,) + shape)
     ctrl0 = (jnp.zeros(shape),) * 4
@@ -108,7 +134,7 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     def sample(carry, inp):
         x, bt, bd, ctrl, ubuf, started, acc = carry
         r, yt_log, yd_log, wt, wdw, v = (a[:, None] for a in inp)
-        st, sd = sense(x[0], x[2])
+        st, sd = sense(x)
         bt = jnp.concatenate([st[None], bt[:-1]], axis=0)
         bd = jnp.concatenate([sd[None], bd[:-1]], axis=0)
         mt = jnp.sum(bt * sel_th, axis=0)
@@ -141,26 +167,29 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     return carry[-1], out
 
 
-_STATIC = ("substeps", "n_buf", "comp_delay", "open_loop")
+_STATIC = ("substeps", "n_buf", "comp_delay", "open_loop", "filters")
 
 
 @partial(jax.jit, static_argnames=_STATIC)
 def closed_loop_cost(m: dict, data: dict, const: dict, *, substeps: int = 2, n_buf: int = 8,
-                     comp_delay: int = 0, open_loop: bool = False):
+                     comp_delay: int = 0, open_loop: bool = False,
+                     filters: tuple[bool, bool] = (False, False)):
     """Weighted sums of squared errors (L, P) of the measured hub angle and tip deflection,
-    and a flag (L, P) for rollouts that diverged (|θ| or |w| beyond 1e3)."""
+    and a flag (L, P) for rollouts that diverged (|θ| or |w| beyond 1e3). ``filters``:
+    whether the hub / tip channel has a low-pass filter (cutoffs in ``const``)."""
     acc, _ = _scan(m, data, const, substeps=substeps, n_buf=n_buf, comp_delay=comp_delay,
-                   open_loop=open_loop, record=False)
+                   open_loop=open_loop, record=False, filters=filters)
     return acc
 
 
 @partial(jax.jit, static_argnames=_STATIC)
 def closed_loop_run(m: dict, data: dict, const: dict, *, substeps: int = 2, n_buf: int = 8,
-                    comp_delay: int = 0, open_loop: bool = False):
+                    comp_delay: int = 0, open_loop: bool = False,
+                    filters: tuple[bool, bool] = (False, False)):
     """Trajectories, each (N, L, P): measured θ, measured d, command u, true θ, true w;
     and the accumulators of :func:`closed_loop_cost`."""
     acc, out = _scan(m, data, const, substeps=substeps, n_buf=n_buf, comp_delay=comp_delay,
-                     open_loop=open_loop, record=True)
+                     open_loop=open_loop, record=True, filters=filters)
     return out, acc
 
 

@@ -37,7 +37,7 @@ from scipy.optimize import differential_evolution, least_squares
 from flexarm.bench import guesses
 from flexarm.bench.global_stage import differential_evolution_stage
 from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
-from flexarm.bench.objective import Objective, Rig
+from flexarm.bench.objective import Objective, Rig, check_filters
 from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.bench.report import FitResult
 from flexarm.bench.uncertainty import hac_covariance, iid_covariance
@@ -157,7 +157,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
         local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
-        progress: Callable[[str], None] | None = None) -> FitResult:
+        progress: Callable[[str], None] | None = None,
+        filters: dict[str, float] | None = None) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
     ``logs``: paths or :class:`~flexarm.bench.logs.BenchLog` s; logs given together are one
@@ -175,6 +176,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     for at most ``maxiter`` generations; the local stage at most ``local_nfev`` evaluations
     (when the tip delay is fitted, first ``delay_nfev`` on the global window at the
     global stage's tip delay and its two neighbours, keeping the best).
+    ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
+    filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.bench.closed_loop`).
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -193,6 +196,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         elif "voltage" not in g.columns:
             raise FitInputError(f"{g.path}: field 'voltage': open-loop replay needs the logged "
                                 "command column 'voltage' (V, or A for a current drive)")
+    filt = check_filters(filters, dts[0], substeps)
     sess = list(sessions) if sessions is not None else [0] * len(blogs)
     if len(sess) != len(blogs) or sorted(set(sess)) != list(range(max(sess) + 1)):
         raise FitInputError(f"fit: field 'sessions' = {sess}: give one index per log, "
@@ -212,7 +216,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
     common = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
-                  wc_guess=wc_guess)
+                  wc_guess=wc_guess, filters=filt)
     obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
     say(f"global stage: {space.n_cont} continuous + discrete parameters, "
         f"{len(blogs)} logs x {n_glob} samples")
@@ -255,7 +259,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         std_u=loc["std_u"], std_iid_u=loc["std_iid_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
         glob=glob, local=loc, info=info, settings=dict(
             mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
-            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed),
+            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed,
+            filters=filt),
         seconds=time.perf_counter() - t_start, objective=obj)
     res.warnings.extend(_poorly_determined(res, rig, space))
     return res

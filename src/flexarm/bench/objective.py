@@ -7,7 +7,8 @@ and compared with the log on the measured hub angle θ and tip deflection d:
 
 (each signal weighted by its spread; the first ``skip`` samples, where the simulated
 sensor delay lines still hold the initial value, are left out). fit % per log and signal
-is 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
+is 100 (1 − ‖y − ŷ‖/‖y − mean y‖). Sensor low-pass filters of known cutoff (``filters``,
+Hz) are simulated in front of the converters (:mod:`flexarm.bench.closed_loop`).
 
 Each log's initial state: hub angle and rate from its first samples; the link's tip
 deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
@@ -18,13 +19,15 @@ stage refines the latter two per log.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from flexarm.bench import guesses
 from flexarm.bench.closed_loop import as_jax, closed_loop_cost, closed_loop_run
-from flexarm.bench.logs import BenchLog
+from flexarm.bench.logs import BenchLog, FitInputError
 from flexarm.bench.params import ParamSpace
+from flexarm.sim.sampled import FILTER_STEP_LIMIT
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
 
@@ -45,13 +48,51 @@ class Rig:
     vel_tol: float = 1e-3
 
 
+FILTER_CHANNELS = ("motor_angle", "tip_deflection")
+
+
+def check_filters(filters: Any, dt: float, substeps: int) -> dict[str, float]:
+    """``fit(filters=...)``: known low-pass cutoffs (Hz) by channel, validated; every
+    channel in the result (0 = no filter). Raises FitInputError naming field, value, fix."""
+    if filters is None:
+        return {c: 0.0 for c in FILTER_CHANNELS}
+    if not isinstance(filters, dict):
+        raise FitInputError(f"fit: field 'filters' = {filters!r}: give a dict of cutoffs in "
+                            "Hz by channel, e.g. {'tip_deflection': 50.0}")
+    out = {c: 0.0 for c in FILTER_CHANNELS}
+    for ch, hz in filters.items():
+        if ch not in FILTER_CHANNELS:
+            raise FitInputError(f"fit: field 'filters' has channel {ch!r}, which is not "
+                                f"known; use {' or '.join(map(repr, FILTER_CHANNELS))}")
+        try:
+            f = float(hz)
+        except (TypeError, ValueError):
+            f = float("nan")
+        if not (np.isfinite(f) and f >= 0):
+            raise FitInputError(f"fit: field 'filters[{ch!r}]' = {hz!r}: a cutoff must be a "
+                                "finite number of Hz >= 0 (the sensor's -3 dB frequency; "
+                                "0 = no filter)")
+        step = 2 * np.pi * f * dt / substeps
+        if step > FILTER_STEP_LIMIT:
+            raise FitInputError(
+                f"fit: field 'filters[{ch!r}]' = {f:g} Hz is too fast for the integration "
+                f"step T / substeps = {dt:g} s / {substeps} (2π f_c h = {step:.3g} > "
+                f"{FILTER_STEP_LIMIT}): pass substeps >= "
+                f"{int(np.ceil(2 * np.pi * f * dt / FILTER_STEP_LIMIT))}")
+        out[ch] = f
+    return out
+
+
 class Objective:
     """Cost of parameter populations on a set of logs (one compiled simulation per shape)."""
 
     def __init__(self, logs: list[BenchLog], rig: Rig, space: ParamSpace, sessions: list[int],
                  *, mode: str = "closed_loop", substeps: int = 2, comp_delay: int = 0,
-                 n_samples: int | None = None, chunk: int = 64, wc_guess: float = 20.0):
+                 n_samples: int | None = None, chunk: int = 64, wc_guess: float = 20.0,
+                 filters: dict[str, float] | None = None):
         self.logs, self.rig, self.space, self.sessions = logs, rig, space, np.asarray(sessions)
+        #: known low-pass cutoffs (Hz) of the channels, 0 = none (checked by fit())
+        self.filters = {"motor_angle": 0.0, "tip_deflection": 0.0, **(filters or {})}
         self.mode, self.substeps, self.comp_delay, self.chunk = mode, substeps, comp_delay, chunk
         T = logs[0].dt
         N = max(len(g) for g in logs) if n_samples is None else n_samples
@@ -82,7 +123,9 @@ class Objective:
         self.data = as_jax(dict(ref=ref, y_th=yt, y_d=yd, w_th=wt, w_d=wd, volt=volt, K=K, tau=tau))
         self.const = as_jax(dict(dt=T, length=rig.length, k_u=rig.k_u, k_omega=rig.k_omega,
                                  q_th=rig.encoder_quantum, q_d=rig.tip_quantum,
-                                 limit=rig.limit, vel_tol=rig.vel_tol))
+                                 limit=rig.limit, vel_tol=rig.vel_tol,
+                                 omega_th=2 * np.pi * self.filters["motor_angle"],
+                                 omega_d=2 * np.pi * self.filters["tip_deflection"]))
         self.hub0 = np.array([guesses.initial_hub(g) for g in logs])  # (L, 2)
         self.tip0 = np.array([[guesses.initial_tip_at(g, k) for k in range(space.max_delay + 1)]
                               for g in logs])  # (L, max_delay + 1, 2)
@@ -147,7 +190,9 @@ class Objective:
 
     def _kw(self):
         return dict(substeps=self.substeps, n_buf=self.space.max_delay + 1,
-                    comp_delay=self.comp_delay, open_loop=self.mode == "open_loop")
+                    comp_delay=self.comp_delay, open_loop=self.mode == "open_loop",
+                    filters=(self.filters["motor_angle"] > 0,
+                             self.filters["tip_deflection"] > 0))
 
     # ------------------------------------------------------------------ evaluation
     def sse(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None):

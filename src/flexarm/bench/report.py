@@ -251,6 +251,9 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     q = rig.encoder_quantum
     sensors = {"motor_angle": {"delay": res.delays["motor_angle"]},
                "tip_deflection": {"gain": p["tip_gain"], "delay": res.delays["tip_deflection"]}}
+    for ch, hz in res.settings.get("filters", {}).items():
+        if hz > 0:  # the known analog low-pass, as given to fit()
+            sensors[ch]["bandwidth"] = hz
     if q > 0:
         counts = 2 * math.pi / q
         bits = int(math.ceil(math.log2(counts) - 1e-9))

@@ -3,11 +3,23 @@
 At each sample instant t_k = k T:
 
 1. the plant's signals s_k are read by the sensors: y = gain·s + noise (seeded Gaussian),
-   quantised to the A/D count (range / 2**bits), delayed by the channel's delay (samples);
+   quantised to the A/D count (range / 2**bits), delayed by the channel's delay (samples).
+   A channel with a low-pass cutoff f_c > 0 reads y = y_f + noise instead, y_f the output
+   of an analog first-order filter in front of the A/D,
+
+       y_f' = ω_f (gain·s(x(t), u) − y_f),   ω_f = 2π f_c,   y_f(0) = gain·s(x_0, 0),
+
+   whose state is integrated with the plant's between samples (step 4, same solver and
+   substeps), so it sees the continuous signal, not its samples. The noise is added after
+   the filter: it is a per-sample white sequence (its standard deviation at the
+   converter), which has no continuous-time path through the filter. RK4 reproduces the
+   filter's exp(−ω_f h) per substep to 4e-4 relative while ω_f h <= 0.5
+   (:data:`FILTER_STEP_LIMIT`); :func:`check_filter_step` asks for more substeps beyond;
 2. the controller steps on the measured signals and the references at t_k;
 3. the command is delayed by the computation delay (samples), saturated at the
    actuator limit and quantised to the D/A count (2·limit / 2**bits);
-4. the plant is integrated over [t_k, t_k + T] with the command held (zero-order hold).
+4. the plant (and the sensor filters' states) is integrated over [t_k, t_k + T] with the
+   command held (zero-order hold).
 
 :func:`simulate_loop` is jit-compiled once per loop structure; gains and plant parameters
 are traced, so sweeps reuse the compiled code, and :func:`simulate_batch` ``vmap``-s over
@@ -39,6 +51,10 @@ class Sensors(eqx.Module):
     gain: Array
     noise: Array
     quantum: Array  # 0 = no quantisation
+    #: positions (in ``names``) of the channels with a low-pass filter, and their ω_f
+    #: (rad/s); no filtered channel leaves the loop exactly as without filters
+    filtered: tuple[int, ...] = eqx.field(static=True, default=())
+    omega: Array | None = None
 
     @classmethod
     def make(cls, plant: Plant, channels: dict[str, dict[str, float]]) -> "Sensors":
@@ -54,9 +70,72 @@ class Sensors(eqx.Module):
             float(channels[n]["range"]) / 2 ** int(channels[n]["bits"])
             if int(channels[n].get("bits", 0)) > 0 else 0.0 for n in names
         ]
+        bw = [float(channels[n].get("bandwidth", 0.0) or 0.0) for n in names]
+        for n, f in zip(names, bw):
+            if not (f >= 0 and np.isfinite(f)):
+                raise ValueError(f"sensor {n!r}: bandwidth = {f!r} Hz; give the low-pass "
+                                 "cutoff as a finite number >= 0 Hz (0 = no filter)")
+        filtered = tuple(i for i, f in enumerate(bw) if f > 0)
+        omega = jnp.asarray([2 * np.pi * bw[i] for i in filtered]) if filtered else None
         return cls(names, tuple(plant.signal_names.index(n) for n in names),
                    tuple(int(channels[n].get("delay", 0)) for n in names),
-                   get("gain", 1.0), get("noise", 0.0), jnp.asarray(quantum))
+                   get("gain", 1.0), get("noise", 0.0), jnp.asarray(quantum),
+                   filtered, omega)
+
+
+#: Largest ω_f h (h the integration substep) :func:`check_filter_step` accepts: RK4's
+#: decay over one substep, 1 − z + z²/2 − z³/6 + z⁴/24 at z = ω_f h = 0.5, is within
+#: 4e-4 relative of exp(−z) (and RK4 is unstable on the filter beyond z = 2.79).
+FILTER_STEP_LIMIT = 0.5
+
+
+def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
+    """Raise ValueError naming the channel when a sensor filter is too fast for the
+    integration substep dt / substeps (ω_f h > :data:`FILTER_STEP_LIMIT`)."""
+    if not sensors.filtered:
+        return
+    omega = np.asarray(sensors.omega, dtype=float).reshape(-1, len(sensors.filtered))
+    dt = float(np.max(np.asarray(dt, dtype=float)))
+    for j, c in enumerate(sensors.filtered):
+        w = float(np.max(omega[:, j]))
+        if w * dt / substeps > FILTER_STEP_LIMIT:
+            need = int(np.ceil(w * dt / FILTER_STEP_LIMIT))
+            raise ValueError(
+                f"sensor {sensors.names[c]!r}: bandwidth = {w / (2 * np.pi):g} Hz is too fast "
+                f"for the integration step {dt / substeps:g} s (T / substeps = {dt:g} s / "
+                f"{substeps}): 2π·bandwidth·step = {w * dt / substeps:.3g} > "
+                f"{FILTER_STEP_LIMIT}; raise simulation.substeps to >= {need}, or lower "
+                "the bandwidth")
+
+
+class _Filtered(Plant):
+    """The plant with the sensor filters' states appended, for the integrator only:
+    z = (x, y_f), ż = (f(x, u), ω_f (gain·s(x, u) − y_f))."""
+
+    plant: Plant
+    index: tuple[int, ...] = eqx.field(static=True)  # plant signal of each filter
+    gain: Array
+    omega: Array
+
+    def rhs(self, z: Array, u: Array) -> Array:
+        n = self.plant.n_states
+        x = z[:n]
+        s = _pick(self.plant.signals(x, u), self.index)
+        return jnp.concatenate([self.plant.rhs(x, u), self.omega * (self.gain * s - z[n:])])
+
+    def signals(self, z: Array, u: Array) -> Array:
+        return self.plant.signals(z[: self.plant.n_states], u)
+
+    def project(self, z_prev: Array, z_next: Array, u: Array) -> Array:
+        n = self.plant.n_states
+        return jnp.concatenate([self.plant.project(z_prev[:n], z_next[:n], u), z_next[n:]])
+
+
+def _with_filters(plant: Plant, sens: Sensors) -> _Filtered:
+    return _Filtered(plant.state_names + tuple(f"filter_{sens.names[c]}" for c in sens.filtered),
+                     plant.signal_names, plant.input_names, plant,
+                     tuple(sens.index[c] for c in sens.filtered),
+                     jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega)
 
 
 class Actuator(eqx.Module):
@@ -90,14 +169,19 @@ def _pick(v: Array, index: tuple[int, ...]) -> Array:
 
 def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     """The loop's state at t = 0: plant state, controller state, sensor and command
-    buffers (sensors read the initial state; no command before t = 0)."""
+    buffers (sensors read the initial state; no command before t = 0), and with sensor
+    filters their states (the unfiltered initial values)."""
     plant, sens = loop.plant, loop.sensors
     n_u = plant.n_inputs
     u0 = jnp.zeros((n_u,))
     dmax = max(sens.delays) if sens.delays else 0
-    y0 = _quantise(sens.gain * _pick(plant.signals(x0, u0), sens.index), sens.quantum)
-    return (x0, loop.controller.init(), jnp.tile(y0, (dmax + 1, 1)),
-            jnp.zeros((loop.delay + 1, n_u)), u0)
+    raw = sens.gain * _pick(plant.signals(x0, u0), sens.index)
+    y0 = _quantise(raw, sens.quantum)
+    carry = (x0, loop.controller.init(), jnp.tile(y0, (dmax + 1, 1)),
+             jnp.zeros((loop.delay + 1, n_u)), u0)
+    if sens.filtered:
+        carry += (_pick(raw, sens.filtered),)
+    return carry
 
 
 # XLA:CPU runs the kernels and copies of a loop body one after the other only when the
@@ -124,13 +208,21 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
     plant, ctrl, sens, act = loop.plant, loop.controller, loop.sensors, loop.actuator
     solver = solver_for(loop.solver)
     h = loop.dt / loop.substeps
+    n_x = plant.n_states
+    fplant = _with_filters(plant, sens) if sens.filtered else None
 
     def sample(carry, inp):
-        x, cstate, sbuf, ubuf, u_prev = carry
+        x, cstate, sbuf, ubuf, u_prev = carry[:5]
         ref_k, noise_k = inp
-        # 1. sensors
+        # 1. sensors (a filtered channel reads its filter's output)
         s = plant.signals(x, u_prev)
-        y = _quantise(sens.gain * _pick(s, sens.index) + sens.noise * noise_k, sens.quantum)
+        raw = sens.gain * _pick(s, sens.index)
+        if fplant is not None:
+            yf = carry[5]
+            slot = {c: j for j, c in enumerate(sens.filtered)}
+            raw = jnp.stack([yf[slot[c]] if c in slot else raw[c]
+                             for c in range(len(sens.names))])
+        y = _quantise(raw + sens.noise * noise_k, sens.quantum)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
         meas_vec = jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)])
         meas = {n: meas_vec[i] for i, n in enumerate(sens.names)}
@@ -138,9 +230,12 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         cstate, u_c = ctrl.step(cstate, meas, ref_k)
         ubuf = jnp.concatenate([u_c[None], ubuf[:-1]], axis=0)
         u = _quantise(jnp.clip(ubuf[-1], -act.limit, act.limit), act.quantum)
-        # 4. plant over one period, command held
-        x_next = integrate_hold(plant, x, u, h, loop.substeps, solver)
-        return (x_next, cstate, sbuf, ubuf, u), (x, meas_vec, u)
+        # 4. plant (and sensor filters) over one period, command held
+        if fplant is None:
+            x_next = integrate_hold(plant, x, u, h, loop.substeps, solver)
+            return (x_next, cstate, sbuf, ubuf, u), (x, meas_vec, u)
+        z = integrate_hold(fplant, jnp.concatenate([x, yf]), u, h, loop.substeps, solver)
+        return (z[:n_x], cstate, sbuf, ubuf, u, z[n_x:]), (x, meas_vec, u)
 
     def sample_if_valid(carry, inp):
         valid, inp = inp
@@ -196,8 +291,10 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
     ``references`` maps channel names to arrays of length ``n_samples`` (values at the
     sample instants). With ``progress``, the run goes in chunks of ``chunk`` samples
     (one compilation) and ``progress(done, total)`` is called after each. Raises
-    :class:`SimulationDiverged` when the state blows up.
+    :class:`SimulationDiverged` when the state blows up, ValueError when a sensor
+    filter is too fast for the substep (:func:`check_filter_step`).
     """
+    check_filter_step(loop.sensors, loop.dt, loop.substeps)
     refs = _prepare_refs(references, n_samples)
     x0 = np.asarray(x0, dtype=float)
     if progress is None or n_samples <= chunk:
@@ -250,6 +347,7 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     to batch only some). ``x0`` is shared. Batches larger than ``batch_size`` run as a
     loop over equal chunks of at most that many rollouts, each chunk vectorised
     (``None``: all rollouts at once); the results do not depend on it."""
+    check_filter_step(loop.sensors, loop.dt, loop.substeps)
     refs = _prepare_refs(references, n_samples)
     fn = _batched(in_axes, batch_size)
     xs, sig, meas, us, xf = fn(loop, np.asarray(x0, dtype=float), refs,

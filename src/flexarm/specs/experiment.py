@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Count, Q, Spec
@@ -24,13 +24,30 @@ class Sampling(Spec):
 class Sensor(Spec):
     """One measured channel: y = gain·x + noise, then A/D quantisation, optional pure
     delay (samples). ``bits = 0`` means no quantisation; ``range`` is the full span
-    of the converter (the count is range / 2**bits); ``noise`` is a standard deviation."""
+    of the converter (the count is range / 2**bits); ``noise`` is a standard deviation.
+    ``bandwidth`` f_c > 0 puts an analog first-order low-pass in front of the A/D,
+    y_f' = 2π f_c (gain·x − y_f) integrated with the plant between samples (y_f = gain·x
+    at t = 0), and y = y_f + noise (0: no filter); in Hz (angular units are refused), with
+    2π f_c T / simulation.substeps <= 0.5."""
 
     bits: Count(ge=0, le=32) = 0
     range: Q("", gt=0) = 2 * 3.141592653589793
     noise: Q("", ge=0) = 0.0
     gain: Q("") = 1.0
     delay: Count(ge=0, le=1000, what="sensor delay in samples") = 0
+    bandwidth: Q("Hz", ge=0, what="first-order low-pass cutoff; 0 = no filter") = 0.0
+
+    @field_validator("bandwidth", mode="before")
+    @classmethod
+    def _not_angular(cls, v: object) -> object:
+        # pint takes the radian as 1, so "100 rad/s" would silently become 100 Hz
+        if isinstance(v, str) and "rad" in v:
+            from flexarm.units import to_si
+
+            w = to_si(v, "Hz", field="bandwidth")
+            raise ValueError(f"got {v!r}: an angular frequency; the cutoff is in Hz, "
+                             f"f_c = ω_c / 2π: write \"{w / 6.283185307179586:.6g} Hz\"")
+        return v
 
 
 class Actuator(Spec):
