@@ -198,6 +198,16 @@ def _pairs(items: list[str] | None, what: str) -> dict[str, str]:
     return out
 
 
+def _filters(items: list[str] | None) -> dict[str, float] | None:
+    out = {}
+    for k, v in _pairs(items, "filter").items():
+        try:
+            out[k] = float(v)
+        except ValueError:
+            _fail(f"--filter {k}={v}: the cutoff must be a number in Hz, e.g. --filter {k}=50")
+    return out or None
+
+
 def _bench_logs(paths: list[Path], column, unit, controller):
     """Bench logs read with the --column / --unit mappings (SI inside) and --controller."""
     from flexarm.bench.logs import read_bench_log
@@ -332,6 +342,8 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         tip_sign: Optional[int] = typer.Option(None, help="sign of the strain gauge, +1 or -1, if known"),
         encoder_counts: Optional[int] = typer.Option(
             None, help="hub encoder counts per revolution (default: detected from the steps)"),
+        filter: Optional[list[str]] = typer.Option(
+            None, help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50"),
         overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
@@ -353,7 +365,8 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
               voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
-              sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts)
+              sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
+              filters=_filters(filter))
     try:
         blogs = _bench_logs(logs, column, unit, controller)
         with console.status("fitting") as status:
