@@ -163,7 +163,7 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
         if "step_metrics" in s:
             m = s["step_metrics"]
             console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                          f"{m['settling_time']} s, steady-state error {m['steady_state_error']:.3g} "
+                          f"{m['settling_time']:.3g} s, steady-state error {m['steady_state_error']:.3g} "
                           f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}")
         elif "tracking" in s:
             tr = s["tracking"]
