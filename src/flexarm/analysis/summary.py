@@ -162,8 +162,10 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
         results[name] = s
         if "step_metrics" in s:
             m = s["step_metrics"]
+            ts = m["settling_time"]
+            settle = "never (within the record)" if ts is None else f"{ts:.3g} s"
             console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                          f"{m['settling_time']:.3g} s, steady-state error {m['steady_state_error']:.3g} "
+                          f"{settle}, steady-state error {m['steady_state_error']:.3g} "
                           f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}")
         elif "tracking" in s:
             tr = s["tracking"]
