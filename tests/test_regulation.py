@@ -153,4 +153,9 @@ def test_bad_regulation_input(model):
         R.regulation_params(model, 18, 10, THETA_D, duration=1.0)
     with pytest.raises(ValueError, match="method"):
         simulate_continuous(model, R.law_pd_constant, np.zeros(12), 1.0, 1e-3,
-                              params=None, method="euler")
+                            params=None, method="euler")
+    p = R.regulation_params(model, 18, 10, THETA_D)
+    with pytest.raises(ValueError, match=r"x0 has 4 values; this arm's state has 12: theta_1"):
+        simulate_continuous(model, R.law_pd_constant, np.zeros(4), 1.0, 1e-3, params=p)
+    with pytest.raises(ValueError, match="NaN"):
+        simulate_continuous(model, R.law_pd_constant, np.full(12, np.nan), 1.0, 1e-3, params=p)

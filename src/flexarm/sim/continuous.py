@@ -212,7 +212,13 @@ def simulate_continuous(model: MultiLinkModel, law: Callable, x0, t_final: float
     non-finite or larger than ``bound`` in absolute value (SI units), or the time at which
     the adaptive solver gave up."""
     plant = model.plant
-    x0 = jnp.asarray(x0, float).reshape(2 * model.n_q)
+    x0 = np.asarray(x0, float)
+    if x0.size != 2 * model.n_q:
+        raise ValueError(f"x0 has {x0.size} values; this arm's state has {2 * model.n_q}: "
+                         f"{', '.join(plant.state_names)} (model.state(theta=...) builds one)")
+    if not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0 holds NaN or infinite values: {x0.ravel().tolist()}")
+    x0 = jnp.asarray(x0.reshape(2 * model.n_q))
     if not (t_final > 0 and dt > 0):
         raise ValueError(f"t_final and dt must be > 0; got {t_final}, {dt}")
     n_out = int(round(t_final / dt))
@@ -277,6 +283,9 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
     if any(ax not in (None, 0) for ax in leaf_axes):
         raise ValueError("axes must be 0 (batched along the first axis) or None")
     x0 = np.asarray(x0, float)
+    if x0.shape[-1:] != (nx,) or x0.ndim > 2 or not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0 must be ({nx},) or (N, {nx}) finite values ({', '.join(plant.state_names)}); "
+                         f"got shape {x0.shape}")
     if x0.ndim == 2:
         sizes.add(x0.shape[0])
     if len(sizes) != 1:
