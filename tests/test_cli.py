@@ -171,6 +171,19 @@ def test_fit_and_validate_read_logs_in_other_names_and_units(tmp_path):
         assert fits["rig"][sig] == pytest.approx(fits["si"][sig], abs=1e-6)
     r = runner.invoke(app, ["validate", "rotary-flexible-link", str(rig)])
     assert r.exit_code == 2 and "rig.csv" in said(r)          # unmapped: names the file
+    # a logger whose time stamps jitter by +-2 % of the period (the controller did not)
+    jit = log.time + 0.02 * log.dt * np.random.default_rng(0).uniform(-1, 1, len(log.time))
+    jittered = write_log(tmp_path / "jit.csv", jit, s, comments=log.comments,
+                         required=("time",), fmt="%.17g")
+    r = runner.invoke(app, ["validate", "rotary-flexible-link", str(jittered)])
+    assert r.exit_code == 2 and "non-uniform sampling" in said(r) and "--max-jitter" in said(r)
+    j = tmp_path / "jit.json"
+    r = runner.invoke(app, ["validate", "rotary-flexible-link", str(jittered), "--max-jitter",
+                            "0.05", "--json", str(j)])
+    assert r.exit_code == 0, r.output
+    got = json.loads(j.read_text())["fit_percent"]["jit.csv"]
+    for sig in ("motor_angle", "tip_deflection"):           # same samples, same replay
+        assert got[sig] == pytest.approx(fits["si"][sig], abs=1e-6)
     rig_args = ["fit", str(rig), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
                 "--armature-resistance", "2.6", "--link-length", "0.42", *maps]
     r = runner.invoke(app, [*rig_args, "--tip-sign", "2"])

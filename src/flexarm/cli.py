@@ -208,12 +208,16 @@ def _filters(items: list[str] | None) -> dict[str, float] | None:
     return out or None
 
 
-def _bench_logs(paths: list[Path], column, unit, controller):
-    """Bench logs read with the --column / --unit mappings (SI inside) and --controller."""
+def _bench_logs(paths: list[Path], column, unit, controller, max_jitter: float):
+    """Bench logs read with the --column / --unit mappings (SI inside), --controller and
+    --max-jitter."""
     from flexarm.bench.logs import read_bench_log
 
+    if not (max_jitter > 0):
+        _fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
     cols, units = _pairs(column, "column") or None, _pairs(unit, "unit") or None
-    return [read_bench_log(p, columns=cols, units=units, controller=controller) for p in paths]
+    return [read_bench_log(p, columns=cols, units=units, controller=controller,
+                           max_jitter=max_jitter) for p in paths]
 
 
 def _floats(text: str | None, what: str) -> list[float]:
@@ -344,6 +348,8 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
             None, help="hub encoder counts per revolution (default: detected from the steps)"),
         filter: Optional[list[str]] = typer.Option(
             None, help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50"),
+        max_jitter: float = typer.Option(
+            1e-3, help="accepted relative deviation of a time step from the median step"),
         overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
@@ -368,7 +374,7 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
               filters=_filters(filter))
     try:
-        blogs = _bench_logs(logs, column, unit, controller)
+        blogs = _bench_logs(logs, column, unit, controller, max_jitter)
         with console.status("fitting") as status:
             res = run_fit(blogs, friction=not no_friction,
                           progress=lambda m: status.update(m), **kw)
@@ -410,6 +416,8 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
                  None, help="map a column to the log's name: motor_angle=theta"),
              unit: Optional[list[str]] = typer.Option(
                  None, help="unit of a column's numbers: motor_angle=deg"),
+             max_jitter: float = typer.Option(
+                 1e-3, help="accepted relative deviation of a time step from the median step"),
              overwrite: bool = typer.Option(False, help="replace an existing JSON file")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
@@ -420,7 +428,7 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         _fail(f"{json_out} exists; pass --overwrite to replace it")
     sc = _load(scenario)
     try:
-        out = run_validate(sc, _bench_logs(logs, column, unit, controller), plots=plots)
+        out = run_validate(sc, _bench_logs(logs, column, unit, controller, max_jitter), plots=plots)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")

@@ -302,7 +302,10 @@ def _check_time(path: Path, t: np.ndarray, h: int, max_jitter: float) -> None:
         raise LogError(f"{path}: non-uniform sampling: the step from data row {k + 1} to "
                        f"{k + 2} (t = {t[k]:.9g} s) is {d[k]:.6g} s against a median step of "
                        f"{med:.6g} s (relative deviation {rel[k]:.3g} > {max_jitter:g}); "
-                       "resample the log to a uniform time grid")
+                       "resample the log to a uniform time grid, or, if the controller ran "
+                       "at a fixed period and only the time stamps jitter, accept it with "
+                       "max_jitter= (flexarm fit / validate --max-jitter): the samples are "
+                       "then taken as uniform at the median step")
 
 
 def write_log(path: str | Path, time: Sequence[float] | np.ndarray,

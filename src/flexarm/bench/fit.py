@@ -36,7 +36,7 @@ from scipy.optimize import differential_evolution, least_squares
 
 from flexarm.bench import guesses
 from flexarm.bench.global_stage import differential_evolution_stage
-from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
+from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.objective import Objective, Rig, check_filters
 from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.bench.report import FitResult
@@ -188,7 +188,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     blogs = [as_bench_log(x, controller) for x in logs]
     dts = [g.dt for g in blogs]
     for g in blogs:
-        if abs(g.dt - dts[0]) > 1e-6 * dts[0]:
+        if abs(g.dt - dts[0]) > PERIOD_TOL * dts[0]:
             raise FitInputError(f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
                                 f"from {blogs[0].path}'s {dts[0]:g} s; resample to one period")
         if mode == "closed_loop":

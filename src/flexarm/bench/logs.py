@@ -27,6 +27,10 @@ from typing import Any, Mapping
 import numpy as np
 
 from flexarm.logs import MAX_JITTER, LogError, read_log, write_log
+
+#: Relative difference of two sampling periods taken as the same period (a logger's
+#: rounding or time-stamp jitter, not another rate).
+PERIOD_TOL = 1e-3
 from flexarm.specs.controllers_bench import StateFeedbackController
 
 OUTPUTS = ("motor_angle", "tip_deflection")
@@ -53,7 +57,10 @@ class BenchLog:
 
     @property
     def dt(self) -> float:
-        return float(np.median(np.diff(self.time)))
+        """The sampling period (s): the mean step (t_N − t_0)/(N − 1), which is also right
+        to ~jitter/N when the logger's time stamps jitter around a fixed controller period
+        (logs read with a larger ``max_jitter``)."""
+        return float((self.time[-1] - self.time[0]) / (len(self.time) - 1))
 
     @property
     def outputs(self) -> tuple[str, ...]:

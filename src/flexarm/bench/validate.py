@@ -19,7 +19,7 @@ import numpy as np
 
 from flexarm.control.state_feedback import from_spec
 from flexarm.bench import guesses
-from flexarm.bench.logs import FitInputError, as_bench_log, check_closed_loop
+from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.report import overlay_plots
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import SimulationDiverged, simulate_loop
@@ -37,7 +37,7 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
         log = as_bench_log(x, controller)
         check_closed_loop(log)
         T = sc.sampling.period
-        if abs(log.dt - T) > 1e-6 * T:
+        if abs(log.dt - T) > PERIOD_TOL * T:
             raise FitInputError(f"{log.path}: field 'time': sampling period {log.dt:g} s, but "
                                 f"the scenario's sampling.period is {T:g} s")
         sensors = {k: v.model_copy(update={"noise": 0.0}) for k, v in sc.sensors.items()}
