@@ -74,6 +74,13 @@ def test_column_and_unit_mapping(tmp_path):
     assert _sha(p) == before  # never modified
     with pytest.raises(LogError, match=r"mapped\.csv: cannot convert column 'current' from 'kg' to A"):
         read_log(p, columns={"current": "i_m", "time": "t_ms"}, units={"current": "kg"})
+    # encoder counts: a scaled unit (4096 counts per turn), 1 count = 2π/4096 rad
+    counts = tmp_path / "counts.csv"
+    rows = [f"{ti:.9g},{r:.9g},{i:.9g},{m * 4096 / (2 * np.pi):.12g},{tt:.9g}" for ti, r, i, m, tt in
+            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"])]
+    _csv(counts, header="time,reference,current,motor_angle,tip_angle", rows=rows)
+    log = read_log(counts, units={"motor_angle": "turn/4096"})
+    np.testing.assert_allclose(log["motor_angle"], s["motor_angle"], rtol=1e-10, atol=1e-15)
 
 
 def test_missing_column_lists_found_expected_and_mapping(tmp_path):

@@ -113,7 +113,10 @@ def _unit_factor(path: Path, column: str, unit: str) -> float:
         raise LogError(f"{path}: a unit was given for column {column!r}, which flexarm "
                        f"does not know; known: {', '.join(KNOWN)}")
     try:
-        q = ureg.Quantity(1.0, unit)
+        try:
+            q = ureg.Quantity(1.0, unit)
+        except Exception:  # a scaled unit, e.g. encoder counts as "turn/4096"
+            q = ureg.parse_expression(unit)
         return float(q.to(si).magnitude)
     except Exception as exc:  # pint raises several exception types
         raise LogError(f"{path}: cannot convert column {column!r} from {unit!r} to {si} "
