@@ -186,12 +186,26 @@ def initial_hub(log: BenchLog, n: int = 20):
     return float(c[2]), float(c[1])
 
 
-def initial_tip_at(log: BenchLog, k: int, n: int = 21) -> tuple[float, float]:
-    """Measured tip deflection and rate at sample ``k`` from a parabola through samples
-    k ... k + n − 1 (the state at t = 0 when the tip channel is delayed by k samples)."""
+def initial_tip_at(log: BenchLog, k: int, n: int = 21,
+                   cutoff: float = 0.0) -> tuple[float, float]:
+    """Tip deflection and rate (measured units, g w and g ẇ) at t = 0 when the tip channel
+    is delayed by ``k`` samples: a parabola g w(t) = a + b t + c t²/2 fitted to samples
+    k ... k + n − 1. With a known first-order sensor low-pass of ``cutoff`` Hz (ω = 2π f_c)
+    the samples are the filter's output y, started at y(0) = g w(0) as the simulators
+    start it, so the parabola is fitted through the filter: y = a + b (t − (1 − e^{−ωt})/ω)
+    + c (t²/2 − t/ω + (1 − e^{−ωt})/ω²); a parabola through y itself would read the
+    filter's lag as the link's state (y's rate is 0 at t = 0 whatever ẇ(0) is)."""
     d = log.columns.get("tip_deflection")
     if d is None or np.ptp(d) == 0:
         return (0.0, 0.0)
     t = np.arange(n) * log.dt
-    c = np.polyfit(t, d[k:k + n], 2)
-    return (float(c[2]), float(c[1]))
+    y = np.asarray(d[k:k + n], float)
+    t = t[:len(y)]
+    if cutoff > 0:
+        w = 2 * np.pi * cutoff
+        e = -np.expm1(-w * t) / w  # (1 − e^{−ωt})/ω, exact for small ωt
+        A = np.column_stack([np.ones_like(t), t - e, 0.5 * t * t - t / w + e / w])
+    else:
+        A = np.column_stack([np.ones_like(t), t, 0.5 * t * t])
+    c = np.linalg.lstsq(A, y, rcond=None)[0]
+    return (float(c[0]), float(c[1]))

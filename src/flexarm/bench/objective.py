@@ -12,7 +12,8 @@ Hz) are simulated in front of the converters (:mod:`flexarm.bench.closed_loop`).
 
 Each log's initial state: hub angle and rate from its first samples; the link's tip
 deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
-delay), from a parabola through samples k ... k + 20, divided by the tip gain g; the local
+delay), from a parabola through samples k ... k + 20 (fitted through the known tip filter,
+:func:`flexarm.bench.guesses.initial_tip_at`), divided by the tip gain g; the local
 stage refines the latter two per log.
 """
 
@@ -127,7 +128,9 @@ class Objective:
                                  omega_th=2 * np.pi * self.filters["motor_angle"],
                                  omega_d=2 * np.pi * self.filters["tip_deflection"]))
         self.hub0 = np.array([guesses.initial_hub(g) for g in logs])  # (L, 2)
-        self.tip0 = np.array([[guesses.initial_tip_at(g, k) for k in range(space.max_delay + 1)]
+        fd = self.filters["tip_deflection"]
+        self.tip0 = np.array([[guesses.initial_tip_at(g, k, cutoff=fd)
+                               for k in range(space.max_delay + 1)]
                               for g in logs])  # (L, max_delay + 1, 2)
         self.wc_guess = wc_guess
         self.tip_scale = np.array([max(np.std(g.columns.get("tip_deflection", [0.0])), 1e-9)

@@ -50,7 +50,7 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
         tip = sc.sensors.get("tip_deflection")
         gain = tip.gain if tip is not None else 1.0
         kd = tip.delay if tip is not None else 0
-        d0, v0 = guesses.initial_tip_at(log, kd)
+        d0, v0 = guesses.initial_tip_at(log, kd, cutoff=tip.bandwidth if tip is not None else 0.0)
         x0 = p.model.initial_state(th0, om0, d0 / gain)
         nb = p.model.beam.mass_dofs
         if nb:
