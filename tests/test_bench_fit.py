@@ -70,13 +70,13 @@ def test_fast_loop_equals_flexarm_simulator():
 def test_fit_two_logs_validate_third(fitted, logs, tmp_path):
     """Every physical parameter against the truth (scenario rotary-flexible-link).
 
-    Within 5 %: J, J_l, ω_c, C, F_c, tip gain; exact: tip sign +1, tip delay 2 samples
-    (chosen by the delay profile), hub delay 0 (fixed by default). Looser, with the reason:
+    Within 5 %: J, J_l, ω_c, C, F_c, tip gain; exact: tip sign +1, tip delay 2 samples,
+    hub delay 0 (fixed by default). Looser, with the reason:
 
-    * ζ within 10 %: measured +6.6 % since the delay profile (+1.3 % before, when the
-      local stage started from the global point refined at delays 1, 2, 3 only); the
-      profile's start point leads least squares to another shallow minimum of the ringdown
-      fit (the full-log costs at delays 2 and 3 differ by 16 %); an open regression;
+    * ζ within 10 %: it shows only in the ringdowns of the link while the hub is stuck,
+      four of about 1.5 s in these two 6 s logs; versions of the optimiser that end at
+      costs within a few % of each other put it at +1.3 % to +6.6 % (now +5.3 %). The 10 s
+      acceptance test holds it to 5 %;
 
     * breakaway F_s within 20 %: it shows only at the few restarts of a stuck hub (the
       torque at which it starts), a handful of events per log;
@@ -181,10 +181,13 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     and 0.15 rad in turn, 1.5 s holds, 10 s at 1 kHz, three state-feedback gain sets, link
     ringing at t = 0, encoder quantisation, strain-gauge noise and 2-sample delay): fit on
     two logs, validate on the third. Every physical parameter within 5 % (measured: all
-    within 2 %; viscous B −1.9 %, breakaway −1.0 %); the bias, whose truth is 0, within
-    0.002 N·m (5 % of the breakaway); delays exact; held-out fit >= 95 % (measured 99.7 %
-    hub angle, 98.3 % tip deflection). local_nfev = 80: with the default 30 the viscous B,
-    5.5 % of the total damping beside the back-EMF, stops at −10 %."""
+    within 3 %; viscous B −2.7 %, ζ +0.5 %, breakaway −0.4 %); the bias, whose truth is 0,
+    within 0.002 N·m (5 % of the breakaway); delays exact; held-out fit >= 95 % (measured
+    99.7 % hub angle, 98.3 % tip deflection). local_nfev = 80: with the default 30 the
+    viscous B, 5.5 % of the total damping beside the back-EMF, stops at −10 %; with a
+    friction polish of 8 generations (the earlier default) it stopped at −9.6 % at 4× the
+    cost (3.4e-5 now), depending on the last digit of the sampling period: B is where
+    least squares on a stick-slip cost ends in local minima."""
     import sys
     from pathlib import Path
 
@@ -359,7 +362,8 @@ def test_open_loop_replay_of_one_log_finds_the_tip_delay(logs):
     −1.3 %). ζ within 20 %, not 10 %: measured −13 % -- one log has two ringdowns of the
     stuck hub, and its ζ comes out −4.7 % when the two best delays are only refined
     briefly, so this is the spread of a weakly determined ζ, not a delay effect."""
-    res = fit(logs[:1], **RIG, mode="open_loop", popsize=8, maxiter=20, global_seconds=4.0)
+    res = fit(logs[:1], **RIG, mode="open_loop", popsize=8, maxiter=20, global_seconds=4.0,
+              )
     p = {**res.params, **res.derived}
     errs = {k: 100 * (p[k] / TRUE[k] - 1) for k in
             ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")}

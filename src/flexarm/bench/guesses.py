@@ -206,6 +206,7 @@ def initial_tip_at(log: BenchLog, k: int, n: int = 21,
         e = -np.expm1(-w * t) / w  # (1 − e^{−ωt})/ω, exact for small ωt
         A = np.column_stack([np.ones_like(t), t - e, 0.5 * t * t - t / w + e / w])
     else:
-        A = np.column_stack([np.ones_like(t), t, 0.5 * t * t])
+        c = np.polyfit(t, y, 2)
+        return (float(c[2]), float(c[1]))
     c = np.linalg.lstsq(A, y, rcond=None)[0]
     return (float(c[0]), float(c[1]))
