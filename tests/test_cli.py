@@ -194,5 +194,7 @@ def test_fit_and_validate_read_logs_in_other_names_and_units(tmp_path):
     assert r.exit_code == 2 and "sessions" in said(r)          # two indices for one log
     r = runner.invoke(app, [*rig_args, "--filter", "tip_deflection=fast"])
     assert r.exit_code == 2 and "--filter tip_deflection=fast" in said(r)
+    r = runner.invoke(app, [*rig_args, "--delay-search", "all"])
+    assert r.exit_code == 2 and "delay_search" in said(r) and "both" in said(r)
     r = runner.invoke(app, [*rig_args, "--filter", "strain=50"])
     assert r.exit_code == 2 and "strain" in said(r)            # unknown channel, named

@@ -350,6 +350,11 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
             None, help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50"),
         max_jitter: float = typer.Option(
             1e-3, help="accepted relative deviation of a time step from the median step"),
+        delay_search: str = typer.Option(
+            "neighbours", help="how the tip delay is chosen: neighbours, profile, or both "
+                               "(two starts, about twice the time: when it may be far off)"),
+        polish_iter: int = typer.Option(
+            8, help="generations of the friction polish (20 with --delay-search both)"),
         overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
@@ -372,7 +377,7 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
               voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
-              filters=_filters(filter))
+              filters=_filters(filter), delay_search=delay_search, polish_iter=polish_iter)
     try:
         blogs = _bench_logs(logs, column, unit, controller, max_jitter)
         with console.status("fitting") as status:

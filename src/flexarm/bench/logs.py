@@ -57,10 +57,10 @@ class BenchLog:
 
     @property
     def dt(self) -> float:
-        """The sampling period (s): the mean step (t_N − t_0)/(N − 1), which is also right
-        to ~jitter/N when the logger's time stamps jitter around a fixed controller period
-        (logs read with a larger ``max_jitter``)."""
-        return float((self.time[-1] - self.time[0]) / (len(self.time) - 1))
+        """The sampling period (s): the median step (within ``PERIOD_TOL`` of the nominal
+        period also when the logger's time stamps jitter by a few %, logs read with a
+        larger ``max_jitter``)."""
+        return float(np.median(np.diff(self.time)))
 
     @property
     def outputs(self) -> tuple[str, ...]:
