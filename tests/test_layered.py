@@ -119,3 +119,19 @@ def test_batch_of_gain_variations_equals_single_runs():
         one["tip_angle"]
     with pytest.raises(ValueError, match="batch"):
         R.regulation_params_batch(model, [18, 18], [10, 2], theta_d)
+
+
+def test_continuous_run_to_csv_round_trip(tmp_path):
+    from flexarm.logs import LogExistsError, read_log
+
+    model = build_multilink(benchmark_arm())
+    p = R.regulation_params(model, [18, 18], [10, 2], [-45 * DEG, 0.0])
+    run = simulate_continuous(model, R.law_pd_constant, model.state(theta=[-90 * DEG, 0.0]),
+                              0.1, 1e-2, params=p)
+    path = run.to_csv(tmp_path / "run.csv")
+    log = read_log(path, required=("time",), min_samples=2)
+    assert list(log.signals) == [*run.state_names, "torque_1", "torque_2"]
+    np.testing.assert_allclose(log["theta_1"], run.theta[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(log["torque_2"], run.torque[:, 1], rtol=1e-9, atol=1e-12)
+    with pytest.raises(LogExistsError):
+        run.to_csv(path)

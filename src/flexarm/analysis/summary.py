@@ -107,13 +107,7 @@ def write_regulation(scenario, out: Path) -> dict:
     model, params, run = run_regulation(scenario)
     name = scenario.name
     n = model.n_links
-    cols = {"time": run.time}
-    cols.update({nm: run.state_array[:, k] for k, nm in enumerate(run.state_names)})
-    cols.update({f"torque_{k + 1}": run.torque[:, k] for k in range(n)})
-    path = out / f"{name}.csv"
-    with path.open("w") as f:
-        f.write("# units: s, rad, m, rad/s, m/s, N*m\n" + ",".join(cols) + "\n")
-        np.savetxt(f, np.column_stack(list(cols.values())), delimiter=",", fmt="%.10g")
+    path = run.to_csv(out / f"{name}.csv", overwrite=True)
     fig, ax = plt.subplots(3, 1, sharex=True, figsize=(7, 8))
     for k in range(n):
         ax[0].plot(run.time, np.degrees(run.theta[:, k]), label=f"θ{k + 1}")

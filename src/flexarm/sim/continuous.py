@@ -20,6 +20,7 @@ time-major named accessors: ``run.theta`` (T, n_links) rad, ``run.delta`` (T, n_
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Callable
 
 import control
@@ -30,6 +31,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.errors import SimulationDiverged
+from flexarm.logs import write_log
 from flexarm.models.multilink import MultiLinkModel
 from flexarm.sim.integrate import rk4_path
 
@@ -69,6 +71,17 @@ class ContinuousRun(control.TimeResponseData):
         """Modal deflections, (T, n_δ), m."""
         nq = self.states.shape[0] // 2
         return self.states[self.n_links:nq].T
+
+    def to_csv(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """Write ``time``, every state and every torque as columns (SI: s, rad, m, rad/s,
+        m/s, N·m) through :func:`flexarm.logs.write_log`; refuses to overwrite unless asked."""
+        cols = {nm: self.states[k] for k, nm in enumerate(self.state_names)}
+        cols.update({nm: self.inputs[k] for k, nm in enumerate(self.input_labels)})
+        return write_log(path, self.time, cols, overwrite=overwrite, fmt="%.10g",
+                         required=("time",), comments=[
+                             f"{self.title}: {self.n_links} links",
+                             "units: time [s], theta [rad], delta [m], theta_dot [rad/s], "
+                             "delta_dot [m/s], torque [N*m]"])
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name in self.state_names:
