@@ -426,3 +426,30 @@ def test_initial_tip_through_the_filter():
     assert abs(d0 - 0.01) < 1e-9 and abs(v0 - 0.2) < 1e-9, (d0, v0)
     d1, v1 = initial_tip_at(log, 2)
     assert abs(v1 - 0.2) > 0.1, v1
+
+
+def test_tip_sensor_offset_is_warned(logs):
+    """A free link rests at zero deflection, so what the gauge reads in the settled second
+    halves of the stuck intervals is its offset (the model has none). On the synthetic logs
+    (no offset) the rest reading is within 1 % of the signal's range (measured 0.4-0.9 %:
+    the last of the ringing and the noise); with 2 mm added (4 % of the ~45 mm range) the
+    fit's warning names the log and the reading."""
+    import sys
+
+    from flexarm.bench import guesses
+    from flexarm.bench.logs import BenchLog, read_bench_log
+
+    fit_mod = sys.modules["flexarm.bench.fit"]
+    clean = [read_bench_log(p) for p in logs]
+    for g in clean:
+        rest, span = guesses.tip_rest_reading(g)
+        assert abs(rest) < 0.01 * span
+    assert fit_mod._tip_offsets(clean) == []
+    g = clean[0]
+    cols = dict(g.columns)
+    cols["tip_deflection"] = cols["tip_deflection"] + 2e-3
+    shifted = BenchLog(g.path, g.time, cols, g.meta, g.controller)
+    rest, span = guesses.tip_rest_reading(shifted)
+    assert rest == pytest.approx(2e-3, abs=0.01 * span)
+    (msg,) = fit_mod._tip_offsets([shifted])
+    assert g.name in msg and "sensor offset" in msg and "zero the gauge" in msg

@@ -312,7 +312,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed,
             filters=filt),
         seconds=time.perf_counter() - t_start, objective=obj)
-    res.warnings.extend(warnings + _poorly_determined(res, rig, space))
+    res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs))
     return res
 
 
@@ -364,6 +364,24 @@ def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: in
                 best = (r, Dk)
     r, Dk = best
     return {"D": Dk, "U": r["U"], "off": r["off"], "trials": trials}
+
+
+#: a tip reading at rest beyond this fraction of the signal's range is called an offset
+TIP_OFFSET_WARN = 0.02
+
+
+def _tip_offsets(blogs) -> list[str]:
+    """Warnings for logs whose tip sensor reads away from zero at rest (see
+    :func:`flexarm.bench.guesses.tip_rest_reading`): the model has no sensor offset."""
+    out = []
+    for g in blogs:
+        r = guesses.tip_rest_reading(g)
+        if r is not None and r[1] > 0 and abs(r[0]) > TIP_OFFSET_WARN * r[1]:
+            out.append(f"{g.name}: tip_deflection reads {r[0]:.3g} m at rest "
+                       f"({100 * abs(r[0]) / r[1]:.0f} % of its range), where a free link "
+                       "rests at 0: a sensor offset, which the model does not have; zero "
+                       "the gauge (subtract its rest reading) before fitting")
+    return out
 
 
 def _poorly_determined(res: FitResult, rig: Rig, space: ParamSpace) -> list[str]:

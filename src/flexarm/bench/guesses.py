@@ -61,6 +61,23 @@ def stuck_intervals(log: BenchLog, min_stuck: float = 0.25) -> list[tuple[int, i
     return out
 
 
+def tip_rest_reading(log: BenchLog, settle: float = 0.5) -> tuple[float, float] | None:
+    """What the tip sensor reads with the link at rest: the median of tip_deflection over
+    the second halves of the stuck intervals at least ``2 settle`` s long (the hub stuck,
+    the ringing decayed), and its scale, the spread of the whole signal (its 1–99 %
+    percentile range). A link free at its tip rests at zero deflection (horizontal arm),
+    so a rest reading away from zero is a sensor offset (an unbalanced bridge), which the
+    model does not have. None when the log has no such interval."""
+    d = log.columns.get("tip_deflection")
+    if d is None:
+        return None
+    rest = [d[(i0 + i1) // 2:i1] for i0, i1 in stuck_intervals(log, 2 * settle)]
+    if not rest:
+        return None
+    lo, hi = np.percentile(d, [1, 99])
+    return float(np.median(np.concatenate(rest))), float(hi - lo)
+
+
 def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
     """(ω_c estimate in rad/s, how: 'stuck' or 'whole') from the tip deflection spectra."""
     segs, how = [], "stuck"
