@@ -265,8 +265,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             starts.append(near)
         if delay_search in ("profile", "both"):
             prof = _tip_delay_profile(obj_g, glob.U, D, min(2 * PROFILE_NFEV, local_nfev),
-                                      min(PROFILE_NFEV, local_nfev),
-                                      keep=space.max_delay + 1)
+                                      min(PROFILE_NFEV, local_nfev))
             info["tip_delay_profile"] = prof["profile"]
             say(f"tip delay profile (short refinements): "
                 f"{ {k: round(v, 6) for k, v in prof['profile'].items()} }")
@@ -325,7 +324,7 @@ PROFILE_NFEV = 10
 
 
 def _tip_delay_profile(obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev: int,
-                       nfev: int, keep: int = 2) -> dict:
+                       nfev: int) -> dict:
     """Profile the cost over every tip delay 0 ... max_delay on ``obj``'s window: first a
     refinement (``start_nfev`` evaluations) at the global stage's delay ``D[1]`` (the
     global stage runs without the per-log initial-state offsets and stops far from the
@@ -334,8 +333,8 @@ def _tip_delay_profile(obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev:
     (``nfev``) at each delay, all parameters and initial states free. The delay is an
     integer the local stage cannot move, and it trades off against J (about ±5 % per
     sample on the synthetic rig), ζ and the initial tip rate, so each delay needs its own
-    adjusted parameters. Returns the profile {delay: cost} and the ``keep`` lowest as
-    candidates (D, U, offsets)."""
+    adjusted parameters. Returns the profile {delay: cost} and every delay's refinement as
+    candidates (D, U, offsets), lowest cost first."""
     r0 = _local(obj, U, D, start_nfev)
     trials = []
     for dd in range(obj.space.max_delay + 1):
@@ -346,7 +345,7 @@ def _tip_delay_profile(obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev:
     profile = {int(t[1]): float(t[0]) for t in trials}
     trials.sort(key=lambda t: t[0])
     return {"profile": profile, "candidates": [
-        {"D": Dk, "U": r["U"], "off": r["off"]} for _, _, Dk, r in trials[:keep]]}
+        {"D": Dk, "U": r["U"], "off": r["off"]} for _, _, Dk, r in trials]}
 
 
 def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: int) -> dict:

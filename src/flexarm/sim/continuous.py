@@ -36,41 +36,49 @@ from flexarm.models.multilink import MultiLinkModel
 from flexarm.sim.integrate import rk4_path
 
 
-class ContinuousRun(control.TimeResponseData):
-    """One closed-loop rollout: python-control's arrays (``states`` (n_x, T): rad, m, rad/s,
-    m/s; ``inputs`` (n_links, T): applied joint torques, N·m) and time-major accessors."""
+class _ArmResponse(control.TimeResponseData):
+    """What one rollout and a batch share: python-control's arrays with the variable first
+    (``states`` (n_x, [N,] T): rad, m, rad/s, m/s; ``inputs`` (n_links, [N,] T): applied
+    joint torques, N·m; ``outputs`` q = (θ, δ)) and views with the variable last."""
 
-    def __init__(self, time, states_tx, torque_tu, state_names, n_links: int,
-                 title: str = "flexarm continuous closed loop"):
+    def __init__(self, time, x, u, state_names, n_links: int, title: str):
         self.n_links = int(n_links)
         self.state_names = tuple(state_names)
-        x = np.asarray(states_tx).T
         nq = x.shape[0] // 2
-        super().__init__(np.asarray(time), x[:nq], states=x, inputs=np.asarray(torque_tu).T,
+        super().__init__(np.asarray(time), x[:nq], states=x, inputs=u,
                          output_labels=list(state_names[:nq]), state_labels=list(state_names),
                          input_labels=[f"torque_{k + 1}" for k in range(self.n_links)],
                          title=title, issiso=False)
 
     @property
     def state_array(self) -> np.ndarray:
-        """The states time-major, (T, n_x)."""
-        return self.states.T
+        """The states with the variable last: ([N,] T, n_x)."""
+        return np.moveaxis(self.states, 0, -1)
 
     @property
     def torque(self) -> np.ndarray:
-        """Applied joint torques (after saturation), (T, n_links), N·m."""
-        return self.inputs.T
+        """Applied joint torques (after saturation), ([N,] T, n_links), N·m."""
+        return np.moveaxis(self.inputs, 0, -1)
 
     @property
     def theta(self) -> np.ndarray:
-        """Joint angles, (T, n_links), rad."""
-        return self.states[:self.n_links].T
+        """Joint angles, ([N,] T, n_links), rad."""
+        return self.state_array[..., :self.n_links]
 
     @property
     def delta(self) -> np.ndarray:
-        """Modal deflections, (T, n_δ), m."""
+        """Modal deflections, ([N,] T, n_δ), m."""
         nq = self.states.shape[0] // 2
-        return self.states[self.n_links:nq].T
+        return self.state_array[..., self.n_links:nq]
+
+
+class ContinuousRun(_ArmResponse):
+    """One closed-loop rollout (see :class:`_ArmResponse`); ``run["theta_1"]`` by name."""
+
+    def __init__(self, time, states_tx, torque_tu, state_names, n_links: int,
+                 title: str = "flexarm continuous closed loop"):
+        super().__init__(time, np.asarray(states_tx).T, np.asarray(torque_tu).T, state_names,
+                         n_links, title)
 
     def to_csv(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """Write ``time``, every state and every torque as columns (SI: s, rad, m, rad/s,
@@ -92,40 +100,17 @@ class ContinuousRun(control.TimeResponseData):
                        f"inputs: {', '.join(self.input_labels)}")
 
 
-class ContinuousBatch(control.TimeResponseData):
+class ContinuousBatch(_ArmResponse):
     """N rollouts as python-control traces: ``states`` (n_x, N, T), ``inputs`` (n_links, N,
-    T); time-major accessors with the rollout first (``theta`` (N, T, n_links), ``torque``,
+    T); the views put the rollout first (``theta`` (N, T, n_links), ``torque``,
     ``state_array`` (N, T, n_x)); ``diverged[i]`` when rollout i became non-finite or left
     the bound (its samples from then on are not meaningful); :meth:`run` gives one."""
 
     def __init__(self, time, states_ntx, torque_ntu, diverged, state_names, n_links: int):
-        self.n_links = int(n_links)
-        self.state_names = tuple(state_names)
         self.diverged = np.asarray(diverged)
-        x = np.moveaxis(np.asarray(states_ntx), 2, 0)
-        nq = x.shape[0] // 2
-        super().__init__(np.asarray(time), x[:nq], states=x,
-                         inputs=np.moveaxis(np.asarray(torque_ntu), 2, 0),
-                         output_labels=list(state_names[:nq]), state_labels=list(state_names),
-                         input_labels=[f"torque_{k + 1}" for k in range(self.n_links)],
-                         title="flexarm continuous closed loops", issiso=False)
-
-    @property
-    def state_array(self) -> np.ndarray:
-        return np.moveaxis(self.states, 0, 2)
-
-    @property
-    def torque(self) -> np.ndarray:
-        return np.moveaxis(self.inputs, 0, 2)
-
-    @property
-    def theta(self) -> np.ndarray:
-        return self.state_array[:, :, :self.n_links]
-
-    @property
-    def delta(self) -> np.ndarray:
-        nq = self.states.shape[0] // 2
-        return self.state_array[:, :, self.n_links:nq]
+        super().__init__(time, np.moveaxis(np.asarray(states_ntx), 2, 0),
+                         np.moveaxis(np.asarray(torque_ntu), 2, 0), state_names, n_links,
+                         "flexarm continuous closed loops")
 
     def run(self, i: int) -> ContinuousRun:
         """Rollout i as a :class:`ContinuousRun`."""
