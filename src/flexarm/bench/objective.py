@@ -28,7 +28,7 @@ from flexarm.bench import guesses
 from flexarm.bench.closed_loop import as_jax, closed_loop_cost, closed_loop_run
 from flexarm.bench.logs import BenchLog, FitInputError
 from flexarm.bench.params import ParamSpace
-from flexarm.sim.sampled import FILTER_STEP_LIMIT
+from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
 
@@ -73,13 +73,13 @@ def check_filters(filters: Any, dt: float, substeps: int) -> dict[str, float]:
             raise FitInputError(f"fit: field 'filters[{ch!r}]' = {hz!r}: a cutoff must be a "
                                 "finite number of Hz >= 0 (the sensor's -3 dB frequency; "
                                 "0 = no filter)")
-        step = 2 * np.pi * f * dt / substeps
-        if step > FILTER_STEP_LIMIT:
+        need = filter_substeps(f, dt)
+        if substeps < need:
             raise FitInputError(
                 f"fit: field 'filters[{ch!r}]' = {f:g} Hz is too fast for the integration "
-                f"step T / substeps = {dt:g} s / {substeps} (2π f_c h = {step:.3g} > "
-                f"{FILTER_STEP_LIMIT}): pass substeps >= "
-                f"{int(np.ceil(2 * np.pi * f * dt / FILTER_STEP_LIMIT))}")
+                f"step T / substeps = {dt:g} s / {substeps} (2π f_c h = "
+                f"{2 * np.pi * f * dt / substeps:.3g} > {FILTER_STEP_LIMIT}): pass "
+                f"substeps >= {need}")
         out[ch] = f
     return out
 

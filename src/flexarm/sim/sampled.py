@@ -89,6 +89,12 @@ class Sensors(eqx.Module):
 FILTER_STEP_LIMIT = 0.5
 
 
+def filter_substeps(bandwidth_hz: float, dt: float) -> int:
+    """Fewest substeps of the sample period dt that integrate a sensor filter of cutoff
+    ``bandwidth_hz`` accurately: ω_f dt / substeps <= :data:`FILTER_STEP_LIMIT`."""
+    return int(np.ceil(2 * np.pi * bandwidth_hz * dt / FILTER_STEP_LIMIT))
+
+
 def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
     """Raise ValueError naming the channel when a sensor filter is too fast for the
     integration substep dt / substeps (ω_f h > :data:`FILTER_STEP_LIMIT`)."""
@@ -98,8 +104,8 @@ def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
     dt = float(np.max(np.asarray(dt, dtype=float)))
     for j, c in enumerate(sensors.filtered):
         w = float(np.max(omega[:, j]))
-        if w * dt / substeps > FILTER_STEP_LIMIT:
-            need = int(np.ceil(w * dt / FILTER_STEP_LIMIT))
+        need = filter_substeps(w / (2 * np.pi), dt)
+        if substeps < need:
             raise ValueError(
                 f"sensor {sensors.names[c]!r}: bandwidth = {w / (2 * np.pi):g} Hz is too fast "
                 f"for the integration step {dt / substeps:g} s (T / substeps = {dt:g} s / "
