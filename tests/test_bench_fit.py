@@ -53,8 +53,15 @@ def test_fast_loop_equals_flexarm_simulator():
     n = p.n_samples
     const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3, q_th=2 * np.pi / 4096,
                         q_d=0.0, limit=10.0, vel_tol=1e-3))
-    data = as_jax(dict(ref=p.references["reference"][None], y_th=np.zeros((1, n)),
-                       y_d=np.zeros((1, n)), w_th=np.zeros((1, n)), w_d=np.zeros((1, n)),
+    # the simulator's own readings as the "log": the fast loop reads the log while a
+    # channel's delay line fills (k < delay), which then equals the simulator's initial
+    # delay-line contents
+    names = p.loop.sensors.names
+    meas = np.asarray(out["measured"])
+    data = as_jax(dict(ref=p.references["reference"][None],
+                       y_th=meas[:, names.index("motor_angle")][None],
+                       y_d=meas[:, names.index("tip_deflection")][None],
+                       w_th=np.zeros((1, n)), w_d=np.zeros((1, n)),
                        volt=np.zeros((1, n)), K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
     model = as_jax({k: np.full((1, 1), v) for k, v in dict(
         J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04, bias=0.0,
@@ -293,7 +300,9 @@ def test_open_loop_replay_recovers_the_parameters(logs):
     const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3,
                         q_th=2 * np.pi / 4096, q_d=0.0, limit=10.0, vel_tol=1e-3))
     z = np.zeros((1, n))
-    data = as_jax(dict(ref=g.columns["reference"][None], y_th=z, y_d=z, w_th=z, w_d=z,
+    # the log's readings, which the loop reads while a channel's delay line fills
+    data = as_jax(dict(ref=g.columns["reference"][None], y_th=g.columns["motor_angle"][None],
+                       y_d=g.columns["tip_deflection"][None], w_th=z, w_d=z,
                        volt=g.columns["voltage"][None], K=np.zeros((1, 4)), tau=np.zeros(1)))
     model = as_jax({k: np.full((1, 1), v) for k, v in dict(
         J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04,

@@ -204,7 +204,11 @@ def test_fast_bench_loop_equals_simulator_with_filters():
                         q_th=2 * np.pi / 4096, q_d=0.0, limit=10.0, vel_tol=1e-3,
                         omega_th=2 * np.pi * fth, omega_d=2 * np.pi * fd))
     z = np.zeros((1, n))
-    data = as_jax(dict(ref=p.references["reference"][None], y_th=z, y_d=z, w_th=z, w_d=z,
+    names = p.loop.sensors.names
+    meas = np.asarray(out["measured"])  # the loop reads the "log" while a delay line fills
+    data = as_jax(dict(ref=p.references["reference"][None],
+                       y_th=meas[:, names.index("motor_angle")][None],
+                       y_d=meas[:, names.index("tip_deflection")][None], w_th=z, w_d=z,
                        volt=z, K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
     model = as_jax({k: np.full((1, 1), v) for k, v in dict(
         J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04,

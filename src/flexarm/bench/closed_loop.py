@@ -30,7 +30,16 @@ and the channel reads y_θ (y_d) instead of θ (g w) before quantisation and del
 
 The controller is the bench law of :mod:`flexarm.control.state_feedback`,
 u = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ with the filtered rate (τ = 0 gives the backward
-difference), so a hub PD is K2 = K4 = 0. In open-loop replay u is the logged voltage.
+difference), so a hub PD is K2 = K4 = 0; the gains are per sample (``data["K"]`` is
+(L, N, 4)), so gains that change inside a log act as logged. In open-loop replay u is the
+logged voltage.
+
+Sensor delays of D samples (up to tens of milliseconds on real rigs) are a ring buffer of
+``n_buf`` >= D + 1 samples per channel, read at (k − D) mod n_buf (one gather, whatever
+the delay). While k < D the channel's reading is the log's own (what the controller
+actually read then: the motion before t = 0 that the delay line would hold is not
+simulated), so the initial state is the true state at t = 0 (the log's reading at k = D)
+and no warm-up samples are lost.
 
 :func:`closed_loop_cost` accumulates, inside the scan, the squared output errors of the
 measured hub angle and tip deflection against the log, weighted per sample (so the
@@ -70,11 +79,8 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     tol = const["vel_tol"]
     damp = kom + B
     shape = J.shape
-    K = data["K"][:, :, None]  # (L, 4, 1)
-    k1, k2, k3, k4 = K[:, 0], K[:, 1], K[:, 2], K[:, 3]
     tau = data["tau"][:, None]
-    sel_th = (jnp.arange(n_buf)[:, None, None] == m["dth"][None]).astype(float)
-    sel_d = (jnp.arange(n_buf)[:, None, None] == m["dd"][None]).astype(float)
+    dth, ddl = m["dth"], m["dd"]
 
     def tau_applied(u, om, w, wd):
         return ku * u - damp * om + JlL * (wc2 * w + c2z * wd) + bias
@@ -127,18 +133,28 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     y0t, y0d = sense(x0)
     bt0 = jnp.broadcast_to(y0t, (n_buf,) + shape)
     bd0 = jnp.broadcast_to(y0d, (n_buf,) + shape)
+
+    def delayed(buf, k, d):
+        """Ring-buffer read of the sample written d samples ago, (L, P)."""
+        idx = jnp.mod(k - d, n_buf)
+        return jnp.take_along_axis(buf, idx[None], axis=0)[0]
     ctrl0 = (jnp.zeros(shape),) * 4
-    ubuf0 = jnp.zeros((comp_delay + 1,) + shape)
+    # the command applied before the first computed one: the logged command where there is
+    # one (a loop that was running before the log started), else 0
+    ubuf0 = jnp.broadcast_to(data["volt"][:, :1], (comp_delay + 1,) + shape)
     acc0 = (jnp.zeros(shape), jnp.zeros(shape), jnp.zeros(shape, dtype=bool))
 
     def sample(carry, inp):
-        x, bt, bd, ctrl, ubuf, started, acc = carry
-        r, yt_log, yd_log, wt, wdw, v = (a[:, None] for a in inp)
+        x, bt, bd, ctrl, ubuf, started, acc, k = carry
+        Kt = inp[-1][:, :, None]  # (L, 4, 1)
+        k1, k2, k3, k4 = Kt[:, 0], Kt[:, 1], Kt[:, 2], Kt[:, 3]
+        r, yt_log, yd_log, wt, wdw, v = (a[:, None] for a in inp[:-1])
         st, sd = sense(x)
-        bt = jnp.concatenate([st[None], bt[:-1]], axis=0)
-        bd = jnp.concatenate([sd[None], bd[:-1]], axis=0)
-        mt = jnp.sum(bt * sel_th, axis=0)
-        md = jnp.sum(bd * sel_d, axis=0)
+        slot = jnp.mod(k, n_buf)
+        bt = jax.lax.dynamic_update_index_in_dim(bt, st, slot, 0)
+        bd = jax.lax.dynamic_update_index_in_dim(bd, sd, slot, 0)
+        mt = jnp.where(k < dth, yt_log, delayed(bt, k, dth))
+        md = jnp.where(k < ddl, yd_log, delayed(bd, k, ddl))
         if open_loop:
             uc = jnp.broadcast_to(v, shape)
         else:
@@ -159,12 +175,16 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
         # keep a diverged rollout finite (its cost is replaced by the caller)
         xn = tuple(jnp.where(bad, 0.0, a) for a in xn)
         out = (mt, md, u, x[0], x[2]) if record else None
-        return (xn, bt, bd, ctrl, ubuf, jnp.array(True), acc), out
+        return (xn, bt, bd, ctrl, ubuf, jnp.array(True), acc, k + 1), out
 
-    carry0 = (x0, bt0, bd0, ctrl0, ubuf0, jnp.array(False), acc0)
-    xs = tuple(data[k].T for k in ("ref", "y_th", "y_d", "w_th", "w_d", "volt"))
+    carry0 = (x0, bt0, bd0, ctrl0, ubuf0, jnp.array(False), acc0, jnp.array(0))
+    K = data["K"]  # (L, N, 4) per sample, or (L, 4) constant
+    if K.ndim == 2:
+        K = jnp.broadcast_to(K[:, None, :], data["ref"].shape + (4,))
+    xs = tuple(data[k].T for k in ("ref", "y_th", "y_d", "w_th", "w_d", "volt")) + (
+        jnp.swapaxes(K, 0, 1),)  # (N, L, 4)
     carry, out = jax.lax.scan(sample, carry0, xs)
-    return carry[-1], out
+    return carry[6], out  # the accumulators
 
 
 _STATIC = ("substeps", "n_buf", "comp_delay", "open_loop", "filters")

@@ -36,7 +36,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from flexarm.bench import guesses
+from flexarm.bench import estimates, guesses
 from flexarm.bench.global_stage import differential_evolution_stage
 from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.objective import Objective, Rig, check_filters
@@ -57,6 +57,16 @@ def detect_quantum(x: np.ndarray) -> float:
             np.abs((x - x[0]) / q - np.round((x - x[0]) / q))) < 1e-3:
         return q
     return 0.0
+
+
+def _finer_than_logged(log, q: float) -> bool:
+    """Whether a logged hub rate shows that the logger read the angle more finely than
+    the step ``q`` of the logged angle (the rate is not a multiple of q / T)."""
+    v = log.columns.get("motor_velocity")
+    if v is None or np.ptp(v) == 0:
+        return False
+    k = v * log.dt / q
+    return bool(np.median(np.abs(k - np.round(k))) > 0.05)
 
 
 def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resistance: float,
@@ -88,18 +98,39 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
 
 
 def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
-           delays, bounds: dict | None, info: dict) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
-    """Bounds from the data (see :mod:`flexarm.bench.guesses`) and the seed point."""
-    wc, how = guesses.link_frequency(logs)
-    info["link_frequency_guess"] = {"value": wc, "from": how}
-    wc_b = (wc / 1.35, wc * 1.35) if wc else (2 * np.pi * 0.3, 2 * np.pi * 40)
-    wc = wc or math.sqrt(wc_b[0] * wc_b[1])
+           delays, bounds: dict | None, info: dict,
+           est: dict | None = None) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
+    """Bounds from the data (see :mod:`flexarm.bench.guesses` and
+    :mod:`flexarm.bench.estimates`) and the seed point. ``est``: the cheap estimates
+    (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
+    frequency estimates), which narrow the search where they are trusted."""
+    est = est or {}
+    tip, hub = est.get("tip"), est.get("hub")
+    fb = (est.get("frequency") or {}).get("bounds")
+    if fb:
+        wc_b = tuple(fb)
+        wc = tip.omega_c if tip is not None and tip.trusted else math.sqrt(fb[0] * fb[1])
+        info["link_frequency_guess"] = {"value": wc, "from": "estimates"}
+    else:
+        wc, how = guesses.link_frequency(logs)
+        info["link_frequency_guess"] = {"value": wc, "from": how}
+        wc_b = (wc / 1.35, wc * 1.35) if wc else (2 * np.pi * 0.3, 2 * np.pi * 40)
+        wc = wc or math.sqrt(wc_b[0] * wc_b[1])
     J_est = guesses.hub_inertia(logs, rig.k_u)
     info["hub_inertia_guess"] = J_est
     J_b = (J_est / 8, J_est * 2) if J_est else (1e-7, 10.0)
+    if hub is not None and hub.trusted and hub.inertia:
+        # the regression's J (delay-aware) and the step-start J (an upper-biased estimate)
+        lo_j = min(hub.inertia / 3, J_b[0]) if J_est else hub.inertia / 3
+        J_b = (lo_j, max(hub.inertia * 3, J_b[1] if J_est else 0))
+        J_est = hub.inertia
     J_ref = J_est or 1e-3
-    g, r2 = guesses.tip_gain(logs, wc, rig.length)
-    info["tip_gain_guess"] = {"value": g, "r2": r2}
+    if tip is not None and tip.trusted:
+        g, r2 = tip.gain, 1.0
+        info["tip_gain_guess"] = {"value": g, "from": "hub-to-tip model"}
+    else:
+        g, r2 = guesses.tip_gain(logs, wc, rig.length)
+        info["tip_gain_guess"] = {"value": g, "r2": r2}
     if g is not None and r2 > 0.3:
         g_b, sign = (abs(g) / 2.5, abs(g) * 2.5), int(np.sign(g))
     else:
@@ -137,14 +168,46 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
             if d.scale == "log" and lo <= 0:
                 raise FitInputError(f"fit: bounds[{name!r}]: {name} must be > 0 (got lo = {lo})")
             defs[i] = ParamDef(d.name, d.unit, float(lo), float(hi), d.scale, d.session)
-    space = ParamSpace(defs, n_sessions, max_delay, sign, friction, tuple(delays))
+    ranges = _delay_ranges(hub, tip, max_delay, delays)
+    info["delay_ranges"] = {"motor_angle": ranges[0], "tip_deflection": ranges[1]}
+    space = ParamSpace(defs, n_sessions, max(r[1] for r in ranges), sign, friction,
+                       tuple(delays), delay_ranges=ranges)
+    zeta0 = float(np.clip(tip.zeta, 0.003, 0.25)) if tip is not None and tip.trusted else 0.03
+    B0 = (float(np.clip(hub.viscous, 0.0, B_hi)) if hub is not None and hub.trusted
+          and hub.viscous is not None else 0.05 * B_hi)
     seed = {"hub_inertia": J_est or J_ref, "link_frequency": wc, "link_inertia": J_ref,
-            "link_damping": 0.03, "tip_gain": abs(g) if g else 1.0, "viscous": 0.05 * B_hi,
+            "link_damping": zeta0, "tip_gain": abs(g) if g else 1.0, "viscous": B0,
             "coulomb": 0.6 * tau_f, "static_excess": 0.2 * tau_f, "bias": 0.0}
     u0 = np.array([float(np.clip(d.to_unit(np.clip(seed[d.name], d.lo, d.hi)), 0, 1))
                    for d in defs])
-    d0 = np.array([delays[0] or 0, delays[1] or 0, ((sign or 1) + 1) // 2])
+    d0 = np.array([delays[0] if delays[0] is not None else sum(ranges[0]) // 2,
+                   delays[1] if delays[1] is not None else sum(ranges[1]) // 2,
+                   ((sign or 1) + 1) // 2])
     return space, u0, d0
+
+
+#: half-width (samples) of the delay search around a trusted estimate
+DELAY_HALF_WIDTH = 6
+
+
+def _delay_ranges(hub, tip, max_delay: int, fixed) -> tuple[tuple[int, int], tuple[int, int]]:
+    """Search ranges of the hub and tip delays (samples): ± ``DELAY_HALF_WIDTH`` around a
+    trusted estimate (the hub regression; the hub range plus the hub → tip lag), else
+    0 ... ``max_delay``; a fixed delay is its own range."""
+    w = DELAY_HALF_WIDTH
+    if fixed[0] is not None:
+        h = (int(fixed[0]), int(fixed[0]))
+    elif hub is not None and hub.trusted and hub.delay is not None:
+        h = (max(hub.delay - w, 0), min(hub.delay + w, max_delay))
+    else:
+        h = (0, max_delay)
+    if fixed[1] is not None:
+        t = (int(fixed[1]), int(fixed[1]))
+    elif tip is not None and tip.trusted:
+        t = (max(h[0] + tip.lag - w, 0), min(h[1] + tip.lag + w, max_delay + tip.lag))
+    else:
+        t = (0, max_delay)
+    return h, t
 
 
 def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
@@ -154,8 +217,9 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         current_limit: float | None = None, mode: str = "closed_loop",
         controller: Any = None, sessions: Sequence[int] | None = None,
         friction: bool = True, encoder_counts: int | None = None,
-        tip_sign: int | None = None, angle_delay: int | None = 0,
-        tip_delay: int | None = None, max_delay: int = 5, computation_delay: int = 0,
+        tip_sign: int | None = None, angle_delay: int | None = None,
+        tip_delay: int | None = None, max_delay: int | None = None,
+        computation_delay: int = 0,
         bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
         local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
@@ -213,6 +277,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         elif "voltage" not in g.columns:
             raise FitInputError(f"{g.path}: field 'voltage': open-loop replay needs the logged "
                                 "command column 'voltage' (V, or A for a current drive)")
+    if max_delay is None:
+        max_delay = int(round(estimates.MAX_DELAY_S / dts[0]))
     filt = check_filters(filters, dts[0], substeps)
     sess = list(sessions) if sessions is not None else [0] * len(blogs)
     if len(sess) != len(blogs) or sorted(set(sess)) != list(range(max(sess) + 1)):
@@ -223,12 +289,25 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     else:
         q = max((detect_quantum(g.columns["motor_angle"]) for g in blogs
                  if "motor_angle" in g.columns), default=0.0)
+        if q > 0 and any(_finer_than_logged(g, q) for g in blogs):
+            # the logger rounds the angle it writes, but its own rate (from the angle it
+            # read) is not a multiple of q / T: the controller read a finer angle
+            q = 0.0
     limit = voltage_limit if drive == "voltage" else (current_limit or voltage_limit)
     rig = make_rig(drive, gear_ratio, motor_constant, armature_resistance, link_length,
                    gear_efficiency, motor_efficiency, limit, q)
     info: dict[str, Any] = {"encoder_quantum": q}
+    say("estimates: hub-to-tip model, hub delay, link frequency")
+    est = _estimates(blogs, rig, max_delay, filters)
+    info["estimates"] = {"tip_model": est["tip"].to_dict() if est["tip"] else None,
+                         "hub_delay": est["hub"].to_dict(), "link_frequency": est["frequency"]}
+    if est.get("tip_cutoff") and not filt["tip_deflection"]:
+        # the hub → tip model's low-pass, as a known sensor filter (lag and cutoff are
+        # estimated together; the closed-loop stages then search the delay around it)
+        filt = check_filters({**{k: v for k, v in filt.items() if v},
+                              "tip_deflection": est["tip_cutoff"]}, dts[0], substeps)
     space, u0, d0 = _space(blogs, rig, max(sess) + 1, friction, max_delay, tip_sign,
-                           (angle_delay, tip_delay), bounds, info)
+                           (angle_delay, tip_delay), bounds, info, est)
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
@@ -313,6 +392,23 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         seconds=time.perf_counter() - t_start, objective=obj)
     res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs))
     return res
+
+
+def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
+    """The cheap estimates of :mod:`flexarm.bench.estimates` (hub → tip model with the
+    tip channel's lag relative to the hub, the hub delay, the link frequency), and the
+    tip low-pass cutoff to use when the user gave none and the model is trusted."""
+    user_fc = (filters or {}).get("tip_deflection")
+    tip = estimates.tip_model(blogs, rig.length, max_lag=max_delay)
+    hub = estimates.hub_delay(blogs, rig.k_u, rig.k_omega, max_delay=max_delay, tip=tip)
+    freq = estimates.link_frequency_estimates(blogs, tip)
+    out = {"tip": tip, "hub": hub, "frequency": freq, "tip_cutoff": None}
+    if tip is not None and tip.trusted and not user_fc:
+        # at most what two RK4 substeps integrate accurately, and only a real low-pass
+        fc = tip.cutoff_hz
+        if fc < 0.1 / blogs[0].dt:
+            out["tip_cutoff"] = float(fc)
+    return out
 
 
 #: the tip delay is called poorly determined when the second candidate's full-log cost is
@@ -435,9 +531,11 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
 
 
 def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
-           step: float = 1e-3, off0: np.ndarray | None = None) -> dict:
+           step: float = 1e-3, off0: np.ndarray | None = None,
+           free_params: bool = True) -> dict:
     """least_squares over the unit coordinates and each log's initial-state offsets (tip
-    deflection and rate, hub angle and rate)."""
+    deflection and rate, hub angle and rate); ``free_params=False`` holds the parameters
+    at ``U0`` and estimates the initial states only (a held-out log's, from its own data)."""
     n, L = obj.space.n_cont, obj.L
     nz = n + 4 * L
     W = np.sqrt(obj.weights())  # (2, L, N)
@@ -446,23 +544,31 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
     z0 = np.concatenate([U0, np.zeros(4 * L) if off0 is None else np.ravel(off0)])
     lo = np.concatenate([np.zeros(n), np.full(4 * L, -5.0)])
     hi = np.concatenate([np.ones(n), np.full(4 * L, 5.0)])
-    Db = np.tile(D, (nz + 1, 1))
+    free = np.arange(nz) if free_params else np.arange(n, nz)
+    nf = free.size
+    Db = np.tile(D, (nf + 1, 1))
     cache: dict = {}
 
     def split(Z):
         return Z[:, :n], Z[:, n:].reshape(-1, L, 4)
 
-    def batch(z):
-        key = z.tobytes()
+    def full(zf):
+        z = z0.copy()
+        z[free] = zf
+        return z
+
+    def batch(zf):
+        key = zf.tobytes()
         if key in cache:
             return cache[key]
-        h = np.where(z + step > hi, -step, step)
-        Z = np.tile(z, (nz + 1, 1))
-        Z[1:] += np.diag(h)
+        z = full(zf)
+        h = np.where(zf + step > hi[free], -step, step)
+        Z = np.tile(z, (nf + 1, 1))
+        Z[1 + np.arange(nf), free] += h
         U, off = split(Z)
         tr, e, bad = obj.run(U, Db, off)
         sim = np.stack([tr[0], tr[1]])  # (2, P, L, N)
-        R = (W[:, None] * (sim - y[:, None])).transpose(1, 0, 2, 3).reshape(nz + 1, -1)
+        R = (W[:, None] * (sim - y[:, None])).transpose(1, 0, 2, 3).reshape(nf + 1, -1)
         R = np.where(np.isfinite(R), R, 1e3)
         R[bad.any(-1)] = 1e3 * W.max()
         cache.clear()
@@ -470,31 +576,74 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
         return cache[key]
 
     t0 = time.perf_counter()
-    res = least_squares(lambda z: batch(z)[0], z0, jac=lambda z: batch(z)[1],
-                        bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
-                        ftol=1e-6, xtol=1e-6, gtol=1e-8)
+    res = least_squares(lambda z: batch(z)[0], z0[free], jac=lambda z: batch(z)[1],
+                        bounds=(lo[free], hi[free]), method="trf", x_scale=1.0,
+                        max_nfev=max_nfev, ftol=1e-6, xtol=1e-6, gtol=1e-8)
     r, Jac = batch(res.x)
+    x = full(res.x)
     keep = mask.ravel()
     r = np.where(keep, r, 0.0)
     Jac = np.where(keep[:, None], Jac, 0.0)
     rr = r[keep]
     rho = float(np.clip(np.sum(rr[1:] * rr[:-1]) / max(rr @ rr, 1e-300), 0.0, 0.999))
-    try:
-        cov_iid = iid_covariance(rr, Jac[keep])
-        cov, bw = hac_covariance(r.reshape(2, L, -1), Jac.reshape(2, L, -1, nz))
-        std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
-        std_iid_u = np.sqrt(np.maximum(np.diag(cov_iid)[:n], 0.0))
-    except np.linalg.LinAlgError:
-        std_u = std_iid_u = np.full(n, np.nan)
-        bw = []
-    U, off = split(res.x[None])
+    std_u = std_iid_u = np.full(n, np.nan)
+    bw: list = []
+    if free_params:
+        try:
+            cov_iid = iid_covariance(rr, Jac[keep])
+            cov, bw = hac_covariance(r.reshape(2, L, -1), Jac.reshape(2, L, -1, nz))
+            std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
+            std_iid_u = np.sqrt(np.maximum(np.diag(cov_iid)[:n], 0.0))
+        except np.linalg.LinAlgError:
+            bw = []
+    U, off = split(x[None])
     return {"U": U[0], "off": off[0], "std_u": std_u, "std_iid_u": std_iid_u,
             "bandwidth": [int(m) for m in bw], "status": int(res.status),
             "success": bool(res.status > 0), "message": str(res.message),
             "nfev": int(res.nfev), "cost": float(2 * res.cost), "rho": rho,
             "seconds": time.perf_counter() - t0, "at_bounds": [
-                i for i in range(n) if (res.x[i] < 1e-3 or res.x[i] > 1 - 1e-3)
+                i for i in range(n) if free_params and (x[i] < 1e-3 or x[i] > 1 - 1e-3)
                 and obj.space.defs[i].scale != "loglin"]}
 
 
-__all__ = ["fit", "FitResult", "FRICTION", "derived"]
+def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = True,
+            nfev: int = 15, controller: Any = None) -> dict:
+    """The fitted model's prediction of other logs (held-out data, e.g. another time
+    window of the same recording): the loop closed with each log's own reference and
+    controller, the parameters as fitted, each log's initial state (hub angle and rate,
+    tip deflection and rate at t = 0) from the log's own first samples and, with
+    ``estimate_initial``, refined by least squares on the log itself (the link may be
+    ringing and the hub moving at the window's start; the model is not refitted).
+    Returns ``{"fit_percent": {log: {signal: %}}, "traj": [...], "logs": [...]}``."""
+    blogs = [as_bench_log(x, controller) for x in logs]
+    T = result.logs[0].dt
+    for g in blogs:
+        if abs(g.dt - T) > PERIOD_TOL * T:
+            raise FitInputError(f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
+                                f"from the fitted logs' {T:g} s")
+        if result.settings["mode"] == "closed_loop":
+            check_closed_loop(g)
+    st = result.settings
+    space = result.space
+    obj = Objective(blogs, result.rig, space, [0] * len(blogs), mode=st["mode"],
+                    substeps=st["substeps"], comp_delay=st["computation_delay"],
+                    wc_guess=float(result.params["link_frequency"]), filters=st["filters"])
+    U, D = result.unit, result.discrete
+    off = np.zeros((len(blogs), 4))
+    if estimate_initial:
+        off = _local(obj, U, D, nfev, off0=off, free_params=False)["off"]
+    tr, e, bad = obj.run(U[None], D[None], off[None])
+    fp = obj.fit_percent(e[0])
+    out = {"fit_percent": {g.name: {"motor_angle": _pct(fp[i, 0]),
+                                    "tip_deflection": _pct(fp[i, 1])}
+                           for i, g in enumerate(blogs)},
+           "diverged": {g.name: bool(bad[0, i]) for i, g in enumerate(blogs)},
+           "traj": [a[0] for a in tr], "logs": blogs}
+    return out
+
+
+def _pct(v) -> float | None:
+    return None if not np.isfinite(v) else round(float(v), 3)
+
+
+__all__ = ["fit", "predict", "FitResult", "FRICTION", "derived"]

@@ -189,17 +189,19 @@ def initial_tip(log: BenchLog, wc: float, zeta: float = 0.03, max_periods: float
     return (float(a), float(b), float(s), float(wd))
 
 
-def initial_hub(log: BenchLog, n: int = 20):
-    """(θ0, ω0) from a parabola through the first samples of the measured hub angle (a
-    line would read a hub that starts from rest and accelerates, e.g. pushed by a ringing
-    link, as already moving at t = 0; the fit's local stage refines both)."""
+def initial_hub(log: BenchLog, n: int = 20, k: int = 0):
+    """(θ0, ω0) at t = 0 when the hub channel is delayed by ``k`` samples: a parabola
+    through samples k ... k + n − 1 of the measured hub angle (a line would read a hub
+    that starts from rest and accelerates, e.g. pushed by a ringing link, as already
+    moving at t = 0; the fit's local stage refines both)."""
     th = log.columns.get("motor_angle")
     if th is None:
         return 0.0, 0.0
-    t = np.arange(n) * log.dt
-    if np.ptp(th[:n]) == 0:
-        return float(th[0]), 0.0
-    c = np.polyfit(t, th[:n], 2)
+    th = np.asarray(th[k:k + n], float)
+    t = np.arange(len(th)) * log.dt
+    if len(th) < 3 or np.ptp(th) == 0:
+        return float(th[0]) if len(th) else 0.0, 0.0
+    c = np.polyfit(t, th, 2)
     return float(c[2]), float(c[1])
 
 

@@ -102,7 +102,7 @@ class Objective:
         self.skip = space.max_delay + comp_delay + 1
         z = lambda: np.zeros((L, N))  # noqa: E731
         ref, yt, yd, wt, wd, volt = z(), z(), z(), z(), z(), z()
-        K, tau = np.zeros((L, 4)), np.zeros(L)
+        K, tau = np.zeros((L, N, 4)), np.zeros(L)
         self.sst = np.zeros((L, 2))
         for i, g in enumerate(logs):
             n = min(len(g), N)
@@ -119,7 +119,11 @@ class Objective:
                     w[i, self.skip:n] = 1.0 / sst
             if g.controller is not None:
                 c = g.controller
-                K[i] = (c.k1, c.k2, c.k3, c.k4)
+                gains = getattr(g, "gains", None)  # per sample (N, 4) where logged
+                if gains is not None:
+                    K[i] = np.concatenate([gains[:n], np.repeat(gains[n - 1:n], N - n, 0)])
+                else:
+                    K[i] = (c.k1, c.k2, c.k3, c.k4)
                 tau[i] = c.rate_time_constant if c.rate == "filtered" else 0.0
         self.data = as_jax(dict(ref=ref, y_th=yt, y_d=yd, w_th=wt, w_d=wd, volt=volt, K=K, tau=tau))
         self.const = as_jax(dict(dt=T, length=rig.length, k_u=rig.k_u, k_omega=rig.k_omega,
@@ -127,7 +131,9 @@ class Objective:
                                  limit=rig.limit, vel_tol=rig.vel_tol,
                                  omega_th=2 * np.pi * self.filters["motor_angle"],
                                  omega_d=2 * np.pi * self.filters["tip_deflection"]))
-        self.hub0 = np.array([guesses.initial_hub(g) for g in logs])  # (L, 2)
+        self.hub0 = np.array([[guesses.initial_hub(g, k=k)
+                               for k in range(space.max_delay + 1)]
+                              for g in logs])  # (L, max_delay + 1, 2)
         fd = self.filters["tip_deflection"]
         self.tip0 = np.array([[guesses.initial_tip_at(g, k, cutoff=fd)
                                for k in range(space.max_delay + 1)]
@@ -150,11 +156,14 @@ class Objective:
             v0 = v0 + offsets[..., 1] * self.tip_scale[None] * w
         return d0, v0
 
-    def hub_initial(self, P: int, offsets: np.ndarray | None = None):
-        """Hub angle and rate at t = 0, (P, L) each; offsets[..., 2:4] (when given) shift
-        them in units of ``hub_scale`` (rad) and ``hub_scale`` · ω_guess (rad/s)."""
-        th0 = np.broadcast_to(self.hub0[:, 0][None], (P, self.L))
-        om0 = np.broadcast_to(self.hub0[:, 1][None], (P, self.L))
+    def hub_initial(self, P: int, offsets: np.ndarray | None = None,
+                    dth: np.ndarray | None = None):
+        """Hub angle and rate at t = 0, (P, L) each: the log's reading at k = the hub
+        delay ``dth`` (P,) (0 when not given); offsets[..., 2:4] (when given) shift them
+        in units of ``hub_scale`` (rad) and ``hub_scale`` · ω_guess (rad/s)."""
+        idx = np.zeros(P, int) if dth is None else np.broadcast_to(np.asarray(dth, int), (P,))
+        th0 = self.hub0[:, idx, 0].T
+        om0 = self.hub0[:, idx, 1].T
         if offsets is not None and offsets.shape[-1] >= 4:
             th0 = th0 + offsets[..., 2] * self.hub_scale
             om0 = om0 + offsets[..., 3] * self.hub_scale * self.wc_guess
@@ -174,7 +183,7 @@ class Objective:
         sign = 2.0 * D[:, 2] - 1.0
         gain = glob("tip_gain") * sign[None]
         d0, v0 = self.tip_initial(D[:, 1], offsets)
-        th0, om0 = self.hub_initial(P, offsets)
+        th0, om0 = self.hub_initial(P, offsets, D[:, 0])
         if sp.friction:
             Fc = per("coulomb")
             Fs = Fc + per("static_excess")

@@ -92,6 +92,8 @@ class ParamSpace:
     friction: bool = True
     fixed_delays: tuple[int | None, int | None] = (None, None)
     extras: dict = field(default_factory=dict)
+    #: search range (lo, hi) of each free delay (hub, tip), samples; None: 0 ... max_delay
+    delay_ranges: tuple[tuple[int, int] | None, tuple[int, int] | None] = (None, None)
 
     @property
     def names(self) -> list[str]:
@@ -111,8 +113,12 @@ class ParamSpace:
     def discrete_bounds(self) -> list[tuple[int, int]]:
         """Bounds of the integer DE coordinates: angle delay, tip delay, sign (0/1)."""
         b = []
-        for fixed in self.fixed_delays:
-            b.append((fixed, fixed) if fixed is not None else (0, self.max_delay))
+        for fixed, rng in zip(self.fixed_delays, self.delay_ranges):
+            if fixed is not None:
+                b.append((fixed, fixed))
+            else:
+                lo, hi = rng if rng is not None else (0, self.max_delay)
+                b.append((max(int(lo), 0), min(int(hi), self.max_delay)))
         b.append((0, 1) if self.sign is None else ((self.sign + 1) // 2,) * 2)
         return b
 

@@ -67,6 +67,11 @@ class FitResult:
     traj: list = field(default_factory=list)
     seconds: float = 0.0
     std_iid: dict[str, float] = field(default_factory=dict)
+    #: the search space and the fitted point in it (unit coordinates, discrete), so that
+    #: the same model predicts other logs (:func:`flexarm.bench.fit.predict`)
+    space: Any = None
+    unit: Any = None
+    discrete: Any = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -94,7 +99,7 @@ class FitResult:
         fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
               for i, n in enumerate(names)}
         d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
-        th0, om0 = objective.hub_initial(1, offsets[None])
+        th0, om0 = objective.hub_initial(1, offsets[None], np.asarray([D[0]]))
         ini = {n: {"motor_angle": float(th0[0, i]),
                    "motor_velocity": float(om0[0, i]),
                    "tip_deflection": float(d0[0, i] / params["tip_gain"]),
@@ -134,7 +139,8 @@ class FitResult:
         stages["local"]["hac_bandwidth_samples"] = {
             n: m for n, m in zip(names, local.get("bandwidth", []))}
         return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
-                   ini, rig, list(logs), traj, seconds, std_iid)
+                   ini, rig, list(logs), traj, seconds, std_iid, space, np.asarray(U),
+                   np.asarray(D))
 
     # ------------------------------------------------------------------ outputs
     def to_dict(self) -> dict:

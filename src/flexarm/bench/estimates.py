@@ -1,0 +1,267 @@
+"""Cheap estimates from the logs, before the expensive closed-loop stages: the link's
+clamped frequency, damping and the tip sensor's gain, sign, lag and low-pass from a linear
+hub → tip model; the hub channel's delay from an integral equation-error regression of
+the hub's equation of motion. They set the search ranges of the closed-loop fit (and are
+reported in its JSON), so that the global stage searches where the data point, over
+delays of up to ``MAX_DELAY_S`` (real rigs lag by tens of milliseconds at the hub and
+several tens more at the tip).
+
+**Hub → tip.** Relative to the hub, the link's tip deflection w (m) obeys
+
+    ẅ + 2 ζ ω_c ẇ + ω_c² w = −L θ̈                                    (1)
+
+(ω_c the hub-clamped frequency: what the link does while the hub moves as measured). The
+measured tip d is g w, seen through the tip channel's extra lag of ``lag`` samples behind
+the hub channel and a first-order low-pass of f_c Hz:
+
+    d(s) = −g L s² / (s² + 2 ζ ω_c s + ω_c²) · 1 / (s / (2π f_c) + 1) · e^{−s lag T} θ_m(s)
+
+driven by the measured hub angle θ_m. For every lag on a grid the output-error least
+squares over (ω_c, ζ, g L, f_c) is solved with the model discretised by zero-order hold
+(θ_m is piecewise constant between samples to within its resolution); the best lag wins.
+Lag and cutoff trade off (both delay the tip), so the pair is reported together with
+the profile of fit % over the lags. Stick-slip does not disturb (1): the hub's motion is
+its input, whatever moved it.
+
+**Hub delay.** The hub obeys J θ̈ = k_u u − (k_ω + B) θ̇ + (J_l/L)(ω_c² w + 2ζω_c ẇ) − F.
+With the true hub θ(t) = θ_m(t + D T), integrated over windows [t_0, t_0 + W] (no second
+derivative of a quantised signal is needed):
+
+    θ̇_m(t_1 + D) − θ̇_m(t_0 + D) = a ∫u − b Δθ_m − c ∫sgn θ̇_m + e ∫d_m(· + D + lag)
+
+a = k_u / J, b = (k_ω + B) / J, c = F_c / J. For every D on a grid the linear least
+squares gives R²; the best D with physical coefficients (a > 0, b > 0) is the estimate,
+trusted when its R² clears ``HUB_R2_MIN`` and beats the profile's median clearly. Rigid
+arms with little motion give a flat profile: then the closed-loop stage searches all
+delays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import scipy.signal
+from scipy.optimize import least_squares
+
+from flexarm.bench.logs import BenchLog
+
+#: default largest sensor delay searched (s)
+MAX_DELAY_S = 0.15
+#: an R² of the hub regression below this is not trusted
+HUB_R2_MIN = 0.3
+#: a tip model with a fit % below this is not trusted
+TIP_FIT_MIN = 50.0
+
+
+@dataclass
+class TipModel:
+    """The hub → tip model (1): clamped frequency (rad/s), damping ratio, signed sensor
+    gain (measured m per m of deflection), lag behind the hub channel (samples), low-pass
+    cutoff (Hz), fit % of the measured tip, and fit % by lag."""
+
+    omega_c: float
+    zeta: float
+    gain: float
+    lag: int
+    cutoff_hz: float
+    fit_percent: float
+    profile: dict[int, float] = field(default_factory=dict)
+
+    @property
+    def trusted(self) -> bool:
+        return bool(np.isfinite(self.fit_percent) and self.fit_percent >= TIP_FIT_MIN)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["trusted"] = self.trusted
+        d["profile"] = {int(k): round(float(v), 3) for k, v in self.profile.items()}
+        return d
+
+
+@dataclass
+class HubDelay:
+    """The hub channel's delay (samples) from the integral regression, its R², the
+    profile of R² by delay, whether it is trusted, and the implied J and B (N·m units)."""
+
+    delay: int | None
+    r2: float
+    trusted: bool
+    inertia: float | None
+    viscous: float | None
+    profile: dict[int, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["profile"] = {int(k): round(float(v), 4) for k, v in self.profile.items()}
+        return d
+
+
+def _fitpct(y: np.ndarray, yh: np.ndarray) -> float:
+    den = np.linalg.norm(y - y.mean())
+    return float(100 * (1 - np.linalg.norm(y - yh) / den)) if den > 0 else float("nan")
+
+
+def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
+    wc, z, gL, fc = p
+    a = 2 * np.pi * fc
+    num = [-gL * a, 0.0, 0.0]
+    den = np.polymul([1.0, 2 * z * wc, wc * wc], [1.0, a])
+    b, aa, _ = scipy.signal.cont2discrete((num, den), dt, method="zoh")
+    x = np.concatenate([np.full(lag, th[0]), th[:len(th) - lag]]) - th[0]
+    return scipy.signal.lfilter(np.ravel(b), aa, x)
+
+
+def tip_model(logs: list[BenchLog], length: float, *, max_lag: int | None = None,
+              omega_guess: float | None = None) -> TipModel | None:
+    """The hub → tip model (1) fitted to every log with both channels (see the module
+    docstring); None when no log has a moving tip channel."""
+    pairs = [(g.columns["motor_angle"], g.columns["tip_deflection"], g.dt) for g in logs
+             if "motor_angle" in g.columns and "tip_deflection" in g.outputs]
+    if not pairs:
+        return None
+    dt = pairs[0][2]
+    max_lag = int(round(MAX_DELAY_S / dt)) if max_lag is None else int(max_lag)
+    skip = max_lag + 10
+    pairs = [(th, d) for th, d, _ in pairs if len(th) > skip + 50]
+    if not pairs:
+        return None
+    # starting frequency: the spectral peak of the tip signals (2-60 rad/s band)
+    if omega_guess is None:
+        f, P = scipy.signal.welch(np.concatenate([d - d.mean() for _, d in pairs]), 1 / dt,
+                                  nperseg=min(4096, min(len(d) for _, d in pairs)))
+        band = (f > 0.3) & (f < 10)
+        omega_guess = 2 * np.pi * float(f[band][np.argmax(P[band])]) if band.any() else 10.0
+
+    def res(p, lag):
+        return np.concatenate([(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:])
+                               for th, d in pairs])
+
+    def solve(lag, p0):
+        lo, hi = [0.2 * omega_guess, 0.0, -50 * length, 0.3], [5 * omega_guess, 0.7,
+                                                                50 * length, 0.45 / dt]
+        p0 = np.clip(p0, np.add(lo, 1e-9), np.subtract(hi, 1e-9))
+        r = least_squares(res, p0, args=(lag,), bounds=(lo, hi), x_scale="jac",
+                          max_nfev=60)
+        return r.x, float(np.sum(r.fun**2))
+
+    # sign and scale of g L from a linear regression at the starting frequency
+    best = None
+    step = max(1, int(round(0.005 / dt)))
+    profile = {}
+    p_prev = None
+    for lag in range(0, max_lag + 1, step):
+        starts = [p_prev] if p_prev is not None else []
+        if p_prev is None:
+            for s in (1.0, -1.0):
+                starts.append(np.array([omega_guess, 0.03, s * 0.2 * length, 20.0]))
+        cand = [solve(lag, p0) for p0 in starts]
+        p, c = min(cand, key=lambda t: t[1])
+        p_prev = p
+        profile[lag] = c
+        if best is None or c < best[2]:
+            best = (lag, p, c)
+    # refine the lag around the best coarse one
+    lag0, p0, c0 = best
+    for lag in range(max(0, lag0 - step + 1), min(max_lag, lag0 + step - 1) + 1):
+        if lag in profile:
+            continue
+        p, c = solve(lag, p0)
+        profile[lag] = c
+        if c < best[2]:
+            best = (lag, p, c)
+    lag, p, _ = best
+    fits = [_fitpct(d[skip:], _tip_response(p, th, lag, dt)[skip:]) for th, d in pairs]
+    n = sum(len(d) - skip for _, d in pairs)
+    prof_fit = {k: float(100 * (1 - np.sqrt(v / n))) for k, v in sorted(profile.items())}
+    return TipModel(float(p[0]), float(p[1]), float(p[2] / length), int(lag), float(p[3]),
+                    float(np.mean(fits)), prof_fit)
+
+
+def hub_delay(logs: list[BenchLog], k_u: float, k_omega: float, *,
+              max_delay: int | None = None, tip: TipModel | None = None,
+              window: float = 0.04) -> HubDelay:
+    """The hub channel's delay from the integral regression (module docstring)."""
+    usable = [g for g in logs if "motor_angle" in g.columns and "voltage" in g.columns]
+    if not usable:
+        return HubDelay(None, float("nan"), False, None, None, {})
+    dt = usable[0].dt
+    max_delay = int(round(MAX_DELAY_S / dt)) if max_delay is None else int(max_delay)
+    W = max(int(round(window / dt)), 5)
+    use_tip = tip is not None and tip.trusted
+    profile, coef = {}, {}
+    for D in range(0, max_delay + 1):
+        ys, Xs = [], []
+        for g in usable:
+            th = g.columns["motor_angle"]
+            N = len(th)
+            w = np.gradient(th, dt)
+            u = g.columns["voltage"]
+            Iu = np.concatenate([[0.0], np.cumsum(u) * dt])[:N]
+            wmax = np.percentile(np.abs(w), 99)
+            sg = np.cumsum(np.sign(w) * (np.abs(w) > 0.05 * wmax)) * dt
+            k0 = np.arange(5, N - D - W - (tip.lag if use_tip else 0) - 5, max(W // 4, 1))
+            if k0.size < 10:
+                continue
+            k1 = k0 + W
+            ys.append(w[k1 + D] - w[k0 + D])
+            cols = [Iu[k1] - Iu[k0], -(th[k1 + D] - th[k0 + D]), -(sg[k1 + D] - sg[k0 + D])]
+            if use_tip and "tip_deflection" in g.outputs:
+                Id = np.cumsum(g.columns["tip_deflection"]) * dt
+                cols.append(Id[k1 + D + tip.lag] - Id[k0 + D + tip.lag])
+            elif use_tip:
+                cols.append(np.zeros(k0.size))
+            Xs.append(np.column_stack(cols))
+        if not ys:
+            break
+        y, X = np.concatenate(ys), np.concatenate(Xs)
+        c, *_ = np.linalg.lstsq(X, y, rcond=None)
+        sst = float(np.sum((y - y.mean()) ** 2))
+        r2 = 1 - float(np.sum((y - X @ c) ** 2)) / sst if sst > 0 else float("nan")
+        profile[D] = r2
+        coef[D] = c
+    ok = {D: r for D, r in profile.items() if coef[D][0] > 0 and coef[D][1] > 0}
+    if not ok:
+        return HubDelay(None, float("nan"), False, None, None, profile)
+    D = max(ok, key=ok.get)
+    r2 = ok[D]
+    med = float(np.median(list(profile.values())))
+    trusted = bool(r2 >= HUB_R2_MIN and r2 - med > 0.1 * max(r2, 1e-9))
+    a, b = coef[D][0], coef[D][1]
+    J = k_u / a
+    return HubDelay(int(D), float(r2), trusted, float(J), float(b * J - k_omega), profile)
+
+
+def link_frequency_estimates(logs: list[BenchLog], tip: TipModel | None) -> dict:
+    """Every estimate of the clamped link frequency (rad/s) the data give: the hub → tip
+    model, the spectral peak while the hub is stuck (the link rings at its clamped
+    frequency then), the spectral peak of the whole tip signal (a closed-loop mode,
+    usually above the clamped one), and their agreement."""
+    from flexarm.bench import guesses
+
+    out: dict = {}
+    if tip is not None:
+        out["hub_to_tip_model"] = {"value": tip.omega_c, "fit_percent": tip.fit_percent,
+                                   "trusted": tip.trusted}
+    wc, how = guesses.link_frequency(logs)
+    if wc:
+        out["spectral_peak_" + how] = {"value": float(wc)}
+    b = frequency_bounds(out)
+    out["bounds"] = None if b is None else [float(b[0]), float(b[1])]
+    return out
+
+
+def frequency_bounds(est: dict, widen: float = 1.35) -> tuple[float, float] | None:
+    """Search bounds for ω_c covering every trusted estimate, ±``widen``."""
+    vals = []
+    model = est.get("hub_to_tip_model", {})
+    if model.get("trusted"):
+        vals.append(model["value"])
+    stuck = est.get("spectral_peak_stuck", {}).get("value")
+    # the stuck-hub peak joins when it agrees with the model (a short stuck interval
+    # holds a fraction of a period, and its peak is then the drift's, far below)
+    if stuck and (not vals or 1 / widen < stuck / vals[0] < widen):
+        vals.append(stuck)
+    if not vals:
+        return None
+    return min(vals) / widen, max(vals) * widen
