@@ -143,13 +143,17 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     speed = max(np.percentile(np.abs(np.gradient(g_.columns["motor_angle"], g_.dt)), 99)
                 for g_ in logs if "motor_angle" in g_.columns)
     B_hi = max(0.5 * rig.k_u * rig.limit / max(speed, 1e-3), 2 * rig.k_omega, 1e-6)
-    defs = [
-        ParamDef("hub_inertia", "kg*m**2", *J_b, "log"),
-        ParamDef("link_frequency", "rad/s", *wc_b, "log"),
-        ParamDef("link_inertia", "kg*m**2", J_ref / 20, J_ref * 20, "log"),
-        ParamDef("link_damping", "", 0.002, 0.3, "log"),
-        ParamDef("tip_gain", "m/m", *g_b, "log"),
-    ]
+    defs = [ParamDef("hub_inertia", "kg*m**2", *J_b, "log")]
+    if any("tip_deflection" in g.outputs for g in logs):
+        defs += [
+            ParamDef("link_frequency", "rad/s", *wc_b, "log"),
+            ParamDef("link_inertia", "kg*m**2", J_ref / 20, J_ref * 20, "log"),
+            ParamDef("link_damping", "", 0.002, 0.3, "log"),
+            ParamDef("tip_gain", "m/m", *g_b, "log"),
+        ]
+    else:  # a rigid arm: no link to fit, its tip delay and sign are not searched
+        sign = 1
+        delays = (delays[0], 0)
     for s in range(n_sessions):
         defs.append(ParamDef("viscous", "N*m*s/rad", 0.0, B_hi, "loglin", s))
         if friction:

@@ -178,10 +178,15 @@ class Objective:
         ses = self.sessions
         per = lambda name: sp.session_values(U, name)[:, ses].T  # noqa: E731  (L, P)
         glob = lambda name: np.broadcast_to(sp.value(U, name)[None], (self.L, P))  # noqa: E731
-        wc = glob("link_frequency")
-        zeta = glob("link_damping")
         sign = 2.0 * D[:, 2] - 1.0
-        gain = glob("tip_gain") * sign[None]
+        if sp.rigid:  # no link: an uncoupled (J_l = 0) dummy mode, read by no log
+            wc, zeta = np.full((self.L, P), 10.0), np.full((self.L, P), 0.1)
+            gain, JlL = np.broadcast_to(sign[None], (self.L, P)), np.zeros((self.L, P))
+        else:
+            wc = glob("link_frequency")
+            zeta = glob("link_damping")
+            gain = glob("tip_gain") * sign[None]
+            JlL = glob("link_inertia") / self.rig.length
         d0, v0 = self.tip_initial(D[:, 1], offsets)
         th0, om0 = self.hub_initial(P, offsets, D[:, 0])
         if sp.friction:
@@ -194,7 +199,7 @@ class Objective:
             B = per("viscous")
         return as_jax(dict(
             J=glob("hub_inertia"), B=B, wc2=wc**2, c2z=2 * zeta * wc,
-            JlL=glob("link_inertia") / self.rig.length, Fc=Fc, Fs=Fs, bias=bias, gain=gain,
+            JlL=JlL, Fc=Fc, Fs=Fs, bias=bias, gain=gain,
             dth=np.broadcast_to(D[:, 0][None], (self.L, P)),
             dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
             th0=th0.T, om0=om0.T,

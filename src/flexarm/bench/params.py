@@ -96,6 +96,12 @@ class ParamSpace:
     delay_ranges: tuple[tuple[int, int] | None, tuple[int, int] | None] = (None, None)
 
     @property
+    def rigid(self) -> bool:
+        """No link parameters: the arm is fitted as a rigid hub (logs without a tip
+        channel)."""
+        return not any(d.name == "link_frequency" for d in self.defs)
+
+    @property
     def names(self) -> list[str]:
         return [d.name if d.session is None or self.n_sessions == 1 else f"{d.name}[{d.session}]"
                 for d in self.defs]
@@ -138,6 +144,8 @@ class ParamSpace:
 
 def derived(p: dict[str, float], length: float) -> dict[str, float]:
     """Stiffness, frequencies and lumped-beam numbers from the fitted parameters."""
+    if "link_frequency" not in p:  # a rigid arm
+        return {}
     J, wc, Jl = p["hub_inertia"], p["link_frequency"], p["link_inertia"]
     C = Jl * wc**2
     return {

@@ -86,10 +86,11 @@ class FitResult:
             std[name] = float(abs(d.dphys_du(U[i])) * std_u[i])
             std_iid[name] = float(abs(d.dphys_du(U[i])) * std_iid_u[i])
         sign = int(2 * D[2] - 1)
-        params["tip_gain"] *= sign
+        if "tip_gain" in params:
+            params["tip_gain"] *= sign
         first = lambda n: params.get(n, params.get(f"{n}[0]", 0.0))  # noqa: E731
-        der = derived({k: first(k) for k in ("hub_inertia", "link_frequency", "link_inertia")},
-                      rig.length)
+        der = derived({k: first(k) for k in ("hub_inertia", "link_frequency", "link_inertia")
+                       if k in params or f"{k}[0]" in params}, rig.length)
         if settings["friction"]:
             for s in range(space.n_sessions):
                 sfx = "" if space.n_sessions == 1 else f"[{s}]"
@@ -102,8 +103,8 @@ class FitResult:
         th0, om0 = objective.hub_initial(1, offsets[None], np.asarray([D[0]]))
         ini = {n: {"motor_angle": float(th0[0, i]),
                    "motor_velocity": float(om0[0, i]),
-                   "tip_deflection": float(d0[0, i] / params["tip_gain"]),
-                   "tip_velocity": float(v0[0, i] / params["tip_gain"])}
+                   "tip_deflection": float(d0[0, i] / params.get("tip_gain", 1.0)),
+                   "tip_velocity": float(v0[0, i] / params.get("tip_gain", 1.0))}
                for i, n in enumerate(names)}
         warn = []
         converged = bool(local["success"])
@@ -255,10 +256,13 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     log0 = res.logs[0]
     T = log0.dt
     q = rig.encoder_quantum
-    sensors = {"motor_angle": {"delay": res.delays["motor_angle"]},
-               "tip_deflection": {"gain": p["tip_gain"], "delay": res.delays["tip_deflection"]}}
+    rigid = "link_frequency" not in p
+    sensors = {"motor_angle": {"delay": res.delays["motor_angle"]}}
+    if not rigid:
+        sensors["tip_deflection"] = {"gain": p["tip_gain"],
+                                     "delay": res.delays["tip_deflection"]}
     for ch, hz in res.settings.get("filters", {}).items():
-        if hz > 0:  # the known analog low-pass, as given to fit()
+        if hz > 0 and ch in sensors:  # the sensor low-pass, given or estimated
             sensors[ch]["bandwidth"] = hz
     if q > 0:
         counts = 2 * math.pi / q
@@ -270,11 +274,12 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     ref = {"type": "step", "offset": float(r[0]),
            "amplitude": float(r[steps[0] + 1] - r[0]) if steps.size else 0.0,
            "start": float((steps[0] + 1) * T) if steps.size else 0.0}
+    beam = ({"model": "rigid", "length": L} if rigid else {
+        "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
+        "damping_ratio": p["link_damping"],
+        "masses": [{"mass": der["tip_mass"], "joint": "pinned"}]})
     d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.bench from bench logs",
-         "arm": {"motor": motor, "friction": fr, "beam": {
-             "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
-             "damping_ratio": p["link_damping"],
-             "masses": [{"mass": der["tip_mass"], "joint": "pinned"}]}},
+         "arm": {"motor": motor, "friction": fr, "beam": beam},
          "sampling": {"period": float(f"{T:.10g}"), "delay": res.settings["computation_delay"]},
          "sensors": sensors, "actuator": {"limit": rig.limit},
          "simulation": {"duration": float(log0.time[-1] - log0.time[0]),
@@ -299,8 +304,9 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
          "sensors.tip_deflection.delay": "samples, fitted",
          "simulation.duration": "s, length of the first log"}
-    c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
-                                 f"J_l = {p['link_inertia']:.5g} kg*m^2")
+    if not rigid:
+        c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
+                                     f"J_l = {p['link_inertia']:.5g} kg*m^2")
     return d, c
 
 
