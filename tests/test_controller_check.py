@@ -112,3 +112,23 @@ def test_check_needs_voltage_and_gains(synthetic_delay1):
                                                if k != "voltage"}))
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'controller': no declared law"):
         check_controller(replace(log, controller=None, gains=None))
+
+
+@needs_data
+def test_cli_fit_checks_the_law_before_fitting(tmp_path):
+    """`flexarm fit --log-format` reads the rig log and stops at the controller check, before
+    any fitting, when the format's K2 has the wrong sign."""
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    by = {p.name: p for p in RIG_FILES}
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text(EXAMPLE.read_text().replace(
+        "gain_columns = { K1 = 8, K2 = 9, K3 = 10, K4 = 11 }",
+        "gain_columns = { K1 = 8, K2 = -9, K3 = 10, K4 = 11 }"))
+    res = CliRunner().invoke(app, ["fit", str(by["Unit7_Flex_trial1.csv"]),
+                                   "--log-format", str(wrong)])
+    out = res.output + (res.stderr if res.stderr_bytes is not None else "")
+    assert res.exit_code != 0
+    assert "K2: declared 1 V/m, regressed -1" in " ".join(out.split())
