@@ -208,16 +208,29 @@ def _filters(items: list[str] | None) -> dict[str, float] | None:
     return out or None
 
 
-def _bench_logs(paths: list[Path], column, unit, controller, max_jitter: float):
-    """Bench logs read with the --column / --unit mappings (SI inside), --controller and
-    --max-jitter."""
+def _bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
+                log_format: Path | None = None, use_regressed: bool = False):
+    """Bench logs read with the --column / --unit mappings (SI inside), --controller,
+    --max-jitter and --log-format; the declared law is checked against each log's command
+    (bench.controller_check) when it has one, and replaced by the regressed law with
+    --use-regressed-law."""
+    from flexarm.bench.controller_check import check_controller
     from flexarm.bench.logs import read_bench_log
 
     if not (max_jitter > 0):
         _fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
     cols, units = _pairs(column, "column") or None, _pairs(unit, "unit") or None
-    return [read_bench_log(p, columns=cols, units=units, controller=controller,
-                           max_jitter=max_jitter) for p in paths]
+    logs = [read_bench_log(p, columns=cols, units=units, controller=controller,
+                           max_jitter=max_jitter, log_format=log_format) for p in paths]
+    out = []
+    for log in logs:
+        if log.gains is None or "voltage" not in log.columns or "motor_angle" not in log.columns:
+            out.append(log)
+            continue
+        chk = check_controller(log, use_regressed=use_regressed)
+        err.print(escape(chk.summary()))
+        out.append(chk.apply(log) if use_regressed else log)
+    return out
 
 
 def _floats(text: str | None, what: str) -> list[float]:
@@ -355,7 +368,13 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
                                "(two starts, about twice the time: when it may be far off)"),
         polish_iter: int = typer.Option(
             8, help="generations of the friction polish (20 with --delay-search both)"),
-        overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
+        overwrite: bool = typer.Option(False, help="replace existing output files"),
+        log_format: Optional[Path] = typer.Option(
+            None, "--log-format", help="the logger's log-format TOML (columns, units, gains)"),
+        use_regressed_law: bool = typer.Option(
+            False, "--use-regressed-law",
+            help="use the law regressed on the logged command where it disagrees with the "
+                 "declared one")) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
     from flexarm.bench import FitInputError
@@ -379,7 +398,8 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
               filters=_filters(filter), delay_search=delay_search, polish_iter=polish_iter)
     try:
-        blogs = _bench_logs(logs, column, unit, controller, max_jitter)
+        blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
+                            use_regressed_law)
         with console.status("fitting") as status:
             res = run_fit(blogs, friction=not no_friction,
                           progress=lambda m: status.update(m), **kw)
@@ -423,7 +443,13 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
                  None, help="unit of a column's numbers: motor_angle=deg"),
              max_jitter: float = typer.Option(
                  1e-3, help="accepted relative deviation of a time step from the median step"),
-             overwrite: bool = typer.Option(False, help="replace an existing JSON file")) -> None:
+             overwrite: bool = typer.Option(False, help="replace an existing JSON file"),
+             log_format: Optional[Path] = typer.Option(
+                 None, "--log-format", help="the logger's log-format TOML (columns, units, gains)"),
+             use_regressed_law: bool = typer.Option(
+                 False, "--use-regressed-law",
+                 help="use the law regressed on the logged command where it disagrees with "
+                      "the declared one")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
     from flexarm.bench import FitInputError
@@ -433,7 +459,8 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         _fail(f"{json_out} exists; pass --overwrite to replace it")
     sc = _load(scenario)
     try:
-        out = run_validate(sc, _bench_logs(logs, column, unit, controller, max_jitter), plots=plots)
+        out = run_validate(sc, _bench_logs(logs, column, unit, controller, max_jitter,
+                                           log_format, use_regressed_law), plots=plots)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")

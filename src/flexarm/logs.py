@@ -15,13 +15,25 @@ reference r), ``current`` (A, motor current i), ``motor_angle`` (rad, θm), ``ti
 (rad, θt).  Optional columns: ``voltage`` (V), ``tip_deflection`` (m), ``motor_velocity``
 (rad/s), ``tip_velocity`` (m/s).  Any other column is kept as read (no unit conversion).
 
+Logs as loggers write them are read too: the delimiter is sniffed on the first data row
+(tab, semicolon, comma, else runs of whitespace), comment lines start with ``#`` or ``%``,
+line ends may be CRLF, a UTF-8 byte-order mark is dropped (non-UTF-8 text is read as
+Latin-1). The header is the first line that is neither blank nor a comment, unless that
+line is all numbers: then the header is the last comment line before the data (e.g.
+``%Time (ms)<TAB>Hub angle ...``), whose fields need not match the data's in number; a
+file without any header is read by column numbers. The time column is kept as written
+(it may start at any clock value; users of the log take ``time - time[0]``).
+
 Files that name or scale columns differently are read with ``columns`` (our name → the
-file's name) and ``units`` (our name → the unit of the file's numbers, parsed by pint),
-e.g. ``read_log(p, columns={"current": "i_m"}, units={"current": "mA"})``.
+file's header text or 1-based column number; a leading ``-`` flips the sign) and
+``units`` (our name → the unit of the file's numbers, parsed by pint), e.g.
+``read_log(p, columns={"current": "i_m", "time": 1}, units={"current": "mA"})``; a
+log-format file (:mod:`flexarm.logformat`) holds these once per logger.
 
 Validation (every message starts with the file's path): missing columns (lists the found
-and the expected names and how to map them), empty / non-numeric / NaN / infinite values
-(column and row), non-increasing or repeated time, non-uniform sampling (relative deviation
+and the expected names and how to map them), rows with another number of fields (a file
+cut mid-line), empty / non-numeric / NaN / infinite values (column, data row and file
+line), non-increasing or repeated time (line and column), non-uniform sampling (relative deviation
 of a step from the median step above ``1e-3``; the worst step is named), too few samples.
 Input files are only ever opened for reading.
 """
@@ -29,7 +41,6 @@ Input files are only ever opened for reading.
 from __future__ import annotations
 
 import csv
-import io
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -106,12 +117,13 @@ class Log:
         return len(self.time)
 
 
-def _unit_factor(path: Path, column: str, unit: str) -> float:
+def _unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,
+                 source: str = "") -> float:
     """Factor from the file's ``unit`` to the SI unit of ``column``."""
-    si = KNOWN.get(column)
+    si = known.get(column)
     if si is None:
         raise LogError(f"{path}: a unit was given for column {column!r}, which flexarm "
-                       f"does not know; known: {', '.join(KNOWN)}")
+                       f"does not know; known: {', '.join(known)}")
     try:
         try:
             q = ureg.Quantity(1.0, unit)
@@ -119,50 +131,202 @@ def _unit_factor(path: Path, column: str, unit: str) -> float:
             q = ureg.parse_expression(unit)
         return float(q.to(si).magnitude)
     except Exception as exc:  # pint raises several exception types
+        where = f" in {source}" if source else ""
         raise LogError(f"{path}: cannot convert column {column!r} from {unit!r} to {si} "
-                       f"({exc})") from None
+                       f"({exc}); give{where} a unit of the same kind as {si}") from None
 
 
-def _parse_header(path: Path, text: str):
-    """Comment lines and header row at the top of ``text``.
+#: Characters that start a comment line (the exchange format writes ``#``; many loggers ``%``).
+COMMENT_CHARS = ("#", "%")
+#: Delimiters tried, in this order, on the first data row: tab, semicolon, comma, then runs
+#: of whitespace (``None``).
+DELIMITERS = ("\t", ";", ",", None)
 
-    Returns (comments, meta, header line, its 0-based line index, offset of the body).
+
+def _decode(path: Path) -> str:
+    """The file's text: UTF-8 (a byte-order mark dropped), else Latin-1 (loggers on Windows
+    write ``°`` or ``µ`` in headers); line ends ``\\r\\n`` and ``\\r`` read as ``\\n``."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read the file ({exc})") from None
+    if b"\x00" in raw:
+        k = raw.index(b"\x00")
+        line = raw[:k].count(b"\n") + 1
+        raise LogError(f"{path}: line {line}: a NUL byte at byte {k}; this is a binary file, "
+                       "not a text log (export the log as text: CSV, tab- or space-separated)")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def _splitter(delimiter: str | None):
+    """Field splitter: ``csv`` for a one-character delimiter (quotes honoured), ``str.split``
+    for whitespace."""
+    if delimiter is None:
+        return str.split
+    return lambda line: next(csv.reader([line], delimiter=delimiter))
+
+
+def _sniff(line: str) -> str | None:
+    """Delimiter of a data row: the first of tab, semicolon, comma found in it, else
+    whitespace."""
+    for d in DELIMITERS[:-1]:
+        if d in line:
+            return d
+    return None
+
+
+def _number(text: str) -> float:
+    """A field as a float; Python's ``float`` but without its ``1_000`` digit grouping."""
+    if "_" in text:
+        raise ValueError(text)
+    return float(text)
+
+
+def _is_numeric_row(fields: list[str]) -> bool:
+    try:
+        for f in fields:
+            _number(f)
+    except ValueError:
+        return False
+    return bool(fields)
+
+
+@dataclass
+class _Layout:
+    """Where things are in a log's text (line numbers 1-based)."""
+
+    comments: list[str]
+    header: list[str] | None       # the header's fields (None: no header)
+    header_line: int | None
+    header_is_comment: bool
+    delimiter: str | None
+    rows: list[tuple[int, list[str]]]  # (file line, fields) of each data row
+
+
+def _layout(path: Path, text: str, delimiter: str | None, comment: Sequence[str],
+            skip_rows: int) -> _Layout:
+    """Comment lines, header, delimiter and data rows of a log.
+
+    The header is the first line that is neither blank nor a comment, unless that line is
+    all numbers: then it is data, and the header is the last comment line before it (its
+    comment character removed), or there is none (columns must then be given by number).
     """
+    lines = text.split("\n")
     comments: list[str] = []
-    meta: dict[str, str] = {}
-    pos, k = 0, 0
-    while pos < len(text):
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end
-        line, pos = text[pos:end], end + 1
-        stripped = line.strip()
-        if stripped.startswith("#"):
-            body = stripped[1:]
-            body = body[1:] if body.startswith(" ") else body
-            comments.append(body.rstrip())
-            if ":" in body:
-                key, _, value = body.partition(":")
-                if key.strip() and " " not in key.strip():
-                    meta[key.strip()] = value.strip()
-        elif stripped:
-            return comments, meta, line, k, pos
+    comment_lines: list[int] = []
+    sniff = delimiter == "auto" or delimiter is None
+    k = skip_rows
+    while k < len(lines):
+        s = lines[k].strip()
+        if s.startswith(tuple(comment)):
+            comments.append(s[1:].removeprefix(" ").rstrip())
+            comment_lines.append(k)
+        elif s:
+            break
         k += 1
-    raise LogError(f"{path}: no header row; expected a line "
-                   f"'{','.join(REQUIRED)}' after any '#' comment lines")
+    else:
+        raise LogError(f"{path}: no header row and no data; expected a line "
+                       f"'{','.join(REQUIRED)}' after any '#' comment lines")
+    first = lines[k]
+    header_is_comment = False
+    if sniff:
+        d = _sniff(first)
+    else:  # one character; a space means runs of whitespace
+        d = None if delimiter == " " else delimiter
+    split = _splitter(d)
+    fields = [f.strip() for f in split(first)]
+    if _is_numeric_row(fields):
+        data_from = k
+        if comments:
+            hl = comment_lines[-1]
+            htext = lines[hl].strip()[1:]
+            header = [f.strip() for f in split(htext)]
+            header_line, header_is_comment = hl + 1, True
+        else:
+            header, header_line = None, None
+    else:
+        header, header_line, data_from = fields, k + 1, k + 1
+        if sniff:  # sniff the delimiter on data, not on a header's free text
+            for j in range(data_from, len(lines)):
+                s = lines[j].strip()
+                if s and not s.startswith(tuple(comment)):
+                    d2 = _sniff(lines[j])
+                    if d2 != d:
+                        d, split = d2, _splitter(d2)
+                        header = [f.strip() for f in split(first)]
+                    break
+    rows = []
+    for j in range(data_from, len(lines)):
+        s = lines[j].strip()
+        if not s or s.startswith(tuple(comment)):
+            continue
+        rows.append((j + 1, [f.strip() for f in split(lines[j])]))
+    return _Layout(comments, header, header_line, header_is_comment, d, rows)
 
 
-def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
+def _norm(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _resolve_column(path: Path, ours: str, spec: object, lay: _Layout, ncol: int,
+                    source: str) -> tuple[int, float]:
+    """(0-based index, sign) of the file column that ``spec`` (header text or 1-based
+    number; a leading ``-`` flips the sign) names for our column ``ours``."""
+    where = f"{source or 'columns'}: column {ours!r} = {spec!r}"
+    have = (f"the file has {ncol} field(s) per data row; header"
+            + (f" (line {lay.header_line}): " + " | ".join(lay.header) if lay.header
+               else ": none (give columns by number, 1 to " f"{ncol})"))
+    if isinstance(spec, bool) or not isinstance(spec, (int, str)):
+        raise LogError(f"{path}: {where}: give the header text or the 1-based column number")
+    if isinstance(spec, str):
+        text = _norm(spec)
+        names = [_norm(h) for h in lay.header or []][:ncol]
+        for cand, sign in ((text, 1.0), (text[1:].strip(), -1.0) if text.startswith("-")
+                           else (None, 1.0)):
+            if cand is not None and cand in names:
+                if names.count(cand) > 1:
+                    raise LogError(f"{path}: {where}: the header names {cand!r} "
+                                   f"{names.count(cand)} times; give the column's number")
+                return names.index(cand), sign
+        try:
+            spec = int(text)
+        except ValueError:
+            raise LogError(f"{path}: {where}: no such column in the file; {have}") from None
+    n = abs(spec)
+    if not 1 <= n <= ncol:
+        raise LogError(f"{path}: {where}: no column {n}; {have}")
+    return n - 1, (-1.0 if spec < 0 else 1.0)
+
+
+def _describe(names: list[str], lay: _Layout, j: int) -> str:
+    """``'time' (file column 1, 'Time (ms)')``."""
+    h = lay.header[j] if lay.header and j < len(lay.header) else None
+    return f"{names[j]!r} (file column {j + 1}" + (f", {h!r})" if h and h != names[j] else ")")
+
+
+def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
              units: Mapping[str, str] | None = None, *,
              min_samples: int = MIN_SAMPLES, max_jitter: float = MAX_JITTER,
-             required: Sequence[str] = tuple(REQUIRED), hint: str = "") -> Log:
+             required: Sequence[str] = tuple(REQUIRED), hint: str = "",
+             delimiter: str | None = None, comment: Sequence[str] = COMMENT_CHARS,
+             skip_rows: int = 0, extra: Mapping[str, str] | None = None,
+             source: str = "") -> Log:
     """Read and validate one experiment log (see the module docstring for the format).
 
     Parameters
     ----------
     path:
-        The CSV file (never modified).
+        The text file (never modified).
     columns:
-        Our column name → the name used in the file, e.g. ``{"current": "i_m"}``.
+        Our column name → the file's column: its header text (``{"current": "i_m"}``) or
+        its 1-based number (``{"time": 1}``, also as text ``"1"``); a leading ``-``
+        (``"-theta"``, ``-2``) flips the column's sign.
     units:
         Our column name → unit of the file's numbers, e.g. ``{"current": "mA"}``;
         columns not named are taken as SI.
@@ -172,138 +336,152 @@ def read_log(path: str | Path, columns: Mapping[str, str] | None = None,
     required, hint:
         The columns this use needs (default: the frequency experiments' five), and a
         sentence saying why, added to the message when one is missing.
+    delimiter, comment, skip_rows:
+        Field delimiter: one character, ``" "`` for runs of whitespace, or ``None`` /
+        ``"auto"`` to sniff it on the first data row (see :data:`DELIMITERS`); the characters that start a comment line, and lines skipped
+        at the top before anything is read.
+    extra:
+        Further column names ``columns`` and ``units`` may use, with their SI units
+        (``{"K1": "V/rad"}``).
+    source:
+        Where ``columns`` / ``units`` came from, for messages (e.g. a format file).
     """
     path = Path(path)
     columns = dict(columns or {})
     units = dict(units or {})
+    known = {**KNOWN, **(extra or {})}
     for ours in list(columns) + list(units):
-        if ours not in KNOWN:
-            raise LogError(f"{path}: {ours!r} is not a column name of the log format; "
-                           f"known: {', '.join(KNOWN)}")
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise LogError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise LogError(f"{path}: cannot read the file ({exc})") from None
-    comments, meta, header_line, h, body_start = _parse_header(path, text)
-    header = [c.strip() for c in next(csv.reader([header_line]))]
+        if ours not in known:
+            raise LogError(f"{path}: {source or 'columns'}: {ours!r} is not a column name of the log "
+                           f"format; known: {', '.join(known)}")
+    text = _decode(path)
+    lay = _layout(path, text, delimiter, comment, skip_rows)
+    comments = lay.comments
+    meta: dict[str, str] = {}
+    for body in comments:
+        key, sep, value = body.partition(":")
+        if sep and key.strip() and " " not in key.strip():
+            meta[key.strip()] = value.strip()
+    plain_header = lay.header is not None and not lay.header_is_comment
+    if plain_header:
+        ncol = len(lay.header)
+    elif lay.rows:
+        counts = np.bincount([len(f) for _, f in lay.rows])
+        ncol = int(np.argmax(counts))
+    else:
+        ncol = 0
 
-    # Map the file's names to ours.
-    file_to_ours = {v: k for k, v in columns.items()}
-    names = [file_to_ours.get(c, c) for c in header]
+    # Our names for the file's columns.
+    index: dict[str, tuple[int, float]] = {}
+    for ours, spec in columns.items():
+        index[ours] = _resolve_column(path, ours, spec, lay, ncol, source)
+    taken: dict[int, str] = {}
+    for ours, (j, _) in index.items():
+        if j in taken:
+            raise LogError(f"{path}: {source or 'columns'}: {taken[j]!r} and {ours!r} both name file "
+                           f"column {j + 1}; each column can be read once")
+        taken[j] = ours
+    use_header = lay.header is not None and len(lay.header) == ncol
+    names = [taken.get(j, _norm(lay.header[j]) if use_header else f"col{j + 1}")
+             for j in range(ncol)]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise LogError(f"{path}: column(s) {', '.join(map(repr, dup))} appear more than once "
-                       f"in the header {header}")
+                       f"in the header {lay.header}")
     missing = [c for c in required if c not in names]
     if missing:
+        found = (", ".join(lay.header) if lay.header else
+                 f"(no header; {ncol} field(s) per data row)")
         lines_msg = [
             f"{path}: missing column(s) {', '.join(map(repr, missing))}." + (f" {hint}" if hint else ""),
-            f"  found:    {', '.join(header) if header else '(none)'}",
+            f"  found:    {found}",
             f"  expected: {', '.join(required)} (optional: "
             f"{', '.join(c for c in KNOWN if c not in required)})",
+            "  if the file names them differently, map them by header text or 1-based "
+            "column number, e.g. " + " ".join(f"--column {c}=NAME" for c in missing)
+            + " (read_log(..., columns={'" + missing[0] + "': 'NAME'}), or a log-format "
+            "file's [columns])",
         ]
-        not_mapped = [c for c in missing if c in columns]
-        if not_mapped:
-            lines_msg.append("  the mapping " + ", ".join(
-                f"{c}={columns[c]}" for c in not_mapped) + " names column(s) not in the file")
-        lines_msg.append(
-            "  if the file names them differently, map them, e.g. "
-            + " ".join(f"--column {c}=NAME" for c in missing)
-            + " (read_log(..., columns={'" + missing[0] + "': 'NAME'}))")
         raise LogError("\n".join(lines_msg))
 
-    data = _parse_numbers(path, text, body_start, h, header, names)
+    data = _parse_numbers(path, lay, ncol, names, plain_header)
     n = data.shape[0]
     if n < min_samples:
         raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} "
                        "needed")
-
-    time = data[:, names.index("time")] * (_unit_factor(path, "time", units["time"])
-                                           if "time" in units else 1.0)
-    _check_time(path, time, h, max_jitter)
+    for ours, (j, sign) in index.items():
+        if sign < 0:
+            data[:, j] = -data[:, j]
+    factors = {name: _unit_factor(path, name, units[name], known, source)
+               for name in units if name in names}
+    tj = names.index("time")
+    time = data[:, tj] * factors.get("time", 1.0)
+    _check_time(path, time, lay, _describe(names, lay, tj), max_jitter)
     signals: dict[str, np.ndarray] = {}
     for j, name in enumerate(names):
         if name == "time":
             continue
         x = data[:, j].copy()
-        if name in units:
-            x *= _unit_factor(path, name, units[name])
+        if name in factors:
+            x *= factors[name]
         signals[name] = x
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 
 
-def _parse_numbers(path: Path, text: str, body_start: int, h: int, header: list[str],
-                   names: list[str]) -> np.ndarray:
-    """Numbers below the header (line ``h``); on any problem, locate it by column and row."""
-    body = text[body_start:]
-    ncol = len(header)
-    try:
-        with np.errstate(all="ignore"):
-            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, comments="#",
-                              dtype=float)
-        ok = data.shape[1] == ncol if data.size else True
-    except ValueError:
-        ok = False
-    if not ok:
-        _locate_parse_error(path, text.splitlines(), h, header, names)
-    if data.size == 0:
-        data = np.zeros((0, ncol))
-    bad = ~np.isfinite(data)
+def _parse_numbers(path: Path, lay: _Layout, ncol: int, names: list[str],
+                   plain_header: bool) -> np.ndarray:
+    """The data rows as an (N, ncol) float array; a row with another number of fields, a
+    field that is not a number, a NaN or an infinity is an error naming line and column."""
+    out = np.empty((len(lay.rows), ncol))
+    for r, (line, fields) in enumerate(lay.rows):
+        if len(fields) != ncol:
+            other = (f"the header (line {lay.header_line}) has {ncol}" if plain_header
+                     else f"most rows have {ncol}")
+            cut = ""
+            if len(fields) < ncol:
+                cut = (f"; column {_describe(names, lay, len(fields))} onwards is missing "
+                       "(is the file cut mid-line?)")
+            shown = f" ({', '.join(lay.header)})" if lay.header else ""
+            raise LogError(f"{path}: data row {r + 1} (line {line}) has {len(fields)} "
+                           f"field(s); {other}{shown}{cut}")
+        try:
+            out[r] = list(map(_number, fields))
+        except ValueError:
+            for j, f in enumerate(fields):
+                try:
+                    _number(f)
+                except ValueError:
+                    shown = repr(f) if f else "an empty field"
+                    raise LogError(f"{path}: column {_describe(names, lay, j)}, data row "
+                                   f"{r + 1} (line {line}): {shown} is not a number") from None
+    bad = ~np.isfinite(out)
     if bad.any():
         r, c = np.argwhere(bad)[0]
-        file_line = _data_line_numbers(text.splitlines(), h)[r]
-        what = "NaN" if math.isnan(data[r, c]) else "infinite"
-        raise LogError(f"{path}: column {names[c]!r} ({header[c]!r} in the file), data row "
-                       f"{r + 1} (line {file_line}): value is {what}; "
-                       f"{int(bad.sum())} non-finite value(s) in all")
-    return data
+        what = "NaN" if math.isnan(out[r, c]) else "infinite"
+        raise LogError(f"{path}: column {_describe(names, lay, c)}, data row {r + 1} (line "
+                       f"{lay.rows[r][0]}): value is {what}; {int(bad.sum())} non-finite "
+                       "value(s) in all")
+    return out
 
 
-def _data_line_numbers(lines: list[str], h: int) -> list[int]:
-    """1-based file line numbers of the data rows (blank and comment lines skipped)."""
-    return [k + 1 for k in range(h + 1, len(lines))
-            if lines[k].strip() and not lines[k].lstrip().startswith("#")]
-
-
-def _locate_parse_error(path, lines, h, header, names):
-    ncol = len(header)
-    row = 0
-    for k in range(h + 1, len(lines)):
-        line = lines[k]
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        row += 1
-        fields = next(csv.reader([line]))
-        if len(fields) != ncol:
-            raise LogError(f"{path}: data row {row} (line {k + 1}) has {len(fields)} "
-                           f"field(s); the header has {ncol} ({', '.join(header)})")
-        for j, f in enumerate(fields):
-            try:
-                float(f)
-            except ValueError:
-                shown = repr(f.strip()) if f.strip() else "an empty field"
-                raise LogError(f"{path}: column {names[j]!r} ({header[j]!r} in the file), "
-                               f"data row {row} (line {k + 1}): {shown} is not a number"
-                               ) from None
-    raise LogError(f"{path}: cannot read the numbers below the header")
-
-
-def _check_time(path: Path, t: np.ndarray, h: int, max_jitter: float) -> None:
+def _check_time(path: Path, t: np.ndarray, lay: _Layout, col: str, max_jitter: float) -> None:
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0))
         kind = "repeats" if d[k] == 0 else "decreases"
-        raise LogError(f"{path}: time {kind} at data row {k + 2}: t = {t[k + 1]:.9g} s after "
-                       f"t = {t[k]:.9g} s; time must increase strictly (duplicated or "
+        raise LogError(f"{path}: time {kind} at data row {k + 2} (line {lay.rows[k + 1][0]}, "
+                       f"column {col}): t = {t[k + 1]:.9g} s after t = {t[k]:.9g} s (line "
+                       f"{lay.rows[k][0]}); time must increase strictly (duplicated or "
                        "unsorted rows?)")
+    if len(d) == 0:
+        return
     med = float(np.median(d))
     rel = np.abs(d - med) / med
     k = int(np.argmax(rel))
     if rel[k] > max_jitter:
         raise LogError(f"{path}: non-uniform sampling: the step from data row {k + 1} to "
-                       f"{k + 2} (t = {t[k]:.9g} s) is {d[k]:.6g} s against a median step of "
+                       f"{k + 2} (lines {lay.rows[k][0]}-{lay.rows[k + 1][0]}, column {col}; "
+                       f"t = {t[k]:.9g} s) is {d[k]:.6g} s against a median step of "
                        f"{med:.6g} s (relative deviation {rel[k]:.3g} > {max_jitter:g}); "
                        "resample the log to a uniform time grid, or, if the controller ran "
                        "at a fixed period and only the time stamps jitter, accept it with "

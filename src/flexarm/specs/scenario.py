@@ -109,8 +109,8 @@ class MultiLinkScenario(Spec):
         return self
 
 
-def _format_errors(err: ValidationError, source: str) -> str:
-    lines = [f"{source}: {err.error_count()} problem(s) in the scenario"]
+def _format_errors(err: ValidationError, source: str, what: str = "scenario") -> str:
+    lines = [f"{source}: {err.error_count()} problem(s) in the {what}"]
     for e in err.errors():
         loc = ".".join(str(p) for p in e["loc"] if not _is_union_tag(p))
         kind = e["type"]

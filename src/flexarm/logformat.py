@@ -1,0 +1,228 @@
+"""Log-format files: how one logger writes its logs, written once per logger (TOML).
+
+A log-format file tells :func:`flexarm.logs.read_log` and
+:func:`flexarm.bench.logs.read_bench_log` which column holds what, in which unit, and which
+control law produced the logged command::
+
+    delimiter = "auto"          # or "tab", "comma", "semicolon", "whitespace", or the character
+    comment = ["#", "%"]        # characters that start a comment line
+    skip_rows = 0               # lines skipped at the top before anything is read
+
+    [columns]                   # flexarm's name = header text, or 1-based column number
+    time = 1                    # a leading "-" (or a negative number) flips the sign:
+    motor_angle = 2             #   tip_deflection = "-tip" or tip_deflection = -3
+    reference = "Position Reference (rad)"
+
+    [units]                     # the unit of the file's numbers (pint); SI when not given
+    time = "ms"
+
+    [controller]
+    kind = "state_feedback"     # u = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ ; or "pd" (KP, KD)
+    gain_columns = {K1 = 8, K2 = 9, K3 = 10, K4 = 11}   # per-sample gains from the log
+    # gains = {K1 = 8, K2 = -8.5, K3 = 1.5, K4 = 1.5}   # or fixed gains (SI or "8 V/rad")
+    rate = "logged"             # the rates the law used: "logged" (the logger's own
+                                #   derivative columns), "backward" difference, "filtered"
+    tau = 0.01                  # s, time constant of the "filtered" rate
+    limit = 5                   # V, the amplifier's saturation
+
+Every gain of the law must be found: in ``gains`` (fixed) or ``gain_columns`` (a column
+per gain: gains that change inside a log are used as logged, piecewise constant); a
+``[controller]`` without either takes the log's ``# controller:`` line. Gains are in SI:
+K1 V/rad, K2 V/m, K3 V·s/rad, K4 V·s/m (KP V/rad, KD V·s/rad).
+
+Problems are :class:`LogFormatError` naming the format file, the field, the value and the
+fix. ``examples/quanser-rotflex.toml`` is a documented example.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
+
+from flexarm.logs import COMMENT_CHARS, KNOWN, LogError
+from flexarm.specs.quantity import Count, Q, Spec
+from flexarm.units import UnitError, to_si, ureg
+
+#: The gains of each law and their SI units.
+GAIN_UNITS: dict[str, dict[str, str]] = {
+    "state_feedback": {"K1": "V/rad", "K2": "V/m", "K3": "V*s/rad", "K4": "V*s/m"},
+    "pd": {"KP": "V/rad", "KD": "V*s/rad"},
+}
+#: Names the ``delimiter`` field accepts for characters.
+DELIMITER_NAMES = {"auto": None, "tab": "\t", "comma": ",", "semicolon": ";",
+                   "whitespace": " ", "space": " "}
+
+
+class LogFormatError(LogError):
+    """A log-format file that cannot be used; the message names the file and the field."""
+
+
+def _column_ref(k: str, v: object) -> int | str:
+    if isinstance(v, bool) or not isinstance(v, (int, str)):
+        raise ValueError(f"{k} = {v!r}: give the header text (a string) or the 1-based column "
+                         "number (an integer; negative flips the sign)")
+    if isinstance(v, int) and v == 0:
+        raise ValueError(f"{k} = 0: column numbers start at 1 (a negative number flips the "
+                         "sign)")
+    if isinstance(v, str) and not v.strip(" -"):
+        raise ValueError(f"{k} = {v!r}: give the column's header text or its number")
+    return v
+
+
+class ControllerFormat(Spec):
+    """``[controller]``: the law that produced the logged command."""
+
+    kind: Literal["state_feedback", "pd"]
+    gains: dict[str, Any] = {}
+    gain_columns: dict[str, int | str] = {}
+    rate: Literal["logged", "backward", "filtered"] = "backward"
+    tau: Q("s", ge=0, what="time constant of the filtered rate") = 0.0
+    limit: Q("V", gt=0, what="the amplifier's saturation") | None = None
+
+    @field_validator("gain_columns")
+    @classmethod
+    def _refs(cls, v: dict) -> dict:
+        return {k: _column_ref(k, x) for k, x in v.items()}
+
+    @model_validator(mode="after")
+    def _complete(self) -> "ControllerFormat":
+        units = GAIN_UNITS[self.kind]
+        for where in ("gains", "gain_columns"):
+            bad = [k for k in getattr(self, where) if k not in units]
+            if bad:
+                raise ValueError(f"{where}: {', '.join(map(repr, bad))} is not a gain of "
+                                 f"{self.kind!r}; its gains are {', '.join(units)}")
+        both = sorted(set(self.gains) & set(self.gain_columns))
+        if both:
+            raise ValueError(f"{', '.join(both)} given both in gains and in gain_columns; "
+                             "keep one")
+        if self.gains or self.gain_columns:
+            missing = [k for k in units if k not in self.gains and k not in self.gain_columns]
+            if missing:
+                raise ValueError(f"gain(s) {', '.join(missing)} of {self.kind!r} not found in "
+                                 "gains or gain_columns; give each (e.g. "
+                                 f"{missing[0]} = 0 in gains if the law has no such term)")
+        for k, v in self.gains.items():
+            try:
+                to_si(v, units[k], field=f"gains.{k}")
+            except UnitError as exc:
+                raise ValueError(str(exc)) from None
+        if self.rate == "filtered" and not self.tau > 0:
+            raise ValueError("rate = 'filtered' needs tau > 0 s (e.g. tau = 0.01)")
+        return self
+
+    def fixed_gains(self) -> dict[str, float]:
+        """The fixed gains in SI, named K1..K4 (a PD's KP, KD as K1, K3)."""
+        units = GAIN_UNITS[self.kind]
+        g = {k: to_si(v, units[k], field=f"gains.{k}") for k, v in self.gains.items()}
+        return _as_state_feedback(g, self.kind)
+
+    def columns(self) -> dict[str, int | str]:
+        """The gain columns, named K1..K4."""
+        return _as_state_feedback(self.gain_columns, self.kind)
+
+
+def _as_state_feedback(d: dict, kind: str) -> dict:
+    if kind == "pd":
+        return {{"KP": "K1", "KD": "K3"}[k]: v for k, v in d.items()}
+    return dict(d)
+
+
+class LogFormat(Spec):
+    """One logger's log format (see the module docstring)."""
+
+    description: str = ""
+    delimiter: str = "auto"
+    comment: list[str] = list(COMMENT_CHARS)
+    skip_rows: Count(what="lines skipped at the top") = 0
+    columns: dict[str, int | str] = {}
+    units: dict[str, str] = {}
+    controller: ControllerFormat | None = None
+    _source: str = PrivateAttr("log format")
+
+    @field_validator("delimiter")
+    @classmethod
+    def _delimiter(cls, v: str) -> str:
+        if v.lower() in DELIMITER_NAMES or len(v) == 1 and v not in "\"'\n\r":
+            return v
+        raise ValueError(f"got {v!r}; give one character or one of "
+                         f"{', '.join(DELIMITER_NAMES)}")
+
+    @field_validator("comment", mode="before")
+    @classmethod
+    def _comment(cls, v: object) -> object:
+        v = [v] if isinstance(v, str) else v
+        if isinstance(v, list) and any(not isinstance(c, str) or len(c) != 1 for c in v):
+            raise ValueError(f"got {v!r}; give single characters, e.g. ['#', '%']")
+        return v
+
+    @field_validator("columns")
+    @classmethod
+    def _columns(cls, v: dict) -> dict:
+        bad = [k for k in v if k not in KNOWN]
+        if bad:
+            raise ValueError(f"{', '.join(map(repr, bad))} is not one of flexarm's column "
+                             f"names; known: {', '.join(KNOWN)} (gain columns go in "
+                             "[controller] gain_columns)")
+        return {k: _column_ref(k, x) for k, x in v.items()}
+
+    @field_validator("units")
+    @classmethod
+    def _units(cls, v: dict) -> dict:
+        for k, u in v.items():
+            si = KNOWN.get(k)
+            if si is None:
+                raise ValueError(f"{k!r} is not one of flexarm's column names; known: "
+                                 f"{', '.join(KNOWN)}")
+            try:
+                ureg.parse_expression(u).to(si)
+            except Exception as exc:  # pint raises several exception types
+                raise ValueError(f"{k} = {u!r} does not convert to {si} ({exc}); give a unit "
+                                 f"of the same kind as {si}, e.g. {k} = "
+                                 f"\"{ {'s': 'ms', 'rad': 'deg', 'm': 'mm', 'V': 'mV'}.get(si, si)}\""
+                                 ) from None
+        return v
+
+    @property
+    def source(self) -> str:
+        """Where the format came from (the file), for messages."""
+        return self._source
+
+    @property
+    def delimiter_char(self) -> str | None:
+        """The delimiter for :func:`flexarm.logs.read_log` (``None``: sniffed, ``" "``: runs
+        of whitespace)."""
+        return DELIMITER_NAMES.get(self.delimiter.lower(), self.delimiter)
+
+
+def log_format_from_dict(data: dict[str, Any], source: str = "log format") -> LogFormat:
+    """Validate a log format given as a dict (as parsed from TOML)."""
+    from flexarm.specs.scenario import _format_errors
+
+    try:
+        fmt = LogFormat.model_validate(data)
+    except ValidationError as err:
+        raise LogFormatError(_format_errors(err, source, "log format")) from None
+    fmt._source = source
+    return fmt
+
+
+def load_log_format(path: str | Path | LogFormat) -> LogFormat:
+    """Read and validate a log-format TOML file (a :class:`LogFormat` is returned as is)."""
+    if isinstance(path, LogFormat):
+        return path
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise LogFormatError(f"{path}: no such log-format file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LogFormatError(f"{path}: cannot read the log-format file ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LogFormatError(f"{path}: not valid TOML: {exc}") from None
+    return log_format_from_dict(data, source=str(path))
