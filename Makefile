@@ -1,19 +1,38 @@
 # Two entry points that work on a fresh machine with only Python >= 3.11:
 #   make demo   set up .venv, run the main job on the built-in default, write out/demo/
 #   make test   set up .venv, run the whole test suite
+# Both install the exact versions of requirements/lock.txt (with hashes), then flexarm
+# itself without dependencies; only pip is needed. `make lock` regenerates the lock from
+# pyproject.toml's ranges (keeping the current pins where they still fit; add
+# LOCK_FLAGS=--upgrade to move every pin to the newest allowed version).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+LOCK   := requirements/lock.txt
+# The lock tool lives in its own throwaway venv, never in .venv; its version is pinned
+# so that two developers regenerating the lock get the same resolver.
+LOCKVENV   := .venv-lock
+UV_VERSION := 0.13.9
+LOCK_FLAGS ?=
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench lock clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "flexarm needs Python >= 3.11, found " + sys.version.split()[0]'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet --require-hashes -r $(LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 	@touch $(STAMP)
+
+# The test and demo environment: Python 3.11 on Linux x86_64, pyproject.toml + [test].
+lock:
+	$(PYTHON) -m venv $(LOCKVENV)
+	$(LOCKVENV)/bin/python -m pip install --quiet 'uv==$(UV_VERSION)'
+	$(LOCKVENV)/bin/uv pip compile pyproject.toml --extra test \
+	    --python-version 3.11 --python-platform x86_64-unknown-linux-gnu \
+	    --generate-hashes --quiet --custom-compile-command 'make lock' $(LOCK_FLAGS) -o $(LOCK)
 
 demo: $(STAMP)
 	$(BIN)/flexarm demo --out out/demo
@@ -25,4 +44,4 @@ bench: $(STAMP)
 	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) $(LOCKVENV) out .pytest_cache

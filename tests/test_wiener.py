@@ -13,6 +13,7 @@ import pytest
 import scipy.integrate
 import scipy.optimize
 import scipy.signal
+import sympy as sp
 
 from flexarm.control.trajectories import parabolic, quasi_parabolic
 from flexarm.control.wiener import (
@@ -123,14 +124,108 @@ def test_closed_forms_nmp():
     u = 1/s²: N = (2s + 1)(s + 2), e = 2/(s + 1), ISE = 2;
     u = 1/(s(s+1)): N = (s + 1)(s + 2), e = 1/(s + 1), ISE = 1/2."""
     num, den = _coeffs(wiener_feedforward(G_NMP, 1 / S**2))
-    np.testing.assert_allclose(num, [2.0, 5.0, 2.0], rtol=1e-10)
-    np.testing.assert_allclose(den, [1.0])
+    # 1e-12: exact integer answer; the method's rounding is a few ε times the condition
+    # of the frequency-scaled Sylvester system (< 1e2 here), i.e. below 1e-13.
+    np.testing.assert_allclose(num, [2.0, 5.0, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(den, [1.0], rtol=1e-12)
+    # u shares the pole −1 with G and with the reflected zero: Q and A both carry
+    # (s + 1), a double root of Q·A that must cancel exactly (it used to cost √ε).
     num, den = _coeffs(wiener_feedforward(G_NMP, 1 / (S * (S + 1))))
-    np.testing.assert_allclose(num, [1.0, 3.0, 2.0], rtol=1e-10)
+    np.testing.assert_allclose(num, [1.0, 3.0, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(den, [1.0], rtol=1e-12)
     assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / S**2), 1 / S**2) == pytest.approx(2.0, rel=1e-6)
     assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / (S * (S + 1))), 1 / (S * (S + 1))) == (
         pytest.approx(0.5, rel=1e-6)
     )
+
+
+# ------------------------------------------- shared and repeated poles, exactly
+SYM_S = sp.symbols("s")
+
+
+def _sym_tf(expr):
+    """control.tf of a sympy rational function with rational coefficients."""
+    num, den = sp.fraction(sp.cancel(sp.together(expr)))
+    return control.tf(
+        [float(c) for c in sp.Poly(num, SYM_S).all_coeffs()],
+        [float(c) for c in sp.Poly(den, SYM_S).all_coeffs()],
+    )
+
+
+def sympy_wiener(g, u):
+    """Eq. (11) in exact rational arithmetic, independently of the module's algorithm:
+    X = B̃_n/B_n · u by sympy's partial fractions (``apart``), [X]_+ = the terms that do
+    not have all their poles in the right half-plane, N = [X]_+ / (G⁺ u) with
+    G⁺ = G B̃_n/B_n. (u without right-half-plane zeros, so u⁺ = u.) Returns N's
+    coefficients with a monic denominator, as floats."""
+    s = SYM_S
+    gn, _ = sp.fraction(sp.cancel(g))
+    zeros = sp.roots(sp.Poly(gn, s))
+    assert sum(zeros.values()) == sp.degree(gn, s)  # every zero found exactly
+    bn = sp.Mul(*[(s - z) ** m for z, m in zeros.items() if sp.re(z) > 0])
+    bnr = sp.Mul(*[(s + z) ** m for z, m in zeros.items() if sp.re(z) > 0])
+    plus = sp.Integer(0)
+    for term in sp.Add.make_args(sp.apart(sp.cancel(bnr / bn * u), s)):
+        poles = sp.roots(sp.Poly(sp.fraction(sp.cancel(term))[1], s))
+        if not (poles and all(sp.re(r) > 0 for r in poles)):
+            plus += term
+    num, den = (sp.Poly(x, s) for x in sp.fraction(sp.cancel(plus / (g * bnr / bn * u))))
+    lc = den.LC()
+    return (np.array([float(c / lc) for c in num.all_coeffs()]),
+            np.array([float(c / lc) for c in den.all_coeffs()]))
+
+
+_s = SYM_S
+_G_NMP_SYM = (1 - _s) / ((_s + 1) * (_s + 2))
+SHARED = [
+    # (plant G, reference u, hand-derived N or None); every u shares a pole with G
+    (_G_NMP_SYM, 1 / (_s * (_s + 1)), (_s + 1) * (_s + 2)),
+    # X = (s+1)/((s−1) s (s+2)): [X]_+ = −(2s+3)/(3 s (s+2)), G⁺ = −1/(s+2)
+    (_G_NMP_SYM, 1 / (_s * (_s + 2)), (2 * _s + 3) * (_s + 2) / 3),
+    # X = 1/(s²(s−1)): [X]_+ = −(s+1)/s², a double root of N at the shared pole
+    (_G_NMP_SYM, 1 / (_s**2 * (_s + 1)), (_s + 1) ** 2 * (_s + 2)),
+    # X = 1/((s−1)(s+1)): [X]_+ = −1/(2(s+1)), u's double pole is G's pole
+    (_G_NMP_SYM, 1 / (_s + 1) ** 2, (_s + 1) * (_s + 2) / 2),
+    # triple plant pole shared with u: X = 1/(s(s−1)), [X]_+ = −1/s, N = (s+1)³
+    ((1 - _s) / (_s + 1) ** 3, 1 / (_s * (_s + 1)), (_s + 1) ** 3),
+    # shared complex pair
+    ((2 - _s) / ((_s**2 + 2 * _s + 2) * (_s + 3)), 1 / (_s * (_s**2 + 2 * _s + 2)), None),
+    # double right-half-plane zero, triple plant pole shared once and twice
+    ((_s - 1) ** 2 / (_s + 2) ** 3, 1 / (_s * (_s + 2)), None),
+    ((_s - 1) ** 2 / (_s + 2) ** 3, 1 / (_s**2 * (_s + 2) ** 2), None),
+    # shared lightly damped pair, and a reference zero on the plant pole −3
+    ((2 - _s) * (_s + 4) / ((_s**2 + sp.Rational(2, 5) * _s + 4) * (_s + 3)),
+     (_s + 3) / (_s * (_s**2 + sp.Rational(2, 5) * _s + 4)), None),
+]
+
+
+@pytest.mark.parametrize("g,u,hand", SHARED, ids=[f"{g}|{u}" for g, u, _ in SHARED])
+def test_shared_and_repeated_poles_exact(g, u, hand):
+    """Reference and plant share poles (some repeated): N agrees with the exact rational
+    computation (and the hand derivation, where given) to 1e-12 of the largest
+    coefficient. The reference is exact; our rounding is a few ε times the Sylvester
+    system's condition (< 1e3 here, measured error ≤ 2e-15): 1e-12 leaves a margin and
+    is four orders below the √ε ≈ 1.5e-8 that re-rooting a repeated root costs."""
+    expect_num, expect_den = sympy_wiener(g, u)
+    if hand is not None:
+        hn, hd = sp.fraction(sp.cancel(hand))
+        hn, hd = sp.Poly(hn, SYM_S), sp.Poly(hd, SYM_S)
+        assert [float(c / hd.LC()) for c in hn.all_coeffs()] == pytest.approx(expect_num, rel=1e-15)
+        assert [float(c / hd.LC()) for c in hd.all_coeffs()] == pytest.approx(expect_den, rel=1e-15)
+    num, den = _coeffs(wiener_feedforward(_sym_tf(g), _sym_tf(u)))
+    assert num.size == expect_num.size and den.size == expect_den.size  # all cancelled
+    scale = np.max(np.abs(expect_num))
+    np.testing.assert_allclose(num, expect_num, rtol=1e-12, atol=1e-12 * scale)
+    np.testing.assert_allclose(den, expect_den, rtol=1e-12, atol=1e-12)
+
+
+def test_cancel_common_roots_repeated_factor():
+    """A double common factor cancels to rounding: (s+1)²(s+3)/((s+1)²(s+2)) → (s+3)/(s+2)
+    exactly (1e-12; a root-by-root match of the √ε-split double roots left 1e-8)."""
+    g = cancel_common_roots((S + 1) ** 2 * (S + 3) / ((S + 1) ** 2 * (S + 2)))
+    num, den = _coeffs(g)
+    np.testing.assert_allclose(num, [1.0, 3.0], rtol=1e-12)
+    np.testing.assert_allclose(den, [1.0, 2.0], rtol=1e-12)
 
 
 def test_optimal_against_numerical_minimisation():
@@ -159,6 +254,7 @@ CASES = [
     # (plant, reference, admissible perturbation direction Δ: keeps ISE finite)
     (G_NMP, 1 / S**2, S**2 / (S + 1) ** 2),
     (G_NMP, 1 / (S * (S + 1)), S / (S + 3)),
+    (G_NMP, 1 / (S**2 * (S + 1)), S**2 / (S + 3) ** 2),  # shared pole, N with a double root
     ((S**2 - 2 * S + 5) / ((S + 1) * (S + 2) * (S + 3)), 1 / S**2, S**2 / (S + 2) ** 3),
     ((S - 1) ** 2 / ((S + 2) ** 3), 1 / S**2, 20 * S**2 / (S + 1) ** 2),
     ((2 - S) * (S + 4) / ((S**2 + 0.4 * S + 4) * (S + 3)), 1 / (S**2 + 2 * S + 2), 1 / (S + 1)),

@@ -198,6 +198,29 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
                      xbar=xbar, tip_shape=shape)
 
 
+def static_coupling(beam: LumpedBeam) -> float:
+    """C_t/(θm − θt) at s = 0 (N*m/rad) of a lumped beam, in closed form.
+
+    In a slow motion the masses follow the rigid acceleration, so the beam carries the
+    inertial loads f = −M x̄ θ̈m: the hub torque is C_t = x̄ᵀ M x̄ θ̈m and the tip lags by
+    θm − θt = −w(ℓ)/ℓ = c_ℓᵀ M x̄ θ̈m / ℓ (c_ℓ: tip deflection per unit generalised force).
+    Hence C(0) = ℓ x̄ᵀ M x̄ / (c_ℓᵀ M x̄); a single tip mass gives 3EI/ℓ (FRB eq. (16)).
+    Equal to the static gain of :meth:`BeamBlock.coupling_tf`, without its 0/0 at s = 0
+    (C_t and θm − θt both vanish there to second order) or the cancellation it needs.
+    """
+    L = beam.length
+    pos, is_slope, mass = [], [], []
+    for m in beam.masses:
+        p = L if m.position is None else m.position
+        pos.append(p), is_slope.append(False), mass.append(m.mass)
+        if m.joint == "clamped" and m.rotary_inertia > 0:
+            pos.append(p), is_slope.append(True), mass.append(m.rotary_inertia)
+    pos, is_slope, mass = np.array(pos), np.array(is_slope), np.array(mass)
+    xbar = np.where(is_slope, 1.0, pos)
+    c_tip = cantilever_flexibility(np.append(pos, L), np.append(is_slope, False), beam.EI)[-1, :-1]
+    return float(L * (xbar * mass) @ xbar / (c_tip @ (mass * xbar)))
+
+
 def transfer_function_block(beam: TransferFunctionBeam) -> BeamBlock:
     """The block of a beam given by G_b(s) and C or H(s) (FRB eqs. 13, 15)."""
     nb, db = np.asarray(beam.tip_num, float), np.asarray(beam.tip_den, float)
