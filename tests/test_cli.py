@@ -333,3 +333,17 @@ def test_plain_ctrl_c_in_fit_exits_130_writing_a_marked_stub(tmp_path, monkeypat
     assert d["status"] == "interrupted" and "parameters" not in d
     r = runner.invoke(app, ["fit", "x.csv"])
     assert r.exit_code == 130 and "nothing written" in said(r)
+
+
+def test_scenario_valid_as_data_but_not_as_a_model_exits_2(tmp_path):
+    """Found by tests/test_properties_scenarios.py: an improper G_b passed the schema and
+    `info` ended in a ValueError traceback from the model layer."""
+    from flexarm.specs import builtin_scenarios
+
+    text = builtin_scenarios()["feliu-single-mass-identified"].read_text()
+    bad = tmp_path / "improper.toml"
+    bad.write_text(text.replace("tip_num = [43.75]", "tip_num = [1.0, 2.0, 3.0, 4.0]"))
+    assert bad.read_text() != text
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2, r.output
+    assert "tip_num" in said(r) and "proper" in said(r)

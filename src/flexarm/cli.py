@@ -39,9 +39,16 @@ def _load(scenario: str):
     from flexarm.specs import ScenarioError, load_scenario
 
     try:
-        return load_scenario(scenario)
+        sc = load_scenario(scenario)
+        if sc.arm.kind == "single_link":  # the model's own checks (a proper, stable G_b, ...)
+            from flexarm.models.single_link import SingleLinkModel
+
+            SingleLinkModel.from_spec(sc.arm)
     except ScenarioError as exc:
         _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"{scenario}: {exc}")
+    return sc
 
 
 def _writable(option: str, path: Path, folder: Path) -> None:
