@@ -198,3 +198,152 @@ def test_fit_and_validate_read_logs_in_other_names_and_units(tmp_path):
     assert r.exit_code == 2 and "delay_search" in said(r) and "both" in said(r)
     r = runner.invoke(app, [*rig_args, "--filter", "strain=50"])
     assert r.exit_code == 2 and "strain" in said(r)            # unknown channel, named
+
+
+# ---------------------------------------------------------------- output paths (issue #12)
+def _no_temp_files(folder) -> bool:
+    """The atomic writer's temporary files start with '.' + the target's name."""
+    return not [p for p in folder.iterdir() if p.name.startswith(".")]
+
+
+def test_simulate_out_an_existing_file_exits_2_and_keeps_the_file(tmp_path):
+    """The issue's report: --out FILE ended in a NotADirectoryError traceback."""
+    f = tmp_path / "result.txt"
+    f.write_text("mine\n")
+    r = runner.invoke(app, ["simulate", "feliu-single-mass", "--out", str(f)])
+    assert r.exit_code == 2, r.output
+    assert "--out" in said(r) and str(f) in said(r) and "is a file, not a folder" in said(r)
+    assert r.exception is None or isinstance(r.exception, SystemExit)
+    assert f.read_text() == "mine\n"
+
+
+def test_out_folder_below_a_file_exits_2(tmp_path):
+    f = tmp_path / "a_file"
+    f.write_text("x")
+    r = runner.invoke(app, ["reproduce", "feliu", "--out", str(f / "sub")])
+    assert r.exit_code == 2, r.output
+    assert "--out" in said(r) and "is a file, so the folder cannot be created" in said(r)
+
+
+def test_json_option_given_a_folder_exits_2(tmp_path):
+    r = runner.invoke(app, ["identify", str(tmp_path / "x.csv"), "--motor-constant", "1",
+                            "--json", str(tmp_path)])
+    assert r.exit_code == 2, r.output
+    assert "--json" in said(r) and "is a folder, not a file" in said(r)
+
+
+def test_json_option_in_a_missing_folder_exits_2(tmp_path):
+    j = tmp_path / "nope" / "f.json"
+    r = runner.invoke(app, ["fit", str(tmp_path / "x.csv"), "--json", str(j)])
+    assert r.exit_code == 2, r.output
+    assert "--json" in said(r) and "does not exist" in said(r) and "mkdir -p" in said(r)
+    assert not (tmp_path / "nope").exists()
+
+
+def test_scenario_out_below_a_file_and_plots_a_file_exit_2(tmp_path):
+    f = tmp_path / "a_file"
+    f.write_text("x")
+    r = runner.invoke(app, ["fit", str(tmp_path / "x.csv"), "--scenario-out", str(f / "arm.toml")])
+    assert r.exit_code == 2 and "--scenario-out" in said(r) and "is a file, not a folder" in said(r)
+    r = runner.invoke(app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"),
+                            "--plots", str(f)])
+    assert r.exit_code == 2 and "--plots" in said(r) and "is a file, not a folder" in said(r)
+
+
+def test_existing_json_is_refused_without_overwrite(tmp_path):
+    j = tmp_path / "v.json"
+    j.write_text("{}")
+    r = runner.invoke(app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"),
+                            "--json", str(j)])
+    assert r.exit_code == 2 and "--json" in said(r) and "--overwrite" in said(r)
+    assert j.read_text() == "{}"
+
+
+def test_unwritable_output_folder_exits_2(tmp_path, monkeypatch):
+    """A folder without write permission.  chmod does not stop root (CI containers), so
+    ``os.access`` is made to report what a non-root user would get for that folder."""
+    import os
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw:
+                        False if os.path.realpath(p) == os.path.realpath(ro) else real(p, mode, **kw))
+    try:
+        r = runner.invoke(app, ["simulate", "feliu-single-mass", "--out", str(ro / "sim")])
+        assert r.exit_code == 2 and "--out" in said(r) and "permission denied" in said(r)
+        r = runner.invoke(app, ["fit", str(tmp_path / "x.csv"), "--json", str(ro / "f.json")])
+        assert r.exit_code == 2 and "--json" in said(r) and "permission denied" in said(r)
+    finally:
+        ro.chmod(0o700)
+
+
+class _FakeFit:
+    """The smallest object with the fit result's JSON method."""
+
+    def to_dict(self):
+        return {"converged": False, "message": "global stage, generation 3",
+                "parameters": {"J": {"value": 1.5e-3}}}
+
+
+def _interrupting_fit(monkeypatch, result):
+    import flexarm.bench
+    import flexarm.cli
+    from flexarm.errors import FitInterrupted
+
+    def fake(*a, **k):
+        if result is KeyboardInterrupt:
+            raise KeyboardInterrupt
+        raise FitInterrupted(result)
+
+    monkeypatch.setattr(flexarm.bench, "fit", fake)
+    monkeypatch.setattr(flexarm.cli, "_bench_logs", lambda *a, **k: [])
+
+
+def test_fit_interrupted_writes_best_result_marked_and_exits_130(tmp_path, monkeypatch):
+    _interrupting_fit(monkeypatch, _FakeFit())
+    j = tmp_path / "f.json"
+    r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
+    assert r.exit_code == 130, r.output
+    assert "fit interrupted" in said(r) and str(j) in said(r)
+    d = json.loads(j.read_text())
+    assert d["interrupted"] is True and d["status"] == "interrupted"
+    assert d["parameters"]["J"]["value"] == 1.5e-3
+    assert _no_temp_files(tmp_path)
+
+
+def test_fit_interrupted_replaces_json_only_with_overwrite(tmp_path, monkeypatch):
+    _interrupting_fit(monkeypatch, _FakeFit())
+    j = tmp_path / "f.json"
+    j.write_text("old")
+    r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
+    assert r.exit_code == 2 and j.read_text() == "old"
+    r = runner.invoke(app, ["fit", "x.csv", "--json", str(j), "--overwrite"])
+    assert r.exit_code == 130 and json.loads(j.read_text())["interrupted"] is True
+
+
+def test_plain_ctrl_c_in_fit_exits_130_writing_a_marked_stub(tmp_path, monkeypatch):
+    """A KeyboardInterrupt that is not (yet) a FitInterrupted: no result, still no traceback."""
+    _interrupting_fit(monkeypatch, KeyboardInterrupt)
+    j = tmp_path / "f.json"
+    r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
+    assert r.exit_code == 130, r.output
+    d = json.loads(j.read_text())
+    assert d["status"] == "interrupted" and "parameters" not in d
+    r = runner.invoke(app, ["fit", "x.csv"])
+    assert r.exit_code == 130 and "nothing written" in said(r)
+
+
+def test_scenario_valid_as_data_but_not_as_a_model_exits_2(tmp_path):
+    """Found by tests/test_properties_scenarios.py: an improper G_b passed the schema and
+    `info` ended in a ValueError traceback from the model layer."""
+    from flexarm.specs import builtin_scenarios
+
+    text = builtin_scenarios()["feliu-single-mass-identified"].read_text()
+    bad = tmp_path / "improper.toml"
+    bad.write_text(text.replace("tip_num = [43.75]", "tip_num = [1.0, 2.0, 3.0, 4.0]"))
+    assert bad.read_text() != text
+    r = runner.invoke(app, ["info", str(bad)])
+    assert r.exit_code == 2, r.output
+    assert "tip_num" in said(r) and "proper" in said(r)

@@ -39,14 +39,69 @@ def _load(scenario: str):
     from flexarm.specs import ScenarioError, load_scenario
 
     try:
-        return load_scenario(scenario)
+        sc = load_scenario(scenario)
+        if sc.arm.kind == "single_link":  # the model's own checks (a proper, stable G_b, ...)
+            from flexarm.models.single_link import SingleLinkModel
+
+            SingleLinkModel.from_spec(sc.arm)
     except ScenarioError as exc:
         _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"{scenario}: {exc}")
+    return sc
 
 
-def _outdir(out: Path, overwrite: bool) -> Path:
+def _writable(option: str, path: Path, folder: Path) -> None:
+    """``folder`` (where ``path`` will be made) must be a writable folder."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        _fail(f"{option} {path}: cannot write into {folder} (permission denied); choose a "
+              "folder you can write to")
+
+
+def _check_dir_option(option: str, path: Optional[Path]) -> None:
+    """An output folder option: refuse, before any work, a path that is an existing file,
+    lies below a file, or cannot be created or written (the folder itself may be missing:
+    it is created with its parents)."""
+    if path is None:
+        return
+    if path.exists() and not path.is_dir():
+        _fail(f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
+              "several files into it), or move the file away")
+    anc = path
+    while not anc.exists():
+        if anc.parent == anc:
+            break
+        anc = anc.parent
+    if not anc.is_dir():
+        _fail(f"{option} {path}: {anc} is a file, so the folder cannot be created there; "
+              "give a path below a folder")
+    _writable(option, path, anc)
+
+
+def _check_file_option(option: str, path: Optional[Path], overwrite: bool,
+                       example: str = "result.json") -> None:
+    """An output file option: refuse, before any work, a folder, an existing file (unless
+    --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
+    if path is None:
+        return
+    if path.is_dir():
+        _fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. "
+              f"{path / example}")
+    if path.exists() and not overwrite:
+        _fail(f"{option} {path}: exists; pass --overwrite to replace it")
+    parent = path.parent
+    if not parent.exists():
+        _fail(f"{option} {path}: the folder {parent} does not exist; create it first "
+              f"(mkdir -p {parent})")
+    if not parent.is_dir():
+        _fail(f"{option} {path}: {parent} is a file, not a folder; give a path in a folder")
+    _writable(option, path, parent)
+
+
+def _outdir(out: Path, overwrite: bool, option: str = "--out") -> Path:
+    _check_dir_option(option, out)
     if out.exists() and any(out.iterdir()) and not overwrite:
-        _fail(f"{out} exists and is not empty; pass --overwrite to write into it")
+        _fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
     out.mkdir(parents=True, exist_ok=True)
     return out
 
@@ -180,6 +235,7 @@ def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder
     _enable_cache()
     from flexarm.analysis.summary import run_demo
 
+    _check_dir_option("--out", out)
     out.mkdir(parents=True, exist_ok=True)
     import importlib.util
 
@@ -258,6 +314,7 @@ def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or b
 
     from flexarm.ident.experiments import SineDesign, run_sine_experiments
 
+    _check_dir_option("--out", out)
     sc = _load(scenario)
     design = SineDesign(frequencies=_floats(frequencies, "--frequencies"), periods=periods,
                         kp=kp, kd=kd)
@@ -297,9 +354,9 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     from flexarm.ident.identify import identify as run_identify
     from flexarm.ident.harmonics import IdentificationError
 
-    for p in (json_out, scenario_out):
-        if p is not None and p.exists() and not overwrite:
-            _fail(f"{p} exists; pass --overwrite to replace it")
+    _check_file_option("--json", json_out, overwrite)
+    _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    _check_dir_option("--plots", plots)
     src = files[0] if len(files) == 1 else files
     mo = tuple(int(x) for x in motor_orders.split(","))
     bo = tuple(int(x) for x in beam_orders.split(","))
@@ -315,13 +372,13 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
         err.print(f"[yellow]warning:[/] {escape(str(w.message))}")
     d = res.to_dict()
     if json_out is not None:
-        res.to_json(json_out)
+        res.to_json(json_out, overwrite=overwrite)
     if plots is not None:
         res.bode_figures(plots)
     if scenario_out is not None:
-        import tomli_w
+        from flexarm.write import write_toml
 
-        scenario_out.write_text(tomli_w.dumps(_scenario_file(res, current_limit)))
+        write_toml(scenario_out, _scenario_file(res, current_limit), overwrite=overwrite)
     cf = d["coulomb_current"]
     console.print(f"Coulomb friction: {cf:.4g} A ({d['coulomb_torque']:.4g} N*m)" if cf is not None
                   else "Coulomb friction: not estimated (no ω0/3ω0 pair)")
@@ -379,10 +436,12 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
     _enable_cache()
     from flexarm.bench import FitInputError
     from flexarm.bench import fit as run_fit
+    from flexarm.errors import FitInterrupted
+    from flexarm.write import write_json
 
-    for p in (json_out, scenario_out):
-        if p is not None and p.exists() and not overwrite:
-            _fail(f"{p} exists; pass --overwrite to replace it")
+    _check_file_option("--json", json_out, overwrite)
+    _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    _check_dir_option("--plots", plots)
     if tip_sign not in (None, 1, -1):
         _fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
     sess = None
@@ -397,18 +456,22 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
               filters=_filters(filter), delay_search=delay_search, polish_iter=polish_iter)
+    res = res0 = None
     try:
         blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
                             use_regressed_law)
         with console.status("fitting") as status:
             res = run_fit(blogs, friction=not no_friction,
                           progress=lambda m: status.update(m), **kw)
-            res0 = None
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
                 res0 = run_fit(blogs, friction=False, **kw)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
+    except FitInterrupted as exc:
+        _fit_interrupted(json_out, overwrite, res, exc.result)
+    except KeyboardInterrupt:
+        _fit_interrupted(json_out, overwrite, res, None)
     console.print(escape(res.summary()))
     if res0 is not None:
         t = Table("log", "signal", "fit % with friction", "fit % without")
@@ -419,12 +482,10 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
                           f"{v0:.1f}" if v0 is not None else "-")
         console.print(t)
     if json_out is not None:
-        res.to_json(json_out)
+        d = res.to_dict()
         if res0 is not None:
-            d = json.loads(json_out.read_text())
-            d["without_friction"] = {"fit_percent": res0.fit_percent, "params": res0.params,
-                                     "message": res0.message}
-            json_out.write_text(json.dumps(d, indent=2))
+            d["without_friction"] = _without_friction(res0)
+        write_json(json_out, d, overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
     if plots is not None:
@@ -455,8 +516,8 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
     from flexarm.bench import FitInputError
     from flexarm.bench import validate as run_validate
 
-    if json_out is not None and json_out.exists() and not overwrite:
-        _fail(f"{json_out} exists; pass --overwrite to replace it")
+    _check_file_option("--json", json_out, overwrite)
+    _check_dir_option("--plots", plots)
     sc = _load(scenario)
     try:
         out = run_validate(sc, _bench_logs(logs, column, unit, controller, max_jitter,
@@ -468,7 +529,41 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
     console.print(t)
     if json_out is not None:
-        json_out.write_text(json.dumps(out, indent=2))
+        from flexarm.write import write_json
+
+        write_json(json_out, out, overwrite=overwrite)
+
+
+def _without_friction(res0) -> dict:
+    return {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
+
+
+def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> None:
+    """Ctrl-C during ``fit``: write the best result so far to --json (atomically), marked
+    ``"interrupted": true, "status": "interrupted"``, say so in one line, exit 130 (the
+    shell's code for SIGINT).  ``res``: the friction fit if it had finished (the
+    interrupted one was then the --compare-no-friction fit), ``best``: the interrupted
+    fit's best result (``None`` if none)."""
+    from flexarm.write import write_json
+
+    mark = {"interrupted": True, "status": "interrupted"}
+    if res is not None:
+        d = res.to_dict()
+        d["without_friction"] = ({**_without_friction(best), **mark} if best is not None
+                                 else dict(mark))
+    elif best is not None:
+        d = best.to_dict()
+    else:
+        d = {"message": "interrupted before any model was evaluated"}
+    d = {**mark, **d, **mark}
+    if json_out is None:
+        err.print("[yellow]fit interrupted[/]: nothing written (no --json given)")
+    else:
+        write_json(json_out, d, overwrite=overwrite)
+        what = "best result so far" if (res is not None or best is not None) else "no result"
+        err.print(f"[yellow]fit interrupted[/]: {what} written to {escape(str(json_out))}, "
+                  "marked \"interrupted\": true", highlight=False)
+    raise typer.Exit(130)
 
 
 def _scenario_file(res, current_limit) -> dict:

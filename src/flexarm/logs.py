@@ -48,7 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
+from flexarm.errors import OutputExistsError
 from flexarm.units import ureg
+from flexarm.write import atomic_open
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -77,7 +79,7 @@ class LogError(ValueError):
     """A log file that cannot be used; the message names the file and the problem."""
 
 
-class LogExistsError(LogError, FileExistsError):
+class LogExistsError(LogError, OutputExistsError):
     """:func:`write_log` refused to replace an existing file (pass ``overwrite=True``)."""
 
 
@@ -499,7 +501,8 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     ``signals`` must hold the required columns other than ``time``; extra columns follow
     in the order given.  ``comments`` are lines written as ``# line`` before the header
     (a mapping is written as ``# key: value``).  An existing file is not replaced unless
-    ``overwrite=True``.
+    ``overwrite=True`` (:class:`LogExistsError`).  Written atomically
+    (:func:`flexarm.write.atomic_open`): the file is complete or absent, never partial.
     """
     path = Path(path)
     t = np.asarray(time, dtype=float)
@@ -519,14 +522,13 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     else:
         comment_lines = list(comments)
     try:
-        f = open(path, "w" if overwrite else "x", newline="")
-    except FileExistsError:
+        with atomic_open(path, "w", overwrite=overwrite, newline="") as f:
+            for c in comment_lines:
+                for line in str(c).splitlines() or [""]:
+                    f.write(f"# {line}\n")
+            f.write(",".join(["time", *order]) + "\n")
+            np.savetxt(f, np.column_stack(cols), delimiter=",", fmt=fmt)
+    except OutputExistsError:
         raise LogExistsError(f"{path}: exists already; not overwritten (pass overwrite=True)"
                              ) from None
-    with f:
-        for c in comment_lines:
-            for line in str(c).splitlines() or [""]:
-                f.write(f"# {line}\n")
-        f.write(",".join(["time", *order]) + "\n")
-        np.savetxt(f, np.column_stack(cols), delimiter=",", fmt=fmt)
     return path

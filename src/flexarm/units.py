@@ -39,7 +39,10 @@ def to_si(value: object, unit: str, *, field: str = "value") -> float:
     if isinstance(value, bool):
         raise UnitError(f"{field}: got {value!r}; expected a number or a quantity in {unit}")
     if isinstance(value, (int, float)):
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # an int beyond float range (Python and tomllib allow them)
+            raise UnitError(f"{field}: got {value!r}, which is not a finite number") from None
     elif isinstance(value, str) and _is_number(value):
         x = float(value)
     elif isinstance(value, str):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ from flexarm.analysis.model_info import single_link_info
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import Scenario, builtin_scenarios, load_scenario
+from flexarm.write import save_figure, write_json
 
 
 def simulate_with_progress(scenario: Scenario, progress: bool = False):
@@ -56,7 +56,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     fig = res.plot_arm()
     fig.suptitle(f"{name}: closed-loop response")
     fig.tight_layout()
-    fig.savefig(out / f"{name}.png", dpi=120)
+    save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
     plt.close(fig)
     ctrl = scenario.controller.measured if scenario.controller else "motor_angle"
     summary = {
@@ -69,7 +69,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
         "command_unit": res.input_names[0],
         "files": [f"{name}.csv", f"{name}.png"],
     }
-    (out / f"{name}.summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / f"{name}.summary.json", summary, overwrite=True)
     return summary
 
 
@@ -124,7 +124,7 @@ def write_regulation(scenario, out: Path) -> dict:
         a.grid(True, alpha=0.3)
     fig.suptitle(f"{name}: law {scenario.regulation.law}")
     fig.tight_layout()
-    fig.savefig(out / f"{name}.png", dpi=120)
+    save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
     plt.close(fig)
     th_err = np.degrees(np.abs(run.theta[-1] - np.asarray(params.theta_d)))
     dd = np.asarray(params.delta_d)
@@ -137,7 +137,7 @@ def write_regulation(scenario, out: Path) -> dict:
         "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
         "files": [path.name, f"{name}.png"],
     }
-    (out / f"{name}.summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / f"{name}.summary.json", summary, overwrite=True)
     return summary
 
 
@@ -151,7 +151,7 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
         sc = load_scenario(path)
         if sc.arm.kind == "single_link":
             info = single_link_info(SingleLinkModel.from_spec(sc.arm))
-            (out / f"{name}.model.json").write_text(json.dumps(info, indent=2))
+            write_json(out / f"{name}.model.json", info, overwrite=True)
         s = write_simulation(sc, out)
         results[name] = s
         if "step_metrics" in s:
@@ -173,6 +173,6 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
     for rname, run in (reproductions or {}).items():
         console.print(f"[bold]reproducing {rname}[/] ...")
         results[f"reproduce_{rname}"] = run(out / rname)
-    (out / "summary.json").write_text(json.dumps(results, indent=2, default=str))
+    write_json(out / "summary.json", results, overwrite=True, default=str)
     console.print(f"wrote {out}/")
     return results

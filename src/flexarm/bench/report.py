@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,6 +12,8 @@ import tomli_w
 
 from flexarm.bench.logs import FitInputError
 from flexarm.bench.params import DOCS, UNITS, derived
+from flexarm.errors import OutputExistsError
+from flexarm.write import save_figure, write_json, write_text
 
 
 def check_physical(params: dict[str, float], source: str = "fit") -> None:
@@ -165,7 +166,7 @@ class FitResult:
 
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
+        write_json(path, self.to_dict(), overwrite=True)
         return path
 
     def summary(self) -> str:
@@ -206,11 +207,12 @@ class FitResult:
     def write_scenario(self, path: str | Path, overwrite: bool = False) -> Path:
         """Write the fitted scenario as commented TOML (SI units); refuses to overwrite."""
         path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        if path.exists() and not overwrite:  # before the work; the writer checks again
+            raise OutputExistsError(f"{path}: exists already; not overwritten "
+                                    "(pass overwrite=True)")
         d, comments = scenario_from_fit(self)
         self.scenario()  # validates
-        path.write_text(toml_with_comments(d, comments, header=[
+        write_text(path, overwrite=overwrite, text=toml_with_comments(d, comments, header=[
             "Fitted by flexarm.bench from " + ", ".join(g.name for g in self.logs),
             self.message,
             "fit %: " + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items()
@@ -373,7 +375,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
         fig.suptitle(f"{g.name} ({tag})")
         fig.tight_layout()
         p = out / f"{Path(g.name).stem}_{tag}.png"
-        fig.savefig(p, dpi=90)
+        save_figure(fig, p, overwrite=True, dpi=90)
         plt.close(fig)
         paths.append(p)
     return paths

@@ -48,6 +48,7 @@ from flexarm.logs import Log, LogError, read_log
 from flexarm.ident.physical import PhysicalFit, fit_physical
 from flexarm.ident.tffit import TFFit, fit_tf, tf_coefficients, tf_response
 from flexarm.units import UnitError, to_si
+from flexarm.write import save_figure, write_text
 
 
 def _cx(z: complex | None) -> dict[str, float] | None:
@@ -212,11 +213,14 @@ class IdentificationResult:
                       "stiffness": "N*m/rad"},
         }
 
-    def to_json(self, path: str | Path | None = None, *, indent: int = 2) -> str:
-        """The :meth:`to_dict` summary as JSON text; also written to ``path`` if given."""
+    def to_json(self, path: str | Path | None = None, *, indent: int = 2,
+                overwrite: bool = True) -> str:
+        """The :meth:`to_dict` summary as JSON text; also written to ``path`` if given
+        (atomically, :func:`flexarm.write.write_text`; an existing file is replaced unless
+        ``overwrite=False``)."""
         text = json.dumps(self.to_dict(), indent=indent)
         if path is not None:
-            Path(path).write_text(text + "\n")
+            write_text(path, text + "\n", overwrite=overwrite)
         return text
 
     def bode_figures(self, out_dir: str | Path, *, dpi: int = 120) -> list[Path]:
@@ -270,14 +274,14 @@ class IdentificationResult:
             ax2.semilogx(wg, np.degrees(np.unwrap(np.angle(h))), "--", color="0.5", lw=1)
             ax1.legend(loc="best", fontsize=8)
         p = out / "motor_bode.png"
-        fig.savefig(p, dpi=dpi)
+        save_figure(fig, p, overwrite=True, dpi=dpi)
         paths.append(p)
 
         fig = Figure(figsize=(7, 6), layout="constrained")
         panel(fig, "Beam G_b = θt/θm", tf_response(self.beam_tf, wg),
               [("experimental data", fr.beam, "x")])
         p = out / "beam_bode.png"
-        fig.savefig(p, dpi=dpi)
+        save_figure(fig, p, overwrite=True, dpi=dpi)
         paths.append(p)
         return paths
 

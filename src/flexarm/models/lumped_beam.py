@@ -165,6 +165,12 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
     dof_pos, dof_slope, dof_mass = np.array(dof_pos), np.array(dof_slope), np.array(dof_mass)
     n = len(dof_pos)
     F = cantilever_flexibility(dof_pos, dof_slope, beam.EI)
+    if not np.all(np.isfinite(F)) or np.linalg.cond(F) > 1e12:
+        # e.g. a length or EI off by many orders of magnitude (a unit slip), F then
+        # under- or overflows; the stiffness K = F⁻¹ would be meaningless
+        raise ValueError(f"arm.beam: length {L:g} m and flexural rigidity {beam.EI:g} N*m**2 "
+                         f"give a singular flexibility matrix (condition number "
+                         f"{np.linalg.cond(F):.3g}); check the values and their units")
     K = np.linalg.inv(F)
     K = 0.5 * (K + K.T)
     M = np.diag(dof_mass)

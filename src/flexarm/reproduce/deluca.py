@@ -47,6 +47,7 @@ from flexarm.sim import continuous
 from flexarm.sim.continuous import ContinuousRun, simulate_continuous
 from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.specs.multilink import benchmark_arm
+from flexarm.write import atomic_open, save_figure, write_text
 
 DEG = math.pi / 180.0
 
@@ -177,7 +178,7 @@ def _fmt(v) -> str:
 
 def _write_table(rows: list[dict], path_csv: Path, path_md: Path, title: str) -> None:
     keys = list(rows[0])
-    with open(path_csv, "w", newline="") as fh:
+    with atomic_open(path_csv, "w", overwrite=True, newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         for r in rows:
@@ -186,7 +187,7 @@ def _write_table(rows: list[dict], path_csv: Path, path_md: Path, title: str) ->
              "|" + "---|" * len(keys)]
     for r in rows:
         lines.append("| " + " | ".join(_fmt(r[k]).replace("|", "\\|") for k in keys) + " |")
-    path_md.write_text("\n".join(lines) + "\n")
+    write_text(path_md, "\n".join(lines) + "\n", overwrite=True)
 
 
 def check_conditions(cond: R.StabilityConditions, where: str = "") -> list[str]:
@@ -303,7 +304,7 @@ def _fig2(run: ContinuousRun, theta_d, delta_d, g_d, path: Path) -> None:
             a.grid(alpha=0.3)
     fig.suptitle("De Luca & Siciliano Fig. 2 on the benchmark arm: PD law (8), "
                  "K_P = diag(18, 18), K_D = diag(10, 2)")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, overwrite=True, dpi=110)
 
 
 def _fig_laws(runs: dict, theta_d, path: Path) -> None:
@@ -325,7 +326,7 @@ def _fig_laws(runs: dict, theta_d, path: Path) -> None:
             a.grid(alpha=0.3)
     fig.suptitle("Law (8) (constant gravity compensation) against law (30): "
                  "(30a) g_θ(θ, δ), (30b) g_θ(θ, δ̄(θ))")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, overwrite=True, dpi=110)
 
 
 def _fig_sweep(sweep_runs: dict, remedy_runs: dict, theta_d, path: Path) -> None:
@@ -351,7 +352,7 @@ def _fig_sweep(sweep_runs: dict, remedy_runs: dict, theta_d, path: Path) -> None
         a.legend(fontsize=8)
     ax[0, 0].set_title("gain sweep (step to θ_d)")
     ax[1, 0].set_title("large gains: step against an interpolating trajectory")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, overwrite=True, dpi=110)
 
 
 # --------------------------------------------------------------------------- the run

@@ -54,6 +54,7 @@ from flexarm.sim.build import Prepared, prepare, to_result
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
+from flexarm.write import atomic_open, save_figure, write_text
 
 __all__ = ["FeliuChoices", "run", "CHOICES"]
 
@@ -204,7 +205,7 @@ def _figure(res: SimulationResult, title: str, path: Path, signals, *, xmax=None
         fig.axes[0].set_xlim(0, xmax)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, overwrite=True, dpi=110)
     plt.close(fig)
     return path
 
@@ -228,7 +229,7 @@ def _fmt(v) -> str:
 def _write_table(rows: list, out: Path) -> tuple[Path, Path]:
     cols = ["key", "quantity", "unit", "paper", "ours", "ratio", "note"]
     csv_path = out / "feliu_table.csv"
-    with csv_path.open("w", newline="") as f:
+    with atomic_open(csv_path, "w", overwrite=True, newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
         for r in rows:
@@ -242,7 +243,7 @@ def _write_table(rows: list, out: Path) -> tuple[Path, Path]:
     for r in rows:
         lines.append(f"| {cell(r['quantity'])} | {r['unit']} | {_fmt(r['paper'])} | "
                      f"{_fmt(r['ours'])} | {_fmt(r['ratio'])} | {cell(r['note'])} |")
-    md_path.write_text("\n".join(lines) + "\n")
+    write_text(md_path, "\n".join(lines) + "\n", overwrite=True)
     return csv_path, md_path
 
 

@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from flexarm.specs.quantity import Q, Spec
+from flexarm.specs.quantity import Coefficients, Q, Spec
 
 
 class CurrentMotor(Spec):
@@ -144,10 +144,10 @@ class TransferFunctionBeam(Spec):
 
     model: Literal["transfer_function"]
     stiffness: Q("N*m/rad", gt=0, what="coupling stiffness C") | None = None
-    tip_num: list[float] = Field(min_length=1)
-    tip_den: list[float] = Field(min_length=2)
-    coupling_num: list[float] | None = None
-    coupling_den: list[float] | None = None
+    tip_num: Coefficients()
+    tip_den: Coefficients(min_length=2, denominator=True)
+    coupling_num: Coefficients() | None = None
+    coupling_den: Coefficients(denominator=True) | None = None
     length: Q("m", gt=0) | None = None
 
     @model_validator(mode="after")

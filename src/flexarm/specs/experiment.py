@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, FiniteFloat, field_validator
 
 from flexarm.specs.controllers_bench import StateFeedbackController
-from flexarm.specs.quantity import Count, Q, Spec
+from flexarm.specs.quantity import Coefficients, Count, Q, Spec
 
 
 class Sampling(Spec):
@@ -113,8 +113,8 @@ class LeadController(Spec):
 
     type: Literal["lead"]
     gain: Q("")
-    zero: float
-    pole: float
+    zero: FiniteFloat
+    pole: FiniteFloat
     measured: str = "motor_angle"
 
 
@@ -122,8 +122,8 @@ class TFController(Spec):
     """u = C(z)·e with C(z) = num/den in descending powers of z, at the sampling period."""
 
     type: Literal["tf"]
-    num: list[float] = Field(min_length=1)
-    den: list[float] = Field(min_length=1)
+    num: Coefficients()
+    den: Coefficients(denominator=True)
     measured: str = "motor_angle"
 
 

@@ -7,10 +7,12 @@ and says which value and unit were wrong.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, PlainSerializer
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, FiniteFloat,
+                      PlainSerializer)
 
 from flexarm.units import UnitError, to_si
 
@@ -57,7 +59,8 @@ def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
     """A non-negative integer field (bits, samples, substeps)."""
 
     def convert(v: object) -> int:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or int(v) != v:
+        if (isinstance(v, bool) or not isinstance(v, (int, float))
+                or (isinstance(v, float) and not math.isfinite(v)) or int(v) != v):
             raise ValueError(f"got {v!r}; expected a whole number")
         n = int(v)
         why = f" ({what})" if what else ""
@@ -68,3 +71,18 @@ def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
 
     return Annotated[int, BeforeValidator(convert),
                      Unit("count", f">= {ge}" + (f", <= {le}" if le is not None else ""), what)]
+
+
+def _leading_nonzero(c: list[float]) -> list[float]:
+    if c and c[0] == 0.0:
+        raise ValueError(f"got {c!r}: the leading coefficient (highest power) is 0; drop "
+                         "leading zeros (coefficients in descending powers)")
+    return c
+
+
+def Coefficients(*, min_length: int = 1, denominator: bool = False) -> Any:
+    """Polynomial coefficients in descending powers: finite numbers; for a denominator,
+    a non-zero leading coefficient.  (TOML and Python accept ``nan`` and ``inf``, which a
+    bare ``list[float]`` field lets through to break the model later.)"""
+    t = Annotated[list[FiniteFloat], Field(min_length=min_length)]
+    return Annotated[t, AfterValidator(_leading_nonzero)] if denominator else t

@@ -179,8 +179,17 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
 def load_scenario(name_or_path: str | Path) -> Scenario | MultiLinkScenario:
     """Read and validate a scenario TOML file (or a built-in scenario by name)."""
     path = resolve_scenario_path(name_or_path)
+    if path.is_dir():
+        raise ScenarioError(f"{path}: is a folder; give a scenario TOML file or a built-in "
+                            "name (flexarm scenarios lists them)")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path}: not a text file in UTF-8 (byte {exc.start}: "
+                            f"{exc.object[exc.start:exc.start + 1]!r}); a scenario is a TOML "
+                            "text file") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
     return scenario_from_dict(data, source=str(path))
