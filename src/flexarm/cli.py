@@ -264,6 +264,20 @@ def _filters(items: list[str] | None) -> dict[str, float] | None:
     return out or None
 
 
+def _window(text: str | None, option: str) -> tuple[float, float] | None:
+    """``START:STOP`` (s from a log's first sample) → (start, stop)."""
+    if not text:
+        return None
+    try:
+        a, b = (float(x) for x in text.split(":"))
+    except ValueError:
+        _fail(f"{option} {text!r}: expected START:STOP in seconds from the log's first "
+              "sample, e.g. 0:5")
+    if not (b > a >= 0):
+        _fail(f"{option} {text!r}: need 0 <= START < STOP (s)")
+    return a, b
+
+
 def _bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
                 log_format: Path | None = None, use_regressed: bool = False):
     """Bench logs read with the --column / --unit mappings (SI inside), --controller,
@@ -431,7 +445,15 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         use_regressed_law: bool = typer.Option(
             False, "--use-regressed-law",
             help="use the law regressed on the logged command where it disagrees with the "
-                 "declared one")) -> None:
+                 "declared one"),
+        window: Optional[str] = typer.Option(
+            None, help="fit on this part of every log only, START:STOP in s from its first "
+                       "sample, e.g. 0:5"),
+        validate_window: Optional[str] = typer.Option(
+            None, "--validate-window",
+            help="then predict this held-out part of every log (START:STOP, s; each "
+                 "part's initial state estimated from its own data) and report its fit %")
+        ) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
     from flexarm.bench import FitInputError
@@ -456,16 +478,24 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
               voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
               filters=_filters(filter), delay_search=delay_search, polish_iter=polish_iter)
-    res = res0 = None
+    res = res0 = held = None
+    win, vwin = _window(window, "--window"), _window(validate_window, "--validate-window")
     try:
-        blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
-                            use_regressed_law)
+        full = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
+                           use_regressed_law)
+        blogs = [g.window(*win) for g in full] if win else full
+        held_logs = [g.window(*vwin) for g in full] if vwin else []
         with console.status("fitting") as status:
             res = run_fit(blogs, friction=not no_friction,
                           progress=lambda m: status.update(m), **kw)
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
                 res0 = run_fit(blogs, friction=False, **kw)
+            if held_logs:
+                from flexarm.bench import predict
+
+                status.update("predicting the held-out windows")
+                held = predict(res, held_logs)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     except FitInterrupted as exc:
@@ -481,15 +511,32 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
                 t.add_row(name, sig, f"{v:.1f}" if v is not None else "-",
                           f"{v0:.1f}" if v0 is not None else "-")
         console.print(t)
+    if held is not None:
+        t = Table("held-out log " + (validate_window or ""), "motor_angle fit %",
+                  "tip_deflection fit %")
+        for name, d in held["fit_percent"].items():
+            t.add_row(name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-"
+                              for k in ("motor_angle", "tip_deflection")))
+        console.print(t)
     if json_out is not None:
         d = res.to_dict()
         if res0 is not None:
             d["without_friction"] = _without_friction(res0)
+        if win:
+            d["window_s"] = list(win)
+        if held is not None:
+            d["held_out"] = {"window_s": list(vwin), "fit_percent": held["fit_percent"],
+                             "diverged": held["diverged"],
+                             "initial_state": "estimated from each window's own data"}
         write_json(json_out, d, overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
     if plots is not None:
         res.plots(plots)
+        if held is not None:
+            from flexarm.bench.report import overlay_plots
+
+            overlay_plots(plots, held["logs"], held["traj"], held["fit_percent"], "held-out")
 
 
 @app.command()
@@ -510,7 +557,10 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
              use_regressed_law: bool = typer.Option(
                  False, "--use-regressed-law",
                  help="use the law regressed on the logged command where it disagrees with "
-                      "the declared one")) -> None:
+                      "the declared one"),
+             window: Optional[str] = typer.Option(
+                 None, help="replay this part of every log only, START:STOP in s from its "
+                            "first sample, e.g. 5:10")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
     from flexarm.bench import FitInputError
@@ -520,8 +570,11 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
     _check_dir_option("--plots", plots)
     sc = _load(scenario)
     try:
-        out = run_validate(sc, _bench_logs(logs, column, unit, controller, max_jitter,
-                                           log_format, use_regressed_law), plots=plots)
+        win = _window(window, "--window")
+        blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
+                            use_regressed_law)
+        out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs,
+                           plots=plots)
     except (FitInputError, ValueError) as exc:
         _fail(str(exc))
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")

@@ -631,7 +631,8 @@ def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = 
     space = result.space
     obj = Objective(blogs, result.rig, space, [0] * len(blogs), mode=st["mode"],
                     substeps=st["substeps"], comp_delay=st["computation_delay"],
-                    wc_guess=float(result.params["link_frequency"]), filters=st["filters"])
+                    wc_guess=float(result.params.get("link_frequency", 10.0)),
+                    filters=st["filters"])
     U, D = result.unit, result.discrete
     off = np.zeros((len(blogs), 4))
     if estimate_initial:
