@@ -89,8 +89,21 @@ def test_motor_bench_example_format():
     if not (DATA / "MultisineTypeB.mat").is_file():
         pytest.skip(f"real recording absent: {DATA} (the shared data folder beside the repo)")
     cols, units = load_format(EXAMPLE)
-    r = read_mat(DATA / "MultisineTypeB.mat", cols, units)
+    with pytest.warns(UserWarning, match="irregular trailing row"):
+        r = read_mat(DATA / "MultisineTypeB.mat", cols, units)
     raw = sio.loadmat(DATA / "MultisineTypeB.mat")
-    assert len(r) == 50000 and r.skipped  # the tf object is skipped, not fatal
+    assert len(r) == 49999 and r.skipped  # the tf object is skipped, not fatal
     np.testing.assert_allclose(np.diff(r.time), 4e-4, rtol=1e-9)  # 2.5 kHz, µs → s
-    np.testing.assert_array_equal(r["load_angle"], -raw["theta_my"].ravel())
+    np.testing.assert_array_equal(r["load_angle"], -raw["theta_my"].ravel()[:-1])
+
+
+def test_irregular_trailing_row_dropped_with_warning(tmp_path):
+    p = tmp_path / "c.mat"
+    sio.savemat(p, {"msr": np.r_[2:12, 11][:, None], "x": np.arange(11.0)[:, None]})
+    with pytest.warns(UserWarning, match="1 irregular trailing row"):
+        r = read_mat(p, {"sample_counter": "msr", "current": "x"})
+    np.testing.assert_array_equal(r["current"], np.arange(10.0))
+    assert "sample_counter" not in r.signals
+    sio.savemat(p, {"msr": np.r_[2:6, 8:15][:, None], "x": np.arange(11.0)[:, None]})
+    with pytest.raises(MatFileError, match="jumps at row 4"):
+        read_mat(p, {"sample_counter": "msr", "current": "x"})

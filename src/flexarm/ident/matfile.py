@@ -13,6 +13,9 @@ Units (``{flexarm name: unit}``, pint text such as ``"us"``, ``"mA"``, ``"deg"``
 SI through the project's one registry (``flexarm.units``): the factor of the known columns
 comes from :mod:`flexarm.logs`; other names go to pint base units (rad, s, A, ...).
 
+A logger's sample counter mapped as ``sample_counter`` drops irregular trailing rows (the
+counter stops advancing; a warning names them); a jump anywhere else is an error.
+
 Version 5 files are read by ``scipy.io.loadmat``; version 7.3 (HDF5) files by ``h5py``
 (imported only then; HDF5 stores MATLAB arrays transposed, which is undone). Objects scipy
 cannot decode (a ``tf`` object saved with the data, MATLAB's ``MatlabOpaque``) are skipped,
@@ -27,6 +30,7 @@ without ``signals.values``, a column out of range, non-numeric data, NaN / infin
 from __future__ import annotations
 
 import re
+import warnings
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -38,6 +42,14 @@ from flexarm.logs import KNOWN, LogError, _unit_factor
 from flexarm.units import ureg
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
+
+
+#: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not returned.
+COUNTER = "sample_counter"
+
+
+class MatFileWarning(UserWarning):
+    """Something in a recording was dropped (e.g. an irregular last row)."""
 
 
 class MatFileError(LogError):
@@ -71,6 +83,7 @@ class MatRecording:
     signals: dict[str, np.ndarray]
     time: np.ndarray | None = None
     skipped: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "time" and self.time is not None:
@@ -270,9 +283,36 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
         raise MatFileError(f"{path}: channels of different lengths: "
                            + ", ".join(f"{k} {n}" for k, n in lengths.items())
                            + "; map channels recorded together")
+    notes: list[str] = []
+    if COUNTER in sig:
+        _check_counter(path, sig, notes)
     t = sig.pop("time", None)
     skipped = [k for k, v in variables.items() if isinstance(v, _Opaque)]
-    return MatRecording(path, sig, t, skipped)
+    return MatRecording(path, sig, t, skipped, notes)
+
+
+def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> None:
+    """Drop trailing rows where the logger's sample counter stops advancing by one step
+    (an irregular last row); an irregular row anywhere else is an error."""
+    c = sig.pop(COUNTER)
+    step = np.diff(c)
+    good = np.median(step) if len(step) else 1.0
+    bad = np.nonzero(step != good)[0]
+    if not len(bad):
+        return
+    first = int(bad[0]) + 1  # first irregular row
+    if np.all(step[first - 1:] != good) or first >= len(c) - 1:
+        n = len(c) - first
+        msg = (f"{path}: the sample counter stops advancing at row {first} (of {len(c)}): "
+               f"{n} irregular trailing row(s) dropped")
+        warnings.warn(msg, MatFileWarning, stacklevel=3)
+        notes.append(msg)
+        for k in sig:
+            sig[k] = sig[k][:first]
+        return
+    raise MatFileError(f"{path}: [columns] {COUNTER}: the sample counter jumps at row {first} "
+                       f"(step {step[first - 1]:g}, expected {good:g}): samples were lost; "
+                       "cut the recording there")
 
 
 def load_format(path: str | Path) -> tuple[dict[str, str], dict[str, str]]:
