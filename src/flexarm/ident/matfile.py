@@ -331,3 +331,25 @@ def load_format(path: str | Path) -> tuple[dict[str, str], dict[str, str]]:
             if not isinstance(v, str):
                 raise MatFileError(f"{path}: [{tab}] {k} = {v!r}: expected a string")
     return dict(cols), dict(units)
+
+
+def read_recording(path: str | Path, log_format: str | Path | None = None
+                   ) -> tuple[dict[str, np.ndarray], float]:
+    """Signals (flexarm name → SI samples) and the sampling rate (Hz) of a ``.mat`` or CSV
+    recording, mapped by a log-format file's ``[columns]`` / ``[units]``."""
+    path = Path(path)
+    cols, units = load_format(log_format) if log_format is not None else ({}, {})
+    if path.suffix.lower() == ".mat":
+        if not cols:
+            raise MatFileError(f"{path}: a .mat recording needs --log-format with a [columns] table")
+        rec = read_mat(path, cols, units)
+        if rec.time is None:
+            raise MatFileError(f"{path}: map the time in [columns] (e.g. time = \"t\")")
+        sig, t = rec.signals, rec.time
+    else:
+        from flexarm.logs import read_log
+        log = read_log(path, cols or None, units or None, required=("time",))
+        sig, t = log.signals, log.time
+    dt = float(np.median(np.diff(t)))
+    fs = float(f"{1 / dt:.9g}")  # the logger's clock, rounded off its float noise
+    return sig, fs

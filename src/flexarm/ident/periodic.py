@@ -86,6 +86,30 @@ class PeriodicFRF:
     spectra: dict = field(repr=False, default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
+    def to_json(self) -> dict:
+        """``frequency_hz`` and ``outputs.<name>``: ``re``, ``im``, ``noise_std`` (std of the
+        FRF estimate per line) and, with detection lines, ``total_std`` and ``distortion``
+        (``band_hz``, ``odd_db``, ``even_db``, ``noise_db`` per band, dB re the output at the
+        excited lines)."""
+        out = {}
+        for j, name in enumerate(self.outputs):
+            d = {"re": self.response[j].real.tolist(), "im": self.response[j].imag.tolist(),
+                 "noise_std": self.noise_std[j].tolist()}
+            if self.total_std is not None:
+                d["total_std"] = self.total_std[j].tolist()
+            if self.distortion is not None:
+                bands = self.distortion[name]
+                nan = lambda v: None if not math.isfinite(v) else float(v)  # noqa: E731
+                d["distortion"] = {"band_hz": [list(map(float, b.band_hz)) for b in bands],
+                                   "odd_db": [nan(b.odd_db) for b in bands],
+                                   "even_db": [nan(b.even_db) for b in bands],
+                                   "noise_db": [nan(b.noise_db) for b in bands]}
+            out[name] = d
+        return {"input": self.input, "frequency_hz": self.frequency_hz.tolist(),
+                "lines": self.lines.tolist(), "period_samples": self.period, "fs_hz": self.fs,
+                "periods_used": self.periods_used, "transient_periods": self.transient_periods,
+                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings}
+
     def verdict(self) -> str:
         """A plain sentence per output about the nonlinear distortion."""
         if self.distortion is None:
