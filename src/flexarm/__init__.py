@@ -7,7 +7,7 @@ The public face (everything else lives in the sub-packages, named after what the
 * simulation: :func:`simulate` (sampled-data closed loop), :class:`SimulationResult`
 * control: :func:`wiener_feedforward` (FRB eq. 11), trajectories, discrete controllers
 * identification: :func:`identify` (FRB Sec. II), :func:`fit` and :func:`validate`
-  (time-domain fit of bench logs)
+  (time-domain fit of bench logs), :func:`tfest` (frequency-domain transfer-function fit)
 """
 
 import jax as _jax
@@ -18,6 +18,7 @@ from flexarm.bench import fit, validate  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
 from flexarm.ident.identify import identify  # noqa: E402
+from flexarm.ident.tfest import tfest  # noqa: E402
 from flexarm.models.multilink import build_multilink  # noqa: E402
 from flexarm.models.single_link import SingleLinkModel  # noqa: E402
 from flexarm.sim.build import simulate  # noqa: E402
@@ -27,7 +28,7 @@ from flexarm.specs import Scenario, builtin_scenarios, load_scenario  # noqa: E4
 __version__ = "0.1.0"
 
 __all__ = [
-    "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink", "builtin_scenarios",
+    "tfest", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink", "builtin_scenarios",
     "fit", "identify", "load_scenario", "parabolic", "quasi_parabolic", "simulate",
     "validate", "wiener_feedforward",
 ]

@@ -633,3 +633,156 @@ def _scenario_file(res, current_limit) -> dict:
 
 def main() -> None:  # pragma: no cover
     app()
+
+
+# --- frequency-domain identification (issue #16): excite, frf, tfest -----------------
+
+@app.command()
+def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a generator plays)"),
+           fs: float = typer.Option(..., "--fs", help="sampling rate, Hz"),
+           period: int = typer.Option(..., "--period", help="samples per period"),
+           f_min: float = typer.Option(..., "--f-min", help="lowest line, Hz"),
+           f_max: float = typer.Option(..., "--f-max", help="highest line, Hz"),
+           kind: str = typer.Option("random-odd", help="full | odd | random-odd | prbs | sweep"),
+           grid: str = typer.Option("linear", help="linear | log"),
+           phases: str = typer.Option("random", help="schroeder | random | min-crest"),
+           rms: float = typer.Option(1.0, help="rms of the signal (multisine)"),
+           periods: int = typer.Option(2, help="periods to play"),
+           realisations: int = typer.Option(1, help="realisations (new random phases)"),
+           seed: int = typer.Option(0),
+           overwrite: bool = typer.Option(False, help="replace existing files")) -> None:
+    """Design an excitation: writes OUT and OUT-lines.csv (excited and detection lines)."""
+    import numpy as np
+
+    from flexarm.ident import excitation as ex
+    try:
+        if kind == "sweep":
+            e = ex.swept_sine(period, fs, f_min, f_max, amplitude=rms * np.sqrt(2), periods=periods)
+        else:
+            e = ex.multisine(period, fs, f_min, f_max, kind=kind, grid=grid, phases=phases,
+                             rms=rms, periods=periods, realisations=realisations, seed=seed)
+        log, lines = ex.write_excitation(out, e, overwrite=overwrite)
+    except (ValueError, FileExistsError) as exc:
+        _fail(str(exc))
+    console.print(f"{log}: {e.signal.shape[1]} samples × {e.signal.shape[0]} realisation(s), "
+                  f"{len(e.excited)} excited and {len(e.detection)} detection lines, crest "
+                  f"factor {e.crest_factor:.3f}; lines in {lines}")
+
+
+@app.command()
+def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.mat or CSV)"),
+        log_format: Optional[Path] = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
+        input: str = typer.Option("current", "--input", help="flexarm name of the input"),
+        output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
+        period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
+        lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
+        json_out: Path = typer.Option(..., "--json", help="JSON result"),
+        plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
+    """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
+    import warnings as _w
+
+    from flexarm.ident.harmonics import IdentificationError
+    from flexarm.ident.matfile import read_recording
+    from flexarm.ident.periodic import periodic_frf, plot_distortion
+    from flexarm.logs import LogError
+    if len(logs) != 1:
+        _fail(f"frf reads one recording per call for now; got {len(logs)}")
+    try:
+        with _w.catch_warnings(record=True) as caught:
+            _w.simplefilter("always")
+            sig, fs = read_recording(logs[0], log_format)
+            names = [n.strip() for n in output.split(",") if n.strip()]
+            for n in [input] + names:
+                if n not in sig:
+                    _fail(f"{logs[0]}: no signal {n!r}; mapped: {', '.join(sig)}")
+            ex_lines = None
+            if lines != "auto":
+                txt = Path(lines).read_text().splitlines()[1:]
+                ex_lines = [int(r.split(",")[0]) for r in txt if r.strip().endswith("excited")]
+            res = periodic_frf(sig[input], {n: sig[n] for n in names}, fs,
+                               period=None if period == "auto" else int(period), lines=ex_lines,
+                               input_name=input, source=str(logs[0]))
+        for c in caught:
+            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+    except (IdentificationError, LogError, OSError, ValueError) as exc:
+        _fail(str(exc))
+    data = {"source": str(logs[0]), **res.to_json()}
+    json_out.write_text(json.dumps(data, indent=2))
+    if plots is not None:
+        plots.mkdir(parents=True, exist_ok=True)
+        plot_distortion(res, plots / "frf-distortion.png")
+    console.print(f"{len(res.lines)} excited lines {res.frequency_hz[0]:g}–{res.frequency_hz[-1]:g} Hz, "
+                  f"period {res.period} samples, {res.periods_used} periods used "
+                  f"({res.transient_periods} transient); {res.verdict()}")
+
+
+@app.command()
+def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
+          poles: Optional[int] = typer.Option(None, "--poles"),
+          zeros: Optional[int] = typer.Option(None, "--zeros"),
+          integrators: int = typer.Option(0, "--integrators"),
+          delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
+          structure: Optional[str] = typer.Option(None, "--structure", help="two-mass"),
+          output: Optional[str] = typer.Option(None, "--output", help="output to fit (rational model)"),
+          json_out: Path = typer.Option(..., "--json", help="JSON result"),
+          plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
+    """Fit a transfer function or the two-mass structure to an FRF (weighted by its variances)."""
+    import control as ct
+    import numpy as np
+
+    from flexarm.ident.tfest import TFEstError, fit_two_mass
+    from flexarm.ident.tfest import tfest as _tfest
+    try:
+        d = json.loads(frf_json.read_text())
+        f = np.asarray(d["frequency_hz"], float)
+        outs = d["outputs"]
+    except (OSError, ValueError, KeyError) as exc:
+        _fail(f"{frf_json}: not an FRF JSON from flexarm frf ({exc})")
+    w = 2 * np.pi * f
+
+    def chan(name):
+        o = outs[name]
+        sd = o.get("total_std") or o["noise_std"]
+        return np.asarray(o["re"]) + 1j * np.asarray(o["im"]), np.asarray(sd, float)
+
+    try:
+        if structure == "two-mass":
+            m = chan("motor_angle") if "motor_angle" in outs else (None, None)
+            lo = chan("load_angle") if "load_angle" in outs else (None, None)
+            fit = fit_two_mass(w, m[0], lo[0], motor_std=m[1], load_std=lo[1])
+            out = {"structure": "two-mass", "units": "per unit of the input's torque constant "
+                   "(A·s²/rad for a current input and angles in rad)"}
+        elif structure is None and poles is not None and zeros is not None:
+            name = output or next(iter(outs))
+            if name not in outs:
+                _fail(f"{frf_json}: --output {name!r} is not in the FRF; outputs: {', '.join(outs)}")
+            H, sd = chan(name)
+            fit = _tfest(ct.frd(H, w), poles, zeros, integrators=integrators, delay=delay, std=sd)
+            out = {"output": name, "num": fit.tf.num[0][0].tolist(), "den": fit.tf.den[0][0].tolist(),
+                   "unstable_poles": [str(p) for p in fit.unstable_poles]}
+        else:
+            _fail("give --poles N --zeros M, or --structure two-mass")
+    except TFEstError as exc:
+        _fail(f"{frf_json}: {exc}")
+    out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
+                "verdict": fit.verdict, "parameters": fit.parameters})
+    json_out.write_text(json.dumps(out, indent=2))
+    if plots is not None:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        plots.mkdir(parents=True, exist_ok=True)
+        fig, ax = plt.subplots(figsize=(7, 4))
+        model = fit.response(w)
+        model = model if isinstance(model, tuple) else (model,)
+        for (nm, o), g in zip(outs.items(), model):
+            H = np.asarray(o["re"]) + 1j * np.asarray(o["im"])
+            ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
+            ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")
+            ax.semilogx(f, 20 * np.log10(np.abs(g - H)), ":", label=f"{nm} |error|")
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("dB")
+        ax.legend(fontsize=7)
+        fig.savefig(plots / "tfest.png", dpi=120)
+        plt.close(fig)
+    console.print(fit.verdict)

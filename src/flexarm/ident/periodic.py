@@ -1,0 +1,358 @@
+"""Nonparametric frequency response from periodic (multisine) records, with noise and
+nonlinear-distortion levels and the best linear approximation (BLA).
+
+Method (Pintelon & Schoukens, *System Identification: a Frequency Domain Approach*, 2nd ed.
+2012, Secs. 2.4, 3.7, 4.3 "fast method"):
+
+1. The record is cut into whole periods of P samples; a trailing partial period is
+   discarded with a warning; leading transient periods (given, or found where a period's
+   spectrum at the excited lines departs from the steady periods' mean by more than
+   ``TRANSIENT_RATIO`` times the typical departure) are dropped; at least two steady periods
+   are needed.  A linear drift (a free rigid-body angle) is removed per channel from the
+   mean difference of consecutive periods, Y_{m+1}[n] − Y_m[n] = b P, which leaves the
+   periodic part untouched.
+2. Per period m the DFT X_m[k] = (1/P) Σ_n x_m[n] e^{−j2πkn/P}; over the M steady periods
+   the means Ū_k, Ȳ_k, sample variances σ²_U, σ²_Y and covariance σ_YU (errors in
+   variables: the measured input is noisy too).
+3. FRF at the excited lines G_k = Ȳ_k/Ū_k with the variance of the estimate (first order)
+       var G_k = |G_k|²/M · (σ²_Y/|Ȳ|² + σ²_U/|Ū|² − 2 Re(σ_YU / (Ȳ Ū*))).
+   SIMO: the same per output.
+4. Detection lines (non-excited lines inside the excited band): with an odd excitation
+   (every excited line index odd), the odd non-excited lines carry the odd (symmetric)
+   nonlinear distortion, the even ones the even distortion.  Per band (octaves from the
+   lowest excited line) the rms of |Ȳ| at odd and even detection lines and the noise level
+   (rms of σ_Y/√M, the std of the averaged spectrum) are given in dB relative to the rms
+   output at the excited lines of that band.
+5. BLA total variance: the stochastic nonlinear contributions at an excited line have the
+   level of the neighbouring odd detection lines, σ²_S,k = max(|Ȳ_d|² − σ²_Y,d/M, 0)
+   averaged over the ``NEIGHBOURS`` nearest odd detection lines; var_total G_k =
+   var G_k + σ²_S,k/|Ū_k|².
+
+Results: a python-control ``FrequencyResponseData`` (outputs × one input) in
+:class:`PeriodicFRF` with ``noise_std``, ``total_std`` and the distortion table.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+
+from flexarm.ident.harmonics import IdentificationError, IdentificationWarning
+
+#: A leading period is transient when its departure is this many times the steady one's.
+TRANSIENT_RATIO = 4.0
+#: Excited lines found from the input: within this many dB of the strongest line.
+LINES_DB = 20.0
+#: Odd detection lines averaged for the nonlinear variance at an excited line.
+NEIGHBOURS = 4
+#: Largest accepted periodic_change of the input for a period (1 = as much noise as signal).
+MAX_CHANGE = 1.0
+#: Distortion counts as detected this many dB above the noise level.
+DETECT_DB = 6.0
+
+
+@dataclass
+class Band:
+    """Distortion levels of one output in one band, dB relative to the excited output."""
+
+    band_hz: tuple[float, float]
+    odd_db: float
+    even_db: float
+    noise_db: float
+
+
+@dataclass
+class PeriodicFRF:
+    """FRF from periodic data; arrays are (outputs, excited lines)."""
+
+    frd: control.FrequencyResponseData
+    response: np.ndarray  # G at the excited lines, (outputs, lines)
+    frequency_hz: np.ndarray
+    lines: np.ndarray
+    outputs: list[str]
+    input: str
+    noise_std: np.ndarray
+    total_std: np.ndarray | None
+    distortion: dict[str, list[Band]] | None
+    period: int
+    fs: float
+    periods_used: int
+    transient_periods: int
+    spectra: dict = field(repr=False, default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        """``frequency_hz`` and ``outputs.<name>``: ``re``, ``im``, ``noise_std`` (std of the
+        FRF estimate per line) and, with detection lines, ``total_std`` and ``distortion``
+        (``band_hz``, ``odd_db``, ``even_db``, ``noise_db`` per band, dB re the output at the
+        excited lines)."""
+        out = {}
+        for j, name in enumerate(self.outputs):
+            d = {"re": self.response[j].real.tolist(), "im": self.response[j].imag.tolist(),
+                 "noise_std": self.noise_std[j].tolist()}
+            if self.total_std is not None:
+                d["total_std"] = self.total_std[j].tolist()
+            if self.distortion is not None:
+                bands = self.distortion[name]
+                nan = lambda v: None if not math.isfinite(v) else float(v)  # noqa: E731
+                d["distortion"] = {"band_hz": [list(map(float, b.band_hz)) for b in bands],
+                                   "odd_db": [nan(b.odd_db) for b in bands],
+                                   "even_db": [nan(b.even_db) for b in bands],
+                                   "noise_db": [nan(b.noise_db) for b in bands]}
+            out[name] = d
+        return {"input": self.input, "frequency_hz": self.frequency_hz.tolist(),
+                "lines": self.lines.tolist(), "period_samples": self.period, "fs_hz": self.fs,
+                "periods_used": self.periods_used, "transient_periods": self.transient_periods,
+                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings}
+
+    def verdict(self) -> str:
+        """A plain sentence per output about the nonlinear distortion."""
+        if self.distortion is None:
+            return ("no detection lines: the distortion cannot be told from the noise; "
+                    "excite a random-odd multisine to check linearity")
+        return " ".join(distortion_verdict(name, bands) for name, bands in self.distortion.items())
+
+
+def distortion_verdict(name: str, bands: Sequence[Band]) -> str:
+    """E.g. 'motor_angle: odd distortion 22 dB above the noise below 52 Hz: ...'."""
+    odd = [b for b in bands if b.odd_db - b.noise_db > DETECT_DB]
+    even = [b for b in bands if b.even_db - b.noise_db > DETECT_DB]
+    parts = []
+    if odd:
+        top = max(b.odd_db - b.noise_db for b in odd)
+        parts.append(f"odd distortion up to {top:.0f} dB above the noise in "
+                     f"{_span(odd)} (up to {max(b.odd_db for b in odd):.0f} dB re the excited "
+                     "output): a symmetric nonlinearity such as Coulomb friction; a linear "
+                     "model cannot fit to the noise level there")
+    if even:
+        top = max(b.even_db - b.noise_db for b in even)
+        parts.append(f"even distortion up to {top:.0f} dB above the noise in {_span(even)}: "
+                     "an asymmetric nonlinearity (an offset, a position-dependent load)")
+    if not parts:
+        parts.append("no distortion above the noise: a linear model can fit to the noise level")
+    return f"{name}: " + "; ".join(parts) + "."
+
+
+def _span(bands: Sequence[Band]) -> str:
+    return ", ".join(f"{b.band_hz[0]:.0f}–{b.band_hz[1]:.0f} Hz" for b in bands)
+
+
+def detect_period(x: np.ndarray, *, min_period: int = 8, name: str = "input") -> int:
+    """Shortest lag P (≥ ``min_period``, ≤ N/2) where the normalised autocorrelation of x is
+    within 10 % of its largest value over those lags (a periodic signal repeats at P, 2P, ...)."""
+    x = np.asarray(x, float) - np.mean(x)
+    n = len(x)
+    if n < 2 * min_period:
+        raise IdentificationError(f"{name}: {n} samples are too few to find a period")
+    f = np.fft.rfft(x, 2 * n)
+    r = np.fft.irfft(np.abs(f) ** 2)[: n // 2 + 1] / (n - np.arange(n // 2 + 1))
+    r = r / r[0]
+    lags = np.arange(min_period, n // 2 + 1)
+    rr = r[lags]
+    best = rr.max()
+    if best < 0.5:
+        raise IdentificationError(f"{name}: no period found (autocorrelation at most "
+                                  f"{best:.2f} for periods of {min_period}–{n // 2} samples); "
+                                  "is the excitation periodic? give --period")
+    cand = lags[rr >= 0.9 * best]
+    return int(cand[0] + np.argmax(r[cand[0]:cand[0] + max(cand[0] // 2, 2)]))
+
+
+def _dft_periods(x: np.ndarray, P: int, M0: int) -> np.ndarray:
+    return np.fft.rfft(x[..., : M0 * P].reshape(*x.shape[:-1], M0, P), axis=-1) / P
+
+
+def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
+                 period: int | None = None, lines: Sequence[int] | None = None,
+                 transient_periods: int | None = None, input_name: str = "input",
+                 source: str = "<data>", detrend: bool = True,
+                 require_distortion: bool = False) -> PeriodicFRF:
+    """FRF, noise and distortion from one periodic record (see the module docstring).
+
+    ``u``: input samples; ``y``: output name → samples (same length); ``fs``: sampling
+    rate (Hz); ``period``: samples per period (None: detected from ``u``); ``lines``: excited
+    DFT line indices of one period (None: lines within ``LINES_DB`` of the strongest input
+    line); ``transient_periods``: leading periods to drop (None: detected);
+    ``require_distortion``: raise if the excitation has no detection lines.
+    """
+    names = list(y)
+    if not names:
+        raise IdentificationError(f"{source}: no output signal given")
+    chans = {input_name: np.asarray(u, float), **{k: np.asarray(v, float) for k, v in y.items()}}
+    for k, v in chans.items():
+        if v.ndim != 1:
+            raise IdentificationError(f"{source}: signal {k!r} has shape {v.shape}; expected 1-D")
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise IdentificationError(f"{source}: signal {k!r} has {int(bad.sum())} NaN/"
+                                      f"infinite value(s), first at sample {int(np.argmax(bad))}")
+    lens = {k: len(v) for k, v in chans.items()}
+    if len(set(lens.values())) > 1:
+        raise IdentificationError(f"{source}: channels of different lengths: "
+                                  + ", ".join(f"{k} {n}" for k, n in lens.items()))
+    N = lens[input_name]
+    notes: list[str] = []
+    P = detect_period(chans[input_name], name=f"{source}: {input_name}") if period is None else int(period)
+    M0 = N // P
+    if P < 2 or M0 < 2:
+        raise IdentificationError(f"{source}: {N} samples hold {M0} whole period(s) of {P} "
+                                  "samples; the FRF and its noise level need at least two "
+                                  "whole periods: record longer or give the right --period")
+    X = np.stack([chans[k] for k in [input_name] + names])  # (C, N)
+    if N - M0 * P:
+        msg = (f"{source}: {N - M0 * P} trailing sample(s) of a partial period discarded "
+               f"({M0} whole periods of {P} samples kept)")
+        warnings.warn(msg, IdentificationWarning, stacklevel=2)
+        notes.append(msg)
+    Xp = X[:, : M0 * P].reshape(len(X), M0, P)
+    if detrend:  # remove a linear drift b·n from the mean period-to-period difference
+        half = Xp[:, M0 // 2:]
+        b = (half[:, -1] - half[:, 0]).mean(axis=1) / (P * max(half.shape[1] - 1, 1)) \
+            if half.shape[1] > 1 else (Xp[:, -1] - Xp[:, 0]).mean(axis=1) / (P * (M0 - 1))
+        Xp = Xp - b[:, None, None] * np.arange(M0 * P).reshape(M0, P)[None]
+    F = np.fft.rfft(Xp, axis=-1) / P  # (C, M0, P/2+1)
+
+    if lines is None:
+        Um = np.abs(F[0, M0 // 2:].mean(axis=0))
+        Um[0] = 0.0
+        exc = np.nonzero(Um >= Um.max() * 10 ** (-LINES_DB / 20))[0]
+    else:
+        exc = np.unique(np.asarray(lines, int))
+        if exc.size == 0 or exc.min() < 1 or exc.max() > P // 2:
+            raise IdentificationError(f"{source}: excited lines must lie in 1..{P // 2} for a "
+                                      f"period of {P} samples; got {exc.min()}..{exc.max()}")
+    change = periodic_change(Xp[0, M0 // 2:] if M0 >= 4 else Xp[0])
+    if change > MAX_CHANGE:
+        raise IdentificationError(
+            f"{source}: the period of {P} samples does not fit the data: consecutive periods "
+            f"of the input {input_name!r} differ by {change:.2f} of its power (a periodic "
+            f"input with fair noise: well below {MAX_CHANGE}); give the excitation's true "
+            "period or --period auto")
+
+    # Transient periods: departure from the steady mean at the excited lines.
+    ref = F[:, M0 // 2:, :][:, :, exc].mean(axis=1)
+    dev = (np.abs(F[:, :, exc] - ref[:, None]) ** 2).sum(axis=-1) / (np.abs(ref) ** 2).sum(-1)[:, None]
+    typical = np.median(dev[:, M0 // 2:], axis=1)
+    ratio = (dev / np.maximum(typical[:, None], 1e-300)).max(axis=0)
+    if transient_periods is None:
+        nt = 0
+        while nt < M0 - 2 and ratio[nt] > TRANSIENT_RATIO:
+            nt += 1
+    else:
+        nt = int(transient_periods)
+        if nt < 0 or M0 - nt < 2:
+            raise IdentificationError(f"{source}: {nt} transient period(s) of {M0} leave fewer "
+                                      "than two steady periods")
+    F = F[:, nt:]
+    M = M0 - nt
+
+    mean = F.mean(axis=1)  # (C, K)
+    d = F - mean[:, None]
+    var = (np.abs(d) ** 2).sum(axis=1) / (M - 1)
+    cov_yu = (d[1:] * np.conj(d[:1])).sum(axis=1) / (M - 1)
+    U, Y = mean[0, exc], mean[1:, exc]
+    G = Y / U
+    varG = np.abs(G) ** 2 / M * (var[1:, exc] / np.abs(Y) ** 2 + var[0, exc] / np.abs(U) ** 2
+                                 - 2 * np.real(cov_yu[:, exc] / (Y * np.conj(U))))
+    noise_std = np.sqrt(np.maximum(varG, 0.0))
+
+    kmin, kmax = int(exc.min()), int(exc.max())
+    inband = np.arange(kmin, kmax + 1)
+    det = np.setdiff1d(inband, exc)
+    odd_exc = bool(np.all(exc % 2 == 1))
+    distortion = total_std = None
+    if det.size:
+        odd_det = det[det % 2 == 1] if odd_exc else det
+        even_det = det[det % 2 == 0] if odd_exc else det[:0]
+        distortion = {}
+        edges = [kmin]
+        while edges[-1] * 2 < kmax:
+            edges.append(edges[-1] * 2)
+        edges.append(kmax + 1)
+        df = fs / P
+        for j, name in enumerate(names):
+            yy = np.abs(mean[1 + j]) ** 2
+            noise_mean = var[1 + j] / M  # variance of the averaged spectrum per line
+            bands = []
+            for lo, hi in zip(edges[:-1], edges[1:]):
+                sel = lambda ks: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
+                e, o, ev = sel(exc), sel(odd_det), sel(even_det)
+                if not e.size:
+                    continue
+                refp = yy[e].mean()
+                db = lambda p: 10 * math.log10(p / refp) if p > 0 else -math.inf  # noqa: E731
+                bands.append(Band((lo * df, (hi - 1) * df),
+                                  db(yy[o].mean()) if o.size else math.nan,
+                                  db(yy[ev].mean()) if ev.size else math.nan,
+                                  db(noise_mean[np.r_[e, o, ev]].mean())))
+            distortion[name] = bands
+        if odd_det.size:
+            s = np.maximum(np.abs(mean[1:, odd_det]) ** 2 - var[1:, odd_det] / M, 0.0)
+            near = np.argsort(np.abs(odd_det[None, :] - exc[:, None]), axis=1)[:, :NEIGHBOURS]
+            s_exc = s[:, near].mean(axis=-1)  # (ny, K)
+            total_std = np.sqrt(noise_std ** 2 + s_exc / np.abs(U) ** 2)
+    elif require_distortion:
+        raise IdentificationError(
+            f"{source}: every line from {kmin} to {kmax} (× {fs / P:g} Hz) is excited: no "
+            "detection lines, so nonlinear distortion cannot be told from the output; use a "
+            "random-odd multisine (flexarm excite --kind random-odd)")
+
+    freq = exc * fs / P
+    frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq,
+                                        inputs=[input_name], outputs=names)
+    spectra = {"lines": np.arange(F.shape[-1]), "mean": mean, "var": var, "M": M,
+               "excited": exc}
+    return PeriodicFRF(frd, G, freq, exc, names, input_name, noise_std, total_std, distortion,
+                       P, float(fs), M, nt, spectra, notes)
+
+
+def periodic_change(xp: np.ndarray) -> float:
+    """Power of the difference of consecutive periods over the power of the signal (rows =
+    periods): 2σ²/(P_s + σ²) for a periodic signal with white noise σ², ≈ 2 when the period
+    is wrong."""
+    x = xp - xp.mean()
+    return float(np.mean(np.diff(x, axis=0) ** 2) / max(np.mean(x**2), 1e-300))
+
+
+def plot_distortion(res: PeriodicFRF, path=None):
+    """The usual figure: output spectrum at excited lines, noise level, odd and even
+    detection lines, in dB (one axis per output); returns the matplotlib figure."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sp = res.spectra
+    df = res.fs / res.period
+    exc = res.lines
+    kmax = int(exc.max())
+    ks = np.arange(1, min(2 * kmax, len(sp["lines"]) - 1) + 1)
+    other = np.setdiff1d(ks, exc)
+    odd = bool(np.all(exc % 2 == 1))
+    fig, axes = plt.subplots(len(res.outputs), 1, figsize=(8, 3.2 * len(res.outputs)),
+                             squeeze=False)
+    for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
+        y = sp["mean"][1 + j]
+        n = np.sqrt(sp["var"][1 + j] / sp["M"])
+        db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
+        ax.plot(exc * df, db(y[exc]), "k+", label="output, excited lines")
+        o = other[other % 2 == 1] if odd else other
+        ax.plot(o * df, db(y[o]), "ro", ms=3, label="odd detection lines" if odd else "detection lines")
+        if odd:
+            e = other[other % 2 == 0]
+            ax.plot(e * df, db(y[e]), "bx", ms=3, label="even detection lines")
+        ax.plot(ks * df, db(n[ks]), "g-", lw=0.8, label="noise (std of the mean)")
+        ax.set_ylabel(f"{name} (dB)")
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[-1, 0].set_xlabel("frequency (Hz)")
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig

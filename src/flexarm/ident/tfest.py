@@ -1,0 +1,436 @@
+"""Transfer-function estimation from frequency-response data: ``flexarm.tfest``.
+
+Model, with k = ``integrators`` poles at the origin and an optional delay τ:
+
+    H(s) = N(s) / (s^k D(s)) · e^{−sτ},   deg N = n_zeros,  deg D = n_poles − k,  D monic.
+
+Frequencies are scaled, s̃ = s/ω_s (ω_s the geometric mean of the data's), while fitting.
+
+1. Linear start: Levy's linear least squares, then Sanathanan–Koerner iterations (each
+   equation divided by |D_prev|), weighted by 1/σ_k; unstable roots of D reflected. With
+   ``delay=True`` the start is the best of a grid of delays in [0, π/ω_max].
+2. Weighted nonlinear least squares (``scipy.optimize.least_squares``, analytic Jacobian)
+   of V(θ) = Σ_k |Ĥ(jω_k, θ) − H_k|² / σ_k²: with σ_k² the variance of the FRF estimate
+   (noise, or the BLA's total variance) this is the maximum-likelihood cost of the FRF
+   (the sample-ML cost linearised in the FRF; Pintelon & Schoukens 2012, Secs. 9.11, 10.2).
+3. Stability: with ``stable=True`` unstable poles are reflected and the fit redone; any
+   left are reported (``unstable_poles``).
+4. With known variances E[V] = F − n_θ/2 and std(V) = √(F − n_θ/2) (V = ½ χ² with 2F − n_θ
+   degrees of freedom); the verdict is a two-sided chi-square test at 1 %.  Parameter
+   covariance ½ (JᵀJ)⁻¹ (J the Jacobian of the real-stacked weighted residuals); without
+   variances, relative weights 1/|H_k| and the covariance scaled by the residual variance.
+5. Order selection (:func:`tfest_orders`): AIC = 2V + 2n_θ, BIC = 2V + n_θ ln 2F.
+
+The physical two-mass structure (motor and load angle per unit of input, one fit for both
+outputs) is :func:`fit_two_mass`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+
+class TFEstError(ValueError):
+    """Bad data or orders for a frequency-domain fit; the message names the field."""
+
+
+@dataclass
+class TFEstimate:
+    """A frequency-domain fit: the model, its cost against the expected, parameters."""
+
+    tf: control.TransferFunction
+    delay: float
+    cost: float
+    expected_cost: float | None
+    cost_std: float | None
+    parameters: dict[str, dict[str, float]]
+    covariance: np.ndarray
+    n_frequencies: int
+    n_parameters: int
+    unstable_poles: list[complex] = field(default_factory=list)
+    residual: np.ndarray | None = None  # weighted complex residuals (model − data)/σ
+
+    @property
+    def aic(self) -> float:
+        return 2 * self.cost + 2 * self.n_parameters
+
+    @property
+    def bic(self) -> float:
+        return 2 * self.cost + self.n_parameters * np.log(2 * self.n_frequencies)
+
+    @property
+    def verdict(self) -> str:
+        return cost_verdict(self.cost, self.n_frequencies, self.n_parameters, self.expected_cost,
+                            self.unstable_poles)
+
+    def response(self, omega) -> np.ndarray:
+        s = 1j * np.asarray(omega, float)
+        num, den = self.tf.num[0][0], self.tf.den[0][0]
+        return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * self.delay)
+
+
+def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
+    """Chi-square test of the ML cost (2V ~ χ² with 2F − n_θ degrees of freedom)."""
+    extra = f"; {len(unstable)} unstable pole(s) remain" if len(unstable) else ""
+    if expected is None:
+        return "no variances given: the cost cannot be tested" + extra
+    dof = 2 * F - n_par
+    lo, hi = chi2.ppf([0.005, 0.995], dof) / 2
+    if cost > hi:
+        return (f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
+                f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
+                "to the noise level (model errors or nonlinear distortion)" + extra)
+    if cost < lo:
+        return (f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "
+                "the variances are overestimated or the model overfits" + extra)
+    return (f"accepted: the cost {cost:.4g} lies within the 99 % range {lo:.4g}–{hi:.4g} of "
+            f"its expected value {expected:.4g}: the model fits to the noise level" + extra)
+
+
+def _frd_data(frd, output: int, input: int, std):
+    omega = np.asarray(frd.omega, float)
+    data = frd.frequency_response(omega) if not hasattr(frd, "frdata") else None
+    H = np.asarray(frd.frdata if hasattr(frd, "frdata") else data.complex, complex)
+    H = H.reshape(frd.noutputs, frd.ninputs, -1)[output, input]
+    if std is not None:
+        std = np.asarray(std, float)
+        if std.ndim == 2:
+            std = std[output]
+        if std.shape != H.shape:
+            raise TFEstError(f"std has shape {std.shape}; the FRD has {H.shape[0]} frequencies")
+        if np.any(~np.isfinite(std)) or np.any(std <= 0):
+            raise TFEstError("std must be finite and positive at every frequency")
+    if np.any(omega <= 0) or not np.all(np.isfinite(H)) or np.any(H == 0):
+        raise TFEstError("tfest needs frequencies > 0 and finite, nonzero responses")
+    return omega, H, std
+
+
+def _levy_sk(s, Hr, w, nz, nd, iterations=20):
+    """Levy then SK: minimise Σ |w (N − Hr D)/D_prev|² over b (nz+1) and a (nd, D monic)."""
+    d_prev = np.ones_like(s)
+    pw = np.vander(s, max(nz, nd) + 1, increasing=True)
+    b = a = None
+    for _ in range(iterations + 1):
+        wt = w / np.abs(d_prev)
+        A = np.column_stack([pw[:, : nz + 1], -Hr[:, None] * pw[:, :nd]]) * wt[:, None]
+        rhs = Hr * pw[:, nd] * wt
+        Ar = np.vstack([A.real, A.imag])
+        sc = np.linalg.norm(Ar, axis=0)
+        sc[sc == 0] = 1
+        x = np.linalg.lstsq(Ar / sc, np.concatenate([rhs.real, rhs.imag]), rcond=None)[0] / sc
+        b_new, a_new = x[: nz + 1], np.r_[x[nz + 1:], 1.0]
+        a_new = _reflect(a_new)
+        done = a is not None and np.linalg.norm(a_new - a) < 1e-12 * np.linalg.norm(a_new)
+        b, a = b_new, a_new
+        if done:
+            break
+        d_prev = np.polynomial.polynomial.polyval(s, a)
+    return b, a
+
+
+def _reflect(a):
+    """Reflect right-half-plane roots of the monic polynomial ``a`` (ascending)."""
+    if len(a) <= 1:
+        return a
+    r = np.roots(a[::-1])
+    if np.all(r.real <= 0):
+        return a
+    r = np.where(r.real > 0, -r.real + 1j * r.imag, r)
+    return np.real(np.poly(r))[::-1]
+
+
+def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool | float = False,
+          std=None, stable: bool = True, output: int = 0, input: int = 0,
+          max_nfev: int = 200) -> TFEstimate:
+    """Fit H(s) = N/(s^k D) e^{−sτ} to one channel of a python-control FRD (module docstring).
+
+    ``std``: standard deviation of the FRF estimate per frequency (a PeriodicFRF's
+    ``noise_std`` or ``total_std``); ``delay``: False (none), True (estimated) or a fixed
+    value in seconds.
+    """
+    omega, H, std = _frd_data(frd, output, input, std)
+    nd = n_poles - integrators
+    if integrators < 0 or nd < 0 or n_zeros < 0:
+        raise TFEstError(f"orders: n_zeros={n_zeros}, n_poles={n_poles}, integrators="
+                         f"{integrators}: need 0 <= integrators <= n_poles and n_zeros >= 0")
+    n_par = n_zeros + 1 + nd + (delay is True)
+    F = len(omega)
+    if 2 * F <= n_par:
+        raise TFEstError(f"{F} frequencies give {2 * F} real equations, not more than the "
+                         f"{n_par} parameters of {n_zeros} zeros and {n_poles} poles")
+    ws = float(np.exp(np.mean(np.log(omega))))
+    s = 1j * omega / ws
+    sig = std if std is not None else np.abs(H)
+    w = 1.0 / sig
+
+    def start(tau):
+        Hr = H * s**integrators * np.exp(1j * omega * tau)
+        b, a = _levy_sk(s, Hr, w, n_zeros, nd)
+        return b, a
+
+    def model(b, a, tau):
+        return (np.polynomial.polynomial.polyval(s, b)
+                / (s**integrators * np.polynomial.polynomial.polyval(s, a))
+                * np.exp(-1j * omega * tau))
+
+    if delay is True:
+        grid = np.linspace(0, np.pi / omega.max(), 21)
+        costs = []
+        for tau in grid:
+            b, a = start(tau)
+            costs.append(np.sum(np.abs((model(b, a, tau) - H) * w) ** 2))
+        tau0 = float(grid[int(np.argmin(costs))])
+    else:
+        tau0 = float(delay) if delay else 0.0
+    b, a = start(tau0)
+    nb = n_zeros + 1
+    fit_tau = delay is True
+
+    def unpack(x):
+        return x[:nb], np.r_[x[nb:nb + nd], 1.0], (x[-1] / ws if fit_tau else tau0)
+
+    def resid(x):
+        bb, aa, tau = unpack(x)
+        e = (model(bb, aa, tau) - H) * w
+        return np.concatenate([e.real, e.imag])
+
+    def jac(x):
+        bb, aa, tau = unpack(x)
+        Dv = np.polynomial.polynomial.polyval(s, aa)
+        Hm = model(bb, aa, tau)
+        cols = [s**i / (s**integrators * Dv) * np.exp(-1j * omega * tau) for i in range(nb)]
+        cols += [-Hm * s**i / Dv for i in range(nd)]
+        if fit_tau:
+            cols.append(-1j * omega * Hm / ws)
+        J = np.column_stack(cols) * w[:, None]
+        return np.vstack([J.real, J.imag])
+
+    # delay parameter in units of 1/ω_s (scaled like the coefficients)
+    x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
+    unstable: list[complex] = []
+    for attempt in range(3):
+        sol = least_squares(resid, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        x = sol.x
+        a_fit = np.r_[x[nb:nb + nd], 1.0]
+        roots = np.roots(a_fit[::-1]) if nd else np.array([])
+        unstable = [complex(r * ws) for r in roots if r.real > 0]
+        if not unstable or not stable:
+            break
+        x0 = np.r_[x[:nb], _reflect(a_fit)[:-1], x[nb + nd:]]
+    bb, aa, tau = unpack(x)
+    cost = float(np.sum(sol.fun**2))
+    Jm = jac(x)
+    JtJ_inv = np.linalg.pinv(Jm.T @ Jm)
+    dof = 2 * F - n_par
+    # real residuals have variance 1/2 with known σ; else their sample variance
+    cov_x = 0.5 * JtJ_inv if std is not None else JtJ_inv * cost / max(dof, 1)
+    # scaled → physical coefficients: num_i = b_i ω_s^{nd+k−i}, den_i = a_i ω_s^{nd−i}
+    scale = np.r_[ws ** (nd + integrators - np.arange(nb)), ws ** (nd - np.arange(nd)),
+                  [1 / ws] if fit_tau else []]
+    cov = cov_x * np.outer(scale, scale)
+    num = bb * ws ** (nd + integrators - np.arange(nb))
+    den = np.r_[aa[:-1] * ws ** (nd - np.arange(nd)), 1.0]
+    den_full = np.r_[np.zeros(integrators), den]
+    tf = control.tf(num[::-1], den_full[::-1])
+    sd = np.sqrt(np.maximum(np.diag(cov), 0))
+    params = {f"b{i}": {"value": float(num[i]), "std": float(sd[i])} for i in range(nb)}
+    params.update({f"a{i}": {"value": float(den[i]), "std": float(sd[nb + i])} for i in range(nd)})
+    if fit_tau:
+        params["delay_s"] = {"value": float(tau), "std": float(sd[-1])}
+    exp = F - n_par / 2 if std is not None else None
+    e = (model(bb, aa, tau) - H) * w
+    return TFEstimate(tf, float(tau), cost, exp, np.sqrt(exp) if exp is not None else None,
+                      params, cov, F, n_par, unstable, e)
+
+
+def tfest_orders(frd, poles, *, relative_degree: int = 1, criterion: str = "aic", **kw):
+    """Fit every number of poles in ``poles`` (zeros = poles − ``relative_degree``) and
+    return (best, all fits) by ``criterion`` ('aic' or 'bic')."""
+    fits = {}
+    for n in poles:
+        nz = n - relative_degree
+        if nz < 0:
+            continue
+        fits[n] = tfest(frd, n, nz, **kw)
+    if not fits:
+        raise TFEstError(f"no order in {list(poles)} leaves n_zeros >= 0")
+    best = min(fits, key=lambda n: getattr(fits[n], criterion))
+    return fits[best], fits
+
+
+# --- physical structure: the two-mass drive ------------------------------------------
+
+#: Parameters of the two-mass structure, in fit order (per unit of the input's torque
+#: constant: inertias in A·s²/rad when the input is a current in A and the outputs in rad).
+TWO_MASS = ("total_inertia", "inertia_ratio", "resonance_hz", "shaft_damping",
+            "motor_viscous", "load_viscous", "delay_s")
+
+
+def two_mass_response(p: dict, omega) -> tuple[np.ndarray, np.ndarray]:
+    """Motor and load angle per unit input of the two-mass drive (viscous friction per side):
+
+        J_m s² θm = u − (c s + k)(θm − θl) − d_m s θm,   J_l s² θl = (c s + k)(θm − θl) − d_l s θl
+
+    with J_m = J/(1+r), J_l = J r/(1+r), k = ω_r² J_m J_l / J, c = 2 ζ_c k / ω_r (ζ_c the
+    shaft's own damping ratio, ``shaft_damping``), times e^{−sτ}:
+    G_m = (J_l s² + (c+d_l) s + k)/Δ, G_l = (c s + k)/Δ,
+    Δ = (J_m s² + (c+d_m) s + k)(J_l s² + (c+d_l) s + k) − (c s + k)².
+    """
+    s = 1j * np.asarray(omega, float)
+    J, r = p["total_inertia"], p["inertia_ratio"]
+    wr = 2 * np.pi * p["resonance_hz"]
+    Jm, Jl = J / (1 + r), J * r / (1 + r)
+    k = wr**2 * Jm * Jl / J
+    c = 2 * p["shaft_damping"] * k / wr
+    dm, dl = p["motor_viscous"], p["load_viscous"]
+    A = Jm * s**2 + (c + dm) * s + k
+    B = Jl * s**2 + (c + dl) * s + k
+    C = c * s + k
+    D = A * B - C**2
+    e = np.exp(-s * p["delay_s"])
+    return B / D * e, C / D * e
+
+
+def _derived(p: dict) -> dict:
+    """Antiresonance, inertias, stiffness, and the damping ratio of the resonant pole pair
+    (shaft and viscous damping together: −Re p/|p| of the complex roots of Δ/s)."""
+    r = p["inertia_ratio"]
+    J = p["total_inertia"]
+    Jm, Jl = J / (1 + r), J * r / (1 + r)
+    wr = 2 * np.pi * p["resonance_hz"]
+    k = wr**2 * Jm * Jl / J
+    c = 2 * p["shaft_damping"] * k / wr
+    dm, dl = p["motor_viscous"], p["load_viscous"]
+    cubic = [Jm * Jl, Jm * (c + dl) + Jl * (c + dm), k * J + (c + dm) * (c + dl) - c**2, k * (dm + dl)]
+    roots = np.roots(cubic)
+    pair = roots[np.argmax(np.abs(roots.imag))]
+    zeta = float(-pair.real / abs(pair)) if abs(pair.imag) > 0 else 1.0
+    return {"resonance_damping": zeta,
+            "antiresonance_hz": p["resonance_hz"] / np.sqrt(1 + r),
+            "motor_inertia": p["total_inertia"] / (1 + r),
+            "load_inertia": p["total_inertia"] * r / (1 + r),
+            "stiffness": (2 * np.pi * p["resonance_hz"]) ** 2 * p["total_inertia"] * r / (1 + r) ** 2}
+
+
+def two_mass_guess(omega, Gm) -> dict:
+    """Start values from the motor FRF: J from the lowest lines (G ≈ −1/(J ω²)), the
+    antiresonance at the minimum and the resonance at the maximum of |G_m| ω² above it."""
+    n = np.abs(Gm) * omega**2
+    J = float(np.median(1 / n[: max(3, len(n) // 20)]))
+    ia = int(np.argmin(n))
+    ir = ia + int(np.argmax(n[ia:])) if ia < len(n) - 1 else ia
+    fa, fr = omega[ia] / (2 * np.pi), omega[ir] / (2 * np.pi)
+    if fr <= fa * 1.01:
+        fr = fa * 1.5
+    return {"total_inertia": J, "inertia_ratio": (fr / fa) ** 2 - 1, "resonance_hz": fr,
+            "shaft_damping": 0.05, "motor_viscous": 0.0, "load_viscous": 0.0, "delay_s": 0.0}
+
+
+@dataclass
+class TwoMassFit:
+    """The two-mass fit: parameters (value, std), derived ones, the cost test."""
+
+    parameters: dict[str, dict[str, float]]
+    cost: float
+    expected_cost: float | None
+    cost_std: float | None
+    n_frequencies: int
+    n_parameters: int
+    covariance: np.ndarray
+    free: tuple[str, ...]
+    residual: np.ndarray
+
+    @property
+    def verdict(self) -> str:
+        return cost_verdict(self.cost, self.n_frequencies, self.n_parameters, self.expected_cost)
+
+    @property
+    def values(self) -> dict[str, float]:
+        return {k: v["value"] for k, v in self.parameters.items()}
+
+    def response(self, omega):
+        return two_mass_response(self.values, omega)
+
+
+def fit_two_mass(omega, motor=None, load=None, *, motor_std=None, load_std=None,
+                 free=TWO_MASS, initial: dict | None = None) -> TwoMassFit:
+    """Fit the two-mass drive to the motor and/or load angle FRF (rad per input unit) at
+    ``omega`` (rad/s), weighted by the FRF standard deviations (the ML cost of
+    :func:`tfest`); ``free``: the parameters fitted (others stay at ``initial``, default
+    from :func:`two_mass_guess`). Positive parameters are fitted as logarithms; the
+    standard deviations of all (and the derived antiresonance) by the delta method."""
+    omega = np.asarray(omega, float)
+    chans = [(np.asarray(g, complex), sd) for g, sd in ((motor, motor_std), (load, load_std))]
+    if motor is None and load is None:
+        raise TFEstError("fit_two_mass needs the motor or the load angle FRF")
+    bad = [f for f in free if f not in TWO_MASS]
+    if bad:
+        raise TFEstError(f"free: unknown parameter(s) {bad}; choose from {', '.join(TWO_MASS)}")
+    known = all(sd is not None for g, sd in zip((motor, load), (motor_std, load_std)) if g is not None)
+    p0 = two_mass_guess(omega, motor if motor is not None else load)
+    p0.update(initial or {})
+    logp = {"total_inertia", "inertia_ratio", "resonance_hz"}
+    free = tuple(f for f in TWO_MASS if f in free)
+    scale = {"motor_viscous": p0["total_inertia"] * omega.min(),
+             "load_viscous": p0["total_inertia"] * omega.min(), "delay_s": 1 / omega.max(),
+             "shaft_damping": 0.01}
+
+    def unpack(x):
+        p = dict(p0)
+        for f, v in zip(free, x):
+            p[f] = float(np.exp(v)) if f in logp else v * scale[f]
+        return p
+
+    def resid(x):
+        Gm, Gl = two_mass_response(unpack(x), omega)
+        out = []
+        for (g, sd), gm in zip(chans, (Gm, Gl)):
+            if g.ndim == 0:
+                continue
+            w = 1 / np.asarray(sd, float) if known else 1 / np.abs(g)
+            e = (gm - g) * w
+            out += [e.real, e.imag]
+        return np.concatenate(out)
+
+    x0 = np.array([np.log(p0[f]) if f in logp else p0[f] / scale[f] for f in free])
+    best = None
+    for tau0 in ([0.0, 0.25, 0.5, 1.0] if "delay_s" in free else [None]):
+        xs = x0.copy()
+        if tau0 is not None:
+            xs[free.index("delay_s")] = tau0
+        # stage 1 without friction terms' freedom would need another x; least_squares with
+        # bounds keeps the viscous terms and the delay non-negative
+        lo = np.array([-np.inf if f in logp else 0.0 for f in free])
+        sol = least_squares(resid, xs, bounds=(lo, np.inf), method="trf", x_scale="jac",
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    x = best.x
+    cost = float(np.sum(best.fun**2))
+    F = int(sum(g.size for g, _ in chans if g.ndim))
+    n_par = len(free)
+    J = best.jac
+    cov_x = np.linalg.pinv(J.T @ J) * (0.5 if known else cost / max(2 * F - n_par, 1))
+    p = unpack(x)
+
+    def all_values(xx):
+        q = unpack(xx)
+        return np.array([q[k] for k in TWO_MASS] + list(_derived(q).values()))
+
+    names = list(TWO_MASS) + list(_derived(p))
+    h = 1e-6
+    D = np.column_stack([(all_values(x + h * e) - all_values(x - h * e)) / (2 * h)
+                         for e in np.eye(len(x))]) if len(x) else np.zeros((len(names), 0))
+    cov_all = D @ cov_x @ D.T
+    vals = all_values(x)
+    params = {n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
+              for i, (n, v) in enumerate(zip(names, vals))}
+    exp = F - n_par / 2 if known else None
+    return TwoMassFit(params, cost, exp, np.sqrt(exp) if exp is not None else None, F, n_par,
+                      cov_all, free, best.fun)
