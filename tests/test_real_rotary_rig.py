@@ -1,0 +1,102 @@
+"""Issue #11 acceptance on the real rotary-rig logs (``../shared/data/rotary-rig``): the
+lab's files as they are, read with ``examples/quanser-rotflex.toml``, fitted with the data
+sheet's values and default options only, and judged on held-out data.
+
+Thresholds: the issue's (an independent gray-box fit of the same logs, closed loop with
+stiction and sensor delays, reached held-out hub 97.6 % / tip 83.9 % on unit 6 and 77.3 % /
+56.9 % on unit 7; the issue asks at least 95 / 80 and 75 / 55). One fit per data set
+(module fixtures); marked slow (about 30 s per fit on 2 cores).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexarm.bench import fit, predict, read_bench_log
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
+FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
+#: the lab's data sheet (README of the data): geared voltage-driven servo, 0.45 m link
+SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
+             armature_resistance=3.29, link_length=0.45, computation_delay=1)
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"real rig logs not found at {DATA} (../shared is absent in a "
+                              "user's clone; CI has it)")]
+
+
+def _log(name: str):
+    return read_bench_log(DATA / name, log_format=FORMAT)
+
+
+def _split(name: str):
+    g = _log(name)
+    return g.window(0.0, 5.0), g.window(5.0, 10.0)
+
+
+@pytest.fixture(scope="module")
+def unit6():
+    ident, held = _split("4PM_Group37_FlexArm_Unit6")
+    res = fit([ident], **SHEET)
+    return res, predict(res, [held])
+
+
+@pytest.fixture(scope="module")
+def unit7():
+    ident, held = _split("Unit7_Flex_trial1.csv")
+    res = fit([ident], **SHEET)
+    return res, predict(res, [held])
+
+
+def _report(res, held):
+    print(res.summary())
+    print("held-out fit %:", held["fit_percent"])
+    est = res.stages["guesses"]["estimates"]
+    print("estimates:", {k: v for k, v in est["tip_model"].items() if k != "profile"},
+          {k: v for k, v in est["hub_delay"].items() if k != "profile"})
+
+
+def test_unit6_held_out(unit6):
+    res, held = unit6
+    _report(res, held)
+    fp = next(iter(held["fit_percent"].values()))
+    assert fp["motor_angle"] >= 95.0 and fp["tip_deflection"] >= 80.0, fp
+    # the link rings near its nominal 1.8 Hz clamped frequency (data sheet): the fitted
+    # clamped frequency lies within the data-derived bounds, not at their edge (#11)
+    wc = res.params["link_frequency"]
+    assert 2 * np.pi * 1.2 < wc < 2 * np.pi * 2.5, wc
+    assert not any("lies at a bound" in w for w in res.warnings), res.warnings
+    # real rigs lag by tens of milliseconds at the hub and more at the tip
+    assert 5 <= res.delays["motor_angle"] <= 60
+    assert res.delays["tip_deflection"] > res.delays["motor_angle"] + 10
+
+
+def test_unit7_held_out(unit7):
+    res, held = unit7
+    _report(res, held)
+    fp = next(iter(held["fit_percent"].values()))
+    assert fp["motor_angle"] >= 75.0 and fp["tip_deflection"] >= 55.0, fp
+    # unit 7's gauge reads with the opposite sign to unit 6's (the data say so)
+    assert res.params["tip_gain"] > 0
+
+
+def test_rigid_session():
+    """The eight rigid-arm runs of 4/25 are one session: fit on K1 = 6, 8 and K1K3 = 6, 8;
+    validate on the other four. A rigid arm fits the hub inertia and friction only. The
+    held-out threshold, 60 %, is what a model with the fitted friction must beat by far:
+    without it the stuck hub's steady-state errors (a few mrad of a 0.2 rad swing) are
+    missed on every run."""
+    fit_names = ["rigidarm_K1_6", "rigidarm_K1_8", "rigidarm_k1k3_6", "rigidarm_k1k3_8"]
+    held_names = ["rigidarm_K1_7", "rigidarm_K1_9", "rigidarm_k1k3_7", "rigidarm_k1k3_9"]
+    res = fit([_log(n) for n in fit_names], **SHEET)
+    held = predict(res, [_log(n) for n in held_names])
+    print(res.summary())
+    print("held-out fit %:", held["fit_percent"])
+    assert "link_frequency" not in res.params  # no tip channel: a rigid hub
+    assert res.params["coulomb"] > 0
+    for name, fp in {**res.fit_percent, **held["fit_percent"]}.items():
+        assert fp["motor_angle"] >= 60.0, (name, fp)
+        assert fp["tip_deflection"] is None
