@@ -134,3 +134,15 @@ def test_coulomb_recovered_from_simulated_paper_arm(paper_analyses):
         assert e.coulomb_current == pytest.approx(0.132, rel=0.10)
     assert est.std < 0.05 * est.coulomb_current
     assert est.max_rel_dev < 0.10
+
+
+def test_cost_is_finite_where_cf_prime_vanishes():
+    """A pair without third-harmonic response (θm and i at 3ω0 both zero) has C_f' = 0
+    for every trial C_f: eq. (6) is ln 0 there. The search gets a finite cost (so Brent's
+    parabolic steps stay defined), ends at the bound of its grid and says so."""
+    ph = PairPhasors(theta1=0.1 + 0j, theta3=0j, current3=0j, theta1_partner=0.05 + 0j,
+                     current1_partner=0.2 + 0j)
+    assert ph.cf_prime(0.1) == 0
+    assert math.isfinite(ph.cost(0.1)) and ph.cost(0.1) > 1e5
+    e = estimate_pair(ph)
+    assert math.isfinite(e.cost) and e.at_search_bound

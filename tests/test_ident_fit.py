@@ -49,6 +49,9 @@ def test_fit_exact_on_noise_free_eq12_and_eq13():
     fb = fit_tf(w, Hb, 0, 2)
     np.testing.assert_allclose(tf_coefficients(fb.tf)["den"], EQ13_DEN, rtol=1e-6)
     np.testing.assert_allclose(tf_response(fb.tf, w), Hb, rtol=1e-8)
+    # the result says how the nonlinear refinement ended; without refinement nothing
+    assert f.message and fb.message
+    assert fit_tf(w, Hb, 0, 2, refine=False).message == ""
 
 
 def test_fit_refuses_too_few_frequencies():

@@ -258,6 +258,10 @@ class InnerLoopDesign:
     time: np.ndarray = field(repr=False)  # s, fine grid of the design response
     response: np.ndarray = field(repr=False)  # θm/step on ``time``
     current: np.ndarray = field(repr=False)  # A per rad of step, at the samples
+    # How the search ended (differential evolution within its maxiter budget, then the
+    # Nelder–Mead polish): the optimisers' status messages. The design is accepted on the
+    # constraints checked after it, not on these.
+    search_message: str = ""
 
     @property
     def peak_current_per_rad(self) -> float:
@@ -488,6 +492,9 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
     polish = scipy.optimize.minimize(
         lambda p: float(cost(np.clip(p, -0.99, 0.99)[:, None])[0]), best.x,
         method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200})
+    search_message = (f"differential evolution: {best.message} "
+                      f"({'converged' if best.success else 'not converged'}); Nelder–Mead "
+                      f"polish: {polish.message}")
     if polish.fun < best.fun:
         best = polish
     p = np.clip(best.x, -0.99, 0.99)
@@ -507,4 +514,5 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
     g2 = _comp(p[2], p[3], 1.0, dt)
     return InnerLoopDesign(g1, g2, dt, int(delay), float(dc_gain), ts, band, max(over, 0.0),
                            float(step),
-                           peak * step, avail, i_max, i_coup, i_fric, p, ev.time, theta, cs)
+                           peak * step, avail, i_max, i_coup, i_fric, p, ev.time, theta, cs,
+                           search_message)

@@ -37,11 +37,16 @@ estimate; the result is their mean (FRB: "take the average"), with the spread.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+
+# Eq. (6) where C_f' vanishes (ln 0): (ln 1e-300)² ≈ 5e5, so 1e6 is worse than any real
+# cost yet finite, which Brent's parabolic steps need.
+_INFEASIBLE_COST = 1e6
 
 from flexarm.ident.harmonics import ideal_friction_phasor as square_wave_phasor  # noqa: F401 (eq. 2)
 from flexarm.ident.harmonics import HarmonicAnalysis, _warn
@@ -88,8 +93,8 @@ class PairPhasors:
     def cost(self, cf: float) -> float:
         """FRB eq. (6): (ln|C_f'/C_f|)² + (∠C_f')²."""
         r = self.cf_prime(cf)
-        if r == 0:
-            return math.inf
+        if not (r != 0 and np.isfinite(r)):  # ln 0: the search gets a large finite cost
+            return _INFEASIBLE_COST
         return math.log(abs(r) / cf) ** 2 + float(np.angle(r)) ** 2
 
 
@@ -125,7 +130,13 @@ def estimate_pair(ph: PairPhasors, *, scale: float | None = None, omega: float =
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
     res = minimize_scalar(lambda u: ph.cost(math.exp(u)), bounds=(a, b), method="bounded",
                           options={"xatol": 1e-12, "maxiter": 500})
-    u = float(res.x) if res.fun <= costs[k] else float(grid[k])
+    if not res.success:
+        warnings.warn(
+            f"Coulomb estimate {name or omega!s}: bounded Brent search stopped without "
+            f"converging ({res.message}); the best grid point is used. Check the pair's "
+            "phasors (a current amplitude near zero, or no 3ω0 response)",
+            RuntimeWarning, stacklevel=2)
+    u = float(res.x) if res.success and res.fun <= costs[k] else float(grid[k])
     cf = math.exp(u)
     return PairEstimate(omega=omega, partner_omega=partner_omega, coulomb_current=cf,
                         cost=ph.cost(cf), cf_prime=ph.cf_prime(cf),

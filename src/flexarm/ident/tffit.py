@@ -14,7 +14,10 @@ the end.  Steps:
    cost tends to Σ w_k² |N/D − H s̃^k|² (poles in the right half-plane are reflected).
 3. Nonlinear weighted least squares (``scipy.optimize.least_squares``) on the complex
    log-ratio ln(Ĥ_k/H_k) = ln|Ĥ_k/H_k| + j∠(Ĥ_k/H_k): log-magnitude and phase errors with
-   equal weight (the same measure as FRB eq. (6)); kept only if it lowers that cost.
+   equal weight (the same measure as FRB eq. (6)); kept only if it lowers that cost and
+   leaves D stable. Where a trial N or D vanishes on a datum the residual is a large
+   finite penalty, not log 0; a refinement that hits its evaluation limit warns, and
+   ``TFFit.message`` says how it ended.
 
 Weights ``w_k`` (default 1) multiply the relative errors: step 1-2 use w_k/|H_k| (relative
 error), step 3 w_k. Returned: a python-control ``TransferFunction`` (descending powers of
@@ -22,6 +25,8 @@ s, monic denominator) and the per-frequency relative error |Ĥ − H|/|H|.
 """
 
 from __future__ import annotations
+
+import warnings
 
 from typing import NamedTuple
 
@@ -35,6 +40,14 @@ class TFFit(NamedTuple):
 
     tf: control.TransferFunction
     relative_error: np.ndarray
+    # How the nonlinear refinement ended: least_squares' status message, or why the
+    # Sanathanan–Koerner estimate was kept ("" when refine=False or nothing to refine).
+    message: str = ""
+
+
+# Log-ratio residual where the trial model's N or D vanishes on a datum (log 0): large
+# (a factor e^50) and finite, so least_squares' Jacobian stays finite.
+_PENALTY = 50.0
 
 
 def _polyval_asc(c: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -120,26 +133,35 @@ def fit_tf(omega, H, n_zeros: int, n_poles: int, integrators: int = 0, weights=N
     def resid(p):
         bb = p[:n_zeros + 1]
         aa = np.concatenate([p[n_zeros + 1:], [1.0]])
-        r = np.log(_polyval_asc(bb, s) / _polyval_asc(aa, s) / Hr) * w
-        return np.concatenate([r.real, r.imag])
+        with np.errstate(all="ignore"):
+            r = np.log(_polyval_asc(bb, s) / _polyval_asc(aa, s) / Hr) * w
+            r = np.concatenate([r.real, r.imag])
+        return np.where(np.isfinite(r), r, _PENALTY)
 
     p0 = np.concatenate([b, a[:-1]])
     best = p0
+    message = ""
     if refine and n_par > 0:
-        with np.errstate(all="ignore"):
-            c0 = resid(p0)
-            cost0 = float(c0 @ c0) if np.all(np.isfinite(c0)) else np.inf
-            try:
-                sol = least_squares(resid, p0, method="trf", x_scale="jac", xtol=1e-14,
-                                    ftol=1e-14, gtol=1e-14, max_nfev=200 * (n_par + 1))
-                c1 = resid(sol.x)
-                cost1 = float(c1 @ c1)
-                a1 = np.concatenate([sol.x[n_zeros + 1:], [1.0]])
-                stable = nd == 0 or np.all(np.roots(a1[::-1]).real <= 0)
-                if np.isfinite(cost1) and cost1 <= cost0 and stable:
-                    best = sol.x
-            except (ValueError, np.linalg.LinAlgError):
-                best = p0
+        c0 = resid(p0)
+        cost0 = float(c0 @ c0)
+        sol = least_squares(resid, p0, method="trf", x_scale="jac", xtol=1e-14,
+                            ftol=1e-14, gtol=1e-14, max_nfev=200 * (n_par + 1))
+        c1 = resid(sol.x)
+        cost1 = float(c1 @ c1)
+        a1 = np.concatenate([sol.x[n_zeros + 1:], [1.0]])
+        stable = nd == 0 or np.all(np.roots(a1[::-1]).real <= 0)
+        if cost1 <= cost0 and stable:
+            best = sol.x
+            message = str(sol.message)
+        else:
+            message = ("Sanathanan–Koerner estimate kept: the refinement "
+                       + ("left an unstable denominator" if not stable else "did not lower the cost"))
+        if sol.status == 0:
+            warnings.warn(
+                f"fit_tf ({n_zeros} zeros, {n_poles} poles): the nonlinear refinement stopped "
+                f"at its evaluation limit without converging ({sol.message}); the fit is "
+                "usable but not a least-squares optimum: check the orders or pass refine=False",
+                RuntimeWarning, stacklevel=2)
     b = best[:n_zeros + 1]
     a = np.concatenate([best[n_zeros + 1:], [1.0]])
 
@@ -150,7 +172,7 @@ def fit_tf(omega, H, n_zeros: int, n_poles: int, integrators: int = 0, weights=N
     num = np.trim_zeros(num, "f") if np.any(num != 0) else np.array([0.0])
     tf = control.tf(num, den)
     Hhat = _polyval_asc(num[::-1], 1j * omega) / _polyval_asc(den[::-1], 1j * omega)
-    return TFFit(tf, np.abs(Hhat - H) / np.abs(H))
+    return TFFit(tf, np.abs(Hhat - H) / np.abs(H), message)
 
 
 def tf_coefficients(tf: control.TransferFunction) -> dict[str, list[float]]:
