@@ -347,3 +347,45 @@ def test_scenario_valid_as_data_but_not_as_a_model_exits_2(tmp_path):
     r = runner.invoke(app, ["info", str(bad)])
     assert r.exit_code == 2, r.output
     assert "tip_num" in said(r) and "proper" in said(r)
+
+
+def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
+    """Ctrl-C (a real SIGINT) during `flexarm fit`: exit 130, a complete JSON marked
+    interrupted with the best parameters so far, and no partial or temporary file left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.specs import load_scenario
+
+    sc = load_scenario("rotary-flexible-link")
+    logs = [synthetic_log(sc, g, tmp_path / f"{i}.csv", duration=10.0, period=3.0,
+                          amplitude=(0.5, 0.15), seed=i)
+            for i, g in enumerate(([6.0, -40.0, 0.15, 0.0], [8.0, -60.0, 0.2, -0.5]))]
+    out = tmp_path / "out"
+    out.mkdir()
+    j = out / "fit.json"
+    cmd = [sys.executable, "-m", "flexarm.cli", "fit", *map(str, logs), "--gear-ratio", "70",
+           "--motor-constant", "7.68e-3", "--armature-resistance", "2.6", "--link-length",
+           "0.42", "--json", str(j), "--delay-search", "both", "--polish-iter", "20"]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    # interrupted in the global stage, once it has a best point (this fit, two 10 s logs
+    # with two delay starts and a long friction polish, runs on long after that)
+    for line in p.stderr:  # stages are printed as lines when stderr is not a terminal
+        if b"generation 2" in line:  # the global stage has a best point
+            break
+    else:
+        raise AssertionError(p.communicate())
+    assert p.poll() is None, p.communicate()
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 130, (p.returncode, stderr.decode()[-2000:])
+    d = json.loads(j.read_text())
+    assert d["interrupted"] is True and d["status"] == "interrupted"
+    assert "hub_inertia" in d["parameters"] and "fit_percent" in d, d.keys()
+    assert d["message"].startswith("INTERRUPTED")
+    assert sorted(x.name for x in out.iterdir()) == ["fit.json"]

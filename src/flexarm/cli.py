@@ -264,6 +264,14 @@ def _filters(items: list[str] | None) -> dict[str, float] | None:
     return out or None
 
 
+def _progress(status, message: str) -> None:
+    """A long job's stage: on the status line, and as a plain line on stderr when that is
+    not a terminal (a log file or a pipe: the status line is not drawn there)."""
+    status.update(message)
+    if not err.is_terminal:
+        err.print(message, highlight=False)
+
+
 def _window(text: str | None, option: str) -> tuple[float, float] | None:
     """``START:STOP`` (s from a log's first sample) → (start, stop)."""
     if not text:
@@ -487,7 +495,7 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         held_logs = [g.window(*vwin) for g in full] if vwin else []
         with console.status("fitting") as status:
             res = run_fit(blogs, friction=not no_friction,
-                          progress=lambda m: status.update(m), **kw)
+                          progress=lambda m: _progress(status, m), **kw)
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
                 res0 = run_fit(blogs, friction=False, **kw)
@@ -786,3 +794,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         fig.savefig(plots / "tfest.png", dpi=120)
         plt.close(fig)
     console.print(fit.verdict)
+
+
+if __name__ == "__main__":  # python -m flexarm.cli
+    main()

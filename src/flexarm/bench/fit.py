@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from flexarm.bench import estimates, guesses
-from flexarm.bench.global_stage import differential_evolution_stage
+from flexarm.bench.global_stage import GlobalResult, differential_evolution_stage
 from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.objective import Objective, Rig, check_filters
 from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
@@ -320,9 +320,55 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
     say(f"global stage: {space.n_cont} continuous + discrete parameters, "
         f"{len(blogs)} logs x {n_glob} samples")
+    best = {"U": u0, "D": d0, "off": None, "cost": float("inf")}
+    try:
+        glob, loc, D, warnings, obj = _stages(
+            obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best, say,
+            popsize=popsize, maxiter=maxiter, seed=seed, local_nfev=local_nfev,
+            delay_nfev=delay_nfev, polish_iter=polish_iter, friction=friction,
+            delay_search=delay_search, info=info)
+        interrupted = False
+    except KeyboardInterrupt:
+        # Ctrl-C: the best point so far, marked interrupted (flexarm.errors.FitInterrupted)
+        interrupted = True
+        D, warnings = np.asarray(best["D"]), []
+        off = best["off"] if best["off"] is not None else np.zeros((len(blogs), 4))
+        loc = {"U": np.asarray(best["U"]), "off": off, "std_u": np.full(space.n_cont, np.nan),
+               "std_iid_u": np.full(space.n_cont, np.nan), "success": False,
+               "message": "interrupted", "nfev": 0, "cost": best["cost"], "seconds": 0.0,
+               "rho": float("nan"), "at_bounds": [], "bandwidth": []}
+        glob = best.get("glob") or GlobalResult(loc["U"], D, best["cost"], 0, 0, False,
+                                                "interrupted", 0.0, np.zeros(0))
+        obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
+    tr, e, bad = obj.run(loc["U"][None], D[None], loc["off"][None])
+    fitp = obj.fit_percent(e[0])
+    res = FitResult.build(
+        logs=blogs, rig=rig, space=space, U=loc["U"], D=D, offsets=loc["off"],
+        std_u=loc["std_u"], std_iid_u=loc["std_iid_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
+        glob=glob, local=loc, info=info, settings=dict(
+            mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
+            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed,
+            filters=filt),
+        seconds=time.perf_counter() - t_start, objective=obj)
+    res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs))
+    if interrupted:
+        from flexarm.errors import FitInterrupted
+
+        res.message = ("INTERRUPTED (Ctrl-C): the best parameters found so far, cost "
+                       f"{best['cost']:.4g}; not converged. " + res.message)
+        raise FitInterrupted(res)
+    return res
+
+
+def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best, say, *,
+            popsize, maxiter, seed, local_nfev, delay_nfev, polish_iter, friction,
+            delay_search, info):
+    """The global stage, the tip-delay starts, the local stage and the friction polish
+    (see :func:`fit`); ``best`` is kept current with the best point so far."""
     glob = differential_evolution_stage(
         obj_g, u0, d0, popsize=popsize, maxiter=maxiter, seed=seed,
-        progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"))
+        progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"), best=best)
+    best["glob"] = glob
     if not np.isfinite(glob.cost) or glob.cost >= 1e3:
         bad = [g.name for i, g in enumerate(blogs)]
         raise FitInputError(
@@ -372,6 +418,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             say("friction polish: batched differential evolution on the friction parameters")
             loc_k = _friction_polish(obj, loc_k, c["D"], polish_iter, seed, local_nfev)
         finals.append((loc_k, c["D"]))
+        if loc_k["cost"] < best["cost"]:
+            best.update(U=loc_k["U"], D=c["D"], off=loc_k["off"], cost=loc_k["cost"])
     finals.sort(key=lambda t: t[0]["cost"])
     loc, D = finals[0]
     if len(finals) > 1:
@@ -384,18 +432,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
                 f"{int(other[0][1][1])} costs only "
                 f"{100 * (other[0][0]['cost'] / loc['cost'] - 1):.1f} % more on the full "
                 "logs; give tip_delay= if it is known, or record longer logs")
-    tr, e, bad = obj.run(loc["U"][None], D[None], loc["off"][None])
-    fitp = obj.fit_percent(e[0])
-    res = FitResult.build(
-        logs=blogs, rig=rig, space=space, U=loc["U"], D=D, offsets=loc["off"],
-        std_u=loc["std_u"], std_iid_u=loc["std_iid_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
-        glob=glob, local=loc, info=info, settings=dict(
-            mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
-            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed,
-            filters=filt),
-        seconds=time.perf_counter() - t_start, objective=obj)
-    res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs))
-    return res
+    return glob, loc, D, warnings, obj
 
 
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:

@@ -36,10 +36,11 @@ class GlobalResult:
 def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray, *,
                                  popsize: int = 8, maxiter: int = 40, seed: int = 0,
                                  tol: float = 1e-3,
-                                 progress: Callable[[int, float], None] | None = None
-                                 ) -> GlobalResult:
+                                 progress: Callable[[int, float], None] | None = None,
+                                 best: dict | None = None) -> GlobalResult:
     """Minimise :meth:`Objective.cost` over the continuous unit coordinates and the free
-    discrete coordinates; ``u0``, ``d0`` seed the initial population."""
+    discrete coordinates; ``u0``, ``d0`` seed the initial population. ``best`` (a dict),
+    when given, holds the best point after every generation (U, D, cost)."""
     n = obj.space.n_cont
     dbounds = obj.space.discrete_bounds()
     free = [i for i, (lo, hi) in enumerate(dbounds) if hi > lo]
@@ -62,6 +63,9 @@ def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray,
 
     def cb(intermediate_result):
         it[0] += 1
+        if best is not None:  # the best point so far, for an interrupted fit
+            U, D = split(np.asarray(intermediate_result.x)[:, None])
+            best.update(U=U[0], D=D[0], cost=float(intermediate_result.fun))
         if progress is not None:
             progress(it[0], float(intermediate_result.fun))
 
