@@ -259,7 +259,10 @@ def _layout(path: Path, text: str, delimiter: str | None, comment: Sequence[str]
                 s = lines[j].strip()
                 if s and not s.startswith(tuple(comment)):
                     d2 = _sniff(lines[j])
-                    if d2 != d:
+                    # a row without any delimiter (one field, e.g. a file cut mid-line)
+                    # cannot overrule the header's: keep it, and the row's short count
+                    # is then reported with its line
+                    if d2 != d and (d2 is not None or d is None):
                         d, split = d2, _splitter(d2)
                         header = [f.strip() for f in split(first)]
                     break

@@ -305,7 +305,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     est = _estimates(blogs, rig, max_delay, filters)
     info["estimates"] = {"tip_model": est["tip"].to_dict() if est["tip"] else None,
                          "hub_delay": est["hub"].to_dict(), "link_frequency": est["frequency"]}
-    if est.get("tip_cutoff") and not filt["tip_deflection"]:
+    if est.get("tip_cutoff"):
         # the hub → tip model's low-pass, as a known sensor filter (lag and cutoff are
         # estimated together; the closed-loop stages then search the delay around it)
         filt = check_filters({**{k: v for k, v in filt.items() if v},
@@ -439,12 +439,12 @@ def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
     """The cheap estimates of :mod:`flexarm.bench.estimates` (hub → tip model with the
     tip channel's lag relative to the hub, the hub delay, the link frequency), and the
     tip low-pass cutoff to use when the user gave none and the model is trusted."""
-    user_fc = (filters or {}).get("tip_deflection")
+    known = "tip_deflection" in (filters or {})  # given, 0 (no filter) included
     tip = estimates.tip_model(blogs, rig.length, max_lag=max_delay)
     hub = estimates.hub_delay(blogs, rig.k_u, rig.k_omega, max_delay=max_delay, tip=tip)
     freq = estimates.link_frequency_estimates(blogs, tip)
     out = {"tip": tip, "hub": hub, "frequency": freq, "tip_cutoff": None}
-    if tip is not None and tip.trusted and not user_fc:
+    if tip is not None and tip.trusted and not known:
         # at most what two RK4 substeps integrate accurately, and only a real low-pass
         fc = tip.cutoff_hz
         if fc < 0.1 / blogs[0].dt:
