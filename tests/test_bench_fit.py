@@ -19,7 +19,9 @@ RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resi
            link_length=0.42, gear_efficiency=0.9, motor_efficiency=0.69,
            # the synthetic rig latches its encoder at the sample instant and its gauge
            # has no low-pass filter: both known, as a user gives what the data sheet says
-           angle_delay=0, filters={"tip_deflection": 0.0})
+           # (delays of a few samples): the earlier protocol, every delay 0...5 searched
+           # with the guesses' bounds (the real-log tests use the default estimates)
+           angle_delay=0, filters={"tip_deflection": 0.0}, max_delay=5, estimates=False)
 GAINS = [(6, -40, 0.15, 0), (8, -60, 0.2, -0.5), (5, -20, 0.12, 0)]
 TRUE = {"hub_inertia": 2.08e-3, "link_inertia": 3.5e-3, "link_frequency": np.sqrt(1.2 / 3.5e-3),
         "link_damping": 0.03, "coulomb": 0.03, "tip_gain": 1.0}

@@ -36,7 +36,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from flexarm.bench import estimates, guesses
+from flexarm.bench import estimates as _est
+from flexarm.bench import guesses
 from flexarm.bench.global_stage import GlobalResult, differential_evolution_stage
 from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
 from flexarm.bench.objective import Objective, Rig, check_filters
@@ -184,8 +185,12 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
             "coulomb": 0.6 * tau_f, "static_excess": 0.2 * tau_f, "bias": 0.0}
     u0 = np.array([float(np.clip(d.to_unit(np.clip(seed[d.name], d.lo, d.hi)), 0, 1))
                    for d in defs])
-    d0 = np.array([delays[0] if delays[0] is not None else sum(ranges[0]) // 2,
-                   delays[1] if delays[1] is not None else sum(ranges[1]) // 2,
+    # the seed's delays: the middle of a range set by a trusted estimate, else the
+    # smallest delay searched
+    from_est = (hub is not None and hub.trusted, tip is not None and tip.trusted)
+    mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est)]
+    d0 = np.array([delays[0] if delays[0] is not None else mid[0],
+                   delays[1] if delays[1] is not None else mid[1],
                    ((sign or 1) + 1) // 2])
     return space, u0, d0
 
@@ -208,7 +213,7 @@ def _delay_ranges(hub, tip, max_delay: int, fixed) -> tuple[tuple[int, int], tup
     if fixed[1] is not None:
         t = (int(fixed[1]), int(fixed[1]))
     elif tip is not None and tip.trusted:
-        t = (max(h[0] + tip.lag - w, 0), min(h[1] + tip.lag + w, max_delay + tip.lag))
+        t = (max(min(h[0] + tip.lag - w, max_delay), 0), min(h[1] + tip.lag + w, max_delay))
     else:
         t = (0, max_delay)
     return h, t
@@ -228,7 +233,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
         local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
         progress: Callable[[str], None] | None = None,
-        filters: dict[str, float] | None = None, delay_search: str = "neighbours") -> FitResult:
+        filters: dict[str, float] | None = None, delay_search: str = "neighbours",
+        estimates: bool = True) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
     ``logs``: paths or :class:`~flexarm.bench.logs.BenchLog` s; logs given together are one
@@ -258,6 +264,12 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     acceptance logs a 1e-15 change of the sampling period moved the viscous B from −2 %
     to −10 % at 4× the cost, and on three 10 s logs ``"both"`` kept delay 3 (true 2) at
     a lower cost than a delay-2 fit that stopped at B −19 %.
+    ``estimates`` (default True): first the cheap estimates of
+    :mod:`flexarm.bench.estimates` (hub → tip model, hub delay, link frequency), which set
+    the delay search ranges (± 6 samples around them, up to ``max_delay``, default
+    150 ms), the bounds of ω_c, J and the tip gain, the gauge's sign and, unless
+    ``filters`` names the tip channel, its low-pass; False: the guesses of
+    :mod:`flexarm.bench.guesses` alone, every delay 0 ... ``max_delay`` searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
     filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.bench.closed_loop`).
     """
@@ -282,7 +294,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             raise FitInputError(f"{g.path}: field 'voltage': open-loop replay needs the logged "
                                 "command column 'voltage' (V, or A for a current drive)")
     if max_delay is None:
-        max_delay = int(round(estimates.MAX_DELAY_S / dts[0]))
+        max_delay = int(round(_est.MAX_DELAY_S / dts[0]))
     filt = check_filters(filters, dts[0], substeps)
     sess = list(sessions) if sessions is not None else [0] * len(blogs)
     if len(sess) != len(blogs) or sorted(set(sess)) != list(range(max(sess) + 1)):
@@ -301,10 +313,15 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     rig = make_rig(drive, gear_ratio, motor_constant, armature_resistance, link_length,
                    gear_efficiency, motor_efficiency, limit, q)
     info: dict[str, Any] = {"encoder_quantum": q}
-    say("estimates: hub-to-tip model, hub delay, link frequency")
-    est = _estimates(blogs, rig, max_delay, filters)
-    info["estimates"] = {"tip_model": est["tip"].to_dict() if est["tip"] else None,
-                         "hub_delay": est["hub"].to_dict(), "link_frequency": est["frequency"]}
+    if estimates:
+        say("estimates: hub-to-tip model, hub delay, link frequency")
+        est = _estimates(blogs, rig, max_delay, filters)
+        info["estimates"] = {"tip_model": est["tip"].to_dict() if est["tip"] else None,
+                             "hub_delay": est["hub"].to_dict(),
+                             "link_frequency": est["frequency"]}
+    else:  # bounds from the guesses alone, every delay 0 ... max_delay searched
+        est = {}
+        info["estimates"] = None
     if est.get("tip_cutoff"):
         # the hub → tip model's low-pass, as a known sensor filter (lag and cutoff are
         # estimated together; the closed-loop stages then search the delay around it)
@@ -440,9 +457,9 @@ def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
     tip channel's lag relative to the hub, the hub delay, the link frequency), and the
     tip low-pass cutoff to use when the user gave none and the model is trusted."""
     known = "tip_deflection" in (filters or {})  # given, 0 (no filter) included
-    tip = estimates.tip_model(blogs, rig.length, max_lag=max_delay)
-    hub = estimates.hub_delay(blogs, rig.k_u, rig.k_omega, max_delay=max_delay, tip=tip)
-    freq = estimates.link_frequency_estimates(blogs, tip)
+    tip = _est.tip_model(blogs, rig.length, max_lag=max_delay)
+    hub = _est.hub_delay(blogs, rig.k_u, rig.k_omega, max_delay=max_delay, tip=tip)
+    freq = _est.link_frequency_estimates(blogs, tip)
     out = {"tip": tip, "hub": hub, "frequency": freq, "tip_cutoff": None}
     if tip is not None and tip.trusted and not known:
         # at most what two RK4 substeps integrate accurately, and only a real low-pass
