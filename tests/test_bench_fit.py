@@ -467,3 +467,17 @@ def test_tip_sensor_offset_is_warned(logs):
     assert rest == pytest.approx(2e-3, abs=0.01 * span)
     (msg,) = fit_mod._tip_offsets([shifted])
     assert g.name in msg and "sensor offset" in msg and "zero the gauge" in msg
+
+
+@pytest.mark.slow
+def test_parameter_at_a_bound_is_widened_and_refitted(logs):
+    """Bounds that exclude the truth (ω_c true 18.5 rad/s, range given as 10...15): the
+    local stage ends at 15, the range is widened (×3) and the refit finds ω_c within 5 %
+    (the tolerance of the acceptance protocol above), with a warning saying so."""
+    res = fit(logs[:2], **RIG, popsize=8, maxiter=15, global_seconds=4.0,
+              bounds={"link_frequency": (10.0, 15.0)})
+    true = TRUE["link_frequency"]
+    print(res.stages["guesses"].get("widened"), res.params["link_frequency"], true)
+    assert res.stages["guesses"]["widened"]
+    assert abs(res.params["link_frequency"] / true - 1) < 0.05
+    assert any("widened" in w for w in res.warnings)

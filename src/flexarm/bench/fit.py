@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -357,6 +358,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         glob = best.get("glob") or GlobalResult(loc["U"], D, best["cost"], 0, 0, False,
                                                 "interrupted", 0.0, np.zeros(0))
         obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
+    if not interrupted:
+        loc, space = _widen_and_retry(obj, loc, D, space, local_nfev, info, warnings, say)
     tr, e, bad = obj.run(loc["U"][None], D[None], loc["off"][None])
     fitp = obj.fit_percent(e[0])
     res = FitResult.build(
@@ -375,6 +378,54 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
                        f"{best['cost']:.4g}; not converged. " + res.message)
         raise FitInterrupted(res)
     return res
+
+
+#: how often bounds that a parameter ends at are widened before the fit gives up on it
+WIDEN_RETRIES = 2
+#: factor (log-scaled parameters) or widths (linear ones) a bound moves out by
+WIDEN_FACTOR = 3.0
+
+
+def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace,
+                     local_nfev: int, info: dict, warnings: list, say) -> tuple:
+    """A parameter that ends at a bound of its data-derived range: move that bound out
+    (×``WIDEN_FACTOR`` for log-scaled, one range width for linear ones), refit from the
+    same physical point by least squares, keep the refit when it costs less; at most
+    ``WIDEN_RETRIES`` times. Every widening is reported (``info["widened"]`` and a
+    warning); a parameter still at a bound is warned about by the result."""
+    for _ in range(WIDEN_RETRIES):
+        hits = [i for i in loc["at_bounds"] if space.defs[i].scale in ("log", "lin")]
+        if not hits:
+            break
+        defs = list(space.defs)
+        moved = {}
+        for i in hits:
+            d, u = defs[i], loc["U"][i]
+            low = u < 0.5
+            if d.scale == "log":
+                lo, hi = (d.lo / WIDEN_FACTOR, d.hi) if low else (d.lo, d.hi * WIDEN_FACTOR)
+            else:
+                w = d.hi - d.lo
+                lo, hi = (d.lo - w, d.hi) if low else (d.lo, d.hi + w)
+            defs[i] = ParamDef(d.name, d.unit, lo, hi, d.scale, d.session, d.doc)
+            moved[space.names[i]] = [[d.lo, d.hi], [lo, hi]]
+        new = replace(space, defs=defs)
+        U1 = np.array([nd.to_unit(od.to_phys(u)) for od, nd, u in
+                       zip(space.defs, defs, loc["U"])])
+        say(f"widening the bounds of {', '.join(moved)} and refitting")
+        obj.space = new
+        loc2 = _local(obj, np.clip(U1, 0.0, 1.0), D, local_nfev, off0=loc["off"])
+        info.setdefault("widened", []).append({"bounds": moved, "cost_before": loc["cost"],
+                                               "cost_after": loc2["cost"]})
+        if loc2["cost"] < loc["cost"]:
+            warnings.append(f"{', '.join(moved)} ended at a bound of the data-derived range; "
+                            "the range was widened and the fit redone (cost "
+                            f"{loc['cost']:.4g} -> {loc2['cost']:.4g})")
+            loc, space = loc2, new
+        else:
+            obj.space = space
+            break
+    return loc, space
 
 
 def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best, say, *,

@@ -1,0 +1,51 @@
+"""Issue #11 speed: the full default fit pipeline (estimates, delay search over 0-150 ms,
+global and local stages, friction polish) on real 10 s logs of ../shared/data/rotary-rig,
+read with examples/quanser-rotflex.toml, data-sheet values only. Target: two 10 s logs of
+one session in at most 60 s on 2 cores. Baseline printed beside it: the same fit with the
+guesses-only search (``estimates=False``) over the same delay range, which the earlier
+default could not do in time (the issue measured ~160 s per session at max_delay=90).
+
+Run: python benchmarks/bench_real_fit.py
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from flexarm.bench import fit, read_bench_log
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "rotary-rig"
+FORMAT = ROOT / "examples" / "quanser-rotflex.toml"
+SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
+             armature_resistance=3.29, link_length=0.45, computation_delay=1)
+
+
+def run(names, **kw):
+    logs = [read_bench_log(DATA / n, log_format=FORMAT) for n in names]
+    t = time.perf_counter()
+    res = fit(logs, **SHEET, **kw)
+    return time.perf_counter() - t, res
+
+
+def main() -> int:
+    if not DATA.is_dir():
+        print(f"skipped: {DATA} not found (../shared is absent)")
+        return 0
+    cases = {"flexible unit 6, one 10 s log": ["4PM_Group37_FlexArm_Unit6"],
+             "rigid session 4/25, two 10 s logs": ["rigidarm_K1_6", "rigidarm_K1_8"]}
+    for what, names in cases.items():
+        run(names[:1])  # compile once (JIT), as a second fit in one process would
+        sec, res = run(names)
+        fp = {k: {s: v for s, v in d.items() if v is not None} for k, d in res.fit_percent.items()}
+        print(f"{what}: {sec:.1f} s (target <= 60 s), delays {res.delays}, fit % {fp}")
+    sec0, res0 = run(cases["flexible unit 6, one 10 s log"], estimates=False, max_delay=150)
+    print(f"baseline, guesses-only search over 0-150 ms (unit 6): {sec0:.1f} s, delays "
+          f"{res0.delays}, fit % {res0.fit_percent}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
