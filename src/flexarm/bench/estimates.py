@@ -145,7 +145,7 @@ def tip_model(logs: list[BenchLog], length: float, *, max_lag: int | None = None
                           max_nfev=60)
         return r.x, float(np.sum(r.fun**2))
 
-    # sign and scale of g L from a linear regression at the starting frequency
+    # every lag from the previous lag's optimum; the first from both gauge signs
     best = None
     step = max(1, int(round(0.005 / dt)))
     profile = {}
@@ -189,25 +189,31 @@ def hub_delay(logs: list[BenchLog], k_u: float, k_omega: float, *,
     max_delay = int(round(MAX_DELAY_S / dt)) if max_delay is None else int(max_delay)
     W = max(int(round(window / dt)), 5)
     use_tip = tip is not None and tip.trusted
+    # per log, once: hub angle and rate, the integrals of the command, of the rate's sign
+    # and of the tip deflection (None without a tip channel)
+    series = []
+    for g in usable:
+        th = g.columns["motor_angle"]
+        N = len(th)
+        w = np.gradient(th, dt)
+        Iu = np.concatenate([[0.0], np.cumsum(g.columns["voltage"]) * dt])[:N]
+        wmax = np.percentile(np.abs(w), 99)
+        sg = np.cumsum(np.sign(w) * (np.abs(w) > 0.05 * wmax)) * dt
+        Id = (np.cumsum(g.columns["tip_deflection"]) * dt
+              if use_tip and "tip_deflection" in g.outputs else None)
+        series.append((th, w, Iu, sg, Id))
     profile, coef = {}, {}
     for D in range(0, max_delay + 1):
         ys, Xs = [], []
-        for g in usable:
-            th = g.columns["motor_angle"]
+        for th, w, Iu, sg, Id in series:
             N = len(th)
-            w = np.gradient(th, dt)
-            u = g.columns["voltage"]
-            Iu = np.concatenate([[0.0], np.cumsum(u) * dt])[:N]
-            wmax = np.percentile(np.abs(w), 99)
-            sg = np.cumsum(np.sign(w) * (np.abs(w) > 0.05 * wmax)) * dt
             k0 = np.arange(5, N - D - W - (tip.lag if use_tip else 0) - 5, max(W // 4, 1))
             if k0.size < 10:
                 continue
             k1 = k0 + W
             ys.append(w[k1 + D] - w[k0 + D])
             cols = [Iu[k1] - Iu[k0], -(th[k1 + D] - th[k0 + D]), -(sg[k1 + D] - sg[k0 + D])]
-            if use_tip and "tip_deflection" in g.outputs:
-                Id = np.cumsum(g.columns["tip_deflection"]) * dt
+            if Id is not None:
                 cols.append(Id[k1 + D + tip.lag] - Id[k0 + D + tip.lag])
             elif use_tip:
                 cols.append(np.zeros(k0.size))

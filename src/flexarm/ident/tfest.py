@@ -124,7 +124,7 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=20):
         sc[sc == 0] = 1
         x = np.linalg.lstsq(Ar / sc, np.concatenate([rhs.real, rhs.imag]), rcond=None)[0] / sc
         b_new, a_new = x[: nz + 1], np.r_[x[nz + 1:], 1.0]
-        a_new = _reflect(a_new)
+        a_new = reflect_unstable_roots(a_new)
         done = a is not None and np.linalg.norm(a_new - a) < 1e-12 * np.linalg.norm(a_new)
         b, a = b_new, a_new
         if done:
@@ -133,8 +133,10 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=20):
     return b, a
 
 
-def _reflect(a):
-    """Reflect right-half-plane roots of the monic polynomial ``a`` (ascending)."""
+def reflect_unstable_roots(a):
+    """Reflect right-half-plane roots of the monic polynomial ``a`` (ascending) into the
+    left half plane (the stable polynomial with the same magnitude response); the one
+    copy, also used by :mod:`flexarm.ident.tffit`."""
     if len(a) <= 1:
         return a
     r = np.roots(a[::-1])
@@ -222,7 +224,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
         unstable = [complex(r * ws) for r in roots if r.real > 0]
         if not unstable or not stable:
             break
-        x0 = np.r_[x[:nb], _reflect(a_fit)[:-1], x[nb + nd:]]
+        x0 = np.r_[x[:nb], reflect_unstable_roots(a_fit)[:-1], x[nb + nd:]]
     bb, aa, tau = unpack(x)
     cost = float(np.sum(sol.fun**2))
     Jm = jac(x)

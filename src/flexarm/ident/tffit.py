@@ -33,6 +33,7 @@ from typing import NamedTuple
 import control
 import numpy as np
 from scipy.optimize import least_squares
+from flexarm.ident.tfest import reflect_unstable_roots
 
 
 class TFFit(NamedTuple):
@@ -71,17 +72,6 @@ def _linear_step(s, Hr, w, nz, nd, d_prev):
     return b, a
 
 
-def _stabilise(a: np.ndarray) -> np.ndarray:
-    """Reflect right-half-plane roots of the monic polynomial a (ascending)."""
-    if len(a) <= 1:
-        return a
-    r = np.roots(a[::-1])
-    if np.all(r.real <= 0):
-        return a
-    r = np.where(r.real > 0, -r.real + 1j * r.imag, r)
-    return np.real(np.poly(r))[::-1]
-
-
 def fit_tf(omega, H, n_zeros: int, n_poles: int, integrators: int = 0, weights=None, *,
            sk_iterations: int = 30, refine: bool = True) -> TFFit:
     """Fit H(s) = N(s)/(s^k D(s)) to samples ``H`` at ``omega`` (rad/s); see module docstring.
@@ -115,7 +105,7 @@ def fit_tf(omega, H, n_zeros: int, n_poles: int, integrators: int = 0, weights=N
     d_prev = np.ones_like(s)
     b, a = _linear_step(s, Hr, wl, n_zeros, nd, d_prev)
     for _ in range(sk_iterations):
-        a = _stabilise(a)
+        a = reflect_unstable_roots(a)
         d_prev = _polyval_asc(a, s)
         b_new, a_new = _linear_step(s, Hr, wl, n_zeros, nd, d_prev)
         change = np.linalg.norm(np.concatenate([b_new - b, a_new - a])) / max(
@@ -123,7 +113,7 @@ def fit_tf(omega, H, n_zeros: int, n_poles: int, integrators: int = 0, weights=N
         b, a = b_new, a_new
         if change < 1e-10:
             break
-    a = _stabilise(a)
+    a = reflect_unstable_roots(a)
     # Rescale N for the best fit with the stabilised D (linear in b).
     dv = _polyval_asc(a, s)
     A = np.column_stack([s**i / dv for i in range(n_zeros + 1)]) * wl[:, None]
