@@ -47,7 +47,9 @@ def test_spec_reads_units_and_builds():
     assert model.n_modes == (2, 1)
     assert model.plant.state_names[:5] == ("theta_1", "theta_2", "delta_1_1", "delta_1_2",
                                            "delta_2_1")
-    assert model.plant.signal_names[-2:] == ("tip_x", "tip_y")
+    assert model.plant.signal_names[5:] == (
+        "tip_x", "tip_y", "theta_dot_1", "theta_dot_2", "deflection_1",
+        "deflection_2", "deflection_angle_1", "deflection_angle_2")
     np.testing.assert_allclose(model.plant.command_limit, [5.0, 2.0])
     m2 = model.modes[1]
     np.testing.assert_allclose(model.D[2, 2], 2 * 0.02 * m2.omega[0] * m2.mass, rtol=1e-12)
@@ -220,9 +222,17 @@ def test_plant_protocol_and_signals(bench):
     np.testing.assert_allclose(bench.tip_position(x[:6]), [0.0, -1.0], atol=1e-15)
     xs = np.tile(x, (4, 1))
     sig = np.asarray(jax.jit(jax.vmap(lambda x: P.signals(x, jnp.zeros(2))))(jnp.asarray(xs)))
-    assert sig.shape == (4, 8)
+    assert sig.shape == (4, 14)
     np.testing.assert_allclose(sig[:, :6], xs[:, :6])
-    np.testing.assert_allclose(sig[:, 6:], [[0.0, -1.0]] * 4, atol=1e-15)
+    np.testing.assert_allclose(sig[:, 6:8], [[0.0, -1.0]] * 4, atol=1e-15)
+    np.testing.assert_allclose(sig[:, 8:10], xs[:, 6:8])  # joint rates
+    # tip deflection of link i: φ_i(ℓ)ᵀδ_i; deflection angle: that over ℓ_i
+    xd = xs.copy()
+    xd[:, 2:6] = [1e-3, -2e-4, 5e-4, 1e-4]
+    sig = np.asarray(jax.vmap(lambda x: P.signals(x, jnp.zeros(2)))(jnp.asarray(xd)))
+    w = [bench.modes[i].tip_value @ xd[0, 2 + 2 * i:4 + 2 * i] for i in range(2)]
+    np.testing.assert_allclose(sig[0, 10:12], w, rtol=1e-14)
+    np.testing.assert_allclose(sig[0, 12:14], np.asarray(w) / 0.5, rtol=1e-14)
     # hanging straight down is an equilibrium with zero torque: ẋ = 0
     np.testing.assert_allclose(bench.rhs(x, np.zeros(2)), 0.0, atol=1e-12)
     assert np.all(np.isinf(np.asarray(P.command_limit)))

@@ -141,7 +141,7 @@ def _check(data, changed, load):
     assert isinstance(sc, (Scenario, MultiLinkScenario))
     bad = _finite_numbers(sc.model_dump())
     assert not bad, f"valid scenario with non-finite numbers at {bad} (changed {changed})"
-    if isinstance(sc, Scenario):
+    if sc.arm.kind == "single_link":
         # a valid arm gives a model, or a ValueError naming the beam (the model layer's
         # checks: proper and stable G_b, a non-singular flexibility); the CLI turns it
         # into a one-line error (tests/test_cli.py)

@@ -66,6 +66,7 @@ B, c, g against the autodiff derivation to round-off and Ḃ − 2C for skew-sym
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -490,9 +491,35 @@ class MultiLinkPlant(Plant):
 
         return prog.emit(outputs, value, share=_SHARE)
 
+    def acceleration_and_mobility(self, x: Array, u: Array) -> tuple[Array, Array]:
+        """q̈ of :meth:`acceleration` and the columns G_j = B⁻¹ e_j (j a joint) of the
+        inverse mass matrix, shape (n_links, n_q): a unit torque at joint j changes q̈ by G_j,
+        and G_jj is the joint's mobility (rad/s² per N·m) with every other coordinate free.
+        Recorded in one :class:`flexarm.layered.Program` with the solve (the factorisation of
+        B is shared by the n + 1 right-hand sides). Used for joint friction: the torque
+        that holds joint j is q̈_j / G_jj, and a joint that sticks is stopped by the impulse
+        along G_j (:class:`flexarm.models.assembly.Arm`)."""
+        prog, outputs = _mobility_program(self.n_modes)
+
+        def value(key):
+            name, idx = key
+            if name == "x":
+                return x[idx]
+            if name == "u":
+                return u[idx]
+            return getattr(self, name)[idx]
+
+        out = prog.emit(outputs, value, share=_SHARE)
+        nq, n = self.n_q, self.n_links
+        return out[:nq], jnp.reshape(out[nq:], (n, nq) + out.shape[1:])
+
+    #: per-link signals after q and the end point: θ̇_i, the tip deflection w_i(ℓ_i) (m) and
+    #: the deflection angle w_i(ℓ_i)/ℓ_i (rad; the α of a torsional link)
     def signals(self, x: Array, u: Array) -> Array:
-        q = x[:self.n_q]
-        return jnp.concatenate([q, self.tip_position(q)])
+        nq, n = self.n_q, self.n_links
+        q = x[:nq]
+        w = self.tip_rows @ q
+        return jnp.concatenate([q, self.tip_position(q), x[nq:nq + n], w, w / self.lengths])
 
     @property
     def command_limit(self) -> Array:
@@ -544,6 +571,17 @@ class _SymbolicPlant:
 @functools.lru_cache(maxsize=64)
 def _rhs_program(n_modes: tuple[int, ...]) -> tuple[layered.Program, list]:
     """q̈ = B⁻¹([u; −Kδ − Dδ̇] − c − g) recorded symbolically for an arm structure."""
+    return _record(n_modes, columns=False)
+
+
+@functools.lru_cache(maxsize=64)
+def _mobility_program(n_modes: tuple[int, ...]) -> tuple[layered.Program, list]:
+    """q̈ (as :func:`_rhs_program`) followed by the columns B⁻¹ e_j of the joints, recorded
+    in a program of their own (the plain right-hand side's schedule is not touched)."""
+    return _record(n_modes, columns=True)
+
+
+def _record(n_modes: tuple[int, ...], columns: bool) -> tuple[layered.Program, list]:
     prog = layered.Program()
     sp = _SymbolicPlant(prog, n_modes)
     n, nq = sp.n_links, sp.n_q
@@ -558,7 +596,20 @@ def _rhs_program(n_modes: tuple[int, ...]) -> tuple[layered.Program, list]:
             for j in range(sl.start, sl.stop):  # K and D are block diagonal
                 el = el + sp.K[i, j] * q[n + j] + sp.D[i, j] * qd[n + j]
             f.append(-el - h[n + i])
-    return prog, layered.solve_spd(B, f, block=_SOLVE_BLOCK)
+    out = layered.solve_spd(B, f, block=_SOLVE_BLOCK)
+    if columns:
+        for j in range(n):
+            out = out + layered.solve_spd(B, [1.0 if k == j else 0.0 for k in range(nq)],
+                                          block=_SOLVE_BLOCK)
+    return prog, out
+
+
+def signal_names(n_links: int, delta_names: list[str]) -> tuple[str, ...]:
+    """Names of :meth:`MultiLinkPlant.signals`."""
+    r = range(1, n_links + 1)
+    return tuple([f"theta_{i}" for i in r] + delta_names + ["tip_x", "tip_y"]
+                 + [f"theta_dot_{i}" for i in r] + [f"deflection_{i}" for i in r]
+                 + [f"deflection_angle_{i}" for i in r])
 
 
 @dataclass(frozen=True)
@@ -671,8 +722,7 @@ def _tip_loads(arm: MultiLinkArm) -> list[tuple[float, float]]:
             hk = arm.hubs[k]
             M += hk.mass + lk.link_mass
             J += hk.inertia + hk.mass * r**2
-            # uniform rod from r to r + ℓ_k: ∫ρ x² dx
-            J += lk.rho * ((r + lk.length) ** 3 - r**3) / 3.0
+            J += lk.inertia_about(r)  # ∫ρ (x + r)² dx over link k
             r += lk.length
         M += arm.payload.mass
         J += arm.payload.inertia + arm.payload.mass * r**2
@@ -680,16 +730,33 @@ def _tip_loads(arm: MultiLinkArm) -> list[tuple[float, float]]:
     return out
 
 
+def torsional_modes(lk) -> LinkModes:
+    """The one coordinate of a torsional link (a rigid body on a torsional spring at its
+    root) as an assumed mode φ(x) = x, δ = α (rad): v = m c, w = Z = J_0, k = K,
+    φ(ℓ) = ℓ, φ'(ℓ) = 1 (:class:`flexarm.specs.multilink.Link`)."""
+    J0, K = lk.joint_inertia, lk.torsional_stiffness
+    return LinkModes(
+        length=lk.length, linear_density=lk.rho, flexural_rigidity=float("nan"),
+        tip_mass=0.0, tip_inertia=0.0, mode_type="torsional",
+        beta_l=np.array([np.nan]), omega=np.array([math.sqrt(K / J0)]),
+        coeffs=np.full((1, 4), np.nan), tip_value=np.array([lk.length]),
+        tip_slope=np.array([1.0]), v=np.array([lk.first_moment]), w=np.array([J0]),
+        Z=np.array([[J0]]), K=np.array([[K]]))
+
+
 def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
-    """Modes of every link (clamped-mass with the distal loads, or clamped-free), modal
-    integrals, stiffness and damping, and the plant."""
+    """Modes of every link (clamped-mass with the distal loads, clamped-free, or the one
+    coordinate of a torsional link), modal integrals, stiffness and damping, and the plant."""
     loads = _tip_loads(arm)
     modes = []
     for i, (lk, (M, J)) in enumerate(zip(arm.links, loads)):
+        if lk.model == "torsional":
+            modes.append(torsional_modes(lk))
+            continue
         try:
             # a rigid link (modes = 0) may omit EI; any positive value gives no modes then
             EI = lk.flexural_rigidity if lk.flexural_rigidity is not None else 1.0
-            modes.append(link_modes(lk.length, lk.rho, EI, lk.modes,
+            modes.append(link_modes(lk.length, lk.rho, EI, lk.n_modes,
                                     tip_mass=M, tip_inertia=J, mode_type=lk.mode_type))
         except ValueError as exc:
             raise type(exc)(f"link {i + 1}: {exc}") from None
@@ -708,6 +775,10 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
         return out
 
     def damping(lk, m):
+        if lk.model == "torsional":
+            if lk.torsional_damping is not None:
+                return np.array([[lk.torsional_damping]])
+            return np.array([[2.0 * lk.damping_ratio * math.sqrt(m.K[0, 0] * m.Z[0, 0])]])
         if lk.modal_damping is not None:
             return np.diag(np.asarray(lk.modal_damping, float))
         return np.diag(2.0 * lk.damping_ratio * m.omega * m.mass)
@@ -743,7 +814,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
     B0 = np.zeros((nq, nq))
     for i, lk in enumerate(arm.links):
         ai = rate[i]
-        B0 += (lk.rho * lk.length**3 / 3.0 + arm.hubs[i].inertia) * np.outer(ai, ai)
+        B0 += (lk.joint_inertia + arm.hubs[i].inertia) * np.outer(ai, ai)
         B0 += np.outer(ai, w_rows[i]) + np.outer(w_rows[i], ai)
     B0 += arm.payload.inertia * np.outer(rate[n], rate[n])
     B0[n:, n:] += blk(lambda m: m.Z)
@@ -758,13 +829,13 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
     f = jnp.asarray
     plant = MultiLinkPlant(
         state_names=state_names,
-        signal_names=tuple(names_t + names_d + ["tip_x", "tip_y"]),
+        signal_names=signal_names(n, names_d),
         input_names=tuple(f"torque_{i + 1}" for i in range(n)),
         n_modes=n_modes,
         lengths=f([lk.length for lk in arm.links]),
         link_mass=f([lk.link_mass for lk in arm.links]),
-        link_d=f([lk.rho * lk.length**2 / 2.0 for lk in arm.links]),
-        link_J0=f([lk.rho * lk.length**3 / 3.0 for lk in arm.links]),
+        link_d=f([lk.first_moment for lk in arm.links]),
+        link_J0=f([lk.joint_inertia for lk in arm.links]),
         hub_mass=f([h.mass for h in arm.hubs]),
         hub_inertia=f([h.inertia for h in arm.hubs]),
         payload_mass=f(arm.payload.mass),

@@ -10,7 +10,8 @@ Linear part (friction off), FRB eq. (12):
     G_m(s) = θm/u = k_u / (J s² + (V + k_ω) s + C_t(s)/θm(s))
     C_t(s)/θm(s) = H(s) (1 − G_b(s))      (= C (1 − G_b) for the single-mass arm)
 
-State of the nonlinear plant: x = (θm, θ̇m, z_beam..., z_friction...).
+State of the nonlinear plant: x = (θm, θ̇m, z_beam..., z_friction...); the plant is the
+one-link case of :class:`flexarm.models.assembly.Arm` (:meth:`SingleLinkModel.plant`).
 """
 
 from __future__ import annotations
@@ -22,77 +23,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from flexarm.models.assembly import Arm, SingleLinkBody
 from flexarm.models.friction import Friction
 from flexarm.models.lumped_beam import BeamBlock, _clean, beam_block, rigid_beam_inertia
 from flexarm.models.motor import Drive
-from flexarm.sim.plant import Plant
 from flexarm.specs.arm import RigidBeam, SingleLinkArm
 
-SIGNALS = ("motor_angle", "motor_velocity", "tip_angle", "tip_deflection",
-           "coupling_torque", "friction_torque")
-
-
-def _mv(A: Array, x: Array) -> Array:
-    """A @ x for tiny matrices: the column products A[:, j] x[j], summed pairwise.
-
-    Only elementwise operations, which XLA fuses into the right-hand side's kernel. On CPU
-    ``@`` is a library call per product (~30x slower), and ``jnp.sum(A * x, -1)`` becomes,
-    under ``vmap``, separate reduction kernels with a (batch, rows, cols) broadcast of
-    ``A`` per RK stage (docs/performance.md). The pairwise order ((t1 + t0) + (t3 + t2))
-    reproduces the results of that ``jnp.sum`` form bit for bit (XLA's reduce order)."""
-    terms = [A[..., j] * x[j] for j in range(A.shape[-1])]
-    if not terms:
-        return jnp.zeros(A.shape[:-1])
-    while len(terms) > 1:
-        pairs = [terms[i + 1] + terms[i] for i in range(0, len(terms) - 1, 2)]
-        terms = pairs + ([terms[-1]] if len(terms) % 2 else [])
-    return terms[0]
-
-
-class SingleLinkPlant(Plant):
-    """The nonlinear single-link plant (see module docstring). All fields SI."""
-
-    J: Array | float
-    V: Array | float
-    drive: Drive
-    friction: Friction
-    Ab: Array
-    Bb: Array
-    Cb: Array
-    Db: Array
-
-    def _split(self, x: Array):
-        nb = self.Ab.shape[0]
-        return x[0], x[1], x[2:2 + nb], x[2 + nb:]
-
-    def _forces(self, x: Array, u: Array):
-        theta, omega, zb, zf = self._split(x)
-        hub = jnp.stack([theta, omega])
-        yb = _mv(self.Cb, zb) + _mv(self.Db, hub)
-        tau_a = self.drive.torque(u[0], omega) - self.V * omega - yb[1] + self.friction.bias
-        f, zf_dot = self.friction.torque(omega, tau_a, zf)
-        return hub, zb, yb, tau_a, f, zf_dot
-
-    def rhs(self, x: Array, u: Array) -> Array:
-        hub, zb, yb, tau_a, f, zf_dot = self._forces(x, u)
-        zb_dot = _mv(self.Ab, zb) + _mv(self.Bb, hub)
-        alpha = (tau_a - f) / self.J
-        return jnp.concatenate([jnp.stack([hub[1], alpha]), zb_dot, zf_dot])
-
-    def signals(self, x: Array, u: Array) -> Array:
-        hub, zb, yb, tau_a, f, _ = self._forces(x, u)
-        return jnp.stack([hub[0], hub[1], yb[0], yb[2], yb[1], f])
-
-    def project(self, x_prev: Array, x_next: Array, u: Array) -> Array:
-        if self.friction.model not in ("coulomb", "stribeck"):
-            return x_next
-        _, _, _, tau_a, _, _ = self._forces(x_next, u)
-        stuck = self.friction.sticks(x_prev[1], x_next[1], tau_a)
-        return x_next.at[1].set(jnp.where(stuck, 0.0, x_next[1]))
-
-    @property
-    def command_limit(self) -> Array:
-        return jnp.reshape(jnp.asarray(self.drive.limit, dtype=float), (1,))
+SIGNALS = SingleLinkBody.signal_names + SingleLinkBody.friction_names
 
 
 @dataclass(frozen=True)
@@ -139,15 +76,21 @@ class SingleLinkModel:
         return _clean(control.minreal(self.motor_tf() * self.beam_tf(), tol=1e-7, verbose=False))
 
     # ----------------------------------------------------------------- nonlinear plant
-    def plant(self) -> SingleLinkPlant:
+    def plant(self) -> Arm:
+        """The one-link case of :class:`flexarm.models.assembly.Arm`: the hub and beam block
+        as its body, the drive and friction at its one joint."""
         b = self.beam
-        names = ("motor_angle", "motor_velocity") + tuple(
-            f"beam_{k}" for k in range(b.n_states)) + (("friction_z",) if self.friction.n_states else ())
-        return SingleLinkPlant(
+        body_names = ("motor_angle", "motor_velocity") + tuple(
+            f"beam_{k}" for k in range(b.n_states))
+        names = body_names + (("friction_z",) if self.friction.n_states else ())
+        body = SingleLinkBody(J=self.J, Ab=jnp.asarray(b.A), Bb=jnp.asarray(b.B),
+                              Cb=jnp.asarray(b.C), Db=jnp.asarray(b.D), state_names=body_names)
+        vec = lambda v: jnp.reshape(jnp.asarray(v, dtype=float), (1,))  # noqa: E731
+        return Arm(
             state_names=names, signal_names=SIGNALS, input_names=(self.drive.input_name,),
-            J=self.J, V=self.V, drive=self.drive, friction=self.friction,
-            Ab=jnp.asarray(b.A), Bb=jnp.asarray(b.B), Cb=jnp.asarray(b.C), Db=jnp.asarray(b.D),
-        )
+            body=body, k_u=vec(self.drive.k_u), k_omega=vec(self.drive.k_omega),
+            viscous=vec(self.V), bias=vec(self.friction.bias), limit=vec(self.drive.limit),
+            frictions=(self.friction,), kind="single")
 
     def initial_state(self, motor_angle: float = 0.0, motor_velocity: float = 0.0,
                       tip_deflection: float = 0.0) -> np.ndarray:

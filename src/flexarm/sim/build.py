@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -60,7 +61,7 @@ class Prepared:
     """A scenario ready to run (kept so callers can change pieces and re-run)."""
 
     scenario: Scenario
-    model: SingleLinkModel
+    model: Any  # SingleLinkModel or MultiLinkModel
     loop: SampledLoop
     x0: np.ndarray
     references: dict[str, np.ndarray]
@@ -71,12 +72,69 @@ class Prepared:
         return len(self.time)
 
 
+def _references(scenario: Scenario, t: np.ndarray, extra) -> dict[str, np.ndarray]:
+    refs = {"reference": reference_signal(scenario.reference, t)}
+    refs.update({k: reference_signal(r, t) for k, r in scenario.references.items()})
+    refs.update(extra or {})
+    return refs
+
+
+def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
+    """A multi-link arm in the sampled-data loop (see :func:`prepare`)."""
+    from flexarm.control.joint_pd import joint_pd_from_spec
+    from flexarm.control.regulation import residual_deflection
+    from flexarm.models.assembly import multi_link_arm
+
+    if scenario.sampling is None:
+        raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation]; a "
+                         "multi-link arm without them runs its [regulation] law "
+                         "(flexarm.reproduce / simulate_regulation)")
+    arm, model = multi_link_arm(scenario.arm)
+    dt = scenario.sampling.period
+    n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
+    t = np.arange(n) * dt
+    spec = scenario.controller
+    if controller is not None:
+        ctrl = controller
+    elif spec is not None and spec.type == "joint_pd":
+        ctrl = joint_pd_from_spec(spec, arm, model, dt)
+    else:
+        ctrl = controller_from_spec(spec, dt)
+    channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
+    for needed in _measured_names(ctrl):
+        channels.setdefault(needed, {})
+    if not channels:
+        channels = {f"theta_{i + 1}": {} for i in range(arm.n_joints)}
+    sensors = Sensors.make(arm, channels)
+    limit = np.asarray(arm.limit, float)
+    if scenario.actuator.limit is not None:
+        limit = np.minimum(limit, scenario.actuator.limit)
+    bits = scenario.actuator.bits
+    if bits and not np.all(np.isfinite(limit)):
+        raise ValueError(f"scenario {scenario.name!r}: actuator.bits = {bits} needs a finite "
+                         "command limit (the D/A span); give actuator.limit or the drives' limits")
+    q = 2 * limit / 2**bits if bits else np.zeros_like(limit)
+    loop = SampledLoop(arm, ctrl, sensors, Actuator(jnp.asarray(limit), jnp.asarray(q)),
+                       jnp.asarray(dt), scenario.simulation.substeps, scenario.sampling.delay)
+    ini = scenario.initial
+    nj = arm.n_joints
+    th0 = np.zeros(nj) if ini.joint_angles is None else np.asarray(ini.joint_angles, float)
+    om0 = np.zeros(nj) if ini.joint_velocities is None else np.asarray(ini.joint_velocities, float)
+    d0 = residual_deflection(model, th0) if ini.equilibrium else None
+    x0 = np.concatenate([model.state(theta=th0, delta=d0, theta_dot=om0),
+                         np.zeros(arm.n_states - 2 * model.n_q)])
+    return Prepared(scenario, model, loop, x0, _references(scenario, t, references), t)
+
+
 def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
             references: dict[str, np.ndarray] | None = None) -> Prepared:
-    """Build model, plant, loop, initial state and references of a scenario.
+    """Build model, plant, loop, initial state and references of a scenario: any arm
+    (:class:`flexarm.models.assembly.Arm`), one sampled-data loop.
 
     ``controller`` replaces the scenario's ``[controller]``; ``references`` adds or
     replaces reference channels (arrays at the sample instants)."""
+    if scenario.arm.kind == "multi_link":
+        return _prepare_multi(scenario, controller, references)
     model = SingleLinkModel.from_spec(scenario.arm, hold_tip=scenario.simulation.hold_tip)
     plant = model.plant()
     dt = scenario.sampling.period
@@ -96,9 +154,7 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
                        jnp.asarray(dt), scenario.simulation.substeps, scenario.sampling.delay)
     ini = scenario.initial
     x0 = model.initial_state(ini.motor_angle, ini.motor_velocity, ini.tip_deflection)
-    refs = {"reference": reference_signal(scenario.reference, t)}
-    refs.update(references or {})
-    return Prepared(scenario, model, loop, x0, refs, t)
+    return Prepared(scenario, model, loop, x0, _references(scenario, t, references), t)
 
 
 def _measured_names(ctrl) -> set[str]:

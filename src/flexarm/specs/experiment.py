@@ -68,11 +68,16 @@ class Simulation(Spec):
 
 
 class Initial(Spec):
-    """Initial state: motor angle and velocity, and a static tip deflection (m) of the link."""
+    """Initial state. A single link: motor angle and velocity, and a static tip deflection
+    (m). Several links: ``joint_angles`` and ``joint_velocities`` (one per joint; the links
+    start straight, or at their static deflection under gravity with ``equilibrium``)."""
 
     motor_angle: Q("rad") = 0.0
     motor_velocity: Q("rad/s") = 0.0
     tip_deflection: Q("m") = 0.0
+    joint_angles: list[Q("rad")] | None = None
+    joint_velocities: list[Q("rad/s")] | None = None
+    equilibrium: bool = False
 
 
 class Reference(Spec):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -23,7 +23,7 @@ from flexarm.specs.experiment import (
     Sensor,
     Simulation,
 )
-from flexarm.specs.multilink import MultiLinkArm
+from flexarm.specs.multilink import JointPDController, MultiLinkArm
 from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
@@ -33,39 +33,8 @@ class ScenarioError(ValueError):
     """A scenario that cannot be used, with one line per problem."""
 
 
-class Scenario(Spec):
-    """A full scenario. Sections: ``arm``, ``sampling``, ``sensors``, ``actuator``,
-    ``simulation``, ``initial``, ``reference``, ``controller``."""
-
-    name: str = "scenario"
-    description: str = ""
-    notes: dict[str, Any] = Field(default_factory=dict)
-    arm: SingleLinkArm
-    sampling: Sampling
-    sensors: dict[str, Sensor] = Field(default_factory=dict)
-    actuator: Actuator = Actuator()
-    simulation: Simulation
-    initial: Initial = Initial()
-    reference: Reference = Reference()
-    controller: ControllerSpec | None = Field(default=None, discriminator="type")
-
-    @model_validator(mode="after")
-    def _check_names(self) -> "Scenario":
-        for name in self.sensors:
-            if name not in KNOWN_SENSORS:
-                raise ValueError(
-                    f"unknown sensor channel {name!r}; known: {', '.join(KNOWN_SENSORS)}"
-                )
-        if self.controller is not None and self.controller.measured not in KNOWN_SENSORS:
-            raise ValueError(
-                f"controller.measured = {self.controller.measured!r} is not a signal; "
-                f"choose one of {', '.join(KNOWN_SENSORS)}"
-            )
-        return self
-
-
 class RegulationSpec(Spec):
-    """Regulation of a multi-link arm (De Luca & Siciliano): PD with gravity compensation.
+    """Regulation of a multi-link arm (De Luca & Siciliano) by a continuous-time law.
 
     ``law``: ``constant`` (eq. 8, g_θ at the target), ``online`` (eq. 30, g_θ at the
     measured θ, δ) or ``quasistatic`` (eq. 30, g_θ at θ and the quasi-static δ̄(θ)).
@@ -92,21 +61,80 @@ class RegulationSpec(Spec):
         return self
 
 
-class MultiLinkScenario(Spec):
-    """A multi-link arm (``arm.kind = "multi_link"``) and, optionally, its regulation."""
+Arm = Annotated[SingleLinkArm | MultiLinkArm, Field(discriminator="kind")]
+
+
+class Scenario(Spec):
+    """A full scenario: one arm (``arm.kind = "single_link"`` or ``"multi_link"``), the
+    experiment and the controller.
+
+    Sections: ``arm``; for the sampled-data loop ``sampling``, ``sensors``, ``actuator``,
+    ``simulation``, ``initial``, ``reference`` (the channel ``reference``) and
+    ``references`` (more named channels, e.g. ``theta_ref_1``), ``controller``; for a
+    multi-link arm under a continuous-time law, ``regulation`` (DLS eqs. 8, 30). Sensor
+    channels are named after the arm's signals (:attr:`flexarm.sim.plant.Plant.signal_names`;
+    a single link: ``motor_angle``, ``tip_angle``, ``tip_deflection``, ``motor_velocity``;
+    several links: ``theta_i``, ``theta_dot_i``, ``deflection_i``, ``deflection_angle_i``,
+    ``tip_x``, ``tip_y``, ...)."""
 
     name: str = "scenario"
     description: str = ""
     notes: dict[str, Any] = Field(default_factory=dict)
-    arm: MultiLinkArm
+    arm: Arm
+    sampling: Sampling | None = None
+    sensors: dict[str, Sensor] = Field(default_factory=dict)
+    actuator: Actuator = Actuator()
+    simulation: Simulation | None = None
+    initial: Initial = Initial()
+    reference: Reference = Reference()
+    references: dict[str, Reference] = Field(default_factory=dict)
+    controller: Annotated[ControllerSpec | JointPDController, Field(discriminator="type")] | None = None
     regulation: RegulationSpec | None = None
 
+    @property
+    def n_joints(self) -> int:
+        return 1 if self.arm.kind == "single_link" else len(self.arm.links)
+
     @model_validator(mode="after")
-    def _joints(self) -> "MultiLinkScenario":
-        if self.regulation is not None and len(self.regulation.target) != len(self.arm.links):
+    def _check_names(self) -> "Scenario":
+        if self.arm.kind == "single_link":
+            for name in ("sampling", "simulation"):
+                if getattr(self, name) is None:
+                    raise ValueError(f"[{name}] is missing; a single-link scenario needs "
+                                     "[sampling] (period) and [simulation] (duration)")
+            if self.regulation is not None:
+                raise ValueError("[regulation] is the multi-link continuous-time law; a "
+                                 "single-link arm takes a [controller]")
+            for name in self.sensors:
+                if name not in KNOWN_SENSORS:
+                    raise ValueError(
+                        f"unknown sensor channel {name!r}; known: {', '.join(KNOWN_SENSORS)}"
+                    )
+            m = getattr(self.controller, "measured", None)
+            if isinstance(m, str) and m not in KNOWN_SENSORS:
+                raise ValueError(
+                    f"controller.measured = {m!r} is not a signal; "
+                    f"choose one of {', '.join(KNOWN_SENSORS)}"
+                )
+            return self
+        n = len(self.arm.links)
+        if self.regulation is not None and len(self.regulation.target) != n:
             raise ValueError(f"regulation.target has {len(self.regulation.target)} joints; the arm "
-                             f"has {len(self.arm.links)} links")
+                             f"has {n} links")
+        if (self.sampling is None) != (self.simulation is None):
+            raise ValueError("give [sampling] and [simulation] together (the sampled-data loop)")
+        if self.sampling is None and self.controller is not None:
+            raise ValueError("a [controller] runs in the sampled-data loop: give [sampling] "
+                             "(period) and [simulation] (duration)")
+        for name in ("joint_angles", "joint_velocities"):
+            v = getattr(self.initial, name)
+            if v is not None and len(v) != n:
+                raise ValueError(f"initial.{name} has {len(v)} values; the arm has {n} joints")
         return self
+
+
+#: The multi-link scenario is the same class (kept for code written against it).
+MultiLinkScenario = Scenario
 
 
 def _format_errors(err: ValidationError, source: str, what: str = "scenario") -> str:
@@ -137,19 +165,21 @@ def _format_errors(err: ValidationError, source: str, what: str = "scenario") ->
 
 
 def _is_union_tag(p: object) -> bool:
-    return isinstance(p, str) and p in {"current", "voltage", "lumped", "transfer_function",
-                                        "rigid", "pd", "pid", "lead", "tf"}
+    return isinstance(p, str) and p in {"current", "voltage", "torque", "lumped",
+                                        "transfer_function", "rigid", "pd", "pid", "lead", "tf",
+                                        "state_feedback", "joint_pd", "single_link",
+                                        "multi_link"}
 
 
 def scenario_from_dict(data: dict[str, Any], source: str = "scenario"
                        ) -> Scenario | MultiLinkScenario:
     """Validate a scenario given as a dict (as parsed from TOML); ``arm.kind`` picks a
     single-link :class:`Scenario` or a :class:`MultiLinkScenario`."""
-    arm = data.get("arm") if isinstance(data, dict) else None
-    kind = arm.get("kind", "single_link") if isinstance(arm, dict) else "single_link"
+    if isinstance(data, dict) and isinstance(data.get("arm"), dict) and "kind" not in data["arm"]:
+        # an arm with links is a multi-link arm; otherwise the single link (motor + beam)
+        kind = "multi_link" if "links" in data["arm"] else "single_link"
+        data = {**data, "arm": {**data["arm"], "kind": kind}}
     try:
-        if kind == "multi_link":
-            return MultiLinkScenario.model_validate(data)
         return Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(_format_errors(err, source)) from None
