@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 import flexarm  # noqa: F401  (float64)
-from flexarm.bench import fit, validate
-from flexarm.bench.synthetic import synthetic_log
+from flexarm.identification.time_domain import fit, validate
+from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.specs import load_scenario
 
 RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resistance=2.6,

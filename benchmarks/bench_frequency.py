@@ -12,9 +12,9 @@ import warnings
 import control
 import numpy as np
 
-from flexarm.ident.excitation import multisine
-from flexarm.ident.periodic import periodic_frf
-from flexarm.ident.tfest import fit_two_mass, tfest, two_mass_response
+from flexarm.identification.frequency_domain.excitation import multisine
+from flexarm.identification.frequency_domain.periodic import periodic_frf
+from flexarm.identification.frequency_domain.tfest import fit_two_mass, tfest, two_mass_response
 
 
 def best_of(f, n=5):

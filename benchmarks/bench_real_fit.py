@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-from flexarm.bench import fit, read_bench_log
+from flexarm.identification.time_domain import fit, read_bench_log
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rotary-rig"

@@ -145,7 +145,7 @@ def simulate(arm: Arm, w: float, *, a: float | None = None, periods: int = 20,
 
 
 def write_csv(path: Path, t, sig, comments=()):
-    """Plain writer (independent of flexarm.logs)."""
+    """Plain writer (independent of flexarm.io.logs)."""
     with open(path, "w") as f:
         for c in comments:
             f.write(f"# {c}\n")

@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from flexarm.bench import FitInputError, fit, parse_controller, read_bench_log, validate
-from flexarm.bench.closed_loop import as_jax, closed_loop_run
-from flexarm.bench.report import check_physical
-from flexarm.bench.synthetic import synthetic_log
+from flexarm.identification.time_domain import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
+from flexarm.identification.time_domain.report import check_physical
+from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
@@ -206,8 +206,8 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from bench_fit import GAINS, RIG, TRUE
 
-    from flexarm.bench import fit, validate
-    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.identification.time_domain import fit, validate
+    from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
     import tempfile
@@ -239,7 +239,7 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
     ~ 0.09 of it and must stay below 0.2 (√((1−ρ)/(1+ρ)) = 0.10 for the AR(1) channel)."""
     from scipy.signal import lfilter
 
-    from flexarm.bench.uncertainty import bartlett_meat, hac_covariance, iid_covariance
+    from flexarm.identification.time_domain.uncertainty import bartlett_meat, hac_covariance, iid_covariance
 
     rng = np.random.default_rng(1)
     g = rng.normal(size=(50, 3))
@@ -428,8 +428,8 @@ def test_initial_tip_through_the_filter():
     y = 0.01 + 0.2 (t − (1 − e^{−ωt})/ω); the estimate must return (0.01, 0.2) to 1e-9
     (a linear input is inside the parabola's span), while a parabola through y itself
     reads the rate as 0.036 (off by more than half)."""
-    from flexarm.bench.guesses import initial_tip_at
-    from flexarm.bench.logs import BenchLog
+    from flexarm.identification.time_domain.guesses import initial_tip_at
+    from flexarm.identification.time_domain.logs import BenchLog
 
     w = 2 * np.pi * 15.0
     t = np.arange(40) * 1e-3
@@ -450,10 +450,10 @@ def test_tip_sensor_offset_is_warned(logs):
     fit's warning names the log and the reading."""
     import sys
 
-    from flexarm.bench import guesses
-    from flexarm.bench.logs import BenchLog, read_bench_log
+    from flexarm.identification.time_domain import guesses
+    from flexarm.identification.time_domain.logs import BenchLog, read_bench_log
 
-    fit_mod = sys.modules["flexarm.bench.fit"]
+    fit_mod = sys.modules["flexarm.identification.time_domain.fit"]
     clean = [read_bench_log(p) for p in logs]
     for g in clean:
         rest, span = guesses.tip_rest_reading(g)

@@ -66,7 +66,7 @@ def test_bad_scenario_exits_2_naming_the_field(tmp_path):
 
 
 def test_validate_true_model_on_its_own_log_and_fit_without_controller(tmp_path):
-    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
     sc = load_scenario("rotary-flexible-link")
@@ -124,7 +124,7 @@ def test_multilink_regulation_joint_count_is_checked(tmp_path):
 def test_fit_reports_with_and_without_friction(tmp_path):
     """`flexarm fit --compare-no-friction`: both fits in the table and the JSON, and the
     friction-free model fits the stick-slip log clearly worse."""
-    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
     log = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
@@ -145,8 +145,8 @@ def test_fit_reports_with_and_without_friction(tmp_path):
 def test_fit_and_validate_read_logs_in_other_names_and_units(tmp_path):
     """A rig's own log (other column names, degrees, millimetres) read with --column/--unit
     gives the same validation as the same log in SI; bad mapping options are named."""
-    from flexarm.bench.synthetic import synthetic_log
-    from flexarm.logs import read_log, write_log
+    from flexarm.identification.time_domain.synthetic import synthetic_log
+    from flexarm.io.logs import read_log, write_log
     from flexarm.specs import load_scenario
 
     si = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
@@ -288,7 +288,7 @@ class _FakeFit:
 
 
 def _interrupting_fit(monkeypatch, result):
-    import flexarm.bench
+    import flexarm.identification.time_domain
     import flexarm.cli
     from flexarm.errors import FitInterrupted
 
@@ -297,7 +297,7 @@ def _interrupting_fit(monkeypatch, result):
             raise KeyboardInterrupt
         raise FitInterrupted(result)
 
-    monkeypatch.setattr(flexarm.bench, "fit", fake)
+    monkeypatch.setattr(flexarm.identification.time_domain, "fit", fake)
     monkeypatch.setattr(flexarm.cli, "_bench_logs", lambda *a, **k: [])
 
 
@@ -358,7 +358,7 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     import sys
     import time
 
-    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
     sc = load_scenario("rotary-flexible-link")

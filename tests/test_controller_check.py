@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from flexarm.bench.controller_check import check_controller
-from flexarm.bench.logs import FitInputError, read_bench_log
-from flexarm.logformat import load_log_format, log_format_from_dict
+from flexarm.identification.time_domain.controller_check import check_controller
+from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.io.logformat import load_log_format, log_format_from_dict
 
 from test_logformat import EXAMPLE, README_GAINS, RIG_FILES, needs_data
 
@@ -72,7 +72,7 @@ def test_wrong_k2_sign_is_rejected_naming_k2():
 
 @pytest.fixture(scope="module")
 def synthetic_delay1(tmp_path_factory):
-    from flexarm.bench.synthetic import synthetic_log
+    from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs.scenario import load_scenario
 
     sc = load_scenario("rotary-flexible-link")

@@ -1,4 +1,4 @@
-"""Coulomb friction from ω0/3ω0 pairs (flexarm.ident.coulomb, FRB eqs. (2)-(6))."""
+"""Coulomb friction from ω0/3ω0 pairs (flexarm.identification.frequency_domain.coulomb, FRB eqs. (2)-(6))."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import _frb_sim as sim
-from flexarm.ident.coulomb import (
+from flexarm.identification.frequency_domain.coulomb import (
     PairPhasors,
     estimate_coulomb,
     estimate_pair,
     square_wave_phasor,
 )
-from flexarm.ident.harmonics import IdentificationWarning, analyse_log
-from flexarm.logs import Log, read_log
+from flexarm.identification.frequency_domain.harmonics import IdentificationWarning, analyse_log
+from flexarm.io.logs import Log, read_log
 
 CF = 0.132  # A
 GINV = sim.PAPER_ARM.Gm_inv  # i/θm of the linear part, A/rad

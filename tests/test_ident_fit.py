@@ -1,5 +1,5 @@
-"""Transfer-function fit (flexarm.ident.tffit) and the identification pipeline
-(flexarm.ident.identify) on data of an independent simulation (tests/_frb_sim.py)."""
+"""Transfer-function fit (flexarm.identification.frequency_domain.tffit) and the identification pipeline
+(flexarm.identification.frequency_domain.identify) on data of an independent simulation (tests/_frb_sim.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import _frb_sim as sim
-from flexarm.ident.harmonics import IdentificationError, IdentificationWarning
-from flexarm.ident.identify import identify
-from flexarm.ident.tffit import fit_tf, tf_coefficients, tf_response
+from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.identify import identify
+from flexarm.identification.frequency_domain.tffit import fit_tf, tf_coefficients, tf_response
 from flexarm.specs.arm import SingleLinkArm
 
 # FRB eqs. (12), (13), as printed (θm in rad, i in A).

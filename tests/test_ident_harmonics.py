@@ -1,4 +1,4 @@
-"""Harmonic analysis (flexarm.ident.harmonics) on analytic signals."""
+"""Harmonic analysis (flexarm.identification.frequency_domain.harmonics) on analytic signals."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from flexarm.ident.harmonics import (
+from flexarm.identification.frequency_domain.harmonics import (
     IdentificationError,
     IdentificationWarning,
     analyse_log,
@@ -17,7 +17,7 @@ from flexarm.ident.harmonics import (
     saturation_level,
     whole_periods,
 )
-from flexarm.logs import Log, read_log, write_log
+from flexarm.io.logs import Log, read_log, write_log
 
 W0 = 2.345678  # rad/s: 2678.6... samples per period at 1 kHz, not a whole number
 PHASORS = {0: 0.03, 1: 0.7 * np.exp(0.4j), 2: 0.01j, 3: 0.05 * np.exp(-2.1j),
@@ -114,7 +114,7 @@ def test_saturated_current_warns_with_file_and_level(tmp_path):
 def test_held_command_phasor_is_that_of_the_zoh_signal():
     """A logged command is held from one sample to the next: its corrected phasor equals
     the Fourier coefficient of the held (staircase) signal, integrated on a fine grid."""
-    from flexarm.ident.harmonics import fourier_phasors, zoh_factor
+    from flexarm.identification.frequency_domain.harmonics import fourier_phasors, zoh_factor
 
     T, w, n = 0.003, 23.0, 6000
     t = np.arange(n) * T
@@ -135,7 +135,7 @@ def test_measured_friction_shape():
     """sign(θ̇m) rebuilt from θm's harmonics: for a pure sinusoid it is eq. (2)'s square
     wave, 4/(nπ) e^{j(n∠θ1 + π/2)}; a third harmonic in θm shifts its zero crossings and
     with them the friction's fundamental."""
-    from flexarm.ident.harmonics import ideal_friction_phasor, measured_friction_shape
+    from flexarm.identification.frequency_domain.harmonics import ideal_friction_phasor, measured_friction_shape
 
     w, T = 3.0, 1e-4
     t = np.arange(int(20 * 2 * np.pi / w / T)) * T  # whole periods up to one sample

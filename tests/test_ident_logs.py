@@ -1,4 +1,4 @@
-"""The CSV exchange format of identification experiments (flexarm.logs)."""
+"""The CSV exchange format of identification experiments (flexarm.io.logs)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from flexarm.logs import LogError, read_log, write_log
+from flexarm.io.logs import LogError, read_log, write_log
 
 HEADER = "time,reference,current,motor_angle,tip_angle"
 

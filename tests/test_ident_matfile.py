@@ -1,4 +1,4 @@
-"""MATLAB .mat reader (flexarm.ident.matfile): v5 and v7.3, Simulink structs, signs, units,
+"""MATLAB .mat reader (flexarm.io.matfile): v5 and v7.3, Simulink structs, signs, units,
 opaque objects skipped, and the errors that name the file and the field."""
 
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.io as sio
 
-from flexarm.ident.matfile import MatFileError, load_format, read_mat
+from flexarm.io.matfile import MatFileError, load_format, read_mat
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "motor-bench.toml"
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench"

@@ -11,9 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from flexarm.cli import app
-from flexarm.ident.matfile import load_format, read_mat
-from flexarm.ident.periodic import periodic_frf
-from flexarm.ident.tfest import fit_two_mass
+from flexarm.io.matfile import load_format, read_mat
+from flexarm.identification.frequency_domain.periodic import periodic_frf
+from flexarm.identification.frequency_domain.tfest import fit_two_mass
 
 ROOT = Path(__file__).resolve().parents[1]
 MAT = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench" / "MultisineTypeB.mat"

@@ -1,15 +1,15 @@
-"""Excitation design (flexarm.ident.excitation) and the periodic FRF / distortion analysis
-(flexarm.ident.periodic) on signals whose answer is known exactly."""
+"""Excitation design (flexarm.identification.frequency_domain.excitation) and the periodic FRF / distortion analysis
+(flexarm.identification.frequency_domain.periodic) on signals whose answer is known exactly."""
 
 import warnings
 
 import numpy as np
 import pytest
 
-from flexarm.ident.excitation import (ExcitationError, crest_factor, multisine, prbs,
+from flexarm.identification.frequency_domain.excitation import (ExcitationError, crest_factor, multisine, prbs,
                                       sine_pairs, swept_sine, write_excitation)
-from flexarm.ident.harmonics import IdentificationError
-from flexarm.ident.periodic import detect_period, periodic_frf
+from flexarm.identification.frequency_domain.harmonics import IdentificationError
+from flexarm.identification.frequency_domain.periodic import detect_period, periodic_frf
 
 FS, P = 1000.0, 500
 

@@ -1,4 +1,4 @@
-"""flexarm.ident.tfest: the frequency-domain fit on FRDs of known systems (exact on
+"""flexarm.identification.frequency_domain.tfest: the frequency-domain fit on FRDs of known systems (exact on
 noise-free data; calibrated intervals and cost under noise of known variance) and the
 two-mass structure."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import control
 import pytest
 
-from flexarm.ident.tfest import (TFEstError, fit_two_mass, tfest, tfest_orders,
+from flexarm.identification.frequency_domain.tfest import (TFEstError, fit_two_mass, tfest, tfest_orders,
                                  two_mass_response)
 
 

@@ -122,7 +122,7 @@ def test_batch_of_gain_variations_equals_single_runs():
 
 
 def test_continuous_run_to_csv_round_trip(tmp_path):
-    from flexarm.logs import LogExistsError, read_log
+    from flexarm.io.logs import LogExistsError, read_log
 
     model = build_multilink(benchmark_arm())
     p = R.regulation_params(model, [18, 18], [10, 2], [-45 * DEG, 0.0])

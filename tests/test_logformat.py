@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.bench.logs import FitInputError, read_bench_log
-from flexarm.logformat import LogFormatError, load_log_format, log_format_from_dict
-from flexarm.logs import LogError, read_log
+from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.io.logformat import LogFormatError, load_log_format, log_format_from_dict
+from flexarm.io.logs import LogError, read_log
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "quanser-rotflex.toml"

@@ -25,8 +25,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexarm.bench.logs import FitInputError, read_bench_log
-from flexarm.logs import LogError, read_log
+from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.io.logs import LogError, read_log
 
 from test_logformat import EXAMPLE
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.bench import fit, predict, read_bench_log
+from flexarm.identification.time_domain import fit, predict, read_bench_log
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"

@@ -9,7 +9,7 @@ import pytest
 from pydantic import ValidationError
 from scipy import signal as sps
 
-from flexarm.bench.closed_loop import as_jax, closed_loop_run
+from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.control import discrete
 from flexarm.sim.build import prepare
 from flexarm.sim.plant import Plant
@@ -183,7 +183,7 @@ def test_bad_bandwidths():
 
 
 def test_fast_bench_loop_equals_simulator_with_filters():
-    """The bench fitter's batched loop (:mod:`flexarm.bench.closed_loop`) with both channels
+    """The bench fitter's batched loop (:mod:`flexarm.identification.time_domain.closed_loop`) with both channels
     filtered (hub 50 Hz, tip 20 Hz) equals :func:`simulate_loop` on the same arm, to
     rounding, as without filters (tests/test_bench_fit.py): 1e-9 rad / m / V."""
     fth, fd = 50.0, 20.0
@@ -228,8 +228,8 @@ def test_fast_bench_loop_equals_simulator_with_filters():
 
 
 def test_fit_filters_keyword_is_checked(tmp_path):
-    from flexarm.bench import FitInputError, fit
-    from flexarm.bench.objective import check_filters
+    from flexarm.identification.time_domain import FitInputError, fit
+    from flexarm.identification.time_domain.objective import check_filters
 
     assert check_filters({"tip_deflection": 50}, 1e-3, 2) == {"motor_angle": 0.0,
                                                               "tip_deflection": 50.0}

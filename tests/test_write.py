@@ -1,4 +1,4 @@
-"""The one atomic writer (flexarm.write): complete file or none, never a partial one;
+"""The one atomic writer (flexarm.io.write): complete file or none, never a partial one;
 no silent overwrite; no temporary file left behind, Ctrl-C included."""
 
 import json
@@ -8,7 +8,7 @@ import stat
 import pytest
 
 from flexarm.errors import OutputExistsError
-from flexarm.write import (atomic_open, save_figure, write_bytes, write_json, write_text,
+from flexarm.io.write import (atomic_open, save_figure, write_bytes, write_json, write_text,
                            write_toml)
 
 
@@ -89,7 +89,7 @@ def test_write_log_keeps_its_error_and_is_atomic(tmp_path):
     as before, and no temporary file beside the log."""
     import numpy as np
 
-    from flexarm.logs import LogError, LogExistsError, write_log
+    from flexarm.io.logs import LogError, LogExistsError, write_log
 
     sig = {k: np.zeros(3) for k in ("reference", "current", "motor_angle", "tip_angle")}
     p = write_log(tmp_path / "a.csv", [0, 1, 2], sig)

@@ -14,11 +14,11 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from flexarm.bench import fit, validate  # noqa: E402
+from flexarm.identification.time_domain import fit, validate  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
-from flexarm.ident.identify import identify  # noqa: E402
-from flexarm.ident.tfest import tfest  # noqa: E402
+from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
+from flexarm.identification.frequency_domain.tfest import tfest  # noqa: E402
 from flexarm.models.multilink import build_multilink  # noqa: E402
 from flexarm.models.single_link import SingleLinkModel  # noqa: E402
 from flexarm.sim.build import simulate  # noqa: E402

@@ -292,8 +292,8 @@ def _bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
     --max-jitter and --log-format; the declared law is checked against each log's command
     (bench.controller_check) when it has one, and replaced by the regressed law with
     --use-regressed-law."""
-    from flexarm.bench.controller_check import check_controller
-    from flexarm.bench.logs import read_bench_log
+    from flexarm.identification.time_domain.controller_check import check_controller
+    from flexarm.identification.time_domain.logs import read_bench_log
 
     if not (max_jitter > 0):
         _fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
@@ -334,7 +334,7 @@ def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or b
     _enable_cache()
     from rich.progress import Progress
 
-    from flexarm.ident.experiments import SineDesign, run_sine_experiments
+    from flexarm.identification.frequency_domain.experiments import SineDesign, run_sine_experiments
 
     _check_dir_option("--out", out)
     sc = _load(scenario)
@@ -373,8 +373,8 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
     import warnings
 
-    from flexarm.ident.identify import identify as run_identify
-    from flexarm.ident.harmonics import IdentificationError
+    from flexarm.identification.frequency_domain.identify import identify as run_identify
+    from flexarm.identification.frequency_domain.harmonics import IdentificationError
 
     _check_file_option("--json", json_out, overwrite)
     _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
@@ -398,7 +398,7 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     if plots is not None:
         res.bode_figures(plots)
     if scenario_out is not None:
-        from flexarm.write import write_toml
+        from flexarm.io.write import write_toml
 
         write_toml(scenario_out, _scenario_file(res, current_limit), overwrite=overwrite)
     cf = d["coulomb_current"]
@@ -464,10 +464,10 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         ) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain)."""
     _enable_cache()
-    from flexarm.bench import FitInputError
-    from flexarm.bench import fit as run_fit
+    from flexarm.identification.time_domain import FitInputError
+    from flexarm.identification.time_domain import fit as run_fit
     from flexarm.errors import FitInterrupted
-    from flexarm.write import write_json
+    from flexarm.io.write import write_json
 
     _check_file_option("--json", json_out, overwrite)
     _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
@@ -500,7 +500,7 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
                 status.update("fitting again without joint friction")
                 res0 = run_fit(blogs, friction=False, **kw)
             if held_logs:
-                from flexarm.bench import predict
+                from flexarm.identification.time_domain import predict
 
                 status.update("predicting the held-out windows")
                 held = predict(res, held_logs)
@@ -542,7 +542,7 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
     if plots is not None:
         res.plots(plots)
         if held is not None:
-            from flexarm.bench.report import overlay_plots
+            from flexarm.identification.time_domain.report import overlay_plots
 
             overlay_plots(plots, held["logs"], held["traj"], held["fit_percent"], "held-out")
 
@@ -571,8 +571,8 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
                             "first sample, e.g. 5:10")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
-    from flexarm.bench import FitInputError
-    from flexarm.bench import validate as run_validate
+    from flexarm.identification.time_domain import FitInputError
+    from flexarm.identification.time_domain import validate as run_validate
 
     _check_file_option("--json", json_out, overwrite)
     _check_dir_option("--plots", plots)
@@ -590,7 +590,7 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
     console.print(t)
     if json_out is not None:
-        from flexarm.write import write_json
+        from flexarm.io.write import write_json
 
         write_json(json_out, out, overwrite=overwrite)
 
@@ -605,7 +605,7 @@ def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> No
     shell's code for SIGINT).  ``res``: the friction fit if it had finished (the
     interrupted one was then the --compare-no-friction fit), ``best``: the interrupted
     fit's best result (``None`` if none)."""
-    from flexarm.write import write_json
+    from flexarm.io.write import write_json
 
     mark = {"interrupted": True, "status": "interrupted"}
     if res is not None:
@@ -662,7 +662,7 @@ def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a gene
     """Design an excitation: writes OUT and OUT-lines.csv (excited and detection lines)."""
     import numpy as np
 
-    from flexarm.ident import excitation as ex
+    from flexarm.identification.frequency_domain import excitation as ex
     try:
         if kind == "sweep":
             e = ex.swept_sine(period, fs, f_min, f_max, amplitude=rms * np.sqrt(2), periods=periods)
@@ -689,10 +689,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.ma
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
     import warnings as _w
 
-    from flexarm.ident.harmonics import IdentificationError
-    from flexarm.ident.matfile import read_recording
-    from flexarm.ident.periodic import periodic_frf, plot_distortion
-    from flexarm.logs import LogError
+    from flexarm.identification.frequency_domain.harmonics import IdentificationError
+    from flexarm.io.matfile import read_recording
+    from flexarm.identification.frequency_domain.periodic import periodic_frf, plot_distortion
+    from flexarm.io.logs import LogError
     if len(logs) != 1:
         _fail(f"frf reads one recording per call for now; got {len(logs)}")
     try:
@@ -738,8 +738,8 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     import control as ct
     import numpy as np
 
-    from flexarm.ident.tfest import TFEstError, fit_two_mass
-    from flexarm.ident.tfest import tfest as _tfest
+    from flexarm.identification.frequency_domain.tfest import TFEstError, fit_two_mass
+    from flexarm.identification.frequency_domain.tfest import tfest as _tfest
     try:
         d = json.loads(frf_json.read_text())
         f = np.asarray(d["frequency_hz"], float)

@@ -7,7 +7,7 @@ class SimulationDiverged(RuntimeError):
 
 
 class OutputExistsError(FileExistsError):
-    """A writer (:mod:`flexarm.write`) refused to replace an existing file; the message
+    """A writer (:mod:`flexarm.io.write`) refused to replace an existing file; the message
     names it (pass ``overwrite=True``, on the command line ``--overwrite``)."""
 
 

@@ -11,7 +11,7 @@ from flexarm.analysis.model_info import single_link_info
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import Scenario, builtin_scenarios, load_scenario
-from flexarm.write import save_figure, write_json
+from flexarm.io.write import save_figure, write_json
 
 
 def simulate_with_progress(scenario: Scenario, progress: bool = False):

@@ -47,7 +47,7 @@ from flexarm.sim import continuous
 from flexarm.sim.continuous import ContinuousRun, simulate_continuous
 from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.specs.multilink import benchmark_arm
-from flexarm.write import atomic_open, save_figure, write_text
+from flexarm.io.write import atomic_open, save_figure, write_text
 
 DEG = math.pi / 180.0
 

@@ -54,7 +54,7 @@ from flexarm.sim.build import Prepared, prepare, to_result
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
-from flexarm.write import atomic_open, save_figure, write_text
+from flexarm.io.write import atomic_open, save_figure, write_text
 
 __all__ = ["FeliuChoices", "run", "CHOICES"]
 

@@ -31,7 +31,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.errors import SimulationDiverged
-from flexarm.logs import write_log
+from flexarm.io.logs import write_log
 from flexarm.models.multilink import MultiLinkModel
 from flexarm.sim.integrate import rk4_path
 
@@ -82,7 +82,7 @@ class ContinuousRun(_ArmResponse):
 
     def to_csv(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """Write ``time``, every state and every torque as columns (SI: s, rad, m, rad/s,
-        m/s, N·m) through :func:`flexarm.logs.write_log`; refuses to overwrite unless asked."""
+        m/s, N·m) through :func:`flexarm.io.logs.write_log`; refuses to overwrite unless asked."""
         cols = {nm: self.states[k] for k, nm in enumerate(self.state_names)}
         cols.update({nm: self.inputs[k] for k, nm in enumerate(self.input_labels)})
         return write_log(path, self.time, cols, overwrite=overwrite, fmt="%.10g",

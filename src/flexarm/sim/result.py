@@ -14,8 +14,8 @@ from pathlib import Path
 import control
 import numpy as np
 
-from flexarm.logs import KNOWN as EXCHANGE_UNITS
-from flexarm.logs import write_log
+from flexarm.io.logs import KNOWN as EXCHANGE_UNITS
+from flexarm.io.logs import write_log
 
 
 class SimulationResult(control.TimeResponseData):
@@ -65,9 +65,9 @@ class SimulationResult(control.TimeResponseData):
 
     def to_csv(self, path: str | Path, *, overwrite: bool = False,
                comments: dict[str, str] | None = None) -> Path:
-        """Write the exchange format (:mod:`flexarm.logs`: header ``time,reference,current,
+        """Write the exchange format (:mod:`flexarm.io.logs`: header ``time,reference,current,
         motor_angle,...``, SI units, ``# key: value`` comment lines first, then a ``# units:``
-        line). Refuses to overwrite unless asked (:class:`flexarm.logs.LogExistsError`, a
+        line). Refuses to overwrite unless asked (:class:`flexarm.io.logs.LogExistsError`, a
         ``FileExistsError``)."""
         path = Path(path)
         cols = self.exchange_columns()

@@ -1,7 +1,7 @@
 """Log-format files: how one logger writes its logs, written once per logger (TOML).
 
-A log-format file tells :func:`flexarm.logs.read_log` and
-:func:`flexarm.bench.logs.read_bench_log` which column holds what, in which unit, and which
+A log-format file tells :func:`flexarm.io.logs.read_log` and
+:func:`flexarm.identification.time_domain.logs.read_bench_log` which column holds what, in which unit, and which
 control law produced the logged command::
 
     delimiter = "auto"          # or "tab", "comma", "semicolon", "whitespace", or the character
@@ -42,7 +42,7 @@ from typing import Any, Literal
 
 from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
 
-from flexarm.logs import COMMENT_CHARS, KNOWN, LogError
+from flexarm.io.logs import COMMENT_CHARS, KNOWN, LogError
 from flexarm.specs.quantity import Count, Q, Spec
 from flexarm.units import UnitError, to_si, ureg
 
@@ -193,7 +193,7 @@ class LogFormat(Spec):
 
     @property
     def delimiter_char(self) -> str | None:
-        """The delimiter for :func:`flexarm.logs.read_log` (``None``: sniffed, ``" "``: runs
+        """The delimiter for :func:`flexarm.io.logs.read_log` (``None``: sniffed, ``" "``: runs
         of whitespace)."""
         return DELIMITER_NAMES.get(self.delimiter.lower(), self.delimiter)
 

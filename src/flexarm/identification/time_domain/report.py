@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from flexarm.bench.logs import FitInputError
-from flexarm.bench.params import DOCS, UNITS, derived
+from flexarm.identification.time_domain.logs import FitInputError
+from flexarm.identification.time_domain.params import DOCS, UNITS, derived
 from flexarm.errors import OutputExistsError
-from flexarm.write import save_figure, write_json, write_text
+from flexarm.io.write import save_figure, write_json, write_text
 
 
 def check_physical(params: dict[str, float], source: str = "fit") -> None:
@@ -43,7 +43,7 @@ class FitResult:
     ``std``: the reported standard errors, from the Newey–West (HAC) sandwich covariance
     (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹ with Ŝ = Σ_logs Σ_|k|<=M w_k Σ_t g_t g_{t+k}ᵀ, g_t = Σ_channels J_tᵀ r_t
     and Bartlett weights w_k = 1 − |k|/(M+1), M = 10 residual correlation times per log
-    (:mod:`flexarm.bench.uncertainty`), mapped to physical units by |dp/du|. They are
+    (:mod:`flexarm.identification.time_domain.uncertainty`), mapped to physical units by |dp/du|. They are
     reported because the output-error residuals are strongly autocorrelated (model error,
     filtered sensors, encoder quantisation of a slow hub), which the textbook estimate
     ignores. ``std_iid``: that textbook s² (JᵀJ)⁻¹, s² = ‖r‖²/(m − n), kept for
@@ -69,7 +69,7 @@ class FitResult:
     seconds: float = 0.0
     std_iid: dict[str, float] = field(default_factory=dict)
     #: the search space and the fitted point in it (unit coordinates, discrete), so that
-    #: the same model predicts other logs (:func:`flexarm.bench.fit.predict`)
+    #: the same model predicts other logs (:func:`flexarm.identification.time_domain.fit.predict`)
     space: Any = None
     unit: Any = None
     discrete: Any = None
@@ -213,7 +213,7 @@ class FitResult:
         d, comments = scenario_from_fit(self)
         self.scenario()  # validates
         write_text(path, overwrite=overwrite, text=toml_with_comments(d, comments, header=[
-            "Fitted by flexarm.bench from " + ", ".join(g.name for g in self.logs),
+            "Fitted by flexarm.identification.time_domain from " + ", ".join(g.name for g in self.logs),
             self.message,
             "fit %: " + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items()
                                                        if v is not None)
@@ -280,7 +280,7 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
         "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
         "damping_ratio": p["link_damping"],
         "masses": [{"mass": der["tip_mass"], "joint": "pinned"}]})
-    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.bench from bench logs",
+    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.identification.time_domain from bench logs",
          "arm": {"motor": motor, "friction": fr, "beam": beam},
          "sampling": {"period": float(f"{T:.10g}"), "delay": res.settings["computation_delay"]},
          "sensors": sensors, "actuator": {"limit": rig.limit},

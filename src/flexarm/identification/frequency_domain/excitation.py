@@ -13,10 +13,10 @@
 * PRBS: maximum-length binary sequences (``scipy.signal.max_len_seq``), ±amplitude.
 * Swept sine: ``scipy.signal.chirp`` (linear or logarithmic), one sweep per period.
 * The FRB ω0/3ω0 stepped-sine plan: pairs (ω0, 3ω0) (FRB Sec. II-A; the experiments
-  themselves are :func:`flexarm.ident.experiments.run_sine_experiments`).
+  themselves are :func:`flexarm.identification.frequency_domain.experiments.run_sine_experiments`).
 
 Crest factor = max|u| / rms(u).  :func:`write_excitation` writes the signal through
-:func:`flexarm.logs.write_log` and the excited / detection lines to a CSV beside it.
+:func:`flexarm.io.logs.write_log` and the excited / detection lines to a CSV beside it.
 """
 
 from __future__ import annotations
@@ -190,7 +190,7 @@ def write_excitation(path: str | Path, exc: Excitation, *, name: str = "referenc
                      overwrite: bool = False) -> tuple[Path, Path]:
     """The signal as a log (``time`` + one column per realisation) and ``<stem>-lines.csv``
     with ``line,frequency_hz,role`` (excited / detection); returns both paths."""
-    from flexarm.logs import write_log
+    from flexarm.io.logs import write_log
 
     path = Path(path)
     cols = {name if i == 0 else f"{name}_{i}": row for i, row in enumerate(exc.signal)}

@@ -28,7 +28,7 @@ Files that name or scale columns differently are read with ``columns`` (our name
 file's header text or 1-based column number; a leading ``-`` flips the sign) and
 ``units`` (our name → the unit of the file's numbers, parsed by pint), e.g.
 ``read_log(p, columns={"current": "i_m", "time": 1}, units={"current": "mA"})``; a
-log-format file (:mod:`flexarm.logformat`) holds these once per logger.
+log-format file (:mod:`flexarm.io.logformat`) holds these once per logger.
 
 Validation (every message starts with the file's path): missing columns (lists the found
 and the expected names and how to map them), rows with another number of fields (a file
@@ -50,7 +50,7 @@ import numpy as np
 
 from flexarm.errors import OutputExistsError
 from flexarm.units import ureg
-from flexarm.write import atomic_open
+from flexarm.io.write import atomic_open
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -505,7 +505,7 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     in the order given.  ``comments`` are lines written as ``# line`` before the header
     (a mapping is written as ``# key: value``).  An existing file is not replaced unless
     ``overwrite=True`` (:class:`LogExistsError`).  Written atomically
-    (:func:`flexarm.write.atomic_open`): the file is complete or absent, never partial.
+    (:func:`flexarm.io.write.atomic_open`): the file is complete or absent, never partial.
     """
     path = Path(path)
     t = np.asarray(time, dtype=float)

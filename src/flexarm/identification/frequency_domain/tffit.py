@@ -33,7 +33,7 @@ from typing import NamedTuple
 import control
 import numpy as np
 from scipy.optimize import least_squares
-from flexarm.ident.tfest import reflect_unstable_roots
+from flexarm.identification.frequency_domain.tfest import reflect_unstable_roots
 
 
 class TFFit(NamedTuple):

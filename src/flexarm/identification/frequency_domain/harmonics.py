@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.logs import Log
+from flexarm.io.logs import Log
 
 
 class IdentificationError(ValueError):

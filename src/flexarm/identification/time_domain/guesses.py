@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from flexarm.bench.logs import BenchLog
+from flexarm.identification.time_domain.logs import BenchLog
 
 
 def controller_command(log: BenchLog) -> np.ndarray:

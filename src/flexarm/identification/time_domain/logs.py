@@ -1,6 +1,6 @@
 """Bench logs: reading, checking, and the controller a log declares.
 
-A bench log is the CSV exchange format of :mod:`flexarm.logs` with the columns of a
+A bench log is the CSV exchange format of :mod:`flexarm.io.logs` with the columns of a
 rig with a hub encoder and a strain gauge (SI units)::
 
     # controller: state_feedback K1=6 K2=-3 K3=0.213 K4=0
@@ -18,7 +18,7 @@ K3=.. K4=.. [rate=backward|filtered] [tau=..]`` or ``# controller: pd KP=.. KD=.
 ``controller=`` argument overrides the log's line.
 
 Logs as a logger writes them are read with a log-format file (``log_format=``, see
-:mod:`flexarm.logformat`): its ``[columns]`` / ``[units]`` map and scale the columns, its
+:mod:`flexarm.io.logformat`): its ``[columns]`` / ``[units]`` map and scale the columns, its
 ``[controller]`` gives the law with fixed gains or the columns holding them. The gains are
 kept per sample (:attr:`BenchLog.gains`, piecewise constant when a log changes them).
 """
@@ -31,8 +31,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexarm.logformat import GAIN_UNITS, LogFormat, load_log_format
-from flexarm.logs import MAX_JITTER, LogError, read_log, write_log
+from flexarm.io.logformat import GAIN_UNITS, LogFormat, load_log_format
+from flexarm.io.logs import MAX_JITTER, LogError, read_log, write_log
 from flexarm.specs.controllers_bench import StateFeedbackController
 
 #: Relative difference of two sampling periods taken as the same period (a logger's
@@ -217,7 +217,7 @@ def read_bench_log(path: str | Path, *, columns: Mapping[str, str | int] | None 
     """Read and check one bench log (see the module docstring); ``columns`` maps our names
     to the file's (header text or 1-based number), ``units`` gives the unit of a column's
     numbers (pint strings), both on top of ``log_format``'s (a log-format file or a
-    :class:`~flexarm.logformat.LogFormat`). The law: ``controller`` if given, else the
+    :class:`~flexarm.io.logformat.LogFormat`). The law: ``controller`` if given, else the
     format's ``[controller]`` (fixed gains or gain columns), else the log's ``# controller:``
     line."""
     path = Path(path)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from flexarm.ident.harmonics import HarmonicAnalysis
+from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ import numpy as np
 import scipy.signal
 from scipy.optimize import least_squares
 
-from flexarm.bench.logs import BenchLog
+from flexarm.identification.time_domain.logs import BenchLog
 
 #: default largest sensor delay searched (s)
 MAX_DELAY_S = 0.15
@@ -243,7 +243,7 @@ def link_frequency_estimates(logs: list[BenchLog], tip: TipModel | None) -> dict
     model, the spectral peak while the hub is stuck (the link rings at its clamped
     frequency then), the spectral peak of the whole tip signal (a closed-loop mode,
     usually above the clamped one), and their agreement."""
-    from flexarm.bench import guesses
+    from flexarm.identification.time_domain import guesses
 
     out: dict = {}
     if tip is not None:

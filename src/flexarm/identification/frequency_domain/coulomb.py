@@ -6,7 +6,7 @@ is a current (A):
     i = G⁻¹ θm + C_f sign(θ̇m),        G(s) = θm/i of the linear part (beam coupling included),
 
 with C_f the Coulomb level *as a current* (the torque is K·C_f).  Phasors follow
-x(t) = Re{X e^{jωt}} (see :mod:`flexarm.ident.harmonics`).
+x(t) = Re{X e^{jωt}} (see :mod:`flexarm.identification.frequency_domain.harmonics`).
 
 Square wave.  For θm = a sin(ω0 t + φ), i.e. ∠θm(ω0) = φ − π/2, sign(θ̇m) = sign(cos(ω0t+φ))
 = (4/π) Σ_{n odd} (−1)^{(n−1)/2} cos(n(ω0t + φ))/n, so its harmonic n has the phasor
@@ -48,8 +48,8 @@ from scipy.optimize import minimize_scalar
 # cost yet finite, which Brent's parabolic steps need.
 _INFEASIBLE_COST = 1e6
 
-from flexarm.ident.harmonics import ideal_friction_phasor as square_wave_phasor  # noqa: F401 (eq. 2)
-from flexarm.ident.harmonics import HarmonicAnalysis, _warn
+from flexarm.identification.frequency_domain.harmonics import ideal_friction_phasor as square_wave_phasor  # noqa: F401 (eq. 2)
+from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis, _warn
 
 #: Relative tolerance for matching a 3ω0 partner experiment.
 PARTNER_TOL = 0.01

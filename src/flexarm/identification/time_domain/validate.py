@@ -18,9 +18,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from flexarm.control.state_feedback import from_spec
-from flexarm.bench import guesses
-from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
-from flexarm.bench.report import overlay_plots
+from flexarm.identification.time_domain import guesses
+from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.report import overlay_plots
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import SimulationDiverged, simulate_loop
 from flexarm.specs import Scenario, load_scenario

@@ -1,17 +1,17 @@
 """Identification of a single-link flexible arm with Coulomb joint friction (FRB Sec. II).
 
-Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.logs`) per sinusoidal
+Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.io.logs`) per sinusoidal
 experiment of the motor-position loop:
 
-1. harmonics of every log (:mod:`flexarm.ident.harmonics`): ω0 from the reference,
+1. harmonics of every log (:mod:`flexarm.identification.frequency_domain.harmonics`): ω0 from the reference,
    fundamental and odd harmonics of θm, θt, i over the last whole periods;
 2. Coulomb level C_f (A) from every ω0 / 3ω0 pair, eqs. (4)-(6) with the corrected phase of
-   (4) (:mod:`flexarm.ident.coulomb`), averaged over the pairs;
+   (4) (:mod:`flexarm.identification.frequency_domain.coulomb`), averaged over the pairs;
 3. motor response G_m = θm/i raw and corrected by eq. (7), beam response G_b = θt/θm
-   (:mod:`flexarm.ident.frf`);
+   (:mod:`flexarm.identification.frequency_domain.frf`);
 4. transfer functions fitted to the corrected G_m (default one integrator, two zeros, four
    poles, the form of FRB eq. (12)) and to G_b (no zeros, two poles, the form of eq. (13))
-   (:mod:`flexarm.ident.tffit`); a fit to the raw G_m is kept for comparison;
+   (:mod:`flexarm.identification.frequency_domain.tffit`); a fit to the raw G_m is kept for comparison;
 5. physical parameters J, V, C of eq. (1) with C_t = C(θm − θt), i.e.
 
        G_m(s) = K / (J s² + V s + C (1 − G_b(s))),
@@ -36,19 +36,19 @@ from typing import Any
 import control
 import numpy as np
 
-from flexarm.ident.coulomb import PARTNER_TOL, CoulombEstimate, estimate_coulomb, find_partners
-from flexarm.ident.frf import FrequencyResponse, frequency_response
-from flexarm.ident.harmonics import (
+from flexarm.identification.frequency_domain.coulomb import PARTNER_TOL, CoulombEstimate, estimate_coulomb, find_partners
+from flexarm.identification.frequency_domain.frf import FrequencyResponse, frequency_response
+from flexarm.identification.frequency_domain.harmonics import (
     HarmonicAnalysis,
     IdentificationError,
     _warn,
     analyse_log,
 )
-from flexarm.logs import Log, LogError, read_log
-from flexarm.ident.physical import PhysicalFit, fit_physical
-from flexarm.ident.tffit import TFFit, fit_tf, tf_coefficients, tf_response
+from flexarm.io.logs import Log, LogError, read_log
+from flexarm.identification.frequency_domain.physical import PhysicalFit, fit_physical
+from flexarm.identification.frequency_domain.tffit import TFFit, fit_tf, tf_coefficients, tf_response
 from flexarm.units import UnitError, to_si
-from flexarm.write import save_figure, write_text
+from flexarm.io.write import save_figure, write_text
 
 
 def _cx(z: complex | None) -> dict[str, float] | None:
@@ -118,7 +118,7 @@ class IdentificationResult:
     @property
     def motor_tf(self) -> control.TransferFunction:
         """G_m(s) = θm/i (rad/A): the structured physical fit if ``structured=True``
-        (:mod:`flexarm.ident.physical`), else the fit to the corrected data (raw if C_f
+        (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected data (raw if C_f
         is unknown)."""
         return self.physical.motor_tf if self.use_physical else self.motor_fit.tf
 
@@ -216,7 +216,7 @@ class IdentificationResult:
     def to_json(self, path: str | Path | None = None, *, indent: int = 2,
                 overwrite: bool = True) -> str:
         """The :meth:`to_dict` summary as JSON text; also written to ``path`` if given
-        (atomically, :func:`flexarm.write.write_text`; an existing file is replaced unless
+        (atomically, :func:`flexarm.io.write.write_text`; an existing file is replaced unless
         ``overwrite=False``)."""
         text = json.dumps(self.to_dict(), indent=indent)
         if path is not None:
@@ -305,7 +305,7 @@ class IdentificationResult:
             raise IdentificationError(
                 "cannot build a scenario: the identified parameters are not physical ("
                 + ", ".join(bad) + "); check the fitted orders and the data")
-        notes = {"source": "flexarm.ident.identify (FRB Sec. II)",
+        notes = {"source": "flexarm.identification.frequency_domain.identify (FRB Sec. II)",
                  "files": ", ".join(str(f) for f in self.files),
                  "parameters_from": "least squares on the fitted G_m, G_b: "
                                     "G_m = K/(J s^2 + V s + C (1 - G_b))"}
@@ -394,7 +394,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         (zeros, poles) of the fitted G_m (poles include ``motor_integrators`` at s = 0)
         and G_b.
     columns, units:
-        Column-name and unit mapping for :func:`flexarm.logs.read_log`.
+        Column-name and unit mapping for :func:`flexarm.io.logs.read_log`.
     coulomb_current:
         A known C_f (A) to use instead of estimating it.
     partner_tol:
@@ -407,7 +407,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         "the velocity of the motor and, hence, the shape of the Coulomb friction");
         ``"ideal"``: the square wave in phase with the fundamental, as eqs. (3)-(7) print.
     structured:
-        Use the joint fit of J, V, C, C_f (:mod:`flexarm.ident.physical`) as ``motor_tf``
+        Use the joint fit of J, V, C, C_f (:mod:`flexarm.identification.frequency_domain.physical`) as ``motor_tf``
         and for the parameters. It is always computed and reported (``physical_fit``)
         when the beam has one mode (``beam_orders == (0, 2)``: C_t = C (θm − θt)); it is
         the better choice where friction dominates the low-frequency current and the
@@ -495,7 +495,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     if use_phys:
         params = {"inertia": phys.inertia, "viscous": phys.viscous,
                   "stiffness": phys.stiffness,
-                  "method": "structured physical fit (flexarm.ident.physical)"}
+                  "method": "structured physical fit (flexarm.identification.frequency_domain.physical)"}
     else:
         params = arm_parameters(mfit.tf, bfit.tf, K, grid)
         params["method"] = ("least squares on the fitted models, G_m = K/(J s^2 + V s + "

@@ -136,7 +136,7 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=20):
 def reflect_unstable_roots(a):
     """Reflect right-half-plane roots of the monic polynomial ``a`` (ascending) into the
     left half plane (the stable polynomial with the same magnitude response); the one
-    copy, also used by :mod:`flexarm.ident.tffit`."""
+    copy, also used by :mod:`flexarm.identification.frequency_domain.tffit`."""
     if len(a) <= 1:
         return a
     r = np.roots(a[::-1])

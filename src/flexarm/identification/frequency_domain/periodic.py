@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from flexarm.ident.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 
 #: A leading period is transient when its departure is this many times the steady one's.
 TRANSIENT_RATIO = 4.0

@@ -13,7 +13,7 @@ An existing target is replaced only with ``overwrite=True``; otherwise
 Functions: :func:`atomic_open` (a file object), :func:`atomic_path` (a temporary path for
 writers that take a path), :func:`write_text`, :func:`write_bytes`, :func:`write_json`,
 :func:`write_toml`, :func:`save_figure`.  CSV logs are written by
-:func:`flexarm.logs.write_log` through :func:`atomic_open`.
+:func:`flexarm.io.logs.write_log` through :func:`atomic_open`.
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def write_json(path: str | Path, data: Any, *, overwrite: bool = False, indent: 
                default: Callable[[Any], Any] | None = None) -> Path:
     """``json.dumps(data, indent=indent, default=default)`` plus a newline, atomically.
     Non-finite floats are written as ``json`` does (``NaN``, ``Infinity``); callers that
-    want ``null`` convert them first (as :mod:`flexarm.bench.report` does).  The text is
+    want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).  The text is
     built before the file is opened, so a value that cannot be serialised leaves no file."""
     return write_text(path, json.dumps(data, indent=indent, default=default) + "\n",
                       overwrite=overwrite)

@@ -1,15 +1,15 @@
-"""``flexarm.bench``: time-domain identification of a bench arm from closed-loop logs.
+"""``flexarm.identification.time_domain``: time-domain identification of a bench arm from closed-loop logs.
 
 Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
 resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
 inertia and damping, hub friction (Coulomb, breakaway, viscous, bias) per recording
 session, the sensor delays and the tip sensor's calibration gain and sign, and each log's
 initial link state, by minimising the closed-loop simulation output error
-(:mod:`flexarm.bench.objective`):
+(:mod:`flexarm.identification.time_domain.objective`):
 
-1. guesses and bounds from the data (:mod:`flexarm.bench.guesses`);
+1. guesses and bounds from the data (:mod:`flexarm.identification.time_domain.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (:mod:`flexarm.bench.global_stage`);
+   on the first ``global_seconds`` of each log (:mod:`flexarm.identification.time_domain.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
    columns are simulated in one batch; it also refines each log's initial tip and hub
@@ -23,7 +23,7 @@ initial link state, by minimising the closed-loop simulation output error
 4. uncertainty from the final Jacobian J and residuals r: the reported ``std`` is the
    Newey–West sandwich (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹, Ŝ the Bartlett-weighted autocovariance of the
    scores Jᵀ_t r_t per log, its bandwidth 10 residual correlation times
-   (:mod:`flexarm.bench.uncertainty`): output-error residuals persist for many samples and
+   (:mod:`flexarm.identification.time_domain.uncertainty`): output-error residuals persist for many samples and
    the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
 """
 
@@ -37,14 +37,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from flexarm.bench import estimates as _est
-from flexarm.bench import guesses
-from flexarm.bench.global_stage import GlobalResult, differential_evolution_stage
-from flexarm.bench.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
-from flexarm.bench.objective import Objective, Rig, check_filters
-from flexarm.bench.params import FRICTION, ParamDef, ParamSpace, derived
-from flexarm.bench.report import FitResult
-from flexarm.bench.uncertainty import hac_covariance, iid_covariance
+from flexarm.identification.time_domain import estimates as _est
+from flexarm.identification.time_domain import guesses
+from flexarm.identification.time_domain.global_stage import GlobalResult, differential_evolution_stage
+from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
+from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
+from flexarm.identification.time_domain.report import FitResult
+from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -102,8 +102,8 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
 def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
            delays, bounds: dict | None, info: dict,
            est: dict | None = None) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
-    """Bounds from the data (see :mod:`flexarm.bench.guesses` and
-    :mod:`flexarm.bench.estimates`) and the seed point. ``est``: the cheap estimates
+    """Bounds from the data (see :mod:`flexarm.identification.time_domain.guesses` and
+    :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap estimates
     (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
     frequency estimates), which narrow the search where they are trusted."""
     est = est or {}
@@ -238,7 +238,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         estimates: bool = True) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
-    ``logs``: paths or :class:`~flexarm.bench.logs.BenchLog` s; logs given together are one
+    ``logs``: paths or :class:`~flexarm.identification.time_domain.logs.BenchLog` s; logs given together are one
     recording session (shared friction) unless ``sessions`` gives a session index per log
     (mechanics shared, friction per session). ``mode``: ``"closed_loop"`` (each log's
     controller closed in simulation; ``controller`` overrides every log's declaration)
@@ -266,13 +266,13 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     to −10 % at 4× the cost, and on three 10 s logs ``"both"`` kept delay 3 (true 2) at
     a lower cost than a delay-2 fit that stopped at B −19 %.
     ``estimates`` (default True): first the cheap estimates of
-    :mod:`flexarm.bench.estimates` (hub → tip model, hub delay, link frequency), which set
+    :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link frequency), which set
     the delay search ranges (± 6 samples around them, up to ``max_delay``, default
     150 ms), the bounds of ω_c, J and the tip gain, the gauge's sign and, unless
     ``filters`` names the tip channel, its low-pass; False: the guesses of
-    :mod:`flexarm.bench.guesses` alone, every delay 0 ... ``max_delay`` searched.
+    :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay`` searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
-    filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.bench.closed_loop`).
+    filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.identification.time_domain.closed_loop`).
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -504,7 +504,7 @@ def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best
 
 
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
-    """The cheap estimates of :mod:`flexarm.bench.estimates` (hub → tip model with the
+    """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model with the
     tip channel's lag relative to the hub, the hub delay, the link frequency), and the
     tip low-pass cutoff to use when the user gave none and the model is trusted."""
     known = "tip_deflection" in (filters or {})  # given, 0 (no filter) included
@@ -576,7 +576,7 @@ TIP_OFFSET_WARN = 0.02
 
 def _tip_offsets(blogs) -> list[str]:
     """Warnings for logs whose tip sensor reads away from zero at rest (see
-    :func:`flexarm.bench.guesses.tip_rest_reading`): the model has no sensor offset."""
+    :func:`flexarm.identification.time_domain.guesses.tip_rest_reading`): the model has no sensor offset."""
     out = []
     for g in blogs:
         r = guesses.tip_rest_reading(g)

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from flexarm.control.state_feedback import state_feedback
-from flexarm.bench.logs import write_bench_log
+from flexarm.identification.time_domain.logs import write_bench_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 

@@ -17,7 +17,7 @@ write a short burst that the law does not produce: up to 12 samples at 1 kHz on 
 logs, hence 20 ms), and the samples at the amplifier's limit. The fit is robust (Huber
 loss, ``scipy.optimize.least_squares``, scale 1.4826·MAD of the least-squares
 residuals, at least the logger's 1e-3 V rounding) and its standard errors are the
-Newey–West (HAC) ones of :mod:`flexarm.bench.uncertainty` (the residuals are
+Newey–West (HAC) ones of :mod:`flexarm.identification.time_domain.uncertainty` (the residuals are
 autocorrelated). R² = 1 − Σ res² / Σ (u − ū)² over the samples used; the best delay is the
 one with the largest R².
 
@@ -28,7 +28,7 @@ with |u| ≥ 0.99 · limit is taken as saturated.
 
 A gain disagrees with the declaration when the difference matters (it moves the command by
 more than 1 % of the command's rms) and either its sign is opposite or it is off by more
-than max(10 %, 4 σ); that is a :class:`~flexarm.bench.logs.FitInputError` naming the gain,
+than max(10 %, 4 σ); that is a :class:`~flexarm.identification.time_domain.logs.FitInputError` naming the gain,
 unless ``use_regressed=True`` (``--use-regressed-law``): then :meth:`ControllerCheck.apply`
 gives the log with the regressed gains.
 
@@ -46,8 +46,8 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
 
-from flexarm.bench.logs import GAINS, BenchLog, FitInputError
-from flexarm.bench.uncertainty import hac_covariance
+from flexarm.identification.time_domain.logs import GAINS, BenchLog, FitInputError
+from flexarm.identification.time_domain.uncertainty import hac_covariance
 
 #: Seconds after a reference step left out (the logged command's glitch).
 GLITCH_S = 0.02

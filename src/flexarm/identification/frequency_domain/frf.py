@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from flexarm.ident.harmonics import HarmonicAnalysis
+from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis
 
 
 def corrected_motor_response(theta_m1, current1, coulomb_current: float, shape1):

@@ -4,7 +4,7 @@ Stick-slip makes the output-error cost piecewise and jumpy, so a gradient method
 from nominal values stalls. Differential evolution (seeded, ``updating='deferred'``,
 ``vectorized=True``) hands each whole generation to :meth:`Objective.cost`, which
 simulates it in one batched JAX call. Continuous parameters live in [0, 1] (see
-:mod:`flexarm.bench.params`); the sensor delays and the tip-gain sign are integer
+:mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are integer
 coordinates (``integrality``).
 """
 
@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from flexarm.bench.objective import Objective
+from flexarm.identification.time_domain.objective import Objective
 
 
 @dataclass

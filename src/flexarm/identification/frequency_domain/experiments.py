@@ -17,7 +17,7 @@ and the angles are logged. Per frequency:
   kd = (2 ζ ω_c J − V)/K — a high gain, as the paper asks, within what the sampling
   period and the computation delay allow.
 
-Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.ident.coulomb` can estimate C_f.
+Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.frequency_domain.coulomb` can estimate C_f.
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         cols = res.exchange_columns()
         rec = {k: np.asarray(v)[keep] for k, v in cols.items()}
         rec["time"] = rec["time"] - rec["time"][0]
-        from flexarm.logs import write_log
+        from flexarm.io.logs import write_log
 
         out.mkdir(parents=True, exist_ok=True)
         write_log(path, rec.pop("time"), rec, overwrite=overwrite, comments=[

@@ -11,7 +11,7 @@ A *variable spec* names where a signal lives in the file::
 
 Units (``{flexarm name: unit}``, pint text such as ``"us"``, ``"mA"``, ``"deg"``) convert to
 SI through the project's one registry (``flexarm.units``): the factor of the known columns
-comes from :mod:`flexarm.logs`; other names go to pint base units (rad, s, A, ...).
+comes from :mod:`flexarm.io.logs`; other names go to pint base units (rad, s, A, ...).
 
 A logger's sample counter mapped as ``sample_counter`` drops irregular trailing rows (the
 counter stops advancing; a warning names them); a jump anywhere else is an error.
@@ -21,7 +21,7 @@ Version 5 files are read by ``scipy.io.loadmat``; version 7.3 (HDF5) files by ``
 cannot decode (a ``tf`` object saved with the data, MATLAB's ``MatlabOpaque``) are skipped,
 never fatal: they are only reported if a spec names them.
 
-Errors (:class:`MatFileError`, a :class:`flexarm.logs.LogError`) name the file, the flexarm
+Errors (:class:`MatFileError`, a :class:`flexarm.io.logs.LogError`) name the file, the flexarm
 name and the spec: a missing variable (with the list of what the file holds), a struct
 without ``signals.values``, a column out of range, non-numeric data, NaN / infinite values
 (with the first bad sample), channels of different lengths. The file is only read.
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.logs import KNOWN, LogError, _unit_factor
+from flexarm.io.logs import KNOWN, LogError, _unit_factor
 from flexarm.units import ureg
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
@@ -347,7 +347,7 @@ def read_recording(path: str | Path, log_format: str | Path | None = None
             raise MatFileError(f"{path}: map the time in [columns] (e.g. time = \"t\")")
         sig, t = rec.signals, rec.time
     else:
-        from flexarm.logs import read_log
+        from flexarm.io.logs import read_log
         log = read_log(path, cols or None, units or None, required=("time",))
         sig, t = log.signals, log.time
     dt = float(np.median(np.diff(t)))

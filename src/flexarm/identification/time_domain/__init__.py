@@ -1,0 +1,10 @@
+"""Time-domain identification of bench arms from closed-loop logs: :func:`fit`,
+:func:`validate` (see :mod:`flexarm.identification.time_domain.fit`, :mod:`flexarm.identification.time_domain.validate`)."""
+
+from flexarm.identification.time_domain.fit import fit, predict
+from flexarm.identification.time_domain.logs import BenchLog, FitInputError, parse_controller, read_bench_log
+from flexarm.identification.time_domain.report import FitResult
+from flexarm.identification.time_domain.validate import validate
+
+__all__ = ["BenchLog", "FitInputError", "FitResult", "fit", "parse_controller", "predict",
+           "read_bench_log", "validate"]

@@ -1,0 +1,1 @@
+"""Every file in and out: log readers (text, MATLAB), log-format files, the one atomic writer."""
