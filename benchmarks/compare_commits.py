@@ -87,7 +87,7 @@ def main() -> None:
             for label in best["old"]:
                 if label in best["new"]:
                     o, n = best["old"][label], best["new"][label]
-                    print(f"  {label:55s} {o:10.2f} {n:10.2f}  {n / o:6.2f}")
+                    print(f"  {label:55s} {o:10.4g} {n:10.4g}  {n / o:6.2f}")
 
 
 if __name__ == "__main__":
