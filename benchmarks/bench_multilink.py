@@ -3,7 +3,8 @@
 RK4 at 0.1 ms (20 000 steps, 80 000 right-hand sides).
 
 Prints, in one run: flexarm's compile time, one rollout (the public ``simulate_continuous``
-call and its jit core), a batch of gain variations per rollout (``simulate_continuous_batch``,
+call and its jit core, the one sampled-data loop with the law evaluated at every RK4 stage),
+a batch of gain variations per rollout (``simulate_continuous_batch``, the loop's batch,
 K_P and K_D scaled by 0.8…1.25), and the same closed loop written the way a user would
 without flexarm: the same model (B, c + g in the explicit particle form, from the same
 ``MultiLinkModel`` numbers) as a NumPy right-hand side with ``np.linalg.solve``, integrated by
@@ -31,6 +32,7 @@ import flexarm  # noqa: F401  (float64)
 from flexarm.control import regulation as R
 from flexarm.models.multilink import build_multilink
 from flexarm.sim import continuous as C
+from flexarm.sim import sampled
 from flexarm.specs.multilink import benchmark_arm
 
 DEG = math.pi / 180
@@ -167,9 +169,10 @@ def main() -> None:
     run = single()
     compile_s = time.perf_counter() - t0
     single_s, single_c = best_of(single, 7)
-    core_args = (model.plant, R.law_pd_constant, p, jnp.asarray(x0), jnp.asarray(STEP),
-                 jnp.asarray(int(round(DT / STEP))), int(round(T_FINAL / DT)))
-    core_s, _ = best_of(lambda: jax.block_until_ready(C._run_rk4(*core_args)), 7)
+    loop = C.law_loop(model, R.law_pd_constant, p, DT, int(round(DT / STEP)))
+    core_args = (loop, jnp.asarray(x0), sampled._prepare_refs({}, int(round(T_FINAL / DT)) + 1),
+                 np.asarray(0, dtype=np.int64))
+    core_s, _ = best_of(lambda: jax.block_until_ready(sampled._run_all(*core_args)), 7)
 
     N = args.batch
     scale = np.linspace(0.8, 1.25, N)

@@ -110,7 +110,9 @@ def test_batch_of_gain_variations_equals_single_runs():
     # one rollout is a control.TimeResponseData: (n, T) arrays, labels, named access
     assert isinstance(one, control.TimeResponseData)
     assert one.states.shape == (12, 21) and one.inputs.shape == (2, 21)
-    assert one.outputs.shape == (6, 21)  # q = (θ, δ)
+    # outputs: the plant's signals (q = (θ, δ) first, then tip position, rates, deflections)
+    assert one.outputs.shape == (len(model.plant.signal_names), 21)
+    assert one.output_labels[:6] == one.state_labels[:6]
     assert one.input_labels == ["torque_1", "torque_2"] and one.state_labels[0] == "theta_1"
     np.testing.assert_array_equal(one["theta_1"], one.theta[:, 0])
     np.testing.assert_array_equal(one["torque_2"], one.torque[:, 1])

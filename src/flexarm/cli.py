@@ -172,17 +172,32 @@ def _fmt(c: list[float]) -> str:
 
 
 @app.command()
-def simulate(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
+def simulate(scenario: list[str] = typer.Argument(..., help="scenario TOML file(s) or built-in name(s)"),
              out: Path = typer.Option(..., "--out", help="folder for CSV, figures and summary"),
              overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
-    """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json."""
-    _enable_cache()
-    from flexarm.analysis.summary import write_simulation
+    """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json.
 
-    sc = _load(scenario)
+    Several scenarios: each one's files, and for multi-link arms in the sampled loop one
+    figure of all of them overlaid (joint errors in encoder counts, link deflections,
+    commands), e.g. flexarm simulate deluca-two-link-geared deluca-two-link-geared-fc."""
+    _enable_cache()
+    from flexarm.analysis.summary import write_comparison, write_multilink, write_simulation
+
+    scs = [_load(s) for s in scenario]
     out = _outdir(out, overwrite)
-    summary = write_simulation(sc, out, progress=True)
-    console.print_json(json.dumps(summary))
+    if len(scs) == 1:
+        console.print_json(json.dumps(write_simulation(scs[0], out, progress=True)))
+        return
+    summaries, results, multi = {}, {}, []
+    for sc in scs:
+        if sc.arm.kind == "multi_link" and sc.sampling is not None:
+            summaries[sc.name], results[sc.name] = write_multilink(sc, out, progress=True)
+            multi.append(sc)
+        else:
+            summaries[sc.name] = write_simulation(sc, out, progress=True)
+    if len(multi) > 1:
+        summaries["comparison_figure"] = write_comparison(multi, results, out).name
+    console.print_json(json.dumps(summaries))
 
 
 REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",

@@ -44,7 +44,9 @@ def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
 def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> dict:
     """Simulate and write ``<name>.csv``, ``<name>.png`` and ``<name>.summary.json``."""
     if getattr(scenario.arm, "kind", "single_link") == "multi_link":
-        return write_regulation(scenario, out)
+        if scenario.sampling is None:
+            return write_regulation(scenario, out)
+        return write_multilink(scenario, out, progress)[0]
     import matplotlib
 
     matplotlib.use("Agg")
@@ -71,6 +73,103 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     }
     write_json(out / f"{name}.summary.json", summary, overwrite=True)
     return summary
+
+
+def joint_counts(scenario: Scenario, n_joints: int) -> np.ndarray:
+    """One encoder count per joint (rad): range / 2**bits of the joint's sensor
+    ``theta_j``; NaN where the joint has no quantised sensor."""
+    out = np.full(n_joints, np.nan)
+    for j in range(n_joints):
+        s = scenario.sensors.get(f"theta_{j + 1}")
+        if s is not None and s.bits:
+            out[j] = s.range / 2**s.bits
+    return out
+
+
+def _joint_errors(scenario: Scenario, res) -> tuple[np.ndarray, np.ndarray]:
+    """θ_d − θ (T, n) rad of a multi-link run (θ_d the controller's target; 0 without
+    one) and the count per joint (rad)."""
+    ctrl = scenario.controller
+    n = res.n_links
+    target = getattr(ctrl, "target", None) if ctrl is not None else None
+    target = np.zeros(n) if target is None else np.asarray(target, float)
+    return target - res.theta, joint_counts(scenario, n)
+
+
+def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
+    """A multi-link arm in the sampled-data loop (``[sampling]``): simulate, write
+    ``<name>.csv`` (every state and command), ``<name>.png`` (:func:`plot_joints`) and
+    ``<name>.summary.json``; returns (summary, result)."""
+    res = simulate_with_progress(scenario, progress)
+    name = scenario.name
+    res.to_csv(out / f"{name}.csv", overwrite=True)
+    plot_joints({name: (scenario, res)}, out / f"{name}.png")
+    err, count = _joint_errors(scenario, res)
+    summary = {
+        "scenario": name,
+        "samples": len(res.time),
+        "sampling_period_s": scenario.sampling.period,
+        "final_joint_error_rad": err[-1].tolist(),
+        "final_joint_error_counts": [None if not np.isfinite(c) else float(e / c)
+                                     for e, c in zip(err[-1], count)],
+        "final_link_deflection_m": [float(res[f"deflection_{j + 1}"][-1])
+                                    for j in range(res.n_links)],
+        "peak_command": np.abs(res.command).max(axis=0).tolist(),
+        "command_names": list(res.input_names),
+        "files": [f"{name}.csv", f"{name}.png"],
+    }
+    write_json(out / f"{name}.summary.json", summary, overwrite=True)
+    return summary, res
+
+
+def plot_joints(runs: dict, path: Path) -> None:
+    """Figure of multi-link runs overlaid (``runs``: label → (scenario, result)): per joint,
+    the error θ_d − θ in encoder counts (symmetric-log axis, linear within ±1 count, that
+    band shaded), the link's tip deflection w_j(ℓ_j) (mm) and the command."""
+    from matplotlib.figure import Figure
+
+    first = next(iter(runs.values()))[1]
+    n = first.n_links
+    fig = Figure(figsize=(5.5 * n, 9), layout="constrained")
+    ax = fig.subplots(3, n, sharex=True, squeeze=False)
+    for label, (sc, res) in runs.items():
+        err, count = _joint_errors(sc, res)
+        for j in range(n):
+            c = count[j] if np.isfinite(count[j]) else 1e-3
+            ax[0, j].plot(res.time, err[:, j] / c, lw=1.2, label=label)
+            ax[1, j].plot(res.time, 1e3 * res[f"deflection_{j + 1}"], lw=1.0, label=label)
+            ax[2, j].step(res.time, res.command[:, j], where="post", lw=0.7, alpha=0.8,
+                          label=label)
+    for j in range(n):
+        unit = "encoder counts" if np.isfinite(joint_counts(next(iter(runs.values()))[0], n)[j]) \
+            else "mrad"
+        ax[0, j].set_yscale("symlog", linthresh=1.0, linscale=0.6)
+        ax[0, j].axhspan(-1, 1, color="0.85", zorder=0, label="±1 count")
+        ax[0, j].axhline(0.0, c="k", lw=0.6)
+        ax[0, j].set_ylabel(f"θ_d,{j + 1} − θ_{j + 1} [{unit}]")
+        ax[0, j].set_title(f"joint {j + 1}")
+        ax[1, j].set_ylabel(f"link {j + 1} tip deflection w(ℓ) [mm]")
+        ax[2, j].set_ylabel(f"{first.input_names[j]} [{_unit(first.input_names[j])}]")
+        ax[2, j].set_xlabel("time [s]")
+        for a in ax[:, j]:
+            a.grid(True, alpha=0.3)
+            a.legend(loc="best", fontsize=8)
+    fig.suptitle(" vs ".join(runs) if len(runs) > 1 else f"{next(iter(runs))}: closed loop")
+    save_figure(fig, path, overwrite=True, dpi=110)
+
+
+def _unit(name: str) -> str:
+    from flexarm.sim.result import _unit as unit
+
+    return unit(name)
+
+
+def write_comparison(scenarios: list[Scenario], results: dict, out: Path) -> Path:
+    """One figure of several multi-link runs overlaid (:func:`plot_joints`):
+    ``<name1>_vs_<name2>....png``."""
+    path = out / ("_vs_".join(sc.name for sc in scenarios) + ".png")
+    plot_joints({sc.name: (sc, results[sc.name]) for sc in scenarios}, path)
+    return path
 
 
 LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
@@ -167,6 +266,10 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
                           f"{tr['rms_error']:.3g} rad, peak tip deflection "
                           f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
                           f"{s['command_unit']}")
+        elif "final_joint_error_counts" in s:
+            console.print(f"[bold]{name}[/]: final joint errors {s['final_joint_error_counts']} "
+                          f"counts, peak commands {np.round(s['peak_command'], 2)} "
+                          f"({', '.join(s['command_names'])})")
         else:
             console.print(f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
                           f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m")

@@ -170,7 +170,7 @@ def _measured_names(ctrl) -> set[str]:
 
 def _walk(c):
     yield c
-    for attr in ("parts", "outer", "inner"):
+    for attr in ("parts", "outer", "inner", "sampled"):
         sub = getattr(c, attr, None)
         if sub is None:
             continue
@@ -185,15 +185,16 @@ def run_prepared(p: Prepared) -> SimulationResult:
 
 
 def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationResult:
-    """Wrap raw simulator arrays (one rollout, or rollout ``index`` of a batch)."""
+    """Wrap raw simulator arrays: one rollout, rollout ``index`` of a batch, or (index None
+    on :func:`~flexarm.sim.sampled.simulate_batch`'s arrays) the whole batch as one result."""
     pick = (lambda a: a) if index is None else (lambda a: a[index])
     sig = pick(out["signals"])
     meas = pick(out["measured"])
     plant = p.loop.plant
     return SimulationResult(
         p.time,
-        {n: sig[:, i] for i, n in enumerate(plant.signal_names)},
-        {n: meas[:, i] for i, n in enumerate(p.loop.sensors.names)},
+        {n: sig[..., i] for i, n in enumerate(plant.signal_names)},
+        {n: meas[..., i] for i, n in enumerate(p.loop.sensors.names)},
         out["references"], pick(out["command"]), plant.input_names, pick(out["states"]),
         plant.state_names, title=p.scenario.name,
         meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period},

@@ -5,6 +5,19 @@
 signal: ``res["tip_angle"]`` (true), ``res.measured["motor_angle"]`` (as the sensors
 read it), ``res.references["reference"]``, ``res.command``; ``to_csv`` writes the
 flexarm CSV exchange format (what a lab log holds).
+
+It is the one result type of every simulation: a sampled-data run of any arm, a
+continuous-law run (:func:`flexarm.sim.continuous.simulate_continuous`), and batches. A batch
+is one object with python-control's multi-trace layout: ``.states`` (n_x, N, T),
+``.inputs`` (m, N, T), ``.outputs`` (p, N, T); the named views put the rollout first
+(``res["theta_1"]`` (N, T), ``res.theta`` (N, T, n_joints)), ``res.diverged`` (N,) flags the
+rollouts that left the bound, and :meth:`SimulationResult.run` gives rollout i alone. One
+object rather than a list: vectorised metrics over the batch (``np.abs(res.theta - θ_d)``),
+one set of labels, and python-control's own convention for several traces.
+
+Multi-link arms (signals ``theta_i``, ``delta_i_j``) have time-major views as well:
+``res.theta`` ([N,] T, n_joints) rad, ``res.delta`` ([N,] T, n_δ) m, ``res.torque`` ([N,] T, m)
+(the command: N·m for torque inputs), ``res.state_array`` ([N,] T, n_x).
 """
 
 from __future__ import annotations
@@ -18,41 +31,124 @@ from flexarm.io.logs import KNOWN as EXCHANGE_UNITS
 from flexarm.io.logs import write_log
 
 
+def _unit(name: str) -> str:
+    """SI unit of an exchange column or a multi-link state/command name."""
+    if name in EXCHANGE_UNITS:
+        return EXCHANGE_UNITS[name]
+    for prefix, unit in (("theta_dot_", "rad/s"), ("delta_dot_", "m/s"), ("theta_", "rad"),
+                         ("delta_", "m"), ("torque_", "N*m"), ("current_", "A"),
+                         ("voltage_", "V"), ("friction_z_", "rad")):
+        if name.startswith(prefix):
+            return unit
+    return "?"
+
+
 class SimulationResult(control.TimeResponseData):
-    """One rollout of a sampled-data closed loop (values at the sample instants)."""
+    """One rollout, or a batch of N, of a closed loop (values at the sample instants).
+
+    ``signals``/``measured``: name → ([N,] T) arrays; ``references``: name → (T,);
+    ``command`` ([N,] T, m); ``states`` ([N,] T, n_x); ``diverged`` (N,) for a batch."""
 
     def __init__(self, time, signals: dict[str, np.ndarray], measured: dict[str, np.ndarray],
                  references: dict[str, np.ndarray], command: np.ndarray, input_names,
                  states: np.ndarray, state_names, title: str = "flexarm simulation",
-                 meta: dict | None = None):
+                 meta: dict | None = None, diverged: np.ndarray | None = None):
         self.signals = signals
         self.measured = measured
         self.references = references
-        self.command = command  # (N, m)
+        self.command = np.asarray(command)  # ([N,] T, m)
         self.input_names = tuple(input_names)
         self.meta = dict(meta or {})
+        self.diverged = None if diverged is None else np.asarray(diverged, dtype=bool)
         names = list(signals)
         super().__init__(
             np.asarray(time), np.array([signals[n] for n in names]),
-            states=np.asarray(states).T, inputs=np.asarray(command).T,
+            states=np.moveaxis(np.asarray(states), -1, 0),
+            inputs=np.moveaxis(self.command, -1, 0),
             output_labels=names, state_labels=list(state_names),
             input_labels=list(input_names), title=title, issiso=False,
         )
+
+    # ------------------------------------------------------------ batches
+    @property
+    def is_batch(self) -> bool:
+        return self.command.ndim == 3
+
+    def run(self, i: int) -> "SimulationResult":
+        """Rollout i of a batch as a result of its own."""
+        if not self.is_batch:
+            raise ValueError("run(i): this result is one rollout, not a batch")
+        return SimulationResult(
+            self.time, {k: v[i] for k, v in self.signals.items()},
+            {k: v[i] for k, v in self.measured.items()}, self.references, self.command[i],
+            self.input_names, self.state_array[i], self.state_labels, title=self.title,
+            meta=self.meta)
+
+    # ------------------------------------------------------------ named views
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(self.state_labels)
+
+    @property
+    def state_array(self) -> np.ndarray:
+        """The states with the variable last: ([N,] T, n_x) (rad, m, rad/s, m/s, ...)."""
+        return np.moveaxis(self.states, 0, -1)
+
+    def _stack(self, names: list[str]) -> np.ndarray:
+        shape = self.command.shape[:-1] + (0,)
+        return np.stack([self.signals[n] for n in names], axis=-1) if names else np.zeros(shape)
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The joint-angle signals ``theta_1``, ``theta_2``, ... (multi-link arms)."""
+        return [n for n in self.signals if n.startswith("theta_") and n[6:].isdigit()]
+
+    @property
+    def n_links(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Joint angles, ([N,] T, n_joints), rad."""
+        return self._stack(self.joint_names)
+
+    @property
+    def delta(self) -> np.ndarray:
+        """Modal deflections, ([N,] T, n_δ), m."""
+        return self._stack([n for n in self.signals if n.startswith("delta_")])
+
+    @property
+    def torque(self) -> np.ndarray:
+        """The applied command (after saturation), ([N,] T, m): joint torques in N·m for
+        torque inputs (the drives' commands, A or V, otherwise)."""
+        return self.command
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name in self.signals:
             return self.signals[name]
         if name in self.input_names:
-            return self.command[:, self.input_names.index(name)]
+            return self.command[..., self.input_names.index(name)]
         if name in self.references:
             return self.references[name]
+        if name in self.state_labels:
+            return self.state_array[..., self.state_labels.index(name)]
         raise KeyError(
             f"{name!r}: no such signal; signals: {', '.join(self.signals)}; inputs: "
-            f"{', '.join(self.input_names)}; references: {', '.join(self.references)}"
+            f"{', '.join(self.input_names)}; references: {', '.join(self.references)}; "
+            f"states: {', '.join(self.state_labels)}"
         )
 
     def exchange_columns(self) -> dict[str, np.ndarray]:
-        """Columns of the CSV exchange format: measured where a sensor exists, else true."""
+        """Columns of the CSV exchange format: measured where a sensor exists, else true.
+        A multi-link arm (no ``motor_angle``) writes every state and every command instead
+        (s, rad, m, rad/s, m/s, then the inputs' units)."""
+        if self.is_batch:
+            raise ValueError("to_csv: a batch has several rollouts; write one: res.run(i)")
+        if "motor_angle" not in self.signals:
+            cols = {"time": self.time}
+            cols.update({n: self.state_array[:, k] for k, n in enumerate(self.state_labels)})
+            cols.update({n: self.command[:, i] for i, n in enumerate(self.input_names)})
+            return cols
         cols = {"time": self.time, "reference": self.references["reference"]}
         for i, n in enumerate(self.input_names):
             cols[n] = self.command[:, i]
@@ -72,7 +168,7 @@ class SimulationResult(control.TimeResponseData):
         path = Path(path)
         cols = self.exchange_columns()
         lines = [f"{k}: {v}" for k, v in {**self.meta, **(comments or {})}.items()]
-        lines.append("units: " + ", ".join(f"{k} [{EXCHANGE_UNITS.get(k, '?')}]" for k in cols))
+        lines.append("units: " + ", ".join(f"{k} [{_unit(k)}]" for k in cols))
         path.parent.mkdir(parents=True, exist_ok=True)
         t = cols.pop("time")
         return write_log(path, t, cols, comments=lines, overwrite=overwrite, fmt="%.10g",
