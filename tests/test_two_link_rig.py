@@ -549,3 +549,90 @@ def test_lab_law_reproduces_the_logged_current(run_log, rig):
     for j in (0, 1):
         err = np.abs(u[:, j] - scope[f"current_{j + 1}"])
         assert err.max() <= 1e-12, (j, err.max(), w.time[np.argmax(err)])
+
+
+# ------------------------------------------------------------------ 6. replay with the data sheet
+@pytest.fixture(scope="module")
+def synthetic_log(rig):
+    """The scenario's own 3 s run from rest (the square-wave setpoints), its measured
+    channels and setpoints as a log."""
+    from flexarm.io.logs import Log
+    from flexarm.sim.build import prepare, run_prepared
+    from flexarm.specs import load_scenario
+
+    sc = load_scenario("quanser-two-link")
+    sc = sc.model_copy(update={"simulation": sc.simulation.model_copy(update={"duration": 3.0})})
+    p = prepare(sc)
+    res = run_prepared(p)
+    sig = {**{k: np.asarray(v) for k, v in res.measured.items()},
+           "theta_ref_1": p.references["theta_ref_1"], "theta_ref_2": p.references["theta_ref_2"]}
+    return sc, Log(None, np.asarray(p.time), sig)
+
+
+def test_replay_of_the_scenarios_own_log_is_exact(synthetic_log):
+    """Replaying a log the scenario made (from rest) on the same scenario: setpoints, initial
+    state and filter states taken from the log give back every channel (fit 100 % to 1e-6
+    points: the same jit-compiled loop, round-off only)."""
+    from flexarm.analysis.replay import replay
+
+    sc, log = synthetic_log
+    rep = replay(sc, log)
+    assert set(rep.fit_percent) == {"theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1",
+                                    "theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"}
+    for k, v in rep.fit_percent.items():
+        assert v == pytest.approx(100.0, abs=1e-6), k
+    # the log's step must be the scenario's sampling period
+    from flexarm.io.logs import Log
+
+    coarse = Log(None, log.time[::2], {k: v[::2] for k, v in log.signals.items()})
+    with pytest.raises(ValueError, match="differs from the scenario's sampling period"):
+        replay(sc, coarse)
+
+
+def test_cli_simulate_replays_a_mat_log(tmp_path, synthetic_log):
+    """``flexarm simulate SCENARIO --log F.mat --log-format F.toml``: the table, replay.json
+    with fit % per channel (the replay's own numbers) and an overlay figure."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    sc, log = synthetic_log
+    X1 = np.column_stack([log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")])
+    X2 = np.column_stack([log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")])
+    R1 = np.column_stack([log["theta_ref_1"]] + [0 * log.time] * 3)
+    R2 = np.column_stack([log["theta_ref_2"]] + [0 * log.time] * 3)
+    sio.savemat(tmp_path / "s.mat", {"time": log.time, "X1_meas": X1, "X1_ref": R1,
+                                      "X2_sim": X2, "X2_meas": R2})
+    r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "o"),
+                                 "--log", str(tmp_path / "s.mat"), "--log-format",
+                                 str(STAIRCASE), "--window", "0:2"])
+    assert r.exit_code == 0, r.output
+    got = json.loads((tmp_path / "o" / "replay.json").read_text())["fit_percent"]
+    fp = got[str(tmp_path / "s.mat")]
+    assert fp["theta_1"] == pytest.approx(100.0, abs=1e-4)  # rounded to 0.01 in the JSON
+    assert (tmp_path / "o" / "replay-s.png").stat().st_size > 10_000
+    # a log that is not there: exit 2, one line naming it
+    r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "p"),
+                                 "--log", str(tmp_path / "nope.mat"), "--log-format",
+                                 str(STAIRCASE)])
+    assert r.exit_code == 2 and "nope.mat" in r.output
+
+
+@pytest.mark.slow
+@needs_data
+def test_data_sheet_replay_of_the_102_s_run(run_log):
+    """The 102 s run replayed with the data sheet's values, no fit (logged setpoints, initial
+    state and filter states from the log). Measured: theta_1 98.4 %, alpha_f_1 56.9 %,
+    theta_2 84.1 %, alpha_f_2 36.3 % (rates 93.2 / 44.7 / 52.5 / 25.9). Asserted: the
+    shoulder angle at least 95 % (the issue's held-out target for the fitted model: the
+    sheet's shoulder stage already meets it) and every channel better than the mean (> 0 %);
+    the deflections and the elbow need the fit (sheet stiffness, torque constants and the
+    friction placeholders: docs/choices.md)."""
+    from flexarm.analysis.replay import replay
+    from flexarm.specs import load_scenario
+
+    rep = replay(load_scenario("quanser-two-link"), run_log)
+    assert rep.fit_percent["theta_1"] >= 95.0
+    assert min(rep.fit_percent.values()) > 0.0
