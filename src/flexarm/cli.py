@@ -210,9 +210,7 @@ def _replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optio
         fmt = load_log_format(log_format) if log_format is not None else LogFormat()
         for path in logs:
             g = fmt.read(path)
-            if win:
-                g = g.window(g.time[0] + win[0], g.time[0] + win[1])
-            rep = replay(sc, g)
+            rep = replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1]) if win else None)
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
             plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
     except (LogError, ValueError, SimulationDiverged) as exc:

@@ -63,10 +63,12 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
 def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> Replay:
     """Simulate ``scenario`` over ``log`` (or its ``window`` (t0, t1) in s on the log's clock)
     and compare every measured channel the log holds."""
-    if window is not None:
-        log = log.window(*window)
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
+    full, k0 = log, 0
+    if window is not None:
+        log = log.window(*window)
+        k0 = int(np.searchsorted(full.time, log.time[0]))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
         raise ValueError(f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "
@@ -83,7 +85,7 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     assert p.n_samples == n, (p.n_samples, n)
     x0 = initial_state_from_log(p, log)
     loop = p.loop
-    states = filter_state_from_log(sc.sensors, log, 0, dt)
+    states = filter_state_from_log(sc.sensors, full, k0, dt)  # the history before the window
     if states:
         loop = with_filter_state(loop, states)
     out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)

@@ -10,8 +10,9 @@ cutoff, x₂ its rate; ``lowpass2`` outputs x₁, the rate kinds x₂. From a lo
   same signal with the same filter (the lab's α̇_f beside α_f), else, with forward Euler,
   x₂ = (c_{k+1} − c_k) / T exactly (x₁⁺ = x₁ + T x₂);
 * a rate channel c gives x₂ = c_k; x₁ is a logged ``lowpass2`` sibling's output, else the
-  filter run over the logged unfiltered reading of the same signal (the encoder angle
-  beside θ̇_f) from rest, far enough back that the start no longer shows (|z|ⁿ < 1e-12).
+  filter run over the logged unfiltered reading u of the same signal (the encoder angle
+  beside θ̇_f) from rest, far enough back that the start no longer shows (|z|ⁿ < 1e-12);
+  with less history than that, x₁ = u_k − (2ζ/ω) x₂ (the low-pass's lag, exact on a ramp).
 """
 
 from __future__ import annotations
@@ -110,8 +111,12 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
                              "the state with with_filter_state")
         filt = digital_filter(f, dt, where=f"sensor {name!r}: filter")
         rho = float(np.max(np.abs(np.linalg.eigvals(filt.A))))
-        back = int(math.ceil(math.log(1e-12) / math.log(rho))) if 0 < rho < 1 else k
-        j0 = max(0, k - back)
-        _, xs = filt.run(log[raw[0]][j0:k + 1])
-        out[name] = xs[-1]
+        back = int(math.ceil(math.log(1e-12) / math.log(rho))) if 0 < rho < 1 else k + 1
+        u = log[raw[0]]
+        if k >= back:  # enough history: the filter's own state, its start forgotten
+            _, xs = filt.run(u[k - back:k + 1])
+            out[name] = np.array([xs[-1][0], x2])
+        else:  # the low-passed input lags it by 2ζ/ω times its rate (exact on a ramp)
+            w = 2 * math.pi * float(f["cutoff"])
+            out[name] = np.array([u[k] - 2 * float(f.get("damping", 0.9)) / w * x2, x2])
     return out
