@@ -636,3 +636,42 @@ def test_data_sheet_replay_of_the_102_s_run(run_log):
     rep = replay(load_scenario("quanser-two-link"), run_log)
     assert rep.fit_percent["theta_1"] >= 95.0
     assert min(rep.fit_percent.values()) > 0.0
+
+
+# ------------------------------------------------------------------ the scenario from a workspace
+def _close(a, b, path=""):
+    """Recursive comparison of validated specs (SI floats to 1e-12 relative)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for k in a:
+            _close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-300), path
+    else:
+        assert a == b, path
+
+
+@needs_data
+def test_scenario_from_the_workspace_is_the_builtin(tmp_path):
+    """``flexarm scenario-from-mat lqr_full_10deg.mat`` writes the built-in scenario's arm,
+    sensors, controller and sampling (the built-in TOML holds the file's numbers to 17
+    digits, so equal to 1e-12 relative), and names a missing variable."""
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+    from flexarm.specs import load_scenario
+
+    r = CliRunner().invoke(app, ["scenario-from-mat", str(RUN), "--out", str(tmp_path / "s.toml")])
+    assert r.exit_code == 0, r.output
+    got, ref = load_scenario(tmp_path / "s.toml"), load_scenario("quanser-two-link")
+    a, b = got.model_dump(), ref.model_dump()
+    for sec in ("arm", "sensors", "controller", "sampling", "references"):
+        _close(a[sec], b[sec], sec)
+    sio.savemat(tmp_path / "w.mat", {"J11": 1.0})
+    r = CliRunner().invoke(app, ["scenario-from-mat", str(tmp_path / "w.mat"), "--out",
+                                 str(tmp_path / "t.toml")])
+    assert r.exit_code == 2 and "J12" in r.output and "w.mat" in r.output
