@@ -675,3 +675,23 @@ def test_scenario_from_the_workspace_is_the_builtin(tmp_path):
     r = CliRunner().invoke(app, ["scenario-from-mat", str(tmp_path / "w.mat"), "--out",
                                  str(tmp_path / "t.toml")])
     assert r.exit_code == 2 and "J12" in r.output and "w.mat" in r.output
+
+
+def test_controller_state_from_the_log_before_a_window():
+    """A dynamic controller's state at sample k, run over a log of its inputs, is the state
+    its own stepping reached (1e-12: the same products)."""
+    from flexarm.control.lti import state_from_log
+    from flexarm.io.logs import Log
+
+    rng = np.random.default_rng(2)
+    ctrl = _ctrl(A=[[0.5, 0.1], [0.0, 0.8]], B=[[1.0, 0.0], [0.5, -1.0]], C=[[0.3, -0.2]],
+                 D=[[2.0, -1.0]], dt=2e-3, x0=[0.2, 0.0])
+    n, k = 40, 25
+    ys, rs = rng.normal(size=(n, 2)), rng.normal(size=n)
+    log = Log(None, np.arange(n) * 1e-3, {"y1": ys[:, 0], "y2": ys[:, 1], "r": rs})
+    state = ctrl.init()
+    for j in range(k):
+        state, _ = ctrl.step(state, {"y1": ys[j, 0], "y2": ys[j, 1]}, {"r": rs[j]})
+    np.testing.assert_allclose(state_from_log(ctrl, log, k), np.asarray(state[0]), rtol=1e-12)
+    with pytest.raises(ValueError, match="has no r"):
+        state_from_log(ctrl, Log(None, log.time, {"y1": ys[:, 0], "y2": ys[:, 1]}), k)
