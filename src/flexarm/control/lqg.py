@@ -98,3 +98,39 @@ def closed_loop_poles(design: LQGDesign) -> np.ndarray:
     bot = np.hstack([-Bc @ C, Ac])
     return np.linalg.eigvals(np.vstack([top, bot]))
 
+
+
+def scenario_lqg(scenario, dt: float, *, measured: dict[str, str], setpoints: dict[str, str],
+                 Q, R, W, V, x0=None):
+    """An LQG design (:func:`lqg`) for a multi-link scenario's arm, and the scenario with it as
+    its ``[controller]`` (``type = "lti"``, period ``dt``) and the sensor channels it reads.
+
+    ``measured``: channel name → plant signal the controller reads (e.g. ``{"theta_1":
+    "theta_1", "alpha_1": "deflection_angle_1", ...}``; channels the scenario lacks are added
+    as plain sensors: an encoder channel keeps the scenario's quantum where the same
+    signal is read by an existing channel without a filter); ``setpoints``: channel name →
+    reference channel (channels without one have setpoint 0). The design model is the
+    arm linearised about ``x0`` (default: rest at zero), joint friction left out."""
+    from flexarm.models.assembly import multi_link_arm
+    from flexarm.models.linearize import linearize
+    from flexarm.specs.scenario import scenario_from_dict
+
+    arm, _ = multi_link_arm(scenario.arm)
+    chans = list(measured)
+    design = lqg(linearize(arm, x0, outputs=[measured[c] for c in chans]), dt, Q, R, W, V)
+    data = scenario.model_dump(mode="json", exclude_none=True)
+    sensors = data.setdefault("sensors", {})
+    for c in chans:
+        if c in sensors:
+            continue
+        same = [s for s in sensors.values() if (s.get("signal") or "") == measured[c]
+                and "filter" not in s]
+        sensors[c] = {"signal": measured[c], **({"quantum": same[0]["quantum"]}
+                                                if same and "quantum" in same[0] else {})}
+    K = design.controller
+    data["controller"] = {
+        "type": "lti", "dt": dt, "A": np.asarray(K.A).tolist(), "B": np.asarray(K.B).tolist(),
+        "C": np.asarray(K.C).tolist(), "D": np.asarray(K.D).tolist(), "inputs": chans,
+        "setpoints": [setpoints.get(c, 0) for c in chans], "outputs": list(K.output_labels),
+        "allow_unstable": bool(np.abs(np.linalg.eigvals(np.asarray(K.A))).max() > 1.0)}
+    return design, scenario_from_dict(data, f"{scenario.name} with an LQG at {dt:g} s")
