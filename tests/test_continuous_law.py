@@ -172,8 +172,17 @@ def test_batch_is_one_result_and_checks_its_input(model):
         ref.run(0)
     with pytest.raises(ValueError, match="a batch has several rollouts"):
         out.to_csv("never.csv")
-    with pytest.raises(ValueError, match=r"x0 must be \(12,\)"):
-        simulate_continuous_batch(model, R.law_pd_constant, np.zeros((2, 12)), 0.1, 1e-2,
+    # one initial state per rollout: rollout 1 from x0 equals the shared-x0 batch's
+    x0s = np.stack([model.state(theta=[-80 * DEG, 0.0]), x0])
+    per = simulate_continuous_batch(model, R.law_pd_constant, x0s, 0.1, 1e-2, params=pb,
+                                    axes=axes, chunk=1)
+    np.testing.assert_allclose(per.state_array[1], one.state_array, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(per.state_array[0, 0], x0s[0], rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"x0 must be \(12,\) or \(N, 12\)"):
+        simulate_continuous_batch(model, R.law_pd_constant, np.zeros(4), 0.1, 1e-2,
+                                  params=pb, axes=axes)
+    with pytest.raises(ValueError, match="x0 holds 3 initial states; the batch has 2"):
+        simulate_continuous_batch(model, R.law_pd_constant, np.zeros((3, 12)), 0.1, 1e-2,
                                   params=pb, axes=axes)
     loop = law_loop(model, R.law_pd_constant, pb, 1e-2, 10)
     with_sensor = eqx.tree_at(lambda lp: lp.sensors, loop,
