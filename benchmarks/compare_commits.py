@@ -51,16 +51,19 @@ def figures(text: str) -> dict[str, float]:
     """label → value in ms of every printed line that holds a time (first number)."""
     found = {}
     for line in text.splitlines():
-        m = re.match(r"^\s*(?P<label>[A-Za-z][^:]*?(?::[^\d]*?)?)\s+(?P<value>\d+(?:\.\d+)?)\s*"
+        m = re.match(r"^\s{2,}(?P<label>[A-Za-z][^:]*?(?::[^\d]*?)?)\s+(?P<value>\d+(?:\.\d+)?)\s*"
                      r"(?P<unit>ms|s)\b(?P<rest>.*)$", line)
         if not m:
             continue
         label, value = m["label"].strip(), float(m["value"])
         value *= 1e3 if m["unit"] == "s" else 1.0
         per = re.search(r"(\d+(?:\.\d+)?) ms per rollout", m["rest"])
+        cpu = re.search(r"\(CPU (\d+(?:\.\d+)?) ms", m["rest"])
         found[label] = value
         if per:
             found[label + " (per rollout)"] = float(per.group(1))
+        if cpu:  # CPU time of the process: less sensitive to other jobs on the machine
+            found[label + (" (per rollout, CPU)" if per else " (CPU)")] = float(cpu.group(1))
     return found
 
 

@@ -172,10 +172,26 @@ def test_batch_is_one_result_and_checks_its_input(model):
         ref.run(0)
     with pytest.raises(ValueError, match="a batch has several rollouts"):
         out.to_csv("never.csv")
-    with pytest.raises(ValueError, match=r"x0 must be \(12,\)"):
-        simulate_continuous_batch(model, R.law_pd_constant, np.zeros((2, 12)), 0.1, 1e-2,
+    # one initial state per rollout: rollout 1 from x0 equals the shared-x0 batch's
+    x0s = np.stack([model.state(theta=[-80 * DEG, 0.0]), x0])
+    per = simulate_continuous_batch(model, R.law_pd_constant, x0s, 0.1, 1e-2, params=pb,
+                                    axes=axes, chunk=1)
+    np.testing.assert_allclose(per.state_array[1], one.state_array, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(per.state_array[0, 0], x0s[0], rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"x0 must be \(12,\) or \(N, 12\)"):
+        simulate_continuous_batch(model, R.law_pd_constant, np.zeros(4), 0.1, 1e-2,
                                   params=pb, axes=axes)
-    loop = law_loop(model, R.law_pd_constant, pb, 1e-2, 10)
+    with pytest.raises(ValueError, match="x0 holds 3 initial states; the batch has 2"):
+        simulate_continuous_batch(model, R.law_pd_constant, np.zeros((3, 12)), 0.1, 1e-2,
+                                  params=pb, axes=axes)
+    # the loop's generic batch (vmap over the batched gains, batch first) runs the same
+    # rollouts as the batch-last layout: rounding only (1e-12)
+    loop = law_loop(model, R.law_pd_constant, pb, 1e-2, 100)
+    in_axes = eqx.tree_at(lambda lp: lp.controller.params, jax.tree.map(lambda _: None, loop),
+                          axes, is_leaf=lambda a: a is None)
+    vb = sampled.simulate_batch(loop, x0, {}, 11, in_axes=in_axes)
+    np.testing.assert_allclose(vb["states"], out.state_array, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(vb["command"], out.torque, rtol=0, atol=1e-10)
     with_sensor = eqx.tree_at(lambda lp: lp.sensors, loop,
                               sampled.Sensors.make(model.plant, {"theta_1": {}}))
     with pytest.raises(ValueError, match="ContinuousLaw alone"):

@@ -35,8 +35,9 @@ forms below are the project's reconstruction (shared/reference/deluca-siciliano.
 
 Laws are pure JAX functions ``u = law(params, x, t)`` with a pytree ``params``
 (:class:`RegulationParams`), usable in any JAX closed loop; gains are traced, so a sweep
-compiles once. :mod:`flexarm.sim.continuous` integrates the closed loop (one rollout or a
-batch of gain variations).
+compiles once. The one sampled-data loop runs them, evaluated at every integration stage
+(:class:`flexarm.control.continuous_law.ContinuousLaw`); :mod:`flexarm.sim.continuous` is
+its front-end (one rollout or a batch of gain variations).
 """
 
 from __future__ import annotations

@@ -170,8 +170,11 @@ class _MultiBody:
 
 class Arm(Plant):
     """The assembled arm (see the module docstring): ``body`` with per-joint drives
-    (``k_u``, ``k_omega``, ``viscous``, ``bias``, ``limit``; arrays of shape (n_joints,))
-    and ``frictions`` (one :class:`~flexarm.models.friction.Friction` per joint)."""
+    (``k_u``, ``k_omega``, ``viscous``, ``bias``, ``limit``; arrays of shape (n_joints,),
+    or tuples of Python floats, which jit folds into the compiled code as constants, as the
+    hand-written single-link plant had them: 0.90 → 1.00 ms for the single-link benchmark
+    when they were traced arrays, docs/performance.md) and ``frictions`` (one
+    :class:`~flexarm.models.friction.Friction` per joint)."""
 
     body: Any
     k_u: Array
@@ -206,12 +209,13 @@ class Arm(Plant):
 
     def _drive(self, xb: Array, u: Array) -> Array:
         om = self._omega(xb)
-        return self.k_u * u - self.k_omega * om - self.viscous * om
+        f = jnp.asarray
+        return f(self.k_u) * u - f(self.k_omega) * om - f(self.viscous) * om
 
     def _balance(self, xb, tau, held):
         if self.kind == "single":
-            return self.body.balance(xb, tau, self.bias)
-        return _MultiBody.balance(self.body, xb, tau, self.bias, held)
+            return self.body.balance(xb, tau, jnp.asarray(self.bias))
+        return _MultiBody.balance(self.body, xb, tau, jnp.asarray(self.bias), held)
 
     def _karnopp(self) -> list[bool]:
         return [fr.model in ("coulomb", "stribeck") for fr in self.frictions]
@@ -285,7 +289,7 @@ class Arm(Plant):
 
     @property
     def command_limit(self) -> Array:
-        return self.limit
+        return jnp.asarray(self.limit, dtype=float)
 
 
 # -------------------------------------------------------------------- assembly

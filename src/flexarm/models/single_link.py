@@ -85,7 +85,10 @@ class SingleLinkModel:
         names = body_names + (("friction_z",) if self.friction.n_states else ())
         body = SingleLinkBody(J=self.J, Ab=jnp.asarray(b.A), Bb=jnp.asarray(b.B),
                               Cb=jnp.asarray(b.C), Db=jnp.asarray(b.D), state_names=body_names)
-        vec = lambda v: jnp.reshape(jnp.asarray(v, dtype=float), (1,))  # noqa: E731
+        def vec(v):  # plain numbers stay Python floats: constants in the compiled loop
+            if isinstance(v, (int, float, np.floating, np.integer)):
+                return (float(v),)
+            return jnp.reshape(jnp.asarray(v, dtype=float), (1,))
         return Arm(
             state_names=names, signal_names=SIGNALS, input_names=(self.drive.input_name,),
             body=body, k_u=vec(self.drive.k_u), k_omega=vec(self.drive.k_omega),

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -134,7 +133,8 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
 
     ``params``/``axes``: a parameter pytree and its vmap-style batch axes (0 on the leaves
     that hold the batch along their first axis, None on shared ones), e.g. from
-    :func:`flexarm.control.regulation.regulation_params_batch`. ``x0``: (n_x,), shared. The
+    :func:`flexarm.control.regulation.regulation_params_batch`. ``x0``: (n_x,) shared, or
+    (N, n_x) one per rollout. The
     batch runs in the one loop with the state carried batch-last, in chunks of ``chunk``
     rollouts (:func:`flexarm.sim.sampled.simulate_law_batch`). Gains are traced: any sweep of the same size compiles once.
     Returns one :class:`SimulationResult` holding the N rollouts as python-control traces;
@@ -144,9 +144,9 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
     n_out = _times(t_final, dt)
     n_sub = max(1, int(round(dt / step)))
     x0 = np.asarray(x0, float)
-    if x0.shape != (nx,) or not np.all(np.isfinite(x0)):
-        raise ValueError(f"x0 must be ({nx},) finite values ({', '.join(plant.state_names)}), "
-                         f"shared by the batch; got shape {x0.shape}")
+    if x0.shape[-1:] != (nx,) or x0.ndim > 2 or not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0 must be ({nx},) or (N, {nx}) finite values "
+                         f"({', '.join(plant.state_names)}); got shape {x0.shape}")
     loop = law_loop(model, law, params, dt, n_sub)
     xs, sig, us = sampled.simulate_law_batch(loop, x0, n_out + 1, axes, chunk=chunk)
     ts = np.arange(n_out + 1) * float(dt)
