@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import scipy.io as sio
 
-from flexarm.io.matfile import MatFileError, load_format, read_mat
+from flexarm.io.logformat import load_log_format
+from flexarm.io.matfile import MatFileError, read_mat
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "motor-bench.toml"
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench"
@@ -88,9 +89,9 @@ def test_v73_through_h5py(tmp_path):
 def test_motor_bench_example_format():
     if not (DATA / "MultisineTypeB.mat").is_file():
         pytest.skip(f"real recording absent: {DATA} (the shared data folder beside the repo)")
-    cols, units = load_format(EXAMPLE)
+    fmt = load_log_format(EXAMPLE)  # the one log-format reader serves .mat files too
     with pytest.warns(UserWarning, match="irregular trailing row"):
-        r = read_mat(DATA / "MultisineTypeB.mat", cols, units)
+        r = fmt.read(DATA / "MultisineTypeB.mat")
     raw = sio.loadmat(DATA / "MultisineTypeB.mat")
     assert len(r) == 49999 and r.skipped  # the tf object is skipped, not fatal
     np.testing.assert_allclose(np.diff(r.time), 4e-4, rtol=1e-9)  # 2.5 kHz, µs → s

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from flexarm.cli import app
-from flexarm.io.matfile import load_format, read_mat
+from flexarm.io.logformat import load_log_format
 from flexarm.identification.frequency_domain.periodic import periodic_frf
 from flexarm.identification.frequency_domain.tfest import fit_two_mass
 
@@ -23,10 +23,10 @@ MAT = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench" / 
 def frf():
     if not MAT.is_file():
         pytest.skip(f"real recording absent: {MAT} (the shared data folder beside the repo)")
-    cols, units = load_format(ROOT / "examples" / "motor-bench.toml")
+    fmt = load_log_format(ROOT / "examples" / "motor-bench.toml")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        r = read_mat(MAT, cols, units)
+        r = fmt.read(MAT)
         return periodic_frf(r["current"], {"motor_angle": r["motor_angle"],
                                            "load_angle": r["load_angle"]}, 2500.0, source=str(MAT))
 

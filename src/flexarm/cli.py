@@ -174,15 +174,54 @@ def _fmt(c: list[float]) -> str:
 @app.command()
 def simulate(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
              out: Path = typer.Option(..., "--out", help="folder for CSV, figures and summary"),
-             overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
-    """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json."""
+             overwrite: bool = typer.Option(False, help="write into a non-empty --out folder"),
+             log: Optional[list[Path]] = typer.Option(
+                 None, "--log", help="replay this log (.mat or text; repeat for several): its "
+                                     "setpoints, initial state, fit % per logged channel"),
+             log_format: Optional[Path] = typer.Option(
+                 None, "--log-format", help="the logs' log-format TOML (examples/)"),
+             window: Optional[str] = typer.Option(
+                 None, help="replay this part of every log, START:STOP in s on its clock")) -> None:
+    """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json;
+    with --log, replay logs on it and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
     _enable_cache()
     from flexarm.analysis.summary import write_simulation
 
     sc = _load(scenario)
     out = _outdir(out, overwrite)
+    if log:
+        _replay_logs(sc, log, log_format, window, out)
+        return
     summary = write_simulation(sc, out, progress=True)
     console.print_json(json.dumps(summary))
+
+
+def _replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optional[str],
+                 out: Path) -> None:
+    from flexarm.analysis.replay import plot_replay, replay
+    from flexarm.io.logformat import LogFormat, load_log_format
+    from flexarm.io.logs import LogError
+    from flexarm.io.write import write_json
+    from flexarm.errors import SimulationDiverged
+
+    win = _window(window, "--window")
+    results = {}
+    try:
+        fmt = load_log_format(log_format) if log_format is not None else LogFormat()
+        for path in logs:
+            g = fmt.read(path)
+            rep = replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1]) if win else None)
+            results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
+            plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
+    except (LogError, ValueError, SimulationDiverged) as exc:
+        _fail(str(exc))
+    names = sorted({k for d in results.values() for k in d})
+    t = Table("fit %", *[Path(name).stem for name in results])
+    for k in names:
+        t.add_row(k, *(f"{d.get(k, float('nan')):.1f}" for d in results.values()))
+    console.print(t)
+    write_json(out / "replay.json", {"scenario": sc.name, "window": window,
+                                     "fit_percent": results}, overwrite=True)
 
 
 REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",

@@ -55,3 +55,11 @@ def ripple(t: np.ndarray, y: np.ndarray, *, after: float, goal: float) -> float:
     """Largest |y − goal| after time ``after``."""
     t, y = np.asarray(t), np.asarray(y)
     return float(np.max(np.abs(y[t >= after] - goal)))
+
+
+def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
+    """fit % = 100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (100: exact; 0: no better than the mean;
+    NaN for a constant y)."""
+    y, y_hat = np.asarray(y, float), np.asarray(y_hat, float)
+    den = float(np.linalg.norm(y - y.mean()))
+    return float(100 * (1 - np.linalg.norm(y - y_hat) / den)) if den > 0 else float("nan")

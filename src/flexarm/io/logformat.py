@@ -25,6 +25,25 @@ control law produced the logged command::
     tau = 0.01                  # s, time constant of the "filtered" rate
     limit = 5                   # V, the amplifier's saturation
 
+The same file describes a MATLAB ``.mat`` recording (the file's suffix picks the reader):
+``[columns]`` then maps each flexarm name to a *variable spec* (:mod:`flexarm.io.matfile`:
+``"name"``, ``"-name"``, ``"struct.field"``, ``"name[0]"`` a 0-based column; a Simulink log
+struct gives its ``signals.values``), and ``delimiter``, ``comment``, ``skip_rows`` do not
+apply. Besides the single-link exchange names, a format may map per-joint signals of a
+multi-link arm (``theta_1``, ``alpha_f_2``, ``current_1``, ...; :data:`flexarm.io.logs.PER_JOINT`
+lists them with their SI units) and ``[units]`` converts any of them.
+
+``[checks]`` guards against a mapping that names the wrong variable::
+
+    [checks]
+    quantum = {theta_2 = "KE_D2"}   # an encoder reading lies on its grid k·q (q a number in
+                                    # the channel's SI unit, or a .mat variable holding it)
+    zero = ["theta_ref_2"]          # ... or a column that must be all zeros
+
+A measured angle off its encoder grid is a setpoint or a computed signal mapped as a
+measurement: reading stops with an error naming the channel, the variable, the worst sample
+and how far off the grid it is.
+
 Every gain of the law must be found: in ``gains`` (fixed) or ``gain_columns`` (a column
 per gain: gains that change inside a log are used as logged, piecewise constant); a
 ``[controller]`` without either takes the log's ``# controller:`` line. Gains are in SI:
@@ -42,7 +61,9 @@ from typing import Any, Literal
 
 from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
 
-from flexarm.io.logs import COMMENT_CHARS, KNOWN, LogError
+import numpy as np
+
+from flexarm.io.logs import COMMENT_CHARS, Log, LogError, known_names, read_log, signal_unit
 from flexarm.specs.quantity import Count, Q, Spec
 from flexarm.units import UnitError, to_si, ureg
 
@@ -131,6 +152,27 @@ def _as_state_feedback(d: dict, kind: str) -> dict:
     return dict(d)
 
 
+class Checks(Spec):
+    """``[checks]``: properties of the mapped channels that reading verifies."""
+
+    quantum: dict[str, float | str] = {}
+    zero: list[str] = []
+
+    @field_validator("quantum")
+    @classmethod
+    def _positive(cls, v: dict) -> dict:
+        for k, q in v.items():
+            if isinstance(q, (int, float)) and not q > 0:
+                raise ValueError(f"{k} = {q!r}: an encoder quantum is > 0 (in the channel's "
+                                 "SI unit), or the name of a .mat variable holding it")
+        return v
+
+
+#: Largest distance (in quanta) of an encoder reading from its grid (the rig's angles are
+#: k·q to 1e-12 relative; a value converted from degrees keeps that to ~1e-10 quanta).
+GRID_TOLERANCE = 1e-6
+
+
 class LogFormat(Spec):
     """One logger's log format (see the module docstring)."""
 
@@ -141,6 +183,7 @@ class LogFormat(Spec):
     columns: dict[str, int | str] = {}
     units: dict[str, str] = {}
     controller: ControllerFormat | None = None
+    checks: Checks = Checks()
     _source: str = PrivateAttr("log format")
 
     @field_validator("delimiter")
@@ -162,10 +205,10 @@ class LogFormat(Spec):
     @field_validator("columns")
     @classmethod
     def _columns(cls, v: dict) -> dict:
-        bad = [k for k in v if k not in KNOWN]
+        bad = [k for k in v if signal_unit(k) is None]
         if bad:
             raise ValueError(f"{', '.join(map(repr, bad))} is not one of flexarm's column "
-                             f"names; known: {', '.join(KNOWN)} (gain columns go in "
+                             f"names; known: {known_names()} (gain columns go in "
                              "[controller] gain_columns)")
         return {k: _column_ref(k, x) for k, x in v.items()}
 
@@ -173,10 +216,10 @@ class LogFormat(Spec):
     @classmethod
     def _units(cls, v: dict) -> dict:
         for k, u in v.items():
-            si = KNOWN.get(k)
+            si = signal_unit(k)
             if si is None:
                 raise ValueError(f"{k!r} is not one of flexarm's column names; known: "
-                                 f"{', '.join(KNOWN)}")
+                                 f"{known_names()}")
             try:
                 ureg.parse_expression(u).to(si)
             except Exception as exc:  # pint raises several exception types
@@ -185,6 +228,79 @@ class LogFormat(Spec):
                                  f"\"{ {'s': 'ms', 'rad': 'deg', 'm': 'mm', 'V': 'mV'}.get(si, si)}\""
                                  ) from None
         return v
+
+    @model_validator(mode="after")
+    def _checked_are_mapped(self) -> "LogFormat":
+        for k in [*self.checks.quantum, *self.checks.zero]:
+            if k not in self.columns:
+                raise ValueError(f"[checks] names {k!r}, which [columns] does not map; "
+                                 f"mapped: {', '.join(self.columns) or 'none'}")
+        return self
+
+    def read(self, path: str | Path, *, required: tuple[str, ...] = ("time",), **kw) -> Log:
+        """Read one log with this format: a ``.mat`` file through
+        :func:`flexarm.io.matfile.read_mat`, any other through
+        :func:`flexarm.io.logs.read_log` (``kw`` passes on to it, e.g. ``max_jitter``);
+        then the ``[checks]``. The result is a :class:`flexarm.io.logs.Log` in SI units."""
+        from flexarm.io import matfile
+
+        path = Path(path)
+        where = f"log format {self.source}"
+        if path.suffix.lower() == ".mat":
+            if not self.columns:
+                raise LogFormatError(f"{path}: a .mat recording needs a log format with a "
+                                     "[columns] table (flexarm name = variable spec)")
+            missing = [c for c in required if c not in self.columns]
+            if missing:
+                raise LogFormatError(f"{path}: {where}: [columns] maps no "
+                                     f"{', '.join(missing)}; map it to a variable (e.g. "
+                                     f"time = \"logsout.time\")")
+            variables = matfile.load_mat(path)
+            log = matfile.read_mat(path, self.columns, self.units, variables=variables,
+                                   source=self.source)
+            quanta = {k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
+                      if isinstance(q, str) else float(q)
+                      for k, q in self.checks.quantum.items()}
+        else:
+            extra = {k: signal_unit(k) for k in [*self.columns, *self.units]}
+            log = read_log(path, self.columns or None, self.units or None, required=required,
+                           delimiter=self.delimiter_char, comment=self.comment,
+                           skip_rows=self.skip_rows, extra=extra, source=where, **kw)
+            quanta = {}
+            for k, q in self.checks.quantum.items():
+                if isinstance(q, str):
+                    raise LogFormatError(f"{self.source}: [checks] quantum.{k} = {q!r}: a "
+                                         "text log has no variables; give the number")
+                quanta[k] = float(q)
+        self._check(log, quanta)
+        return log
+
+    def _check(self, log: Log, quanta: dict[str, float]) -> None:
+        for k, q in quanta.items():
+            x = log[k]
+            if not q > 0 or not np.isfinite(q):
+                raise LogFormatError(f"{log.name}: [checks] quantum.{k} = {q!r}: not a "
+                                     "positive number")
+            off = np.abs(x / q - np.round(x / q))
+            j = int(np.argmax(off))
+            if off[j] > GRID_TOLERANCE:
+                at = f" (t = {log.time[j]:.6g} s)" if log.time is not None else ""
+                raise LogFormatError(
+                    f"{log.name}: {k} = {self.columns[k]!r} is not an encoder reading: sample "
+                    f"{j}{at} = {x[j]:.9g} lies {off[j]:.3g} quanta off the grid k·{q:.6g} "
+                    f"([checks] quantum.{k} in {self.source}); {int((off > GRID_TOLERANCE).sum())} "
+                    f"of {len(x)} samples are off it. A measured angle lies on its encoder's "
+                    "grid: is this variable a setpoint or a simulated signal? Map the "
+                    "variable that holds the measurement (check the file's variables "
+                    "against each other)")
+        for k in self.checks.zero:
+            x = log[k]
+            if np.any(x != 0):
+                j = int(np.argmax(x != 0))
+                raise LogFormatError(
+                    f"{log.name}: {k} = {self.columns[k]!r} must be all zeros ([checks] zero "
+                    f"in {self.source}); sample {j} is {x[j]:.6g} ({int((x != 0).sum())} "
+                    "non-zero): the format maps another variable than the one meant")
 
     @property
     def source(self) -> str:

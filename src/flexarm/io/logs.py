@@ -68,11 +68,48 @@ OPTIONAL: dict[str, str] = {
     "tip_velocity": "m/s",
 }
 KNOWN: dict[str, str] = {**REQUIRED, **OPTIONAL}
+#: Further named signals a log-format file may map, with their SI units.
+OTHER: dict[str, str] = {
+    "sample_counter": "",       # a logger's sample counter (dropped after the check)
+    "load_angle": "rad",
+    "load_velocity": "rad/s",
+    "tip_x": "m",
+    "tip_y": "m",
+}
+#: Per-joint signals of a multi-link arm, named ``<base>_<joint>`` (``theta_1``,
+#: ``alpha_f_2``, ...), with their SI units: joint angle θ, setpoint, rates, the link's
+#: deflection angle α (raw, or ``_f`` filtered as a controller logs it) and its rate, the
+#: drive's command (current, voltage, torque) and the measured current.
+PER_JOINT: dict[str, str] = {
+    "theta": "rad", "theta_ref": "rad", "theta_dot": "rad/s", "theta_dot_f": "rad/s",
+    "alpha": "rad", "alpha_f": "rad", "alpha_dot": "rad/s", "alpha_dot_f": "rad/s",
+    "deflection": "m", "deflection_angle": "rad",
+    "current": "A", "current_measured": "A", "voltage": "V", "torque": "N*m",
+}
 
 #: Largest accepted relative deviation of a time step from the median step.
 MAX_JITTER = 1e-3
 #: Fewest samples accepted in a log.
 MIN_SAMPLES = 16
+
+
+def signal_unit(name: str) -> str | None:
+    """The SI unit of a flexarm signal name (:data:`KNOWN`, :data:`OTHER`, or a per-joint
+    name ``<base>_<j>`` of :data:`PER_JOINT`); ``None`` for a name flexarm does not know."""
+    if name in KNOWN:
+        return KNOWN[name]
+    if name in OTHER:
+        return OTHER[name]
+    base, sep, j = name.rpartition("_")
+    if sep and j.isdigit() and int(j) >= 1 and base in PER_JOINT:
+        return PER_JOINT[base]
+    return None
+
+
+def known_names() -> str:
+    """The signal names a log may map, for messages."""
+    return (", ".join([*KNOWN, *OTHER]) + "; per joint j: "
+            + ", ".join(f"{b}_j" for b in PER_JOINT))
 
 
 class LogError(ValueError):
@@ -89,13 +126,18 @@ class Log:
 
     ``signals`` maps column name → array (all columns except ``time``), ``comments`` holds
     the comment lines (without the leading ``#``), ``meta`` the ``key: value`` comments.
+    Read from a ``.mat`` file (:func:`flexarm.io.matfile.read_mat`), ``time`` is ``None``
+    when the format maps none, ``skipped`` names the objects of the file that could not be
+    decoded and ``notes`` what was dropped (e.g. an irregular last row).
     """
 
     path: Path | None
-    time: np.ndarray
+    time: np.ndarray | None
     signals: dict[str, np.ndarray]
     comments: list[str] = field(default_factory=list)
     meta: dict[str, str] = field(default_factory=dict)
+    skipped: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def dt(self) -> float:
@@ -116,7 +158,26 @@ class Log:
                            f"time, {', '.join(self.signals)}") from None
 
     def __len__(self) -> int:
-        return len(self.time)
+        if self.time is not None:
+            return len(self.time)
+        return len(next(iter(self.signals.values()))) if self.signals else 0
+
+    def window(self, t0: float, t1: float) -> "Log":
+        """The samples with t0 <= t <= t1 (s, on the log's own clock; a bound within 1e-6 of
+        a step of a sample time includes it), as a new :class:`Log` (arrays copied)."""
+        if self.time is None:
+            raise LogError(f"{self.name}: no time mapped; a window needs the log's time")
+        if not t1 >= t0:
+            raise LogError(f"{self.name}: window({t0:g}, {t1:g}): the end must not precede "
+                           "the start")
+        eps = 1e-6 * (self.dt if len(self.time) > 1 else 1.0)
+        keep = (self.time >= t0 - eps) & (self.time <= t1 + eps)
+        if keep.sum() < 2:
+            raise LogError(f"{self.name}: window({t0:g}, {t1:g}) s holds {int(keep.sum())} "
+                           f"sample(s); the log spans {self.time[0]:g} to {self.time[-1]:g} s")
+        return Log(self.path, self.time[keep].copy(),
+                   {k: v[keep].copy() for k, v in self.signals.items()},
+                   list(self.comments), dict(self.meta), list(self.skipped), list(self.notes))
 
 
 def _unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,

@@ -31,14 +31,13 @@ from __future__ import annotations
 
 import re
 import warnings
-import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from flexarm.io.logs import KNOWN, LogError, _unit_factor
+from flexarm.io.logs import Log, LogError, _unit_factor, known_names, signal_unit
 from flexarm.units import ureg
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
@@ -75,27 +74,8 @@ class VarSpec:
                    -1.0 if m["sign"] == "-" else 1.0, text)
 
 
-@dataclass
-class MatRecording:
-    """Signals read from one file, SI units. ``time`` is None when no time was mapped."""
-
-    path: Path
-    signals: dict[str, np.ndarray]
-    time: np.ndarray | None = None
-    skipped: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        if name == "time" and self.time is not None:
-            return self.time
-        try:
-            return self.signals[name]
-        except KeyError:
-            raise MatFileError(f"{self.path}: no signal {name!r}; mapped: "
-                               f"{', '.join(self.signals) or 'none'}") from None
-
-    def __len__(self) -> int:
-        return len(next(iter(self.signals.values())))
+#: Signals read from one ``.mat`` file are a :class:`flexarm.io.logs.Log` (one log type).
+MatRecording = Log
 
 
 # --- file access ----------------------------------------------------------------------
@@ -197,7 +177,8 @@ def _describe(variables: dict) -> str:
 
 
 def _resolve(path: Path, variables: dict, name: str, spec: VarSpec) -> np.ndarray:
-    where = f"{path}: [columns] {name} = {spec.text!r}"
+    where = (f"{path}: {name} = {spec.text!r}" if name.startswith("[") else
+             f"{path}: [columns] {name} = {spec.text!r}")
     node: object = variables
     for depth, part in enumerate(spec.path):
         nxt = _child(_unwrap(node) if depth else node, part)
@@ -247,22 +228,41 @@ def _resolve(path: Path, variables: dict, name: str, spec: VarSpec) -> np.ndarra
     return spec.sign * x
 
 
+def scalar(path: str | Path, variables: dict, text: str, where: str) -> float:
+    """The number a variable spec names (a scalar variable such as a rig parameter ``KE_D2``);
+    ``where`` says which field asked, for messages."""
+    path = Path(path)
+    spec = VarSpec.parse(text, where=f"{path}: {where}")
+    x = _resolve(path, variables, where, spec)
+    if x.size != 1:
+        raise MatFileError(f"{path}: {where} = {text!r}: expected one number, "
+                           f"{'.'.join(spec.path)} holds {x.size}")
+    return float(x[0])
+
+
 def _factor(path: Path, name: str, unit: str) -> float:
-    if name in KNOWN:
-        return _unit_factor(path, name, unit)
+    """Factor from the file's ``unit`` to the SI unit of ``name`` (its known unit, else pint's
+    base units)."""
+    si = signal_unit(name)
+    if si is not None:
+        return _unit_factor(path, name, unit, {name: si})
     try:
         q = ureg.Quantity(1.0, unit)
         return float(q.to_base_units().magnitude)
     except Exception as exc:  # pint raises several exception types
-        raise MatFileError(f"{path}: [units] {name} = {unit!r}: not a unit pint knows ({exc})") from None
+        raise MatFileError(f"{path}: [units] {name} = {unit!r}: not a unit pint knows ({exc}); "
+                           f"signal names flexarm knows: {known_names()}") from None
 
 
 def read_mat(path: str | Path, columns: Mapping[str, str],
-             units: Mapping[str, str] | None = None) -> MatRecording:
+             units: Mapping[str, str] | None = None, *, variables: dict | None = None,
+             source: str = "") -> Log:
     """Read the signals ``columns`` (flexarm name → variable spec) from a ``.mat`` file.
 
     ``units`` (flexarm name → the file's unit) converts to SI; the name ``time`` becomes
-    :attr:`MatRecording.time`. All mapped channels must have the same length.
+    :attr:`Log.time` (``None`` when not mapped). All mapped channels must have the same
+    length. ``variables``: the file's variables when already loaded (:func:`load_mat`);
+    ``source``: the format file the mapping came from, for messages.
     """
     path = Path(path)
     units = dict(units or {})
@@ -270,9 +270,14 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
         if name not in columns:
             raise MatFileError(f"{path}: [units] names {name!r}, which [columns] does not "
                                f"map; mapped: {', '.join(columns)}")
-    variables = load_mat(path)
+    if variables is None:
+        variables = load_mat(path)
     sig: dict[str, np.ndarray] = {}
     for name, text in columns.items():
+        if not isinstance(text, str):
+            raise MatFileError(f"{path}: {source + ': ' if source else ''}[columns] {name} = "
+                               f"{text!r}: a .mat file's signal is a variable spec (a string "
+                               "such as 'name', '-name', 'struct.field' or 'name[0]')")
         spec = VarSpec.parse(text, where=f"{path}: [columns] {name}")
         x = _resolve(path, variables, name, spec)
         if name in units:
@@ -288,7 +293,7 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
         _check_counter(path, sig, notes)
     t = sig.pop("time", None)
     skipped = [k for k, v in variables.items() if isinstance(v, _Opaque)]
-    return MatRecording(path, sig, t, skipped, notes)
+    return Log(path, t, sig, skipped=skipped, notes=notes)
 
 
 def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> None:
@@ -315,41 +320,14 @@ def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> 
                        "cut the recording there")
 
 
-def load_format(path: str | Path) -> tuple[dict[str, str], dict[str, str]]:
-    """``[columns]`` and ``[units]`` tables of a log-format TOML file (for ``read_mat``)."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise MatFileError(f"{path}: cannot read the log-format file ({exc})") from None
-    cols, units = data.get("columns"), data.get("units", {})
-    if not isinstance(cols, dict) or not cols:
-        raise MatFileError(f"{path}: needs a [columns] table mapping flexarm names to "
-                           "variables, e.g. current = \"iq_adx\"")
-    for tab, d in (("columns", cols), ("units", units)):
-        for k, v in d.items():
-            if not isinstance(v, str):
-                raise MatFileError(f"{path}: [{tab}] {k} = {v!r}: expected a string")
-    return dict(cols), dict(units)
-
-
-def read_recording(path: str | Path, log_format: str | Path | None = None
-                   ) -> tuple[dict[str, np.ndarray], float]:
+def read_recording(path: str | Path, log_format=None) -> tuple[dict[str, np.ndarray], float]:
     """Signals (flexarm name → SI samples) and the sampling rate (Hz) of a ``.mat`` or CSV
-    recording, mapped by a log-format file's ``[columns]`` / ``[units]``."""
+    recording, mapped by a log-format file (:class:`flexarm.io.logformat.LogFormat`)."""
+    from flexarm.io.logformat import LogFormat, load_log_format
+
     path = Path(path)
-    cols, units = load_format(log_format) if log_format is not None else ({}, {})
-    if path.suffix.lower() == ".mat":
-        if not cols:
-            raise MatFileError(f"{path}: a .mat recording needs --log-format with a [columns] table")
-        rec = read_mat(path, cols, units)
-        if rec.time is None:
-            raise MatFileError(f"{path}: map the time in [columns] (e.g. time = \"t\")")
-        sig, t = rec.signals, rec.time
-    else:
-        from flexarm.io.logs import read_log
-        log = read_log(path, cols or None, units or None, required=("time",))
-        sig, t = log.signals, log.time
-    dt = float(np.median(np.diff(t)))
+    fmt = load_log_format(log_format) if log_format is not None else LogFormat()
+    log = fmt.read(path)
+    dt = float(np.median(np.diff(log.time)))
     fs = float(f"{1 / dt:.9g}")  # the logger's clock, rounded off its float noise
-    return sig, fs
+    return log.signals, fs

@@ -36,10 +36,18 @@ def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     return ref.offset + ref.amplitude * ((phase >= 0.5) & (tau >= 0))
 
 
-def controller_from_spec(spec, dt: float) -> discrete.Controller:
-    """The discrete controller a scenario's ``[controller]`` section describes."""
+def controller_from_spec(spec, dt: float, *, input_names=None,
+                         references=None) -> discrete.Controller:
+    """The discrete controller a scenario's ``[controller]`` section describes; an ``lti``
+    controller needs the plant's ``input_names`` and checks its setpoints against the
+    run's ``references`` (channel names)."""
     if spec is None:
         return discrete.from_transfer_function(([0.0], [1.0]), dt)
+    if spec.type == "lti":
+        from flexarm.control.lti import lti_from_spec
+
+        return lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names or ("u",)),
+                             references=references)
     m = spec.measured
     if spec.type == "pd":
         return discrete.pd(spec.kp, spec.kd, dt, measured=m)
@@ -94,18 +102,19 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
     t = np.arange(n) * dt
     spec = scenario.controller
+    refs = _references(scenario, t, references)
     if controller is not None:
         ctrl = controller
     elif spec is not None and spec.type == "joint_pd":
         ctrl = joint_pd_from_spec(spec, arm, model, dt)
     else:
-        ctrl = controller_from_spec(spec, dt)
+        ctrl = controller_from_spec(spec, dt, input_names=arm.input_names, references=refs)
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
     if not channels:
         channels = {f"theta_{i + 1}": {} for i in range(arm.n_joints)}
-    sensors = Sensors.make(arm, channels)
+    sensors = Sensors.make(arm, channels, dt)
     limit = np.asarray(arm.limit, float)
     if scenario.actuator.limit is not None:
         limit = np.minimum(limit, scenario.actuator.limit)
@@ -123,7 +132,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     d0 = residual_deflection(model, th0) if ini.equilibrium else None
     x0 = np.concatenate([model.state(theta=th0, delta=d0, theta_dot=om0),
                          np.zeros(arm.n_states - 2 * model.n_q)])
-    return Prepared(scenario, model, loop, x0, _references(scenario, t, references), t)
+    return Prepared(scenario, model, loop, x0, refs, t)
 
 
 def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
@@ -140,13 +149,15 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     dt = scenario.sampling.period
     n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
     t = np.arange(n) * dt
-    ctrl = controller if controller is not None else controller_from_spec(scenario.controller, dt)
+    refs = _references(scenario, t, references)
+    ctrl = controller if controller is not None else controller_from_spec(
+        scenario.controller, dt, input_names=plant.input_names, references=refs)
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
     if not channels:
         channels["motor_angle"] = {}
-    sensors = Sensors.make(plant, channels)
+    sensors = Sensors.make(plant, channels, dt)
     limit = scenario.actuator.limit or float(model.drive.limit)
     q = 2 * limit / 2**scenario.actuator.bits if scenario.actuator.bits else 0.0
     loop = SampledLoop(plant, ctrl, sensors,
@@ -154,7 +165,7 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
                        jnp.asarray(dt), scenario.simulation.substeps, scenario.sampling.delay)
     ini = scenario.initial
     x0 = model.initial_state(ini.motor_angle, ini.motor_velocity, ini.tip_deflection)
-    return Prepared(scenario, model, loop, x0, _references(scenario, t, references), t)
+    return Prepared(scenario, model, loop, x0, refs, t)
 
 
 def _measured_names(ctrl) -> set[str]:

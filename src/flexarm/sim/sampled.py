@@ -14,7 +14,12 @@ At each sample instant t_k = k T:
    the filter: it is a per-sample white sequence (its standard deviation at the
    converter), which has no continuous-time path through the filter. RK4 reproduces the
    filter's exp(−ω_f h) per substep to 4e-4 relative while ω_f h <= 0.5
-   (:data:`FILTER_STEP_LIMIT`); :func:`check_filter_step` asks for more substeps beyond;
+   (:data:`FILTER_STEP_LIMIT`); :func:`check_filter_step` asks for more substeps beyond.
+   A channel may read any plant signal (``signal``, several channels one signal), and a
+   channel with a digital filter (:func:`flexarm.control.lti.digital_filter`) passes its
+   quantised reading y_k through it at the sample rate, ξ_{k+1} = A ξ_k + B y_k,
+   v_k = C ξ_k + D y_k, before the delay; ξ_0 at rest on the first reading,
+   (I − A) ξ_0 = B y_0, or as set (:func:`flexarm.sim.filters.with_filter_state`);
 2. the controller steps on the measured signals and the references at t_k;
 3. the command is delayed by the computation delay (samples), saturated at the
    actuator limit and quantised to the D/A count (2·limit / 2**bits);
@@ -55,18 +60,35 @@ class Sensors(eqx.Module):
     #: (rad/s); no filtered channel leaves the loop exactly as without filters
     filtered: tuple[int, ...] = eqx.field(static=True, default=())
     omega: Array | None = None
+    #: positions of the channels with a digital filter, and the filters' discrete state
+    #: spaces padded to one order k: A (n_d, k, k), B, C (n_d, k), D (n_d,); x0 (n_d, k) the
+    #: initial states (NaN: at rest on the first reading); no digital filter leaves the loop
+    #: exactly as without
+    digital: tuple[int, ...] = eqx.field(static=True, default=())
+    fA: Array | None = None
+    fB: Array | None = None
+    fC: Array | None = None
+    fD: Array | None = None
+    fx0: Array | None = None
 
     @classmethod
-    def make(cls, plant: Plant, channels: dict[str, dict[str, float]]) -> "Sensors":
+    def make(cls, plant: Plant, channels: dict[str, dict[str, Any]],
+             dt: float | None = None) -> "Sensors":
+        """Channels (name → a :class:`flexarm.specs.experiment.Sensor` as a dict) of
+        ``plant``; ``dt`` the sample period (needed by digital filters with a cutoff)."""
         names = tuple(channels)
+        signal = {n: channels[n].get("signal") or n for n in names}
         for n in names:
-            if n not in plant.signal_names:
+            if signal[n] not in plant.signal_names:
                 raise ValueError(
-                    f"sensor {n!r}: the plant has no such signal; it has "
+                    f"sensor {n!r}: the plant has no signal {signal[n]!r}; it has "
                     f"{', '.join(plant.signal_names)}"
+                    + ("" if channels[n].get("signal") else
+                       " (name the signal a channel reads with signal = ...)")
                 )
         get = lambda key, d: jnp.asarray([float(channels[n].get(key, d)) for n in names])  # noqa: E731
         quantum = [
+            float(channels[n]["quantum"]) if float(channels[n].get("quantum", 0) or 0) > 0 else
             float(channels[n]["range"]) / 2 ** int(channels[n]["bits"])
             if int(channels[n].get("bits", 0)) > 0 else 0.0 for n in names
         ]
@@ -77,10 +99,25 @@ class Sensors(eqx.Module):
                                  "cutoff as a finite number >= 0 Hz (0 = no filter)")
         filtered = tuple(i for i, f in enumerate(bw) if f > 0)
         omega = jnp.asarray([2 * np.pi * bw[i] for i in filtered]) if filtered else None
-        return cls(names, tuple(plant.signal_names.index(n) for n in names),
+        digital = tuple(i for i, n in enumerate(names) if channels[n].get("filter"))
+        mats: dict[str, Any] = {}
+        if digital:
+            from flexarm.control.lti import digital_filter
+
+            filts = [digital_filter(channels[names[i]]["filter"], dt,
+                                    where=f"sensor {names[i]!r}: filter") for i in digital]
+            k = max(1, *(f.order for f in filts))
+            A = np.zeros((len(filts), k, k))
+            B, C = np.zeros((len(filts), k)), np.zeros((len(filts), k))
+            for j, f in enumerate(filts):
+                A[j, :f.order, :f.order], B[j, :f.order], C[j, :f.order] = f.A, f.B, f.C
+            mats = dict(fA=jnp.asarray(A), fB=jnp.asarray(B), fC=jnp.asarray(C),
+                        fD=jnp.asarray([f.D for f in filts]),
+                        fx0=jnp.full((len(filts), k), jnp.nan))
+        return cls(names, tuple(plant.signal_names.index(signal[n]) for n in names),
                    tuple(int(channels[n].get("delay", 0)) for n in names),
                    get("gain", 1.0), get("noise", 0.0), jnp.asarray(quantum),
-                   filtered, omega)
+                   filtered, omega, digital, **mats)
 
 
 #: Largest ω_f h (h the integration substep) :func:`check_filter_step` accepts: RK4's
@@ -183,11 +220,34 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     dmax = max(sens.delays) if sens.delays else 0
     raw = sens.gain * _pick(plant.signals(x0, u0), sens.index)
     y0 = _quantise(raw, sens.quantum)
+    xd0 = None
+    if sens.digital:
+        xd0, y0 = _digital_initial(sens, y0)
     carry = (x0, loop.controller.init(), jnp.tile(y0, (dmax + 1, 1)),
              jnp.zeros((loop.delay + 1, n_u)), u0)
     if sens.filtered:
         carry += (_pick(raw, sens.filtered),)
+    if sens.digital:
+        carry += (xd0,)
     return carry
+
+
+def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
+    """The digital filters' initial states (at rest on the first reading y0 where not set)
+    and the channels' first outputs."""
+    ys = _pick(y0, sens.digital)
+    k = sens.fA.shape[-1]
+    rest = jax.vmap(lambda A, B, y: jnp.linalg.solve(jnp.eye(k) - A, B * y))(sens.fA, sens.fB, ys)
+    xd0 = jnp.where(jnp.isnan(sens.fx0), rest, sens.fx0)
+    return xd0, _digital_out(sens, xd0, y0)
+
+
+def _digital_out(sens: Sensors, xd: Array, y: Array) -> Array:
+    """The channels' readings with the digitally filtered ones replaced by v = C ξ + D y."""
+    ys = _pick(y, sens.digital)
+    v = jnp.sum(sens.fC * xd, axis=-1) + sens.fD * ys
+    slot = {c: j for j, c in enumerate(sens.digital)}
+    return jnp.stack([v[slot[c]] if c in slot else y[c] for c in range(len(sens.names))])
 
 
 # XLA:CPU runs the kernels and copies of a loop body one after the other only when the
@@ -229,6 +289,12 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             raw = jnp.stack([yf[slot[c]] if c in slot else raw[c]
                              for c in range(len(sens.names))])
         y = _quantise(raw + sens.noise * noise_k, sens.quantum)
+        extra = ()
+        if sens.digital:  # digital filters at the sample rate, after quantisation
+            xd = carry[-1]
+            ys = _pick(y, sens.digital)
+            y = _digital_out(sens, xd, y)
+            extra = (jnp.einsum("ijk,ik->ij", sens.fA, xd) + sens.fB * ys[:, None],)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
         meas_vec = jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)])
         meas = {n: meas_vec[i] for i, n in enumerate(sens.names)}
@@ -239,9 +305,9 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         # 4. plant (and sensor filters) over one period, command held
         if fplant is None:
             x_next = integrate_hold(plant, x, u, h, loop.substeps, solver)
-            return (x_next, cstate, sbuf, ubuf, u), (x, meas_vec, u)
+            return (x_next, cstate, sbuf, ubuf, u) + extra, (x, meas_vec, u)
         z = integrate_hold(fplant, jnp.concatenate([x, yf]), u, h, loop.substeps, solver)
-        return (z[:n_x], cstate, sbuf, ubuf, u, z[n_x:]), (x, meas_vec, u)
+        return (z[:n_x], cstate, sbuf, ubuf, u, z[n_x:]) + extra, (x, meas_vec, u)
 
     def sample_if_valid(carry, inp):
         valid, inp = inp

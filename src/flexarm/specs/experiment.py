@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, FiniteFloat, field_validator
+from typing import Any
+
+from pydantic import Field, FiniteFloat, field_validator, model_validator
 
 from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Coefficients, Count, Q, Spec
@@ -21,33 +23,92 @@ class Sampling(Spec):
     delay: Count(ge=0, le=100, what="computation delay in samples") = 0
 
 
+def _not_angular(v: object, name: str) -> object:
+    # pint takes the radian as 1, so "100 rad/s" would silently become 100 Hz
+    if isinstance(v, str) and "rad" in v:
+        from flexarm.units import to_si
+
+        w = to_si(v, "Hz", field=name)
+        raise ValueError(f"got {v!r}: an angular frequency; the cutoff is in Hz, "
+                         f"f_c = ω_c / 2π: write \"{w / 6.283185307179586:.6g} Hz\"")
+    return v
+
+
+class DigitalFilterSpec(Spec):
+    """A sensor channel's digital filter, run at the sample rate after gain, noise and
+    quantisation (:func:`flexarm.control.lti.digital_filter`): ``kind`` ``lowpass2``
+    ω²/(s² + 2ζω s + ω²), ``lowpass2_rate`` / ``derivative2`` ω² s/(s² + 2ζω s + ω²)
+    (ω = 2π·``cutoff``, ζ = ``damping``), discretised by ``forward_euler`` (s → (z − 1)/T),
+    ``zoh`` or ``tustin``; or ``kind = "tf"`` with ``num``/``den`` in z (descending powers).
+    The filter starts at rest on the channel's first reading."""
+
+    kind: Literal["lowpass2", "lowpass2_rate", "derivative2", "tf"]
+    cutoff: Q("Hz", gt=0, what="cutoff frequency") | None = None
+    damping: Q("", gt=0) = 0.9
+    discretisation: Literal["forward_euler", "tustin", "zoh"] = "forward_euler"
+    num: list[FiniteFloat] | None = None
+    den: list[FiniteFloat] | None = None
+
+    @field_validator("cutoff", mode="before")
+    @classmethod
+    def _cutoff_hz(cls, v: object) -> object:
+        return _not_angular(v, "cutoff")
+
+    @model_validator(mode="after")
+    def _complete(self) -> "DigitalFilterSpec":
+        if self.kind == "tf":
+            if self.num is None or self.den is None:
+                raise ValueError("kind = 'tf' needs num and den (in z, descending powers)")
+            if self.cutoff is not None:
+                raise ValueError("kind = 'tf' takes num/den, not cutoff")
+            if not any(self.den):
+                raise ValueError(f"den = {self.den}: the denominator is zero")
+        else:
+            if self.cutoff is None:
+                raise ValueError(f"kind = {self.kind!r} needs cutoff (Hz), e.g. cutoff = \"2 Hz\"")
+            if self.num is not None or self.den is not None:
+                raise ValueError(f"kind = {self.kind!r} takes cutoff and damping; num/den "
+                                 "belong to kind = 'tf'")
+        return self
+
+
 class Sensor(Spec):
     """One measured channel: y = gain·x + noise, then A/D quantisation, optional pure
     delay (samples). ``bits = 0`` means no quantisation; ``range`` is the full span
-    of the converter (the count is range / 2**bits); ``noise`` is a standard deviation.
+    of the converter (the count is range / 2**bits); ``quantum`` > 0 gives the count
+    directly (an encoder's 2π / counts per turn, in the signal's unit) instead of
+    range / 2**bits; ``noise`` is a standard deviation.
     ``bandwidth`` f_c > 0 puts an analog first-order low-pass in front of the A/D,
     y_f' = 2π f_c (gain·x − y_f) integrated with the plant between samples (y_f = gain·x
     at t = 0), and y = y_f + noise (0: no filter); in Hz (angular units are refused), with
-    2π f_c T / simulation.substeps <= 0.5."""
+    2π f_c T / simulation.substeps <= 0.5.
+
+    ``signal``: the plant signal the channel reads (default: the channel's own name), so
+    several channels may read one signal (an angle, and its filtered rate). ``filter``: a
+    digital filter (:class:`DigitalFilterSpec`) applied at the sample rate after
+    quantisation, before the delay; its state starts at rest on the first reading."""
 
     bits: Count(ge=0, le=32) = 0
     range: Q("", gt=0) = 2 * 3.141592653589793
+    quantum: Q("", ge=0, what="quantisation step; 0 = from bits and range") = 0.0
     noise: Q("", ge=0) = 0.0
     gain: Q("") = 1.0
     delay: Count(ge=0, le=1000, what="sensor delay in samples") = 0
     bandwidth: Q("Hz", ge=0, what="first-order low-pass cutoff; 0 = no filter") = 0.0
+    signal: str | None = None
+    filter: DigitalFilterSpec | None = None
 
     @field_validator("bandwidth", mode="before")
     @classmethod
-    def _not_angular(cls, v: object) -> object:
-        # pint takes the radian as 1, so "100 rad/s" would silently become 100 Hz
-        if isinstance(v, str) and "rad" in v:
-            from flexarm.units import to_si
+    def _bandwidth_hz(cls, v: object) -> object:
+        return _not_angular(v, "bandwidth")
 
-            w = to_si(v, "Hz", field="bandwidth")
-            raise ValueError(f"got {v!r}: an angular frequency; the cutoff is in Hz, "
-                             f"f_c = ω_c / 2π: write \"{w / 6.283185307179586:.6g} Hz\"")
-        return v
+    @model_validator(mode="after")
+    def _one_quantum(self) -> "Sensor":
+        if self.quantum > 0 and self.bits > 0:
+            raise ValueError(f"give quantum ({self.quantum:g}) or bits ({self.bits}) and range, "
+                             "not both")
+        return self
 
 
 class Actuator(Spec):
@@ -132,5 +193,56 @@ class TFController(Spec):
     measured: str = "motor_angle"
 
 
+class LTIControllerSpec(Spec):
+    """Any discrete LTI controller (:mod:`flexarm.control.lti`): x⁺ = A x + B e,
+    u = C x + D e on e = setpoint − measured, run every ``dt`` (a whole multiple of the
+    sampling period; default the sampling period), output held in between and saturated at
+    the drives' limits. Give ``A, B, C, D`` (only ``D`` for a static gain, e.g. a state
+    feedback K), or SISO ``num``/``den`` in z, or ``file`` (``.mat``, ``.npz``, JSON holding
+    A, B, C, D and dt). ``inputs``: the measured channels (one per column of D);
+    ``setpoints``: per input a reference channel or 0 (default all 0); ``outputs``: the
+    plant inputs driven (``current_1``, or joint numbers); ``initial_state`` (default 0).
+    A controller with an eigenvalue of A outside the unit circle is refused unless
+    ``allow_unstable = true``."""
+
+    type: Literal["lti"]
+    A: list[list[FiniteFloat]] | None = None
+    B: list[list[FiniteFloat]] | None = None
+    C: list[list[FiniteFloat]] | None = None
+    D: list[list[FiniteFloat]] | None = None
+    num: list[FiniteFloat] | None = None
+    den: list[FiniteFloat] | None = None
+    file: str | None = None
+    dt: Q("s", gt=0, what="controller period") | None = None
+    inputs: list[str] = Field(min_length=1)
+    setpoints: list[str | FiniteFloat] | None = None
+    outputs: list[str | int] = Field(min_length=1)
+    initial_state: list[FiniteFloat] | None = None
+    allow_unstable: bool = False
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "LTIControllerSpec":
+        given = [name for name, on in (("A..D", any(getattr(self, k) is not None
+                                                    for k in "ABCD")),
+                                       ("num/den", self.num is not None or self.den is not None),
+                                       ("file", self.file is not None)) if on]
+        if len(given) != 1:
+            raise ValueError("give the controller one way: A, B, C, D (D alone for a static "
+                             "gain), or num and den, or file; got "
+                             + (" and ".join(given) if given else "none"))
+        if given == ["num/den"] and (self.num is None or self.den is None):
+            raise ValueError("give num and den together")
+        if given == ["A..D"] and self.D is None:
+            raise ValueError("D is missing (outputs × inputs); A, B, C are optional together")
+        if self.setpoints is not None and len(self.setpoints) != len(self.inputs):
+            raise ValueError(f"setpoints has {len(self.setpoints)} entries, inputs "
+                             f"{len(self.inputs)}: one setpoint (a reference channel or 0) "
+                             "per input")
+        for s in self.setpoints or []:
+            if not isinstance(s, str) and s != 0:
+                raise ValueError(f"setpoint {s!r}: give a reference channel name or 0")
+        return self
+
+
 ControllerSpec = (PDController | PIDController | LeadController | TFController
-                  | StateFeedbackController)
+                  | StateFeedbackController | LTIControllerSpec)

@@ -105,10 +105,12 @@ class Scenario(Spec):
             if self.regulation is not None:
                 raise ValueError("[regulation] is the multi-link continuous-time law; a "
                                  "single-link arm takes a [controller]")
-            for name in self.sensors:
-                if name not in KNOWN_SENSORS:
+            for name, sensor in self.sensors.items():
+                if (sensor.signal or name) not in KNOWN_SENSORS:
                     raise ValueError(
-                        f"unknown sensor channel {name!r}; known: {', '.join(KNOWN_SENSORS)}"
+                        f"unknown sensor channel {name!r}"
+                        + (f" (signal {sensor.signal!r})" if sensor.signal else "")
+                        + f"; known signals: {', '.join(KNOWN_SENSORS)}"
                     )
             m = getattr(self.controller, "measured", None)
             if isinstance(m, str) and m not in KNOWN_SENSORS:
@@ -167,7 +169,7 @@ def _format_errors(err: ValidationError, source: str, what: str = "scenario") ->
 def _is_union_tag(p: object) -> bool:
     return isinstance(p, str) and p in {"current", "voltage", "torque", "lumped",
                                         "transfer_function", "rigid", "pd", "pid", "lead", "tf",
-                                        "state_feedback", "joint_pd", "single_link",
+                                        "state_feedback", "joint_pd", "lti", "single_link",
                                         "multi_link"}
 
 

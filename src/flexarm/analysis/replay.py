@@ -1,0 +1,120 @@
+"""Replay a log on a scenario: the logged setpoints as references, the initial state and the
+sensor filters' states from the log's first sample, and fit % per logged channel,
+100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (:func:`flexarm.analysis.metrics.fit_percent`).
+
+For a multi-link arm the initial state is read off the log where it holds the channels
+(``theta_j``, else 0; the link deflection α_j from ``alpha_j`` or, when only the filtered
+``alpha_f_j`` is logged, from it: the filter's output lags α, exact at rest; rates from
+``theta_dot_j`` / ``theta_dot_f_j`` and ``alpha_dot_j`` / ``alpha_dot_f_j``, else 0), the
+digital filters' states by :func:`flexarm.sim.filters.filter_state_from_log`. Reference
+channels the scenario uses (its ``[references]`` and the controller's setpoints) are taken
+from the log when it holds them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexarm.analysis.metrics import fit_percent
+from flexarm.io.logs import Log
+from flexarm.sim.build import prepare, to_result
+from flexarm.sim.filters import filter_state_from_log, with_filter_state
+from flexarm.sim.result import SimulationResult
+from flexarm.sim.sampled import simulate_loop
+
+
+@dataclass
+class Replay:
+    """A replayed log: the simulation, the log (its window) and fit % per channel."""
+
+    result: SimulationResult
+    log: Log
+    fit_percent: dict[str, float] = field(default_factory=dict)
+
+
+def _first(log: Log, names: list[str]) -> float:
+    for n in names:
+        if n in log.signals:
+            return float(log[n][0])
+    return 0.0
+
+
+def initial_state_from_log(prepared, log: Log) -> np.ndarray:
+    """The plant state at the log's first sample (module docstring)."""
+    model, arm = prepared.model, prepared.loop.plant
+    if getattr(model, "n_links", None) is None:
+        raise ValueError("replay reads the initial state of multi-link arms (theta_j, "
+                         "alpha_j, ...); a single-link scenario takes it from [initial]")
+    n = model.n_links
+    if any(m != 1 for m in model.n_modes):
+        raise ValueError("replay: the initial deflection is read as one angle α_j per link "
+                         f"(torsional links); this arm has modes {model.n_modes}")
+    th = [_first(log, [f"theta_{j}"]) for j in range(1, n + 1)]
+    al = [_first(log, [f"alpha_{j}", f"alpha_f_{j}"]) for j in range(1, n + 1)]
+    thd = [_first(log, [f"theta_dot_{j}", f"theta_dot_f_{j}"]) for j in range(1, n + 1)]
+    ald = [_first(log, [f"alpha_dot_{j}", f"alpha_dot_f_{j}"]) for j in range(1, n + 1)]
+    x = model.state(theta=th, delta=al, theta_dot=thd, delta_dot=ald)
+    return np.concatenate([x, np.zeros(arm.n_states - len(x))])
+
+
+def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> Replay:
+    """Simulate ``scenario`` over ``log`` (or its ``window`` (t0, t1) in s on the log's clock)
+    and compare every measured channel the log holds."""
+    if log.time is None:
+        raise ValueError(f"{log.name}: replay needs the log's time")
+    full, k0 = log, 0
+    if window is not None:
+        log = log.window(*window)
+        k0 = int(np.searchsorted(full.time, log.time[0]))
+    dt = scenario.sampling.period
+    if abs(log.dt - dt) > 1e-6 * dt:
+        raise ValueError(f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "
+                         f"sampling period {dt:g} s; resample the log or change [sampling]")
+    n = len(log)
+    duration = (n - 1) * dt
+    sim = scenario.simulation.model_copy(update={"duration": duration})
+    sc = scenario.model_copy(update={"simulation": sim})
+    used = set(sc.references)
+    setpoints = getattr(sc.controller, "setpoints", None) or []
+    used.update(s for s in setpoints if isinstance(s, str))
+    refs = {k: log[k] for k in sorted(used) if k in log.signals}
+    p = prepare(sc, references=refs)
+    assert p.n_samples == n, (p.n_samples, n)
+    x0 = initial_state_from_log(p, log)
+    loop = p.loop
+    states = filter_state_from_log(sc.sensors, full, k0, dt)  # the history before the window
+    if states:
+        loop = with_filter_state(loop, states)
+    out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)
+    p.loop, p.x0 = loop, x0
+    res = to_result(p, out)
+    fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in log.signals}
+    return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)})
+
+
+def plot_replay(rep: Replay, path, *, overwrite: bool = False):
+    """Overlay figure: every compared channel, logged and simulated, with its fit %."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flexarm.io.write import save_figure
+
+    names = list(rep.fit_percent)
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 0.5), sharex=True,
+                             squeeze=False)
+    t = rep.log.time - rep.log.time[0]
+    for ax, k in zip(axes[:, 0], names):
+        ax.plot(t, rep.log[k], "k", lw=0.8, label="log")
+        ax.plot(t, rep.result.measured[k], "C1", lw=0.8, label="simulated")
+        ax.set_ylabel(k, fontsize=8)
+        ax.set_title(f"{k}: fit {rep.fit_percent[k]:.1f} %", fontsize=8, loc="left")
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("t (s)")
+    fig.tight_layout()
+    save_figure(fig, path, overwrite=overwrite, dpi=100)
+    plt.close(fig)

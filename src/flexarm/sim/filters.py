@@ -1,0 +1,122 @@
+"""The sensors' digital filters started from a log: the filter states a segment of a real run
+starts from, taken from the logged filter outputs (for a fit in segments started from the
+logged state).
+
+The filters of the kinds ``lowpass2``, ``lowpass2_rate`` / ``derivative2``
+(:mod:`flexarm.control.lti`) have the state ξ = (x₁, x₂): x₁ the input low-passed at the
+cutoff, x₂ its rate; ``lowpass2`` outputs x₁, the rate kinds x₂. From a log at sample k:
+
+* a ``lowpass2`` channel c gives x₁ = c_k; x₂ is the logged output of a rate channel on the
+  same signal with the same filter (the lab's α̇_f beside α_f), else, with forward Euler,
+  x₂ = (c_{k+1} − c_k) / T exactly (x₁⁺ = x₁ + T x₂);
+* a rate channel c gives x₂ = c_k; x₁ is a logged ``lowpass2`` sibling's output, else the
+  filter run over the logged unfiltered reading u of the same signal (the encoder angle
+  beside θ̇_f) from rest, far enough back that the start no longer shows (|z|ⁿ < 1e-12);
+  with less history than that, x₁ = u_k − (2ζ/ω) x₂ (the low-pass's lag, exact on a ramp).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from flexarm.control.lti import FILTER_KINDS, digital_filter
+from flexarm.sim.sampled import SampledLoop, Sensors
+
+
+def with_filter_state(loop: SampledLoop | Sensors, states: dict[str, Any]):
+    """``loop`` (or its sensors) with the digital filters of the channels named in
+    ``states`` (channel → state vector ξ_0) starting there; the others start at rest on
+    their first reading."""
+    sens = loop.sensors if isinstance(loop, SampledLoop) else loop
+    if not sens.digital:
+        raise ValueError("with_filter_state: no sensor channel has a digital filter")
+    x0 = np.array(sens.fx0, dtype=float)
+    k = x0.shape[1]
+    for name, x in states.items():
+        if name not in sens.names or sens.names.index(name) not in sens.digital:
+            have = [sens.names[i] for i in sens.digital]
+            raise ValueError(f"with_filter_state: channel {name!r} has no digital filter; "
+                             f"filtered channels: {', '.join(have)}")
+        j = sens.digital.index(sens.names.index(name))
+        x = np.asarray(x, float).ravel()
+        if x.size > k or not np.all(np.isfinite(x)):
+            raise ValueError(f"with_filter_state: {name!r}: state {x} (the filter has at most "
+                             f"{k} states; finite values)")
+        x0[j] = 0.0
+        x0[j, :x.size] = x
+    new = eqx.tree_at(lambda s: s.fx0, sens, jnp.asarray(x0))
+    if isinstance(loop, SampledLoop):
+        return eqx.tree_at(lambda lp: lp.sensors, loop, new)
+    return new
+
+
+def _spec(sensors: dict, name: str) -> dict:
+    s = sensors[name]
+    return s.model_dump() if hasattr(s, "model_dump") else dict(s)
+
+
+def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np.ndarray]:
+    """States ξ_k of every digitally filtered channel of ``sensors`` (a scenario's
+    ``[sensors]``: channel → :class:`flexarm.specs.experiment.Sensor`) that the log holds,
+    at its sample k (module docstring). ``dt``: the sample period (s). A channel the rules
+    cannot start from the log is an error naming it and what is missing."""
+    chans = {n: _spec(sensors, n) for n in sensors}
+    sig = {n: c.get("signal") or n for n, c in chans.items()}
+    out: dict[str, np.ndarray] = {}
+
+    def same_filter(a: dict, b: dict) -> bool:
+        return all(a.get(x) == b.get(x) for x in ("cutoff", "damping", "discretisation"))
+
+    for name, c in chans.items():
+        f = c.get("filter")
+        if not f or name not in log.signals:
+            continue
+        kind = f["kind"]
+        if kind not in FILTER_KINDS or f.get("discretisation", "forward_euler") == "tustin":
+            raise ValueError(f"sensor {name!r}: a {kind!r} filter"
+                             + (" discretised by tustin" if kind in FILTER_KINDS else "")
+                             + " has no state read off its outputs; set it with "
+                             "with_filter_state")
+        y = log[name]
+        sib_kinds = ("lowpass2",) if FILTER_KINDS[kind] == 1 else ("lowpass2_rate", "derivative2")
+        sibs = [n for n, o in chans.items() if n != name and sig[n] == sig[name]
+                and o.get("filter") and o["filter"]["kind"] in sib_kinds
+                and same_filter(o["filter"], f) and n in log.signals]
+        if FILTER_KINDS[kind] == 0:  # lowpass2: x1 logged
+            x1 = y[k]
+            if sibs:
+                x2 = log[sibs[0]][k]
+            elif f.get("discretisation", "forward_euler") == "forward_euler" and k + 1 < len(y):
+                x2 = (y[k + 1] - y[k]) / dt
+            else:
+                raise ValueError(f"sensor {name!r}: its rate is not logged (no rate channel on "
+                                 f"{sig[name]!r} with the same filter) and cannot be "
+                                 "differenced at the log's last sample")
+            out[name] = np.array([x1, x2])
+            continue
+        x2 = y[k]
+        if sibs:
+            out[name] = np.array([log[sibs[0]][k], x2])
+            continue
+        raw = [n for n, o in chans.items() if sig[n] == sig[name] and not o.get("filter")
+               and n in log.signals and float(o.get("gain", 1.0)) == float(c.get("gain", 1.0))]
+        if not raw:
+            raise ValueError(f"sensor {name!r}: the log holds neither its low-passed signal "
+                             f"nor the unfiltered reading of {sig[name]!r}; log one, or set "
+                             "the state with with_filter_state")
+        filt = digital_filter(f, dt, where=f"sensor {name!r}: filter")
+        rho = float(np.max(np.abs(np.linalg.eigvals(filt.A))))
+        back = int(math.ceil(math.log(1e-12) / math.log(rho))) if 0 < rho < 1 else k + 1
+        u = log[raw[0]]
+        if k >= back:  # enough history: the filter's own state, its start forgotten
+            _, xs = filt.run(u[k - back:k + 1])
+            out[name] = np.array([xs[-1][0], x2])
+        else:  # the low-passed input lags it by 2ζ/ω times its rate (exact on a ramp)
+            w = 2 * math.pi * float(f["cutoff"])
+            out[name] = np.array([u[k] - 2 * float(f.get("damping", 0.9)) / w * x2, x2])
+    return out
