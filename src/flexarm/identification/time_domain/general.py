@@ -54,8 +54,8 @@ differences. At a segment start k0 the loop's state is taken from the log:
   one tip sensor, friction states) starts at zero; ``burn_in`` seconds at the start of each
   segment can be left out of the cost while those transients decay.
 
-A segment starting at a log's first sample (no window) starts from the scenario's own
-initial state instead (``[initial]``: the logs start at rest where the scenario does).
+With ``initial = "scenario"``, a segment starting at a log's first sample (no window)
+starts from the scenario's own ``[initial]`` state instead (synthetic logs).
 
 The whole-run prediction (:func:`predict_scenario`, validation) is one simulation per log.
 
@@ -84,7 +84,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.identification.time_domain.estimates import _fitpct
+from flexarm.analysis.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, initial_carry
@@ -218,6 +218,10 @@ class FitOptions:
     a quantiser inside the loop makes the cost piecewise constant in the parameters at the
     scale of one count, which stalls finite differences; its effect on the loop is a
     small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
+    substeps: integration substeps per sample while fitting (None: the scenario's).
+    initial: ``"log"``: every segment, the first of a log included, starts from the state
+    read off the log; ``"scenario"``: a segment at a log's first sample starts from the
+    scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
     polish: after the segment fit, refine on whole logs (each one simulation from its start;
     only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
     """
@@ -245,6 +249,8 @@ class FitOptions:
     polish: bool = False
     estimate_states: bool = True
     quantise: bool = False
+    initial: str = "log"
+    substeps: int | None = None
 
     def check(self) -> None:
         if not self.bound_factor > 1:
@@ -254,6 +260,10 @@ class FitOptions:
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ValueError(f"FitOptions.{name} = {v!r}: must be a finite number > 0")
+        if self.initial not in ("log", "scenario"):
+            raise ValueError(f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
+                             "from the logged state) or 'scenario' (a log's first sample "
+                             "starts from the scenario's [initial] state)")
         if self.segment is not None and not self.segment > 0:
             raise ValueError(f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
                              "(e.g. 2–5 s) or None for whole logs")
@@ -273,6 +283,7 @@ class _LogData:
     present: np.ndarray  # (C,) bool
     from_scenario: bool  # the (window) start is the log's first sample
     window: tuple[int, int]  # samples [k0, k1) fitted
+    log: Any = None  # the whole log as a flexarm.io.logs.Log (time from 0)
 
 
 def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
@@ -348,6 +359,9 @@ class _Engine:
     def __init__(self, scenario, logs: Sequence, free: Sequence[str], options: FitOptions,
                  segment: float | None = "options"):
         options.check()
+        if options.substeps is not None and scenario.simulation is not None:
+            scenario = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
+                update={"substeps": int(options.substeps)})})
         self.template = scenario
         self.options = options
         self.dump = scenario.model_dump()
@@ -441,7 +455,11 @@ class _Engine:
                         else self.template.references.get(k))
                 refs[k] = (reference_signal(spec, t) if spec is not None else np.zeros(N))
         label = name if window is None else f"{name}[{window[0]:g}:{window[1]:g} s]"
-        return _LogData(label, t, y, refs, present, k0 == 0, (k0, k1))
+        from flexarm.io.logs import Log
+
+        whole = Log(None, t, {k: np.asarray(v, float) for k, v in sig.items()})
+        return _LogData(label, t, y, refs, present,
+                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole)
 
     def _segments(self, seg: float | None) -> None:
         """Segment table: (log, k0, length) and the padded per-segment arrays."""
@@ -498,15 +516,60 @@ class _Engine:
                 dy0[s, c] = _savgol_derivative(col[:, None], min(N - 1, k0 + d), h, self.dt)[0]
                 for j in range(dmax + 1):
                     sbuf[s, j, c] = col[min(N - 1, max(0, k0 - 1 - j + d))]
+        self.seg_xd = np.zeros((S, 0, 0))
+        if self.prep0.loop.sensors.digital:
+            self._digital_init(y0, dy0)
         self.y0, self.dy0, self.sbuf0 = y0, dy0, sbuf
         self.seg_log = np.array([r[0] for r in self.seg])
         self.seg_k0 = np.array([r[1] for r in self.seg])
         self.seg_scn = np.array([r[1] == 0 and self.logs[r[0]].from_scenario for r in self.seg])
-        Nmax = max(L.t.size for L in self.logs)
-        self.log_y = np.stack([np.pad(np.nan_to_num(L.y), ((0, Nmax - L.t.size), (0, 0)),
-                                      mode="edge") for L in self.logs])
-        self.log_refs = {k: np.stack([np.pad(L.refs[k], (0, Nmax - L.t.size), mode="edge")
-                                      for L in self.logs]) for k in self.prep0.references}
+        self._cache: dict = {}
+        Nmax = max(1, int(self.seg_k0.max()) + 1)
+        fit_n = lambda a: (a[:Nmax] if a.shape[0] >= Nmax else  # noqa: E731
+                           np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1),
+                                  mode="edge"))
+        self.log_y = np.stack([fit_n(np.nan_to_num(L.y)) for L in self.logs])
+        self.log_refs = {k: np.stack([fit_n(L.refs[k]) for L in self.logs])
+                         for k in self.prep0.references}
+
+    def _digital_init(self, y0: np.ndarray, dy0: np.ndarray) -> None:
+        """Digitally filtered channels (``sensors.X.filter``): their states at each segment
+        start from the log (:func:`flexarm.sim.filters.filter_state_from_log`: the logged
+        output, its logged rate sibling or the filter run over the unfiltered reading), and
+        the reading u behind the filter recovered by inverting it, B u_k = ξ_{k+1} − A ξ_k,
+        over ±``derivative_half_width`` samples, for the plant-state rows (y0, ẏ0)."""
+        from flexarm.sim.filters import filter_state_from_log
+
+        sens = self.prep0.loop.sensors
+        A, B = np.asarray(sens.fA), np.asarray(sens.fB)
+        kmax = A.shape[-1]
+        h = self.options.derivative_half_width
+        S = len(self.seg)
+        xd = np.full((S, len(sens.digital), kmax), np.nan)
+        for s_, (li, k0, _) in enumerate(self.seg):
+            L = self.logs[li]
+            N = L.t.size
+            ks = list(range(max(0, k0 - h), min(N - 1, k0 + h + 1) + 1))
+            st = {k: filter_state_from_log(self.template.sensors, L.log, k, self.dt) for k in ks}
+            for j, c in enumerate(sens.digital):
+                name = self.names[c]
+                if name not in st[k0]:
+                    raise ValueError(f"{L.name}: no column {name!r}: the state of its digital "
+                                     "filter at a segment start cannot be read off the log; "
+                                     "log it, or fit whole logs from rest (segment=None)")
+                xd[s_, j, :len(st[k0][name])] = st[k0][name]
+                us = []
+                for k in ks[:-1]:
+                    a, b = np.zeros(kmax), np.zeros(kmax)
+                    a[:len(st[k][name])] = st[k][name]
+                    b[:len(st[k + 1][name])] = st[k + 1][name]
+                    rhs = b - A[j] @ a
+                    us.append(float(B[j] @ rhs / max(B[j] @ B[j], 1e-300)))
+                us = np.asarray(us)
+                i0 = ks.index(k0) if k0 in ks[:-1] else len(us) - 1
+                y0[s_, c] = us[i0]
+                dy0[s_, c] = _savgol_derivative(us[:, None], i0, h, self.dt)[0]
+        self.seg_xd = xd
 
     # ------------------------------------------------------------------ candidates
     def values(self, z: np.ndarray) -> dict[str, float]:
@@ -535,13 +598,33 @@ class _Engine:
         O = O * self.state_scale
         for a in range(0, Z.shape[0], B):
             loop, x0s = self.loops(Z[a:a + B])
+            warm, shared = self._warm(loop)
             out.append(np.asarray(_run_segments(
-                loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]),
+                loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
                 {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
                 jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
-                jnp.asarray(self.log_y), {k: jnp.asarray(v) for k, v in self.log_refs.items()},
-                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0), jnp.asarray(self.seg_scn))))
+                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn))))
         return np.concatenate(out)
+
+    def _warm(self, loop):
+        """Controller states and command buffers at the segment starts (:func:`_warm`):
+        computed once when every candidate has the same controller (its gains do not
+        depend on the free parameters), else per candidate."""
+        nd = self.delay + 1
+        args = (jnp.asarray(self.log_y), {k: jnp.asarray(v) for k, v in self.log_refs.items()},
+                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0))
+        leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller,
+                                                                     eqx.is_array))]
+        same = all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in leaves)
+        if same:
+            ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
+            key = "warm"
+            if key not in self._cache or not all(
+                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves)):
+                self._cache[key] = ([x.copy() for x in leaves],
+                                    _warm_jit(ctrl0, self.names, nd, *args))
+            return self._cache[key][1], True
+        return eqx.filter_vmap(lambda c: _warm(c, self.names, nd, *args))(loop.controller), False
 
     @property
     def state_scale(self) -> np.ndarray:
@@ -619,14 +702,10 @@ def _state_from_log(loop, y0, dy0):
     return x0
 
 
-def _one_candidate(loop, x0_scn, offsets, seg_refs, y0, dy0, sbuf0, log_y, log_refs, seg_log,
-                   seg_k0, seg_scn):
-    ctrl, act, sens = loop.controller, loop.actuator, loop.sensors
-    names = sens.names
-    M = next(iter(seg_refs.values())).shape[1]
-    C = len(names)
-
-    # controller warm-up on each whole log: states before every sample, raw commands
+def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0):
+    """The controller run on the logged measured channels and references from each log's
+    first sample: its state before each segment's first sample (S, ...) and the raw
+    commands of the nd samples before it (S, nd, m), newest first (0 before the log)."""
     def warm(ly, lr):
         def step(cs, inp):
             m, r = inp
@@ -636,23 +715,43 @@ def _one_candidate(loop, x0_scn, offsets, seg_refs, y0, dy0, sbuf0, log_y, log_r
         return cs_all, u_all
 
     cs_all, u_all = jax.vmap(warm)(log_y, log_refs)
-    scn_carry = initial_carry(loop, x0_scn)
-    nd = scn_carry[3].shape[0]  # computation delay + 1
 
-    def seg_carry(s_log, k0, y0s, dy0s, sb, use_scn, off):
+    def one(s_log, k0):
         cs = jax.tree.map(lambda a: a[s_log, k0], cs_all)
         uc = u_all[s_log]
         ub = jnp.stack([jnp.where(k0 - 1 - i >= 0, uc[jnp.maximum(k0 - 1 - i, 0)], 0.0)
                         for i in range(nd)])
+        return cs, ub
+
+    return jax.vmap(one)(seg_log, seg_k0)
+
+
+_warm_jit = eqx.filter_jit(_warm)
+
+
+def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn):
+    act, sens = loop.actuator, loop.sensors
+    M = next(iter(seg_refs.values())).shape[1]
+    C = len(sens.names)
+    cs_seg, ub_seg = warm
+    scn_carry = initial_carry(loop, x0_scn)
+
+    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off):
         up = _quantise(jnp.clip(ub[-1], -act.limit, act.limit), act.quantum)
         x0 = _state_from_log(loop, y0s, dy0s)
         carry = (x0, cs, sb, ub, up)
         if sens.filtered:
             carry += (jnp.stack([y0s[c] for c in sens.filtered]),)
+        if sens.digital:
+            carry += (xd,)
+        if len(carry) != len(scn_carry):
+            raise RuntimeError(f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
+                               f"builds {len(carry)} (flexarm.sim.sampled changed: update "
+                               "general._one_candidate)")
         carry = jax.tree.map(lambda a, b: jnp.where(use_scn, a, b), scn_carry, carry)
         return (carry[0] + off,) + tuple(carry[1:])
 
-    carries = jax.vmap(seg_carry)(seg_log, seg_k0, y0, dy0, sbuf0, seg_scn, offsets)
+    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets)
     noise = jnp.zeros((M, C))
 
     def one_seg(carry, refs):
@@ -663,11 +762,12 @@ def _one_candidate(loop, x0_scn, offsets, seg_refs, y0, dy0, sbuf0, log_y, log_r
 
 
 @eqx.filter_jit
-def _run_segments(loop, x0s, offsets, seg_refs, y0, dy0, sbuf0, log_y, log_refs, seg_log,
-                  seg_k0, seg_scn):
-    f = lambda lp, x0, off: _one_candidate(lp, x0, off, seg_refs, y0, dy0,  # noqa: E731
-                                           sbuf0, log_y, log_refs, seg_log, seg_k0, seg_scn)
-    return eqx.filter_vmap(f)(loop, x0s, offsets)
+def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
+                  seg_xd, seg_scn):
+    f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
+                                              sbuf0, seg_xd, seg_scn)
+    return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
+        loop, x0s, offsets, warm)
 
 
 @eqx.filter_jit
@@ -713,13 +813,14 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
 
     z0 = np.clip(z0, eng.lo, eng.hi)
     res, r, J, info = _local(eng, z0, options,
-                              states=options.estimate_states and options.segment is not None)
+                              states=options.estimate_states and options.segment is not None,
+                              progress=progress)
     stages["local"] = info
     say(f"local stage: cost {info['cost']:.4g} after {info['nfev']} evaluations "
         f"({info['message']})")
     if options.polish and options.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
-        res, r, J, info = _local(eng, res.x, options)
+        res, r, J, info = _local(eng, res.x, options, progress=progress)
         stages["polish"] = info
         say(f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
             f"({info['message']})")
@@ -755,7 +856,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
 
 
 def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = False,
-           o0: np.ndarray | None = None):
+           o0: np.ndarray | None = None, progress=None):
     """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
     columns are simulated with the point itself as one batch. With ``states``, each
     segment's start state is estimated too (multiple shooting's node states): offsets O
@@ -778,21 +879,30 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
         O = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
         return z, O
 
-    def batch(v):
+    def point(v):
         key = v.tobytes()
-        if key in cache:
-            return cache[key]
+        if key not in cache:
+            z, O = split(v)
+            cache.clear()
+            cache[key] = {"r": eng.residuals(z[None], O[None])[0]}
+        return cache[key]
+
+    def jac(v):
+        c = point(v)
+        if "J" in c:
+            return c["J"]
         z, O = split(v)
         h = np.where(z + step > eng.hi, -step, step)
-        Z = np.tile(z, (n + 1 + nx, 1))
-        Z[1 + np.arange(n), np.arange(n)] += h
-        OO = np.tile(O, (n + 1 + nx, 1, 1))
+        Z = np.tile(z, (n + nx, 1))
+        Z[np.arange(n), np.arange(n)] += h
+        OO = np.tile(O, (n + nx, 1, 1))
         for i in range(nx):
-            OO[1 + n + i, :, i] += step
+            OO[n + i, :, i] += step
         R = eng.residuals(Z, OO)
-        Jp = ((R[1:n + 1] - R[0]) / h[:, None]).T
+        r0 = c["r"]
+        Jp = ((R[:n] - r0) / h[:, None]).T
         if nx:
-            D = (R[n + 1:] - R[0]) / step  # (nx, m)
+            D = (R[n:] - r0) / step  # (nx, m)
             r_i, c_i, vals = [], [], []
             for s_ in range(S):
                 a_, b_ = int(rows[s_]), int(rows[s_ + 1])
@@ -802,19 +912,22 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
                     vals.append(D[i, a_:b_])
             Jo = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(r_i),
                                                            np.concatenate(c_i))),
-                                   shape=(R.shape[1], S * nx))
-            J = sparse.hstack([sparse.csr_matrix(Jp), Jo]).tocsr()
+                                   shape=(r0.size, S * nx))
+            c["J"] = sparse.hstack([sparse.csr_matrix(Jp), Jo]).tocsr()
         else:
-            J = Jp
-        cache.clear()
-        cache[key] = (R[0], J)
-        return cache[key]
+            c["J"] = Jp
+        if progress is not None:
+            progress(f"  cost {float(r0 @ r0):.6g}")
+        return c["J"]
+
+    def batch(v):
+        return point(v)["r"], jac(v)
 
     v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0)])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
-    res = least_squares(lambda v: batch(v)[0], v0, jac=lambda v: batch(v)[1],
+    res = least_squares(lambda v: point(v)["r"], v0, jac=jac,
                         bounds=(lo, hi), method="trf", x_scale=1.0,
                         tr_solver="lsmr" if nx else "exact",
                         max_nfev=options.max_nfev, ftol=options.ftol, xtol=options.xtol,
