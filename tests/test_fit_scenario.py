@@ -119,3 +119,38 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
     # a pinned tip mass on a massless wire: only ω² = 3EI/(L³m) and the coupling C = 3EI/L
     # reach the hub, and the data barely separate EI from m: the fit must say so
     assert any("youngs_modulus" in w and "masses[0].mass" in w for w in res.warnings)
+
+
+def test_bad_input_names_the_field_and_value():
+    truth = two_mode_link()
+    log = scenario_log(truth.model_copy(update={"simulation": truth.simulation.model_copy(
+        update={"duration": 0.2})}))
+    free = ["arm.hubs[0].inertia"]
+    with pytest.raises(ValueError, match=r"bounds\['arm.hubs\[0\].inertia'\].*does not contain"):
+        fit_scenario(truth, [log], free, FitOptions(bounds={"arm.hubs[0].inertia": (0.03, 0.05)}))
+    with pytest.raises(ValueError, match="has a prior or bounds but is not free"):
+        fit_scenario(truth, [log], free, FitOptions(priors={"arm.joints[0].viscous": 0.3}))
+    with pytest.raises(ValueError, match="template value is 0.0"):
+        fit_scenario(truth, [log], ["arm.payload.mass"] * 0 + ["arm.hubs[0].mass"])
+    with pytest.raises(ValueError, match="no log holds channel 'theta_2'|not a sensor channel"):
+        fit_scenario(truth, [log], free, FitOptions(channels={"theta_2": 1.0}))
+    slow = log.__class__(log.path, log.time * 2, log.signals)
+    with pytest.raises(ValueError, match="sampled every 0.004 s.*samples every 0.002 s"):
+        fit_scenario(truth, [slow], free)
+    with pytest.raises(ValueError, match="relative standard deviation"):
+        fit_scenario(truth, [log], free, FitOptions(priors={"arm.hubs[0].inertia": 0.0}))
+
+
+def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():
+    """A parameter the data cannot see (a sensor gain on a channel left out of the cost)
+    stays at its prior mean, and its std is the prior's: |p| σ_p (eq. 2 alone). (The log
+    starts from the scenario's state: with initial="log" the gain would scale the start
+    deflection read off the log, which the data do see.)"""
+    truth = two_mode_link()
+    log = scenario_log(truth.model_copy(update={"simulation": truth.simulation.model_copy(
+        update={"duration": 0.5})}), {"reference": np.full(251, 0.2)})
+    res = fit_scenario(truth, [log], ["sensors.deflection_1.gain"],
+                       FitOptions(channels={"theta_1": 1.0}, initial="scenario", priors={
+                           "sensors.deflection_1.gain": 0.25}, max_nfev=5))
+    assert res.params["sensors.deflection_1.gain"] == pytest.approx(1.0, abs=1e-9)
+    assert res.std["sensors.deflection_1.gain"] == pytest.approx(0.25, rel=1e-6)

@@ -219,6 +219,8 @@ class FitOptions:
     scale of one count, which stalls finite differences; its effect on the loop is a
     small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
     substeps: integration substeps per sample while fitting (None: the scenario's).
+    ties: path → free path: the first is not free but moves with the second by the same
+    factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
     initial: ``"log"``: every segment, the first of a log included, starts from the state
     read off the log; ``"scenario"``: a segment at a log's first sample starts from the
     scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
@@ -251,6 +253,7 @@ class FitOptions:
     quantise: bool = False
     initial: str = "log"
     substeps: int | None = None
+    ties: Mapping[str, str] = field(default_factory=dict)
 
     def check(self) -> None:
         if not self.bound_factor > 1:
@@ -389,6 +392,13 @@ class _Engine:
                 lo[i], hi[i] = za, zb
         self.lo, self.hi = lo, hi
         self.sigma = np.array([options.priors.get(p, np.inf) for p in self.free])
+        self.tied = {}
+        for p, master in options.ties.items():
+            if master not in self.free:
+                raise ValueError(f"FitOptions.ties: {p!r} follows {master!r}, which is not "
+                                 f"free; free: {', '.join(self.free)}")
+            self.tied[p] = (self.free.index(master),
+                            _template_value(self.dump, parse_path(p), p))
         self.prep0 = prepare(scenario)
         loop = self.prep0.loop
         self.dt = float(loop.dt)
@@ -573,7 +583,10 @@ class _Engine:
 
     # ------------------------------------------------------------------ candidates
     def values(self, z: np.ndarray) -> dict[str, float]:
-        return {p: float(self.p0[i] * np.exp(z[i])) for i, p in enumerate(self.free)}
+        out = {p: float(self.p0[i] * np.exp(z[i])) for i, p in enumerate(self.free)}
+        for p, (i, v0) in self.tied.items():
+            out[p] = float(v0 * np.exp(z[i]))
+        return out
 
     def prepared(self, z: np.ndarray) -> Prepared:
         return prepare(scenario_with(self.template, self.values(z)))
@@ -777,7 +790,8 @@ def _states_jit(loop, y0, dy0):
 
 # ----------------------------------------------------------------------------- fit
 def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
-                 options: FitOptions | None = None, *, progress=None) -> ScenarioFit:
+                 options: FitOptions | None = None, *, progress=None,
+                 predict: bool = True) -> ScenarioFit:
     """Estimate the ``free`` parameters of ``scenario`` from closed-loop ``logs``
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
     columns, sampled at the scenario's period). See the module docstring."""
@@ -825,16 +839,29 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
         say(f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
             f"({info['message']})")
     z = res.x
-    cov = _covariance(eng, r, J)
-    values = eng.values(z)
+    info_diag = np.einsum("ij,ij->j", J, J)
+    det = info_diag > 1e-12 * max(float(info_diag.max()), 1e-300)
+    cov = np.full((n, n), np.nan)
+    if det.any():
+        cov[np.ix_(det, det)] = _covariance(eng, r, J[:, det])
+    fitted = scenario_with(scenario, eng.values(z))
+    fd = fitted.model_dump()
+    # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
+    values = {p: float(_get(fd, parse_path(p), p)) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    std = {p: float(abs(values[p]) * std_z[i]) for i, p in enumerate(eng.free)}
+    std = {p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
+           for i, p in enumerate(eng.free)}
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(d, d)
     warnings = []
+    for i, p in enumerate(eng.free):
+        if not det[i]:
+            warnings.append(f"{p}: the fit does not depend on it at the optimum (e.g. a "
+                            "breakaway level below the Coulomb level, raised to it, or a "
+                            "joint that never sticks): its value is not determined by the data")
     for i in range(n):
         for j in range(i + 1, n):
-            if abs(corr[i, j]) > options.corr_warn:
+            if det[i] and det[j] and abs(corr[i, j]) > options.corr_warn:
                 warnings.append(f"the data cannot tell {eng.free[i]} from {eng.free[j]} "
                                 f"(correlation {corr[i, j]:+.3f}): fix one, give a prior, or "
                                 "add an experiment that separates them")
@@ -845,8 +872,8 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
                             f"widen it with FitOptions.bounds={{{p!r}: (lo, hi)}}")
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
-    fitted = scenario_with(scenario, values)
-    pred = predict_scenario(fitted, logs, options, channels=list(eng.channels))
+    pred = (predict_scenario(fitted, logs, options, channels=list(eng.channels)) if predict
+            else {"fit_percent": {}})
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
     return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0))), std, corr,
