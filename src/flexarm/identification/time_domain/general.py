@@ -978,6 +978,35 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
     return res, r, Jz, info
 
 
+def friction_paths(scenario) -> list[str]:
+    """The joints' friction parameters of a scenario that can be fitted (non-zero): per joint
+    Coulomb, breakaway (where set apart from Coulomb) and viscous friction."""
+    d = scenario.model_dump()
+    arm = d["arm"]
+    out = []
+    if arm.get("kind") == "single_link":
+        fr = arm.get("friction") or {}
+        base = "arm.friction"
+        groups = [(base, fr, "arm.motor.viscous", arm["motor"].get("viscous", 0.0))]
+    else:
+        groups = [(f"arm.joints[{j}].friction", jt.get("friction") or {},
+                   f"arm.joints[{j}].viscous", jt.get("viscous", 0.0))
+                  for j, jt in enumerate(arm.get("joints") or [])]
+    for base, fr, vpath, v in groups:
+        if fr.get("model", "none") != "none":
+            if fr.get("coulomb"):
+                out.append(f"{base}.coulomb")
+            if fr.get("static"):
+                out.append(f"{base}.static")
+        if v:
+            out.append(vpath)
+    if not out:
+        raise ValueError(f"scenario {scenario.name!r}: no joint friction to re-estimate (every "
+                         "friction level is 0 or its model is 'none'); give starting values "
+                         "in the scenario")
+    return out
+
+
 def _scenario_free(scenario) -> list[str]:
     notes = getattr(scenario, "notes", {}) or {}
     fit = notes.get("fit") if isinstance(notes, dict) else None
