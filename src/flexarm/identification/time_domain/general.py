@@ -794,11 +794,18 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
                  predict: bool = True) -> ScenarioFit:
     """Estimate the ``free`` parameters of ``scenario`` from closed-loop ``logs``
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
-    columns, sampled at the scenario's period). See the module docstring."""
+    columns, sampled at the scenario's period). See the module docstring. Without ``free``
+    (and priors), the scenario's ``[notes.fit]`` table gives them (``free = [...]``,
+    ``priors = {...}``). ``predict``: also simulate each whole log (window) with the fitted
+    values (fit % of the whole-run prediction; skip for long chaotic runs)."""
     from scipy.optimize import differential_evolution
 
     options = options or FitOptions()
-    free = list(free if free is not None else _scenario_free(scenario))
+    fit_notes = _scenario_fit_notes(scenario)
+    free = list(free if free is not None else fit_notes.get("free", []))
+    if not options.priors and fit_notes.get("priors"):
+        options = copy.copy(options)
+        options.priors = dict(fit_notes["priors"])
     if not free:
         raise ValueError("fit_scenario: no free parameters; list them (free=[...]) as paths "
                          "into the scenario, e.g. 'arm.joints[0].friction.coulomb'")
@@ -1007,10 +1014,18 @@ def friction_paths(scenario) -> list[str]:
     return out
 
 
-def _scenario_free(scenario) -> list[str]:
+def _scenario_fit_notes(scenario) -> dict:
+    """The scenario's ``[notes.fit]`` table: ``free = [paths]`` and ``priors = {path =
+    rel_std}``, used when the call gives none."""
     notes = getattr(scenario, "notes", {}) or {}
     fit = notes.get("fit") if isinstance(notes, dict) else None
-    return list((fit or {}).get("free", []))
+    if fit is None:
+        return {}
+    if not isinstance(fit, dict) or not isinstance(fit.get("free", []), list) or not isinstance(
+            fit.get("priors", {}), dict):
+        raise ValueError(f"scenario {scenario.name!r}: [notes.fit] must hold free = [\"path\", "
+                         f"...] and priors = {{\"path\" = rel_std}}; got {fit!r}")
+    return fit
 
 
 def _covariance(eng: _Engine, r: np.ndarray, J: np.ndarray) -> np.ndarray:
