@@ -1067,7 +1067,8 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
     at the log's first sample: from the logged state there). Returns fit % per log and
     channel (100 (1 − ‖y − ŷ‖/‖y − ȳ‖)), and the simulated channels."""
     opts = copy.copy(options) if options is not None else FitOptions()
-    opts.priors, opts.bounds, opts.quantise = {}, {}, True
+    opts.priors, opts.bounds, opts.ties, opts.quantise = {}, {}, {}, True
+    opts.substeps = None  # the scenario's own integration step
     if channels is not None:
         opts.channels = {c: 1.0 for c in channels}
     eng = _Engine(scenario, logs, [], opts, segment=None)
