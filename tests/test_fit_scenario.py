@@ -140,6 +140,10 @@ def test_bad_input_names_the_field_and_value():
         fit_scenario(truth, [slow], free)
     with pytest.raises(ValueError, match="relative standard deviation"):
         fit_scenario(truth, [log], free, FitOptions(priors={"arm.hubs[0].inertia": 0.0}))
+    blind = log.__class__(log.path, log.time, {k: v for k, v in log.signals.items()
+                                               if k != "theta_1"})
+    with pytest.raises(ValueError, match="no column 'theta_1', which the controller"):
+        fit_scenario(truth, [blind], free, FitOptions(channels={"deflection_1": 1.0}))
 
 
 def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():

@@ -410,6 +410,17 @@ class _Engine:
         if len(wins) != len(logs):
             raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
         self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
+        from flexarm.sim.build import _measured_names
+
+        read = _measured_names(loop.controller)
+        for L in self.logs:
+            missing = sorted(n for n in read if n in self.names
+                             and not L.present[self.names.index(n)])
+            if missing:
+                raise ValueError(f"{L.name}: no column {', '.join(map(repr, missing))}, which "
+                                 f"the controller of scenario {self.template.name!r} reads; the "
+                                 "fit runs the controller on the logged channels from the log's "
+                                 "start: log them (or map them with a log format)")
         chans = options.channels or {n: 1.0 for n in self.names
                                      if any(L.present[self.names.index(n)] for L in self.logs)}
         for c in chans:
