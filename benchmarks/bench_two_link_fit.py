@@ -30,6 +30,8 @@ def main() -> None:
     ap.add_argument("--no-friction", action="store_true", help="fit without joint friction")
     ap.add_argument("--json", type=Path, default=None,
                     help="write the figures as JSON (and overlay figures beside it)")
+    ap.add_argument("--scenario-out", type=Path, default=None,
+                    help="write the fitted scenario TOML (for flexarm validate --refit friction)")
     a = ap.parse_args()
     if not DATA.exists():
         sys.exit(f"no rig data at {DATA}")
@@ -45,6 +47,8 @@ def main() -> None:
                           plots=None if a.json is None else a.json.with_suffix(""))
     for k, v in rep.items():
         print(k, v)
+    if a.scenario_out is not None:
+        res.write_scenario(a.scenario_out, overwrite=True)
     if a.json is not None:
         from flexarm.io.write import write_json
 

@@ -797,9 +797,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
         write_json(json_out, {**res.to_dict(), "fit_percent": pred["fit_percent"],
                               "plots": pred["plots"]}, overwrite=overwrite)
     if scenario_out is not None:
-        from flexarm.io.write import write_toml
-
-        write_toml(scenario_out, _drop_none(res.scenario.model_dump()), overwrite=overwrite)
+        res.write_scenario(scenario_out, overwrite=overwrite)
 
 
 def _fit_table(fp: dict, title: str) -> None:
@@ -808,14 +806,6 @@ def _fit_table(fp: dict, title: str) -> None:
     for log, d in fp.items():
         t.add_row(log, *(f"{d[k]:.1f}" if k in d else "-" for k in names))
     console.print(t)
-
-
-def _drop_none(d):
-    if isinstance(d, dict):
-        return {k: _drop_none(v) for k, v in d.items() if v is not None}
-    if isinstance(d, (list, tuple)):
-        return [_drop_none(v) for v in d]
-    return d
 
 
 def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, channel,

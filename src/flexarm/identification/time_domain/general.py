@@ -325,6 +325,12 @@ class ScenarioFit:
     stages: dict[str, Any] = field(default_factory=dict)
     prediction: dict[str, Any] = field(default_factory=dict)
 
+    def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
+        from flexarm.io.write import write_toml
+
+        return write_toml(path, _drop_none(self.scenario.model_dump()), overwrite=overwrite)
+
     def to_dict(self) -> dict:
         return {"free": self.free, "params": self.params, "template": self.template,
                 "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
@@ -332,6 +338,15 @@ class ScenarioFit:
                 "segment_fit_percent": self.segment_fit_percent, "converged": self.converged,
                 "message": self.message, "nfev": self.nfev, "cost": self.cost,
                 "seconds": round(self.seconds, 2), "stages": self.stages}
+
+
+def _drop_none(d):
+    """A model_dump without the unset (None) fields, which TOML cannot hold."""
+    if isinstance(d, dict):
+        return {k: _drop_none(v) for k, v in d.items() if v is not None}
+    if isinstance(d, (list, tuple)):
+        return [_drop_none(v) for v in d]
+    return d
 
 
 # ----------------------------------------------------------------------------- engine
