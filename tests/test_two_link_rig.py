@@ -636,3 +636,62 @@ def test_data_sheet_replay_of_the_102_s_run(run_log):
     rep = replay(load_scenario("quanser-two-link"), run_log)
     assert rep.fit_percent["theta_1"] >= 95.0
     assert min(rep.fit_percent.values()) > 0.0
+
+
+# ------------------------------------------------------------------ the scenario from a workspace
+def _close(a, b, path=""):
+    """Recursive comparison of validated specs (SI floats to 1e-12 relative)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for k in a:
+            _close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-300), path
+    else:
+        assert a == b, path
+
+
+@needs_data
+def test_scenario_from_the_workspace_is_the_builtin(tmp_path):
+    """``flexarm scenario-from-mat lqr_full_10deg.mat`` writes the built-in scenario's arm,
+    sensors, controller and sampling (the built-in TOML holds the file's numbers to 17
+    digits, so equal to 1e-12 relative), and names a missing variable."""
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+    from flexarm.specs import load_scenario
+
+    r = CliRunner().invoke(app, ["scenario-from-mat", str(RUN), "--out", str(tmp_path / "s.toml")])
+    assert r.exit_code == 0, r.output
+    got, ref = load_scenario(tmp_path / "s.toml"), load_scenario("quanser-two-link")
+    a, b = got.model_dump(), ref.model_dump()
+    for sec in ("arm", "sensors", "controller", "sampling", "references"):
+        _close(a[sec], b[sec], sec)
+    sio.savemat(tmp_path / "w.mat", {"J11": 1.0})
+    r = CliRunner().invoke(app, ["scenario-from-mat", str(tmp_path / "w.mat"), "--out",
+                                 str(tmp_path / "t.toml")])
+    assert r.exit_code == 2 and "J12" in r.output and "w.mat" in r.output
+
+
+def test_controller_state_from_the_log_before_a_window():
+    """A dynamic controller's state at sample k, run over a log of its inputs, is the state
+    its own stepping reached (1e-12: the same products)."""
+    from flexarm.control.lti import state_from_log
+    from flexarm.io.logs import Log
+
+    rng = np.random.default_rng(2)
+    ctrl = _ctrl(A=[[0.5, 0.1], [0.0, 0.8]], B=[[1.0, 0.0], [0.5, -1.0]], C=[[0.3, -0.2]],
+                 D=[[2.0, -1.0]], dt=2e-3, x0=[0.2, 0.0])
+    n, k = 40, 25
+    ys, rs = rng.normal(size=(n, 2)), rng.normal(size=n)
+    log = Log(None, np.arange(n) * 1e-3, {"y1": ys[:, 0], "y2": ys[:, 1], "r": rs})
+    state = ctrl.init()
+    for j in range(k):
+        state, _ = ctrl.step(state, {"y1": ys[j, 0], "y2": ys[j, 1]}, {"r": rs[j]})
+    np.testing.assert_allclose(state_from_log(ctrl, log, k), np.asarray(state[0]), rtol=1e-12)
+    with pytest.raises(ValueError, match="has no r"):
+        state_from_log(ctrl, Log(None, log.time, {"y1": ys[:, 0], "y2": ys[:, 1]}), k)

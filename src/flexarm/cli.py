@@ -224,6 +224,34 @@ def _replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optio
                                      "fit_percent": results}, overwrite=True)
 
 
+@app.command("scenario-from-mat")
+def scenario_from_mat(workspace: Path = typer.Argument(..., help="the lab's MATLAB workspace (.mat) of a two-link flexible arm"),
+                      out: Path = typer.Option(..., "--out", help="scenario TOML to write"),
+                      current_limits: str = typer.Option(
+                          "0.94,1.2", help="the amplifiers' current limits per joint, A (not in the file)"),
+                      overwrite: bool = typer.Option(False, help="replace an existing --out file")) -> None:
+    """A two-link scenario (quanser-two-link's layout) from a lab workspace's parameters."""
+    from flexarm.io.logs import LogError
+    from flexarm.io.workspace import scenario_from_workspace
+    from flexarm.io.write import write_toml
+    from flexarm.specs import ScenarioError, scenario_from_dict
+
+    _check_file_option("--out", out, overwrite)
+    try:
+        lims = [float(x) for x in current_limits.split(",")]
+    except ValueError:
+        lims = []
+    if len(lims) != 2 or not min(lims) > 0:
+        _fail(f"--current-limits {current_limits!r}: give two positive currents in A, e.g. 0.94,1.2")
+    try:
+        data = scenario_from_workspace(workspace, current_limits=(lims[0], lims[1]))
+        scenario_from_dict(data, source=str(workspace))
+        write_toml(out, data, overwrite=overwrite)
+    except (LogError, ScenarioError) as exc:
+        _fail(str(exc))
+    console.print(f"{out}: scenario {data['name']!r} from {workspace}")
+
+
 REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
                  "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example"}
 

@@ -8,7 +8,8 @@ For a multi-link arm the initial state is read off the log where it holds the ch
 ``theta_dot_j`` / ``theta_dot_f_j`` and ``alpha_dot_j`` / ``alpha_dot_f_j``, else 0), the
 digital filters' states by :func:`flexarm.sim.filters.filter_state_from_log`. Reference
 channels the scenario uses (its ``[references]`` and the controller's setpoints) are taken
-from the log when it holds them.
+from the log when it holds them. A dynamic LTI controller replayed from inside a log starts
+from its state run over the log before the window (:func:`flexarm.control.lti.state_from_log`).
 """
 
 from __future__ import annotations
@@ -88,6 +89,14 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     states = filter_state_from_log(sc.sensors, full, k0, dt)  # the history before the window
     if states:
         loop = with_filter_state(loop, states)
+    from flexarm.control.lti import LTIController, state_from_log
+
+    if isinstance(loop.controller, LTIController) and loop.controller.A.size and k0 > 0:
+        import equinox as eqx
+        import jax.numpy as jnp
+
+        xc = state_from_log(loop.controller, full, k0)  # the controller's state before the window
+        loop = eqx.tree_at(lambda lp: lp.controller.x0, loop, jnp.asarray(xc))
     out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)
     p.loop, p.x0 = loop, x0
     res = to_result(p, out)

@@ -392,3 +392,25 @@ def lti_from_spec(spec, *, base_dt: float, input_names, references=None) -> LTIC
                           outputs=spec.outputs, input_names=list(input_names), dt=dt,
                           base_dt=base_dt, x0=spec.initial_state,
                           allow_unstable=spec.allow_unstable, tf=tf, where=where)
+
+
+def state_from_log(ctrl: LTIController, log, k: int) -> np.ndarray:
+    """The controller's state x_k at sample k of ``log`` (a :class:`flexarm.io.logs.Log`
+    holding its input channels and setpoints): the controller run from its ``x0`` over the
+    logged samples 0..k−1, updating at every ``every``-th sample from the first (the
+    command it computed is not needed: x⁺ = A x + B e). Exact when the log holds what the
+    controller read; for an observer-based controller this is its estimate before a
+    window, not a guess."""
+    missing = [c for c in (*ctrl.inputs, *ctrl.reference_signals) if c not in log.signals]
+    if missing:
+        raise ValueError(f"{log.name}: the controller's state is run over the log, which has no "
+                         f"{', '.join(missing)}")
+    A, B = np.asarray(ctrl.A, float), np.asarray(ctrl.B, float)
+    x = np.asarray(ctrl.x0, float).copy()
+    if A.size == 0:
+        return x
+    y = np.stack([log[c] for c in ctrl.inputs], 1)
+    s = np.stack([log[c] if c is not None else np.zeros(len(y)) for c in ctrl.setpoints], 1)
+    for j in range(0, k, ctrl.every):
+        x = A @ x + B @ (s[j] - y[j])
+    return x
