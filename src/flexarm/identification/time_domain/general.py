@@ -332,12 +332,25 @@ class ScenarioFit:
         return write_toml(path, _drop_none(self.scenario.model_dump()), overwrite=overwrite)
 
     def to_dict(self) -> dict:
-        return {"free": self.free, "params": self.params, "template": self.template,
-                "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
-                "warnings": self.warnings, "fit_percent": self.fit_percent,
-                "segment_fit_percent": self.segment_fit_percent, "converged": self.converged,
-                "message": self.message, "nfev": self.nfev, "cost": self.cost,
-                "seconds": round(self.seconds, 2), "stages": self.stages}
+        """JSON-ready (non-finite numbers, e.g. the std of an undetermined parameter, as
+        null)."""
+        return _finite({"free": self.free, "params": self.params, "template": self.template,
+                        "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
+                        "warnings": self.warnings, "fit_percent": self.fit_percent,
+                        "segment_fit_percent": self.segment_fit_percent,
+                        "converged": self.converged, "message": self.message,
+                        "nfev": self.nfev, "cost": self.cost,
+                        "seconds": round(self.seconds, 2), "stages": self.stages})
+
+
+def _finite(x):
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
 
 
 def _drop_none(d):
