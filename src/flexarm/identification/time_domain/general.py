@@ -243,7 +243,7 @@ class FitOptions:
     popsize: int = 6
     maxiter: int = 8
     seed: int = 0
-    derivative_half_width: int = 5
+    derivative_half_width: int = 10
     corr_warn: float = 0.95
     max_batch: int = 64
     ftol: float = 1e-6
@@ -373,13 +373,19 @@ def _stack(loops: list):
 
 
 def _savgol_derivative(y: np.ndarray, k: int, h: int, dt: float) -> np.ndarray:
-    """ẏ at sample k by a least-squares quadratic over samples k−h … k+h (clipped to the log)."""
+    """ẏ at sample k by a least-squares quadratic over samples k−h … k+h; where the log
+    ends within h samples of k, a straight line over the 2h + 1 samples at that end (an
+    end-point quadratic amplifies the noise several times)."""
     n = y.shape[0]
     lo, hi = max(0, k - h), min(n, k + h + 1)
+    deg = 2
+    if lo == 0 or hi == n:  # one-sided: a line over 2h + 1 samples
+        lo, hi = (0, min(n, 2 * h + 1)) if lo == 0 else (max(0, n - 2 * h - 1), n)
+        deg = 1
     tt = (np.arange(lo, hi) - k) * dt
     if hi - lo < 3:
         return np.zeros(y.shape[1:])
-    V = np.stack([np.ones_like(tt), tt, tt**2], 1)
+    V = np.stack([tt**j for j in range(deg + 1)], 1)
     coef, *_ = np.linalg.lstsq(V, np.nan_to_num(y[lo:hi]), rcond=None)
     return coef[1]
 
