@@ -78,18 +78,17 @@ def test_paths_parse_and_expand():
 
 @pytest.mark.slow  # ~35 s on a shared 2-core machine
 def test_two_mode_link_recovered_within_5_percent():
-    """Multiple shooting on 0.5 s segments (start states estimated per segment), then a
-    polish on the whole 6 s log from its known rest start (initial="scenario": the log
-    starts where the scenario does). 5 % is #13's acceptance; measured <= 0.22 % on these
-    logs (noise 1e-4 rad / 20 µm, 16/14-bit converters); with the start read off the log
-    instead (initial="log") up to 3 % (Coulomb −2.3 %, viscous +3.0 %)."""
+    """Multiple shooting on 0.5 s segments, each started from the state read off the log
+    with its offsets estimated (node states), then a polish on the whole 6 s log (its start
+    state estimated the same way). 5 % is #13's acceptance; measured <= 0.21 % on these
+    logs (noise 1e-4 rad / 20 µm, 16/14-bit converters)."""
     truth = two_mode_link()
     t = np.arange(3001) * 0.002
     ref = staircase(t, [0.0, 0.4, -0.1, 0.6, 0.05, -0.3, 0.2, 0.0], 0.75)
     free = ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous",
             "arm.links[0].flexural_rigidity", "arm.hubs[0].inertia",
             "arm.joints[0].drive.torque_constant", "arm.links[0].damping_ratio"]
-    res, err = _recover(truth, free, ref, FitOptions(segment=0.5, polish=True, max_nfev=60, initial="scenario"))
+    res, err = _recover(truth, free, ref, FitOptions(segment=0.5, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # the whole-run prediction of the fitted model matches the log (noise only: > 97 %)
     assert res.fit_percent["synthetic"]["theta_1"] > 97
@@ -105,7 +104,7 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
     chatters by ±0.15 A; the smooth fitted loop (quantisation off while fitting) lacks that
     dither and the viscous V comes out 5–11 % off (measured), so this test uses 14 bits.
     Reference: 4 s of two sines (a range of speeds separates V from F_c), then a
-    staircase. Measured errors: <= 0.77 % (viscous; 3.9 % with initial="log")."""
+    staircase. Measured errors: <= 0.70 % (EI and m, which the data barely separate)."""
     sc = load_scenario("feliu-single-mass")
     fr = sc.arm.friction.model_copy(update={"static": None})
     sens = {k: v.model_copy(update={"bits": 14}) for k, v in sc.sensors.items()}
@@ -117,7 +116,7 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
                    staircase(t - 4.0, [0.0, 0.4, -0.1, 0.6, 0.05, -0.3], 0.7))
     free = ["arm.motor.inertia", "arm.motor.viscous", "arm.friction.coulomb",
             "arm.beam.youngs_modulus", "arm.beam.masses[0].mass"]
-    res, err = _recover(truth, free, ref, FitOptions(segment=0.6, polish=True, max_nfev=60, initial="scenario"))
+    res, err = _recover(truth, free, ref, FitOptions(segment=0.6, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # a pinned tip mass on a massless wire: only ω² = 3EI/(L³m) and the coupling C = 3EI/L
     # reach the hub, and the data barely separate EI from m: the fit must say so

@@ -886,7 +886,9 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
         f"({info['message']})")
     if options.polish and options.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
-        res, r, J, info = _local(eng, res.x, options, progress=progress)
+        # each log's start state stays a nuisance parameter (offsets to the logged state)
+        res, r, J, info = _local(eng, res.x, options, progress=progress,
+                                 states=options.estimate_states and not eng.seg_scn.all())
         stages["polish"] = info
         say(f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
             f"({info['message']})")
