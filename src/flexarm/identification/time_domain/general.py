@@ -24,7 +24,8 @@ The residuals stacked for least squares are, per measured channel c of ``options
 with σ_c the logged channel's spread (standard deviation over all fitted logs), λ =
 ``residual_level`` the expected misfit as a fraction of that spread and τ =
 ``correlation_time`` the residuals' correlation time (s), so that Σ r² counts independent
-misfits in units of their expected size; and per prior (path → relative std σ_p,
+misfits in units of their expected size (fit % is :func:`flexarm.analysis.metrics.fit_percent`,
+100 (1 − ‖y − ŷ‖/‖y − ȳ‖)); and per prior (path → relative std σ_p,
 ``options.priors``; the mean is the template value, the data-sheet value)
 
     r_p = (ln p − ln p0) / σ_p                                                        (2)
@@ -50,9 +51,13 @@ differences. At a segment start k0 the loop's state is taken from the log:
   g_c ∂s_c/∂x · x0 = y_c(k0) (positions) and g_c ∂s_c/∂x · ∂f/∂x · x0 = ẏ_c(k0) (rates), the
   derivatives of the signals and right-hand side at x = 0 (:func:`jax.jacfwd` of the
   candidate's plant), ẏ a local quadratic (Savitzky–Golay) derivative of the log over
-  ±``derivative_half_width`` samples. What the channels do not observe (a second mode behind
-  one tip sensor, friction states) starts at zero; ``burn_in`` seconds at the start of each
-  segment can be left out of the cost while those transients decay.
+  ±``derivative_half_width`` samples (a straight line over as many samples at a log's
+  end). What the channels do not observe (a second mode behind one tip sensor, friction
+  states) starts at zero; ``burn_in`` seconds at the start of each segment can be left out
+  of the cost while those transients decay;
+* with ``estimate_states`` the start state of every segment is then refined as a nuisance
+  parameter (offsets to the state read off the log: multiple shooting's node states), and
+  so is each log's start state in the ``polish`` on whole logs.
 
 With ``initial = "scenario"``, a segment starting at a log's first sample (no window)
 starts from the scenario's own ``[initial]`` state instead (synthetic logs).
