@@ -494,7 +494,10 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
 
 
 @app.command()
-def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one recording session"),
+def fit(logs: list[Path] = typer.Argument(
+            ..., help="closed-loop CSV logs of one recording session; or SCENARIO LOG...: a "
+                      "scenario (TOML file or built-in name) as the model template, then its "
+                      "logs (the general fit: --free, --prior, --segment)"),
         drive: str = typer.Option("voltage", help="voltage or current"),
         gear_ratio: float = typer.Option(1.0, help="K_g"),
         motor_constant: Optional[float] = typer.Option(None, help="K_m, V*s/rad (voltage) or N*m/A (current)"),
@@ -532,8 +535,9 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         polish_iter: int = typer.Option(
             8, help="generations of the friction polish (20 with --delay-search both)"),
         overwrite: bool = typer.Option(False, help="replace existing output files"),
-        log_format: Optional[Path] = typer.Option(
-            None, "--log-format", help="the logger's log-format TOML (columns, units, gains)"),
+        log_format: Optional[list[str]] = typer.Option(
+            None, "--log-format", help="the logger's log-format TOML (columns, units, gains); "
+                                       "with SCENARIO: once per log, or PATTERN=FILE by file name"),
         use_regressed_law: bool = typer.Option(
             False, "--use-regressed-law",
             help="use the law regressed on the logged command where it disagrees with the "
@@ -541,13 +545,39 @@ def fit(logs: list[Path] = typer.Argument(..., help="closed-loop CSV logs of one
         window: Optional[str] = typer.Option(
             None, help="fit on this part of every log only, START:STOP in s from its first "
                        "sample, e.g. 0:5"),
+        free: Optional[list[str]] = typer.Option(
+            None, "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
+                                 "(repeat), e.g. 'arm.joints[*].friction.coulomb'"),
+        prior: Optional[list[str]] = typer.Option(
+            None, "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the "
+                                  "scenario's value, ± REL_STD relative), e.g. "
+                                  "'arm.joints[0].drive.torque_constant=0.3'"),
+        segment: Optional[float] = typer.Option(
+            None, "--segment", help="with SCENARIO: multiple-shooting segment length, s"),
+        channel: Optional[list[str]] = typer.Option(
+            None, "--channel", help="with SCENARIO: a measured channel to fit, NAME or "
+                                    "NAME=WEIGHT (repeat; default: every logged sensor channel)"),
+        max_nfev: int = typer.Option(30, "--max-nfev", help="with SCENARIO: least-squares budget"),
         validate_window: Optional[str] = typer.Option(
             None, "--validate-window",
             help="then predict this held-out part of every log (START:STOP, s; each "
                  "part's initial state estimated from its own data) and report its fit %")
         ) -> None:
-    """Fit a physical model with joint friction to closed-loop logs (time domain)."""
+    """Fit a physical model with joint friction to closed-loop logs (time domain).
+
+    With a scenario first (``flexarm fit SCENARIO LOG... --free PATH ...``): the general fit
+    of any arm the scenario describes (identification.time_domain.fit_scenario)."""
     _enable_cache()
+    if logs and _is_scenario(str(logs[0])):
+        _fit_scenario_cli(str(logs[0]), logs[1:], log_format, free, prior, segment, channel,
+                          window, max_nfev, json_out, scenario_out, plots, overwrite)
+        return
+    if free or prior or segment is not None or channel:
+        _fail("--free, --prior, --segment and --channel belong to the general fit: give the "
+              "scenario first, flexarm fit SCENARIO LOG... --free PATH")
+    if log_format and len(log_format) > 1:
+        _fail("--log-format is given once for the bench fit (every log has one format)")
+    log_format = Path(log_format[0]) if log_format else None
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import fit as run_fit
     from flexarm.errors import FitInterrupted
@@ -644,17 +674,39 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
              max_jitter: float = typer.Option(
                  1e-3, help="accepted relative deviation of a time step from the median step"),
              overwrite: bool = typer.Option(False, help="replace an existing JSON file"),
-             log_format: Optional[Path] = typer.Option(
-                 None, "--log-format", help="the logger's log-format TOML (columns, units, gains)"),
+             log_format: Optional[list[str]] = typer.Option(
+                 None, "--log-format", help="the logger's log-format TOML (columns, units, "
+                                            "gains); once per log, or PATTERN=FILE"),
              use_regressed_law: bool = typer.Option(
                  False, "--use-regressed-law",
                  help="use the law regressed on the logged command where it disagrees with "
                       "the declared one"),
              window: Optional[str] = typer.Option(
                  None, help="replay this part of every log only, START:STOP in s from its "
-                            "first sample, e.g. 5:10")) -> None:
-    """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖)."""
+                            "first sample, e.g. 5:10"),
+             refit: Optional[str] = typer.Option(
+                 None, "--refit", help="'friction': re-estimate only the joints' friction on "
+                                       "--refit-window of the first log, then validate with "
+                                       "everything else fixed (reports both)"),
+             refit_window: str = typer.Option(
+                 "0:5", "--refit-window", help="the part of the first log the refit uses, "
+                                               "START:STOP in s"),
+             channel: Optional[list[str]] = typer.Option(
+                 None, "--channel", help="measured channel to compare (repeat; default: every "
+                                         "logged sensor channel)")) -> None:
+    """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
+
+    A multi-link scenario, or --refit, takes the general path (any arm, logs read by
+    --log-format, the prediction from each log's logged state)."""
     _enable_cache()
+    sc0 = _load(scenario)
+    if sc0.arm.kind == "multi_link" or refit is not None:
+        _validate_scenario_cli(sc0, logs, log_format, window, refit, refit_window, channel,
+                               json_out, plots, overwrite)
+        return
+    if log_format and len(log_format) > 1:
+        _fail("--log-format is given once for a bench scenario's logs")
+    log_format = Path(log_format[0]) if log_format else None
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import validate as run_validate
 
@@ -676,6 +728,179 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
     if json_out is not None:
         from flexarm.io.write import write_json
 
+        write_json(json_out, out, overwrite=overwrite)
+
+
+def _is_scenario(arg: str) -> bool:
+    from flexarm.specs.scenario import builtin_scenarios
+
+    return arg.endswith(".toml") or arg in builtin_scenarios()
+
+
+def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:
+    """Read each log with its format: --log-format once per log (in order), one for all,
+    or PATTERN=FILE (fnmatch on the file name; the first match wins)."""
+    import fnmatch
+
+    from flexarm.io.logformat import LogFormat, load_log_format
+
+    if not paths:
+        _fail("no logs given: flexarm fit SCENARIO LOG... (one or more log files)")
+    specs = list(log_format or [])
+    pats = [x.split("=", 1) for x in specs if "=" in x]
+    plain = [x for x in specs if "=" not in x]
+    if pats and plain:
+        _fail("--log-format: give either one FILE per log (or one for all), or PATTERN=FILE "
+              f"entries, not both (got {specs})")
+    if plain and len(plain) not in (1, len(paths)):
+        _fail(f"--log-format given {len(plain)} times for {len(paths)} logs: give it once for "
+              "all, once per log in order, or as PATTERN=FILE")
+    cache: dict = {}
+
+    def fmt(f: str | None):
+        if f is None:
+            return LogFormat()
+        if f not in cache:
+            cache[f] = load_log_format(f)
+        return cache[f]
+
+    out = []
+    for i, p in enumerate(paths):
+        if pats:
+            hit = [f for pat, f in pats if fnmatch.fnmatch(Path(p).name, pat)]
+            if not hit:
+                _fail(f"{p}: no --log-format PATTERN matches its name (patterns: "
+                      f"{', '.join(pat for pat, _ in pats)})")
+            f = hit[0]
+        else:
+            f = plain[0] if len(plain) == 1 else (plain[i] if plain else None)
+        out.append(fmt(f).read(p))
+    return out
+
+
+def _channels(channel: Optional[list[str]]) -> dict | None:
+    if not channel:
+        return None
+    out = {}
+    for c in channel:
+        name, _, w = c.partition("=")
+        try:
+            out[name.strip()] = float(w) if w else 1.0
+        except ValueError:
+            _fail(f"--channel {c!r}: expected NAME or NAME=WEIGHT (a number)")
+    return out
+
+
+def _priors(prior: Optional[list[str]]) -> dict:
+    out = {}
+    for x in prior or []:
+        path, _, v = x.rpartition("=")
+        try:
+            out[path.strip()] = float(v)
+        except ValueError:
+            path = ""
+        if not path:
+            _fail(f"--prior {x!r}: expected PATH=REL_STD, e.g. "
+                  "'arm.joints[0].drive.torque_constant=0.3'")
+    return out
+
+
+def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, segment,
+                      channel, window, max_nfev, json_out, scenario_out, plots,
+                      overwrite) -> None:
+    from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
+    from flexarm.io.logs import LogError
+    from flexarm.io.write import write_json
+
+    _check_file_option("--json", json_out, overwrite)
+    _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    _check_dir_option("--plots", plots)
+    sc = _load(scenario)
+    win = _window(window, "--window")
+    try:
+        glogs = _general_logs(logs, log_format)
+        opts = FitOptions(channels=_channels(channel), priors=_priors(prior), segment=segment,
+                          max_nfev=max_nfev, windows=[win] * len(glogs) if win else None)
+        with console.status("fitting") as status:
+            res = fit_scenario(sc, glogs, free or None, opts,
+                               progress=lambda m: _progress(status, m), predict=False)
+            status.update("predicting the logs with the fitted parameters")
+            pred = predict_scenario(res.scenario, glogs, opts,
+                                    channels=list(opts.channels) if opts.channels else None,
+                                    plots=plots, tag="fit")
+    except (LogError, ValueError) as exc:
+        _fail(str(exc))
+    t = Table("parameter", "template", "fitted", "std")
+    for p in res.free:
+        t.add_row(p, f"{res.template[p]:.5g}", f"{res.params[p]:.5g}", f"{res.std[p]:.3g}")
+    console.print(t)
+    console.print(escape(res.message))
+    for w in res.warnings:
+        console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+    _fit_table(pred["fit_percent"], "whole-log prediction")
+    if json_out is not None:
+        write_json(json_out, {**res.to_dict(), "fit_percent": pred["fit_percent"],
+                              "plots": pred["plots"]}, overwrite=overwrite)
+    if scenario_out is not None:
+        res.write_scenario(scenario_out, overwrite=overwrite)
+
+
+def _fit_table(fp: dict, title: str) -> None:
+    names = sorted({k for d in fp.values() for k in d})
+    t = Table(f"fit % ({title})", *names)
+    for log, d in fp.items():
+        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if k in d else "-" for k in names))
+    console.print(t)
+
+
+def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, channel,
+                           json_out, plots, overwrite) -> None:
+    from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
+    from flexarm.identification.time_domain.general import friction_paths
+    from flexarm.io.logs import LogError
+    from flexarm.io.write import write_json
+
+    _check_file_option("--json", json_out, overwrite)
+    _check_dir_option("--plots", plots)
+    if refit not in (None, "friction"):
+        _fail(f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
+              "viscous friction) can be re-estimated")
+    win = _window(window, "--window")
+    rwin = _window(refit_window, "--refit-window")
+    out: dict = {}
+    try:
+        glogs = _general_logs(logs, log_format)
+        ch = _channels(channel)
+        opts = FitOptions(channels=ch, windows=[win] * len(glogs) if win else None)
+        with console.status("predicting") as status:
+            before = predict_scenario(sc, glogs, opts, channels=list(ch) if ch else None,
+                                      plots=plots, tag="validate")
+            out["fit_percent"] = before["fit_percent"]
+            if refit:
+                status.update("re-estimating the joints' friction")
+                free = friction_paths(sc)
+                res = fit_scenario(sc, glogs[:1], free, FitOptions(channels=ch, windows=[rwin]),
+                                   predict=False)
+                after = predict_scenario(res.scenario, glogs, opts,
+                                         channels=list(ch) if ch else None, plots=plots,
+                                         tag="refit")
+                out["refit"] = {"window_s": list(rwin), "log": str(logs[0]),
+                                "params": {p: res.params[p] for p in free},
+                                "template": {p: res.template[p] for p in free},
+                                "std": {p: res.std[p] for p in free},
+                                "warnings": res.warnings,
+                                "fit_percent": after["fit_percent"]}
+    except (LogError, ValueError) as exc:
+        _fail(str(exc))
+    _fit_table(out["fit_percent"], "scenario as given")
+    if refit:
+        t = Table("friction", "scenario", "refitted", "std")
+        for p in out["refit"]["params"]:
+            t.add_row(p, f"{out['refit']['template'][p]:.4g}",
+                      f"{out['refit']['params'][p]:.4g}", f"{out['refit']['std'][p]:.3g}")
+        console.print(t)
+        _fit_table(out["refit"]["fit_percent"], f"friction refitted on {refit_window} s")
+    if json_out is not None:
         write_json(json_out, out, overwrite=overwrite)
 
 

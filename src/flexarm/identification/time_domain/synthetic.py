@@ -50,3 +50,22 @@ def synthetic_log(scenario, gains: Sequence[float], path: str | Path, *, duratio
                      comments=[f"controller: state_feedback K1={k1:g} K2={k2:g} K3={k3:g} K4={k4:g}",
                                f"source: flexarm synthetic, scenario {scenario.name}"],
                      overwrite=overwrite)
+
+
+def scenario_log(scenario, references: dict[str, np.ndarray] | None = None, *, seed: int = 0,
+                 name: str = "synthetic"):
+    """A synthetic closed-loop log of any scenario (:func:`flexarm.sim.build.prepare`: its
+    sensors with noise and quantisation, its sampled controller, converters), as a
+    :class:`flexarm.io.logs.Log` with the measured channels, the references and the
+    command (``command`` or ``command_i``) as columns; ``references`` replaces reference
+    channels (arrays at the sample instants)."""
+    from flexarm.io.logs import Log
+
+    p = prepare(scenario, references=references)
+    out = simulate_loop(p.loop, p.x0, p.references, p.n_samples, seed=seed)
+    sig = {n: out["measured"][:, i] for i, n in enumerate(p.loop.sensors.names)}
+    sig.update({k: np.asarray(v, float) for k, v in p.references.items()})
+    u = out["command"]
+    for j in range(u.shape[1]):
+        sig["command" if u.shape[1] == 1 else f"command_{j + 1}"] = u[:, j]
+    return Log(Path(name), p.time, sig, meta={"scenario": scenario.name, "seed": str(seed)})

@@ -1,0 +1,1178 @@
+"""One time-domain fit for every arm a scenario describes: :func:`fit_scenario`.
+
+The scenario is the model template; ``free`` lists the parameters to estimate as paths into
+it (``"arm.joints[0].friction.coulomb"``, ``"arm.links[1].torsional_stiffness"``,
+``"sensors.deflection_1.gain"``; ``[*]`` expands to every element of a list). Every other
+number stays at the template's value. The model is the one sampled-data loop
+(:class:`flexarm.sim.sampled.SampledLoop`): plant, sensors (gains, filters, quantisation,
+delays), the scenario's discrete controller, actuator limits.
+
+Parameters and cost
+-------------------
+Parameters are positive (or sign-fixed) physical numbers, estimated in log space:
+p_i = p0_i · exp(z_i), p0_i the template value, z_i ∈ [−ln f, ln f] (f =
+``FitOptions.bound_factor``; ``FitOptions.bounds`` gives absolute bounds per path).
+A candidate z becomes a scenario (``model_dump`` → set the paths → ``scenario_from_dict``),
+then a loop (:func:`flexarm.sim.build.prepare`); a population of candidates is stacked leaf
+by leaf into one batched loop and run by one ``vmap``-ed simulation.
+
+The residuals stacked for least squares are, per measured channel c of ``options.channels``
+(weight w_c), segment s and sample k,
+
+    r_c,s,k = √w_c · (ŷ_c,s,k − y_c,s,k) / (λ · σ_c) · √(T / τ)                       (1)
+
+with σ_c the logged channel's spread (standard deviation over all fitted logs), λ =
+``residual_level`` the expected misfit as a fraction of that spread and τ =
+``correlation_time`` the residuals' correlation time (s), so that Σ r² counts independent
+misfits in units of their expected size (fit % is :func:`flexarm.analysis.metrics.fit_percent`,
+100 (1 − ‖y − ŷ‖/‖y − ȳ‖)); and per prior (path → relative std σ_p,
+``options.priors``; the mean is the template value, the data-sheet value)
+
+    r_p = (ln p − ln p0) / σ_p                                                        (2)
+
+(σ_p = 0.3 says "within ±30 % with 68 % probability"). Only the ratio of (1) to (2)
+depends on λ and τ; the fitted values without priors do not.
+
+Multiple shooting
+-----------------
+With ``options.segment`` = L seconds, each log (or its window) is cut into segments of L s,
+each simulated from the logged state at its start, so that a stick-slip run, chaotic in the
+parameters over 100 s (issue #17), yields a cost that is smooth enough for finite
+differences. At a segment start k0 the loop's state is taken from the log:
+
+* controller state and command buffer: the controller is run on the logged measured
+  channels and references from the log's first sample to k0 (what the real controller did,
+  up to its own quantisation: exact for a controller fed by logged channels);
+* sensor delay buffers: the logged (delayed) values, shifted back by each channel's delay;
+* analog sensor filters (first-order, ``sensors.X.bandwidth``): the filter's state is the
+  logged value; the signal behind it is recovered by inverting the filter,
+  g s = y + ẏ / ω_f;
+* plant state x0: the least-squares (minimum-norm) solution of the linear conditions
+  g_c ∂s_c/∂x · x0 = y_c(k0) (positions) and g_c ∂s_c/∂x · ∂f/∂x · x0 = ẏ_c(k0) (rates), the
+  derivatives of the signals and right-hand side at x = 0 (:func:`jax.jacfwd` of the
+  candidate's plant), ẏ a local quadratic (Savitzky–Golay) derivative of the log over
+  ±``derivative_half_width`` samples (a straight line over as many samples at a log's
+  end). What the channels do not observe (a second mode behind one tip sensor, friction
+  states) starts at zero; ``burn_in`` seconds at the start of each segment can be left out
+  of the cost while those transients decay;
+* with ``estimate_states`` the start state of every segment is then refined as a nuisance
+  parameter (offsets to the state read off the log: multiple shooting's node states), and
+  so is each log's start state in the ``polish`` on whole logs.
+
+With ``initial = "scenario"``, a segment starting at a log's first sample (no window)
+starts from the scenario's own ``[initial]`` state instead (synthetic logs).
+
+The whole-run prediction (:func:`predict_scenario`, validation) is one simulation per log.
+
+Optimiser
+---------
+Optionally a global stage (SciPy ``differential_evolution``, whole generations as one
+batch), then SciPy ``least_squares`` (trust-region reflective) with the finite-difference
+Jacobian's columns simulated as one batch (step ``fd_step`` in z). Uncertainty: the
+Newey–West (HAC) sandwich of :mod:`flexarm.identification.time_domain.uncertainty` per
+segment, with the priors' information added: cov(z) = H⁻¹ (Ŝ + J_pᵀ J_p) H⁻¹,
+H = J_dᵀ J_d + J_pᵀ J_p; std(p) = |p| std(z).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from flexarm.analysis.metrics import fit_percent as _fitpct
+from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
+from flexarm.sim.build import Prepared, prepare, reference_signal
+from flexarm.sim.sampled import _quantise, _scan, initial_carry
+
+__all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "expand_paths",
+           "scenario_with"]
+
+
+# ----------------------------------------------------------------------------- paths
+_TOKEN = re.compile(r"\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+|\*)\]")
+
+
+def parse_path(path: str) -> list[str | int]:
+    """``"arm.joints[0].friction.coulomb"`` → ``["arm", "joints", 0, "friction", "coulomb"]``
+    (``[*]`` stays ``"*"``)."""
+    keys: list[str | int] = []
+    pos = 0
+    for m in _TOKEN.finditer(path):
+        if m.start() != pos:
+            break
+        keys.append(m.group(1) if m.group(1) else (m.group(2) if m.group(2) == "*"
+                                                   else int(m.group(2))))
+        pos = m.end()
+    if pos != len(path) or not keys:
+        raise ValueError(f"free parameter {path!r}: not a path into the scenario; write it as "
+                         "dotted names with [index] for lists, e.g. "
+                         "'arm.joints[0].friction.coulomb' or 'sensors.theta_1.gain'")
+    return keys
+
+
+def _get(d: Any, keys: Sequence, path: str) -> Any:
+    for i, k in enumerate(keys):
+        try:
+            d = d[k]
+        except (KeyError, IndexError, TypeError):
+            here = ".".join(str(x) for x in keys[:i]) or "the scenario"
+            have = (", ".join(map(str, d)) if isinstance(d, dict)
+                    else f"{len(d)} entries" if isinstance(d, list) else type(d).__name__)
+            raise ValueError(f"free parameter {path!r}: {here} has no {k!r} (it has {have})"
+                             ) from None
+    return d
+
+
+def _set(d: Any, keys: Sequence, value: float) -> None:
+    for k in keys[:-1]:
+        d = d[k]
+    d[keys[-1]] = value
+
+
+def expand_paths(dump: dict, paths: Sequence[str]) -> list[str]:
+    """The paths with every ``[*]`` replaced by each index of that list."""
+    out: list[str] = []
+    for p in paths:
+        keys = parse_path(p)
+        if "*" not in keys:
+            out.append(p)
+            continue
+        i = keys.index("*")
+        lst = _get(dump, keys[:i], p)
+        if not isinstance(lst, list):
+            raise ValueError(f"free parameter {p!r}: [*] needs a list; found {type(lst).__name__}")
+        head = _fmt(keys[:i])
+        tail = _fmt(keys[i + 1:])
+        out += expand_paths(dump, [f"{head}[{j}]{'.' if tail and not tail.startswith('[') else ''}"
+                                   f"{tail}" for j in range(len(lst))])
+    return out
+
+
+def _fmt(keys: Sequence) -> str:
+    s = ""
+    for k in keys:
+        s += f"[{k}]" if isinstance(k, int) else (f".{k}" if s else k)
+    return s
+
+
+def _template_value(dump: dict, keys: list, path: str) -> float:
+    v = _get(dump, keys, path)
+    if v is None and keys[-1] == "static" and "friction" in keys:
+        v = _get(dump, keys[:-1], path).get("coulomb", 0.0)  # breakaway defaults to coulomb
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"free parameter {path!r}: the scenario's value there is {v!r}, not "
+                         "a number; give it a number in the scenario (the template value)")
+    if not math.isfinite(v) or v == 0.0:
+        raise ValueError(f"free parameter {path!r}: the template value is {v!r}; parameters "
+                         "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
+                         "starting value in the scenario (e.g. the data-sheet value)")
+    return float(v)
+
+
+def scenario_with(template, values: Mapping[str, float]):
+    """The scenario with the parameters at ``values`` (path → SI value). A friction's
+    breakaway ``static`` below its ``coulomb`` level is raised to it (Karnopp needs
+    F_s >= F_c)."""
+    from flexarm.specs.scenario import scenario_from_dict
+
+    d = copy.deepcopy(template.model_dump())
+    for path, v in values.items():
+        _set(d, parse_path(path), float(v))
+    _fix_friction(d)
+    return scenario_from_dict(d, source=f"scenario {template.name!r} with fitted values")
+
+
+def _fix_friction(d: dict) -> None:
+    joints = (d.get("arm") or {}).get("joints") or []
+    frs = [j.get("friction") for j in joints if isinstance(j, dict)]
+    fr1 = (d.get("arm") or {}).get("friction")
+    for fr in frs + [fr1]:
+        if isinstance(fr, dict) and fr.get("static") is not None:
+            fr["static"] = max(fr["static"], fr.get("coulomb", 0.0))
+
+
+# ----------------------------------------------------------------------------- options
+@dataclass
+class FitOptions:
+    """Options of :func:`fit_scenario` (see the module docstring for the equations).
+
+    channels: measured channel → weight (default: every sensor channel the logs hold, 1).
+    bound_factor: default bounds p0/f … p0·f. bounds: path → (lo, hi) in SI (same sign as
+    p0). priors: path → relative standard deviation (log space) about the template value.
+    segment: multiple-shooting segment length (s); None: each log (window) is one segment.
+    burn_in: seconds at the start of each segment left out of the cost.
+    windows: per log (t0, t1) in s from its first sample, or None for the whole log.
+    residual_level, correlation_time: λ and τ of eq. (1). max_nfev: least-squares budget.
+    fd_step: finite-difference step in z (relative step of p). global_stage: run
+    differential evolution first (popsize, maxiter, seed). derivative_half_width: samples
+    each side of the local quadratic fit for ẏ at segment starts. corr_warn: |corr| above
+    which a pair is reported as not separable. max_batch: most candidates per vmapped call.
+    estimate_states: with segments, estimate each segment's start state too (offsets to
+    the log-derived state; multiple shooting's node states).
+    quantise: keep the converters' quantisation in the fitted simulation. Off by default:
+    a quantiser inside the loop makes the cost piecewise constant in the parameters at the
+    scale of one count, which stalls finite differences; its effect on the loop is a
+    small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
+    substeps: integration substeps per sample while fitting (None: the scenario's).
+    ties: path → free path: the first is not free but moves with the second by the same
+    factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
+    initial: ``"log"``: every segment, the first of a log included, starts from the state
+    read off the log; ``"scenario"``: a segment at a log's first sample starts from the
+    scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
+    polish: after the segment fit, refine on whole logs (each one simulation from its start;
+    only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
+    """
+
+    channels: Mapping[str, float] | None = None
+    bound_factor: float = 3.0
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    priors: Mapping[str, float] = field(default_factory=dict)
+    segment: float | None = None
+    burn_in: float = 0.0
+    windows: Sequence[tuple[float, float] | None] | None = None
+    residual_level: float = 0.05
+    correlation_time: float = 0.05
+    max_nfev: int = 30
+    fd_step: float = 1e-2
+    global_stage: bool = False
+    popsize: int = 6
+    maxiter: int = 8
+    seed: int = 0
+    derivative_half_width: int = 10
+    corr_warn: float = 0.95
+    max_batch: int = 64
+    ftol: float = 1e-6
+    xtol: float = 1e-6
+    polish: bool = False
+    estimate_states: bool = True
+    quantise: bool = False
+    initial: str = "log"
+    substeps: int | None = None
+    ties: Mapping[str, str] = field(default_factory=dict)
+
+    def check(self) -> None:
+        if not self.bound_factor > 1:
+            raise ValueError(f"FitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
+                             "(bounds p0/f … p0·f)")
+        for name in ("residual_level", "correlation_time", "fd_step"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"FitOptions.{name} = {v!r}: must be a finite number > 0")
+        if self.initial not in ("log", "scenario"):
+            raise ValueError(f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
+                             "from the logged state) or 'scenario' (a log's first sample "
+                             "starts from the scenario's [initial] state)")
+        if self.segment is not None and not self.segment > 0:
+            raise ValueError(f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
+                             "(e.g. 2–5 s) or None for whole logs")
+        for p, s in self.priors.items():
+            if not (s > 0 and math.isfinite(s)):
+                raise ValueError(f"FitOptions.priors[{p!r}] = {s!r}: the relative standard "
+                                 "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)")
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass
+class _LogData:
+    name: str
+    t: np.ndarray  # (N,) from 0
+    y: np.ndarray  # (N, C) in the loop's sensor order; NaN where a channel is absent
+    refs: dict[str, np.ndarray]
+    present: np.ndarray  # (C,) bool
+    from_scenario: bool  # the (window) start is the log's first sample
+    window: tuple[int, int]  # samples [k0, k1) fitted
+    log: Any = None  # the whole log as a flexarm.io.logs.Log (time from 0)
+
+
+def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
+    if hasattr(log, "signals") and hasattr(log, "time"):
+        return getattr(log, "name", "<log>"), np.asarray(log.time, float), dict(log.signals)
+    if isinstance(log, Mapping):
+        d = dict(log)
+        t = np.asarray(d.pop("time"), float)
+        return str(d.pop("name", "<log>")), t, d
+    raise TypeError(f"logs: got {type(log).__name__}; give flexarm.io.logs.Log objects (read_log) "
+                    "or dicts with 'time' and channel arrays")
+
+
+# ----------------------------------------------------------------------------- result
+@dataclass
+class ScenarioFit:
+    """Result of :func:`fit_scenario`: fitted values (SI) by path with standard deviations
+    (Newey–West, priors included), the correlation matrix of the log-parameters, warnings
+    (bounds, inseparable pairs), fit % per log and channel of the whole-run prediction and
+    of the segments, the fitted scenario, and the optimiser's record."""
+
+    free: list[str]
+    params: dict[str, float]
+    template: dict[str, float]
+    std: dict[str, float]
+    correlation: np.ndarray
+    warnings: list[str]
+    fit_percent: dict[str, dict[str, float]]
+    segment_fit_percent: dict[str, dict[str, float]]
+    scenario: Any
+    converged: bool
+    message: str
+    nfev: int
+    cost: float
+    seconds: float
+    stages: dict[str, Any] = field(default_factory=dict)
+    prediction: dict[str, Any] = field(default_factory=dict)
+
+    def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
+        from flexarm.io.write import write_toml
+
+        return write_toml(path, _drop_none(self.scenario.model_dump()), overwrite=overwrite)
+
+    def to_dict(self) -> dict:
+        """JSON-ready (non-finite numbers, e.g. the std of an undetermined parameter, as
+        null)."""
+        return _finite({"free": self.free, "params": self.params, "template": self.template,
+                        "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
+                        "warnings": self.warnings, "fit_percent": self.fit_percent,
+                        "segment_fit_percent": self.segment_fit_percent,
+                        "converged": self.converged, "message": self.message,
+                        "nfev": self.nfev, "cost": self.cost,
+                        "seconds": round(self.seconds, 2), "stages": self.stages})
+
+
+def _finite(x):
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _drop_none(d):
+    """A model_dump without the unset (None) fields, which TOML cannot hold."""
+    if isinstance(d, dict):
+        return {k: _drop_none(v) for k, v in d.items() if v is not None}
+    if isinstance(d, (list, tuple)):
+        return [_drop_none(v) for v in d]
+    return d
+
+
+# ----------------------------------------------------------------------------- engine
+def _stack(loops: list):
+    try:
+        return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *loops)
+    except ValueError as exc:
+        raise ValueError("the free parameters change the structure of the loop (e.g. a "
+                         "friction model, a filter switched on or off), which cannot be "
+                         f"batched: {exc}") from None
+
+
+def _savgol_derivative(y: np.ndarray, k: int, h: int, dt: float) -> np.ndarray:
+    """ẏ at sample k by a least-squares quadratic over samples k−h … k+h; where the log
+    ends within h samples of k, a straight line over the 2h + 1 samples at that end (an
+    end-point quadratic amplifies the noise several times)."""
+    n = y.shape[0]
+    lo, hi = max(0, k - h), min(n, k + h + 1)
+    deg = 2
+    if lo == 0 or hi == n:  # one-sided: a line over 2h + 1 samples
+        lo, hi = (0, min(n, 2 * h + 1)) if lo == 0 else (max(0, n - 2 * h - 1), n)
+        deg = 1
+    tt = (np.arange(lo, hi) - k) * dt
+    if hi - lo < 3:
+        return np.zeros(y.shape[1:])
+    V = np.stack([tt**j for j in range(deg + 1)], 1)
+    coef, *_ = np.linalg.lstsq(V, np.nan_to_num(y[lo:hi]), rcond=None)
+    return coef[1]
+
+
+class _Engine:
+    """Logs cut into segments, the batched run of candidate parameter vectors, residuals."""
+
+    def __init__(self, scenario, logs: Sequence, free: Sequence[str], options: FitOptions,
+                 segment: float | None = "options"):
+        options.check()
+        if options.substeps is not None and scenario.simulation is not None:
+            scenario = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
+                update={"substeps": int(options.substeps)})})
+        self.template = scenario
+        self.options = options
+        self.dump = scenario.model_dump()
+        self.free = expand_paths(self.dump, list(free))
+        if len(set(self.free)) != len(self.free):
+            raise ValueError(f"free parameters listed twice: {self.free}")
+        self.keys = [parse_path(p) for p in self.free]
+        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free)])
+        for p in list(options.priors) + list(options.bounds):
+            if p not in self.free:
+                raise ValueError(f"FitOptions: {p!r} has a prior or bounds but is not free; "
+                                 f"free: {', '.join(self.free)}")
+        lo = np.full(len(self.free), -math.log(options.bound_factor))
+        hi = -lo
+        for i, p in enumerate(self.free):
+            if p in options.bounds:
+                a, b = (float(v) for v in options.bounds[p])
+                if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
+                    raise ValueError(f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
+                                     f"must have the sign of the template value {self.p0[i]:g}")
+                za, zb = sorted((math.log(a / self.p0[i]), math.log(b / self.p0[i])))
+                if not za <= 0 <= zb:
+                    raise ValueError(f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
+                                     f"the template value {self.p0[i]:g}; move one of them")
+                lo[i], hi[i] = za, zb
+        self.lo, self.hi = lo, hi
+        self.sigma = np.array([options.priors.get(p, np.inf) for p in self.free])
+        self.tied = {}
+        for p, master in options.ties.items():
+            if master not in self.free:
+                raise ValueError(f"FitOptions.ties: {p!r} follows {master!r}, which is not "
+                                 f"free; free: {', '.join(self.free)}")
+            self.tied[p] = (self.free.index(master),
+                            _template_value(self.dump, parse_path(p), p))
+        self.prep0 = prepare(scenario)
+        loop = self.prep0.loop
+        self.dt = float(loop.dt)
+        self.names = loop.sensors.names
+        self.delays = np.asarray(loop.sensors.delays, int)
+        self.delay = int(loop.delay)
+        # ---- logs
+        wins = options.windows or [None] * len(logs)
+        if len(wins) != len(logs):
+            raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
+        self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
+        from flexarm.sim.build import _measured_names
+
+        read = _measured_names(loop.controller)
+        for L in self.logs:
+            missing = sorted(n for n in read if n in self.names
+                             and not L.present[self.names.index(n)])
+            if missing:
+                raise ValueError(f"{L.name}: no column {', '.join(map(repr, missing))}, which "
+                                 f"the controller of scenario {self.template.name!r} reads; the "
+                                 "fit runs the controller on the logged channels from the log's "
+                                 "start: log them (or map them with a log format)")
+        chans = options.channels or {n: 1.0 for n in self.names
+                                     if any(L.present[self.names.index(n)] for L in self.logs)}
+        for c in chans:
+            if c not in self.names:
+                raise ValueError(f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
+                                 f"{scenario.name!r}; channels: {', '.join(self.names)}")
+            if not any(L.present[self.names.index(c)] for L in self.logs):
+                raise ValueError(f"FitOptions.channels: no log holds channel {c!r}; the logs hold "
+                                 f"{sorted({k for L in self.logs for k in _cols(L, self.names)})}")
+        self.channels = dict(chans)
+        self.cidx = [self.names.index(c) for c in self.channels]
+        allv = {c: np.concatenate([L.y[:, self.names.index(c)] for L in self.logs
+                                   if L.present[self.names.index(c)]]) for c in self.channels}
+        self.spread = np.array([max(float(np.nanstd(allv[c])), 1e-300) for c in self.channels])
+        self.scale = (np.sqrt(np.array(list(self.channels.values()), float))
+                      / (options.residual_level * self.spread)
+                      * math.sqrt(self.dt / options.correlation_time))
+        seg = options.segment if segment == "options" else segment
+        self._segments(seg)
+
+    # ------------------------------------------------------------------ logs, segments
+    def _read(self, log, window) -> _LogData:
+        name, t, sig = _log_arrays(log)
+        if t.size < 3:
+            raise ValueError(f"{name}: {t.size} samples; a log needs at least 3")
+        dt = float(np.median(np.diff(t)))
+        if abs(dt - self.dt) > 1e-6 * self.dt:
+            raise ValueError(f"{name}: sampled every {dt:g} s, but scenario "
+                             f"{self.template.name!r} samples every {self.dt:g} s "
+                             "([sampling] period); resample the log or change the scenario")
+        t = t - t[0]
+        k0, k1 = 0, t.size
+        if window is not None:
+            a, b = window
+            k0 = int(round(a / dt))
+            k1 = min(t.size, int(round(b / dt)) + 1)
+            if not 0 <= k0 < k1 - 2:
+                raise ValueError(f"{name}: window ({a:g}, {b:g}) s is outside the log "
+                                 f"(0 … {t[-1]:g} s)")
+        N = t.size
+        y = np.full((N, len(self.names)), np.nan)
+        present = np.zeros(len(self.names), bool)
+        for j, n in enumerate(self.names):
+            if n in sig:
+                y[:, j] = np.asarray(sig[n], float)
+                present[j] = True
+        refs = {}
+        for k, v in self.prep0.references.items():
+            if k in sig:
+                refs[k] = np.asarray(sig[k], float)
+            else:
+                spec = (self.template.reference if k == "reference"
+                        else self.template.references.get(k))
+                refs[k] = (reference_signal(spec, t) if spec is not None else np.zeros(N))
+        label = name if window is None else f"{name}[{window[0]:g}:{window[1]:g} s]"
+        from flexarm.io.logs import Log
+
+        whole = Log(None, t, {k: np.asarray(v, float) for k, v in sig.items()})
+        return _LogData(label, t, y, refs, present,
+                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole)
+
+    def _segments(self, seg: float | None) -> None:
+        """Segment table: (log, k0, length) and the padded per-segment arrays."""
+        rows = []
+        for li, L in enumerate(self.logs):
+            a, b = L.window
+            n = b - a
+            step = n if seg is None else max(3, int(round(seg / self.dt)))
+            for k0 in range(a, b, step):
+                ln = min(step, b - k0)
+                if ln >= 3:
+                    rows.append((li, k0, ln))
+        self.seg = rows
+        S = len(rows)
+        M = max(r[2] for r in rows)
+        self.M = M
+        C = len(self.names)
+        burn = int(round(self.options.burn_in / self.dt))
+        y = np.zeros((S, M, C))
+        mask = np.zeros((S, M, C), bool)
+        refs = {k: np.zeros((S, M)) for k in self.prep0.references}
+        for s, (li, k0, ln) in enumerate(rows):
+            L = self.logs[li]
+            idx = np.minimum(np.arange(k0, k0 + M), L.t.size - 1)
+            yy = L.y[idx]
+            y[s] = np.nan_to_num(yy)
+            valid = np.arange(M) < ln
+            if not (k0 == 0 and L.from_scenario):
+                valid &= np.arange(M) >= burn
+            mask[s] = valid[:, None] & L.present[None, :] & np.isfinite(yy)
+            for k in refs:
+                refs[k][s] = L.refs[k][idx]
+        self.seg_y = y
+        self.seg_mask = mask
+        self.seg_refs = refs
+        self._init_data()
+
+    def _init_data(self) -> None:
+        """Per segment: the delay-corrected logged values y(k0) and ẏ(k0), the sensor delay
+        buffers, and the whole logs (padded) for the controller warm-up."""
+        S, C = len(self.seg), len(self.names)
+        dmax = int(self.delays.max()) if C else 0
+        h = self.options.derivative_half_width
+        y0 = np.zeros((S, C))
+        dy0 = np.zeros((S, C))
+        sbuf = np.zeros((S, dmax + 1, C))
+        for s, (li, k0, _) in enumerate(self.seg):
+            L = self.logs[li]
+            N = L.t.size
+            for c in range(C):
+                d = int(self.delays[c])
+                col = np.nan_to_num(L.y[:, c])
+                y0[s, c] = col[min(N - 1, k0 + d)]
+                dy0[s, c] = _savgol_derivative(col[:, None], min(N - 1, k0 + d), h, self.dt)[0]
+                for j in range(dmax + 1):
+                    sbuf[s, j, c] = col[min(N - 1, max(0, k0 - 1 - j + d))]
+        self.seg_xd = np.zeros((S, 0, 0))
+        if self.prep0.loop.sensors.digital:
+            self._digital_init(y0, dy0)
+        self.y0, self.dy0, self.sbuf0 = y0, dy0, sbuf
+        self.seg_log = np.array([r[0] for r in self.seg])
+        self.seg_k0 = np.array([r[1] for r in self.seg])
+        self.seg_scn = np.array([r[1] == 0 and self.logs[r[0]].from_scenario for r in self.seg])
+        self._cache: dict = {}
+        Nmax = max(1, int(self.seg_k0.max()) + 1)
+        fit_n = lambda a: (a[:Nmax] if a.shape[0] >= Nmax else  # noqa: E731
+                           np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1),
+                                  mode="edge"))
+        self.log_y = np.stack([fit_n(np.nan_to_num(L.y)) for L in self.logs])
+        self.log_refs = {k: np.stack([fit_n(L.refs[k]) for L in self.logs])
+                         for k in self.prep0.references}
+
+    def _digital_init(self, y0: np.ndarray, dy0: np.ndarray) -> None:
+        """Digitally filtered channels (``sensors.X.filter``): their states at each segment
+        start from the log (:func:`flexarm.sim.filters.filter_state_from_log`: the logged
+        output, its logged rate sibling or the filter run over the unfiltered reading), and
+        the reading u behind the filter recovered by inverting it, B u_k = ξ_{k+1} − A ξ_k,
+        over ±``derivative_half_width`` samples, for the plant-state rows (y0, ẏ0)."""
+        from flexarm.sim.filters import filter_state_from_log
+
+        sens = self.prep0.loop.sensors
+        A, B = np.asarray(sens.fA), np.asarray(sens.fB)
+        kmax = A.shape[-1]
+        h = self.options.derivative_half_width
+        S = len(self.seg)
+        xd = np.full((S, len(sens.digital), kmax), np.nan)
+        for s_, (li, k0, _) in enumerate(self.seg):
+            L = self.logs[li]
+            N = L.t.size
+            ks = list(range(max(0, k0 - h), min(N - 1, k0 + h + 1) + 1))
+            st = {k: filter_state_from_log(self.template.sensors, L.log, k, self.dt) for k in ks}
+            for j, c in enumerate(sens.digital):
+                name = self.names[c]
+                if name not in st[k0]:
+                    raise ValueError(f"{L.name}: no column {name!r}: the state of its digital "
+                                     "filter at a segment start cannot be read off the log; "
+                                     "log it, or fit whole logs from rest (segment=None)")
+                xd[s_, j, :len(st[k0][name])] = st[k0][name]
+                us = []
+                for k in ks[:-1]:
+                    a, b = np.zeros(kmax), np.zeros(kmax)
+                    a[:len(st[k][name])] = st[k][name]
+                    b[:len(st[k + 1][name])] = st[k + 1][name]
+                    rhs = b - A[j] @ a
+                    us.append(float(B[j] @ rhs / max(B[j] @ B[j], 1e-300)))
+                us = np.asarray(us)
+                i0 = ks.index(k0) if k0 in ks[:-1] else len(us) - 1
+                y0[s_, c] = us[i0]
+                dy0[s_, c] = _savgol_derivative(us[:, None], i0, h, self.dt)[0]
+        self.seg_xd = xd
+
+    # ------------------------------------------------------------------ candidates
+    def values(self, z: np.ndarray) -> dict[str, float]:
+        out = {p: float(self.p0[i] * np.exp(z[i])) for i, p in enumerate(self.free)}
+        for p, (i, v0) in self.tied.items():
+            out[p] = float(v0 * np.exp(z[i]))
+        return out
+
+    def prepared(self, z: np.ndarray) -> Prepared:
+        return prepare(scenario_with(self.template, self.values(z)))
+
+    def loops(self, Z: np.ndarray):
+        preps = [self.prepared(z) for z in Z]
+        loop = _stack([p.loop for p in preps])
+        if not self.options.quantise:
+            loop = eqx.tree_at(lambda lp: (lp.sensors.quantum, lp.actuator.quantum), loop,
+                               replace=(jnp.zeros_like(loop.sensors.quantum),
+                                        jnp.zeros_like(loop.actuator.quantum)))
+        return loop, np.stack([p.x0 for p in preps])
+
+    def run(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+        """Simulated measured channels (P, S, M, C) of the candidates ``Z`` (P, n), with the
+        segments' plant states offset by ``O`` (P, S, n_x) (× :attr:`state_scale`)."""
+        out = []
+        B = max(1, self.options.max_batch)
+        nx = self.prep0.loop.plant.n_states
+        if O is None:
+            O = np.zeros((Z.shape[0], len(self.seg), nx))
+        O = O * self.state_scale
+        for a in range(0, Z.shape[0], B):
+            loop, x0s = self.loops(Z[a:a + B])
+            warm, shared = self._warm(loop)
+            out.append(np.asarray(_run_segments(
+                loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
+                {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
+                jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
+                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn))))
+        return np.concatenate(out)
+
+    def _warm(self, loop):
+        """Controller states and command buffers at the segment starts (:func:`_warm`):
+        computed once when every candidate has the same controller (its gains do not
+        depend on the free parameters), else per candidate."""
+        nd = self.delay + 1
+        args = (jnp.asarray(self.log_y), {k: jnp.asarray(v) for k, v in self.log_refs.items()},
+                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0))
+        leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller,
+                                                                     eqx.is_array))]
+        same = all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in leaves)
+        if same:
+            ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
+            key = "warm"
+            if key not in self._cache or not all(
+                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves)):
+                self._cache[key] = ([x.copy() for x in leaves],
+                                    _warm_jit(ctrl0, self.names, nd, *args))
+            return self._cache[key][1], True
+        return eqx.filter_vmap(lambda c: _warm(c, self.names, nd, *args))(loop.controller), False
+
+    @property
+    def state_scale(self) -> np.ndarray:
+        """Unit of the segment-state offsets per plant state: the RMS over segments of the
+        template's log-derived start states (states the logs do not observe: the median
+        of the others), so that offsets are O(1)."""
+        if getattr(self, "_state_scale", None) is None:
+            loop = self.prep0.loop
+            x0 = np.asarray(_states_jit(loop, jnp.asarray(self.y0), jnp.asarray(self.dy0)))
+            rms = np.sqrt(np.mean(x0**2, axis=0))
+            pos = rms[rms > 0]
+            fill = float(np.median(pos)) if pos.size else 1.0
+            self._state_scale = np.where(rms > 0, rms, fill)
+        return self._state_scale
+
+    def residuals(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+        """Stacked residuals (P, m): data, eq. (1), segment by segment, then priors, eq. (2)."""
+        sim = self.run(Z, O)[..., self.cidx]
+        y = self.seg_y[..., self.cidx]
+        m = self.seg_mask[..., self.cidx]
+        r = np.where(m[None], (sim - y[None]) * self.scale, 0.0)
+        bad = ~np.isfinite(r)
+        r = np.where(bad | (np.abs(r) > 1e6), 1e6, r)
+        data = r[:, m].reshape(Z.shape[0], -1)
+        pri = self.prior_residuals(Z)
+        return np.concatenate([data, pri], axis=1)
+
+    def segment_rows(self) -> np.ndarray:
+        """Row offsets of each segment's data residuals (S + 1,)."""
+        m = self.seg_mask[..., self.cidx]
+        return np.concatenate([[0], np.cumsum(m.reshape(m.shape[0], -1).sum(1))])
+
+    def prior_residuals(self, Z: np.ndarray) -> np.ndarray:
+        has = np.isfinite(self.sigma)
+        return Z[:, has] / self.sigma[has]
+
+    def fit_percent_segments(self, sim: np.ndarray) -> dict[str, dict[str, float]]:
+        out: dict[str, dict[str, float]] = {}
+        for li, L in enumerate(self.logs):
+            rows = np.nonzero(self.seg_log == li)[0]
+            d = {}
+            for j, c in zip(self.cidx, self.channels):
+                m = self.seg_mask[rows, :, j]
+                if not m.any():
+                    continue
+                d[c] = round(_fitpct(self.seg_y[rows, :, j][m], sim[rows][:, :, j][m]), 2)
+            out[L.name] = d
+        return out
+
+
+def _cols(L: _LogData, names) -> list[str]:
+    return [n for n, p in zip(names, L.present) if p]
+
+
+# ----------------------------------------------------------------------------- JAX core
+def _state_from_log(loop, y0, dy0):
+    """Minimum-norm plant state x0 (and sensor-filter states) from the logged values y0 and
+    rates dy0 (C,) at a segment start (module docstring)."""
+    plant, sens = loop.plant, loop.sensors
+    n = plant.n_states
+    u0 = jnp.zeros((plant.n_inputs,))
+    x = jnp.zeros((n,))
+    Sj = jax.jacfwd(lambda xx: plant.signals(xx, u0))(x)
+    F = jax.jacfwd(lambda xx: plant.rhs(xx, u0))(x)
+    rows = jnp.stack([sens.gain[c] * Sj[i] for c, i in enumerate(sens.index)])  # (C, n)
+    b_pos = y0
+    vel_ok = jnp.ones_like(y0)
+    if sens.filtered:
+        for j, c in enumerate(sens.filtered):
+            b_pos = b_pos.at[c].set(y0[c] + dy0[c] / sens.omega[j])
+            vel_ok = vel_ok.at[c].set(0.0)
+    A = jnp.concatenate([rows, (rows @ F) * vel_ok[:, None]])
+    b = jnp.concatenate([b_pos, dy0 * vel_ok])
+    x0 = jnp.linalg.pinv(A, rtol=1e-10) @ b
+    return x0
+
+
+def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0):
+    """The controller run on the logged measured channels and references from each log's
+    first sample: its state before each segment's first sample (S, ...) and the raw
+    commands of the nd samples before it (S, nd, m), newest first (0 before the log)."""
+    def warm(ly, lr):
+        def step(cs, inp):
+            m, r = inp
+            cs2, u = ctrl.step(cs, {n: m[i] for i, n in enumerate(names)}, r)
+            return cs2, (cs, u)
+        _, (cs_all, u_all) = jax.lax.scan(step, ctrl.init(), (ly, lr))
+        return cs_all, u_all
+
+    cs_all, u_all = jax.vmap(warm)(log_y, log_refs)
+
+    def one(s_log, k0):
+        cs = jax.tree.map(lambda a: a[s_log, k0], cs_all)
+        uc = u_all[s_log]
+        ub = jnp.stack([jnp.where(k0 - 1 - i >= 0, uc[jnp.maximum(k0 - 1 - i, 0)], 0.0)
+                        for i in range(nd)])
+        return cs, ub
+
+    return jax.vmap(one)(seg_log, seg_k0)
+
+
+_warm_jit = eqx.filter_jit(_warm)
+
+
+def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn):
+    act, sens = loop.actuator, loop.sensors
+    M = next(iter(seg_refs.values())).shape[1]
+    C = len(sens.names)
+    cs_seg, ub_seg = warm
+    scn_carry = initial_carry(loop, x0_scn)
+
+    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off):
+        up = _quantise(jnp.clip(ub[-1], -act.limit, act.limit), act.quantum)
+        x0 = _state_from_log(loop, y0s, dy0s)
+        carry = (x0, cs, sb, ub, up)
+        if sens.filtered:
+            carry += (jnp.stack([y0s[c] for c in sens.filtered]),)
+        if sens.digital:
+            carry += (xd,)
+        if len(carry) != len(scn_carry):
+            raise RuntimeError(f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
+                               f"builds {len(carry)} (flexarm.sim.sampled changed: update "
+                               "general._one_candidate)")
+        carry = jax.tree.map(lambda a, b: jnp.where(use_scn, a, b), scn_carry, carry)
+        return (carry[0] + off,) + tuple(carry[1:])
+
+    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets)
+    noise = jnp.zeros((M, C))
+
+    def one_seg(carry, refs):
+        _, (xs, sig, meas, us) = _scan(loop, carry, refs, noise, 1)
+        return meas
+
+    return jax.vmap(one_seg)(carries, seg_refs)
+
+
+@eqx.filter_jit
+def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
+                  seg_xd, seg_scn):
+    f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
+                                              sbuf0, seg_xd, seg_scn)
+    return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
+        loop, x0s, offsets, warm)
+
+
+@eqx.filter_jit
+def _states_jit(loop, y0, dy0):
+    return jax.vmap(lambda a, b: _state_from_log(loop, a, b))(y0, dy0)
+
+
+# ----------------------------------------------------------------------------- fit
+def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
+                 options: FitOptions | None = None, *, progress=None,
+                 predict: bool = True) -> ScenarioFit:
+    """Estimate the ``free`` parameters of ``scenario`` from closed-loop ``logs``
+    (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
+    columns, sampled at the scenario's period). See the module docstring. Without ``free``
+    (and priors), the scenario's ``[notes.fit]`` table gives them (``free = [...]``,
+    ``priors = {...}``). ``predict``: also simulate each whole log (window) with the fitted
+    values (fit % of the whole-run prediction; skip for long chaotic runs)."""
+    from scipy.optimize import differential_evolution
+
+    options = options or FitOptions()
+    fit_notes = _scenario_fit_notes(scenario)
+    free = list(free if free is not None else fit_notes.get("free", []))
+    if not options.priors and fit_notes.get("priors"):
+        options = copy.copy(options)
+        options.priors = dict(fit_notes["priors"])
+    if not free:
+        raise ValueError("fit_scenario: no free parameters; list them (free=[...]) as paths "
+                         "into the scenario, e.g. 'arm.joints[0].friction.coulomb'")
+    t_start = time.perf_counter()
+    eng = _Engine(scenario, logs, free, options)
+    n = len(eng.free)
+    say = progress or (lambda msg: None)
+    z0 = np.zeros(n)
+    stages: dict[str, Any] = {"segments": len(eng.seg), "segment_samples": eng.M}
+    if options.global_stage:
+        t0 = time.perf_counter()
+
+        def f(x):
+            X = np.atleast_2d(np.asarray(x).T) if np.ndim(x) == 2 else np.asarray(x)[None]
+            R = eng.residuals(X)
+            return np.sum(R * R, axis=1)
+
+        res = differential_evolution(
+            f, list(zip(eng.lo, eng.hi)), popsize=options.popsize, maxiter=options.maxiter,
+            seed=options.seed, tol=1e-3, updating="deferred", vectorized=True, polish=False,
+            init="latinhypercube", x0=z0, mutation=(0.5, 1.0), recombination=0.7)
+        z0 = np.asarray(res.x)
+        stages["global"] = {"cost": float(res.fun), "nfev": int(res.nfev), "generations":
+                            int(res.nit), "seconds": round(time.perf_counter() - t0, 2)}
+        say(f"global stage: cost {res.fun:.4g} after {res.nit} generations")
+
+    z0 = np.clip(z0, eng.lo, eng.hi)
+    res, r, J, info = _local(eng, z0, options,
+                              states=options.estimate_states and options.segment is not None,
+                              progress=progress)
+    stages["local"] = info
+    say(f"local stage: cost {info['cost']:.4g} after {info['nfev']} evaluations "
+        f"({info['message']})")
+    if options.polish and options.segment is not None:
+        eng = _Engine(scenario, logs, free, options, segment=None)
+        # each log's start state stays a nuisance parameter (offsets to the logged state)
+        res, r, J, info = _local(eng, res.x, options, progress=progress,
+                                 states=options.estimate_states and not eng.seg_scn.all())
+        stages["polish"] = info
+        say(f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
+            f"({info['message']})")
+    z = res.x
+    info_diag = np.einsum("ij,ij->j", J, J)
+    det = info_diag > 1e-12 * max(float(info_diag.max()), 1e-300)
+    cov = np.full((n, n), np.nan)
+    if det.any():
+        cov[np.ix_(det, det)] = _covariance(eng, r, J[:, det])
+    fitted = scenario_with(scenario, eng.values(z))
+    fd = fitted.model_dump()
+    # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
+    values = {p: float(_get(fd, parse_path(p), p)) for p in eng.values(z)}
+    std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    std = {p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
+           for i, p in enumerate(eng.free)}
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    corr = cov / np.outer(d, d)
+    warnings = []
+    for i, p in enumerate(eng.free):
+        if not det[i]:
+            warnings.append(f"{p}: the fit does not depend on it at the optimum (e.g. a "
+                            "breakaway level below the Coulomb level, raised to it, or a "
+                            "joint that never sticks): its value is not determined by the data")
+    for i in range(n):
+        for j in range(i + 1, n):
+            if det[i] and det[j] and abs(corr[i, j]) > options.corr_warn:
+                warnings.append(f"the data cannot tell {eng.free[i]} from {eng.free[j]} "
+                                f"(correlation {corr[i, j]:+.3f}): fix one, give a prior, or "
+                                "add an experiment that separates them")
+    for i, p in enumerate(eng.free):
+        if z[i] <= eng.lo[i] + 1e-3 or z[i] >= eng.hi[i] - 1e-3:
+            lo, hi = sorted((eng.p0[i] * math.exp(eng.lo[i]), eng.p0[i] * math.exp(eng.hi[i])))
+            warnings.append(f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
+                            f"widen it with FitOptions.bounds={{{p!r}: (lo, hi)}}")
+    sim = eng.run(z[None], res.offsets[None])[0]
+    seg_fp = eng.fit_percent_segments(sim)
+    pred = (predict_scenario(fitted, logs, options, channels=list(eng.channels)) if predict
+            else {"fit_percent": {}})
+    converged = res.status > 0
+    msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
+    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0))), std, corr,
+                       warnings, pred["fit_percent"], seg_fp, fitted, converged, msg,
+                       int(res.nfev), float(2 * res.cost), time.perf_counter() - t_start,
+                       stages, pred)
+
+
+def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = False,
+           o0: np.ndarray | None = None, progress=None):
+    """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
+    columns are simulated with the point itself as one batch. With ``states``, each
+    segment's start state is estimated too (multiple shooting's node states): offsets O
+    (S, n_x) in units of :attr:`_Engine.state_scale`; the segments are independent, so one
+    simulation perturbing state i in every segment gives the S columns of state i (a
+    block-sparse Jacobian, solved by LSMR)."""
+    from scipy import sparse
+    from scipy.optimize import least_squares
+
+    n = len(eng.free)
+    S = len(eng.seg)
+    nx = eng.prep0.loop.plant.n_states if states else 0
+    step = options.fd_step
+    rows = eng.segment_rows()
+    nd = int(rows[-1])
+    cache: dict = {}
+
+    def split(v):
+        z = v[:n]
+        O = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
+        return z, O
+
+    def point(v):
+        key = v.tobytes()
+        if key not in cache:
+            z, O = split(v)
+            cache.clear()
+            cache[key] = {"r": eng.residuals(z[None], O[None])[0]}
+        return cache[key]
+
+    def jac(v):
+        c = point(v)
+        if "J" in c:
+            return c["J"]
+        z, O = split(v)
+        h = np.where(z + step > eng.hi, -step, step)
+        Z = np.tile(z, (n + nx, 1))
+        Z[np.arange(n), np.arange(n)] += h
+        OO = np.tile(O, (n + nx, 1, 1))
+        for i in range(nx):
+            OO[n + i, :, i] += step
+        R = eng.residuals(Z, OO)
+        r0 = c["r"]
+        Jp = ((R[:n] - r0) / h[:, None]).T
+        if nx:
+            D = (R[n:] - r0) / step  # (nx, m)
+            r_i, c_i, vals = [], [], []
+            for s_ in range(S):
+                a_, b_ = int(rows[s_]), int(rows[s_ + 1])
+                for i in range(nx):
+                    r_i.append(np.arange(a_, b_))
+                    c_i.append(np.full(b_ - a_, s_ * nx + i))
+                    vals.append(D[i, a_:b_])
+            Jo = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(r_i),
+                                                           np.concatenate(c_i))),
+                                   shape=(r0.size, S * nx))
+            c["J"] = sparse.hstack([sparse.csr_matrix(Jp), Jo]).tocsr()
+        else:
+            c["J"] = Jp
+        if progress is not None:
+            progress(f"  cost {float(r0 @ r0):.6g}")
+        return c["J"]
+
+    def batch(v):
+        return point(v)["r"], jac(v)
+
+    v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0)])
+    lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
+    hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
+    t0 = time.perf_counter()
+    res = least_squares(lambda v: point(v)["r"], v0, jac=jac,
+                        bounds=(lo, hi), method="trf", x_scale=1.0,
+                        tr_solver="lsmr" if nx else "exact",
+                        max_nfev=options.max_nfev, ftol=options.ftol, xtol=options.xtol,
+                        gtol=1e-10)
+    r, J = batch(res.x)
+    J = J.toarray() if nx else J
+    z, O = split(res.x)
+    Jz = J[:, :n]
+    if nx:  # profile the state offsets out (Frisch–Waugh), segment by segment
+        Jz = Jz.copy()
+        for s_ in range(S):
+            a_, b_ = int(rows[s_]), int(rows[s_ + 1])
+            Jo = J[a_:b_, n + s_ * nx:n + (s_ + 1) * nx]
+            coef, *_ = np.linalg.lstsq(Jo, Jz[a_:b_], rcond=1e-10)
+            Jz[a_:b_] -= Jo @ coef
+    info = {"cost": float(2 * res.cost), "nfev": int(res.nfev), "status": int(res.status),
+            "message": str(res.message), "segments": S, "state_offsets": S * nx,
+            "seconds": round(time.perf_counter() - t0, 2)}
+    res.x = z
+    res.offsets = O
+    return res, r, Jz, info
+
+
+def friction_paths(scenario) -> list[str]:
+    """The joints' friction parameters of a scenario that can be fitted (non-zero): per joint
+    Coulomb, breakaway (where set apart from Coulomb) and viscous friction."""
+    d = scenario.model_dump()
+    arm = d["arm"]
+    out = []
+    if arm.get("kind") == "single_link":
+        fr = arm.get("friction") or {}
+        base = "arm.friction"
+        groups = [(base, fr, "arm.motor.viscous", arm["motor"].get("viscous", 0.0))]
+    else:
+        groups = [(f"arm.joints[{j}].friction", jt.get("friction") or {},
+                   f"arm.joints[{j}].viscous", jt.get("viscous", 0.0))
+                  for j, jt in enumerate(arm.get("joints") or [])]
+    for base, fr, vpath, v in groups:
+        if fr.get("model", "none") != "none":
+            if fr.get("coulomb"):
+                out.append(f"{base}.coulomb")
+            if fr.get("static"):
+                out.append(f"{base}.static")
+        if v:
+            out.append(vpath)
+    if not out:
+        raise ValueError(f"scenario {scenario.name!r}: no joint friction to re-estimate (every "
+                         "friction level is 0 or its model is 'none'); give starting values "
+                         "in the scenario")
+    return out
+
+
+def _scenario_fit_notes(scenario) -> dict:
+    """The scenario's ``[notes.fit]`` table: ``free = [paths]`` and ``priors = {path =
+    rel_std}``, used when the call gives none."""
+    notes = getattr(scenario, "notes", {}) or {}
+    fit = notes.get("fit") if isinstance(notes, dict) else None
+    if fit is None:
+        return {}
+    if not isinstance(fit, dict) or not isinstance(fit.get("free", []), list) or not isinstance(
+            fit.get("priors", {}), dict):
+        raise ValueError(f"scenario {scenario.name!r}: [notes.fit] must hold free = [\"path\", "
+                         f"...] and priors = {{\"path\" = rel_std}}; got {fit!r}")
+    return fit
+
+
+def _covariance(eng: _Engine, r: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """H⁻¹ (Ŝ + J_pᵀJ_p) H⁻¹ (module docstring); Ŝ the Newey–West meat per segment."""
+    n = J.shape[1]
+    npri = int(np.isfinite(eng.sigma).sum())
+    nd = r.size - npri
+    rd, Jd = r[:nd], J[:nd]
+    Jp = J[nd:]
+    m = eng.seg_mask[..., eng.cidx]  # (S, M, C)
+    # scatter back to (S, M, C) to form the per-segment score series
+    Rfull = np.zeros(m.shape)
+    Rfull[m] = rd
+    Jfull = np.zeros(m.shape + (n,))
+    Jfull[m] = Jd
+    Smeat = np.zeros((n, n))
+    for s in range(m.shape[0]):
+        used = m[s].any(axis=1)
+        if not used.any():
+            continue
+        rs, Js = Rfull[s][used], Jfull[s][used]  # (T, C), (T, C, n)
+        M = bandwidth(rs.T)
+        g = np.einsum("tc,tcp->tp", rs, Js)
+        fb = M / rs.shape[0]
+        Smeat += bartlett_meat(g, M) / (1.0 - fb + fb**2 / 3.0)
+    H = Jd.T @ Jd + Jp.T @ Jp
+    Hi = np.linalg.pinv(H)
+    dof = nd / max(nd - n, 1)
+    cov = Hi @ (Smeat * dof + Jp.T @ Jp) @ Hi
+    return 0.5 * (cov + cov.T)
+
+
+# ----------------------------------------------------------------------------- predict
+def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None, *,
+                     channels: Sequence[str] | None = None, plots: str | Path | None = None,
+                     tag: str = "predict") -> dict:
+    """Whole-run prediction of each log (or window) with the scenario's parameters fixed:
+    one simulation per log from the scenario's initial state (a window that does not start
+    at the log's first sample: from the logged state there). Returns fit % per log and
+    channel (100 (1 − ‖y − ŷ‖/‖y − ȳ‖)), and the simulated channels."""
+    opts = copy.copy(options) if options is not None else FitOptions()
+    opts.priors, opts.bounds, opts.ties, opts.quantise = {}, {}, {}, True
+    opts.substeps = None  # the scenario's own integration step
+    if channels is not None:
+        opts.channels = {c: 1.0 for c in channels}
+    eng = _Engine(scenario, logs, [], opts, segment=None)
+    sim = eng.run(np.zeros((1, 0)))[0]
+    fp: dict[str, dict[str, float]] = {}
+    traj: dict[str, dict[str, np.ndarray]] = {}
+    for s, (li, k0, ln) in enumerate(eng.seg):
+        L = eng.logs[li]
+        d, tr = {}, {}
+        for j, c in zip(eng.cidx, eng.channels):
+            tr[c] = sim[s, :ln, j]
+            m = eng.seg_mask[s, :ln, j]
+            if m.any():
+                d[c] = round(_fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]), 2)
+        fp[L.name] = d
+        traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
+                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
+    out = {"fit_percent": fp, "trajectories": traj, "plots": []}
+    if plots is not None:
+        out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
+    return out
+
+
+def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: str) -> list[Path]:
+    """Measured vs simulated, one PNG per log with one panel per channel."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from flexarm.io.write import save_figure
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, (name, tr) in enumerate(traj.items()):
+        chans = list(tr["simulated"])
+        fig, ax = plt.subplots(len(chans), 1, sharex=True, figsize=(8, 2.2 * len(chans) + 0.6),
+                               squeeze=False)
+        for a, c in zip(ax[:, 0], chans):
+            a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
+            a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
+            fpv = fit_percent.get(name, {}).get(c)
+            a.set_title(f"{c}: fit {fpv:.1f} %" if fpv is not None else c, fontsize=9)
+            a.grid(alpha=0.3)
+            a.legend(loc="best", fontsize=7)
+        ax[-1, 0].set_xlabel("time [s]")
+        fig.suptitle(f"{name} ({tag})", fontsize=10)
+        fig.tight_layout()
+        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name)
+        p = out / f"{i:02d}_{stem}_{tag}.png"
+        save_figure(fig, p, overwrite=True, dpi=90)
+        plt.close(fig)
+        paths.append(p)
+    return paths

@@ -1,0 +1,78 @@
+"""The real two-link rig (issue #17) through the general fit: one fit of the must-show
+split (first 50 s of the 102 s run + the staircase steps to 5°, −10°, 20°, −30°), shared by
+the tests; held out: the last 52 s and the other steps. Slow (minutes)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexarm.identification.time_domain.two_link import (CHANNELS, fit_two_link,
+                                                         held_out_report)
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "two-link-rig"
+EXAMPLES = ROOT / "examples"
+
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(not (DATA / "lqr_full_10deg.mat").exists(),
+                                 reason=f"two-link rig data not found at {DATA}")]
+
+#: issue #17's targets on the last 52 s (shoulder, shoulder link, elbow, elbow link), fit %
+TARGETS = {"theta_1": 95.0, "alpha_f_1": 75.0, "theta_2": 93.0, "alpha_f_2": 65.0}
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    res = fit_two_link(DATA, EXAMPLES)
+    return res, held_out_report(res.scenario, DATA, EXAMPLES)
+
+
+def test_held_out_last_52_s_reaches_the_targets(fitted):
+    """Held-out data (never seen by the fit): the targets of #17, which an independent
+    physical fit with stick-slip friction exceeded (98 / 81 / 96 / 73 %)."""
+    _, rep = fitted
+    for c in CHANNELS:
+        assert rep["last_52s"][c] >= TARGETS[c], (c, rep["last_52s"])
+
+
+def test_fit_reports_std_correlations_and_stays_physical(fitted):
+    res, rep = fitted
+    n = len(res.free)
+    assert res.correlation.shape == (n, n)
+    # a correlation matrix: unit diagonal, |ρ| <= 1 (to round-off)
+    assert np.allclose(np.diag(res.correlation), 1.0, atol=1e-9)
+    assert np.all(np.abs(res.correlation) <= 1 + 1e-9)
+    for p in res.free:
+        assert res.params[p] > 0 and np.isfinite(res.std[p]), p
+    # breakaway at or above the Coulomb level at both joints (Karnopp, enforced by the fit)
+    for j in (0, 1):
+        assert (res.params[f"arm.joints[{j}].friction.static"]
+                >= res.params[f"arm.joints[{j}].friction.coulomb"] - 1e-12)
+    # every held-out step is reported per signal (the medians are what #17 asks for)
+    assert set(rep["steps_median"]) == set(CHANNELS)
+
+
+def test_prediction_from_the_logged_state_equals_replay():
+    """Two independent readings of the logged state at 50 s (the fit's: plant state from
+    the channels with the strain-gauge filter inverted, filter states from the log,
+    controller run over the log; analysis.replay's: the arm's states read per joint) give
+    the same data-sheet prediction of the last 52 s: fit % equal within 0.2 points. They
+    differ only in the start rates (ours: a local quadratic of the encoder angle over
+    ±10 samples; replay: the logged 40 Hz-filtered rate, which lags by 2ζ/ω = 7 ms);
+    measured differences 0.00–0.07 points."""
+    from flexarm.analysis.replay import replay
+    from flexarm.identification.time_domain.general import FitOptions, predict_scenario
+    from flexarm.identification.time_domain.two_link import load_split
+    from flexarm.specs.scenario import load_scenario
+
+    sc = load_scenario("quanser-two-link")
+    run = load_split(DATA, EXAMPLES)["run"]
+    ours = predict_scenario(sc, [run], FitOptions(windows=[(50.0, 102.0)]),
+                            channels=list(CHANNELS))
+    theirs = replay(sc, run, window=(50.0, run.time[-1]))
+    got = next(iter(ours["fit_percent"].values()))
+    for c in CHANNELS:
+        assert got[c] == pytest.approx(theirs.fit_percent[c], abs=0.2), (c, got, theirs.fit_percent)
