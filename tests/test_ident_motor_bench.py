@@ -65,6 +65,10 @@ def test_two_mass_fit_physics(frf):
     assert f.cost > f.expected_cost + 5 * f.cost_std and "rejected" in f.verdict
     # but the model is within a few total standard deviations on average (measured ~3)
     assert np.sqrt(f.cost / f.n_frequencies) < 5
+    # rejected: each parameter also carries its std inflated by sqrt(cost/expected)
+    k = np.sqrt(f.cost / f.expected_cost)
+    for name, v in f.parameters.items():
+        assert v["std_inflated"] == pytest.approx(v["std"] * k, rel=1e-12), name
 
 
 def test_cli_frf_and_tfest_json(frf, tmp_path):
@@ -84,6 +88,11 @@ def test_cli_frf_and_tfest_json(frf, tmp_path):
     assert {"cost", "expected_cost", "verdict", "parameters"} <= set(t)
     assert {"total_inertia", "inertia_ratio", "antiresonance_hz", "resonance_hz",
             "resonance_damping", "delay_s"} <= set(t["parameters"])
+    # rejected fit: raw and inflated standard deviations side by side, said which is which
+    assert "rejected" in t["verdict"] and "std_inflated" in t["std_note"]
+    p = t["parameters"]["resonance_hz"]
+    assert p["std_inflated"] == pytest.approx(p["std"] * np.sqrt(t["cost"] / t["expected_cost"]))
+    assert "(noise), inflated ±" in r.output
     r = run.invoke(app, ["frf", str(MAT), "--log-format", str(ROOT / "examples" / "motor-bench.toml"),
                          "--output", "tip", "--json", str(tmp_path / "x.json")])
     assert r.exit_code == 2 and "no signal 'tip'" in r.output

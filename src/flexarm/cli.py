@@ -799,7 +799,8 @@ def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.ma
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         _fail(str(exc))
     data = {"source": str(logs[0]), **res.to_json()}
-    json_out.write_text(json.dumps(data, indent=2))
+    from flexarm.io.write import write_json
+    write_json(json_out, data, overwrite=True)
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_distortion(res, plots / "frf-distortion.png")
@@ -858,7 +859,12 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         _fail(f"{frf_json}: {exc}")
     out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
                 "verdict": fit.verdict, "parameters": fit.parameters})
-    json_out.write_text(json.dumps(out, indent=2))
+    inflated = any("std_inflated" in v for v in fit.parameters.values())
+    out["std_note"] = ("'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
+                       "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
+                       "rejected)" if inflated else "'std': from the noise (or BLA) variances")
+    from flexarm.io.write import write_json
+    write_json(json_out, out, overwrite=True)
     if plots is not None:
         import matplotlib
         matplotlib.use("Agg")
@@ -878,6 +884,9 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         fig.savefig(plots / "tfest.png", dpi=120)
         plt.close(fig)
     console.print(fit.verdict)
+    for name, v in fit.parameters.items():
+        extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
+        console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} (noise){extra}")
 
 
 if __name__ == "__main__":  # python -m flexarm.cli
