@@ -817,6 +817,9 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
           structure: Optional[str] = typer.Option(None, "--structure", help="two-mass"),
           output: Optional[str] = typer.Option(None, "--output", help="output to fit (rational model)"),
+          coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
+                                       help="two-mass: the Coulomb level from the odd distortion "
+                                            "(simulates the fitted model; a few seconds)"),
           json_out: Path = typer.Option(..., "--json", help="JSON result"),
           plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
     """Fit a transfer function or the two-mass structure to an FRF (weighted by its variances)."""
@@ -845,6 +848,29 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             fit = fit_two_mass(w, m[0], lo[0], motor_std=m[1], load_std=lo[1])
             out = {"structure": "two-mass", "units": "per unit of the input's torque constant "
                    "(A·s²/rad for a current input and angles in rad)"}
+            if coulomb and d.get("spectra") and "motor_angle" in outs:
+                import warnings as _w
+
+                from flexarm.identification.frequency_domain.harmonics import IdentificationError
+                from flexarm.identification.frequency_domain.multisine_friction import (
+                    coulomb_from_distortion)
+                from flexarm.identification.frequency_domain.periodic import PeriodicFRF
+                err.print("Coulomb level from the odd distortion: simulating the fitted model ...")
+                try:
+                    with _w.catch_warnings(record=True) as caught:
+                        _w.simplefilter("always")
+                        cf = coulomb_from_distortion(
+                            PeriodicFRF.from_json(d, str(frf_json)), fit.values,
+                            progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
+                    for c in caught:
+                        if "IdentificationWarning" in type(c.message).__name__:
+                            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+                    fit.parameters["coulomb_current"] = {"value": cf.coulomb_current,
+                                                         "std": cf.std}
+                    out["coulomb"] = cf.to_json()
+                except IdentificationError as exc:
+                    err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
+                    out["coulomb"] = {"error": str(exc)}
         elif structure is None and poles is not None and zeros is not None:
             name = output or next(iter(outs))
             if name not in outs:

@@ -105,10 +105,49 @@ class PeriodicFRF:
                                    "even_db": [nan(b.even_db) for b in bands],
                                    "noise_db": [nan(b.noise_db) for b in bands]}
             out[name] = d
+        sp = self.spectra
+        spectra = None if not sp else {
+            "note": "mean DFT over the steady periods (1/P scaling) of input then outputs at "
+                    "every line 0..P/2, their variances, and the number of periods M",
+            "re": sp["mean"].real.tolist(), "im": sp["mean"].imag.tolist(),
+            "var": sp["var"].tolist(), "M": int(sp["M"])}
         return {"input": self.input, "frequency_hz": self.frequency_hz.tolist(),
                 "lines": self.lines.tolist(), "period_samples": self.period, "fs_hz": self.fs,
                 "periods_used": self.periods_used, "transient_periods": self.transient_periods,
-                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings}
+                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings,
+                "spectra": spectra}
+
+    @classmethod
+    def from_json(cls, d: dict, source: str = "FRF JSON") -> "PeriodicFRF":
+        """The result back from :meth:`to_json` (``spectra`` needed for the friction
+        analysis of :mod:`.multisine_friction`)."""
+        try:
+            names = list(d["outputs"])
+            G = np.array([np.asarray(d["outputs"][n]["re"]) + 1j * np.asarray(d["outputs"][n]["im"])
+                          for n in names])
+            f = np.asarray(d["frequency_hz"], float)
+            nstd = np.array([d["outputs"][n]["noise_std"] for n in names], float)
+            tstd = (np.array([d["outputs"][n]["total_std"] for n in names], float)
+                    if all("total_std" in d["outputs"][n] for n in names) else None)
+            dist = None
+            if all("distortion" in d["outputs"][n] for n in names):
+                fl = lambda v: math.nan if v is None else float(v)  # noqa: E731
+                dist = {n: [Band(tuple(b), fl(o), fl(e), fl(z)) for b, o, e, z in zip(
+                    *(d["outputs"][n]["distortion"][k] for k in ("band_hz", "odd_db", "even_db",
+                                                                "noise_db")))] for n in names}
+            sp = d.get("spectra")
+            spectra = {} if not sp else {
+                "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
+                "var": np.asarray(sp["var"], float), "M": int(sp["M"]),
+                "lines": np.arange(len(sp["re"][0])), "excited": np.asarray(d["lines"], int)}
+            frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * f,
+                                                inputs=[d["input"]], outputs=names)
+            return cls(frd, G, f, np.asarray(d["lines"], int), names, d["input"], nstd, tstd,
+                       dist, int(d["period_samples"]), float(d["fs_hz"]), int(d["periods_used"]),
+                       int(d["transient_periods"]), spectra, list(d.get("warnings", [])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise IdentificationError(f"{source}: not an FRF written by flexarm frf "
+                                      f"(missing or bad {exc})") from None
 
     def verdict(self) -> str:
         """A plain sentence per output about the nonlinear distortion."""
