@@ -865,6 +865,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                     for c in caught:
                         if "IdentificationWarning" in type(c.message).__name__:
                             err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+                    err.print("")
                     fit.parameters["coulomb_current"] = {"value": cf.coulomb_current,
                                                          "std": cf.std}
                     out["coulomb"] = cf.to_json()
@@ -912,7 +913,8 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     console.print(fit.verdict)
     for name, v in fit.parameters.items():
         extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
-        console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} (noise){extra}")
+        kind = "line scatter" if name == "coulomb_current" else "noise"
+        console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} ({kind}){extra}")
 
 
 if __name__ == "__main__":  # python -m flexarm.cli
