@@ -762,7 +762,7 @@ def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a gene
 
 
 @app.command()
-def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.mat or CSV)"),
+def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"),
         log_format: Optional[Path] = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
         input: str = typer.Option("current", "--input", help="flexarm name of the input"),
         output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
@@ -775,30 +775,35 @@ def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.ma
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.io.matfile import read_recording
-    from flexarm.identification.frequency_domain.periodic import periodic_frf, plot_distortion
+    from flexarm.identification.frequency_domain.periodic import (combine_realisations,
+                                                                  periodic_frf, plot_distortion)
     from flexarm.io.logs import LogError
-    if len(logs) != 1:
-        _fail(f"frf reads one recording per call for now; got {len(logs)}")
     try:
         with _w.catch_warnings(record=True) as caught:
             _w.simplefilter("always")
-            sig, fs = read_recording(logs[0], log_format)
-            names = [n.strip() for n in output.split(",") if n.strip()]
-            for n in [input] + names:
-                if n not in sig:
-                    _fail(f"{logs[0]}: no signal {n!r}; mapped: {', '.join(sig)}")
             ex_lines = None
             if lines != "auto":
                 txt = Path(lines).read_text().splitlines()[1:]
                 ex_lines = [int(r.split(",")[0]) for r in txt if r.strip().endswith("excited")]
-            res = periodic_frf(sig[input], {n: sig[n] for n in names}, fs,
-                               period=None if period == "auto" else int(period), lines=ex_lines,
-                               input_name=input, source=str(logs[0]))
+            names = [n.strip() for n in output.split(",") if n.strip()]
+            results = []
+            for log in logs:  # one realisation per recording
+                sig, fs = read_recording(log, log_format)
+                for n in [input] + names:
+                    if n not in sig:
+                        _fail(f"{log}: no signal {n!r}; mapped: {', '.join(sig)}")
+                results.append(periodic_frf(
+                    sig[input], {n: sig[n] for n in names}, fs,
+                    period=None if period == "auto" else int(period), lines=ex_lines,
+                    input_name=input, source=str(log)))
+            res = results[0] if len(results) == 1 else combine_realisations(
+                results, source=", ".join(map(str, logs)))
         for c in caught:
             err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         _fail(str(exc))
-    data = {"source": str(logs[0]), **res.to_json()}
+    data = {"source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
+            "realisations": len(logs), **res.to_json()}
     from flexarm.io.write import write_json
     write_json(json_out, data, overwrite=True)
     if plots is not None:

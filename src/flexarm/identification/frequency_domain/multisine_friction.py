@@ -21,8 +21,9 @@ Method:
    σ_v² = Σ_{k≥1} 2 |ω_k Θ_k|²).
 2. One period of the measured input (its mean over the steady periods, DC removed: a
    constant torque would run the free rigid body away) is played for
-   ``n_tr`` + 2 periods (n_tr ≥ 1 covers 10 time constants J/(d_m' + d_l) of the rigid
-   body) in :class:`flexarm.sim.sampled.SampledLoop` through
+   ``n_tr`` + 2 periods (n_tr ≥ 1 covers 10 time constants of the slowest mode: the
+   rigid body's J/(d_m' + d_l) or the resonance's 1/(ζ ω_r); at most
+   ``MAX_TRANSIENT_PERIODS``) in :class:`flexarm.sim.sampled.SampledLoop` through
    :func:`flexarm.sim.build.prepare`; :func:`~.periodic.periodic_frf` of the simulated
    output gives the output spectrum Ŷ_d(C_f) at the odd detection lines d.
 3. Measured odd power per line P_d = |Ȳ_d|² − σ²_d/M (noise removed), in the octave bands
@@ -52,6 +53,7 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
+from flexarm.identification.frequency_domain.tfest import _derived
 
 #: Simulated friction levels (× the input rms) for the first search grid.
 GRID = np.geomspace(1e-3, 0.5, 8)
@@ -197,10 +199,13 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
 
     def simulate(cf) -> np.ndarray:
         dmp = dm - d_eq(cf)
-        tau = J / max(max(dmp, 0.0) + dl, 1e-300)
+        p = dict(params, motor_viscous=max(dmp, 0.0))
+        # slowest decay: the rigid body J/(d_m' + d_l) or the resonance 1/(ζ ω_r)
+        zeta = _derived(p)["resonance_damping"]
+        tau = max(J / max(max(dmp, 0.0) + dl, 1e-300),
+                  1 / max(zeta * 2 * math.pi * p["resonance_hz"], 1e-300))
         ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
         n = (ntr + 2) * P
-        p = dict(params, motor_viscous=max(dmp, 0.0))
         sc = scenario_from_dict(two_mass_scenario(p, cf, fs, n))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block

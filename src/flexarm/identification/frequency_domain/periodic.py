@@ -350,6 +350,54 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
                        P, float(fs), M, nt, spectra, notes)
 
 
+def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>") -> PeriodicFRF:
+    """The BLA over R ≥ 2 realisations (records with new random phases, same lines), the
+    robust method (Pintelon & Schoukens 2012):
+
+        G_BLA,k = (1/R) Σ_r G_r,k,
+        var_noise G_BLA,k = (1/R²) Σ_r var_noise G_r,k,
+        var_total G_BLA,k = Σ_r |G_r,k − G_BLA,k|² / (R (R − 1)),
+
+    the last the sample variance of the mean over realisations: noise plus the stochastic
+    nonlinear contributions, which change with the phases (no detection lines needed).
+    The distortion table is the power mean of the realisations' levels per band. Raises
+    :class:`IdentificationError` when the records disagree on lines, outputs or rate."""
+    rs = list(results)
+    if len(rs) < 2:
+        raise IdentificationError(f"{source}: the robust BLA needs at least two realisations; "
+                                  f"got {len(rs)}")
+    first = rs[0]
+    for k, r in enumerate(rs[1:], 2):
+        if (r.outputs != first.outputs or r.fs != first.fs or r.period != first.period
+                or not np.array_equal(r.lines, first.lines)):
+            raise IdentificationError(
+                f"{source}: realisation {k} differs from the first in its excited lines, "
+                f"outputs, period or sampling rate ({r.outputs} at {r.fs:g} Hz, {r.period} "
+                f"samples, {len(r.lines)} lines vs {first.outputs} at {first.fs:g} Hz, "
+                f"{first.period} samples, {len(first.lines)} lines): one design per call")
+    R = len(rs)
+    G = np.stack([r.response for r in rs])  # (R, ny, K)
+    Gm = G.mean(axis=0)
+    noise = np.sqrt(np.sum(np.stack([r.noise_std for r in rs]) ** 2, axis=0)) / R
+    total = np.sqrt(np.sum(np.abs(G - Gm) ** 2, axis=0) / (R * (R - 1)))
+    dist = None
+    if all(r.distortion is not None for r in rs):
+        def pmean(vals):
+            v = [x for x in vals if math.isfinite(x)]
+            return 10 * math.log10(np.mean([10 ** (x / 10) for x in v])) if v else math.nan
+        dist = {n: [Band(bs[0].band_hz, pmean([b.odd_db for b in bs]),
+                         pmean([b.even_db for b in bs]), pmean([b.noise_db for b in bs]))
+                    for bs in zip(*(r.distortion[n] for r in rs))] for n in first.outputs}
+    frd = control.FrequencyResponseData(Gm[:, None, :], 2 * np.pi * first.frequency_hz,
+                                        inputs=[first.input], outputs=first.outputs)
+    notes = [w for r in rs for w in r.warnings]
+    notes.append(f"{source}: BLA over {R} realisations (robust method): total_std from their "
+                 "spread")
+    return PeriodicFRF(frd, Gm, first.frequency_hz, first.lines, first.outputs, first.input,
+                       noise, total, dist, first.period, first.fs,
+                       sum(r.periods_used for r in rs), first.transient_periods, {}, notes)
+
+
 def periodic_change(xp: np.ndarray) -> float:
     """Power of the difference of consecutive periods over the power of the signal (rows =
     periods): 2σ²/(P_s + σ²) for a periodic signal with white noise σ², ≈ 2 when the period
