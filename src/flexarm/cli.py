@@ -768,6 +768,9 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
         period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
         lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
+        method: str = typer.Option("periodic", "--method",
+                                   help="periodic (multisine over whole periods) or lpm "
+                                        "(local polynomial method: non-periodic or transient records)"),
         json_out: Path = typer.Option(..., "--json", help="JSON result"),
         plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
@@ -775,8 +778,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.io.matfile import read_recording
-    from flexarm.identification.frequency_domain.periodic import (combine_realisations,
+    from flexarm.identification.frequency_domain.periodic import (combine_realisations, lpm_frf,
                                                                   periodic_frf, plot_distortion)
+    if method not in ("periodic", "lpm"):
+        _fail(f"--method {method!r}: choose periodic or lpm")
     from flexarm.io.logs import LogError
     try:
         with _w.catch_warnings(record=True) as caught:
@@ -792,6 +797,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                 for n in [input] + names:
                     if n not in sig:
                         _fail(f"{log}: no signal {n!r}; mapped: {', '.join(sig)}")
+                if method == "lpm":
+                    results.append(lpm_frf(sig[input], {n: sig[n] for n in names}, fs,
+                                           input_name=input, source=str(log)))
+                    continue
                 results.append(periodic_frf(
                     sig[input], {n: sig[n] for n in names}, fs,
                     period=None if period == "auto" else int(period), lines=ex_lines,
@@ -809,6 +818,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_distortion(res, plots / "frf-distortion.png")
+    if method == "lpm":
+        console.print(f"LPM: {len(res.lines)} lines {res.frequency_hz[0]:g}–"
+                      f"{res.frequency_hz[-1]:g} Hz from {res.period} samples; {res.verdict()}")
+        return
     console.print(f"{len(res.lines)} excited lines {res.frequency_hz[0]:g}–{res.frequency_hz[-1]:g} Hz, "
                   f"period {res.period} samples, {res.periods_used} periods used "
                   f"({res.transient_periods} transient); {res.verdict()}")

@@ -350,6 +350,96 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
                        P, float(fs), M, nt, spectra, notes)
 
 
+def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int = 2,
+            half_width: int = 5, f_min: float | None = None, f_max: float | None = None,
+            max_lines: int = 2000, input_name: str = "input",
+            source: str = "<data>") -> PeriodicFRF:
+    """FRF of a record that is not periodic or not in steady state: the local polynomial
+    method (LPM; Pintelon & Schoukens 2012). With the DFTs U(k), Y(k) of the whole record
+    (N samples), around each line k and r = −n..n (n = ``half_width``),
+
+        Y(k+r) = Σ_{s=0}^{R} g_s r^s U(k+r) + Σ_{s=0}^{R} t_s r^s + V(k+r),   R = ``order``,
+
+    G(k) = g_0 (the FRF, θ-independent of the transient, which the smooth t-polynomial
+    absorbs along with leakage), by least squares over the 2n+1 lines. The noise variance
+    from the residual, σ̂²_V = ‖e‖²/q with q = 2n+1 − 2(R+1) degrees of freedom, and
+    var Ĝ(k) = σ̂²_V [(KᴴK)⁻¹]_00 (K the local regressor matrix) give ``noise_std``. The
+    input is taken as exact (noise on it biases G as in any direct estimate). Lines in
+    [f_min, f_max] (default the whole band the windows fit), at most ``max_lines`` of them
+    evenly spread. Returned as a :class:`PeriodicFRF` with ``period`` = N, one "period"
+    used, no distortion table (detection lines need a periodic excitation)."""
+    names = list(y)
+    chans = {input_name: np.asarray(u, float), **{k: np.asarray(v, float) for k, v in y.items()}}
+    for k, v in chans.items():
+        if v.ndim != 1 or not np.all(np.isfinite(v)):
+            raise IdentificationError(f"{source}: signal {k!r} must be 1-D and finite")
+    lens = {k: len(v) for k, v in chans.items()}
+    if len(set(lens.values())) > 1:
+        raise IdentificationError(f"{source}: channels of different lengths: "
+                                  + ", ".join(f"{k} {n}" for k, n in lens.items()))
+    R, n = int(order), int(half_width)
+    q = 2 * n + 1 - 2 * (R + 1)
+    if R < 0 or q < 1:
+        raise IdentificationError(f"{source}: LPM order {R} with half_width {n} leaves {q} "
+                                  "degrees of freedom; need 2·half_width + 1 > 2·(order + 1)")
+    N = lens[input_name]
+    X = np.fft.rfft(np.stack(list(chans.values())), axis=-1) / np.sqrt(N)
+    df = fs / N
+    k0 = max(n + 1, int(np.ceil((f_min or 0) / df)))
+    k1 = min(X.shape[-1] - n - 2, int(np.floor(f_max / df)) if f_max else X.shape[-1])
+    if k1 < k0:
+        raise IdentificationError(f"{source}: {N} samples give no line in the band with "
+                                  f"{n} lines on each side; record longer or widen the band")
+    ks = np.arange(k0, k1 + 1)
+    # lines whose window carries input: the local input energy above 1e-8 of the largest
+    # (an unexcited window makes the regressor singular; G is not observable there)
+    e_loc = np.convolve(np.abs(X[0]) ** 2, np.ones(2 * n + 1), mode="same")[ks]
+    ks = ks[e_loc > 1e-8 * e_loc.max()]
+    if ks.size == 0:
+        raise IdentificationError(f"{source}: the input {input_name!r} carries no power in "
+                                  "the band: no FRF line can be estimated")
+    if ks.size > max_lines:
+        ks = ks[np.round(np.linspace(0, ks.size - 1, max_lines)).astype(int)]
+    r = np.arange(-n, n + 1)
+    idx = ks[:, None] + r[None, :]  # (L, 2n+1)
+    Uw = X[0][idx]
+    pw = r[None, :, None] ** np.arange(R + 1)[None, None, :]  # (1, 2n+1, R+1)
+    K = np.concatenate([Uw[:, :, None] * pw, np.broadcast_to(pw, Uw.shape + (R + 1,))], axis=-1)
+    KhK = np.einsum("lri,lrj->lij", K.conj(), K)
+    # rank check: a window with too few excited lines (e.g. a periodic multisine, whose
+    # record DFT is zero off the period's lines) leaves G undetermined there: dropped
+    # (R + 1 lines with input above 1e-6 of the window's largest; then the conditioning
+    # of the column-scaled normal matrix, its scaling floored so round-off columns stay small)
+    au = np.abs(Uw)
+    enough = np.sum(au > 1e-6 * au.max(axis=1, keepdims=True), axis=1) >= R + 1
+    dd = np.einsum("lii->li", KhK).real
+    dg = 1 / np.sqrt(np.maximum(dd, 1e-12 * dd.max(axis=1, keepdims=True)))
+    ev = np.linalg.eigvalsh(KhK * dg[:, :, None] * dg[:, None, :])
+    ok = enough & (ev[:, 0] > 1e-10 * ev[:, -1])
+    if not ok.any():
+        raise IdentificationError(
+            f"{source}: no window of {2 * n + 1} lines holds enough excited lines for the "
+            f"local polynomial of order {R}: the LPM needs a broadband input (noise, a sweep, "
+            "a full multisine); for a periodic multisine use the periodic method")
+    ks, K, KhK, idx = ks[ok], K[ok], KhK[ok], idx[ok]
+    KhK_inv = np.linalg.inv(KhK)
+    G = np.empty((len(names), ks.size), complex)
+    sd = np.empty((len(names), ks.size))
+    for j in range(len(names)):
+        Yw = X[1 + j][idx]
+        theta = np.einsum("lij,lrj,lr->li", KhK_inv, K.conj(), Yw)
+        e = Yw - np.einsum("lri,li->lr", K, theta)
+        s2 = np.sum(np.abs(e) ** 2, axis=1) / q
+        G[j] = theta[:, 0]
+        sd[j] = np.sqrt(s2 * KhK_inv[:, 0, 0].real)
+    freq = ks * df
+    frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq, inputs=[input_name],
+                                        outputs=names)
+    return PeriodicFRF(frd, G, freq, ks, names, input_name, sd, None, None, N, float(fs), 1, 0,
+                       {}, [f"{source}: local polynomial method (order {R}, {2 * n + 1} lines, "
+                            f"{q} dof per line)"])
+
+
 def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>") -> PeriodicFRF:
     """The BLA over R ≥ 2 realisations (records with new random phases, same lines), the
     robust method (Pintelon & Schoukens 2012):
@@ -414,6 +504,26 @@ def plot_distortion(res: PeriodicFRF, path=None):
     import matplotlib.pyplot as plt
 
     sp = res.spectra
+    if not sp:  # LPM or several realisations: the FRF with its standard deviations
+        fig, axes = plt.subplots(len(res.outputs), 1, figsize=(8, 3.2 * len(res.outputs)),
+                                 squeeze=False)
+        db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
+        for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
+            ax.plot(res.frequency_hz, db(res.response[j]), "k+", label="FRF")
+            ax.plot(res.frequency_hz, db(res.noise_std[j]), "g-", lw=0.8, label="noise std")
+            if res.total_std is not None:
+                ax.plot(res.frequency_hz, db(res.total_std[j]), "r-", lw=0.8, label="total std")
+            ax.set_ylabel(f"{name} (dB)")
+            ax.set_xscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=7)
+        axes[-1, 0].set_xlabel("frequency (Hz)")
+        fig.tight_layout()
+        if path is not None:
+            from flexarm.io.write import save_figure
+            save_figure(fig, path, overwrite=True, dpi=120)
+            plt.close(fig)
+        return fig
     df = res.fs / res.period
     exc = res.lines
     kmax = int(exc.max())
@@ -440,6 +550,7 @@ def plot_distortion(res: PeriodicFRF, path=None):
     axes[-1, 0].set_xlabel("frequency (Hz)")
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        from flexarm.io.write import save_figure
+        save_figure(fig, path, overwrite=True, dpi=120)
         plt.close(fig)
     return fig
