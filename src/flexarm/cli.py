@@ -768,6 +768,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
         period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
         lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
+        reference: Optional[str] = typer.Option(
+            None, "--reference", help="closed loop, with --method lpm: the reference's flexarm "
+                                      "name; G = G_yr/G_ur (indirect). Periodic data need none: "
+                                      "the ratio of period means is already Ȳ/Ū = (Ȳ/R̄)/(Ū/R̄)"),
         method: str = typer.Option("periodic", "--method",
                                    help="periodic (multisine over whole periods) or lpm "
                                         "(local polynomial method: non-periodic or transient records)"),
@@ -794,12 +798,13 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
             results = []
             for log in logs:  # one realisation per recording
                 sig, fs = read_recording(log, log_format)
-                for n in [input] + names:
+                for n in [input] + names + ([reference] if reference else []):
                     if n not in sig:
                         _fail(f"{log}: no signal {n!r}; mapped: {', '.join(sig)}")
                 if method == "lpm":
                     results.append(lpm_frf(sig[input], {n: sig[n] for n in names}, fs,
-                                           input_name=input, source=str(log)))
+                                           input_name=input, source=str(log),
+                                           reference=sig[reference] if reference else None))
                     continue
                 results.append(periodic_frf(
                     sig[input], {n: sig[n] for n in names}, fs,

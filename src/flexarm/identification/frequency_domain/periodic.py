@@ -352,7 +352,7 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
 
 def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int = 2,
             half_width: int = 5, f_min: float | None = None, f_max: float | None = None,
-            max_lines: int = 2000, input_name: str = "input",
+            max_lines: int = 2000, input_name: str = "input", reference: np.ndarray | None = None,
             source: str = "<data>") -> PeriodicFRF:
     """FRF of a record that is not periodic or not in steady state: the local polynomial
     method (LPM; Pintelon & Schoukens 2012). With the DFTs U(k), Y(k) of the whole record
@@ -364,12 +364,21 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
     absorbs along with leakage), by least squares over the 2n+1 lines. The noise variance
     from the residual, σ̂²_V = ‖e‖²/q with q = 2n+1 − 2(R+1) degrees of freedom, and
     var Ĝ(k) = σ̂²_V [(KᴴK)⁻¹]_00 (K the local regressor matrix) give ``noise_std``. The
-    input is taken as exact (noise on it biases G as in any direct estimate). Lines in
+    input is taken as exact (noise on it biases G as in any direct estimate).
+
+    Closed loop (``reference`` given, the indirect method): the same local model with the
+    reference R as regressor, for the input and each output; G = G_yr/G_ur, and to first
+    order var G = |G|² (var G_yr/|G_yr|² + var G_ur/|G_ur|² − 2 Re(cov/(G_yr G_ur*))),
+    the covariance from the residuals' cross-product (the loop makes the input's and the
+    output's noise correlated, which biases the direct estimate; this one is not biased
+    by it). Lines in
     [f_min, f_max] (default the whole band the windows fit), at most ``max_lines`` of them
     evenly spread. Returned as a :class:`PeriodicFRF` with ``period`` = N, one "period"
     used, no distortion table (detection lines need a periodic excitation)."""
     names = list(y)
     chans = {input_name: np.asarray(u, float), **{k: np.asarray(v, float) for k, v in y.items()}}
+    if reference is not None:
+        chans["reference"] = np.asarray(reference, float)
     for k, v in chans.items():
         if v.ndim != 1 or not np.all(np.isfinite(v)):
             raise IdentificationError(f"{source}: signal {k!r} must be 1-D and finite")
@@ -390,10 +399,11 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
     if k1 < k0:
         raise IdentificationError(f"{source}: {N} samples give no line in the band with "
                                   f"{n} lines on each side; record longer or widen the band")
+    reg = X[-1] if reference is not None else X[0]  # the local regressor's signal
     ks = np.arange(k0, k1 + 1)
     # lines whose window carries input: the local input energy above 1e-8 of the largest
     # (an unexcited window makes the regressor singular; G is not observable there)
-    e_loc = np.convolve(np.abs(X[0]) ** 2, np.ones(2 * n + 1), mode="same")[ks]
+    e_loc = np.convolve(np.abs(reg) ** 2, np.ones(2 * n + 1), mode="same")[ks]
     ks = ks[e_loc > 1e-8 * e_loc.max()]
     if ks.size == 0:
         raise IdentificationError(f"{source}: the input {input_name!r} carries no power in "
@@ -402,7 +412,7 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
         ks = ks[np.round(np.linspace(0, ks.size - 1, max_lines)).astype(int)]
     r = np.arange(-n, n + 1)
     idx = ks[:, None] + r[None, :]  # (L, 2n+1)
-    Uw = X[0][idx]
+    Uw = reg[idx]
     pw = r[None, :, None] ** np.arange(R + 1)[None, None, :]  # (1, 2n+1, R+1)
     K = np.concatenate([Uw[:, :, None] * pw, np.broadcast_to(pw, Uw.shape + (R + 1,))], axis=-1)
     KhK = np.einsum("lri,lrj->lij", K.conj(), K)
@@ -425,19 +435,35 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
     KhK_inv = np.linalg.inv(KhK)
     G = np.empty((len(names), ks.size), complex)
     sd = np.empty((len(names), ks.size))
+
+    def local(x):
+        """g_0 and the residual of the local model for the channel x."""
+        w = x[idx]
+        theta = np.einsum("lij,lrj,lr->li", KhK_inv, K.conj(), w)
+        return theta[:, 0], w - np.einsum("lri,li->lr", K, theta)
+
+    p00 = KhK_inv[:, 0, 0].real
+    if reference is not None:
+        gu, eu = local(X[0])
     for j in range(len(names)):
-        Yw = X[1 + j][idx]
-        theta = np.einsum("lij,lrj,lr->li", KhK_inv, K.conj(), Yw)
-        e = Yw - np.einsum("lri,li->lr", K, theta)
-        s2 = np.sum(np.abs(e) ** 2, axis=1) / q
-        G[j] = theta[:, 0]
-        sd[j] = np.sqrt(s2 * KhK_inv[:, 0, 0].real)
+        gy, ey = local(X[1 + j])
+        if reference is None:
+            G[j] = gy
+            sd[j] = np.sqrt(np.sum(np.abs(ey) ** 2, axis=1) / q * p00)
+            continue
+        vy = np.sum(np.abs(ey) ** 2, axis=1) / q * p00
+        vu = np.sum(np.abs(eu) ** 2, axis=1) / q * p00
+        cyu = np.sum(ey * eu.conj(), axis=1) / q * p00
+        G[j] = gy / gu
+        sd[j] = np.abs(G[j]) * np.sqrt(np.maximum(
+            vy / np.abs(gy) ** 2 + vu / np.abs(gu) ** 2 - 2 * np.real(cyu / (gy * gu.conj())), 0))
     freq = ks * df
     frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq, inputs=[input_name],
                                         outputs=names)
     return PeriodicFRF(frd, G, freq, ks, names, input_name, sd, None, None, N, float(fs), 1, 0,
                        {}, [f"{source}: local polynomial method (order {R}, {2 * n + 1} lines, "
-                            f"{q} dof per line)"])
+                            f"{q} dof per line" + (", indirect through the reference)"
+                                                   if reference is not None else ")")])
 
 
 def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>") -> PeriodicFRF:
