@@ -167,9 +167,7 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     U = mean[0].copy()
     U[0] = 0.0
     u = np.fft.irfft(U * P, n=P)
-    kk = np.arange(U.size)
-    wk = 2 * np.pi * kk * fs / P
-    sv = float(np.sqrt(2 * np.sum(np.abs(wk[1:P // 2] * mean[j, 1:P // 2]) ** 2)))
+    sv = velocity_rms(frf, output)
     J = params["total_inertia"]
     dm, dl = float(params["motor_viscous"]), float(params["load_viscous"])
 
@@ -296,6 +294,19 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     return MultisineCoulomb(float(cf), float(std), band_vals,
                             [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
                             bool(detected), deq, dm, sv, floor_db, count[0], notes)
+
+
+def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
+    """rms of the angle's derivative over the mean period (rad/s): σ_v² = Σ_{1≤k<P/2}
+    2 |ω_k Θ_k|² (Θ_k the mean period's DFT with 1/P scaling)."""
+    sp = frf.spectra
+    if not sp:
+        raise IdentificationError(f"{output}: the FRF carries no period spectra (LPM or "
+                                  "several realisations): the velocity rms needs them")
+    P, fs = frf.period, frf.fs
+    j = 1 + frf.outputs.index(output)
+    wk = 2 * np.pi * np.arange(1, P // 2) * fs / P
+    return float(np.sqrt(2 * np.sum(np.abs(wk * sp["mean"][j, 1:P // 2]) ** 2)))
 
 
 def _play(params, state, measured, reference):
