@@ -895,6 +895,9 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                 except IdentificationError as exc:
                     err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
                     out["coulomb"] = {"error": str(exc)}
+            elif coulomb and "motor_angle" in outs:
+                err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
+                          "several realisations, or written by an older flexarm frf)")
         elif structure is None and poles is not None and zeros is not None:
             name = output or next(iter(outs))
             if name not in outs:
