@@ -103,6 +103,7 @@ def test_two_mass_noise_free_and_noisy():
     for k, v in p.items():  # within 4 standard deviations (one draw; P(fail) ~ 1e-4 each)
         assert abs(f.parameters[k]["value"] - v) < 4 * f.parameters[k]["std"], k
     assert "accepted" in f.verdict
+    assert not any("std_inflated" in v for v in f.parameters.values())  # only when rejected
     fixed = fit_two_mass(w, Gm, Gl, free=("total_inertia", "inertia_ratio", "resonance_hz"),
                          initial={"delay_s": 3e-4, "motor_viscous": 0.01, "load_viscous": 0.005,
                                   "shaft_damping": 0.03})

@@ -987,12 +987,19 @@ def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a gene
 
 
 @app.command()
-def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.mat or CSV)"),
+def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"),
         log_format: Optional[Path] = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
         input: str = typer.Option("current", "--input", help="flexarm name of the input"),
         output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
         period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
         lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
+        reference: Optional[str] = typer.Option(
+            None, "--reference", help="closed loop, with --method lpm: the reference's flexarm "
+                                      "name; G = G_yr/G_ur (indirect). Periodic data need none: "
+                                      "the ratio of period means is already Ȳ/Ū = (Ȳ/R̄)/(Ū/R̄)"),
+        method: str = typer.Option("periodic", "--method",
+                                   help="periodic (multisine over whole periods) or lpm "
+                                        "(local polynomial method: non-periodic or transient records)"),
         json_out: Path = typer.Option(..., "--json", help="JSON result"),
         plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
@@ -1000,34 +1007,51 @@ def frf(logs: list[Path] = typer.Argument(..., help="one periodic recording (.ma
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.io.matfile import read_recording
-    from flexarm.identification.frequency_domain.periodic import periodic_frf, plot_distortion
+    from flexarm.identification.frequency_domain.periodic import (combine_realisations, lpm_frf,
+                                                                  periodic_frf, plot_distortion)
+    if method not in ("periodic", "lpm"):
+        _fail(f"--method {method!r}: choose periodic or lpm")
     from flexarm.io.logs import LogError
-    if len(logs) != 1:
-        _fail(f"frf reads one recording per call for now; got {len(logs)}")
     try:
         with _w.catch_warnings(record=True) as caught:
             _w.simplefilter("always")
-            sig, fs = read_recording(logs[0], log_format)
-            names = [n.strip() for n in output.split(",") if n.strip()]
-            for n in [input] + names:
-                if n not in sig:
-                    _fail(f"{logs[0]}: no signal {n!r}; mapped: {', '.join(sig)}")
             ex_lines = None
             if lines != "auto":
                 txt = Path(lines).read_text().splitlines()[1:]
                 ex_lines = [int(r.split(",")[0]) for r in txt if r.strip().endswith("excited")]
-            res = periodic_frf(sig[input], {n: sig[n] for n in names}, fs,
-                               period=None if period == "auto" else int(period), lines=ex_lines,
-                               input_name=input, source=str(logs[0]))
+            names = [n.strip() for n in output.split(",") if n.strip()]
+            results = []
+            for log in logs:  # one realisation per recording
+                sig, fs = read_recording(log, log_format)
+                for n in [input] + names + ([reference] if reference else []):
+                    if n not in sig:
+                        _fail(f"{log}: no signal {n!r}; mapped: {', '.join(sig)}")
+                if method == "lpm":
+                    results.append(lpm_frf(sig[input], {n: sig[n] for n in names}, fs,
+                                           input_name=input, source=str(log),
+                                           reference=sig[reference] if reference else None))
+                    continue
+                results.append(periodic_frf(
+                    sig[input], {n: sig[n] for n in names}, fs,
+                    period=None if period == "auto" else int(period), lines=ex_lines,
+                    input_name=input, source=str(log)))
+            res = results[0] if len(results) == 1 else combine_realisations(
+                results, source=", ".join(map(str, logs)))
         for c in caught:
             err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         _fail(str(exc))
-    data = {"source": str(logs[0]), **res.to_json()}
-    json_out.write_text(json.dumps(data, indent=2))
+    data = {"source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
+            "realisations": len(logs), **res.to_json()}
+    from flexarm.io.write import write_json
+    write_json(json_out, data, overwrite=True)
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_distortion(res, plots / "frf-distortion.png")
+    if method == "lpm":
+        console.print(f"LPM: {len(res.lines)} lines {res.frequency_hz[0]:g}–"
+                      f"{res.frequency_hz[-1]:g} Hz from {res.period} samples; {res.verdict()}")
+        return
     console.print(f"{len(res.lines)} excited lines {res.frequency_hz[0]:g}–{res.frequency_hz[-1]:g} Hz, "
                   f"period {res.period} samples, {res.periods_used} periods used "
                   f"({res.transient_periods} transient); {res.verdict()}")
@@ -1041,6 +1065,9 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
           structure: Optional[str] = typer.Option(None, "--structure", help="two-mass"),
           output: Optional[str] = typer.Option(None, "--output", help="output to fit (rational model)"),
+          coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
+                                       help="two-mass: the Coulomb level from the odd distortion "
+                                            "(simulates the fitted model; a few seconds)"),
           json_out: Path = typer.Option(..., "--json", help="JSON result"),
           plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
     """Fit a transfer function or the two-mass structure to an FRF (weighted by its variances)."""
@@ -1069,6 +1096,33 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             fit = fit_two_mass(w, m[0], lo[0], motor_std=m[1], load_std=lo[1])
             out = {"structure": "two-mass", "units": "per unit of the input's torque constant "
                    "(A·s²/rad for a current input and angles in rad)"}
+            if coulomb and d.get("spectra") and "motor_angle" in outs:
+                import warnings as _w
+
+                from flexarm.identification.frequency_domain.harmonics import IdentificationError
+                from flexarm.identification.frequency_domain.multisine_friction import (
+                    coulomb_from_distortion)
+                from flexarm.identification.frequency_domain.periodic import PeriodicFRF
+                err.print("Coulomb level from the odd distortion: simulating the fitted model ...")
+                try:
+                    with _w.catch_warnings(record=True) as caught:
+                        _w.simplefilter("always")
+                        cf = coulomb_from_distortion(
+                            PeriodicFRF.from_json(d, str(frf_json)), fit.values,
+                            progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
+                    for c in caught:
+                        if "IdentificationWarning" in type(c.message).__name__:
+                            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+                    err.print("")
+                    fit.parameters["coulomb_current"] = {"value": cf.coulomb_current,
+                                                         "std": cf.std}
+                    out["coulomb"] = cf.to_json()
+                except IdentificationError as exc:
+                    err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
+                    out["coulomb"] = {"error": str(exc)}
+            elif coulomb and "motor_angle" in outs:
+                err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
+                          "several realisations, or written by an older flexarm frf)")
         elif structure is None and poles is not None and zeros is not None:
             name = output or next(iter(outs))
             if name not in outs:
@@ -1083,7 +1137,12 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         _fail(f"{frf_json}: {exc}")
     out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
                 "verdict": fit.verdict, "parameters": fit.parameters})
-    json_out.write_text(json.dumps(out, indent=2))
+    inflated = any("std_inflated" in v for v in fit.parameters.values())
+    out["std_note"] = ("'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
+                       "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
+                       "rejected)" if inflated else "'std': from the noise (or BLA) variances")
+    from flexarm.io.write import write_json
+    write_json(json_out, out, overwrite=True)
     if plots is not None:
         import matplotlib
         matplotlib.use("Agg")
@@ -1103,6 +1162,10 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         fig.savefig(plots / "tfest.png", dpi=120)
         plt.close(fig)
     console.print(fit.verdict)
+    for name, v in fit.parameters.items():
+        extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
+        kind = "line scatter" if name == "coulomb_current" else "noise"
+        console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} ({kind}){extra}")
 
 
 if __name__ == "__main__":  # python -m flexarm.cli

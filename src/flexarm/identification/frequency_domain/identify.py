@@ -11,7 +11,10 @@ experiment of the motor-position loop:
    (:mod:`flexarm.identification.frequency_domain.frf`);
 4. transfer functions fitted to the corrected G_m (default one integrator, two zeros, four
    poles, the form of FRB eq. (12)) and to G_b (no zeros, two poles, the form of eq. (13))
-   (:mod:`flexarm.identification.frequency_domain.tffit`); a fit to the raw G_m is kept for comparison;
+   by :func:`flexarm.identification.frequency_domain.tfest.tfest` with the log-ratio cost
+   Σ|ln(Ĥ/H)|² (log-magnitude and phase errors with equal weight, the measure of FRB
+   eq. (6); the sine experiments carry no variances and span decades of |G_m|); a fit to
+   the raw G_m is kept for comparison;
 5. physical parameters J, V, C of eq. (1) with C_t = C(θm − θt), i.e.
 
        G_m(s) = K / (J s² + V s + C (1 − G_b(s))),
@@ -29,7 +32,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +49,8 @@ from flexarm.identification.frequency_domain.harmonics import (
 )
 from flexarm.io.logs import Log, LogError, read_log
 from flexarm.identification.frequency_domain.physical import PhysicalFit, fit_physical
-from flexarm.identification.frequency_domain.tffit import TFFit, fit_tf, tf_coefficients, tf_response
+from flexarm.identification.frequency_domain.tfest import (TFEstError, TFEstimate, tf_coefficients,
+                                                           tf_response, tfest)
 from flexarm.units import UnitError, to_si
 from flexarm.io.write import save_figure, write_text
 
@@ -93,9 +97,9 @@ class IdentificationResult:
     analyses: list[HarmonicAnalysis]
     coulomb: CoulombEstimate
     response: FrequencyResponse
-    motor_fit: TFFit
-    motor_fit_raw: TFFit | None
-    beam_fit: TFFit
+    motor_fit: TFEstimate
+    motor_fit_raw: TFEstimate | None
+    beam_fit: TFEstimate
     motor_constant: float
     parameters: dict[str, float]
     settings: dict[str, Any] = field(default_factory=dict)
@@ -339,16 +343,22 @@ class IdentificationResult:
         }
 
 
-def _unit_static_gain(fit: TFFit, omega: np.ndarray, H: np.ndarray) -> TFFit:
+def _unit_static_gain(fit: TFEstimate, omega: np.ndarray, H: np.ndarray) -> TFEstimate:
     """G_b with G_b(0) = 1 exactly: at rest the tip lines up with the hub (θt = θm). The
-    free fit misses this by ~1e-4, enough to move G_m's integrator off the origin."""
+    free fit misses this by ~1e-4, enough to move G_m's integrator off the origin. The
+    numerator is rescaled (tf, relative_error and parameters b_i follow; cost and
+    covariance stay those of the free fit)."""
     num = np.trim_zeros(np.asarray(fit.tf.num[0][0], float), "f")
     den = np.trim_zeros(np.asarray(fit.tf.den[0][0], float), "f")
     if num[-1] == 0 or den[-1] == 0:
         return fit
-    tf = control.tf(num * (den[-1] / num[-1]), den)
+    g = den[-1] / num[-1]
+    tf = control.tf(num * g, den)
     err = np.abs(tf_response(tf, omega) - H) / np.abs(H)
-    return TFFit(tf, err)
+    params = {k: ({**v, "value": v["value"] * g, "std": v["std"] * abs(g)} if k.startswith("b")
+                  else v) for k, v in fit.parameters.items()}
+    return replace(fit, tf=tf, relative_error=err, parameters=params,
+                   message=fit.message + "; numerator scaled to G_b(0) = 1")
 
 
 def _collect_files(files_or_dir, pattern: str) -> list[Path]:
@@ -454,11 +464,15 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
 
     nz, npl = motor_orders
     bz, bp = beam_orders
+    def fit_tf(omega, H, n_zeros, n_poles, integrators):
+        return tfest(control.frd(np.asarray(H, complex), omega), n_poles, n_zeros,
+                     integrators=integrators, cost="log")
+
     try:
         mfit = fit_tf(fr.omega, fr.motor_corrected if cf is not None else fr.motor_raw,
                       nz, npl, integrators=motor_integrators)
         bfit = fit_tf(fr.omega, fr.beam, bz, bp, integrators=beam_integrators)
-    except ValueError as exc:
+    except (TFEstError, ValueError) as exc:
         raise IdentificationError(f"cannot fit the transfer functions to the {len(fr.omega)} "
                                   f"experiment(s): {exc}") from None
     if beam_integrators == 0:
@@ -467,7 +481,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     if cf is not None:
         try:
             mfit_raw = fit_tf(fr.omega, fr.motor_raw, nz, npl, integrators=motor_integrators)
-        except ValueError as exc:
+        except (TFEstError, ValueError) as exc:
             _warn(f"no fit to the raw motor response: {exc}", warnings_)
     worst = int(np.argmax(mfit.relative_error))
     if mfit.relative_error[worst] > 0.2:

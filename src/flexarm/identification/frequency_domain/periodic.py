@@ -105,10 +105,49 @@ class PeriodicFRF:
                                    "even_db": [nan(b.even_db) for b in bands],
                                    "noise_db": [nan(b.noise_db) for b in bands]}
             out[name] = d
+        sp = self.spectra
+        spectra = None if not sp else {
+            "note": "mean DFT over the steady periods (1/P scaling) of input then outputs at "
+                    "every line 0..P/2, their variances, and the number of periods M",
+            "re": sp["mean"].real.tolist(), "im": sp["mean"].imag.tolist(),
+            "var": sp["var"].tolist(), "M": int(sp["M"])}
         return {"input": self.input, "frequency_hz": self.frequency_hz.tolist(),
                 "lines": self.lines.tolist(), "period_samples": self.period, "fs_hz": self.fs,
                 "periods_used": self.periods_used, "transient_periods": self.transient_periods,
-                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings}
+                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings,
+                "spectra": spectra}
+
+    @classmethod
+    def from_json(cls, d: dict, source: str = "FRF JSON") -> "PeriodicFRF":
+        """The result back from :meth:`to_json` (``spectra`` needed for the friction
+        analysis of :mod:`.multisine_friction`)."""
+        try:
+            names = list(d["outputs"])
+            G = np.array([np.asarray(d["outputs"][n]["re"]) + 1j * np.asarray(d["outputs"][n]["im"])
+                          for n in names])
+            f = np.asarray(d["frequency_hz"], float)
+            nstd = np.array([d["outputs"][n]["noise_std"] for n in names], float)
+            tstd = (np.array([d["outputs"][n]["total_std"] for n in names], float)
+                    if all("total_std" in d["outputs"][n] for n in names) else None)
+            dist = None
+            if all("distortion" in d["outputs"][n] for n in names):
+                fl = lambda v: math.nan if v is None else float(v)  # noqa: E731
+                dist = {n: [Band(tuple(b), fl(o), fl(e), fl(z)) for b, o, e, z in zip(
+                    *(d["outputs"][n]["distortion"][k] for k in ("band_hz", "odd_db", "even_db",
+                                                                "noise_db")))] for n in names}
+            sp = d.get("spectra")
+            spectra = {} if not sp else {
+                "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
+                "var": np.asarray(sp["var"], float), "M": int(sp["M"]),
+                "lines": np.arange(len(sp["re"][0])), "excited": np.asarray(d["lines"], int)}
+            frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * f,
+                                                inputs=[d["input"]], outputs=names)
+            return cls(frd, G, f, np.asarray(d["lines"], int), names, d["input"], nstd, tstd,
+                       dist, int(d["period_samples"]), float(d["fs_hz"]), int(d["periods_used"]),
+                       int(d["transient_periods"]), spectra, list(d.get("warnings", [])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise IdentificationError(f"{source}: not an FRF written by flexarm frf "
+                                      f"(missing or bad {exc})") from None
 
     def verdict(self) -> str:
         """A plain sentence per output about the nonlinear distortion."""
@@ -311,6 +350,170 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
                        P, float(fs), M, nt, spectra, notes)
 
 
+def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int = 2,
+            half_width: int = 5, f_min: float | None = None, f_max: float | None = None,
+            max_lines: int = 2000, input_name: str = "input", reference: np.ndarray | None = None,
+            source: str = "<data>") -> PeriodicFRF:
+    """FRF of a record that is not periodic or not in steady state: the local polynomial
+    method (LPM; Pintelon & Schoukens 2012). With the DFTs U(k), Y(k) of the whole record
+    (N samples), around each line k and r = −n..n (n = ``half_width``),
+
+        Y(k+r) = Σ_{s=0}^{R} g_s r^s U(k+r) + Σ_{s=0}^{R} t_s r^s + V(k+r),   R = ``order``,
+
+    G(k) = g_0 (the FRF, θ-independent of the transient, which the smooth t-polynomial
+    absorbs along with leakage), by least squares over the 2n+1 lines. The noise variance
+    from the residual, σ̂²_V = ‖e‖²/q with q = 2n+1 − 2(R+1) degrees of freedom, and
+    var Ĝ(k) = σ̂²_V [(KᴴK)⁻¹]_00 (K the local regressor matrix) give ``noise_std``. The
+    input is taken as exact (noise on it biases G as in any direct estimate).
+
+    Closed loop (``reference`` given, the indirect method): the same local model with the
+    reference R as regressor, for the input and each output; G = G_yr/G_ur, and to first
+    order var G = |G|² (var G_yr/|G_yr|² + var G_ur/|G_ur|² − 2 Re(cov/(G_yr G_ur*))),
+    the covariance from the residuals' cross-product (the loop makes the input's and the
+    output's noise correlated, which biases the direct estimate; this one is not biased
+    by it). Lines in
+    [f_min, f_max] (default the whole band the windows fit), at most ``max_lines`` of them
+    evenly spread. Returned as a :class:`PeriodicFRF` with ``period`` = N, one "period"
+    used, no distortion table (detection lines need a periodic excitation)."""
+    names = list(y)
+    chans = {input_name: np.asarray(u, float), **{k: np.asarray(v, float) for k, v in y.items()}}
+    if reference is not None:
+        chans["reference"] = np.asarray(reference, float)
+    for k, v in chans.items():
+        if v.ndim != 1 or not np.all(np.isfinite(v)):
+            raise IdentificationError(f"{source}: signal {k!r} must be 1-D and finite")
+    lens = {k: len(v) for k, v in chans.items()}
+    if len(set(lens.values())) > 1:
+        raise IdentificationError(f"{source}: channels of different lengths: "
+                                  + ", ".join(f"{k} {n}" for k, n in lens.items()))
+    R, n = int(order), int(half_width)
+    q = 2 * n + 1 - 2 * (R + 1)
+    if R < 0 or q < 1:
+        raise IdentificationError(f"{source}: LPM order {R} with half_width {n} leaves {q} "
+                                  "degrees of freedom; need 2·half_width + 1 > 2·(order + 1)")
+    N = lens[input_name]
+    X = np.fft.rfft(np.stack(list(chans.values())), axis=-1) / np.sqrt(N)
+    df = fs / N
+    k0 = max(n + 1, int(np.ceil((f_min or 0) / df)))
+    k1 = min(X.shape[-1] - n - 2, int(np.floor(f_max / df)) if f_max else X.shape[-1])
+    if k1 < k0:
+        raise IdentificationError(f"{source}: {N} samples give no line in the band with "
+                                  f"{n} lines on each side; record longer or widen the band")
+    reg = X[-1] if reference is not None else X[0]  # the local regressor's signal
+    ks = np.arange(k0, k1 + 1)
+    # lines whose window carries input: the local input energy above 1e-8 of the largest
+    # (an unexcited window makes the regressor singular; G is not observable there)
+    e_loc = np.convolve(np.abs(reg) ** 2, np.ones(2 * n + 1), mode="same")[ks]
+    ks = ks[e_loc > 1e-8 * e_loc.max()]
+    if ks.size == 0:
+        raise IdentificationError(f"{source}: the input {input_name!r} carries no power in "
+                                  "the band: no FRF line can be estimated")
+    if ks.size > max_lines:
+        ks = ks[np.round(np.linspace(0, ks.size - 1, max_lines)).astype(int)]
+    r = np.arange(-n, n + 1)
+    idx = ks[:, None] + r[None, :]  # (L, 2n+1)
+    Uw = reg[idx]
+    pw = r[None, :, None] ** np.arange(R + 1)[None, None, :]  # (1, 2n+1, R+1)
+    K = np.concatenate([Uw[:, :, None] * pw, np.broadcast_to(pw, Uw.shape + (R + 1,))], axis=-1)
+    KhK = np.einsum("lri,lrj->lij", K.conj(), K)
+    # rank check: a window with too few excited lines (e.g. a periodic multisine, whose
+    # record DFT is zero off the period's lines) leaves G undetermined there: dropped
+    # (R + 1 lines with input above 1e-6 of the window's largest; then the conditioning
+    # of the column-scaled normal matrix, its scaling floored so round-off columns stay small)
+    au = np.abs(Uw)
+    enough = np.sum(au > 1e-6 * au.max(axis=1, keepdims=True), axis=1) >= R + 1
+    dd = np.einsum("lii->li", KhK).real
+    dg = 1 / np.sqrt(np.maximum(dd, 1e-12 * dd.max(axis=1, keepdims=True)))
+    ev = np.linalg.eigvalsh(KhK * dg[:, :, None] * dg[:, None, :])
+    ok = enough & (ev[:, 0] > 1e-10 * ev[:, -1])
+    if not ok.any():
+        raise IdentificationError(
+            f"{source}: no window of {2 * n + 1} lines holds enough excited lines for the "
+            f"local polynomial of order {R}: the LPM needs a broadband input (noise, a sweep, "
+            "a full multisine); for a periodic multisine use the periodic method")
+    ks, K, KhK, idx = ks[ok], K[ok], KhK[ok], idx[ok]
+    KhK_inv = np.linalg.inv(KhK)
+    G = np.empty((len(names), ks.size), complex)
+    sd = np.empty((len(names), ks.size))
+
+    def local(x):
+        """g_0 and the residual of the local model for the channel x."""
+        w = x[idx]
+        theta = np.einsum("lij,lrj,lr->li", KhK_inv, K.conj(), w)
+        return theta[:, 0], w - np.einsum("lri,li->lr", K, theta)
+
+    p00 = KhK_inv[:, 0, 0].real
+    if reference is not None:
+        gu, eu = local(X[0])
+    for j in range(len(names)):
+        gy, ey = local(X[1 + j])
+        if reference is None:
+            G[j] = gy
+            sd[j] = np.sqrt(np.sum(np.abs(ey) ** 2, axis=1) / q * p00)
+            continue
+        vy = np.sum(np.abs(ey) ** 2, axis=1) / q * p00
+        vu = np.sum(np.abs(eu) ** 2, axis=1) / q * p00
+        cyu = np.sum(ey * eu.conj(), axis=1) / q * p00
+        G[j] = gy / gu
+        sd[j] = np.abs(G[j]) * np.sqrt(np.maximum(
+            vy / np.abs(gy) ** 2 + vu / np.abs(gu) ** 2 - 2 * np.real(cyu / (gy * gu.conj())), 0))
+    freq = ks * df
+    frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq, inputs=[input_name],
+                                        outputs=names)
+    return PeriodicFRF(frd, G, freq, ks, names, input_name, sd, None, None, N, float(fs), 1, 0,
+                       {}, [f"{source}: local polynomial method (order {R}, {2 * n + 1} lines, "
+                            f"{q} dof per line" + (", indirect through the reference)"
+                                                   if reference is not None else ")")])
+
+
+def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>") -> PeriodicFRF:
+    """The BLA over R ≥ 2 realisations (records with new random phases, same lines), the
+    robust method (Pintelon & Schoukens 2012):
+
+        G_BLA,k = (1/R) Σ_r G_r,k,
+        var_noise G_BLA,k = (1/R²) Σ_r var_noise G_r,k,
+        var_total G_BLA,k = Σ_r |G_r,k − G_BLA,k|² / (R (R − 1)),
+
+    the last the sample variance of the mean over realisations: noise plus the stochastic
+    nonlinear contributions, which change with the phases (no detection lines needed).
+    The distortion table is the power mean of the realisations' levels per band. Raises
+    :class:`IdentificationError` when the records disagree on lines, outputs or rate."""
+    rs = list(results)
+    if len(rs) < 2:
+        raise IdentificationError(f"{source}: the robust BLA needs at least two realisations; "
+                                  f"got {len(rs)}")
+    first = rs[0]
+    for k, r in enumerate(rs[1:], 2):
+        if (r.outputs != first.outputs or r.fs != first.fs or r.period != first.period
+                or not np.array_equal(r.lines, first.lines)):
+            raise IdentificationError(
+                f"{source}: realisation {k} differs from the first in its excited lines, "
+                f"outputs, period or sampling rate ({r.outputs} at {r.fs:g} Hz, {r.period} "
+                f"samples, {len(r.lines)} lines vs {first.outputs} at {first.fs:g} Hz, "
+                f"{first.period} samples, {len(first.lines)} lines): one design per call")
+    R = len(rs)
+    G = np.stack([r.response for r in rs])  # (R, ny, K)
+    Gm = G.mean(axis=0)
+    noise = np.sqrt(np.sum(np.stack([r.noise_std for r in rs]) ** 2, axis=0)) / R
+    total = np.sqrt(np.sum(np.abs(G - Gm) ** 2, axis=0) / (R * (R - 1)))
+    dist = None
+    if all(r.distortion is not None for r in rs):
+        def pmean(vals):
+            v = [x for x in vals if math.isfinite(x)]
+            return 10 * math.log10(np.mean([10 ** (x / 10) for x in v])) if v else math.nan
+        dist = {n: [Band(bs[0].band_hz, pmean([b.odd_db for b in bs]),
+                         pmean([b.even_db for b in bs]), pmean([b.noise_db for b in bs]))
+                    for bs in zip(*(r.distortion[n] for r in rs))] for n in first.outputs}
+    frd = control.FrequencyResponseData(Gm[:, None, :], 2 * np.pi * first.frequency_hz,
+                                        inputs=[first.input], outputs=first.outputs)
+    notes = [w for r in rs for w in r.warnings]
+    notes.append(f"{source}: BLA over {R} realisations (robust method): total_std from their "
+                 "spread")
+    return PeriodicFRF(frd, Gm, first.frequency_hz, first.lines, first.outputs, first.input,
+                       noise, total, dist, first.period, first.fs,
+                       sum(r.periods_used for r in rs), first.transient_periods, {}, notes)
+
+
 def periodic_change(xp: np.ndarray) -> float:
     """Power of the difference of consecutive periods over the power of the signal (rows =
     periods): 2σ²/(P_s + σ²) for a periodic signal with white noise σ², ≈ 2 when the period
@@ -327,6 +530,26 @@ def plot_distortion(res: PeriodicFRF, path=None):
     import matplotlib.pyplot as plt
 
     sp = res.spectra
+    if not sp:  # LPM or several realisations: the FRF with its standard deviations
+        fig, axes = plt.subplots(len(res.outputs), 1, figsize=(8, 3.2 * len(res.outputs)),
+                                 squeeze=False)
+        db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
+        for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
+            ax.plot(res.frequency_hz, db(res.response[j]), "k+", label="FRF")
+            ax.plot(res.frequency_hz, db(res.noise_std[j]), "g-", lw=0.8, label="noise std")
+            if res.total_std is not None:
+                ax.plot(res.frequency_hz, db(res.total_std[j]), "r-", lw=0.8, label="total std")
+            ax.set_ylabel(f"{name} (dB)")
+            ax.set_xscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=7)
+        axes[-1, 0].set_xlabel("frequency (Hz)")
+        fig.tight_layout()
+        if path is not None:
+            from flexarm.io.write import save_figure
+            save_figure(fig, path, overwrite=True, dpi=120)
+            plt.close(fig)
+        return fig
     df = res.fs / res.period
     exc = res.lines
     kmax = int(exc.max())
@@ -353,6 +576,7 @@ def plot_distortion(res: PeriodicFRF, path=None):
     axes[-1, 0].set_xlabel("frequency (Hz)")
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        from flexarm.io.write import save_figure
+        save_figure(fig, path, overwrite=True, dpi=120)
         plt.close(fig)
     return fig

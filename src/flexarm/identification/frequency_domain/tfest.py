@@ -13,12 +13,25 @@ Frequencies are scaled, s̃ = s/ω_s (ω_s the geometric mean of the data's), wh
    of V(θ) = Σ_k |Ĥ(jω_k, θ) − H_k|² / σ_k²: with σ_k² the variance of the FRF estimate
    (noise, or the BLA's total variance) this is the maximum-likelihood cost of the FRF
    (the sample-ML cost linearised in the FRF; Pintelon & Schoukens 2012, Secs. 9.11, 10.2).
+   ``cost="log"`` fits instead the complex log-ratio
+
+       V_log(θ) = Σ_k w_k² |ln(Ĥ(jω_k, θ)/H_k)|²,   ln z = ln|z| + j∠z,
+
+   log-magnitude (neper) and phase (rad) errors with equal weight, the measure of FRB
+   eq. (6); w_k = |H_k|/σ_k (to first order ln(Ĥ/H) ≈ (Ĥ − H)/H, so with known variances
+   V_log has the same χ² law as V) or 1. It suits data spanning many decades of |H| with
+   relative errors (the sine experiments of FRB Sec. II), where V without variances is
+   dominated by the largest |H|. A trial model whose N or D vanishes at a datum gets a
+   large finite residual (50 neper), not ln 0.
 3. Stability: with ``stable=True`` unstable poles are reflected and the fit redone; any
    left are reported (``unstable_poles``).
 4. With known variances E[V] = F − n_θ/2 and std(V) = √(F − n_θ/2) (V = ½ χ² with 2F − n_θ
    degrees of freedom); the verdict is a two-sided chi-square test at 1 %.  Parameter
    covariance ½ (JᵀJ)⁻¹ (J the Jacobian of the real-stacked weighted residuals); without
    variances, relative weights 1/|H_k| and the covariance scaled by the residual variance.
+   A rejected fit (cost above its 99 % range) also reports ``std_inflated`` = std ·
+   √(V/E[V]) per parameter: the spread if the misfit were noise of a larger variance (a
+   common, optimistic correction; model errors are not noise).
 5. Order selection (:func:`tfest_orders`): AIC = 2V + 2n_θ, BIC = 2V + n_θ ln 2F.
 
 The physical two-mass structure (motor and load angle per unit of input, one fit for both
@@ -41,7 +54,12 @@ class TFEstError(ValueError):
 
 @dataclass
 class TFEstimate:
-    """A frequency-domain fit: the model, its cost against the expected, parameters."""
+    """A frequency-domain fit: the model, its cost against the expected, parameters.
+
+    ``parameters.<name>`` = ``{value, std}`` (std from the covariance, valid when the
+    model fits to the noise level) and, when the χ² check rejects the fit, ``std_inflated``
+    = std·√(cost/expected_cost) beside it. ``relative_error`` is |Ĥ(jω_k) − H_k|/|H_k| per
+    datum; ``message`` how the nonlinear solver ended; ``cost_kind`` "ml" or "log"."""
 
     tf: control.TransferFunction
     delay: float
@@ -54,6 +72,9 @@ class TFEstimate:
     n_parameters: int
     unstable_poles: list[complex] = field(default_factory=list)
     residual: np.ndarray | None = None  # weighted complex residuals (model − data)/σ
+    relative_error: np.ndarray | None = None
+    message: str = ""
+    cost_kind: str = "ml"
 
     @property
     def aic(self) -> float:
@@ -74,6 +95,24 @@ class TFEstimate:
         return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * self.delay)
 
 
+def cost_rejected(cost, F, n_par, expected) -> bool:
+    """True when the cost lies above the 99 % range of ½χ²(2F − n_θ) (the verdict's test)."""
+    if expected is None:
+        return False
+    return bool(cost > chi2.ppf(0.995, 2 * F - n_par) / 2)
+
+
+def inflate_std(parameters: dict, cost, F, n_par, expected) -> dict:
+    """Add ``std_inflated`` = std·√(cost/expected) to every parameter when the χ² check
+    rejects the fit: the usual correction when the residual is larger than the noise
+    (the misfit treated as white noise of a larger variance); optimistic, since model
+    errors are neither random nor independent from line to line."""
+    if not cost_rejected(cost, F, n_par, expected):
+        return parameters
+    k = float(np.sqrt(cost / expected))
+    return {n: {**v, "std_inflated": v["std"] * k} for n, v in parameters.items()}
+
+
 def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
     """Chi-square test of the ML cost (2V ~ χ² with 2F − n_θ degrees of freedom)."""
     extra = f"; {len(unstable)} unstable pole(s) remain" if len(unstable) else ""
@@ -84,7 +123,9 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
     if cost > hi:
         return (f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
                 f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
-                "to the noise level (model errors or nonlinear distortion)" + extra)
+                "to the noise level (model errors or nonlinear distortion); the standard "
+                f"deviations 'std' hold for noise only, 'std_inflated' (× {np.sqrt(cost / expected):.3g}) "
+                "treat the misfit as extra noise" + extra)
     if cost < lo:
         return (f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "
                 "the variances are overestimated or the model overfits" + extra)
@@ -110,8 +151,9 @@ def _frd_data(frd, output: int, input: int, std):
     return omega, H, std
 
 
-def _levy_sk(s, Hr, w, nz, nd, iterations=20):
-    """Levy then SK: minimise Σ |w (N − Hr D)/D_prev|² over b (nz+1) and a (nd, D monic)."""
+def _levy_sk(s, Hr, w, nz, nd, iterations=30):
+    """Levy then SK: minimise Σ |w (N − Hr D)/D_prev|² over b (nz+1) and a (nd, D monic);
+    unstable roots of D reflected; N re-solved for the final (stable) D."""
     d_prev = np.ones_like(s)
     pw = np.vander(s, max(nz, nd) + 1, increasing=True)
     b = a = None
@@ -130,13 +172,17 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=20):
         if done:
             break
         d_prev = np.polynomial.polynomial.polyval(s, a)
+    # N for the best fit with the stabilised D (linear in b): Σ |w (N/D − Hr)|²
+    dv = np.polynomial.polynomial.polyval(s, a)
+    A = pw[:, : nz + 1] / dv[:, None] * w[:, None]
+    b = np.linalg.lstsq(np.vstack([A.real, A.imag]),
+                        np.concatenate([(Hr * w).real, (Hr * w).imag]), rcond=None)[0]
     return b, a
 
 
 def reflect_unstable_roots(a):
     """Reflect right-half-plane roots of the monic polynomial ``a`` (ascending) into the
-    left half plane (the stable polynomial with the same magnitude response); the one
-    copy, also used by :mod:`flexarm.identification.frequency_domain.tffit`."""
+    left half plane (the stable polynomial with the same magnitude response)."""
     if len(a) <= 1:
         return a
     r = np.roots(a[::-1])
@@ -146,15 +192,23 @@ def reflect_unstable_roots(a):
     return np.real(np.poly(r))[::-1]
 
 
+# Log-ratio residual where the trial model's N or D vanishes on a datum (ln 0): large (a
+# factor e^50) and finite, so the solver's steps stay finite.
+_LOG_PENALTY = 50.0
+
+
 def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool | float = False,
           std=None, stable: bool = True, output: int = 0, input: int = 0,
-          max_nfev: int = 200) -> TFEstimate:
+          max_nfev: int = 200, cost: str = "ml") -> TFEstimate:
     """Fit H(s) = N/(s^k D) e^{−sτ} to one channel of a python-control FRD (module docstring).
 
     ``std``: standard deviation of the FRF estimate per frequency (a PeriodicFRF's
     ``noise_std`` or ``total_std``); ``delay``: False (none), True (estimated) or a fixed
-    value in seconds.
+    value in seconds; ``cost``: ``"ml"`` (Σ|Ĥ − H|²/σ², default) or ``"log"`` (the
+    log-ratio of FRB eq. (6), weighted by |H|/σ when ``std`` is given).
     """
+    if cost not in ("ml", "log"):
+        raise TFEstError(f"cost = {cost!r}: choose 'ml' (Σ|Ĥ−H|²/σ²) or 'log' (FRB eq. (6))")
     omega, H, std = _frd_data(frd, output, input, std)
     nd = n_poles - integrators
     if integrators < 0 or nd < 0 or n_zeros < 0:
@@ -168,24 +222,35 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     ws = float(np.exp(np.mean(np.log(omega))))
     s = 1j * omega / ws
     sig = std if std is not None else np.abs(H)
-    w = 1.0 / sig
+    w = 1.0 / sig  # weight of the error Ĥ − H
+    w_log = np.abs(H) * w  # weight of ln(Ĥ/H) ≈ (Ĥ − H)/H
+    use_log = cost == "log"
 
     def start(tau):
+        # N − Hr D = s^k D (Ĥ − H) e^{jωτ}: weight w/|s^k| makes the SK cost Σ w²|Ĥ − H|²
         Hr = H * s**integrators * np.exp(1j * omega * tau)
-        b, a = _levy_sk(s, Hr, w, n_zeros, nd)
-        return b, a
+        return _levy_sk(s, Hr, w / np.abs(s) ** integrators, n_zeros, nd)
 
     def model(b, a, tau):
         return (np.polynomial.polynomial.polyval(s, b)
                 / (s**integrators * np.polynomial.polynomial.polyval(s, a))
                 * np.exp(-1j * omega * tau))
 
+    def cresid(b, a, tau):
+        """Weighted complex residual of the chosen cost."""
+        Hm = model(b, a, tau)
+        if not use_log:
+            return (Hm - H) * w
+        with np.errstate(all="ignore"):
+            e = np.log(Hm / H) * w_log
+        return np.where(np.isfinite(e), e, _LOG_PENALTY)
+
     if delay is True:
         grid = np.linspace(0, np.pi / omega.max(), 21)
         costs = []
         for tau in grid:
             b, a = start(tau)
-            costs.append(np.sum(np.abs((model(b, a, tau) - H) * w) ** 2))
+            costs.append(np.sum(np.abs(cresid(b, a, tau)) ** 2))
         tau0 = float(grid[int(np.argmin(costs))])
     else:
         tau0 = float(delay) if delay else 0.0
@@ -197,19 +262,27 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
         return x[:nb], np.r_[x[nb:nb + nd], 1.0], (x[-1] / ws if fit_tau else tau0)
 
     def resid(x):
-        bb, aa, tau = unpack(x)
-        e = (model(bb, aa, tau) - H) * w
+        e = cresid(*unpack(x))
         return np.concatenate([e.real, e.imag])
 
     def jac(x):
         bb, aa, tau = unpack(x)
+        Nv = np.polynomial.polynomial.polyval(s, bb)
         Dv = np.polynomial.polynomial.polyval(s, aa)
-        Hm = model(bb, aa, tau)
-        cols = [s**i / (s**integrators * Dv) * np.exp(-1j * omega * tau) for i in range(nb)]
-        cols += [-Hm * s**i / Dv for i in range(nd)]
-        if fit_tau:
-            cols.append(-1j * omega * Hm / ws)
-        J = np.column_stack(cols) * w[:, None]
+        if use_log:  # ∂ ln Ĥ: s^i/N, −s^i/D, −jω
+            with np.errstate(all="ignore"):
+                cols = [s**i / Nv for i in range(nb)] + [-(s**i) / Dv for i in range(nd)]
+            if fit_tau:
+                cols.append(-1j * omega / ws + 0 * s)
+            J = np.column_stack(cols) * w_log[:, None]
+            J = np.where(np.isfinite(J), J, 0.0)
+        else:
+            Hm = model(bb, aa, tau)
+            cols = [s**i / (s**integrators * Dv) * np.exp(-1j * omega * tau) for i in range(nb)]
+            cols += [-Hm * s**i / Dv for i in range(nd)]
+            if fit_tau:
+                cols.append(-1j * omega * Hm / ws)
+            J = np.column_stack(cols) * w[:, None]
         return np.vstack([J.real, J.imag])
 
     # delay parameter in units of 1/ω_s (scaled like the coefficients)
@@ -226,12 +299,12 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
             break
         x0 = np.r_[x[:nb], reflect_unstable_roots(a_fit)[:-1], x[nb + nd:]]
     bb, aa, tau = unpack(x)
-    cost = float(np.sum(sol.fun**2))
+    cost_value = float(np.sum(sol.fun**2))
     Jm = jac(x)
     JtJ_inv = np.linalg.pinv(Jm.T @ Jm)
     dof = 2 * F - n_par
     # real residuals have variance 1/2 with known σ; else their sample variance
-    cov_x = 0.5 * JtJ_inv if std is not None else JtJ_inv * cost / max(dof, 1)
+    cov_x = 0.5 * JtJ_inv if std is not None else JtJ_inv * cost_value / max(dof, 1)
     # scaled → physical coefficients: num_i = b_i ω_s^{nd+k−i}, den_i = a_i ω_s^{nd−i}
     scale = np.r_[ws ** (nd + integrators - np.arange(nb)), ws ** (nd - np.arange(nd)),
                   [1 / ws] if fit_tau else []]
@@ -246,9 +319,27 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     if fit_tau:
         params["delay_s"] = {"value": float(tau), "std": float(sd[-1])}
     exp = F - n_par / 2 if std is not None else None
-    e = (model(bb, aa, tau) - H) * w
-    return TFEstimate(tf, float(tau), cost, exp, np.sqrt(exp) if exp is not None else None,
-                      params, cov, F, n_par, unstable, e)
+    params = inflate_std(params, cost_value, F, n_par, exp)
+    Hm = model(bb, aa, tau)
+    message = str(sol.message) + ("" if not unstable else
+                                  f"; {len(unstable)} unstable pole(s) left")
+    return TFEstimate(tf, float(tau), cost_value, exp, np.sqrt(exp) if exp is not None else None,
+                      params, cov, F, n_par, unstable, cresid(bb, aa, tau),
+                      np.abs(Hm - H) / np.abs(H), message, cost)
+
+
+def tf_coefficients(tf: control.TransferFunction) -> dict[str, list[float]]:
+    """{num: [...], den: [...]} of a SISO transfer function, descending powers of s."""
+    num = np.atleast_1d(np.squeeze(tf.num[0][0])).astype(float)
+    den = np.atleast_1d(np.squeeze(tf.den[0][0])).astype(float)
+    return {"num": [float(x) for x in num], "den": [float(x) for x in den]}
+
+
+def tf_response(tf: control.TransferFunction, omega) -> np.ndarray:
+    """H(jω) of a SISO transfer function at ``omega`` (rad/s)."""
+    c = tf_coefficients(tf)
+    s = 1j * np.asarray(omega, dtype=float)
+    return np.polyval(c["num"], s) / np.polyval(c["den"], s)
 
 
 def tfest_orders(frd, poles, *, relative_degree: int = 1, criterion: str = "aic", **kw):
@@ -434,5 +525,6 @@ def fit_two_mass(omega, motor=None, load=None, *, motor_std=None, load_std=None,
     params = {n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
               for i, (n, v) in enumerate(zip(names, vals))}
     exp = F - n_par / 2 if known else None
+    params = inflate_std(params, cost, F, n_par, exp)
     return TwoMassFit(params, cost, exp, np.sqrt(exp) if exp is not None else None, F, n_par,
                       cov_all, free, best.fun)

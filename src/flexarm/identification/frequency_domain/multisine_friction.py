@@ -1,0 +1,340 @@
+"""Coulomb friction from a periodic (multisine) record: the odd distortion matched by
+flexarm's own simulator of the fitted two-mass model with Coulomb friction.
+
+Beside the FRB ω0/3ω0 estimate (:mod:`flexarm.identification.frequency_domain.coulomb`).
+Per unit of the input's torque constant (the input a current i in A, the outputs angles in
+rad, as in :func:`flexarm.identification.frequency_domain.tfest.fit_two_mass`):
+
+    J_m θ̈m = i − (c s + k)(θm − θl) − d_m' θ̇m − C_f sign(θ̇m),
+    J_l θ̈l = (c s + k)(θm − θl) − d_l θ̇l,
+
+C_f (A) at the motor (the single-link arm of :mod:`flexarm.models.assembly` with a
+transfer-function beam is exactly this two-mass drive:
+:func:`two_mass_scenario`), Karnopp stick with breakaway = C_f.
+
+Method:
+
+1. The BLA's viscous motor damping d_m already holds the friction's linear part: for a
+   Gaussian-like velocity of rms σ_v, Bussgang's theorem gives the best linear gain of
+   C_f sign(v) as C_f E|v|/E[v²] = C_f √(2/π)/σ_v =: d_eq. The simulator gets
+   d_m' = d_m − d_eq (σ_v from the measured periodic motor angle,
+   σ_v² = Σ_{k≥1} 2 |ω_k Θ_k|²).
+2. One period of the measured input (its mean over the steady periods, DC removed: a
+   constant torque would run the free rigid body away) is played for
+   ``n_tr`` + 2 periods (n_tr ≥ 1 covers 10 time constants of the slowest mode: the
+   rigid body's J/(d_m' + d_l) or the resonance's 1/(ζ ω_r); at most
+   ``MAX_TRANSIENT_PERIODS``) in :class:`flexarm.sim.sampled.SampledLoop` through
+   :func:`flexarm.sim.build.prepare`; :func:`~.periodic.periodic_frf` of the simulated
+   output gives the output spectrum Ŷ_d(C_f) at the odd detection lines d.
+3. Measured odd power per line P_d = |Ȳ_d|² − σ²_d/M (noise removed), in the octave bands
+   where the odd level is ``DETECT_DB`` above the noise; C_f solves
+   Σ_d |Ŷ_d(C_f)|² = Σ_d P_d (log-log interpolation on a grid of C_f, then secant steps).
+   The measured input's own content at the odd lines (a current loop reacting to the
+   friction puts some there) is played too, so its linear response is part of both sides
+   (``linear_share_db``: the frictionless simulator's odd power re the measured).
+4. Uncertainty: the line-by-line log ratio ρ_d = ln(P_d/|Ŷ_d|²) at the solution has a
+   scatter s_ρ (noise and model error, lines taken as independent); the sum's relative
+   std is ≈ s_ρ/√n_d and std(ln C_f) = s_ρ/(√n_d · ∂ln P/∂ln C_f). The C_f of each band
+   alone is reported too (their spread shows model error across frequency).
+5. Conditioning: at one amplitude the BLA cannot tell C_f from viscous damping (both are a
+   damping d_eq); only the odd distortion can. Without odd distortion above the noise the
+   result is the upper bound (the level whose distortion reaches the noise) and a warning
+   says so; a d_eq above the BLA's d_m (the friction would need negative viscous damping)
+   is warned too. Across amplitudes, :func:`coulomb_from_amplitudes`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
+from flexarm.identification.frequency_domain.tfest import _derived
+
+#: Simulated friction levels (× the input rms) for the first search grid.
+GRID = np.geomspace(1e-3, 0.5, 8)
+#: Largest number of transient periods simulated before the two analysed ones.
+MAX_TRANSIENT_PERIODS = 12
+
+
+def two_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
+                      substeps: int = 4) -> dict:
+    """Scenario dict of the two-mass drive (per unit torque constant; ``p`` as
+    :func:`~.tfest.two_mass_response`) as flexarm's single-link arm with a transfer-function
+    beam: θl/θm = G_b = (c s + k)/(J_l s² + (c + d_l) s + k); the coupling torque
+    (c s + k)(θm − θl) = c s θm + H(s)(1 − G_b)θm with H = ((k J_l − c²) s + (k d_l − c k))
+    /(J_l s + d_l) (proper), so the motor's viscous term is d_m + c. ``coulomb`` in A
+    (torque per unit of the torque constant); the delay is left out."""
+    J, r = p["total_inertia"], p["inertia_ratio"]
+    Jm, Jl = J / (1 + r), J * r / (1 + r)
+    wr = 2 * np.pi * p["resonance_hz"]
+    k = wr**2 * Jm * Jl / J
+    c = 2 * p["shaft_damping"] * k / wr
+    c = c if c * wr > 1e-12 * k else 0.0  # a shaft damping at round-off: none
+    dm = max(float(p["motor_viscous"]), 0.0)
+    dl = max(float(p["load_viscous"]), 1e-9 * k / wr)  # H's pole off the origin
+    return {
+        "name": "two-mass-from-frf",
+        "arm": {"kind": "single_link",
+                "motor": {"drive": "current", "inertia": Jm, "viscous": dm + c,
+                          "torque_constant": 1.0, "current_limit": 1e9},
+                "friction": ({"model": "coulomb", "coulomb": float(coulomb),
+                              "static": float(coulomb)} if coulomb > 0 else {"model": "none"}),
+                "beam": {"model": "transfer_function", "tip_num": [c, k] if c else [k],
+                         "tip_den": [Jl, c + dl, k],
+                         "coupling_num": [k * Jl - c * c, k * dl - c * k],
+                         "coupling_den": [Jl, dl]}},
+        "sampling": {"period": 1.0 / fs, "delay": 0},
+        "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
+        "sensors": {"motor_angle": {}, "tip_angle": {}},
+    }
+
+
+@dataclass
+class MultisineCoulomb:
+    """C_f (A) from the odd distortion; see the module docstring."""
+
+    coulomb_current: float
+    std: float
+    band_values: list[float | None]
+    band_hz: list[tuple[float, float]]
+    detected: bool
+    equivalent_damping: float  # d_eq = C_f √(2/π)/σ_v (A·s/rad)
+    motor_viscous_bla: float  # d_m of the BLA fit
+    velocity_rms: float
+    linear_share_db: float  # odd power of the frictionless simulator re the measured
+    simulations: int
+    warnings: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return {"value": self.coulomb_current, "std": self.std,
+                "band_hz": [list(b) for b in self.band_hz], "band_values": self.band_values,
+                "detected": self.detected, "equivalent_damping": self.equivalent_damping,
+                "motor_viscous_bla": self.motor_viscous_bla, "velocity_rms": self.velocity_rms,
+                "linear_share_db": self.linear_share_db, "simulations": self.simulations,
+                "method": "odd distortion matched by flexarm's simulator of the fitted "
+                          "two-mass model with Coulomb friction at the motor",
+                "warnings": self.warnings}
+
+
+def _odd_lines(frf: PeriodicFRF) -> np.ndarray:
+    exc = frf.lines
+    det = np.setdiff1d(np.arange(exc.min(), exc.max() + 1), exc)
+    if not np.all(exc % 2 == 1):
+        raise IdentificationError(
+            f"{frf.input}: the excited lines are not all odd; the odd distortion (the Coulomb "
+            "friction's signature) needs an odd multisine (flexarm excite --kind random-odd)")
+    odd = det[det % 2 == 1]
+    if odd.size == 0:
+        raise IdentificationError(
+            f"{frf.input}: no odd detection lines between the excited ones: the Coulomb level "
+            "cannot be measured; use a random-odd multisine (flexarm excite --kind random-odd)")
+    return odd
+
+
+def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
+    kmin, kmax = int(frf.lines.min()), int(frf.lines.max())
+    edges = [kmin]
+    while edges[-1] * 2 < kmax:
+        edges.append(edges[-1] * 2)
+    edges.append(kmax + 1)
+    return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:])]
+
+
+def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "motor_angle",
+                            progress=None) -> MultisineCoulomb:
+    """C_f (A) from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
+    of the measured record) and the two-mass parameters ``params`` fitted to its BLA
+    (``TwoMassFit.values``); see the module docstring. ``progress(i, n)`` after each
+    simulation."""
+    if output not in frf.outputs:
+        raise IdentificationError(f"output {output!r} is not in the FRF (outputs: "
+                                  f"{', '.join(frf.outputs)})")
+    sp = frf.spectra
+    P, M, fs = frf.period, sp["M"], frf.fs
+    j = 1 + frf.outputs.index(output)
+    odd = _odd_lines(frf)
+    mean, var = sp["mean"], sp["var"]
+    y2 = np.abs(mean[j, odd]) ** 2
+    noise = var[j, odd] / M
+    Pd = y2 - noise
+    notes: list[str] = []
+
+    U = mean[0].copy()
+    U[0] = 0.0
+    u = np.fft.irfft(U * P, n=P)
+    sv = velocity_rms(frf, output)
+    J = params["total_inertia"]
+    dm, dl = float(params["motor_viscous"]), float(params["load_viscous"])
+
+    bands = _bands(frf, odd)
+    pos = {int(k): i for i, k in enumerate(odd)}
+    detected = []
+    for lo, hi, ls in bands:
+        if ls.size:
+            idx = [pos[int(k)] for k in ls]
+            if 10 * math.log10(max(y2[idx].mean(), 1e-300) / max(noise[idx].mean(), 1e-300)) >= DETECT_DB:
+                detected.append(ls)
+    use = np.concatenate(detected) if detected else odd
+    sel = np.array([pos[int(k)] for k in use])
+    target = float(np.sum(Pd[sel])) if detected else float(np.sum(noise[sel]))
+
+    def d_eq(cf):
+        return cf * math.sqrt(2 / math.pi) / max(sv, 1e-300)
+
+    from flexarm.control.discrete import FunctionController
+    from flexarm.sim.build import prepare
+    from flexarm.sim.sampled import simulate_loop
+    from flexarm.specs import scenario_from_dict
+    import jax.numpy as jnp
+
+    ctrl = FunctionController(fn=_play, params=None, state0=jnp.zeros(0))
+    count = [0]
+
+    def simulate(cf) -> np.ndarray:
+        dmp = dm - d_eq(cf)
+        p = dict(params, motor_viscous=max(dmp, 0.0))
+        # slowest decay: the rigid body J/(d_m' + d_l) or the resonance 1/(ζ ω_r)
+        zeta = _derived(p)["resonance_damping"]
+        tau = max(J / max(max(dmp, 0.0) + dl, 1e-300),
+                  1 / max(zeta * 2 * math.pi * p["resonance_hz"], 1e-300))
+        ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
+        n = (ntr + 2) * P
+        sc = scenario_from_dict(two_mass_scenario(p, cf, fs, n))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
+            prep = prepare(sc, controller=ctrl, references={"current": np.tile(u, ntr + 2)})
+        out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
+        name = prep.loop.sensors.names.index("motor_angle" if output == "motor_angle"
+                                               else "tip_angle")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = periodic_frf(out["command"][:, 0], {output: out["measured"][:, name]}, fs,
+                               period=P, lines=frf.lines, transient_periods=ntr)
+        count[0] += 1
+        if progress is not None:
+            progress(count[0], None)
+        return np.abs(res.spectra["mean"][1, odd]) ** 2
+
+    urms = float(np.sqrt(np.mean(u**2)))
+    floor = simulate(0.0)
+    grid = GRID * urms
+    sims = [simulate(cf) for cf in grid]
+    tot = np.array([s[sel].sum() for s in sims])
+    lg, lt = np.log(grid), np.log(np.maximum(tot, 1e-300))
+    if target <= tot[0] or target >= tot[-1]:
+        raise IdentificationError(
+            f"{frf.input}: the measured odd distortion ({10 * math.log10(target):.1f} dB re 1 "
+            f"rad²) is outside what the simulated two-mass model gives for C_f from "
+            f"{grid[0]:.3g} to {grid[-1]:.3g} A; the fitted model or the friction structure "
+            "(Coulomb at the motor) does not describe this record")
+    # log-log interpolation on the monotone part, then secant steps with new simulations
+    i = int(np.nonzero(tot >= target)[0][0])
+    pts = [(lg[i - 1], lt[i - 1], sims[i - 1]), (lg[i], lt[i], sims[i])]
+    lt_target = math.log(target)
+    for _ in range(3):
+        (a0, f0, _), (a1, f1, _) = pts[-2], pts[-1]
+        x = a1 + (lt_target - f1) * (a1 - a0) / (f1 - f0) if f1 != f0 else a1
+        x = float(np.clip(x, lg[0], lg[-1]))
+        s = simulate(math.exp(x))
+        pts.append((x, math.log(max(s[sel].sum(), 1e-300)), s))
+        if abs(pts[-1][1] - lt_target) < 1e-3:
+            break
+    x, fx, s_best = min(pts, key=lambda q: abs(q[1] - lt_target))
+    (a0, f0, _), (a1, f1, _) = sorted(pts[-2:], key=lambda q: q[0])
+    slope = (f1 - f0) / (a1 - a0) if a1 != a0 else 2.0
+    slope = slope if slope > 0.2 else 2.0
+    cf = math.exp(x + (lt_target - fx) / slope)
+
+    if detected:
+        ratio = np.log(np.maximum(Pd[sel], noise[sel] * 0.1) / np.maximum(s_best[sel], 1e-300))
+        s_rho = float(np.std(ratio, ddof=1)) if len(ratio) > 1 else 1.0
+        std = cf * s_rho / (math.sqrt(len(sel)) * slope)
+    else:
+        std = cf  # an upper bound only
+    band_vals: list[float | None] = []
+    for lo, hi, ls in bands:
+        if not any(ls is d for d in detected):
+            band_vals.append(None)
+            continue
+        idx = np.array([pos[int(k)] for k in ls])
+        tb = np.array([sm[idx].sum() for sm in sims])
+        want = float(np.sum(Pd[idx]))
+        ok = (tb[:-1] <= want) & (tb[1:] > want)
+        if not ok.any():
+            band_vals.append(None)
+            continue
+        q = int(np.nonzero(ok)[0][0])
+        xb = lg[q] + (math.log(want) - math.log(tb[q])) * (lg[q + 1] - lg[q]) / (
+            math.log(tb[q + 1]) - math.log(tb[q]))
+        band_vals.append(float(math.exp(xb)))
+    floor_db = 10 * math.log10(max(floor[sel].sum(), 1e-300) / target)
+    if not detected:
+        notes.append(
+            f"{output}: no odd distortion {DETECT_DB:g} dB above the noise: at this amplitude "
+            "Coulomb friction cannot be told from viscous damping (both only damp the BLA); "
+            f"C_f = {cf:.3g} A is the upper bound whose distortion would reach the noise level")
+    deq = d_eq(cf)
+    if deq > dm:
+        notes.append(
+            f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} A·s/rad "
+            f"exceeds the BLA's motor viscous damping {dm:.3g}: the model (Coulomb at the "
+            "motor only) does not explain both the distortion and the damping; friction on "
+            "the load side or a different friction law is likely")
+    if detected and floor_db > -1.0:
+        notes.append(f"{output}: the measured input's own odd-line content, through the linear "
+                     f"model, already gives {floor_db:+.1f} dB of the measured odd distortion: "
+                     "the friction's share cannot be separated from it")
+    for m in notes:
+        warnings.warn(m, IdentificationWarning, stacklevel=2)
+    return MultisineCoulomb(float(cf), float(std), band_vals,
+                            [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
+                            bool(detected), deq, dm, sv, floor_db, count[0], notes)
+
+
+def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
+    """rms of the angle's derivative over the mean period (rad/s): σ_v² = Σ_{1≤k<P/2}
+    2 |ω_k Θ_k|² (Θ_k the mean period's DFT with 1/P scaling)."""
+    sp = frf.spectra
+    if not sp:
+        raise IdentificationError(f"{output}: the FRF carries no period spectra (LPM or "
+                                  "several realisations): the velocity rms needs them")
+    P, fs = frf.period, frf.fs
+    j = 1 + frf.outputs.index(output)
+    wk = 2 * np.pi * np.arange(1, P // 2) * fs / P
+    return float(np.sqrt(2 * np.sum(np.abs(wk * sp["mean"][j, 1:P // 2]) ** 2)))
+
+
+def _play(params, state, measured, reference):
+    """The open-loop 'controller': the command is the reference channel ``current``."""
+    return state, reference["current"]
+
+
+def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
+    """C_f and the viscous damping from the BLA's damping at several amplitudes: the BLA's
+    damping d(σ_v) = d_v + C_f √(2/π)/σ_v (Bussgang gain of C_f sign(v)), weighted linear
+    least squares in 1/σ_v. Returns ``coulomb_current``, ``viscous`` (value, std) and the
+    correlation of the two; a warning when C_f is within two standard deviations of zero
+    (the amplitudes are too close to tell Coulomb from viscous damping)."""
+    sv = np.asarray(velocity_rms, float)
+    d = np.asarray(damping, float)
+    sd = np.asarray(damping_std, float)
+    if sv.size < 2 or np.ptp(1 / sv) <= 0:
+        raise IdentificationError("coulomb_from_amplitudes needs records at two or more "
+                                  "different amplitudes (velocity rms)")
+    A = np.column_stack([np.ones_like(sv), math.sqrt(2 / math.pi) / sv]) / sd[:, None]
+    x, *_ = np.linalg.lstsq(A, d / sd, rcond=None)
+    cov = np.linalg.inv(A.T @ A)
+    s = np.sqrt(np.diag(cov))
+    out = {"viscous": {"value": float(x[0]), "std": float(s[0])},
+           "coulomb_current": {"value": float(x[1]), "std": float(s[1])},
+           "correlation": float(cov[0, 1] / (s[0] * s[1])), "warnings": []}
+    if abs(x[1]) < 2 * s[1]:
+        out["warnings"].append(
+            f"C_f = {x[1]:.3g} ± {s[1]:.2g} A is within two standard deviations of zero: the "
+            "amplitudes recorded cannot tell Coulomb friction from viscous damping")
+    return out
