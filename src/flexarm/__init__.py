@@ -2,33 +2,47 @@
 
 The public face (everything else lives in the sub-packages, named after what they hold):
 
-* scenarios: :func:`load_scenario`, :func:`builtin_scenarios`, :class:`Scenario`
-* models: :class:`SingleLinkModel` (FRB eqs. 1, 12-16), :func:`build_multilink` (De Luca)
-* simulation: :func:`simulate` (sampled-data closed loop), :class:`SimulationResult`
-* control: :func:`wiener_feedforward` (FRB eq. 11), trajectories, discrete controllers
-* identification: :func:`identify` (FRB Sec. II), :func:`fit` and :func:`validate`
-  (time-domain fit of bench logs), :func:`tfest` (frequency-domain transfer-function fit)
+* scenarios and logs: :func:`load_scenario`, :func:`builtin_scenarios`, :class:`Scenario`,
+  :func:`load_log` (text or MATLAB logs through a log-format file)
+* models: :class:`Arm` (the one plant of every arm: links, drives, joint friction),
+  :class:`SingleLinkModel` (FRB eqs. 1, 12-16), :func:`build_multilink` (De Luca),
+  :func:`linearize` (a named python-control ``StateSpace`` of any arm)
+* simulation, one sampled-data loop for every arm: :func:`simulate`, :func:`prepare`,
+  :func:`simulate_batch` (a ``vmap`` batch of a prepared loop), :class:`SimulationResult`
+  (a python-control ``TimeResponseData``)
+* control: :func:`wiener_feedforward` (FRB eq. 11), :func:`parabolic`,
+  :func:`quasi_parabolic`, :func:`lqg` (discrete observer-based design)
+* identification: :func:`fit` and :func:`validate` (time domain: any scenario with a
+  ``free`` list, or the servo-rig data-sheet pipeline), :func:`identify` (FRB Sec. II),
+  :func:`periodic_frf`, :func:`tfest` (frequency domain)
 """
 
 import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from flexarm.identification.time_domain import fit, validate  # noqa: E402
+from flexarm.control.lqg import lqg  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
+from flexarm.identification import fit, validate  # noqa: E402
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
+from flexarm.identification.frequency_domain.periodic import periodic_frf  # noqa: E402
 from flexarm.identification.frequency_domain.tfest import tfest  # noqa: E402
+from flexarm.io.logformat import load_log  # noqa: E402
+from flexarm.models.assembly import Arm  # noqa: E402
+from flexarm.models.linearize import linearize  # noqa: E402
 from flexarm.models.multilink import build_multilink  # noqa: E402
 from flexarm.models.single_link import SingleLinkModel  # noqa: E402
-from flexarm.sim.build import simulate  # noqa: E402
+from flexarm.sim.build import prepare, simulate  # noqa: E402
 from flexarm.sim.result import SimulationResult  # noqa: E402
+from flexarm.sim.sampled import simulate_batch  # noqa: E402
 from flexarm.specs import Scenario, builtin_scenarios, load_scenario  # noqa: E402
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "tfest", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink", "builtin_scenarios",
-    "fit", "identify", "load_scenario", "parabolic", "quasi_parabolic", "simulate",
-    "validate", "wiener_feedforward",
+    "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",
+    "builtin_scenarios", "fit", "identify", "linearize", "load_scenario", "lqg", "parabolic",
+    "periodic_frf", "prepare", "quasi_parabolic", "load_log", "simulate", "simulate_batch",
+    "tfest", "validate", "wiener_feedforward",
 ]

@@ -342,3 +342,11 @@ def load_log_format(path: str | Path | LogFormat) -> LogFormat:
     except tomllib.TOMLDecodeError as exc:
         raise LogFormatError(f"{path}: not valid TOML: {exc}") from None
     return log_format_from_dict(data, source=str(path))
+
+
+def load_log(path: str | Path, log_format: str | Path | LogFormat | None = None, **kw):
+    """One log as its logger wrote it (text or ``.mat``), read through a log-format file
+    (``None``: a text log in flexarm's exchange format, SI units, named columns); returns a
+    :class:`flexarm.io.logs.Log` in SI units. ``kw`` passes on to :meth:`LogFormat.read`."""
+    fmt = load_log_format(log_format) if log_format is not None else LogFormat()
+    return fmt.read(path, **kw)
