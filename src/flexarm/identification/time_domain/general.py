@@ -412,6 +412,14 @@ class _Engine:
             raise ValueError(f"free parameters listed twice: {self.free}")
         self.keys = [parse_path(p) for p in self.free]
         self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free)])
+        # priors and bounds may name paths with [*] too: one entry per element
+        if any("[*]" in p for p in list(options.priors) + list(options.bounds)):
+            options = copy.copy(options)
+            options.priors = {q: v for p, v in options.priors.items()
+                              for q in expand_paths(self.dump, [p])}
+            options.bounds = {q: v for p, v in options.bounds.items()
+                              for q in expand_paths(self.dump, [p])}
+            self.options = options
         for p in list(options.priors) + list(options.bounds):
             if p not in self.free:
                 raise ValueError(f"FitOptions: {p!r} has a prior or bounds but is not free; "
