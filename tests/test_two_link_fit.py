@@ -76,3 +76,31 @@ def test_prediction_from_the_logged_state_equals_replay():
     got = next(iter(ours["fit_percent"].values()))
     for c in CHANNELS:
         assert got[c] == pytest.approx(theirs.fit_percent[c], abs=0.2), (c, got, theirs.fit_percent)
+
+
+def test_our_lqg_on_the_fitted_rig(fitted):
+    """Issue #17: the 102 s run's setpoints under an observer-based controller of our own
+    (dlqr + predictor Kalman gain at 10 ms) designed on the FITTED model: its command before
+    saturation stays inside ±0.94 A / ±1.2 A (peaks and time at the limit printed), and a
+    joint at rest is held by friction within its fitted static level, |F_j| <= F_s,j: the
+    rest error is stiction's (test_lqg.rig_lqg: the same design and checks)."""
+    import sys
+
+    from flexarm.io.logformat import load_log_format
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_lqg import rig_lqg
+
+    res, _ = fitted if isinstance(fitted, tuple) else (fitted, None)
+    log = load_log_format(EXAMPLES / "two-link-workspace.toml").read(DATA / "lqr_full_10deg.mat")
+    sc, r, u_pre = rig_lqg(res.scenario, log)
+    peak = np.abs(u_pre).max(0)
+    at_limit = (np.abs(u_pre) >= [0.94, 1.2]).sum(0) * 0.01
+    print("LQG on the fitted rig: peak command before saturation (A)", peak,
+          "time at the limit (s)", at_limit)
+    assert np.all(peak < [0.94, 1.2])
+    Fs = np.array([j.friction.static for j in sc.arm.joints])
+    for j in range(2):
+        still = np.r_[False, np.diff(r.signals[f"theta_{j + 1}"]) == 0.0]
+        assert still.sum() > 100
+        assert np.all(np.abs(r.signals[f"friction_torque_{j + 1}"][still]) <= Fs[j] * (1 + 1e-12))
