@@ -479,8 +479,10 @@ class MultiLinkPlant(Plant):
         and emitted as a few fused kernels that compute every shared value once. ``x`` may
         carry trailing batch dimensions, (n_x, *batch) with u (n_u, *batch): one kernel per
         layer then serves the whole batch."""
-        prog, outputs = _rhs_program(self.n_modes)
+        return self._emit(*_rhs_program(self.n_modes), x, u)
 
+    def _emit(self, prog: layered.Program, outputs: list, x: Array, u: Array) -> Array:
+        """Evaluate a recorded program on the state x, input u and this plant's numbers."""
         def value(key):
             name, idx = key
             if name == "x":
@@ -499,17 +501,7 @@ class MultiLinkPlant(Plant):
         B is shared by the n + 1 right-hand sides). Used for joint friction: the torque
         that holds joint j is q̈_j / G_jj, and a joint that sticks is stopped by the impulse
         along G_j (:class:`flexarm.models.assembly.Arm`)."""
-        prog, outputs = _mobility_program(self.n_modes)
-
-        def value(key):
-            name, idx = key
-            if name == "x":
-                return x[idx]
-            if name == "u":
-                return u[idx]
-            return getattr(self, name)[idx]
-
-        out = prog.emit(outputs, value, share=_SHARE)
+        out = self._emit(*_mobility_program(self.n_modes), x, u)
         nq, n = self.n_q, self.n_links
         return out[:nq], jnp.reshape(out[nq:], (n, nq) + out.shape[1:])
 

@@ -539,17 +539,8 @@ def plot_distortion(res: PeriodicFRF, path=None):
             ax.plot(res.frequency_hz, db(res.noise_std[j]), "g-", lw=0.8, label="noise std")
             if res.total_std is not None:
                 ax.plot(res.frequency_hz, db(res.total_std[j]), "r-", lw=0.8, label="total std")
-            ax.set_ylabel(f"{name} (dB)")
-            ax.set_xscale("log")
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
-        axes[-1, 0].set_xlabel("frequency (Hz)")
-        fig.tight_layout()
-        if path is not None:
-            from flexarm.io.write import save_figure
-            save_figure(fig, path, overwrite=True, dpi=120)
-            plt.close(fig)
-        return fig
+            _style(ax, name)
+        return _finish(fig, axes, path)
     df = res.fs / res.period
     exc = res.lines
     kmax = int(exc.max())
@@ -569,10 +560,22 @@ def plot_distortion(res: PeriodicFRF, path=None):
             e = other[other % 2 == 0]
             ax.plot(e * df, db(y[e]), "bx", ms=3, label="even detection lines")
         ax.plot(ks * df, db(n[ks]), "g-", lw=0.8, label="noise (std of the mean)")
-        ax.set_ylabel(f"{name} (dB)")
-        ax.set_xscale("log")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        _style(ax, name)
+    return _finish(fig, axes, path)
+
+
+def _style(ax, name: str) -> None:
+    """One output's axes of the FRF figures: dB over a log frequency axis."""
+    ax.set_ylabel(f"{name} (dB)")
+    ax.set_xscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def _finish(fig, axes, path):
+    """Label, lay out and (with ``path``) write the figure through the one writer."""
+    import matplotlib.pyplot as plt
+
     axes[-1, 0].set_xlabel("frequency (Hz)")
     fig.tight_layout()
     if path is not None:
