@@ -123,9 +123,6 @@ class SingleLinkBody(eqx.Module):
         """Stop the stuck hub: θ̇m = 0; the beam's absolute coordinates are unchanged."""
         return x.at[1].set(jnp.where(stuck[0], 0.0, x[1]))
 
-    def initial_state(self, **kw) -> np.ndarray:  # pragma: no cover - via SingleLinkModel
-        raise NotImplementedError
-
 
 class _MultiBody:
     """The protocol methods of :class:`~flexarm.models.multilink.MultiLinkPlant` as a body
