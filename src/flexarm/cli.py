@@ -568,7 +568,9 @@ def fit(logs: list[Path] = typer.Argument(
     With a scenario first (``flexarm fit SCENARIO LOG... --free PATH ...``): the general fit
     of any arm the scenario describes (identification.time_domain.fit_scenario)."""
     _enable_cache()
-    if logs and _is_scenario(str(logs[0])):
+    from flexarm.specs.scenario import names_a_scenario
+
+    if logs and names_a_scenario(str(logs[0])):
         _fit_scenario_cli(str(logs[0]), logs[1:], log_format, free, prior, segment, channel,
                           window, max_nfev, json_out, scenario_out, plots, overwrite)
         return
@@ -729,12 +731,6 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
         from flexarm.io.write import write_json
 
         write_json(json_out, out, overwrite=overwrite)
-
-
-def _is_scenario(arg: str) -> bool:
-    from flexarm.specs.scenario import builtin_scenarios
-
-    return arg.endswith(".toml") or arg in builtin_scenarios()
 
 
 def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:

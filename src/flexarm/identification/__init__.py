@@ -12,15 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Sequence
 
-
-def _is_scenario(x: Any) -> bool:
-    from flexarm.specs.scenario import Scenario, builtin_scenarios
-
-    if isinstance(x, Scenario):
-        return True
-    if isinstance(x, (str, Path)):
-        return str(x).endswith(".toml") or str(x) in builtin_scenarios()
-    return False
+from flexarm.specs.scenario import names_a_scenario
 
 
 def _scenario(x: Any):
@@ -45,7 +37,7 @@ def fit(model: Any, logs: Sequence[Any] | None = None, free: Sequence[str] | Non
     from flexarm.identification.time_domain import fit as bench_fit
     from flexarm.identification.time_domain import fit_scenario
 
-    if _is_scenario(model):
+    if names_a_scenario(model):
         if logs is None:
             raise TypeError("fit(scenario, logs, free=..., options=...): give the logs")
         return fit_scenario(_scenario(model), logs, free, options, **kw)
@@ -64,7 +56,7 @@ def validate(model: Any, logs: Sequence[Any], **kw) -> dict:
     from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain import validate as bench_validate
 
-    sc = _scenario(model) if _is_scenario(model) else model
+    sc = _scenario(model) if names_a_scenario(model) else model
     if getattr(getattr(sc, "arm", None), "kind", None) == "multi_link":
         return predict_scenario(sc, logs, **kw)
     return bench_validate(model, logs, **kw)

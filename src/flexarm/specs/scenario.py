@@ -225,3 +225,14 @@ def load_scenario(name_or_path: str | Path) -> Scenario | MultiLinkScenario:
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
     return scenario_from_dict(data, source=str(path))
+
+
+def names_a_scenario(x: Any) -> bool:
+    """Whether ``x`` is a scenario or names one (a ``.toml`` path or a built-in name), as
+    the first argument of ``fit`` / ``validate`` and of ``flexarm fit`` (where logs are the
+    alternative)."""
+    if isinstance(x, Scenario):
+        return True
+    if isinstance(x, (str, Path)):
+        return str(x).endswith(".toml") or str(x) in builtin_scenarios()
+    return False
