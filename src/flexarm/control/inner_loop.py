@@ -56,6 +56,7 @@ import scipy.optimize
 from jax import Array
 
 from flexarm.control.discrete import Controller, Signals, from_transfer_function
+from flexarm.control.friction_compensation import friction_sign
 
 __all__ = [
     "InnerLoop",
@@ -174,8 +175,7 @@ class InnerLoop(Controller):
         x1n, x2n, u_fb = self.feedback(state, measured, reference)
         xcn, c_hat = self._lin(self.coupling, xc, th - measured["tip_angle"])
         v = (th - th_prev) / self.dt
-        rest_sign = jnp.where(jnp.abs(u_fb) > self.rest_deadband, jnp.sign(u_fb), 0.0)
-        sigma = jnp.where(jnp.abs(v) > self.velocity_deadband, jnp.sign(v), rest_sign)
+        sigma = friction_sign(v, u_fb, self.velocity_deadband, self.rest_deadband)
         i_c = (self.coupling_on * c_hat + self.friction_on * self.coulomb * sigma) / self.torque_constant
         return (x1n, x2n, xcn, th), jnp.reshape(u_fb + i_c, (1,))
 

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from flexarm.control.discrete import Controller, Signals
+from flexarm.control.friction_compensation import friction_sign
 
 
 class JointPD(Controller):
@@ -54,8 +55,7 @@ class JointPD(Controller):
         prev = jnp.where(started, prev, th)
         v = (th - prev) / self.dt
         tau_pd = self.kp * (self.target - th) - self.kd * v
-        rest = jnp.where(jnp.abs(tau_pd) > self.rest_deadband, jnp.sign(tau_pd), 0.0)
-        sigma = jnp.where(jnp.abs(v) > self.velocity_deadband, jnp.sign(v), rest)
+        sigma = friction_sign(v, tau_pd, self.velocity_deadband, self.rest_deadband)
         tau = tau_pd + self.gravity + self.coulomb * sigma
         return (th, jnp.ones((), dtype=bool)), tau / self.k_u
 

@@ -36,11 +36,34 @@ def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     return ref.offset + ref.amplitude * ((phase >= 0.5) & (tau >= 0))
 
 
-def controller_from_spec(spec, dt: float, *, input_names=None,
-                         references=None) -> discrete.Controller:
+def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
+                         quanta: dict[str, float] | None = None) -> discrete.Controller:
     """The discrete controller a scenario's ``[controller]`` section describes; an ``lti``
     controller needs the plant's ``input_names`` and checks its setpoints against the
-    run's ``references`` (channel names)."""
+    run's ``references`` (channel names). With ``[controller.friction_compensation]`` the
+    feedback is wrapped in :class:`~flexarm.control.friction_compensation.FrictionCompensated`;
+    ``quanta`` (channel → quantisation step) gives its default velocity deadband."""
+    ctrl = _feedback_from_spec(spec, dt, input_names=input_names, references=references)
+    fc = getattr(spec, "friction_compensation", None)
+    if fc is None:
+        return ctrl
+    from flexarm.control.friction_compensation import friction_compensated
+
+    return friction_compensated(ctrl, fc.level, dt=dt, measured=fc.measured,
+                                quantum=(quanta or {}).get(fc.measured, 0.0),
+                                velocity_deadband=fc.velocity_deadband,
+                                rest_deadband=fc.rest_deadband)
+
+
+def sensor_quanta(sensors: dict) -> dict[str, float]:
+    """Channel → quantisation step (signal units) of a scenario's ``[sensors]``: ``quantum``,
+    or ``range / 2**bits``, or 0 (unquantised)."""
+    return {k: float(s.quantum or (s.range / 2**s.bits if s.bits else 0.0))
+            for k, s in sensors.items()}
+
+
+def _feedback_from_spec(spec, dt: float, *, input_names=None,
+                        references=None) -> discrete.Controller:
     if spec is None:
         return discrete.from_transfer_function(([0.0], [1.0]), dt)
     if spec.type == "lti":
@@ -108,7 +131,13 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     elif spec is not None and spec.type == "joint_pd":
         ctrl = joint_pd_from_spec(spec, arm, model, dt)
     else:
-        ctrl = controller_from_spec(spec, dt, input_names=arm.input_names, references=refs)
+        if getattr(spec, "friction_compensation", None) is not None and arm.n_joints > 1:
+            raise ValueError(f"scenario {scenario.name!r}: [controller.friction_compensation] "
+                             f"compensates one joint; this arm has {arm.n_joints}. Use "
+                             "[controller] type = \"joint_pd\" with friction_compensation = "
+                             "[C_f per joint] for a multi-link arm")
+        ctrl = controller_from_spec(spec, dt, input_names=arm.input_names, references=refs,
+                                    quanta=sensor_quanta(scenario.sensors))
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
@@ -151,7 +180,8 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     t = np.arange(n) * dt
     refs = _references(scenario, t, references)
     ctrl = controller if controller is not None else controller_from_spec(
-        scenario.controller, dt, input_names=plant.input_names, references=refs)
+        scenario.controller, dt, input_names=plant.input_names, references=refs,
+        quanta=sensor_quanta(scenario.sensors))
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})

@@ -15,6 +15,7 @@ from typing import Literal
 
 from pydantic import model_validator
 
+from flexarm.specs.friction_compensation import FrictionCompensationSpec
 from flexarm.specs.quantity import Q, Spec
 
 
@@ -22,6 +23,7 @@ class StateFeedbackController(Spec):
     """u = k1 (r − θ) − k2 d − k3 θ̇ − k4 ḋ on measured hub angle θ and tip deflection d."""
 
     type: Literal["state_feedback"]
+    friction_compensation: FrictionCompensationSpec | None = None
     k1: Q("", what="V/rad (or A/rad) on the hub-angle error")
     k2: Q("", what="V/m on the tip deflection") = 0.0
     k3: Q("", what="V*s/rad on the hub rate") = 0.0

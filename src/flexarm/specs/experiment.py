@@ -13,6 +13,7 @@ from typing import Any
 from pydantic import Field, FiniteFloat, field_validator, model_validator
 
 from flexarm.specs.controllers_bench import StateFeedbackController
+from flexarm.specs.friction_compensation import FrictionCompensationSpec
 from flexarm.specs.quantity import Coefficients, Count, Q, Spec
 
 
@@ -159,6 +160,7 @@ class PDController(Spec):
     """u = kp·e + kd·(e_k − e_{k−1})/T with e = reference − measured (discrete PD)."""
 
     type: Literal["pd"]
+    friction_compensation: FrictionCompensationSpec | None = None
     kp: Q("")
     kd: Q("") = 0.0
     measured: str = "motor_angle"
@@ -168,6 +170,7 @@ class PIDController(Spec):
     """u = kp·e + ki·T·Σe + kd·(e_k − e_{k−1})/T (discrete PID, backward rectangles)."""
 
     type: Literal["pid"]
+    friction_compensation: FrictionCompensationSpec | None = None
     kp: Q("")
     ki: Q("") = 0.0
     kd: Q("") = 0.0
@@ -178,6 +181,7 @@ class LeadController(Spec):
     """u = gain·(z − zero)/(z − pole)·e (discrete lead/lag)."""
 
     type: Literal["lead"]
+    friction_compensation: FrictionCompensationSpec | None = None
     gain: Q("")
     zero: FiniteFloat
     pole: FiniteFloat
@@ -188,6 +192,7 @@ class TFController(Spec):
     """u = C(z)·e with C(z) = num/den in descending powers of z, at the sampling period."""
 
     type: Literal["tf"]
+    friction_compensation: FrictionCompensationSpec | None = None
     num: Coefficients()
     den: Coefficients(denominator=True)
     measured: str = "motor_angle"
@@ -206,6 +211,7 @@ class LTIControllerSpec(Spec):
     ``allow_unstable = true``."""
 
     type: Literal["lti"]
+    friction_compensation: FrictionCompensationSpec | None = None
     A: list[list[FiniteFloat]] | None = None
     B: list[list[FiniteFloat]] | None = None
     C: list[list[FiniteFloat]] | None = None
