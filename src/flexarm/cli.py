@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -96,6 +98,51 @@ def _check_file_option(option: str, path: Optional[Path], overwrite: bool,
     if not parent.is_dir():
         _fail(f"{option} {path}: {parent} is a file, not a folder; give a path in a folder")
     _writable(option, path, parent)
+
+
+def _command_line(ctx: typer.Context) -> str:
+    """The running command as an equivalent ``flexarm ...`` line (for reports): its
+    arguments and the options given on the command line (defaults left out), shell-quoted."""
+    import shlex
+
+    args, opts = [], []
+    for prm in ctx.command.params:
+        src = ctx.get_parameter_source(prm.name)
+        if getattr(src, "name", None) != "COMMANDLINE":
+            continue
+        v = ctx.params[prm.name]
+        vals = list(v) if isinstance(v, (list, tuple)) else [v]
+        if prm.param_type_name == "argument":
+            args += [str(x) for x in vals]
+        elif getattr(prm, "is_flag", False):
+            names = prm.opts if v else prm.secondary_opts
+            opts += names[:1]
+        else:
+            for x in vals:
+                opts += [prm.opts[0], str(x)]
+    return shlex.join(["flexarm", str(ctx.info_name), *args, *opts])
+
+
+@contextlib.contextmanager
+def _figure_folder(plots: Optional[Path], report: Optional[Path]):
+    """Where the figures go: --plots, else (a report needs them) a temporary folder removed
+    after the report is written; None when neither is asked for."""
+    if plots is not None or report is None:
+        yield plots
+    else:
+        with tempfile.TemporaryDirectory(prefix="flexarm-report-") as d:
+            yield Path(d)
+
+
+def _write_report(rep, path: Optional[Path], overwrite: bool) -> None:
+    """Write an :class:`flexarm.analysis.html_report.HtmlReport` to --report."""
+    from flexarm.errors import OutputExistsError
+
+    try:
+        rep.write(path, overwrite=overwrite)
+    except (OutputExistsError, OSError) as exc:
+        _fail(f"--report {path}: {exc}")
+    console.print(f"report: {escape(str(path))}")
 
 
 def _outdir(out: Path, overwrite: bool, option: str = "--out") -> Path:
@@ -494,7 +541,7 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
 
 
 @app.command()
-def fit(logs: list[Path] = typer.Argument(
+def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
             ..., help="closed-loop CSV logs of one recording session; or SCENARIO LOG...: a "
                       "scenario (TOML file or built-in name) as the model template, then its "
                       "logs (the general fit: --free, --prior, --segment)"),
@@ -561,7 +608,10 @@ def fit(logs: list[Path] = typer.Argument(
         validate_window: Optional[str] = typer.Option(
             None, "--validate-window",
             help="then predict this held-out part of every log (START:STOP, s; each "
-                 "part's initial state estimated from its own data) and report its fit %")
+                 "part's initial state estimated from its own data) and report its fit %"),
+        report: Optional[Path] = typer.Option(
+            None, "--report", help="write a self-contained HTML report (parameters ± std, "
+                                   "fit %, warnings, figures embedded), e.g. fit.html")
         ) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain).
 
@@ -572,7 +622,8 @@ def fit(logs: list[Path] = typer.Argument(
 
     if logs and names_a_scenario(str(logs[0])):
         _fit_scenario_cli(str(logs[0]), logs[1:], log_format, free, prior, segment, channel,
-                          window, max_nfev, json_out, scenario_out, plots, overwrite)
+                          window, max_nfev, json_out, scenario_out, plots, overwrite, report,
+                          ctx)
         return
     if free or prior or segment is not None or channel:
         _fail("--free, --prior, --segment and --channel belong to the general fit: give the "
@@ -587,6 +638,7 @@ def fit(logs: list[Path] = typer.Argument(
 
     _check_file_option("--json", json_out, overwrite)
     _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    _check_file_option("--report", report, overwrite, "fit.html")
     _check_dir_option("--plots", plots)
     if tip_sign not in (None, 1, -1):
         _fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
@@ -655,16 +707,29 @@ def fit(logs: list[Path] = typer.Argument(
         write_json(json_out, d, overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
-    if plots is not None:
-        res.plots(plots)
+    with _figure_folder(plots, report) as folder:
+        if folder is None:
+            return
+        figs = res.plots(folder)
         if held is not None:
             from flexarm.identification.time_domain.report import overlay_plots
 
-            overlay_plots(plots, held["logs"], held["traj"], held["fit_percent"], "held-out")
+            figs += overlay_plots(folder, held["logs"], held["traj"], held["fit_percent"],
+                                  "held-out")
+        if report is not None:
+            from flexarm.analysis.html_report import fit_report
+
+            extra = {}
+            if held is not None:
+                extra[f"Fit % of the held-out windows {validate_window} s"] = held["fit_percent"]
+            if res0 is not None:
+                extra["Fit % of the fit without joint friction"] = res0.fit_percent
+            _write_report(fit_report(res, figures=figs, command=_command_line(ctx), inputs=logs,
+                                     extra_fit_percent=extra), report, overwrite)
 
 
 @app.command()
-def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
+def validate(ctx: typer.Context, scenario: str = typer.Argument(..., help="fitted scenario TOML"),
              logs: list[Path] = typer.Argument(..., help="CSV logs to replay"),
              json_out: Optional[Path] = typer.Option(None, "--json", help="write the fit % as JSON"),
              plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
@@ -695,7 +760,10 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
                                                "START:STOP in s"),
              channel: Optional[list[str]] = typer.Option(
                  None, "--channel", help="measured channel to compare (repeat; default: every "
-                                         "logged sensor channel)")) -> None:
+                                         "logged sensor channel)"),
+             report: Optional[Path] = typer.Option(
+                 None, "--report", help="write a self-contained HTML report (fit %, warnings, "
+                                        "figures embedded), e.g. validate.html")) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
 
     A multi-link scenario, or --refit, takes the general path (any arm, logs read by
@@ -704,7 +772,7 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
     sc0 = _load(scenario)
     if sc0.arm.kind == "multi_link" or refit is not None:
         _validate_scenario_cli(sc0, logs, log_format, window, refit, refit_window, channel,
-                               json_out, plots, overwrite)
+                               json_out, plots, overwrite, report, ctx)
         return
     if log_format and len(log_format) > 1:
         _fail("--log-format is given once for a bench scenario's logs")
@@ -713,16 +781,26 @@ def validate(scenario: str = typer.Argument(..., help="fitted scenario TOML"),
     from flexarm.identification.time_domain import validate as run_validate
 
     _check_file_option("--json", json_out, overwrite)
+    _check_file_option("--report", report, overwrite, "validate.html")
     _check_dir_option("--plots", plots)
     sc = _load(scenario)
-    try:
-        win = _window(window, "--window")
-        blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
-                            use_regressed_law)
-        out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs,
-                           plots=plots)
-    except (FitInputError, ValueError) as exc:
-        _fail(str(exc))
+    with _figure_folder(plots, report) as folder:
+        try:
+            win = _window(window, "--window")
+            blogs = _bench_logs(logs, column, unit, controller, max_jitter, log_format,
+                                use_regressed_law)
+            out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs,
+                               plots=folder)
+        except (FitInputError, ValueError) as exc:
+            _fail(str(exc))
+        if report is not None:
+            from flexarm.analysis.html_report import validate_report
+
+            _write_report(validate_report(out, scenario=scenario, figures=out["plots"],
+                                          command=_command_line(ctx), inputs=[scenario, *logs]),
+                          report, overwrite)
+        if plots is None:
+            out["plots"] = []
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
     for name, d in out["fit_percent"].items():
         t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
@@ -803,16 +881,19 @@ def _priors(prior: Optional[list[str]]) -> dict:
 
 def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, segment,
                       channel, window, max_nfev, json_out, scenario_out, plots,
-                      overwrite) -> None:
+                      overwrite, report=None, ctx=None) -> None:
     from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
     _check_file_option("--json", json_out, overwrite)
     _check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    _check_file_option("--report", report, overwrite, "fit.html")
     _check_dir_option("--plots", plots)
     sc = _load(scenario)
     win = _window(window, "--window")
+    figures = contextlib.ExitStack()
+    folder = figures.enter_context(_figure_folder(plots, report))
     try:
         glogs = _general_logs(logs, log_format)
         opts = FitOptions(channels=_channels(channel), priors=_priors(prior), segment=segment,
@@ -823,8 +904,9 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
             status.update("predicting the logs with the fitted parameters")
             pred = predict_scenario(res.scenario, glogs, opts,
                                     channels=list(opts.channels) if opts.channels else None,
-                                    plots=plots, tag="fit")
+                                    plots=folder, tag="fit")
     except (LogError, ValueError) as exc:
+        figures.close()
         _fail(str(exc))
     t = Table("parameter", "template", "fitted", "std")
     for p in res.free:
@@ -836,9 +918,17 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     _fit_table(pred["fit_percent"], "whole-log prediction")
     if json_out is not None:
         write_json(json_out, {**res.to_dict(), "fit_percent": pred["fit_percent"],
-                              "plots": pred["plots"]}, overwrite=overwrite)
+                              "plots": pred["plots"] if plots is not None else []},
+                   overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
+    with figures:
+        if report is not None:
+            from flexarm.analysis.html_report import fit_report
+
+            _write_report(fit_report(res, figures=pred["plots"], command=_command_line(ctx),
+                                     inputs=[scenario, *logs], fit_percent=pred["fit_percent"]),
+                          report, overwrite)
 
 
 def _fit_table(fp: dict, title: str) -> None:
@@ -850,13 +940,14 @@ def _fit_table(fp: dict, title: str) -> None:
 
 
 def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, channel,
-                           json_out, plots, overwrite) -> None:
+                           json_out, plots, overwrite, report=None, ctx=None) -> None:
     from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
     from flexarm.identification.time_domain.general import friction_paths
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
     _check_file_option("--json", json_out, overwrite)
+    _check_file_option("--report", report, overwrite, "validate.html")
     _check_dir_option("--plots", plots)
     if refit not in (None, "friction"):
         _fail(f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
@@ -864,6 +955,9 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
     win = _window(window, "--window")
     rwin = _window(refit_window, "--refit-window")
     out: dict = {}
+    figures = contextlib.ExitStack()
+    plots = figures.enter_context(_figure_folder(plots, report))
+    figs: list = []
     try:
         glogs = _general_logs(logs, log_format)
         ch = _channels(channel)
@@ -872,6 +966,7 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
             before = predict_scenario(sc, glogs, opts, channels=list(ch) if ch else None,
                                       plots=plots, tag="validate")
             out["fit_percent"] = before["fit_percent"]
+            figs += before["plots"]
             if refit:
                 status.update("re-estimating the joints' friction")
                 free = friction_paths(sc)
@@ -880,6 +975,7 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
                 after = predict_scenario(res.scenario, glogs, opts,
                                          channels=list(ch) if ch else None, plots=plots,
                                          tag="refit")
+                figs += after["plots"]
                 out["refit"] = {"window_s": list(rwin), "log": str(logs[0]),
                                 "params": {p: res.params[p] for p in free},
                                 "template": {p: res.template[p] for p in free},
@@ -887,6 +983,7 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
                                 "warnings": res.warnings,
                                 "fit_percent": after["fit_percent"]}
     except (LogError, ValueError) as exc:
+        figures.close()
         _fail(str(exc))
     _fit_table(out["fit_percent"], "scenario as given")
     if refit:
@@ -898,6 +995,13 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
         _fit_table(out["refit"]["fit_percent"], f"friction refitted on {refit_window} s")
     if json_out is not None:
         write_json(json_out, out, overwrite=overwrite)
+    with figures:
+        if report is not None:
+            from flexarm.analysis.html_report import validate_report
+
+            _write_report(validate_report(out, scenario=sc.name, figures=figs,
+                                          command=_command_line(ctx), inputs=list(logs)),
+                          report, overwrite)
 
 
 def _without_friction(res0) -> dict:
