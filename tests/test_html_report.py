@@ -291,6 +291,52 @@ def test_synthetic_fit_and_validate_reports_render_in_chromium(synthetic, tmp_pa
         _check_in_browser(d / name, sub, 1)
 
 
+@pytest.mark.slow  # two general fits (least squares on the one simulator): ~40-80 s
+def test_general_fit_and_refit_validate_reports(tmp_path):
+    """The general path (flexarm fit SCENARIO LOG --free ..., validate --refit friction)
+    with --report, on test_fit_scenario's synthetic two-mode link: the report's fitted
+    values, std and fit % are the JSON's, and the refitted friction table is there."""
+    from test_fit_scenario import scenario_with, staircase, two_mode_link
+
+    from flexarm.identification.time_domain.general import _drop_none
+    from flexarm.identification.time_domain.synthetic import scenario_log
+    from flexarm.io.logs import write_log
+    from flexarm.io.write import write_toml
+
+    truth = two_mode_link()
+    t = np.arange(1501) * 0.002
+    short = truth.model_copy(update={"simulation": truth.simulation.model_copy(
+        update={"duration": 3.0})})
+    log = scenario_log(short, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)}, seed=2)
+    path = write_log(tmp_path / "run.csv", log.time, log.signals, required=("time",))
+    sc_path = tmp_path / "template.toml"
+    write_toml(sc_path, _drop_none(scenario_with(
+        short, {"arm.joints[0].friction.coulomb": 0.026}).model_dump()))
+    coul = "arm.joints[0].friction.coulomb"
+    r = runner.invoke(app, ["fit", str(sc_path), str(path), "--free", "arm.hubs[0].inertia",
+                            "--free", coul, "--json", str(tmp_path / "fit.json"),
+                            "--max-nfev", "20", "--report", str(tmp_path / "fit.html")])
+    assert r.exit_code == 0, r.output
+    d = json.loads((tmp_path / "fit.json").read_text())
+    text = (tmp_path / "fit.html").read_text()
+    c = _cells(text, coul)
+    assert [float(x) for x in c[1:4]] == pytest.approx(
+        [d["template"][coul], d["params"][coul], d["std"][coul]], rel=0.05)  # '.2g' std
+    fp = next(iter(d["fit_percent"].values()))
+    row = _cells(text, "run.csv")
+    assert [float(x) for x in row[1:]] == pytest.approx(list(fp.values()), abs=0.051)
+    assert text.count("<img ") == len(d["fit_percent"]) >= 1
+    r = runner.invoke(app, ["validate", str(sc_path), str(path), "--refit", "friction",
+                            "--refit-window", "0:3", "--json", str(tmp_path / "v.json"),
+                            "--report", str(tmp_path / "v.html")])
+    assert r.exit_code == 0, r.output
+    v = json.loads((tmp_path / "v.json").read_text())
+    text = (tmp_path / "v.html").read_text()
+    assert "Friction refitted on [0.0, 3.0] s of run.csv" in text
+    assert float(_cells(text, coul)[2]) == pytest.approx(v["refit"]["params"][coul], rel=1e-4)
+    assert text.count("<img ") == 2  # the scenario as given and after the refit
+
+
 @needs_browser
 def test_the_browser_check_fails_on_a_broken_or_blank_figure(tmp_path):
     """The check can fail: a figure whose data is not an image does not load, and a blank

@@ -1000,7 +1000,8 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
             from flexarm.analysis.html_report import validate_report
 
             _write_report(validate_report(out, scenario=sc.name, figures=figs,
-                                          command=_command_line(ctx), inputs=list(logs)),
+                                          command=_command_line(ctx),
+                                          inputs=[ctx.params["scenario"], *logs]),
                           report, overwrite)
 
 

@@ -206,9 +206,7 @@ class HtmlReport:
                  "(not run from the command line)"),
                 ("flexarm", _e(__version__)), ("written", _e(now))]
         if self.inputs:
-            meta.append(("inputs", "<br>".join(
-                f"<code>{_e(Path(str(p)).name)}</code> <small>({_e(Path(str(p)).parent)})</small>"
-                for p in self.inputs)))
+            meta.append(("inputs", "<br>".join(_input(p) for p in self.inputs)))
         head = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in meta)
         if self.warnings:
             warn = ('<div class="warnings" id="warnings"><h2>Warnings</h2><ul>'
@@ -225,6 +223,13 @@ class HtmlReport:
     def write(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """Write the page to ``path`` (atomically; an existing file only with ``overwrite``)."""
         return write_text(path, self.html(), overwrite=overwrite)
+
+
+def _input(p: str | Path) -> str:
+    """An input by name, its folder beside it (a built-in scenario's name alone)."""
+    p = Path(str(p))
+    folder = f" <small>({_e(p.parent)})</small>" if str(p.parent) != "." else ""
+    return f"<code>{_e(p.name)}</code>{folder}"
 
 
 # ---------------------------------------------------------------------- fit / validate
@@ -244,7 +249,9 @@ def fit_report(result: Any, *, figures: Iterable[Any] = (), command: str | None 
         rep = HtmlReport(f"flexarm fit: {result.scenario.name}", command,
                          list(inputs or ()), list(result.warnings))
         if not result.converged:
-            rep.warnings.insert(0, f"not converged: {result.message}")
+            m = result.message
+            rep.warnings.insert(0, m if m.upper().startswith("NOT CONVERGED")
+                                else f"not converged: {m}")
         rep.heading("Status").text(result.message)
         rep.heading("Fitted parameters (SI units of the scenario)")
         rep.table(("parameter", "template", "fitted", "± std", "relative std [%]"),
