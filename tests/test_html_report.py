@@ -196,7 +196,7 @@ def test_design_report_shows_controller_poles_info_comparison_and_figures(tmp_pa
     assert "[6, -3, 0.213, 0]" in text and "<td class=\"num\">1.25</td>" in text
     assert "saturates in 3 of 200 plants" in text.split('class="warnings"')[1]
     assert "<th>hub error median [counts]</th>" in text and '<td class="num">0.5</td>' in text
-    assert '"iterations"' in html.unescape(text)  # a long list goes to the JSON block, not the table
+    assert '"iterations"' in html.unescape(text)  # a long list: in the JSON block
     ctrl = sc.model_dump(mode="json", exclude_none=True)["controller"]
     assert f"<td>type</td><td>{ctrl['type']}</td>" in text
     if _chromium():

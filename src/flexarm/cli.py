@@ -724,7 +724,8 @@ def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
                 extra[f"Fit % of the held-out windows {validate_window} s"] = held["fit_percent"]
             if res0 is not None:
                 extra["Fit % of the fit without joint friction"] = res0.fit_percent
-            _write_report(fit_report(res, figures=figs, command=_command_line(ctx), inputs=logs,
+            _write_report(fit_report(res, figures=figs, command=_command_line(ctx),
+                                     inputs=[*logs, *([log_format] if log_format else [])],
                                      extra_fit_percent=extra), report, overwrite)
 
 
@@ -797,7 +798,9 @@ def validate(ctx: typer.Context, scenario: str = typer.Argument(..., help="fitte
             from flexarm.analysis.html_report import validate_report
 
             _write_report(validate_report(out, scenario=scenario, figures=out["plots"],
-                                          command=_command_line(ctx), inputs=[scenario, *logs]),
+                                          command=_command_line(ctx),
+                                          inputs=[scenario, *logs,
+                                                  *([log_format] if log_format else [])]),
                           report, overwrite)
         if plots is None:
             out["plots"] = []
@@ -927,7 +930,8 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
             from flexarm.analysis.html_report import fit_report
 
             _write_report(fit_report(res, figures=pred["plots"], command=_command_line(ctx),
-                                     inputs=[scenario, *logs], fit_percent=pred["fit_percent"]),
+                                     inputs=[scenario, *logs, *(log_format or [])],
+                                     fit_percent=pred["fit_percent"]),
                           report, overwrite)
 
 
@@ -1001,7 +1005,8 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
 
             _write_report(validate_report(out, scenario=sc.name, figures=figs,
                                           command=_command_line(ctx),
-                                          inputs=[ctx.params["scenario"], *logs]),
+                                          inputs=[ctx.params["scenario"], *logs,
+                                                  *(log_format or [])]),
                           report, overwrite)
 
 
