@@ -186,8 +186,9 @@ def test_design_report_shows_controller_poles_info_comparison_and_figures(tmp_pa
     d = Design("lqr", sc, lin, info={"gains": [6.0, -3.0, 0.213, 0.0], "cost": 1.25,
                                      "trace": {"iterations": list(range(20))}},
                warnings=["saturates in 3 of 200 plants"])
-    rows = [{"controller": "logged", "hub error median [counts]": 7.0},
-            {"controller": "lqr", "hub error median [counts]": 0.5}]
+    # the comparison as design/compare's Comparison.rows: controller -> nested metrics
+    rows = {"logged": {"median": {"hub_error_counts": 7.0}, "unstable": 0},
+            "lqr": {"median": {"hub_error_counts": 0.5}, "unstable": 2}}
     page = design_report(d, figures=[_figure()], command="flexarm design x --method lqr",
                          comparison=rows).write(tmp_path / "d.html")
     text = page.read_text()
@@ -195,7 +196,8 @@ def test_design_report_shows_controller_poles_info_comparison_and_figures(tmp_pa
     assert "|poles| (discrete; &lt; 1 stable): 0.5, 0.9" in text
     assert "[6, -3, 0.213, 0]" in text and "<td class=\"num\">1.25</td>" in text
     assert "saturates in 3 of 200 plants" in text.split('class="warnings"')[1]
-    assert "<th>hub error median [counts]</th>" in text and '<td class="num">0.5</td>' in text
+    assert "<th>median.hub_error_counts</th><th>unstable</th>" in text
+    assert _cells(text, "lqr")[1:] == ["0.5", "2"] and _cells(text, "logged")[1:] == ["7", "0"]
     assert '"iterations"' in html.unescape(text)  # a long list: in the JSON block
     ctrl = sc.model_dump(mode="json", exclude_none=True)["controller"]
     assert f"<td>type</td><td>{ctrl['type']}</td>" in text

@@ -336,14 +336,15 @@ def _rel(v: Any, s: Any) -> float | None:
 # ---------------------------------------------------------------------- design
 def design_report(design: Any, *, figures: Iterable[Any] = (), command: str | None = None,
                   inputs: Sequence[str | Path] = (),
-                  comparison: Sequence[Mapping[str, Any]] | None = None) -> HtmlReport:
+                  comparison: Any = None) -> HtmlReport:
     """The report of a controller design (:class:`flexarm.design.result.Design`): method,
     the rig's scenario, the designed ``[controller]`` table, the linear part (poles of
     its state matrix, or the transfer function), the method's figures in ``design.info``
     (numbers and short lists as a table, longer structures as JSON text), the warnings,
-    and ``figures``. ``comparison``: rows of a side-by-side prediction (one dict per
-    controller and plant set, e.g. hub error in counts, settling time, peak voltage),
-    shown as one table with the dicts' keys as columns."""
+    and ``figures``. ``comparison``: the side-by-side prediction as one table, one row
+    per controller: a sequence of row dicts, a mapping controller → row dict, or an object
+    with such a mapping as ``.rows`` (and ``.warnings``, added to the report's); nested
+    dicts become dotted columns (``median.hub_error_counts``)."""
     import json
 
     sc = design.scenario
@@ -366,10 +367,15 @@ def design_report(design: Any, *, figures: Iterable[Any] = (), command: str | No
                 if k not in {s.split(".")[0] for s, _ in scalars}}
         if rest:
             rep.text(json.dumps(rest, indent=1, default=str)[:20000], pre=True)
-    if comparison:
-        cols = list(dict.fromkeys(k for row in comparison for k in row))
+    if comparison is not None:
+        rep.warnings += list(getattr(comparison, "warnings", []) or [])
+        rows = getattr(comparison, "rows", comparison)
+        if isinstance(rows, Mapping):
+            rows = [{"controller": name, **row} for name, row in rows.items()]
+        rows = [dict(_flatten(r)) for r in rows]
+        cols = list(dict.fromkeys(k for row in rows for k in row))
         rep.heading("Prediction: logged controller and design")
-        rep.table(cols, [[row.get(c) for c in cols] for row in comparison])
+        rep.table(cols, [[_short(row.get(c)) for c in cols] for row in rows])
     figs = list(figures)
     if figs:
         rep.heading("Figures")
@@ -390,7 +396,9 @@ def _flatten(d: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
 
 def _short(v: Any) -> Any:
     """Numbers as they are (the table formats them); lists with 5 significant digits."""
-    if isinstance(v, bool) or v is None:
+    if v is None:
+        return None
+    if isinstance(v, bool):
         return str(v)
     if isinstance(v, (int, float)):
         return v
