@@ -14,7 +14,8 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.excitation import multisine
 from flexarm.identification.frequency_domain.periodic import periodic_frf
-from flexarm.identification.frequency_domain.tfest import fit_two_mass, tfest, two_mass_response
+from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response
+from flexarm.identification.frequency_domain.tfest import tfest
 
 
 def best_of(f, n=5):

@@ -23,7 +23,7 @@ from flexarm.identification.frequency_domain.harmonics import IdentificationErro
 from flexarm.identification.frequency_domain.multisine_friction import (
     _play, coulomb_from_amplitudes, coulomb_from_distortion, two_mass_scenario, velocity_rms)
 from flexarm.identification.frequency_domain.periodic import periodic_frf
-from flexarm.identification.frequency_domain.tfest import fit_two_mass, two_mass_response
+from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import scenario_from_dict

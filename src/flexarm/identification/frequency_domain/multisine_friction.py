@@ -53,7 +53,7 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
-from flexarm.identification.frequency_domain.tfest import _derived
+from flexarm.identification.frequency_domain.structures import two_mass_derived as _derived
 
 #: Simulated friction levels (× the input rms) for the first search grid.
 GRID = np.geomspace(1e-3, 0.5, 8)
