@@ -151,3 +151,54 @@ def test_free_list_given_values_and_errors():
         fit_structure("voltage-servo", w, {"motor_angle": G}, given={**given, "gear_ratio": -70.0})
     with pytest.raises(TFEstError, match="NaN"):
         fit_structure("voltage-servo", w, {"motor_angle": G * np.nan}, given=given)
+
+
+def test_cli_tfest_structure_voltage_servo(tmp_path):
+    """flexarm tfest FRF.json --structure voltage-servo with the data-sheet options: the
+    JSON carries parameters.<name> = {value, std} and the given values; noise-free FRF with
+    a nominal std of 1e-3 |G| (the fit is exact: 1e-8 as above); missing data-sheet values
+    and an unknown structure are clear errors naming the option."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    _, given, truth = _rotary()
+    f_hz = np.geomspace(0.2, 50, 60)
+    r = voltage_servo_response({**truth, **given}, 2 * np.pi * f_hz)
+    frf = {"frequency_hz": f_hz.tolist(), "outputs": {
+        k: {"re": r[k].real.tolist(), "im": r[k].imag.tolist(),
+            "noise_std": (1e-3 * np.abs(r[k])).tolist()} for k in ("motor_angle", "tip_deflection")}}
+    (tmp_path / "frf.json").write_text(json.dumps(frf))
+    opts = ["--motor-constant", str(given["motor_constant"]), "--resistance",
+            str(given["armature_resistance"]), "--gear-ratio", str(given["gear_ratio"]),
+            "--efficiency", str(given["efficiency"]), "--length", str(given["length"])]
+    run = CliRunner()
+    res = run.invoke(app, ["tfest", str(tmp_path / "frf.json"), "--structure", "voltage-servo",
+                           *opts, "--json", str(tmp_path / "t.json")])
+    assert res.exit_code == 0, res.output
+    t = json.loads((tmp_path / "t.json").read_text())
+    assert t["structure"] == "voltage-servo" and t["outputs"] == ["motor_angle", "tip_deflection"]
+    for k, v in truth.items():
+        assert set(t["parameters"][k]) >= {"value", "std"}
+        if v:
+            assert t["parameters"][k]["value"] == pytest.approx(v, rel=1e-8), k
+    assert t["given"]["gear_ratio"] == given["gear_ratio"]
+    assert "suspicious" in t["verdict"]  # exact data: the cost (~0) lies below its χ² range
+    res = run.invoke(app, ["tfest", str(tmp_path / "frf.json"), "--structure", "voltage-servo",
+                           "--motor-constant", "0.00768", "--json", str(tmp_path / "u.json")])
+    assert res.exit_code != 0 and "--resistance" in res.output
+    res = run.invoke(app, ["tfest", str(tmp_path / "frf.json"), "--structure", "three-mass",
+                           "--json", str(tmp_path / "u.json")])
+    assert res.exit_code != 0 and "voltage-servo" in res.output
+    # a free list through the CLI: only the link fitted, the hub held at its true values
+    res = run.invoke(app, ["tfest", str(tmp_path / "frf.json"), "--structure", "voltage-servo",
+                           *opts, "--free", "link_stiffness,link_inertia,link_damping",
+                           "--fix", f"hub_inertia={truth['hub_inertia']}",
+                           "--fix", f"hub_viscous={truth['hub_viscous']}", "--fix", "delay_s=0",
+                           "--json", str(tmp_path / "v.json")])
+    assert res.exit_code == 0, res.output
+    v = json.loads((tmp_path / "v.json").read_text())
+    assert v["free"] == ["link_stiffness", "link_inertia", "link_damping"]
+    assert v["parameters"]["link_stiffness"]["value"] == pytest.approx(truth["link_stiffness"], rel=1e-8)

@@ -1059,18 +1059,38 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           zeros: Optional[int] = typer.Option(None, "--zeros"),
           integrators: int = typer.Option(0, "--integrators"),
           delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
-          structure: Optional[str] = typer.Option(None, "--structure", help="two-mass"),
-          output: Optional[str] = typer.Option(None, "--output", help="output to fit (rational model)"),
+          structure: Optional[str] = typer.Option(
+              None, "--structure", help="physical structure: two-mass, frb-single-mass "
+                                        "(needs --motor-constant) or voltage-servo (needs "
+                                        "--motor-constant, --resistance, --gear-ratio, --efficiency)"),
+          output: Optional[str] = typer.Option(
+              None, "--output", help="output(s) to fit: one for a rational model; for a "
+                                     "structure a comma list (default: every output of the "
+                                     "FRF the structure has)"),
+          free: Optional[str] = typer.Option(None, "--free", help="structure: comma list of "
+                                             "the parameters fitted (default all)"),
+          fixed: list[str] = typer.Option([], "--fix", help="structure: NAME=VALUE held "
+                                          "(SI; with --free, the value of a parameter not fitted)"),
+          motor_constant: Optional[float] = typer.Option(
+              None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
+          resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
+          gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
+          efficiency: Optional[float] = typer.Option(
+              None, "--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)"),
+          length: Optional[float] = typer.Option(
+              None, "--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
                                        help="two-mass: the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
           json_out: Path = typer.Option(..., "--json", help="JSON result"),
           plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
-    """Fit a transfer function or the two-mass structure to an FRF (weighted by its variances)."""
+    """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
+    voltage-servo) to an FRF, weighted by its variances; JSON parameters.<name> = {value, std}."""
     import control as ct
     import numpy as np
 
-    from flexarm.identification.frequency_domain.tfest import TFEstError, fit_two_mass
+    from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
+    from flexarm.identification.frequency_domain.tfest import TFEstError
     from flexarm.identification.frequency_domain.tfest import tfest as _tfest
     try:
         d = json.loads(frf_json.read_text())
@@ -1086,13 +1106,45 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         return np.asarray(o["re"]) + 1j * np.asarray(o["im"]), np.asarray(sd, float)
 
     try:
-        if structure == "two-mass":
-            m = chan("motor_angle") if "motor_angle" in outs else (None, None)
-            lo = chan("load_angle") if "load_angle" in outs else (None, None)
-            fit = fit_two_mass(w, m[0], lo[0], motor_std=m[1], load_std=lo[1])
-            out = {"structure": "two-mass", "units": "per unit of the input's torque constant "
-                   "(A·s²/rad for a current input and angles in rad)"}
-            if coulomb and d.get("spectra") and "motor_angle" in outs:
+        if structure is not None:
+            if structure not in STRUCTURES:
+                _fail(f"--structure {structure!r}: choose one of {', '.join(STRUCTURES)}")
+            st = STRUCTURES[structure]
+            names = ([n.strip() for n in output.split(",") if n.strip()] if output
+                     else [n for n in st.outputs if n in outs])
+            for n in names:
+                if n not in outs:
+                    _fail(f"{frf_json}: --output {n!r} is not in the FRF; outputs: {', '.join(outs)}")
+            if not names:
+                _fail(f"{frf_json}: none of the FRF's outputs ({', '.join(outs)}) is an output "
+                      f"of the {structure} structure ({', '.join(st.outputs)}); name them with "
+                      "flexarm frf --output")
+            given = {"motor_constant": motor_constant, "armature_resistance": resistance,
+                     "gear_ratio": gear_ratio, "efficiency": efficiency, "length": length}
+            given = {k: v for k, v in given.items() if v is not None}
+            opt = {"motor_constant": "--motor-constant", "armature_resistance": "--resistance",
+                   "gear_ratio": "--gear-ratio", "efficiency": "--efficiency", "length": "--length"}
+            extra = [opt[k] for k in given if k not in st.given and k not in st.optional_given]
+            if extra:
+                _fail(f"--structure {structure} takes no {', '.join(extra)}")
+            missing = [f"{opt[k]} ({st.given[k]})" for k in st.given if k not in given]
+            if missing:
+                _fail(f"--structure {structure} needs the data-sheet value(s) {'; '.join(missing)}")
+            held = {}
+            for item in fixed:
+                k, _, v = item.partition("=")
+                try:
+                    held[k.strip()] = float(v)
+                except ValueError:
+                    _fail(f"--fix {item!r}: write NAME=VALUE with a number (SI units)")
+            chans = {n: chan(n) for n in names}
+            fit = fit_structure(st, w, {n: c[0] for n, c in chans.items()},
+                                {n: c[1] for n, c in chans.items()},
+                                free=[x.strip() for x in free.split(",")] if free else None,
+                                initial=held or None, given=given)
+            out = {"structure": structure, "units": st.units, "outputs": names,
+                   "given": given, "free": list(fit.free)}
+            if structure == "two-mass" and coulomb and d.get("spectra") and "motor_angle" in outs:
                 import warnings as _w
 
                 from flexarm.identification.frequency_domain.harmonics import IdentificationError
@@ -1116,7 +1168,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                 except IdentificationError as exc:
                     err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
                     out["coulomb"] = {"error": str(exc)}
-            elif coulomb and "motor_angle" in outs:
+            elif structure == "two-mass" and coulomb and "motor_angle" in outs:
                 err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
                           "several realisations, or written by an older flexarm frf)")
         elif structure is None and poles is not None and zeros is not None:
@@ -1128,7 +1180,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             out = {"output": name, "num": fit.tf.num[0][0].tolist(), "den": fit.tf.den[0][0].tolist(),
                    "unstable_poles": [str(p) for p in fit.unstable_poles]}
         else:
-            _fail("give --poles N --zeros M, or --structure two-mass")
+            _fail(f"give --poles N --zeros M, or --structure ({', '.join(STRUCTURES)})")
     except TFEstError as exc:
         _fail(f"{frf_json}: {exc}")
     out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
@@ -1146,8 +1198,11 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         plots.mkdir(parents=True, exist_ok=True)
         fig, ax = plt.subplots(figsize=(7, 4))
         model = fit.response(w)
-        model = model if isinstance(model, tuple) else (model,)
-        for (nm, o), g in zip(outs.items(), model):
+        model = model if isinstance(model, dict) else {out["output"]: model}
+        for nm, g in model.items():
+            if nm not in outs or (structure is not None and nm not in out["outputs"]):
+                continue
+            o = outs[nm]
             H = np.asarray(o["re"]) + 1j * np.asarray(o["im"])
             ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
             ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")

@@ -53,7 +53,8 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
-from flexarm.identification.frequency_domain.structures import two_mass_derived as _derived
+from flexarm.identification.frequency_domain.structures import (servo_gains, two_mass_derived,
+                                                                 voltage_servo_derived)
 
 #: Simulated friction levels (× the input rms) for the first search grid.
 GRID = np.geomspace(1e-3, 0.5, 8)
@@ -94,11 +95,83 @@ def two_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
     }
 
 
+def voltage_servo_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
+                           substeps: int = 4) -> dict:
+    """Scenario dict of the geared voltage-driven servo with a flexible link (``p`` as
+    :func:`~.structures.voltage_servo_response`, with the given K_m, R_m, K_g, η) as
+    flexarm's single-link arm: voltage drive (η as the gear efficiency, motor efficiency 1:
+    the drive uses their product), hub J_eq, B_eq; a lumped beam of length L (``length``,
+    or 1 m: the angles do not depend on it) with EI = C L/3, a pinned tip mass J_l/L² and
+    modal damping ratio c/(2√(C J_l)) (hub-clamped mode: the damping c across the link,
+    models/lumped_beam.py). ``coulomb``: Coulomb level at the output shaft in N·m (Karnopp,
+    breakaway = Coulomb); the delay is left out."""
+    L = float(p.get("length") or 1.0)
+    C, Jl, c = p["link_stiffness"], p["link_inertia"], p["link_damping"]
+    zeta = float(c / (2 * math.sqrt(C * Jl)))
+    if zeta > 1:
+        raise IdentificationError(f"voltage-servo: the fitted link damping ratio {zeta:.3g} "
+                                  "exceeds 1; the lumped beam takes 0–1: refit the BLA")
+    return {
+        "name": "voltage-servo-from-frf",
+        "arm": {"kind": "single_link",
+                "motor": {"drive": "voltage", "inertia": p["hub_inertia"],
+                          "viscous": max(float(p["hub_viscous"]), 0.0),
+                          "motor_constant": p["motor_constant"],
+                          "armature_resistance": p["armature_resistance"],
+                          "gear_ratio": p["gear_ratio"], "gear_efficiency": p["efficiency"],
+                          "motor_efficiency": 1.0, "voltage_limit": 1e9},
+                "friction": ({"model": "coulomb", "coulomb": float(coulomb),
+                              "static": float(coulomb)} if coulomb > 0 else {"model": "none"}),
+                "beam": {"model": "lumped", "length": L, "flexural_rigidity": C * L / 3,
+                         "damping_ratio": zeta,
+                         "masses": [{"mass": Jl / L**2, "joint": "pinned"}]}},
+        "sampling": {"period": 1.0 / fs, "delay": 0},
+        "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
+        "sensors": {"motor_angle": {}, "tip_angle": {}, "tip_deflection": {}},
+    }
+
+
+@dataclass(frozen=True)
+class _Simulator:
+    """How a fitted structure is simulated with Coulomb friction at the (output) shaft."""
+
+    scenario: object  # (params, C_f, fs, n) → scenario dict
+    viscous: str  # the BLA's viscous parameter that holds the friction's Bussgang share
+    rigid: object  # params → (total inertia, damping besides ``viscous``): slowest decay
+    derived: object  # params → dict with resonance_hz, resonance_damping
+    torque: object  # params → torque per unit of input (scales the C_f grid)
+    input: str  # the reference channel the open-loop 'controller' plays
+    unit: str  # of C_f
+    damping_unit: str
+    where: str
+
+
+def _two_mass_rigid(p):
+    return p["total_inertia"], float(p["load_viscous"])
+
+
+def _servo_rigid(p):
+    return p["hub_inertia"] + p["link_inertia"], servo_gains(p)[1]
+
+
+SIMULATORS = {
+    "two-mass": _Simulator(two_mass_scenario, "motor_viscous", _two_mass_rigid, two_mass_derived,
+                           lambda p: 1.0, "current", "A", "A·s/rad", "at the motor"),
+    "voltage-servo": _Simulator(voltage_servo_scenario, "hub_viscous", _servo_rigid,
+                                voltage_servo_derived, lambda p: servo_gains(p)[0], "voltage",
+                                "N·m", "N·m·s/rad", "at the output shaft"),
+}
+#: The arm's signal that each structure output is read from.
+_SIGNAL = {"motor_angle": "motor_angle", "load_angle": "tip_angle", "tip_angle": "tip_angle",
+           "tip_deflection": "tip_deflection"}
+
+
 @dataclass
 class MultisineCoulomb:
-    """C_f (A) from the odd distortion; see the module docstring."""
+    """C_f from the odd distortion (in ``unit``: A per unit torque constant for the two-mass
+    drive, N·m at the output shaft for the voltage servo); see the module docstring."""
 
-    coulomb_current: float
+    coulomb_current: float  # C_f in ``unit`` (the name kept from the current-driven case)
     std: float
     band_values: list[float | None]
     band_hz: list[tuple[float, float]]
@@ -109,15 +182,19 @@ class MultisineCoulomb:
     linear_share_db: float  # odd power of the frictionless simulator re the measured
     simulations: int
     warnings: list[str] = field(default_factory=list)
+    unit: str = "A"
+    structure: str = "two-mass"
 
     def to_json(self) -> dict:
-        return {"value": self.coulomb_current, "std": self.std,
+        where = SIMULATORS[self.structure].where
+        return {"value": self.coulomb_current, "std": self.std, "unit": self.unit,
+                "structure": self.structure,
                 "band_hz": [list(b) for b in self.band_hz], "band_values": self.band_values,
                 "detected": self.detected, "equivalent_damping": self.equivalent_damping,
                 "motor_viscous_bla": self.motor_viscous_bla, "velocity_rms": self.velocity_rms,
                 "linear_share_db": self.linear_share_db, "simulations": self.simulations,
                 "method": "odd distortion matched by flexarm's simulator of the fitted "
-                          "two-mass model with Coulomb friction at the motor",
+                          f"{self.structure} model with Coulomb friction {where}",
                 "warnings": self.warnings}
 
 
@@ -146,11 +223,21 @@ def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
 
 
 def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "motor_angle",
-                            progress=None) -> MultisineCoulomb:
-    """C_f (A) from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
-    of the measured record) and the two-mass parameters ``params`` fitted to its BLA
-    (``TwoMassFit.values``); see the module docstring. ``progress(i, n)`` after each
-    simulation."""
+                            structure: str = "two-mass", progress=None) -> MultisineCoulomb:
+    """C_f from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
+    of the measured record) and the parameters ``params`` of ``structure`` fitted to its BLA
+    (``StructuredFit.values``; for ``voltage-servo`` with the given K_m, R_m, K_g, η merged
+    in: ``{**fit.given, **fit.values}``); see the module docstring. C_f in A (per unit
+    torque constant) for ``two-mass``, in N·m at the output shaft for ``voltage-servo``
+    (its Bussgang share is taken from B_eq, the back-EMF damping being known).
+    ``progress(i, n)`` after each simulation."""
+    if structure not in SIMULATORS:
+        raise IdentificationError(f"structure {structure!r}: the Coulomb level from the odd "
+                                  f"distortion simulates {', '.join(SIMULATORS)}")
+    sim = SIMULATORS[structure]
+    if output not in _SIGNAL:
+        raise IdentificationError(f"output {output!r}: the odd distortion is matched on "
+                                  f"{', '.join(_SIGNAL)}")
     if output not in frf.outputs:
         raise IdentificationError(f"output {output!r} is not in the FRF (outputs: "
                                   f"{', '.join(frf.outputs)})")
@@ -167,9 +254,9 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     U = mean[0].copy()
     U[0] = 0.0
     u = np.fft.irfft(U * P, n=P)
-    sv = velocity_rms(frf, output)
-    J = params["total_inertia"]
-    dm, dl = float(params["motor_viscous"]), float(params["load_viscous"])
+    sv = velocity_rms(frf, "motor_angle" if "motor_angle" in frf.outputs else output)
+    J, d_rest = sim.rigid(params)
+    dm = float(params[sim.viscous])
 
     bands = _bands(frf, odd)
     pos = {int(k): i for i, k in enumerate(odd)}
@@ -197,20 +284,19 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
 
     def simulate(cf) -> np.ndarray:
         dmp = dm - d_eq(cf)
-        p = dict(params, motor_viscous=max(dmp, 0.0))
-        # slowest decay: the rigid body J/(d_m' + d_l) or the resonance 1/(ζ ω_r)
-        zeta = _derived(p)["resonance_damping"]
-        tau = max(J / max(max(dmp, 0.0) + dl, 1e-300),
-                  1 / max(zeta * 2 * math.pi * p["resonance_hz"], 1e-300))
+        p = dict(params, **{sim.viscous: max(dmp, 0.0)})
+        # slowest decay: the rigid body J/(d_m' + d_rest) or the resonance 1/(ζ ω_r)
+        der = sim.derived(p)
+        tau = max(J / max(max(dmp, 0.0) + d_rest, 1e-300),
+                  1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300))
         ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
         n = (ntr + 2) * P
-        sc = scenario_from_dict(two_mass_scenario(p, cf, fs, n))
+        sc = scenario_from_dict(sim.scenario(p, cf, fs, n))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
-            prep = prepare(sc, controller=ctrl, references={"current": np.tile(u, ntr + 2)})
+            prep = prepare(sc, controller=ctrl, references={sim.input: np.tile(u, ntr + 2)})
         out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
-        name = prep.loop.sensors.names.index("motor_angle" if output == "motor_angle"
-                                               else "tip_angle")
+        name = prep.loop.sensors.names.index(_SIGNAL[output])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = periodic_frf(out["command"][:, 0], {output: out["measured"][:, name]}, fs,
@@ -222,16 +308,16 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
 
     urms = float(np.sqrt(np.mean(u**2)))
     floor = simulate(0.0)
-    grid = GRID * urms
+    grid = GRID * urms * sim.torque(params)
     sims = [simulate(cf) for cf in grid]
     tot = np.array([s[sel].sum() for s in sims])
     lg, lt = np.log(grid), np.log(np.maximum(tot, 1e-300))
     if target <= tot[0] or target >= tot[-1]:
         raise IdentificationError(
             f"{frf.input}: the measured odd distortion ({10 * math.log10(target):.1f} dB re 1 "
-            f"rad²) is outside what the simulated two-mass model gives for C_f from "
-            f"{grid[0]:.3g} to {grid[-1]:.3g} A; the fitted model or the friction structure "
-            "(Coulomb at the motor) does not describe this record")
+            f"rad²) is outside what the simulated {structure} model gives for C_f from "
+            f"{grid[0]:.3g} to {grid[-1]:.3g} {sim.unit}; the fitted model or the friction "
+            f"structure (Coulomb {sim.where}) does not describe this record")
     # log-log interpolation on the monotone part, then secant steps with new simulations
     i = int(np.nonzero(tot >= target)[0][0])
     pts = [(lg[i - 1], lt[i - 1], sims[i - 1]), (lg[i], lt[i], sims[i])]
@@ -277,14 +363,15 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
         notes.append(
             f"{output}: no odd distortion {DETECT_DB:g} dB above the noise: at this amplitude "
             "Coulomb friction cannot be told from viscous damping (both only damp the BLA); "
-            f"C_f = {cf:.3g} A is the upper bound whose distortion would reach the noise level")
+            f"C_f = {cf:.3g} {sim.unit} is the upper bound whose distortion would reach the "
+            "noise level")
     deq = d_eq(cf)
     if deq > dm:
         notes.append(
-            f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} A·s/rad "
-            f"exceeds the BLA's motor viscous damping {dm:.3g}: the model (Coulomb at the "
-            "motor only) does not explain both the distortion and the damping; friction on "
-            "the load side or a different friction law is likely")
+            f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} "
+            f"{sim.damping_unit} exceeds the BLA's viscous damping {sim.viscous} = {dm:.3g}: "
+            f"the model (Coulomb {sim.where} only) does not explain both the distortion and "
+            "the damping; friction elsewhere or a different friction law is likely")
     if detected and floor_db > -1.0:
         notes.append(f"{output}: the measured input's own odd-line content, through the linear "
                      f"model, already gives {floor_db:+.1f} dB of the measured odd distortion: "
@@ -293,7 +380,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
         warnings.warn(m, IdentificationWarning, stacklevel=2)
     return MultisineCoulomb(float(cf), float(std), band_vals,
                             [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
-                            bool(detected), deq, dm, sv, floor_db, count[0], notes)
+                            bool(detected), deq, dm, sv, floor_db, count[0], notes, sim.unit,
+                            structure)
 
 
 def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
@@ -310,8 +398,9 @@ def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
 
 
 def _play(params, state, measured, reference):
-    """The open-loop 'controller': the command is the reference channel ``current``."""
-    return state, reference["current"]
+    """The open-loop 'controller': the command is the reference channel ``current`` (a
+    current drive) or ``voltage`` (a voltage drive)."""
+    return state, reference["current"] if "current" in reference else reference["voltage"]
 
 
 def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
