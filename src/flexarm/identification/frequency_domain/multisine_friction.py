@@ -222,6 +222,51 @@ def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
     return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:])]
 
 
+def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: str = "two-mass",
+                    outputs=("motor_angle",)) -> PeriodicFRF:
+    """The periodic FRF of ``structure`` at ``params`` with Coulomb level ``coulomb`` (in the
+    structure's unit, :data:`SIMULATORS`) driven by the measured record's mean input period
+    (DC removed: a constant torque would run the free rigid body away), played open loop
+    for ``n_tr`` + 2 periods by flexarm's one sampled loop; ``n_tr`` ≥ 1 covers 10 time
+    constants of the slowest mode (the rigid body's J/(d + d_rest) or the resonance's
+    1/(ζ ω_r)), at most ``MAX_TRANSIENT_PERIODS``. Noise-free; the same lines as ``frf``."""
+    import jax.numpy as jnp
+
+    from flexarm.control.discrete import FunctionController
+    from flexarm.sim.build import prepare
+    from flexarm.sim.sampled import simulate_loop
+    from flexarm.specs import scenario_from_dict
+
+    sim = SIMULATORS[structure]
+    sp = frf.spectra
+    if not sp:
+        raise IdentificationError(f"{frf.input}: the FRF carries no period spectra (LPM or "
+                                  "several realisations): the record cannot be replayed")
+    P, fs = frf.period, frf.fs
+    U = sp["mean"][0].copy()
+    U[0] = 0.0
+    u = np.fft.irfft(U * P, n=P)
+    J, d_rest = sim.rigid(params)
+    d = max(float(params[sim.viscous]), 0.0)
+    der = {**params, **sim.derived(params)}  # resonance_hz: a parameter or derived
+    tau = max(J / max(d + d_rest, 1e-300),
+              1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300))
+    ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
+    n = (ntr + 2) * P
+    sc = scenario_from_dict(sim.scenario(params, coulomb, fs, n))
+    ctrl = FunctionController(fn=_play, params=None, state0=jnp.zeros(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
+        prep = prepare(sc, controller=ctrl, references={sim.input: np.tile(u, ntr + 2)})
+    out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
+    names = prep.loop.sensors.names
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return periodic_frf(out["command"][:, 0],
+                            {o: out["measured"][:, names.index(_SIGNAL[o])] for o in outputs},
+                            fs, period=P, lines=frf.lines, transient_periods=ntr)
+
+
 def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "motor_angle",
                             structure: str = "two-mass", progress=None) -> MultisineCoulomb:
     """C_f from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
@@ -255,7 +300,6 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     U[0] = 0.0
     u = np.fft.irfft(U * P, n=P)
     sv = velocity_rms(frf, "motor_angle" if "motor_angle" in frf.outputs else output)
-    J, d_rest = sim.rigid(params)
     dm = float(params[sim.viscous])
 
     bands = _bands(frf, odd)
@@ -273,34 +317,11 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     def d_eq(cf):
         return cf * math.sqrt(2 / math.pi) / max(sv, 1e-300)
 
-    from flexarm.control.discrete import FunctionController
-    from flexarm.sim.build import prepare
-    from flexarm.sim.sampled import simulate_loop
-    from flexarm.specs import scenario_from_dict
-    import jax.numpy as jnp
-
-    ctrl = FunctionController(fn=_play, params=None, state0=jnp.zeros(0))
     count = [0]
 
     def simulate(cf) -> np.ndarray:
-        dmp = dm - d_eq(cf)
-        p = dict(params, **{sim.viscous: max(dmp, 0.0)})
-        # slowest decay: the rigid body J/(d_m' + d_rest) or the resonance 1/(ζ ω_r)
-        der = sim.derived(p)
-        tau = max(J / max(max(dmp, 0.0) + d_rest, 1e-300),
-                  1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300))
-        ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
-        n = (ntr + 2) * P
-        sc = scenario_from_dict(sim.scenario(p, cf, fs, n))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
-            prep = prepare(sc, controller=ctrl, references={sim.input: np.tile(u, ntr + 2)})
-        out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
-        name = prep.loop.sensors.names.index(_SIGNAL[output])
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            res = periodic_frf(out["command"][:, 0], {output: out["measured"][:, name]}, fs,
-                               period=P, lines=frf.lines, transient_periods=ntr)
+        p = dict(params, **{sim.viscous: max(dm - d_eq(cf), 0.0)})
+        res = simulate_record(frf, p, cf, structure, outputs=(output,))
         count[0] += 1
         if progress is not None:
             progress(count[0], None)
@@ -427,3 +448,96 @@ def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
             f"C_f = {x[1]:.3g} ± {s[1]:.2g} A is within two standard deviations of zero: the "
             "amplitudes recorded cannot tell Coulomb friction from viscous damping")
     return out
+
+
+def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: str = "two-mass",
+                                *, iterations: int = 3, progress=None) -> dict:
+    """C_f and the viscous damping d_v from the BLA's viscous damping at several amplitudes,
+    matched with flexarm's simulator of the fitted model with friction.
+
+    ``frfs``: periodic FRFs of records at different amplitudes (with their period spectra);
+    ``fits``: the ``structure`` fit (:func:`~.structures.fit_structure`) to each one's BLA.
+    The BLA damping d_i (``motor_viscous`` or ``hub_viscous``) at velocity rms σ_i follows
+    d_i ≈ d_v + C_f √(2/π)/σ_i (Bussgang, :func:`coulomb_from_amplitudes`: the start). The
+    Gaussian-velocity assumption fails where the hub sticks, so the start is corrected by
+    the simulator: each record's mean input period is played through the fitted model with
+    (d_v, C_f) (:func:`simulate_record`), the same structure is fitted to the simulated BLA
+    (same free parameters, same weights), and (d_v, C_f) move by the weighted least-squares
+    step of the mismatch d_i − d_i^sim with the Bussgang Jacobian [1, √(2/π)/σ_i]
+    (``iterations`` times; a fixed point where the simulated BLA damping equals the
+    measured one at every amplitude). Covariance: (AᵀWA)⁻¹ with W = 1/std(d_i)²
+    (``std_inflated`` where the χ² check rejected a fit). Returns a dict: ``coulomb``,
+    ``viscous`` ({value, std}, in the structure's units), ``correlation``, ``bussgang``
+    (the start), ``records`` (σ_v, d, d_sim per amplitude), ``mismatch`` (rms of
+    (d − d_sim)/std at the end), ``warnings`` (C_f within two standard deviations of zero:
+    the amplitudes cannot tell Coulomb friction from viscous damping; a negative d_v)."""
+    if structure not in SIMULATORS:
+        raise IdentificationError(f"structure {structure!r}: the amplitude match simulates "
+                                  f"{', '.join(SIMULATORS)}")
+    if len(frfs) != len(fits) or len(frfs) < 2:
+        raise IdentificationError("coulomb_from_bla_amplitudes needs two or more records "
+                                  "(one FRF and one fit each) at different amplitudes")
+    from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
+
+    sim = SIMULATORS[structure]
+    names = STRUCTURES[structure].parameters
+    sv = np.array([velocity_rms(f) for f in frfs])
+    d = np.array([fit.parameters[sim.viscous]["value"] for fit in fits])
+    sd = np.array([fit.parameters[sim.viscous].get("std_inflated",
+                                                   fit.parameters[sim.viscous]["std"])
+                   for fit in fits])
+    if np.any(~(sd > 0)):
+        raise IdentificationError(f"the {sim.viscous} of a fit has no positive standard "
+                                  f"deviation (held fixed?): it must be fitted in every record")
+    start = coulomb_from_amplitudes(sv, d, sd)
+    x = np.array([start["viscous"]["value"], start["coulomb_current"]["value"]])
+    A = np.column_stack([np.ones_like(sv), math.sqrt(2 / math.pi) / sv]) / sd[:, None]
+    cov = np.linalg.inv(A.T @ A)
+    count = 0
+    d_sim = np.zeros_like(d)
+    for _ in range(max(int(iterations), 0)):
+        for i, (frf, fit) in enumerate(zip(frfs, fits)):
+            outs = tuple(o for o in fit.outputs if o in _SIGNAL)
+            p = {**fit.given, **fit.values, sim.viscous: max(float(x[0]), 0.0)}
+            rec = simulate_record(frf, p, max(float(x[1]), 0.0), structure, outputs=outs)
+            count += 1
+            if progress is not None:
+                progress(count, None)
+            k = [frf.outputs.index(o) for o in outs]
+            w = 2 * np.pi * rec.frequency_hz
+            # the simulator holds the played input over each sample: its FRF carries the
+            # ZOH (1 − e^{−sT})/sT, divided out to compare with the fitted continuous model
+            sT = 1j * w / frf.fs
+            zoh = (1 - np.exp(-sT)) / sT
+            f2 = fit_structure(structure, w,
+                               {o: rec.response[j] / zoh for j, o in enumerate(outs)},
+                               {o: (frf.total_std if frf.total_std is not None
+                                    else frf.noise_std)[kk] for o, kk in zip(outs, k)},
+                               free=fit.free, initial={n: fit.values[n] for n in names},
+                               given=fit.given)
+            d_sim[i] = f2.parameters[sim.viscous]["value"]
+        x = x + cov @ A.T @ ((d - d_sim) / sd)
+    s = np.sqrt(np.diag(cov))
+    mismatch = float(np.sqrt(np.mean(((d - d_sim) / sd) ** 2))) if iterations else None
+    notes = list(start["warnings"])
+    if abs(x[1]) < 2 * s[1] and not notes:
+        notes.append(f"C_f = {x[1]:.3g} ± {s[1]:.2g} {sim.unit} is within two standard deviations "
+                     "of zero: the amplitudes recorded cannot tell Coulomb friction from "
+                     "viscous damping")
+    if x[0] < 0:
+        notes.append(f"the viscous damping {x[0]:.3g} {sim.damping_unit} is negative: the BLA's "
+                     "damping falls faster with amplitude than Coulomb friction explains")
+    for m in notes[len(start["warnings"]):]:
+        warnings.warn(m, IdentificationWarning, stacklevel=2)
+    return {"structure": structure, "unit": sim.unit, "damping_unit": sim.damping_unit,
+            "coulomb": {"value": float(x[1]), "std": float(s[1])},
+            "viscous": {"value": float(x[0]), "std": float(s[0])},
+            "correlation": float(cov[0, 1] / (s[0] * s[1])),
+            "bussgang": {"coulomb": start["coulomb_current"], "viscous": start["viscous"]},
+            "records": [{"velocity_rms": float(a), "damping": float(b), "damping_std": float(c),
+                         "damping_simulated": float(e)} for a, b, c, e in zip(sv, d, sd, d_sim)],
+            "mismatch": mismatch, "iterations": int(iterations), "simulations": count,
+            "method": "BLA viscous damping per amplitude; Bussgang start, then matched by "
+                      f"flexarm's simulator of the fitted {structure} model with Coulomb "
+                      f"friction {sim.where}",
+            "warnings": notes}
