@@ -1293,17 +1293,16 @@ def friction(frf_json: list[Path] = typer.Argument(
         fits.append(fit)
         err.print(f"{path}: {structure} fit, {fit.verdict.split(':')[0]}")
     try:
-        with _w.catch_warnings(record=True) as caught:
-            _w.simplefilter("always")
+        with _w.catch_warnings():
+            _w.simplefilter("ignore")  # all of them are in res["warnings"]
             res = coulomb_from_bla_amplitudes(
                 frfs, fits, structure, iterations=iterations,
                 progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
         err.print("")
     except IdentificationError as exc:
         _fail(str(exc))
-    for c in caught:
-        if "IdentificationWarning" in type(c.message).__name__:
-            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+    for m in res["warnings"]:
+        err.print(f"[yellow]warning:[/] {escape(m)}")
     res["sources"] = [str(p) for p in frf_json]
     res["fits"] = [f.to_json() for f in fits]
     from flexarm.io.write import write_json
