@@ -1097,7 +1097,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           length: Optional[float] = typer.Option(
               None, "--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
-                                       help="two-mass, voltage-servo: the Coulomb level from the odd distortion "
+                                       help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
           json_out: Path = typer.Option(..., "--json", help="JSON result"),
           plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
@@ -1233,9 +1233,9 @@ def friction(frf_json: list[Path] = typer.Argument(
                  ..., help="FRF JSONs written by flexarm frf, one per amplitude (same "
                            "excitation lines, different levels)"),
              structure: str = typer.Option("two-mass", "--structure",
-                                           help="two-mass or voltage-servo"),
-             motor_constant: Optional[float] = typer.Option(None, "--motor-constant",
-                                                            help="voltage-servo: K_m (V·s/rad)"),
+                                           help="two-mass, frb-single-mass or voltage-servo"),
+             motor_constant: Optional[float] = typer.Option(
+                 None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
              resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
              gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
              efficiency: Optional[float] = typer.Option(None, "--efficiency",

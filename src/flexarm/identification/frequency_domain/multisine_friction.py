@@ -53,7 +53,8 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
-from flexarm.identification.frequency_domain.structures import (servo_gains, two_mass_derived,
+from flexarm.identification.frequency_domain.structures import (frb_single_mass_derived,
+                                                                 servo_gains, two_mass_derived,
                                                                  voltage_servo_derived)
 
 #: Simulated friction levels (× the input rms) for the first search grid.
@@ -131,6 +132,30 @@ def voltage_servo_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *
     }
 
 
+def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
+                             substeps: int = 4) -> dict:
+    """Scenario dict of FRB's single-mass arm (``p`` as
+    :func:`~.structures.frb_single_mass_response`, with the given K) as flexarm's
+    single-link arm: current drive K, hub J, V, and the transfer-function beam of FRB eqs.
+    (13), (16): G_b = (C/J_t)/(s² + (d_t/J_t) s + C/J_t), C_t = C (θm − θt). ``coulomb`` in A
+    (the torque C_f = K·``coulomb``, as FRB reports it); the delay is left out."""
+    K, C, Jt = p["motor_constant"], p["link_stiffness"], p["tip_inertia"]
+    return {
+        "name": "frb-single-mass-from-frf",
+        "arm": {"kind": "single_link",
+                "motor": {"drive": "current", "inertia": p["hub_inertia"],
+                          "viscous": max(float(p["hub_viscous"]), 0.0), "torque_constant": K,
+                          "current_limit": 1e9},
+                "friction": ({"model": "coulomb", "coulomb": float(coulomb) * K,
+                              "static": float(coulomb) * K} if coulomb > 0 else {"model": "none"}),
+                "beam": {"model": "transfer_function", "stiffness": C, "tip_num": [C / Jt],
+                         "tip_den": [1.0, p["tip_damping"] / Jt, C / Jt]}},
+        "sampling": {"period": 1.0 / fs, "delay": 0},
+        "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
+        "sensors": {"motor_angle": {}, "tip_angle": {}},
+    }
+
+
 @dataclass(frozen=True)
 class _Simulator:
     """How a fitted structure is simulated with Coulomb friction at the (output) shaft."""
@@ -142,8 +167,9 @@ class _Simulator:
     torque: object  # params → torque per unit of input (scales the C_f grid)
     input: str  # the reference channel the open-loop 'controller' plays
     unit: str  # of C_f
-    damping_unit: str
+    damping_unit: str  # of ``viscous``
     where: str
+    friction_torque: object = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
 
 
 def _two_mass_rigid(p):
@@ -154,7 +180,15 @@ def _servo_rigid(p):
     return p["hub_inertia"] + p["link_inertia"], servo_gains(p)[1]
 
 
+def _frb_rigid(p):
+    return p["hub_inertia"] + p["tip_inertia"], float(p["tip_damping"])
+
+
 SIMULATORS = {
+    # the FRB arm's V in N·m·s/rad, C_f in A (as the paper): the friction torque is K C_f
+    "frb-single-mass": _Simulator(frb_single_mass_scenario, "hub_viscous", _frb_rigid,
+                                  frb_single_mass_derived, lambda p: 1.0, "current", "A",
+                                  "N·m·s/rad", "at the motor", lambda p: p["motor_constant"]),
     "two-mass": _Simulator(two_mass_scenario, "motor_viscous", _two_mass_rigid, two_mass_derived,
                            lambda p: 1.0, "current", "A", "A·s/rad", "at the motor"),
     "voltage-servo": _Simulator(voltage_servo_scenario, "hub_viscous", _servo_rigid,
@@ -169,14 +203,15 @@ _SIGNAL = {"motor_angle": "motor_angle", "load_angle": "tip_angle", "tip_angle":
 @dataclass
 class MultisineCoulomb:
     """C_f from the odd distortion (in ``unit``: A per unit torque constant for the two-mass
-    drive, N·m at the output shaft for the voltage servo); see the module docstring."""
+    drive and FRB's arm (whose friction torque is K·C_f), N·m at the output shaft for the
+    voltage servo); see the module docstring."""
 
     coulomb_current: float  # C_f in ``unit`` (the name kept from the current-driven case)
     std: float
     band_values: list[float | None]
     band_hz: list[tuple[float, float]]
     detected: bool
-    equivalent_damping: float  # d_eq = C_f √(2/π)/σ_v (A·s/rad)
+    equivalent_damping: float  # d_eq = C_f √(2/π)/σ_v (× K for FRB's arm), viscous units
     motor_viscous_bla: float  # d_m of the BLA fit
     velocity_rms: float
     linear_share_db: float  # odd power of the frictionless simulator re the measured
@@ -273,7 +308,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     of the measured record) and the parameters ``params`` of ``structure`` fitted to its BLA
     (``StructuredFit.values``; for ``voltage-servo`` with the given K_m, R_m, K_g, η merged
     in: ``{**fit.given, **fit.values}``); see the module docstring. C_f in A (per unit
-    torque constant) for ``two-mass``, in N·m at the output shaft for ``voltage-servo``
+    torque constant) for ``two-mass``, in A for ``frb-single-mass`` (torque K·C_f, its
+    Bussgang share taken from V in N·m·s/rad), in N·m at the output shaft for ``voltage-servo``
     (its Bussgang share is taken from B_eq, the back-EMF damping being known).
     ``progress(i, n)`` after each simulation."""
     if structure not in SIMULATORS:
@@ -314,8 +350,10 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     sel = np.array([pos[int(k)] for k in use])
     target = float(np.sum(Pd[sel])) if detected else float(np.sum(noise[sel]))
 
+    ft = float(sim.friction_torque(params))
+
     def d_eq(cf):
-        return cf * math.sqrt(2 / math.pi) / max(sv, 1e-300)
+        return cf * ft * math.sqrt(2 / math.pi) / max(sv, 1e-300)
 
     count = [0]
 
@@ -489,9 +527,11 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
     if np.any(~(sd > 0)):
         raise IdentificationError(f"the {sim.viscous} of a fit has no positive standard "
                                   f"deviation (held fixed?): it must be fitted in every record")
-    start = coulomb_from_amplitudes(sv, d, sd)
+    ft = float(sim.friction_torque({**fits[0].given, **fits[0].values}))  # torque per unit C_f
+    start = coulomb_from_amplitudes(sv, d / ft, sd / ft)
+    start["viscous"] = {k: v * ft for k, v in start["viscous"].items()}
     x = np.array([start["viscous"]["value"], start["coulomb_current"]["value"]])
-    A = np.column_stack([np.ones_like(sv), math.sqrt(2 / math.pi) / sv]) / sd[:, None]
+    A = np.column_stack([np.ones_like(sv), ft * math.sqrt(2 / math.pi) / sv]) / sd[:, None]
     cov = np.linalg.inv(A.T @ A)
     count = 0
     d_sim = np.zeros_like(d)
