@@ -1150,8 +1150,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                                 {n: c[1] for n, c in chans.items()},
                                 free=[x.strip() for x in free.split(",")] if free else None,
                                 initial=held or None, given=given)
-            out = {"structure": structure, "units": st.units, "outputs": names,
-                   "given": given, "free": list(fit.free)}
+            out = fit.to_json()  # structure, units, given, free, outputs, cost, parameters
             if structure in SIMULATORS and coulomb and d.get("spectra") and "motor_angle" in outs:
                 import warnings as _w
 
