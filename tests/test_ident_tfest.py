@@ -6,8 +6,8 @@ import numpy as np
 import control
 import pytest
 
-from flexarm.identification.frequency_domain.tfest import (TFEstError, fit_two_mass, tfest, tfest_orders,
-                                 two_mass_response)
+from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response
+from flexarm.identification.frequency_domain.tfest import TFEstError, tfest, tfest_orders
 
 
 def _coef_err(fit, sys):

@@ -1163,24 +1163,62 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                   f"({res.transient_periods} transient); {res.verdict()}")
 
 
+def _structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length) -> dict:
+    """The known constants of a structure from the CLI's data-sheet options; a clear error
+    for a missing or a foreign option."""
+    given = {"motor_constant": motor_constant, "armature_resistance": resistance,
+             "gear_ratio": gear_ratio, "efficiency": efficiency, "length": length}
+    given = {k: v for k, v in given.items() if v is not None}
+    opt = {"motor_constant": "--motor-constant", "armature_resistance": "--resistance",
+           "gear_ratio": "--gear-ratio", "efficiency": "--efficiency", "length": "--length"}
+    extra = [opt[k] for k in given if k not in st.given and k not in st.optional_given]
+    if extra:
+        _fail(f"--structure {st.name} takes no {', '.join(extra)}")
+    missing = [f"{opt[k]} ({st.given[k]})" for k in st.given if k not in given]
+    if missing:
+        _fail(f"--structure {st.name} needs the data-sheet value(s) {'; '.join(missing)}")
+    return given
+
+
 @app.command()
 def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
           poles: Optional[int] = typer.Option(None, "--poles"),
           zeros: Optional[int] = typer.Option(None, "--zeros"),
           integrators: int = typer.Option(0, "--integrators"),
           delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
-          structure: Optional[str] = typer.Option(None, "--structure", help="two-mass"),
-          output: Optional[str] = typer.Option(None, "--output", help="output to fit (rational model)"),
+          structure: Optional[str] = typer.Option(
+              None, "--structure", help="physical structure: two-mass, frb-single-mass "
+                                        "(needs --motor-constant) or voltage-servo (needs "
+                                        "--motor-constant, --resistance, --gear-ratio, --efficiency)"),
+          output: Optional[str] = typer.Option(
+              None, "--output", help="output(s) to fit: one for a rational model; for a "
+                                     "structure a comma list (default: every output of the "
+                                     "FRF the structure has)"),
+          free: Optional[str] = typer.Option(None, "--free", help="structure: comma list of "
+                                             "the parameters fitted (default all)"),
+          fixed: list[str] = typer.Option([], "--fix", help="structure: NAME=VALUE held "
+                                          "(SI; with --free, the value of a parameter not fitted)"),
+          motor_constant: Optional[float] = typer.Option(
+              None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
+          resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
+          gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
+          efficiency: Optional[float] = typer.Option(
+              None, "--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)"),
+          length: Optional[float] = typer.Option(
+              None, "--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
-                                       help="two-mass: the Coulomb level from the odd distortion "
+                                       help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
           json_out: Path = typer.Option(..., "--json", help="JSON result"),
           plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
-    """Fit a transfer function or the two-mass structure to an FRF (weighted by its variances)."""
+    """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
+    voltage-servo) to an FRF, weighted by its variances; JSON parameters.<name> = {value, std}."""
     import control as ct
     import numpy as np
 
-    from flexarm.identification.frequency_domain.tfest import TFEstError, fit_two_mass
+    from flexarm.identification.frequency_domain.multisine_friction import SIMULATORS
+    from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
+    from flexarm.identification.frequency_domain.tfest import TFEstError
     from flexarm.identification.frequency_domain.tfest import tfest as _tfest
     try:
         d = json.loads(frf_json.read_text())
@@ -1196,13 +1234,34 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         return np.asarray(o["re"]) + 1j * np.asarray(o["im"]), np.asarray(sd, float)
 
     try:
-        if structure == "two-mass":
-            m = chan("motor_angle") if "motor_angle" in outs else (None, None)
-            lo = chan("load_angle") if "load_angle" in outs else (None, None)
-            fit = fit_two_mass(w, m[0], lo[0], motor_std=m[1], load_std=lo[1])
-            out = {"structure": "two-mass", "units": "per unit of the input's torque constant "
-                   "(A·s²/rad for a current input and angles in rad)"}
-            if coulomb and d.get("spectra") and "motor_angle" in outs:
+        if structure is not None:
+            if structure not in STRUCTURES:
+                _fail(f"--structure {structure!r}: choose one of {', '.join(STRUCTURES)}")
+            st = STRUCTURES[structure]
+            names = ([n.strip() for n in output.split(",") if n.strip()] if output
+                     else [n for n in st.outputs if n in outs])
+            for n in names:
+                if n not in outs:
+                    _fail(f"{frf_json}: --output {n!r} is not in the FRF; outputs: {', '.join(outs)}")
+            if not names:
+                _fail(f"{frf_json}: none of the FRF's outputs ({', '.join(outs)}) is an output "
+                      f"of the {structure} structure ({', '.join(st.outputs)}); name them with "
+                      "flexarm frf --output")
+            given = _structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
+            held = {}
+            for item in fixed:
+                k, _, v = item.partition("=")
+                try:
+                    held[k.strip()] = float(v)
+                except ValueError:
+                    _fail(f"--fix {item!r}: write NAME=VALUE with a number (SI units)")
+            chans = {n: chan(n) for n in names}
+            fit = fit_structure(st, w, {n: c[0] for n, c in chans.items()},
+                                {n: c[1] for n, c in chans.items()},
+                                free=[x.strip() for x in free.split(",")] if free else None,
+                                initial=held or None, given=given)
+            out = fit.to_json()  # structure, units, given, free, outputs, cost, parameters
+            if structure in SIMULATORS and coulomb and d.get("spectra") and "motor_angle" in outs:
                 import warnings as _w
 
                 from flexarm.identification.frequency_domain.harmonics import IdentificationError
@@ -1214,19 +1273,20 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                     with _w.catch_warnings(record=True) as caught:
                         _w.simplefilter("always")
                         cf = coulomb_from_distortion(
-                            PeriodicFRF.from_json(d, str(frf_json)), fit.values,
+                            PeriodicFRF.from_json(d, str(frf_json)),
+                            {**fit.given, **fit.values}, structure=structure,
                             progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
                     for c in caught:
                         if "IdentificationWarning" in type(c.message).__name__:
                             err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
                     err.print("")
-                    fit.parameters["coulomb_current"] = {"value": cf.coulomb_current,
-                                                         "std": cf.std}
+                    fit.parameters["coulomb_current" if cf.unit == "A" else "coulomb_torque"] = {
+                        "value": cf.coulomb_current, "std": cf.std}
                     out["coulomb"] = cf.to_json()
                 except IdentificationError as exc:
                     err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
                     out["coulomb"] = {"error": str(exc)}
-            elif coulomb and "motor_angle" in outs:
+            elif structure in SIMULATORS and coulomb and "motor_angle" in outs:
                 err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
                           "several realisations, or written by an older flexarm frf)")
         elif structure is None and poles is not None and zeros is not None:
@@ -1238,7 +1298,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             out = {"output": name, "num": fit.tf.num[0][0].tolist(), "den": fit.tf.den[0][0].tolist(),
                    "unstable_poles": [str(p) for p in fit.unstable_poles]}
         else:
-            _fail("give --poles N --zeros M, or --structure two-mass")
+            _fail(f"give --poles N --zeros M, or --structure ({', '.join(STRUCTURES)})")
     except TFEstError as exc:
         _fail(f"{frf_json}: {exc}")
     out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
@@ -1256,8 +1316,11 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         plots.mkdir(parents=True, exist_ok=True)
         fig, ax = plt.subplots(figsize=(7, 4))
         model = fit.response(w)
-        model = model if isinstance(model, tuple) else (model,)
-        for (nm, o), g in zip(outs.items(), model):
+        model = model if isinstance(model, dict) else {out["output"]: model}
+        for nm, g in model.items():
+            if nm not in outs or (structure is not None and nm not in out["outputs"]):
+                continue
+            o = outs[nm]
             H = np.asarray(o["re"]) + 1j * np.asarray(o["im"])
             ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
             ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")
@@ -1270,8 +1333,93 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     console.print(fit.verdict)
     for name, v in fit.parameters.items():
         extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
-        kind = "line scatter" if name == "coulomb_current" else "noise"
+        kind = "line scatter" if name.startswith("coulomb_") else "noise"
         console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} ({kind}){extra}")
+
+
+@app.command()
+def friction(frf_json: list[Path] = typer.Argument(
+                 ..., help="FRF JSONs written by flexarm frf, one per amplitude (same "
+                           "excitation lines, different levels)"),
+             structure: str = typer.Option("two-mass", "--structure",
+                                           help="two-mass, frb-single-mass or voltage-servo"),
+             motor_constant: Optional[float] = typer.Option(
+                 None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
+             resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
+             gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
+             efficiency: Optional[float] = typer.Option(None, "--efficiency",
+                                                        help="voltage-servo: η = η_g η_m"),
+             length: Optional[float] = typer.Option(None, "--length",
+                                                    help="voltage-servo: link length L (m)"),
+             iterations: int = typer.Option(3, "--iterations",
+                                            help="simulator corrections of the Bussgang start (0: none)"),
+             json_out: Path = typer.Option(..., "--json", help="JSON result")) -> None:
+    """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
+    structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v
+    (Bussgang), then matched with flexarm's simulator of the fitted model with friction."""
+    import warnings as _w
+
+    import numpy as np
+
+    from flexarm.identification.frequency_domain.harmonics import IdentificationError
+    from flexarm.identification.frequency_domain.multisine_friction import (
+        SIMULATORS, coulomb_from_bla_amplitudes)
+    from flexarm.identification.frequency_domain.periodic import PeriodicFRF
+    from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
+    from flexarm.identification.frequency_domain.tfest import TFEstError
+
+    if structure not in SIMULATORS:
+        _fail(f"--structure {structure!r}: the friction match simulates {', '.join(SIMULATORS)}")
+    if len(frf_json) < 2:
+        _fail("flexarm friction needs two or more FRF JSONs at different amplitudes (one "
+              "amplitude: flexarm tfest --structure ... gives C_f from the odd distortion)")
+    st = STRUCTURES[structure]
+    given = _structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
+    frfs, fits = [], []
+    for path in frf_json:
+        try:
+            d = json.loads(path.read_text())
+            frf = PeriodicFRF.from_json(d, str(path))
+        except (OSError, ValueError, KeyError, IdentificationError) as exc:
+            _fail(f"{path}: not an FRF JSON from flexarm frf ({exc})")
+        if not frf.spectra:
+            _fail(f"{path}: the FRF JSON has no period spectra (LPM or several realisations): "
+                  "the record cannot be replayed by the simulator")
+        names = [n for n in st.outputs if n in frf.outputs]
+        if "motor_angle" not in names:
+            _fail(f"{path}: no motor_angle output (outputs: {', '.join(frf.outputs)}); the "
+                  "velocity rms and the friction are taken at the motor")
+        idx = [frf.outputs.index(n) for n in names]
+        try:
+            fit = fit_structure(st, 2 * np.pi * frf.frequency_hz,
+                                {n: frf.response[i] for n, i in zip(names, idx)},
+                                {n: (frf.total_std if frf.total_std is not None
+                                     else frf.noise_std)[i] for n, i in zip(names, idx)},
+                                given=given)
+        except TFEstError as exc:
+            _fail(f"{path}: {exc}")
+        frfs.append(frf)
+        fits.append(fit)
+        err.print(f"{path}: {structure} fit, {fit.verdict.split(':')[0]}")
+    try:
+        with _w.catch_warnings():
+            _w.simplefilter("ignore")  # all of them are in res["warnings"]
+            res = coulomb_from_bla_amplitudes(
+                frfs, fits, structure, iterations=iterations,
+                progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
+        err.print("")
+    except IdentificationError as exc:
+        _fail(str(exc))
+    for m in res["warnings"]:
+        err.print(f"[yellow]warning:[/] {escape(m)}")
+    res["sources"] = [str(p) for p in frf_json]
+    res["fits"] = [f.to_json() for f in fits]
+    from flexarm.io.write import write_json
+    write_json(json_out, res, overwrite=True)
+    c, v = res["coulomb"], res["viscous"]
+    console.print(f"Coulomb {c['value']:.4g} ± {c['std']:.2g} {res['unit']}, viscous "
+                  f"{v['value']:.4g} ± {v['std']:.2g} {res['damping_unit']} (correlation "
+                  f"{res['correlation']:.2f}; Bussgang start {res['bussgang']['coulomb']['value']:.4g})")
 
 
 if __name__ == "__main__":  # python -m flexarm.cli

@@ -53,7 +53,9 @@ import numpy as np
 
 from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
-from flexarm.identification.frequency_domain.tfest import _derived
+from flexarm.identification.frequency_domain.structures import (frb_single_mass_derived,
+                                                                 servo_gains, two_mass_derived,
+                                                                 voltage_servo_derived)
 
 #: Simulated friction levels (× the input rms) for the first search grid.
 GRID = np.geomspace(1e-3, 0.5, 8)
@@ -94,30 +96,140 @@ def two_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
     }
 
 
+def voltage_servo_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
+                           substeps: int = 4) -> dict:
+    """Scenario dict of the geared voltage-driven servo with a flexible link (``p`` as
+    :func:`~.structures.voltage_servo_response`, with the given K_m, R_m, K_g, η) as
+    flexarm's single-link arm: voltage drive (η as the gear efficiency, motor efficiency 1:
+    the drive uses their product), hub J_eq, B_eq; a lumped beam of length L (``length``,
+    or 1 m: the angles do not depend on it) with EI = C L/3, a pinned tip mass J_l/L² and
+    modal damping ratio c/(2√(C J_l)) (hub-clamped mode: the damping c across the link,
+    models/lumped_beam.py). ``coulomb``: Coulomb level at the output shaft in N·m (Karnopp,
+    breakaway = Coulomb); the delay is left out."""
+    L = float(p.get("length") or 1.0)
+    C, Jl, c = p["link_stiffness"], p["link_inertia"], p["link_damping"]
+    zeta = float(c / (2 * math.sqrt(C * Jl)))
+    if zeta > 1:
+        raise IdentificationError(f"voltage-servo: the fitted link damping ratio {zeta:.3g} "
+                                  "exceeds 1; the lumped beam takes 0–1: refit the BLA")
+    return {
+        "name": "voltage-servo-from-frf",
+        "arm": {"kind": "single_link",
+                "motor": {"drive": "voltage", "inertia": p["hub_inertia"],
+                          "viscous": max(float(p["hub_viscous"]), 0.0),
+                          "motor_constant": p["motor_constant"],
+                          "armature_resistance": p["armature_resistance"],
+                          "gear_ratio": p["gear_ratio"], "gear_efficiency": p["efficiency"],
+                          "motor_efficiency": 1.0, "voltage_limit": 1e9},
+                "friction": ({"model": "coulomb", "coulomb": float(coulomb),
+                              "static": float(coulomb)} if coulomb > 0 else {"model": "none"}),
+                "beam": {"model": "lumped", "length": L, "flexural_rigidity": C * L / 3,
+                         "damping_ratio": zeta,
+                         "masses": [{"mass": Jl / L**2, "joint": "pinned"}]}},
+        "sampling": {"period": 1.0 / fs, "delay": 0},
+        "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
+        "sensors": {"motor_angle": {}, "tip_angle": {}, "tip_deflection": {}},
+    }
+
+
+def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
+                             substeps: int = 4) -> dict:
+    """Scenario dict of FRB's single-mass arm (``p`` as
+    :func:`~.structures.frb_single_mass_response`, with the given K) as flexarm's
+    single-link arm: current drive K, hub J, V, and the transfer-function beam of FRB eqs.
+    (13), (16): G_b = (C/J_t)/(s² + (d_t/J_t) s + C/J_t), C_t = C (θm − θt). ``coulomb`` in A
+    (the torque C_f = K·``coulomb``, as FRB reports it); the delay is left out."""
+    K, C, Jt = p["motor_constant"], p["link_stiffness"], p["tip_inertia"]
+    return {
+        "name": "frb-single-mass-from-frf",
+        "arm": {"kind": "single_link",
+                "motor": {"drive": "current", "inertia": p["hub_inertia"],
+                          "viscous": max(float(p["hub_viscous"]), 0.0), "torque_constant": K,
+                          "current_limit": 1e9},
+                "friction": ({"model": "coulomb", "coulomb": float(coulomb) * K,
+                              "static": float(coulomb) * K} if coulomb > 0 else {"model": "none"}),
+                "beam": {"model": "transfer_function", "stiffness": C, "tip_num": [C / Jt],
+                         "tip_den": [1.0, p["tip_damping"] / Jt, C / Jt]}},
+        "sampling": {"period": 1.0 / fs, "delay": 0},
+        "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
+        "sensors": {"motor_angle": {}, "tip_angle": {}},
+    }
+
+
+@dataclass(frozen=True)
+class _Simulator:
+    """How a fitted structure is simulated with Coulomb friction at the (output) shaft."""
+
+    scenario: object  # (params, C_f, fs, n) → scenario dict
+    viscous: str  # the BLA's viscous parameter that holds the friction's Bussgang share
+    rigid: object  # params → (total inertia, damping besides ``viscous``): slowest decay
+    derived: object  # params → dict with resonance_hz, resonance_damping
+    torque: object  # params → torque per unit of input (scales the C_f grid)
+    input: str  # the reference channel the open-loop 'controller' plays
+    unit: str  # of C_f
+    damping_unit: str  # of ``viscous``
+    where: str
+    friction_torque: object = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
+
+
+def _two_mass_rigid(p):
+    return p["total_inertia"], float(p["load_viscous"])
+
+
+def _servo_rigid(p):
+    return p["hub_inertia"] + p["link_inertia"], servo_gains(p)[1]
+
+
+def _frb_rigid(p):
+    return p["hub_inertia"] + p["tip_inertia"], float(p["tip_damping"])
+
+
+SIMULATORS = {
+    # the FRB arm's V in N·m·s/rad, C_f in A (as the paper): the friction torque is K C_f
+    "frb-single-mass": _Simulator(frb_single_mass_scenario, "hub_viscous", _frb_rigid,
+                                  frb_single_mass_derived, lambda p: 1.0, "current", "A",
+                                  "N·m·s/rad", "at the motor", lambda p: p["motor_constant"]),
+    "two-mass": _Simulator(two_mass_scenario, "motor_viscous", _two_mass_rigid, two_mass_derived,
+                           lambda p: 1.0, "current", "A", "A·s/rad", "at the motor"),
+    "voltage-servo": _Simulator(voltage_servo_scenario, "hub_viscous", _servo_rigid,
+                                voltage_servo_derived, lambda p: servo_gains(p)[0], "voltage",
+                                "N·m", "N·m·s/rad", "at the output shaft"),
+}
+#: The arm's signal that each structure output is read from.
+_SIGNAL = {"motor_angle": "motor_angle", "load_angle": "tip_angle", "tip_angle": "tip_angle",
+           "tip_deflection": "tip_deflection"}
+
+
 @dataclass
 class MultisineCoulomb:
-    """C_f (A) from the odd distortion; see the module docstring."""
+    """C_f from the odd distortion (in ``unit``: A per unit torque constant for the two-mass
+    drive and FRB's arm (whose friction torque is K·C_f), N·m at the output shaft for the
+    voltage servo); see the module docstring."""
 
-    coulomb_current: float
+    coulomb_current: float  # C_f in ``unit`` (the name kept from the current-driven case)
     std: float
     band_values: list[float | None]
     band_hz: list[tuple[float, float]]
     detected: bool
-    equivalent_damping: float  # d_eq = C_f √(2/π)/σ_v (A·s/rad)
+    equivalent_damping: float  # d_eq = C_f √(2/π)/σ_v (× K for FRB's arm), viscous units
     motor_viscous_bla: float  # d_m of the BLA fit
     velocity_rms: float
     linear_share_db: float  # odd power of the frictionless simulator re the measured
     simulations: int
     warnings: list[str] = field(default_factory=list)
+    unit: str = "A"
+    structure: str = "two-mass"
 
     def to_json(self) -> dict:
-        return {"value": self.coulomb_current, "std": self.std,
+        where = SIMULATORS[self.structure].where
+        return {"value": self.coulomb_current, "std": self.std, "unit": self.unit,
+                "structure": self.structure,
                 "band_hz": [list(b) for b in self.band_hz], "band_values": self.band_values,
                 "detected": self.detected, "equivalent_damping": self.equivalent_damping,
                 "motor_viscous_bla": self.motor_viscous_bla, "velocity_rms": self.velocity_rms,
                 "linear_share_db": self.linear_share_db, "simulations": self.simulations,
                 "method": "odd distortion matched by flexarm's simulator of the fitted "
-                          "two-mass model with Coulomb friction at the motor",
+                          f"{self.structure} model with Coulomb friction {where}",
                 "warnings": self.warnings}
 
 
@@ -145,12 +257,68 @@ def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
     return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:])]
 
 
+def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: str = "two-mass",
+                    outputs=("motor_angle",)) -> PeriodicFRF:
+    """The periodic FRF of ``structure`` at ``params`` with Coulomb level ``coulomb`` (in the
+    structure's unit, :data:`SIMULATORS`) driven by the measured record's mean input period
+    (DC removed: a constant torque would run the free rigid body away), played open loop
+    for ``n_tr`` + 2 periods by flexarm's one sampled loop; ``n_tr`` ≥ 1 covers 10 time
+    constants of the slowest mode (the rigid body's J/(d + d_rest) or the resonance's
+    1/(ζ ω_r)), at most ``MAX_TRANSIENT_PERIODS``. Noise-free; the same lines as ``frf``."""
+    import jax.numpy as jnp
+
+    from flexarm.control.discrete import FunctionController
+    from flexarm.sim.build import prepare
+    from flexarm.sim.sampled import simulate_loop
+    from flexarm.specs import scenario_from_dict
+
+    sim = SIMULATORS[structure]
+    sp = frf.spectra
+    if not sp:
+        raise IdentificationError(f"{frf.input}: the FRF carries no period spectra (LPM or "
+                                  "several realisations): the record cannot be replayed")
+    P, fs = frf.period, frf.fs
+    U = sp["mean"][0].copy()
+    U[0] = 0.0
+    u = np.fft.irfft(U * P, n=P)
+    J, d_rest = sim.rigid(params)
+    d = max(float(params[sim.viscous]), 0.0)
+    der = {**params, **sim.derived(params)}  # resonance_hz: a parameter or derived
+    tau = max(J / max(d + d_rest, 1e-300),
+              1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300))
+    ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
+    n = (ntr + 2) * P
+    sc = scenario_from_dict(sim.scenario(params, coulomb, fs, n))
+    ctrl = FunctionController(fn=_play, params=None, state0=jnp.zeros(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
+        prep = prepare(sc, controller=ctrl, references={sim.input: np.tile(u, ntr + 2)})
+    out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
+    names = prep.loop.sensors.names
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return periodic_frf(out["command"][:, 0],
+                            {o: out["measured"][:, names.index(_SIGNAL[o])] for o in outputs},
+                            fs, period=P, lines=frf.lines, transient_periods=ntr)
+
+
 def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "motor_angle",
-                            progress=None) -> MultisineCoulomb:
-    """C_f (A) from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
-    of the measured record) and the two-mass parameters ``params`` fitted to its BLA
-    (``TwoMassFit.values``); see the module docstring. ``progress(i, n)`` after each
-    simulation."""
+                            structure: str = "two-mass", progress=None) -> MultisineCoulomb:
+    """C_f from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
+    of the measured record) and the parameters ``params`` of ``structure`` fitted to its BLA
+    (``StructuredFit.values``; for ``voltage-servo`` with the given K_m, R_m, K_g, η merged
+    in: ``{**fit.given, **fit.values}``); see the module docstring. C_f in A (per unit
+    torque constant) for ``two-mass``, in A for ``frb-single-mass`` (torque K·C_f, its
+    Bussgang share taken from V in N·m·s/rad), in N·m at the output shaft for ``voltage-servo``
+    (its Bussgang share is taken from B_eq, the back-EMF damping being known).
+    ``progress(i, n)`` after each simulation."""
+    if structure not in SIMULATORS:
+        raise IdentificationError(f"structure {structure!r}: the Coulomb level from the odd "
+                                  f"distortion simulates {', '.join(SIMULATORS)}")
+    sim = SIMULATORS[structure]
+    if output not in _SIGNAL:
+        raise IdentificationError(f"output {output!r}: the odd distortion is matched on "
+                                  f"{', '.join(_SIGNAL)}")
     if output not in frf.outputs:
         raise IdentificationError(f"output {output!r} is not in the FRF (outputs: "
                                   f"{', '.join(frf.outputs)})")
@@ -167,9 +335,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     U = mean[0].copy()
     U[0] = 0.0
     u = np.fft.irfft(U * P, n=P)
-    sv = velocity_rms(frf, output)
-    J = params["total_inertia"]
-    dm, dl = float(params["motor_viscous"]), float(params["load_viscous"])
+    sv = velocity_rms(frf, "motor_angle" if "motor_angle" in frf.outputs else output)
+    dm = float(params[sim.viscous])
 
     bands = _bands(frf, odd)
     pos = {int(k): i for i, k in enumerate(odd)}
@@ -183,38 +350,16 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     sel = np.array([pos[int(k)] for k in use])
     target = float(np.sum(Pd[sel])) if detected else float(np.sum(noise[sel]))
 
+    ft = float(sim.friction_torque(params))
+
     def d_eq(cf):
-        return cf * math.sqrt(2 / math.pi) / max(sv, 1e-300)
+        return cf * ft * math.sqrt(2 / math.pi) / max(sv, 1e-300)
 
-    from flexarm.control.discrete import FunctionController
-    from flexarm.sim.build import prepare
-    from flexarm.sim.sampled import simulate_loop
-    from flexarm.specs import scenario_from_dict
-    import jax.numpy as jnp
-
-    ctrl = FunctionController(fn=_play, params=None, state0=jnp.zeros(0))
     count = [0]
 
     def simulate(cf) -> np.ndarray:
-        dmp = dm - d_eq(cf)
-        p = dict(params, motor_viscous=max(dmp, 0.0))
-        # slowest decay: the rigid body J/(d_m' + d_l) or the resonance 1/(ζ ω_r)
-        zeta = _derived(p)["resonance_damping"]
-        tau = max(J / max(max(dmp, 0.0) + dl, 1e-300),
-                  1 / max(zeta * 2 * math.pi * p["resonance_hz"], 1e-300))
-        ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
-        n = (ntr + 2) * P
-        sc = scenario_from_dict(two_mass_scenario(p, cf, fs, n))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # scipy's tf2ss on the beam block
-            prep = prepare(sc, controller=ctrl, references={"current": np.tile(u, ntr + 2)})
-        out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
-        name = prep.loop.sensors.names.index("motor_angle" if output == "motor_angle"
-                                               else "tip_angle")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            res = periodic_frf(out["command"][:, 0], {output: out["measured"][:, name]}, fs,
-                               period=P, lines=frf.lines, transient_periods=ntr)
+        p = dict(params, **{sim.viscous: max(dm - d_eq(cf), 0.0)})
+        res = simulate_record(frf, p, cf, structure, outputs=(output,))
         count[0] += 1
         if progress is not None:
             progress(count[0], None)
@@ -222,16 +367,16 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
 
     urms = float(np.sqrt(np.mean(u**2)))
     floor = simulate(0.0)
-    grid = GRID * urms
+    grid = GRID * urms * sim.torque(params)
     sims = [simulate(cf) for cf in grid]
     tot = np.array([s[sel].sum() for s in sims])
     lg, lt = np.log(grid), np.log(np.maximum(tot, 1e-300))
     if target <= tot[0] or target >= tot[-1]:
         raise IdentificationError(
             f"{frf.input}: the measured odd distortion ({10 * math.log10(target):.1f} dB re 1 "
-            f"rad²) is outside what the simulated two-mass model gives for C_f from "
-            f"{grid[0]:.3g} to {grid[-1]:.3g} A; the fitted model or the friction structure "
-            "(Coulomb at the motor) does not describe this record")
+            f"rad²) is outside what the simulated {structure} model gives for C_f from "
+            f"{grid[0]:.3g} to {grid[-1]:.3g} {sim.unit}; the fitted model or the friction "
+            f"structure (Coulomb {sim.where}) does not describe this record")
     # log-log interpolation on the monotone part, then secant steps with new simulations
     i = int(np.nonzero(tot >= target)[0][0])
     pts = [(lg[i - 1], lt[i - 1], sims[i - 1]), (lg[i], lt[i], sims[i])]
@@ -277,14 +422,15 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
         notes.append(
             f"{output}: no odd distortion {DETECT_DB:g} dB above the noise: at this amplitude "
             "Coulomb friction cannot be told from viscous damping (both only damp the BLA); "
-            f"C_f = {cf:.3g} A is the upper bound whose distortion would reach the noise level")
+            f"C_f = {cf:.3g} {sim.unit} is the upper bound whose distortion would reach the "
+            "noise level")
     deq = d_eq(cf)
     if deq > dm:
         notes.append(
-            f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} A·s/rad "
-            f"exceeds the BLA's motor viscous damping {dm:.3g}: the model (Coulomb at the "
-            "motor only) does not explain both the distortion and the damping; friction on "
-            "the load side or a different friction law is likely")
+            f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} "
+            f"{sim.damping_unit} exceeds the BLA's viscous damping {sim.viscous} = {dm:.3g}: "
+            f"the model (Coulomb {sim.where} only) does not explain both the distortion and "
+            "the damping; friction elsewhere or a different friction law is likely")
     if detected and floor_db > -1.0:
         notes.append(f"{output}: the measured input's own odd-line content, through the linear "
                      f"model, already gives {floor_db:+.1f} dB of the measured odd distortion: "
@@ -293,7 +439,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
         warnings.warn(m, IdentificationWarning, stacklevel=2)
     return MultisineCoulomb(float(cf), float(std), band_vals,
                             [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
-                            bool(detected), deq, dm, sv, floor_db, count[0], notes)
+                            bool(detected), deq, dm, sv, floor_db, count[0], notes, sim.unit,
+                            structure)
 
 
 def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
@@ -310,8 +457,9 @@ def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
 
 
 def _play(params, state, measured, reference):
-    """The open-loop 'controller': the command is the reference channel ``current``."""
-    return state, reference["current"]
+    """The open-loop 'controller': the command is the reference channel ``current`` (a
+    current drive) or ``voltage`` (a voltage drive)."""
+    return state, reference["current"] if "current" in reference else reference["voltage"]
 
 
 def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
@@ -338,3 +486,98 @@ def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
             f"C_f = {x[1]:.3g} ± {s[1]:.2g} A is within two standard deviations of zero: the "
             "amplitudes recorded cannot tell Coulomb friction from viscous damping")
     return out
+
+
+def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: str = "two-mass",
+                                *, iterations: int = 3, progress=None) -> dict:
+    """C_f and the viscous damping d_v from the BLA's viscous damping at several amplitudes,
+    matched with flexarm's simulator of the fitted model with friction.
+
+    ``frfs``: periodic FRFs of records at different amplitudes (with their period spectra);
+    ``fits``: the ``structure`` fit (:func:`~.structures.fit_structure`) to each one's BLA.
+    The BLA damping d_i (``motor_viscous`` or ``hub_viscous``) at velocity rms σ_i follows
+    d_i ≈ d_v + C_f √(2/π)/σ_i (Bussgang, :func:`coulomb_from_amplitudes`: the start). The
+    Gaussian-velocity assumption fails where the hub sticks, so the start is corrected by
+    the simulator: each record's mean input period is played through the fitted model with
+    (d_v, C_f) (:func:`simulate_record`), the same structure is fitted to the simulated BLA
+    (same free parameters, same weights), and (d_v, C_f) move by the weighted least-squares
+    step of the mismatch d_i − d_i^sim with the Bussgang Jacobian [1, √(2/π)/σ_i]
+    (``iterations`` times; a fixed point where the simulated BLA damping equals the
+    measured one at every amplitude). Covariance: (AᵀWA)⁻¹ with W = 1/std(d_i)²
+    (``std_inflated`` where the χ² check rejected a fit). Returns a dict: ``coulomb``,
+    ``viscous`` ({value, std}, in the structure's units), ``correlation``, ``bussgang``
+    (the start), ``records`` (σ_v, d, d_sim per amplitude), ``mismatch`` (rms of
+    (d − d_sim)/std at the end), ``warnings`` (C_f within two standard deviations of zero:
+    the amplitudes cannot tell Coulomb friction from viscous damping; a negative d_v)."""
+    if structure not in SIMULATORS:
+        raise IdentificationError(f"structure {structure!r}: the amplitude match simulates "
+                                  f"{', '.join(SIMULATORS)}")
+    if len(frfs) != len(fits) or len(frfs) < 2:
+        raise IdentificationError("coulomb_from_bla_amplitudes needs two or more records "
+                                  "(one FRF and one fit each) at different amplitudes")
+    from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
+
+    sim = SIMULATORS[structure]
+    names = STRUCTURES[structure].parameters
+    sv = np.array([velocity_rms(f) for f in frfs])
+    d = np.array([fit.parameters[sim.viscous]["value"] for fit in fits])
+    sd = np.array([fit.parameters[sim.viscous].get("std_inflated",
+                                                   fit.parameters[sim.viscous]["std"])
+                   for fit in fits])
+    if np.any(~(sd > 0)):
+        raise IdentificationError(f"the {sim.viscous} of a fit has no positive standard "
+                                  f"deviation (held fixed?): it must be fitted in every record")
+    ft = float(sim.friction_torque({**fits[0].given, **fits[0].values}))  # torque per unit C_f
+    start = coulomb_from_amplitudes(sv, d / ft, sd / ft)
+    start["viscous"] = {k: v * ft for k, v in start["viscous"].items()}
+    x = np.array([start["viscous"]["value"], start["coulomb_current"]["value"]])
+    A = np.column_stack([np.ones_like(sv), ft * math.sqrt(2 / math.pi) / sv]) / sd[:, None]
+    cov = np.linalg.inv(A.T @ A)
+    count = 0
+    d_sim = np.zeros_like(d)
+    for _ in range(max(int(iterations), 0)):
+        for i, (frf, fit) in enumerate(zip(frfs, fits)):
+            outs = tuple(o for o in fit.outputs if o in _SIGNAL)
+            p = {**fit.given, **fit.values, sim.viscous: max(float(x[0]), 0.0)}
+            rec = simulate_record(frf, p, max(float(x[1]), 0.0), structure, outputs=outs)
+            count += 1
+            if progress is not None:
+                progress(count, None)
+            k = [frf.outputs.index(o) for o in outs]
+            w = 2 * np.pi * rec.frequency_hz
+            # the simulator holds the played input over each sample: its FRF carries the
+            # ZOH (1 − e^{−sT})/sT, divided out to compare with the fitted continuous model
+            sT = 1j * w / frf.fs
+            zoh = (1 - np.exp(-sT)) / sT
+            f2 = fit_structure(structure, w,
+                               {o: rec.response[j] / zoh for j, o in enumerate(outs)},
+                               {o: (frf.total_std if frf.total_std is not None
+                                    else frf.noise_std)[kk] for o, kk in zip(outs, k)},
+                               free=fit.free, initial={n: fit.values[n] for n in names},
+                               given=fit.given)
+            d_sim[i] = f2.parameters[sim.viscous]["value"]
+        x = x + cov @ A.T @ ((d - d_sim) / sd)
+    s = np.sqrt(np.diag(cov))
+    mismatch = float(np.sqrt(np.mean(((d - d_sim) / sd) ** 2))) if iterations else None
+    notes = list(start["warnings"])
+    if abs(x[1]) < 2 * s[1] and not notes:
+        notes.append(f"C_f = {x[1]:.3g} ± {s[1]:.2g} {sim.unit} is within two standard deviations "
+                     "of zero: the amplitudes recorded cannot tell Coulomb friction from "
+                     "viscous damping")
+    if x[0] < 0:
+        notes.append(f"the viscous damping {x[0]:.3g} {sim.damping_unit} is negative: the BLA's "
+                     "damping falls faster with amplitude than Coulomb friction explains")
+    for m in notes[len(start["warnings"]):]:
+        warnings.warn(m, IdentificationWarning, stacklevel=2)
+    return {"structure": structure, "unit": sim.unit, "damping_unit": sim.damping_unit,
+            "coulomb": {"value": float(x[1]), "std": float(s[1])},
+            "viscous": {"value": float(x[0]), "std": float(s[0])},
+            "correlation": float(cov[0, 1] / (s[0] * s[1])),
+            "bussgang": {"coulomb": start["coulomb_current"], "viscous": start["viscous"]},
+            "records": [{"velocity_rms": float(a), "damping": float(b), "damping_std": float(c),
+                         "damping_simulated": float(e)} for a, b, c, e in zip(sv, d, sd, d_sim)],
+            "mismatch": mismatch, "iterations": int(iterations), "simulations": count,
+            "method": "BLA viscous damping per amplitude; Bussgang start, then matched by "
+                      f"flexarm's simulator of the fitted {structure} model with Coulomb "
+                      f"friction {sim.where}",
+            "warnings": notes}
