@@ -207,7 +207,8 @@ def design_nested(scenario, *, distance: float | None = None,
                   advance_by_inner_lag: bool = True, move_start: float = 0.05,
                   duration: float | None = None, band: float = 0.02,
                   inner_band: float = 0.02, inner_step: float | None = None,
-                  derivative_kick: float = 0.05, seed: int = 0) -> Design:
+                  derivative_kick: float = 0.05, rest_deadband_counts: float = 1.5,
+                  seed: int = 0) -> Design:
     """Feliu's nested loops for the single-link rig of ``scenario`` (module docstring).
 
     Parameters (SI; angles in rad, commands in the drive's units)
@@ -237,6 +238,11 @@ def design_nested(scenario, *, distance: float | None = None,
     move_start: rest before the move (s). duration: the run (default the scenario's).
     band: tip settling band (fraction of the move); inner_band, inner_step: the held-tip
         inner-loop step (default ``design_step``) and its settling band.
+    rest_deadband_counts: at rest the friction feedforward acts only when the inner
+        feedback exceeds G_cm1(1) × this many encoder counts. FRB's half count suits an arm
+        whose breakaway equals its Coulomb level; with stiction above it (a geared servo)
+        a half-count deadband makes the hub hunt between adjacent counts (rotary rig:
+        ±1.7 counts for ever, tip ±1.6 mrad); 1.5 counts leaves the hub within one count.
     seed: the inner-loop search's seed (deterministic design).
 
     Raises ValueError naming the missing piece (no sampling, a multi-link arm, no tip
@@ -325,10 +331,17 @@ def design_nested(scenario, *, distance: float | None = None,
     if defl_lin > max_deflection * (1 + 1e-9):
         warnings.append(f"the move bends the linear model to {defl_lin:.4g} rad, beyond "
                         f"max_deflection {max_deflection:g} rad")
-    u_move = _move_command(model, n, traj, gb, c_hat, coulomb_cmd)
-    if u_move > limit:
-        warnings.append(f"the move needs {u_move:.4g} (command units) in the linear model, "
-                        f"beyond the limit {limit:g}: it will saturate")
+    if trajectory == "parabolic":
+        # N has a polynomial part of degree 2 (FRB eq. (13)): θ̂_mr steps where ü jumps
+        u_move = None
+        warnings.append("a parabolic move's feedforward steps at its acceleration corners "
+                        "(FRB Sec. V-B): the command saturates there briefly; the "
+                        "quasi-parabolic move avoids it")
+    else:
+        u_move = _move_command(model, n, traj, gb, c_hat, coulomb_cmd)
+        if u_move > limit:
+            warnings.append(f"the move needs {u_move:.4g} (command units) in the linear "
+                            f"model, beyond the limit {limit:g}: it will saturate")
     advance = inner.lag if advance_by_inner_lag else 0.0
     start = max(float(move_start), advance)
 
@@ -356,7 +369,8 @@ def design_nested(scenario, *, distance: float | None = None,
     gbn, gbd = _tf_lists(gcb_tf)
     nn = _coeffs(np.asarray(n.num[0][0], float))
     nd = _coeffs(np.asarray(n.den[0][0], float))
-    fc = (FrictionCompensationSpec(level=coulomb_cmd, rest_deadband=0.5 * count * gain)
+    fc = (FrictionCompensationSpec(level=coulomb_cmd,
+                                   rest_deadband=rest_deadband_counts * count * gain)
           if coulomb_cmd > 0 else None)
     spec = NestedController(
         type="nested", friction_compensation=fc, gcm1_num=g1n, gcm1_den=g1d,
@@ -383,13 +397,23 @@ def design_nested(scenario, *, distance: float | None = None,
         "reference": Reference(type="step", amplitude=h_step, offset=ref.offset,
                                start=float(move_start)),
         "simulation": designed.simulation.model_copy(update={"hold_tip": True})})
-    r_held = simulate(held)
-    from flexarm.analysis.metrics import step_metrics
+    try:  # FRB Fig. 11 holds the tip: a lumped beam with a tip mass only
+        SingleLinkModel.from_spec(sc.arm, hold_tip=True)
+        can_hold = True
+    except ValueError as exc:
+        can_hold = False
+        warnings.append(f"no held-tip inner-loop run ({exc}); the inner settling is the "
+                        "linear design's")
+    held_ts, held_err = None, math.nan
+    if can_hold:
+        from flexarm.analysis.metrics import step_metrics
 
-    mh = step_metrics(r_held.time, r_held["motor_angle"], r_held["reference"],
-                      band=inner_band, t_step=float(move_start), target=ref.offset + h_step)
-    last = r_held.time >= r_held.time[-1] - 0.5
-    held_err = float(np.mean(ref.offset + h_step - r_held.measured["motor_angle"][last]))
+        r_held = simulate(held)
+        mh = step_metrics(r_held.time, r_held["motor_angle"], r_held["reference"],
+                          band=inner_band, t_step=float(move_start), target=ref.offset + h_step)
+        held_ts = mh.settling_time if mh.settling_time is not None else math.inf
+        last = r_held.time >= r_held.time[-1] - 0.5
+        held_err = float(np.mean(ref.offset + h_step - r_held.measured["motor_angle"][last]))
     res = simulate(designed)
     figs = nested_metrics(res, start=start, distance=d, move_end=start + traj.duration,
                           count=count, limit=limit, band=band, offset=ref.offset)
@@ -400,8 +424,7 @@ def design_nested(scenario, *, distance: float | None = None,
         "design_model": {"J_kg_m2": J, "V_N_m_s_per_rad": V, "k_u_N_m_per_unit": k_u},
         "inner": {"dc_gain": gain, "design_step_rad": step,
                   "settling_linear_s": float(inner.settling_time),
-                  "settling_held_tip_s": (mh.settling_time if mh.settling_time is not None
-                                          else math.inf),
+                  "settling_held_tip_s": held_ts,
                   "held_tip_step_rad": h_step,
                   "held_tip_error_counts": held_err / count if count else math.nan,
                   "lag_s": float(inner.lag), "peak_feedback_linear": float(inner.peak_current),
@@ -412,7 +435,7 @@ def design_nested(scenario, *, distance: float | None = None,
         "trajectory": {"kind": trajectory, "distance_rad": d, "acceleration": float(traj.max_acceleration),
                        "snap": s_val, "duration_s": float(traj.duration), "start_s": start,
                        "advance_s": advance, "linear_peak_deflection_rad": float(defl_lin),
-                       "linear_peak_command": float(u_move)},
+                       "linear_peak_command": u_move},
         "gcb": gcb_info,
         "simulated": figs,
     }

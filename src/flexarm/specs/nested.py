@@ -32,9 +32,14 @@ from flexarm.specs.quantity import Coefficients, Q, Spec
 
 
 class NestedController(Spec):
-    """Feliu's inner hub loop and outer tip loop (module docstring). Discrete transfer
-    functions in descending powers of z at the sampling period; N(s) in descending powers
-    of s."""
+    """Feliu's nested loops (FRB Figs. 3-5): θ_mr = θ̂_mr + G_cb(z)(θ_tr − θt) and
+    u = G_cm1(z)[θ_mr − G_cm2(z) θm] + ``coupling_gain``·(θm − θt) + c_f σ (command units;
+    c_f σ from ``friction_compensation``). θ̂_mr = N(s) θ_tr (``feedforward_num/den``, in
+    s; a dynamic N needs a ``parabolic`` / ``quasi_parabolic`` [reference]) is sent
+    ``feedforward_advance`` s early. θt: the ``tip_angle`` channel, or with ``tip =
+    "tip_deflection"`` θt = θm + ``deflection_to_angle``·d (1/(gain·L) rad per unit).
+    G_cm1, G_cm2, G_cb in z (descending powers) at the sampling period.
+    ``flexarm.design.nested.design_nested`` writes it."""
 
     type: Literal["nested"]
     friction_compensation: FrictionCompensationSpec | None = None
