@@ -18,6 +18,7 @@ run from the scenario it writes.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -208,3 +209,53 @@ def test_bad_input_is_named():
         design_nested(no_tip)
     with pytest.raises(ValueError, match="single-link"):
         design_nested("quanser-two-link")
+
+
+# ---------------------------------------------------------------------------- real rigs
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
+FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
+#: the lab's data sheet (as tests/test_real_rotary_rig.py)
+SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
+             armature_resistance=3.29, link_length=0.45, computation_delay=1)
+real = [pytest.mark.slow, pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"real rig logs not found at {DATA} (../shared is absent in a "
+                              "user's clone; CI has it)")]
+
+
+def _fitted_design(name: str):
+    """Fit the whole log (the issue's rule), give the fitted rig the SRV02-class encoder
+    (4096 counts per turn: the fit has no quantiser, the logger rounds to 1 mrad), design,
+    and run the logged state feedback on the same move for comparison."""
+    from flexarm.identification.time_domain import fit, read_bench_log
+
+    res = fit([read_bench_log(DATA / name, log_format=FORMAT)], **SHEET)
+    sc = res.scenario()
+    sens = dict(sc.sensors)
+    sens["motor_angle"] = sens["motor_angle"].model_copy(update={"quantum": COUNT})
+    sc = sc.model_copy(update={"sensors": sens, "simulation": sc.simulation.model_copy(
+        update={"duration": 6.0})})
+    d = design_nested(sc)
+    tr = d.info["trajectory"]
+    logged = sc.model_copy(update={"reference": Reference(
+        type="step", amplitude=tr["distance_rad"], start=tr["start_s"])})
+    lim = d.info["command_limit"]
+    m = nested_metrics(simulate(logged), start=tr["start_s"], distance=tr["distance_rad"],
+                       move_end=tr["start_s"] + tr["duration_s"], count=COUNT, limit=lim,
+                       band=0.02)
+    return d, m
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=real) for n in
+                                  ("4PM_Group37_FlexArm_Unit6", "Unit7_Flex_trial1.csv")])
+def test_fitted_rig_beats_its_logged_controller(name):
+    """On the fitted unit 6 / unit 7 models (one nominal plant each; the 200-plant batch is
+    the comparison's job): the issue's targets, hub within one count, tip settling at least
+    30 % shorter than the logged state feedback's (inf: never within 2 %), no time at the
+    voltage limit; and less residual tip oscillation."""
+    d, logged = _fitted_design(name)
+    sim = d.info["simulated"]
+    print(name, d.info["inner"], d.info["trajectory"], d.info["gcb"], sim, logged, d.warnings)
+    assert abs(sim["hub_error_counts"]) <= 1.0
+    assert sim["tip_settling_s"] <= 0.7 * logged["tip_settling_s"]
+    assert sim["time_at_limit_s"] == 0.0
+    assert sim["residual_tip_oscillation_rad"] < logged["residual_tip_oscillation_rad"]

@@ -11,7 +11,7 @@ Inner hub loop (FRB Sec. IV, Fig. 4), in the drive's command units (A or V)
     Design model FRB eq. (9): θm/u = k_u / (s (J s + V)) with, for a geared voltage servo,
     V = B_eq + η K_g² K_m²/R_m (back-EMF) and k_u = η K_g K_m/R_m (N·m/V); for a current
     drive k_u = K (N·m/A) (:func:`~flexarm.control.inner_loop.motor_design_model`).
-    ZOH, the scenario's computation delay; G_cm1(1) = ``dc_gain`` with the peak-command rule
+    ZOH, the scenario's computation delay plus the hub sensor's delay; G_cm1(1) = ``dc_gain`` with the peak-command rule
     peak |u_fb| <= G_cm1(1)·step <= limit − ĉ·bending − c_f (the drive's limit, V or A;
     :func:`~flexarm.control.inner_loop.design_inner_loop`).
     c_f = F_c / k_u: the scenario's Coulomb level in command units (FRB Sec. III-B).
@@ -146,13 +146,19 @@ def _size_quasi_parabolic(model, gb, distance, design_deflection, max_command, c
 
 
 def _auto_pd(t_inner, gb, dt, tip_delay, gauge: bool, w1: float, kick: float,
-             quantum: float, g1_inf: float):
+             quantum: float, g1_inf: float, tip_bandwidth: float = 0.0):
     """(spectral radius, kp, kd, p) of the filtered PD G_cb (:func:`pd_tf`, p from
     :func:`derivative_pole`) minimising the spectral radius of the linear tip loop
-    θ_mr = G_cb (θ_tr − θt_meas), θm = T_in θ_mr, θt = G_b θm, θt_meas = z^-d θt (tip
-    sensor) or θm + z^-d (θt − θm) (strain gauge): a grid kp ∈ [0, 2], kd ∈ [0, 2/ω1]."""
+    θ_mr = G_cb (θ_tr − θt_meas), θm_meas = T_in θ_mr (T_in with the hub sensor's delay),
+    θt = G_b θm, and θt_meas = z^-d F θt (tip sensor) or θm_meas + z^-d F (θt − θm)
+    (strain gauge), d the tip channel's delay beyond the hub's (samples), F its analog
+    first-order low-pass at ``tip_bandwidth`` Hz (ZOH-sampled; 1 when 0): a grid
+    kp ∈ [0, 2], kd ∈ [0, 2/ω1]."""
     gbd = control.sample_system(gb, dt, method="zoh")
     zd = control.tf([1.0], [1.0] + [0.0] * tip_delay, dt) if tip_delay else 1
+    if tip_bandwidth > 0:
+        wc = 2 * math.pi * tip_bandwidth
+        zd = zd * control.sample_system(control.tf([wc], [1.0, wc]), dt, method="zoh")
     h = (1 + zd * (gbd - 1)) if gauge else zd * gbd
     fwd, back = control.ss(t_inner), control.ss(h)
     best = (np.inf, 0.0, 0.0, 0.0)
@@ -208,7 +214,7 @@ def design_nested(scenario, *, distance: float | None = None,
                   duration: float | None = None, band: float = 0.02,
                   inner_band: float = 0.02, inner_step: float | None = None,
                   derivative_kick: float = 0.05, rest_deadband_counts: float = 1.5,
-                  seed: int = 0) -> Design:
+                  min_root: float = -0.5, seed: int = 0) -> Design:
     """Feliu's nested loops for the single-link rig of ``scenario`` (module docstring).
 
     Parameters (SI; angles in rad, commands in the drive's units)
@@ -226,7 +232,8 @@ def design_nested(scenario, *, distance: float | None = None,
         target (default half of it, FRB Sec. VI-B.3: "50 % of the maximum").
     command_fraction: the share of the drive's limit the move's own command may take.
     dc_gain: G_cm1(1) (command units per rad; default the available command over
-        ``design_step``); design_step: the step of the peak-command rule (default 0.2 ×
+        ``design_step``, lowered by factors 0.7 while the delayed loop cannot meet the
+        no-overshoot design); design_step: the step of the peak-command rule (default 0.2 ×
         distance: the feedforward carries the move, the feedback the error).
     gcb: G_cb as a discrete transfer function at the sampling period, or (kp, kd) of a PD
         (rad/rad, rad·s/rad), or None: the PD of the smallest closed-loop spectral radius,
@@ -243,6 +250,10 @@ def design_nested(scenario, *, distance: float | None = None,
         whose breakaway equals its Coulomb level; with stiction above it (a geared servo)
         a half-count deadband makes the hub hunt between adjacent counts (rotary rig:
         ±1.7 counts for ever, tip ±1.6 mrad); 1.5 counts leaves the hub within one count.
+    min_root: the smallest zero or pole of G_cm1, G_cm2 searched (default −0.5: a pole
+        near z = −1 rings at the Nyquist frequency; on the fitted unit 6 rig, with 24
+        samples of loop delay, the search put G_cm2's pole at −0.99 and the command
+        chattered at the limit).
     seed: the inner-loop search's seed (deterministic design).
 
     Raises ValueError naming the missing piece (no sampling, a multi-link arm, no tip
@@ -253,6 +264,8 @@ def design_nested(scenario, *, distance: float | None = None,
         raise ValueError(f"scenario {sc.name!r}: design_nested is Feliu's single-link scheme; "
                          f"this arm has {len(sc.arm.links)} links")
     dt, delay = float(sc.sampling.period), int(sc.sampling.delay)
+    hub = sc.sensors.get("motor_angle")
+    hub_delay = int(hub.delay) if hub is not None else 0
     model = SingleLinkModel.from_spec(sc.arm)
     J, V, k_u = motor_design_model(model)
     limit = float(sc.actuator.limit or model.drive.limit)
@@ -267,7 +280,8 @@ def design_nested(scenario, *, distance: float | None = None,
 
     # the tip measurement: a tip-angle sensor, or the hub encoder plus a strain gauge
     if "tip_angle" in sc.sensors:
-        tip, to_angle, tip_delay = "tip_angle", 0.0, int(sc.sensors["tip_angle"].delay)
+        tip_sensor = sc.sensors["tip_angle"]
+        tip, to_angle = "tip_angle", 0.0
     elif "tip_deflection" in sc.sensors:
         s = sc.sensors["tip_deflection"]
         length = getattr(sc.arm.beam, "length", None)
@@ -275,11 +289,20 @@ def design_nested(scenario, *, distance: float | None = None,
             raise ValueError(f"scenario {sc.name!r}: the tip comes from [sensors.tip_deflection] "
                              f"(gain {float(s.gain):g}) and the link length "
                              f"({length!r} m); both must be non-zero")
-        tip, to_angle, tip_delay = "tip_deflection", 1.0 / (float(s.gain) * float(length)), int(s.delay)
+        tip_sensor = s
+        tip, to_angle = "tip_deflection", 1.0 / (float(s.gain) * float(length))
     else:
         raise ValueError(f"scenario {sc.name!r}: the tip loop needs a tip measurement: add "
                          "[sensors.tip_angle] or [sensors.tip_deflection] (strain gauge)")
 
+    tip_delay = int(tip_sensor.delay) - hub_delay
+    if tip_delay < 0:
+        warnings.append(f"the tip channel lags less than the hub's ({tip_sensor.delay} < "
+                        f"{hub_delay} samples); the G_cb design takes it as equal")
+        tip_delay = 0
+    if hub is not None and float(hub.bandwidth) > 0:
+        warnings.append(f"the hub sensor's {float(hub.bandwidth):g} Hz low-pass is not in "
+                        "the inner loop's design model (its delay is)")
     d = float(sc.reference.amplitude) if distance is None else float(distance)
     if d == 0.0 or not math.isfinite(d):
         raise ValueError(f"scenario {sc.name!r}: the move is {d!r} rad; give distance= or a "
@@ -298,10 +321,27 @@ def design_nested(scenario, *, distance: float | None = None,
     step = 0.2 * dist if design_step is None else float(design_step)
     avail = limit - abs(coupling_cmd) * max_deflection - abs(coulomb_cmd)
     gain = avail / step if dc_gain is None else float(dc_gain)
-    inner = design_inner_loop(model, dt, delay, dc_gain=gain, current_limit=limit, step=step,
-                              bending=max_deflection, coupling_gain=c_hat,
-                              coulomb=float(model.friction.coulomb), band=inner_band,
-                              seed=seed)
+    # the loop closes on the measured hub angle: computation plus hub sensor delay. With a
+    # long delay the largest gain the limit allows cannot settle without overshoot: lower
+    # it (× 0.7) until the design meets its constraints (a given dc_gain is kept)
+    horizon = max(0.3, 30 * (delay + hub_delay) * dt)
+    gains = [gain] if dc_gain is not None else [gain * 0.7**k for k in range(10)]
+    for k, g in enumerate(gains):
+        try:
+            inner = design_inner_loop(model, dt, delay + hub_delay, dc_gain=g,
+                                      current_limit=limit, step=step, bending=max_deflection,
+                                      coupling_gain=c_hat, coulomb=float(model.friction.coulomb),
+                                      band=inner_band, horizon=horizon, seed=seed,
+                                      min_root=min_root)
+            break
+        except ValueError as exc:
+            if k == len(gains) - 1 or "no inner-loop design" not in str(exc):
+                raise
+    if g != gain:
+        warnings.append(f"G_cm1(1) lowered from {gain:.4g} to {g:.4g} (command/rad): the "
+                        f"{delay + hub_delay}-sample loop delay admits no faster design "
+                        "without overshoot")
+    gain = g
     t_inner = inner.closed_loop(model)
 
     # ---- the move and the Wiener feedforward (FRB Secs. V, VI-B.3, VI-C.3)
@@ -342,7 +382,8 @@ def design_nested(scenario, *, distance: float | None = None,
         if u_move > limit:
             warnings.append(f"the move needs {u_move:.4g} (command units) in the linear "
                             f"model, beyond the limit {limit:g}: it will saturate")
-    advance = inner.lag if advance_by_inner_lag else 0.0
+    # the inner loop's lag seen at the hub itself (its measurement lags hub_delay more)
+    advance = max(0.0, inner.lag - hub_delay * dt) if advance_by_inner_lag else 0.0
     start = max(float(move_start), advance)
 
     # ---- G_cb (FRB Sec. VI-B.3 / VI-C.3)
@@ -352,7 +393,8 @@ def design_nested(scenario, *, distance: float | None = None,
         g1n0, g1d0 = _tf_lists(inner.gcm1)
         g1_inf = g1n0[0] / g1d0[0] if len(g1n0) == len(g1d0) else 0.0
         rho, kp, kd, pole = _auto_pd(t_inner, gb, dt, tip_delay, tip == "tip_deflection", w1,
-                                     derivative_kick * limit, q_tip, g1_inf)
+                                     derivative_kick * limit, q_tip, g1_inf,
+                                     float(tip_sensor.bandwidth))
         gcb_tf = pd_tf(kp, kd, dt, pole)
         gcb_info = {"kind": "filtered pd (smallest spectral radius)", "kp": kp, "kd_s": kd,
                     "derivative_pole": pole, "spectral_radius": rho}
@@ -420,7 +462,8 @@ def design_nested(scenario, *, distance: float | None = None,
 
     info = {
         "drive": sc.arm.motor.drive, "command_unit": "A" if model.drive.input_name.startswith("current") else "V",
-        "sampling_period_s": dt, "delay_samples": delay, "command_limit": limit,
+        "sampling_period_s": dt, "delay_samples": delay,
+        "hub_sensor_delay_samples": hub_delay, "tip_sensor_extra_delay_samples": tip_delay, "command_limit": limit,
         "design_model": {"J_kg_m2": J, "V_N_m_s_per_rad": V, "k_u_N_m_per_unit": k_u},
         "inner": {"dc_gain": gain, "design_step_rad": step,
                   "settling_linear_s": float(inner.settling_time),
