@@ -209,6 +209,9 @@ def test_bad_input_is_named():
         design_nested(no_tip)
     with pytest.raises(ValueError, match="single-link"):
         design_nested("quanser-two-link")
+    # coupling 1.2 N·m/rad / k_u 0.128 N·m/V = 9.35 V/rad: 2 rad of bending needs 18.7 V
+    with pytest.raises(ValueError, match="compensation alone"):
+        design_nested("rotary-flexible-link", max_deflection=2.0)
 
 
 # ---------------------------------------------------------------------------- real rigs
