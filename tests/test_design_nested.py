@@ -90,6 +90,9 @@ def test_feliu_single_mass(single):
     # A = 0.2 rad × ω² (FRB: 8.75 rad/s² for the identified ω² = 43.75 s⁻²; our physical
     # wire is within 3 %, as test_reproduce_feliu's accel_single row)
     assert single.info["trajectory"]["acceleration"] == pytest.approx(8.75, rel=0.03)
+    # the reproduction's 1 s run ends 0.65 s after the 0.305 s move: the design says so
+    assert any("settling figures are cut" in w for w in single.warnings)
+    assert single.scenario.simulation.duration == C.duration_single  # a given one is kept
 
 
 def test_feliu_two_mass(two_mass):

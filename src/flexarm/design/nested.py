@@ -87,36 +87,43 @@ def _tf_lists(g: control.TransferFunction) -> tuple[list[float], list[float]]:
     return _coeffs(num if num.size else [0.0]), _coeffs(den)
 
 
-def _move_command(model, n, traj, gb, coupling: float, coulomb_cmd: float) -> float:
-    """Peak |u| (command units) the move needs in the linear model: θm = N u,
-    θt = G_b θm, u = (J θ̈m + V θ̇m + Ĉ (θm − θt))/k_u + c_f (FRB eq. (9) with the coupling
-    torque of eq. (16))."""
-    J, V, k_u = motor_design_model(model)
-    t_end = traj.duration + 1.0  # s: the move and the link's ringing after it
+def _move_profile(model, n, traj, gb, t_inner, hub_delay: int, coupling: float,
+                  coulomb_cmd: float) -> tuple[float, float]:
+    """(peak |θm − θt| in rad, peak |u| in command units) of the move through the designed
+    loops, linear: θ̂_mr = N u (:func:`~flexarm.control.outer_loop.trajectory_references`),
+    the hub follows the inner closed loop T_in (its measured angle lags ``hub_delay``
+    samples more), θt = G_b θm, and u = (J θ̈m + V θ̇m + Ĉ (θm − θt))/k_u + c_f (FRB eq. (9)
+    with the coupling torque of eq. (16)). The inner loop smooths the steps a Wiener N of
+    polynomial degree 4 puts in θ̂_mr at the snap corners (FRB two-mass arm), which the
+    ideal θm = N u would turn into impulses of command."""
+    from flexarm.control.outer_loop import trajectory_references
 
-    h = min(traj.duration / 2000.0, 1e-3)
-    t = np.arange(0.0, t_end, h)
-    th_m = feedforward_signal(n, traj, t)
-    th_t = control.forced_response(gb, t, th_m).outputs
-    vel = np.gradient(th_m, h)
-    acc = np.gradient(vel, h)
+    J, V, k_u = motor_design_model(model)
+    dt = float(t_inner.dt)
+    t = np.arange(0.0, traj.duration + 1.0, dt)  # the move and 1 s of ringing after it
+    th_mr = trajectory_references(n, traj, t)["feedforward"]
+    th_meas = np.asarray(control.forced_response(t_inner, t, th_mr).outputs, float)
+    th_m = np.concatenate([th_meas[hub_delay:], np.full(hub_delay, th_meas[-1])])
+    th_t = np.asarray(control.forced_response(gb, t, th_m).outputs, float)
+    vel = np.gradient(th_m, dt)
+    acc = np.gradient(vel, dt)
     u = (J * acc + V * vel + coupling * (th_m - th_t)) / k_u
-    return float(np.max(np.abs(u)) + abs(coulomb_cmd))
+    return float(np.max(np.abs(th_m - th_t))), float(np.max(np.abs(u)) + abs(coulomb_cmd))
 
 
 def _size_quasi_parabolic(model, gb, distance, design_deflection, max_command, coupling,
-                          coulomb_cmd, rounding_time):
+                          coulomb_cmd, rounding_time, t_inner, hub_delay):
     """Largest A (rad/s², within 1 %) of a quasi-parabolic move with corner time
-    ``rounding_time`` whose linear-model peak deflection is <= ``design_deflection`` and
-    whose command is <= ``max_command``; bisection in log A (both grow with A)."""
+    ``rounding_time`` whose peak deflection through the designed loops
+    (:func:`_move_profile`) is <= ``design_deflection`` and whose command is
+    <= ``max_command``; bisection in log A (both grow with A)."""
     def trial(a):
         try:
             tr = quasi_parabolic(distance, a, rounding_time=rounding_time)
         except ValueError:  # the distance is too short for A with this rounding
             return None
         n = wiener_feedforward(gb, tr.laplace_model())
-        d = peak_deflection(gb, n, tr)
-        u = _move_command(model, n, tr, gb, coupling, coulomb_cmd)
+        d, u = _move_profile(model, n, tr, gb, t_inner, hub_delay, coupling, coulomb_cmd)
         return (d <= design_deflection and u <= max_command), tr, n, d, u
 
     w1 = float(np.min(np.abs(gb.poles())))
@@ -242,7 +249,8 @@ def design_nested(scenario, *, distance: float | None = None,
         unfiltered, one hub count through kd/T and G_cm1 would kick the command by volts).
     advance_by_inner_lag: send θ̂_mr early by the inner loop's lag (FRB Sec. V, "correction
         terms that compensate for motor delays").
-    move_start: rest before the move (s). duration: the run (default the scenario's).
+    move_start: rest before the move (s). duration: the run (default the scenario's, made
+        longer where the move and 1 s after it do not fit).
     band: tip settling band (fraction of the move); inner_band, inner_step: the held-tip
         inner-loop step (default ``design_step``) and its settling band.
     rest_deadband_counts: at rest the friction feedforward acts only when the inner
@@ -378,28 +386,32 @@ def design_nested(scenario, *, distance: float | None = None,
     else:
         tau = 2.0 * inner.settling_time if rounding_time is None else float(rounding_time)
         if acceleration is None:
-            traj, n, defl_lin, _ = _size_quasi_parabolic(
-                model, gb, dist, defl_design, command_fraction * limit, c_hat, coulomb_cmd, tau)
+            traj, n, _, _ = _size_quasi_parabolic(
+                model, gb, dist, defl_design, command_fraction * limit, c_hat, coulomb_cmd,
+                tau, t_inner, hub_delay)
         else:
             kw = {"max_snap": float(snap)} if snap is not None else {"rounding_time": tau}
             traj = quasi_parabolic(dist, float(acceleration), **kw)
             n = wiener_feedforward(gb, traj.laplace_model())
-            defl_lin = peak_deflection(gb, n, traj)
+        defl_lin = peak_deflection(gb, n, traj)
         s_val = float(traj.max_snap)
+    # the move through the designed loops (linear): what the sizing limits
+    defl_loop, u_move = _move_profile(model, n, traj, gb, t_inner, hub_delay, c_hat,
+                                      coulomb_cmd)
+    if defl_loop > max_deflection * (1 + 1e-9):
+        warnings.append(f"the move bends the link to {defl_loop:.4g} rad through the "
+                        f"designed loops (linear), beyond max_deflection {max_deflection:g} rad")
     if defl_lin > max_deflection * (1 + 1e-9):
-        warnings.append(f"the move bends the linear model to {defl_lin:.4g} rad, beyond "
-                        f"max_deflection {max_deflection:g} rad")
+        warnings.append(f"the ideal θm = N u bends the link to {defl_lin:.4g} rad, beyond "
+                        f"max_deflection {max_deflection:g} rad (the inner loop filters it)")
     if trajectory == "parabolic":
         # N has a polynomial part of degree 2 (FRB eq. (13)): θ̂_mr steps where ü jumps
-        u_move = None
         warnings.append("a parabolic move's feedforward steps at its acceleration corners "
                         "(FRB Sec. V-B): the command saturates there briefly; the "
                         "quasi-parabolic move avoids it")
-    else:
-        u_move = _move_command(model, n, traj, gb, c_hat, coulomb_cmd)
-        if u_move > limit:
-            warnings.append(f"the move needs {u_move:.4g} (command units) in the linear "
-                            f"model, beyond the limit {limit:g}: it will saturate")
+    if u_move > limit:
+        warnings.append(f"the move needs {u_move:.4g} (command units) through the designed "
+                        f"loops (linear), beyond the limit {limit:g}: it will saturate")
     # the inner loop's lag seen at the hub itself (its measurement lags hub_delay more)
     advance = max(0.0, inner.lag - hub_delay * dt) if advance_by_inner_lag else 0.0
     start = max(float(move_start), advance)
@@ -440,7 +452,12 @@ def design_nested(scenario, *, distance: float | None = None,
     ref = Reference(type=trajectory, amplitude=d, offset=float(sc.initial.motor_angle),
                     start=start, acceleration=float(traj.max_acceleration),
                     snap=s_val)
-    run_time = float(sc.simulation.duration) if duration is None else float(duration)
+    # the run holds the move and 1 s after it (unless a duration is given)
+    needed = start + float(traj.duration) + 1.0
+    run_time = max(float(sc.simulation.duration), needed) if duration is None else float(duration)
+    if run_time < needed:
+        warnings.append(f"duration {run_time:g} s ends less than 1 s after the move "
+                        f"({start + float(traj.duration):.4g} s): the settling figures are cut")
     designed = sc.model_copy(update={
         "name": f"{sc.name}-nested",
         "description": f"{sc.name} under Feliu's nested loops (flexarm design --method nested)",
@@ -496,7 +513,8 @@ def design_nested(scenario, *, distance: float | None = None,
         "trajectory": {"kind": trajectory, "distance_rad": d, "acceleration": float(traj.max_acceleration),
                        "snap": s_val, "duration_s": float(traj.duration), "start_s": start,
                        "advance_s": advance, "linear_peak_deflection_rad": float(defl_lin),
-                       "linear_peak_command": u_move},
+                       "loop_peak_deflection_rad": defl_loop,
+                       "loop_peak_command": u_move},
         "gcb": gcb_info,
         "simulated": figs,
     }
