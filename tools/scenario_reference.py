@@ -18,6 +18,7 @@ from pydantic import BaseModel
 
 from flexarm.specs import arm, experiment, multilink, scenario
 from flexarm.specs.controllers_bench import StateFeedbackController
+from flexarm.specs.nested import NestedController
 from flexarm.specs.quantity import Unit
 
 BEGIN, END = "<!-- scenario-reference:begin -->", "<!-- scenario-reference:end -->"
@@ -45,6 +46,7 @@ SECTIONS = [
     ("[controller] type = \"tf\"", experiment.TFController),
     ("[controller] type = \"state_feedback\"", StateFeedbackController),
     ("[controller] type = \"lti\"", experiment.LTIControllerSpec),
+    ("[controller] type = \"nested\"", NestedController),
     ("top level (multi-link, arm.kind = \"multi_link\")", scenario.MultiLinkScenario),
     ("[arm] (multi-link)", multilink.MultiLinkArm),
     ("[[arm.links]]", multilink.Link),

@@ -411,13 +411,16 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
                       bending: float | None = None, coupling_gain: float | None = None,
                       coulomb: float | None = None, band: float = 0.02,
                       max_overshoot: float = 0.0, horizon: float = 0.3, popsize: int = 15,
-                      maxiter: int = 200, seed: int = 0) -> InnerLoopDesign:
+                      maxiter: int = 200, seed: int = 0,
+                      min_root: float = -0.99) -> InnerLoopDesign:
     r"""Minimum-settling-time G_cm1(z), G_cm2(z) for the motor loop (FRB Sec. VI-B.2).
 
     G_cm1(z) = k1 (z − a1)/(z − b1), G_cm2(z) = k2 (z − a2)/(z − b2), searched over the
-    zeros and poles (a1, b1, a2, b2) ∈ [−0.99, 0.99]⁴ by differential evolution
+    zeros and poles (a1, b1, a2, b2) ∈ [``min_root``, 0.99]⁴ by differential evolution
     (derivative-free, ``popsize``, ``maxiter``, ``seed``; the cost is piecewise smooth and
-    multimodal) polished by Nelder–Mead, with the gains fixed by the constraints
+    multimodal) polished by Nelder–Mead (``min_root`` > −0.99 keeps the roots away from
+    z = −1: a compensator pole there rings at the Nyquist frequency on every encoder count
+    and sensor delay), with the gains fixed by the constraints
 
         G_cm2(1) = 1  (zero steady-state error),  G_cm1(1) = ``dc_gain`` (A/rad),
 
@@ -485,19 +488,22 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
         c = ts + horizon * 10.0 * (excess + over) + 1e-3 * np.minimum(ise, 1.0)
         return np.where(np.isfinite(c), c, 100.0 * horizon)
 
-    bounds = [(-0.99, 0.99)] * 4
+    lo = float(min_root)
+    if not -0.99 <= lo < 0.99:
+        raise ValueError(f"min_root must be in [-0.99, 0.99); got {min_root!r}")
+    bounds = [(lo, 0.99)] * 4
     best = scipy.optimize.differential_evolution(
         cost, bounds, popsize=popsize, maxiter=maxiter, tol=1e-8, seed=seed,
         vectorized=True, updating="deferred", polish=False)
     polish = scipy.optimize.minimize(
-        lambda p: float(cost(np.clip(p, -0.99, 0.99)[:, None])[0]), best.x,
+        lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]), best.x,
         method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200})
     search_message = (f"differential evolution: {best.message} "
                       f"({'converged' if best.success else 'not converged'}); Nelder–Mead "
                       f"polish: {polish.message}")
     if polish.fun < best.fun:
         best = polish
-    p = np.clip(best.x, -0.99, 0.99)
+    p = np.clip(best.x, lo, 0.99)
     theta, cs = ev.run(p, dc_gain)
     ts = _settling(ev.time, theta, band)
     peak = float(np.max(np.abs(cs)))

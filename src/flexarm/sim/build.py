@@ -22,8 +22,30 @@ from flexarm.specs.experiment import Reference
 from flexarm.specs.scenario import Scenario
 
 
+def reference_trajectory(ref: Reference):
+    """The :class:`~flexarm.control.trajectories.PointToPointTrajectory` of a
+    ``parabolic`` / ``quasi_parabolic`` reference (a move of ``amplitude`` from 0; the
+    reference is ``offset`` + u(t − ``start``))."""
+    from flexarm.control.trajectories import parabolic, quasi_parabolic
+
+    sign = 1.0 if ref.amplitude > 0 else -1.0
+    if ref.type == "parabolic":
+        traj = parabolic(abs(ref.amplitude), ref.acceleration)
+    elif ref.type == "quasi_parabolic":
+        traj = quasi_parabolic(abs(ref.amplitude), ref.acceleration, max_snap=ref.snap)
+    else:
+        raise ValueError(f"reference.type = {ref.type!r} is not a point-to-point move")
+    if sign > 0:
+        return traj
+    from dataclasses import replace
+
+    return replace(traj, distance=-traj.distance, states=-traj.states)
+
+
 def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     """The reference (rad) at the times ``t`` (s)."""
+    if ref.type in ("parabolic", "quasi_parabolic"):
+        return ref.offset + reference_trajectory(ref).position(t - ref.start)
     if ref.type == "constant":
         return np.full_like(t, ref.offset)
     if ref.type == "step":
@@ -43,6 +65,8 @@ def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
     run's ``references`` (channel names). With ``[controller.friction_compensation]`` the
     feedback is wrapped in :class:`~flexarm.control.friction_compensation.FrictionCompensated`;
     ``quanta`` (channel → quantisation step) gives its default velocity deadband."""
+    if getattr(spec, "type", None) == "nested":
+        return _nested_from_spec(spec, dt, quanta or {})
     ctrl = _feedback_from_spec(spec, dt, input_names=input_names, references=references)
     fc = getattr(spec, "friction_compensation", None)
     if fc is None:
@@ -53,6 +77,52 @@ def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
                                 quantum=(quanta or {}).get(fc.measured, 0.0),
                                 velocity_deadband=fc.velocity_deadband,
                                 rest_deadband=fc.rest_deadband)
+
+
+def _nested_from_spec(spec, dt: float, quanta: dict[str, float]) -> discrete.Controller:
+    """``[controller] type = "nested"`` (:mod:`flexarm.specs.nested`); its friction
+    feedforward is the inner loop's own (on G_cm1's output, FRB Fig. 4), not the wrapper."""
+    import control
+
+    from flexarm.control.nested import nested_loops
+
+    tf = lambda num, den: control.tf(num, den, dt)  # noqa: E731
+    fc = spec.friction_compensation
+    if fc is not None and fc.measured != "motor_angle":
+        raise ValueError(f"controller.friction_compensation.measured = {fc.measured!r}: the "
+                         "nested loops compensate the hub; use 'motor_angle'")
+    return nested_loops(tf(spec.gcm1_num, spec.gcm1_den), tf(spec.gcm2_num, spec.gcm2_den),
+                        tf(spec.gcb_num, spec.gcb_den), dt=dt,
+                        coupling_gain=spec.coupling_gain,
+                        friction_level=fc.level if fc is not None else 0.0,
+                        angle_resolution=quanta.get("motor_angle", 0.0),
+                        velocity_deadband=fc.velocity_deadband if fc is not None else None,
+                        rest_deadband=fc.rest_deadband if fc is not None else None,
+                        deflection_to_angle=(spec.deflection_to_angle
+                                             if spec.tip == "tip_deflection" else None))
+
+
+def nested_feedforward(spec, ref: Reference, t: np.ndarray) -> np.ndarray:
+    """The ``feedforward`` channel θ̂_mr(t) = (N θ_tr)(t + advance) of a nested controller
+    (rad): N(s) = ``feedforward_num/den`` on the reference trajectory, sent
+    ``feedforward_advance`` s early (:func:`flexarm.control.outer_loop.trajectory_references`).
+    A static N (a number) acts on any reference; a dynamic one needs a parabolic or
+    quasi-parabolic reference (its derivatives)."""
+    import control
+
+    from flexarm.control.outer_loop import trajectory_references
+
+    n = control.tf(spec.feedforward_num, spec.feedforward_den)
+    n0 = float(np.real(control.dcgain(n)))
+    if len(spec.feedforward_num) == 1 and len(spec.feedforward_den) == 1:
+        return n0 * reference_signal(ref, t)
+    if ref.type not in ("parabolic", "quasi_parabolic"):
+        raise ValueError(f"controller.feedforward_num/den is a dynamic N(s); it needs the "
+                         f"derivatives of the reference, so [reference] type must be "
+                         f"'parabolic' or 'quasi_parabolic', not {ref.type!r}")
+    ff = trajectory_references(n, reference_trajectory(ref), t, start=ref.start,
+                               advance=spec.feedforward_advance)["feedforward"]
+    return n0 * ref.offset + ff
 
 
 def sensor_quanta(sensors: dict) -> dict[str, float]:
@@ -106,6 +176,8 @@ class Prepared:
 def _references(scenario: Scenario, t: np.ndarray, extra) -> dict[str, np.ndarray]:
     refs = {"reference": reference_signal(scenario.reference, t)}
     refs.update({k: reference_signal(r, t) for k, r in scenario.references.items()})
+    if getattr(scenario.controller, "type", None) == "nested":
+        refs["feedforward"] = nested_feedforward(scenario.controller, scenario.reference, t)
     refs.update(extra or {})
     return refs
 

@@ -14,6 +14,7 @@ from pydantic import Field, FiniteFloat, field_validator, model_validator
 
 from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.friction_compensation import FrictionCompensationSpec
+from flexarm.specs.nested import NestedController
 from flexarm.specs.quantity import Coefficients, Count, Q, Spec
 
 
@@ -147,13 +148,33 @@ class Reference(Spec):
 
     type: ``step`` (amplitude after ``start``), ``square`` (between offset and
     offset + amplitude, period ``period``), ``sine`` (offset + amplitude·sin(2π t/period)),
-    ``constant`` (offset)."""
+    ``constant`` (offset); ``parabolic`` / ``quasi_parabolic``: a rest-to-rest move of
+    ``amplitude`` from ``offset`` starting at ``start``, peak ``acceleration`` (rad/s²) and,
+    quasi-parabolic, peak ``snap`` (rad/s⁴) (FRB Sec. V-B,
+    :mod:`flexarm.control.trajectories`)."""
 
-    type: Literal["step", "square", "sine", "constant"] = "step"
+    type: Literal["step", "square", "sine", "constant", "parabolic",
+                  "quasi_parabolic"] = "step"
     amplitude: Q("rad") = 0.0
     offset: Q("rad") = 0.0
     start: Q("s", ge=0) = 0.0
     period: Q("s", gt=0) = 1.0
+    acceleration: Q("rad/s**2", gt=0) | None = None
+    snap: Q("rad/s**4", gt=0) | None = None
+
+    @model_validator(mode="after")
+    def _trajectory(self) -> "Reference":
+        moves = self.type in ("parabolic", "quasi_parabolic")
+        if moves and (self.acceleration is None or self.amplitude == 0.0):
+            raise ValueError(f"type = {self.type!r} needs amplitude (the move, rad, non-zero) "
+                             "and acceleration (rad/s**2)")
+        if (self.type == "quasi_parabolic") != (self.snap is not None):
+            raise ValueError("snap (rad/s**4) is given with type = 'quasi_parabolic' and only "
+                             f"then; type = {self.type!r}, snap = {self.snap!r}")
+        if not moves and self.acceleration is not None:
+            raise ValueError(f"acceleration is read only by parabolic / quasi_parabolic "
+                             f"references; type = {self.type!r}")
+        return self
 
 
 class PDController(Spec):
@@ -251,4 +272,4 @@ class LTIControllerSpec(Spec):
 
 
 ControllerSpec = (PDController | PIDController | LeadController | TFController
-                  | StateFeedbackController | LTIControllerSpec)
+                  | StateFeedbackController | LTIControllerSpec | NestedController)

@@ -169,7 +169,7 @@ def _format_errors(err: ValidationError, source: str, what: str = "scenario") ->
 def _is_union_tag(p: object) -> bool:
     return isinstance(p, str) and p in {"current", "voltage", "torque", "lumped",
                                         "transfer_function", "rigid", "pd", "pid", "lead", "tf",
-                                        "state_feedback", "joint_pd", "lti", "single_link",
+                                        "state_feedback", "joint_pd", "lti", "nested", "single_link",
                                         "multi_link"}
 
 
