@@ -248,7 +248,7 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         part.init += [f"for (i = 0; i < {ctx.n_u}; ++i) s->{p}held[i] = 0;",
                       f"s->{p}phase = 0;"]
     x = f"s->{p}x"
-    body = [f"{ctx.real} e[{q}], v[{m}], acc, acc2;"]
+    body = [f"{ctx.real} e[{q}], v[{m}], {'acc, ' if n else ''}acc2;"]
     if n:
         body.append(f"{ctx.real} xn[{n}];")
     for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints)):
@@ -654,6 +654,8 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
         f"    {R} y[{N}_N_U];",
         *(["    (void)measured;"] if not meas else []),
         *(["    (void)reference;"] if not refs else []),
+        *(["    (void)s;  /* a static law: no state */"]
+          if not any("s->" in ln for ln in part.step) else []),
         *("    " + ln for ln in part.step),
         *act_step,
         *([f"    for (i = 0; i < {N}_N_U; ++i) u[i] = (double)y[i];"] if uses_ij or uses_j
@@ -696,12 +698,14 @@ def load_design(design: str | Path) -> tuple[Any, str | None, str]:
 def export_c(design, out: str | Path, *, name: str = "controller", precision: str = "double",
              overwrite: bool = False) -> tuple[CCode, list[Path]]:
     """``flexarm export-c``: the controller of ``design`` (a design directory, a scenario
-    file or name, or a :class:`~flexarm.design.result.Design`) as ``out/NAME.h`` and
-    ``out/NAME.c``. Returns the code and the paths written."""
+    file or name, a :class:`~flexarm.design.result.Design`) as ``out/NAME.h`` and
+    ``out/NAME.c``, or a scenario object. Returns the code and the paths written."""
     from flexarm.design.result import Design
 
     if isinstance(design, Design):
         sc, method, label = design.scenario, design.method, None
+    elif hasattr(design, "controller") and hasattr(design, "arm"):  # a Scenario
+        sc, method, label = design, None, None
     else:
         sc, method, label = load_design(design)
     code = generate_c(sc, name=name, precision=precision, method=method, source=label)
