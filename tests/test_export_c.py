@@ -10,11 +10,14 @@ simulator builds (``sim.build.prepare``), stepped over that sequence (``lax.scan
 
 Bounds.
 
-* double: the C performs the Python's operations in the same order, so the outputs agree
-  to rounding differences XLA may introduce (fused multiply-add, another order inside a
-  fused dot product): a few ulp of the intermediate terms, propagated through the
-  controller's dynamics. The first-order bound below with u = 2⁻⁵³ is ≤ 3e-14 V on these
-  sequences; the assertion is the issue's 1e-12 V, and the derived bound, both.
+* double: the C performs the Python's operations in the same order, so the outputs differ
+  only by what XLA may do differently (a fused multiply-add, another order inside a fused
+  dot product): about one ulp of the largest intermediate term per sample, carried by the
+  controller's dynamics. The largest term |C||x| + |D||w| is 2.2e3 V in the tf case (a
+  slow lag: its states reach 1e3), 5-180 V in the others, so one ulp is at most 4.5e-13 V:
+  the issue's 1e-12 V is two ulps there, and the test asserts it together with the
+  first-order bound below taken with u = 2⁻⁵³ (6e-15 to 2e-11 V). Measured: at most
+  4.8e-13 V (tf), 1.8e-15 V (LQG), 9e-16 V (the rig's state feedback).
 * float: every operation rounds with relative error ≤ u = 2⁻²⁴ ≈ 6e-8 (Higham, Accuracy and
   Stability of Numerical Algorithms, Sec. 2.2). Write the controller as its Jacobian form
   at each sample, x⁺ = A_k x + B_k w, y = C_k x + D_k w (w the inputs; the same law,
@@ -32,7 +35,10 @@ Bounds.
   sign where |y_fb| is below its bound (a jump of 2c at most), the velocity sign where
   | |v̂| − v_db | is below the rate's error (2c), the D/A round-off at a tie within the
   error (one count q). The test asserts |u_C − u_Py| below this bound at every sample and
-  counts the decisions that flipped.
+  counts the decisions that flipped. Measured: 4e-6 V against a bound of 1.5e-4 V (the
+  rig's state feedback), 1e-6 V / 1.3e-4 V (LQG + friction compensation), 5e-4 V / 1e-2 V
+  (the tf with the slow lag); at most 0.22 of the bound at any sample, no decision
+  flipped; with a D/A count (12 or 10 bits) float and double give the same counts here.
 """
 
 from __future__ import annotations
@@ -393,9 +399,9 @@ def test_cli_exports_the_lqg_design_and_the_rig_state_feedback(tmp_path):
         if case == "lti_lqg_fc":
             assert "Design method: lqg (test)" in header
             assert "FrictionCompensated" in header
-        ref = _reference(case)
-        if case == "state_feedback":  # the built-in scenario's own run (6 s), shortened
-            assert "StateFeedback" in header
+        ref = _reference(case)  # state_feedback: the same law, gains, limit (0.8 s run)
+        if case == "state_feedback":
+            assert "StateFeedback" in header and "Design method: none" in header
         u_c = _run_c(out, ref["meas"], ref["refs"])
         assert np.max(np.abs(u_c - ref["u"])) <= 1e-12
 
@@ -446,3 +452,29 @@ def test_bad_input_errors(tmp_path):
     d.pop("controller")
     with pytest.raises(ExportError, match="has no \\[controller\\]"):
         generate_c(scenario_from_dict(d))
+
+
+@needs_cc
+def test_readme_c_example_compiles(tmp_path):
+    """The README's target loop compiles against an export (its I/O calls stubbed) and
+    calls the step: one tick from rest at the reference gives u = 0 V."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("## Deploying a controller in C")[1].split("```c\n")[1].split("```")[0]
+    export_c("rotary-flexible-link", tmp_path, name="rig")
+    stubs = ("#include <stdio.h>\n#define GAUGE_M_PER_V 0.01\n"
+             "static long encoder_counts(void) { return 0; }\n"
+             "static double strain_gauge_volts(void) { return 0.0; }\n"
+             "static double setpoint_rad(void) { return 0.0; }\n"
+             "static double last_u = -1.0;\n"
+             "static void dac_write_volts(double v) { last_u = v; }\n")
+    main = ("\nint main(void) { control_start(); control_tick(); printf(\"%.17g\\n\", last_u);"
+            " return 0; }\n")
+    src = tmp_path / "loop.c"
+    src.write_text(stubs + block.replace("void control_start", "static void control_start")
+                   .replace("void control_tick", "static void control_tick") + main)
+    exe = tmp_path / "loop"
+    cp = subprocess.run([CC, *CFLAGS, "-o", str(exe), str(src), str(tmp_path / "rig.c")],
+                        capture_output=True, text=True)
+    assert cp.returncode == 0, cp.stderr
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    assert float(out) == 0.0  # at rest on the reference: K1·0 − K2·0 − K3·0 − K4·0
