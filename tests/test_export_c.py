@@ -133,8 +133,24 @@ CASES = {
 }
 
 
+def _two_link():
+    """The real two-link rig's scenario (quanser-two-link: the lab's LQR as a static MIMO
+    ``lti`` gain on 8 channels, 4 of them through digital filters, two current drives with
+    0.94 / 1.2 A limits), a 1 s run with both joints' references switching at 0.5 s."""
+    d = load_scenario("quanser-two-link").model_dump(mode="json", exclude_none=True)
+    d["simulation"]["duration"] = 1.0
+    for r in d["references"].values():
+        r.update(period=1.0, start=0.0)
+    return scenario_from_dict(d)
+
+
+CASES["lti_mimo_two_link"] = (_two_link, None)
+
+
 def _spec(case: str):
     spec, bits = CASES[case]
+    if bits is None:  # a whole scenario
+        return spec()
     return _rig(spec() if callable(spec) else spec, bits=bits)
 
 
@@ -320,8 +336,9 @@ def test_c_matches_python(case, precision, tmp_path):
         f"{case} {precision}: |u_C - u_Py| = {diff.ravel()[worst]:.3g} V at sample {worst}, "
         f"above the rounding bound {allowed.ravel()[worst]:.3g} V")
     smooth = (jump == 0) & (bound > 0)  # bound 0: both exact (diff 0 asserted above)
-    print(f"{case} {precision}: max |u_C - u_Py| = {diff.max():.3g} V; rounding bound "
-          f"{bound.max():.3g} V, max ratio {np.max(diff[smooth] / bound[smooth]):.3g} "
+    ratio = np.max(diff[smooth] / bound[smooth])
+    print(f"{case} {precision}: max |u_C - u_Py| = {diff.max():.3g}; rounding bound "
+          f"{bound.max():.3g} (command units), max ratio {ratio:.3g} "
           f"(samples without a possible flip); samples where a decision may flip "
           f"{np.count_nonzero(jump)}, flipped {np.count_nonzero(diff > bound)}")
     if precision == "double":
@@ -432,9 +449,15 @@ def test_bad_input_errors(tmp_path):
     empty.mkdir()
     r = runner.invoke(app, ["export-c", str(empty), "--out", str(tmp_path / "o1")])
     assert r.exit_code == 2 and "without design.toml" in r.output
+    # a scenario kind without an exporter, through the CLI: named with the scenario
+    r = runner.invoke(app, ["export-c", "deluca-two-link-geared", "--out", str(tmp_path / "o3")])
+    assert r.exit_code == 2
+    assert "[controller] type = 'joint_pd': controller JointPD cannot be exported" in \
+        " ".join(r.output.split())
     # an existing output without --overwrite, then with it
     out = tmp_path / "o2"
-    assert runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out)]).exit_code == 0
+    r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out)])
+    assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out)])
     assert r.exit_code == 2 and "controller.h" in r.output and "--overwrite" in r.output
     r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out),
