@@ -144,14 +144,41 @@ def _two_link():
     return scenario_from_dict(d)
 
 
-CASES["lti_mimo_two_link"] = (_two_link, None)
+def _nested():
+    """Feliu's nested loops built in Python (control/outer_loop.tip_loop around
+    control/inner_loop.InnerLoop, FRB Figs. 3-5) on the rig in volts: G_cm1 = 40 (z − 0.95)
+    /(z − 0.5) V/rad, G_cm2 = 0.5 z/(z − 0.5), coupling gain 2 V/rad, the rig's Coulomb
+    level, G_cb = 0.3 (z − 0.9)/(z − 0.8) on the tip angle; feedforward θ̂_mr = θ_tr."""
+    import control
+
+    from flexarm.control.inner_loop import inner_loop
+    from flexarm.control.outer_loop import tip_loop
+
+    dt = 1e-3
+    inner = inner_loop(control.tf([40.0, -38.0], [1.0, -0.5], dt),
+                       control.tf([0.5, 0.0], [1.0, -0.5], dt), dt=dt, torque_constant=1.0,
+                       coulomb=FC_LEVEL, coupling=2.0, angle_resolution=2 * np.pi / 4096,
+                       reference="motor_reference")
+    ctrl = tip_loop(inner, control.tf([0.3, -0.27], [1.0, -0.8], dt), dt)
+    sc = _rig(None)
+    n = int(round(sc.simulation.duration / dt)) + 1
+    from flexarm.sim.build import reference_signal
+
+    return sc, ctrl, {"feedforward": reference_signal(sc.reference, np.arange(n) * dt)}
+
+
+CASES["lti_mimo_two_link"] = (_two_link, "scenario")
+CASES["nested_feliu_python"] = (_nested, "python")
 
 
 def _spec(case: str):
+    """(scenario, controller given in Python or None, extra reference channels)."""
     spec, bits = CASES[case]
-    if bits is None:  # a whole scenario
+    if bits == "scenario":
+        return spec(), None, None
+    if bits == "python":
         return spec()
-    return _rig(spec() if callable(spec) else spec, bits=bits)
+    return _rig(spec() if callable(spec) else spec, bits=bits), None, None
 
 
 # ----------------------------------------------------------------------------- Python side
@@ -222,11 +249,11 @@ def _reference(case: str) -> dict:
     shared by both precisions)."""
     if case in _CACHE:
         return _CACHE[case]
-    sc = _spec(case)
-    res = simulate(sc)
-    loop = prepare(sc).loop
+    sc, given, extra = _spec(case)
+    res = simulate(sc, given, extra)
+    loop = prepare(sc, given, extra).loop
     ctrl = loop.controller
-    code = generate_c(sc, name="ctl")
+    code = generate_c(sc, name="ctl", controller=given)
     meas = {k: jnp.asarray(res.measured[k]) for k, _ in code.measured}
     refs = {k: jnp.asarray(res.references[k]) for k, _ in code.references}
     y, states = _run_python(ctrl, meas, refs)
@@ -235,7 +262,7 @@ def _reference(case: str) -> dict:
     fb = ctrl.feedback if isinstance(ctrl, FrictionCompensated) else ctrl
     y_fb, fb_states = _run_python(fb, meas, refs) if fb is not ctrl else (y, states)
     jac = _jacobians(fb, fb_states, meas, refs)
-    out = dict(scenario=sc, ctrl=ctrl, meas=meas, refs=refs, y=y, y_fb=y_fb, jac=jac,
+    out = dict(scenario=sc, given=given, ctrl=ctrl, meas=meas, refs=refs, y=y, y_fb=y_fb, jac=jac,
                limit=limit, q=q, u=_actuate(y, limit, q), sim_command=np.asarray(res.command),
                delay=sc.sampling.delay)
     _CACHE[case] = out
@@ -322,7 +349,8 @@ def _allowed(ref: dict, unit: float) -> tuple[np.ndarray, np.ndarray]:
 def test_c_matches_python(case, precision, tmp_path):
     ref = _reference(case)
     sc = ref["scenario"]
-    code, paths = export_c(sc, tmp_path, name="ctl", precision=precision)
+    code = generate_c(sc, name="ctl", precision=precision, controller=ref["given"])
+    paths = code.write(tmp_path)
     assert [p.name for p in paths] == ["ctl.h", "ctl.c"]
     u_c = _run_c(tmp_path, ref["meas"], ref["refs"])
     u_py = ref["u"]
@@ -438,9 +466,14 @@ def test_bad_input_errors(tmp_path):
     from flexarm.control import discrete
 
     sc = _rig(None)
-    # a controller kind without an exporter: named, with the kinds that are
-    two = discrete.Sum(discrete.pd(1.0, 0.0, 1e-3), discrete.pd(2.0, 0.0, 1e-3))
-    with pytest.raises(ExportError, match=r"controller Sum cannot be exported.*"
+    # a controller kind without an exporter (a user's JAX law), even nested in a Sum:
+    # named, with the kinds that are
+    law = discrete.FunctionController(lambda p, s, m, r: (s, p * (r["reference"]
+                                                                  - m["motor_angle"])),
+                                      1.0, jnp.zeros(()))
+    two = discrete.Sum(discrete.pd(1.0, 0.0, 1e-3), law)
+    with pytest.raises(ExportError, match=r"the controller given: controller "
+                                          r"FunctionController cannot be exported.*"
                                           r"LTIController.*StateFeedback"):
         generate_c(sc, controller=two)
     runner = CliRunner()

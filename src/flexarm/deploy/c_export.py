@@ -36,7 +36,17 @@ Kinds (equations in the generated comments):
 * :class:`~flexarm.control.state_feedback.StateFeedback` (``state_feedback``):
   y = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ, rates by backward difference or the filtered one;
 * :class:`~flexarm.control.friction_compensation.FrictionCompensated`: y = y_fb + c σ, σ
-  Feliu's sign rule with its deadbands (FRB Sec. III-B).
+  Feliu's sign rule with its deadbands (FRB Sec. III-B);
+* :class:`~flexarm.control.inner_loop.InnerLoop` (FRB Fig. 4: G_cm1, G_cm2, the coupling
+  filter, the friction feedforward) and the combinators Feliu's nested loops are built of
+  (:func:`~flexarm.control.outer_loop.tip_loop`): :class:`~flexarm.control.discrete.Sum`,
+  :class:`~flexarm.control.discrete.Cascade` (the outer output becomes the inner loop's
+  reference channel: a computed channel, :attr:`_Ctx.computed_references`, not an input),
+  :class:`~flexarm.control.outer_loop.ReferenceChannel` (the feedforward θ̂_mr, an input).
+
+Not exportable (refused by name): a user's JAX law (``FunctionController``), continuous-time
+laws, the multi-link ``JointPD``; a sensor's digital filter is not part of the controller
+and is not exported (the header says so for each filtered channel).
 """
 
 from __future__ import annotations
@@ -80,14 +90,23 @@ class _Ctx:
         self.measured: list[str] = []
         self.references: list[str] = []
         self.helpers: set[str] = set()
+        #: channels computed inside the controller (a cascade's inner reference, a tip
+        #: angle formed from other channels): name → C expression, not inputs
+        self.computed_measured: dict[str, str] = {}
+        self.computed_references: dict[str, str] = {}
 
     def meas(self, channel: str) -> str:
-        """The C local holding measured channel ``channel`` (registered on first use)."""
+        """The C expression of measured channel ``channel`` (an input, registered on first
+        use, unless computed inside the controller)."""
+        if channel in self.computed_measured:
+            return self.computed_measured[channel]
         if channel not in self.measured:
             self.measured.append(channel)
         return f"m_{self.measured.index(channel)}"
 
     def ref(self, channel: str) -> str:
+        if channel in self.computed_references:
+            return self.computed_references[channel]
         if channel not in self.references:
             self.references.append(channel)
         return f"r_{self.references.index(channel)}"
@@ -180,10 +199,18 @@ def _register_builtin() -> None:
     from flexarm.control.lti import LTIController
     from flexarm.control.state_feedback import StateFeedback
 
+    from flexarm.control.discrete import Cascade, Sum
+    from flexarm.control.inner_loop import InnerLoop
+    from flexarm.control.outer_loop import ReferenceChannel
+
     exporter(LinearController)(_linear)
     exporter(LTIController)(_lti)
     exporter(StateFeedback)(_state_feedback)
     exporter(FrictionCompensated)(_friction)
+    exporter(Sum)(_sum)
+    exporter(Cascade)(_cascade)
+    exporter(ReferenceChannel)(_reference_channel)
+    exporter(InnerLoop)(_inner_loop)
 
 
 def _linear(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
@@ -379,6 +406,140 @@ def _friction(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
              "    }",
              f"    {sv}started = 1;",
              "}"]
+    part.step = step
+    return part
+
+
+def _nest(inner: Part, into: Part) -> None:
+    """Add ``inner``'s members, constants, init and law to ``into``."""
+    into.members += inner.members
+    into.constants += inner.constants
+    into.init += inner.init
+    into.law += inner.law
+
+
+def _sum(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """y = Σ_i y_i, the parts in order (:class:`~flexarm.control.discrete.Sum`)."""
+    part = Part(law=[f"Sum of {len(ctrl.parts)} controllers:"])
+    step = ["{"]
+    names = []
+    for k, sub in enumerate(ctrl.parts):
+        arr = f"{p}sum{k}"
+        names.append(arr)
+        inner = _emit(sub, ctx, f"{p}s{k}_", arr)
+        _nest(inner, part)
+        step += [f"    {ctx.real} {arr}[{ctx.n_u}];"]
+        step += [f"    for (i = 1; i < {ctx.n_u}; ++i) {arr}[i] = 0;"] if ctx.n_u > 1 else []
+        step += ["    " + ln for ln in inner.step]
+    step += [f"    for (i = 0; i < {ctx.n_u}; ++i) {{", f"        {out}[i] = {names[0]}[i];",
+             *(f"        {out}[i] += {a}[i];" for a in names[1:]), "    }", "}"]
+    part.step = step
+    return part
+
+
+def _cascade(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """Nested loops: the outer controller's y_0 is the inner one's reference channel
+    ``via`` (:class:`~flexarm.control.discrete.Cascade`; FRB Fig. 3)."""
+    arr = f"{p}outer"
+    outer = _emit(ctrl.outer, ctx, f"{p}o_", arr)
+    saved = ctx.computed_references.get(ctrl.via)
+    ctx.computed_references[ctrl.via] = f"{arr}[0]"
+    try:
+        inner = _emit(ctrl.inner, ctx, f"{p}i_", out)
+    finally:
+        if saved is None:
+            ctx.computed_references.pop(ctrl.via)
+        else:
+            ctx.computed_references[ctrl.via] = saved
+    part = Part(law=[f"Cascade: the outer loop's output is the inner loop's {ctrl.via}:"])
+    _nest(outer, part)
+    _nest(inner, part)
+    part.step = ["{", f"    {ctx.real} {arr}[{ctx.n_u}];",
+                 *(["    " + f"for (i = 1; i < {ctx.n_u}; ++i) {arr}[i] = 0;"]
+                   if ctx.n_u > 1 else []),
+                 *("    " + ln for ln in outer.step), *("    " + ln for ln in inner.step), "}"]
+    return part
+
+
+def _reference_channel(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """y = reference[channel] (a precomputed signal passed through: FRB's θ̂_mr)."""
+    return Part(law=[f"ReferenceChannel: y = {ctrl.channel}"],
+                step=[f"{out}[0] = {ctx.ref(ctrl.channel)};"])
+
+
+def _siso_ss(ctx: _Ctx, P: str, r, what: str) -> tuple[list[str], int]:
+    """Constants ``P``A, B, C, D of a SISO realisation ``r`` = (A, B, C, D)."""
+    A, B, C, D = (_np(a) for a in r)
+    n = B.size
+    consts = ctx.array(f"{P}A", A.reshape(n, n), f"{what}: A")
+    consts += ctx.array(f"{P}B", B.ravel(), f"{what}: B")
+    consts += ctx.array(f"{P}C", C.ravel(), f"{what}: C")
+    consts += ctx.scalar(f"{P}D", float(D), f"{what}: D")
+    return consts, n
+
+
+def _siso_step(P: str, n: int, x: str, e: str, y: str, xn: str) -> list[str]:
+    """xn = Σ_j A[i][j] x[j] + B[i] e (each row summed from j = 0), y = Σ_j C[j] x[j] + D e,
+    the order of ``InnerLoop._lin``."""
+    return [f"for (i = 0; i < {n}; ++i) {{",
+            f"    acc = {P}A[i][0] * {x}[0];",
+            *([f"    for (j = 1; j < {n}; ++j) acc += {P}A[i][j] * {x}[j];"] if n > 1 else []),
+            f"    {xn}[i] = acc + {P}B[i] * {e};", "}",
+            f"acc = {P}C[0] * {x}[0];",
+            *([f"for (j = 1; j < {n}; ++j) acc += {P}C[j] * {x}[j];"] if n > 1 else []),
+            f"{y} = acc + {P}D * {e};"]
+
+
+def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """FRB Fig. 4 (:class:`~flexarm.control.inner_loop.InnerLoop`): y2 = G_cm2 θm,
+    u_fb = G_cm1 (θ_mr − y2), ĉ = H (θm − θt), v̂ = (θm − θm,k−1)/T,
+    u = u_fb + (on_c ĉ + on_f C_f σ) / K, σ the friction sign rule."""
+    N = ctx.name.upper()
+    P = f"{N}_{p.upper()}"
+    R = ctx.real
+    ctx.helpers.add("sign")
+    part = Part(law=[f"InnerLoop (FRB Fig. 4): u = G_cm1 ({ctrl.reference} - G_cm2 "
+                     "motor_angle) + (coupling H (motor_angle - tip_angle) + C_f sigma) / K"])
+    ns = {}
+    for key, r, what in (("G1", ctrl.g1, "G_cm1"), ("G2", ctrl.g2, "G_cm2"),
+                         ("H", ctrl.coupling, "coupling filter H")):
+        consts, ns[key] = _siso_ss(ctx, f"{P}{key}_", r, what)
+        part.constants += consts
+        part.members.append(f"{R} {p}{key.lower()}[{ns[key]}];  /* {what} state */")
+        part.init.append(f"for (i = 0; i < {ns[key]}; ++i) s->{p}{key.lower()}[i] = 0;")
+    for cname, val, what in (("K", ctrl.torque_constant, "K: torque per unit command"),
+                             ("CF", ctrl.coulomb, "C_f: Coulomb level (torque units)"),
+                             ("ON_F", ctrl.friction_on, "friction compensation on (1) / off"),
+                             ("ON_C", ctrl.coupling_on, "coupling compensation on (1) / off"),
+                             ("VDB", ctrl.velocity_deadband, "velocity deadband, rad/s"),
+                             ("UDB", ctrl.rest_deadband, "rest deadband, command units"),
+                             ("DT", ctrl.dt, "T: sample period, s"),
+                             ("TH0", ctrl.initial_motor_angle, "motor angle before t = 0, rad")):
+        part.constants += ctx.scalar(f"{P}{cname}", float(_np(val)), what)
+    part.members.append(f"{R} {p}th_prev;  /* motor angle at k-1, rad */")
+    part.init.append(f"s->{p}th_prev = {P}TH0;")
+    th, tip, ref = ctx.meas("motor_angle"), ctx.meas("tip_angle"), ctx.ref(ctrl.reference)
+    sv = f"s->{p}"
+    nmax = max(ns.values())
+    step = ["{", f"    {R} xn2[{ns['G2']}], xn1[{ns['G1']}], xnc[{ns['H']}], y2, u_fb, c_hat, "
+            "acc;", f"    const {R} th = {th};"]
+    step += ["    " + ln for ln in _siso_step(f"{P}G2_", ns["G2"], f"{sv}g2", "th", "y2", "xn2")]
+    step += [f"    {{ const {R} e1 = {ref} - y2;"]
+    step += ["    " + ln for ln in _siso_step(f"{P}G1_", ns["G1"], f"{sv}g1", "e1", "u_fb",
+                                               "xn1")]
+    step += ["    }", f"    {{ const {R} ec = th - {tip};"]
+    step += ["    " + ln for ln in _siso_step(f"{P}H_", ns["H"], f"{sv}h", "ec", "c_hat",
+                                               "xnc")]
+    step += ["    }",
+             f"    {{ const {R} v = (th - {sv}th_prev) / {P}DT;",
+             f"      const {R} sigma = {N}_friction_sign(v, u_fb, {P}VDB, {P}UDB);",
+             f"      {out}[0] = u_fb + ({P}ON_C * c_hat + {P}ON_F * {P}CF * sigma) / {P}K; }}",
+             *(f"    for (i = 0; i < {ns[k]}; ++i) {sv}{k.lower()}[i] = xn{c}[i];"
+               for k, c in (("G1", "1"), ("G2", "2"), ("H", "c"))),
+             f"    {sv}th_prev = th;", "}"]
+    for i in range(1, ctx.n_u):
+        step.insert(-1, f"    {out}[{i}] = 0;")
+    del nmax
     part.step = step
     return part
 
