@@ -345,7 +345,8 @@ def _allowed(ref: dict, unit: float) -> tuple[np.ndarray, np.ndarray]:
 # ----------------------------------------------------------------------------- tests
 @needs_cc
 @pytest.mark.parametrize("precision", ["double", "float"])
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow)
+                                  if c == "lti_mimo_two_link" else c for c in CASES])
 def test_c_matches_python(case, precision, tmp_path):
     ref = _reference(case)
     sc = ref["scenario"]

@@ -243,6 +243,7 @@ def _linear(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         "    }",
         f"    for (i = 0; i < {n}; ++i) {x}[i] = xn[i];",
         "}"]
+    part.step += [f"{out}[{i}] = 0;" for i in range(1, ctx.n_u)]
     return part
 
 
@@ -464,7 +465,8 @@ def _cascade(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
 def _reference_channel(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     """y = reference[channel] (a precomputed signal passed through: FRB's θ̂_mr)."""
     return Part(law=[f"ReferenceChannel: y = {ctrl.channel}"],
-                step=[f"{out}[0] = {ctx.ref(ctrl.channel)};"])
+                step=[f"{out}[0] = {ctx.ref(ctrl.channel)};",
+                      *(f"{out}[{i}] = 0;" for i in range(1, ctx.n_u))])
 
 
 def _siso_ss(ctx: _Ctx, P: str, r, what: str) -> tuple[list[str], int]:
@@ -520,7 +522,6 @@ def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     part.init.append(f"s->{p}th_prev = {P}TH0;")
     th, tip, ref = ctx.meas("motor_angle"), ctx.meas("tip_angle"), ctx.ref(ctrl.reference)
     sv = f"s->{p}"
-    nmax = max(ns.values())
     step = ["{", f"    {R} xn2[{ns['G2']}], xn1[{ns['G1']}], xnc[{ns['H']}], y2, u_fb, c_hat, "
             "acc;", f"    const {R} th = {th};"]
     step += ["    " + ln for ln in _siso_step(f"{P}G2_", ns["G2"], f"{sv}g2", "th", "y2", "xn2")]
@@ -539,7 +540,6 @@ def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
              f"    {sv}th_prev = th;", "}"]
     for i in range(1, ctx.n_u):
         step.insert(-1, f"    {out}[{i}] = 0;")
-    del nmax
     part.step = step
     return part
 
@@ -677,7 +677,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
 
     def chan_lines(items, arr, extra=None):
         if not items:
-            return [f" *   (none: pass NULL)"]
+            return [" *   (none: pass NULL)"]
         return [f" *   {arr}[{i}]  {n}  ({u}){(extra or {}).get(n, '')}"
                 for i, (n, u) in enumerate(items)]
 
