@@ -54,7 +54,9 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
+from flexarm.control.discrete import Controller
 from flexarm.control.friction_compensation import FrictionCompensated, friction_sign
+from flexarm.deploy import c_export
 from flexarm.deploy import ExportError, export_c, generate_c
 from flexarm.sim.build import prepare, simulate
 from flexarm.specs import load_scenario
@@ -167,7 +169,36 @@ def _nested():
     return sc, ctrl, {"feedforward": reference_signal(sc.reference, np.arange(n) * dt)}
 
 
+class _MeasuredTip(Controller):
+    """The strain-gauge rig's wrapper of the nested loops (a copy of
+    ``flexarm.control.nested.MeasuredTip``, on another branch): the law reads
+    tip_angle = motor_angle + scale · tip_deflection."""
+
+    law: Controller
+    scale: jax.Array
+
+    measured_signals = ("motor_angle", "tip_deflection")
+
+    def init(self):
+        return self.law.init()
+
+    def step(self, state, measured, reference):
+        m = dict(measured)
+        m["tip_angle"] = measured["motor_angle"] + self.scale * measured["tip_deflection"]
+        return self.law.step(state, m, reference)
+
+
+c_export.exporter(_MeasuredTip)(c_export.measured_tip)  # what c_export does for the real one
+
+
+def _nested_gauge():
+    """The nested loops of :func:`_nested` on the gauge: θt = θm + d / L (L = 0.42 m)."""
+    sc, ctrl, refs = _nested()
+    return sc, _MeasuredTip(ctrl, jnp.asarray(1 / 0.42)), refs
+
+
 CASES["lti_mimo_two_link"] = (_two_link, "scenario")
+CASES["nested_gauge_python"] = (_nested_gauge, "python")
 CASES["nested_feliu_python"] = (_nested, "python")
 
 
@@ -450,6 +481,15 @@ def test_cli_exports_the_lqg_design_and_the_rig_state_feedback(tmp_path):
             assert "StateFeedback" in header and "Design method: none" in header
         u_c = _run_c(out, ref["meas"], ref["refs"])
         assert np.max(np.abs(u_c - ref["u"])) <= 1e-12
+    # --precision float through the CLI: the same channels, float arithmetic
+    out = tmp_path / "c_float"
+    r = runner.invoke(app, ["export-c", str(design), "--out", str(out), "--name", "ctl",
+                            "--precision", "float"])
+    assert r.exit_code == 0, r.output
+    assert "typedef float ctl_real;" in (out / "ctl.h").read_text()
+    ref = _reference("lti_lqg_fc")
+    bound, jump = _allowed(ref, 2.0 ** -24)
+    assert np.all(np.abs(_run_c(out, ref["meas"], ref["refs"]) - ref["u"]) <= bound + jump)
 
 
 def test_export_is_reproducible(tmp_path):

@@ -42,7 +42,9 @@ Kinds (equations in the generated comments):
   (:func:`~flexarm.control.outer_loop.tip_loop`): :class:`~flexarm.control.discrete.Sum`,
   :class:`~flexarm.control.discrete.Cascade` (the outer output becomes the inner loop's
   reference channel: a computed channel, :attr:`_Ctx.computed_references`, not an input),
-  :class:`~flexarm.control.outer_loop.ReferenceChannel` (the feedforward θ̂_mr, an input).
+  :class:`~flexarm.control.outer_loop.ReferenceChannel` (the feedforward θ̂_mr, an input),
+  and ``MeasuredTip`` (θt = θm + s d from the gauge: a computed measured channel;
+  :func:`measured_tip`, registered when :mod:`flexarm.control.nested` is present).
 
 Not exportable (refused by name): a user's JAX law (``FunctionController``), continuous-time
 laws, the multi-link ``JointPD``; a sensor's digital filter is not part of the controller
@@ -211,6 +213,12 @@ def _register_builtin() -> None:
     exporter(Cascade)(_cascade)
     exporter(ReferenceChannel)(_reference_channel)
     exporter(InnerLoop)(_inner_loop)
+    try:  # Feliu's nested loops on a strain-gauge rig (flexarm.control.nested)
+        from flexarm.control.nested import MeasuredTip
+    except ImportError:
+        pass
+    else:
+        exporter(MeasuredTip)(measured_tip)
 
 
 def _linear(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
@@ -469,6 +477,32 @@ def _reference_channel(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
                       *(f"{out}[{i}] = 0;" for i in range(1, ctx.n_u))])
 
 
+def measured_tip(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """``ctrl.law`` with the tip angle formed from the hub encoder and the gauge,
+    θt = θm + s d (s = ``ctrl.scale``, rad per unit of d): the measured ``tip_angle`` the law
+    reads is a computed channel, not an input (``flexarm.control.nested.MeasuredTip``)."""
+    N = ctx.name.upper()
+    P = f"{N}_{p.upper()}"
+    tip = f"{p}tip_angle"
+    part = Part(law=["tip_angle = motor_angle + S tip_deflection (from the gauge), then:"])
+    part.constants += ctx.scalar(f"{P}S", float(_np(ctrl.scale)),
+                                 "s: rad of tip angle per unit of tip_deflection")
+    line = (f"const {ctx.real} {tip} = {ctx.meas('motor_angle')} + {P}S * "
+            f"{ctx.meas('tip_deflection')};")
+    saved = ctx.computed_measured.get("tip_angle")
+    ctx.computed_measured["tip_angle"] = tip
+    try:
+        inner = _emit(ctrl.law, ctx, f"{p}l_", out)
+    finally:
+        if saved is None:
+            ctx.computed_measured.pop("tip_angle")
+        else:
+            ctx.computed_measured["tip_angle"] = saved
+    _nest(inner, part)
+    part.step = ["{", "    " + line, *("    " + ln for ln in inner.step), "}"]
+    return part
+
+
 def _siso_ss(ctx: _Ctx, P: str, r, what: str) -> tuple[list[str], int]:
     """Constants ``P``A, B, C, D of a SISO realisation ``r`` = (A, B, C, D)."""
     A, B, C, D = (_np(a) for a in r)
@@ -617,6 +651,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     scenario's ``[controller]`` (as :func:`flexarm.sim.build.prepare` takes it), with the
     scenario's period, actuator and sensors."""
     from flexarm import __version__
+    from flexarm.io.logs import signal_unit
     from flexarm.sim.build import prepare
 
     name = _c_name(name)
@@ -669,7 +704,10 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
 
     sc_sens = scenario.sensors or {}
     meas = [(c, _unit(c, scenario)) for c in ctx.measured]
-    refs = [(r, _unit(r, scenario)) for r in ctx.references]
+    # reference channels: a scenario's [reference] / [references.X] are angles (rad), as is
+    # the nested loops' feedforward; a known signal name keeps its own unit
+    refs = [(r, _unit(r, scenario) if signal_unit(r) is not None else "rad")
+            for r in ctx.references]
     outs = [(nm, "V" if nm.startswith("voltage") else "A" if nm.startswith("current")
              else "N*m" if nm.startswith("torque") else "command units") for nm in input_names]
     dt = float(scenario.sampling.period)
