@@ -575,3 +575,61 @@ def test_readme_c_example_compiles(tmp_path):
     assert cp.returncode == 0, cp.stderr
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     assert float(out) == 0.0  # at rest on the reference: K1·0 − K2·0 − K3·0 − K4·0
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
+FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
+
+
+#: samples of the real log used (the first 4 s: the bound's cost grows as N²)
+N_REAL = 4000
+
+
+@needs_cc
+@pytest.mark.slow
+@pytest.mark.skipif(not (DATA / "4PM_Group37_FlexArm_Unit6").is_file(),
+                    reason=f"real rig logs not found at {DATA} (../shared is absent)")
+def test_c_matches_python_on_the_real_unit6_log(tmp_path):
+    """The real unit 6 run (its first 4 s: 4000 samples of 1-mrad / 1-mm rounded hub angle,
+    gauge and reference, with reference steps) as the input sequence: the lab's own law (logged gains 8, −8.5, 1.5, 1.5;
+    rates filtered with the logger's τ = 3.3 ms from controller_check; ±5 V) with
+    friction compensation, exported and compiled. Double: 1e-12 V and the derived bound;
+    float: the derived bound (module docstring)."""
+    from flexarm.identification.time_domain.logs import read_bench_log
+
+    log = read_bench_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)
+    k1, k2, k3, k4 = (float(g) for g in np.asarray(log.gains)[0])
+    sc = _rig({"type": "state_feedback", "k1": k1, "k2": k2, "k3": k3, "k4": k4,
+               "rate": "filtered", "rate_time_constant": 3.3e-3, **_fc()},
+              extra={"actuator": {"bits": 0, "limit": 5.0}})
+    ctrl = prepare(sc).loop.controller
+    c = {k: np.asarray(v)[:N_REAL] for k, v in log.columns.items()}
+    assert len(np.unique(c["reference"])) >= 2  # a reference step inside the window
+    meas = {"motor_angle": jnp.asarray(c["motor_angle"]),
+            "tip_deflection": jnp.asarray(c["tip_deflection"])}
+    refs = {"reference": jnp.asarray(c["reference"])}
+    y, _ = _run_python(ctrl, meas, refs)
+    y_fb, fb_states = _run_python(ctrl.feedback, meas, refs)
+    ref = dict(ctrl=ctrl, meas=meas, refs=refs, y=y, y_fb=y_fb,
+               jac=_jacobians(ctrl.feedback, fb_states, meas, refs),
+               limit=np.array([5.0]), q=np.array([0.0]))
+    u_py = _actuate(y, ref["limit"], ref["q"])
+    assert np.count_nonzero(np.abs(u_py) == 5.0) > 0  # the run saturates: clip exercised
+    th = c["motor_angle"]
+    v = np.diff(th, prepend=th[0]) / 1e-3
+    sigma = np.round((y[:, 0] - y_fb[:, 0]) / FC_LEVEL)
+    moving = np.abs(v) > float(ctrl.velocity_deadband[0])
+    assert {-1.0, 1.0} <= set(sigma[moving].tolist())  # the sign rule switches on real data
+    assert {-1.0, 1.0} <= set(sigma[~moving].tolist())
+    for precision, unit in (("double", 2.0 ** -53), ("float", 2.0 ** -24)):
+        out = tmp_path / precision
+        generate_c(sc, name="ctl", precision=precision).write(out)
+        u_c = _run_c(out, meas, refs)
+        bound, jump = _allowed(ref, unit)
+        diff = np.abs(u_c - u_py)
+        assert np.all(diff <= bound + jump), precision
+        if precision == "double":
+            assert diff.max() <= 1e-12
+        print(f"unit 6 log, {precision}: max |u_C - u_Py| = {diff.max():.3g} V, bound "
+              f"{bound.max():.3g} V, possible flips {np.count_nonzero(jump)}, flipped "
+              f"{np.count_nonzero(diff > bound)}")
