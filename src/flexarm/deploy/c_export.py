@@ -121,7 +121,12 @@ class _Ctx:
             raise ExportError(f"a constant of the controller is {v}; C constants must be "
                               "finite")
         if self.precision == "float":
-            s = format(float(np.float32(v)), ".9g")  # 9 digits: float32 round trip
+            with np.errstate(over="ignore"):
+                f32 = np.float32(v)
+            if not np.isfinite(f32):
+                raise ExportError(f"a constant of the controller, {v:.6g}, is beyond the "
+                                  "float range (3.4e38); export with --precision double")
+            s = format(float(f32), ".9g")  # 9 digits: float32 round trip
             return (s if any(ch in s for ch in ".e") else s + ".0") + "f"
         s = format(v, ".17g")
         return s if any(ch in s for ch in ".en") else s + ".0"
