@@ -1058,6 +1058,33 @@ def main() -> None:  # pragma: no cover
     app()
 
 
+@app.command("export-c")
+def export_c(design: str = typer.Argument(..., help="design directory (holding design.toml) or a scenario TOML / built-in name"),
+             out: Path = typer.Option(..., "--out", help="folder for NAME.h and NAME.c"),
+             precision: str = typer.Option("double", "--precision", help="double or float"),
+             name: str = typer.Option("controller", "--name", help="C prefix and file name"),
+             overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c")) -> None:
+    """Write the [controller] of a design (or scenario) as C99 for a real-time target:
+    NAME.h (state struct, NAME_init, NAME_step, channel order and units) and NAME.c (the
+    law, friction feedforward, saturation and D/A count); no dependencies."""
+    from flexarm.deploy.c_export import ExportError, export_c as _export_c
+    from flexarm.errors import OutputExistsError
+
+    _check_dir_option("--out", out)
+    try:
+        code, paths = _export_c(design, out, name=name, precision=precision,
+                                overwrite=overwrite)
+    except (ExportError, OutputExistsError) as exc:
+        _fail(str(exc))
+    except ValueError as exc:
+        _fail(f"{design}: {exc}")
+    console.print_json(json.dumps({
+        "files": [str(p) for p in paths], "precision": code.precision,
+        "measured": [f"{n} ({u})" for n, u in code.measured],
+        "reference": [f"{n} ({u})" for n, u in code.references],
+        "u": [f"{n} ({u})" for n, u in code.outputs]}))
+
+
 # --- frequency-domain identification (issue #16): excite, frf, tfest -----------------
 
 @app.command()
