@@ -169,32 +169,13 @@ def _nested():
     return sc, ctrl, {"feedforward": reference_signal(sc.reference, np.arange(n) * dt)}
 
 
-class _MeasuredTip(Controller):
-    """The strain-gauge rig's wrapper of the nested loops (a copy of
-    ``flexarm.control.nested.MeasuredTip``, on another branch): the law reads
-    tip_angle = motor_angle + scale · tip_deflection."""
-
-    law: Controller
-    scale: jax.Array
-
-    measured_signals = ("motor_angle", "tip_deflection")
-
-    def init(self):
-        return self.law.init()
-
-    def step(self, state, measured, reference):
-        m = dict(measured)
-        m["tip_angle"] = measured["motor_angle"] + self.scale * measured["tip_deflection"]
-        return self.law.step(state, m, reference)
-
-
-c_export.exporter(_MeasuredTip)(c_export.measured_tip)  # what c_export does for the real one
-
-
 def _nested_gauge():
-    """The nested loops of :func:`_nested` on the gauge: θt = θm + d / L (L = 0.42 m)."""
+    """The nested loops of :func:`_nested` on the gauge: θt = θm + d / L (L = 0.42 m),
+    through the scenario law's own wrapper (:class:`flexarm.control.nested.MeasuredTip`)."""
+    from flexarm.control.nested import MeasuredTip
+
     sc, ctrl, refs = _nested()
-    return sc, _MeasuredTip(ctrl, jnp.asarray(1 / 0.42)), refs
+    return sc, MeasuredTip(ctrl, jnp.asarray(1 / 0.42)), refs
 
 
 CASES["lti_mimo_two_link"] = (_two_link, "scenario")
