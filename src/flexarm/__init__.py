@@ -25,7 +25,7 @@ _jax.config.update("jax_enable_x64", True)
 from flexarm.control.lqg import lqg  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
-from flexarm.design import design  # noqa: E402
+import flexarm.design as design  # noqa: E402  (callable: the front door)
 from flexarm.identification import fit, validate  # noqa: E402
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
 from flexarm.identification.frequency_domain.periodic import periodic_frf  # noqa: E402

@@ -3,10 +3,16 @@ loops (``nested``) and gains tuned in simulation over the fit's uncertainty (``t
 
 The front door :func:`design` dispatches on the method through :data:`METHODS` (method →
 the function that designs it, each ``f(scenario, **options) -> Design``); a new method adds
-one entry there."""
+one entry there.
+
+``flexarm.design`` is both this package and the front door: the package is callable,
+``flexarm.design(scenario, "lqr")`` is :func:`design`, and its modules stay importable
+(``import flexarm.design.linear``)."""
 
 from __future__ import annotations
 
+import sys
+import types
 from typing import Any, Callable
 
 from flexarm.design.result import Design
@@ -45,3 +51,14 @@ def design(scenario: Any, method: str = "lqr", **options) -> Design:
 
         scenario = load_scenario(str(scenario))
     return METHODS[method](scenario, **options)
+
+
+class _CallablePackage(types.ModuleType):
+    """This package, callable as :func:`design` (so ``flexarm.design(...)`` designs and
+    ``flexarm.design.linear`` is still the module)."""
+
+    def __call__(self, scenario: Any, method: str = "lqr", **options) -> Design:
+        return design(scenario, method, **options)
+
+
+sys.modules[__name__].__class__ = _CallablePackage

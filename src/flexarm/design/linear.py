@@ -79,6 +79,7 @@ class DesignModel:
     channels: list[str]  #: measured channels, the controller's inputs
     signals: list[str]  #: plant signal each channel reads
     setpoints: list[str | None]  #: reference channel of each channel (None: 0)
+    tracked: list[int]  #: channels whose setpoint was asked for (integrators, step sizes)
     continuous: control.StateSpace  #: arm + analog sensor filters, outputs = the channels
     sampled: control.StateSpace  #: zero-order hold at T
     augmented: control.StateSpace  #: + computation and sensor delays
@@ -92,11 +93,8 @@ class DesignModel:
     coulomb: np.ndarray  #: joint Coulomb level, per joint (N·m)
     amplitude: dict[str, float]  #: reference step amplitude per tracked channel
     scales: list[float]  #: Bryson scale of each channel
+    rigid: np.ndarray  #: (n_aug, n_tracked): the augmented state of a unit shift of each tracked channel at rest
     added_sensors: dict[str, dict] = field(default_factory=dict)
-
-    @property
-    def tracked(self) -> list[int]:
-        return [i for i, s in enumerate(self.setpoints) if s]
 
     @property
     def n_arm(self) -> int:
@@ -239,12 +237,21 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     spl = [sp.get(c) for c in chans]
     tracked = [i for i, s in enumerate(spl) if s]
     amp = {chans[i]: _amplitude(scenario, spl[i]) for i in tracked}
-    _check_rigid_rotation(Ac, Cc, chans, tracked, scenario.name)
+    follow, v = _rigid_rotation(Ac, Cc, chans, tracked, scenario.name)
+    # the same shift in the augmented state: input registers 0, output registers C_i v
+    rigid = np.zeros((aug.nstates, v.shape[1]))
+    rigid[:N] = v
+    k = N + m * int(scenario.sampling.delay)
+    for i, d in enumerate(delays):
+        rigid[k:k + d] = Cc[i] @ v
+        k += d
+    for i, j in follow.items():
+        spl[i] = spl[j]
 
     scales = []
     for i, c in enumerate(chans):
-        if i in tracked:
-            scales.append(amp[c] * abs(gains[i]))
+        if i in tracked or i in follow:
+            scales.append(amp[chans[follow.get(i, i)]] * abs(gains[i]))
         else:
             a = max(amp.values())
             travel = a * (length if signals[i] == "tip_deflection" and length else 1.0)
@@ -252,30 +259,50 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     k_u = np.asarray(arm.k_u, float).reshape(-1)
     coulomb = np.asarray([float(np.asarray(f.coulomb)) if f.model != "none" else 0.0
                           for f in arm.frictions])
-    return DesignModel(chans, signals, spl, cont, sysd, aug, dt, int(scenario.sampling.delay),
-                       delays, [float(quanta_all[c]) for c in chans],
+    return DesignModel(chans, signals, spl, tracked, cont, sysd, aug, dt,
+                       int(scenario.sampling.delay), delays,
+                       [float(quanta_all[c]) for c in chans],
                        [float(spec_of[c].get("noise", 0.0) or 0.0) for c in chans], limit, k_u,
-                       coulomb, amp, scales, added)
+                       coulomb, amp, scales, rigid, added)
 
 
-def _check_rigid_rotation(A, C, chans, tracked, name) -> None:
-    """Each tracked channel must be shiftable alone at rest: a state v with A v = 0,
-    C_j v = 1 for tracked channel j, 0 on every other channel."""
+def _rigid_rotation(A, C, chans, tracked, name) -> tuple[dict[int, int], np.ndarray]:
+    """Each tracked channel j must be shiftable at rest: a state v with A v = 0, C_j v = 1,
+    the other tracked channels at 0. An untracked channel i must read 0 there, or 1 (it
+    reads the same angle, e.g. a tip angle: it then takes j's setpoint); returns
+    {i: j} for those and the states v (columns, one per tracked channel)."""
     Nsp = scipy.linalg.null_space(A, rcond=1e-10)
+    follow: dict[int, int] = {}
+    vs = []
     for j in tracked:
-        target = np.zeros(len(chans))
-        target[j] = 1.0
+        rows = list(tracked)
+        target = np.zeros(len(rows))
+        target[rows.index(j)] = 1.0
+        v = None
         if Nsp.size:
-            a, *_ = np.linalg.lstsq(C @ Nsp, target, rcond=None)
-            res = np.abs(C @ Nsp @ a - target).max()
-        else:
-            res = 1.0
-        if res > 1e-6:
+            a, *_ = np.linalg.lstsq(C[rows] @ Nsp, target, rcond=None)
+            if np.abs(C[rows] @ Nsp @ a - target).max() <= 1e-6:
+                v = Nsp @ a
+                vs.append(v)
+        if v is None:
             raise ValueError(
                 f"scenario {name!r}: channel {chans[j]!r} cannot rest at an arbitrary setpoint "
-                "with the other channels at 0 (the arm has a stiffness to ground, e.g. gravity, "
-                "or two channels read one angle); the error-form design needs a horizontal "
-                "arm: set gravity = 0 or leave the duplicate channel out of measured")
+                "(the arm has a stiffness to ground, e.g. gravity, or the tracked channels read "
+                "one angle); the error-form design needs a horizontal arm (gravity = 0)")
+        for i in range(len(chans)):
+            if i in tracked:
+                continue
+            c = float(C[i] @ v)
+            if abs(c) <= 1e-6:
+                continue
+            if abs(c - 1.0) <= 1e-6 and i not in follow:
+                follow[i] = j
+                continue
+            raise ValueError(
+                f"scenario {name!r}: channel {chans[i]!r} reads {c:.6g} per unit of "
+                f"{chans[j]!r} at rest, so its setpoint is neither 0 nor {chans[j]!r}'s; leave "
+                "it out of measured or give its gain")
+    return follow, np.stack(vs, axis=1)
 
 
 # ----------------------------------------------------------------------------- gains
@@ -365,7 +392,10 @@ def step_response(dm: DesignModel, controller: control.StateSpace, n: int,
     amp = dm.amplitude if amplitude is None else amplitude
     r = np.zeros(len(dm.channels))
     for c, a in amp.items():
-        r[dm.channels.index(c)] = a
+        j = dm.channels.index(c)
+        for i, s in enumerate(dm.setpoints):  # a channel reading the same angle follows
+            if s is not None and s == dm.setpoints[j]:
+                r[i] = a
     z, xi = np.zeros(A.shape[0]), np.zeros(Ak.shape[0])
     ys, ms, us = np.empty((n, C.shape[0])), np.empty((n, C.shape[0])), np.empty((n, B.shape[1]))
     for k in range(n):
@@ -580,6 +610,16 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
         K, weights, wanted, ctrl, sr, peak = attempt(rho)
     weights["rho"] = rho
     weights["observer"] = obs
+    if fc:
+        # no compensation at rest while the feedback is below what half an encoder count
+        # of hub error gives (its static gain without the integrators): no chatter on the
+        # last count (control/friction_compensation.py)
+        h = dm.channels.index(fc["measured"])
+        na = P.nstates
+        Ak = np.asarray(ctrl.A)[:na, :na]
+        Bk, Ck = np.asarray(ctrl.B)[:na, h], np.asarray(ctrl.C)[:, :na]
+        kp = float(np.abs(Ck @ np.linalg.solve(np.eye(na) - Ak, Bk))[0])
+        fc["rest_deadband"] = 0.5 * dm.quanta[h] * kp
     reg = np.linalg.eigvals(Ar - Br @ K)
     est = np.linalg.eigvals(A - L @ C)
     cl = loop_poles(P, ctrl)
