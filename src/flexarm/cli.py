@@ -298,7 +298,7 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
     controller and with the design)."""
     _enable_cache()
     from flexarm.design import METHODS, design
-    from flexarm.design.figure import step_comparison
+    from flexarm.analysis.design_step import step_comparison
 
     if method not in METHODS:
         _fail(f"--method {method!r}: not known; choose one of {', '.join(METHODS)}")
