@@ -256,3 +256,21 @@ def test_design_on_the_fitted_unit6_rig(unit6_rig):
     assert own["tip_settling_s"] is not None and new["tip_settling_s"] is not None
     assert new["tip_settling_s"] < own["tip_settling_s"]
     assert new["peak_command"] < 10.0
+
+
+def test_current_drive_and_a_tip_angle_channel():
+    """Feliu's arm (current drive, computation delay 1, hub and tip angle sensors): the tip
+    angle reads the hub's rigid rotation one to one, so it takes the hub's setpoint; the
+    feedforward level is C_f / K exactly (A); the loop (5 augmented states) is stable and
+    separates (matrices to 1e-12)."""
+    sc = flexarm.load_scenario("feliu-single-mass")
+    des = flexarm.design(sc, "lqr")
+    assert des.info["model"]["setpoints"] == {"motor_angle": "reference",
+                                              "tip_angle": "reference"}
+    m = sc.arm.motor
+    assert des.info["friction_compensation"]["level"] == pytest.approx(
+        sc.arm.friction.coulomb / m.torque_constant, rel=1e-12)
+    assert des.info["model"]["n_augmented"] == 4 + 1
+    assert des.info["separation_error"] < 1e-12
+    assert np.abs(loop_poles(design_model(sc).augmented, des.controller)).max() < 1.0
+    assert des.info["step"]["peak_command"][0] <= 0.9 * m.current_limit + 1e-9

@@ -21,6 +21,12 @@ a discrete ``StateSpace`` from e (one input per measured output) to u (one per j
 ``dt = T``; u_k uses the errors up to k − 1 (a predictor: one period to compute). Its closed
 loop with the design model has the eigenvalues of A_d − B_d K and of A_d − L C (separation
 principle), which :func:`lqg` returns for checking.
+
+The pieces, for designs on richer models (:mod:`flexarm.design.linear`): the loop's pure
+delays as shift registers of the sampled model (:func:`augment_delays`), integrators of
+tracking errors (LQI, :func:`integral_model`), the controller e → u of any gains K, L
+(:func:`observer_controller`), its loop's poles (:func:`loop_poles`), and its
+``[controller] type = "lti"`` scenario section (:func:`lti_controller_spec`).
 """
 
 from __future__ import annotations

@@ -52,7 +52,6 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import control
 import numpy as np
@@ -64,7 +63,9 @@ from flexarm.design.result import Design
 
 __all__ = ["DesignModel", "design_model", "design_linear", "separation_check", "step_response"]
 
-#: Bryson scale of a deflection channel as a fraction of the tip's travel (1: a deflection as large as the move; tighter values slow the rigid mode down under the command limit: unit 6 fit, tip 2 % settling 1.7 s at 1.0, 2.4 s at 0.3).
+#: Bryson scale of a deflection channel as a fraction of the tip's travel (1: a deflection
+#: as large as the move; tighter values slow the rigid mode down under the command limit:
+#: unit 6 fit, tip 2 % settling 1.7 s at 1.0, 2.4 s at 0.3).
 DEFLECTION_FRACTION = 1.0
 #: Bryson scale of an integrator: amplitude × this time (s).
 INTEGRAL_TIME = 0.2
@@ -93,7 +94,8 @@ class DesignModel:
     coulomb: np.ndarray  #: joint Coulomb level, per joint (N·m)
     amplitude: dict[str, float]  #: reference step amplitude per tracked channel
     scales: list[float]  #: Bryson scale of each channel
-    rigid: np.ndarray  #: (n_aug, n_tracked): the augmented state of a unit shift of each tracked channel at rest
+    #: (n_aug, n_tracked): the augmented state of a unit shift of each tracked channel at rest
+    rigid: np.ndarray
     added_sensors: dict[str, dict] = field(default_factory=dict)
 
     @property
