@@ -138,24 +138,34 @@ def test_place_gives_the_designed_poles():
     cl = loop_poles(dm.augmented, des.controller)
     for w in want:
         assert np.abs(cl - w).min() < 1e-8, w
-    assert des.controller.dt == T and des.controller.ninputs == 2
+    # two degrees of freedom: both channels against 0, the hub against the reference
+    assert des.controller.dt == T
+    assert list(des.controller.input_labels) == ["e_motor_angle", "e_tip_deflection",
+                                                 "e_motor_angle_ref"]
+    assert des.scenario.controller.inputs == ["motor_angle", "tip_deflection", "motor_angle"]
+    assert des.scenario.controller.setpoints == [0, 0, "reference"]
     # the observer (Kalman predictor) is stable and so is the loop
     assert np.abs(cl).max() < 1.0
 
 
-def test_lqr_friction_compensation_stops_within_one_count():
+@pytest.mark.parametrize("integral", [False, True], ids=["disturbance", "lqi"])
+def test_lqr_friction_compensation_stops_within_one_count(integral):
     """The built-in rotary rig (Coulomb 0.03 N·m, stiction 0.04 N·m, 12-bit encoder, noisy
     gauge 2 samples late), a 0.3 rad step: the scenario's own state feedback sticks 7.3
     counts short (test_friction_compensation: the band F_s / (k1 k_u)); the LQR design with
-    the Coulomb feedforward C_f / k_u and integral action stops within one count, and its
-    command stays inside the 10 V limit (the design scales R until the linear loop's peak
-    is within 90 % of it). Measured: scenario 7.25 counts, design 0.17 counts, peak
-    4.85 V (3 s runs)."""
+    the Coulomb feedforward C_f / k_u and integral action (the default estimated input
+    disturbance, or LQI) stops within one count, and its command stays inside the 10 V
+    limit (the design scales R until the linear loop's peak is within 90 % of it).
+    Measured (3 s runs): scenario 7.25 counts; default design 0.11 counts, 8.99 V; LQI
+    0.07 counts, 8.94 V (its tip overshoots 41 % against 9 % for the default: flexarm
+    design's step comparison)."""
     sc = scenario_from_dict(_rotary())
-    des = flexarm.design(sc, "lqr", integral=True)
+    des = flexarm.design(sc, "lqr", integral=integral)
     assert des.info["friction_compensation"]["level"] == pytest.approx(
         0.03 / (0.9 * 0.69 * 70 * 7.68e-3 / 2.6), rel=1e-12)
+    assert des.info["model"]["n_disturbances"] == (0 if integral else 1)
     assert not des.warnings, des.warnings
+    assert des.info["separation_error"] < 1e-12
     own = flexarm.simulate(sc)
     new = flexarm.simulate(des.scenario)
     e_own = (0.3 - np.asarray(own.outputs)[0, -1]) / COUNT
@@ -239,14 +249,14 @@ def unit6_rig():
 @pytest.mark.slow
 def test_design_on_the_fitted_unit6_rig(unit6_rig):
     """On the fitted unit 6 rig (hub read 23 samples late, the gauge 55 late through its
-    fitted 8.7 Hz low-pass, 1 sample to compute: an augmented model of 84 states), the LQR
-    design with integral action and the friction feedforward: the hub ends within one
-    count of the 0.8 rad step (the logged gains: 1.8 counts), the tip angle settles (2 %)
-    sooner than under the logged gains, and the command stays inside 10 V. Measured:
-    logged gains 1.85 counts, tip 3.34 s, 7.5 V; design 0.32 counts, tip 1.69 s, 9.0 V (its
-    tip overshoots 37 % against 13 %)."""
+    fitted 8.7 Hz low-pass, 1 sample to compute: an augmented model of 84 states), the
+    default LQR design (estimated input disturbance, reference as a state, friction
+    feedforward): the hub ends within one count of the 0.8 rad step (the logged gains: 1.8
+    counts), the tip angle settles (2 %) at least 30 % sooner than under the logged gains
+    (the issue's target), and the command stays inside 10 V. Measured: logged gains 1.85
+    counts, tip 3.34 s, 13 % overshoot, 7.5 V; design 0.12 counts, tip 1.01 s, 7 %, 8.9 V."""
     sc = unit6_rig
-    des = flexarm.design(sc, "lqr", integral=True)
+    des = flexarm.design(sc, "lqr")
     assert des.info["model"]["n_augmented"] == 4 + 1 + 1 + 23 + 55
     assert des.info["separation_error"] < 1e-12
     cmp = step_comparison(sc, des, amplitude=0.8, start=0.5)
@@ -254,7 +264,7 @@ def test_design_on_the_fitted_unit6_rig(unit6_rig):
     own, new = cmp["scenario"], cmp["lqr"]
     assert abs(new["hub_error_counts"]) <= 1.0
     assert own["tip_settling_s"] is not None and new["tip_settling_s"] is not None
-    assert new["tip_settling_s"] < own["tip_settling_s"]
+    assert new["tip_settling_s"] < 0.7 * own["tip_settling_s"]
     assert new["peak_command"] < 10.0
 
 

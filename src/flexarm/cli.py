@@ -284,14 +284,19 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
                    None, "--observer-poles", help="observer poles of the arm's states (default: Kalman predictor)"),
                pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
                integral: bool = typer.Option(False, "--integral/--no-integral",
-                                             help="integral action on the tracked channels' errors"),
+                                             help="integrators of the tracked channels' errors (LQI)"),
+               disturbance: Optional[bool] = typer.Option(
+                   None, "--disturbance/--no-disturbance",
+                   help="estimate and cancel a constant input disturbance (integral action; "
+                        "default: on unless --integral)"),
                friction_compensation: bool = typer.Option(
                    True, "--friction-compensation/--no-friction-compensation",
                    help="Coulomb feedforward C_f / k_u from the scenario's friction"),
                overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
     """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
     period, its computation and sensor delays in the model): state feedback by LQR or pole
-    placement with a Kalman (or placed) predictor, optional integral action, and the
+    placement with a Kalman (or placed) predictor, the reference as a state (two degrees of
+    freedom), integral action (an estimated input disturbance, or --integral), and the
     Coulomb friction feedforward. Writes design.toml (the scenario with the designed
     [controller]: flexarm simulate OUT/design.toml runs it), design.json (gains, poles,
     weights, figures, warnings) and design-step.png (a reference step with the scenario's
@@ -314,7 +319,10 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
         _fail("--q/--r: only with --method lqr (place takes --poles)")
     sc = _load(scenario)
     out = _outdir(out, overwrite)
-    opts = dict(integral=integral, friction_compensation=friction_compensation,
+    if integral and disturbance:
+        _fail("--integral and --disturbance both give integral action; choose one")
+    opts = dict(integral=integral, disturbance=disturbance,
+                friction_compensation=friction_compensation,
                 pole_domain=pole_domain, observer_poles=_complex_list(observer_poles, "--observer-poles"))
     if method == "place":
         opts["poles"] = _complex_list(poles, "--poles")

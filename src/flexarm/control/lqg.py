@@ -25,7 +25,8 @@ principle), which :func:`lqg` returns for checking.
 The pieces, for designs on richer models (:mod:`flexarm.design.linear`): the loop's pure
 delays as shift registers of the sampled model (:func:`augment_delays`), integrators of
 tracking errors (LQI, :func:`integral_model`), the controller e → u of any gains K, L
-(:func:`observer_controller`), its loop's poles (:func:`loop_poles`), and its
+(:func:`observer_controller`; with two degrees of freedom: the reference as a state),
+its loop's poles (:func:`loop_poles`), and its
 ``[controller] type = "lti"`` scenario section (:func:`lti_controller_spec`).
 """
 
@@ -159,8 +160,8 @@ def integral_model(plant: control.StateSpace, integral) -> tuple[np.ndarray, np.
     return Ar, Br
 
 
-def observer_controller(plant: control.StateSpace, K, L, *, integral=(), name: str = "lqg"
-                        ) -> control.StateSpace:
+def observer_controller(plant: control.StateSpace, K, L, *, integral=(), reference=None,
+                        name: str = "lqg") -> control.StateSpace:
     """The observer-based controller e → u of the discrete model ``plant`` (x⁺ = A x + B u,
     y = C x): predictor x̂⁺ = A x̂ + B u + L (y − C x̂) on y = −e (module docstring), and,
     for the outputs ``integral`` (indices), integrators q⁺ = q + T e_i of the errors;
@@ -170,31 +171,74 @@ def observer_controller(plant: control.StateSpace, K, L, *, integral=(), name: s
 
     Discrete, dt = T, inputs ``e_<output>``, outputs the plant's inputs, no feedthrough (u_k
     uses the errors up to k − 1). Its loop with ``plant`` has the eigenvalues of
-    A_r − B_r K (:func:`integral_model`) and of A − L C (separation)."""
+    A_r − B_r K (:func:`integral_model`) and of A − L C (separation).
+
+    ``reference = (tracked, Z)``: two degrees of freedom. The controller reads every output
+    against 0 (e = −y: the observer estimates the state itself, not its shift) and, as
+    extra inputs ``e_<output>_ref``, the tracked outputs against their references,
+    e_r = r − y_t; so r = e_r + y_t is known and the reference enters as the state it
+    asks for, Z r (Z: (n, len(tracked)), the state of a unit shift of each tracked output
+    at rest), u = −K_x (x̂ − Z r) − K_q q; the integrators integrate e_r. A reference step is
+    then a state error for the regulator, not a jump the observer has to explain; the loop's
+    own dynamics (r = 0) are those of the one-input form."""
     A, B, C = (np.asarray(a, float) for a in (plant.A, plant.B, plant.C))
     n, m, p = A.shape[0], B.shape[1], C.shape[0]
     K, L = np.asarray(K, float), np.asarray(L, float)
     idx = list(integral or ())
     ni = len(idx)
     Kx, Kq = K[:, :n], K[:, n:]
-    S = np.eye(p)[idx].reshape(ni, p)
     T = float(plant.dt)
     Ac = np.block([[A - L @ C - B @ Kx, -B @ Kq], [np.zeros((ni, n)), np.eye(ni)]])
-    Bc = np.vstack([-L, T * S])
     Cc = np.hstack([-Kx, -Kq])
-    return control.ss(Ac, Bc, Cc, np.zeros((m, p)), plant.dt,
-                      inputs=[f"e_{k}" for k in plant.output_labels],
+    outs = list(plant.output_labels)
+    if reference is None:
+        S = np.eye(p)[idx].reshape(ni, p)
+        return control.ss(Ac, np.vstack([-L, T * S]), Cc, np.zeros((m, p)), plant.dt,
+                          inputs=[f"e_{k}" for k in outs], outputs=list(plant.input_labels),
+                          name=name)
+    tracked, Z = list(reference[0]), np.asarray(reference[1], float)
+    nt = len(tracked)
+    Z = Z.reshape(n, nt)
+    if not set(idx) <= set(tracked):
+        raise ValueError(f"observer_controller: integral {idx} must be tracked outputs "
+                         f"{tracked}")
+    St = np.eye(p)[tracked].reshape(nt, p)
+    KZ = Kx @ Z  # (m, nt): r = e_r − St e_y
+    Sq = np.zeros((ni, nt))
+    for j, i in enumerate(idx):
+        Sq[j, tracked.index(i)] = 1.0
+    Bc = np.vstack([np.hstack([-L - B @ KZ @ St, B @ KZ]),
+                    np.hstack([np.zeros((ni, p)), T * Sq])])
+    Dc = np.hstack([-KZ @ St, KZ])
+    return control.ss(Ac, Bc, Cc, Dc, plant.dt,
+                      inputs=[f"e_{k}" for k in outs] + [f"e_{outs[i]}_ref" for i in tracked],
                       outputs=list(plant.input_labels), name=name)
+
+
+def input_rows(plant: control.StateSpace, controller: control.StateSpace) -> np.ndarray:
+    """M: the controller's inputs as rows of the plant's outputs (e = r − M y): the identity
+    for the one-input form, with the tracked outputs' rows appended for the two-degrees-of-
+    freedom form (inputs ``e_<output>_ref``)."""
+    outs = list(plant.output_labels)
+    if not any(lab.endswith("_ref") for lab in controller.input_labels):
+        return np.eye(len(outs))
+    rows = []
+    for lab in controller.input_labels:
+        k = lab[2:-4] if lab.endswith("_ref") else lab[2:]
+        rows.append(np.eye(len(outs))[outs.index(k)])
+    return np.asarray(rows).reshape(len(rows), len(outs))
 
 
 def loop_poles(plant: control.StateSpace, controller: control.StateSpace) -> np.ndarray:
     """Eigenvalues of the discrete ``plant`` (x⁺ = A x + B u, y = C x) in closed loop with
-    ``controller`` (e → u, no feedthrough) on e = −y."""
+    ``controller`` (e → u) on e = −M y, references at 0 (M: :func:`input_rows`)."""
     Ad, Bd, C = (np.asarray(a) for a in (plant.A, plant.B, plant.C))
-    Ac, Bc, Cc = (np.asarray(a) for a in (controller.A, controller.B, controller.C))
-    # x⁺ = Ad x + Bd Cc ξ ;  ξ⁺ = Ac ξ + Bc (−C x)
-    top = np.hstack([Ad, Bd @ Cc])
-    bot = np.hstack([-Bc @ C, Ac])
+    Ac, Bc, Cc, Dc = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
+                                               controller.D))
+    MC = input_rows(plant, controller) @ C
+    # u = Cc ξ − Dc M C x;  x⁺ = Ad x + Bd u ;  ξ⁺ = Ac ξ − Bc M C x
+    top = np.hstack([Ad - Bd @ Dc @ MC, Bd @ Cc])
+    bot = np.hstack([-Bc @ MC, Ac])
     return np.linalg.eigvals(np.vstack([top, bot]))
 
 

@@ -19,9 +19,9 @@ Regulator u = −K (x̂, q), q the integrators of the tracked channels' measured
 * ``lqr``: K = ``control.dlqr(A_r, B_r, Q, R)`` with Q = C_uᵀ diag(q_i) C_u + diag(q_I)
   on the channels' undelayed outputs C_u and the integrators, R = diag(r). Defaults by
   Bryson's rule, q_i = 1 / s_i², r = 1 / u_max²: s = the reference step amplitude |a| for a
-  tracked channel (rad), |a| L g_i for a tip deflection in m (|a| g_i for a deflection
-  angle: a deflection as large as the tip's travel, :data:`DEFLECTION_FRACTION`), |a| ×
-  0.2 s for an integrator (rad·s, :data:`INTEGRAL_TIME`),
+  tracked channel (rad), 0.3 |a| L g_i for a tip deflection in m (0.3 |a| g_i for a
+  deflection angle: 30 % of the tip's travel, :data:`DEFLECTION_FRACTION`), |a| × 0.2 s
+  for an integrator (rad·s, :data:`INTEGRAL_TIME`),
   u_max the actuator limit (V or A); R then scaled up (ρ ≥ 1) until the linear loop's
   peak command for the step is within 90 % of the limit (``fit_limit``);
 * ``place``: K by ``control.place`` on the states the feedback acts through (arm, input
@@ -29,10 +29,25 @@ Regulator u = −K (x̂, q), q the integrators of the tracked channels' measured
   (and integrator) states, as continuous-time s (z = e^{sT}, ``pole_domain="s"``) or discrete
   z, the delay registers at z = 0; the other registers get no gain (their poles stay at 0).
 
+Integral action by default without integrators (``disturbance``): the observer also
+estimates a constant disturbance d per input, entering the arm as the command does
+(:func:`disturbance_model`: z⁺ = A z + B u + G d, d⁺ = d), and the command cancels it,
+u = −K x̂ − d̂. A hub held by friction short of its setpoint does not move although the
+model says it should: d̂ grows until it breaks free, so there is no rest short of the
+setpoint; a reference step, in the two-degrees-of-freedom form below, is no disturbance
+and winds nothing up (LQI's integrators do: its steps overshoot).
+
+Reference (``two_dof``, default): the controller reads every channel against 0 and the
+tracked channels also against their references (extra inputs e_r = r − y), so
+u = −K (x̂ − Z r) − d̂, Z r the state at rest at the reference
+(:func:`flexarm.control.lqg.observer_controller`): a step is an error of the regulator's
+state, not a jump the observer must explain.
+
 Observer (predictor) x̂⁺ = A x̂ + B u + L (y − C x̂) on the augmented model: a Kalman
 predictor ``control.dlqe`` (default) with V = diag(σ_i² + q_i²/12) from the sensors' noise
 σ_i and quantum q_i, and a process noise entering as the command does, W = B_d σ_d² B_dᵀ,
 σ_d = max(Coulomb level, 2 % of the limit) in command units (the unmodelled friction torque),
+and a random walk of the disturbance state of σ_d per 0.1 s (:data:`DISTURBANCE_TIME`),
 or placed poles (``observer_poles``, count and domain as for ``poles``, registers at 0).
 
 Result (:class:`~flexarm.design.result.Design`): the controller e → u as a discrete
@@ -57,18 +72,20 @@ import control
 import numpy as np
 import scipy.linalg
 
-from flexarm.control.lqg import (augment_delays, integral_model, loop_poles,
+from flexarm.control.lqg import (augment_delays, input_rows, integral_model, loop_poles,
                                  lti_controller_spec, observer_controller)
 from flexarm.design.result import Design
 
 __all__ = ["DesignModel", "design_model", "design_linear", "separation_check", "step_response"]
 
-#: Bryson scale of a deflection channel as a fraction of the tip's travel (1: a deflection
-#: as large as the move; tighter values slow the rigid mode down under the command limit:
-#: unit 6 fit, tip 2 % settling 1.7 s at 1.0, 2.4 s at 0.3).
-DEFLECTION_FRACTION = 1.0
+#: Bryson scale of a deflection channel as a fraction of the tip's travel. Unit 6 fit, 0.8 rad
+#: step, default design: tip 2 % settling 1.01 s and 7 % overshoot at 0.3; 0.84 s and 19 %
+#: at 1.0 (tighter values slow the rigid mode down under the command limit).
+DEFLECTION_FRACTION = 0.3
 #: Bryson scale of an integrator: amplitude × this time (s).
 INTEGRAL_TIME = 0.2
+#: Time (s) in which the estimated input disturbance may change by σ_d (``disturbance``).
+DISTURBANCE_TIME = 0.1
 #: Process noise σ_d: at least this fraction of the command limit.
 DISTURBANCE_FRACTION = 0.02
 
@@ -380,31 +397,43 @@ def _channel_weights(dm: DesignModel, q, integral: bool) -> tuple[dict, dict]:
 
 
 # ----------------------------------------------------------------------------- response
+def _input_setpoints(dm: DesignModel, controller) -> list[str | None]:
+    """The reference channel (or None: 0) of each controller input: the channels' setpoints
+    in the one-input form; 0 on every channel and the reference on the ``_ref`` inputs in
+    the two-degrees-of-freedom form (:func:`flexarm.control.lqg.observer_controller`)."""
+    labels = list(controller.input_labels)
+    if not any(lab.endswith("_ref") for lab in labels):
+        return list(dm.setpoints)
+    return [dm.setpoints[dm.channels.index(lab[2:-4])] if lab.endswith("_ref") else None
+            for lab in labels]
+
+
 def step_response(dm: DesignModel, controller: control.StateSpace, n: int,
                   amplitude: dict[str, float] | None = None) -> dict[str, np.ndarray]:
-    """The linear loop (augmented model and ``controller`` on e = r − y) for a step of the
-    tracked channels' references at k = 0 (``amplitude`` per channel; default the scenario's):
-    t (s), the undelayed channel outputs ``y`` (n, p), the measured ones ``measured`` and
-    the command ``u`` (n, m), no saturation and no friction."""
+    """The linear loop (augmented model and ``controller`` on its inputs e = r − M y,
+    :func:`flexarm.control.lqg.input_rows`) for a step of the tracked channels' references
+    at k = 0 (``amplitude`` per channel; default the scenario's): t (s), the undelayed
+    channel outputs ``y`` (n, p), the measured ones ``measured``, the command ``u`` (n, m)
+    and the channels' references ``r``; no saturation and no friction."""
     P = dm.augmented
     A, B, C = (np.asarray(a) for a in (P.A, P.B, P.C))
-    Ak, Bk, Ck = (np.asarray(a) for a in (controller.A, controller.B, controller.C))
+    Ak, Bk, Ck, Dk = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
+                                               controller.D))
+    M = input_rows(P, controller)
     nx = dm.sampled.nstates
     Cu = np.asarray(dm.sampled.C)
     amp = dm.amplitude if amplitude is None else amplitude
-    r = np.zeros(len(dm.channels))
-    for c, a in amp.items():
-        j = dm.channels.index(c)
-        for i, s in enumerate(dm.setpoints):  # a channel reading the same angle follows
-            if s is not None and s == dm.setpoints[j]:
-                r[i] = a
+    by_ref = {dm.setpoints[dm.channels.index(c)]: a for c, a in amp.items()}
+    r = np.array([by_ref.get(s, 0.0) if s else 0.0 for s in dm.setpoints])
+    w_ref = np.array([by_ref.get(s, 0.0) if s else 0.0 for s in _input_setpoints(dm, controller)])
     z, xi = np.zeros(A.shape[0]), np.zeros(Ak.shape[0])
     ys, ms, us = np.empty((n, C.shape[0])), np.empty((n, C.shape[0])), np.empty((n, B.shape[1]))
     for k in range(n):
         y = C @ z
-        u = Ck @ xi
+        e = w_ref - M @ y
+        u = Ck @ xi + Dk @ e
         ys[k], ms[k], us[k] = Cu @ z[:nx], y, u
-        xi = Ak @ xi + Bk @ (r - y)
+        xi = Ak @ xi + Bk @ e
         z = A @ z + B @ u
     return {"t": np.arange(n) * dm.dt, "y": ys, "measured": ms, "u": us, "r": r}
 
@@ -471,19 +500,39 @@ def _regulator(dm: DesignModel, Ar, Br, idx, method, q, r, poles, pole_domain, r
         np.concatenate([allp, np.zeros(na + ni - len(keep))])
 
 
-def _observer(dm: DesignModel, level, observer_poles, pole_domain, warnings):
-    """L of the predictor on the augmented model and what it was designed with."""
+def disturbance_model(dm: DesignModel) -> control.StateSpace:
+    """The augmented model with a constant disturbance d per input entering the arm as its
+    command does (a torque offset in command units: friction bias, a stuck gear train):
+    z⁺ = A z + B u + G d, d⁺ = d, y = C z (G: the arm's rows of B, not delayed)."""
     P = dm.augmented
-    A, C = np.asarray(P.A), np.asarray(P.C)
-    na, m = P.nstates, P.ninputs
+    A, B, C = (np.asarray(a) for a in (P.A, P.B, P.C))
+    na, m = B.shape
+    p = C.shape[0]
+    G = np.zeros((na, m))
+    G[:dm.sampled.nstates] = np.asarray(dm.sampled.B)
+    Ae = np.block([[A, G], [np.zeros((m, na)), np.eye(m)]])
+    return control.ss(Ae, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((p, m))]),
+                      np.zeros((p, m)), P.dt,
+                      states=list(P.state_labels) + [f"disturbance_{k}" for k in P.input_labels],
+                      inputs=list(P.input_labels), outputs=list(P.output_labels))
+
+
+def _observer(dm: DesignModel, plant, level, observer_poles, pole_domain, warnings):
+    """L of the predictor on ``plant`` (the augmented model, or :func:`disturbance_model`)
+    and what it was designed with."""
+    A, C = np.asarray(plant.A), np.asarray(plant.C)
+    ne, m = plant.nstates, plant.ninputs
+    na = dm.augmented.nstates
+    nd = ne - na  # disturbance states
     nx = dm.sampled.nstates
     if observer_poles is not None:
         zo = _poles_z(observer_poles, pole_domain, dm.dt, "observer_poles")
-        if zo.size != nx:
-            raise ValueError(f"observer_poles: {zo.size} given; give {nx}, one per state of "
-                             f"the arm's model ({', '.join(dm.continuous.state_labels)}); the "
-                             "delay registers get z = 0")
-        L = _place(A.T, C.T, np.concatenate([zo, np.zeros(na - nx)]), "observer_poles").T
+        if zo.size != nx + nd:
+            raise ValueError(f"observer_poles: {zo.size} given; give {nx + nd}, one per state "
+                             f"of the arm's model ({', '.join(dm.continuous.state_labels)})"
+                             + (f" and one per disturbance ({nd})" if nd else "")
+                             + "; the delay registers get z = 0")
+        L = _place(A.T, C.T, np.concatenate([zo, np.zeros(ne - zo.size)]), "observer_poles").T
         return L, {"kind": "placed", "poles": [[float(x.real), float(x.imag)] for x in zo]}
     V = np.array([s**2 + qq**2 / 12 for s, qq in zip(dm.noise, dm.quanta)])
     for i, v in enumerate(V):
@@ -493,37 +542,45 @@ def _observer(dm: DesignModel, level, observer_poles, pole_domain, warnings):
                             f"observer assumes σ = {math.sqrt(V[i]):.3g} (0.1 % of its scale); "
                             "give [sensors] noise or quantum for a Kalman gain that fits the rig")
     sd = np.maximum(level, DISTURBANCE_FRACTION * dm.limit)
-    G = np.zeros((na, m))
+    G = np.zeros((ne, m))
     G[:nx] = np.asarray(dm.sampled.B)
     W = G @ np.diag(sd**2) @ G.T
-    W += 1e-9 * float(np.max(np.diag(W))) * np.eye(na)
-    L, _, _ = control.dlqe(A, np.eye(na), C, W, np.diag(V))
+    for j in range(nd):  # a disturbance state walks by σ_d per DISTURBANCE_TIME
+        W[na + j, na + j] = sd[j]**2 * dm.dt / DISTURBANCE_TIME
+    W += 1e-9 * float(np.max(np.diag(W))) * np.eye(ne)
+    L, _, _ = control.dlqe(A, np.eye(ne), C, W, np.diag(V))
     return np.asarray(L), {"kind": "Kalman predictor", "V": V.tolist(),
                            "disturbance_sigma": sd.tolist()}
 
 
-def separation_check(dm: DesignModel, K, L, controller, integral) -> float:
+def separation_check(dm: DesignModel, K, L, controller, integral,
+                     observer_plant=None) -> float:
     """The separation principle, checked on the matrices: the loop of the augmented model
-    and ``controller`` in the coordinates (z, q, ε = z − ẑ) must be block triangular,
-    [[A_r − B_r K, ·], [0, A − L C]]; the largest deviation of those blocks (relative to the
-    loop matrix's norm). Its eigenvalues are then exactly the regulator's and the
-    observer's."""
+    and ``controller`` (states ẑ of ``observer_plant``, default the augmented model, then
+    the integrators q) in the coordinates (z, q, ε = E z − ẑ) (E: z into the observer's
+    state, disturbances 0) must be block triangular, [[A_r − B_r K, ·], [0, A_o − L C_o]];
+    the largest deviation of those blocks (relative to the loop matrix's norm). Its
+    eigenvalues are then exactly the regulator's and the observer's."""
     P = dm.augmented
+    Po = P if observer_plant is None else observer_plant
     A, B, C = (np.asarray(a) for a in (P.A, P.B, P.C))
-    Ak, Bk, Ck = (np.asarray(a) for a in (controller.A, controller.B, controller.C))
-    na, nk = A.shape[0], Ak.shape[0]
-    ni = nk - na
-    M = np.block([[A, B @ Ck], [-Bk @ C, Ak]])  # states (z, ẑ, q)
-    # (z, q, ε) → (z, ẑ, q): ẑ = z − ε
+    Ao, Co = np.asarray(Po.A), np.asarray(Po.C)
+    Ak, Bk, Ck, Dk = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
+                                               controller.D))
+    MC = input_rows(P, controller) @ C
+    na, ne, nk = A.shape[0], Ao.shape[0], Ak.shape[0]
+    ni = nk - ne
+    M = np.block([[A - B @ Dk @ MC, B @ Ck], [-Bk @ MC, Ak]])  # states (z, ẑ, q)
+    # (z, q, ε) → (z, ẑ, q): ẑ = E z − ε
     T = np.zeros((na + nk, na + nk))
     T[:na, :na] = np.eye(na)
-    T[na:2 * na, :na], T[na:2 * na, na + ni:] = np.eye(na), -np.eye(na)
-    T[2 * na:, na:na + ni] = np.eye(ni)
+    T[na:na + ne, :na], T[na:na + ne, na + ni:] = np.eye(ne, na), -np.eye(ne)
+    T[na + ne:, na:na + ni] = np.eye(ni)
     Mt = np.linalg.solve(T, M @ T)
     Ar, Br = integral_model(P, integral)
     dev = max(np.abs(Mt[na + ni:, :na + ni]).max(initial=0.0),
               np.abs(Mt[:na + ni, :na + ni] - (Ar - Br @ K)).max(),
-              np.abs(Mt[na + ni:, na + ni:] - (A - L @ C)).max())
+              np.abs(Mt[na + ni:, na + ni:] - (Ao - L @ Co)).max())
     return float(dev / max(np.abs(M).max(), 1.0))
 
 
@@ -531,7 +588,9 @@ def separation_check(dm: DesignModel, K, L, controller, integral) -> float:
 def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
                   observer_poles=None, pole_domain: str = "s", integral: bool = False,
                   friction_compensation: bool = True, measured=None, setpoints=None,
-                  fit_limit: bool = True, check_seconds: float = 3.0) -> Design:
+                  disturbance: bool | None = None, fit_limit: bool = True,
+                  two_dof: bool = True,
+                  check_seconds: float = 3.0) -> Design:
     """``lqr`` or ``place`` state feedback with an observer for ``scenario``'s arm (module
     docstring); a :class:`~flexarm.design.result.Design`.
 
@@ -543,8 +602,13 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     ``poles``: for ``place``, the closed-loop poles of the arm's states (and the
     integrators with ``integral``), in ``pole_domain`` ``"s"`` (rad/s) or ``"z"``;
     ``observer_poles``: the observer's poles for the arm's states (default a Kalman
-    predictor); ``integral``: integrate the tracked channels' errors;
-    ``friction_compensation``: add the Coulomb feedforward C_f / k_u; ``measured``,
+    predictor); ``integral``: integrate the tracked channels' errors (LQI);
+    ``disturbance`` (default: unless ``integral``): estimate a constant input disturbance
+    and cancel it (integral action that a reference step does not wind up);
+    ``friction_compensation``: add the Coulomb feedforward C_f / k_u; ``two_dof``: the
+    reference enters as the state it asks for (extra inputs e_r = r − y of the tracked
+    channels, :func:`flexarm.control.lqg.observer_controller`) instead of through the
+    observer as an error (False: e → u alone, one degree of freedom); ``measured``,
     ``setpoints``: see :func:`design_model`; ``check_seconds``: length of the linear step
     response whose peak command is checked against the limit."""
     from flexarm.specs.scenario import scenario_from_dict
@@ -583,12 +647,24 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
             else:
                 fc = {"level": float(level[0]), "measured": hub}
     ff = level if fc else np.zeros(m)
-    L, obs = _observer(dm, level, observer_poles, pole_domain, warnings)
+    if disturbance is None:
+        disturbance = not integral
+    if disturbance and integral:
+        raise ValueError("integral and disturbance: both give integral action; choose one "
+                         "(integral: integrators of the errors, LQI; disturbance: an estimated "
+                         "constant input disturbance, cancelled)")
+    Po = disturbance_model(dm) if disturbance else P
+    nd = Po.nstates - P.nstates
+    L, obs = _observer(dm, Po, level, observer_poles, pole_domain, warnings)
+    Zo = np.vstack([dm.rigid, np.zeros((nd, dm.rigid.shape[1]))])
     n = int(round(check_seconds / dm.dt)) + 1
 
     def attempt(rho):
         K, weights, wanted = _regulator(dm, Ar, Br, idx, method, q, r, poles, pole_domain, rho)
-        ctrl = observer_controller(P, K, L, integral=idx, name=method)
+        # with a disturbance estimate d̂: u = −K x̂ − d̂ (cancelled where it enters)
+        Ko = np.hstack([K[:, :P.nstates], np.eye(m)[:, :nd], K[:, P.nstates:]])
+        ctrl = observer_controller(Po, Ko, L, integral=idx, name=method, reference=(
+            (dm.tracked, Zo) if two_dof else None))
         sr = step_response(dm, ctrl, n)
         return K, weights, wanted, ctrl, sr, np.abs(sr["u"]).max(axis=0) + ff
 
@@ -614,18 +690,15 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     weights["observer"] = obs
     if fc:
         # no compensation at rest while the feedback is below what half an encoder count
-        # of hub error gives (its static gain without the integrators): no chatter on the
-        # last count (control/friction_compensation.py)
+        # of hub error gives: no chatter on the last count (control/friction_compensation.py)
+        # (the regulator's command for a rigid shift of half a count: |K_x Z| q / 2)
         h = dm.channels.index(fc["measured"])
-        na = P.nstates
-        Ak = np.asarray(ctrl.A)[:na, :na]
-        Bk, Ck = np.asarray(ctrl.B)[:na, h], np.asarray(ctrl.C)[:, :na]
-        kp = float(np.abs(Ck @ np.linalg.solve(np.eye(na) - Ak, Bk))[0])
+        kp = float(np.abs(K[:, :P.nstates] @ dm.rigid[:, dm.tracked.index(h)])[0])
         fc["rest_deadband"] = 0.5 * dm.quanta[h] * kp
     reg = np.linalg.eigvals(Ar - Br @ K)
-    est = np.linalg.eigvals(A - L @ C)
+    est = np.linalg.eigvals(np.asarray(Po.A) - L @ np.asarray(Po.C))
     cl = loop_poles(P, ctrl)
-    sep = separation_check(dm, K, L, ctrl, idx)
+    sep = separation_check(dm, K, L, ctrl, idx, Po)
     if sep > 1e-9:
         warnings.append(f"separation check: the loop deviates from the block-triangular form "
                         f"by {sep:.3g} (relative); the closed-loop poles may differ from the "
@@ -648,7 +721,8 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     sens = data.setdefault("sensors", {})
     for c, s in dm.added_sensors.items():
         sens.setdefault(c, s)
-    spec = lti_controller_spec(ctrl, dm.channels, [s or 0 for s in dm.setpoints])
+    chans = [lab[2:-4] if lab.endswith("_ref") else lab[2:] for lab in ctrl.input_labels]
+    spec = lti_controller_spec(ctrl, chans, [s or 0 for s in _input_setpoints(dm, ctrl)])
     if fc:
         spec["friction_compensation"] = fc
     data["controller"] = spec
@@ -660,6 +734,7 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     info = {
         "model": {"arm_states": list(dm.continuous.state_labels), "n_arm": dm.n_arm,
                   "n_augmented": P.nstates, "n_integrators": len(idx),
+                  "n_disturbances": nd, "two_dof": two_dof,
                   "n_controller": ctrl.nstates, "period": dm.dt,
                   "computation_delay": dm.computation_delay,
                   "sensor_delays": dict(zip(dm.channels, dm.sensor_delays)),
