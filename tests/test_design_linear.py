@@ -217,6 +217,18 @@ def test_cli_design_writes_a_scenario_that_runs(tmp_path):
     bad = runner.invoke(app, ["design", "rotary-flexible-link", "--method", "nope",
                               "--out", str(tmp_path / "b")])
     assert bad.exit_code == 2 and "--method 'nope'" in bad.output
+    bad = runner.invoke(app, ["design", "rotary-flexible-link", "--integral", "--disturbance",
+                              "--out", str(tmp_path / "b")])
+    assert bad.exit_code == 2 and "choose one" in bad.output
+
+
+def test_front_door_is_the_callable_package():
+    """flexarm.design(...) designs; flexarm.design.linear stays the module; the dispatch
+    table names the methods."""
+    import flexarm.design.linear as linear
+
+    assert callable(flexarm.design) and linear.design_linear is design_linear
+    assert set(flexarm.design.METHODS) >= {"lqr", "place"}
 
 
 # ----------------------------------------------------------------------------- real rig
