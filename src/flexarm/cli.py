@@ -344,8 +344,10 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
     for label in (cmp or {}):
         table.add_column(label)
     if cmp:
-        for key in ("hub_error_counts", "hub_settling_s", "tip_settling_s", "tip_overshoot",
-                    "peak_command"):
+        for v in cmp.values():
+            v["hub_error_mrad"] = 1e3 * v["hub_error_rad"]
+        for key in ("hub_error_counts", "hub_error_mrad", "hub_settling_s", "tip_settling_s",
+                    "tip_overshoot", "peak_command"):
             table.add_row(key, *[("-" if v[key] is None else f"{v[key]:.3g}")
                                  for v in cmp.values()])
         console.print(table)
