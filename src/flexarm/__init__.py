@@ -11,7 +11,8 @@ The public face (everything else lives in the sub-packages, named after what the
   :func:`simulate_batch` (a ``vmap`` batch of a prepared loop), :class:`SimulationResult`
   (a python-control ``TimeResponseData``)
 * control: :func:`wiener_feedforward` (FRB eq. 11), :func:`parabolic`,
-  :func:`quasi_parabolic`, :func:`lqg` (discrete observer-based design)
+  :func:`quasi_parabolic`, :func:`lqg` (discrete observer-based design), :func:`design`
+  (a controller for a scenario's rig: ``lqr``, ``place``; a :class:`flexarm.design.Design`)
 * identification: :func:`fit` and :func:`validate` (time domain: any scenario with a
   ``free`` list, or the servo-rig data-sheet pipeline), :func:`identify` (FRB Sec. II),
   :func:`periodic_frf`, :func:`tfest` (frequency domain)
@@ -24,6 +25,7 @@ _jax.config.update("jax_enable_x64", True)
 from flexarm.control.lqg import lqg  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
+import flexarm.design as design  # noqa: E402  (callable: the front door)
 from flexarm.identification import fit, validate  # noqa: E402
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
 from flexarm.identification.frequency_domain.periodic import periodic_frf  # noqa: E402
@@ -42,7 +44,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",
-    "builtin_scenarios", "fit", "identify", "linearize", "load_scenario", "lqg", "parabolic",
-    "periodic_frf", "prepare", "quasi_parabolic", "load_log", "simulate", "simulate_batch",
+    "builtin_scenarios", "design", "fit", "identify", "linearize", "load_scenario", "lqg",
+    "parabolic", "periodic_frf", "prepare", "quasi_parabolic", "load_log", "simulate", "simulate_batch",
     "tfest", "validate", "wiener_feedforward",
 ]

@@ -288,6 +288,125 @@ def _replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optio
                                      "fit_percent": results}, overwrite=True)
 
 
+def _complex_list(text: str | None, option: str) -> list[complex] | None:
+    """``"-20+15j,-20-15j,-30"`` → complex numbers; a clear error naming the option."""
+    if text is None:
+        return None
+    out = []
+    for item in text.replace(" ", "").split(","):
+        try:
+            out.append(complex(item.replace("i", "j")))
+        except ValueError:
+            _fail(f"{option} {text!r}: {item!r} is not a number; give comma-separated poles, "
+                  "e.g. {option} '-20+15j,-20-15j,-30'".replace("{option}", option))
+    return out
+
+
+def _weights(text: str | None, option: str):
+    """``"motor_angle=1e3,tip_deflection=10"`` → dict, or ``"1e3,10"`` → numbers."""
+    if text is None:
+        return None
+    items = [t for t in text.replace(" ", "").split(",") if t]
+    try:
+        if all("=" in t for t in items):
+            return {k: float(v) for k, v in (t.split("=", 1) for t in items)}
+        return [float(t) for t in items]
+    except ValueError:
+        _fail(f"{option} {text!r}: give numbers (one per channel) or CHANNEL=WEIGHT pairs, "
+              f"e.g. {option} motor_angle=1e3,tip_deflection=10")
+
+
+@app.command("design")
+def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
+               method: str = typer.Option("lqr", "--method", help="lqr or place"),
+               out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
+               q: Optional[str] = typer.Option(
+                   None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
+                                     "integrator) or one number per channel; default Bryson"),
+               r: Optional[str] = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
+               poles: Optional[str] = typer.Option(
+                   None, "--poles", help="place: closed-loop poles of the arm's states (+ integrators), "
+                                         "e.g. '-20+15j,-20-15j,-30,-40'"),
+               observer_poles: Optional[str] = typer.Option(
+                   None, "--observer-poles", help="observer poles of the arm's states (default: Kalman predictor)"),
+               pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
+               integral: bool = typer.Option(False, "--integral/--no-integral",
+                                             help="integrators of the tracked channels' errors (LQI)"),
+               disturbance: Optional[bool] = typer.Option(
+                   None, "--disturbance/--no-disturbance",
+                   help="estimate and cancel a constant input disturbance (integral action; "
+                        "default: on unless --integral)"),
+               friction_compensation: bool = typer.Option(
+                   True, "--friction-compensation/--no-friction-compensation",
+                   help="Coulomb feedforward C_f / k_u from the scenario's friction"),
+               overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+    """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
+    period, its computation and sensor delays in the model): state feedback by LQR or pole
+    placement with a Kalman (or placed) predictor, the reference as a state (two degrees of
+    freedom), integral action (an estimated input disturbance, or --integral), and the
+    Coulomb friction feedforward. Writes design.toml (the scenario with the designed
+    [controller]: flexarm simulate OUT/design.toml runs it), design.json (gains, poles,
+    weights, figures, warnings) and design-step.png (a reference step with the scenario's
+    controller and with the design)."""
+    _enable_cache()
+    from flexarm.design import METHODS, design
+    from flexarm.analysis.design_step import step_comparison
+
+    if method not in METHODS:
+        _fail(f"--method {method!r}: not known; choose one of {', '.join(METHODS)}")
+    if pole_domain not in ("s", "z"):
+        _fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
+    if method == "place" and poles is None:
+        _fail("--method place needs --poles (the closed-loop poles of the arm's states, "
+              "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
+              "the model's states in design.json)")
+    if method != "place" and poles is not None:
+        _fail(f"--poles: only with --method place (got --method {method})")
+    if method == "place" and (q is not None or r is not None):
+        _fail("--q/--r: only with --method lqr (place takes --poles)")
+    sc = _load(scenario)
+    out = _outdir(out, overwrite)
+    if integral and disturbance:
+        _fail("--integral and --disturbance both give integral action; choose one")
+    opts = dict(integral=integral, disturbance=disturbance,
+                friction_compensation=friction_compensation,
+                pole_domain=pole_domain, observer_poles=_complex_list(observer_poles, "--observer-poles"))
+    if method == "place":
+        opts["poles"] = _complex_list(poles, "--poles")
+    else:
+        opts.update(q=_weights(q, "--q"), r=_weights(r, "--r"))
+    with console.status(f"designing ({method})...") as status:
+        try:
+            des = design(sc, method, **opts)
+        except ValueError as exc:
+            _fail(f"{scenario}: {exc}")
+        _progress(status, "simulating a reference step with the scenario's controller and the design...")
+        cmp = step_comparison(sc, des, out / "design-step.png", overwrite=overwrite)
+    if cmp is not None:
+        des.info["step_on_scenario"] = cmp
+    files = des.write(out, overwrite=overwrite)
+    info = des.info
+    table = Table(title=f"{sc.name}: {method} design")
+    table.add_column("")
+    for label in (cmp or {}):
+        table.add_column(label)
+    if cmp:
+        for v in cmp.values():
+            v["hub_error_mrad"] = 1e3 * v["hub_error_rad"]
+        for key in ("hub_error_counts", "hub_error_mrad", "hub_settling_s", "tip_settling_s",
+                    "tip_overshoot", "peak_command"):
+            table.add_row(key, *[("-" if v[key] is None else f"{v[key]:.3g}")
+                                 for v in cmp.values()])
+        console.print(table)
+    console.print(f"augmented model: {info['model']['n_augmented']} states "
+                  f"(arm {info['model']['n_arm']}); linear peak command "
+                  f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
+    for w in des.warnings:
+        err.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    console.print("wrote " + ", ".join(str(p) for p in [*files, out / "design-step.png"]
+                                        if Path(p).exists()))
+
+
 @app.command("scenario-from-mat")
 def scenario_from_mat(workspace: Path = typer.Argument(..., help="the lab's MATLAB workspace (.mat) of a two-link flexible arm"),
                       out: Path = typer.Option(..., "--out", help="scenario TOML to write"),

@@ -60,7 +60,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     fig.tight_layout()
     save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
     plt.close(fig)
-    ctrl = scenario.controller.measured if scenario.controller else "motor_angle"
+    ctrl = _controlled_signal(scenario.controller)
     summary = {
         "scenario": name,
         "samples": len(res.time),
@@ -73,6 +73,17 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     }
     write_json(out / f"{name}.summary.json", summary, overwrite=True)
     return summary
+
+
+def _controlled_signal(spec) -> str:
+    """The measured channel a single-link controller tracks the reference on: its
+    ``measured``, or an ``lti`` controller's input whose setpoint is ``reference``."""
+    if spec is None:
+        return "motor_angle"
+    if getattr(spec, "type", None) == "lti":
+        return next((i for i, s in zip(spec.inputs, spec.setpoints or [])
+                     if s == "reference"), spec.inputs[0])
+    return getattr(spec, "measured", None) or "motor_angle"
 
 
 def joint_counts(scenario: Scenario, n_joints: int) -> np.ndarray:

@@ -1,6 +1,64 @@
 """Controller design for a fitted rig: state feedback (``lqr``, ``place``), Feliu's nested
-loops (``nested``) and gains tuned in simulation over the fit's uncertainty (``tune``)."""
+loops (``nested``) and gains tuned in simulation over the fit's uncertainty (``tune``).
+
+The front door :func:`design` dispatches on the method through :data:`METHODS` (method →
+the function that designs it, each ``f(scenario, **options) -> Design``); a new method adds
+one entry there.
+
+``flexarm.design`` is both this package and the front door: the package is callable,
+``flexarm.design(scenario, "lqr")`` is :func:`design`, and its modules stay importable
+(``import flexarm.design.linear``)."""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any, Callable
 
 from flexarm.design.result import Design
 
-__all__ = ["Design"]
+__all__ = ["Design", "METHODS", "design"]
+
+
+def _lqr(scenario, **options) -> Design:
+    from flexarm.design.linear import design_linear
+
+    return design_linear(scenario, "lqr", **options)
+
+
+def _place(scenario, **options) -> Design:
+    from flexarm.design.linear import design_linear
+
+    return design_linear(scenario, "place", **options)
+
+
+#: method name → designer ``f(scenario, **options) -> Design`` (``nested``, ``tune``: to come)
+METHODS: dict[str, Callable[..., Design]] = {
+    "lqr": _lqr,
+    "place": _place,
+}
+
+
+def design(scenario: Any, method: str = "lqr", **options) -> Design:
+    """Design a controller for ``scenario`` (a :class:`flexarm.specs.scenario.Scenario`, a
+    scenario file or a built-in name) by ``method`` (a key of :data:`METHODS`); the options
+    are the method's (``lqr``/``place``: :func:`flexarm.design.linear.design_linear`)."""
+    if method not in METHODS:
+        raise ValueError(f"method = {method!r} is not known; choose one of "
+                         f"{', '.join(METHODS)}")
+    if isinstance(scenario, str) or hasattr(scenario, "__fspath__"):
+        from flexarm.specs import load_scenario
+
+        scenario = load_scenario(str(scenario))
+    return METHODS[method](scenario, **options)
+
+
+class _CallablePackage(types.ModuleType):
+    """This package, callable as :func:`design` (so ``flexarm.design(...)`` designs and
+    ``flexarm.design.linear`` is still the module)."""
+
+    def __call__(self, scenario: Any, method: str = "lqr", **options) -> Design:
+        return design(scenario, method, **options)
+
+
+sys.modules[__name__].__class__ = _CallablePackage
