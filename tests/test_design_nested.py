@@ -265,3 +265,30 @@ def test_fitted_rig_beats_its_logged_controller(name):
     assert sim["tip_settling_s"] <= 0.7 * logged["tip_settling_s"]
     assert sim["time_at_limit_s"] == 0.0
     assert sim["residual_tip_oscillation_rad"] < logged["residual_tip_oscillation_rad"]
+
+
+def test_cli_design_nested_with_report(tmp_path):
+    """`flexarm design --method nested --report`: the design runs from its design.toml, the
+    step table holds both controllers, and the HTML report embeds the step figure. The hub
+    stops within one encoder count on the built-in rig (its Coulomb level compensated; the
+    scenario's own state feedback stops ~16 counts short of the 0.5 rad move)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    out, rep = tmp_path / "d", tmp_path / "d.html"
+    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "nested",
+                                 "--out", str(out), "--report", str(rep)])
+    assert r.exit_code == 0, r.output
+    info = json.loads((out / "design.json").read_text())["info"]
+    step = info["step_on_scenario"]
+    assert abs(step["nested"]["hub_error_counts"]) <= 1.0, step
+    assert abs(step["scenario"]["hub_error_counts"]) > 5.0, step
+    html = rep.read_text()
+    assert html.count("<img") == 1 and "gcm1: TransferFunction" in html
+    # the options of the other methods are refused by name
+    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "nested",
+                                 "--q", "1", "--out", str(tmp_path / "e")])
+    assert r.exit_code == 2 and "--q" in r.output

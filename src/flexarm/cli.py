@@ -317,8 +317,8 @@ def _weights(text: str | None, option: str):
 
 
 @app.command("design")
-def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
-               method: str = typer.Option("lqr", "--method", help="lqr or place"),
+def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
+               method: str = typer.Option("lqr", "--method", help="lqr, place or nested (Feliu's two loops)"),
                out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
                q: Optional[str] = typer.Option(
                    None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
@@ -339,12 +339,21 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
                friction_compensation: bool = typer.Option(
                    True, "--friction-compensation/--no-friction-compensation",
                    help="Coulomb feedforward C_f / k_u from the scenario's friction"),
+               max_deflection: Optional[float] = typer.Option(
+                   None, "--max-deflection", help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)"),
+               distance: Optional[float] = typer.Option(
+                   None, "--distance", help="nested: the tip move, rad (default the scenario's reference amplitude)"),
+               report: Optional[Path] = typer.Option(
+                   None, "--report", help="write a self-contained HTML report (the designed "
+                                          "controller, its figures, the step comparison)"),
                overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
     """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
     period, its computation and sensor delays in the model): state feedback by LQR or pole
     placement with a Kalman (or placed) predictor, the reference as a state (two degrees of
     freedom), integral action (an estimated input disturbance, or --integral), and the
-    Coulomb friction feedforward. Writes design.toml (the scenario with the designed
+    Coulomb friction feedforward (lqr, place); or Feliu's nested loops (nested: inner hub
+    loop with friction and coupling feedforward, outer tip loop with the Wiener feedforward
+    of a deflection-limited quasi-parabolic move). Writes design.toml (the scenario with the designed
     [controller]: flexarm simulate OUT/design.toml runs it), design.json (gains, poles,
     weights, figures, warnings) and design-step.png (a reference step with the scenario's
     controller and with the design)."""
@@ -364,16 +373,30 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
         _fail(f"--poles: only with --method place (got --method {method})")
     if method == "place" and (q is not None or r is not None):
         _fail("--q/--r: only with --method lqr (place takes --poles)")
+    if method == "nested":
+        given = [o for o, v in (("--q", q), ("--r", r), ("--observer-poles", observer_poles),
+                                ("--integral", integral or None), ("--disturbance", disturbance))
+                 if v is not None]
+        if given:
+            _fail(f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
+                  "--max-deflection and --distance)")
+    elif max_deflection is not None or distance is not None:
+        _fail("--max-deflection/--distance: only with --method nested")
+    _check_file_option("--report", report, overwrite, "design.html")
     sc = _load(scenario)
     out = _outdir(out, overwrite)
     if integral and disturbance:
         _fail("--integral and --disturbance both give integral action; choose one")
-    opts = dict(integral=integral, disturbance=disturbance,
-                friction_compensation=friction_compensation,
-                pole_domain=pole_domain, observer_poles=_complex_list(observer_poles, "--observer-poles"))
+    if method == "nested":
+        opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
+                if v is not None}
+    else:
+        opts = dict(integral=integral, disturbance=disturbance,
+                    friction_compensation=friction_compensation, pole_domain=pole_domain,
+                    observer_poles=_complex_list(observer_poles, "--observer-poles"))
     if method == "place":
         opts["poles"] = _complex_list(poles, "--poles")
-    else:
+    elif method == "lqr":
         opts.update(q=_weights(q, "--q"), r=_weights(r, "--r"))
     with console.status(f"designing ({method})...") as status:
         try:
@@ -398,13 +421,21 @@ def design_cmd(scenario: str = typer.Argument(..., help="scenario TOML file or b
             table.add_row(key, *[("-" if v[key] is None else f"{v[key]:.3g}")
                                  for v in cmp.values()])
         console.print(table)
-    console.print(f"augmented model: {info['model']['n_augmented']} states "
-                  f"(arm {info['model']['n_arm']}); linear peak command "
-                  f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
+    if "model" in info:
+        console.print(f"augmented model: {info['model']['n_augmented']} states "
+                      f"(arm {info['model']['n_arm']}); linear peak command "
+                      f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
     for w in des.warnings:
         err.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
     console.print("wrote " + ", ".join(str(p) for p in [*files, out / "design-step.png"]
                                         if Path(p).exists()))
+    if report is not None:
+        from flexarm.analysis.html_report import design_report
+
+        step_png = out / "design-step.png"
+        _write_report(design_report(des, figures=[step_png] if step_png.exists() else [],
+                                    comparison=cmp, command=_command_line(ctx),
+                                    inputs=[scenario]), report, overwrite)
 
 
 @app.command("scenario-from-mat")

@@ -22,6 +22,8 @@ __all__ = ["step_comparison"]
 def _step_scenario(scenario, amplitude: float | None, start: float):
     from flexarm.specs.scenario import scenario_from_dict
 
+    if scenario.reference.type in ("parabolic", "quasi_parabolic"):
+        return scenario  # a design that shapes its own move (nested) runs that move
     d = scenario.model_dump(mode="json", exclude_none=True)
     a = amplitude if amplitude is not None else float(scenario.reference.amplitude or 0.1)
     d["reference"] = {"type": "step", "amplitude": a,
@@ -49,7 +51,9 @@ def step_comparison(scenario, design, path: str | Path | None = None, *,
     from the initial hub angle at ``start`` s) with the scenario's controller and with
     ``design``'s (a :class:`~flexarm.design.result.Design`); the figures of the module
     docstring per controller, and with ``path`` the overlay figure (hub angle, tip angle,
-    command). Single-link arms only (None for others)."""
+    command). A design whose scenario carries its own move (``[reference] type =
+    "parabolic"`` or ``"quasi_parabolic"``: the nested loops' shaped move of the same distance)
+    runs that move instead of the step. Single-link arms only (None for others)."""
     import flexarm
     from flexarm.sim.build import sensor_quanta
 

@@ -416,9 +416,12 @@ def _short_item(x: Any) -> str:
 
 
 def _lti_text(sys: Any) -> str:
-    """A python-control system in words: its class, sampling period and poles."""
+    """A python-control system in words: its class, sampling period and poles; a mapping of
+    named systems (the nested loops' G_cm1, G_cm2, G_cb, N) one after the other."""
     import numpy as np
 
+    if isinstance(sys, dict):
+        return "\n\n".join(f"{name}: {_lti_text(part)}" for name, part in sys.items())
     lines = [f"{type(sys).__name__}, dt = {getattr(sys, 'dt', None)} s"]
     try:
         p = np.asarray(sys.poles())

@@ -32,17 +32,25 @@ def _place(scenario, **options) -> Design:
     return design_linear(scenario, "place", **options)
 
 
-#: method name → designer ``f(scenario, **options) -> Design`` (``nested``, ``tune``: to come)
+def _nested(scenario, **options) -> Design:
+    from flexarm.design.nested import design_nested
+
+    return design_nested(scenario, **options)
+
+
+#: method name → designer ``f(scenario, **options) -> Design``
 METHODS: dict[str, Callable[..., Design]] = {
     "lqr": _lqr,
     "place": _place,
+    "nested": _nested,
 }
 
 
 def design(scenario: Any, method: str = "lqr", **options) -> Design:
     """Design a controller for ``scenario`` (a :class:`flexarm.specs.scenario.Scenario`, a
     scenario file or a built-in name) by ``method`` (a key of :data:`METHODS`); the options
-    are the method's (``lqr``/``place``: :func:`flexarm.design.linear.design_linear`)."""
+    are the method's (``lqr``/``place``: :func:`flexarm.design.linear.design_linear`;
+    ``nested``: :func:`flexarm.design.nested.design_nested`)."""
     if method not in METHODS:
         raise ValueError(f"method = {method!r} is not known; choose one of "
                          f"{', '.join(METHODS)}")
