@@ -12,8 +12,9 @@ Two sources:
 
   in those coordinates, so log-scaled parameters (inertias, link frequency, damping, gauge
   gain) stay positive by construction; a draw with a negative friction level
-  (``loglin`` below its lower bound 0) is rejected and drawn again (a truncated normal: the
-  fraction rejected is reported in ``info``). Without the full covariance (fits made
+  (``loglin`` below its lower bound 0) or a value the scenario schema refuses (a link
+  damping ratio above 1) is rejected and drawn again (a truncated normal: the fraction
+  rejected is reported in ``info``). Without the full covariance (fits made
   before it was kept) the coordinates are drawn independently with the fit's std_u =
   std / |dp/du|. A coordinate whose std_u exceeds :data:`UNDETERMINED` (the normal then
   spans the whole search box within ±2σ) is not determined by the data (a parameter at a
@@ -181,7 +182,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
     """N plants drawn from a servo-rig fit's uncertainty, eq. (1) of the module doc."""
     from flexarm.identification.time_domain.params import derived
     from flexarm.identification.time_domain.report import scenario_from_fit
-    from flexarm.specs.scenario import scenario_from_dict
+    from flexarm.specs.scenario import ScenarioError, scenario_from_dict
 
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
@@ -218,34 +219,49 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
     sign = {nm: (-1.0 if result.params.get(nm, 1.0) < 0 else 1.0)
             for nm in names if nm.split("[")[0] == "tip_gain"}
     lower_ok = np.array([d.scale != "loglin" for d in defs])  # loglin: p >= lo needs u >= 0
-    draws, tried = [], 0
     sub = cov[np.ix_(free, free)]
-    for _ in range(max_rounds):
-        Z = np.tile(U, (n, 1))
-        if free:
-            Z[:, free] = rng.multivariate_normal(U[free], sub, size=n, method="eigh")
-        tried += n
-        ok = np.all(lower_ok | (Z >= 0.0), axis=1)
-        draws.extend(Z[ok])
-        if len(draws) >= n:
-            break
-    if len(draws) < n:
-        raise ValueError(f"only {len(draws)} of {tried} draws from the fit are physical "
-                         "(friction levels >= 0): its uncertainty is too wide to sample; "
-                         "refit with more data or give the spreads with from_paths")
-    Z = np.asarray(draws[:n])
-    values = {nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
-              for i, (nm, d) in enumerate(zip(names, defs))}
-    scen = []
     length = result.rig.length
-    for j in range(n):
-        p = {nm: float(values[nm][j]) for nm in names}
+
+    def plant(z, j):
+        """The scenario of draw z, or None where it is not physical: a friction level
+        below 0, or a value the scenario schema refuses (e.g. a damping ratio > 1)."""
+        if not np.all(lower_ok | (z >= 0.0)):
+            return None
+        p = {nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
+             for i, (nm, d) in enumerate(zip(names, defs))}
         first = lambda m: p.get(m, p.get(f"{m}[0]", 0.0))  # noqa: E731
         der = derived({m: first(m) for m in ("hub_inertia", "link_frequency", "link_inertia")
                        if m in p or f"{m}[0]" in p}, length)
         d, _ = scenario_from_fit(dataclasses.replace(result, params=p, derived=der))
         d["name"] = f"{d['name']}-draw-{j}"
-        scen.append(scenario_from_dict(d, source=f"plant {j} drawn from the fit"))
+        try:
+            return scenario_from_dict(d, source=f"plant {j} drawn from the fit")
+        except ScenarioError:
+            return None
+
+    draws, scen, tried = [], [], 0
+    for _ in range(max_rounds):
+        Z = np.tile(U, (n, 1))
+        if free:
+            Z[:, free] = rng.multivariate_normal(U[free], sub, size=n, method="eigh")
+        for z in Z:
+            tried += 1
+            s = plant(z, len(scen))
+            if s is not None:
+                draws.append(z)
+                scen.append(s)
+                if len(scen) == n:
+                    break
+        if len(scen) == n:
+            break
+    if len(scen) < n:
+        raise ValueError(f"only {len(scen)} of {tried} draws from the fit are physical "
+                         "(friction levels >= 0, values the scenario schema accepts): its "
+                         "uncertainty is too wide to sample; refit with more data or give "
+                         "the spreads with from_paths")
+    Z = np.asarray(draws)
+    values = {nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
+              for i, (nm, d) in enumerate(zip(names, defs))}
     nominal = result.scenario()
     info = {"source": source, "n": n, "seed": seed, "drawn": tried,
             "rejected_fraction": 1.0 - n / tried if tried else 0.0,
