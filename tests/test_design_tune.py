@@ -142,7 +142,7 @@ def test_compare_needs_an_encoder_count():
 
 
 # ----------------------------------------------------------------------------- tune
-def test_tune_lowers_the_batch_cost_and_is_reproducible():
+def test_tune_lowers_the_batch_cost_and_is_reproducible(tmp_path):
     """A short tuning on 8 plants: the cost quantile falls below the start's; the tuned
     scenario evaluated afresh gives the same cost (deterministic plants and loop, 1e-12);
     the linear part (python-control) reproduces the state-feedback law on a random
@@ -161,6 +161,13 @@ def test_tune_lowers_the_batch_cost_and_is_reproducible():
     p = [v["tuned"] for v in info["parameters"].values()]
     assert fresh.evaluate(p)[0] == pytest.approx(info["cost"]["tuned"], rel=1e-12)
     assert des.scenario.controller.friction_compensation is not None
+    # written as a scenario file that loads with the tuned gains
+    des.write(tmp_path / "d")
+    back = flexarm.load_scenario(tmp_path / "d" / "design.toml")
+    assert back.controller.k1 == pytest.approx(info["parameters"]["controller.k1"]["tuned"],
+                                               rel=1e-15)
+    assert back.controller.friction_compensation.level == pytest.approx(
+        info["parameters"]["controller.friction_compensation.level"]["tuned"], rel=1e-15)
     # the linear part against the controller itself
     import control
 

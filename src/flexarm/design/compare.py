@@ -305,12 +305,14 @@ def summarise(m: dict[str, np.ndarray], limit: float) -> dict[str, Any]:
 def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
             logged: str | None = "logged controller", step: float | None = None,
             start: float = 0.1, duration: float = 3.0, band: float = 0.02,
-            tail: float = 0.25, count: float | None = None, seed: int = 0) -> Comparison:
+            tail: float = 0.25, count: float | None = None,
+            seed: int | None = None) -> Comparison:
     """Compare the nominal scenario's own controller (named ``logged``; None leaves it
     out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
     encoder count (rad) where the scenario's hub sensor has none (it then also quantises
-    the simulated encoder)."""
+    the simulated encoder); ``seed``: the sensor noise's (default the scenario's
+    ``simulation.seed``, as :func:`flexarm.simulate` uses)."""
     nominal = plants.nominal
     q = encoder_count(nominal, count)
     has_q = count is None
@@ -319,6 +321,8 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
     pb = plants.with_overrides(exp)
     base = pb.loop()
     scn = pb.nominal
+    if seed is None:
+        seed = int(scn.simulation.seed)
     specs: dict[str, Any] = {}
     if logged is not None:
         specs[logged] = scn.controller
@@ -345,6 +349,7 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
     settings = {"step_rad": float(scn.reference.amplitude), "start_s": start,
                 "duration_s": duration, "band_fraction": band, "tail_fraction": tail,
                 "count_rad": q, "limit_V": limit, "n_plants": len(plants), "seed": plants.seed,
+                "noise_seed": seed,
                 "plants": plants.info,
                 "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()}}
     return Comparison(rows, per, traces, settings, list(plants.warnings))
