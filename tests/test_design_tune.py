@@ -104,7 +104,8 @@ def test_compare_nominal_equals_plain_simulation(tmp_path):
     time is a sample instant, equal to within one sample."""
     sc = _rotary()
     b = pl.from_paths(sc, SPREAD, 6, seed=1)
-    c = cmp.compare(b, duration=2.5, step=0.3, start=0.1)
+    hot = sc.controller.model_copy(update={"k1": 60.0})  # 60 V/rad x 0.3 rad: saturates
+    c = cmp.compare(b, {"hot": hot}, duration=2.5, step=0.3, start=0.1)
     q = 2 * math.pi / 4096  # the scenario's encoder: 12 bits over one revolution
     assert c.settings["count_rad"] == pytest.approx(q, rel=1e-12)
     exp = cmp.experiment(b.nominal, step=0.3, start=0.1, duration=2.5)
@@ -121,11 +122,14 @@ def test_compare_nominal_equals_plain_simulation(tmp_path):
     assert ind["hub_error_counts"] > 1.0 and math.isfinite(ind["tip_settling_s"])
     assert c.rows["logged controller"]["n_plants"] == 6
     assert c.rows["logged controller"]["limit_respected"]
+    assert not c.rows["hot"]["limit_respected"]
+    assert c.rows["hot"]["nominal"]["time_at_limit_s"] > 0
+    assert c.rows["hot"]["nominal"]["peak_command_V"] == pytest.approx(10.0, rel=1e-12)
     # JSON dict, markdown table and figures
     dd = c.to_dict()
     assert dd["rows"]["logged controller"]["nominal"]["peak_command_V"] == pytest.approx(
         ind["peak_command_V"])
-    assert c.table().count("\n") == 2
+    assert c.table().count("\n") == 3  # header, rule, two controllers
     paths = c.figures(tmp_path)
     assert all(p.stat().st_size > 5000 for p in paths)
 
@@ -236,6 +240,14 @@ def test_plants_from_fit_moments(unit6):
         med = float(np.median(b.values[name]))
         sp = su[i] * abs(float(unit6.space.defs[i].dphys_du(U[i])))
         assert abs(med - unit6.params[name]) <= 3 * 1.2533 * sp / math.sqrt(n) + 1e-15, name
+    # the covariance is used: the most correlated pair of drawn coordinates keeps its
+    # correlation within 3 (1 − ρ²)/√N (the sample correlation's standard error)
+    free = [i for i, nm in enumerate(b.names) if nm not in held]
+    R = cov[np.ix_(free, free)] / np.outer(su[free], su[free])
+    i, j = np.unravel_index(np.argmax(np.abs(R - np.eye(len(free)))), R.shape)
+    rho = R[i, j]
+    r_hat = np.corrcoef(b.coordinates[:, free[i]], b.coordinates[:, free[j]])[0, 1]
+    assert abs(rho) > 0.5 and abs(r_hat - rho) <= 3 * (1 - rho**2) / math.sqrt(n), (rho, r_hat)
     for j in range(0, n, 97):
         check_physical({k: float(v[j]) for k, v in b.values.items()}, source=f"draw {j}")
         sc = b.scenarios[j]
