@@ -100,6 +100,13 @@ class BatchLoop:
         """The same plants under another controller (one :class:`Controller`, its leaves
         broadcast to every rollout): no plant is prepared again, and a controller of the
         same structure reuses the compiled batch."""
+        from flexarm.sim.build import _measured_names
+
+        missing = sorted(_measured_names(controller) - set(self.loop.sensors.names))
+        if missing:
+            raise ValueError(f"the controller reads {', '.join(missing)}, which the plants' "
+                             f"sensors ({', '.join(self.loop.sensors.names)}) do not measure; "
+                             "add [sensors.NAME] to the rig scenario")
         n = self.size
         tiled = jax.tree.map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)),
                              eqx.filter(controller, eqx.is_array))
