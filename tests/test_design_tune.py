@@ -92,9 +92,12 @@ def _independent_metrics(res, step: float, start: float, q: float, band: float, 
     over = 100 * step_metrics(t, tip, r).overshoot
     dd = d[n - int(round(tail * n)):]
     osc = 1e3 * float(np.sqrt(np.mean((dd - dd.mean()) ** 2)))
+    us = np.asarray(res.command).reshape(len(t), -1)[:, 0]
+    chatter = math.sqrt(sum((us[k] - us[k - 1]) ** 2 for k in range(1, n)) / (n - 1))
     return {"hub_error_counts": hub, "tip_settling_s": ts, "tip_overshoot_pct": over,
             "tip_oscillation_mm": osc, "peak_command_V": float(u.max()),
-            "time_at_limit_s": float(np.sum(u >= limit * (1 - 1e-9)) * (t[1] - t[0]))}
+            "time_at_limit_s": float(np.sum(u >= limit * (1 - 1e-9)) * (t[1] - t[0])),
+            "command_chatter_V": chatter}
 
 
 def test_compare_nominal_equals_plain_simulation(tmp_path):

@@ -20,6 +20,9 @@ the delayed sensors), with Δ = the reference step, k ≥ the step's sample:
 * ``tip_oscillation_mm``: rms of d − d̄ over the last ``tail`` (25 %) of the run, mm;
 * ``peak_command_V``: max |u| of the applied (saturated) command; ``time_at_limit_s``:
   T · #{k : |u_k| ≥ limit (1 − 1e-9)};
+* ``command_chatter_V``: rms of the command's change per sample, √(mean (u_k − u_{k−1})²),
+  V: the sign switching of a friction compensation and the backward-difference rate of a
+  quantised encoder (one count per sample is a rate step of q/T) show here;
 * ``stable``: the run stayed finite (|signals| ≤ 1e6 SI), the tip settled, and the hub
   stayed within ±band·|Δ| of its final value over the last ``tail`` of the run (a hub
   limit cycle is not a settled response).
@@ -53,6 +56,7 @@ METRICS = {
     "tip_oscillation_mm": ("tip residual rms", "mm", "max"),
     "peak_command_V": ("peak command", "V", "max"),
     "time_at_limit_s": ("time at limit", "s", "max"),
+    "command_chatter_V": ("command chatter", "V", "max"),
 }
 
 
@@ -94,10 +98,12 @@ def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarr
         osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2,
                                     axis=1))
         peak = np.max(u, axis=1)
+        ua = np.asarray(out["command"])[..., 0]
+        chatter = np.sqrt(np.mean(np.diff(ua, axis=1) ** 2, axis=1))
         at_lim = dt * np.sum(u >= limit * (1 - 1e-9), axis=1)
     m = {"hub_error_counts": hub_err, "tip_settling_s": ts,
          "tip_overshoot_pct": np.maximum(over, 0.0), "tip_oscillation_mm": osc,
-         "peak_command_V": peak, "time_at_limit_s": at_lim}
+         "peak_command_V": peak, "time_at_limit_s": at_lim, "command_chatter_V": chatter}
     stable = ~bad & np.isfinite(ts) & hub_still
     for k in m:
         m[k] = np.where(bad, np.nan, m[k])

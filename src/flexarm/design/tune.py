@@ -4,9 +4,11 @@ plants drawn from the fit's uncertainty (:mod:`flexarm.design.plants`).
 Structure: the numeric fields of the scenario's ``[controller]`` named by path
 (``"controller.k1"``, ``"controller.friction_compensation.level"``, any controller type's
 fields); by default, for the rig's state feedback u = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ + c σ,
-the gains K1..K4 and the Coulomb compensation level c (V) of
-:mod:`flexarm.control.friction_compensation` (added, starting at the fitted Coulomb torque
-over the drive's torque per volt, F_c / k_u, when the controller has none).
+the gains K1..K4, the Coulomb compensation level c (V) of
+:mod:`flexarm.control.friction_compensation` and its rest deadband (V: below it a resting
+hub gets no push, which stops the compensation from hunting around the reference against
+the delayed encoder); added when the controller has none, starting at the fitted Coulomb
+torque over the drive's torque per volt, c = F_c / k_u, and one count's feedback K1 q.
 
 Experiment (as :func:`flexarm.design.compare.compare`): the plants at rest, a reference step
 Δ (default the scenario's step) at ``start``, ``duration`` s (2 s by default), through the
@@ -22,6 +24,7 @@ duration after the step, band b·|Δ|):
         + w_ss · max(0, e_j − e_max)                       hub steady-state error (counts) beyond e_max
         + w_u · t_lim,j / T_h                              time at the voltage limit
         + w_osc · rms_j / (b|Δ| L)                         residual tip oscillation (tail rms of d)
+        + w_ch · ch_j / 0.1 V                              command chatter (rms change per sample)
 
 with a plant that does not settle within the run charged t_s = T_h (1 + ε_j / (b|Δ|)),
 ε_j the largest |θ_t − θ̄_t| over the last quarter (so the optimiser still sees which way
@@ -30,8 +33,9 @@ default; 1.0 the worst case) of c over the nominal and the drawn plants: the des
 be good on the batch, not on the nominal plant only.
 
 Optimiser: SciPy's Nelder–Mead, in coordinates scaled by each gain's start value
-(x_i = (p_i − p0_i)/s_i, s_i = |p0_i|, or 1 where p0_i = 0), initial simplex ±``step`` (30 %),
-bounds clipped. Why: the cost is piecewise constant and discontinuous in the gains
+(x_i = (p_i − p0_i)/s_i, s_i = |p0_i|, or 1 where p0_i = 0), initial simplex
+±``simplex_step`` (30 %), bounds clipped (a tuned value at a bound is warned: widen it
+with ``bounds=``). Why: the cost is piecewise constant and discontinuous in the gains
 (encoder counts, stick-slip stops, the last sample outside a band), so gradient methods
 and finite differences fail; with five or so parameters Nelder–Mead needs one or two batch
 evaluations per iteration where differential evolution or CMA-ES would need a population
@@ -54,7 +58,10 @@ from flexarm.design.result import Design
 
 __all__ = ["design_tune", "TuneCost", "DEFAULT_WEIGHTS"]
 
-DEFAULT_WEIGHTS = {"overshoot": 1.0, "hub_error": 0.5, "at_limit": 1.0, "oscillation": 0.5}
+DEFAULT_WEIGHTS = {"overshoot": 1.0, "hub_error": 0.5, "at_limit": 1.0, "oscillation": 0.5,
+                   "chatter": 0.3}
+#: the command chatter's scale in the cost (V per sample, rms)
+CHATTER_SCALE = 0.1
 DIVERGED_COST = 1000.0
 
 
@@ -142,7 +149,8 @@ class TuneCost:
             c = (ts / T + w["overshoot"] * m["tip_overshoot_pct"] / 100
                  + w["hub_error"] * np.maximum(0.0, m["hub_error_counts"] - self.hub_error_max)
                  + w["at_limit"] * m["time_at_limit_s"] / T
-                 + w["oscillation"] * 1e-3 * m["tip_oscillation_mm"] / (tol * self.length))
+                 + w["oscillation"] * 1e-3 * m["tip_oscillation_mm"] / (tol * self.length)
+                 + w["chatter"] * m["command_chatter_V"] / CHATTER_SCALE)
         return np.where(np.isfinite(c), c, DIVERGED_COST)
 
 
@@ -261,6 +269,10 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     if not stable.all():
         warn.append(f"{int((~stable).sum())} of {stable.size} plants (nominal included) do "
                     "not settle within the tuning run with the tuned gains")
+    for p, v, a, b in zip(params, pbest, lo, hi):
+        if np.isclose(v, a, rtol=1e-9, atol=1e-12) or np.isclose(v, b, rtol=1e-9, atol=1e-12):
+            warn.append(f"{p} = {v:.4g} lies at a bound of [{a:.4g}, {b:.4g}]; widen it with "
+                        f"bounds={{'{p}': (lo, hi)}}")
     if Jb >= J0:
         warn.append("tuning did not lower the cost: the starting gains are returned")
         tuned, pbest, Jb = cost.scenario(p0), p0, J0
