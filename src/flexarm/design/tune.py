@@ -35,7 +35,9 @@ be good on the batch, not on the nominal plant only.
 Optimiser: SciPy's Nelder–Mead, in coordinates scaled by each gain's start value
 (x_i = (p_i − p0_i)/s_i, s_i = |p0_i|, or 1 where p0_i = 0), initial simplex
 ±``simplex_step`` (30 %), bounds clipped (a tuned value at a bound is warned: widen it
-with ``bounds=``). Why: the cost is piecewise constant and discontinuous in the gains
+with ``bounds=``); the budget ``maxfev`` is shared by the first search and ``restarts``
+fresh simplices about the best point so far (a simplex that collapsed onto a ridge of the
+discontinuous cost starts over). Why: the cost is piecewise constant and discontinuous in the gains
 (encoder counts, stick-slip stops, the last sample outside a band), so gradient methods
 and finite differences fail; with five or so parameters Nelder–Mead needs one or two batch
 evaluations per iteration where differential evolution or CMA-ES would need a population
@@ -175,7 +177,8 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
                 step: float | None = None, start: float = 0.1, duration: float = 2.0,
                 band: float = 0.02, quantile: float = 0.9,
                 weights: Mapping[str, float] | None = None, hub_error_max: float = 1.0,
-                maxfev: int = 150, simplex_step: float = 0.3, count: float | None = None,
+                maxfev: int = 150, simplex_step: float = 0.3, restarts: int = 1,
+                count: float | None = None,
                 seed: int = 0,
                 callback: Callable[[dict], Any] | None = None) -> Design:
     """Tune ``params`` (paths into ``scenario``, default K1..K4 and the friction
@@ -254,13 +257,21 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
 
     J0 = f(np.zeros(len(params)))
     xb = ((lo - p0) / scale, (hi - p0) / scale)
-    simplex = np.vstack([np.zeros(len(params)), simplex_step * np.eye(len(params))])
-    simplex = np.clip(simplex, xb[0], xb[1])
-    res = minimize(f, np.zeros(len(params)), method="Nelder-Mead",
-                   bounds=list(zip(xb[0], xb[1])),
-                   options={"maxfev": maxfev, "initial_simplex": simplex, "xatol": 1e-3,
-                            "fatol": 1e-4})
-    xbest = best["x"] if best["x"] is not None else res.x
+    messages = []
+    x_start = np.zeros(len(params))
+    for r in range(restarts + 1):  # each restart: a fresh simplex about the best point
+        left = maxfev - len(hist)
+        if left <= len(params) + 1:
+            break
+        simplex = np.vstack([x_start, x_start + simplex_step * np.eye(len(params))])
+        simplex = np.clip(simplex, xb[0], xb[1])
+        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1])),
+                       options={"maxfev": left if r == restarts else
+                                max(left // (restarts + 1 - r), len(params) + 2),
+                                "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-4})
+        messages.append(str(res.message))
+        x_start = best["x"] if best["x"] is not None else res.x
+    xbest = best["x"] if best["x"] is not None else np.zeros(len(params))
     pbest = np.clip(p0 + scale * xbest, lo, hi)
     tuned = cost.scenario(pbest)
     Jb, cj, m = cost.evaluate(pbest)
@@ -289,6 +300,6 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         "plants": {**plants.info, "batch_size": cost.base.size},
         "evaluations": len(hist), "seconds": seconds,
         "seconds_per_evaluation": cost.seconds / max(cost.nfev, 1),
-        "history": [float(h) for h in hist], "message": str(res.message)}
+        "history": [float(h) for h in hist], "restarts": restarts, "message": messages}
     return Design("tune", tuned, _linear_part(tuned.controller, float(tuned.sampling.period)),
                   info, warn + list(plants.warnings))
