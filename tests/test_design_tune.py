@@ -282,3 +282,26 @@ def test_tuned_design_meets_issue_targets(unit, request):
     assert tuned["median"]["tip_settling_s"] <= 0.7 * log["median"]["tip_settling_s"], (
         tuned["median"], log["median"])
     assert tuned["median"]["hub_error_counts"] <= 1.0, tuned["median"]
+
+
+def test_tune_any_controller_by_path_and_bad_input():
+    """A PD controller's kp and kd tuned by path (no friction compensation asked for):
+    the Design is a PD with the tuned values; bad paths and bounds name the field."""
+    from flexarm.specs.scenario import scenario_from_dict
+
+    d = _rotary().model_dump(mode="json", exclude_none=True)
+    d["controller"] = {"type": "pd", "kp": 6.0, "kd": 0.05}
+    sc = scenario_from_dict(d)
+    b = pl.from_paths(sc, SPREAD, 3, seed=4)
+    des = design_tune(sc, b, params=["controller.kp", "controller.kd"], step=0.3,
+                      duration=1.0, maxfev=12, restarts=0)
+    info = des.info
+    assert des.scenario.controller.type == "pd" and des.controller is None
+    assert des.scenario.controller.friction_compensation is None
+    assert des.scenario.controller.kp == info["parameters"]["controller.kp"]["tuned"]
+    assert info["evaluations"] <= 13 and info["cost"]["tuned"] <= info["cost"]["start"]
+    with pytest.raises(ValueError, match="controller.*has no 'kq'"):
+        design_tune(sc, b, params=["controller.kq"], step=0.3, duration=1.0, maxfev=3)
+    with pytest.raises(ValueError, match=r"bounds\['controller.k1'\]"):
+        design_tune(sc, b, params=["controller.kp"], bounds={"controller.k1": (0, 1)},
+                    step=0.3, duration=1.0, maxfev=3)

@@ -70,7 +70,10 @@ DIVERGED_COST = 1000.0
 def _get(d: dict, path: str):
     from flexarm.identification.time_domain.general import _get as get, parse_path
 
-    return get(d, parse_path(path), path)
+    try:
+        return get(d, parse_path(path), path)
+    except ValueError as err:  # the general fit's message, in this function's words
+        raise ValueError(str(err).replace("free parameter", "tuned parameter", 1)) from None
 
 
 def _set(d: dict, path: str, v: float) -> None:
