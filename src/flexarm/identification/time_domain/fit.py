@@ -696,18 +696,20 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
     rr = r[keep]
     rho = float(np.clip(np.sum(rr[1:] * rr[:-1]) / max(rr @ rr, 1e-300), 0.0, 0.999))
     std_u = std_iid_u = np.full(n, np.nan)
+    cov_u = np.full((n, n), np.nan)
     bw: list = []
     if free_params:
         try:
             cov_iid = iid_covariance(rr, Jac[keep])
             cov, bw = hac_covariance(r.reshape(2, L, -1), Jac.reshape(2, L, -1, nz))
             std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
+            cov_u = cov[:n, :n]
             std_iid_u = np.sqrt(np.maximum(np.diag(cov_iid)[:n], 0.0))
         except np.linalg.LinAlgError:
             bw = []
     U, off = split(x[None])
     return {"U": U[0], "off": off[0], "std_u": std_u, "std_iid_u": std_iid_u,
-            "bandwidth": [int(m) for m in bw], "status": int(res.status),
+            "cov_u": cov_u, "bandwidth": [int(m) for m in bw], "status": int(res.status),
             "success": bool(res.status > 0), "message": str(res.message),
             "nfev": int(res.nfev), "cost": float(2 * res.cost), "rho": rho,
             "seconds": time.perf_counter() - t0, "at_bounds": [

@@ -138,6 +138,9 @@ class FitResult:
                   "local": {k: local[k] for k in ("cost", "nfev", "success", "message",
                                                   "seconds", "rho")},
                   "guesses": info}
+        if local.get("cov_u") is not None:  # the HAC covariance of the unit coordinates
+            # (space.names order): plants drawn from the fit (flexarm.design.plants)
+            stages["local"]["covariance_unit"] = np.asarray(local["cov_u"]).tolist()
         stages["local"]["hac_bandwidth_samples"] = {
             n: m for n, m in zip(names, local.get("bandwidth", []))}
         return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,

@@ -1,0 +1,362 @@
+"""The side-by-side prediction: the rig's own controller and each design, on the nominal
+(fitted) plant and on a batch of plants drawn from the fit's uncertainty
+(:mod:`flexarm.design.plants`), one ``vmap``-ed batch per controller.
+
+The experiment: the plants at rest, a reference step of ``step`` rad at ``start`` s
+(default the scenario's own step size), ``duration`` s, through the one sampled-data loop
+with everything the scenario has: friction (Karnopp stick), sensor and computation
+delays, encoder quantisation, saturation. Per plant, from the plant's true signals (not
+the delayed sensors), with Δ = the reference step, k ≥ the step's sample:
+
+* ``hub_error_counts``: the mean of |r_end − θ| / q over the last 5 % of the run, q the
+  encoder count (rad; the scenario's ``sensors.motor_angle`` quantum, or ``count=``): a
+  hub stuck short counts its gap, a hub hunting around the reference (friction
+  compensation against a delayed encoder) its excursions;
+* ``tip_settling_s``: the first time after the step after which the tip angle
+  θ_t = θ + d/L stays within ±band·|Δ| of its final value (its mean over the last 5 %,
+  the convention of :mod:`flexarm.analysis.metrics`); band 2 % unless given. NaN when the
+  last sample is still outside (never settles);
+* ``tip_overshoot_pct``: 100 max_k (θ_t − r_end) sgn Δ / |Δ|, at least 0;
+* ``tip_oscillation_mm``: rms of d − d̄ over the last ``tail`` (25 %) of the run, mm;
+* ``peak_command_V``: max |u| of the applied (saturated) command; ``time_at_limit_s``:
+  T · #{k : |u_k| ≥ limit (1 − 1e-9)};
+* ``command_chatter_V``: rms of the command's change per sample, √(mean (u_k − u_{k−1})²),
+  V: the sign switching of a friction compensation and the backward-difference rate of a
+  quantised encoder (one count per sample is a rate step of q/T) show here;
+* ``stable``: the run stayed finite (|signals| ≤ 1e6 SI), the tip settled, and the hub
+  stayed within ±band·|Δ| of its final value over the last ``tail`` of the run (a hub
+  limit cycle is not a settled response).
+
+Summary per controller: the nominal plant's values, and over the N drawn plants the median
+and the worst case (largest; a plant that never settles counts as +inf settling time), the
+number unstable, and whether the voltage limit was respected. The applied command is
+saturated, so "respected" means that no plant's command ever reached the limit (0 s at
+it, nominal and every drawn plant): the law works inside the amplifier's range.
+:class:`Comparison` gives the table as markdown/text and a dict
+(JSON), and overlay figures through :func:`flexarm.io.write.save_figure`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from flexarm.design.plants import BatchLoop, PlantBatch, diverged
+
+__all__ = ["compare", "Comparison", "batch_metrics", "METRICS", "experiment"]
+
+#: metric → (column title, unit, how the worst case is taken)
+METRICS = {
+    "hub_error_counts": ("hub ss error", "counts", "max"),
+    "tip_settling_s": ("tip settling", "s", "max"),
+    "tip_overshoot_pct": ("tip overshoot", "%", "max"),
+    "tip_oscillation_mm": ("tip residual rms", "mm", "max"),
+    "peak_command_V": ("peak command", "V", "max"),
+    "time_at_limit_s": ("time at limit", "s", "max"),
+    "command_chatter_V": ("command chatter", "V", "max"),
+}
+
+
+def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarray, *,
+                  count: float, limit: float, length: float, band: float = 0.02,
+                  tail: float = 0.25) -> dict[str, np.ndarray]:
+    """The per-plant metrics of the module doc from :func:`simulate_batch` arrays
+    (signals (B, N, S), command (B, N, m)); ``reference`` (N,) at the sample instants,
+    one step; ``length`` L (m) of the link; returns metric → (B,) arrays."""
+    sig = np.asarray(out["signals"])
+    idx = {n: i for i, n in enumerate(signal_names)}
+    th, tip, d = (sig[..., idx[n]] for n in ("motor_angle", "tip_angle", "tip_deflection"))
+    u = np.abs(np.asarray(out["command"])[..., 0])
+    r = np.asarray(reference, float)
+    jumps = np.nonzero(np.abs(np.diff(r)) > 0)[0]
+    k0 = int(jumps[0] + 1) if jumps.size else 0
+    delta = float(r[-1] - r[k0 - 1]) if k0 > 0 else float(r[-1] - r[0])
+    if delta == 0.0:
+        raise ValueError("the reference has no step: the comparison needs a step of the hub "
+                         "angle (step= rad)")
+    n = r.size
+    dt = float(time[1] - time[0])
+    last = max(1, n // 20)
+    bad = diverged(out)
+    with np.errstate(invalid="ignore", over="ignore"):
+        th_f = np.mean(th[:, -last:], axis=1)
+        tip_f = np.mean(tip[:, -last:], axis=1)
+        hub_err = np.mean(np.abs(r[-1] - th[:, -last:]), axis=1) / count
+        outside = np.abs(tip - tip_f[:, None]) > band * abs(delta)
+        outside[:, :k0] = False
+        any_out = outside.any(axis=1)
+        last_out = n - 1 - np.argmax(outside[:, ::-1], axis=1)
+        ts = np.where(any_out, time[np.minimum(last_out + 1, n - 1)] - time[k0], 0.0)
+        ts = np.where(any_out & (last_out == n - 1), np.nan, ts)
+        over = 100 * np.max((tip[:, k0:] - r[-1]) * np.sign(delta), axis=1) / abs(delta)
+        k_tail = n - max(1, int(round(tail * n)))
+        hub_still = np.max(np.abs(th[:, k_tail:] - th_f[:, None]), axis=1) <= band * abs(delta)
+        dt_tail = d[:, k_tail:]
+        osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2,
+                                    axis=1))
+        peak = np.max(u, axis=1)
+        ua = np.asarray(out["command"])[..., 0]
+        chatter = np.sqrt(np.mean(np.diff(ua, axis=1) ** 2, axis=1))
+        at_lim = dt * np.sum(u >= limit * (1 - 1e-9), axis=1)
+    m = {"hub_error_counts": hub_err, "tip_settling_s": ts,
+         "tip_overshoot_pct": np.maximum(over, 0.0), "tip_oscillation_mm": osc,
+         "peak_command_V": peak, "time_at_limit_s": at_lim, "command_chatter_V": chatter}
+    stable = ~bad & np.isfinite(ts) & hub_still
+    for k in m:
+        m[k] = np.where(bad, np.nan, m[k])
+    m["stable"] = stable
+    return m
+
+
+def experiment(scenario, *, step: float | None = None, start: float = 0.1,
+               duration: float = 3.0, quantum: float | None = None) -> dict:
+    """The overrides (:func:`flexarm.design.plants.with_overrides`) of the comparison's
+    experiment: at rest, a step of ``step`` rad (default the scenario's reference
+    amplitude) at ``start`` s, ``duration`` s; ``quantum`` sets the hub encoder's count
+    (rad) where the scenario has none."""
+    if step is None:
+        step = float(scenario.reference.amplitude)
+        if step == 0.0:
+            raise ValueError(f"scenario {scenario.name!r}: reference.amplitude = 0; give the "
+                             "step size (rad) with step=")
+    if not duration > start:
+        raise ValueError(f"duration = {duration} s must exceed the step time start = {start} s")
+    over: dict[str, Any] = {
+        "reference": {"type": "step", "offset": 0.0, "amplitude": float(step),
+                      "start": float(start)},
+        "simulation": {"duration": float(duration)},
+        "initial": {"motor_angle": 0.0, "motor_velocity": 0.0, "tip_deflection": 0.0}}
+    if quantum is not None:
+        over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None,
+                                           "range": None}}
+    return over
+
+
+def encoder_count(scenario, count: float | None = None) -> float:
+    """The hub encoder's count (rad): ``count`` if given, else the scenario's
+    ``sensors.motor_angle`` quantum (or range / 2**bits)."""
+    from flexarm.sim.build import sensor_quanta
+
+    if count is not None:
+        if not count > 0:
+            raise ValueError(f"count = {count!r} rad: the encoder count must be > 0")
+        return float(count)
+    q = sensor_quanta(scenario.sensors).get("motor_angle", 0.0)
+    if not q > 0:
+        raise ValueError(f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
+                         "(or bits and range), so the hub error cannot be given in encoder "
+                         "counts; give count= (rad per count, e.g. 2*pi/4096) or "
+                         "sensors.motor_angle.quantum")
+    return float(q)
+
+
+def controller_spec(design) -> Any:
+    """The ``[controller]`` spec of a design: a :class:`~flexarm.design.result.Design`, a
+    scenario, or a controller spec itself."""
+    sc = getattr(design, "scenario", None)
+    if sc is not None and hasattr(sc, "controller"):
+        return sc.controller
+    if hasattr(design, "controller") and hasattr(design, "arm"):
+        return design.controller
+    if hasattr(design, "type"):
+        return design
+    raise TypeError(f"{type(design).__name__}: give a Design, a scenario or a controller "
+                    "spec to compare")
+
+
+def build_controller(batch: BatchLoop, spec, scenario) -> Any:
+    """The discrete controller of ``spec`` for the batch's sampling, references and
+    encoder (:func:`flexarm.sim.build.controller_from_spec`)."""
+    from flexarm.sim.build import controller_from_spec, sensor_quanta
+
+    lp = batch.prepared.loop
+    return controller_from_spec(spec, float(scenario.sampling.period),
+                                input_names=lp.plant.input_names,
+                                references=batch.references,
+                                quanta=sensor_quanta(scenario.sensors))
+
+
+@dataclass
+class Comparison:
+    """``rows``: controller name → {"nominal": metrics, "median": ..., "worst": ...,
+    "unstable": count, "n_plants": N, "limit_respected": bool}; ``per_plant``: name →
+    metric → (N + 1,) (index 0 the nominal plant); ``traces``: name → time, reference,
+    nominal tip/hub/command and the batch's 5/50/95 % tip percentiles (figures);
+    ``settings``: the experiment."""
+
+    rows: dict[str, dict[str, Any]]
+    per_plant: dict[str, dict[str, np.ndarray]]
+    traces: dict[str, dict[str, np.ndarray]]
+    settings: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        def clean(x):
+            if isinstance(x, dict):
+                return {k: clean(v) for k, v in x.items()}
+            if isinstance(x, (float, np.floating)):
+                return float(x) if np.isfinite(x) else None
+            if isinstance(x, (np.bool_, bool)):
+                return bool(x)
+            if isinstance(x, (np.integer,)):
+                return int(x)
+            return x
+        return {"settings": clean(self.settings), "rows": clean(self.rows),
+                "warnings": list(self.warnings)}
+
+    def table(self, fmt: str = "markdown") -> str:
+        """One row per controller: each metric as nominal / median / worst, the unstable
+        count and whether the voltage limit held; ``fmt`` ``markdown`` or ``text``."""
+        head = ["controller"] + [f"{t} [{u}] nom / med / worst" for t, u, _ in METRICS.values()]
+        head += ["unstable", "limit ok"]
+        body = []
+        for name, row in self.rows.items():
+            cells = [name]
+            for k in METRICS:
+                cells.append(" / ".join(_fmt(row[s][k]) for s in ("nominal", "median", "worst")))
+            cells += [f"{row['unstable']}/{row['n_plants']}",
+                      "yes" if row["limit_respected"] else "NO"]
+            body.append(cells)
+        if fmt == "markdown":
+            lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+            lines += ["| " + " | ".join(c) + " |" for c in body]
+            return "\n".join(lines)
+        if fmt == "text":
+            w = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+            lines = ["  ".join(h.ljust(w[i]) for i, h in enumerate(head))]
+            lines += ["  ".join(c.ljust(w[i]) for i, c in enumerate(b)) for b in body]
+            return "\n".join(lines)
+        raise ValueError(f"fmt = {fmt!r}: choose 'markdown' or 'text'")
+
+    def figures(self, directory: str | Path, *, overwrite: bool = False) -> list[Path]:
+        """Overlay figures (PNG): ``compare_tip.png`` (tip angle on the nominal plant and
+        the batch's 5–95 % band per controller), ``compare_hub_command.png`` (hub angle
+        and command on the nominal plant)."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        from flexarm.io.write import save_figure
+
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = []
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        for i, (name, tr) in enumerate(self.traces.items()):
+            c = f"C{i}"
+            ax.fill_between(tr["time"], tr["tip_p05"], tr["tip_p95"], color=c, alpha=0.2,
+                            lw=0, label=f"{name}: 5-95 % of {self.settings['n_plants']} plants")
+            ax.plot(tr["time"], tr["tip_nominal"], color=c, lw=1.2, label=f"{name}: nominal")
+        tr0 = next(iter(self.traces.values()))
+        ax.plot(tr0["time"], tr0["reference"], "k:", lw=0.8, label="reference")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("tip angle θ + d/L [rad]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        paths.append(save_figure(fig, out / "compare_tip.png", overwrite=overwrite, dpi=100))
+        plt.close(fig)
+        fig, ax = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
+        for i, (name, tr) in enumerate(self.traces.items()):
+            ax[0].plot(tr["time"], tr["hub_nominal"], color=f"C{i}", lw=1.0, label=name)
+            ax[1].plot(tr["time"], tr["command_nominal"], color=f"C{i}", lw=0.8, label=name)
+        ax[0].plot(tr0["time"], tr0["reference"], "k:", lw=0.8, label="reference")
+        lim = self.settings["limit_V"]
+        for s in (-1, 1):
+            ax[1].axhline(s * lim, color="k", ls="--", lw=0.6)
+        ax[0].set_ylabel("hub angle [rad]")
+        ax[1].set_ylabel("command [V]")
+        ax[1].set_xlabel("time [s]")
+        for a in ax:
+            a.grid(alpha=0.3)
+            a.legend(fontsize=7, loc="best")
+        fig.suptitle("nominal plant")
+        fig.tight_layout()
+        paths.append(save_figure(fig, out / "compare_hub_command.png", overwrite=overwrite,
+                                 dpi=100))
+        plt.close(fig)
+        return paths
+
+
+def _fmt(v) -> str:
+    if v is None or (isinstance(v, float) and np.isnan(v)):
+        return "-"
+    if np.isinf(v):
+        return "never"
+    return f"{v:.3g}"
+
+
+def summarise(m: dict[str, np.ndarray], limit: float) -> dict[str, Any]:
+    """Nominal (index 0), median and worst over the drawn plants (index 1 on); an unstable
+    plant counts as +inf in the worst case and in the median of the settling time."""
+    nom = {k: float(m[k][0]) for k in METRICS}
+    drawn = {k: np.asarray(m[k][1:], float) for k in METRICS}
+    st = np.asarray(m["stable"][1:], bool)
+    n = st.size
+    med, worst = {}, {}
+    for k, (_, _, how) in METRICS.items():
+        v = np.where(st, drawn[k], np.inf) if k == "tip_settling_s" else drawn[k]
+        v = np.where(np.isnan(v), np.inf, v)
+        med[k] = float(np.median(v)) if n else float("nan")
+        worst[k] = float(np.max(v)) if n else float("nan")
+    at_lim = np.asarray(m["time_at_limit_s"], float)
+    return {"nominal": nom, "median": med, "worst": worst, "unstable": int(n - st.sum()),
+            "nominal_stable": bool(m["stable"][0]), "n_plants": int(n),
+            "limit_respected": bool(np.all(at_lim == 0.0))}
+
+
+def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
+            logged: str | None = "logged controller", step: float | None = None,
+            start: float = 0.1, duration: float = 3.0, band: float = 0.02,
+            tail: float = 0.25, count: float | None = None,
+            seed: int | None = None) -> Comparison:
+    """Compare the nominal scenario's own controller (named ``logged``; None leaves it
+    out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
+    controller spec) on the nominal plant and the batch (module doc). ``count``: the
+    encoder count (rad) where the scenario's hub sensor has none (it then also quantises
+    the simulated encoder); ``seed``: the sensor noise's (default the scenario's
+    ``simulation.seed``, as :func:`flexarm.simulate` uses)."""
+    nominal = plants.nominal
+    q = encoder_count(nominal, count)
+    has_q = count is None
+    exp = experiment(nominal, step=step, start=start, duration=duration,
+                     quantum=None if has_q else q)
+    pb = plants.with_overrides(exp)
+    base = pb.loop()
+    scn = pb.nominal
+    if seed is None:
+        seed = int(scn.simulation.seed)
+    specs: dict[str, Any] = {}
+    if logged is not None:
+        specs[logged] = scn.controller
+    for name, d in (designs or {}).items():
+        specs[name] = controller_spec(d)
+    limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[0])
+    length = float(scn.arm.beam.length)
+    rows, per, traces = {}, {}, {}
+    for name, spec in specs.items():
+        bl = base.with_controller(build_controller(base, spec, scn))
+        out = bl.run(seed=seed)
+        ref = bl.references["reference"]
+        m = batch_metrics(out, bl.prepared.loop.plant.signal_names, bl.time, ref, count=q,
+                          limit=limit, length=length, band=band, tail=tail)
+        per[name] = m
+        rows[name] = summarise(m, limit)
+        sn = list(bl.prepared.loop.plant.signal_names)
+        tip = out["signals"][:, :, sn.index("tip_angle")]
+        pct = np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
+        traces[name] = {"time": bl.time, "reference": ref, "tip_nominal": tip[0],
+                        "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
+                        "command_nominal": out["command"][0, :, 0], "tip_p05": pct[0],
+                        "tip_p50": pct[1], "tip_p95": pct[2]}
+    settings = {"step_rad": float(scn.reference.amplitude), "start_s": start,
+                "duration_s": duration, "band_fraction": band, "tail_fraction": tail,
+                "count_rad": q, "limit_V": limit, "n_plants": len(plants), "seed": plants.seed,
+                "noise_seed": seed,
+                "plants": plants.info,
+                "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()}}
+    return Comparison(rows, per, traces, settings, list(plants.warnings))
