@@ -268,8 +268,9 @@ def test_fitted_rig_beats_its_logged_controller(name):
 
 
 def test_cli_design_nested_with_report(tmp_path):
-    """`flexarm design --method nested --report`: the design runs from its design.toml, the
-    step table holds both controllers, and the HTML report embeds the step figure. The hub
+    """`flexarm design --method nested --report`: the comparison on the nominal plant holds
+    both controllers (the nested design on its own move), and the HTML report embeds the
+    comparison's two figures. The hub
     stops within one encoder count on the built-in rig (its Coulomb level compensated; the
     scenario's own state feedback stops ~16 counts short of the 0.5 rad move)."""
     import json
@@ -283,11 +284,11 @@ def test_cli_design_nested_with_report(tmp_path):
                                  "--out", str(out), "--report", str(rep)])
     assert r.exit_code == 0, r.output
     info = json.loads((out / "design.json").read_text())["info"]
-    step = info["step_on_scenario"]
-    assert abs(step["nested"]["hub_error_counts"]) <= 1.0, step
-    assert abs(step["scenario"]["hub_error_counts"]) > 5.0, step
+    step = info["comparison"]
+    assert step["nested"]["nominal"]["hub_error_counts"] <= 1.0, step
+    assert step["scenario"]["nominal"]["hub_error_counts"] > 5.0, step
     html = rep.read_text()
-    assert html.count("<img") == 1 and "gcm1: TransferFunction" in html
+    assert html.count("<img") == 2 and "gcm1: TransferFunction" in html
     # the options of the other methods are refused by name
     r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "nested",
                                  "--q", "1", "--out", str(tmp_path / "e")])

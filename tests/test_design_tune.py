@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import flexarm
-from flexarm.analysis.metrics import step_metrics
+from flexarm.metrics import step_metrics
 from flexarm.design import compare as cmp
 from flexarm.design import plants as pl
 from flexarm.design.tune import TuneCost, design_tune
@@ -73,7 +73,7 @@ def test_from_paths_bad_input_names_the_path():
 def _independent_metrics(res, step: float, start: float, q: float, band: float, tail: float,
                          length: float, limit: float):
     """The metrics of design/compare.py from one plain flexarm.simulate run, computed
-    here by other code: flexarm.analysis.metrics.step_metrics for the overshoot, a loop
+    here by other code: flexarm.metrics.step_metrics for the overshoot, a loop
     backwards in time for the settling."""
     t = res.time
     r = np.asarray(res.references["reference"])
@@ -305,3 +305,60 @@ def test_tune_any_controller_by_path_and_bad_input():
     with pytest.raises(ValueError, match=r"bounds\['controller.k1'\]"):
         design_tune(sc, b, params=["controller.kp"], bounds={"controller.k1": (0, 1)},
                     step=0.3, duration=1.0, maxfev=3)
+
+
+def test_cli_design_tune_over_drawn_plants(tmp_path):
+    """`flexarm design --method tune --spread ...`: the gains tuned over the drawn plants
+    end the hub within one count in the median drawn plant (the scenario's own state
+    feedback stops ~15 counts short: the stiction band F_s/(k1 k_u) is 34 counts), the
+    comparison table and figures are written, and a tune without a spread is refused."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    out = tmp_path / "t"
+    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
+                                 "--spread", "arm.motor.inertia=10%,arm.friction.coulomb=20%",
+                                 "--plants", "6", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    rows = json.loads((out / "compare.json").read_text())["rows"]
+    assert rows["tune"]["median"]["hub_error_counts"] <= 1.0, rows["tune"]
+    assert rows["scenario"]["median"]["hub_error_counts"] > 5.0, rows["scenario"]
+    assert rows["tune"]["unstable"] == 0 and rows["tune"]["limit_respected"]
+    assert {"compare_tip.png", "compare_hub_command.png", "design.toml"} <= {
+        p.name for p in out.iterdir()}
+    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
+                                 "--out", str(tmp_path / "u")])
+    assert r.exit_code == 2 and "--fit-json" in r.output
+    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
+                                 "--spread", "arm.motor.nope=10%", "--out", str(tmp_path / "v")])
+    assert r.exit_code == 2 and "nope" in r.output
+
+
+def test_scenario_spread_from_a_fit_json():
+    """The fit JSON's HAC std mapped onto the fitted scenario's paths (report.scenario_spread):
+    J, B, C_f (and the breakaway with it), ζ, the gauge gain, J_l → tip mass J_l/L², and
+    the stiffness C = ω² J_l → EI with relative std √((2 σ_ω/ω)² + (σ_J/J_l)²)."""
+    import flexarm
+    from flexarm.identification.time_domain.report import scenario_spread
+
+    sc = flexarm.load_scenario("rotary-flexible-link")
+    L = sc.arm.beam.length
+    fit = {"parameters": {
+        "hub_inertia": {"value": 2.08e-3, "std": 1e-4}, "viscous": {"value": 4e-3, "std": 4e-4},
+        "coulomb": {"value": 0.03, "std": 0.003}, "link_damping": {"value": 0.03, "std": 0.01},
+        "link_frequency": {"value": 18.5, "std": 0.37}, "link_inertia": {"value": 3.5e-3,
+                                                                       "std": 3.5e-4},
+        "tip_gain": {"value": 1.0, "std": None}}}
+    sp = scenario_spread(fit, sc)
+    assert sp["arm.motor.inertia"] == (sc.arm.motor.inertia, 1e-4)
+    assert sp["arm.friction.static"][1] == sp["arm.friction.coulomb"][1] == 0.003
+    assert sp["arm.beam.masses[0].mass"][1] == pytest.approx(3.5e-4 / L**2, rel=1e-12)
+    ei = sc.arm.beam.flexural_rigidity
+    assert sp["arm.beam.flexural_rigidity"][1] == pytest.approx(
+        ei * math.hypot(2 * 0.02, 0.1), rel=1e-12)
+    assert "sensors.tip_deflection.gain" not in sp  # no std: not drawn
+    with pytest.raises(Exception, match="no 'parameters'"):
+        scenario_spread({}, sc)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from _feliu import COUNT, design, model, scenario
-from flexarm.analysis.metrics import step_metrics
+from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import inner_loop
 from flexarm.control.outer_loop import (
     deflection_report,

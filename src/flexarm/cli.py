@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -316,9 +317,46 @@ def _weights(text: str | None, option: str):
               f"e.g. {option} motor_angle=1e3,tip_deflection=10")
 
 
+def _plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | None:
+    """Scenario path → (mean, std) for the plant draws of ``design``: from the fit's JSON
+    (:func:`flexarm.identification.time_domain.report.scenario_spread`) or ``--spread``."""
+    if fit_json is not None:
+        from flexarm.identification.time_domain.logs import FitInputError
+        from flexarm.identification.time_domain.report import scenario_spread
+
+        try:
+            data = json.loads(Path(fit_json).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            _fail(f"--fit-json {fit_json}: cannot read it as JSON ({exc})")
+        try:
+            return scenario_spread(data, sc)
+        except (FitInputError, KeyError, TypeError) as exc:
+            _fail(f"--fit-json {fit_json}: {exc}")
+    if spread is None:
+        return None
+    from flexarm.identification.time_domain.general import _get, parse_path
+
+    base = sc.model_dump(mode="json", exclude_none=True)
+    out = {}
+    for item in spread.split(","):
+        path, eq, val = item.strip().partition("=")
+        if not eq or not path:
+            _fail(f"--spread {item!r}: write PATH=STD, e.g. arm.motor.inertia=10%")
+        try:
+            mean = float(_get(base, parse_path(path), path))
+            std = (abs(mean) * float(val.strip()[:-1]) / 100 if val.strip().endswith("%")
+                   else float(val))
+        except (ValueError, TypeError) as exc:
+            _fail(f"--spread {item!r}: {exc}")
+        if not (math.isfinite(std) and std >= 0):
+            _fail(f"--spread {item!r}: the std must be a finite number >= 0")
+        out[path] = (mean, std)
+    return out
+
+
 @app.command("design")
 def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
-               method: str = typer.Option("lqr", "--method", help="lqr, place or nested (Feliu's two loops)"),
+               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's gains over plants drawn from the fit's uncertainty)"),
                out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
                q: Optional[str] = typer.Option(
                    None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
@@ -343,6 +381,19 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                    None, "--max-deflection", help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)"),
                distance: Optional[float] = typer.Option(
                    None, "--distance", help="nested: the tip move, rad (default the scenario's reference amplitude)"),
+               fit_json: Optional[Path] = typer.Option(
+                   None, "--fit-json", help="the fit's JSON (flexarm fit --json) of the rig whose "
+                                            "--scenario-out is SCENARIO: plants drawn from its "
+                                            "standard deviations (tune; and the comparison)"),
+               spread: Optional[str] = typer.Option(
+                   None, "--spread", help="plants drawn from PATH=STD,... (SI; STD may end in % of "
+                                          "the scenario's value), e.g. "
+                                          "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'"),
+               plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
+               seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
+               encoder_counts: Optional[int] = typer.Option(
+                   None, "--encoder-counts", help="counts per turn of the hub encoder, where the "
+                                                  "scenario's hub sensor has no quantum (errors in counts)"),
                report: Optional[Path] = typer.Option(
                    None, "--report", help="write a self-contained HTML report (the designed "
                                           "controller, its figures, the step comparison)"),
@@ -353,13 +404,17 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     freedom), integral action (an estimated input disturbance, or --integral), and the
     Coulomb friction feedforward (lqr, place); or Feliu's nested loops (nested: inner hub
     loop with friction and coupling feedforward, outer tip loop with the Wiener feedforward
-    of a deflection-limited quasi-parabolic move). Writes design.toml (the scenario with the designed
-    [controller]: flexarm simulate OUT/design.toml runs it), design.json (gains, poles,
-    weights, figures, warnings) and design-step.png (a reference step with the scenario's
-    controller and with the design)."""
+    of a deflection-limited quasi-parabolic move); or the controller's own gains and a
+    friction feedforward tuned in simulation over plants drawn from the fit (tune).
+    The scenario's controller and the design are then compared on a reference step (a
+    nested design runs its own move of the same distance) with friction, delays,
+    quantisation and saturation: on the nominal plant, and with --fit-json or --spread over
+    --plants drawn plants (nominal / median / worst, unstable count, the limit).
+    Writes design.toml (the scenario with the designed [controller]: flexarm simulate
+    OUT/design.toml runs it), design.json (gains, poles, weights, figures, warnings),
+    compare.json / compare.md (the comparison) and its figures; --report an HTML page."""
     _enable_cache()
     from flexarm.design import METHODS, design
-    from flexarm.analysis.design_step import step_comparison
 
     if method not in METHODS:
         _fail(f"--method {method!r}: not known; choose one of {', '.join(METHODS)}")
@@ -382,14 +437,27 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                   "--max-deflection and --distance)")
     elif max_deflection is not None or distance is not None:
         _fail("--max-deflection/--distance: only with --method nested")
+    if method == "tune" and fit_json is None and spread is None:
+        _fail("--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
+              "--spread PATH=STD,...")
+    if fit_json is not None and spread is not None:
+        _fail("--fit-json and --spread both give the plants' spread; choose one")
+    if plants < 1:
+        _fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
+    if encoder_counts is not None and encoder_counts < 2:
+        _fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
     _check_file_option("--report", report, overwrite, "design.html")
     sc = _load(scenario)
+    spread_d = _plant_spread(sc, fit_json, spread)
     out = _outdir(out, overwrite)
     if integral and disturbance:
         _fail("--integral and --disturbance both give integral action; choose one")
+    count = 2 * math.pi / encoder_counts if encoder_counts else None
     if method == "nested":
         opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
                 if v is not None}
+    elif method == "tune":
+        opts = dict(spread=spread_d, n_plants=plants, plant_seed=seed, count=count)
     else:
         opts = dict(integral=integral, disturbance=disturbance,
                     friction_compensation=friction_compensation, pole_domain=pole_domain,
@@ -399,42 +467,68 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     elif method == "lqr":
         opts.update(q=_weights(q, "--q"), r=_weights(r, "--r"))
     with console.status(f"designing ({method})...") as status:
+        if method == "tune":
+            opts["callback"] = lambda e: _progress(
+                status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}")
         try:
             des = design(sc, method, **opts)
         except ValueError as exc:
             _fail(f"{scenario}: {exc}")
-        _progress(status, "simulating a reference step with the scenario's controller and the design...")
-        cmp = step_comparison(sc, des, out / "design-step.png", overwrite=overwrite)
-    if cmp is not None:
-        des.info["step_on_scenario"] = cmp
+        from flexarm.design.compare import compare
+        from flexarm.design.plants import PlantBatch, from_paths
+
+        batch = (from_paths(sc, spread_d, plants, seed=seed) if spread_d
+                 else PlantBatch.nominal_only(sc))
+        _progress(status, "the scenario's controller and the design on a reference step "
+                          f"(nominal plant{f' and {plants} drawn' if spread_d else ''})...")
+        side = None
+        try:
+            side = compare(batch, {method: des}, logged="scenario", count=count,
+                           duration=max(3.0, float(sc.simulation.duration)))
+        except (ValueError, KeyError) as exc:
+            des.warnings.append(f"comparison not run: {exc}")
+    if side is not None:
+        des.info["comparison"] = side.to_dict()["rows"]
     files = des.write(out, overwrite=overwrite)
+    if side is not None:
+        from flexarm.io.write import write_json, write_text
+
+        files += [write_json(out / "compare.json", side.to_dict(), overwrite=overwrite),
+                  write_text(out / "compare.md", side.table("markdown") + "\n",
+                             overwrite=overwrite),
+                  *side.figures(out, overwrite=overwrite)]
+        from flexarm.design.compare import METRICS, _fmt
+
+        drawn = side.settings["n_plants"] > 0
+        cols = ("nominal", "median", "worst") if drawn else ("nominal",)
+        tab = Table(title=(f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
+                           f"over {plants} drawn plants" if drawn else
+                           f"a {side.settings['step_rad']:g} rad step on the nominal plant"))
+        tab.add_column("controller")
+        for title, unit, _ in METRICS.values():
+            tab.add_column(f"{title} [{unit}]")
+        if drawn:
+            tab.add_column("unstable")
+        tab.add_column("limit ok")
+        for name, row in side.rows.items():
+            tab.add_row(name, *[" / ".join(_fmt(row[k][m]) for k in cols) for m in METRICS],
+                        *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
+                        "yes" if row["limit_respected"] else "NO")
+        console.print(tab)
+        des.warnings.extend(w for w in side.warnings if w not in des.warnings)
     info = des.info
-    table = Table(title=f"{sc.name}: {method} design")
-    table.add_column("")
-    for label in (cmp or {}):
-        table.add_column(label)
-    if cmp:
-        for v in cmp.values():
-            v["hub_error_mrad"] = 1e3 * v["hub_error_rad"]
-        for key in ("hub_error_counts", "hub_error_mrad", "hub_settling_s", "tip_settling_s",
-                    "tip_overshoot", "peak_command"):
-            table.add_row(key, *[("-" if v[key] is None else f"{v[key]:.3g}")
-                                 for v in cmp.values()])
-        console.print(table)
     if "model" in info:
         console.print(f"augmented model: {info['model']['n_augmented']} states "
                       f"(arm {info['model']['n_arm']}); linear peak command "
                       f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
     for w in des.warnings:
         err.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
-    console.print("wrote " + ", ".join(str(p) for p in [*files, out / "design-step.png"]
-                                        if Path(p).exists()))
+    console.print("wrote " + ", ".join(str(p) for p in files))
     if report is not None:
         from flexarm.analysis.html_report import design_report
 
-        step_png = out / "design-step.png"
-        _write_report(design_report(des, figures=[step_png] if step_png.exists() else [],
-                                    comparison=cmp, command=_command_line(ctx),
+        _write_report(design_report(des, figures=[p for p in files if str(p).endswith(".png")],
+                                    comparison=side, command=_command_line(ctx),
                                     inputs=[scenario]), report, overwrite)
 
 

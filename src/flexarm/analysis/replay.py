@@ -1,6 +1,6 @@
 """Replay a log on a scenario: the logged setpoints as references, the initial state and the
 sensor filters' states from the log's first sample, and fit % per logged channel,
-100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (:func:`flexarm.analysis.metrics.fit_percent`).
+100 (1 − ‖y − ŷ‖ / ‖y − mean y‖) (:func:`flexarm.metrics.fit_percent`).
 
 For a multi-link arm the initial state is read off the log where it holds the channels
 (``theta_j``, else 0; the link deflection α_j from ``alpha_j`` or, when only the filtered
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.analysis.metrics import fit_percent
+from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.filters import filter_state_from_log, with_filter_state

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.analysis.metrics import step_metrics
+from flexarm.metrics import step_metrics
 from flexarm.analysis.model_info import single_link_info
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop

@@ -38,11 +38,29 @@ def _nested(scenario, **options) -> Design:
     return design_nested(scenario, **options)
 
 
+def _tune(scenario, *, plants=None, spread=None, n_plants: int = 200, plant_seed: int = 0,
+          **options) -> Design:
+    """``tune`` over ``plants`` (a :class:`~flexarm.design.plants.PlantBatch`, e.g.
+    :func:`~flexarm.design.plants.from_fit` of a fit result), or over ``n_plants`` drawn from
+    ``spread`` (scenario path → (mean, std), :func:`~flexarm.design.plants.from_paths`)."""
+    from flexarm.design.plants import from_paths
+    from flexarm.design.tune import design_tune
+
+    if plants is None:
+        if not spread:
+            raise ValueError("method 'tune' needs the plants to tune over: plants= (e.g. "
+                             "flexarm.design.plants.from_fit(fit_result, 200)) or spread= "
+                             "{path: (mean, std)}")
+        plants = from_paths(scenario, spread, n_plants, seed=plant_seed)
+    return design_tune(scenario, plants, **options)
+
+
 #: method name → designer ``f(scenario, **options) -> Design``
 METHODS: dict[str, Callable[..., Design]] = {
     "lqr": _lqr,
     "place": _place,
     "nested": _nested,
+    "tune": _tune,
 }
 
 
@@ -50,7 +68,7 @@ def design(scenario: Any, method: str = "lqr", **options) -> Design:
     """Design a controller for ``scenario`` (a :class:`flexarm.specs.scenario.Scenario`, a
     scenario file or a built-in name) by ``method`` (a key of :data:`METHODS`); the options
     are the method's (``lqr``/``place``: :func:`flexarm.design.linear.design_linear`;
-    ``nested``: :func:`flexarm.design.nested.design_nested`)."""
+    ``nested``: :func:`flexarm.design.nested.design_nested`; ``tune``: :func:`_tune`)."""
     if method not in METHODS:
         raise ValueError(f"method = {method!r} is not known; choose one of "
                          f"{', '.join(METHODS)}")

@@ -14,7 +14,7 @@ the delayed sensors), with Δ = the reference step, k ≥ the step's sample:
   compensation against a delayed encoder) its excursions;
 * ``tip_settling_s``: the first time after the step after which the tip angle
   θ_t = θ + d/L stays within ±band·|Δ| of its final value (its mean over the last 5 %,
-  the convention of :mod:`flexarm.analysis.metrics`); band 2 % unless given. NaN when the
+  the convention of :mod:`flexarm.metrics`); band 2 % unless given. NaN when the
   last sample is still outside (never settles);
 * ``tip_overshoot_pct``: 100 max_k (θ_t − r_end) sgn Δ / |Δ|, at least 0;
 * ``tip_oscillation_mm``: rms of d − d̄ over the last ``tail`` (25 %) of the run, mm;
@@ -44,7 +44,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexarm.design.plants import BatchLoop, PlantBatch, diverged
+from flexarm.design.plants import BatchLoop, PlantBatch, Replace, diverged
 
 __all__ = ["compare", "Comparison", "batch_metrics", "METRICS", "experiment"]
 
@@ -133,6 +133,20 @@ def experiment(scenario, *, step: float | None = None, start: float = 0.1,
         over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None,
                                            "range": None}}
     return over
+
+
+#: reference types with which a design shapes its own move (run as they are)
+SHAPED = ("parabolic", "quasi_parabolic")
+
+
+def _own_move(design_scenario, exp: dict) -> dict:
+    """Overrides that give every plant the design's controller and its own shaped move
+    (from rest at 0, its distance unchanged), the run at least the experiment's length."""
+    d = design_scenario.model_dump(mode="json", exclude_none=True)
+    ref = {**d["reference"], "offset": 0.0}
+    dur = max(float(exp["simulation"]["duration"]), float(design_scenario.simulation.duration))
+    return {"controller": Replace(d["controller"]), "reference": Replace(ref),
+            "simulation": {"duration": dur}}
 
 
 def encoder_count(scenario, count: float | None = None) -> float:
@@ -248,8 +262,10 @@ class Comparison:
         fig, ax = plt.subplots(figsize=(8, 4.5))
         for i, (name, tr) in enumerate(self.traces.items()):
             c = f"C{i}"
-            ax.fill_between(tr["time"], tr["tip_p05"], tr["tip_p95"], color=c, alpha=0.2,
-                            lw=0, label=f"{name}: 5-95 % of {self.settings['n_plants']} plants")
+            if self.settings["n_plants"] > 0:
+                ax.fill_between(tr["time"], tr["tip_p05"], tr["tip_p95"], color=c, alpha=0.2,
+                                lw=0, label=f"{name}: 5-95 % of {self.settings['n_plants']} "
+                                            "plants")
             ax.plot(tr["time"], tr["tip_nominal"], color=c, lw=1.2, label=f"{name}: nominal")
         tr0 = next(iter(self.traces.values()))
         ax.plot(tr0["time"], tr0["reference"], "k:", lw=0.8, label="reference")
@@ -338,8 +354,17 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
     limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[0])
     length = float(scn.arm.beam.length)
     rows, per, traces = {}, {}, {}
+    moves = {name: d.scenario for name, d in (designs or {}).items()
+             if getattr(getattr(getattr(d, "scenario", None), "reference", None), "type", None)
+             in SHAPED}
     for name, spec in specs.items():
-        bl = base.with_controller(build_controller(base, spec, scn))
+        if name in moves:
+            # a design that shapes its own move (Feliu's nested loops: the quasi-parabolic
+            # tip reference and its Wiener feedforward channel) runs that move, of the same
+            # distance from rest, on the same plants
+            bl = pb.with_overrides(_own_move(moves[name], exp)).loop()
+        else:
+            bl = base.with_controller(build_controller(base, spec, scn))
         out = bl.run(seed=seed)
         ref = bl.references["reference"]
         m = batch_metrics(out, bl.prepared.loop.plant.signal_names, bl.time, ref, count=q,
@@ -348,7 +373,8 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
         rows[name] = summarise(m, limit)
         sn = list(bl.prepared.loop.plant.signal_names)
         tip = out["signals"][:, :, sn.index("tip_angle")]
-        pct = np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
+        pct = (np.nanpercentile(tip[1:], [5, 50, 95], axis=0) if tip.shape[0] > 1
+               else np.repeat(tip[:1], 3, axis=0))  # nominal only: no band
         traces[name] = {"time": bl.time, "reference": ref, "tip_nominal": tip[0],
                         "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
                         "command_nominal": out["command"][0, :, 0], "tip_p05": pct[0],

@@ -188,7 +188,7 @@ def nested_metrics(res, *, start: float, distance: float, move_end: float, count
     over the last ``steady_window`` s, encoder counts of ``count`` rad), residual tip
     oscillation (max |θt − mean θt| from ``move_end`` + ``settle_after`` s on, rad), peak
     command and the time at the ``limit``, peak deflection |θm − θt| (rad)."""
-    from flexarm.analysis.metrics import step_metrics
+    from flexarm.metrics import step_metrics
 
     t = res.time
     goal = offset + distance
@@ -483,7 +483,7 @@ def design_nested(scenario, *, distance: float | None = None,
                         "linear design's")
     held_ts, held_err = None, math.nan
     if can_hold:
-        from flexarm.analysis.metrics import step_metrics
+        from flexarm.metrics import step_metrics
 
         r_held = simulate(held)
         mh = step_metrics(r_held.time, r_held["motor_angle"], r_held["reference"],

@@ -60,10 +60,17 @@ __all__ = ["PlantBatch", "BatchLoop", "from_fit", "from_paths", "with_overrides"
 UNDETERMINED = 0.5
 
 
+class Replace(dict):
+    """An override table that replaces the scenario's table instead of being merged into it
+    (:func:`with_overrides`; e.g. another ``[controller]`` type)."""
+
+
 def _merge(d: dict, over: Mapping) -> dict:
     for k, v in over.items():
         if v is None:  # None removes the field (back to its default)
             d.pop(k, None)
+        elif isinstance(v, Replace):  # a whole table replaced, not merged
+            d[k] = copy.deepcopy(dict(v))
         elif isinstance(v, Mapping) and isinstance(d.get(k), dict):
             _merge(d[k], v)
         else:
@@ -152,6 +159,12 @@ class PlantBatch:
 
     def __len__(self) -> int:
         return len(self.scenarios)
+
+    @classmethod
+    def nominal_only(cls, scenario) -> "PlantBatch":
+        """The scenario alone, no drawn plants (a comparison on the nominal plant)."""
+        return cls(scenario, [], {}, [], np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0, [],
+                   {"source": "the nominal plant only", "n": 0})
 
     def with_overrides(self, overrides: Mapping | None) -> "PlantBatch":
         """Every plant (and the nominal) with the same experiment changes (reference,

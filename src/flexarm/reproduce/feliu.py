@@ -38,7 +38,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.analysis.metrics import step_metrics
+from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import InnerLoopDesign, design_inner_loop
 from flexarm.control.outer_loop import (
     deflection_report,

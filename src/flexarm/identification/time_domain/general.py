@@ -24,7 +24,7 @@ The residuals stacked for least squares are, per measured channel c of ``options
 with σ_c the logged channel's spread (standard deviation over all fitted logs), λ =
 ``residual_level`` the expected misfit as a fraction of that spread and τ =
 ``correlation_time`` the residuals' correlation time (s), so that Σ r² counts independent
-misfits in units of their expected size (fit % is :func:`flexarm.analysis.metrics.fit_percent`,
+misfits in units of their expected size (fit % is :func:`flexarm.metrics.fit_percent`,
 100 (1 − ‖y − ŷ‖/‖y − ȳ‖)); and per prior (path → relative std σ_p,
 ``options.priors``; the mean is the template value, the data-sheet value)
 
@@ -89,7 +89,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.analysis.metrics import fit_percent as _fitpct
+from flexarm.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, initial_carry

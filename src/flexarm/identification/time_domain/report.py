@@ -382,3 +382,64 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
         plt.close(fig)
         paths.append(p)
     return paths
+
+
+def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
+    """Scenario path → (value, std) of a servo-rig fit's JSON (:meth:`FitResult.to_dict`,
+    ``flexarm fit --json``) on the scenario it wrote (``--scenario-out``), for drawing plants
+    (:func:`flexarm.design.plants.from_paths`). Values are the scenario's; the standard
+    deviations the fit's HAC ones, mapped as :func:`scenario_from_fit` maps the parameters:
+    J → ``arm.motor.inertia``, B → ``arm.motor.viscous``, C_f → ``arm.friction.coulomb``
+    (the breakaway moves with it: ``arm.friction.static`` gets the same std), ζ →
+    ``arm.beam.damping_ratio``, the gauge gain → ``sensors.tip_deflection.gain``, J_l →
+    the tip mass J_l / L², and the stiffness C = ω_c² J_l → EI = C L / 3 with relative std
+    √((2 σ_ω/ω)² + (σ_J/J_l)²). The parameters' correlations are not in the JSON: the draws
+    are independent (wider or narrower than the fit's joint uncertainty where two parameters
+    trade off; the Python path :func:`flexarm.design.plants.from_fit` keeps them)."""
+    par = fit.get("parameters")
+    if not isinstance(par, dict):
+        raise FitInputError("the fit JSON has no 'parameters' table: give the file "
+                            "`flexarm fit ... --json FIT.json` wrote")
+    d = scenario.model_dump(mode="json", exclude_none=True)
+    arm = d["arm"]
+
+    def std(name):
+        v = par.get(name) or par.get(f"{name}[0]") or {}
+        s = v.get("std")
+        return float(s) if s is not None and math.isfinite(float(s)) else None
+
+    def value(name):
+        v = par.get(name) or par.get(f"{name}[0]") or {}
+        return v.get("value")
+
+    out: dict[str, tuple[float, float]] = {}
+
+    def put(path, mean, s):
+        if s is not None and mean is not None:
+            out[path] = (float(mean), float(s))
+
+    put("arm.motor.inertia", arm["motor"].get("inertia"), std("hub_inertia"))
+    put("arm.motor.viscous", arm["motor"].get("viscous"), std("viscous"))
+    fr = arm.get("friction", {})
+    if fr.get("model") == "coulomb":
+        put("arm.friction.coulomb", fr.get("coulomb"), std("coulomb"))
+        put("arm.friction.static", fr.get("static"), std("coulomb"))
+    beam = arm.get("beam", {})
+    if beam.get("model") == "lumped":
+        put("arm.beam.damping_ratio", beam.get("damping_ratio"), std("link_damping"))
+        L = float(beam["length"])
+        sj, sw = std("link_inertia"), std("link_frequency")
+        J, w = value("link_inertia"), value("link_frequency")
+        if sj is not None and J:
+            put("arm.beam.masses[0].mass", beam["masses"][0]["mass"], sj / L**2)
+            if sw is not None and w:
+                rel = math.hypot(2 * sw / w, sj / J)
+                put("arm.beam.flexural_rigidity", beam["flexural_rigidity"],
+                    rel * beam["flexural_rigidity"])
+        tip = d.get("sensors", {}).get("tip_deflection", {})
+        put("sensors.tip_deflection.gain", tip.get("gain"), std("tip_gain"))
+    if not out:
+        raise FitInputError("the fit JSON gives no standard deviation the scenario can use "
+                            "(every std is missing or NaN): the fit could not estimate its "
+                            "uncertainty; give --spread PATH=STD instead")
+    return out
