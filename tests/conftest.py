@@ -14,3 +14,35 @@ try:  # property tests (tests/test_properties_*.py): repeatable, bounded, no exa
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "flexarm"))
 except ImportError:  # the property test files skip themselves
     pass
+
+
+# ------------------------------------------------------------------ the real rotary rig
+import functools  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+#: the rotary-rig logs (../shared/data/rotary-rig: absent in a user's clone, present in CI)
+ROTARY_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
+ROTARY_FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
+#: the lab's data sheet (README of the data): geared voltage-driven servo, 0.45 m link
+ROTARY_SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
+                    armature_resistance=3.29, link_length=0.45, computation_delay=1)
+
+
+@functools.lru_cache(maxsize=None)
+def _rotary_whole_fit(name: str):
+    from flexarm.identification.time_domain import fit, read_bench_log
+
+    return fit([read_bench_log(ROTARY_DATA / name, log_format=ROTARY_FORMAT)], **ROTARY_SHEET)
+
+
+@pytest.fixture(scope="session")
+def rotary_whole_fit():
+    """``get(name)``: the servo-rig fit of one rotary-rig log on its whole length with the
+    data sheet, one fit per log for the whole test session (the design, tuning and report
+    tests share it; treat the result as read-only). Skips where ../shared is absent."""
+    if not ROTARY_DATA.is_dir():
+        pytest.skip(f"real rig logs not found at {ROTARY_DATA} (../shared is absent in a "
+                    "user's clone; CI has it)")
+    return _rotary_whole_fit

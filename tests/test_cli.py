@@ -356,7 +356,6 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     import signal
     import subprocess
     import sys
-    import time
 
     from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario

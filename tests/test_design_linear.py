@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -236,24 +234,13 @@ def test_front_door_is_the_callable_package():
 
 
 # ----------------------------------------------------------------------------- real rig
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
-
-
 @pytest.fixture(scope="module")
-def unit6_rig():
+def unit6_rig(rotary_whole_fit):
     """The unit 6 rig fitted on its whole log (tests/test_real_rotary_rig.py's SHEET), as
     the rig runs: its hub encoder's count (4096 per turn, the rig class's) and the gauge's
     1 mm resolution of the logs (σ = 1 mm / √12) as the sensors' quantum and noise, and an
     0.8 rad step (the logged square wave's)."""
-    if not DATA.is_dir():
-        pytest.skip(f"real rig logs not found at {DATA} (../shared is absent in a user's "
-                    "clone; CI has it)")
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from test_real_rotary_rig import FORMAT, SHEET
-
-    from flexarm.identification.time_domain import fit, read_bench_log
-
-    res = fit([read_bench_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)], **SHEET)
+    res = rotary_whole_fit("4PM_Group37_FlexArm_Unit6")
     d = res.scenario().model_dump(mode="json", exclude_none=True)
     d["sensors"]["motor_angle"]["quantum"] = COUNT
     d["sensors"]["tip_deflection"]["noise"] = 1e-3 / math.sqrt(12)

@@ -18,7 +18,6 @@ run from the scenario it writes.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,23 +217,13 @@ def test_bad_input_is_named():
 
 
 # ---------------------------------------------------------------------------- real rigs
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
-FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
-#: the lab's data sheet (as tests/test_real_rotary_rig.py)
-SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-             armature_resistance=3.29, link_length=0.45, computation_delay=1)
-real = [pytest.mark.slow, pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"real rig logs not found at {DATA} (../shared is absent in a "
-                              "user's clone; CI has it)")]
+real = [pytest.mark.slow]  # the fit (conftest rotary_whole_fit) skips without ../shared
 
 
-def _fitted_design(name: str):
+def _fitted_design(res):
     """Fit the whole log (the issue's rule), give the fitted rig the SRV02-class encoder
     (4096 counts per turn: the fit has no quantiser, the logger rounds to 1 mrad), design,
     and run the logged state feedback on the same move for comparison."""
-    from flexarm.identification.time_domain import fit, read_bench_log
-
-    res = fit([read_bench_log(DATA / name, log_format=FORMAT)], **SHEET)
     sc = res.scenario()
     sens = dict(sc.sensors)
     sens["motor_angle"] = sens["motor_angle"].model_copy(update={"quantum": COUNT})
@@ -253,12 +242,12 @@ def _fitted_design(name: str):
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=real) for n in
                                   ("4PM_Group37_FlexArm_Unit6", "Unit7_Flex_trial1.csv")])
-def test_fitted_rig_beats_its_logged_controller(name):
+def test_fitted_rig_beats_its_logged_controller(name, rotary_whole_fit):
     """On the fitted unit 6 / unit 7 models (one nominal plant each; the 200-plant batch is
     the comparison's job): the issue's targets, hub within one count, tip settling at least
     30 % shorter than the logged state feedback's (inf: never within 2 %), no time at the
     voltage limit; and less residual tip oscillation."""
-    d, logged = _fitted_design(name)
+    d, logged = _fitted_design(rotary_whole_fit(name))
     sim = d.info["simulated"]
     print(name, d.info["inner"], d.info["trajectory"], d.info["gcb"], sim, logged, d.warnings)
     assert abs(sim["hub_error_counts"]) <= 1.0

@@ -54,9 +54,7 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
-from flexarm.control.discrete import Controller
 from flexarm.control.friction_compensation import FrictionCompensated, friction_sign
-from flexarm.deploy import c_export
 from flexarm.deploy import ExportError, export_c, generate_c
 from flexarm.sim.build import prepare, simulate
 from flexarm.specs import load_scenario

@@ -41,7 +41,6 @@ from flexarm.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rotary-rig"
-FORMAT = ROOT / "examples" / "quanser-rotflex.toml"
 runner = CliRunner()
 
 
@@ -360,19 +359,12 @@ def test_the_browser_check_fails_on_a_broken_or_blank_figure(tmp_path):
 
 # ----------------------------------------------------------------------------- real data
 @pytest.fixture(scope="module")
-def unit6(tmp_path_factory):
-    """The unit 6 rig fitted on its whole log (the data sheet of test_real_rotary_rig),
+def unit6(tmp_path_factory, rotary_whole_fit):
+    """The unit 6 rig fitted on its whole log (conftest's shared fit, the data sheet),
     its report written with its overlay figure."""
-    if not DATA.is_dir():
-        pytest.skip(f"real rig logs not found at {DATA} (../shared is absent in a user's "
-                    "clone; CI has it)")
-    from test_real_rotary_rig import SHEET
-
-    from flexarm.identification.time_domain import fit, read_bench_log
-
     d = tmp_path_factory.mktemp("unit6")
     path = DATA / "4PM_Group37_FlexArm_Unit6"
-    res = fit([read_bench_log(path, log_format=FORMAT)], **SHEET)
+    res = rotary_whole_fit(path.name)
     page = fit_report(res, figures=res.plots(d), command="flexarm.identification.fit "
                       "(tests/test_html_report.py)", inputs=[path]).write(d / "unit6.html")
     return res, page

@@ -466,6 +466,10 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         opts["poles"] = _complex_list(poles, "--poles")
     elif method == "lqr":
         opts.update(q=_weights(q, "--q"), r=_weights(r, "--r"))
+        if spread_d:  # robust over the drawn plants (R raised until every one is stable)
+            from flexarm.design.plants import from_paths
+
+            opts.update(plants=from_paths(sc, spread_d, plants, seed=seed), count=count)
     with console.status(f"designing ({method})...") as status:
         if method == "tune":
             opts["callback"] = lambda e: _progress(

@@ -16,7 +16,6 @@ deflection angle.
 from __future__ import annotations
 
 import control
-import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
 

@@ -817,7 +817,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     helpers = []
     if "sign" in ctx.helpers:
         helpers += [
-            f"/* sigma of Feliu's friction compensation: sgn v if |v| > vdb, else sgn u_fb if",
+            "/* sigma of Feliu's friction compensation: sgn v if |v| > vdb, else sgn u_fb if",
             " * |u_fb| > udb, else 0. */",
             f"static {R} {N}_sgn({R} x) {{ return x > 0 ? ({R})1 : (x < 0 ? ({R})-1 : ({R})0); }}",
             f"static {R} {N}_abs({R} x) {{ return x < 0 ? -x : x; }}",

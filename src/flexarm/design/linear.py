@@ -624,7 +624,6 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
                          "states (e.g. poles = [-20, -25, -8+15j, -8-15j]; see info)")
     dm = design_model(scenario, measured, setpoints)
     P = dm.augmented
-    A, C = np.asarray(P.A), np.asarray(P.C)
     m = P.ninputs
     idx = dm.tracked if integral else []
     Ar, Br = integral_model(P, idx)

@@ -48,10 +48,10 @@ import numpy as np
 from flexarm.control.inner_loop import design_inner_loop, motor_design_model
 from flexarm.control.outer_loop import size_parabolic
 from flexarm.control.trajectories import peak_deflection, quasi_parabolic
-from flexarm.control.wiener import feedforward_signal, wiener_feedforward
+from flexarm.control.wiener import wiener_feedforward
 from flexarm.design.result import Design
 from flexarm.models.single_link import SingleLinkModel
-from flexarm.sim.build import reference_trajectory, sensor_quanta, simulate
+from flexarm.sim.build import sensor_quanta, simulate
 from flexarm.specs import load_scenario
 from flexarm.specs.experiment import Reference
 from flexarm.specs.friction_compensation import FrictionCompensationSpec

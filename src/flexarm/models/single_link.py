@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import control
 import jax.numpy as jnp
 import numpy as np
-from jax import Array
 
 from flexarm.models.assembly import Arm, SingleLinkBody
 from flexarm.models.friction import Friction

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from typing import Literal
 
-from typing import Any
 
 from pydantic import Field, FiniteFloat, field_validator, model_validator
 

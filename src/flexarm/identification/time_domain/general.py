@@ -965,7 +965,6 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
     nx = eng.prep0.loop.plant.n_states if states else 0
     step = options.fd_step
     rows = eng.segment_rows()
-    nd = int(rows[-1])
     cache: dict = {}
 
     def split(v):
