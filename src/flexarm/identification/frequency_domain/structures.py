@@ -76,6 +76,21 @@ def _pair(cubic) -> tuple[float, float]:
     return float(abs(p) / (2 * np.pi)), float(-p.real / abs(p))
 
 
+def _hub_link_starts(structure: str, omega, data, gain: float, damping: float,
+                     link: tuple[str, str], unit: str) -> list[dict]:
+    """Start candidates of a hub + link structure (one per inertia ratio r of
+    :func:`_rigid_and_modes`): hub inertia J/(1+r), link inertia J r/(1+r) and stiffness
+    ω_a² J r/(1+r), link damping at ζ = 0.02, no hub viscous friction, no delay; ``link``
+    the structure's names of the link inertia and damping."""
+    if data.get("motor_angle") is None:
+        raise TFEstError(f"{structure}: the start values need the motor_angle FRF ({unit}); "
+                         "give it, or give every parameter in 'initial'")
+    J, wa, ratios = _rigid_and_modes(omega, data["motor_angle"], gain=gain, damping=damping)
+    return [{"hub_inertia": J / (1 + r), "hub_viscous": 0.0, "link_stiffness": wa**2 * J * r / (1 + r),
+             link[0]: J * r / (1 + r), link[1]: 2 * 0.02 * wa * J * r / (1 + r),
+             "delay_s": 0.0} for r in ratios]
+
+
 def _rigid_and_modes(omega, G, gain=1.0, damping=0.0):
     """Start values shared by the hub-driven structures, from the hub angle FRF G: the total
     inertia J_tot from the lowest lines (gain/(jω G) ≈ J_tot jω + damping below the modes),
@@ -237,13 +252,8 @@ def frb_single_mass_derived(p: dict) -> dict:
 
 def _frb_guess(omega, data, given):
     K = given["motor_constant"]
-    if data.get("motor_angle") is None:
-        raise TFEstError("frb-single-mass: the start values need the motor_angle FRF (θm/i); "
-                         "give it, or give every parameter in 'initial'")
-    J, wa, ratios = _rigid_and_modes(omega, data["motor_angle"], gain=K)
-    return [{"hub_inertia": J / (1 + r), "hub_viscous": 0.0, "link_stiffness": wa**2 * J * r / (1 + r),
-             "tip_inertia": J * r / (1 + r), "tip_damping": 2 * 0.02 * wa * J * r / (1 + r),
-             "delay_s": 0.0} for r in ratios]
+    return _hub_link_starts("frb-single-mass", omega, data, K, 0.0,
+                            ("tip_inertia", "tip_damping"), "θm/i")
 
 
 FRB_SINGLE_MASS_STRUCTURE = Structure(
@@ -313,13 +323,8 @@ def voltage_servo_derived(p: dict) -> dict:
 
 def _servo_guess(omega, data, given):
     ku, kw = servo_gains(given)
-    if data.get("motor_angle") is None:
-        raise TFEstError("voltage-servo: the start values need the motor_angle FRF (hub angle "
-                         "per volt); give it, or give every parameter in 'initial'")
-    J, wa, ratios = _rigid_and_modes(omega, data["motor_angle"], gain=ku, damping=kw)
-    return [{"hub_inertia": J / (1 + r), "hub_viscous": 0.0, "link_stiffness": wa**2 * J * r / (1 + r),
-             "link_inertia": J * r / (1 + r), "link_damping": 2 * 0.02 * wa * J * r / (1 + r),
-             "delay_s": 0.0} for r in ratios]
+    return _hub_link_starts("voltage-servo", omega, data, ku, kw,
+                            ("link_inertia", "link_damping"), "hub angle per volt")
 
 
 VOLTAGE_SERVO_STRUCTURE = Structure(
