@@ -457,7 +457,7 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
                 if v is not None}
     elif method == "tune":
-        opts = dict(spread=spread_d, n_plants=plants, plant_seed=seed, count=count)
+        opts = {}  # the plants below (tune needs --fit-json or --spread: checked above)
     else:
         opts = dict(integral=integral, disturbance=disturbance,
                     friction_compensation=friction_compensation, pole_domain=pole_domain,
@@ -466,11 +466,16 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         opts["poles"] = _complex_list(poles, "--poles")
     elif method == "lqr":
         opts.update(q=_weights(q, "--q"), r=_weights(r, "--r"))
-        if spread_d:  # robust over the drawn plants (R raised until every one is stable)
-            from flexarm.design.plants import from_paths
+    from flexarm.design.compare import compare
+    from flexarm.design.plants import PlantBatch, from_paths
 
-            opts.update(plants=from_paths(sc, spread_d, plants, seed=seed), count=count)
     with console.status(f"designing ({method})...") as status:
+        try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
+            drawn = from_paths(sc, spread_d, plants, seed=seed) if spread_d else None
+        except ValueError as exc:
+            _fail(f"--fit-json/--spread: {exc}")
+        if drawn is not None and method in ("lqr", "tune"):
+            opts.update(plants=drawn, count=count)
         if method == "tune":
             opts["callback"] = lambda e: _progress(
                 status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}")
@@ -478,11 +483,7 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
             des = design(sc, method, **opts)
         except ValueError as exc:
             _fail(f"{scenario}: {exc}")
-        from flexarm.design.compare import compare
-        from flexarm.design.plants import PlantBatch, from_paths
-
-        batch = (from_paths(sc, spread_d, plants, seed=seed) if spread_d
-                 else PlantBatch.nominal_only(sc))
+        batch = drawn if drawn is not None else PlantBatch.nominal_only(sc)
         _progress(status, "the scenario's controller and the design on a reference step "
                           f"(nominal plant{f' and {plants} drawn' if spread_d else ''})...")
         side = None
