@@ -724,6 +724,9 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
         return [f" *   {arr}[{i}]  {n}  ({u}){(extra or {}).get(n, '')}"
                 for i, (n, u) in enumerate(items)]
 
+    from flexarm.sim.build import sensor_quanta
+
+    quanta = sensor_quanta(sc_sens)
     notes = {}
     for c in ctx.measured:
         s = sc_sens.get(c)
@@ -732,7 +735,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
         bits = []
         if s.gain != 1.0:
             bits.append(f"sensor gain {s.gain:g} applied")
-        q = s.quantum or (s.range / 2 ** s.bits if s.bits else 0.0)
+        q = quanta[c]
         if q:
             bits.append(f"quantum {q:.6g}")
         if s.delay:
