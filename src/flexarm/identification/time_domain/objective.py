@@ -19,6 +19,7 @@ stage refines the latter two per log.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Any
 
@@ -204,6 +205,23 @@ class Objective:
             dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
             th0=th0.T, om0=om0.T,
             w0=d0.T / gain, wd0=v0.T / gain))
+
+    @property
+    def quantised(self) -> bool:
+        """Whether the simulated converters round (an encoder or tip-sensor quantum > 0)."""
+        return bool(self.rig.encoder_quantum > 0 or self.rig.tip_quantum > 0)
+
+    def unquantised(self) -> "Objective":
+        """The same objective with the simulated converters' rounding off (a shallow copy
+        sharing the data). With rounding the controller in the simulated loop reads whole
+        counts, so the cost jumps wherever a count flips: along any one parameter it is
+        jagged at scales of 1e-3 of its search range, and least squares stops there on its
+        step tolerance. Without it the cost is smooth and its minimum lies within those
+        jags of the rounded cost's (the local stage's continuation, :mod:`.fit`)."""
+        out = copy.copy(self)
+        out.const = {**self.const, "q_th": self.const["q_th"] * 0.0,
+                     "q_d": self.const["q_d"] * 0.0}
+        return out
 
     def _kw(self):
         return dict(substeps=self.substeps, n_buf=self.space.max_delay + 1,
