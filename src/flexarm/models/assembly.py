@@ -58,16 +58,17 @@ from flexarm.sim.plant import Plant
 
 
 def _mv(A: Array, x: Array) -> Array:
-    """A @ x for tiny matrices: the column products A[:, j] x[j], summed pairwise.
+    """A @ x for tiny matrices: the column products A[:, j] x[j], summed pairwise. A batch
+    may be carried last: A (rows, cols, *batch) with x (cols, *batch).
 
     Only elementwise operations, which XLA fuses into the right-hand side's kernel. On CPU
     ``@`` is a library call per product (~30x slower), and ``jnp.sum(A * x, -1)`` becomes,
     under ``vmap``, separate reduction kernels with a (batch, rows, cols) broadcast of
     ``A`` per RK stage (docs/performance.md). The pairwise order ((t1 + t0) + (t3 + t2))
     reproduces the results of that ``jnp.sum`` form bit for bit (XLA's reduce order)."""
-    terms = [A[..., j] * x[j] for j in range(A.shape[-1])]
+    terms = [A[:, j] * x[j] for j in range(A.shape[1])]
     if not terms:
-        return jnp.zeros(A.shape[:-1])
+        return jnp.zeros(A.shape[:1] + A.shape[2:])
     while len(terms) > 1:
         pairs = [terms[i + 1] + terms[i] for i in range(0, len(terms) - 1, 2)]
         terms = pairs + ([terms[-1]] if len(terms) % 2 else [])

@@ -63,7 +63,7 @@ class Friction(eqx.Module):
     def torque(self, omega: Array, tau_applied: Array, z: Array | None) -> tuple[Array, Array]:
         """Friction torque F (N*m) and the friction state derivative (shape (0,) or (1,))."""
         if self.model == "none":
-            return jnp.zeros_like(omega), jnp.zeros((0,))
+            return jnp.zeros_like(omega), jnp.zeros((0,) + jnp.shape(omega))
         if self.model == "lugre":
             zz = z[0]
             g = self._level(omega) / self.stiffness
@@ -72,7 +72,7 @@ class Friction(eqx.Module):
         moving = self._level(omega) * jnp.sign(omega)
         stuck = jnp.clip(tau_applied, -self.static, self.static)
         f = jnp.where(jnp.abs(omega) < self.velocity_tolerance, stuck, moving)
-        return f, jnp.zeros((0,))
+        return f, jnp.zeros((0,) + jnp.shape(omega))
 
     def sticks(self, omega_prev: Array, omega_next: Array, tau_applied: Array) -> Array:
         """True where the joint is (or becomes) stuck after a substep (Karnopp models)."""

@@ -159,7 +159,7 @@ def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
                 "the bandwidth")
 
 
-class _Filtered(Plant):
+class FilteredPlant(Plant):
     """The plant with the sensor filters' states appended, for the integrator only:
     z = (x, y_f), ż = (f(x, u), ω_f (gain·s(x, u) − y_f))."""
 
@@ -182,8 +182,8 @@ class _Filtered(Plant):
         return jnp.concatenate([self.plant.project(z_prev[:n], z_next[:n], u), z_next[n:]])
 
 
-def _with_filters(plant: Plant, sens: Sensors) -> _Filtered:
-    return _Filtered(plant.state_names + tuple(f"filter_{sens.names[c]}" for c in sens.filtered),
+def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
+    return FilteredPlant(plant.state_names + tuple(f"filter_{sens.names[c]}" for c in sens.filtered),
                      plant.signal_names, plant.input_names, plant,
                      tuple(sens.index[c] for c in sens.filtered),
                      jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega)
