@@ -35,6 +35,9 @@ def export(commit: str, dest: Path) -> Path:
         subprocess.run(["git", "-C", str(ROOT), "archive", commit], stdout=fh, check=True)
     with tarfile.open(archive) as tar:
         tar.extractall(dest / "tree", filter="data")
+    shared = ROOT.parent / "shared"
+    if shared.is_dir():  # the real data beside the old tree too (bench_real_fit.py)
+        (dest / "shared").symlink_to(shared)
     return dest / "tree"
 
 

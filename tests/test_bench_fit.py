@@ -193,13 +193,13 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     and 0.15 rad in turn, 1.5 s holds, 10 s at 1 kHz, three state-feedback gain sets, link
     ringing at t = 0, encoder quantisation, strain-gauge noise and 2-sample delay): fit on
     two logs, validate on the third. Every physical parameter within 5 % (measured: all
-    within 3 %; viscous B −2.7 %, ζ +0.5 %, breakaway −0.4 %); the bias, whose truth is 0,
-    within 0.002 N·m (5 % of the breakaway); delays exact; held-out fit >= 95 % (measured
-    99.7 % hub angle, 98.3 % tip deflection). local_nfev = 80: with the default 30 the
-    viscous B, 5.5 % of the total damping beside the back-EMF, stops at −10 %; with a
-    friction polish of 8 generations (the earlier default) it stopped at −9.6 % at 4× the
-    cost (3.4e-5 now), depending on the last digit of the sampling period: B is where
-    least squares on a stick-slip cost ends in local minima."""
+    within 1.4 %; viscous B −1.1 %, ζ +1.2 %, breakaway +1.3 %); the bias, whose truth is
+    0, within 0.002 N·m (5 % of the breakaway); delays exact; held-out fit >= 95 %
+    (measured 99.9 % hub angle, 99.6 % tip deflection). local_nfev = 80 as before the
+    continuation of the local stage (smooth cost first, then the rounded loop): without
+    it least squares stopped on its step tolerance in jags of the rounded cost, and which
+    jag depended on the last bits of the simulation (B −2 % or −21 %, ζ +1 % or −26 %,
+    between two plants equal to 1e-9)."""
     import sys
     from pathlib import Path
 
@@ -272,16 +272,19 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
 
 
 def test_fit_reports_hac_and_iid_std(fitted):
-    """Both estimates reach the summary and the JSON; on these logs the residuals persist
-    for hundreds of samples (encoder quantisation of a slow or stuck hub, link ringing), so
-    the HAC std must exceed the iid one by at least 3× for every parameter (measured
-    6-15×: the square root of the residual correlation time) and the bandwidth must be
-    more than one sample."""
+    """Both estimates reach the summary and the JSON. The residuals of a quantised hub
+    that creeps or sticks are positively correlated (the encoder's rounding error of a
+    slowly moving angle persists for many samples), so the lag-1 correlation must be
+    positive, the HAC bandwidth more than one sample and the HAC std at least the iid one
+    for every parameter (measured 1.3-3.3× with ρ = 0.06 at the continued fit's optimum,
+    where the residual is nearly the sensors' noise; 6-22× at the earlier, 15× costlier
+    stop of least squares, whose model error persisted for hundreds of samples)."""
     res = fitted
     d = res.to_dict()["parameters"]
+    assert res.stages["local"]["rho"] > 0
     for k in res.params:
         assert np.isfinite(res.std[k]) and np.isfinite(res.std_iid[k]), k
-        assert res.std[k] > 3 * res.std_iid[k], (k, res.std[k], res.std_iid[k])
+        assert res.std[k] >= res.std_iid[k], (k, res.std[k], res.std_iid[k])
         assert d[k]["std"] == pytest.approx(res.std[k]) and d[k]["std_iid"] == pytest.approx(
             res.std_iid[k])
     assert all(m > 1 for m in res.stages["local"]["hac_bandwidth_samples"].values())

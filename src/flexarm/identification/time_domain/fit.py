@@ -265,10 +265,11 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     ``"neighbours"`` is the default (one start: the acceptance protocol's figures); use
     ``"both"`` with ``polish_iter=20`` when the global stage may miss the tip delay by
     2 samples (one open-loop log, several sessions, a slow sensor filter: tested), at
-    about twice the time. Least squares on a stick-slip cost ends in local minima: on the
-    acceptance logs a 1e-15 change of the sampling period moved the viscous B from −2 %
-    to −10 % at 4× the cost, and on three 10 s logs ``"both"`` kept delay 3 (true 2) at
-    a lower cost than a delay-2 fit that stopped at B −19 %.
+    about twice the time. Least squares runs as a continuation (:func:`_local_continued`):
+    on the rounded loop's cost alone it stopped in local minima that the last bits moved
+    (on the acceptance logs a 1e-15 change of the sampling period moved the viscous B from
+    −2 % to −10 % at 4× the cost); continued, sampling periods changed by ±1e-12 and
+    1e-10 give the same delays and every parameter within 1.4 %.
     ``estimates`` (default True): first the cheap estimates of
     :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link frequency), which set
     the delay search ranges (± 6 samples around them, up to ``max_delay``, default
@@ -479,11 +480,9 @@ def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best
             new = [c for c in prof["candidates"] if int(c["D"][1]) not in taken]
             starts.extend(new[:2 if delay_search == "profile" else 1])
     # every start gets the local stage and the friction polish on the full logs; the
-    # lowest cost wins (least squares on a stick-slip cost stops in local minima: on the
-    # acceptance logs a 1e-15 change of the sampling period moved the viscous B from −2 %
-    # to −10 % at 4× the cost; and on one open-loop log, two sessions or behind a slow
-    # sensor filter the global stage's tip delay was 2 samples off, which the profile over
-    # every delay finds)
+    # lowest cost wins (on one open-loop log, two sessions or behind a slow sensor filter
+    # the global stage's tip delay was 2 samples off, which the profile over every delay
+    # finds)
     finals = []
     for k, c in enumerate(starts):
         say(f"local stage{f' (start {k + 1} of {len(starts)})' if len(starts) > 1 else ''}: "
@@ -643,6 +642,8 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
     out = _local(obj, U1, D, max(local_nfev // 2, 2), off0=off)
     out["nfev"] += loc["nfev"] + int(res.nfev)
     out["seconds"] += loc["seconds"]
+    if "smooth_stage" in loc:
+        out["smooth_stage"] = loc["smooth_stage"]
     return out if out["cost"] <= float(res.fun) + 1e-15 else loc
 
 

@@ -138,6 +138,8 @@ class FitResult:
                   "local": {k: local[k] for k in ("cost", "nfev", "success", "message",
                                                   "seconds", "rho")},
                   "guesses": info}
+        if "smooth_stage" in local:  # the continuation's first stage (unrounded loop)
+            stages["local"]["smooth_stage"] = local["smooth_stage"]
         if local.get("cov_u") is not None:  # the HAC covariance of the unit coordinates
             # (space.names order): plants drawn from the fit (flexarm.design.plants)
             stages["local"]["covariance_unit"] = np.asarray(local["cov_u"]).tolist()
