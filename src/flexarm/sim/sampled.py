@@ -168,6 +168,14 @@ class FilteredPlant(Plant):
     gain: Array
     omega: Array
 
+    @classmethod
+    def around(cls, plant: Plant, index, gain: Array, omega: Array,
+               labels) -> "FilteredPlant":
+        """``plant`` with one filter on each plant signal ``index[i]`` (gain ``gain[i]``,
+        cutoff ``omega[i]`` rad/s), its state named ``filter_<labels[i]>``."""
+        return cls(plant.state_names + tuple(f"filter_{lb}" for lb in labels),
+                   plant.signal_names, plant.input_names, plant, tuple(index), gain, omega)
+
     def rhs(self, z: Array, u: Array) -> Array:
         n = self.plant.n_states
         x = z[:n]
@@ -183,10 +191,9 @@ class FilteredPlant(Plant):
 
 
 def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
-    return FilteredPlant(plant.state_names + tuple(f"filter_{sens.names[c]}" for c in sens.filtered),
-                     plant.signal_names, plant.input_names, plant,
-                     tuple(sens.index[c] for c in sens.filtered),
-                     jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega)
+    return FilteredPlant.around(plant, [sens.index[c] for c in sens.filtered],
+                                jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega,
+                                [sens.names[c] for c in sens.filtered])
 
 
 class Actuator(eqx.Module):

@@ -15,8 +15,8 @@ inertia and C = J_l ω_c² its stiffness (N·m/rad). F is Karnopp friction
 (:mod:`flexarm.models.friction`: stuck while |τ_a| <= F_s, F_c sign(ω) when moving; after
 every substep a hub that crossed zero velocity, or entered the band |ω| < Δv, while
 |τ_a| <= F_s is stopped with the link's absolute motion unchanged). What is special here is
-the sample loop around it, for fitting: one rollout per log and parameter point
-(:func:`_rollout`, ``vmap``-ed over both), sensor delays that are traced parameters, the
+the sample loop around it, for fitting: every log and parameter point at once (the batch
+(L, P) carried last in every array), sensor delays that are traced parameters, the
 logged per-sample gains, and the cost summed inside the scan; it equals
 :func:`flexarm.sim.sampled.simulate_loop` on the same rig to 1e-9 (tests/test_bench_fit.py).
 
@@ -133,15 +133,18 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
         gains = jnp.stack(([one] if filt_th else []) + ([gain] if filt_d else []))
         omega = jnp.stack(([const["omega_th"] * one] if filt_th else [])
                           + ([const["omega_d"] * one] if filt_d else []))
-        plant = FilteredPlant(arm.state_names + tuple(f"filter_{i}" for i in index),
-                              arm.signal_names, arm.input_names, arm, index, gains, omega)
+        plant = FilteredPlant.around(arm, index, gains, omega, [SIGNALS[i] for i in index])
     solver = solver_for("rk4")
+
+    def deflection(x):
+        """The tip deflection w = y − L θ (m) from the beam block's absolute coordinate."""
+        return x[2] - L * x[0]
 
     def sense(x):
         """What the A/D converters read: the filters' outputs where there are filters."""
         f = list(x[4:])
         th = f.pop(0) if filt_th else x[0]
-        d = f.pop(0) if filt_d else gain * (x[2] - L * x[0])
+        d = f.pop(0) if filt_d else gain * deflection(x)
         return _quantise(th, const["q_th"]), _quantise(d, const["q_d"])
 
     th0, om0, w0 = m["th0"], m["om0"], m["w0"]
@@ -186,12 +189,11 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
         u = jnp.clip(ubuf[-1], -const["limit"], const["limit"])
         xn = integrate_hold(plant, x, u[None], h, substeps, solver)
         et, ed = mt - yt_log, md - yd_log
-        w = xn[2] - L * xn[0]
-        bad = acc[2] | ~(jnp.abs(xn[0]) < 1e3) | ~(jnp.abs(w) < 1e3)
+        bad = acc[2] | ~(jnp.abs(xn[0]) < 1e3) | ~(jnp.abs(deflection(xn)) < 1e3)
         acc = (acc[0] + wt * et * et, acc[1] + wdw * ed * ed, bad)
         # keep a diverged rollout finite (its cost is replaced by the caller)
         xn = jnp.where(bad, 0.0, xn)
-        out = (mt, md, u, x[0], x[2] - L * x[0]) if record else None
+        out = (mt, md, u, x[0], deflection(x)) if record else None
         return (xn, bt, bd, ctrl, ubuf, jnp.array(True), acc, k + 1), out
 
     carry0 = (x0, bt0, bd0, ctrl0, ubuf0, jnp.array(False), acc0, jnp.array(0))
