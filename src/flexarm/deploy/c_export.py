@@ -97,21 +97,24 @@ class _Ctx:
         self.computed_measured: dict[str, str] = {}
         self.computed_references: dict[str, str] = {}
 
+    @staticmethod
+    def _input(channel: str, computed: dict[str, str], inputs: list[str], prefix: str) -> str:
+        """The C expression of ``channel``: its computed expression, else the input
+        ``<prefix>_<i>`` in order of first use (registered here)."""
+        if channel in computed:
+            return computed[channel]
+        if channel not in inputs:
+            inputs.append(channel)
+        return f"{prefix}_{inputs.index(channel)}"
+
     def meas(self, channel: str) -> str:
         """The C expression of measured channel ``channel`` (an input, registered on first
         use, unless computed inside the controller)."""
-        if channel in self.computed_measured:
-            return self.computed_measured[channel]
-        if channel not in self.measured:
-            self.measured.append(channel)
-        return f"m_{self.measured.index(channel)}"
+        return self._input(channel, self.computed_measured, self.measured, "m")
 
     def ref(self, channel: str) -> str:
-        if channel in self.computed_references:
-            return self.computed_references[channel]
-        if channel not in self.references:
-            self.references.append(channel)
-        return f"r_{self.references.index(channel)}"
+        """The C expression of reference channel ``channel`` (as :meth:`meas`)."""
+        return self._input(channel, self.computed_references, self.references, "r")
 
     def lit(self, v: float) -> str:
         """An exact literal of ``v`` in the precision (double: 17 significant digits round
