@@ -5,11 +5,17 @@ digital filters.
 Controller (:class:`LTIController`), run every ``every`` base periods T (its own period
 T_c = every·T; the output is held in between)::
 
-    e_k = s_k − y_k                      (setpoints s: named reference channels or 0;
-                                          y: named measured channels)
-    x_{k+1} = A x_k + B e_k,   v_k = C x_k + D e_k       (at t_k = j·T_c)
+    w_k = s_k − y_k                      (the error form: setpoints s named reference
+                                          channels or 0, y named measured channels)
+    w_k = (z_1, ..., z_p)                (the block form, ``signals``: each z_i a measured
+                                          channel, a reference channel or a constant)
+    x_{k+1} = A x_k + B w_k,   v_k = C x_k + D w_k       (at t_k = j·T_c)
     u = v mapped to the plant's inputs (``outputs``), others 0; the loop's actuator
     saturates u at the drives' limits.
+
+Several blocks at several rates (:class:`Blocks`, a scenario's ``[[controllers]]``): each
+block runs at its own multiple of T and drives its own plant inputs; u is their sum (each
+block's outputs are 0 on the inputs it does not drive, so the sum is a placement).
 
 A state-feedback law i = K (x_ref − x) is the static case D = K (A, B, C empty); two joints'
 laws side by side are D = blockdiag(K_1, K_2). The state starts at ``x0`` (default 0). A
@@ -47,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from flexarm.control.discrete import Controller
+from flexarm.control.discrete import Controller, Sum
 
 #: Largest accepted spectral radius of a controller's or filter's A (stable: <= 1).
 STABILITY_MARGIN = 1e-9
@@ -158,12 +164,17 @@ def digital_filter(spec: Any, dt: float | None, *, where: str = "filter") -> Dig
 
 # ----------------------------------------------------------------------------- controller
 class LTIController(Controller):
-    """Any discrete LTI controller on e = setpoint − measured (module docstring).
+    """Any discrete LTI controller block (module docstring).
 
-    ``A, B, C, D``: (n, n), (n, p), (m, n), (m, p); ``x0`` (n,). ``inputs``: p measured
-    channel names; ``setpoints``: p reference channel names or ``None`` (0); ``outputs``: the
-    plant input index of each of the m outputs; ``n_u``: the plant's inputs; ``every``: the
-    controller period in base periods."""
+    ``A, B, C, D``: (n, n), (n, p), (m, n), (m, p); ``x0`` (n,). The input vector, one of:
+    ``inputs`` (p measured channel names) with ``setpoints`` (p reference channel names or
+    ``None`` for 0), w = s − y; or ``signals`` (p entries ``("measured", name)``,
+    ``("reference", name)`` or ``("constant", value)``), w the entries in that order.
+    ``outputs``: the plant input index of each of the m outputs; ``n_u``: the plant's
+    inputs; ``every``: the controller period in base periods. ``u0`` (n_u,) and ``k0``
+    (samples since the start of the run, for the phase of ``every``) start the block
+    inside a run (:func:`flexarm.sim.filters.continuous_starts`); default a fresh start
+    (output 0, phase 0). ``name``: how messages name the block."""
 
     A: Array
     B: Array
@@ -175,23 +186,46 @@ class LTIController(Controller):
     outputs: tuple[int, ...] = eqx.field(static=True)
     n_u: int = eqx.field(static=True)
     every: int = eqx.field(static=True, default=1)
+    signals: tuple[tuple[str, Any], ...] | None = eqx.field(static=True, default=None)
+    u0: Array | None = None
+    k0: Array | None = None
+    name: str = eqx.field(static=True, default="controller")
 
     @property
     def measured_signals(self) -> tuple[str, ...]:
         """The measured channels it reads (the loop adds sensors for them)."""
+        if self.signals is not None:
+            return tuple(dict.fromkeys(v for kind, v in self.signals if kind == "measured"))
         return self.inputs
 
     @property
     def reference_signals(self) -> tuple[str, ...]:
+        if self.signals is not None:
+            return tuple(dict.fromkeys(v for kind, v in self.signals if kind == "reference"))
         return tuple(s for s in self.setpoints if s is not None)
 
+    @property
+    def dynamic(self) -> bool:
+        """Whether the block has a state (n > 0)."""
+        return self.A.shape[-1] > 0
+
     def init(self):
-        return (self.x0, jnp.zeros((self.n_u,)), jnp.zeros((), dtype=jnp.int32))
+        u0 = jnp.zeros((self.n_u,)) if self.u0 is None else self.u0
+        k0 = jnp.zeros((), dtype=jnp.int32) if self.k0 is None else self.k0
+        return (self.x0, u0, k0)
+
+    def input_vector(self, measured, reference):
+        """w_k from the sample's measured and reference signals (dicts of scalars)."""
+        if self.signals is not None:
+            return jnp.stack([measured[v] if kind == "measured" else reference[v]
+                              if kind == "reference" else jnp.asarray(float(v))
+                              for kind, v in self.signals])
+        return jnp.stack([(reference[s] if s is not None else 0.0) - measured[i]
+                          for i, s in zip(self.inputs, self.setpoints)])
 
     def step(self, state, measured, reference):
         x, held, k = state
-        e = jnp.stack([(reference[s] if s is not None else 0.0) - measured[i]
-                       for i, s in zip(self.inputs, self.setpoints)])
+        e = self.input_vector(measured, reference)
         v = self.C @ x + self.D @ e
         x_new = self.A @ x + self.B @ e
         u_new = jnp.zeros((self.n_u,)).at[jnp.asarray(self.outputs)].set(v)
@@ -200,6 +234,19 @@ class LTIController(Controller):
         run = (k % self.every) == 0
         u = jnp.where(run, u_new, held)
         return (jnp.where(run, x_new, x), u, k + 1), u
+
+
+class Blocks(Sum):
+    """Several controller blocks, each at its own period (``every``) and driving its own
+    plant inputs: u = Σ_i u_i (:class:`LTIController` blocks put zeros on the inputs they
+    do not drive, so the sum places each block's outputs). A scenario's ``[[controllers]]``."""
+
+    names: tuple[str, ...] = eqx.field(static=True, default=())
+
+    def __init__(self, *parts: Controller, names=()):
+        self.parts = tuple(parts)
+        self.names = tuple(names) or tuple(getattr(p, "name", f"controllers[{i}]")
+                                           for i, p in enumerate(parts))
 
 
 def _matrix(value: Any, name: str, where: str) -> np.ndarray:
@@ -214,35 +261,119 @@ def _matrix(value: Any, name: str, where: str) -> np.ndarray:
     return a
 
 
-def read_lti_file(path: str | Path, *, where: str = "[controller] file") -> dict[str, Any]:
-    """A, B, C, D (and dt when present) from a ``.mat``, ``.npz`` or JSON file."""
+def _struct(node: Any) -> dict[str, Any] | None:
+    """The fields of a struct as a dict (a v7.3 / JSON dict, scipy's ``mat_struct``, or
+    a 1×1 object array holding one), else ``None``."""
+    while isinstance(node, np.ndarray) and node.dtype == object and node.size == 1:
+        node = node.flat[0]
+    if isinstance(node, Mapping):
+        return dict(node)
+    names = getattr(node, "_fieldnames", None)
+    if names is not None:
+        return {k: getattr(node, k) for k in names}
+    if isinstance(node, np.ndarray) and node.dtype.names:  # a record array (a 1×1 struct)
+        rec = node.reshape(-1)[0]
+        return {k: rec[k] for k in node.dtype.names}
+    return None
+
+
+def _numeric(v: Any, key: str, where: str) -> np.ndarray:
+    while isinstance(v, np.ndarray) and v.dtype == object and v.size == 1:
+        v = v.flat[0]
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: field {key} is not numeric ({type(v).__name__}); give "
+                         "A, B, C, D as matrices of numbers") from None
+    return a
+
+
+def read_lti_file(path: str | Path, variable: str | None = None, *,
+                  where: str = "[controller] file") -> dict[str, Any]:
+    """A, B, C, D (and dt, from ``dt`` or ``Ts``, when present) from a ``.mat`` (v5 or
+    v7.3, through :func:`flexarm.io.matfile.load_mat`), ``.npz`` or JSON file.
+
+    ``variable``: the struct (``.mat``; ``a.b`` for a nested one), object (JSON) or key
+    prefix (``.npz``: keys ``NAME.A`` or ``NAME_A``) holding the fields; ``None``: the
+    file's top-level A, B, C, D. A MATLAB ``ss`` object cannot be read (it is opaque
+    outside MATLAB): save ``struct('A', sys.A, 'B', sys.B, 'C', sys.C, 'D', sys.D,
+    'Ts', sys.Ts)`` instead."""
     path = Path(path)
+    at = f"{where} = {str(path)!r}" + (f", variable = {variable!r}" if variable else "")
     if not path.is_file():
-        raise ValueError(f"{where} = {str(path)!r}: no such file")
+        raise ValueError(f"{where} = {str(path)!r}: no such file (a relative file is read "
+                         "from the folder of the TOML that names it)")
     suffix = path.suffix.lower()
     if suffix == ".mat":
-        from flexarm.io.matfile import load_mat
+        from flexarm.io.matfile import MatFileError, load_mat
 
-        raw = load_mat(path)
+        try:
+            raw = load_mat(path)
+        except MatFileError as exc:
+            raise ValueError(f"{at}: {exc}") from None
     elif suffix == ".npz":
         with np.load(path, allow_pickle=False) as z:
             raw = {k: z[k] for k in z.files}
+        if variable is not None:
+            sub = {}
+            for k, v in raw.items():
+                for sep in (".", "_", "/"):
+                    if k.startswith(variable + sep):
+                        sub[k[len(variable) + 1:]] = v
+            if not sub:
+                raise ValueError(f"{at}: the file has no keys {variable}.A, {variable}.B, ... "
+                                 f"(it holds: {', '.join(raw) or 'nothing'}); give the "
+                                 "prefix of the block's keys, or no variable for top-level "
+                                 "A, B, C, D")
+            raw, variable = sub, None
     elif suffix == ".json":
         try:
             raw = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
             raise ValueError(f"{where} = {str(path)!r}: not readable JSON ({exc})") from None
+        if not isinstance(raw, dict):
+            raise ValueError(f"{at}: the JSON is a {type(raw).__name__}; give an object with "
+                             "A, B, C, D (and dt or Ts)")
     else:
         raise ValueError(f"{where} = {str(path)!r}: give a .mat, .npz or .json file holding "
-                         "A, B, C, D and dt")
-    out = {}
-    for k in ("A", "B", "C", "D", "dt"):
+                         "A, B, C, D and dt (or Ts)")
+    if variable is not None:
+        node: Any = raw
+        for depth, part in enumerate(variable.split(".")):
+            fields = _struct(node)
+            if fields is None or part not in fields:
+                have = ", ".join(map(str, fields or {})) or "nothing"
+                what = "the file" if depth == 0 else ".".join(variable.split(".")[:depth])
+                raise ValueError(f"{at}: {what} has no {part!r} (it holds: {have}); give "
+                                 "variable = the name of the struct with fields A, B, C, D")
+            node = fields[part]
+        fields = _struct(node)
+        if fields is None:
+            raise ValueError(f"{at}: {variable} is not a struct (a "
+                             f"{type(node).__name__}); give the struct with fields A, B, C, "
+                             "D (and Ts)")
+        raw = fields
+    out: dict[str, Any] = {}
+    for k in ("A", "B", "C", "D"):
         if k in raw:
-            out[k] = np.asarray(raw[k], dtype=float) if k != "dt" else float(np.asarray(raw[k]).ravel()[0])
+            a = _numeric(raw[k], k, at)
+            out[k] = None if a.size == 0 and k != "D" else a
+    for k in ("dt", "Ts"):
+        if k in raw and "dt" not in out:
+            ts = _numeric(raw[k], k, at).ravel()
+            # MATLAB writes Ts = 0 for a continuous system, -1 for an unspecified period
+            if ts.size and ts[0] == 0:
+                raise ValueError(f"{at}: {k} = 0: a continuous-time system; discretise it "
+                                 "(c2d) before exporting the block")
+            if ts.size and ts[0] > 0:
+                out["dt"] = float(ts[0])
     if "D" not in out:
-        raise ValueError(f"{where} = {str(path)!r}: no D in the file (it holds: "
-                         f"{', '.join(map(str, raw)) or 'nothing'}); a controller needs at "
-                         "least D (and A, B, C when it has states)")
+        raise ValueError(f"{at}: no D (the {'struct' if variable else 'file'} holds: "
+                         f"{', '.join(map(str, raw)) or 'nothing'}); a controller block needs "
+                         "D (outputs × inputs) and A, B, C when it has states: add the "
+                         "field D (zeros for a strictly proper block)")
+    if all(out.get(k) is None for k in "ABC"):
+        out.pop("A", None), out.pop("B", None), out.pop("C", None)
     return out
 
 
@@ -303,30 +434,68 @@ def controller_period(dt: float | None, base: float, *, where: str = "[controlle
     return int(k)
 
 
-def lti_controller(A=None, B=None, C=None, D=None, *, inputs, setpoints=None, outputs,
+def _signal_entries(signals, *, references, measured, where: str):
+    """``signals`` (channel names and numbers) as (kind, value) entries: a name in
+    ``references`` is a reference channel, any other name a measured channel (checked
+    against ``measured`` when given), a number a constant."""
+    out = []
+    for j, s in enumerate(signals):
+        if isinstance(s, str):
+            if references is not None and s in references:
+                out.append(("reference", s))
+            elif measured is None or s in measured:
+                out.append(("measured", s))
+            else:
+                raise ValueError(
+                    f"{where}: signals[{j}] = {s!r} is neither a channel nor a number: give "
+                    f"a measured channel ({', '.join(sorted(measured))}), a reference "
+                    f"channel ({', '.join(sorted(references or ()))}) or a number")
+        elif isinstance(s, (int, float, np.integer, np.floating)) and not isinstance(s, bool) \
+                and math.isfinite(float(s)):
+            out.append(("constant", float(s)))
+        else:
+            raise ValueError(f"{where}: signals[{j}] = {s!r} is neither a channel nor a "
+                             "number: give a channel name or a finite number")
+    return tuple(out)
+
+
+def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=None, outputs,
                    input_names, dt: float | None = None, base_dt: float,
-                   x0=None, allow_unstable: bool = False, tf=None,
+                   x0=None, allow_unstable: bool = False, tf=None, signals=None,
+                   references=None, measured=None, name: str = "controller",
                    where: str = "[controller]") -> LTIController:
     """Build an :class:`LTIController`.
 
     ``tf``: a python-control ``StateSpace`` / ``TransferFunction`` with ``dt`` instead of
-    A..D (its dt is the controller period), or a (num, den) pair in z (SISO). ``inputs``:
-    measured channel names; ``setpoints``: reference channel names, or 0 / ``None`` for no
-    setpoint (default all 0); ``outputs``: names of the plant's inputs (``current_1``) or
-    1-based joint numbers; ``input_names``: the plant's input names."""
-    inputs = list(inputs)
-    setpoints = [None] * len(inputs) if setpoints is None else list(setpoints)
-    if len(setpoints) != len(inputs):
-        raise ValueError(f"{where}: setpoints has {len(setpoints)} entries, inputs "
-                         f"{len(inputs)}: give one setpoint (a reference channel or 0) per input")
-    sp = []
-    for s in setpoints:
-        if s is None or (not isinstance(s, str) and float(s) == 0.0):
-            sp.append(None)
-        elif isinstance(s, str):
-            sp.append(s)
-        else:
-            raise ValueError(f"{where}: setpoint {s!r}: give a reference channel name or 0")
+    A..D (its dt is the controller period), or a (num, den) pair in z (SISO). The input
+    vector: ``inputs`` (measured channel names) and ``setpoints`` (reference channel names,
+    or 0 / ``None`` for no setpoint; default all 0), w = s − y; or ``signals`` (the block's
+    own vector: channel names and numbers; a name in ``references`` is a reference channel,
+    another a measured one, checked against ``measured`` when given). ``outputs``: names of
+    the plant's inputs (``current_1``) or 1-based joint numbers; ``input_names``: the
+    plant's input names."""
+    if (inputs is None) == (signals is None):
+        raise ValueError(f"{where}: give inputs (+ setpoints) or signals, one of them")
+    if signals is not None:
+        sig = _signal_entries(signals, references=references, measured=measured, where=where)
+        inputs, sp, n_in = (), (), len(sig)
+    else:
+        sig = None
+        inputs = list(inputs)
+        setpoints = [None] * len(inputs) if setpoints is None else list(setpoints)
+        if len(setpoints) != len(inputs):
+            raise ValueError(f"{where}: setpoints has {len(setpoints)} entries, inputs "
+                             f"{len(inputs)}: give one setpoint (a reference channel or 0) per "
+                             "input")
+        sp = []
+        for s in setpoints:
+            if s is None or (not isinstance(s, str) and float(s) == 0.0):
+                sp.append(None)
+            elif isinstance(s, str):
+                sp.append(s)
+            else:
+                raise ValueError(f"{where}: setpoint {s!r}: give a reference channel name or 0")
+        n_in = len(inputs)
     outs = []
     for o in outputs:
         if isinstance(o, str) and o in input_names:
@@ -352,7 +521,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs, setpoints=None, ou
         A, B, C, D = ss.A, ss.B, ss.C, ss.D
         if ss.nstates == 0:
             A = B = C = None
-    A, B, C, D = lti_matrices(A, B, C, D, n_in=len(inputs), n_out=len(outs), where=where)
+    A, B, C, D = lti_matrices(A, B, C, D, n_in=n_in, n_out=len(outs), where=where)
     check_stable(A, allow_unstable=allow_unstable, where=where)
     every = controller_period(dt, base_dt, where=where)
     n = A.shape[0]
@@ -362,21 +531,27 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs, setpoints=None, ou
                          f"{n} state(s)")
     f = lambda a: jnp.asarray(np.asarray(a, float))  # noqa: E731
     return LTIController(f(A), f(B), f(C), f(D), f(x0), tuple(inputs), tuple(sp), tuple(outs),
-                         len(input_names), every)
+                         len(input_names), every, sig, name=name)
 
 
-def lti_from_spec(spec, *, base_dt: float, input_names, references=None) -> LTIController:
-    """The controller a scenario's ``[controller] type = "lti"`` describes
-    (:class:`flexarm.specs.experiment.LTIControllerSpec`); ``references``: the reference
-    channels the run provides (a setpoint naming another is an error)."""
-    where = "[controller]"
+def lti_from_spec(spec, *, base_dt: float, input_names, references=None, measured=None,
+                  where: str = "[controller]") -> LTIController:
+    """The controller block a scenario's ``[controller] type = "lti"`` (or one of its
+    ``[[controllers]]``) describes (:class:`flexarm.specs.experiment.LTIControllerSpec`);
+    ``references``: the reference channels the run provides (a setpoint naming another is
+    an error; in ``signals`` these names are the reference entries); ``measured``: the
+    measured channels and plant signals a ``signals`` entry may name (``None``: any)."""
+    name = getattr(spec, "name", None) or where.strip("[]")
     A = B = C = D = tf = None
     dt = spec.dt
     if spec.file is not None:
-        got = read_lti_file(spec.file, where=f"{where} file")
+        got = read_lti_file(spec.file, getattr(spec, "variable", None), where=f"{where} file")
         A, B, C, D = (got.get(k) for k in ("A", "B", "C", "D"))
         if dt is None:
             dt = got.get("dt")
+        elif got.get("dt") is not None and abs(got["dt"] - dt) > 1e-9 * dt:
+            raise ValueError(f"{where}: dt = {dt:g} s, but the file {spec.file!r} says "
+                             f"{got['dt']:g} s (Ts); drop dt, or fix the one that is wrong")
         where = f"{where} file {spec.file!r}"
     elif spec.num is not None:
         tf = (list(spec.num), list(spec.den))
@@ -385,32 +560,65 @@ def lti_from_spec(spec, *, base_dt: float, input_names, references=None) -> LTIC
     if references is not None:
         for s in spec.setpoints or []:
             if isinstance(s, str) and s not in references:
-                raise ValueError(f"[controller] setpoint {s!r} is not a reference channel of "
+                raise ValueError(f"{where} setpoint {s!r} is not a reference channel of "
                                  f"the run; it has {', '.join(sorted(references))} (add "
                                  f"[references.{s}] or pass it)")
     return lti_controller(A, B, C, D, inputs=spec.inputs, setpoints=spec.setpoints,
-                          outputs=spec.outputs, input_names=list(input_names), dt=dt,
-                          base_dt=base_dt, x0=spec.initial_state,
-                          allow_unstable=spec.allow_unstable, tf=tf, where=where)
+                          signals=getattr(spec, "signals", None), references=references,
+                          measured=measured, outputs=spec.outputs,
+                          input_names=list(input_names), dt=dt, base_dt=base_dt,
+                          x0=spec.initial_state, allow_unstable=spec.allow_unstable, tf=tf,
+                          name=name, where=where)
+
+
+def input_history(ctrl: LTIController, log) -> np.ndarray:
+    """The block's input vectors w_k over a log (N, p): its measured and reference channels
+    as logged, constants as given (the error form: s − y). Raises ValueError naming the
+    channels the log lacks."""
+    need = (*ctrl.measured_signals, *ctrl.reference_signals)
+    missing = [c for c in need if c not in log.signals]
+    if missing:
+        raise ValueError(f"{log.name}: the state of {ctrl.name} is run over the log, which "
+                         f"has no {', '.join(missing)}")
+    n = len(log)
+    if ctrl.signals is not None:
+        cols = [np.asarray(log[v], float) if kind != "constant" else np.full(n, float(v))
+                for kind, v in ctrl.signals]
+        return np.stack(cols, 1) if cols else np.zeros((n, 0))
+    y = np.stack([log[c] for c in ctrl.inputs], 1)
+    s = np.stack([log[c] if c is not None else np.zeros(n) for c in ctrl.setpoints], 1)
+    return s - y
+
+
+def run_state(ctrl: LTIController, w: np.ndarray, k: int, *, x0=None, k0: int = 0
+              ) -> tuple[np.ndarray, np.ndarray, int]:
+    """The block run over the inputs w_0..w_{k−1} (rows of ``w``) from state ``x0``
+    (default its own) at phase ``k0`` (samples since the run's start): its state x_k, the
+    output it holds at k (the last update's, in the plant's inputs) and the phase k0 + k.
+    x⁺ = A x + B w and v = C x + D w at every sample whose phase is a multiple of
+    ``every``."""
+    A, B = np.asarray(ctrl.A, float), np.asarray(ctrl.B, float)
+    C, D = np.asarray(ctrl.C, float), np.asarray(ctrl.D, float)
+    x = np.asarray(ctrl.x0 if x0 is None else x0, float).copy()
+    u = np.zeros(ctrl.n_u)
+    for j in range(k):
+        if (k0 + j) % ctrl.every:
+            continue
+        v = (C @ x if x.size else 0.0) + D @ w[j]
+        u = np.zeros(ctrl.n_u)
+        u[list(ctrl.outputs)] = v
+        if x.size:
+            x = A @ x + B @ w[j]
+    return x, u, k0 + k
 
 
 def state_from_log(ctrl: LTIController, log, k: int) -> np.ndarray:
     """The controller's state x_k at sample k of ``log`` (a :class:`flexarm.io.logs.Log`
     holding its input channels and setpoints): the controller run from its ``x0`` over the
     logged samples 0..k−1, updating at every ``every``-th sample from the first (the
-    command it computed is not needed: x⁺ = A x + B e). Exact when the log holds what the
+    command it computed is not needed: x⁺ = A x + B w). Exact when the log holds what the
     controller read; for an observer-based controller this is its estimate before a
     window, not a guess."""
-    missing = [c for c in (*ctrl.inputs, *ctrl.reference_signals) if c not in log.signals]
-    if missing:
-        raise ValueError(f"{log.name}: the controller's state is run over the log, which has no "
-                         f"{', '.join(missing)}")
-    A, B = np.asarray(ctrl.A, float), np.asarray(ctrl.B, float)
-    x = np.asarray(ctrl.x0, float).copy()
-    if A.size == 0:
-        return x
-    y = np.stack([log[c] for c in ctrl.inputs], 1)
-    s = np.stack([log[c] if c is not None else np.zeros(len(y)) for c in ctrl.setpoints], 1)
-    for j in range(0, k, ctrl.every):
-        x = A @ x + B @ (s[j] - y[j])
-    return x
+    if not ctrl.dynamic:
+        return np.asarray(ctrl.x0, float).copy()
+    return run_state(ctrl, input_history(ctrl, log), k)[0]

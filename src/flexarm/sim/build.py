@@ -58,7 +58,36 @@ def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     return ref.offset + ref.amplitude * ((phase >= 0.5) & (tau >= 0))
 
 
+def scenario_controller(scenario: Scenario, dt: float, *, input_names, references=None,
+                        measured=None) -> discrete.Controller:
+    """The controller of a scenario: its ``[controller]`` (:func:`controller_from_spec`), or
+    its ``[[controllers]]`` as :class:`~flexarm.control.lti.Blocks` (each block at its own
+    period, driving its own inputs). ``measured``: the channels and plant signals a block's
+    ``signals`` may name; ``references``: the run's reference channels."""
+    if scenario.controllers is None:
+        return controller_from_spec(scenario.controller, dt, input_names=input_names,
+                                    references=references, measured=measured,
+                                    quanta=sensor_quanta(scenario.sensors))
+    from flexarm.control.lti import Blocks, lti_from_spec
+
+    blocks = []
+    for i, spec in enumerate(scenario.controllers):
+        where = f"[[controllers]][{i}]" + (f" ({spec.name})" if spec.name else "")
+        blocks.append(lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names),
+                                    references=references, measured=measured, where=where))
+    driven: dict[int, str] = {}
+    for b in blocks:
+        for o in b.outputs:
+            if o in driven:
+                raise ValueError(f"{b.name}: outputs: {input_names[o]!r} is driven by "
+                                 f"{driven[o]} already; two controllers cannot drive one "
+                                 "output (sum them in one block, or give each its own outputs)")
+            driven[o] = b.name
+    return Blocks(*blocks)
+
+
 def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
+                         measured=None,
                          quanta: dict[str, float] | None = None) -> discrete.Controller:
     """The discrete controller a scenario's ``[controller]`` section describes; an ``lti``
     controller needs the plant's ``input_names`` and checks its setpoints against the
@@ -67,7 +96,8 @@ def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
     ``quanta`` (channel → quantisation step) gives its default velocity deadband."""
     if getattr(spec, "type", None) == "nested":
         return _nested_from_spec(spec, dt, quanta or {})
-    ctrl = _feedback_from_spec(spec, dt, input_names=input_names, references=references)
+    ctrl = _feedback_from_spec(spec, dt, input_names=input_names, references=references,
+                               measured=measured)
     fc = getattr(spec, "friction_compensation", None)
     if fc is None:
         return ctrl
@@ -132,15 +162,15 @@ def sensor_quanta(sensors: dict) -> dict[str, float]:
             for k, s in sensors.items()}
 
 
-def _feedback_from_spec(spec, dt: float, *, input_names=None,
-                        references=None) -> discrete.Controller:
+def _feedback_from_spec(spec, dt: float, *, input_names=None, references=None,
+                        measured=None) -> discrete.Controller:
     if spec is None:
         return discrete.from_transfer_function(([0.0], [1.0]), dt)
     if spec.type == "lti":
         from flexarm.control.lti import lti_from_spec
 
         return lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names or ("u",)),
-                             references=references)
+                             references=references, measured=measured)
     m = spec.measured
     if spec.type == "pd":
         return discrete.pd(spec.kp, spec.kd, dt, measured=m)
@@ -208,8 +238,9 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
                              f"compensates one joint; this arm has {arm.n_joints}. Use "
                              "[controller] type = \"joint_pd\" with friction_compensation = "
                              "[C_f per joint] for a multi-link arm")
-        ctrl = controller_from_spec(spec, dt, input_names=arm.input_names, references=refs,
-                                    quanta=sensor_quanta(scenario.sensors))
+        ctrl = scenario_controller(scenario, dt, input_names=arm.input_names,
+                                   references=refs,
+                                   measured=set(scenario.sensors) | set(arm.signal_names))
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
@@ -251,9 +282,9 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
     t = np.arange(n) * dt
     refs = _references(scenario, t, references)
-    ctrl = controller if controller is not None else controller_from_spec(
-        scenario.controller, dt, input_names=plant.input_names, references=refs,
-        quanta=sensor_quanta(scenario.sensors))
+    ctrl = controller if controller is not None else scenario_controller(
+        scenario, dt, input_names=plant.input_names, references=refs,
+        measured=set(scenario.sensors) | set(plant.signal_names))
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})

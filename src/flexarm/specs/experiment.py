@@ -219,18 +219,30 @@ class TFController(Spec):
 
 
 class LTIControllerSpec(Spec):
-    """Any discrete LTI controller (:mod:`flexarm.control.lti`): x⁺ = A x + B e,
-    u = C x + D e on e = setpoint − measured, run every ``dt`` (a whole multiple of the
-    sampling period; default the sampling period), output held in between and saturated at
-    the drives' limits. Give ``A, B, C, D`` (only ``D`` for a static gain, e.g. a state
-    feedback K), or SISO ``num``/``den`` in z, or ``file`` (``.mat``, ``.npz``, JSON holding
-    A, B, C, D and dt). ``inputs``: the measured channels (one per column of D);
-    ``setpoints``: per input a reference channel or 0 (default all 0); ``outputs``: the
-    plant inputs driven (``current_1``, or joint numbers); ``initial_state`` (default 0).
-    A controller with an eigenvalue of A outside the unit circle is refused unless
-    ``allow_unstable = true``."""
+    """Any discrete LTI controller block (:mod:`flexarm.control.lti`): x⁺ = A x + B v,
+    u = C x + D v, run every ``dt`` (a whole multiple of the sampling period; default the
+    sampling period), output held in between and saturated at the drives' limits.
+
+    The input vector v, one of two ways:
+
+    * ``inputs`` (+ ``setpoints``): v_i = setpoint_i − measured_i (the tracking error; per
+      input a reference channel or 0, default all 0);
+    * ``signals``: the block's own input vector as exported (MATLAB, python-control), in
+      its order; each entry a measured channel, a reference (setpoint) channel or a number
+      (a constant input), e.g. ``["theta_1", "alpha_f_1", "theta_dot_f_1",
+      "alpha_dot_f_1", "theta_ref_1", 0, 0, 0]``.
+
+    The matrices: ``A, B, C, D`` inline (only ``D`` for a static gain, e.g. a state feedback
+    K), or SISO ``num``/``den`` in z, or ``file`` (``.mat`` v5 / v7.3, ``.npz``, JSON) with
+    ``variable`` naming the struct (``.mat``) / object (JSON) / key prefix (``.npz``:
+    ``NAME.A`` or ``NAME_A``) holding fields A, B, C, D and, when present, ``Ts`` or ``dt``
+    (s); without ``variable`` the file's top-level A, B, C, D. A relative ``file`` is
+    relative to the folder of the TOML that names it. ``outputs``: the plant inputs driven
+    (``current_1``, or joint numbers); ``initial_state`` (default 0). A controller with an
+    eigenvalue of A outside the unit circle is refused unless ``allow_unstable = true``."""
 
     type: Literal["lti"]
+    name: str | None = None
     friction_compensation: FrictionCompensationSpec | None = None
     A: list[list[FiniteFloat]] | None = None
     B: list[list[FiniteFloat]] | None = None
@@ -239,9 +251,11 @@ class LTIControllerSpec(Spec):
     num: list[FiniteFloat] | None = None
     den: list[FiniteFloat] | None = None
     file: str | None = None
+    variable: str | None = None
     dt: Q("s", gt=0, what="controller period") | None = None
-    inputs: list[str] = Field(min_length=1)
+    inputs: list[str] | None = None
     setpoints: list[str | FiniteFloat] | None = None
+    signals: list[str | FiniteFloat] | None = None
     outputs: list[str | int] = Field(min_length=1)
     initial_state: list[FiniteFloat] | None = None
     allow_unstable: bool = False
@@ -260,6 +274,26 @@ class LTIControllerSpec(Spec):
             raise ValueError("give num and den together")
         if given == ["A..D"] and self.D is None:
             raise ValueError("D is missing (outputs × inputs); A, B, C are optional together")
+        if self.variable is not None and self.file is None:
+            raise ValueError(f"variable = {self.variable!r} selects a struct in a file: give "
+                             "file too (e.g. file = \"ctrl.mat\")")
+        if (self.inputs is None) == (self.signals is None):
+            raise ValueError("give the block's inputs one way: inputs (+ setpoints: v = "
+                             "setpoint − measured) or signals (the input vector in the "
+                             "block's order: channels and numbers); got "
+                             + ("both" if self.inputs is not None else "neither"))
+        if self.signals is not None:
+            if not self.signals:
+                raise ValueError("signals is empty: list the block's inputs in its order")
+            if self.setpoints is not None:
+                raise ValueError("setpoints go with inputs; with signals, write the setpoint "
+                                 "channels into the vector itself")
+            for j, s in enumerate(self.signals):
+                if isinstance(s, str) and not s.strip():
+                    raise ValueError(f"signals[{j}] = {s!r}: give a channel name or a number")
+            return self
+        if not self.inputs:
+            raise ValueError("inputs is empty: list the measured channels (one per column of D)")
         if self.setpoints is not None and len(self.setpoints) != len(self.inputs):
             raise ValueError(f"setpoints has {len(self.setpoints)} entries, inputs "
                              f"{len(self.inputs)}: one setpoint (a reference channel or 0) "

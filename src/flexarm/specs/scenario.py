@@ -6,6 +6,7 @@ whose lines name the field, the value given and what is expected.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -27,6 +28,9 @@ from flexarm.specs.multilink import JointPDController, MultiLinkArm
 from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
+#: plant signals of a multi-link arm (:func:`flexarm.models.multilink.signal_names`)
+_MULTI_SIGNAL = re.compile(r"(theta|theta_dot|deflection|deflection_angle|delta|"
+                           r"friction_torque)_\d+(_\d+)?|tip_x|tip_y")
 
 
 class ScenarioError(ValueError):
@@ -89,11 +93,106 @@ class Scenario(Spec):
     reference: Reference = Reference()
     references: dict[str, Reference] = Field(default_factory=dict)
     controller: Annotated[ControllerSpec | JointPDController, Field(discriminator="type")] | None = None
+    controllers: list[Annotated[ControllerSpec | JointPDController,
+                                Field(discriminator="type")]] | None = None
     regulation: RegulationSpec | None = None
 
     @property
     def n_joints(self) -> int:
         return 1 if self.arm.kind == "single_link" else len(self.arm.links)
+
+    def controller_specs(self) -> list:
+        """The controller blocks: ``[[controllers]]`` in order, or ``[controller]``, or none."""
+        if self.controllers is not None:
+            return list(self.controllers)
+        return [] if self.controller is None else [self.controller]
+
+    def reference_channels(self) -> set[str]:
+        """The reference channels the scenario defines: ``reference`` and ``[references]``."""
+        return {"reference", *self.references}
+
+    def controller_references(self) -> set[str]:
+        """The reference channels the controllers read (their setpoints, and the entries
+        of a ``signals`` vector that name a reference channel)."""
+        refs, out = self.reference_channels(), set()
+        for spec in self.controller_specs():
+            out.update(s for s in getattr(spec, "setpoints", None) or [] if isinstance(s, str))
+            out.update(s for s in getattr(spec, "signals", None) or []
+                       if isinstance(s, str) and s in refs)
+        return out
+
+    def with_controllers(self, tables: "ControllerFile | dict[str, Any]",
+                         source: str | None = None) -> "Scenario":
+        """This scenario with its controllers replaced by ``tables`` (a
+        :class:`ControllerFile` from :func:`load_controllers`, or a dict with a
+        ``controller`` table or a ``controllers`` list as in a scenario TOML); validated
+        again, so a period or output that does not fit this scenario is a
+        :class:`ScenarioError` naming ``source`` (default the controller file)."""
+        if isinstance(tables, ControllerFile):
+            source = source or tables.source
+            tables = tables.model_dump(mode="json", exclude_none=True,
+                                       exclude={"source"})
+        given = {k: v for k, v in tables.items() if k in ("controller", "controllers")}
+        if len(given) != 1 or set(tables) - {"controller", "controllers"}:
+            raise ScenarioError(f"{source or 'controllers'}: give [controller] (one block) or "
+                                "[[controllers]] (several), nothing else; got "
+                                f"{', '.join(sorted(tables)) or 'nothing'}")
+        data = self.model_dump(mode="json", exclude_none=True)
+        data.pop("controller", None)
+        data.pop("controllers", None)
+        data.update(given)
+        return scenario_from_dict(data, source=f"{source or 'controllers'} (with scenario "
+                                                f"{self.name!r})")
+
+    @model_validator(mode="after")
+    def _check_controllers(self) -> "Scenario":
+        if self.controller is not None and self.controllers is not None:
+            raise ValueError("give [controller] (one block) or [[controllers]] (several), "
+                             "not both")
+        if self.controllers is None:
+            blocks = [("controller", self.controller)] if self.controller is not None else []
+        else:
+            if not self.controllers:
+                raise ValueError("[[controllers]] is empty; give at least one block, or drop it")
+            blocks = [(f"controllers[{i}]", c) for i, c in enumerate(self.controllers)]
+            for where, c in blocks:
+                if c.type != "lti" or c.friction_compensation is not None:
+                    raise ValueError(
+                        f"{where}: type = {c.type!r}"
+                        + (" with friction_compensation" if c.type == "lti" else "")
+                        + " cannot run as one of several [[controllers]]: each block "
+                        "needs its own outputs and period, which type = \"lti\" has (write "
+                        "the law as A, B, C, D, or use [controller] for a single one)")
+        base = self.sampling.period if self.sampling is not None else None
+        driven: dict[object, str] = {}
+        known = (set(self.sensors) | self.reference_channels()
+                 | (set(KNOWN_SENSORS) if self.arm.kind == "single_link" else set()))
+        for where, c in blocks:
+            dt = getattr(c, "dt", None)
+            if dt is not None and base is not None:
+                r = dt / base
+                if round(r) < 1 or abs(r - round(r)) > 1e-9 * max(1.0, round(r)):
+                    raise ValueError(
+                        f"{where}.dt = {dt:g} s is not a whole multiple of the sampling "
+                        f"period {base:g} s (ratio {r:.9g}); give dt = k·{base:g} s, e.g. "
+                        f"{max(1, round(r)) * base:g} s (the block runs every k samples)")
+            for j, s in enumerate(getattr(c, "signals", None) or []):
+                if isinstance(s, str) and s not in known and not (
+                        self.arm.kind == "multi_link" and _MULTI_SIGNAL.fullmatch(s)):
+                    raise ValueError(
+                        f"{where}.signals[{j}] = {s!r} is neither a channel nor a number: "
+                        f"give a sensor channel ({', '.join(sorted(self.sensors)) or 'none'}), "
+                        f"a reference channel ({', '.join(sorted(self.reference_channels()))}"
+                        "), a plant signal, or a number (a constant input)")
+            for o in getattr(c, "outputs", None) or []:
+                m = re.fullmatch(r".*_(\d+)", o) if isinstance(o, str) else None
+                key = int(o) if not isinstance(o, str) else int(m.group(1)) if m else o
+                if key in driven and driven[key] != where:
+                    raise ValueError(f"{where}.outputs: {o!r} is driven by {driven[key]} "
+                                     "already; two controllers cannot drive one output (sum "
+                                     "them in one block, or give each its own outputs)")
+                driven[key] = where
+        return self
 
     @model_validator(mode="after")
     def _check_names(self) -> "Scenario":
@@ -125,7 +224,7 @@ class Scenario(Spec):
                              f"has {n} links")
         if (self.sampling is None) != (self.simulation is None):
             raise ValueError("give [sampling] and [simulation] together (the sampled-data loop)")
-        if self.sampling is None and self.controller is not None:
+        if self.sampling is None and (self.controller is not None or self.controllers):
             raise ValueError("a [controller] runs in the sampled-data loop: give [sampling] "
                              "(period) and [simulation] (duration)")
         for name in ("joint_angles", "joint_velocities"):
@@ -164,6 +263,76 @@ def _format_errors(err: ValidationError, source: str, what: str = "scenario") ->
                 msg = f"got {given!r}: {msg}"
             lines.append(f"  {loc}: {msg}")
     return "\n".join(lines)
+
+
+class ControllerFile(Spec):
+    """A controller file (``--controller FILE.toml``): ``[controller]`` or
+    ``[[controllers]]`` tables exactly as in a scenario (:func:`load_controllers`)."""
+
+    source: str = "controllers"
+    controller: Annotated[ControllerSpec | JointPDController,
+                          Field(discriminator="type")] | None = None
+    controllers: list[Annotated[ControllerSpec | JointPDController,
+                                Field(discriminator="type")]] | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> "ControllerFile":
+        if (self.controller is None) == (self.controllers is None):
+            raise ValueError("give [controller] (one block) or [[controllers]] (several): "
+                             + ("both given" if self.controller is not None else
+                                "the file has neither"))
+        return self
+
+
+def _resolve_files(data: Any, folder: Path) -> Any:
+    """``data`` with every controller table's relative ``file`` made absolute against
+    ``folder`` (the folder of the TOML that names it)."""
+    if not isinstance(data, dict):
+        return data
+    out = dict(data)
+    tables = []
+    if isinstance(out.get("controller"), dict):
+        out["controller"] = dict(out["controller"])
+        tables.append(out["controller"])
+    if isinstance(out.get("controllers"), list):
+        out["controllers"] = [dict(t) if isinstance(t, dict) else t for t in out["controllers"]]
+        tables += [t for t in out["controllers"] if isinstance(t, dict)]
+    for t in tables:
+        f = t.get("file")
+        if isinstance(f, str) and f and not Path(f).expanduser().is_absolute():
+            t["file"] = str((folder / Path(f).expanduser()).resolve())
+    return out
+
+
+def _read_toml(path: Path, what: str) -> dict[str, Any]:
+    if path.is_dir():
+        raise ScenarioError(f"{path}: is a folder; give a {what} TOML file")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path}: not a text file in UTF-8 (byte {exc.start}: "
+                            f"{exc.object[exc.start:exc.start + 1]!r}); a {what} is a TOML "
+                            "text file") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
+
+
+def load_controllers(path: str | Path) -> ControllerFile:
+    """Read a controller file: a TOML with ``[controller]`` or ``[[controllers]]`` tables
+    exactly as in a scenario (relative ``file`` entries resolved against the file's
+    folder). Pass the result to :meth:`Scenario.with_controllers` (what ``--controller
+    FILE.toml`` does). Problems are a :class:`ScenarioError` naming the file and field."""
+    path = Path(path)
+    if not path.exists():
+        raise ScenarioError(f"{path}: no such controller file (a TOML with [controller] or "
+                            "[[controllers]])")
+    data = _resolve_files(_read_toml(path, "controller file"), path.parent)
+    try:
+        return ControllerFile.model_validate({**data, "source": str(path)})
+    except ValidationError as err:
+        raise ScenarioError(_format_errors(err, str(path), "controller file")) from None
 
 
 def _is_union_tag(p: object) -> bool:
@@ -209,21 +378,13 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario | MultiLinkScenario:
-    """Read and validate a scenario TOML file (or a built-in scenario by name)."""
+    """Read and validate a scenario TOML file (or a built-in scenario by name). A relative
+    controller ``file`` is read from the scenario's folder, not the working directory."""
     path = resolve_scenario_path(name_or_path)
     if path.is_dir():
         raise ScenarioError(f"{path}: is a folder; give a scenario TOML file or a built-in "
                             "name (flexarm scenarios lists them)")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(f"{path}: not a text file in UTF-8 (byte {exc.start}: "
-                            f"{exc.object[exc.start:exc.start + 1]!r}); a scenario is a TOML "
-                            "text file") from None
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
+    data = _resolve_files(_read_toml(path, "scenario"), path.parent)
     return scenario_from_dict(data, source=str(path))
 
 
