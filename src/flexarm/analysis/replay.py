@@ -22,7 +22,8 @@ import numpy as np
 from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
 from flexarm.sim.build import prepare, to_result
-from flexarm.sim.filters import filter_state_from_log, with_filter_state
+from flexarm.sim.filters import (PieceStart, continuous_starts, filter_state_from_log,
+                                 start_piece, warn_assumed_start, with_filter_state)
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 
@@ -61,9 +62,11 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
     return np.concatenate([x, np.zeros(arm.n_states - len(x))])
 
 
-def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> Replay:
+def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
+           start: PieceStart | None = None) -> Replay:
     """Simulate ``scenario`` over ``log`` (or its ``window`` (t0, t1) in s on the log's clock)
-    and compare every measured channel the log holds."""
+    and compare every measured channel the log holds. ``start``: the controllers' and
+    filters' states at the log's first sample (:func:`replay_run`)."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
     full, k0 = log, 0
@@ -78,30 +81,44 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     duration = (n - 1) * dt
     sim = scenario.simulation.model_copy(update={"duration": duration})
     sc = scenario.model_copy(update={"simulation": sim})
-    used = set(sc.references)
-    setpoints = getattr(sc.controller, "setpoints", None) or []
-    used.update(s for s in setpoints if isinstance(s, str))
+    used = set(sc.references) | sc.controller_references()
     refs = {k: log[k] for k in sorted(used) if k in log.signals}
     p = prepare(sc, references=refs)
     assert p.n_samples == n, (p.n_samples, n)
     x0 = initial_state_from_log(p, log)
     loop = p.loop
-    states = filter_state_from_log(sc.sensors, full, k0, dt)  # the history before the window
-    if states:
-        loop = with_filter_state(loop, states)
-    from flexarm.control.lti import LTIController, state_from_log
-
-    if isinstance(loop.controller, LTIController) and loop.controller.A.size and k0 > 0:
-        import equinox as eqx
-        import jax.numpy as jnp
-
-        xc = state_from_log(loop.controller, full, k0)  # the controller's state before the window
-        loop = eqx.tree_at(lambda lp: lp.controller.x0, loop, jnp.asarray(xc))
+    if start is not None:
+        loop = start_piece(loop, start)
+    elif k0 > 0:  # the history before the window: filters and controllers run over it
+        head = Log(full.path, full.time[:k0], {k: v[:k0] for k, v in full.signals.items()})
+        loop = start_piece(loop, continuous_starts(loop, sc.sensors, [head, log], dt)[1])
+    else:
+        states = filter_state_from_log(sc.sensors, full, k0, dt)
+        if states:
+            loop = with_filter_state(loop, states)
+        warn_assumed_start(loop, log.name)
     out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)
     p.loop, p.x0 = loop, x0
     res = to_result(p, out)
     fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in log.signals}
     return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)})
+
+
+def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[Replay]:
+    """Replay each of ``logs``; with ``continuous`` they are consecutive pieces of one run, in
+    order: each piece's plant starts from its logged state and its dynamic controllers and
+    digital filters from the states run over the pieces before
+    (:func:`flexarm.sim.filters.continuous_starts`). Without it, a dynamic controller
+    starting a log from its assumed state is a warning naming it."""
+    if not continuous:
+        return [replay(scenario, lg) for lg in logs]
+    dt = scenario.sampling.period
+    sim = scenario.simulation.model_copy(update={"duration": (len(logs[0]) - 1) * dt})
+    sc = scenario.model_copy(update={"simulation": sim})
+    used = set(sc.references) | sc.controller_references()
+    p = prepare(sc, references={k: logs[0][k] for k in used if k in logs[0].signals})
+    starts = continuous_starts(p.loop, sc.sensors, logs, dt)
+    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts)]
 
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):

@@ -54,6 +54,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.control.discrete import Controller, Sum
+from flexarm.specs.scenario import ScenarioError
 
 #: Largest accepted spectral radius of a controller's or filter's A (stable: <= 1).
 STABILITY_MARGIN = 1e-9
@@ -283,7 +284,7 @@ def _numeric(v: Any, key: str, where: str) -> np.ndarray:
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: field {key} is not numeric ({type(v).__name__}); give "
+        raise ScenarioError(f"{where}: field {key} is not numeric ({type(v).__name__}); give "
                          "A, B, C, D as matrices of numbers") from None
     return a
 
@@ -301,7 +302,7 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
     path = Path(path)
     at = f"{where} = {str(path)!r}" + (f", variable = {variable!r}" if variable else "")
     if not path.is_file():
-        raise ValueError(f"{where} = {str(path)!r}: no such file (a relative file is read "
+        raise ScenarioError(f"{where} = {str(path)!r}: no such file (a relative file is read "
                          "from the folder of the TOML that names it)")
     suffix = path.suffix.lower()
     if suffix == ".mat":
@@ -310,7 +311,7 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
         try:
             raw = load_mat(path)
         except MatFileError as exc:
-            raise ValueError(f"{at}: {exc}") from None
+            raise ScenarioError(f"{at}: {exc}") from None
     elif suffix == ".npz":
         with np.load(path, allow_pickle=False) as z:
             raw = {k: z[k] for k in z.files}
@@ -321,7 +322,7 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
                     if k.startswith(variable + sep):
                         sub[k[len(variable) + 1:]] = v
             if not sub:
-                raise ValueError(f"{at}: the file has no keys {variable}.A, {variable}.B, ... "
+                raise ScenarioError(f"{at}: the file has no keys {variable}.A, {variable}.B, ... "
                                  f"(it holds: {', '.join(raw) or 'nothing'}); give the "
                                  "prefix of the block's keys, or no variable for top-level "
                                  "A, B, C, D")
@@ -330,12 +331,12 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
         try:
             raw = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
-            raise ValueError(f"{where} = {str(path)!r}: not readable JSON ({exc})") from None
+            raise ScenarioError(f"{where} = {str(path)!r}: not readable JSON ({exc})") from None
         if not isinstance(raw, dict):
-            raise ValueError(f"{at}: the JSON is a {type(raw).__name__}; give an object with "
+            raise ScenarioError(f"{at}: the JSON is a {type(raw).__name__}; give an object with "
                              "A, B, C, D (and dt or Ts)")
     else:
-        raise ValueError(f"{where} = {str(path)!r}: give a .mat, .npz or .json file holding "
+        raise ScenarioError(f"{where} = {str(path)!r}: give a .mat, .npz or .json file holding "
                          "A, B, C, D and dt (or Ts)")
     if variable is not None:
         node: Any = raw
@@ -344,12 +345,12 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
             if fields is None or part not in fields:
                 have = ", ".join(map(str, fields or {})) or "nothing"
                 what = "the file" if depth == 0 else ".".join(variable.split(".")[:depth])
-                raise ValueError(f"{at}: {what} has no {part!r} (it holds: {have}); give "
+                raise ScenarioError(f"{at}: {what} has no {part!r} (it holds: {have}); give "
                                  "variable = the name of the struct with fields A, B, C, D")
             node = fields[part]
         fields = _struct(node)
         if fields is None:
-            raise ValueError(f"{at}: {variable} is not a struct (a "
+            raise ScenarioError(f"{at}: {variable} is not a struct (a "
                              f"{type(node).__name__}); give the struct with fields A, B, C, "
                              "D (and Ts)")
         raw = fields
@@ -363,12 +364,12 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
             ts = _numeric(raw[k], k, at).ravel()
             # MATLAB writes Ts = 0 for a continuous system, -1 for an unspecified period
             if ts.size and ts[0] == 0:
-                raise ValueError(f"{at}: {k} = 0: a continuous-time system; discretise it "
+                raise ScenarioError(f"{at}: {k} = 0: a continuous-time system; discretise it "
                                  "(c2d) before exporting the block")
             if ts.size and ts[0] > 0:
                 out["dt"] = float(ts[0])
     if "D" not in out:
-        raise ValueError(f"{at}: no D (the {'struct' if variable else 'file'} holds: "
+        raise ScenarioError(f"{at}: no D (the {'struct' if variable else 'file'} holds: "
                          f"{', '.join(map(str, raw)) or 'nothing'}); a controller block needs "
                          "D (outputs × inputs) and A, B, C when it has states: add the "
                          "field D (zeros for a strictly proper block)")
@@ -541,7 +542,7 @@ def lti_from_spec(spec, *, base_dt: float, input_names, references=None, measure
     ``references``: the reference channels the run provides (a setpoint naming another is
     an error; in ``signals`` these names are the reference entries); ``measured``: the
     measured channels and plant signals a ``signals`` entry may name (``None``: any)."""
-    name = getattr(spec, "name", None) or where.strip("[]")
+    name = getattr(spec, "name", None) or where
     A = B = C = D = tf = None
     dt = spec.dt
     if spec.file is not None:

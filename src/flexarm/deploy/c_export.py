@@ -32,7 +32,11 @@ Kinds (equations in the generated comments):
 * :class:`~flexarm.control.discrete.LinearController` (``pd``, ``pid``, ``lead``, ``tf``):
   x⁺ = A x + B e, y = C x + D e, e = r − y_m;
 * :class:`~flexarm.control.lti.LTIController` (``lti``): e_i = s_i − y_i (s_i a reference
-  channel or 0), v = C x + D e, x⁺ = A x + B e every ``every`` samples, output held between;
+  channel or 0), or e the block's own ``signals`` vector (measured and reference channels,
+  constants), v = C x + D e, x⁺ = A x + B e every ``every`` samples, output held between;
+* :class:`~flexarm.control.lti.Blocks` (``[[controllers]]``): one step function schedules
+  the blocks, each updating every ``every`` calls on its own phase counter and holding its
+  output between; the blocks' outputs placed on their own commands (the header says so);
 * :class:`~flexarm.control.state_feedback.StateFeedback` (``state_feedback``):
   y = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ, rates by backward difference or the filtered one;
 * :class:`~flexarm.control.friction_compensation.FrictionCompensated`: y = y_fb + c σ, σ
@@ -218,6 +222,9 @@ def _register_builtin() -> None:
     exporter(StateFeedback)(_state_feedback)
     exporter(FrictionCompensated)(_friction)
     exporter(Sum)(_sum)
+    from flexarm.control.lti import Blocks
+
+    exporter(Blocks)(_blocks)
     exporter(Cascade)(_cascade)
     exporter(ReferenceChannel)(_reference_channel)
     exporter(InnerLoop)(_inner_loop)
@@ -272,8 +279,14 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     N = ctx.name.upper()
     P = f"{N}_{p.upper()}"
     every = int(ctrl.every)
-    ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints)]
-    part = Part(law=[f"LTIController: e = setpoint - measured ({', '.join(ins)}); "
+    if ctrl.signals is not None:
+        ins = [f"{v:.17g}" if kind == "constant" else str(v) for kind, v in ctrl.signals]
+        form = f"e = the block's input vector ({', '.join(ins)})"
+    else:
+        ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints)]
+        form = f"e = setpoint - measured ({', '.join(ins)})"
+    label = "" if ctrl.name in ("controller", "[controller]") else f" {ctrl.name}"
+    part = Part(law=[f"LTIController{label}: {form}; "
                      f"v = C x + D e, x+ = A x + B e; {n} state(s), {q} input(s), "
                      f"{m} output(s) -> u[{', '.join(map(str, ctrl.outputs))}]"
                      + (f"; runs every {every} samples, output held between" if every > 1
@@ -295,6 +308,12 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     body = [f"{ctx.real} e[{q}], v[{m}], {'acc, ' if n else ''}acc2;"]
     if n:
         body.append(f"{ctx.real} xn[{n}];")
+    if ctrl.signals is not None:
+        for j, (kind, v) in enumerate(ctrl.signals):
+            src = (ctx.meas(v) if kind == "measured" else ctx.ref(v) if kind == "reference"
+                   else ctx.lit(v))
+            note = f"{kind} {v}" if kind != "constant" else "constant"
+            body.append(f"e[{j}] = {src};  /* {note} */")
     for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints)):
         r = ctx.ref(sp) if sp is not None else "0"
         body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {sp or '0'} - {inp} */")
@@ -451,6 +470,22 @@ def _sum(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     step += [f"    for (i = 0; i < {ctx.n_u}; ++i) {{", f"        {out}[i] = {names[0]}[i];",
              *(f"        {out}[i] += {a}[i];" for a in names[1:]), "    }", "}"]
     part.step = step
+    return part
+
+
+def _blocks(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
+    """Several blocks at several rates (:class:`~flexarm.control.lti.Blocks`, a scenario's
+    ``[[controllers]]``): one step function is the scheduler; it runs every block's code at
+    each call, and a block with a period of k samples updates when its own phase counter is
+    0 (every k-th call from init) and holds its output between; y = Σ of the blocks'
+    outputs (each drives its own u entries, zeros on the others)."""
+    part = _sum(ctrl, ctx, p, out)
+    every = [int(getattr(b, "every", 1)) for b in ctrl.parts]
+    part.law[0] = (f"{len(ctrl.parts)} controller blocks ([[controllers]]), scheduled by this "
+                   f"one step function: block i runs every k_i calls (k = "
+                   f"{', '.join(map(str, every))}; its first run at the first call after "
+                   "init) and holds its output between; u = the blocks' outputs, each on its "
+                   "own commands:")
     return part
 
 
@@ -665,7 +700,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     name = _c_name(name)
     if precision not in PRECISIONS:
         raise ExportError(f"--precision {precision!r}: give double or float")
-    if scenario.controller is None and controller is None:
+    if not scenario.controller_specs() and controller is None:
         raise ExportError(f"scenario {scenario.name!r} has no [controller]: nothing to "
                           "export (add one, or export a design directory)")
     if scenario.sampling is None:
@@ -683,7 +718,9 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
         part = _emit(ctrl, ctx, "", "y")
     except ExportError as exc:
         what = ("the controller given" if controller is not None else
-                f"[controller] type = {getattr(scenario.controller, 'type', '?')!r}")
+                f"[controller] type = {getattr(scenario.controller, 'type', '?')!r}"
+                if scenario.controllers is None else
+                f"[[controllers]] ({len(scenario.controllers)} blocks)")
         raise ExportError(f"scenario {scenario.name!r}, {what}: {exc}") from None
 
     limit = np.broadcast_to(_np(loop.actuator.limit), (n_u,))
@@ -755,6 +792,10 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
         f" * Scenario: {scenario.name}" + (f" ({source})" if source and source != scenario.name
                                            else ""),
         f" * Design method: {method or 'none (the scenario file controller)'}",
+        f" * Controllers: {len(scenario.controllers)} blocks ([[controllers]]: "
+        + ", ".join(f"{b.name} every {b.every * scenario.sampling.period:g} s"
+                    for b in getattr(ctrl, "parts", ())) + ")"
+        if controller is None and scenario.controllers is not None else
         (f" * Controller type: {getattr(scenario.controller, 'type', '?')}"
          + (" + friction_compensation" if getattr(scenario.controller,
                                                      "friction_compensation", None) else ""))

@@ -13,18 +13,39 @@ cutoff, x₂ its rate; ``lowpass2`` outputs x₁, the rate kinds x₂. From a lo
   filter run over the logged unfiltered reading u of the same signal (the encoder angle
   beside θ̇_f) from rest, far enough back that the start no longer shows (|z|ⁿ < 1e-12);
   with less history than that, x₁ = u_k − (2ζ/ω) x₂ (the low-pass's lag, exact on a ramp).
+
+Consecutive files of one run (``continuous``, :func:`continuous_starts`): the logs, in order,
+are pieces of one run, sample K_i the first of piece i. Every dynamic controller block
+(:class:`~flexarm.control.lti.LTIController` with states, and the error-driven
+:class:`~flexarm.control.discrete.LinearController` of ``pd``/``pid``/``lead``/``tf``) starts
+piece i from the state reached by running it on the logged inputs of the pieces before,
+
+    x_{K_i} = run of x⁺ = A x + B w_k over k = 0..K_i − 1 from x_0 (at the block's own
+    phase: an update at every sample k with k ≡ 0 mod ``every``),
+
+with the output it holds and its phase K_i mod ``every``; the digital filters start from
+:func:`filter_state_from_log` at K_i on the pieces joined (their rate channels' history runs
+across the file boundary). Not carried: the sensors' pure-delay buffers and the computation
+delay's command buffer (they restart from the piece's first reading / 0); state-feedback
+rates restart from the piece's first sample.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.control.lti import FILTER_KINDS, digital_filter
+from flexarm.control.discrete import Controller, LinearController, Sum
+from flexarm.control.friction_compensation import FrictionCompensated
+from flexarm.control.lti import (FILTER_KINDS, Blocks, LTIController, digital_filter,
+                                 input_history, run_state)
 from flexarm.sim.sampled import SampledLoop, Sensors
 
 
@@ -120,3 +141,169 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
             w = 2 * math.pi * float(f["cutoff"])
             out[name] = np.array([u[k] - 2 * float(f.get("damping", 0.9)) / w * x2, x2])
     return out
+
+
+# ----------------------------------------------------------------------------- consecutive files
+class ControllerStateWarning(UserWarning):
+    """A dynamic controller starts a log from an assumed state (its ``initial_state``)."""
+
+
+@dataclass(frozen=True)
+class PieceStart:
+    """Where piece ``index`` of a run starts: its first sample's index in the run
+    (``sample``), each dynamic controller block's (state x, held output u, phase k) by
+    name, and the digital filters' states by channel."""
+
+    index: int
+    sample: int
+    controllers: dict[str, tuple[np.ndarray, np.ndarray, int]] = field(default_factory=dict)
+    filters: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _map_blocks(ctrl: Controller, fn: Callable[[Controller], Controller]) -> Controller:
+    """``ctrl`` with each block (an :class:`LTIController` or a :class:`LinearController`)
+    replaced by ``fn(block)``, through :class:`Blocks`, :class:`Sum` and
+    :class:`FrictionCompensated`."""
+    if isinstance(ctrl, (LTIController, LinearController)):
+        return fn(ctrl)
+    if isinstance(ctrl, Blocks):
+        return Blocks(*(_map_blocks(p, fn) for p in ctrl.parts), names=ctrl.names)
+    if isinstance(ctrl, Sum):
+        return Sum(*(_map_blocks(p, fn) for p in ctrl.parts))
+    if isinstance(ctrl, FrictionCompensated):
+        return dataclasses.replace(ctrl, feedback=_map_blocks(ctrl.feedback, fn))
+    return ctrl
+
+
+def _block_name(block: Controller, i: int) -> str:
+    return getattr(block, "name", None) or f"{type(block).__name__} #{i}"
+
+
+def dynamic_blocks(ctrl: Controller) -> list[tuple[str, Controller]]:
+    """The controller's blocks that have a state (name, block), in order."""
+    found: list[Controller] = []
+
+    def visit(b):
+        if (isinstance(b, LTIController) and b.dynamic) or (
+                isinstance(b, LinearController) and np.asarray(b.A).size):
+            found.append(b)
+        return b
+
+    _map_blocks(ctrl, visit)
+    out, seen = [], set()
+    for i, b in enumerate(found):
+        name = _block_name(b, i)
+        name = name if name not in seen else f"{name} #{i}"
+        seen.add(name)
+        out.append((name, b))
+    return out
+
+
+def _linear_history(block: LinearController, log) -> np.ndarray:
+    missing = [c for c in (block.measured, block.reference) if c not in log.signals]
+    if missing:
+        raise ValueError(f"{log.name}: the state of the {block.measured} controller is run "
+                         f"over the logs, which have no {', '.join(missing)}")
+    return np.asarray(log[block.reference], float) - np.asarray(log[block.measured], float)
+
+
+def _join(logs) -> Any:
+    """The logs joined into one (the signals all of them hold; time re-based to one clock
+    of the first log's step)."""
+    from flexarm.io.logs import Log
+
+    common = [k for k in logs[0].signals if all(k in lg.signals for lg in logs)]
+    n = sum(len(lg) for lg in logs)
+    dt = logs[0].dt if logs[0].time is not None and len(logs[0]) > 1 else 1.0
+    return Log(None, np.arange(n) * dt,
+               {k: np.concatenate([np.asarray(lg[k], float) for lg in logs]) for k in common})
+
+
+def continuous_starts(loop: SampledLoop, sensors: dict, logs, dt: float) -> list[PieceStart]:
+    """The start of each of ``logs`` (consecutive pieces of one run, in order) for ``loop``:
+    the dynamic controller blocks' states run over the pieces before (module docstring) and
+    the digital filters' states from the joined logs. ``sensors``: the scenario's
+    ``[sensors]``; ``dt``: the base sample period (s). A block whose inputs a log lacks is
+    an error naming the log and the channels."""
+    if not logs:
+        return []
+    blocks = dynamic_blocks(loop.controller)
+    joined = _join(logs)
+    hist = {}
+    for name, b in blocks:
+        if isinstance(b, LTIController):
+            hist[name] = input_history(b, joined)
+        else:
+            hist[name] = _linear_history(b, joined)[:, None]
+    starts, k = [], 0
+    state = {name: (np.asarray(b.x0 if isinstance(b, LTIController) else b.init(), float),
+                    np.zeros(getattr(b, "n_u", 1)), 0) for name, b in blocks}
+    for i, lg in enumerate(logs):
+        filt = filter_state_from_log(sensors, joined, k, dt) if i else \
+            filter_state_from_log(sensors, lg, 0, dt)
+        starts.append(PieceStart(i, k, {n: (x.copy(), u.copy(), ph)
+                                        for n, (x, u, ph) in state.items()}, filt))
+        n = len(lg)
+        for name, b in blocks:
+            x, u, ph = state[name]
+            w = hist[name][k:k + n]
+            if isinstance(b, LTIController):
+                state[name] = run_state(b, w, n, x0=x, k0=ph)
+            else:
+                A, B = np.asarray(b.A, float), np.asarray(b.B, float)
+                for j in range(n):
+                    x = A @ x + B * w[j, 0]
+                state[name] = (x, u, ph + n)
+        k += n
+    return starts
+
+
+def start_piece(loop: SampledLoop, start: PieceStart) -> SampledLoop:
+    """``loop`` with its dynamic controller blocks and digital filters starting where
+    ``start`` (from :func:`continuous_starts`) says."""
+    names = dict(dynamic_blocks(loop.controller))
+    by_id = {id(b): n for n, b in names.items()}
+
+    def set_state(b):
+        n = by_id.get(id(b))
+        if n is None or n not in start.controllers:
+            return b
+        x, u, ph = start.controllers[n]
+        if isinstance(b, LTIController):
+            return dataclasses.replace(b, x0=jnp.asarray(x), u0=jnp.asarray(u),
+                                       k0=jnp.asarray(ph % b.every, dtype=jnp.int32))
+        return _LinearStarted.around(b, x)
+
+    ctrl = _map_blocks(loop.controller, set_state)
+    loop = eqx.tree_at(lambda lp: lp.controller, loop, ctrl)
+    if start.filters and loop.sensors.digital:
+        loop = with_filter_state(loop, start.filters)
+    return loop
+
+
+class _LinearStarted(LinearController):
+    """A :class:`LinearController` whose state starts at ``x_start`` instead of 0."""
+
+    x_start: Any = None
+
+    @classmethod
+    def around(cls, b: LinearController, x) -> "_LinearStarted":
+        return cls(b.A, b.B, b.C, b.D, b.measured, b.reference, jnp.asarray(x, float))
+
+    def init(self):
+        return self.x_start
+
+
+def warn_assumed_start(loop: SampledLoop, log_name: str, *, stacklevel: int = 2) -> list[str]:
+    """Warn (:class:`ControllerStateWarning`) that each dynamic controller block of
+    ``loop`` starts the log from an assumed state; returns the messages."""
+    msgs = []
+    for name, b in dynamic_blocks(loop.controller):
+        n = int(np.asarray(b.A).shape[-1])
+        msgs.append(f"{log_name}: controller {name!r} is dynamic ({n} state(s)) and starts "
+                    "this log from its initial_state (an assumption, 0 by default); if the "
+                    "logs are consecutive pieces of one run, pass --continuous "
+                    "(continuous=True) to carry its state from the pieces before")
+    for m in msgs:
+        warnings.warn(m, ControllerStateWarning, stacklevel=stacklevel + 1)
+    return msgs
