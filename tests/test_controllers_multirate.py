@@ -16,8 +16,8 @@ def _scenario(duration=0.2):
     signals form and the lab's elbow LQR at 2 ms."""
     d = load_scenario("quanser-two-link").model_dump(mode="json", exclude_none=True)
     d["simulation"]["duration"] = duration
-    for r in d["references"].values():  # both setpoints move inside the run
-        r.update(period=0.1, start=0.0)
+    for r in d["references"].values():  # both setpoints move inside the run, unsaturated
+        r.update(period=0.1, start=0.0, amplitude=0.02, offset=-0.01)
     K = np.asarray(d.pop("controller")["D"])
     Dw = list(-K[0, :4]) + [K[0, 0], 0.0, 0.0, 0.0]
     d["controllers"] = [
@@ -58,6 +58,7 @@ def test_each_block_updates_at_its_own_period_and_holds_between():
         e2 = np.r_[r["theta_ref_2"][k] - m["theta_2"][k], -m["alpha_f_2"][k],
                    -m["theta_dot_f_2"][k], -m["alpha_dot_f_2"][k]]
         want[k] = [held[0], K[1, 4:] @ e2]
+    assert np.abs(want[:, 0]).max() < 0.94  # the shoulder's holds are not hidden by saturation
     want = np.clip(want, [-0.94, -1.2], [0.94, 1.2])
     np.testing.assert_allclose(res.command, want, rtol=0, atol=1e-12)
     # the shoulder's command changes only at its own updates

@@ -176,7 +176,30 @@ def _nested_gauge():
     return sc, MeasuredTip(ctrl, jnp.asarray(1 / 0.42)), refs
 
 
+def _two_link_blocks():
+    """``[[controllers]]`` on the two-link rig (issue #24): a dynamic shoulder block at
+    10 ms (5 samples) on its own 8-entry input vector [θ1, α1_f, θ̇1_f, α̇1_f, θ1_ref, 0.5,
+    0, 0] (measured channels, a setpoint, constants), the lab's elbow LQR at 2 ms; a 1 s run
+    with both references switching at 0.5 s."""
+    d = load_scenario("quanser-two-link").model_dump(mode="json", exclude_none=True)
+    d["simulation"]["duration"] = 1.0
+    for r in d["references"].values():
+        r.update(period=1.0, start=0.0)
+    K = np.asarray(d.pop("controller")["D"])
+    d["controllers"] = [
+        {"type": "lti", "name": "shoulder", "dt": 0.01, "outputs": ["current_1"],
+         "signals": ["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_ref_1",
+                     0.5, 0, 0],
+         "A": [[0.9, 0.05], [0.0, 0.8]], "B": [[0.02] * 8, [-0.01] * 8], "C": [[0.3, -0.2]],
+         "D": [list(-K[0, :4]) + [K[0, 0], 0.01, 0.0, 0.0]]},
+        {"type": "lti", "name": "elbow", "dt": 0.002, "outputs": ["current_2"],
+         "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
+         "setpoints": ["theta_ref_2", 0, 0, 0], "D": [list(K[1, 4:])]}]
+    return scenario_from_dict(d)
+
+
 CASES["lti_mimo_two_link"] = (_two_link, "scenario")
+CASES["controllers_two_link_multirate"] = (_two_link_blocks, "scenario")
 CASES["nested_gauge_python"] = (_nested_gauge, "python")
 CASES["nested_feliu_python"] = (_nested, "python")
 
@@ -356,7 +379,8 @@ def _allowed(ref: dict, unit: float) -> tuple[np.ndarray, np.ndarray]:
 @needs_cc
 @pytest.mark.parametrize("precision", ["double", "float"])
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow)
-                                  if c == "lti_mimo_two_link" else c for c in CASES])
+                                  if c in ("lti_mimo_two_link", "controllers_two_link_multirate")
+                                  else c for c in CASES])
 def test_c_matches_python(case, precision, tmp_path):
     ref = _reference(case)
     sc = ref["scenario"]

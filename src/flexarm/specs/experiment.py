@@ -221,7 +221,13 @@ class TFController(Spec):
 class LTIControllerSpec(Spec):
     """Any discrete LTI controller block (:mod:`flexarm.control.lti`): x⁺ = A x + B v,
     u = C x + D v, run every ``dt`` (a whole multiple of the sampling period; default the
-    sampling period), output held in between and saturated at the drives' limits.
+    sampling period, or the file's ``Ts``), output held in between and saturated at the
+    drives' limits; v is ``setpoint − measured`` over ``inputs`` / ``setpoints``, or the
+    block's own input vector ``signals`` (measured channels, reference channels, numbers);
+    A, B, C, D inline, as ``num``/``den``, or from ``file`` (+ ``variable``: a struct in a
+    ``.mat``, a key prefix in an ``.npz``, an object in JSON; a relative path is relative
+    to the TOML's folder). Also each block of ``[[controllers]]`` (own ``dt`` and
+    ``outputs``; no two blocks drive one output).
 
     The input vector v, one of two ways:
 
@@ -238,8 +244,11 @@ class LTIControllerSpec(Spec):
     ``NAME.A`` or ``NAME_A``) holding fields A, B, C, D and, when present, ``Ts`` or ``dt``
     (s); without ``variable`` the file's top-level A, B, C, D. A relative ``file`` is
     relative to the folder of the TOML that names it. ``outputs``: the plant inputs driven
-    (``current_1``, or joint numbers); ``initial_state`` (default 0). A controller with an
-    eigenvalue of A outside the unit circle is refused unless ``allow_unstable = true``."""
+    (``current_1``, or joint numbers); ``initial_state`` (default 0); ``name``: how messages
+    name the block (e.g. the warning that it starts a log from an assumed state). A
+    controller with an eigenvalue of A outside the unit circle is refused unless
+    ``allow_unstable = true``. Each block of a scenario's ``[[controllers]]`` is one of
+    these, with its own ``dt`` and ``outputs`` (no two blocks drive one output)."""
 
     type: Literal["lti"]
     name: str | None = None

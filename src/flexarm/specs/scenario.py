@@ -74,7 +74,9 @@ class Scenario(Spec):
 
     Sections: ``arm``; for the sampled-data loop ``sampling``, ``sensors``, ``actuator``,
     ``simulation``, ``initial``, ``reference`` (the channel ``reference``) and
-    ``references`` (more named channels, e.g. ``theta_ref_1``), ``controller``; for a
+    ``references`` (more named channels, e.g. ``theta_ref_1``), ``controller`` (one block)
+    or ``controllers`` (``[[controllers]]``: several ``type = "lti"`` blocks, each at its own
+    period, a multiple of the sampling period, driving its own outputs); for a
     multi-link arm under a continuous-time law, ``regulation`` (DLS eqs. 8, 30). Sensor
     channels are named after the arm's signals (:attr:`flexarm.sim.plant.Plant.signal_names`;
     a single link: ``motor_angle``, ``tip_angle``, ``tip_deflection``, ``motor_velocity``;
@@ -261,7 +263,7 @@ def _format_errors(err: ValidationError, source: str, what: str = "scenario") ->
             given = e.get("input")
             if isinstance(given, (str, int, float)) and repr(given) not in msg:
                 msg = f"got {given!r}: {msg}"
-            lines.append(f"  {loc}: {msg}")
+            lines.append(f"  {loc}: {msg}" if loc else f"  {msg}")
     return "\n".join(lines)
 
 
