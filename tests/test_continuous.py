@@ -88,8 +88,8 @@ def test_a_log_without_the_blocks_inputs_is_named():
     blk = lti_controller([[0.5]], [[1.0]], [[1.0]], [[0.0]], inputs=["y1"], outputs=[1],
                          input_names=("current_1",), base_dt=1e-3, name="shoulder LQG")
     logs = [Log(Path("a.mat"), np.arange(5) * 1e-3, {"y2": np.zeros(5)})]
-    with pytest.raises(ValueError, match="the state of shoulder LQG is run over the log, which "
-                                         "has no y1"):
+    with pytest.raises(ValueError, match=r"a.mat: no y1, an input of shoulder LQG, whose state "
+                                         r"is run over the logs \(continuous\)"):
         continuous_starts(_Loop(blk), {}, logs, 1e-3)
 
 

@@ -228,6 +228,15 @@ def continuous_starts(loop: SampledLoop, sensors: dict, logs, dt: float) -> list
     if not logs:
         return []
     blocks = dynamic_blocks(loop.controller)
+    for name, b in blocks:
+        need = ((*b.measured_signals, *b.reference_signals) if isinstance(b, LTIController)
+                else (b.measured, b.reference))
+        for lg in logs:
+            missing = [c for c in need if c not in lg.signals]
+            if missing:
+                raise ValueError(f"{lg.name}: no {', '.join(missing)}, an input of {name}, "
+                                 "whose state is run over the logs (continuous): log the "
+                                 "block's inputs, or replay without continuous")
     joined = _join(logs)
     hist = {}
     for name, b in blocks:
