@@ -22,7 +22,7 @@ import numpy as np
 from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
 from flexarm.sim.build import prepare, to_result
-from flexarm.sim.filters import filter_state_from_log, with_filter_state
+from flexarm.sim.filters import computed_channels, filter_state_from_log, with_filter_state
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 
@@ -34,6 +34,8 @@ class Replay:
     result: SimulationResult
     log: Log
     fit_percent: dict[str, float] = field(default_factory=dict)
+    #: channels the log lacks, computed from logged ones (:func:`computed_channels`)
+    notes: list[str] = field(default_factory=list)
 
 
 def _first(log: Log, names: list[str]) -> float:
@@ -66,6 +68,11 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     and compare every measured channel the log holds."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
+    extra, notes = computed_channels(scenario.sensors, log, scenario.sampling.period)
+    logged = set(log.signals)
+    if extra:
+        log = Log(log.path, log.time, {**log.signals, **extra}, list(log.comments),
+                  dict(log.meta), list(log.skipped), list(log.notes) + notes)
     full, k0 = log, 0
     if window is not None:
         log = log.window(*window)
@@ -100,8 +107,8 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)
     p.loop, p.x0 = loop, x0
     res = to_result(p, out)
-    fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in log.signals}
-    return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)})
+    fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in logged}
+    return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)}, notes)
 
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):

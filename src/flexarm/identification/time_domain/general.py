@@ -292,6 +292,7 @@ class _LogData:
     from_scenario: bool  # the (window) start is the log's first sample
     window: tuple[int, int]  # samples [k0, k1) fitted
     log: Any = None  # the whole log as a flexarm.io.logs.Log (time from 0)
+    computed: tuple[str, ...] = ()  # channels computed from logged ones, not compared
 
 
 def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
@@ -456,6 +457,7 @@ class _Engine:
         wins = options.windows or [None] * len(logs)
         if len(wins) != len(logs):
             raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
+        self.notes: list[str] = []  # channels computed from logged ones (_read)
         self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
         from flexarm.sim.build import _measured_names
 
@@ -469,7 +471,8 @@ class _Engine:
                                  "fit runs the controller on the logged channels from the log's "
                                  "start: log them (or map them with a log format)")
         chans = options.channels or {n: 1.0 for n in self.names
-                                     if any(L.present[self.names.index(n)] for L in self.logs)}
+                                     if any(L.present[self.names.index(n)]
+                                            and n not in L.computed for L in self.logs)}
         for c in chans:
             if c not in self.names:
                 raise ValueError(f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
@@ -498,6 +501,11 @@ class _Engine:
             raise ValueError(f"{name}: sampled every {dt:g} s, but scenario "
                              f"{self.template.name!r} samples every {self.dt:g} s "
                              "([sampling] period); resample the log or change the scenario")
+        from flexarm.sim.filters import computed_channels
+
+        extra, notes = computed_channels(self.template.sensors, sig, self.dt, name=name)
+        sig = {**sig, **extra}
+        self.notes += notes
         t = t - t[0]
         k0, k1 = 0, t.size
         if window is not None:
@@ -527,7 +535,8 @@ class _Engine:
 
         whole = Log(None, t, {k: np.asarray(v, float) for k, v in sig.items()})
         return _LogData(label, t, y, refs, present,
-                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole)
+                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole,
+                        tuple(extra))
 
     def _segments(self, seg: float | None) -> None:
         """Segment table: (log, k0, length) and the padded per-segment arrays."""
@@ -873,6 +882,8 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     say = progress or (lambda msg: None)
     z0 = np.zeros(n)
     stages: dict[str, Any] = {"segments": len(eng.seg), "segment_samples": eng.M}
+    if eng.notes:
+        stages["computed_channels"] = list(eng.notes)
     if options.global_stage:
         t0 = time.perf_counter()
 
@@ -1145,7 +1156,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
         fp[L.name] = d
         traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
                         "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
-    out = {"fit_percent": fp, "trajectories": traj, "plots": []}
+    out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes)}
     if plots is not None:
         out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
     return out
