@@ -24,7 +24,7 @@ from flexarm.io.logs import Log
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.filters import computed_channels, filter_state_from_log, with_filter_state
 from flexarm.sim.result import SimulationResult
-from flexarm.sim.sampled import simulate_loop
+from flexarm.sim.sampled import check_zeroing, simulate_loop
 
 
 @dataclass
@@ -91,6 +91,7 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> 
     refs = {k: log[k] for k in sorted(used) if k in log.signals}
     p = prepare(sc, references=refs)
     assert p.n_samples == n, (p.n_samples, n)
+    check_zeroing(p.loop.sensors, n, dt, log.name)
     x0 = initial_state_from_log(p, log)
     loop = p.loop
     states = filter_state_from_log(sc.sensors, full, k0, dt)  # the history before the window

@@ -92,7 +92,7 @@ import numpy as np
 from flexarm.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.sim.build import Prepared, prepare, reference_signal
-from flexarm.sim.sampled import _quantise, _scan, initial_carry
+from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
 __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "expand_paths",
            "scenario_with"]
@@ -501,6 +501,7 @@ class _Engine:
             raise ValueError(f"{name}: sampled every {dt:g} s, but scenario "
                              f"{self.template.name!r} samples every {self.dt:g} s "
                              "([sampling] period); resample the log or change the scenario")
+        check_zeroing(self.prep0.loop.sensors, t.size, self.dt, name)
         from flexarm.sim.filters import computed_channels
 
         extra, notes = computed_channels(self.template.sensors, sig, self.dt, name=name)
@@ -683,7 +684,8 @@ class _Engine:
                 loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
                 {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
                 jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
-                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn))))
+                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn),
+                jnp.asarray(self.seg_k0, jnp.int32))))
         return np.concatenate(out)
 
     def _warm(self, loop):
@@ -809,14 +811,15 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0):
 _warm_jit = eqx.filter_jit(_warm)
 
 
-def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn):
+def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn,
+                   seg_k0):
     act, sens = loop.actuator, loop.sensors
     M = next(iter(seg_refs.values())).shape[1]
     C = len(sens.names)
     cs_seg, ub_seg = warm
     scn_carry = initial_carry(loop, x0_scn)
 
-    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off):
+    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off, k0):
         up = _quantise(jnp.clip(ub[-1], -act.limit, act.limit), act.quantum)
         x0 = _state_from_log(loop, y0s, dy0s)
         carry = (x0, cs, sb, ub, up)
@@ -824,6 +827,8 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
             carry += (jnp.stack([y0s[c] for c in sens.filtered]),)
         if sens.digital:
             carry += (xd,)
+        if sens.zeroed:  # the logger's zeroing: a segment after its window reads the
+            carry += (zeroing_start(sens, k0),)  # logged (zeroed) values, offset 0
         if len(carry) != len(scn_carry):
             raise RuntimeError(f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
                                f"builds {len(carry)} (flexarm.sim.sampled changed: update "
@@ -831,7 +836,8 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
         carry = jax.tree.map(lambda a, b: jnp.where(use_scn, a, b), scn_carry, carry)
         return (carry[0] + off,) + tuple(carry[1:])
 
-    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets)
+    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets,
+                                  seg_k0)
     noise = jnp.zeros((M, C))
 
     def one_seg(carry, refs):
@@ -843,9 +849,9 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
 
 @eqx.filter_jit
 def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
-                  seg_xd, seg_scn):
+                  seg_xd, seg_scn, seg_k0):
     f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
-                                              sbuf0, seg_xd, seg_scn)
+                                              sbuf0, seg_xd, seg_scn, seg_k0)
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
         loop, x0s, offsets, warm)
 
