@@ -10,6 +10,9 @@ digital filters' states by :func:`flexarm.sim.filters.filter_state_from_log`. Re
 channels the scenario uses (its ``[references]`` and the controller's setpoints) are taken
 from the log when it holds them. A dynamic LTI controller replayed from inside a log starts
 from its state run over the log before the window (:func:`flexarm.control.lti.state_from_log`).
+Filtered channels the log lacks but its signals define (the lab's rates of a logged angle)
+are computed through the channel's filter (:func:`flexarm.sim.filters.computed_channels`)
+for the start states, not compared; :attr:`Replay.notes` says which.
 """
 
 from __future__ import annotations
