@@ -148,7 +148,7 @@ def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
             continue
         if dt is None or not dt > 0:
             raise ValueError(f"sensor {n!r}: zeroing = {w:g} s needs the sample period")
-        k = int(round(w / dt))
+        k = round(w / dt)
         if k < 1:
             raise ValueError(f"sensors.{n}.zeroing = {w:g} s is shorter than one sample "
                              f"({dt:g} s): give a window of at least one sample, or 0 for none")
@@ -157,7 +157,7 @@ def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
     return tuple(pos), tuple(ns)
 
 
-def check_zeroing(sensors: "Sensors", n_samples: int, dt: float, where: str = "the run") -> None:
+def check_zeroing(sensors: Sensors, n_samples: int, dt: float, where: str = "the run") -> None:
     """Raise ValueError naming ``where`` (a log file) and the channel when a zeroing window
     is not shorter than the run: the channel would read 0 throughout."""
     for c, k in zip(sensors.zeroed, sensors.zero_n):
