@@ -10,6 +10,9 @@ digital filters' states by :func:`flexarm.sim.filters.filter_state_from_log`. Re
 channels the scenario uses (its ``[references]`` and the controller's setpoints) are taken
 from the log when it holds them. A dynamic LTI controller replayed from inside a log starts
 from its state run over the log before the window (:func:`flexarm.control.lti.state_from_log`).
+Filtered channels the log lacks but its signals define (the lab's rates of a logged angle)
+are computed through the channel's filter (:func:`flexarm.sim.filters.computed_channels`)
+for the start states, not compared; :attr:`Replay.notes` says which.
 """
 
 from __future__ import annotations
@@ -22,10 +25,11 @@ import numpy as np
 from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
 from flexarm.sim.build import prepare, to_result
-from flexarm.sim.filters import (PieceStart, continuous_starts, filter_state_from_log,
-                                 start_piece, warn_assumed_start, with_filter_state)
+from flexarm.sim.filters import (PieceStart, computed_channels, continuous_starts,
+                                 filter_state_from_log, start_piece, warn_assumed_start,
+                                 with_filter_state)
 from flexarm.sim.result import SimulationResult
-from flexarm.sim.sampled import simulate_loop
+from flexarm.sim.sampled import check_zeroing, simulate_loop
 
 
 @dataclass
@@ -35,6 +39,8 @@ class Replay:
     result: SimulationResult
     log: Log
     fit_percent: dict[str, float] = field(default_factory=dict)
+    #: channels the log lacks, computed from logged ones (:func:`computed_channels`)
+    notes: list[str] = field(default_factory=list)
 
 
 def _first(log: Log, names: list[str]) -> float:
@@ -69,6 +75,11 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
     filters' states at the log's first sample (:func:`replay_run`)."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
+    extra, notes = computed_channels(scenario.sensors, log, scenario.sampling.period)
+    logged = set(log.signals)
+    if extra:
+        log = Log(log.path, log.time, {**log.signals, **extra}, list(log.comments),
+                  dict(log.meta), list(log.skipped), list(log.notes) + notes)
     full, k0 = log, 0
     if window is not None:
         log = log.window(*window)
@@ -85,6 +96,7 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
     refs = {k: log[k] for k in sorted(used) if k in log.signals}
     p = prepare(sc, references=refs)
     assert p.n_samples == n, (p.n_samples, n)
+    check_zeroing(p.loop.sensors, n, dt, log.name)
     x0 = initial_state_from_log(p, log)
     loop = p.loop
     if start is not None:
@@ -100,8 +112,8 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
     out = simulate_loop(loop, x0, p.references, n, seed=sc.simulation.seed)
     p.loop, p.x0 = loop, x0
     res = to_result(p, out)
-    fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in log.signals}
-    return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)})
+    fp = {k: fit_percent(log[k], res.measured[k]) for k in res.measured if k in logged}
+    return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)}, notes)
 
 
 def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[Replay]:

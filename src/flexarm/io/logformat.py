@@ -33,6 +33,20 @@ apply. Besides the single-link exchange names, a format may map per-joint signal
 multi-link arm (``theta_1``, ``alpha_f_2``, ``current_1``, ...; :data:`flexarm.io.logs.PER_JOINT`
 lists them with their SI units) and ``[units]`` converts any of them.
 
+One run saved as several files (one scope capture per signal) is one log: a ``[columns]``
+entry may name its own file, the column in the format's own syntax::
+
+    [columns]
+    time = { file = "{stem}_th11.mat", column = "data_th11[0]" }
+    theta_1 = { file = "{stem}_th11.mat", column = "data_th11[2]" }
+    alpha_f_1 = { file = "{stem}_th12.mat", column = "data_th12[2]", time = "data_th12[0]" }
+
+``{stem}`` is the path given to :meth:`LogFormat.read` (the command line's log argument)
+without its suffix: ``read("runs/run01")`` reads ``runs/run01_th11.mat`` and
+``runs/run01_th12.mat``. ``time`` may come from any of the files; every file must have the
+log's number of samples, and a file's own ``time`` (optional) must equal the log's: an
+error names both files.
+
 ``[checks]`` guards against a mapping that names the wrong variable::
 
     [checks]
@@ -91,6 +105,39 @@ def _column_ref(k: str, v: object) -> int | str:
     if isinstance(v, str) and not v.strip(" -"):
         raise ValueError(f"{k} = {v!r}: give the column's header text or its number")
     return v
+
+
+class ColumnInFile(Spec):
+    """A ``[columns]`` entry read from another file of the same run (one scope capture per
+    signal): ``theta_1 = { file = "{stem}_th11.mat", column = "data_th11[2]" }``.
+    ``column``: the column in the format's own syntax (a ``.mat`` variable spec, or a text
+    file's header text / 1-based number); ``file``: the file, ``{stem}`` standing for the
+    path given to :meth:`LogFormat.read` without its suffix (a relative path without
+    ``{stem}`` is taken in that path's folder); ``time`` (optional): that file's own time
+    column, checked against the log's time (the files of one log share one time base)."""
+
+    file: str
+    column: int | str
+    time: int | str | None = None
+
+    @field_validator("file")
+    @classmethod
+    def _file(cls, v: str) -> str:
+        if not v.strip():
+            raise ValueError("file = '': give the file, e.g. file = \"{stem}_th11.mat\"")
+        return v
+
+    @field_validator("column", "time")
+    @classmethod
+    def _ref(cls, v: object, info) -> object:
+        return v if v is None else _column_ref(info.field_name, v)
+
+    def path(self, stem: str, folder: Path) -> Path:
+        """The file for the log read as ``stem`` (module docstring)."""
+        if "{stem}" in self.file:
+            return Path(self.file.replace("{stem}", stem))
+        f = Path(self.file)
+        return f if f.is_absolute() else folder / f
 
 
 class ControllerFormat(Spec):
@@ -180,7 +227,7 @@ class LogFormat(Spec):
     delimiter: str = "auto"
     comment: list[str] = list(COMMENT_CHARS)
     skip_rows: Count(what="lines skipped at the top") = 0
-    columns: dict[str, int | str] = {}
+    columns: dict[str, int | str | ColumnInFile] = {}
     units: dict[str, str] = {}
     controller: ControllerFormat | None = None
     checks: Checks = Checks()
@@ -210,7 +257,8 @@ class LogFormat(Spec):
             raise ValueError(f"{', '.join(map(repr, bad))} is not one of flexarm's column "
                              f"names; known: {known_names()} (gain columns go in "
                              "[controller] gain_columns)")
-        return {k: _column_ref(k, x) for k, x in v.items()}
+        return {k: x if isinstance(x, ColumnInFile) else _column_ref(k, x)
+                for k, x in v.items()}
 
     @field_validator("units")
     @classmethod
@@ -245,6 +293,8 @@ class LogFormat(Spec):
         from flexarm.io import matfile
 
         path = Path(path)
+        if any(isinstance(c, ColumnInFile) for c in self.columns.values()):
+            return self._read_files(path, required, **kw)
         where = f"log format {self.source}"
         if path.suffix.lower() == ".mat":
             if not self.columns:
@@ -272,6 +322,77 @@ class LogFormat(Spec):
                     raise LogFormatError(f"{self.source}: [checks] quantum.{k} = {q!r}: a "
                                          "text log has no variables; give the number")
                 quanta[k] = float(q)
+        self._check(log, quanta)
+        return log
+
+    def _read_files(self, path: Path, required: tuple[str, ...], **kw) -> Log:
+        """One run saved as several files (``[columns]`` entries with ``file``): each file
+        read with its own columns (:class:`ColumnInFile`; plain entries from ``path``),
+        then joined; the files must have the same number of samples and, where a file's
+        own ``time`` is mapped, the same times as the log's (to 1e-6 of a step): an error
+        names both files. ``path`` is the run's stem (module docstring)."""
+        from flexarm.io import matfile
+
+        stem = str(path.with_suffix("")) if path.suffix else str(path)
+        files: dict[Path, dict[str, int | str]] = {}
+        own_time: dict[Path, tuple[str, int | str]] = {}
+        for name, ref in self.columns.items():
+            f = ref.path(stem, path.parent) if isinstance(ref, ColumnInFile) else path
+            files.setdefault(f, {})[name] = ref.column if isinstance(ref, ColumnInFile) else ref
+            if isinstance(ref, ColumnInFile) and ref.time is not None:
+                own_time.setdefault(f, (name, ref.time))
+        missing = [c for c in required if c not in self.columns]
+        if missing:
+            raise LogFormatError(f"{path}: log format {self.source}: [columns] maps no "
+                                 f"{', '.join(missing)}; map it (from any of the run's files)")
+        parts: dict[Path, Log] = {}
+        for f, cols in files.items():
+            cols = dict(cols)
+            if f in own_time and "time" not in cols:
+                cols["time"] = own_time[f][1]
+            if not f.is_file():
+                who = ", ".join(k for k in cols if k != "time" or f not in own_time)
+                raise LogFormatError(
+                    f"{f}: no such file ([columns] {who} in {self.source}, read for the log "
+                    f"{path}); {{stem}} = {stem!r}: give the run's stem (the path the files' "
+                    "names start with) or fix the 'file' entries")
+            sub = LogFormat.model_construct(
+                **{**{k: getattr(self, k) for k in type(self).model_fields},
+                   "columns": cols, "checks": Checks(), "controller": None,
+                   "units": {k: u for k, u in self.units.items() if k in cols}})
+            sub._source = self.source
+            parts[f] = sub.read(f, required=("time",) if "time" in cols else (), **kw)
+        t_file = next(f for f, c in files.items() if "time" in c)
+        time = parts[t_file].time
+        n = len(time)
+        for f, g in parts.items():
+            if len(g) != n:
+                raise LogFormatError(
+                    f"{f}: {len(g)} samples, but {t_file} (the log's time, [columns] time in "
+                    f"{self.source}) has {n}: the files of one log must share one time base; "
+                    "give files captured together (same trigger, same length)")
+            if g.time is not None and f != t_file:
+                step = float(np.median(np.diff(time))) if n > 1 else 1.0
+                off = np.abs(g.time - time)
+                j = int(np.argmax(off))
+                if off[j] > 1e-6 * abs(step):
+                    raise LogFormatError(
+                        f"{f}: its time ({own_time[f][0]} time = {own_time[f][1]!r}) differs "
+                        f"from the log's time in {t_file} at sample {j}: {g.time[j]:.9g} s vs "
+                        f"{time[j]:.9g} s (step {step:g} s): the files of one log must share "
+                        "one time base; give captures of the same run and window")
+        signals = {k: v for g in parts.values() for k, v in g.signals.items()}
+        log = Log(path, time, signals, skipped=[x for g in parts.values() for x in g.skipped],
+                  notes=[x for g in parts.values() for x in g.notes])
+        quanta = {}
+        for k, q in self.checks.quantum.items():
+            if isinstance(q, str):
+                f = next(f for f, c in files.items() if k in c)
+                if f.suffix.lower() != ".mat":
+                    raise LogFormatError(f"{self.source}: [checks] quantum.{k} = {q!r}: a "
+                                         "text log has no variables; give the number")
+                q = matfile.scalar(f, matfile.load_mat(f), q, f"[checks] quantum.{k}")
+            quanta[k] = float(q)
         self._check(log, quanta)
         return log
 

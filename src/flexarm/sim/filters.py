@@ -316,3 +316,97 @@ def warn_assumed_start(loop: SampledLoop, log_name: str, *, stacklevel: int = 2)
     for m in msgs:
         warnings.warn(m, ControllerStateWarning, stacklevel=stacklevel + 1)
     return msgs
+# ----------------------------------------------------------------------------- computed inputs
+def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
+                      ) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The digitally filtered channels of ``sensors`` (a scenario's ``[sensors]``) that the
+    log does not hold but that its logged signals define, computed as the logger computed
+    them (issue #24, item 5: a controller reading the lab's filtered rates from a log that
+    holds only the angles). ``log``: a :class:`flexarm.io.logs.Log` or a mapping channel →
+    samples; ``dt``: the sample period (s). Returns (channel → samples, notes: one line per
+    computed channel saying from what).
+
+    For a channel c with digital filter F (:func:`flexarm.control.lti.digital_filter`, the
+    filter the simulator's sensor stage runs) reading plant signal s:
+
+    * a logged rate sibling's rule: c of a rate kind (output ξ₂), forward Euler, and the log
+      holds the ``lowpass2`` output ξ₁ of the same filter on s (same cutoff, damping, gain,
+      delay, zeroing): ξ₂,k = (ξ₁,k+1 − ξ₁,k) / T exactly (ξ₁⁺ = ξ₁ + T ξ₂); the last
+      sample extrapolated linearly;
+    * the raw reading's rule: the log holds an unfiltered channel r of s with the same
+      zeroing: c = F run on (g_c / g_r) r quantised to c's count, from rest on its first
+      sample (the simulator's start, (I − A) ξ₀ = B y₀), shifted by c's delay minus r's
+      (samples; the ends held). Exact where the filter's start is forgotten (|z|ⁿ, e.g.
+      ~30 ms for the lab's 40 Hz derivative, ~0.5 s for a 2 Hz low-pass); the first
+      samples of a log that starts in motion read the filter's start-up transient.
+
+    Channels neither rule defines are left out (the caller's own error names them)."""
+    from flexarm.control.lti import FILTER_KINDS, digital_filter
+
+    sig = log.signals if hasattr(log, "signals") else log
+    where = name or getattr(log, "name", "log")
+    chans = {n: _spec(sensors, n) for n in sensors}
+    src = {n: c.get("signal") or n for n, c in chans.items()}
+
+    default = {"gain": 1.0, "delay": 0.0, "zeroing": 0.0, "cutoff": 0.0, "damping": 0.9}
+
+    def same(a: dict, b: dict, keys) -> bool:
+        return all(float(a.get(k) if a.get(k) is not None else default[k])
+                   == float(b.get(k) if b.get(k) is not None else default[k]) for k in keys)
+
+    out: dict[str, np.ndarray] = {}
+    notes: list[str] = []
+    for c, spec in chans.items():
+        f = spec.get("filter")
+        if not f or c in sig:
+            continue
+        fe = f.get("discretisation", "forward_euler") == "forward_euler"
+        if f["kind"] in FILTER_KINDS and FILTER_KINDS[f["kind"]] == 1 and fe:
+            sib = [n for n, o in chans.items() if n in sig and src[n] == src[c]
+                   and o.get("filter") and o["filter"]["kind"] == "lowpass2"
+                   and same(o["filter"], f, ("cutoff", "damping"))
+                   and o["filter"].get("discretisation", "forward_euler") == "forward_euler"
+                   and same(o, spec, ("gain", "delay", "zeroing"))]
+            if sib:
+                x1 = np.asarray(sig[sib[0]], float)
+                if x1.size >= 3:
+                    v = np.empty_like(x1)
+                    v[:-1] = np.diff(x1) / dt
+                    v[-1] = 2 * v[-2] - v[-3]
+                    out[c] = v
+                    notes.append(f"{where}: {c!r} is not logged: computed from the logged "
+                                 f"{sib[0]!r} (the rate state of its {f['kind']} filter, "
+                                 "ξ₂ = Δξ₁/T; the last sample extrapolated)")
+                    continue
+        raw = [n for n, o in chans.items() if n in sig and src[n] == src[c]
+               and not o.get("filter") and same(o, spec, ("zeroing",))
+               and float(o.get("gain", 1.0)) != 0.0]
+        if not raw:
+            continue
+        r = chans[raw[0]]
+        u = np.asarray(sig[raw[0]], float) * (float(spec.get("gain", 1.0))
+                                              / float(r.get("gain", 1.0)))
+        q = float(spec.get("quantum", 0.0) or 0.0)
+        if q <= 0 and int(spec.get("bits", 0) or 0) > 0:
+            q = float(spec["range"]) / 2 ** int(spec["bits"])
+        if q > 0:
+            u = np.round(u / q) * q
+        shift = int(spec.get("delay", 0) or 0) - int(r.get("delay", 0) or 0)
+        u = _shift(u, -int(r.get("delay", 0) or 0))
+        v, _ = digital_filter(f, dt, where=f"sensor {c!r}: filter").run(u)
+        out[c] = _shift(v, int(spec.get("delay", 0) or 0))
+        notes.append(f"{where}: {c!r} is not logged: computed from the logged {raw[0]!r} "
+                     f"through its {f['kind']} filter (as the sensor stage runs it, from rest "
+                     "on the log's first sample" + (f"; delay {shift:+d} samples" if shift
+                                                    else "") + ")")
+    return out, notes
+
+
+def _shift(x: np.ndarray, d: int) -> np.ndarray:
+    """x delayed by d samples (d < 0: advanced), the ends held."""
+    if d == 0 or x.size == 0:
+        return x
+    if d > 0:
+        return np.concatenate([np.full(min(d, x.size), x[0]), x[:-d]])[:x.size]
+    d = -d
+    return np.concatenate([x[d:], np.full(min(d, x.size), x[-1])])[:x.size]

@@ -19,7 +19,10 @@ At each sample instant t_k = k T:
    channel with a digital filter (:func:`flexarm.control.lti.digital_filter`) passes its
    quantised reading y_k through it at the sample rate, ξ_{k+1} = A ξ_k + B y_k,
    v_k = C ξ_k + D y_k, before the delay; ξ_0 at rest on the first reading,
-   (I − A) ξ_0 = B y_0, or as set (:func:`flexarm.sim.filters.with_filter_state`);
+   (I − A) ξ_0 = B y_0, or as set (:func:`flexarm.sim.filters.with_filter_state`).
+   A channel with a ``zeroing`` window of n samples (the logger's tare) reads, after
+   quantisation and before its digital filter, 0 for k < n and y_k − (1/n) Σ_{i<n} y_i
+   afterwards (:func:`_zeroing_step`; the window's sum is carried in the loop);
 2. the controller steps on the measured signals and the references at t_k;
 3. the command is delayed by the computation delay (samples), saturated at the
    actuator limit and quantised to the D/A count (2·limit / 2**bits);
@@ -78,6 +81,10 @@ class Sensors(eqx.Module):
     fC: Array | None = None
     fD: Array | None = None
     fx0: Array | None = None
+    #: positions of the channels the logger zeroes, and their windows in samples (no
+    #: zeroed channel leaves the loop exactly as without)
+    zeroed: tuple[int, ...] = eqx.field(static=True, default=())
+    zero_n: tuple[int, ...] = eqx.field(static=True, default=())
 
     @classmethod
     def make(cls, plant: Plant, channels: dict[str, dict[str, Any]],
@@ -122,10 +129,45 @@ class Sensors(eqx.Module):
             mats = dict(fA=jnp.asarray(A), fB=jnp.asarray(B), fC=jnp.asarray(C),
                         fD=jnp.asarray([f.D for f in filts]),
                         fx0=jnp.full((len(filts), k), jnp.nan))
+        zeroed, zero_n = zeroing_windows(channels, dt)
         return cls(names, tuple(plant.signal_names.index(signal[n]) for n in names),
                    tuple(int(channels[n].get("delay", 0)) for n in names),
                    get("gain", 1.0), get("noise", 0.0), jnp.asarray(quantum),
-                   filtered, omega, digital, **mats)
+                   filtered, omega, digital, **mats, zeroed=zeroed, zero_n=zero_n)
+
+
+def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
+                    ) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Positions (in ``channels``' order) of the channels with a ``zeroing`` window W > 0 s
+    and its length n = round(W / dt) samples (:class:`flexarm.specs.experiment.Sensor`).
+    A window shorter than half a sample is an error naming the channel."""
+    pos, ns = [], []
+    for i, (n, c) in enumerate(channels.items()):
+        w = float(c.get("zeroing", 0.0) or 0.0)
+        if w <= 0:
+            continue
+        if dt is None or not dt > 0:
+            raise ValueError(f"sensor {n!r}: zeroing = {w:g} s needs the sample period")
+        k = round(w / dt)
+        if k < 1:
+            raise ValueError(f"sensors.{n}.zeroing = {w:g} s is shorter than one sample "
+                             f"({dt:g} s): give a window of at least one sample, or 0 for none")
+        pos.append(i)
+        ns.append(k)
+    return tuple(pos), tuple(ns)
+
+
+def check_zeroing(sensors: Sensors, n_samples: int, dt: float, where: str = "the run") -> None:
+    """Raise ValueError naming ``where`` (a log file) and the channel when a zeroing window
+    is not shorter than the run: the channel would read 0 throughout."""
+    for c, k in zip(sensors.zeroed, sensors.zero_n):
+        if k >= n_samples:
+            raise ValueError(
+                f"{where}: sensors.{sensors.names[c]}.zeroing = {k * dt:g} s ({k} samples) is "
+                f"not shorter than the {'run' if where == 'the run' else 'log'} ({n_samples} "
+                f"samples, {(n_samples - 1) * dt:g} s): "
+                "the channel would read 0 throughout; shorten the window, or set zeroing = 0 "
+                "for a log that starts after the logger's tare (a later piece of a run)")
 
 
 #: Largest ω_f h (h the integration substep) :func:`check_filter_step` accepts: RK4's
@@ -246,6 +288,8 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     dmax = max(sens.delays) if sens.delays else 0
     raw = sens.gain * _pick(_signals(plant, x0, u0), sens.index)
     y0 = _quantise(raw, sens.quantum)
+    if sens.zeroed:  # the first sample lies in the window: it reads 0
+        y0 = _zeroed_out(sens, y0, jnp.zeros((len(sens.zeroed),), y0.dtype))
     xd0 = None
     if sens.digital:
         xd0, y0 = _digital_initial(sens, y0)
@@ -255,7 +299,33 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
         carry += (_pick(raw, sens.filtered),)
     if sens.digital:
         carry += (xd0,)
+    if sens.zeroed:
+        carry += (zeroing_start(sens),)
     return carry
+
+
+def zeroing_start(sens: Sensors, k: int | Array = 0, total: Array | None = None) -> tuple:
+    """The zeroing stage's state at sample k: (k, Σ of the zeroed channels' readings over
+    the window so far), (0, 0) at a run's start."""
+    acc = jnp.zeros((len(sens.zeroed),)) if total is None else jnp.asarray(total)
+    return (jnp.asarray(k, jnp.int32), acc)
+
+
+def _zeroed_out(sens: Sensors, y: Array, v: Array) -> Array:
+    """The readings y with the zeroed channels' replaced by v."""
+    slot = {c: j for j, c in enumerate(sens.zeroed)}
+    return jnp.stack([v[slot[c]] if c in slot else y[c] for c in range(len(sens.names))])
+
+
+def _zeroing_step(sens: Sensors, z: tuple, y: Array) -> tuple[Array, tuple]:
+    """One sample of the logger's zeroing (:class:`flexarm.specs.experiment.Sensor`):
+    y_k → 0 while k < n (the window's sum accumulates y_k), then y_k − Σ/n."""
+    k, acc = z
+    yz = _pick(y, sens.zeroed)
+    n = jnp.asarray(sens.zero_n, yz.dtype)
+    inside = k < jnp.asarray(sens.zero_n)
+    out = jnp.where(inside, 0.0, yz - acc / n)
+    return _zeroed_out(sens, y, out), (k + 1, acc + jnp.where(inside, yz, 0.0))
 
 
 def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
@@ -337,11 +407,17 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
                              for c in range(len(sens.names))])
         y = _quantise(raw + sens.noise * noise_k, sens.quantum)
         extra = ()
+        pos = 6 if fplant is not None else 5  # the optional parts of the carry
+        zpos = pos + (1 if sens.digital else 0)
+        if sens.zeroed:  # the logger's zeroing, after quantisation, before the filters
+            y, z_next = _zeroing_step(sens, carry[zpos], y)
         if sens.digital:  # digital filters at the sample rate, after quantisation
-            xd = carry[-1]
+            xd = carry[pos]
             ys = _pick(y, sens.digital)
             y = _digital_out(sens, xd, y)
             extra = (jnp.einsum("ijk,ik->ij", sens.fA, xd) + sens.fB * ys[:, None],)
+        if sens.zeroed:
+            extra += (z_next,)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
         meas_vec = (jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)]) if sens.delays
                     else jnp.zeros((0,)))
@@ -417,6 +493,7 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
     filter is too fast for the substep (:func:`check_filter_step`).
     """
     check_filter_step(loop.sensors, loop.dt, loop.substeps)
+    check_zeroing(loop.sensors, n_samples, float(loop.dt))
     refs = _prepare_refs(references, n_samples)
     x0 = np.asarray(x0, dtype=float)
     if progress is None or n_samples <= chunk:

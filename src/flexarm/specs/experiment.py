@@ -87,7 +87,14 @@ class Sensor(Spec):
     ``signal``: the plant signal the channel reads (default: the channel's own name), so
     several channels may read one signal (an angle, and its filtered rate). ``filter``: a
     digital filter (:class:`DigitalFilterSpec`) applied at the sample rate after
-    quantisation, before the delay; its state starts at rest on the first reading."""
+    quantisation, before the delay; its state starts at rest on the first reading.
+
+    ``zeroing`` W > 0 (s): the logger's tare of the channel (lab loggers zero strain gauges
+    over the first second, while the arm may already move): with n = round(W / T) samples,
+    the quantised reading y_k is replaced by 0 for k < n and by y_k − (1/n) Σ_{i<n} y_i
+    afterwards (the mean of the channel's own reading over the window), before the digital
+    filter (the lab's filtered gauge leaves rest one sample after the window,
+    ../shared/data/two-link-rig); 0: no zeroing."""
 
     bits: Count(ge=0, le=32) = 0
     range: Q("", gt=0) = 2 * 3.141592653589793
@@ -98,6 +105,7 @@ class Sensor(Spec):
     bandwidth: Q("Hz", ge=0, what="first-order low-pass cutoff; 0 = no filter") = 0.0
     signal: str | None = None
     filter: DigitalFilterSpec | None = None
+    zeroing: Q("s", ge=0, what="the logger's zeroing window; 0 = none") = 0.0
 
     @field_validator("bandwidth", mode="before")
     @classmethod

@@ -92,7 +92,7 @@ import numpy as np
 from flexarm.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.sim.build import Prepared, prepare, reference_signal
-from flexarm.sim.sampled import _quantise, _scan, initial_carry
+from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
 __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "expand_paths",
            "scenario_with"]
@@ -292,6 +292,7 @@ class _LogData:
     from_scenario: bool  # the (window) start is the log's first sample
     window: tuple[int, int]  # samples [k0, k1) fitted
     log: Any = None  # the whole log as a flexarm.io.logs.Log (time from 0)
+    computed: tuple[str, ...] = ()  # channels computed from logged ones, not compared
 
 
 def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
@@ -456,6 +457,7 @@ class _Engine:
         wins = options.windows or [None] * len(logs)
         if len(wins) != len(logs):
             raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
+        self.notes: list[str] = []  # channels computed from logged ones (_read)
         self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
         from flexarm.sim.build import _measured_names
 
@@ -469,7 +471,8 @@ class _Engine:
                                  "fit runs the controller on the logged channels from the log's "
                                  "start: log them (or map them with a log format)")
         chans = options.channels or {n: 1.0 for n in self.names
-                                     if any(L.present[self.names.index(n)] for L in self.logs)}
+                                     if any(L.present[self.names.index(n)]
+                                            and n not in L.computed for L in self.logs)}
         for c in chans:
             if c not in self.names:
                 raise ValueError(f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
@@ -498,6 +501,12 @@ class _Engine:
             raise ValueError(f"{name}: sampled every {dt:g} s, but scenario "
                              f"{self.template.name!r} samples every {self.dt:g} s "
                              "([sampling] period); resample the log or change the scenario")
+        check_zeroing(self.prep0.loop.sensors, t.size, self.dt, name)
+        from flexarm.sim.filters import computed_channels
+
+        extra, notes = computed_channels(self.template.sensors, sig, self.dt, name=name)
+        sig = {**sig, **extra}
+        self.notes += notes
         t = t - t[0]
         k0, k1 = 0, t.size
         if window is not None:
@@ -527,7 +536,8 @@ class _Engine:
 
         whole = Log(None, t, {k: np.asarray(v, float) for k, v in sig.items()})
         return _LogData(label, t, y, refs, present,
-                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole)
+                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole,
+                        tuple(extra))
 
     def _segments(self, seg: float | None) -> None:
         """Segment table: (log, k0, length) and the padded per-segment arrays."""
@@ -674,7 +684,8 @@ class _Engine:
                 loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
                 {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
                 jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
-                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn))))
+                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn),
+                jnp.asarray(self.seg_k0, jnp.int32))))
         return np.concatenate(out)
 
     def _warm(self, loop):
@@ -800,14 +811,15 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0):
 _warm_jit = eqx.filter_jit(_warm)
 
 
-def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn):
+def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn,
+                   seg_k0):
     act, sens = loop.actuator, loop.sensors
     M = next(iter(seg_refs.values())).shape[1]
     C = len(sens.names)
     cs_seg, ub_seg = warm
     scn_carry = initial_carry(loop, x0_scn)
 
-    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off):
+    def seg_carry(cs, ub, y0s, dy0s, sb, xd, use_scn, off, k0):
         up = _quantise(jnp.clip(ub[-1], -act.limit, act.limit), act.quantum)
         x0 = _state_from_log(loop, y0s, dy0s)
         carry = (x0, cs, sb, ub, up)
@@ -815,6 +827,8 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
             carry += (jnp.stack([y0s[c] for c in sens.filtered]),)
         if sens.digital:
             carry += (xd,)
+        if sens.zeroed:  # the logger's zeroing: a segment after its window reads the
+            carry += (zeroing_start(sens, k0),)  # logged (zeroed) values, offset 0
         if len(carry) != len(scn_carry):
             raise RuntimeError(f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
                                f"builds {len(carry)} (flexarm.sim.sampled changed: update "
@@ -822,7 +836,8 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
         carry = jax.tree.map(lambda a, b: jnp.where(use_scn, a, b), scn_carry, carry)
         return (carry[0] + off,) + tuple(carry[1:])
 
-    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets)
+    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets,
+                                  seg_k0)
     noise = jnp.zeros((M, C))
 
     def one_seg(carry, refs):
@@ -834,9 +849,9 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
 
 @eqx.filter_jit
 def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
-                  seg_xd, seg_scn):
+                  seg_xd, seg_scn, seg_k0):
     f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
-                                              sbuf0, seg_xd, seg_scn)
+                                              sbuf0, seg_xd, seg_scn, seg_k0)
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
         loop, x0s, offsets, warm)
 
@@ -873,6 +888,8 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     say = progress or (lambda msg: None)
     z0 = np.zeros(n)
     stages: dict[str, Any] = {"segments": len(eng.seg), "segment_samples": eng.M}
+    if eng.notes:
+        stages["computed_channels"] = list(eng.notes)
     if options.global_stage:
         t0 = time.perf_counter()
 
@@ -1145,7 +1162,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
         fp[L.name] = d
         traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
                         "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
-    out = {"fit_percent": fp, "trajectories": traj, "plots": []}
+    out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes)}
     if plots is not None:
         out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
     return out
