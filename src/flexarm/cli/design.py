@@ -107,12 +107,16 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
     if encoder_counts is not None and encoder_counts < 2:
         fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
+    if integral and disturbance:
+        fail("--integral and --disturbance both give integral action; choose one")
+    # the option values parsed before any work: a malformed one is refused first
+    poles_v = parsing.complex_list(poles, "--poles")
+    observer_v = parsing.complex_list(observer_poles, "--observer-poles")
+    q_v, r_v = parsing.weights(q, "--q"), parsing.weights(r, "--r")
     check_file_option("--report", report, overwrite, "design.html")
     sc = load(scenario)
     spread_d = plant_spread(sc, fit_json, spread)
     out = outdir(out, overwrite)
-    if integral and disturbance:
-        fail("--integral and --disturbance both give integral action; choose one")
     count = 2 * math.pi / encoder_counts if encoder_counts else None
     if method == "nested":
         opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
@@ -122,11 +126,11 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     else:
         opts = dict(integral=integral, disturbance=disturbance,
                     friction_compensation=friction_compensation, pole_domain=pole_domain,
-                    observer_poles=parsing.complex_list(observer_poles, "--observer-poles"))
+                    observer_poles=observer_v)
     if method == "place":
-        opts["poles"] = parsing.complex_list(poles, "--poles")
+        opts["poles"] = poles_v
     elif method == "lqr":
-        opts.update(q=parsing.weights(q, "--q"), r=parsing.weights(r, "--r"))
+        opts.update(q=q_v, r=r_v)
     from flexarm.design.compare import compare
     from flexarm.design.plants import PlantBatch, from_paths
 

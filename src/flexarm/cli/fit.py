@@ -9,89 +9,82 @@ from __future__ import annotations
 
 import contextlib
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 from rich.markup import escape
 from rich.table import Table
 
+from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, command_line, console,
                                 enable_cache, err, fail, figure_folder, load, progress,
                                 write_report)
 
 
-def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
-            ..., help="closed-loop CSV logs of one recording session; or SCENARIO LOG...: a "
-                      "scenario (TOML file or built-in name) as the model template, then its "
-                      "logs (the general fit: --free, --prior, --segment)"),
-        drive: str = typer.Option("voltage", help="voltage or current"),
-        gear_ratio: float = typer.Option(1.0, help="K_g"),
-        motor_constant: Optional[float] = typer.Option(None, help="K_m, V*s/rad (voltage) or N*m/A (current)"),
-        armature_resistance: Optional[float] = typer.Option(None, help="R, ohm"),
-        link_length: Optional[float] = typer.Option(None, help="link length, m"),
-        gear_efficiency: float = typer.Option(1.0), motor_efficiency: float = typer.Option(1.0),
-        voltage_limit: float = typer.Option(10.0, help="amplifier limit, V"),
-        controller: Optional[str] = typer.Option(
-            None, help="overrides the logs' '# controller:' line, e.g. 'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"),
-        mode: str = typer.Option("closed_loop", help="closed_loop, or open_loop (replay the logged voltage)"),
-        no_friction: bool = typer.Option(False, "--no-friction", help="fit without joint friction (for comparison)"),
-        json_out: Optional[Path] = typer.Option(None, "--json", help="write the result as JSON"),
-        scenario_out: Optional[Path] = typer.Option(None, "--scenario-out", help="write the fitted scenario TOML"),
-        plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
-        seconds: float = typer.Option(5.0, help="time budget of the global stage, s"),
-        compare_no_friction: bool = typer.Option(
-            False, "--compare-no-friction",
-            help="also fit without joint friction and report both fits side by side"),
-        column: Optional[list[str]] = typer.Option(
-            None, help="map a column to the log's name: motor_angle=theta"),
-        unit: Optional[list[str]] = typer.Option(
-            None, help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm"),
-        sessions: Optional[str] = typer.Option(
-            None, help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per session"),
-        tip_sign: Optional[int] = typer.Option(None, help="sign of the strain gauge, +1 or -1, if known"),
-        encoder_counts: Optional[int] = typer.Option(
-            None, help="hub encoder counts per revolution (default: detected from the steps)"),
-        filter: Optional[list[str]] = typer.Option(
-            None, help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50"),
-        max_jitter: float = typer.Option(
-            1e-3, help="accepted relative deviation of a time step from the median step"),
-        delay_search: str = typer.Option(
-            "neighbours", help="how the tip delay is chosen: neighbours, profile, or both "
-                               "(two starts, about twice the time: when it may be far off)"),
-        polish_iter: int = typer.Option(
-            8, help="generations of the friction polish (20 with --delay-search both)"),
-        overwrite: bool = typer.Option(False, help="replace existing output files"),
-        log_format: Optional[list[str]] = typer.Option(
-            None, "--log-format", help="the logger's log-format TOML (columns, units, gains); "
-                                       "with SCENARIO: once per log, or PATTERN=FILE by file name"),
-        use_regressed_law: bool = typer.Option(
-            False, "--use-regressed-law",
-            help="use the law regressed on the logged command where it disagrees with the "
-                 "declared one"),
-        window: Optional[str] = typer.Option(
-            None, help="fit on this part of every log only, START:STOP in s from its first "
-                       "sample, e.g. 0:5"),
-        free: Optional[list[str]] = typer.Option(
-            None, "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
-                                 "(repeat), e.g. 'arm.joints[*].friction.coulomb'"),
-        prior: Optional[list[str]] = typer.Option(
-            None, "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the "
-                                  "scenario's value, ± REL_STD relative), e.g. "
-                                  "'arm.joints[0].drive.torque_constant=0.3'"),
-        segment: Optional[float] = typer.Option(
-            None, "--segment", help="with SCENARIO: multiple-shooting segment length, s"),
-        channel: Optional[list[str]] = typer.Option(
-            None, "--channel", help="with SCENARIO: a measured channel to fit, NAME or "
-                                    "NAME=WEIGHT (repeat; default: every logged sensor channel)"),
-        max_nfev: int = typer.Option(30, "--max-nfev", help="with SCENARIO: least-squares budget"),
-        validate_window: Optional[str] = typer.Option(
-            None, "--validate-window",
-            help="then predict this held-out part of every log (START:STOP, s; each "
-                 "part's initial state estimated from its own data) and report its fit %"),
-        report: Optional[Path] = typer.Option(
-            None, "--report", help="write a self-contained HTML report (parameters ± std, "
-                                   "fit %, warnings, figures embedded), e.g. fit.html")
+def fit(ctx: typer.Context,
+        logs: Annotated[list[Path], typer.Argument(
+            help="closed-loop CSV logs of one recording session; or SCENARIO LOG...: a "
+                 "scenario (TOML file or built-in name) as the model template, then its "
+                 "logs (the general fit: --free, --prior, --segment)")],
+        drive: o.Drive = "voltage",
+        gear_ratio: o.GearRatio = 1.0,
+        motor_constant: o.MotorConstant = None,
+        armature_resistance: o.ArmatureResistance = None,
+        link_length: o.LinkLength = None,
+        gear_efficiency: o.GearEfficiency = 1.0,
+        motor_efficiency: o.MotorEfficiency = 1.0,
+        voltage_limit: o.VoltageLimit = 10.0,
+        controller: o.Controller = None,
+        mode: Annotated[str, typer.Option(
+            help="closed_loop, or open_loop (replay the logged voltage)")] = "closed_loop",
+        no_friction: Annotated[bool, typer.Option(
+            "--no-friction", help="fit without joint friction (for comparison)")] = False,
+        json_out: o.JsonOut = None,
+        scenario_out: o.ScenarioOut = None,
+        plots: o.Plots = None,
+        seconds: Annotated[float, typer.Option(help="time budget of the global stage, s")] = 5.0,
+        compare_no_friction: Annotated[bool, typer.Option(
+            "--compare-no-friction",
+            help="also fit without joint friction and report both fits side by side")] = False,
+        column: o.Column = None,
+        unit: o.Unit = None,
+        sessions: Annotated[Optional[str], typer.Option(
+            help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per "
+                 "session")] = None,
+        tip_sign: Annotated[Optional[int], typer.Option(
+            help="sign of the strain gauge, +1 or -1, if known")] = None,
+        encoder_counts: Annotated[Optional[int], typer.Option(
+            help="hub encoder counts per revolution (default: detected from the steps)")] = None,
+        filter: Annotated[Optional[list[str]], typer.Option(
+            help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50")] = None,
+        max_jitter: o.MaxJitter = 1e-3,
+        delay_search: Annotated[str, typer.Option(
+            help="how the tip delay is chosen: neighbours, profile, or both (two starts, "
+                 "about twice the time: when it may be far off)")] = "neighbours",
+        polish_iter: Annotated[int, typer.Option(
+            help="generations of the friction polish (20 with --delay-search both)")] = 8,
+        overwrite: o.Overwrite = False,
+        log_format: o.LogFormats = None,
+        use_regressed_law: o.UseRegressedLaw = False,
+        window: o.Window = None,
+        free: Annotated[Optional[list[str]], typer.Option(
+            "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
+                           "(repeat), e.g. 'arm.joints[*].friction.coulomb'")] = None,
+        prior: Annotated[Optional[list[str]], typer.Option(
+            "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the scenario's "
+                            "value, ± REL_STD relative), e.g. "
+                            "'arm.joints[0].drive.torque_constant=0.3'")] = None,
+        segment: Annotated[Optional[float], typer.Option(
+            "--segment", help="with SCENARIO: multiple-shooting segment length, s")] = None,
+        channel: o.Channels = None,
+        max_nfev: Annotated[int, typer.Option(
+            "--max-nfev", help="with SCENARIO: least-squares budget")] = 30,
+        validate_window: Annotated[Optional[str], typer.Option(
+            "--validate-window",
+            help="then predict this held-out part of every log (START:STOP, s; each part's "
+                 "initial state estimated from its own data) and report its fit %")] = None,
+        report: o.Report = None,
         ) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain).
 
@@ -100,6 +93,8 @@ def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
     enable_cache()
     from flexarm.specs.scenario import names_a_scenario
 
+    # DECISION (issue #23 item 6: moves to the library): which fit runs. A scenario first
+    # takes the general fit (fit_scenario), else the servo-rig data-sheet fit.
     if logs and names_a_scenario(str(logs[0])):
         _fit_scenario_cli(str(logs[0]), logs[1:], log_format, free, prior, segment, channel,
                           window, max_nfev, json_out, scenario_out, plots, overwrite, report,
@@ -122,12 +117,7 @@ def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
     check_dir_option("--plots", plots)
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
-    sess = None
-    if sessions is not None:
-        try:
-            sess = [int(x) for x in sessions.replace(";", ",").split(",") if x.strip()]
-        except ValueError:
-            fail(f"--sessions {sessions!r}: expected whole numbers, one per log, e.g. 0,0,1")
+    sess = parsing.int_list(sessions, "--sessions")
     kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
@@ -175,16 +165,8 @@ def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
                               for k in ("motor_angle", "tip_deflection")))
         console.print(t)
     if json_out is not None:
-        d = res.to_dict()
-        if res0 is not None:
-            d["without_friction"] = _without_friction(res0)
-        if win:
-            d["window_s"] = list(win)
-        if held is not None:
-            d["held_out"] = {"window_s": list(vwin), "fit_percent": held["fit_percent"],
-                             "diverged": held["diverged"],
-                             "initial_state": "estimated from each window's own data"}
-        write_json(json_out, d, overwrite=overwrite)
+        write_json(json_out, bench_fit_document(res, res0, win, held, vwin),
+                   overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
     with figure_folder(plots, report) as folder:
@@ -209,47 +191,35 @@ def fit(ctx: typer.Context, logs: list[Path] = typer.Argument(
                                      extra_fit_percent=extra), report, overwrite)
 
 
-def validate(ctx: typer.Context, scenario: str = typer.Argument(..., help="fitted scenario TOML"),
-             logs: list[Path] = typer.Argument(..., help="CSV logs to replay"),
-             json_out: Optional[Path] = typer.Option(None, "--json", help="write the fit % as JSON"),
-             plots: Optional[Path] = typer.Option(None, help="folder for overlay figures"),
-             controller: Optional[str] = typer.Option(None, help="overrides the logs' controller line"),
-             column: Optional[list[str]] = typer.Option(
-                 None, help="map a column to the log's name: motor_angle=theta"),
-             unit: Optional[list[str]] = typer.Option(
-                 None, help="unit of a column's numbers: motor_angle=deg"),
-             max_jitter: float = typer.Option(
-                 1e-3, help="accepted relative deviation of a time step from the median step"),
-             overwrite: bool = typer.Option(False, help="replace an existing JSON file"),
-             log_format: Optional[list[str]] = typer.Option(
-                 None, "--log-format", help="the logger's log-format TOML (columns, units, "
-                                            "gains); once per log, or PATTERN=FILE"),
-             use_regressed_law: bool = typer.Option(
-                 False, "--use-regressed-law",
-                 help="use the law regressed on the logged command where it disagrees with "
-                      "the declared one"),
-             window: Optional[str] = typer.Option(
-                 None, help="replay this part of every log only, START:STOP in s from its "
-                            "first sample, e.g. 5:10"),
-             refit: Optional[str] = typer.Option(
-                 None, "--refit", help="'friction': re-estimate only the joints' friction on "
-                                       "--refit-window of the first log, then validate with "
-                                       "everything else fixed (reports both)"),
-             refit_window: str = typer.Option(
-                 "0:5", "--refit-window", help="the part of the first log the refit uses, "
-                                               "START:STOP in s"),
-             channel: Optional[list[str]] = typer.Option(
-                 None, "--channel", help="measured channel to compare (repeat; default: every "
-                                         "logged sensor channel)"),
-             report: Optional[Path] = typer.Option(
-                 None, "--report", help="write a self-contained HTML report (fit %, warnings, "
-                                        "figures embedded), e.g. validate.html")) -> None:
+def validate(ctx: typer.Context,
+             scenario: Annotated[str, typer.Argument(help="fitted scenario TOML")],
+             logs: Annotated[list[Path], typer.Argument(help="CSV logs to replay")],
+             json_out: o.JsonOut = None,
+             plots: o.Plots = None,
+             controller: o.Controller = None,
+             column: o.Column = None,
+             unit: o.Unit = None,
+             max_jitter: o.MaxJitter = 1e-3,
+             overwrite: o.Overwrite = False,
+             log_format: o.LogFormats = None,
+             use_regressed_law: o.UseRegressedLaw = False,
+             window: o.Window = None,
+             refit: Annotated[Optional[str], typer.Option(
+                 "--refit", help="'friction': re-estimate only the joints' friction on "
+                                 "--refit-window of the first log, then validate with "
+                                 "everything else fixed (reports both)")] = None,
+             refit_window: Annotated[str, typer.Option(
+                 "--refit-window", help="the part of the first log the refit uses, "
+                                        "START:STOP in s")] = "0:5",
+             channel: o.Channels = None,
+             report: o.Report = None) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
 
     A multi-link scenario, or --refit, takes the general path (any arm, logs read by
     --log-format, the prediction from each log's logged state)."""
     enable_cache()
     sc0 = load(scenario)
+    # DECISION (moves to the library's one predict): which prediction runs.
     if sc0.arm.kind == "multi_link" or refit is not None:
         _validate_scenario_cli(sc0, logs, log_format, window, refit, refit_window, channel,
                                json_out, plots, overwrite, report, ctx)
@@ -281,8 +251,7 @@ def validate(ctx: typer.Context, scenario: str = typer.Argument(..., help="fitte
                                           inputs=[scenario, *logs,
                                                   *([log_format] if log_format else [])]),
                           report, overwrite)
-        if plots is None:
-            out["plots"] = []
+        out = bench_validate_document(out, plots is not None)
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
     for name, d in out["fit_percent"].items():
         t.add_row(name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection")))
@@ -299,6 +268,9 @@ def bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
     --max-jitter and --log-format; the declared law is checked against each log's command
     (bench.controller_check) when it has one, and replaced by the regressed law with
     --use-regressed-law."""
+    # DECISION (moves to the library: io.logformat.load_log plus a rig check, target map
+    # step 2): the declared law is checked against the logged command, and replaced by
+    # the regressed one with --use-regressed-law.
     from flexarm.identification.time_domain.controller_check import check_controller
     from flexarm.identification.time_domain.logs import read_bench_log
 
@@ -370,14 +342,15 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     check_file_option("--report", report, overwrite, "fit.html")
     check_dir_option("--plots", plots)
-    sc = load(scenario)
     win = parsing.window(window, "--window")
+    chans, priors = parsing.channels(channel), parsing.priors(prior)
+    sc = load(scenario)
     figures = contextlib.ExitStack()
     folder = figures.enter_context(figure_folder(plots, report))
     try:
         glogs = _general_logs(logs, log_format)
-        opts = FitOptions(channels=parsing.channels(channel), priors=parsing.priors(prior), segment=segment,
-                          max_nfev=max_nfev, windows=[win] * len(glogs) if win else None)
+        opts = FitOptions(channels=chans, priors=priors, segment=segment, max_nfev=max_nfev,
+                          windows=[win] * len(glogs) if win else None)
         with console.status("fitting") as status:
             res = fit_scenario(sc, glogs, free or None, opts,
                                progress=lambda m: progress(status, m), predict=False)
@@ -397,8 +370,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _fit_table(pred["fit_percent"], "whole-log prediction")
     if json_out is not None:
-        write_json(json_out, {**res.to_dict(), "fit_percent": pred["fit_percent"],
-                              "plots": pred["plots"] if plots is not None else []},
+        write_json(json_out, scenario_fit_document(res, pred, plots is not None),
                    overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
@@ -435,34 +407,29 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
               "viscous friction) can be re-estimated")
     win = parsing.window(window, "--window")
     rwin = parsing.window(refit_window, "--refit-window")
-    out: dict = {}
+    out: dict = {}  # JSON LAYOUT: scenario_validate_document, refit_document
     figures = contextlib.ExitStack()
     plots = figures.enter_context(figure_folder(plots, report))
     figs: list = []
+    ch = parsing.channels(channel)
     try:
         glogs = _general_logs(logs, log_format)
-        ch = parsing.channels(channel)
         opts = FitOptions(channels=ch, windows=[win] * len(glogs) if win else None)
         with console.status("predicting") as status:
             before = predict_scenario(sc, glogs, opts, channels=list(ch) if ch else None,
                                       plots=plots, tag="validate")
-            out["fit_percent"] = before["fit_percent"]
+            out = scenario_validate_document(before)
             figs += before["plots"]
             if refit:
                 status.update("re-estimating the joints' friction")
-                free = friction_paths(sc)
+                free = friction_paths(sc)  # DECISION: what --refit friction frees
                 res = fit_scenario(sc, glogs[:1], free, FitOptions(channels=ch, windows=[rwin]),
                                    predict=False)
                 after = predict_scenario(res.scenario, glogs, opts,
                                          channels=list(ch) if ch else None, plots=plots,
                                          tag="refit")
                 figs += after["plots"]
-                out["refit"] = {"window_s": list(rwin), "log": str(logs[0]),
-                                "params": {p: res.params[p] for p in free},
-                                "template": {p: res.template[p] for p in free},
-                                "std": {p: res.std[p] for p in free},
-                                "warnings": res.warnings,
-                                "fit_percent": after["fit_percent"]}
+                out["refit"] = refit_document(res, free, rwin, logs[0], after)
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
@@ -487,10 +454,6 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
                           report, overwrite)
 
 
-def _without_friction(res0) -> dict:
-    return {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
-
-
 def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> None:
     """Ctrl-C during ``fit``: write the best result so far to --json (atomically), marked
     ``"interrupted": true, "status": "interrupted"``, say so in one line, exit 130 (the
@@ -499,16 +462,7 @@ def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> No
     fit's best result (``None`` if none)."""
     from flexarm.io.write import write_json
 
-    mark = {"interrupted": True, "status": "interrupted"}
-    if res is not None:
-        d = res.to_dict()
-        d["without_friction"] = ({**_without_friction(best), **mark} if best is not None
-                                 else dict(mark))
-    elif best is not None:
-        d = best.to_dict()
-    else:
-        d = {"message": "interrupted before any model was evaluated"}
-    d = {**mark, **d, **mark}
+    d = interrupted_document(res, best)
     if json_out is None:
         err.print("[yellow]fit interrupted[/]: nothing written (no --json given)")
     else:
@@ -517,3 +471,76 @@ def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> No
         err.print(f"[yellow]fit interrupted[/]: {what} written to {escape(str(json_out))}, "
                   "marked \"interrupted\": true", highlight=False)
     raise typer.Exit(130)
+
+
+# --- JSON LAYOUT -----------------------------------------------------------------------------
+# The documents `fit --json` and `validate --json` write, assembled here, one function each.
+# MERGE: the library's FitResult.to_dict() (the `fitcore` work, identification/time_domain/)
+# takes these keys; each function below then becomes `result.to_dict()`.
+
+def bench_fit_document(res, res0, win, held, vwin) -> dict:
+    """JSON LAYOUT of ``fit LOG... --json`` (the servo-rig fit): the fit's own dictionary
+    plus the fit without friction (``--compare-no-friction``), the fitted window
+    (``--window``) and the held-out prediction (``--validate-window``)."""
+    d = res.to_dict()
+    if res0 is not None:
+        d["without_friction"] = without_friction_document(res0)
+    if win:
+        d["window_s"] = list(win)
+    if held is not None:
+        d["held_out"] = {"window_s": list(vwin), "fit_percent": held["fit_percent"],
+                         "diverged": held["diverged"],
+                         "initial_state": "estimated from each window's own data"}
+    return d
+
+
+def without_friction_document(res0) -> dict:
+    """JSON LAYOUT of the ``without_friction`` entry (``fit --compare-no-friction``)."""
+    return {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
+
+
+def interrupted_document(res, best) -> dict:
+    """JSON LAYOUT of an interrupted ``fit``: the best result so far, marked
+    ``"interrupted": true, "status": "interrupted"`` (``res``: the friction fit when it
+    had finished and the --compare-no-friction fit was interrupted; ``best``: the
+    interrupted fit's best result, ``None`` if none)."""
+    mark = {"interrupted": True, "status": "interrupted"}
+    if res is not None:
+        d = res.to_dict()
+        d["without_friction"] = ({**without_friction_document(best), **mark}
+                                 if best is not None else dict(mark))
+    elif best is not None:
+        d = best.to_dict()
+    else:
+        d = {"message": "interrupted before any model was evaluated"}
+    return {**mark, **d, **mark}
+
+
+def scenario_fit_document(res, pred: dict, with_plots: bool) -> dict:
+    """JSON LAYOUT of ``fit SCENARIO LOG... --json`` (the general fit): the fit's own
+    dictionary with the whole-log prediction's fit % and the figure paths (``--plots``)."""
+    return {**res.to_dict(), "fit_percent": pred["fit_percent"],
+            "plots": pred["plots"] if with_plots else []}
+
+
+def refit_document(res, free: list[str], rwin, log, after: dict) -> dict:
+    """JSON LAYOUT of the ``refit`` entry of ``validate --refit friction --json``."""
+    return {"window_s": list(rwin), "log": str(log),
+            "params": {p: res.params[p] for p in free},
+            "template": {p: res.template[p] for p in free},
+            "std": {p: res.std[p] for p in free},
+            "warnings": res.warnings,
+            "fit_percent": after["fit_percent"]}
+
+
+def bench_validate_document(out: dict, with_plots: bool) -> dict:
+    """JSON LAYOUT of ``validate SCENARIO LOG... --json`` on a single-link rig: the
+    library's validation dictionary, its figure list emptied when no ``--plots`` was asked
+    (the figures then went to a report's temporary folder)."""
+    return {**out, "plots": out["plots"] if with_plots else []}
+
+
+def scenario_validate_document(before: dict) -> dict:
+    """JSON LAYOUT of ``validate --json`` on the general path (a multi-link scenario, or
+    ``--refit``): the prediction's fit % (``refit`` added by :func:`refit_document`)."""
+    return {"fit_percent": before["fit_percent"]}

@@ -70,12 +70,12 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     from flexarm.identification.frequency_domain.identify import identify as run_identify
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
 
+    mo = parsing.ints(motor_orders, "--motor-orders", 2, "2,4")
+    bo = parsing.ints(beam_orders, "--beam-orders", 2, "0,2")
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     check_dir_option("--plots", plots)
     src = files[0] if len(files) == 1 else files
-    mo = tuple(int(x) for x in motor_orders.split(","))
-    bo = tuple(int(x) for x in beam_orders.split(","))
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -200,10 +200,8 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
             err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         fail(str(exc))
-    data = {"source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
-            "realisations": len(logs), **res.to_json()}
     from flexarm.io.write import write_json
-    write_json(json_out, data, overwrite=True)
+    write_json(json_out, frf_document(logs, res), overwrite=True)
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)
         plot_distortion(res, plots / "frf-distortion.png")
@@ -353,16 +351,11 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             fail(f"give --poles N --zeros M, or --structure ({', '.join(STRUCTURES)})")
     except TFEstError as exc:
         fail(f"{frf_json}: {exc}")
-    out.update({"cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
-                "verdict": fit.verdict, "parameters": fit.parameters})
-    inflated = any("std_inflated" in v for v in fit.parameters.values())
-    out["std_note"] = ("'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
-                       "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
-                       "rejected)" if inflated else "'std': from the noise (or BLA) variances")
+    out = tfest_document(out, fit)
     from flexarm.io.write import write_json
     write_json(json_out, out, overwrite=True)
     if plots is not None:
-        import matplotlib
+        import matplotlib  # LIBRARY: a figure function of tfest's result (no matplotlib.use)
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         plots.mkdir(parents=True, exist_ok=True)
@@ -463,11 +456,38 @@ def friction(frf_json: list[Path] = typer.Argument(
         fail(str(exc))
     for m in res["warnings"]:
         err.print(f"[yellow]warning:[/] {escape(m)}")
-    res["sources"] = [str(p) for p in frf_json]
-    res["fits"] = [f.to_json() for f in fits]
+    res = friction_document(res, frf_json, fits)
     from flexarm.io.write import write_json
     write_json(json_out, res, overwrite=True)
     c, v = res["coulomb"], res["viscous"]
     console.print(f"Coulomb {c['value']:.4g} ± {c['std']:.2g} {res['unit']}, viscous "
                   f"{v['value']:.4g} ± {v['std']:.2g} {res['damping_unit']} (correlation "
                   f"{res['correlation']:.2f}; Bussgang start {res['bussgang']['coulomb']['value']:.4g})")
+
+
+# --- JSON LAYOUT ---------------------------------------------------------------------------
+# The documents `frf`, `tfest` and `friction` write, assembled here; they belong to the
+# library's results (PeriodicFRF, the tfest/structure fit, the friction match).
+
+def frf_document(logs: list[Path], res) -> dict:
+    """JSON LAYOUT of ``frf --json``: the source(s), the realisation count and the FRF."""
+    return {"source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
+            "realisations": len(logs), **res.to_json()}
+
+
+def tfest_document(out: dict, fit) -> dict:
+    """JSON LAYOUT of ``tfest --json``: the model's own entries plus the cost, its check
+    and the parameters with their standard deviations (and what those mean)."""
+    out = {**out, "cost": fit.cost, "expected_cost": fit.expected_cost,
+           "cost_std": fit.cost_std, "verdict": fit.verdict, "parameters": fit.parameters}
+    inflated = any("std_inflated" in v for v in fit.parameters.values())
+    out["std_note"] = ("'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
+                       "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
+                       "rejected)" if inflated else "'std': from the noise (or BLA) variances")
+    return out
+
+
+def friction_document(res: dict, frf_json: list[Path], fits: list) -> dict:
+    """JSON LAYOUT of ``friction --json``: the match's result, its sources and the
+    structure fitted to each record."""
+    return {**res, "sources": [str(p) for p in frf_json], "fits": [f.to_json() for f in fits]}

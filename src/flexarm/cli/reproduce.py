@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from flexarm.cli import parsing
 from flexarm.cli.common import check_dir_option, check_file_option, console, enable_cache, err, fail, outdir
 
 
@@ -79,12 +80,7 @@ def scenario_from_mat(workspace: Path = typer.Argument(..., help="the lab's MATL
     from flexarm.specs import ScenarioError, scenario_from_dict
 
     check_file_option("--out", out, overwrite)
-    try:
-        lims = [float(x) for x in current_limits.split(",")]
-    except ValueError:
-        lims = []
-    if len(lims) != 2 or not min(lims) > 0:
-        fail(f"--current-limits {current_limits!r}: give two positive currents in A, e.g. 0.94,1.2")
+    lims = parsing.positive_floats(current_limits, "--current-limits", 2, "0.94,1.2 (A)")
     try:
         data = scenario_from_workspace(workspace, current_limits=(lims[0], lims[1]))
         scenario_from_dict(data, source=str(workspace))
