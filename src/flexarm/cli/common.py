@@ -29,9 +29,19 @@ def enable_cache() -> None:
         pass
 
 
+def fold(text: str) -> str:
+    """A message as one line: its lines joined (after a colon by a space, else by "; "),
+    runs of spaces made one."""
+    out = ""
+    for line in (" ".join(ln.split()) for ln in str(text).splitlines()):
+        if line:
+            out += (line if not out else (" " if out.endswith(":") else "; ") + line)
+    return out
+
+
 def fail(msg: str) -> NoReturn:
     """Refuse a bad input: ``error: MSG`` as one line on stderr, exit 2."""
-    err.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+    err.print(f"[bold red]error:[/] {escape(fold(msg))}", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
 
 

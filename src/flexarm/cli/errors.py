@@ -24,7 +24,7 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from flexarm.cli.common import err
+from flexarm.cli.common import err, fold
 
 EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
@@ -58,8 +58,7 @@ def one_line(exc: BaseException) -> str:
     """A project error as one line (its message with line breaks folded).
 
     MERGE: becomes ``flexarm.errors.one_line(exc)``."""
-    text = " ".join(str(exc).split())
-    return text or type(exc).__name__
+    return fold(str(exc)) or type(exc).__name__
 
 
 def bad_input(exc: BaseException) -> int:
@@ -94,7 +93,7 @@ def internal_error(exc: BaseException, command: str = "") -> int:
     except OSError as exc2:
         where = None
         note = f"(the traceback could not be saved: {exc2}; it follows)"
-    msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+    msg = fold(f"{type(exc).__name__}: {exc}")
     if where is not None:
         err.print(f"[bold red]internal error:[/] {escape(msg)} (a flexarm bug: the traceback "
                   f"is in {escape(where)}; please report it with that file)", highlight=False,
@@ -111,6 +110,6 @@ def usage_error(exc: typer.TyperException) -> int:
     unknown option): one line with the command's ``--help``; the exit code (2)."""
     ctx = getattr(exc, "ctx", None)
     where = f" (see {ctx.command_path} --help)" if ctx is not None else ""
-    err.print(f"[bold red]error:[/] {escape(' '.join(exc.format_message().split()))}{escape(where)}",
+    err.print(f"[bold red]error:[/] {escape(fold(exc.format_message()))}{escape(where)}",
               highlight=False, soft_wrap=True)
     return exc.exit_code
