@@ -90,6 +90,7 @@ CASES = [
     (TOML, ["frf", "{d}/bad.csv", "--log-format", "{d}/bad.toml", "--json", "{o}/f.json"]),
     (MAT, ["frf", "{d}/garbage.mat", "--json", "{o}/f.json"]),
     (CHOICE, ["frf", "{d}/bad.csv", "--method", "guess", "--json", "{o}/f.json"]),
+    (OPTION, ["frf", "{d}/bad.csv", "--period", "lots", "--json", "{o}/f.json"]),
     (MISSING, ["tfest", "{d}/nope.json", "--poles", "2", "--zeros", "0", "--json", "{o}/t.json"]),
     (JSON, ["tfest", "{d}/bad.json", "--poles", "2", "--zeros", "0", "--json", "{o}/t.json"]),
     (JSON, ["tfest", "{d}/not-frf.json", "--poles", "2", "--zeros", "0", "--json",

@@ -77,38 +77,9 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     enable_cache()
     from flexarm.design import METHODS, design
 
-    if method not in METHODS:
-        fail(f"--method {method!r}: not known; choose one of {', '.join(METHODS)}")
-    if pole_domain not in ("s", "z"):
-        fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
-    if method == "place" and poles is None:
-        fail("--method place needs --poles (the closed-loop poles of the arm's states, "
-              "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
-              "the model's states in design.json)")
-    if method != "place" and poles is not None:
-        fail(f"--poles: only with --method place (got --method {method})")
-    if method == "place" and (q is not None or r is not None):
-        fail("--q/--r: only with --method lqr (place takes --poles)")
-    if method == "nested":
-        given = [o for o, v in (("--q", q), ("--r", r), ("--observer-poles", observer_poles),
-                                ("--integral", integral or None), ("--disturbance", disturbance))
-                 if v is not None]
-        if given:
-            fail(f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
-                  "--max-deflection and --distance)")
-    elif max_deflection is not None or distance is not None:
-        fail("--max-deflection/--distance: only with --method nested")
-    if method == "tune" and fit_json is None and spread is None:
-        fail("--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
-              "--spread PATH=STD,...")
-    if fit_json is not None and spread is not None:
-        fail("--fit-json and --spread both give the plants' spread; choose one")
-    if plants < 1:
-        fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
-    if encoder_counts is not None and encoder_counts < 2:
-        fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
-    if integral and disturbance:
-        fail("--integral and --disturbance both give integral action; choose one")
+    _check_options(method, METHODS, pole_domain, poles, q, r, observer_poles, integral,
+                   disturbance, max_deflection, distance, fit_json, spread, plants,
+                   encoder_counts)
     # the option values parsed before any work: a malformed one is refused first
     poles_v = parsing.complex_list(poles, "--poles")
     observer_v = parsing.complex_list(observer_poles, "--observer-poles")
@@ -167,25 +138,7 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                   write_text(out / "compare.md", side.table("markdown") + "\n",
                              overwrite=overwrite),
                   *side.figures(out, overwrite=overwrite)]
-        # LIBRARY: compare's private _fmt (one metric's text); wanted public (format_metric)
-        from flexarm.design.compare import METRICS, _fmt
-
-        drawn = side.settings["n_plants"] > 0
-        cols = ("nominal", "median", "worst") if drawn else ("nominal",)
-        tab = Table(title=(f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
-                           f"over {plants} drawn plants" if drawn else
-                           f"a {side.settings['step_rad']:g} rad step on the nominal plant"))
-        tab.add_column("controller")
-        for title, unit, _ in METRICS.values():
-            tab.add_column(f"{title} [{unit}]")
-        if drawn:
-            tab.add_column("unstable")
-        tab.add_column("limit ok")
-        for name, row in side.rows.items():
-            tab.add_row(name, *[" / ".join(_fmt(row[k][m]) for k in cols) for m in METRICS],
-                        *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
-                        "yes" if row["limit_respected"] else "NO")
-        console.print(tab)
+        _print_comparison(side, plants)
         des.warnings.extend(w for w in side.warnings if w not in des.warnings)
     info = des.info
     if "model" in info:
@@ -236,3 +189,67 @@ def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | 
             fail(f"--spread {item!r}: the std must be a finite number >= 0")
         out[path] = (mean, std)
     return out
+
+
+def _check_options(method, methods, pole_domain, poles, q, r, observer_poles, integral,
+                   disturbance, max_deflection, distance, fit_json, spread, plants,
+                   encoder_counts) -> None:
+    """The option combinations ``design`` accepts (refused before any work).
+
+    DECISION: the library's ``design()`` checks its own arguments too; these checks name
+    the command-line options."""
+    if method not in methods:
+        fail(f"--method {method!r}: not known; choose one of {', '.join(methods)}")
+    if pole_domain not in ("s", "z"):
+        fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
+    if method == "place" and poles is None:
+        fail("--method place needs --poles (the closed-loop poles of the arm's states, "
+              "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
+              "the model's states in design.json)")
+    if method != "place" and poles is not None:
+        fail(f"--poles: only with --method place (got --method {method})")
+    if method == "place" and (q is not None or r is not None):
+        fail("--q/--r: only with --method lqr (place takes --poles)")
+    if method == "nested":
+        given = [o for o, v in (("--q", q), ("--r", r), ("--observer-poles", observer_poles),
+                                ("--integral", integral or None), ("--disturbance", disturbance))
+                 if v is not None]
+        if given:
+            fail(f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
+                  "--max-deflection and --distance)")
+    elif max_deflection is not None or distance is not None:
+        fail("--max-deflection/--distance: only with --method nested")
+    if method == "tune" and fit_json is None and spread is None:
+        fail("--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
+              "--spread PATH=STD,...")
+    if fit_json is not None and spread is not None:
+        fail("--fit-json and --spread both give the plants' spread; choose one")
+    if plants < 1:
+        fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
+    if encoder_counts is not None and encoder_counts < 2:
+        fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
+    if integral and disturbance:
+        fail("--integral and --disturbance both give integral action; choose one")
+
+
+def _print_comparison(side, plants: int) -> None:
+    """The step comparison as a table: nominal / median / worst per metric and controller."""
+    # LIBRARY: compare's private _fmt (one metric's text); wanted public (format_metric)
+    from flexarm.design.compare import METRICS, _fmt
+
+    drawn = side.settings["n_plants"] > 0
+    cols = ("nominal", "median", "worst") if drawn else ("nominal",)
+    tab = Table(title=(f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
+                       f"over {plants} drawn plants" if drawn else
+                       f"a {side.settings['step_rad']:g} rad step on the nominal plant"))
+    tab.add_column("controller")
+    for title, unit, _ in METRICS.values():
+        tab.add_column(escape(f"{title} [{unit}]"))  # rich markup ate "[s]"
+    if drawn:
+        tab.add_column("unstable")
+    tab.add_column("limit ok")
+    for name, row in side.rows.items():
+        tab.add_row(name, *[" / ".join(_fmt(row[k][m]) for k in cols) for m in METRICS],
+                    *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
+                    "yes" if row["limit_respected"] else "NO")
+    console.print(tab)

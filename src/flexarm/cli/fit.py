@@ -149,6 +149,20 @@ def fit(ctx: typer.Context,
     except KeyboardInterrupt:
         _fit_interrupted(json_out, overwrite, res, None)
     console.print(escape(res.summary()))
+    _print_bench_tables(res, res0, held, validate_window)
+    if json_out is not None:
+        write_json(json_out, bench_fit_document(res, res0, win, held, vwin),
+                   overwrite=overwrite)
+    if scenario_out is not None:
+        res.write_scenario(scenario_out, overwrite=overwrite)
+    with figure_folder(plots, report) as folder:
+        if folder is not None:
+            _bench_figures(ctx, folder, res, res0, held, validate_window, report, overwrite,
+                           [*logs, *([log_format] if log_format else [])])
+
+
+def _print_bench_tables(res, res0, held, validate_window: Optional[str]) -> None:
+    """The bench fit's tables: with and without friction, the held-out windows."""
     if res0 is not None:
         t = Table("log", "signal", "fit % with friction", "fit % without")
         for name, d in res.fit_percent.items():
@@ -164,31 +178,28 @@ def fit(ctx: typer.Context,
             t.add_row(name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-"
                               for k in ("motor_angle", "tip_deflection")))
         console.print(t)
-    if json_out is not None:
-        write_json(json_out, bench_fit_document(res, res0, win, held, vwin),
-                   overwrite=overwrite)
-    if scenario_out is not None:
-        res.write_scenario(scenario_out, overwrite=overwrite)
-    with figure_folder(plots, report) as folder:
-        if folder is None:
-            return
-        figs = res.plots(folder)
+
+
+def _bench_figures(ctx, folder: Path, res, res0, held, validate_window, report, overwrite,
+                   inputs: list) -> None:
+    """The bench fit's overlay figures into ``folder`` (and the held-out windows'), and
+    the HTML report from them (--report)."""
+    figs = res.plots(folder)
+    if held is not None:
+        from flexarm.identification.time_domain.report import overlay_plots
+
+        figs += overlay_plots(folder, held["logs"], held["traj"], held["fit_percent"],
+                              "held-out")
+    if report is not None:
+        from flexarm.analysis.html_report import fit_report
+
+        extra = {}
         if held is not None:
-            from flexarm.identification.time_domain.report import overlay_plots
-
-            figs += overlay_plots(folder, held["logs"], held["traj"], held["fit_percent"],
-                                  "held-out")
-        if report is not None:
-            from flexarm.analysis.html_report import fit_report
-
-            extra = {}
-            if held is not None:
-                extra[f"Fit % of the held-out windows {validate_window} s"] = held["fit_percent"]
-            if res0 is not None:
-                extra["Fit % of the fit without joint friction"] = res0.fit_percent
-            write_report(fit_report(res, figures=figs, command=command_line(ctx),
-                                     inputs=[*logs, *([log_format] if log_format else [])],
-                                     extra_fit_percent=extra), report, overwrite)
+            extra[f"Fit % of the held-out windows {validate_window} s"] = held["fit_percent"]
+        if res0 is not None:
+            extra["Fit % of the fit without joint friction"] = res0.fit_percent
+        write_report(fit_report(res, figures=figs, command=command_line(ctx), inputs=inputs,
+                                extra_fit_percent=extra), report, overwrite)
 
 
 def validate(ctx: typer.Context,

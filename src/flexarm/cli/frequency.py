@@ -11,6 +11,7 @@ from typing import Optional
 import typer
 from rich.markup import escape
 
+from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, console, enable_cache, err,
                                 fail, fmt, load)
@@ -50,7 +51,7 @@ def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or b
 def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one folder of them"),
              motor_constant: str = typer.Option(..., "--motor-constant",
                                                 help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"),
-             json_out: Optional[Path] = typer.Option(None, "--json", help="write the result as JSON"),
+             json_out: o.JsonOut = None,
              plots: Optional[Path] = typer.Option(None, help="folder for the Bode figures"),
              scenario_out: Optional[Path] = typer.Option(
                  None, "--scenario-out", help="write the identified arm as a scenario TOML"),
@@ -159,8 +160,8 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         method: str = typer.Option("periodic", "--method",
                                    help="periodic (multisine over whole periods) or lpm "
                                         "(local polynomial method: non-periodic or transient records)"),
-        json_out: Path = typer.Option(..., "--json", help="JSON result"),
-        plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
+        json_out: o.JsonRequired = ...,
+        plots: o.Plots = None) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
     import warnings as _w
 
@@ -170,6 +171,7 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                                                                   periodic_frf, plot_distortion)
     if method not in ("periodic", "lpm"):
         fail(f"--method {method!r}: choose periodic or lpm")
+    n_period = None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
     from flexarm.io.logs import LogError
     try:
         with _w.catch_warnings(record=True) as caught:
@@ -192,7 +194,7 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                     continue
                 results.append(periodic_frf(
                     sig[input], {n: sig[n] for n in names}, fs,
-                    period=None if period == "auto" else int(period), lines=ex_lines,
+                    period=n_period, lines=ex_lines,
                     input_name=input, source=str(log)))
             res = results[0] if len(results) == 1 else combine_realisations(
                 results, source=", ".join(map(str, logs)))
@@ -248,19 +250,16 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                                              "the parameters fitted (default all)"),
           fixed: list[str] = typer.Option([], "--fix", help="structure: NAME=VALUE held "
                                           "(SI; with --free, the value of a parameter not fitted)"),
-          motor_constant: Optional[float] = typer.Option(
-              None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
-          resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
-          gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
-          efficiency: Optional[float] = typer.Option(
-              None, "--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)"),
-          length: Optional[float] = typer.Option(
-              None, "--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
+          motor_constant: o.StructMotorConstant = None,
+          resistance: o.StructResistance = None,
+          gear_ratio: o.StructGearRatio = None,
+          efficiency: o.StructEfficiency = None,
+          length: o.StructLength = None,
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
                                        help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
-          json_out: Path = typer.Option(..., "--json", help="JSON result"),
-          plots: Optional[Path] = typer.Option(None, "--plots", help="folder for figures")) -> None:
+          json_out: o.JsonRequired = ...,
+          plots: o.Plots = None) -> None:
     """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
     voltage-servo) to an FRF, weighted by its variances; JSON parameters.<name> = {value, std}."""
     import control as ct
@@ -279,9 +278,9 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     w = 2 * np.pi * f
 
     def chan(name):
-        o = outs[name]
-        sd = o.get("total_std") or o["noise_std"]
-        return np.asarray(o["re"]) + 1j * np.asarray(o["im"]), np.asarray(sd, float)
+        oc = outs[name]
+        sd = oc.get("total_std") or oc["noise_std"]
+        return np.asarray(oc["re"]) + 1j * np.asarray(oc["im"]), np.asarray(sd, float)
 
     try:
         if structure is not None:
@@ -355,26 +354,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     from flexarm.io.write import write_json
     write_json(json_out, out, overwrite=True)
     if plots is not None:
-        import matplotlib  # LIBRARY: a figure function of tfest's result (no matplotlib.use)
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        plots.mkdir(parents=True, exist_ok=True)
-        fig, ax = plt.subplots(figsize=(7, 4))
-        model = fit.response(w)
-        model = model if isinstance(model, dict) else {out["output"]: model}
-        for nm, g in model.items():
-            if nm not in outs or (structure is not None and nm not in out["outputs"]):
-                continue
-            o = outs[nm]
-            H = np.asarray(o["re"]) + 1j * np.asarray(o["im"])
-            ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
-            ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")
-            ax.semilogx(f, 20 * np.log10(np.abs(g - H)), ":", label=f"{nm} |error|")
-        ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel("dB")
-        ax.legend(fontsize=7)
-        fig.savefig(plots / "tfest.png", dpi=120)
-        plt.close(fig)
+        _tfest_figure(fit, f, outs, out, structure, plots)
     console.print(fit.verdict)
     for name, v in fit.parameters.items():
         extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
@@ -387,17 +367,14 @@ def friction(frf_json: list[Path] = typer.Argument(
                            "excitation lines, different levels)"),
              structure: str = typer.Option("two-mass", "--structure",
                                            help="two-mass, frb-single-mass or voltage-servo"),
-             motor_constant: Optional[float] = typer.Option(
-                 None, "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"),
-             resistance: Optional[float] = typer.Option(None, "--resistance", help="voltage-servo: R_m (ohm)"),
-             gear_ratio: Optional[float] = typer.Option(None, "--gear-ratio", help="voltage-servo: K_g"),
-             efficiency: Optional[float] = typer.Option(None, "--efficiency",
-                                                        help="voltage-servo: η = η_g η_m"),
-             length: Optional[float] = typer.Option(None, "--length",
-                                                    help="voltage-servo: link length L (m)"),
+             motor_constant: o.StructMotorConstant = None,
+             resistance: o.StructResistance = None,
+             gear_ratio: o.StructGearRatio = None,
+             efficiency: o.StructEfficiency = None,
+             length: o.StructLength = None,
              iterations: int = typer.Option(3, "--iterations",
                                             help="simulator corrections of the Bussgang start (0: none)"),
-             json_out: Path = typer.Option(..., "--json", help="JSON result")) -> None:
+             json_out: o.JsonRequired = ...) -> None:
     """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
     structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v
     (Bussgang), then matched with flexarm's simulator of the fitted model with friction."""
@@ -491,3 +468,28 @@ def friction_document(res: dict, frf_json: list[Path], fits: list) -> dict:
     """JSON LAYOUT of ``friction --json``: the match's result, its sources and the
     structure fitted to each record."""
     return {**res, "sources": [str(p) for p in frf_json], "fits": [f.to_json() for f in fits]}
+
+
+def _tfest_figure(fit, f, outs: dict, out: dict, structure: Optional[str], plots: Path) -> None:
+    """``tfest --plots``: data, model and |error| in dB over frequency (tfest.png)."""
+    import matplotlib  # LIBRARY: a figure function of tfest's result (no matplotlib.use)
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    plots.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    model = fit.response(2 * np.pi * f)
+    model = model if isinstance(model, dict) else {out["output"]: model}
+    for nm, g in model.items():
+        if nm not in outs or (structure is not None and nm not in out["outputs"]):
+            continue
+        H = np.asarray(outs[nm]["re"]) + 1j * np.asarray(outs[nm]["im"])
+        ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
+        ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")
+        ax.semilogx(f, 20 * np.log10(np.abs(g - H)), ":", label=f"{nm} |error|")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("dB")
+    ax.legend(fontsize=7)
+    fig.savefig(plots / "tfest.png", dpi=120)
+    plt.close(fig)
