@@ -12,8 +12,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, err,
-                                fail, load, outdir, progress, write_report)
+from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, fail,
+                                load, outdir, progress, warn, write_report)
 
 
 def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
@@ -146,7 +146,7 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                       f"(arm {info['model']['n_arm']}); linear peak command "
                       f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
     for w in des.warnings:
-        err.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+        warn(w)
     console.print("wrote " + ", ".join(str(p) for p in files))
     if report is not None:
         from flexarm.analysis.html_report import design_report

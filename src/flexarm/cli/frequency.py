@@ -9,12 +9,11 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.markup import escape
 
 from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, console, enable_cache, err,
-                                fail, fmt, load)
+                                fail, fmt, load, warn)
 
 
 def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
@@ -86,7 +85,7 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     except (IdentificationError, ValueError) as exc:
         fail(str(exc))
     for w in caught:
-        err.print(f"[yellow]warning:[/] {escape(str(w.message))}")
+        warn(str(w.message))
     d = res.to_dict()
     if json_out is not None:
         res.to_json(json_out, overwrite=overwrite)
@@ -199,7 +198,7 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
             res = results[0] if len(results) == 1 else combine_realisations(
                 results, source=", ".join(map(str, logs)))
         for c in caught:
-            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+            warn(str(c.message))
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         fail(str(exc))
     from flexarm.io.write import write_json
@@ -327,13 +326,13 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                             progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
                     for c in caught:
                         if "IdentificationWarning" in type(c.message).__name__:
-                            err.print(f"[yellow]warning:[/] {escape(str(c.message))}")
+                            warn(str(c.message))
                     err.print("")
                     fit.parameters["coulomb_current" if cf.unit == "A" else "coulomb_torque"] = {
                         "value": cf.coulomb_current, "std": cf.std}
                     out["coulomb"] = cf.to_json()
                 except IdentificationError as exc:
-                    err.print(f"[yellow]warning:[/] no Coulomb level: {escape(str(exc))}")
+                    warn(f"no Coulomb level: {exc}")
                     out["coulomb"] = {"error": str(exc)}
             elif structure in SIMULATORS and coulomb and "motor_angle" in outs:
                 err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
@@ -432,7 +431,7 @@ def friction(frf_json: list[Path] = typer.Argument(
     except IdentificationError as exc:
         fail(str(exc))
     for m in res["warnings"]:
-        err.print(f"[yellow]warning:[/] {escape(m)}")
+        warn(m)
     res = friction_document(res, frf_json, fits)
     from flexarm.io.write import write_json
     write_json(json_out, res, overwrite=True)
