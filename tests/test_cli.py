@@ -288,8 +288,8 @@ class _FakeFit:
 
 
 def _interrupting_fit(monkeypatch, result):
+    import flexarm.cli.fit
     import flexarm.identification.time_domain
-    import flexarm.cli
     from flexarm.errors import FitInterrupted
 
     def fake(*a, **k):
@@ -298,7 +298,7 @@ def _interrupting_fit(monkeypatch, result):
         raise FitInterrupted(result)
 
     monkeypatch.setattr(flexarm.identification.time_domain, "fit", fake)
-    monkeypatch.setattr(flexarm.cli, "_bench_logs", lambda *a, **k: [])
+    monkeypatch.setattr(flexarm.cli.fit, "bench_logs", lambda *a, **k: [])
 
 
 def test_fit_interrupted_writes_best_result_marked_and_exits_130(tmp_path, monkeypatch):

@@ -1,0 +1,5 @@
+"""``python -m flexarm.cli``."""
+
+from flexarm.cli import main
+
+main()

@@ -1,0 +1,182 @@
+"""What every command shares: the consoles, the one way to refuse (:func:`fail`), loading a
+scenario, checking output paths before any work, the report writer and progress lines."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import NoReturn, Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+console = Console()
+err = Console(stderr=True)
+
+
+def enable_cache() -> None:
+    """JAX's persistent compilation cache, so repeated CLI runs skip recompiling."""
+    import jax
+
+    cache = os.environ.get("FLEXARM_JAX_CACHE", str(Path.home() / ".cache" / "flexarm-jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except Exception:  # an old jax without the option: run uncached
+        pass
+
+
+def fold(text: str) -> str:
+    """A message as one line: its lines joined (after a colon by a space, else by "; "),
+    runs of spaces made one."""
+    out = ""
+    for line in (" ".join(ln.split()) for ln in str(text).splitlines()):
+        if line:
+            out += (line if not out else (" " if out.endswith(":") else "; ") + line)
+    return out
+
+
+def fail(msg: str) -> NoReturn:
+    """Refuse a bad input: ``error: MSG`` as one line on stderr, exit 2."""
+    err.print(f"[bold red]error:[/] {escape(fold(msg))}", highlight=False, soft_wrap=True)
+    raise typer.Exit(2)
+
+
+def load(scenario: str):
+    """A scenario (file or built-in name) with the model's own checks; a bad one is one
+    line naming the field."""
+    from flexarm.specs import ScenarioError, load_scenario
+
+    try:
+        sc = load_scenario(scenario)
+        if sc.arm.kind == "single_link":  # the model's own checks (a proper, stable G_b, ...)
+            from flexarm.models.single_link import SingleLinkModel
+
+            SingleLinkModel.from_spec(sc.arm)
+    except ScenarioError as exc:
+        fail(str(exc))
+    except ValueError as exc:
+        fail(f"{scenario}: {exc}")
+    return sc
+
+
+def writable(option: str, path: Path, folder: Path) -> None:
+    """``folder`` (where ``path`` will be made) must be a writable folder."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        fail(f"{option} {path}: cannot write into {folder} (permission denied); choose a "
+             "folder you can write to")
+
+
+def check_dir_option(option: str, path: Optional[Path]) -> None:
+    """An output folder option: refuse, before any work, a path that is an existing file,
+    lies below a file, or cannot be created or written (the folder itself may be missing:
+    it is created with its parents)."""
+    if path is None:
+        return
+    if path.exists() and not path.is_dir():
+        fail(f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
+             "several files into it), or move the file away")
+    anc = path
+    while not anc.exists():
+        if anc.parent == anc:
+            break
+        anc = anc.parent
+    if not anc.is_dir():
+        fail(f"{option} {path}: {anc} is a file, so the folder cannot be created there; "
+             "give a path below a folder")
+    writable(option, path, anc)
+
+
+def check_file_option(option: str, path: Optional[Path], overwrite: bool,
+                      example: str = "result.json") -> None:
+    """An output file option: refuse, before any work, a folder, an existing file (unless
+    --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
+    if path is None:
+        return
+    if path.is_dir():
+        fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. "
+             f"{path / example}")
+    if path.exists() and not overwrite:
+        fail(f"{option} {path}: exists; pass --overwrite to replace it")
+    parent = path.parent
+    if not parent.exists():
+        fail(f"{option} {path}: the folder {parent} does not exist; create it first "
+             f"(mkdir -p {parent})")
+    if not parent.is_dir():
+        fail(f"{option} {path}: {parent} is a file, not a folder; give a path in a folder")
+    writable(option, path, parent)
+
+
+def outdir(out: Path, overwrite: bool, option: str = "--out") -> Path:
+    """An output folder, created; a non-empty one only with --overwrite."""
+    check_dir_option(option, out)
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def command_line(ctx: typer.Context) -> str:
+    """The running command as an equivalent ``flexarm ...`` line (for reports): its
+    arguments and the options given on the command line (defaults left out), shell-quoted."""
+    import shlex
+
+    args, opts = [], []
+    for prm in ctx.command.params:
+        src = ctx.get_parameter_source(prm.name)
+        if getattr(src, "name", None) != "COMMANDLINE":
+            continue
+        v = ctx.params[prm.name]
+        vals = list(v) if isinstance(v, (list, tuple)) else [v]
+        if prm.param_type_name == "argument":
+            args += [str(x) for x in vals]
+        elif getattr(prm, "is_flag", False):
+            names = prm.opts if v else prm.secondary_opts
+            opts += names[:1]
+        else:
+            for x in vals:
+                opts += [prm.opts[0], str(x)]
+    return shlex.join(["flexarm", str(ctx.info_name), *args, *opts])
+
+
+@contextlib.contextmanager
+def figure_folder(plots: Optional[Path], report: Optional[Path]):
+    """Where the figures go: --plots, else (a report needs them) a temporary folder removed
+    after the report is written; None when neither is asked for."""
+    if plots is not None or report is None:
+        yield plots
+    else:
+        with tempfile.TemporaryDirectory(prefix="flexarm-report-") as d:
+            yield Path(d)
+
+
+def write_report(rep, path: Optional[Path], overwrite: bool) -> None:
+    """Write an :class:`flexarm.analysis.html_report.HtmlReport` to --report."""
+    from flexarm.errors import OutputExistsError
+
+    try:
+        rep.write(path, overwrite=overwrite)
+    except (OutputExistsError, OSError) as exc:
+        fail(f"--report {path}: {exc}")
+    console.print(f"report: {escape(str(path))}")
+
+
+def progress(status, message: str) -> None:
+    """A long job's stage: on the status line, and as a plain line on stderr when that is
+    not a terminal (a log file or a pipe: the status line is not drawn there)."""
+    status.update(message)
+    if not err.is_terminal:
+        err.print(message, highlight=False)
+
+
+def warn(message: str) -> None:
+    """A warning line on stderr."""
+    err.print(f"[yellow]warning:[/] {escape(message)}", highlight=False)
+
+
+def fmt(c: list[float]) -> str:
+    """Numbers as ``[a, b, c]`` with 6 significant digits."""
+    return "[" + ", ".join(f"{x:.6g}" for x in c) + "]"

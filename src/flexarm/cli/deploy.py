@@ -1,0 +1,36 @@
+"""``flexarm export-c``: a design's (or scenario's) controller as C99."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from flexarm.cli.common import check_dir_option, console, fail
+
+
+def export_c(design: str = typer.Argument(..., help="design directory (holding design.toml) or a scenario TOML / built-in name"),
+             out: Path = typer.Option(..., "--out", help="folder for NAME.h and NAME.c"),
+             precision: str = typer.Option("double", "--precision", help="double or float"),
+             name: str = typer.Option("controller", "--name", help="C prefix and file name"),
+             overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c")) -> None:
+    """Write the [controller] of a design (or scenario) as C99 for a real-time target:
+    NAME.h (state struct, NAME_init, NAME_step, channel order and units) and NAME.c (the
+    law, friction feedforward, saturation and D/A count); no dependencies."""
+    from flexarm.deploy.c_export import ExportError, export_c as _export_c
+    from flexarm.errors import OutputExistsError
+
+    check_dir_option("--out", out)
+    try:
+        code, paths = _export_c(design, out, name=name, precision=precision,
+                                overwrite=overwrite)
+    except (ExportError, OutputExistsError) as exc:
+        fail(str(exc))
+    except ValueError as exc:
+        fail(f"{design}: {exc}")
+    console.print_json(json.dumps({
+        "files": [str(p) for p in paths], "precision": code.precision,
+        "measured": [f"{n} ({u})" for n, u in code.measured],
+        "reference": [f"{n} ({u})" for n, u in code.references],
+        "u": [f"{n} ({u})" for n, u in code.outputs]}))

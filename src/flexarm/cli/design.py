@@ -1,0 +1,255 @@
+"""``flexarm design``: a discrete controller for a scenario's rig, compared with the
+scenario's own controller on a reference step over drawn plants."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from flexarm.cli import parsing
+from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, fail,
+                                load, outdir, progress, warn, write_report)
+
+
+def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
+               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's gains over plants drawn from the fit's uncertainty)"),
+               out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
+               q: Optional[str] = typer.Option(
+                   None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
+                                     "integrator) or one number per channel; default Bryson"),
+               r: Optional[str] = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
+               poles: Optional[str] = typer.Option(
+                   None, "--poles", help="place: closed-loop poles of the arm's states (+ integrators), "
+                                         "e.g. '-20+15j,-20-15j,-30,-40'"),
+               observer_poles: Optional[str] = typer.Option(
+                   None, "--observer-poles", help="observer poles of the arm's states (default: Kalman predictor)"),
+               pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
+               integral: bool = typer.Option(False, "--integral/--no-integral",
+                                             help="integrators of the tracked channels' errors (LQI)"),
+               disturbance: Optional[bool] = typer.Option(
+                   None, "--disturbance/--no-disturbance",
+                   help="estimate and cancel a constant input disturbance (integral action; "
+                        "default: on unless --integral)"),
+               friction_compensation: bool = typer.Option(
+                   True, "--friction-compensation/--no-friction-compensation",
+                   help="Coulomb feedforward C_f / k_u from the scenario's friction"),
+               max_deflection: Optional[float] = typer.Option(
+                   None, "--max-deflection", help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)"),
+               distance: Optional[float] = typer.Option(
+                   None, "--distance", help="nested: the tip move, rad (default the scenario's reference amplitude)"),
+               fit_json: Optional[Path] = typer.Option(
+                   None, "--fit-json", help="the fit's JSON (flexarm fit --json) of the rig whose "
+                                            "--scenario-out is SCENARIO: plants drawn from its "
+                                            "standard deviations (tune; and the comparison)"),
+               spread: Optional[str] = typer.Option(
+                   None, "--spread", help="plants drawn from PATH=STD,... (SI; STD may end in % of "
+                                          "the scenario's value), e.g. "
+                                          "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'"),
+               plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
+               seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
+               encoder_counts: Optional[int] = typer.Option(
+                   None, "--encoder-counts", help="counts per turn of the hub encoder, where the "
+                                                  "scenario's hub sensor has no quantum (errors in counts)"),
+               report: Optional[Path] = typer.Option(
+                   None, "--report", help="write a self-contained HTML report (the designed "
+                                          "controller, its figures, the step comparison)"),
+               overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+    """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
+    period, its computation and sensor delays in the model): state feedback by LQR or pole
+    placement with a Kalman (or placed) predictor, the reference as a state (two degrees of
+    freedom), integral action (an estimated input disturbance, or --integral), and the
+    Coulomb friction feedforward (lqr, place); or Feliu's nested loops (nested: inner hub
+    loop with friction and coupling feedforward, outer tip loop with the Wiener feedforward
+    of a deflection-limited quasi-parabolic move); or the controller's own gains and a
+    friction feedforward tuned in simulation over plants drawn from the fit (tune).
+    The scenario's controller and the design are then compared on a reference step (a
+    nested design runs its own move of the same distance) with friction, delays,
+    quantisation and saturation: on the nominal plant, and with --fit-json or --spread over
+    --plants drawn plants (nominal / median / worst, unstable count, the limit).
+    Writes design.toml (the scenario with the designed [controller]: flexarm simulate
+    OUT/design.toml runs it), design.json (gains, poles, weights, figures, warnings),
+    compare.json / compare.md (the comparison) and its figures; --report an HTML page."""
+    enable_cache()
+    from flexarm.design import METHODS, design
+
+    _check_options(method, METHODS, pole_domain, poles, q, r, observer_poles, integral,
+                   disturbance, max_deflection, distance, fit_json, spread, plants,
+                   encoder_counts)
+    # the option values parsed before any work: a malformed one is refused first
+    poles_v = parsing.complex_list(poles, "--poles")
+    observer_v = parsing.complex_list(observer_poles, "--observer-poles")
+    q_v, r_v = parsing.weights(q, "--q"), parsing.weights(r, "--r")
+    check_file_option("--report", report, overwrite, "design.html")
+    sc = load(scenario)
+    spread_d = plant_spread(sc, fit_json, spread)
+    out = outdir(out, overwrite)
+    count = 2 * math.pi / encoder_counts if encoder_counts else None
+    if method == "nested":
+        opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
+                if v is not None}
+    elif method == "tune":
+        opts = {}  # the plants below (tune needs --fit-json or --spread: checked above)
+    else:
+        opts = dict(integral=integral, disturbance=disturbance,
+                    friction_compensation=friction_compensation, pole_domain=pole_domain,
+                    observer_poles=observer_v)
+    if method == "place":
+        opts["poles"] = poles_v
+    elif method == "lqr":
+        opts.update(q=q_v, r=r_v)
+    from flexarm.design.compare import compare
+    from flexarm.design.plants import PlantBatch, from_paths
+
+    with console.status(f"designing ({method})...") as status:
+        try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
+            drawn = from_paths(sc, spread_d, plants, seed=seed) if spread_d else None
+        except ValueError as exc:
+            fail(f"--fit-json/--spread: {exc}")
+        if drawn is not None and method in ("lqr", "tune"):
+            opts.update(plants=drawn, count=count)
+        if method == "tune":
+            opts["callback"] = lambda e: progress(
+                status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}")
+        try:
+            des = design(sc, method, **opts)
+        except ValueError as exc:
+            fail(f"{scenario}: {exc}")
+        batch = drawn if drawn is not None else PlantBatch.nominal_only(sc)
+        progress(status, "the scenario's controller and the design on a reference step "
+                          f"(nominal plant{f' and {plants} drawn' if spread_d else ''})...")
+        side = None
+        try:
+            side = compare(batch, {method: des}, logged="scenario", count=count,
+                           duration=max(3.0, float(sc.simulation.duration)))
+        except (ValueError, KeyError) as exc:
+            des.warnings.append(f"comparison not run: {exc}")
+    if side is not None:
+        des.info["comparison"] = side.to_dict()["rows"]
+    files = des.write(out, overwrite=overwrite)
+    if side is not None:
+        from flexarm.io.write import write_json, write_text
+
+        files += [write_json(out / "compare.json", side.to_dict(), overwrite=overwrite),
+                  write_text(out / "compare.md", side.table("markdown") + "\n",
+                             overwrite=overwrite),
+                  *side.figures(out, overwrite=overwrite)]
+        _print_comparison(side, plants)
+        des.warnings.extend(w for w in side.warnings if w not in des.warnings)
+    info = des.info
+    if "model" in info:
+        console.print(f"augmented model: {info['model']['n_augmented']} states "
+                      f"(arm {info['model']['n_arm']}); linear peak command "
+                      f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
+    for w in des.warnings:
+        warn(w)
+    console.print("wrote " + ", ".join(str(p) for p in files))
+    if report is not None:
+        from flexarm.analysis.html_report import design_report
+
+        write_report(design_report(des, figures=[p for p in files if str(p).endswith(".png")],
+                                    comparison=side, command=command_line(ctx),
+                                    inputs=[scenario]), report, overwrite)
+
+
+def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | None:
+    """Scenario path → (mean, std) for the plant draws of ``design``: from the fit's JSON
+    (:func:`flexarm.identification.time_domain.report.scenario_spread`) or ``--spread``."""
+    if fit_json is not None:
+        from flexarm.identification.time_domain.logs import FitInputError
+        from flexarm.identification.time_domain.report import scenario_spread
+
+        data = parsing.json_file(fit_json, "--fit-json")
+        try:
+            return scenario_spread(data, sc)
+        except (FitInputError, KeyError, TypeError) as exc:
+            fail(f"--fit-json {fit_json}: {exc}")
+    if spread is None:
+        return None
+    # LIBRARY: a private name of general.py; specs/paths.py (target map step 1) makes it public
+    from flexarm.identification.time_domain.general import _get, parse_path
+
+    base = sc.model_dump(mode="json", exclude_none=True)
+    out = {}
+    for item in spread.split(","):
+        path, eq, val = item.strip().partition("=")
+        if not eq or not path:
+            fail(f"--spread {item!r}: write PATH=STD, e.g. arm.motor.inertia=10%")
+        try:
+            mean = float(_get(base, parse_path(path), path))
+            std = (abs(mean) * float(val.strip()[:-1]) / 100 if val.strip().endswith("%")
+                   else float(val))
+        except (ValueError, TypeError) as exc:
+            fail(f"--spread {item!r}: {exc}")
+        if not (math.isfinite(std) and std >= 0):
+            fail(f"--spread {item!r}: the std must be a finite number >= 0")
+        out[path] = (mean, std)
+    return out
+
+
+def _check_options(method, methods, pole_domain, poles, q, r, observer_poles, integral,
+                   disturbance, max_deflection, distance, fit_json, spread, plants,
+                   encoder_counts) -> None:
+    """The option combinations ``design`` accepts (refused before any work).
+
+    DECISION: the library's ``design()`` checks its own arguments too; these checks name
+    the command-line options."""
+    if method not in methods:
+        fail(f"--method {method!r}: not known; choose one of {', '.join(methods)}")
+    if pole_domain not in ("s", "z"):
+        fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
+    if method == "place" and poles is None:
+        fail("--method place needs --poles (the closed-loop poles of the arm's states, "
+              "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
+              "the model's states in design.json)")
+    if method != "place" and poles is not None:
+        fail(f"--poles: only with --method place (got --method {method})")
+    if method == "place" and (q is not None or r is not None):
+        fail("--q/--r: only with --method lqr (place takes --poles)")
+    if method == "nested":
+        given = [o for o, v in (("--q", q), ("--r", r), ("--observer-poles", observer_poles),
+                                ("--integral", integral or None), ("--disturbance", disturbance))
+                 if v is not None]
+        if given:
+            fail(f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
+                  "--max-deflection and --distance)")
+    elif max_deflection is not None or distance is not None:
+        fail("--max-deflection/--distance: only with --method nested")
+    if method == "tune" and fit_json is None and spread is None:
+        fail("--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
+              "--spread PATH=STD,...")
+    if fit_json is not None and spread is not None:
+        fail("--fit-json and --spread both give the plants' spread; choose one")
+    if plants < 1:
+        fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
+    if encoder_counts is not None and encoder_counts < 2:
+        fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
+    if integral and disturbance:
+        fail("--integral and --disturbance both give integral action; choose one")
+
+
+def _print_comparison(side, plants: int) -> None:
+    """The step comparison as a table: nominal / median / worst per metric and controller."""
+    # LIBRARY: compare's private _fmt (one metric's text); wanted public (format_metric)
+    from flexarm.design.compare import METRICS, _fmt
+
+    drawn = side.settings["n_plants"] > 0
+    cols = ("nominal", "median", "worst") if drawn else ("nominal",)
+    tab = Table(title=(f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
+                       f"over {plants} drawn plants" if drawn else
+                       f"a {side.settings['step_rad']:g} rad step on the nominal plant"))
+    tab.add_column("controller")
+    for title, unit, _ in METRICS.values():
+        tab.add_column(escape(f"{title} [{unit}]"))  # rich markup ate "[s]"
+    if drawn:
+        tab.add_column("unstable")
+    tab.add_column("limit ok")
+    for name, row in side.rows.items():
+        tab.add_row(name, *[" / ".join(_fmt(row[k][m]) for k in cols) for m in METRICS],
+                    *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
+                    "yes" if row["limit_respected"] else "NO")
+    console.print(tab)

@@ -1,0 +1,73 @@
+"""The option groups several commands share, as ``Annotated`` types (one spelling, one
+help text): a motor's data sheet, how a log is read, and where results are written.
+
+A command declares ``json_out: JsonOut = None`` and gets ``--json`` with the shared help.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+# --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
+Drive = Annotated[str, typer.Option(help="voltage or current")]
+GearRatio = Annotated[float, typer.Option(help="K_g")]
+MotorConstant = Annotated[Optional[float], typer.Option(
+    help="K_m, V*s/rad (voltage) or N*m/A (current)")]
+ArmatureResistance = Annotated[Optional[float], typer.Option(help="R, ohm")]
+LinkLength = Annotated[Optional[float], typer.Option(help="link length, m")]
+GearEfficiency = Annotated[float, typer.Option()]
+MotorEfficiency = Annotated[float, typer.Option()]
+VoltageLimit = Annotated[float, typer.Option(help="amplifier limit, V")]
+
+# --- the data sheet of a physical structure fitted to an FRF (tfest, friction) ------------
+StructMotorConstant = Annotated[Optional[float], typer.Option(
+    "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)")]
+StructResistance = Annotated[Optional[float], typer.Option(
+    "--resistance", help="voltage-servo: R_m (ohm)")]
+StructGearRatio = Annotated[Optional[float], typer.Option("--gear-ratio", help="voltage-servo: K_g")]
+StructEfficiency = Annotated[Optional[float], typer.Option(
+    "--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)")]
+StructLength = Annotated[Optional[float], typer.Option(
+    "--length", help="voltage-servo: link length L (m), for a tip_deflection output")]
+
+# --- how a log is read ---------------------------------------------------------------------
+LogFormats = Annotated[Optional[list[str]], typer.Option(
+    "--log-format", help="the logger's log-format TOML (columns, units, gains); with a "
+                         "scenario: once per log, or PATTERN=FILE by file name")]
+LogFormatFile = Annotated[Optional[Path], typer.Option(
+    "--log-format", help="the logs' log-format TOML ([columns], [units]; examples/)")]
+Column = Annotated[Optional[list[str]], typer.Option(
+    help="map a column to the log's name: motor_angle=theta")]
+Unit = Annotated[Optional[list[str]], typer.Option(
+    help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm")]
+Window = Annotated[Optional[str], typer.Option(
+    help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5")]
+MaxJitter = Annotated[float, typer.Option(
+    help="accepted relative deviation of a time step from the median step")]
+Controller = Annotated[Optional[str], typer.Option(
+    help="overrides the logs' '# controller:' line, e.g. "
+         "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'")]
+UseRegressedLaw = Annotated[bool, typer.Option(
+    "--use-regressed-law", help="use the law regressed on the logged command where it "
+                                "disagrees with the declared one")]
+Channels = Annotated[Optional[list[str]], typer.Option(
+    "--channel", help="a measured channel to fit or compare, NAME or NAME=WEIGHT (repeat; "
+                      "default: every logged sensor channel)")]
+
+# --- outputs -------------------------------------------------------------------------------
+JsonOut = Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")]
+JsonRequired = Annotated[Path, typer.Option("--json", help="JSON result")]
+Plots = Annotated[Optional[Path], typer.Option(help="folder for figures")]
+Report = Annotated[Optional[Path], typer.Option(
+    "--report", help="write a self-contained HTML report (figures embedded), e.g. result.html")]
+ScenarioOut = Annotated[Optional[Path], typer.Option(
+    "--scenario-out", help="write the fitted (identified) scenario TOML")]
+Out = Annotated[Path, typer.Option("--out", help="output folder")]
+Overwrite = Annotated[bool, typer.Option(help="replace existing output files")]
+OverwriteOut = Annotated[bool, typer.Option(help="write into a non-empty --out folder")]
+
+# --- inputs --------------------------------------------------------------------------------
+ScenarioArg = Annotated[str, typer.Argument(help="scenario TOML file or built-in name")]

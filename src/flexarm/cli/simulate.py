@@ -1,0 +1,91 @@
+"""``flexarm simulate``: a scenario's closed loop, or logs replayed on it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.table import Table
+
+from flexarm.cli import parsing
+from flexarm.cli.common import console, enable_cache, fail, load, outdir
+from flexarm.cli.options import LogFormatFile, OverwriteOut
+
+
+def simulate(scenario: Annotated[list[str], typer.Argument(
+                 help="scenario TOML file(s) or built-in name(s)")],
+             out: Annotated[Path, typer.Option(
+                 "--out", help="folder for CSV, figures and summary")],
+             overwrite: OverwriteOut = False,
+             log: Annotated[Optional[list[Path]], typer.Option(
+                 "--log", help="replay this log (.mat or text; repeat for several): its "
+                               "setpoints, initial state, fit % per logged channel")] = None,
+             log_format: LogFormatFile = None,
+             window: Annotated[Optional[str], typer.Option(
+                 help="replay this part of every log, START:STOP in s on its clock")] = None,
+             ) -> None:
+    """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json;
+    with --log, replay logs on it and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
+
+    Several scenarios: each one's files, and for multi-link arms in the sampled loop one
+    figure of all of them overlaid (joint errors in encoder counts, link deflections,
+    commands), e.g. flexarm simulate deluca-two-link-geared deluca-two-link-geared-fc."""
+    enable_cache()
+    from flexarm.analysis.summary import write_comparison, write_multilink, write_simulation
+
+    scs = [load(s) for s in scenario]
+    out = outdir(out, overwrite)
+    if log:
+        if len(scs) != 1:
+            fail("--log replays logs on one scenario; give exactly one SCENARIO")
+        replay_logs(scs[0], log, log_format, window, out)
+        return
+    if len(scs) == 1:
+        console.print_json(json.dumps(write_simulation(scs[0], out, progress=True)))
+        return
+    summaries, results, multi = {}, {}, []
+    for sc in scs:
+        if sc.arm.kind == "multi_link" and sc.sampling is not None:
+            summaries[sc.name], results[sc.name] = write_multilink(sc, out, progress=True)
+            multi.append(sc)
+        else:
+            summaries[sc.name] = write_simulation(sc, out, progress=True)
+    if len(multi) > 1:
+        summaries["comparison_figure"] = write_comparison(multi, results, out).name
+    console.print_json(json.dumps(summaries))
+
+
+def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optional[str],
+                out: Path) -> None:
+    """``simulate --log``: each log replayed on the scenario, fit % per channel, figures."""
+    from flexarm.analysis.replay import plot_replay, replay
+    from flexarm.errors import SimulationDiverged
+    from flexarm.io.logformat import LogFormat, load_log_format
+    from flexarm.io.logs import LogError
+    from flexarm.io.write import write_json
+
+    win = parsing.window(window, "--window")
+    results = {}
+    try:
+        fmt = load_log_format(log_format) if log_format is not None else LogFormat()
+        for path in logs:
+            g = fmt.read(path)
+            rep = replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1]) if win else None)
+            results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
+            plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
+    except (LogError, ValueError, SimulationDiverged) as exc:
+        fail(str(exc))
+    write_json(out / "replay.json", replay_document(sc, window, results), overwrite=True)
+    names = sorted({k for d in results.values() for k in d})
+    t = Table("fit %", *[Path(name).stem for name in results])
+    for k in names:
+        t.add_row(k, *(f"{d.get(k, float('nan')):.1f}" for d in results.values()))
+    console.print(t)
+
+
+def replay_document(sc, window: Optional[str], results: dict) -> dict:
+    """JSON LAYOUT (to move into the library's prediction result's ``to_dict()``):
+    ``replay.json`` of ``simulate --log``."""
+    return {"scenario": sc.name, "window": window, "fit_percent": results}
