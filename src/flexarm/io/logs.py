@@ -40,6 +40,8 @@ Input files are only ever opened for reading.
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import csv
 import math
 from collections.abc import Mapping, Sequence
@@ -112,7 +114,7 @@ def known_names() -> str:
             + ", ".join(f"{b}_j" for b in PER_JOINT))
 
 
-class LogError(ValueError):
+class LogError(FlexarmError, ValueError):
     """A log file that cannot be used; the message names the file and the problem."""
 
 

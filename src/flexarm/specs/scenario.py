@@ -6,6 +6,8 @@ whose lines name the field, the value given and what is expected.
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -29,7 +31,7 @@ from flexarm.specs.quantity import Q, Spec
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(FlexarmError, ValueError):
     """A scenario that cannot be used, with one line per problem."""
 
 
