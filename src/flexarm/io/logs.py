@@ -40,8 +40,6 @@ Input files are only ever opened for reading.
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import csv
 import math
 from collections.abc import Mapping, Sequence
@@ -50,9 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.errors import OutputExistsError
+from flexarm.errors import FlexarmError, OutputExistsError
 from flexarm.units import ureg
 from flexarm.io.write import atomic_open
+from flexarm.io import checks as _checks  # the readers' checks (issue #25)
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -484,7 +483,6 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
                for name in units if name in names}
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)
-    _check_time(path, time, lay, _describe(names, lay, tj), max_jitter)
     signals: dict[str, np.ndarray] = {}
     for j, name in enumerate(names):
         if name == "time":
@@ -493,6 +491,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
         if name in factors:
             x *= factors[name]
         signals[name] = x
+    _checks.check_signals(path, signals, time=time, time_column=_describe(names, lay, tj), lines=[ln for ln, _ in lay.rows], max_jitter=max_jitter)
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 
 
