@@ -32,9 +32,9 @@ class FlexarmError(Exception):
 
     ``FlexarmError(message, file=..., field=..., value=..., fix=...)``: each keyword is
     optional; the message is what went wrong, the keywords where (the file, the field or
-    column of it), what was found (the value) and what to do (the fix).  ``str(exc)`` is the
-    message as given; :func:`one_line` adds the keywords that the message does not already
-    show, on one line."""
+    column of it), what was found (the value) and what to do (the fix).  ``str(exc)`` is
+    ``<file>: <field> = <value>: <message>; <fix>``, each part only where given and not
+    already in the message; :func:`one_line` puts a message of several lines on one."""
 
     def __init__(self, *args: Any, file: str | os.PathLike | None = None,
                  field: str | None = None, value: Any = None, fix: str | None = None):
@@ -43,6 +43,9 @@ class FlexarmError(Exception):
         self.field = field
         self.value = value
         self.fix = fix
+
+    def __str__(self) -> str:
+        return _compose(self, super().__str__())
 
 
 class SimulationDiverged(FlexarmError, RuntimeError):
@@ -97,21 +100,8 @@ def _shown(text: str, part: Any) -> bool:
     return part is not None and str(part) in text
 
 
-def one_line(exc: BaseException, log: str | os.PathLike | None = None) -> str:
-    """The one line the command line prints for ``exc`` (no newline, no traceback).
-
-    A :class:`FlexarmError`: ``<file>: <field> = <value>: <message>; <fix>``, each part
-    only where given and not already in the message; a message of several lines (a
-    scenario's list of problems) is joined with ``"; "``.  Any other exception:
-    ``internal error: <Type>: <message>`` and, with ``log`` (the file
-    :func:`internal_error_report` wrote), ``(traceback in <log>)``."""
-    msg = "; ".join(s.strip() for s in str(exc).splitlines() if s.strip())
-    if not isinstance(exc, FlexarmError):
-        text = f"internal error: {type(exc).__name__}: {msg}" if msg else \
-            f"internal error: {type(exc).__name__}"
-        if log is not None:
-            text += f" (traceback in {log})"
-        return text
+def _compose(exc: "FlexarmError", msg: str) -> str:
+    """``<file>: <field> = <value>: <msg>; <fix>``, the parts ``msg`` does not show."""
     head = []
     if exc.file and not _shown(msg, exc.file):
         head.append(exc.file)
@@ -120,9 +110,27 @@ def one_line(exc: BaseException, log: str | os.PathLike | None = None) -> str:
                     else f"{exc.field} = {exc.value!r}")
     elif exc.value is not None and not _shown(msg, exc.value):
         head.append(f"got {exc.value!r}")
-    text = ": ".join([*head, msg]) if msg else ": ".join(head) or type(exc).__name__
+    text = ": ".join([*head, msg]) if msg else ": ".join(head)
     if exc.fix and not _shown(msg, exc.fix):
-        text += f"; {exc.fix}"
+        text = f"{text}; {exc.fix}" if text else exc.fix
+    return text
+
+
+def one_line(exc: BaseException, log: str | os.PathLike | None = None) -> str:
+    """The one line the command line prints for ``exc`` (no newline, no traceback).
+
+    A :class:`FlexarmError`: ``str(exc)`` (``<file>: <field> = <value>: <message>; <fix>``,
+    each part only where given and not already in the message), a message of several lines
+    (a scenario's list of problems) joined with ``"; "``.  Any other exception:
+    ``internal error: <Type>: <message>`` and, with ``log`` (the file
+    :func:`internal_error_report` wrote), ``(traceback in <log>)``."""
+    msg = "; ".join(s.strip() for s in str(exc).splitlines() if s.strip())
+    if isinstance(exc, FlexarmError):
+        return msg or type(exc).__name__
+    text = f"internal error: {type(exc).__name__}: {msg}" if msg else \
+        f"internal error: {type(exc).__name__}"
+    if log is not None:
+        text += f" (traceback in {log})"
     return text
 
 
