@@ -370,8 +370,12 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     cmd = [sys.executable, "-m", "flexarm.cli", "fit", *map(str, logs), "--gear-ratio", "70",
            "--motor-constant", "7.68e-3", "--armature-resistance", "2.6", "--link-length",
            "0.42", "--json", str(j), "--delay-search", "both", "--polish-iter", "20"]
+    # the child gets the default SIGINT disposition, so Python installs its Ctrl-C handler:
+    # a suite started in the background (`nohup make test &`) has SIGINT ignored, and an
+    # ignored signal stays ignored across fork and exec (issue #25)
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # interrupted in the global stage, once it has a best point (this fit, two 10 s logs
     # with two delay starts and a long friction polish, runs on long after that)
     for line in p.stderr:  # stages are printed as lines when stderr is not a terminal
