@@ -5,6 +5,10 @@ The front door :func:`design` dispatches on the method through :data:`METHODS` (
 the function that designs it, each ``f(scenario, **options) -> Design``); a new method adds
 one entry there.
 
+:func:`design_checked` (:mod:`flexarm.design.gate`) is what ``flexarm design`` calls: the
+design, compared with the scenario's own controller, with the gate's verdict (``"stable"``
+or what failed), refused unless accepted.
+
 ``flexarm.design`` is both this package and the front door: the package is callable,
 ``flexarm.design(scenario, "lqr")`` is :func:`design`, and its modules stay importable
 (``import flexarm.design.linear``)."""
@@ -15,9 +19,10 @@ import sys
 import types
 from typing import Any, Callable
 
+from flexarm.design.gate import GateOptions, design_checked
 from flexarm.design.result import Design
 
-__all__ = ["Design", "METHODS", "design"]
+__all__ = ["Design", "METHODS", "design", "design_checked", "GateOptions"]
 
 
 def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int = 4,

@@ -141,7 +141,7 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
     des.verdict = des.gate["verdict"]
     if des.verdict != STABLE and not gate.accept_unstable:
         raise UnstableDesignError(f"the {method} design is not safe to run: {des.verdict}",
-                                  design=des, field="verdict", fix=(
+                                  design=des, fix=(
                                       "look at compare.md and design.json; pass "
                                       "accept_unstable (--accept-unstable) to keep it anyway"))
     return des

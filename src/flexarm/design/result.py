@@ -80,7 +80,7 @@ class Design:
 
         why = self.verdict if self.verdict is not None else "not checked by the design gate"
         raise UnstableDesignError(f"the {self.method} design is not safe to run: {why}",
-                                  design=self, field="verdict",
+                                  design=self,
                                   fix="pass accept_unstable (--accept-unstable) to keep it")
 
     def write(self, directory: str | Path, *, overwrite: bool = False) -> list[Path]:
