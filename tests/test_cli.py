@@ -367,7 +367,14 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     j = out / "fit.json"
-    cmd = [sys.executable, "-m", "flexarm.cli", "fit", *map(str, logs), "--gear-ratio", "70",
+    # the child restores Python's Ctrl-C handler itself: a suite started in the background
+    # (`nohup make test &` from a script) has SIGINT ignored, an ignored signal stays ignored
+    # across fork and exec, and Python then installs no handler (issue #25). Done in the
+    # child's own code, not a preexec_fn (which forks a multithreaded JAX process)
+    restore = ("import runpy, signal, sys; "
+               "signal.signal(signal.SIGINT, signal.default_int_handler); "
+               "sys.argv[0] = 'flexarm'; runpy.run_module('flexarm.cli', run_name='__main__')")
+    cmd = [sys.executable, "-c", restore, "fit", *map(str, logs), "--gear-ratio", "70",
            "--motor-constant", "7.68e-3", "--armature-resistance", "2.6", "--link-length",
            "0.42", "--json", str(j), "--delay-search", "both", "--polish-iter", "20"]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

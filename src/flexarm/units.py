@@ -7,6 +7,8 @@ Everything inside flexarm is SI: kg, m, s, rad, A, V, N*m.
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import math
 
 import pint
@@ -19,7 +21,7 @@ LBF_IN = 0.112984829027616  # N*m per lb*in
 INCH = 0.0254  # m per in
 
 
-class UnitError(ValueError):
+class UnitError(FlexarmError, ValueError):
     """A quantity whose text cannot be parsed or whose unit does not fit the field."""
 
 

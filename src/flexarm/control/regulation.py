@@ -42,6 +42,8 @@ its front-end (one rollout or a batch of gain variations).
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 from dataclasses import dataclass
 from typing import Callable
 
@@ -54,7 +56,7 @@ from jax import Array
 from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
 
 
-class RegulationError(ValueError):
+class RegulationError(FlexarmError, ValueError):
     """A regulation problem without a solution (e.g. no residual deflection found)."""
 
 

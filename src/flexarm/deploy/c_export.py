@@ -57,6 +57,8 @@ and is not exported (the header says so for each filtered channel).
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import json
 import re
 from dataclasses import dataclass, field
@@ -79,7 +81,7 @@ _C_RESERVED = {
     "_Imaginary", "main"}
 
 
-class ExportError(ValueError):
+class ExportError(FlexarmError, ValueError):
     """A controller or design that cannot be exported; the message names what and why."""
 
 
@@ -964,17 +966,62 @@ def load_design(design: str | Path) -> tuple[Any, str | None, str]:
 
 
 def export_c(design, out: str | Path, *, name: str = "controller", precision: str = "double",
-             overwrite: bool = False) -> tuple[CCode, list[Path]]:
+             overwrite: bool = False, force: bool = False) -> tuple[CCode, list[Path]]:
     """``flexarm export-c``: the controller of ``design`` (a design directory, a scenario
     file or name, a :class:`~flexarm.design.result.Design`) as ``out/NAME.h`` and
-    ``out/NAME.c``, or a scenario object. Returns the code and the paths written."""
+    ``out/NAME.c``, or a scenario object. Returns the code and the paths written.
+
+    The design gate (:mod:`flexarm.design.gate`): a design whose verdict (``Design.verdict``,
+    or ``"verdict"`` in the directory's ``design.json``) is a failure is refused with
+    :class:`flexarm.errors.UnstableDesignError` unless ``force``; with ``force`` the header
+    carries the verdict as a ``#warning`` (every compiler says it on each build).  A
+    scenario (no design) and a design without a verdict (not checked, or written before the
+    gate) are exported as before."""
     from flexarm.design.result import Design
 
     if isinstance(design, Design):
         sc, method, label = design.scenario, design.method, None
+        verdict = design.verdict
     elif hasattr(design, "controller") and hasattr(design, "arm"):  # a Scenario
-        sc, method, label = design, None, None
+        sc, method, label, verdict = design, None, None, None
     else:
         sc, method, label = load_design(design)
+        verdict = _design_verdict(design)
+    if verdict is not None and verdict != "stable":
+        if not force:
+            from flexarm.errors import UnstableDesignError
+
+            raise UnstableDesignError(
+                f"{label or method or 'design'}: the design gate's verdict is not stable: "
+                f"{verdict}; not exported", field="verdict", value=verdict,
+                fix="redesign (design.json and compare.md say why), or pass force=True "
+                    "(--force) to export it with the verdict as a #warning in the header")
     code = generate_c(sc, name=name, precision=precision, method=method, source=label)
+    if verdict is not None and verdict != "stable":
+        code = _with_warning(code, f"{label or method}: design verdict: {verdict}")
     return code, code.write(out, overwrite=overwrite)
+
+
+def _design_verdict(design) -> str | None:
+    """The ``"verdict"`` of a design directory's ``design.json`` (None: none there)."""
+    js = Path(design) / "design.json"
+    if not js.is_file():
+        return None
+    try:
+        v = json.loads(js.read_text(encoding="utf-8")).get("verdict")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise ExportError(f"{js}: not readable JSON ({exc})") from None
+    return None if v is None else str(v)
+
+
+def _with_warning(code: CCode, text: str) -> CCode:
+    """``code`` with ``#warning "flexarm: <text>"`` after the header's include guard."""
+    from dataclasses import replace
+
+    text = re.sub(r'[\\"\n\r]', " ", text)
+    guard = f"#define {code.name.upper()}_H\n"
+    head = code.header
+    i = head.find(guard)
+    line = f'#warning "flexarm: {text}; exported with force"\n'
+    head = head[:i + len(guard)] + line + head[i + len(guard):] if i >= 0 else line + head
+    return replace(code, header=head)

@@ -5,6 +5,10 @@ The front door :func:`design` dispatches on the method through :data:`METHODS` (
 the function that designs it, each ``f(scenario, **options) -> Design``); a new method adds
 one entry there.
 
+:func:`design_checked` (:mod:`flexarm.design.gate`) is what ``flexarm design`` calls: the
+design, compared with the scenario's own controller, with the gate's verdict (``"stable"``
+or what failed), refused unless accepted.
+
 ``flexarm.design`` is both this package and the front door: the package is callable,
 ``flexarm.design(scenario, "lqr")`` is :func:`design`, and its modules stay importable
 (``import flexarm.design.linear``)."""
@@ -15,9 +19,10 @@ import sys
 import types
 from typing import Any, Callable
 
+from flexarm.design.gate import GateOptions, design_checked
 from flexarm.design.result import Design
 
-__all__ = ["Design", "METHODS", "design"]
+__all__ = ["Design", "METHODS", "design", "design_checked", "GateOptions"]
 
 
 def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int = 4,
@@ -26,9 +31,12 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
     over them: while a drawn plant is unstable or reaches the command limit in the
     comparison's step (:func:`flexarm.design.compare.compare`, ``check_duration`` s; ``count``
     the encoder count where the scenario has none), the command weight R is
-    raised fourfold and the design redone (at most ``max_rounds`` times; a warning says
-    when the batch still fails). A design on the nominal plant alone knows nothing of the
-    spread: on unit 7's fit the default weights left 5 of 200 plants unstable."""
+    raised fourfold and the design redone (at most ``max_rounds`` times). The round with
+    the fewest failures is kept (nominal plant unstable first, then drawn plants unstable
+    or at the limit; the later round on a tie): a higher R is not always safer (a slower
+    loop leaves a hub stuck in its friction band). A warning says when the kept round still
+    fails. A design on the nominal plant alone knows nothing of the spread: on unit 7's fit
+    the default weights left 5 of 200 plants unstable."""
     import numpy as np
 
     from flexarm.design.linear import design_linear
@@ -39,23 +47,35 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
     from flexarm.design.compare import compare
 
     history = []
+    best = None
+    n = len(plants)
     for k in range(max_rounds + 1):
         row = compare(plants, {"lqr": des}, logged=None, count=count,
                       duration=check_duration).rows["lqr"]
         r = list(des.info["weights"]["r"])
         history.append({"r": r, "unstable": row["unstable"],
+                        "nominal_stable": row["nominal_stable"],
                         "limit_respected": row["limit_respected"]})
-        if row["unstable"] == 0 and row["nominal_stable"] and row["limit_respected"]:
+        fails = (not row["nominal_stable"],
+                 row["unstable"] + (0 if row["limit_respected"] else n))
+        if best is None or fails <= best[0]:
+            best = (fails, des, k)
+        if fails == (False, 0):
             break
         if k == max_rounds:
-            des.warnings.append(
-                f"over the {len(plants)} plants {row['unstable']} stay unstable or reach the "
-                f"limit after raising R {4 ** max_rounds}-fold: the spread of the fit is too "
-                "wide for one linear design; tune over the plants (method 'tune') or fit "
-                "longer logs")
             break
         des = design_linear(scenario, "lqr", **{**options, "r": (4 * np.asarray(r)).tolist()})
-    des.info["robust_over_plants"] = {"n_plants": len(plants), "rounds": history}
+    fails, des, kept = best
+    if fails != (False, 0):
+        h = history[kept]
+        des.warnings.append(
+            f"over the {n} plants the best of {len(history)} rounds (R x{4 ** kept}) leaves "
+            f"{'the nominal plant unstable, ' if not h['nominal_stable'] else ''}"
+            f"{h['unstable']} unstable"
+            f"{'' if h['limit_respected'] else ' and reaches the limit'} (R raised up to "
+            f"{4 ** (len(history) - 1)}-fold): the spread of the fit is too wide for one "
+            "linear design; tune over the plants (method 'tune') or fit longer logs")
+    des.info["robust_over_plants"] = {"n_plants": n, "rounds": history, "kept_round": kept}
     return des
 
 

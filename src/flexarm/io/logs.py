@@ -48,9 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.errors import OutputExistsError
+from flexarm.errors import FlexarmError, OutputExistsError
 from flexarm.units import ureg
 from flexarm.io.write import atomic_open
+from flexarm.io import checks as _checks  # the readers' checks (issue #25)
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -112,7 +113,7 @@ def known_names() -> str:
             + ", ".join(f"{b}_j" for b in PER_JOINT))
 
 
-class LogError(ValueError):
+class LogError(FlexarmError, ValueError):
     """A log file that cannot be used; the message names the file and the problem."""
 
 
@@ -482,7 +483,6 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
                for name in units if name in names}
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)
-    _check_time(path, time, lay, _describe(names, lay, tj), max_jitter)
     signals: dict[str, np.ndarray] = {}
     for j, name in enumerate(names):
         if name == "time":
@@ -491,6 +491,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
         if name in factors:
             x *= factors[name]
         signals[name] = x
+    _checks.check_signals(path, signals, time=time, time_column=_describe(names, lay, tj), lines=[ln for ln, _ in lay.rows], max_jitter=max_jitter)
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 
 

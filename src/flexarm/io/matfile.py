@@ -39,6 +39,7 @@ import numpy as np
 
 from flexarm.io.logs import Log, LogError, _unit_factor, known_names, signal_unit
 from flexarm.units import ureg
+from flexarm.io import checks as _checks  # the readers' checks (issue #25)
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
 
@@ -131,11 +132,11 @@ def load_mat(path: str | Path) -> dict:
     with open(path, "rb") as fh:
         head = fh.read(128)
     if head[:8] == b"\x89HDF\r\n\x1a\n" or b"MATLAB 7.3" in head[:116]:
-        return _load_v73(path)
+        return _checks.readable(path, _load_v73)
     try:
         return _load_v5(path)
     except NotImplementedError:  # scipy's message for v7.3 without the HDF5 signature first
-        return _load_v73(path)
+        return _checks.readable(path, _load_v73)
     except Exception as exc:
         raise MatFileError(f"{path}: not a readable MATLAB .mat file ({exc})") from None
 
@@ -290,7 +291,9 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
                            + "; map channels recorded together")
     notes: list[str] = []
     if COUNTER in sig:
+        sig[COUNTER] = _checks.unwrap_counter(sig[COUNTER])  # a 16-bit counter's wrap is no lost sample
         _check_counter(path, sig, notes)
+    _checks.check_signals(path, sig, columns=columns, max_jitter=_checks.MAT_MAX_JITTER)
     t = sig.pop("time", None)
     skipped = [k for k, v in variables.items() if isinstance(v, _Opaque)]
     return Log(path, t, sig, skipped=skipped, notes=notes)

@@ -7,28 +7,52 @@ of replacing a file that appeared meanwhile).  A reader therefore sees the old f
 complete new one, never a half-written one, and on any exception, ``KeyboardInterrupt``
 included, the temporary file is removed and the target is left as it was.
 
-An existing target is replaced only with ``overwrite=True``; otherwise
-:class:`flexarm.errors.OutputExistsError` (a ``FileExistsError``) names it.
+The output policy (issue #25), one for every writer:
+
+* an existing target is replaced only with ``overwrite=True``; otherwise
+  :class:`flexarm.errors.OutputExistsError` (a ``FileExistsError``) names it; an output
+  folder (figures) that holds files is written into only with ``overwrite=True``
+  (:func:`output_folder`);
+* a file that is an input of the run is never written over, ``overwrite=True`` or not:
+  the run declares its inputs with :func:`inputs` (a context; the CLI wraps each command
+  in it) and every write checks the target against them
+  (:class:`flexarm.errors.InputOverwriteError`; the same file by another path or a hard
+  link counts);
+* result keys are unique per input (:func:`unique_keys`): the file names without
+  extension where they differ, else every input's path relative to the inputs' common
+  folder; the same file given twice is numbered (``name#2``);
+* a final write that fails (a full disk, a folder that vanished, a file that appeared
+  meanwhile) saves the result next to the requested path and says where
+  (:func:`save_or_rescue`);
+* SIGTERM and a second Ctrl-C do not lose the best result (:func:`interruptible`).
 
 Functions: :func:`atomic_open` (a file object), :func:`atomic_path` (a temporary path for
 writers that take a path), :func:`write_text`, :func:`write_bytes`, :func:`write_json`,
-:func:`write_toml`, :func:`save_figure`.  CSV logs are written by
-:func:`flexarm.io.logs.write_log` through :func:`atomic_open`.
+:func:`write_toml`, :func:`save_figure`, :func:`output_folder`, :func:`inputs`,
+:func:`unique_keys`, :func:`save_or_rescue`, :func:`interruptible`.  CSV logs are
+written by :func:`flexarm.io.logs.write_log` through :func:`atomic_open`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
+import datetime as _dt
 import json
 import os
+import signal
 import tempfile
+import threading
+from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Callable, Iterator
+from typing import IO, Any, Callable, Iterable, Iterator, Sequence
 
-from flexarm.errors import OutputExistsError
+from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
 
 __all__ = ["atomic_open", "atomic_path", "write_text", "write_bytes", "write_json",
-           "write_toml", "save_figure", "OutputExistsError"]
+           "write_toml", "save_figure", "output_folder", "inputs", "is_input",
+           "unique_keys", "save_or_rescue", "Saved", "interruptible", "Interruptible",
+           "OutputExistsError", "InputOverwriteError"]
 
 
 def _file_mode() -> int:
@@ -38,7 +62,60 @@ def _file_mode() -> int:
     return 0o666 & ~mask
 
 
+# ------------------------------------------------------------------ the run's inputs
+#: the input files of the current run: (resolved path, (st_dev, st_ino) or None)
+_INPUTS: contextvars.ContextVar[tuple[tuple[Path, tuple[int, int] | None], ...]] = \
+    contextvars.ContextVar("flexarm_inputs", default=())
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino)
+
+
+@contextlib.contextmanager
+def inputs(paths: Iterable[str | os.PathLike | None]) -> Iterator[None]:
+    """Declare ``paths`` the run's input files for the block (nested blocks add to the
+    outer ones; ``None`` entries and folders' files are skipped: a folder given as an
+    input protects the files in it when written to).  Every writer of this module then
+    refuses to write over any of them, even with ``overwrite=True``."""
+    items = []
+    for p in paths:
+        if p is None:
+            continue
+        q = Path(p).expanduser()
+        items.append((q.resolve(), _identity(q)))
+    token = _INPUTS.set(_INPUTS.get() + tuple(items))
+    try:
+        yield
+    finally:
+        _INPUTS.reset(token)
+
+
+def is_input(path: str | os.PathLike) -> Path | None:
+    """The declared input (:func:`inputs`) that ``path`` would write over, or None: the same
+    resolved path, a path inside a declared input folder, or the same file (device and
+    inode) by another name."""
+    q = Path(path).expanduser()
+    rq = q.resolve()
+    ident = _identity(q)
+    for p, pid in _INPUTS.get():
+        if rq == p or (ident is not None and ident == pid):
+            return p
+        if pid is not None and p.is_dir() and p in rq.parents:
+            return p
+    return None
+
+
 def _check_target(path: Path, overwrite: bool) -> None:
+    src = is_input(path)
+    if src is not None:
+        raise InputOverwriteError(
+            f"{path}: is an input of this run ({src}); flexarm never writes over an input, "
+            "even with overwrite", file=path, fix="give another output path")
     if path.is_dir():
         raise IsADirectoryError(f"{path}: is a folder; give a file name to write")
     if path.exists() and not overwrite:
@@ -152,3 +229,173 @@ def save_figure(fig, path: str | Path, *, overwrite: bool = False, **savefig_kw)
     with atomic_path(path, overwrite=overwrite) as tmp:
         fig.savefig(tmp, **savefig_kw)
     return path
+
+
+def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """The output folder ``path`` (figures, a design), created with its parents.  A folder
+    that already holds files is used only with ``overwrite=True`` (then files of the same
+    names are replaced; others stay); a file where the folder should be, or a folder inside
+    a declared input folder, is refused."""
+    d = Path(path)
+    src = is_input(d)
+    if src is not None:
+        raise InputOverwriteError(f"{d}: is (inside) an input of this run ({src}); give "
+                                  "another output folder", file=d)
+    if d.exists() and not d.is_dir():
+        raise OutputExistsError(f"{d}: is a file, not a folder; give a folder name",
+                                file=d, fix="give a folder name")
+    if d.is_dir() and any(d.iterdir()) and not overwrite:
+        raise OutputExistsError(f"{d}: the folder holds files already; not written into "
+                                "(pass overwrite=True, on the command line --overwrite)",
+                                file=d)
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+# ------------------------------------------------------------------ unique result keys
+def unique_keys(paths: Sequence[str | os.PathLike]) -> list[str]:
+    """One key per input, in order, never two alike (result entries, figure names).
+
+    Rule: the file names without extension (``Path.stem``) when they are all different
+    (what results were always keyed by); otherwise each input's path relative to the
+    inputs' common folder, ``/``-separated, extension kept (``a/trial1.csv``,
+    ``b/trial1.csv``); the same file given more than once gets ``#2``, ``#3``, ... after
+    its key.  Strings that are not files (scenario names) follow the same rule."""
+    ps = [Path(p) for p in paths]
+    keys = [p.stem for p in ps]
+    if len(set(keys)) < len(keys):
+        res = [p.expanduser().resolve() for p in ps]
+        try:
+            common = Path(os.path.commonpath([str(r) for r in res]))
+        except ValueError:  # different drives
+            common = None
+        keys = []
+        for r in res:
+            if common is not None and r != common:
+                keys.append(r.relative_to(common).as_posix())
+            else:
+                keys.append(r.name)
+    out, seen = [], {}
+    for k in keys:
+        seen[k] = seen.get(k, 0) + 1
+        out.append(k if seen[k] == 1 else f"{k}#{seen[k]}")
+    return out
+
+
+# ------------------------------------------------------------------ rescue a final write
+@dataclass(frozen=True)
+class Saved:
+    """Where :func:`save_or_rescue` wrote: ``path``; ``rescued`` True when that is not the
+    requested path, ``reason`` then says why (the one line of the failed write)."""
+
+    path: Path
+    rescued: bool = False
+    reason: str = ""
+
+    def message(self, what: str = "result") -> str:
+        """One line for the user."""
+        if not self.rescued:
+            return f"wrote {self.path}"
+        return f"could not write the {what} where asked ({self.reason}); saved it to {self.path}"
+
+
+def _write_any(path: Path, data: Any, overwrite: bool) -> Path:
+    if isinstance(data, (bytes, bytearray)):
+        return write_bytes(path, bytes(data), overwrite=overwrite)
+    if isinstance(data, str):
+        return write_text(path, data, overwrite=overwrite)
+    if path.suffix.lower() == ".toml":
+        return write_toml(path, data, overwrite=overwrite)
+    return write_json(path, data, overwrite=overwrite)
+
+
+def save_or_rescue(path: str | os.PathLike, data: Any, *, overwrite: bool = False,
+                   writer: Callable[[Path, bool], Any] | None = None) -> Saved:
+    """Write ``data`` (text, bytes, or a dict: JSON, or TOML for a ``.toml`` path) to
+    ``path``, or with ``writer(path, overwrite)``; when that fails (any ``OSError``: a full
+    disk, a missing or read-only folder, a file that appeared meanwhile, an input of the
+    run), write it to ``<stem>.rescued-<UTC time><suffix>`` next to ``path``, else in the
+    current folder, else in the system's temporary folder, and say where.  Errors in the
+    data itself (``TypeError``, ``ValueError`` of the serialiser) are raised: there is
+    nothing to rescue."""
+    path = Path(path)
+    write = writer or (lambda p, ow: _write_any(p, data, ow))
+    try:
+        write(path, overwrite)
+        return Saved(path)
+    except OSError as exc:
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    name = f"{path.stem}.rescued-{stamp}{path.suffix}"
+    tried = []
+    for folder in (path.parent, Path.cwd(), Path(tempfile.gettempdir())):
+        cand = folder / name
+        k = 1
+        while cand.exists():
+            k += 1
+            cand = folder / f"{path.stem}.rescued-{stamp}-{k}{path.suffix}"
+        try:
+            write(cand, False)
+            return Saved(cand, True, reason)
+        except OSError as exc:
+            tried.append(f"{cand}: {exc}")
+    raise OSError(f"{path}: {reason}; the rescue copies failed too: " + "; ".join(tried))
+
+
+# ------------------------------------------------------------------ signals
+class Interruptible:
+    """The state of :func:`interruptible`: ``signal`` (the first signal's name, or None),
+    ``count`` (signals received)."""
+
+    def __init__(self):
+        self.signal: str | None = None
+        self.count = 0
+
+    @property
+    def interrupted(self) -> bool:
+        return self.count > 0
+
+
+@contextlib.contextmanager
+def interruptible(*, on_repeat: Callable[[str], None] | None = None
+                  ) -> Iterator[Interruptible]:
+    """The one place where flexarm handles SIGINT and SIGTERM (the CLI and the fit use it).
+
+    Inside the block the first SIGINT (Ctrl-C) raises ``KeyboardInterrupt`` and the first
+    SIGTERM raises :class:`flexarm.errors.Interrupted` (a ``KeyboardInterrupt``), so a run
+    that keeps its best result on Ctrl-C (the fit: :class:`flexarm.errors.FitInterrupted`)
+    keeps it on SIGTERM too.  Every later SIGINT or SIGTERM is not raised again: it only
+    calls ``on_repeat(name)`` (e.g. to print "saving the best result first"), so a second
+    Ctrl-C cannot break the writing of the best result.  SIGKILL still ends the process.
+    A SIGINT that was ignored when the block began (a job started with ``nohup ... &``)
+    stays ignored.  Outside the main thread nothing is installed.  The previous handlers
+    are restored when the block ends."""
+    state = Interruptible()
+    if threading.current_thread() is not threading.main_thread():
+        yield state
+        return
+
+    def handler(signum, frame):
+        name = signal.Signals(signum).name
+        state.count += 1
+        if state.count > 1:
+            if on_repeat is not None:
+                on_repeat(name)
+            return
+        state.signal = name
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise Interrupted(f"stopped by {name}", signal=name, number=int(signum))
+
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        prev = signal.getsignal(sig)
+        if sig == signal.SIGINT and prev == signal.SIG_IGN:
+            continue
+        old[sig] = prev
+        signal.signal(sig, handler)
+    try:
+        yield state
+    finally:
+        for sig, prev in old.items():
+            signal.signal(sig, prev if prev is not None else signal.SIG_DFL)

@@ -55,6 +55,8 @@ and the fixed quadrature is sized for it. Each computed set is checked a posteri
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -70,7 +72,7 @@ _NODES_PER_PANEL = 24
 ModeType = Literal["clamped_mass", "clamped_free"]
 
 
-class ModeError(ValueError):
+class ModeError(FlexarmError, ValueError):
     """Modes that cannot be computed for the given link (bad data or too many modes)."""
 
 

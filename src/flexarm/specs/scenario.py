@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
+from flexarm.errors import FlexarmError
 from flexarm.specs.arm import SingleLinkArm
 from flexarm.specs.experiment import (
     Actuator,
@@ -33,7 +34,7 @@ _MULTI_SIGNAL = re.compile(r"(theta|theta_dot|deflection|deflection_angle|delta|
                            r"friction_torque)_\d+(_\d+)?|tip_x|tip_y")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(FlexarmError, ValueError):
     """A scenario that cannot be used, with one line per problem."""
 
 

@@ -21,6 +21,8 @@ Crest factor = max|u| / rms(u).  :func:`write_excitation` writes the signal thro
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +32,7 @@ KINDS = ("full", "odd", "random-odd")
 PHASES = ("schroeder", "random", "min-crest")
 
 
-class ExcitationError(ValueError):
+class ExcitationError(FlexarmError, ValueError):
     """An excitation design that cannot be built; names the field and the value."""
 
 

@@ -24,6 +24,8 @@ different columns of one log share a time origin; ratios of phasors do not depen
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 import math
 import warnings
 from collections.abc import Iterable, Sequence
@@ -34,7 +36,7 @@ import numpy as np
 from flexarm.io.logs import Log
 
 
-class IdentificationError(ValueError):
+class IdentificationError(FlexarmError, ValueError):
     """Experiments that cannot be used for identification (message names file and problem)."""
 
 

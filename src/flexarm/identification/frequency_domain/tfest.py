@@ -40,6 +40,8 @@ are fitted with the same cost by :func:`flexarm.identification.frequency_domain.
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 from dataclasses import dataclass, field
 
 import control
@@ -48,7 +50,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 
-class TFEstError(ValueError):
+class TFEstError(FlexarmError, ValueError):
     """Bad data or orders for a frequency-domain fit; the message names the field."""
 
 

@@ -25,6 +25,8 @@ kept per sample (:attr:`BenchLog.gains`, piecewise constant when a log changes t
 
 from __future__ import annotations
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
+
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -46,7 +48,7 @@ GAINS: dict[str, str] = GAIN_UNITS["state_feedback"]
 MIN_BENCH_SAMPLES = 64
 
 
-class FitInputError(ValueError):
+class FitInputError(FlexarmError, ValueError):
     """Input a fit or a validation cannot use; the message names the file, the field and
     what to do."""
 

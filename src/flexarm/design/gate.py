@@ -1,0 +1,147 @@
+"""The design gate: no controller leaves flexarm unflagged (issue #25).
+
+A design is checked on the comparison's step (:func:`flexarm.design.compare.compare`:
+friction, delays, encoder quantisation, saturation) on the nominal plant and on the drawn
+plants, and gets a verdict (:attr:`flexarm.design.result.Design.verdict`):
+
+* ``"stable"`` when all three hold;
+* otherwise the failures, joined by ``"; "``:
+
+  - ``unstable on the nominal plant``: the nominal plant's loop did not settle (the
+    comparison's ``stable``: finite, tip settled, hub settled over the tail);
+  - ``unstable on U of N drawn plants (p % > s %)``: the share U / N of drawn plants that
+    are unstable exceeds ``max_unstable_share`` s (default 1 %);
+  - ``the command reaches the ±L limit on the nominal plant`` or ``... on K of N drawn
+    plants (p % > s %)``: the saturated command sat at the actuator limit L (V or A) for
+    some time (``time_at_limit_s > 0``) on the nominal plant, or on more than the same share
+    of the drawn plants: the law then leans on the amplifier's clipping, which the linear
+    design did not plan for.
+
+:func:`design_checked` is what ``flexarm design`` calls: it designs, compares the design
+with the scenario's own controller, sets the verdict and the comparison, and raises
+:class:`flexarm.errors.UnstableDesignError` (the design attached, so it can still be
+written with its verdict) unless the verdict is ``"stable"`` or
+``GateOptions.accept_unstable``.  The encoder count and the limit are the scenario's
+(``sensors.motor_angle.quantum`` or ``range / 2**bits``; ``[actuator] limit`` and the
+drive's limit, the smaller): a fitted scenario that carries them needs no extra option.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flexarm.errors import FlexarmError, UnstableDesignError
+
+__all__ = ["GateOptions", "STABLE", "assess", "design_checked"]
+
+#: the verdict of a design that passed the gate
+STABLE = "stable"
+
+
+@dataclass(frozen=True)
+class GateOptions:
+    """``max_unstable_share``: the largest share (0..1) of drawn plants that may be unstable
+    or reach the limit (default 0.01, 1 %); ``accept_unstable``: return a design that fails
+    the gate instead of raising (its verdict still says why; ``--accept-unstable``);
+    ``check_limit``: count reaching the command limit as a failure (default True);
+    ``duration``: the comparison step's length, s (None: the scenario's
+    ``simulation.duration``, at least 3 s)."""
+
+    max_unstable_share: float = 0.01
+    accept_unstable: bool = False
+    check_limit: bool = True
+    duration: float | None = None
+
+    def __post_init__(self):
+        s = self.max_unstable_share
+        if not (isinstance(s, (int, float)) and 0.0 <= s <= 1.0):
+            raise FlexarmError("the share of drawn plants allowed to fail must lie in [0, 1]",
+                               field="max_unstable_share", value=s,
+                               fix="give e.g. 0.01 for 1 %")
+
+
+def assess(comparison, name: str, options: GateOptions = GateOptions()) -> dict[str, Any]:
+    """The gate of controller ``name`` in ``comparison`` (a
+    :class:`~flexarm.design.compare.Comparison`): a dict with ``verdict`` (``"stable"`` or
+    the failures, module doc), ``reasons`` (the failures as a list), ``nominal_stable``,
+    ``unstable`` and ``n_plants`` (drawn plants), ``limit_reached`` (drawn plants whose
+    command reached the limit), ``nominal_limit_reached``, ``limit`` and
+    ``max_unstable_share``."""
+    row = comparison.rows[name]
+    per = comparison.per_plant[name]
+    n = int(row["n_plants"])
+    unstable = int(row["unstable"])
+    at_lim = np.asarray(per["time_at_limit_s"], float)
+    nom_lim = bool(at_lim[0] > 0)
+    k_lim = int(np.sum(at_lim[1:] > 0))
+    limit = comparison.settings.get("limit_V")
+    s = options.max_unstable_share
+    reasons = []
+    if not row["nominal_stable"]:
+        reasons.append("unstable on the nominal plant")
+    if n and unstable / n > s:
+        reasons.append(f"unstable on {unstable} of {n} drawn plants "
+                       f"({100 * unstable / n:.3g} % > {100 * s:g} %)")
+    if options.check_limit:
+        if nom_lim:
+            reasons.append(f"the command reaches the ±{limit:g} limit on the nominal plant")
+        if n and k_lim / n > s:
+            reasons.append(f"the command reaches the ±{limit:g} limit on {k_lim} of {n} drawn "
+                           f"plants ({100 * k_lim / n:.3g} % > {100 * s:g} %)")
+    return {"verdict": "; ".join(reasons) if reasons else STABLE, "reasons": reasons,
+            "nominal_stable": bool(row["nominal_stable"]), "unstable": unstable,
+            "n_plants": n, "nominal_limit_reached": nom_lim, "limit_reached": k_lim,
+            "limit": None if limit is None else float(limit), "max_unstable_share": s}
+
+
+def design_checked(scenario, method: str = "lqr", *, plants=None, count: float | None = None,
+                   gate: GateOptions = GateOptions(), logged: str | None = "scenario",
+                   **options):
+    """Design ``scenario``'s controller by ``method`` (:func:`flexarm.design.design`, with
+    ``options``), compare it with the scenario's own controller (named ``logged``; None
+    leaves it out) on the nominal plant and ``plants`` (a
+    :class:`~flexarm.design.plants.PlantBatch`; None: the nominal plant only), and gate it
+    (module doc).  ``count``: the encoder count (rad) only where the scenario has none.
+    Returns the :class:`~flexarm.design.result.Design` with ``verdict``, ``gate`` and
+    ``comparison`` set (and the comparison's rows in ``info["comparison"]``); raises
+    :class:`~flexarm.errors.UnstableDesignError` (``.design`` the design) when the verdict is
+    not ``"stable"`` unless ``gate.accept_unstable``."""
+    from flexarm.design import design
+    from flexarm.design.compare import compare, encoder_count
+    from flexarm.design.plants import PlantBatch
+
+    if isinstance(scenario, str) or hasattr(scenario, "__fspath__"):
+        from flexarm.specs import load_scenario
+
+        scenario = load_scenario(str(scenario))
+    try:
+        q = encoder_count(scenario, count)
+    except ValueError:
+        raise FlexarmError(
+            "the hub encoder's count is not known, so the design cannot be checked against "
+            "the rig's quantisation", field="sensors.motor_angle.quantum",
+            fix="add quantum = <rad per count> under [sensors.motor_angle] of the scenario "
+                "(a fit writes it when it finds the encoder step; 1 mrad for the rotary rig's "
+                "logs), or give the encoder's counts per turn (--encoder-counts)") from None
+    given = None if count is None else q
+    if plants is not None and method in ("lqr", "tune"):
+        options = {**options, "plants": plants, "count": given}
+    des = design(scenario, method, **options)
+    batch = plants if plants is not None else PlantBatch.nominal_only(scenario)
+    duration = gate.duration if gate.duration is not None else max(
+        3.0, float(scenario.simulation.duration))
+    c = compare(batch, {method: des}, logged=logged, count=given, duration=duration)
+    des.comparison = c
+    des.info["comparison"] = c.to_dict()["rows"]
+    des.warnings.extend(w for w in c.warnings if w not in des.warnings)
+    des.gate = assess(c, method, gate)
+    des.verdict = des.gate["verdict"]
+    if des.verdict != STABLE and not gate.accept_unstable:
+        raise UnstableDesignError(f"the {method} design is not safe to run: {des.verdict}",
+                                  design=des, fix=(
+                                      "look at compare.md and design.json; pass "
+                                      "accept_unstable (--accept-unstable) to keep it anyway"))
+    return des
