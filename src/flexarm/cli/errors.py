@@ -14,9 +14,7 @@ Exit codes of every ``flexarm`` command:
 
 from __future__ import annotations
 
-import datetime
 import os
-import sys
 import tempfile
 import traceback
 from pathlib import Path
@@ -31,34 +29,18 @@ EXIT_BAD_INPUT = 2
 
 
 def project_errors() -> tuple[type[BaseException], ...]:
-    """The project's own error classes: raised for bad input, printed as one line.
+    """The project's own errors, printed as one line: every one is a
+    :class:`flexarm.errors.FlexarmError` (issue #25)."""
+    from flexarm.errors import FlexarmError
 
-    MERGE: when ``flexarm.errors.FlexarmError`` (the ``safe`` work) is the base of every
-    project error, this becomes ``return (FlexarmError,)``.  Until then, the classes the
-    library raises for bad input, listed once here (imported on demand: an error path
-    only, so the command line starts without them)."""
-    from flexarm.control.regulation import RegulationError
-    from flexarm.deploy.c_export import ExportError
-    from flexarm.errors import OutputExistsError, SimulationDiverged
-    from flexarm.identification.frequency_domain.excitation import ExcitationError
-    from flexarm.identification.frequency_domain.harmonics import IdentificationError
-    from flexarm.identification.frequency_domain.tfest import TFEstError
-    from flexarm.identification.time_domain.logs import FitInputError
-    from flexarm.io.logs import LogError  # LogFormatError, MatFileError, LogExistsError
-    from flexarm.models.modes import ModeError
-    from flexarm.specs.scenario import ScenarioError
-    from flexarm.units import UnitError
-
-    return (ScenarioError, LogError, FitInputError, IdentificationError, ExcitationError,
-            TFEstError, ExportError, RegulationError, ModeError, UnitError,
-            OutputExistsError, SimulationDiverged)
+    return (FlexarmError,)
 
 
 def one_line(exc: BaseException) -> str:
-    """A project error as one line (its message with line breaks folded).
+    """A project error as one line: :func:`flexarm.errors.one_line`."""
+    from flexarm.errors import one_line as _library_one_line
 
-    MERGE: becomes ``flexarm.errors.one_line(exc)``."""
-    return fold(str(exc)) or type(exc).__name__
+    return _library_one_line(exc)
 
 
 def bad_input(exc: BaseException) -> int:
@@ -73,35 +55,24 @@ def log_dir() -> Path:
 
 
 def internal_error(exc: BaseException, command: str = "") -> int:
-    """Any other exception: its traceback into a log file, one line naming that file on
-    stderr; the exit code (1)."""
-    from flexarm import __version__
+    """Any other exception: its traceback into a log file
+    (:func:`flexarm.errors.internal_error_report`), one line naming that file on stderr;
+    the exit code (1)."""
+    from flexarm.errors import internal_error_report
 
-    stamp = datetime.datetime.now(datetime.timezone.utc)
-    text = (f"flexarm {__version__}, Python {sys.version.split()[0]}, "
-            f"{stamp.isoformat(timespec='seconds')}\ncommand: {command or ' '.join(sys.argv)}\n\n"
-            + "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
-    where = None
     try:
-        folder = log_dir()
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f"flexarm-error-{stamp:%Y%m%dT%H%M%S}-",
-                                    suffix=".log", dir=folder)
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        where = name
+        where = str(internal_error_report(exc, log_dir()))
     except OSError as exc2:
-        where = None
-        note = f"(the traceback could not be saved: {exc2}; it follows)"
-    msg = fold(f"{type(exc).__name__}: {exc}")
-    if where is not None:
-        err.print(f"[bold red]internal error:[/] {escape(msg)} (a flexarm bug: the traceback "
-                  f"is in {escape(where)}; please report it with that file)", highlight=False,
-                  soft_wrap=True)
-    else:
-        err.print(f"[bold red]internal error:[/] {escape(msg)} {escape(note)}",
+        err.print(f"[bold red]internal error:[/] {escape(fold(f'{type(exc).__name__}: {exc}'))}"
+                  f" (the traceback could not be saved: {escape(str(exc2))}; it follows)",
                   highlight=False, soft_wrap=True)
-        err.print(text, markup=False, highlight=False)
+        err.print("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)),
+                  markup=False, highlight=False)
+        return EXIT_INTERNAL
+    msg = fold(f"{type(exc).__name__}: {exc}")
+    err.print(f"[bold red]internal error:[/] {escape(msg)} (a flexarm bug: the traceback "
+              f"is in {escape(where)}; please report it with that file)", highlight=False,
+              soft_wrap=True)
     return EXIT_INTERNAL
 
 
