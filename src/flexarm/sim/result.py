@@ -27,6 +27,7 @@ from pathlib import Path
 import control
 import numpy as np
 
+from flexarm.display import Table
 from flexarm.io.logs import KNOWN as EXCHANGE_UNITS
 from flexarm.io.logs import write_log
 
@@ -40,6 +41,8 @@ def _unit(name: str) -> str:
                          ("voltage_", "V"), ("friction_z_", "rad")):
         if name.startswith(prefix):
             return unit
+    if name.endswith("_torque"):
+        return "N*m"
     return "?"
 
 
@@ -137,6 +140,45 @@ class SimulationResult(control.TimeResponseData):
             f"{', '.join(self.input_names)}; references: {', '.join(self.references)}; "
             f"states: {', '.join(self.state_labels)}"
         )
+
+    # ------------------------------------------------------------ display
+    def _table(self) -> Table:
+        """One row per signal, command and reference: unit, final value, min, max (over
+        every rollout of a batch; ``final`` is then their mean)."""
+        t = np.asarray(self.time)
+        span = f"{len(t)} samples, {t[0]:.4g}–{t[-1]:.4g} s" if len(t) else "no samples"
+        if len(t) > 1:
+            span += f", dt {t[1] - t[0]:.4g} s"
+        title = f"SimulationResult {self.title!r}: {span}"
+        notes = []
+        if self.is_batch:
+            n = self.command.shape[0]
+            k = 0 if self.diverged is None else int(self.diverged.sum())
+            title += f", {n} rollouts"
+            notes.append(f"{k} of {n} rollouts diverged; final is the mean over the rollouts")
+
+        def row(name, x, unit):
+            x = np.asarray(x, float)
+            if x.size == 0:
+                return (name, unit, None, None, None)
+            with np.errstate(all="ignore"):
+                final = float(np.nanmean(x[..., -1]))
+                return (name, unit, final, float(np.nanmin(x)), float(np.nanmax(x)))
+
+        rows = [row(n, v, _unit(n)) for n, v in self.signals.items()]
+        rows += [row(n, self.command[..., i], _unit(n)) for i, n in enumerate(self.input_names)
+                 if n not in self.signals]
+        rows += [row(n, v, _unit(n)) for n, v in self.references.items() if n not in self.signals]
+        notes.append(f"{len(self.state_labels)} states ({', '.join(self.state_labels[:4])}"
+                     + (", ..." if len(self.state_labels) > 4 else "") + "); "
+                     "res[name] gives any of them, res.measured[name] as the sensors read it")
+        return Table(title, rows, header=("signal", "unit", "final", "min", "max"), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
 
     def exchange_columns(self) -> dict[str, np.ndarray]:
         """Columns of the CSV exchange format: measured where a sensor exists, else true.
