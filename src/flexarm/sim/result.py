@@ -218,13 +218,15 @@ class SimulationResult(control.TimeResponseData):
 
     def plot_arm(self, signals=("reference", "motor_angle", "tip_angle"), *, ax=None,
                  command: bool = True):
-        """Angles against time (mrad) and, below, the command: the figure of FRB Figs. 11-19."""
-        import matplotlib.pyplot as plt
-
+        """Angles against time (mrad) and, below, the command: the figure of FRB Figs. 11-19.
+        Draws on ``ax`` when given, else on a new :class:`matplotlib.figure.Figure` (no pyplot
+        state: a notebook shows the returned figure; :func:`flexarm.io.write.save_figure`
+        writes it)."""
         if ax is None:
-            fig, axes = plt.subplots(2 if command else 1, 1, sharex=True, figsize=(7, 5),
-                                     squeeze=False)
-            axes = axes[:, 0]
+            from matplotlib.figure import Figure
+
+            fig = Figure(figsize=(7, 5))
+            axes = fig.subplots(2 if command else 1, 1, sharex=True, squeeze=False)[:, 0]
         else:
             axes = [ax]
             fig = ax.figure
