@@ -20,8 +20,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src"
 
-_ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|attr|data|exc|obj|const|ref|term):"
-                   r"`(~?)([^`<]+?)(?:\s*<([^>]+)>)?`")
+_ROLE = re.compile(
+    r":(?:py:)?(?:func|class|meth|mod|attr|data|exc|obj|const|ref|term):"
+    r"`(~?)([^`<]+?)(?:\s*<([^>]+)>)?`"
+)
 _API = re.compile(r"<!-- api: ([\w.]+) -->")
 _INCLUDE = re.compile(r"<!-- include: ([\w./-]+) -->")
 
@@ -29,9 +31,11 @@ _INCLUDE = re.compile(r"<!-- include: ([\w./-]+) -->")
 def sphinx_roles_to_code(text: str) -> str:
     """``:func:`~a.b.c``` → ```c```, ``:class:`a.B``` → ```a.B```, ``:ref:`text <x>``` →
     ```text```."""
+
     def repl(m: re.Match) -> str:
         tilde, name = m.group(1), m.group(2).strip()
         return f"`{name.rsplit('.', 1)[-1] if tilde else name}`"
+
     return _ROLE.sub(repl, text)
 
 
@@ -57,8 +61,9 @@ def public_modules(package: str) -> list[str]:
 
 def scenario_reference() -> str:
     """The text ``python tools/scenario_reference.py`` prints."""
-    spec = importlib.util.spec_from_file_location("_scenario_reference",
-                                                  ROOT / "tools" / "scenario_reference.py")
+    spec = importlib.util.spec_from_file_location(
+        "_scenario_reference", ROOT / "tools" / "scenario_reference.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     if str(SRC) not in sys.path:
         sys.path.insert(0, str(SRC))
@@ -70,8 +75,9 @@ def expand(markdown: str) -> str:
     """Apply the three markers of this module to a page's Markdown."""
     if "<!-- scenario-reference -->" in markdown:
         markdown = markdown.replace("<!-- scenario-reference -->", scenario_reference())
-    markdown = _API.sub(lambda m: "\n\n".join(f"::: {name}" for name in
-                                              public_modules(m.group(1))), markdown)
+    markdown = _API.sub(
+        lambda m: "\n\n".join(f"::: {name}" for name in public_modules(m.group(1))), markdown
+    )
     return _INCLUDE.sub(lambda m: (ROOT / m.group(1)).read_text(), markdown)
 
 

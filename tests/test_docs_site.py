@@ -25,9 +25,11 @@ NOTEBOOKS = sorted((DOCS / "notebooks").glob("*.ipynb"))
 
 #: a repository path: known top folders, or a module path under src/flexarm (architecture
 #: map), or the shared data; ends in a file name with an extension, or a folder "/"
-_PATH = re.compile(r"(?<![\w./-])((?:\.\./shared/|examples/|src/|docs/|tools/|tests/|"
-                   r"benchmarks/|requirements/|[a-z_]+/)[\w*.\-/]*\.(?:py|toml|md|txt|mat|"
-                   r"csv|yaml|yml|ipynb))(?![\w/])")
+_PATH = re.compile(
+    r"(?<![\w./-])((?:\.\./shared/|examples/|src/|docs/|tools/|tests/|"
+    r"benchmarks/|requirements/|[a-z_]+/)[\w*.\-/]*\.(?:py|toml|md|txt|mat|"
+    r"csv|yaml|yml|ipynb))(?![\w/])"
+)
 _CODE_SPAN = re.compile(r"`([^`\n]+)`")
 _FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.S | re.M)
 
@@ -95,10 +97,12 @@ def cli_help():
 
     def get(sub: str) -> tuple[int, str]:
         if sub not in cache:
-            r = runner.invoke(app, [sub, "--help"], terminal_width=250,
-                              env={"COLUMNS": "250", "NO_COLOR": "1"})
+            r = runner.invoke(
+                app, [sub, "--help"], terminal_width=250, env={"COLUMNS": "250", "NO_COLOR": "1"}
+            )
             cache[sub] = (r.exit_code, re.sub(r"[\s│╭╮╰╯─]+", "", r.output))
         return cache[sub]
+
     return get
 
 
@@ -119,18 +123,41 @@ def test_every_command_parses(cli_help):
 
 
 def test_site_builds_strict(tmp_path):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(ROOT / "src")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]),
-        "NO_MKDOCS_2_WARNING": "1", "FLEXARM_DOCS_EXECUTE": "false"}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(
+            [str(ROOT / "src")]
+            + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        ),
+        "NO_MKDOCS_2_WARNING": "1",
+        "FLEXARM_DOCS_EXECUTE": "false",
+    }
     site = tmp_path / "site"
-    r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f",
-                        str(ROOT / "mkdocs.yml"), "-d", str(site)], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=900)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "-f",
+            str(ROOT / "mkdocs.yml"),
+            "-d",
+            str(site),
+        ],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-4000:]
     assert "WARNING" not in r.stderr
     # the generated pages hold what they are generated from
     scen = (site / "scenarios" / "index.html").read_text()
-    assert "[arm.motor] drive = &quot;voltage&quot;" in scen or '[arm.motor] drive = "voltage"' in scen
+    assert (
+        "[arm.motor] drive = &quot;voltage&quot;" in scen or '[arm.motor] drive = "voltage"' in scen
+    )
     sim = (site / "api" / "sim" / "index.html").read_text()
     assert "flexarm.sim.result.SimulationResult" in sim
     assert ":class:`" not in sim and ":func:`" not in sim  # Sphinx roles shown as code

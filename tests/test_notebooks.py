@@ -9,7 +9,6 @@ import importlib.util
 import os
 import time
 from html.parser import HTMLParser
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,7 +19,9 @@ nbformat = pytest.importorskip("nbformat", reason="the docs extra is not install
 nbclient = pytest.importorskip("nbclient", reason="the docs extra is not installed")
 
 NB_DIR = ROOT / "docs" / "notebooks"
-_spec = importlib.util.spec_from_file_location("make_notebooks", ROOT / "docs" / "make_notebooks.py")
+_spec = importlib.util.spec_from_file_location(
+    "make_notebooks", ROOT / "docs" / "make_notebooks.py"
+)
 make_notebooks = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(make_notebooks)
 NAMES = sorted(make_notebooks.NOTEBOOKS)
@@ -34,7 +35,8 @@ def test_notebooks_are_generated_without_outputs():
         text = (NB_DIR / f"{name}.ipynb").read_text()
         assert text == make_notebooks.text(name), (
             f"docs/notebooks/{name}.ipynb differs from what docs/make_notebooks.py writes; "
-            "run python docs/make_notebooks.py")
+            "run python docs/make_notebooks.py"
+        )
         nbformat.validate(nbformat.reads(text, as_version=4))
 
 
@@ -43,23 +45,38 @@ def execute(name: str, monkeypatch, real: bool):
     monkeypatch.setenv("FLEXARM_NOTEBOOK_REAL", "1" if real else "0")
     monkeypatch.setenv("FLEXARM_DATA", str(DATA))
     src = str(ROOT / "src")
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
-        [src] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    monkeypatch.setenv(
+        "PYTHONPATH",
+        os.pathsep.join(
+            [src] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        ),
+    )
     nb = nbformat.read(NB_DIR / f"{name}.ipynb", as_version=4)
     t0 = time.perf_counter()
-    nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
-                            resources={"metadata": {"path": str(ROOT)}}).execute()
+    nbclient.NotebookClient(
+        nb, timeout=900, kernel_name="python3", resources={"metadata": {"path": str(ROOT)}}
+    ).execute()
     return nb, time.perf_counter() - t0
 
 
 def outputs(nb, mime: str) -> list[str]:
-    return [o["data"][mime] for c in nb.cells if c.cell_type == "code"
-            for o in c.outputs if mime in o.get("data", {})]
+    return [
+        o["data"][mime]
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if mime in o.get("data", {})
+    ]
 
 
 def printed(nb) -> str:
-    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
-                   for o in c.outputs if o.get("output_type") == "stream")
+    return "".join(
+        o.get("text", "")
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if o.get("output_type") == "stream"
+    )
 
 
 class _Rows(HTMLParser):

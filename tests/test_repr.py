@@ -81,8 +81,13 @@ def test_simulation_result_repr(sim):
     h = cells(sim._repr_html_())
     assert h.tables == 1
     k = h.cells.index("motor_angle")
-    assert h.cells[k:k + 5] == ["motor_angle", "rad", fmt(sim["motor_angle"][-1]),
-                                fmt(sim["motor_angle"].min()), fmt(sim["motor_angle"].max())]
+    assert h.cells[k : k + 5] == [
+        "motor_angle",
+        "rad",
+        fmt(sim["motor_angle"][-1]),
+        fmt(sim["motor_angle"].min()),
+        fmt(sim["motor_angle"].max()),
+    ]
     assert "coupling_torque" in text and "N*m" in h.cells[h.cells.index("coupling_torque") + 1]
 
 
@@ -108,8 +113,7 @@ def test_named_transfer_functions():
     assert "sys[" not in repr(gm)
     # G_t = G_m G_b at a frequency: the names change nothing in the numbers
     w = 7.0
-    assert complex(gt(1j * w)) == pytest.approx(complex(gm(1j * w)) * complex(gb(1j * w)),
-                                                rel=1e-9)
+    assert complex(gt(1j * w)) == pytest.approx(complex(gm(1j * w)) * complex(gb(1j * w)), rel=1e-9)
 
 
 def _G(f):
@@ -136,15 +140,16 @@ def test_frf_and_tfest_reprs(frf):
     h = cells(frf._repr_html_())
     db = 20 * np.log10(np.abs(frf.response[0]))
     assert h.cells[h.cells.index("y") + 1] == f"{db.min():.1f} … {db.max():.1f}"
-    fit = tfest(control.frd(frf.response[0], 2 * np.pi * frf.frequency_hz), 2, 2,
-                std=frf.noise_std[0])
+    fit = tfest(
+        control.frd(frf.response[0], 2 * np.pi * frf.frequency_hz), 2, 2, std=frf.noise_std[0]
+    )
     text = repr(fit)
     check_text(text)
     assert text.startswith("TFEstimate: 2 poles, 2 zeros")
     h = cells(fit._repr_html_())
     for name, v in fit.parameters.items():
         k = h.cells.index(name)
-        assert h.cells[k + 1:k + 3] == [fmt(v["value"]), fmt(v["std"])]
+        assert h.cells[k + 1 : k + 3] == [fmt(v["value"]), fmt(v["std"])]
 
 
 def test_bode_figures(frf, tmp_path):
@@ -155,10 +160,16 @@ def test_bode_figures(frf, tmp_path):
     assert len(mag.collections) == 1  # the ±2σ band
     # the data points are 20 log10 |G| at the lines
     np.testing.assert_allclose(mag.lines[0].get_ydata(), 20 * np.log10(np.abs(frf.response[0])))
-    fit = tfest(control.frd(frf.response[0], 2 * np.pi * frf.frequency_hz), 2, 2,
-                std=frf.noise_std[0])
-    fig = plot_fit(fit, frf.frequency_hz, {"y": frf.response[0]}, {"y": frf.noise_std[0]},
-                   path=tmp_path / "tfest.png")
+    fit = tfest(
+        control.frd(frf.response[0], 2 * np.pi * frf.frequency_hz), 2, 2, std=frf.noise_std[0]
+    )
+    fig = plot_fit(
+        fit,
+        frf.frequency_hz,
+        {"y": frf.response[0]},
+        {"y": frf.noise_std[0]},
+        path=tmp_path / "tfest.png",
+    )
     mag, ph = fig.axes[:2]
     labels = [ln.get_label() for ln in mag.lines]
     assert labels == ["data", "fit", "|fit − data|", "2σ level"]
@@ -170,7 +181,13 @@ def test_bode_figures(frf, tmp_path):
     # tick labels of the frequency axis do not overlap (the old tfest.png's did)
     fig.canvas.draw()
     lo, hi = ph.get_xlim()
-    boxes = sorted((t.get_window_extent() for t, x in zip(ph.get_xticklabels(), ph.get_xticks())
-                    if t.get_text() and lo <= x <= hi), key=lambda b: b.x0)
+    boxes = sorted(
+        (
+            t.get_window_extent()
+            for t, x in zip(ph.get_xticklabels(), ph.get_xticks(), strict=True)
+            if t.get_text() and lo <= x <= hi
+        ),
+        key=lambda b: b.x0,
+    )
     assert len(boxes) >= 3
-    assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:]))
+    assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:], strict=False))

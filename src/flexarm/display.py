@@ -86,7 +86,8 @@ class Table:
             # aligned columns; the last one wrapped when it is too long
             last = max(width - lead, 1)
             for i, r in enumerate(allrows):
-                first = "  " + "  ".join(c.ljust(w) for c, w in zip(r[:-1], widths[:-1]))
+                cols = zip(r[:-1], widths[:-1], strict=True)
+                first = "  " + "  ".join(c.ljust(w) for c, w in cols)
                 first = first + "  " if ncol > 1 else first
                 parts = textwrap.wrap(r[-1], last, break_on_hyphens=False) or [""]
                 lines.append((first + parts[0]).rstrip())
@@ -96,31 +97,49 @@ class Table:
         else:  # stack: one block per row, every cell on its own wrapped line
             names = head or [""] * ncol
             for r in rows:
-                text = [f"{n}: {c}" if n else c for n, c in zip(names, r) if c or n]
+                text = [f"{n}: {c}" if n else c for n, c in zip(names, r, strict=True) if c or n]
                 for k, t in enumerate(text):
                     ind = "  " if k == 0 else "    "
-                    lines.extend(textwrap.wrap(t, width, initial_indent=ind,
-                                               subsequent_indent=ind + "  ",
-                                               break_on_hyphens=False) or [""])
+                    lines.extend(
+                        textwrap.wrap(
+                            t,
+                            width,
+                            initial_indent=ind,
+                            subsequent_indent=ind + "  ",
+                            break_on_hyphens=False,
+                        )
+                        or [""]
+                    )
         for n in self.notes:
-            lines.extend(textwrap.wrap(n, width, initial_indent="  note: ",
-                                       subsequent_indent="        "))
+            lines.extend(
+                textwrap.wrap(n, width, initial_indent="  note: ", subsequent_indent="        ")
+            )
         return "\n".join(lines)
 
     def html(self) -> str:
         """The table as a compact HTML ``<table>`` (the title as its caption, notes in a
         last row), escaped."""
         e = html.escape
-        out = ['<table class="flexarm" style="font-size:small;border-collapse:collapse">',
-               f'<caption style="text-align:left;font-weight:bold">{e(self.title)}</caption>']
+        out = [
+            '<table class="flexarm" style="font-size:small;border-collapse:collapse">',
+            f'<caption style="text-align:left;font-weight:bold">{e(self.title)}</caption>',
+        ]
         if self.header:
-            out.append("<thead><tr>" + "".join(f"<th>{e(h)}</th>" for h in self.header)
-                       + "</tr></thead>")
+            out.append(
+                "<thead><tr>" + "".join(f"<th>{e(h)}</th>" for h in self.header) + "</tr></thead>"
+            )
         out.append("<tbody>")
         ncol = max([len(r) for r in self.rows] + [len(self.header or ())] + [1])
         for row in self._cells():
-            tds = [f"<th style='text-align:left'>{e(row[0])}</th>" if not self.header
-                   else f"<td>{e(row[0])}</td>"] if row else []
+            tds = (
+                [
+                    f"<th style='text-align:left'>{e(row[0])}</th>"
+                    if not self.header
+                    else f"<td>{e(row[0])}</td>"
+                ]
+                if row
+                else []
+            )
             tds += [f"<td>{e(c)}</td>" for c in row[1:]]
             out.append("<tr>" + "".join(tds) + "</tr>")
         for n in self.notes:

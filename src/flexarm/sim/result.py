@@ -77,7 +77,7 @@ class SimulationResult(control.TimeResponseData):
     def is_batch(self) -> bool:
         return self.command.ndim == 3
 
-    def run(self, i: int) -> "SimulationResult":
+    def run(self, i: int) -> SimulationResult:
         """Rollout i of a batch as a result of its own."""
         if not self.is_batch:
             raise ValueError("run(i): this result is one rollout, not a batch")

@@ -10,9 +10,10 @@ For every output y the figure has two axes over a log frequency axis (Hz):
   band ∠G ± 2 arcsin(min(σ_k/|G_k|, 1)) (the angle a complex error of size 2σ can turn G), and
   the model's phase.
 
-The |error| |Ĝ − G| of the fit is drawn in the magnitude axes as a dotted line (dB) beside the
-level 2σ_k (a thin green line): where the error lies below it, the misfit is noise. Figures are :class:`matplotlib.figure.Figure`
-objects (no pyplot state, no backend switch); :func:`flexarm.io.write.save_figure` writes them.
+The |error| |Ĝ − G| of the fit is drawn in the magnitude axes as a dotted line (dB) beside
+the level 2σ_k (a thin green line): where the error lies below it, the misfit is noise.
+Figures are :class:`matplotlib.figure.Figure` objects (no pyplot state, no backend switch);
+:func:`flexarm.io.write.save_figure` writes them.
 """
 
 from __future__ import annotations
@@ -41,10 +42,16 @@ def _hz_axis(ax) -> None:
     ax.grid(True, which="both", alpha=0.3)
 
 
-def bode_figure(frequency_hz: np.ndarray, data: Mapping[str, np.ndarray],
-                std: Mapping[str, np.ndarray] | None = None,
-                model: Callable[[np.ndarray], Mapping[str, np.ndarray]] | None = None, *,
-                title: str = "", path: str | Path | None = None, dpi: int = 120):
+def bode_figure(
+    frequency_hz: np.ndarray,
+    data: Mapping[str, np.ndarray],
+    std: Mapping[str, np.ndarray] | None = None,
+    model: Callable[[np.ndarray], Mapping[str, np.ndarray]] | None = None,
+    *,
+    title: str = "",
+    path: str | Path | None = None,
+    dpi: int = 120,
+):
     """The Bode figure of ``data`` (output name → complex G at ``frequency_hz``, Hz) with its
     ±2σ band (``std``: name → σ of the estimate at each line) and the ``model`` (a function of
     ω in rad/s returning name → complex Ĝ(jω)), drawn on a 300-point grid from half the lowest
@@ -71,10 +78,18 @@ def bode_figure(frequency_hz: np.ndarray, data: Mapping[str, np.ndarray],
             ph = ph + 360 * np.round(np.median(ref - ph) / 360)
         if std is not None and name in std:
             sd = 2 * np.asarray(std[name], float)
-            am.fill_between(f, _db(np.maximum(np.abs(G) - sd, 1e-300)), _db(np.abs(G) + sd),
-                            color="tab:green", alpha=0.25, lw=0, label="data ± 2σ")
-            dphi = np.degrees(2 * np.arcsin(np.minimum(sd / 2 / np.maximum(np.abs(G), 1e-300),
-                                                       1.0)))
+            am.fill_between(
+                f,
+                _db(np.maximum(np.abs(G) - sd, 1e-300)),
+                _db(np.abs(G) + sd),
+                color="tab:green",
+                alpha=0.25,
+                lw=0,
+                label="data ± 2σ",
+            )
+            dphi = np.degrees(
+                2 * np.arcsin(np.minimum(sd / 2 / np.maximum(np.abs(G), 1e-300), 1.0))
+            )
             ap.fill_between(f, ph - dphi, ph + dphi, color="tab:green", alpha=0.25, lw=0)
         am.plot(f, _db(G), "k.", ms=4, label="data")
         ap.plot(f, ph, "k.", ms=4)

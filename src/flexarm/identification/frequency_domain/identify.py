@@ -39,7 +39,13 @@ from typing import Any
 import control
 import numpy as np
 
-from flexarm.identification.frequency_domain.coulomb import PARTNER_TOL, CoulombEstimate, estimate_coulomb, find_partners
+from flexarm.display import Table
+from flexarm.identification.frequency_domain.coulomb import (
+    PARTNER_TOL,
+    CoulombEstimate,
+    estimate_coulomb,
+    find_partners,
+)
 from flexarm.identification.frequency_domain.frf import FrequencyResponse, frequency_response
 from flexarm.identification.frequency_domain.harmonics import (
     HarmonicAnalysis,
@@ -47,13 +53,17 @@ from flexarm.identification.frequency_domain.harmonics import (
     _warn,
     analyse_log,
 )
-from flexarm.io.logs import Log, LogError, read_log
 from flexarm.identification.frequency_domain.physical import PhysicalFit, fit_physical
-from flexarm.identification.frequency_domain.tfest import (TFEstError, TFEstimate, tf_coefficients,
-                                                           tf_response, tfest)
-from flexarm.units import UnitError, to_si
-from flexarm.display import Table
+from flexarm.identification.frequency_domain.tfest import (
+    TFEstError,
+    TFEstimate,
+    tf_coefficients,
+    tf_response,
+    tfest,
+)
+from flexarm.io.logs import Log, LogError, read_log
 from flexarm.io.write import save_figure, write_text
+from flexarm.units import UnitError, to_si
 
 
 def _cx(z: complex | None) -> dict[str, float] | None:

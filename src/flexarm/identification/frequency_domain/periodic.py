@@ -43,7 +43,10 @@ import control
 import numpy as np
 
 from flexarm.display import Table
-from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.harmonics import (
+    IdentificationError,
+    IdentificationWarning,
+)
 
 #: A leading period is transient when its departure is this many times the steady one's.
 TRANSIENT_RATIO = 4.0
@@ -119,7 +122,7 @@ class PeriodicFRF:
                 "spectra": spectra}
 
     @classmethod
-    def from_json(cls, d: dict, source: str = "FRF JSON") -> "PeriodicFRF":
+    def from_json(cls, d: dict, source: str = "FRF JSON") -> PeriodicFRF:
         """The result back from :meth:`to_json` (``spectra`` needed for the friction
         analysis of :mod:`.multisine_friction`)."""
         try:
@@ -160,7 +163,7 @@ class PeriodicFRF:
             for j, name in enumerate(self.outputs):
                 mag = np.abs(self.response[j])
                 db = 20 * np.log10(np.maximum(mag, 1e-300))
-                rel = lambda sd: f"{100 * float(np.median(sd / mag)):.3g} %"  # noqa: E731
+                rel = lambda sd, mag=mag: f"{100 * float(np.median(sd / mag)):.3g} %"  # noqa: E731
                 rows.append((name, f"{db.min():.1f} … {db.max():.1f}", rel(self.noise_std[j]),
                              None if self.total_std is None else rel(self.total_std[j])))
         notes = [f"period {self.period} samples at {self.fs:g} Hz, {self.periods_used} periods "

@@ -334,7 +334,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     # delay parameter in units of 1/ω_s (scaled like the coefficients)
     x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
     unstable: list[complex] = []
-    for attempt in range(3):
+    for _attempt in range(3):
         sol = least_squares(resid, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
                             xtol=1e-15, ftol=1e-15, gtol=1e-15)
         x = sol.x
