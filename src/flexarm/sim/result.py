@@ -84,13 +84,14 @@ class SimulationResult(control.TimeResponseData):
         return SimulationResult(
             self.time, {k: v[i] for k, v in self.signals.items()},
             {k: v[i] for k, v in self.measured.items()}, self.references, self.command[i],
-            self.input_names, self.state_array[i], self.state_labels, title=self.title,
+            self.input_names, self.state_array[i], self.state_names, title=str(self.title),
             meta=self.meta)
 
     # ------------------------------------------------------------ named views
     @property
     def state_names(self) -> tuple[str, ...]:
-        return tuple(self.state_labels)
+        """The state labels (python-control's ``state_labels``, typed optional there)."""
+        return tuple(self.state_labels or ())
 
     @property
     def state_array(self) -> np.ndarray:
@@ -133,12 +134,12 @@ class SimulationResult(control.TimeResponseData):
             return self.command[..., self.input_names.index(name)]
         if name in self.references:
             return self.references[name]
-        if name in self.state_labels:
-            return self.state_array[..., self.state_labels.index(name)]
+        if name in self.state_names:
+            return self.state_array[..., self.state_names.index(name)]
         raise KeyError(
             f"{name!r}: no such signal; signals: {', '.join(self.signals)}; inputs: "
             f"{', '.join(self.input_names)}; references: {', '.join(self.references)}; "
-            f"states: {', '.join(self.state_labels)}"
+            f"states: {', '.join(self.state_names)}"
         )
 
     # ------------------------------------------------------------ display
@@ -169,8 +170,9 @@ class SimulationResult(control.TimeResponseData):
         rows += [row(n, self.command[..., i], _unit(n)) for i, n in enumerate(self.input_names)
                  if n not in self.signals]
         rows += [row(n, v, _unit(n)) for n, v in self.references.items() if n not in self.signals]
-        notes.append(f"{len(self.state_labels)} states ({', '.join(self.state_labels[:4])}"
-                     + (", ..." if len(self.state_labels) > 4 else "") + "); "
+        states = self.state_names
+        notes.append(f"{len(states)} states ({', '.join(states[:4])}"
+                     + (", ..." if len(states) > 4 else "") + "); "
                      "res[name] gives any of them, res.measured[name] as the sensors read it")
         return Table(title, rows, header=("signal", "unit", "final", "min", "max"), notes=notes)
 
@@ -188,7 +190,7 @@ class SimulationResult(control.TimeResponseData):
             raise ValueError("to_csv: a batch has several rollouts; write one: res.run(i)")
         if "motor_angle" not in self.signals:
             cols = {"time": self.time}
-            cols.update({n: self.state_array[:, k] for k, n in enumerate(self.state_labels)})
+            cols.update({n: self.state_array[:, k] for k, n in enumerate(self.state_names)})
             cols.update({n: self.command[:, i] for i, n in enumerate(self.input_names)})
             return cols
         cols = {"time": self.time, "reference": self.references["reference"]}
