@@ -346,13 +346,14 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
             yy = np.abs(mean[1 + j]) ** 2
             noise_mean = var[1 + j] / M  # variance of the averaged spectrum per line
             bands = []
-            for lo, hi in zip(edges[:-1], edges[1:]):
-                sel = lambda ks: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
+            for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+                sel = lambda ks, lo=lo, hi=hi: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
                 e, o, ev = sel(exc), sel(odd_det), sel(even_det)
                 if not e.size:
                     continue
                 refp = yy[e].mean()
-                db = lambda p: 10 * math.log10(p / refp) if p > 0 else -math.inf  # noqa: E731
+                db = lambda p, refp=refp: (  # noqa: E731
+                    10 * math.log10(p / refp) if p > 0 else -math.inf)
                 bands.append(Band((lo * df, (hi - 1) * df),
                                   db(yy[o].mean()) if o.size else math.nan,
                                   db(yy[ev].mean()) if ev.size else math.nan,
