@@ -167,3 +167,5 @@ def test_site_builds_strict(tmp_path):
     for nb in NOTEBOOKS:
         assert (site / "notebooks" / nb.stem / "index.html").is_file()
     assert "Unreleased" in (site / "changelog" / "index.html").read_text()
+    # the build helpers beside the pages are not pages (mkdocs-jupyter reads .py as notebooks)
+    assert not (site / "make_notebooks").exists() and not (site / "hooks").exists()
