@@ -16,7 +16,7 @@ LOCKVENV   := .venv-lock
 UV_VERSION := 0.13.9
 LOCK_FLAGS ?=
 
-.PHONY: demo test bench lock clean
+.PHONY: demo test bench lock docs clean
 
 $(STAMP): pyproject.toml $(LOCK)
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "flexarm needs Python >= 3.11, found " + sys.version.split()[0]'
@@ -30,7 +30,7 @@ $(STAMP): pyproject.toml $(LOCK)
 lock:
 	$(PYTHON) -m venv $(LOCKVENV)
 	$(LOCKVENV)/bin/python -m pip install --quiet 'uv==$(UV_VERSION)'
-	$(LOCKVENV)/bin/uv pip compile pyproject.toml --extra test \
+	$(LOCKVENV)/bin/uv pip compile pyproject.toml --extra test --extra docs \
 	    --python-version 3.11 --python-platform x86_64-unknown-linux-gnu \
 	    --generate-hashes --quiet --custom-compile-command 'make lock' $(LOCK_FLAGS) -o $(LOCK)
 
@@ -47,8 +47,14 @@ test: $(STAMP)
 	    >/dev/null 2>&1 || echo "chromium not installed: the browser test will skip"; fi
 	$(BIN)/python -m pytest -q
 
+# The documentation site (mkdocs.yml: mkdocs-material, mkdocstrings, mkdocs-jupyter) into
+# site/, warnings as errors, the notebooks executed; docs/hooks.py generates the scenario
+# reference and the API pages at build time. tests/test_docs_site.py builds it too.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 FLEXARM_DOCS_EXECUTE=true $(BIN)/python -m mkdocs build --strict --site-dir site
+
 bench: $(STAMP)
 	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
 
 clean:
-	rm -rf $(VENV) $(LOCKVENV) out .pytest_cache
+	rm -rf $(VENV) $(LOCKVENV) out site .pytest_cache

@@ -16,11 +16,26 @@ except ImportError:  # the property test files skip themselves
     pass
 
 
-# ------------------------------------------------------------------ the real rotary rig
+# ------------------------------------------------------------------ the real lab logs
 import functools  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
+
+#: the repository root
+ROOT = Path(__file__).resolve().parents[1]
+#: the real lab logs: $FLEXARM_DATA, else ../shared/data beside the repository (absent in a
+#: user's clone; tests that need them are marked ``rig`` and skip, naming this path)
+DATA = Path(os.environ.get("FLEXARM_DATA") or ROOT.parent / "shared" / "data").resolve()
+
+
+def skip_without_data(sub: str = "") -> Path:
+    """``DATA / sub``, or skip the calling test saying where the logs were looked for."""
+    path = DATA / sub
+    if not path.exists():
+        pytest.skip(f"real lab logs not found at {path} (set FLEXARM_DATA to the folder "
+                    "that holds rotary-rig/, two-link-rig/, motor-bench/)")
+    return path
 
 #: the rotary-rig logs (../shared/data/rotary-rig: absent in a user's clone, present in CI)
 ROTARY_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"

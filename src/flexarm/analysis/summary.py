@@ -47,11 +47,6 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
         if scenario.sampling is None:
             return write_regulation(scenario, out)
         return write_multilink(scenario, out, progress)[0]
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     res = simulate_with_progress(scenario, progress)
     name = scenario.name
     res.to_csv(out / f"{name}.csv", overwrite=True)
@@ -59,7 +54,6 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
     fig.suptitle(f"{name}: closed-loop response")
     fig.tight_layout()
     save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
-    plt.close(fig)
     ctrl = _controlled_signal(scenario.controller)
     summary = {
         "scenario": name,
@@ -209,16 +203,14 @@ def run_regulation(scenario):
 
 def write_regulation(scenario, out: Path) -> dict:
     """Simulate a multi-link regulation; write CSV, the Fig. 2-style figure, summary."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     model, params, run = run_regulation(scenario)
     name = scenario.name
     n = model.n_links
     path = run.to_csv(out / f"{name}.csv", overwrite=True)
-    fig, ax = plt.subplots(3, 1, sharex=True, figsize=(7, 8))
+    fig = Figure(figsize=(7, 8))
+    ax = fig.subplots(3, 1, sharex=True)
     for k in range(n):
         ax[0].plot(run.time, np.degrees(run.theta[:, k]), label=f"θ{k + 1}")
     ax[0].set_ylabel("joint angle [deg]")
@@ -235,7 +227,6 @@ def write_regulation(scenario, out: Path) -> dict:
     fig.suptitle(f"{name}: law {scenario.regulation.law}")
     fig.tight_layout()
     save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
-    plt.close(fig)
     th_err = np.degrees(np.abs(run.theta[-1] - np.asarray(params.theta_d)))
     dd = np.asarray(params.delta_d)
     summary = {

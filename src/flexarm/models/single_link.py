@@ -31,6 +31,13 @@ from flexarm.specs.arm import RigidBeam, SingleLinkArm
 SIGNALS = SingleLinkBody.signal_names + SingleLinkBody.friction_names
 
 
+def _named(g: control.TransferFunction, name: str, input: str,
+           output: str) -> control.TransferFunction:
+    """``g`` with a name and signal names (python-control prints and connects by them)."""
+    return control.TransferFunction(g.num, g.den, g.dt, name=name, inputs=[input],
+                                    outputs=[output])
+
+
 @dataclass(frozen=True)
 class SingleLinkModel:
     """The arm spec turned into numbers: hub, drive, friction and the beam block."""
@@ -55,8 +62,9 @@ class SingleLinkModel:
 
     # ----------------------------------------------------------------- linear part
     def beam_tf(self) -> control.TransferFunction:
-        """G_b(s) = θt/θm (FRB eq. 13/14)."""
-        return self.beam.transfer_functions()[0]
+        """G_b(s) = θt/θm (FRB eq. 13/14), rad/rad; named ``G_b`` (input ``motor_angle``,
+        output ``tip_angle``)."""
+        return _named(self.beam.transfer_functions()[0], "G_b", "motor_angle", "tip_angle")
 
     def coupling_tf(self) -> control.TransferFunction:
         """C_t(s)/(θm(s) − θt(s)) (FRB eq. 15; a constant C for the single-mass arm)."""
@@ -68,11 +76,14 @@ class SingleLinkModel:
         s = control.tf("s")
         d = self.drive
         g = float(d.k_u) / (self.J * s**2 + (self.V + float(d.k_omega)) * s + ct)
-        return _clean(control.minreal(g, tol=1e-7, verbose=False))
+        return _named(_clean(control.minreal(g, tol=1e-7, verbose=False)), "G_m",
+                      d.input_name, "motor_angle")
 
     def tip_tf(self) -> control.TransferFunction:
-        """θt/u = G_m G_b."""
-        return _clean(control.minreal(self.motor_tf() * self.beam_tf(), tol=1e-7, verbose=False))
+        """θt/u = G_m G_b (rad/A or rad/V); named ``G_t`` (input the drive's, output
+        ``tip_angle``)."""
+        g = _clean(control.minreal(self.motor_tf() * self.beam_tf(), tol=1e-7, verbose=False))
+        return _named(g, "G_t", self.drive.input_name, "tip_angle")
 
     # ----------------------------------------------------------------- nonlinear plant
     def plant(self) -> Arm:

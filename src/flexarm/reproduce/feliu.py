@@ -192,11 +192,6 @@ def _steady_error_counts(res: SimulationResult, step: float, count: float,
 # ---------------------------------------------------------------------------- figures
 def _figure(res: SimulationResult, title: str, path: Path, signals, *, xmax=None,
             extra=None) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     fig = res.plot_arm(signals=signals)
     if extra is not None:
         extra(fig.axes[0])
@@ -206,7 +201,6 @@ def _figure(res: SimulationResult, title: str, path: Path, signals, *, xmax=None
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     save_figure(fig, path, overwrite=True, dpi=110)
-    plt.close(fig)
     return path
 
 

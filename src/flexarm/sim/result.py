@@ -27,6 +27,7 @@ from pathlib import Path
 import control
 import numpy as np
 
+from flexarm.display import Table
 from flexarm.io.logs import KNOWN as EXCHANGE_UNITS
 from flexarm.io.logs import write_log
 
@@ -40,6 +41,8 @@ def _unit(name: str) -> str:
                          ("voltage_", "V"), ("friction_z_", "rad")):
         if name.startswith(prefix):
             return unit
+    if name.endswith("_torque"):
+        return "N*m"
     return "?"
 
 
@@ -74,20 +77,21 @@ class SimulationResult(control.TimeResponseData):
     def is_batch(self) -> bool:
         return self.command.ndim == 3
 
-    def run(self, i: int) -> "SimulationResult":
+    def run(self, i: int) -> SimulationResult:
         """Rollout i of a batch as a result of its own."""
         if not self.is_batch:
             raise ValueError("run(i): this result is one rollout, not a batch")
         return SimulationResult(
             self.time, {k: v[i] for k, v in self.signals.items()},
             {k: v[i] for k, v in self.measured.items()}, self.references, self.command[i],
-            self.input_names, self.state_array[i], self.state_labels, title=self.title,
+            self.input_names, self.state_array[i], self.state_names, title=str(self.title),
             meta=self.meta)
 
     # ------------------------------------------------------------ named views
     @property
     def state_names(self) -> tuple[str, ...]:
-        return tuple(self.state_labels)
+        """The state labels (python-control's ``state_labels``, typed optional there)."""
+        return tuple(self.state_labels or ())
 
     @property
     def state_array(self) -> np.ndarray:
@@ -130,13 +134,53 @@ class SimulationResult(control.TimeResponseData):
             return self.command[..., self.input_names.index(name)]
         if name in self.references:
             return self.references[name]
-        if name in self.state_labels:
-            return self.state_array[..., self.state_labels.index(name)]
+        if name in self.state_names:
+            return self.state_array[..., self.state_names.index(name)]
         raise KeyError(
             f"{name!r}: no such signal; signals: {', '.join(self.signals)}; inputs: "
             f"{', '.join(self.input_names)}; references: {', '.join(self.references)}; "
-            f"states: {', '.join(self.state_labels)}"
+            f"states: {', '.join(self.state_names)}"
         )
+
+    # ------------------------------------------------------------ display
+    def _table(self) -> Table:
+        """One row per signal, command and reference: unit, final value, min, max (over
+        every rollout of a batch; ``final`` is then their mean)."""
+        t = np.asarray(self.time)
+        span = f"{len(t)} samples, {t[0]:.4g}–{t[-1]:.4g} s" if len(t) else "no samples"
+        if len(t) > 1:
+            span += f", dt {t[1] - t[0]:.4g} s"
+        title = f"SimulationResult {self.title!r}: {span}"
+        notes = []
+        if self.is_batch:
+            n = self.command.shape[0]
+            k = 0 if self.diverged is None else int(self.diverged.sum())
+            title += f", {n} rollouts"
+            notes.append(f"{k} of {n} rollouts diverged; final is the mean over the rollouts")
+
+        def row(name, x, unit):
+            x = np.asarray(x, float)
+            if x.size == 0:
+                return (name, unit, None, None, None)
+            with np.errstate(all="ignore"):
+                final = float(np.nanmean(x[..., -1]))
+                return (name, unit, final, float(np.nanmin(x)), float(np.nanmax(x)))
+
+        rows = [row(n, v, _unit(n)) for n, v in self.signals.items()]
+        rows += [row(n, self.command[..., i], _unit(n)) for i, n in enumerate(self.input_names)
+                 if n not in self.signals]
+        rows += [row(n, v, _unit(n)) for n, v in self.references.items() if n not in self.signals]
+        states = self.state_names
+        notes.append(f"{len(states)} states ({', '.join(states[:4])}"
+                     + (", ..." if len(states) > 4 else "") + "); "
+                     "res[name] gives any of them, res.measured[name] as the sensors read it")
+        return Table(title, rows, header=("signal", "unit", "final", "min", "max"), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
 
     def exchange_columns(self) -> dict[str, np.ndarray]:
         """Columns of the CSV exchange format: measured where a sensor exists, else true.
@@ -146,7 +190,7 @@ class SimulationResult(control.TimeResponseData):
             raise ValueError("to_csv: a batch has several rollouts; write one: res.run(i)")
         if "motor_angle" not in self.signals:
             cols = {"time": self.time}
-            cols.update({n: self.state_array[:, k] for k, n in enumerate(self.state_labels)})
+            cols.update({n: self.state_array[:, k] for k, n in enumerate(self.state_names)})
             cols.update({n: self.command[:, i] for i, n in enumerate(self.input_names)})
             return cols
         cols = {"time": self.time, "reference": self.references["reference"]}
@@ -176,13 +220,15 @@ class SimulationResult(control.TimeResponseData):
 
     def plot_arm(self, signals=("reference", "motor_angle", "tip_angle"), *, ax=None,
                  command: bool = True):
-        """Angles against time (mrad) and, below, the command: the figure of FRB Figs. 11-19."""
-        import matplotlib.pyplot as plt
-
+        """Angles against time (mrad) and, below, the command: the figure of FRB Figs. 11-19.
+        Draws on ``ax`` when given, else on a new :class:`matplotlib.figure.Figure` (no pyplot
+        state: a notebook shows the returned figure; :func:`flexarm.io.write.save_figure`
+        writes it)."""
         if ax is None:
-            fig, axes = plt.subplots(2 if command else 1, 1, sharex=True, figsize=(7, 5),
-                                     squeeze=False)
-            axes = axes[:, 0]
+            from matplotlib.figure import Figure
+
+            fig = Figure(figsize=(7, 5))
+            axes = fig.subplots(2 if command else 1, 1, sharex=True, squeeze=False)[:, 0]
         else:
             axes = [ax]
             fig = ax.figure

@@ -236,6 +236,39 @@ class Scenario(Spec):
                 raise ValueError(f"initial.{name} has {len(v)} values; the arm has {n} joints")
         return self
 
+    def __repr__(self) -> str:
+        """A short table (name, arm, drive, beam, sampling, controller); the full
+        specification is ``model_dump()``."""
+        return _scenario_table(self).text()
+
+    def _repr_html_(self) -> str:
+        return _scenario_table(self).html()
+
+
+def _scenario_table(sc: "Scenario"):
+    """The rows of :meth:`Scenario.__repr__` (:class:`flexarm.display.Table`)."""
+    from flexarm.display import Table
+
+    arm = sc.arm
+    rows: list[tuple[str, object]] = [("description", sc.description or None)]
+    if arm.kind == "single_link":
+        motor = arm.motor
+        rows += [("arm", "single link"),
+                 ("drive", f"{motor.drive}, J = {motor.inertia:.4g} kg*m**2"),
+                 ("beam", getattr(arm.beam, "model", None)),
+                 ("friction", f"Coulomb {arm.friction.coulomb:.4g} N*m"
+                  if getattr(arm.friction, "coulomb", None) is not None else None)]
+    else:
+        rows.append(("arm", f"{len(arm.links)} links"))
+    if sc.sampling is not None:
+        rows.append(("sampling", f"period {sc.sampling.period:.4g} s"))
+    if sc.simulation is not None:
+        rows.append(("duration", f"{sc.simulation.duration:.4g} s"))
+    rows.append(("controller", None if sc.controller is None else sc.controller.type))
+    if sc.regulation is not None:
+        rows.append(("regulation", f"{sc.regulation.law}, {sc.regulation.duration:.4g} s"))
+    return Table(f"Scenario {sc.name!r}", rows)
+
 
 #: The multi-link scenario is the same class (kept for code written against it).
 MultiLinkScenario = Scenario

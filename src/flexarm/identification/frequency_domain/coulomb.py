@@ -44,12 +44,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis, _warn
+from flexarm.identification.frequency_domain.harmonics import (
+    ideal_friction_phasor as square_wave_phasor,  # noqa: F401 (eq. 2)
+)
+
 # Eq. (6) where C_f' vanishes (ln 0): (ln 1e-300)² ≈ 5e5, so 1e6 is worse than any real
 # cost yet finite, which Brent's parabolic steps need.
 _INFEASIBLE_COST = 1e6
-
-from flexarm.identification.frequency_domain.harmonics import ideal_friction_phasor as square_wave_phasor  # noqa: F401 (eq. 2)
-from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis, _warn
 
 #: Relative tolerance for matching a 3ω0 partner experiment.
 PARTNER_TOL = 0.01
@@ -73,7 +75,7 @@ class PairPhasors:
     shape1_partner: complex | None = None  # fundamental of the shape, 3ω0 experiment
 
     @classmethod
-    def from_analyses(cls, base: HarmonicAnalysis, partner: HarmonicAnalysis) -> "PairPhasors":
+    def from_analyses(cls, base: HarmonicAnalysis, partner: HarmonicAnalysis) -> PairPhasors:
         return cls(base.phasor("motor_angle", 1), base.phasor("motor_angle", 3),
                    base.phasor("current", 3), partner.phasor("motor_angle", 1),
                    partner.phasor("current", 1), base.friction(3), partner.friction(1))

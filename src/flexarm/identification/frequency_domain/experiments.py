@@ -23,9 +23,9 @@ Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.freque
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 

@@ -39,7 +39,13 @@ from typing import Any
 import control
 import numpy as np
 
-from flexarm.identification.frequency_domain.coulomb import PARTNER_TOL, CoulombEstimate, estimate_coulomb, find_partners
+from flexarm.display import Table
+from flexarm.identification.frequency_domain.coulomb import (
+    PARTNER_TOL,
+    CoulombEstimate,
+    estimate_coulomb,
+    find_partners,
+)
 from flexarm.identification.frequency_domain.frf import FrequencyResponse, frequency_response
 from flexarm.identification.frequency_domain.harmonics import (
     HarmonicAnalysis,
@@ -47,12 +53,17 @@ from flexarm.identification.frequency_domain.harmonics import (
     _warn,
     analyse_log,
 )
-from flexarm.io.logs import Log, LogError, read_log
 from flexarm.identification.frequency_domain.physical import PhysicalFit, fit_physical
-from flexarm.identification.frequency_domain.tfest import (TFEstError, TFEstimate, tf_coefficients,
-                                                           tf_response, tfest)
-from flexarm.units import UnitError, to_si
+from flexarm.identification.frequency_domain.tfest import (
+    TFEstError,
+    TFEstimate,
+    tf_coefficients,
+    tf_response,
+    tfest,
+)
+from flexarm.io.logs import Log, LogError, read_log
 from flexarm.io.write import save_figure, write_text
+from flexarm.units import UnitError, to_si
 
 
 def _cx(z: complex | None) -> dict[str, float] | None:
@@ -141,6 +152,28 @@ class IdentificationResult:
 
     def beam_frd(self) -> control.FrequencyResponseData:
         return self.response.frd("beam")
+
+    # -- display --------------------------------------------------------------------
+    def _table(self) -> Table:
+        """The headline numbers: C_f, K, the fitted parameters, the poles; the warnings."""
+        rows: list[tuple[str, object]] = [
+            ("experiments", len(self.analyses)),
+            ("Coulomb current C_f", None if self.coulomb_current is None
+             else f"{self.coulomb_current:.4g} A"),
+            ("Coulomb torque K·C_f", None if self.coulomb_torque is None
+             else f"{self.coulomb_torque:.4g} N*m"),
+            ("motor constant K", f"{self.motor_constant:.4g} N*m/A")]
+        rows += [(k, v) for k, v in self.parameters.items()]
+        rows += [("G_m poles", [complex(p) for p in np.roots(self.motor_tf.den[0][0])]),
+                 ("G_b poles", [complex(p) for p in np.roots(self.beam_tf.den[0][0])])]
+        return Table(f"IdentificationResult ({len(self.files)} files)", rows,
+                     notes=list(self.warnings))
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
 
     # -- exports --------------------------------------------------------------------
     def _roles(self) -> dict[str, str]:

@@ -51,11 +51,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.harmonics import (
+    IdentificationError,
+    IdentificationWarning,
+)
 from flexarm.identification.frequency_domain.periodic import DETECT_DB, PeriodicFRF, periodic_frf
-from flexarm.identification.frequency_domain.structures import (frb_single_mass_derived,
-                                                                 servo_gains, two_mass_derived,
-                                                                 voltage_servo_derived)
+from flexarm.identification.frequency_domain.structures import (
+    frb_single_mass_derived,
+    servo_gains,
+    two_mass_derived,
+    voltage_servo_derived,
+)
 
 #: Simulated friction levels (× the input rms) for the first search grid.
 GRID = np.geomspace(1e-3, 0.5, 8)
@@ -341,7 +347,7 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     bands = _bands(frf, odd)
     pos = {int(k): i for i, k in enumerate(odd)}
     detected = []
-    for lo, hi, ls in bands:
+    for _lo, _hi, ls in bands:
         if ls.size:
             idx = [pos[int(k)] for k in ls]
             if 10 * math.log10(max(y2[idx].mean(), 1e-300) / max(noise[idx].mean(), 1e-300)) >= DETECT_DB:
@@ -402,7 +408,7 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     else:
         std = cf  # an upper bound only
     band_vals: list[float | None] = []
-    for lo, hi, ls in bands:
+    for _lo, _hi, ls in bands:
         if not any(ls is d for d in detected):
             band_vals.append(None)
             continue

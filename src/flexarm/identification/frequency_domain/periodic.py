@@ -42,7 +42,11 @@ from dataclasses import dataclass, field
 import control
 import numpy as np
 
-from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.display import Table
+from flexarm.identification.frequency_domain.harmonics import (
+    IdentificationError,
+    IdentificationWarning,
+)
 
 #: A leading period is transient when its departure is this many times the steady one's.
 TRANSIENT_RATIO = 4.0
@@ -118,7 +122,7 @@ class PeriodicFRF:
                 "spectra": spectra}
 
     @classmethod
-    def from_json(cls, d: dict, source: str = "FRF JSON") -> "PeriodicFRF":
+    def from_json(cls, d: dict, source: str = "FRF JSON") -> PeriodicFRF:
         """The result back from :meth:`to_json` (``spectra`` needed for the friction
         analysis of :mod:`.multisine_friction`)."""
         try:
@@ -148,6 +152,30 @@ class PeriodicFRF:
         except (KeyError, TypeError, ValueError) as exc:
             raise IdentificationError(f"{source}: not an FRF written by flexarm frf "
                                       f"(missing or bad {exc})") from None
+
+    def _table(self) -> Table:
+        """One row per output: |G| range (dB), median noise and total std relative to |G|."""
+        f = self.frequency_hz
+        title = (f"PeriodicFRF {self.input} → {', '.join(self.outputs)}: {len(self.lines)} lines"
+                 + (f", {f[0]:.4g}–{f[-1]:.4g} Hz" if len(f) else ""))
+        rows = []
+        with np.errstate(all="ignore"):
+            for j, name in enumerate(self.outputs):
+                mag = np.abs(self.response[j])
+                db = 20 * np.log10(np.maximum(mag, 1e-300))
+                rel = lambda sd, mag=mag: f"{100 * float(np.median(sd / mag)):.3g} %"  # noqa: E731
+                rows.append((name, f"{db.min():.1f} … {db.max():.1f}", rel(self.noise_std[j]),
+                             None if self.total_std is None else rel(self.total_std[j])))
+        notes = [f"period {self.period} samples at {self.fs:g} Hz, {self.periods_used} periods "
+                 f"used ({self.transient_periods} transient)", self.verdict(), *self.warnings]
+        return Table(title, rows, header=("output", "|G| (dB)", "noise std/|G|",
+                                          "total std/|G|"), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
 
     def verdict(self) -> str:
         """A plain sentence per output about the nonlinear distortion."""
@@ -318,13 +346,14 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
             yy = np.abs(mean[1 + j]) ** 2
             noise_mean = var[1 + j] / M  # variance of the averaged spectrum per line
             bands = []
-            for lo, hi in zip(edges[:-1], edges[1:]):
-                sel = lambda ks: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
+            for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+                sel = lambda ks, lo=lo, hi=hi: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
                 e, o, ev = sel(exc), sel(odd_det), sel(even_det)
                 if not e.size:
                     continue
                 refp = yy[e].mean()
-                db = lambda p: 10 * math.log10(p / refp) if p > 0 else -math.inf  # noqa: E731
+                db = lambda p, refp=refp: (  # noqa: E731
+                    10 * math.log10(p / refp) if p > 0 else -math.inf)
                 bands.append(Band((lo * df, (hi - 1) * df),
                                   db(yy[o].mean()) if o.size else math.nan,
                                   db(yy[ev].mean()) if ev.size else math.nan,
@@ -524,15 +553,14 @@ def periodic_change(xp: np.ndarray) -> float:
 
 def plot_distortion(res: PeriodicFRF, path=None):
     """The usual figure: output spectrum at excited lines, noise level, odd and even
-    detection lines, in dB (one axis per output); returns the matplotlib figure."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    detection lines, in dB (one axis per output); returns the matplotlib
+    :class:`~matplotlib.figure.Figure` (no pyplot, no backend switch)."""
+    from matplotlib.figure import Figure
 
     sp = res.spectra
     if not sp:  # LPM or several realisations: the FRF with its standard deviations
-        fig, axes = plt.subplots(len(res.outputs), 1, figsize=(8, 3.2 * len(res.outputs)),
-                                 squeeze=False)
+        fig = Figure(figsize=(8, 3.2 * len(res.outputs)))
+        axes = fig.subplots(len(res.outputs), 1, squeeze=False)
         db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
         for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
             ax.plot(res.frequency_hz, db(res.response[j]), "k+", label="FRF")
@@ -547,8 +575,8 @@ def plot_distortion(res: PeriodicFRF, path=None):
     ks = np.arange(1, min(2 * kmax, len(sp["lines"]) - 1) + 1)
     other = np.setdiff1d(ks, exc)
     odd = bool(np.all(exc % 2 == 1))
-    fig, axes = plt.subplots(len(res.outputs), 1, figsize=(8, 3.2 * len(res.outputs)),
-                             squeeze=False)
+    fig = Figure(figsize=(8, 3.2 * len(res.outputs)))
+    axes = fig.subplots(len(res.outputs), 1, squeeze=False)
     for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
         y = sp["mean"][1 + j]
         n = np.sqrt(sp["var"][1 + j] / sp["M"])
@@ -574,12 +602,23 @@ def _style(ax, name: str) -> None:
 
 def _finish(fig, axes, path):
     """Label, lay out and (with ``path``) write the figure through the one writer."""
-    import matplotlib.pyplot as plt
-
     axes[-1, 0].set_xlabel("frequency (Hz)")
     fig.tight_layout()
     if path is not None:
         from flexarm.io.write import save_figure
         save_figure(fig, path, overwrite=True, dpi=120)
-        plt.close(fig)
     return fig
+
+
+def plot_bode(res: PeriodicFRF, path=None, model=None):
+    """The Bode figure of the FRF (:func:`.bode.bode_figure`): magnitude (dB) and phase (deg)
+    of G at the excited lines with the ±2σ band (the BLA's total std where there are
+    detection lines or several realisations, else the noise std), and ``model`` (ω in
+    rad/s → {output: Ĝ(jω)}) when given. Written to ``path`` when given."""
+    from flexarm.identification.frequency_domain.bode import bode_figure
+
+    sd = res.total_std if res.total_std is not None else res.noise_std
+    data = {n: res.response[j] for j, n in enumerate(res.outputs)}
+    return bode_figure(res.frequency_hz, data, {n: sd[j] for j, n in enumerate(res.outputs)},
+                       model, title=f"FRF from {res.input} (±2σ: "
+                       f"{'total' if res.total_std is not None else 'noise'} std)", path=path)

@@ -40,8 +40,8 @@ Structures (``STRUCTURES``):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -102,7 +102,7 @@ def _rigid_and_modes(omega, G, gain=1.0, damping=0.0):
     s = 1j * omega
     low = slice(0, max(3, len(omega) // 20))
     Y = gain / (s * G)
-    J = float(np.median((Y[low].imag / omega[low])))
+    J = float(np.median(Y[low].imag / omega[low]))
     if not np.isfinite(J) or J <= 0:
         J = float(np.median(gain / (np.abs(G[low]) * omega[low] ** 2)))
     n = np.abs(G) * np.abs(J * s**2 + damping * s) / gain

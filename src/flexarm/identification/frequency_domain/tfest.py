@@ -49,6 +49,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
+from flexarm.display import Table
+
 
 class TFEstError(FlexarmError, ValueError):
     """Bad data or orders for a frequency-domain fit; the message names the field."""
@@ -91,10 +93,54 @@ class TFEstimate:
         return cost_verdict(self.cost, self.n_frequencies, self.n_parameters, self.expected_cost,
                             self.unstable_poles)
 
+    def _table(self) -> Table:
+        """One row per parameter: value, std (and the inflated std of a rejected fit)."""
+        nz, npo = len(self.tf.num[0][0]) - 1, len(self.tf.den[0][0]) - 1
+        title = (f"TFEstimate: {npo} poles, {nz} zeros"
+                 + (f", delay {self.delay:.4g} s" if self.delay else "")
+                 + f", {self.n_frequencies} frequencies")
+        inflated = any("std_inflated" in v for v in self.parameters.values())
+        rows = [(n, v.get("value"), v.get("std"), *((v.get("std_inflated"),) if inflated else ()))
+                for n, v in self.parameters.items()]
+        header = ("parameter", "value", "std") + (("std inflated",) if inflated else ())
+        cost = (f"cost {self.cost:.4g}" + (f", expected {self.expected_cost:.4g} ± "
+                                           f"{self.cost_std:.3g}" if self.expected_cost else ""))
+        return Table(title, rows, header=header, notes=[cost, self.verdict])
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
+
     def response(self, omega) -> np.ndarray:
         s = 1j * np.asarray(omega, float)
         num, den = self.tf.num[0][0], self.tf.den[0][0]
         return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * self.delay)
+
+
+def plot_fit(fit, frequency_hz, data, std=None, *, path=None):
+    """The Bode figure of a frequency-domain fit (:func:`.bode.bode_figure`): the data
+    (``data``: output name → complex G at ``frequency_hz``, Hz; or one array for a single
+    output named ``"G"``) with its ±2σ band (``std``, same layout) and the fit, magnitude (dB)
+    and phase (deg), and |fit − data|. ``fit`` is a :class:`TFEstimate` or a structure fit
+    (:func:`.structures.fit_structure`), whose ``response(ω)`` gives one array or a dict by
+    output. Written to ``path`` when given (the CLI's ``tfest.png``)."""
+    from flexarm.identification.frequency_domain.bode import bode_figure
+
+    if not isinstance(data, dict):
+        data = {"G": data}
+        std = None if std is None else {"G": std}
+    names = list(data)
+
+    def model(w):
+        r = fit.response(w)
+        return {k: v for k, v in r.items() if k in names} if isinstance(r, dict) else {
+            names[0]: r}
+
+    title = f"fit: cost {fit.cost:.4g}" + (f", expected {fit.expected_cost:.4g}"
+                                           if fit.expected_cost else "")
+    return bode_figure(frequency_hz, data, std, model, title=title, path=path)
 
 
 def cost_rejected(cost, F, n_par, expected) -> bool:
@@ -290,7 +336,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     # delay parameter in units of 1/ω_s (scaled like the coefficients)
     x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
     unstable: list[complex] = []
-    for attempt in range(3):
+    for _attempt in range(3):
         sol = least_squares(resid, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
                             xtol=1e-15, ftol=1e-15, gtol=1e-15)
         x = sol.x
