@@ -99,76 +99,20 @@ __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "exp
 
 
 # ----------------------------------------------------------------------------- paths
-_TOKEN = re.compile(r"\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+|\*)\]")
-
-
-def parse_path(path: str) -> list[str | int]:
-    """``"arm.joints[0].friction.coulomb"`` → ``["arm", "joints", 0, "friction", "coulomb"]``
-    (``[*]`` stays ``"*"``)."""
-    keys: list[str | int] = []
-    pos = 0
-    for m in _TOKEN.finditer(path):
-        if m.start() != pos:
-            break
-        keys.append(m.group(1) if m.group(1) else (m.group(2) if m.group(2) == "*"
-                                                   else int(m.group(2))))
-        pos = m.end()
-    if pos != len(path) or not keys:
-        raise ValueError(f"free parameter {path!r}: not a path into the scenario; write it as "
-                         "dotted names with [index] for lists, e.g. "
-                         "'arm.joints[0].friction.coulomb' or 'sensors.theta_1.gain'")
-    return keys
+# the path language lives in flexarm.specs.paths; these names stay importable from here
+# (the CLI imports them) until the CLI is re-pointed
+from flexarm.specs.paths import expand_paths, get as _path_get, parse_path, scenario_with  # noqa: E402,F401
 
 
 def _get(d: Any, keys: Sequence, path: str) -> Any:
-    for i, k in enumerate(keys):
-        try:
-            d = d[k]
-        except (KeyError, IndexError, TypeError):
-            here = ".".join(str(x) for x in keys[:i]) or "the scenario"
-            have = (", ".join(map(str, d)) if isinstance(d, dict)
-                    else f"{len(d)} entries" if isinstance(d, list) else type(d).__name__)
-            raise ValueError(f"free parameter {path!r}: {here} has no {k!r} (it has {have})"
-                             ) from None
-    return d
-
-
-def _set(d: Any, keys: Sequence, value: float) -> None:
-    for k in keys[:-1]:
-        d = d[k]
-    d[keys[-1]] = value
-
-
-def expand_paths(dump: dict, paths: Sequence[str]) -> list[str]:
-    """The paths with every ``[*]`` replaced by each index of that list."""
-    out: list[str] = []
-    for p in paths:
-        keys = parse_path(p)
-        if "*" not in keys:
-            out.append(p)
-            continue
-        i = keys.index("*")
-        lst = _get(dump, keys[:i], p)
-        if not isinstance(lst, list):
-            raise ValueError(f"free parameter {p!r}: [*] needs a list; found {type(lst).__name__}")
-        head = _fmt(keys[:i])
-        tail = _fmt(keys[i + 1:])
-        out += expand_paths(dump, [f"{head}[{j}]{'.' if tail and not tail.startswith('[') else ''}"
-                                   f"{tail}" for j in range(len(lst))])
-    return out
-
-
-def _fmt(keys: Sequence) -> str:
-    s = ""
-    for k in keys:
-        s += f"[{k}]" if isinstance(k, int) else (f".{k}" if s else k)
-    return s
+    """Deprecated: :func:`flexarm.specs.paths.get`."""
+    return _path_get(d, keys if keys is not None else path)
 
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
-    v = _get(dump, keys, path)
+    v = _path_get(dump, path)
     if v is None and keys[-1] == "static" and "friction" in keys:
-        v = _get(dump, keys[:-1], path).get("coulomb", 0.0)  # breakaway defaults to coulomb
+        v = _path_get(dump, keys[:-1]).get("coulomb", 0.0)  # breakaway defaults to coulomb
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"free parameter {path!r}: the scenario's value there is {v!r}, not "
                          "a number; give it a number in the scenario (the template value)")
@@ -177,28 +121,6 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
                          "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
                          "starting value in the scenario (e.g. the data-sheet value)")
     return float(v)
-
-
-def scenario_with(template, values: Mapping[str, float]):
-    """The scenario with the parameters at ``values`` (path → SI value). A friction's
-    breakaway ``static`` below its ``coulomb`` level is raised to it (Karnopp needs
-    F_s >= F_c)."""
-    from flexarm.specs.scenario import scenario_from_dict
-
-    d = copy.deepcopy(template.model_dump())
-    for path, v in values.items():
-        _set(d, parse_path(path), float(v))
-    _fix_friction(d)
-    return scenario_from_dict(d, source=f"scenario {template.name!r} with fitted values")
-
-
-def _fix_friction(d: dict) -> None:
-    joints = (d.get("arm") or {}).get("joints") or []
-    frs = [j.get("friction") for j in joints if isinstance(j, dict)]
-    fr1 = (d.get("arm") or {}).get("friction")
-    for fr in frs + [fr1]:
-        if isinstance(fr, dict) and fr.get("static") is not None:
-            fr["static"] = max(fr["static"], fr.get("coulomb", 0.0))
 
 
 # ----------------------------------------------------------------------------- options
@@ -368,7 +290,9 @@ def _drop_none(d):
 
 
 # ----------------------------------------------------------------------------- engine
-def _stack(loops: list):
+def stack_loops(loops: list):
+    """Prepared loops of one structure (e.g. one scenario with different numbers) stacked
+    leaf by leaf into one batched loop (leading axis: the loop), for one ``vmap``-ed run."""
     try:
         return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *loops)
     except ValueError as exc:
@@ -651,7 +575,7 @@ class _Engine:
 
     def loops(self, Z: np.ndarray):
         preps = [self.prepared(z) for z in Z]
-        loop = _stack([p.loop for p in preps])
+        loop = stack_loops([p.loop for p in preps])
         if not self.options.quantise:
             loop = eqx.tree_at(lambda lp: (lp.sensors.quantum, lp.actuator.quantum), loop,
                                replace=(jnp.zeros_like(loop.sensors.quantum),
@@ -914,7 +838,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     fitted = scenario_with(scenario, eng.values(z))
     fd = fitted.model_dump()
     # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
-    values = {p: float(_get(fd, parse_path(p), p)) for p in eng.values(z)}
+    values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
     std = {p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
            for i, p in enumerate(eng.free)}

@@ -36,7 +36,8 @@ from typing import Callable
 import numpy as np
 
 from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
-                                                        predict_scenario, scenario_with)
+                                                        predict_scenario)
+from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
 FIT_STEPS = ("5deg", "neg_10deg", "20deg", "neg_30deg")
