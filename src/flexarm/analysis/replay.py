@@ -62,14 +62,14 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
 
 
 def replay(scenario, log: Log, *, window: tuple[float, float] | None = None) -> Replay:
-    """Simulate ``scenario`` over ``log`` (or its ``window`` (t0, t1) in s on the log's clock)
+    """Simulate ``scenario`` over ``log`` (or its ``window`` [t0, t1) in s from the log's first sample)
     and compare every measured channel the log holds."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
     full, k0 = log, 0
     if window is not None:
         log = log.window(*window)
-        k0 = int(np.searchsorted(full.time, log.time[0]))
+        k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
         raise ValueError(f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "

@@ -4,10 +4,11 @@
 from flexarm.identification.time_domain.fit import fit, predict
 from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
                                                         predict_scenario)
-from flexarm.identification.time_domain.logs import BenchLog, FitInputError, parse_controller, read_bench_log
+from flexarm.identification.time_domain.logs import (BenchLog, FitInputError, load_rig_log,
+                                                     parse_controller, read_bench_log)
 from flexarm.identification.time_domain.report import FitResult
 from flexarm.identification.time_domain.validate import validate
 
 __all__ = ["BenchLog", "FitInputError", "FitOptions", "FitResult", "ScenarioFit", "fit",
-           "fit_scenario", "parse_controller", "predict", "predict_scenario", "read_bench_log",
+           "fit_scenario", "load_rig_log", "parse_controller", "predict", "predict_scenario", "read_bench_log",
            "validate"]
