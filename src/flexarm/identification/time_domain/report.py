@@ -302,8 +302,6 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "arm.friction.coulomb": "N*m, fitted Coulomb friction",
          "arm.friction.static": "N*m, fitted breakaway (static) friction",
          "arm.friction.bias": "N*m, fitted constant bias torque",
-         "arm.beam.flexural_rigidity": f"N*m^2, EI = C L / 3 with fitted stiffness "
-                                       f"C = {der['link_stiffness']:.5g} N*m/rad",
          "arm.beam.damping_ratio": "fitted link damping ratio",
          "arm.beam.length": "m, link length (data sheet)",
          "sampling.period": "s", "sampling.delay": "samples of computation delay",
@@ -311,7 +309,9 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
          "sensors.tip_deflection.delay": "samples, fitted",
          "simulation.duration": "s, length of the first log"}
-    if not rigid:
+    if not rigid:  # a rigid arm has no link stiffness (its --scenario-out raised KeyError)
+        c["arm.beam.flexural_rigidity"] = (f"N*m^2, EI = C L / 3 with fitted stiffness "
+                                           f"C = {der['link_stiffness']:.5g} N*m/rad")
         c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
                                      f"J_l = {p['link_inertia']:.5g} kg*m^2")
     return d, c
