@@ -228,65 +228,11 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
 
 
 # ----------------------------------------------------------------------------- result
-@dataclass
-class ScenarioFit:
-    """Result of :func:`fit_scenario`: fitted values (SI) by path with standard deviations
-    (Newey–West, priors included), the correlation matrix of the log-parameters, warnings
-    (bounds, inseparable pairs), fit % per log and channel of the whole-run prediction and
-    of the segments, the fitted scenario, and the optimiser's record."""
+from flexarm.identification.time_domain.result import (FitResult, drop_none as _drop_none,  # noqa: E402,F401
+                                                       finite as _finite)
 
-    free: list[str]
-    params: dict[str, float]
-    template: dict[str, float]
-    std: dict[str, float]
-    correlation: np.ndarray
-    warnings: list[str]
-    fit_percent: dict[str, dict[str, float]]
-    segment_fit_percent: dict[str, dict[str, float]]
-    scenario: Any
-    converged: bool
-    message: str
-    nfev: int
-    cost: float
-    seconds: float
-    stages: dict[str, Any] = field(default_factory=dict)
-    prediction: dict[str, Any] = field(default_factory=dict)
-
-    def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
-        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
-        from flexarm.io.write import write_toml
-
-        return write_toml(path, _drop_none(self.scenario.model_dump()), overwrite=overwrite)
-
-    def to_dict(self) -> dict:
-        """JSON-ready (non-finite numbers, e.g. the std of an undetermined parameter, as
-        null)."""
-        return _finite({"free": self.free, "params": self.params, "template": self.template,
-                        "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
-                        "warnings": self.warnings, "fit_percent": self.fit_percent,
-                        "segment_fit_percent": self.segment_fit_percent,
-                        "converged": self.converged, "message": self.message,
-                        "nfev": self.nfev, "cost": self.cost,
-                        "seconds": round(self.seconds, 2), "stages": self.stages})
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
-def _drop_none(d):
-    """A model_dump without the unset (None) fields, which TOML cannot hold."""
-    if isinstance(d, dict):
-        return {k: _drop_none(v) for k, v in d.items() if v is not None}
-    if isinstance(d, (list, tuple)):
-        return [_drop_none(v) for v in d]
-    return d
+#: Deprecated name of :class:`~flexarm.identification.time_domain.result.FitResult`.
+ScenarioFit = FitResult
 
 
 # ----------------------------------------------------------------------------- engine
@@ -380,7 +326,11 @@ class _Engine:
         wins = options.windows or [None] * len(logs)
         if len(wins) != len(logs):
             raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
-        self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
+        from flexarm.io.logs import log_keys
+
+        keys = log_keys(logs)  # unique per log: same file names in other folders stay apart
+        self.logs = [self._read(log, w, k if getattr(log, "path", None) is not None else None)
+                     for log, w, k in zip(logs, wins, keys)]
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
@@ -413,8 +363,9 @@ class _Engine:
         self._segments(seg)
 
     # ------------------------------------------------------------------ logs, segments
-    def _read(self, log, window) -> _LogData:
+    def _read(self, log, window, key: str | None = None) -> _LogData:
         name, t, sig = _log_arrays(log)
+        name = key or name
         if t.size < 3:
             raise ValueError(f"{name}: {t.size} samples; a log needs at least 3")
         dt = float(np.median(np.diff(t)))
@@ -426,8 +377,9 @@ class _Engine:
         k0, k1 = 0, t.size
         if window is not None:
             a, b = window
-            k0 = int(round(a / dt))
-            k1 = min(t.size, int(round(b / dt)) + 1)
+            # the one window rule (flexarm.io.logs.Log.window): [a, b) s from the first sample
+            k0 = max(0, int(math.ceil(a / dt - 1e-6)))
+            k1 = min(t.size, int(math.ceil(b / dt - 1e-6)))
             if not 0 <= k0 < k1 - 2:
                 raise ValueError(f"{name}: window ({a:g}, {b:g}) s is outside the log "
                                  f"(0 … {t[-1]:g} s)")
@@ -783,7 +735,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     from scipy.optimize import differential_evolution
 
     options = options or FitOptions()
-    fit_notes = _scenario_fit_notes(scenario)
+    fit_notes = scenario_fit_notes(scenario)
     free = list(free if free is not None else fit_notes.get("free", []))
     if not options.priors and fit_notes.get("priors"):
         options = copy.copy(options)
@@ -997,7 +949,7 @@ def friction_paths(scenario) -> list[str]:
     return out
 
 
-def _scenario_fit_notes(scenario) -> dict:
+def scenario_fit_notes(scenario) -> dict:
     """The scenario's ``[notes.fit]`` table: ``free = [paths]`` and ``priors = {path =
     rel_std}``, used when the call gives none."""
     notes = getattr(scenario, "notes", {}) or {}

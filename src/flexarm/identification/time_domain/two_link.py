@@ -103,17 +103,24 @@ def default_options(**kw) -> FitOptions:
 def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = True,
                  options: FitOptions | None = None,
                  progress: Callable[[str], None] | None = None) -> ScenarioFit:
-    """The fit of the split (module docstring); ``friction=False`` fits the rig without
-    joint friction (its friction parameters are then not free)."""
+    """The fit of the split (module docstring) through the one engine
+    (:func:`flexarm.identification.time_domain.engine.fit` on
+    :func:`~flexarm.identification.time_domain.presets.two_link`); ``friction=False`` fits
+    the rig without joint friction (its friction parameters are then not free);
+    ``options``: the engine's flat options replacing the preset's."""
+    from flexarm.identification.time_domain import engine, presets
+    from flexarm.identification.time_domain.options import FitOptions as Grouped
+
     logs = load_split(data, examples)
-    free = FREE if friction else [p for p in FREE if "friction" not in p]
-    opts = options or default_options()
-    if not friction:
-        opts.priors = {k: v for k, v in opts.priors.items() if "friction" not in k}
-        opts.bounds = {k: v for k, v in opts.bounds.items() if "friction" not in k}
-    opts.windows = [(0.0, 50.0)] + [None] * len(logs["fit_steps"])
-    return fit_scenario(template(friction), [logs["run"]] + logs["fit_steps"], free, opts,
-                        progress=progress, predict=False)
+    preset = presets.two_link(friction)
+    if options is not None:
+        if not friction:
+            options.priors = {k: v for k, v in options.priors.items() if "friction" not in k}
+            options.bounds = {k: v for k, v in options.bounds.items() if "friction" not in k}
+        preset.options = options
+    wins = [(0.0, 50.0)] + [None] * len(logs["fit_steps"])
+    return engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
+                      Grouped(windows=wins, predict=False), progress=progress)
 
 
 def held_out_report(scenario, data: str | Path, examples: str | Path, *,
