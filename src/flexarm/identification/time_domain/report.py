@@ -169,6 +169,29 @@ class FitResult:
                                 "Both ignore the jumps of stick-slip and structural bias",
         })
 
+    def document(self, *, without_friction: "FitResult | None" = None,
+                 window: tuple[float, float] | None = None, held_out: Any = None,
+                 held_window: tuple[float, float] | None = None) -> dict:
+        """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`
+        plus, when given, the fit without joint friction (``without_friction``: its fit %,
+        parameters, message), the fitted window (``window_s``, s from each log's first
+        sample) and the held-out prediction (``held_out``: a
+        :class:`~flexarm.identification.time_domain.predict.Prediction` or the rig's
+        ``predict`` dict, over ``held_window``)."""
+        d = self.to_dict()
+        if without_friction is not None:
+            d["without_friction"] = _jsonable({"fit_percent": without_friction.fit_percent,
+                                               "params": without_friction.params,
+                                               "message": without_friction.message})
+        if window is not None:
+            d["window_s"] = list(window)
+        if held_out is not None:
+            d["held_out"] = _jsonable({
+                "window_s": list(held_window) if held_window is not None else None,
+                "fit_percent": held_out["fit_percent"], "diverged": held_out["diverged"],
+                "initial_state": "estimated from each window's own data"})
+        return d
+
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
         write_json(path, self.to_dict(), overwrite=True)
