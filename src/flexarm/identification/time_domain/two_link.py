@@ -40,6 +40,9 @@ from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit,
 from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
+#: the run's part the split fits, [t0, t1) s from its first sample: the first 50 s with the
+#: sample at 50 s (25 001 samples at 2 ms, the samples the split was always fitted on)
+FIT_WINDOW = (0.0, 50.002)
 FIT_STEPS = ("5deg", "neg_10deg", "20deg", "neg_30deg")
 HELD_STEPS = ("neg_5deg", "10deg", "neg_20deg", "30deg", "0deg_run02")
 FREE = ["arm.joints[*].friction.coulomb", "arm.joints[*].friction.static",
@@ -118,7 +121,7 @@ def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = Tru
             options.priors = {k: v for k, v in options.priors.items() if "friction" not in k}
             options.bounds = {k: v for k, v in options.bounds.items() if "friction" not in k}
         preset.options = options
-    wins = [(0.0, 50.0)] + [None] * len(logs["fit_steps"])
+    wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
     return engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
                       Grouped(windows=wins, predict=False), progress=progress)
 
