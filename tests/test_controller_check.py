@@ -108,7 +108,7 @@ def test_check_needs_voltage_and_gains(synthetic_delay1):
     log = read_bench_log(synthetic_delay1)
     from dataclasses import replace
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'voltage'"):
-        check_controller(replace(log, columns={k: v for k, v in log.columns.items()
+        check_controller(replace(log, signals={k: v for k, v in log.columns.items()
                                                if k != "voltage"}))
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'controller': no declared law"):
         check_controller(replace(log, controller=None, gains=None))

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from flexarm.identification.time_domain import FitOptions, fit_scenario
-from flexarm.identification.time_domain.general import (expand_paths, parse_path,
-                                                        scenario_with)
+from flexarm.specs.paths import (expand_paths, parse_path,
+                                  scenario_with)
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.specs.scenario import load_scenario, scenario_from_dict
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.io.logformat import LogFormatError, load_log_format, log_format_from_dict
 from flexarm.io.logs import LogError, read_log
 
@@ -24,6 +24,7 @@ README_GAINS = {
     **{f"rigidarm_K1_{k}": (k, 0, 0, 0) for k in (6, 7, 8, 9)},
     **{f"rigidarm_k1k3_{k}": (k, 0, k3, 0) for k, k3 in
        ((6, 0.212), (7, 0.271), (8, 0.326), (9, 0.377))},
+    "flexarm_K1_6": (6, 0, 0, 0), "flexarm_K1K2_6_-5": (6, -5, 0, 0),  # the 4/27 session
 }
 needs_data = pytest.mark.skipif(not RIG_FILES, reason=f"real logs not found in {DATA} "
                                 "(the shared data folder beside the repository)")
@@ -65,7 +66,7 @@ def test_example_format_reads_a_rig_style_log_exactly(tmp_path):
     rows = _rig_rows()
     p = _write_rig(tmp_path / "rig", rows)
     before = _sha(p)
-    log = read_bench_log(p, log_format=EXAMPLE)
+    log = load_rig_log(p, EXAMPLE)
     assert _sha(p) == before
     r = np.round(rows, 3)
     np.testing.assert_allclose(log.time, r[:, 0] * 1e-3, rtol=0, atol=1e-12)  # ms -> s, offset kept
@@ -78,8 +79,7 @@ def test_example_format_reads_a_rig_style_log_exactly(tmp_path):
 
 
 def test_gains_changing_inside_a_log_are_kept_per_sample(tmp_path):
-    log = read_bench_log(_write_rig(tmp_path / "switch", _rig_rows(switch=120)),
-                         log_format=EXAMPLE)
+    log = load_rig_log(_write_rig(tmp_path / "switch", _rig_rows(switch=120)), EXAMPLE)
     assert log.gain_segments == [(0, 120), (120, 200)]
     assert log.controller.k1 == 8 and log.gains[119, 0] == 8 and log.gains[120, 0] == 9
     w = log.window(0.1, 0.2)  # samples 100..199, relative time
@@ -89,12 +89,12 @@ def test_gains_changing_inside_a_log_are_kept_per_sample(tmp_path):
 
 
 def test_window_outside_or_too_short_names_log_window_and_span(tmp_path):
-    log = read_bench_log(_write_rig(tmp_path / "w"), log_format=EXAMPLE)
-    with pytest.raises(FitInputError, match=r"w: window \[5, 6\) s lies outside the log; "
+    log = load_rig_log(_write_rig(tmp_path / "w"), EXAMPLE)
+    with pytest.raises(LogError, match=r"w: window \[5, 6\) s lies outside the log; "
                                             r"the log spans \[0, 0\.2\) s"):
         log.window(5, 6)
-    with pytest.raises(FitInputError, match=r"holds only 10 sample\(s\), fewer than 64"):
-        log.window(0.0, 0.01)
+    with pytest.raises(LogError, match=r"holds only 10 sample\(s\), fewer than 64"):
+        log.window(0.0, 0.01, min_samples=64)
 
 
 def test_fixed_gains_and_sign_flip_in_the_format(tmp_path):
@@ -104,7 +104,7 @@ def test_fixed_gains_and_sign_flip_in_the_format(tmp_path):
                          "gains": {"K1": "8 V/rad", "K2": 8.5, "K3": 1.5, "K4": 1.5}}
     fmt["columns"]["tip_deflection"] = -3
     fmt["columns"]["motor_angle"] = "-Hubangle(Theta in rad)"
-    log = read_bench_log(p, log_format=log_format_from_dict(fmt, "f.toml"))
+    log = load_rig_log(p, log_format_from_dict(fmt, "f.toml"))
     r = np.round(_rig_rows(), 3)
     np.testing.assert_array_equal(log.columns["tip_deflection"], -r[:, 2])
     np.testing.assert_array_equal(log.columns["motor_angle"], -r[:, 1])
@@ -116,13 +116,13 @@ def test_fixed_gains_and_sign_flip_in_the_format(tmp_path):
 @pytest.mark.parametrize("path", RIG_FILES, ids=lambda p: p.name)
 def test_every_rig_log_loads_unedited_with_the_example_format(path):
     before = _sha(path)
-    log = read_bench_log(path, log_format=EXAMPLE)
+    log = load_rig_log(path, EXAMPLE)
     assert _sha(path) == before
     assert len(log) == 10_000  # README: 10 000 rows at 1 kHz
     assert log.dt == pytest.approx(1e-3, rel=1e-9)
     np.testing.assert_allclose(log.gains[0], README_GAINS[path.name], rtol=0, atol=1e-12)
     assert "motor_angle" in log.outputs
-    assert ("tip_deflection" in log.outputs) == ("Flex" in path.name)
+    assert ("tip_deflection" in log.outputs) == ("flex" in path.name.lower())
 
 
 @pytest.mark.parametrize("sep, nl", [(",", "\n"), (";", "\r\n"), ("\t", "\r\n"), (" ", "\n"),
@@ -133,7 +133,7 @@ def test_delimiter_and_line_ends_are_sniffed(tmp_path, sep, nl):
     lines += [sep.join(f"{v:.6g}" for v in (ti, 0.1, 0.05 * ti)) for ti in t]
     p = tmp_path / "d.txt"
     p.write_bytes((nl.join(lines) + nl).encode())
-    log = read_bench_log(p, min_samples=16)
+    log = load_rig_log(p, min_samples=16)
     np.testing.assert_allclose(log.columns["motor_angle"], 0.05 * t, rtol=1e-6)
     assert log.controller.k1 == 3
 
@@ -154,7 +154,7 @@ def test_headerless_log_read_by_column_numbers(tmp_path):
 def test_cut_mid_line_names_file_line_and_column(tmp_path):
     p = _write_rig(tmp_path / "cut", edit=lambda ls: ls.__setitem__(-1, ls[-1][:20]))
     with pytest.raises(FitInputError) as e:
-        read_bench_log(p, log_format=EXAMPLE)
+        load_rig_log(p, EXAMPLE)
     msg = str(e.value)
     assert f"{p}: data row 200 (line 201) has 3 field(s); most rows have 13" in msg
     assert "column 'tip_deflection' (file column 3" not in msg  # the 3rd field is there
@@ -172,7 +172,7 @@ def test_text_in_a_number_column_names_file_line_and_column(tmp_path):
     with pytest.raises(FitInputError, match=r"text: column 'voltage' \(file column 7, 'Output "
                                             r"Voltage \(V\)'\), data row 51 \(line 52\): '1\.2V' "
                                             r"is not a number"):
-        read_bench_log(p, log_format=EXAMPLE)
+        load_rig_log(p, EXAMPLE)
 
 
 def test_duplicated_time_stamp_names_file_line_and_column(tmp_path):
@@ -182,7 +182,7 @@ def test_duplicated_time_stamp_names_file_line_and_column(tmp_path):
     with pytest.raises(FitInputError, match=r"dup: time repeats at data row 81 \(line 82, column "
                                             r"'time' \(file column 1, 'Time \(s\)'\)\): "
                                             r"t = 718\.657 s after t = 718\.657 s \(line 81\)"):
-        read_bench_log(p, log_format=EXAMPLE)
+        load_rig_log(p, EXAMPLE)
 
 
 def test_gains_that_cannot_be_found(tmp_path):
@@ -191,7 +191,7 @@ def test_gains_that_cannot_be_found(tmp_path):
     fmt["controller"] = {"kind": "state_feedback"}
     with pytest.raises(FitInputError, match=r"nogains: the gains of the state_feedback law "
                                             r"cannot be found: log format g\.toml \[controller\]"):
-        read_bench_log(p, log_format=log_format_from_dict(fmt, "g.toml"))
+        load_rig_log(p, log_format_from_dict(fmt, "g.toml"))
     fmt["controller"] = {"kind": "state_feedback", "gain_columns": {"K1": 8, "K2": 9, "K3": 10}}
     with pytest.raises(LogFormatError, match=r"h\.toml: 1 problem.*\n  controller: gain\(s\) K4 "
                                              r"of 'state_feedback' not found"):
@@ -202,7 +202,7 @@ def test_gains_that_cannot_be_found(tmp_path):
                                             r"'K1 \(Hub P\)': no such column in the file; the "
                                             r"file has 13 field\(s\) per data row; header \(line "
                                             r"1\): Time \(s\) \| Hubangle"):
-        read_bench_log(p, log_format=log_format_from_dict(fmt, "i.toml"))
+        load_rig_log(p, log_format_from_dict(fmt, "i.toml"))
 
 
 def test_format_naming_a_column_that_is_not_there(tmp_path):
@@ -212,10 +212,10 @@ def test_format_naming_a_column_that_is_not_there(tmp_path):
     with pytest.raises(FitInputError, match=r"cols: log format j\.toml: column 'voltage' = 14: "
                                             r"no column 14; the file has 13 field\(s\) per data "
                                             r"row; header \(line 1\): Time"):
-        read_bench_log(p, log_format=log_format_from_dict(fmt, "j.toml"))
+        load_rig_log(p, log_format_from_dict(fmt, "j.toml"))
     fmt["columns"]["voltage"] = "Voltage"
     with pytest.raises(FitInputError, match=r"column 'voltage' = 'Voltage': no such column"):
-        read_bench_log(p, log_format=log_format_from_dict(fmt, "j.toml"))
+        load_rig_log(p, log_format_from_dict(fmt, "j.toml"))
 
 
 def test_unit_that_does_not_fit_names_field_and_unit(tmp_path):

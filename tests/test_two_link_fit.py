@@ -20,14 +20,19 @@ pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(not (DATA / "lqr_full_10deg.mat").exists(),
                                  reason=f"two-link rig data not found at {DATA}")]
 
-#: issue #17's targets on the last 52 s (shoulder, shoulder link, elbow, elbow link), fit %
-TARGETS = {"theta_1": 95.0, "alpha_f_1": 75.0, "theta_2": 93.0, "alpha_f_2": 65.0}
+#: the last 52 s (shoulder, shoulder link, elbow, elbow link), fit %: issue #23 keeps the
+#: split as it was (98.9 / 80.2 / 97.1 / 78.4 measured before the one engine), so the
+#: floors are those figures rounded down (#17's own targets were 95 / 75 / 93 / 65)
+TARGETS = {"theta_1": 98.0, "alpha_f_1": 80.0, "theta_2": 97.0, "alpha_f_2": 78.0}
 
 
 @pytest.fixture(scope="module")
 def fitted():
     res = fit_two_link(DATA, EXAMPLES)
-    return res, held_out_report(res.scenario, DATA, EXAMPLES)
+    rep = held_out_report(res.scenario, DATA, EXAMPLES)
+    print(f"\ntwo-link split ({res.free_source}, {res.seconds:.0f} s): last 52 s "
+          f"{rep['last_52s']}, steps' medians {rep['steps_median']}")
+    return res, rep
 
 
 def test_held_out_last_52_s_reaches_the_targets(fitted):

@@ -74,7 +74,8 @@ def test_workspace_layout_loads_with_the_shipped_format(run_log, raw):
 def test_scope_captures_are_a_second_log_of_the_same_samples(run_log):
     scope = load_log_format(SCOPE).read(RUN)
     assert len(scope) == 10000  # README: the last 20 s at 2 ms
-    w = run_log.window(scope.time[0], scope.time[-1])
+    w = run_log.window(scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
+                       scope.time[-1] - run_log.time[0] + run_log.dt)
     np.testing.assert_array_equal(w.time, scope.time)
     # the scope's degrees are the workspace's radians (converted by [units]); the file
     # holds rad·180/π rounded to double: agreement to 1e-12 relative of the range
@@ -146,9 +147,9 @@ def test_mat_log_format_synthetic(tmp_path):
     log = fmt.read(p)
     np.testing.assert_array_equal(log["alpha_f_1"], -2 * th)
     np.testing.assert_allclose(log["theta_2"], th, rtol=1e-14, atol=1e-17)  # deg → rad
-    w = log.window(0.01, 0.02)
-    np.testing.assert_allclose(w.time, t[5:11], rtol=0, atol=1e-15)  # both ends included
-    with pytest.raises(LogError, match="holds 0 sample"):
+    w = log.window(0.01, 0.022)  # [t0, t1) s from the first sample
+    np.testing.assert_allclose(w.time, t[5:11], rtol=0, atol=1e-15)
+    with pytest.raises(LogError, match="lies outside the log"):
         log.window(5.0, 6.0)
     # a struct without signals.values: the error names the file, the channel and the struct
     bad = log_format_from_dict({"columns": {"time": "X.time", "theta_1": "S"}}, "g.toml")
@@ -539,7 +540,8 @@ def test_lab_law_reproduces_the_logged_current(run_log, rig):
     import jax
 
     scope = load_log_format(SCOPE).read(RUN)
-    w = run_log.window(scope.time[0], scope.time[-1])
+    w = run_log.window(scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
+                       scope.time[-1] - run_log.time[0] + run_log.dt)
     ctrl = rig.loop.controller
     meas = {k: w[k] for k in ctrl.inputs}
     refs = {k: w[k] for k in ctrl.reference_signals}

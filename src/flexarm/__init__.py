@@ -13,9 +13,16 @@ The public face (everything else lives in the sub-packages, named after what the
 * control: :func:`wiener_feedforward` (FRB eq. 11), :func:`parabolic`,
   :func:`quasi_parabolic`, :func:`lqg` (discrete observer-based design), :func:`design`
   (a controller for a scenario's rig: ``lqr``, ``place``; a :class:`flexarm.design.Design`)
-* identification: :func:`fit` and :func:`validate` (time domain: any scenario with a
-  ``free`` list, or the servo-rig data-sheet pipeline), :func:`identify` (FRB Sec. II),
-  :func:`periodic_frf`, :func:`tfest` (frequency domain)
+* identification: :func:`fit` (time domain, the one front door: a scenario or a rig preset,
+  logs, an optional ``free`` list (default: the preset's), grouped options; returns the one
+  :class:`~flexarm.identification.time_domain.result.FitResult`), :func:`validate` (=
+  :func:`predict`: fit % per log and signal, a
+  :class:`~flexarm.identification.time_domain.predict.Prediction`), :func:`identify` (FRB
+  Sec. II), :func:`periodic_frf`, :func:`tfest` (frequency domain)
+
+The data path, one way: a lab file → :func:`load_log` (one :class:`~flexarm.io.logs.Log`,
+with the controller the lab ran) → :func:`fit` → ``FitResult`` (``to_dict()`` is the JSON)
+→ :func:`validate` / :func:`predict` → design.
 """
 
 import jax as _jax
@@ -26,7 +33,7 @@ from flexarm.control.lqg import lqg  # noqa: E402
 from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
 from flexarm.control.wiener import wiener_feedforward  # noqa: E402
 import flexarm.design as design  # noqa: E402  (callable: the front door)
-from flexarm.identification import fit, validate  # noqa: E402
+from flexarm.identification import fit, predict, validate  # noqa: E402
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
 from flexarm.identification.frequency_domain.periodic import periodic_frf  # noqa: E402
 from flexarm.identification.frequency_domain.tfest import tfest  # noqa: E402
@@ -45,6 +52,6 @@ __version__ = "0.1.0"
 __all__ = [
     "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",
     "builtin_scenarios", "design", "fit", "identify", "linearize", "load_scenario", "lqg",
-    "parabolic", "periodic_frf", "prepare", "quasi_parabolic", "load_log", "simulate", "simulate_batch",
+    "parabolic", "periodic_frf", "predict", "prepare", "quasi_parabolic", "load_log", "simulate", "simulate_batch",
     "tfest", "validate", "wiener_feedforward",
 ]

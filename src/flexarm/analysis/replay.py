@@ -70,9 +70,9 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
 
 def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
            start: PieceStart | None = None) -> Replay:
-    """Simulate ``scenario`` over ``log`` (or its ``window`` (t0, t1) in s on the log's clock)
-    and compare every measured channel the log holds. ``start``: the controllers' and
-    filters' states at the log's first sample (:func:`replay_run`)."""
+    """Simulate ``scenario`` over ``log`` (or its ``window`` [t0, t1) in s from the log's
+    first sample) and compare every measured channel the log holds. ``start``: the
+    controllers' and filters' states at the log's first sample (:func:`replay_run`)."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
     extra, notes = computed_channels(scenario.sensors, log, scenario.sampling.period)
@@ -83,7 +83,7 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
     full, k0 = log, 0
     if window is not None:
         log = log.window(*window)
-        k0 = int(np.searchsorted(full.time, log.time[0]))
+        k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
         raise ValueError(f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "

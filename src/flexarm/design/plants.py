@@ -31,11 +31,11 @@ Two sources:
 
   (so it keeps its sign: a physical magnitude never crosses zero); a zero mean is drawn
   normal. Each draw is set into the scenario by the general fit's
-  :func:`~flexarm.identification.time_domain.general.scenario_with` and validated.
+  :func:`~flexarm.specs.paths.scenario_with` and validated.
 
 A :class:`PlantBatch` holds the nominal scenario and the N drawn ones; :meth:`PlantBatch.loop`
 prepares them (:func:`flexarm.sim.build.prepare`) and stacks their loops leaf by leaf (the
-general fit's :func:`~flexarm.identification.time_domain.general._stack`) into one
+general fit's :func:`~flexarm.identification.time_domain.general.stack_loops`) into one
 :class:`BatchLoop` that :func:`flexarm.sim.sampled.simulate_batch` runs in one call, the
 nominal plant first (rollout 0) and the N draws after it.
 """
@@ -180,7 +180,7 @@ class PlantBatch:
         """Prepare every plant (the nominal first) with ``controller`` (a
         :class:`~flexarm.control.discrete.Controller`; default the nominal scenario's
         ``[controller]``) and stack the loops."""
-        from flexarm.identification.time_domain.general import _stack
+        from flexarm.identification.time_domain.general import stack_loops
         from flexarm.sim.build import prepare
 
         scns = ([self.nominal] if include_nominal else []) + list(self.scenarios)
@@ -192,7 +192,7 @@ class PlantBatch:
             raise ValueError("the plants' initial states differ (an initial tip deflection "
                              "maps onto each plant's own beam); start them at rest "
                              "(initial.tip_deflection = 0) to run them as one batch")
-        return BatchLoop(_stack([p.loop for p in preps]), x0s[0], p0.references, p0.time,
+        return BatchLoop(stack_loops([p.loop for p in preps]), x0s[0], p0.references, p0.time,
                          p0, len(preps))
 
 
@@ -294,7 +294,7 @@ def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200
                seed: int = 0) -> PlantBatch:
     """N plants from ``scenario`` with the parameters at ``spread`` (path → (mean, std) in
     SI) drawn independently, eq. (2) of the module doc."""
-    from flexarm.identification.time_domain.general import scenario_with
+    from flexarm.specs.paths import scenario_with
 
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")

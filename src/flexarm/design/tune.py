@@ -57,6 +57,7 @@ from flexarm.design.compare import (batch_metrics, build_controller, encoder_cou
                                     experiment)
 from flexarm.design.plants import PlantBatch
 from flexarm.design.result import Design
+from flexarm.specs import paths as scenario_paths
 
 __all__ = ["design_tune", "TuneCost", "DEFAULT_WEIGHTS"]
 
@@ -68,18 +69,11 @@ DIVERGED_COST = 1000.0
 
 
 def _get(d: dict, path: str):
-    from flexarm.identification.time_domain.general import _get as get, parse_path
-
-    try:
-        return get(d, parse_path(path), path)
-    except ValueError as err:  # the general fit's message, in this function's words
-        raise ValueError(str(err).replace("free parameter", "tuned parameter", 1)) from None
+    return scenario_paths.get(d, path, "tuned parameter")
 
 
 def _set(d: dict, path: str, v: float) -> None:
-    from flexarm.identification.time_domain.general import _set as set_, parse_path
-
-    set_(d, parse_path(path), float(v))
+    scenario_paths.set(d, path, float(v), "tuned parameter")
 
 
 def _default_params(ctrl: dict) -> list[str]:

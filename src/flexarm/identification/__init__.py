@@ -9,54 +9,42 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from flexarm.specs.scenario import names_a_scenario
 
-
-def _scenario(x: Any):
-    from flexarm.specs import load_scenario
-
-    return x if not isinstance(x, (str, Path)) else load_scenario(x)
+__all__ = ["fit", "validate", "predict"]
 
 
-def fit(model: Any, logs: Sequence[Any] | None = None, free: Sequence[str] | None = None,
-        options: Any = None, **kw):
-    """Fit a model to closed-loop logs in the time domain (output error).
+def fit(scenario: Any, logs: Sequence[Any] | None = None, free: Sequence[str] | None = None,
+        options: Any = None, *, progress: Callable[[str], None] | None = None):
+    """The one time-domain fit: ``fit(scenario, logs, free=None, options=None)`` →
+    :class:`~flexarm.identification.time_domain.result.FitResult`
+    (:func:`flexarm.identification.time_domain.engine.fit`). ``scenario``: a scenario (a
+    :class:`flexarm.Scenario`, a TOML path or a built-in name) or a preset
+    (:mod:`flexarm.identification.time_domain.presets`: ``servo_rig(DataSheet(...))`` for
+    the rotary servo's logs, ``two_link()``); without ``free`` the preset's default free
+    list runs; ``options``: :class:`~flexarm.identification.time_domain.options.FitOptions`."""
+    from flexarm.identification.time_domain import engine
+    from flexarm.identification.time_domain.presets import Preset
 
-    * ``fit(scenario, logs, free=[...], options=FitOptions(...))``: any arm a scenario
-      describes (a :class:`flexarm.Scenario`, a TOML path or a built-in name) is the
-      template; the parameters named by ``free`` (paths into the scenario, e.g.
-      ``"arm.joints[0].friction.coulomb"``) are estimated
-      (:func:`flexarm.identification.time_domain.general.fit_scenario`, returns a
-      ``ScenarioFit``);
-    * ``fit(logs, drive=..., gear_ratio=..., ...)``: the data-sheet pipeline for voltage- or
-      current-driven single-link servo rigs with a strain gauge (cheap estimates first,
-      sensor delays searched; :func:`flexarm.identification.time_domain.fit.fit`)."""
-    from flexarm.identification.time_domain import fit as bench_fit
-    from flexarm.identification.time_domain import fit_scenario
-
-    if names_a_scenario(model):
-        if logs is None:
-            raise TypeError("fit(scenario, logs, free=..., options=...): give the logs")
-        return fit_scenario(_scenario(model), logs, free, options, **kw)
-    if logs is not None or free is not None or options is not None:
-        raise TypeError("fit(logs, drive=..., ...) takes the rig's data sheet as keywords; "
-                        "to fit a scenario's parameters call fit(scenario, logs, free=[...])")
-    return bench_fit(model, **kw)
+    if not (isinstance(scenario, Preset) or names_a_scenario(scenario)):
+        raise TypeError("fit(scenario, logs, free=None, options=None): the first argument is "
+                        "a scenario (flexarm.Scenario, TOML path or built-in name) or a preset "
+                        "(for servo-rig logs: presets.servo_rig(DataSheet(gear_ratio=..., "
+                        "motor_constant=..., ...))), then the logs")
+    if logs is None:
+        raise TypeError("fit(scenario, logs, free=None, options=None): give the logs")
+    return engine.fit(scenario, logs, free, options, progress=progress)
 
 
-def validate(model: Any, logs: Sequence[Any], **kw) -> dict:
-    """fit % of each log (or window) predicted by a model with its parameters fixed: a
-    multi-link scenario through
-    :func:`flexarm.identification.time_domain.general.predict_scenario`, a single-link rig
-    through :func:`flexarm.identification.time_domain.validate.validate` (its logs' own
-    references and controllers)."""
-    from flexarm.identification.time_domain import predict_scenario
-    from flexarm.identification.time_domain import validate as bench_validate
+def predict(model: Any, logs: Sequence[Any], options: Any = None):
+    """The one prediction (:func:`flexarm.identification.time_domain.predict.predict`): fit %
+    per log and signal of ``model`` (a scenario, a fit result) with its parameters fixed."""
+    from flexarm.identification.time_domain.predict import predict as _predict
 
-    sc = _scenario(model) if names_a_scenario(model) else model
-    if getattr(getattr(sc, "arm", None), "kind", None) == "multi_link":
-        return predict_scenario(sc, logs, **kw)
-    return bench_validate(model, logs, **kw)
+    return _predict(model, logs, options)
+
+
+#: ``flexarm.validate`` is the one prediction.
+validate = predict

@@ -1,8 +1,10 @@
 """Log-format files: how one logger writes its logs, written once per logger (TOML).
 
-A log-format file tells :func:`flexarm.io.logs.read_log` and
-:func:`flexarm.identification.time_domain.logs.read_bench_log` which column holds what, in which unit, and which
-control law produced the logged command::
+A log-format file tells :func:`load_log` (the one loader: text through
+:func:`flexarm.io.logs.read_log`, ``.mat`` through :func:`flexarm.io.matfile.read_mat`) which
+column holds what, in which unit, and which control law produced the logged command (the
+:class:`~flexarm.io.logs.Log` it returns carries that law: ``controller``, per-sample
+``gains``, ``voltage_limit``, ``rate``)::
 
     delimiter = "auto"          # or "tab", "comma", "semicolon", "whitespace", or the character
     comment = ["#", "%"]        # characters that start a comment line
@@ -71,19 +73,22 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
 
 from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
 
 import numpy as np
 
-from flexarm.io.logs import COMMENT_CHARS, Log, LogError, known_names, read_log, signal_unit
+from flexarm.io import matfile
+from flexarm.io.logs import (COMMENT_CHARS, STATE_FEEDBACK_GAINS, Log, LogError,
+                             known_names, read_log, signal_unit)
+from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Count, Q, Spec
 from flexarm.units import UnitError, to_si, ureg
 
 #: The gains of each law and their SI units.
 GAIN_UNITS: dict[str, dict[str, str]] = {
-    "state_feedback": {"K1": "V/rad", "K2": "V/m", "K3": "V*s/rad", "K4": "V*s/m"},
+    "state_feedback": dict(STATE_FEEDBACK_GAINS),
     "pd": {"KP": "V/rad", "KD": "V*s/rad"},
 }
 #: Names the ``delimiter`` field accepts for characters.
@@ -285,37 +290,46 @@ class LogFormat(Spec):
                                  f"mapped: {', '.join(self.columns) or 'none'}")
         return self
 
-    def read(self, path: str | Path, *, required: tuple[str, ...] = ("time",), **kw) -> Log:
+    def read(self, path: str | Path, *, required: tuple[str, ...] = ("time",),
+             controller: Any = None, columns: Mapping[str, str | int] | None = None,
+             units: Mapping[str, str] | None = None, **kw) -> Log:
         """Read one log with this format: a ``.mat`` file through
         :func:`flexarm.io.matfile.read_mat`, any other through
-        :func:`flexarm.io.logs.read_log` (``kw`` passes on to it, e.g. ``max_jitter``);
-        then the ``[checks]``. The result is a :class:`flexarm.io.logs.Log` in SI units."""
-        from flexarm.io import matfile
-
+        :func:`flexarm.io.logs.read_log` (``kw`` passes on to it, e.g. ``max_jitter``,
+        ``min_samples``, ``hint``); ``columns`` / ``units`` on top of the format's; then the
+        ``[checks]`` and the declared controller (:meth:`declared_controller`). The result
+        is a :class:`flexarm.io.logs.Log` in SI units."""
         path = Path(path)
         if any(isinstance(c, ColumnInFile) for c in self.columns.values()):
             return self._read_files(path, required, **kw)
         where = f"log format {self.source}"
+        cols = {**self.columns, **dict(columns or {})}
+        uts = {**self.units, **dict(units or {})}
+        fc = self.controller if controller is None else None
+        gain_cols = fc.columns() if fc is not None else {}
         if path.suffix.lower() == ".mat":
-            if not self.columns:
+            if not cols:
                 raise LogFormatError(f"{path}: a .mat recording needs a log format with a "
                                      "[columns] table (flexarm name = variable spec)")
-            missing = [c for c in required if c not in self.columns]
+            missing = [c for c in required if c not in cols]
             if missing:
                 raise LogFormatError(f"{path}: {where}: [columns] maps no "
                                      f"{', '.join(missing)}; map it to a variable (e.g. "
                                      f"time = \"logsout.time\")")
             variables = matfile.load_mat(path)
-            log = matfile.read_mat(path, self.columns, self.units, variables=variables,
+            log = matfile.read_mat(path, {**cols, **gain_cols}, uts, variables=variables,
                                    source=self.source)
             quanta = {k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
                       if isinstance(q, str) else float(q)
                       for k, q in self.checks.quantum.items()}
         else:
-            extra = {k: signal_unit(k) for k in [*self.columns, *self.units]}
-            log = read_log(path, self.columns or None, self.units or None, required=required,
-                           delimiter=self.delimiter_char, comment=self.comment,
-                           skip_rows=self.skip_rows, extra=extra, source=where, **kw)
+            extra = {k: signal_unit(k) for k in [*cols, *uts] if signal_unit(k) is not None}
+            extra.update(STATE_FEEDBACK_GAINS)
+            text = dict(delimiter=self.delimiter_char, comment=self.comment,
+                        skip_rows=self.skip_rows, source=where)
+            text.update(kw)
+            log = read_log(path, {**cols, **gain_cols} or None, uts or None,
+                           required=required, extra=extra, **text)
             quanta = {}
             for k, q in self.checks.quantum.items():
                 if isinstance(q, str):
@@ -323,6 +337,49 @@ class LogFormat(Spec):
                                          "text log has no variables; give the number")
                 quanta[k] = float(q)
         self._check(log, quanta)
+        return self.declared_controller(log, controller)
+
+    def declared_controller(self, log: Log, controller: Any = None) -> Log:
+        """The log with the law that produced its command: ``controller`` if given (a
+        declaration string, a dict or a spec), else the format's ``[controller]`` (fixed
+        gains or gain columns, moved out of the signals into :attr:`Log.gains`), else the
+        log's ``# controller:`` line, else none (a ``[controller]`` that names no gains and
+        a log without the line is an error)."""
+        fc = self.controller
+        sig = log.signals
+        n = len(log)
+        ctrl, gains = None, None
+        if controller is not None:
+            ctrl = controller_from_any(controller, f"{log.where}: controller option")
+        elif fc is not None and (fc.gains or fc.gain_columns):
+            fixed = fc.fixed_gains()
+            gcols = fc.columns()
+            gains = np.column_stack([sig.pop(k) if k in gcols else np.full(n, fixed.get(k, 0.0))
+                                     for k in STATE_FEEDBACK_GAINS])
+            try:
+                ctrl = StateFeedbackController(
+                    type="state_feedback", rate="filtered" if fc.tau > 0 else "backward",
+                    rate_time_constant=fc.tau,
+                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]))))
+            except Exception as exc:
+                raise LogFormatError(f"{log.where}: gains at the first sample: {exc}") from None
+        elif "controller" in log.meta:
+            ctrl = parse_controller(log.meta["controller"], f"{log.where}: '# controller:' line")
+        elif fc is not None:
+            raise LogFormatError(
+                f"{log.where}: the gains of the {fc.kind} law cannot be found: log format "
+                f"{self.source} [controller] gives neither gains nor gain_columns, and the log "
+                "has no '# controller:' line; add gain_columns = {K1 = .., ...} (the columns "
+                "holding the gains) or gains = {K1 = .., ...} to the format's [controller], "
+                "or pass controller= (--controller)")
+        log.controller, log.gains, log.rate = ctrl, None, None
+        log.voltage_limit = fc.limit if fc is not None else None
+        log.log_format = self
+        log.__post_init__()  # gains from the law when not logged, rate from the law
+        if gains is not None:
+            log.gains = gains
+        if fc is not None and controller is None:
+            log.rate = fc.rate
         return log
 
     def _read_files(self, path: Path, required: tuple[str, ...], **kw) -> Log:
@@ -400,14 +457,14 @@ class LogFormat(Spec):
         for k, q in quanta.items():
             x = log[k]
             if not q > 0 or not np.isfinite(q):
-                raise LogFormatError(f"{log.name}: [checks] quantum.{k} = {q!r}: not a "
+                raise LogFormatError(f"{log.where}: [checks] quantum.{k} = {q!r}: not a "
                                      "positive number")
             off = np.abs(x / q - np.round(x / q))
             j = int(np.argmax(off))
             if off[j] > GRID_TOLERANCE:
                 at = f" (t = {log.time[j]:.6g} s)" if log.time is not None else ""
                 raise LogFormatError(
-                    f"{log.name}: {k} = {self.columns[k]!r} is not an encoder reading: sample "
+                    f"{log.where}: {k} = {self.columns[k]!r} is not an encoder reading: sample "
                     f"{j}{at} = {x[j]:.9g} lies {off[j]:.3g} quanta off the grid k·{q:.6g} "
                     f"([checks] quantum.{k} in {self.source}); {int((off > GRID_TOLERANCE).sum())} "
                     f"of {len(x)} samples are off it. A measured angle lies on its encoder's "
@@ -419,7 +476,7 @@ class LogFormat(Spec):
             if np.any(x != 0):
                 j = int(np.argmax(x != 0))
                 raise LogFormatError(
-                    f"{log.name}: {k} = {self.columns[k]!r} must be all zeros ([checks] zero "
+                    f"{log.where}: {k} = {self.columns[k]!r} must be all zeros ([checks] zero "
                     f"in {self.source}); sample {j} is {x[j]:.6g} ({int((x != 0).sum())} "
                     "non-zero): the format maps another variable than the one meant")
 
@@ -465,9 +522,101 @@ def load_log_format(path: str | Path | LogFormat) -> LogFormat:
     return log_format_from_dict(data, source=str(path))
 
 
-def load_log(path: str | Path, log_format: str | Path | LogFormat | None = None, **kw):
+def load_log(path: str | Path, log_format: str | Path | LogFormat | None = None, *,
+             controller: Any = None, columns: Mapping[str, str | int] | None = None,
+             units: Mapping[str, str] | None = None, **kw) -> Log:
     """One log as its logger wrote it (text or ``.mat``), read through a log-format file
-    (``None``: a text log in flexarm's exchange format, SI units, named columns); returns a
-    :class:`flexarm.io.logs.Log` in SI units. ``kw`` passes on to :meth:`LogFormat.read`."""
+    (``None``: a text log in flexarm's exchange format, SI units, named columns); returns
+    the one :class:`flexarm.io.logs.Log` in SI units with the controller the lab ran
+    (:meth:`LogFormat.declared_controller`). ``columns`` / ``units`` apply on top of the
+    format's; ``kw`` passes on to :meth:`LogFormat.read` (``required``, ``max_jitter``,
+    ``min_samples``, ``hint``)."""
     fmt = load_log_format(log_format) if log_format is not None else LogFormat()
-    return fmt.read(path, **kw)
+    return fmt.read(path, controller=controller, columns=columns, units=units, **kw)
+
+
+def load_logs(paths, log_format: str | Path | LogFormat | None = None, **kw) -> list[Log]:
+    """:func:`load_log` for each path (logs already read pass through)."""
+    return [p if isinstance(p, Log) else load_log(p, log_format, **kw) for p in paths]
+
+
+def sample_rate(log: Log) -> float:
+    """The log's sampling rate (Hz): 1 / median step, rounded off the logger's float noise
+    to 9 digits."""
+    return float(f"{1 / log.dt:.9g}")
+
+
+def read_recording(path: str | Path, log_format=None) -> tuple[dict[str, np.ndarray], float]:
+    """Signals (flexarm name → SI samples) and the sampling rate (Hz) of a ``.mat`` or text
+    recording, mapped by a log-format file (:func:`load_log`, :func:`sample_rate`)."""
+    log = load_log(path, log_format)
+    return log.signals, sample_rate(log)
+
+
+# ----------------------------------------------------------------------------- controllers
+def parse_controller(text: str, source: str = "controller") -> StateFeedbackController:
+    """A ``# controller:`` line: ``state_feedback K1=6 K2=-3 K3=0.213 K4=0 [rate=filtered
+    tau=0.02]`` or ``pd KP=10 KD=0.3`` → the spec (a PD is the state feedback with K2 = K4 =
+    0: u = KP (r − θ) − KD θ̇)."""
+    words = text.replace(",", " ").split()
+    if not words:
+        raise LogError(f"{source}: empty controller declaration; write e.g. "
+                       "'state_feedback K1=6 K2=-3 K3=0.2 K4=0' or 'pd KP=10 KD=0.3'")
+    kind = words[0].lower()
+    vals: dict[str, Any] = {}
+    for w in words[1:]:
+        if "=" not in w:
+            raise LogError(f"{source}: {w!r} in the controller declaration is not NAME=VALUE")
+        k, _, v = w.partition("=")
+        vals[k.strip().lower()] = v.strip()
+    allowed = {"state_feedback": {"k1", "k2", "k3", "k4", "rate", "tau"},
+               "pd": {"kp", "kd", "rate", "tau"}}
+    if kind not in allowed:
+        raise LogError(f"{source}: controller type {kind!r} is not known; a log declares "
+                       "'state_feedback K1=.. K2=.. K3=.. K4=..' or 'pd KP=.. KD=..'")
+    unknown = set(vals) - allowed[kind]
+    if unknown:
+        raise LogError(f"{source}: unknown controller field(s) {sorted(unknown)} for "
+                       f"{kind}; allowed: {sorted(allowed[kind])}")
+    num = {}
+    for k, v in vals.items():
+        if k == "rate":
+            continue
+        try:
+            num[k] = float(v)
+        except ValueError:
+            raise LogError(f"{source}: controller field {k.upper()} = {v!r} is not a "
+                           "number") from None
+    rate = vals.get("rate", "filtered" if "tau" in num else "backward")
+    if kind == "pd":
+        if "kp" not in num:
+            raise LogError(f"{source}: pd controller without KP")
+        g = dict(k1=num["kp"], k2=0.0, k3=num.get("kd", 0.0), k4=0.0)
+    else:
+        if "k1" not in num:
+            raise LogError(f"{source}: state_feedback controller without K1")
+        g = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
+    try:
+        return StateFeedbackController(type="state_feedback", rate=rate,
+                                       rate_time_constant=num.get("tau", 0.0), **g)
+    except Exception as exc:
+        raise LogError(f"{source}: controller declaration: {exc}") from None
+
+
+def controller_from_any(c: Any, source: str) -> StateFeedbackController:
+    """A spec, a dict of spec fields, or a declaration string (:func:`parse_controller`)."""
+    if isinstance(c, StateFeedbackController):
+        return c
+    if isinstance(c, str):
+        return parse_controller(c, source)
+    if isinstance(c, Mapping):
+        d = {"type": "state_feedback", **c}
+        if d.get("type") == "pd":
+            d = {"type": "state_feedback", "k1": d.get("kp"), "k3": d.get("kd", 0.0),
+                 **{k: v for k, v in d.items() if k in ("rate", "rate_time_constant")}}
+        try:
+            return StateFeedbackController(**d)
+        except Exception as exc:
+            raise LogError(f"{source}: controller: {exc}") from None
+    raise LogError(f"{source}: controller {c!r}: give a declaration string, a dict or a "
+                   "StateFeedbackController")

@@ -43,8 +43,9 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -121,15 +122,31 @@ class LogExistsError(LogError, OutputExistsError):
     """:func:`write_log` refused to replace an existing file (pass ``overwrite=True``)."""
 
 
+#: The rig's outputs a servo-rig fit reads (hub encoder and strain gauge).
+RIG_OUTPUTS = ("motor_angle", "tip_deflection")
+#: The state-feedback gains in the order of :attr:`Log.gains`, with their SI units.
+STATE_FEEDBACK_GAINS: dict[str, str] = {"K1": "V/rad", "K2": "V/m", "K3": "V*s/rad",
+                                        "K4": "V*s/m"}
+
+
 @dataclass
 class Log:
-    """One experiment log, in SI units.
+    """One experiment log, in SI units: the one log type of flexarm (text and ``.mat``
+    logs, simulation output, every fit's and prediction's input).
 
     ``signals`` maps column name → array (all columns except ``time``), ``comments`` holds
     the comment lines (without the leading ``#``), ``meta`` the ``key: value`` comments.
     Read from a ``.mat`` file (:func:`flexarm.io.matfile.read_mat`), ``time`` is ``None``
     when the format maps none, ``skipped`` names the objects of the file that could not be
     decoded and ``notes`` what was dropped (e.g. an irregular last row).
+
+    The controller the lab ran, when the log or its format declares one
+    (:func:`flexarm.io.logformat.load_log`): ``controller`` the declared law (a
+    :class:`~flexarm.specs.controllers_bench.StateFeedbackController`, u = K1 (r − θ) − K2 d
+    − K3 θ̇ − K4 ḋ; with gains that change inside the log, the law at the first sample),
+    ``gains`` K1..K4 per sample (N, 4) in V/rad, V/m, V·s/rad, V·s/m (piecewise constant
+    when the log changes them), ``voltage_limit`` (V, the amplifier's saturation) and
+    ``rate`` (``"logged"``, ``"backward"``, ``"filtered"``: the rates the law used).
     """
 
     path: Path | None
@@ -139,6 +156,26 @@ class Log:
     meta: dict[str, str] = field(default_factory=dict)
     skipped: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    controller: Any = None
+    gains: np.ndarray | None = None
+    voltage_limit: float | None = None
+    rate: str | None = None
+    log_format: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.path is not None and not isinstance(self.path, Path):
+            self.path = Path(self.path)
+        n = len(self)
+        c = self.controller
+        if self.gains is None and c is not None and hasattr(c, "k4"):
+            self.gains = np.tile([c.k1, c.k2, c.k3, c.k4], (n, 1)).astype(float)
+        if self.gains is not None:
+            self.gains = np.asarray(self.gains, dtype=float)
+            if self.gains.shape != (n, 4):
+                raise LogError(f"{self.where}: gains have shape {self.gains.shape}; expected "
+                               f"({n}, 4): K1..K4 per sample")
+        if self.rate is None and c is not None:
+            self.rate = getattr(c, "rate", None)
 
     @property
     def dt(self) -> float:
@@ -147,7 +184,34 @@ class Log:
 
     @property
     def name(self) -> str:
+        """The file's name (``"<log>"`` for a log not read from a file); results key logs
+        by :func:`log_keys`, which keeps logs of one name in different folders apart."""
+        return self.path.name if self.path is not None else "<log>"
+
+    @property
+    def where(self) -> str:
+        """The file (its full path) for messages."""
         return str(self.path) if self.path is not None else "<log>"
+
+    @property
+    def columns(self) -> dict[str, np.ndarray]:
+        """The signals (``signals``; the name the servo-rig pipeline reads them by)."""
+        return self.signals
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The rig outputs (:data:`RIG_OUTPUTS`) present and usable (not constant)."""
+        return tuple(c for c in RIG_OUTPUTS if c in self.signals and np.ptp(self.signals[c]) > 0)
+
+    @property
+    def gain_segments(self) -> list[tuple[int, int]]:
+        """[start, stop) sample ranges over which the gains are constant (one range when
+        they never change; none when no law is known)."""
+        if self.gains is None:
+            return []
+        change = np.flatnonzero(np.any(np.diff(self.gains, axis=0) != 0, axis=1)) + 1
+        edges = [0, *change.tolist(), len(self)]
+        return list(zip(edges[:-1], edges[1:]))
 
     def __getitem__(self, column: str) -> np.ndarray:
         if column == "time":
@@ -155,7 +219,7 @@ class Log:
         try:
             return self.signals[column]
         except KeyError:
-            raise KeyError(f"{self.name}: no column {column!r}; columns: "
+            raise KeyError(f"{self.where}: no column {column!r}; columns: "
                            f"time, {', '.join(self.signals)}") from None
 
     def __len__(self) -> int:
@@ -163,25 +227,63 @@ class Log:
             return len(self.time)
         return len(next(iter(self.signals.values()))) if self.signals else 0
 
-    def window(self, t0: float, t1: float) -> "Log":
-        """The samples with t0 <= t <= t1 (s, on the log's own clock; a bound within 1e-6 of
-        a step of a sample time includes it), as a new :class:`Log` (arrays copied)."""
+    def window(self, t0: float, t1: float, *, min_samples: int = 2) -> "Log":
+        """The samples with t0 <= time − time[0] < t1 (s from the log's first sample; a
+        bound on the sample grid takes that sample whatever the time stamps' rounding: bounds
+        are compared to within 1e-6 sample) as a new :class:`Log` (arrays copied); the
+        declared ``controller`` is the law at the window's first sample."""
+        where = f"{self.where}: window [{t0:g}, {t1:g}) s"
         if self.time is None:
-            raise LogError(f"{self.name}: no time mapped; a window needs the log's time")
-        if not t1 >= t0:
-            raise LogError(f"{self.name}: window({t0:g}, {t1:g}): the end must not precede "
-                           "the start")
-        eps = 1e-6 * (self.dt if len(self.time) > 1 else 1.0)
-        keep = (self.time >= t0 - eps) & (self.time <= t1 + eps)
-        if keep.sum() < 2:
-            raise LogError(f"{self.name}: window({t0:g}, {t1:g}) s holds {int(keep.sum())} "
-                           f"sample(s); the log spans {self.time[0]:g} to {self.time[-1]:g} s")
-        return Log(self.path, self.time[keep].copy(),
-                   {k: v[keep].copy() for k, v in self.signals.items()},
-                   list(self.comments), dict(self.meta), list(self.skipped), list(self.notes))
+            raise LogError(f"{where}: no time mapped; a window needs the log's time")
+        if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+            raise LogError(f"{where}: give t0 < t1 (s from the log's first sample)")
+        rel = self.time - self.time[0]
+        dt = self.dt if len(self.time) > 1 else 1.0
+        eps = 1e-6 * dt  # time stamps like 718.708 s carry ~1e-13 s of rounding
+        keep = (rel >= t0 - eps) & (rel < t1 - eps)
+        k = int(keep.sum())
+        if k < min_samples:
+            what = ("lies outside the log" if k == 0 else f"holds only {k} sample(s), fewer "
+                    f"than {min_samples}")
+            raise LogError(f"{where} {what}; the log spans [0, {float(rel[-1]) + dt:g}) s "
+                           f"from its first sample ({len(self.time)} samples of {dt:g} s); "
+                           "choose a window inside it")
+        gains = self.gains[keep].copy() if self.gains is not None else None
+        ctrl = self.controller
+        if ctrl is not None and gains is not None and hasattr(ctrl, "model_copy"):
+            ctrl = ctrl.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
+                                                   map(float, gains[0]))))
+        return replace(self, time=self.time[keep].copy(),
+                       signals={c: x[keep].copy() for c, x in self.signals.items()},
+                       comments=list(self.comments), meta=dict(self.meta),
+                       skipped=list(self.skipped), notes=list(self.notes), controller=ctrl,
+                       gains=gains)
 
 
-def _unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,
+def log_keys(logs: Sequence[Log]) -> list[str]:
+    """One unique key per log for results (fit %, traces): each file's path relative to the
+    logs' common folder (``"a.csv"`` when all lie in one folder; ``"unit6/run.csv"`` and
+    ``"unit7/run.csv"`` when the names repeat in different folders); a log without a file,
+    or a repeated key, gets ``"#i"`` (its 0-based position) appended."""
+    import os
+
+    paths = [getattr(g, "path", None) for g in logs]
+    files = [Path(p).resolve() for p in paths if p is not None]
+    base = Path(os.path.commonpath([str(f.parent) for f in files])) if files else None
+    keys: list[str] = []
+    for i, (g, p) in enumerate(zip(logs, paths)):
+        if p is None:
+            k = getattr(g, "name", "<log>") or "<log>"
+        else:
+            k = Path(p).resolve().relative_to(base).as_posix()
+        keys.append(k)
+    out = []
+    for i, k in enumerate(keys):
+        out.append(f"{k}#{i}" if keys.count(k) > 1 else k)
+    return out
+
+
+def unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,
                  source: str = "") -> float:
     """Factor from the file's ``unit`` to the SI unit of ``column``."""
     si = known.get(column)
@@ -479,7 +581,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     for ours, (j, sign) in index.items():
         if sign < 0:
             data[:, j] = -data[:, j]
-    factors = {name: _unit_factor(path, name, units[name], known, source)
+    factors = {name: unit_factor(path, name, units[name], known, source)
                for name in units if name in names}
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.io.logs import Log, LogError, _unit_factor, known_names, signal_unit
+from flexarm.io.logs import Log, LogError, unit_factor, known_names, signal_unit
 from flexarm.units import ureg
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
 
@@ -177,7 +177,7 @@ def _describe(variables: dict) -> str:
     return "; ".join(parts)
 
 
-def _resolve(path: Path, variables: dict, name: str, spec: VarSpec) -> np.ndarray:
+def resolve_variable(path: Path, variables: dict, name: str, spec: VarSpec) -> np.ndarray:
     where = (f"{path}: {name} = {spec.text!r}" if name.startswith("[") else
              f"{path}: [columns] {name} = {spec.text!r}")
     node: object = variables
@@ -234,7 +234,7 @@ def scalar(path: str | Path, variables: dict, text: str, where: str) -> float:
     ``where`` says which field asked, for messages."""
     path = Path(path)
     spec = VarSpec.parse(text, where=f"{path}: {where}")
-    x = _resolve(path, variables, where, spec)
+    x = resolve_variable(path, variables, where, spec)
     if x.size != 1:
         raise MatFileError(f"{path}: {where} = {text!r}: expected one number, "
                            f"{'.'.join(spec.path)} holds {x.size}")
@@ -246,7 +246,7 @@ def _factor(path: Path, name: str, unit: str) -> float:
     base units)."""
     si = signal_unit(name)
     if si is not None:
-        return _unit_factor(path, name, unit, {name: si})
+        return unit_factor(path, name, unit, {name: si})
     try:
         q = ureg.Quantity(1.0, unit)
         return float(q.to_base_units().magnitude)
@@ -280,7 +280,7 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
                                f"{text!r}: a .mat file's signal is a variable spec (a string "
                                "such as 'name', '-name', 'struct.field' or 'name[0]')")
         spec = VarSpec.parse(text, where=f"{path}: [columns] {name}")
-        x = _resolve(path, variables, name, spec)
+        x = resolve_variable(path, variables, name, spec)
         if name in units:
             x = x * _factor(path, name, units[name])
         sig[name] = x
@@ -323,14 +323,12 @@ def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> 
                        "cut the recording there")
 
 
-def read_recording(path: str | Path, log_format=None) -> tuple[dict[str, np.ndarray], float]:
-    """Signals (flexarm name → SI samples) and the sampling rate (Hz) of a ``.mat`` or CSV
-    recording, mapped by a log-format file (:class:`flexarm.io.logformat.LogFormat`)."""
-    from flexarm.io.logformat import LogFormat, load_log_format
+def __getattr__(name: str):
+    """Deprecated: ``read_recording`` moved to :func:`flexarm.io.logformat.read_recording`
+    (this module decodes ``.mat`` files only; the import is lazy so that no circle remains
+    at import time). Remove once the CLI imports it from logformat."""
+    if name == "read_recording":
+        import importlib
 
-    path = Path(path)
-    fmt = load_log_format(log_format) if log_format is not None else LogFormat()
-    log = fmt.read(path)
-    dt = float(np.median(np.diff(log.time)))
-    fs = float(f"{1 / dt:.9g}")  # the logger's clock, rounded off its float noise
-    return log.signals, fs
+        return importlib.import_module("flexarm.io.logformat").read_recording
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -115,6 +115,6 @@ def scenario_from_workspace(path: str | Path, *, current_limits: tuple[float, fl
 
 def load_time(path: Path, variables: dict) -> np.ndarray:
     """The logger's time vector ``stage1_X1_meas.time``."""
-    from flexarm.io.matfile import VarSpec, _resolve
+    from flexarm.io.matfile import VarSpec, resolve_variable
 
-    return _resolve(path, variables, "time", VarSpec.parse("stage1_X1_meas.time"))
+    return resolve_variable(path, variables, "time", VarSpec.parse("stage1_X1_meas.time"))

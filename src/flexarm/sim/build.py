@@ -221,7 +221,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     if scenario.sampling is None:
         raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation]; a "
                          "multi-link arm without them runs its [regulation] law "
-                         "(flexarm.reproduce / simulate_regulation)")
+                         "(flexarm.simulate runs it; prepare builds sampled loops only)")
     arm, model = multi_link_arm(scenario.arm)
     dt = scenario.sampling.period
     n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
@@ -345,7 +345,46 @@ def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationRes
     )
 
 
+#: a scenario's ``[regulation] law`` → the law of :mod:`flexarm.control.regulation`
+REGULATION_LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
+                   "quasistatic": "law_pd_quasistatic"}
+
+
+def simulate_regulation(scenario: Scenario) -> SimulationResult:
+    """A multi-link scenario's ``[regulation]``: the continuous-time law (DLS eq. (8)
+    ``constant``, eq. (30) ``online`` / ``quasistatic``) u = sat(law(x, t)) on the arm from
+    θ(0) = ``initial``, δ(0) = 0, θ̇(0) = 0, fixed-step RK4 (``step``), outputs every
+    ``output_period`` over ``duration`` (:func:`flexarm.sim.continuous.simulate_continuous`)."""
+    from flexarm.control import regulation as R
+    from flexarm.models.multilink import build_multilink
+    from flexarm.sim.continuous import simulate_continuous
+
+    reg = scenario.regulation
+    if reg is None:
+        raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation] and no "
+                         "[regulation]; give a sampled loop ([sampling], [simulation], "
+                         "[controller]) or a [regulation] law to simulate")
+    model = build_multilink(scenario.arm)
+    params = R.regulation_params(model, np.diag(reg.kp), np.diag(reg.kd), reg.target,
+                                 theta_0=reg.initial, duration=reg.interpolation_time)
+    x0 = np.zeros(2 * model.n_q)
+    x0[:model.n_links] = reg.initial
+    run = simulate_continuous(model, getattr(R, REGULATION_LAWS[reg.law]), x0, reg.duration,
+                              reg.output_period, params=params, step=reg.step)
+    run.title = scenario.name
+    return run
+
+
 def simulate(scenario: Scenario, controller: discrete.Controller | None = None,
              references: dict[str, np.ndarray] | None = None) -> SimulationResult:
-    """Simulate a scenario in closed loop and return the result."""
+    """Simulate a scenario and return the result: the sampled-data loop
+    (:func:`prepare`), or, for a multi-link scenario with ``[regulation]`` and no
+    ``[sampling]``, its continuous-time law (:func:`simulate_regulation`)."""
+    if (scenario.arm.kind == "multi_link" and scenario.sampling is None
+            and scenario.regulation is not None):
+        if controller is not None or references:
+            raise ValueError(f"scenario {scenario.name!r} runs its [regulation] law "
+                             "(continuous time); a controller or references apply to a "
+                             "sampled loop: give the scenario [sampling] and [simulation]")
+        return simulate_regulation(scenario)
     return run_prepared(prepare(scenario, controller, references))

@@ -1,13 +1,28 @@
-"""Time-domain identification of bench arms from closed-loop logs: :func:`fit`,
-:func:`validate` (see :mod:`flexarm.identification.time_domain.fit`, :mod:`flexarm.identification.time_domain.validate`)."""
+"""Time-domain identification from closed-loop logs: the one fit
+(:func:`~flexarm.identification.time_domain.engine.fit`, ``flexarm.fit``) with presets per rig
+kind (:mod:`~flexarm.identification.time_domain.presets`), one result
+(:class:`~flexarm.identification.time_domain.result.FitResult`), one prediction
+(:func:`~flexarm.identification.time_domain.predict.predict`, ``flexarm.validate``).
+
+Deprecated names kept until their callers move: ``fit`` / ``predict`` here are the rotary
+servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` its replay,
+``fit_scenario`` / ``predict_scenario`` / ``ScenarioFit`` the general engine's,
+``BenchLog`` / ``read_bench_log`` the old log type and reader, ``RigFitResult`` the servo
+pipeline's result."""
 
 from flexarm.identification.time_domain.fit import fit, predict
-from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
+from flexarm.identification.time_domain.general import (ScenarioFit, fit_scenario,
                                                         predict_scenario)
-from flexarm.identification.time_domain.logs import BenchLog, FitInputError, parse_controller, read_bench_log
-from flexarm.identification.time_domain.report import FitResult
+from flexarm.identification.time_domain.general import FitOptions
+from flexarm.identification.time_domain.logs import (BenchLog, FitInputError, load_rig_log,
+                                                     parse_controller, read_bench_log)
+from flexarm.identification.time_domain.options import PredictOptions
+from flexarm.identification.time_domain.predict import Prediction, overlay_figure
+from flexarm.identification.time_domain.report import FitResult as RigFitResult
+from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.validate import validate
 
-__all__ = ["BenchLog", "FitInputError", "FitOptions", "FitResult", "ScenarioFit", "fit",
-           "fit_scenario", "parse_controller", "predict", "predict_scenario", "read_bench_log",
-           "validate"]
+__all__ = ["BenchLog", "FitInputError", "FitOptions", "FitResult", "PredictOptions",
+           "Prediction", "RigFitResult", "ScenarioFit", "fit", "fit_scenario", "load_rig_log",
+           "overlay_figure", "parse_controller", "predict", "predict_scenario",
+           "read_bench_log", "validate"]

@@ -46,7 +46,8 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
 
-from flexarm.identification.time_domain.logs import GAINS, BenchLog, FitInputError
+from flexarm.identification.time_domain.logs import GAINS, FitInputError
+from flexarm.io.logs import Log
 from flexarm.identification.time_domain.uncertainty import hac_covariance
 
 #: Seconds after a reference step left out (the logged command's glitch).
@@ -132,7 +133,7 @@ class ControllerCheck:
         lines += [f"  disagrees: {d}" for d in self.disagreements]
         return "\n".join(lines)
 
-    def apply(self, log: BenchLog) -> BenchLog:
+    def apply(self, log: Log) -> Log:
         """``log`` with the regressed gains (declared ones where a term is not identifiable)."""
         g = np.array(log.gains, float)
         for s, (a, b) in enumerate(self.segments):
@@ -143,7 +144,7 @@ class ControllerCheck:
         return replace(log, controller=c, gains=g)
 
 
-def _terms(log: BenchLog) -> tuple[np.ndarray, str]:
+def _terms(log: Log) -> tuple[np.ndarray, str]:
     """The law's regressors (N, 4): r − θ, −d, −θ̇, −ḋ, and where the rates came from."""
     c, T = log.columns, log.dt
     th = c["motor_angle"]
@@ -169,7 +170,7 @@ def _robust_fit(A: np.ndarray, y: np.ndarray):
     return sol.x, y - A @ sol.x
 
 
-def _rate_filter(log: BenchLog) -> tuple[dict[str, float], dict[str, float]]:
+def _rate_filter(log: Log) -> tuple[dict[str, float], dict[str, float]]:
     taus, r2s = {}, {}
     T = log.dt
     for pos, vel in _RATES:
@@ -190,7 +191,7 @@ def _rate_filter(log: BenchLog) -> tuple[dict[str, float], dict[str, float]]:
     return taus, r2s
 
 
-def check_controller(log: BenchLog, *, delays=(0, 1, 2), use_regressed: bool = False,
+def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
                      glitch: float = GLITCH_S) -> ControllerCheck:
     """Regress the logged command on the declared law's terms (module docstring); raise
     :class:`FitInputError` naming the gain when it disagrees, unless ``use_regressed``."""

@@ -44,7 +44,7 @@ import numpy as np
 import scipy.signal
 from scipy.optimize import least_squares
 
-from flexarm.identification.time_domain.logs import BenchLog
+from flexarm.io.logs import Log
 
 #: default largest sensor delay searched (s)
 MAX_DELAY_S = 0.15
@@ -112,7 +112,7 @@ def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
     return scipy.signal.lfilter(np.ravel(b), aa, x)
 
 
-def tip_model(logs: list[BenchLog], length: float, *, max_lag: int | None = None,
+def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
               omega_guess: float | None = None) -> TipModel | None:
     """The hub → tip model (1) fitted to every log with both channels (see the module
     docstring); None when no log has a moving tip channel."""
@@ -178,7 +178,7 @@ def tip_model(logs: list[BenchLog], length: float, *, max_lag: int | None = None
                     float(np.mean(fits)), prof_fit)
 
 
-def hub_delay(logs: list[BenchLog], k_u: float, k_omega: float, *,
+def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
               max_delay: int | None = None, tip: TipModel | None = None,
               window: float = 0.04) -> HubDelay:
     """The hub channel's delay from the integral regression (module docstring)."""
@@ -238,7 +238,7 @@ def hub_delay(logs: list[BenchLog], k_u: float, k_omega: float, *,
     return HubDelay(int(D), float(r2), trusted, float(J), float(b * J - k_omega), profile)
 
 
-def link_frequency_estimates(logs: list[BenchLog], tip: TipModel | None) -> dict:
+def link_frequency_estimates(logs: list[Log], tip: TipModel | None) -> dict:
     """Every estimate of the clamped link frequency (rad/s) the data give: the hub → tip
     model, the spectral peak while the hub is stuck (the link rings at its clamped
     frequency then), the spectral peak of the whole tip signal (a closed-loop mode,

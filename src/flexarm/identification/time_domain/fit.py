@@ -242,7 +242,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         estimates: bool = True) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
-    ``logs``: paths or :class:`~flexarm.identification.time_domain.logs.BenchLog` s; logs given together are one
+    ``logs``: paths or :class:`~flexarm.io.logs.Log` s; logs given together are one
     recording session (shared friction) unless ``sessions`` gives a session index per log
     (mechanics shared, friction per session). ``mode``: ``"closed_loop"`` (each log's
     controller closed in simulation; ``controller`` overrides every log's declaration)

@@ -99,76 +99,20 @@ __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "exp
 
 
 # ----------------------------------------------------------------------------- paths
-_TOKEN = re.compile(r"\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+|\*)\]")
-
-
-def parse_path(path: str) -> list[str | int]:
-    """``"arm.joints[0].friction.coulomb"`` → ``["arm", "joints", 0, "friction", "coulomb"]``
-    (``[*]`` stays ``"*"``)."""
-    keys: list[str | int] = []
-    pos = 0
-    for m in _TOKEN.finditer(path):
-        if m.start() != pos:
-            break
-        keys.append(m.group(1) if m.group(1) else (m.group(2) if m.group(2) == "*"
-                                                   else int(m.group(2))))
-        pos = m.end()
-    if pos != len(path) or not keys:
-        raise ValueError(f"free parameter {path!r}: not a path into the scenario; write it as "
-                         "dotted names with [index] for lists, e.g. "
-                         "'arm.joints[0].friction.coulomb' or 'sensors.theta_1.gain'")
-    return keys
+# the path language lives in flexarm.specs.paths; these names stay importable from here
+# (the CLI imports them) until the CLI is re-pointed
+from flexarm.specs.paths import expand_paths, get as _path_get, parse_path, scenario_with  # noqa: E402,F401
 
 
 def _get(d: Any, keys: Sequence, path: str) -> Any:
-    for i, k in enumerate(keys):
-        try:
-            d = d[k]
-        except (KeyError, IndexError, TypeError):
-            here = ".".join(str(x) for x in keys[:i]) or "the scenario"
-            have = (", ".join(map(str, d)) if isinstance(d, dict)
-                    else f"{len(d)} entries" if isinstance(d, list) else type(d).__name__)
-            raise ValueError(f"free parameter {path!r}: {here} has no {k!r} (it has {have})"
-                             ) from None
-    return d
-
-
-def _set(d: Any, keys: Sequence, value: float) -> None:
-    for k in keys[:-1]:
-        d = d[k]
-    d[keys[-1]] = value
-
-
-def expand_paths(dump: dict, paths: Sequence[str]) -> list[str]:
-    """The paths with every ``[*]`` replaced by each index of that list."""
-    out: list[str] = []
-    for p in paths:
-        keys = parse_path(p)
-        if "*" not in keys:
-            out.append(p)
-            continue
-        i = keys.index("*")
-        lst = _get(dump, keys[:i], p)
-        if not isinstance(lst, list):
-            raise ValueError(f"free parameter {p!r}: [*] needs a list; found {type(lst).__name__}")
-        head = _fmt(keys[:i])
-        tail = _fmt(keys[i + 1:])
-        out += expand_paths(dump, [f"{head}[{j}]{'.' if tail and not tail.startswith('[') else ''}"
-                                   f"{tail}" for j in range(len(lst))])
-    return out
-
-
-def _fmt(keys: Sequence) -> str:
-    s = ""
-    for k in keys:
-        s += f"[{k}]" if isinstance(k, int) else (f".{k}" if s else k)
-    return s
+    """Deprecated: :func:`flexarm.specs.paths.get`."""
+    return _path_get(d, keys if keys is not None else path)
 
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
-    v = _get(dump, keys, path)
+    v = _path_get(dump, path)
     if v is None and keys[-1] == "static" and "friction" in keys:
-        v = _get(dump, keys[:-1], path).get("coulomb", 0.0)  # breakaway defaults to coulomb
+        v = _path_get(dump, keys[:-1]).get("coulomb", 0.0)  # breakaway defaults to coulomb
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"free parameter {path!r}: the scenario's value there is {v!r}, not "
                          "a number; give it a number in the scenario (the template value)")
@@ -177,28 +121,6 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
                          "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
                          "starting value in the scenario (e.g. the data-sheet value)")
     return float(v)
-
-
-def scenario_with(template, values: Mapping[str, float]):
-    """The scenario with the parameters at ``values`` (path → SI value). A friction's
-    breakaway ``static`` below its ``coulomb`` level is raised to it (Karnopp needs
-    F_s >= F_c)."""
-    from flexarm.specs.scenario import scenario_from_dict
-
-    d = copy.deepcopy(template.model_dump())
-    for path, v in values.items():
-        _set(d, parse_path(path), float(v))
-    _fix_friction(d)
-    return scenario_from_dict(d, source=f"scenario {template.name!r} with fitted values")
-
-
-def _fix_friction(d: dict) -> None:
-    joints = (d.get("arm") or {}).get("joints") or []
-    frs = [j.get("friction") for j in joints if isinstance(j, dict)]
-    fr1 = (d.get("arm") or {}).get("friction")
-    for fr in frs + [fr1]:
-        if isinstance(fr, dict) and fr.get("static") is not None:
-            fr["static"] = max(fr["static"], fr.get("coulomb", 0.0))
 
 
 # ----------------------------------------------------------------------------- options
@@ -307,69 +229,17 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
 
 
 # ----------------------------------------------------------------------------- result
-@dataclass
-class ScenarioFit:
-    """Result of :func:`fit_scenario`: fitted values (SI) by path with standard deviations
-    (Newey–West, priors included), the correlation matrix of the log-parameters, warnings
-    (bounds, inseparable pairs), fit % per log and channel of the whole-run prediction and
-    of the segments, the fitted scenario, and the optimiser's record."""
+from flexarm.identification.time_domain.result import (FitResult, drop_none as _drop_none,  # noqa: E402,F401
+                                                       finite as _finite)
 
-    free: list[str]
-    params: dict[str, float]
-    template: dict[str, float]
-    std: dict[str, float]
-    correlation: np.ndarray
-    warnings: list[str]
-    fit_percent: dict[str, dict[str, float]]
-    segment_fit_percent: dict[str, dict[str, float]]
-    scenario: Any
-    converged: bool
-    message: str
-    nfev: int
-    cost: float
-    seconds: float
-    stages: dict[str, Any] = field(default_factory=dict)
-    prediction: dict[str, Any] = field(default_factory=dict)
-
-    def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
-        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
-        from flexarm.io.write import write_toml
-
-        return write_toml(path, _drop_none(self.scenario.model_dump()), overwrite=overwrite)
-
-    def to_dict(self) -> dict:
-        """JSON-ready (non-finite numbers, e.g. the std of an undetermined parameter, as
-        null)."""
-        return _finite({"free": self.free, "params": self.params, "template": self.template,
-                        "std": self.std, "correlation": np.round(self.correlation, 4).tolist(),
-                        "warnings": self.warnings, "fit_percent": self.fit_percent,
-                        "segment_fit_percent": self.segment_fit_percent,
-                        "converged": self.converged, "message": self.message,
-                        "nfev": self.nfev, "cost": self.cost,
-                        "seconds": round(self.seconds, 2), "stages": self.stages})
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
-def _drop_none(d):
-    """A model_dump without the unset (None) fields, which TOML cannot hold."""
-    if isinstance(d, dict):
-        return {k: _drop_none(v) for k, v in d.items() if v is not None}
-    if isinstance(d, (list, tuple)):
-        return [_drop_none(v) for v in d]
-    return d
+#: Deprecated name of :class:`~flexarm.identification.time_domain.result.FitResult`.
+ScenarioFit = FitResult
 
 
 # ----------------------------------------------------------------------------- engine
-def _stack(loops: list):
+def stack_loops(loops: list):
+    """Prepared loops of one structure (e.g. one scenario with different numbers) stacked
+    leaf by leaf into one batched loop (leading axis: the loop), for one ``vmap``-ed run."""
     try:
         return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *loops)
     except ValueError as exc:
@@ -458,7 +328,11 @@ class _Engine:
         if len(wins) != len(logs):
             raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
         self.notes: list[str] = []  # channels computed from logged ones (_read)
-        self.logs = [self._read(log, w) for log, w in zip(logs, wins)]
+        from flexarm.io.logs import log_keys
+
+        keys = log_keys(logs)  # unique per log: same file names in other folders stay apart
+        self.logs = [self._read(log, w, k if getattr(log, "path", None) is not None else None)
+                     for log, w, k in zip(logs, wins, keys)]
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
@@ -492,8 +366,9 @@ class _Engine:
         self._segments(seg)
 
     # ------------------------------------------------------------------ logs, segments
-    def _read(self, log, window) -> _LogData:
+    def _read(self, log, window, key: str | None = None) -> _LogData:
         name, t, sig = _log_arrays(log)
+        name = key or name
         if t.size < 3:
             raise ValueError(f"{name}: {t.size} samples; a log needs at least 3")
         dt = float(np.median(np.diff(t)))
@@ -511,8 +386,9 @@ class _Engine:
         k0, k1 = 0, t.size
         if window is not None:
             a, b = window
-            k0 = int(round(a / dt))
-            k1 = min(t.size, int(round(b / dt)) + 1)
+            # the one window rule (flexarm.io.logs.Log.window): [a, b) s from the first sample
+            k0 = max(0, int(math.ceil(a / dt - 1e-6)))
+            k1 = min(t.size, int(math.ceil(b / dt - 1e-6)))
             if not 0 <= k0 < k1 - 2:
                 raise ValueError(f"{name}: window ({a:g}, {b:g}) s is outside the log "
                                  f"(0 … {t[-1]:g} s)")
@@ -661,7 +537,7 @@ class _Engine:
 
     def loops(self, Z: np.ndarray):
         preps = [self.prepared(z) for z in Z]
-        loop = _stack([p.loop for p in preps])
+        loop = stack_loops([p.loop for p in preps])
         if not self.options.quantise:
             loop = eqx.tree_at(lambda lp: (lp.sensors.quantum, lp.actuator.quantum), loop,
                                replace=(jnp.zeros_like(loop.sensors.quantum),
@@ -874,7 +750,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     from scipy.optimize import differential_evolution
 
     options = options or FitOptions()
-    fit_notes = _scenario_fit_notes(scenario)
+    fit_notes = scenario_fit_notes(scenario)
     free = list(free if free is not None else fit_notes.get("free", []))
     if not options.priors and fit_notes.get("priors"):
         options = copy.copy(options)
@@ -931,7 +807,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     fitted = scenario_with(scenario, eng.values(z))
     fd = fitted.model_dump()
     # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
-    values = {p: float(_get(fd, parse_path(p), p)) for p in eng.values(z)}
+    values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
     std = {p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
            for i, p in enumerate(eng.free)}
@@ -1090,7 +966,7 @@ def friction_paths(scenario) -> list[str]:
     return out
 
 
-def _scenario_fit_notes(scenario) -> dict:
+def scenario_fit_notes(scenario) -> dict:
     """The scenario's ``[notes.fit]`` table: ``free = [paths]`` and ``priors = {path =
     rel_std}``, used when the call gives none."""
     notes = getattr(scenario, "notes", {}) or {}

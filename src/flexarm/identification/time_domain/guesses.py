@@ -20,10 +20,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from flexarm.identification.time_domain.logs import BenchLog
+from flexarm.io.logs import Log
 
 
-def controller_command(log: BenchLog) -> np.ndarray:
+def controller_command(log: Log) -> np.ndarray:
     """The command the log's controller computed (replayed on the logged signals), or the
     logged voltage when present."""
     if "voltage" in log.columns:
@@ -39,7 +39,7 @@ def controller_command(log: BenchLog) -> np.ndarray:
     return c.k1 * (log.columns["reference"] - th) - c.k2 * d - c.k3 * dth - c.k4 * dd
 
 
-def stuck_intervals(log: BenchLog, min_stuck: float = 0.25) -> list[tuple[int, int]]:
+def stuck_intervals(log: Log, min_stuck: float = 0.25) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) where the measured hub angle stays constant."""
     th = log.columns.get("motor_angle")
     if th is None:
@@ -61,7 +61,7 @@ def stuck_intervals(log: BenchLog, min_stuck: float = 0.25) -> list[tuple[int, i
     return out
 
 
-def tip_rest_reading(log: BenchLog, settle: float = 0.5) -> tuple[float, float] | None:
+def tip_rest_reading(log: Log, settle: float = 0.5) -> tuple[float, float] | None:
     """What the tip sensor reads with the link at rest: the median of tip_deflection over
     the second halves of the stuck intervals at least ``2 settle`` s long (the hub stuck,
     the ringing decayed), and its scale, the spread of the whole signal (its 1–99 %
@@ -78,7 +78,7 @@ def tip_rest_reading(log: BenchLog, settle: float = 0.5) -> tuple[float, float] 
     return float(np.median(np.concatenate(rest))), float(hi - lo)
 
 
-def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
+def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0):
     """(ω_c estimate in rad/s, how: 'stuck' or 'whole') from the tip deflection spectra."""
     segs, how = [], "stuck"
     for log in logs:
@@ -104,7 +104,7 @@ def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
     return 2 * np.pi * f[k], how
 
 
-def tip_gain(logs: list[BenchLog], wc: float, length: float, zeta: float = 0.03):
+def tip_gain(logs: list[Log], wc: float, length: float, zeta: float = 0.03):
     """(g estimate with sign, R²) from d ≈ g H(s)(−L θ̈)."""
     num = den = 0.0
     ss = 0.0
@@ -127,7 +127,7 @@ def tip_gain(logs: list[BenchLog], wc: float, length: float, zeta: float = 0.03)
     return g, (num * num / den) / ss
 
 
-def hub_inertia(logs: list[BenchLog], k_u: float, window: float = 0.025):
+def hub_inertia(logs: list[Log], k_u: float, window: float = 0.025):
     """Median of J ≈ k_u ū / θ̈ over the reference steps (None when no step is usable)."""
     est = []
     for log in logs:
@@ -155,7 +155,7 @@ def hub_inertia(logs: list[BenchLog], k_u: float, window: float = 0.025):
     return float(np.median(est)) if est else None
 
 
-def stick_torque(logs: list[BenchLog], k_u: float) -> float | None:
+def stick_torque(logs: list[Log], k_u: float) -> float | None:
     """Largest |k_u u| held by a stuck, settled hub (N·m), or None."""
     vals = []
     for log in logs:
@@ -168,7 +168,7 @@ def stick_torque(logs: list[BenchLog], k_u: float) -> float | None:
     return max(vals) if vals else None
 
 
-def initial_tip(log: BenchLog, wc: float, zeta: float = 0.03, max_periods: float = 1.5):
+def initial_tip(log: Log, wc: float, zeta: float = 0.03, max_periods: float = 1.5):
     """Damped sinusoid d(t) = e^{−σt}(a cos ω t + b sin ω t) fitted to the measured tip
     deflection before the first reference change (at most 1.5 periods): (a, b, σ, ω)."""
     d = log.columns.get("tip_deflection")
@@ -189,7 +189,7 @@ def initial_tip(log: BenchLog, wc: float, zeta: float = 0.03, max_periods: float
     return (float(a), float(b), float(s), float(wd))
 
 
-def initial_hub(log: BenchLog, n: int = 20, k: int = 0):
+def initial_hub(log: Log, n: int = 20, k: int = 0):
     """(θ0, ω0) at t = 0 when the hub channel is delayed by ``k`` samples: a parabola
     through samples k ... k + n − 1 of the measured hub angle (a line would read a hub
     that starts from rest and accelerates, e.g. pushed by a ringing link, as already
@@ -205,7 +205,7 @@ def initial_hub(log: BenchLog, n: int = 20, k: int = 0):
     return float(c[2]), float(c[1])
 
 
-def initial_tip_at(log: BenchLog, k: int, n: int = 21,
+def initial_tip_at(log: Log, k: int, n: int = 21,
                    cutoff: float = 0.0) -> tuple[float, float]:
     """Tip deflection and rate (measured units, g w and g ẇ) at t = 0 when the tip channel
     is delayed by ``k`` samples: a parabola g w(t) = a + b t + c t²/2 fitted to samples

@@ -27,7 +27,8 @@ import numpy as np
 
 from flexarm.identification.time_domain import guesses
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_cost, closed_loop_run
-from flexarm.identification.time_domain.logs import BenchLog, FitInputError
+from flexarm.identification.time_domain.logs import FitInputError
+from flexarm.io.logs import Log
 from flexarm.identification.time_domain.params import ParamSpace
 from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
@@ -88,7 +89,7 @@ def check_filters(filters: Any, dt: float, substeps: int) -> dict[str, float]:
 class Objective:
     """Cost of parameter populations on a set of logs (one compiled simulation per shape)."""
 
-    def __init__(self, logs: list[BenchLog], rig: Rig, space: ParamSpace, sessions: list[int],
+    def __init__(self, logs: list[Log], rig: Rig, space: ParamSpace, sessions: list[int],
                  *, mode: str = "closed_loop", substeps: int = 2, comp_delay: int = 0,
                  n_samples: int | None = None, chunk: int = 64, wc_guess: float = 20.0,
                  filters: dict[str, float] | None = None):

@@ -169,6 +169,29 @@ class FitResult:
                                 "Both ignore the jumps of stick-slip and structural bias",
         })
 
+    def document(self, *, without_friction: "FitResult | None" = None,
+                 window: tuple[float, float] | None = None, held_out: Any = None,
+                 held_window: tuple[float, float] | None = None) -> dict:
+        """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`
+        plus, when given, the fit without joint friction (``without_friction``: its fit %,
+        parameters, message), the fitted window (``window_s``, s from each log's first
+        sample) and the held-out prediction (``held_out``: a
+        :class:`~flexarm.identification.time_domain.predict.Prediction` or the rig's
+        ``predict`` dict, over ``held_window``)."""
+        d = self.to_dict()
+        if without_friction is not None:
+            d["without_friction"] = _jsonable({"fit_percent": without_friction.fit_percent,
+                                               "params": without_friction.params,
+                                               "message": without_friction.message})
+        if window is not None:
+            d["window_s"] = list(window)
+        if held_out is not None:
+            d["held_out"] = _jsonable({
+                "window_s": list(held_window) if held_window is not None else None,
+                "fit_percent": held_out["fit_percent"], "diverged": held_out["diverged"],
+                "initial_state": "estimated from each window's own data"})
+        return d
+
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
         write_json(path, self.to_dict(), overwrite=True)
@@ -302,8 +325,6 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "arm.friction.coulomb": "N*m, fitted Coulomb friction",
          "arm.friction.static": "N*m, fitted breakaway (static) friction",
          "arm.friction.bias": "N*m, fitted constant bias torque",
-         "arm.beam.flexural_rigidity": f"N*m^2, EI = C L / 3 with fitted stiffness "
-                                       f"C = {der['link_stiffness']:.5g} N*m/rad",
          "arm.beam.damping_ratio": "fitted link damping ratio",
          "arm.beam.length": "m, link length (data sheet)",
          "sampling.period": "s", "sampling.delay": "samples of computation delay",
@@ -311,7 +332,9 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
          "sensors.tip_deflection.delay": "samples, fitted",
          "simulation.duration": "s, length of the first log"}
-    if not rigid:
+    if not rigid:  # a rigid arm has no link stiffness (its --scenario-out raised KeyError)
+        c["arm.beam.flexural_rigidity"] = (f"N*m^2, EI = C L / 3 with fitted stiffness "
+                                           f"C = {der['link_stiffness']:.5g} N*m/rad")
         c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
                                      f"J_l = {p['link_inertia']:.5g} kg*m^2")
     return d, c

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from flexarm.control.state_feedback import state_feedback
-from flexarm.identification.time_domain.logs import write_bench_log
+from flexarm.io.logs import write_log
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 
@@ -44,12 +44,12 @@ def synthetic_log(scenario, gains: Sequence[float], path: str | Path, *, duratio
     names = p.loop.sensors.names
     meas = {n: out["measured"][:, i] for i, n in enumerate(names)}
     k1, k2, k3, k4 = gains
-    return write_bench_log(path, t, {"reference": ref, "voltage": out["command"][:, 0],
+    return write_log(path, t, {"reference": ref, "voltage": out["command"][:, 0],
                                "motor_angle": meas["motor_angle"],
                                "tip_deflection": meas["tip_deflection"]},
                      comments=[f"controller: state_feedback K1={k1:g} K2={k2:g} K3={k3:g} K4={k4:g}",
                                f"source: flexarm synthetic, scenario {scenario.name}"],
-                     overwrite=overwrite)
+                     overwrite=overwrite, fmt="%.12g", required=("time",))
 
 
 def scenario_log(scenario, references: dict[str, np.ndarray] | None = None, *, seed: int = 0,

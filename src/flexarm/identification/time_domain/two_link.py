@@ -36,9 +36,13 @@ from typing import Callable
 import numpy as np
 
 from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
-                                                        predict_scenario, scenario_with)
+                                                        predict_scenario)
+from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
+#: the run's part the split fits, [t0, t1) s from its first sample: the first 50 s with the
+#: sample at 50 s (25 001 samples at 2 ms, the samples the split was always fitted on)
+FIT_WINDOW = (0.0, 50.002)
 FIT_STEPS = ("5deg", "neg_10deg", "20deg", "neg_30deg")
 HELD_STEPS = ("neg_5deg", "10deg", "neg_20deg", "30deg", "0deg_run02")
 FREE = ["arm.joints[*].friction.coulomb", "arm.joints[*].friction.static",
@@ -102,17 +106,24 @@ def default_options(**kw) -> FitOptions:
 def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = True,
                  options: FitOptions | None = None,
                  progress: Callable[[str], None] | None = None) -> ScenarioFit:
-    """The fit of the split (module docstring); ``friction=False`` fits the rig without
-    joint friction (its friction parameters are then not free)."""
+    """The fit of the split (module docstring) through the one engine
+    (:func:`flexarm.identification.time_domain.engine.fit` on
+    :func:`~flexarm.identification.time_domain.presets.two_link`); ``friction=False`` fits
+    the rig without joint friction (its friction parameters are then not free);
+    ``options``: the engine's flat options replacing the preset's."""
+    from flexarm.identification.time_domain import engine, presets
+    from flexarm.identification.time_domain.options import FitOptions as Grouped
+
     logs = load_split(data, examples)
-    free = FREE if friction else [p for p in FREE if "friction" not in p]
-    opts = options or default_options()
-    if not friction:
-        opts.priors = {k: v for k, v in opts.priors.items() if "friction" not in k}
-        opts.bounds = {k: v for k, v in opts.bounds.items() if "friction" not in k}
-    opts.windows = [(0.0, 50.0)] + [None] * len(logs["fit_steps"])
-    return fit_scenario(template(friction), [logs["run"]] + logs["fit_steps"], free, opts,
-                        progress=progress, predict=False)
+    preset = presets.two_link(friction)
+    if options is not None:
+        if not friction:
+            options.priors = {k: v for k, v in options.priors.items() if "friction" not in k}
+            options.bounds = {k: v for k, v in options.bounds.items() if "friction" not in k}
+        preset.options = options
+    wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
+    return engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
+                      Grouped(windows=wins, predict=False), progress=progress)
 
 
 def held_out_report(scenario, data: str | Path, examples: str | Path, *,

@@ -27,9 +27,11 @@ from flexarm.specs import Scenario, load_scenario
 
 
 def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller: Any = None,
-             plots: str | Path | None = None) -> dict:
+             plots: str | Path | None = None, traces: bool = False) -> dict:
     """fit % per log and signal: ``{"fit_percent": {"<file name>": {"motor_angle": x,
-    "tip_deflection": y}}, "scenario": ..., "plots": [...]}``."""
+    "tip_deflection": y}}, "scenario": ..., "plots": [...]}`` (with ``traces``, also
+    ``"traces"``: per log ``time``, ``measured``, ``simulated``). The servo-rig replay
+    behind :func:`flexarm.identification.time_domain.predict.predict`, the one entry."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     result: dict[str, Any] = {"scenario": sc.name, "fit_percent": {}, "plots": []}
     blogs, trajs = [], []
@@ -89,6 +91,16 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
                 "the gains make the simulated loop unstable; check their signs and units "
                 "(V/rad, V/m, V*s/rad, V*s/m) and the tip sensor's gain sign")
         result["fit_percent"][log.name] = fp
+        if traces:
+            meas = {c: log.signals[c] for c in ("motor_angle", "tip_deflection")
+                    if c in log.signals}
+            if "voltage" in log.signals:
+                meas["command"] = log.signals["voltage"]
+            sim = {c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection"))
+                   if c in names}
+            sim["command"] = traj[2][0]
+            result.setdefault("traces", []).append(
+                {"time": log.time - log.time[0], "measured": meas, "simulated": sim})
         blogs.append(log)
         trajs.append(traj)
     if plots is not None:

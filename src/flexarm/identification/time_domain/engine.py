@@ -1,0 +1,72 @@
+"""The front door of the time-domain fit: :func:`fit` (``flexarm.fit``).
+
+    fit(scenario, logs, free=None, options=None) -> FitResult
+
+``scenario`` is a :class:`~flexarm.specs.scenario.Scenario` (or a TOML path / built-in name)
+or a :class:`~.presets.Preset`. Without ``free`` the preset's default free list runs
+(:func:`~.presets.for_scenario`: the scenario's ``[notes.fit]``, the registered preset of a
+built-in, e.g. ``quanser-two-link``'s 15 parameters, or the joints' friction) and the result
+says which (:attr:`~.result.FitResult.free_source`). ``options`` is a grouped
+:class:`~.options.FitOptions` (or, deprecated, the general engine's flat options); its
+groups override the preset's.
+
+Engines: ``"scenario"`` — the general engine (multiple shooting from the logged state,
+priors, HAC std; :func:`~.general.fit_scenario`); ``"servo_rig"`` — the rotary servo's
+data-sheet pipeline (:func:`~.fit.fit`, its estimates, delay search, global stage and
+continuation), called through its keyword interface with the preset's data sheet and
+``options.servo_rig``; it returns that pipeline's result
+(:class:`~.report.FitResult`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from flexarm.identification.time_domain.options import FitOptions
+from flexarm.identification.time_domain.presets import Preset, for_scenario
+
+__all__ = ["fit"]
+
+
+def fit(scenario: Any, logs: Sequence[Any], free: Sequence[str] | None = None,
+        options: Any = None, *, progress: Callable[[str], None] | None = None):
+    """Fit ``scenario``'s free parameters to ``logs`` (module docstring). Paths in ``logs``
+    are read by :func:`flexarm.io.logformat.load_log` (exchange format)."""
+    from flexarm.identification.time_domain import general
+    from flexarm.io.logformat import load_logs
+    from flexarm.specs import Scenario, load_scenario
+
+    if isinstance(scenario, Preset):
+        preset = scenario
+    else:
+        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        preset = for_scenario(sc) if free is None else Preset(sc.name, sc, list(free))
+    if preset.engine == "servo_rig":
+        return _servo_rig(preset, logs, options, progress)
+    logs = load_logs(logs)
+    grouped = options if isinstance(options, FitOptions) else None
+    if isinstance(options, general.FitOptions):
+        flat = options
+    else:
+        base = preset.options if free is None else None
+        flat = (grouped or FitOptions()).engine_options(base)
+    source = "given" if free is not None else (
+        f"preset {preset.name}" if not isinstance(scenario, Preset) else f"preset {preset.name}")
+    free_list = list(free) if free is not None else list(preset.free)
+    res = general.fit_scenario(preset.scenario, logs, free_list, flat, progress=progress,
+                               predict=grouped.predict if grouped is not None else True)
+    res.free_source = source
+    return res
+
+
+def _servo_rig(preset: Preset, logs, options, progress):
+    from flexarm.identification.time_domain.fit import fit as rig_fit
+    from flexarm.identification.time_domain.logs import as_bench_log
+
+    opts = options if isinstance(options, FitOptions) else FitOptions()
+    kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
+    logs = [as_bench_log(g) if isinstance(g, (str, Path)) else g for g in logs]
+    if opts.windows is not None:
+        logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows)]
+    return rig_fit(logs, progress=progress, **kw)

@@ -1,0 +1,172 @@
+"""Typed, grouped options of the one fit and the one prediction.
+
+:class:`FitOptions` groups what the general engine
+(:mod:`flexarm.identification.time_domain.general`, eqs. (1)–(2) there) reads as flat fields:
+
+* :class:`Cost` — channels and weights w_c, residual level λ and correlation time τ of
+  eq. (1), quantisation in the fitted loop, integration substeps;
+* :class:`Shooting` — multiple-shooting segment length (s), burn-in (s), estimated node
+  states, the start state (``"log"`` or ``"scenario"``), a polish on whole logs;
+* :class:`Local` — the least-squares budget and tolerances, the finite-difference step in z;
+* :class:`GlobalDE` — differential evolution first (population, generations, seed), or None;
+* :class:`Priors` — bounds p0/f … p0·f, absolute bounds, priors (relative std, eq. (2)),
+  tied paths;
+* :class:`ServoRig` — the options of the voltage-driven rotary servo's engine (its sensor
+  delay search, global stage time budget, friction polish, sessions, tip sign, encoder
+  counts, analog filters, mode), passed to that engine's keyword interface.
+
+``windows`` (per log, (t0, t1) s from its first sample, [t0, t1)) is common to all.
+
+:class:`PredictOptions` are the prediction's (:mod:`~flexarm.identification.time_domain.predict`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+__all__ = ["Cost", "Shooting", "Local", "GlobalDE", "Priors", "ServoRig", "FitOptions",
+           "PredictOptions"]
+
+
+@dataclass
+class Cost:
+    """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s)."""
+
+    channels: Mapping[str, float] | None = None
+    residual_level: float = 0.05
+    correlation_time: float = 0.05
+    quantise: bool = False
+    substeps: int | None = None
+
+
+@dataclass
+class Shooting:
+    """Multiple shooting: ``segment`` s (None: whole logs), ``burn_in`` s left out of the cost
+    at each segment start, node states estimated, start state from the log or the
+    scenario, then a polish on whole logs."""
+
+    segment: float | None = None
+    burn_in: float = 0.0
+    estimate_states: bool = True
+    initial: str = "log"
+    polish: bool = False
+    derivative_half_width: int = 10
+
+
+@dataclass
+class Local:
+    """SciPy ``least_squares`` (trf): budget, tolerances, finite-difference step in z."""
+
+    max_nfev: int = 30
+    ftol: float = 1e-6
+    xtol: float = 1e-6
+    fd_step: float = 1e-2
+    max_batch: int = 64
+
+
+@dataclass
+class GlobalDE:
+    """SciPy ``differential_evolution`` before the local stage (whole generations as one
+    batch)."""
+
+    popsize: int = 6
+    maxiter: int = 8
+    seed: int = 0
+
+
+@dataclass
+class Priors:
+    """Bounds and priors in log space: p = p0·exp(z), z ∈ [−ln f, ln f] (f =
+    ``bound_factor``) or ``bounds`` (path → (lo, hi) SI); ``priors`` path → relative std
+    σ_p of eq. (2); ``ties`` path → free path moving by the same factor."""
+
+    bound_factor: float = 3.0
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    priors: Mapping[str, float] = field(default_factory=dict)
+    ties: Mapping[str, str] = field(default_factory=dict)
+    corr_warn: float = 0.95
+
+
+@dataclass
+class ServoRig:
+    """The rotary servo engine's own options (its keyword interface,
+    :func:`flexarm.identification.time_domain.fit.fit`)."""
+
+    mode: str = "closed_loop"
+    friction: bool = True
+    global_seconds: float | None = 5.0
+    delay_search: str = "neighbours"
+    polish_iter: int = 8
+    sessions: Sequence[int] | None = None
+    tip_sign: int | None = None
+    encoder_counts: int | None = None
+    filters: Mapping[str, float] | None = None
+    controller: Any = None
+    seed: int = 0
+
+    def keywords(self) -> dict:
+        return dict(mode=self.mode, friction=self.friction, global_seconds=self.global_seconds,
+                    delay_search=self.delay_search, polish_iter=self.polish_iter,
+                    sessions=self.sessions, tip_sign=self.tip_sign,
+                    encoder_counts=self.encoder_counts,
+                    filters=dict(self.filters) if self.filters else None,
+                    controller=self.controller, seed=self.seed)
+
+
+@dataclass
+class FitOptions:
+    """Options of :func:`flexarm.fit`, grouped (module docstring). ``None`` groups take the
+    preset's (or the defaults)."""
+
+    cost: Cost | None = None
+    shooting: Shooting | None = None
+    local: Local | None = None
+    global_de: GlobalDE | None = None
+    priors: Priors | None = None
+    servo_rig: ServoRig | None = None
+    windows: Sequence[tuple[float, float] | None] | None = None
+    predict: bool = True
+
+    def engine_options(self, base=None):
+        """The general engine's flat options (:class:`general.FitOptions`), starting from
+        ``base`` (a preset's) and overriding the groups given here."""
+        import copy
+
+        from flexarm.identification.time_domain.general import FitOptions as Flat
+
+        flat = copy.deepcopy(base) if base is not None else Flat()
+        groups = [self.cost, self.shooting, self.local, self.priors]
+        for g in groups:
+            if g is None:
+                continue
+            for k, v in vars(g).items():
+                setattr(flat, k, v)
+        if self.global_de is not None:
+            flat.global_stage = True
+            for k, v in vars(self.global_de).items():
+                setattr(flat, k, v)
+        if self.windows is not None:
+            flat.windows = list(self.windows)
+        return flat
+
+
+@dataclass
+class PredictOptions:
+    """Options of :func:`flexarm.validate` / :func:`~flexarm.identification.time_domain.predict.predict`.
+
+    ``channels``: the measured channels compared (None: every logged sensor channel);
+    ``windows``: per log (t0, t1) s from its first sample, [t0, t1), or None;
+    ``estimate_initial``: a servo-rig prediction refines each log's initial state on the
+    log itself (the model is not refitted); ``continuous``: controller and filter states
+    carried across consecutive files of one run (hook for multi-file runs); ``controller``:
+    overrides the logs' declared law; ``plots``: a folder for overlay PNGs, ``tag`` their
+    name."""
+
+    channels: Sequence[str] | None = None
+    windows: Sequence[tuple[float, float] | None] | None = None
+    estimate_initial: bool = True
+    continuous: bool = False
+    controller: Any = None
+    plots: Any = None
+    tag: str = "predict"

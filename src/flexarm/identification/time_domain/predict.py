@@ -1,0 +1,215 @@
+"""One prediction of logs by a model with its parameters fixed: :func:`predict` →
+:class:`Prediction`, and one overlay figure, :func:`overlay_figure`.
+
+Each log (or its window, [t0, t1) s from its first sample) is simulated once with its own
+references and the controller it ran, and compared per measured signal by
+
+    fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                           (:func:`flexarm.metrics.fit_percent`)
+
+The model is a scenario (any arm: the one engine's whole-run prediction,
+:func:`flexarm.identification.time_domain.general.predict_scenario`, from the scenario's
+initial state or, for a window, the logged state), a :class:`~.result.FitResult` (its fitted
+scenario), or a rotary servo-rig fit (that engine's loop, each log's initial state
+estimated on the log itself; :func:`flexarm.identification.time_domain.fit.predict`). A
+single-link scenario predicting servo-rig logs (a declared state-feedback law, a
+``reference`` column) runs the rig's replay
+(:func:`flexarm.identification.time_domain.validate.validate`). Logs are keyed by
+:func:`flexarm.io.logs.log_keys` (same file names in other folders stay apart).
+
+This replaces ``validate.validate``, ``fit.predict``, ``general.predict_scenario`` and
+``analysis.replay.replay`` as the one entry (those stay as the engines behind it, or as
+deprecated aliases).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from flexarm.identification.time_domain.options import PredictOptions
+
+__all__ = ["Prediction", "predict", "overlay_figure", "write_overlays"]
+
+
+@dataclass
+class Prediction:
+    """fit % per log key and signal (None where the log lacks the signal), the traces
+    (per key: ``time`` s from the log's first sample, ``measured`` and ``simulated`` per
+    signal), warnings and notes, per-log divergence and any figures written."""
+
+    scenario: str
+    fit_percent: dict[str, dict[str, float | None]]
+    traces: dict[str, dict[str, Any]] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    diverged: dict[str, bool] = field(default_factory=dict)
+    plots: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: scenario, fit %, divergence, warnings, notes, figures (no traces)."""
+        from flexarm.identification.time_domain.result import finite
+
+        return finite({"scenario": self.scenario, "fit_percent": self.fit_percent,
+                       "diverged": self.diverged, "warnings": self.warnings,
+                       "notes": self.notes, "plots": [str(p) for p in self.plots]})
+
+    def __getitem__(self, key: str):
+        """Deprecated dict access (``validate(...)["fit_percent"]``), as the old
+        validators returned dicts."""
+        if key in ("fit_percent", "diverged", "warnings", "notes", "plots", "scenario",
+                   "traces"):
+            return getattr(self, key)
+        raise KeyError(key)
+
+
+def _is_rig_fit(x) -> bool:
+    return hasattr(x, "rig") and hasattr(x, "space") and hasattr(x, "settings")
+
+
+def _rig_logs(logs, controller) -> bool:
+    return all(getattr(g, "controller", None) is not None or controller is not None
+               for g in logs) and all("reference" in getattr(g, "signals", {}) for g in logs)
+
+
+def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = None) -> Prediction:
+    """Predict ``logs`` with ``model`` (a scenario, its TOML path or built-in name, a
+    :class:`~.result.FitResult`, or a rotary servo-rig fit) with its parameters fixed; see
+    the module docstring. Paths in ``logs`` are read by :func:`flexarm.io.logformat.load_log`
+    (exchange format)."""
+    from flexarm.io.logformat import load_logs
+    from flexarm.io.logs import log_keys
+    from flexarm.specs import Scenario, load_scenario
+
+    opts = options or PredictOptions()
+    logs = load_logs(logs)
+    if opts.windows is not None:
+        if len(opts.windows) != len(logs):
+            raise ValueError(f"PredictOptions.windows has {len(opts.windows)} entries for "
+                             f"{len(logs)} logs")
+    keys = log_keys(logs)
+    if _is_rig_fit(model):
+        return _predict_rig_fit(model, logs, keys, opts)
+    sc = getattr(model, "scenario", model)
+    sc = sc if isinstance(sc, Scenario) else load_scenario(sc)
+    if sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
+        return _predict_rig_scenario(sc, logs, keys, opts)
+    return _predict_scenario(sc, logs, keys, opts)
+
+
+def _windowed(logs, opts):
+    if opts.windows is None:
+        return list(logs)
+    return [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows)]
+
+
+def _predict_scenario(sc, logs, keys, opts) -> Prediction:
+    from flexarm.identification.time_domain.general import FitOptions, predict_scenario
+
+    fo = FitOptions(windows=list(opts.windows) if opts.windows is not None else None)
+    out = predict_scenario(sc, logs, fo, channels=list(opts.channels) if opts.channels else None)
+    # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
+    fp = dict(zip(keys, out["fit_percent"].values()))
+    traces = {}
+    for k, tr in zip(keys, out["trajectories"].values()):
+        t = np.asarray(tr["time"], float)
+        traces[k] = {"time": t - t[0] if t.size else t, "measured": tr["measured"],
+                     "simulated": tr["simulated"]}
+    pred = Prediction(sc.name, fp, traces, diverged={k: False for k in keys})
+    if opts.plots is not None:
+        pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
+    return pred
+
+
+def _predict_rig_scenario(sc, logs, keys, opts) -> Prediction:
+    from flexarm.identification.time_domain.validate import validate
+
+    fp, traces = {}, {}
+    for k, g in zip(keys, _windowed(logs, opts)):
+        out = validate(sc, [g], controller=opts.controller, traces=True)
+        fp[k] = next(iter(out["fit_percent"].values()))
+        traces[k] = out["traces"][0]
+    pred = Prediction(sc.name, fp, traces, diverged={k: False for k in keys})
+    if opts.plots is not None:
+        pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
+    return pred
+
+
+def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
+    from flexarm.identification.time_domain.fit import predict as rig_predict
+
+    ws = _windowed(logs, opts)
+    names = [g.name for g in ws]
+    groups = [ws] if len(set(names)) == len(names) else [[g] for g in ws]
+    fp, div, traces = {}, {}, {}
+    i = 0
+    for grp in groups:
+        out = rig_predict(res, grp, estimate_initial=opts.estimate_initial,
+                          controller=opts.controller)
+        for j, g in enumerate(out["logs"]):
+            k = keys[i]
+            fp[k] = out["fit_percent"][g.name]
+            div[k] = out["diverged"][g.name]
+            n = len(g)
+            tr = out["traj"]
+            sim = {"motor_angle": np.asarray(tr[0][j, :n]),
+                   "tip_deflection": np.asarray(tr[1][j, :n]),
+                   "command": np.asarray(tr[2][j, :n])}
+            meas = {c: g.signals[c] for c in ("motor_angle", "tip_deflection") if c in g.signals}
+            if "voltage" in g.signals:
+                meas["command"] = g.signals["voltage"]
+            traces[k] = {"time": g.time - g.time[0], "measured": meas, "simulated": sim}
+            i += 1
+    pred = Prediction("fitted rig", fp, traces, diverged=div,
+                      warnings=[f"{k}: the simulated loop diverged" for k, d in div.items() if d],
+                      notes=["initial state estimated from each log's own data"]
+                      if opts.estimate_initial else [])
+    if opts.plots is not None:
+        pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
+    return pred
+
+
+def overlay_figure(prediction: Prediction, key: str, fig=None):
+    """Measured vs simulated, one panel per signal, for log ``key`` of ``prediction``, drawn
+    on a :class:`matplotlib.figure.Figure` (a new one when ``fig`` is None; no pyplot, no
+    backend switched)."""
+    from matplotlib.figure import Figure
+
+    tr = prediction.traces[key]
+    chans = list(tr["simulated"])
+    fig = fig or Figure(figsize=(8, 2.2 * len(chans) + 0.6))
+    ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
+    for a, c in zip(ax, chans):
+        if c in tr["measured"]:
+            a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
+        a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
+        fpv = prediction.fit_percent.get(key, {}).get(c)
+        a.set_title(f"{c}: fit {fpv:.1f} %" if fpv is not None else c, fontsize=9)
+        a.grid(alpha=0.3)
+        a.legend(loc="best", fontsize=7)
+    ax[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{key} ({prediction.scenario})", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def write_overlays(prediction: Prediction, directory: str | Path, tag: str = "predict"
+                   ) -> list[Path]:
+    """:func:`overlay_figure` for every log, as PNGs in ``directory`` (written by
+    :func:`flexarm.io.write.save_figure`)."""
+    import re
+
+    from flexarm.io.write import save_figure
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, key in enumerate(prediction.traces):
+        fig = overlay_figure(prediction, key)
+        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", key)
+        p = out / f"{i:02d}_{stem}_{tag}.png"
+        save_figure(fig, p, overwrite=True, dpi=90)
+        paths.append(p)
+    return paths

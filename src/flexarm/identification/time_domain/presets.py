@@ -1,0 +1,113 @@
+"""Presets: what is special about a rig kind, for the one fit (:func:`flexarm.fit`).
+
+A preset is a function that builds the rig's model and returns it with its default free
+list, priors, bounds and options (and, for the rotary servo, the cheap start estimates'
+engine) as one :class:`Preset`:
+
+* :func:`two_link` — the current-driven two-link arm (``quanser-two-link``): the split's
+  free list (15 parameters: joint friction, link stiffness and damping, gauge gains,
+  torque constants, elbow inertia), data-sheet priors, bounds, segments of 3 s
+  (:mod:`flexarm.identification.time_domain.two_link`);
+* :func:`servo_rig` — the voltage-driven rotary servo from its data sheet (flexible, or
+  rigid with ``link_length`` None ... see there): its engine is the servo-rig pipeline
+  (:func:`flexarm.identification.time_domain.fit.fit`: hub → tip estimates, delay search,
+  global stage, continuation), called through its keyword interface;
+* :func:`for_scenario` — a built-in or user scenario: its ``[notes.fit]`` table, the
+  preset registered under its name (:data:`BUILTIN`), or the joints' friction
+  (:func:`~flexarm.identification.time_domain.general.friction_paths`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+__all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUILTIN"]
+
+
+@dataclass
+class Preset:
+    """A rig kind's model and defaults. ``engine``: ``"scenario"`` (the general engine on
+    ``scenario``) or ``"servo_rig"`` (the rotary servo pipeline on ``sheet``); ``options``:
+    the general engine's flat options (priors, bounds, ties, segments, channels)."""
+
+    name: str
+    scenario: Any
+    free: list[str]
+    options: Any = None
+    engine: str = "scenario"
+    sheet: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class DataSheet:
+    """A voltage- (or current-) driven rotary servo's data sheet (SI): K_g, K_m (V·s/rad or
+    N·m/A), R (Ω), link length (m; None: a rigid arm without a tip sensor), efficiencies,
+    amplifier limit (V)."""
+
+    drive: str = "voltage"
+    gear_ratio: float = 1.0
+    motor_constant: float | None = None
+    armature_resistance: float | None = None
+    link_length: float | None = None
+    gear_efficiency: float = 1.0
+    motor_efficiency: float = 1.0
+    voltage_limit: float = 10.0
+    current_limit: float | None = None
+
+    def keywords(self) -> dict:
+        return dict(vars(self))
+
+
+def two_link(friction: bool = True) -> Preset:
+    """The current-driven two-link arm: ``quanser-two-link`` with link 1's damping started
+    at 0.1 N·m·s/rad, the split's free list, priors, bounds and ties
+    (:func:`~flexarm.identification.time_domain.two_link.default_options`)."""
+    from flexarm.identification.time_domain import two_link as tl
+
+    opts = tl.default_options()
+    free = list(tl.FREE) if friction else [p for p in tl.FREE if "friction" not in p]
+    if not friction:
+        opts.priors = {k: v for k, v in opts.priors.items() if "friction" not in k}
+        opts.bounds = {k: v for k, v in opts.bounds.items() if "friction" not in k}
+    return Preset("quanser-two-link", tl.template(friction), free, opts)
+
+
+def servo_rig(sheet: DataSheet) -> Preset:
+    """The rotary servo from its data sheet; flexible with a ``link_length``. Its free list
+    is the pipeline's physical parameters (hub inertia, viscous and Coulomb friction,
+    breakaway excess, bias torque; for a flexible link its frequency, damping, inertia and
+    the gauge gain), its start estimates the pipeline's (hub → tip model, hub delay, link
+    frequency)."""
+    from flexarm.identification.time_domain.fit import FRICTION
+
+    free = ["hub_inertia", "viscous", *FRICTION]
+    if sheet.link_length is not None:
+        free += ["link_frequency", "link_damping", "link_inertia", "tip_gain"]
+    return Preset("rotary-servo", None, list(dict.fromkeys(free)), None, "servo_rig",
+                  sheet.keywords())
+
+
+#: Built-in scenario name → its preset.
+BUILTIN: dict[str, Callable[[], Preset]] = {"quanser-two-link": two_link}
+
+
+def for_scenario(scenario) -> Preset:
+    """The preset of a scenario: its ``[notes.fit]`` (free, priors), else the one registered
+    under its name, else its joints' friction levels (Coulomb, breakaway, viscous)."""
+    from flexarm.identification.time_domain.general import (FitOptions, friction_paths,
+                                                            scenario_fit_notes)
+
+    notes = scenario_fit_notes(scenario)
+    if notes.get("free"):
+        return Preset(scenario.name, scenario, list(notes["free"]),
+                      FitOptions(priors=dict(notes.get("priors", {}))))
+    if scenario.name in BUILTIN:
+        p = BUILTIN[scenario.name]()
+        # the registered preset's template is the built-in; a changed copy keeps its numbers
+        return Preset(p.name, scenario, p.free, p.options, p.engine, p.sheet)
+    if scenario.sampling is None:
+        raise ValueError(f"scenario {scenario.name!r} has no [sampling]: a continuous-time "
+                         "[regulation] law is simulated (flexarm.simulate), not fitted to "
+                         "logs; give a scenario with a sampled loop")
+    return Preset(scenario.name, scenario, friction_paths(scenario), FitOptions())

@@ -1,0 +1,126 @@
+"""One fit result for every rig fitted by the one engine: :class:`FitResult`.
+
+Values (SI, by scenario path), standard deviations (Newey–West HAC with the priors'
+information, :mod:`flexarm.identification.time_domain.uncertainty`), the correlation matrix
+of the log-parameters z_i = ln(p_i / p0_i), warnings (bounds, inseparable pairs, undetermined
+parameters), fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖) per log and signal of the whole-run
+prediction (:func:`flexarm.metrics.fit_percent`) and of the segments, the fitted scenario,
+and the optimiser's record.
+
+:meth:`FitResult.to_dict` is the ``--json`` document ``flexarm fit SCENARIO LOG...`` writes;
+:meth:`FitResult.from_dict` reads it back; :meth:`FitResult.write_scenario` writes the fitted
+scenario TOML (``--scenario-out``). Logs are keyed by :func:`flexarm.io.logs.log_keys`
+(paths relative to the logs' common folder, so logs of one name in different folders keep
+separate entries).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FitResult", "finite", "drop_none"]
+
+
+@dataclass
+class FitResult:
+    """The result of :func:`flexarm.fit` (see the module docstring).
+
+    ``free_source`` says where the free list came from (``"given"``, ``"preset
+    quanser-two-link"``, ``"scenario [notes.fit]"``); ``extras`` holds what a caller adds to
+    the document (``window_s``, ``held_out``, ``without_friction``), written by
+    :meth:`to_dict` as top-level keys."""
+
+    free: list[str]
+    params: dict[str, float]
+    template: dict[str, float]
+    std: dict[str, float]
+    correlation: np.ndarray
+    warnings: list[str]
+    fit_percent: dict[str, dict[str, float]]
+    segment_fit_percent: dict[str, dict[str, float]]
+    scenario: Any
+    converged: bool
+    message: str
+    nfev: int
+    cost: float
+    seconds: float
+    stages: dict[str, Any] = field(default_factory=dict)
+    prediction: Any = field(default_factory=dict)
+    free_source: str = "given"
+    plots: list[str] = field(default_factory=list)
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
+        from flexarm.io.write import write_toml
+
+        return write_toml(path, drop_none(self.scenario.model_dump()), overwrite=overwrite)
+
+    def to_dict(self) -> dict:
+        """The ``--json`` document (non-finite numbers, e.g. the std of an undetermined
+        parameter, as null)."""
+        d = {"free": self.free, "params": self.params, "template": self.template,
+             "std": self.std, "correlation": np.round(np.asarray(self.correlation, float),
+                                                      4).tolist(),
+             "warnings": self.warnings, "fit_percent": self.fit_percent,
+             "segment_fit_percent": self.segment_fit_percent,
+             "converged": self.converged, "message": self.message,
+             "nfev": self.nfev, "cost": self.cost,
+             "seconds": round(self.seconds, 2), "stages": self.stages,
+             "free_source": self.free_source, "plots": [str(p) for p in self.plots]}
+        d.update(self.extras)
+        return finite(d)
+
+    @classmethod
+    def from_dict(cls, d: dict, scenario: Any = None) -> "FitResult":
+        """A result read back from :meth:`to_dict`'s document (``scenario``: the fitted
+        scenario, e.g. ``load_scenario`` of the ``--scenario-out`` file; the document does
+        not hold it). Nulls read back as NaN (std) and the correlation as an array."""
+        known = {"free", "params", "template", "std", "correlation", "warnings",
+                 "fit_percent", "segment_fit_percent", "converged", "message", "nfev",
+                 "cost", "seconds", "stages", "free_source", "plots"}
+        missing = [k for k in ("free", "params", "std") if k not in d]
+        if missing:
+            raise ValueError(f"fit document: no {', '.join(missing)}: not a document written "
+                             "by FitResult.to_dict (flexarm fit SCENARIO LOG... --json)")
+        nan = float("nan")
+        corr = np.array([[nan if v is None else v for v in row]
+                         for row in d.get("correlation", [])], float)
+        return cls(list(d["free"]), dict(d["params"]), dict(d.get("template", {})),
+                   {k: nan if v is None else float(v) for k, v in d["std"].items()},
+                   corr, list(d.get("warnings", [])), dict(d.get("fit_percent", {})),
+                   dict(d.get("segment_fit_percent", {})), scenario,
+                   bool(d.get("converged", False)), str(d.get("message", "")),
+                   int(d.get("nfev", 0)), float(d.get("cost") or nan),
+                   float(d.get("seconds", 0.0)), dict(d.get("stages", {})), {},
+                   str(d.get("free_source", "given")), list(d.get("plots", [])),
+                   {k: v for k, v in d.items() if k not in known})
+
+
+def finite(x):
+    """JSON-ready: non-finite floats as None, recursively."""
+    if isinstance(x, dict):
+        return {k: finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [finite(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return None if not math.isfinite(float(x)) else float(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def drop_none(d):
+    """A model_dump without the unset (None) fields, which TOML cannot hold."""
+    if isinstance(d, dict):
+        return {k: drop_none(v) for k, v in d.items() if v is not None}
+    if isinstance(d, (list, tuple)):
+        return [drop_none(v) for v in d]
+    return d

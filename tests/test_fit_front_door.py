@@ -1,0 +1,98 @@
+"""The one fit's front door (flexarm.fit with presets), the one result (FitResult.to_dict /
+from_dict, the fitted scenario), the one prediction (flexarm.validate → Prediction) and the
+unique log keys, on a short synthetic log of the one-link two-mode arm of
+test_fit_scenario (a current drive with Coulomb friction, a sampled PD)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import flexarm
+from flexarm.identification.time_domain import presets
+from flexarm.identification.time_domain.options import (Cost, FitOptions, Local,
+                                                        PredictOptions, Shooting)
+from flexarm.identification.time_domain.result import FitResult
+from flexarm.identification.time_domain.synthetic import scenario_log
+from flexarm.io.logs import Log, log_keys, write_log
+from flexarm.specs.paths import scenario_with
+
+from test_fit_scenario import staircase, two_mode_link
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    """3 s of the two-mode link on a staircase, written twice under one file name in two
+    folders (the keys must keep them apart); the template's Coulomb level 30 % high."""
+    truth = two_mode_link()
+    truth = truth.model_copy(update={"simulation": truth.simulation.model_copy(
+        update={"duration": 3.0})})
+    t = np.arange(1501) * 0.002
+    log = scenario_log(truth, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)},
+                       seed=2)
+    d = tmp_path_factory.mktemp("runs")
+    for f in ("a", "b"):
+        (d / f).mkdir()
+    paths = [write_log(d / f / "run.csv", log.time, log.signals, required=("time",))
+             for f in ("a", "b")]
+    template = scenario_with(truth, {"arm.joints[0].friction.coulomb": 0.026})
+    return truth, template, paths
+
+
+def test_log_keys_keep_same_names_in_other_folders_apart(tmp_path):
+    a = Log(tmp_path / "u6" / "run.csv", np.arange(3.0), {})
+    b = Log(tmp_path / "u7" / "run.csv", np.arange(3.0), {})
+    c = Log(tmp_path / "u7" / "other.csv", np.arange(3.0), {})
+    assert log_keys([a, b, c]) == ["u6/run.csv", "u7/run.csv", "u7/other.csv"]
+    assert log_keys([b, c]) == ["run.csv", "other.csv"]  # one folder: the file names
+    assert log_keys([a, a]) == ["run.csv#0", "run.csv#1"]  # the same file twice: numbered
+
+
+def test_a_scenario_without_free_runs_its_preset_and_says_which():
+    two = presets.for_scenario(flexarm.load_scenario("quanser-two-link"))
+    assert two.free == presets.two_link().free and len(two.free) == 9  # 15 after [*]
+    assert two.options.priors["arm.hubs[1].inertia"] == 0.3
+    feliu = presets.for_scenario(flexarm.load_scenario("feliu-single-mass"))
+    assert feliu.free == ["arm.friction.coulomb", "arm.friction.static", "arm.motor.viscous"]
+    with pytest.raises(ValueError, match="deluca-two-link.*no \\[sampling\\]"):
+        presets.for_scenario(flexarm.load_scenario("deluca-two-link"))
+
+
+def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
+    """flexarm.fit(template, logs) with no free list: the preset (here the joint friction)
+    runs and the result says so; the Coulomb level comes back within 5 % of the truth
+    (the synthetic acceptance's tolerance; noise 1e-4 rad, 3 s); to_dict is JSON, from_dict
+    reads it back to the same document; the scenario writes and loads."""
+    truth, template, paths = short_run
+    res = flexarm.fit(template, paths, options=FitOptions(local=Local(max_nfev=20)))
+    assert isinstance(res, FitResult)
+    assert res.free_source == "preset two-mode-link"
+    assert res.free == ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous"]
+    assert res.params["arm.joints[0].friction.coulomb"] == pytest.approx(0.02, rel=0.05)
+    assert set(res.fit_percent) == {"a/run.csv", "b/run.csv"}
+    doc = json.loads(json.dumps(res.to_dict()))
+    assert FitResult.from_dict(doc).to_dict() == doc
+    out = res.write_scenario(tmp_path / "fitted.toml")
+    again = flexarm.load_scenario(out)
+    assert again.arm.joints[0].friction.coulomb == pytest.approx(
+        res.params["arm.joints[0].friction.coulomb"], rel=1e-12)
+    # the one prediction of the fitted model: fit % per log key and signal, the truth's
+    # own prediction as the reference (noise only)
+    pred = flexarm.validate(res, paths, PredictOptions(windows=[(0.0, 2.0), None]))
+    ref = flexarm.validate(truth, paths, PredictOptions(windows=[(0.0, 2.0), None]))
+    assert set(pred.fit_percent) == {"a/run.csv", "b/run.csv"}
+    for k in pred.fit_percent:
+        assert pred.fit_percent[k]["theta_1"] == pytest.approx(ref.fit_percent[k]["theta_1"],
+                                                               abs=1.0)
+    assert len(pred.traces["a/run.csv"]["time"]) == 1000  # [0, 2) s at 2 ms
+    fig = flexarm.identification.time_domain.overlay_figure(pred, "a/run.csv")
+    assert len(fig.axes) == len(pred.traces["a/run.csv"]["simulated"])
+
+
+def test_grouped_options_map_onto_the_engine():
+    flat = FitOptions(cost=Cost(residual_level=0.2), shooting=Shooting(segment=3.0),
+                      windows=[(0.0, 5.0)]).engine_options()
+    assert (flat.residual_level, flat.segment, flat.windows, flat.global_stage) == (
+        0.2, 3.0, [(0.0, 5.0)], False)
