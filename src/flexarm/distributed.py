@@ -276,17 +276,20 @@ def chunk_seed(seed: int, j: int) -> int:
 
 
 def map_chunks(fn: Callable, args: Sequence[tuple], client=None, *, retries: int = 1,
-               shared: Mapping[str, Any] | None = None) -> list:
+               shared: Mapping[str, Any] | None = None,
+               workers: Sequence[str] | None = None) -> list:
     """``[fn(*a, **shared) for a in args]``, in-process (``client`` None) or as one task per
-    item on the client's workers (``shared`` sent once to every worker), results in the
-    order of ``args``."""
+    item on the client's workers (``shared`` sent once to every worker; ``workers``: only
+    these worker addresses), results in the order of ``args``."""
     shared = dict(shared or {})
     if client is None:
         return [fn(*a, **shared) for a in args]
+    where = list(workers) if workers else None
     if shared:
-        fut = client.scatter(shared, broadcast=True, hash=False)
+        fut = client.scatter(shared, broadcast=True, hash=False, workers=where)
         shared = dict(fut)
-    futures = [client.submit(fn, *a, **shared, pure=False, retries=retries) for a in args]
+    futures = [client.submit(fn, *a, **shared, pure=False, retries=retries, workers=where,
+                             allow_other_workers=False) for a in args]
     return client.gather(futures)
 
 
@@ -294,12 +297,14 @@ def map_chunks(fn: Callable, args: Sequence[tuple], client=None, *, retries: int
 class ChunkOptions:
     """``chunk``: plants (rollouts) per chunk, one vmap batch on one worker; ``trajectories``:
     bring the trajectories back too (large: N × samples × signals); ``quantiles`` of the
-    per-plant reductions; ``retries`` of a chunk that raised."""
+    per-plant reductions; ``retries`` of a chunk that raised; ``workers``: run the chunks
+    on these worker addresses only (e.g. the GPU workers; None: any)."""
 
     chunk: int = 2000
     trajectories: bool = False
     quantiles: tuple[float, ...] = (0.05, 0.5, 0.95)
     retries: int = 1
+    workers: tuple[str, ...] | None = None
 
 
 # ------------------------------------------------------------------ simulate_batch in chunks
@@ -385,7 +390,7 @@ def simulate_chunked(loop, x0, references: dict[str, Any], n_samples: int, *, se
     x0 = np.asarray(x0, float)
     refs = {k: np.asarray(v) for k, v in references.items()}
     args = [(_loop_chunk(leaves, axes, treedef, a, b),) for a, b in bounds]
-    parts = map_chunks(_simulate_chunk, args, client, retries=o.retries,
+    parts = map_chunks(_simulate_chunk, args, client, retries=o.retries, workers=o.workers,
                        shared=dict(x0=x0, references=refs, n_samples=int(n_samples),
                                    seed=int(seed), in_axes=in_axes, batch_size=batch_size,
                                    reduce=reduce, trajectories=o.trajectories))
@@ -503,7 +508,8 @@ def compare_chunked(plants, designs: Mapping[str, Any] | None = None, *, client=
     src = plants if isinstance(plants, PlantSource) or len(plants) else _nominal_batch(plants)
     parts = map_chunks(_compare_chunk_any, [((src, j, a, b), j == 0 or o.trajectories)
                                             for j, (a, b) in enumerate(bounds)],
-                       client, retries=o.retries, shared=dict(designs=designs, kwargs=kwargs))
+                       client, retries=o.retries, workers=o.workers,
+                       shared=dict(designs=designs, kwargs=kwargs))
     per: dict[str, dict[str, np.ndarray]] = {}
     for name in parts[0][0]:
         per[name] = {k: np.concatenate([parts[0][0][name][k]] +
@@ -582,7 +588,7 @@ class ChunkedTuneCost:
         src = self.plants if len(self.plants) else _nominal_batch(self.plants)
         parts = map_chunks(_tune_chunk, [(self.token, src, j, a, b, np.asarray(p, float))
                                          for j, (a, b) in enumerate(self.bounds)],
-                           self.client, retries=self.o.retries,
+                           self.client, retries=self.o.retries, workers=self.o.workers,
                            shared=dict(scenario=self.scenario_, paths=self.paths,
                                        kwargs=self.kwargs))
         c = np.concatenate([parts[0][0]] + [q[0][1:] for q in parts[1:]])
