@@ -131,6 +131,27 @@ def test_compare_in_chunks_equals_one_batch():
             assert chunked.rows[name][s][k] == pytest.approx(v, rel=1e-12, nan_ok=True), (s, k)
 
 
+def test_tune_cost_in_chunks_equals_one_batch():
+    """The tuning cost over 4 plants in chunks of 2 (in-process) against one batch: the same
+    per-plant costs and quantile, 1e-12 relative."""
+    from flexarm.design import plants as pl
+    from flexarm.design.tune import TuneCost
+
+    sc = flexarm.load_scenario("rotary-flexible-link")
+    b = pl.from_paths(sc, SPREAD, 4, seed=1)
+    kw = dict(step=0.3, start=0.1, duration=0.8, band=0.02, quantile=0.9, weights={},
+              hub_error_max=1.0, count=None, seed=0)
+    paths = ["controller.k1", "controller.k3"]
+    one = TuneCost(sc, b, paths, **kw)
+    chunked = fd.ChunkedTuneCost(sc, b, paths, options=fd.ChunkOptions(chunk=2), **kw)
+    p = [1.1 * sc.controller.k1, sc.controller.k3]
+    J1, c1, _ = one.evaluate(p)
+    J2, c2, _ = chunked.evaluate(p)
+    assert chunked.base.size == one.base.size == 5
+    np.testing.assert_allclose(c2, c1, rtol=1e-12)
+    assert J2 == pytest.approx(J1, rel=1e-12)
+
+
 # ------------------------------------------------------------------ many fits
 def _manifest(tmp: Path) -> Path:
     from flexarm.identification.time_domain.synthetic import synthetic_log

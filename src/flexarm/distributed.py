@@ -649,7 +649,8 @@ def _window(text: str, where: str) -> tuple[float, float] | None:
     return a, b
 
 
-def _value(text: str):
+def option_value(text: str):
+    """A manifest option's value: true/false, none, an int, a float, else the text."""
     t = text.strip()
     if t.lower() in ("true", "false"):
         return t.lower() == "true"
@@ -742,7 +743,7 @@ def read_manifest(path: str | Path) -> list[FitRow]:
                 raise ManifestError(f"{_where(path, i, 'options')}: {item!r} is not "
                                     "key=value; e.g. seed=0;popsize=8")
             k, v = item.split("=", 1)
-            opts[k.strip()] = _value(v)
+            opts[k.strip()] = option_value(v)
         sess = None
         if r.get("sessions"):
             try:
@@ -930,13 +931,14 @@ def fit_many(rows: Sequence[FitRow] | str | Path, client=None, out: str | Path =
         from distributed import as_completed
 
         futs = {client.submit(_run_fit_task, r, str(out), figures=o.figures, fit=o.fit,
-                              pure=False, retries=o.retries, key=f"fit-{r.id}-{_time.time_ns()}"): r
-                for r in todo}
-        for fut in as_completed(futs):
-            r = futs[fut]
-            try:
-                done(fut.result())
-            except Exception as exc:  # noqa: BLE001 - the task itself failed (e.g. killed twice)
-                done({"id": r.id, "status": "failed", "seconds": None,
-                      "error": f"{type(exc).__name__}: {exc}".splitlines()[0]})
+                              pure=False, retries=o.retries,
+                              key=f"fit-{r.id}-{_time.time_ns()}"): r for r in todo}
+        with client.as_current():  # as_completed looks for the current client
+            for fut in as_completed(futs):
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # noqa: BLE001 - the task failed (e.g. killed 3 times)
+                    rec = {"id": futs[fut].id, "status": "failed", "seconds": None,
+                           "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+                done(rec)
     return [recs[i] for i in order]
