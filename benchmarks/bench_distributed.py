@@ -72,7 +72,8 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
         res[label] = {"wall_s": time.perf_counter() - t0, "startup_s": t1 - t0, "records": recs}
         print(f"fit-many {label}: {res[label]['wall_s']:.1f} s wall "
               f"(cluster start {t1 - t0:.1f} s); "
-              + ", ".join(f"{r['id']} {r['status']} {float(r['seconds'] or 0):.1f} s" for r in recs))
+              + ", ".join(f"{r['id']} {r['status']} {float(r['seconds'] or 0):.1f} s"
+                          for r in recs))
     a, b = (res[k]["records"] for k in res)
     worst = 0.0
     for ra, rb in zip(a, b):

@@ -197,6 +197,12 @@ def test_read_manifest_resolves_paths_and_names_bad_cells(tmp_path):
     assert rows[0].logs == (str((tmp_path / "logs" / "a.csv").resolve()),)
     assert rows[0].data_sheet["gear_ratio"] == 70.0 and rows[0].options["popsize"] == 4
     assert rows[0].options["estimates"] is False
+    general = tmp_path / "general.csv"
+    general.write_text("id,scenario,logs,free,window\n"
+                       "g,rotary-flexible-link,logs/a.csv,arm.friction.coulomb;arm.motor.inertia,0:1\n")
+    (g,) = fd.read_manifest(general)
+    assert g.scenario == "rotary-flexible-link" and g.preset is None and g.window == (0.0, 1.0)
+    assert g.free == ("arm.friction.coulomb", "arm.motor.inertia")
     bad = tmp_path / "bad.csv"
     bad.write_text("id,logs,gear_ratio\nx,logs/a.csv,seventy\n")
     with pytest.raises(fd.ManifestError, match=r"row 2, column 'gear_ratio' = 'seventy'"):

@@ -45,32 +45,22 @@ task rerun (Dask's ``allowed-failures``; ``retries=`` for exceptions).
 The manifest (CSV, one header line; ``#`` lines are comments; paths resolve against the
 manifest's folder; lists are ``;``-separated):
 
-=====================  =============================================================
-column                 meaning
-=====================  =============================================================
-``id``                 the row's name and output folder (letters, digits, ``._-``)
-``preset``             ``servo_rig``: the data-sheet fit of a single-link servo rig
-                       (:func:`flexarm.identification.time_domain.fit.fit`); empty
-                       with ``scenario``
-``scenario``           a scenario (TOML path or built-in name) for the general fit
-                       (:func:`~flexarm.identification.time_domain.general.fit_scenario`)
-``logs``               the run's log files (one session), ``a.txt;b.txt``
-``log_format``         the logger's log-format TOML (columns, units, gains)
-``window``             fit window ``START:STOP`` (s from each log's first sample)
-``validate_window``    held-out window ``START:STOP`` predicted after the fit (servo rig)
-``sessions``           servo rig: a session index per log, ``0;0;1`` (default one session)
-``free``               general fit: the free parameters (paths into the scenario)
-``drive``              servo rig data sheet: ``voltage`` or ``current``
-``gear_ratio``         K_g
-``motor_constant``     K_m (V·s/rad or N·m/A)
-``armature_resistance``  R (Ω)
-``link_length``        L (m)
-``voltage_limit``      amplifier limit (V)
-``computation_delay``  samples
-``tip_sign``           +1 or -1 when known
-``encoder_counts``     counts per revolution when known
-``options``            further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``)
-=====================  =============================================================
+* ``id``: the row's name and output folder (letters, digits, ``._-``);
+* ``preset``: ``servo_rig``, the data-sheet fit of a single-link servo rig
+  (:func:`flexarm.identification.time_domain.fit.fit`; the default without ``scenario``);
+* ``scenario``: a scenario (TOML path or built-in name) for the general fit
+  (:func:`~flexarm.identification.time_domain.general.fit_scenario`);
+* ``logs``: the run's log files (one session), ``a.txt;b.txt``;
+* ``log_format``: the logger's log-format TOML (columns, units, gains);
+* ``window``: the fit window ``START:STOP`` (s from each log's first sample);
+* ``validate_window``: a held-out window ``START:STOP`` predicted after the fit (servo rig);
+* ``sessions``: servo rig, a session index per log, ``0;0;1`` (default one session);
+* ``free``: general fit, the free parameters (paths into the scenario);
+* the servo rig's data sheet (SI): ``drive`` (``voltage`` or ``current``), ``gear_ratio``
+  K_g, ``motor_constant`` K_m (V·s/rad or N·m/A), ``armature_resistance`` R (Ω),
+  ``link_length`` L (m), ``voltage_limit`` (V), ``computation_delay`` (samples),
+  ``tip_sign`` (+1 or -1 when known), ``encoder_counts`` (per revolution when known);
+* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``).
 
 Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, error,
 n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
