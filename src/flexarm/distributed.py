@@ -821,14 +821,24 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
     try:
         res, extra = (fit or fit_row)(row)
         d = {**res.to_dict(), **extra}
-        res.write_scenario(folder / "fitted.toml", overwrite=True)
-        if figures and hasattr(res, "plots"):
-            res.plots(folder / "plots")
     except Exception as exc:  # noqa: BLE001 - a failing row is reported, others go on
-        msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        msg = _first_line(exc)
         (folder / "error.txt").write_text(msg + "\n", encoding="utf-8")
         return {"id": row.id, "status": "failed", "seconds": _time.perf_counter() - t0,
                 "error": msg}
+    # the fit stands even where its scenario or figures cannot be written (e.g. a rigid
+    # arm's servo-rig fit has no link for the scenario): a warning says so
+    notes = []
+    try:
+        res.write_scenario(folder / "fitted.toml", overwrite=True)
+    except Exception as exc:  # noqa: BLE001
+        notes.append(f"fitted scenario not written: {_first_line(exc)}")
+    if figures and hasattr(res, "plots"):
+        try:
+            res.plots(folder / "plots")
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"figures not written: {_first_line(exc)}")
+    d["warnings"] = list(d.get("warnings") or []) + notes
     seconds = _time.perf_counter() - t0
     d["flexarm_fit_many"] = {"status": "done", "row": dataclasses.asdict(row),
                              "seconds": seconds, "host": os.uname().nodename, "pid": os.getpid()}
@@ -837,6 +847,10 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
     os.replace(tmp, folder / "fit.json")  # atomic: fit.json present = row finished
     (folder / "error.txt").unlink(missing_ok=True)
     return summary_record(row.id, d)
+
+
+def _first_line(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0]
 
 
 def summary_record(rid: str, d: dict, status: str = "done") -> dict:
@@ -929,6 +943,6 @@ def fit_many(rows: Sequence[FitRow] | str | Path, client=None, out: str | Path =
                     rec = fut.result()
                 except Exception as exc:  # noqa: BLE001 - the task failed (e.g. killed 3 times)
                     rec = {"id": futs[fut].id, "status": "failed", "seconds": None,
-                           "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+                           "error": _first_line(exc)}
                 done(rec)
     return [recs[i] for i in order]
