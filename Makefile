@@ -26,11 +26,12 @@ $(STAMP): pyproject.toml $(LOCK)
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	@touch $(STAMP)
 
-# The test and demo environment: Python 3.11 on Linux x86_64, pyproject.toml + [test].
+# The test and demo environment: Python 3.11 on Linux x86_64, pyproject.toml + [test] +
+# [docs] + [distributed] (the docs site and Dask, so that the suite builds the docs and runs the distributed tests).
 lock:
 	$(PYTHON) -m venv $(LOCKVENV)
 	$(LOCKVENV)/bin/python -m pip install --quiet 'uv==$(UV_VERSION)'
-	$(LOCKVENV)/bin/uv pip compile pyproject.toml --extra test --extra docs \
+	$(LOCKVENV)/bin/uv pip compile pyproject.toml --extra test --extra docs --extra distributed \
 	    --python-version 3.11 --python-platform x86_64-unknown-linux-gnu \
 	    --generate-hashes --quiet --custom-compile-command 'make lock' $(LOCK_FLAGS) -o $(LOCK)
 

@@ -329,13 +329,22 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
             logged: str | None = "logged controller", step: float | None = None,
             start: float = 0.1, duration: float = 3.0, band: float = 0.02,
             tail: float = 0.25, count: float | None = None,
-            seed: int | None = None) -> Comparison:
+            seed: int | None = None, client: Any = None, chunks: Any = None) -> Comparison:
     """Compare the nominal scenario's own controller (named ``logged``; None leaves it
     out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
     encoder count (rad) where the scenario's hub sensor has none (it then also quantises
     the simulated encoder); ``seed``: the sensor noise's (default the scenario's
-    ``simulation.seed``, as :func:`flexarm.simulate` uses)."""
+    ``simulation.seed``, as :func:`flexarm.simulate` uses). With a Dask ``client`` (or
+    ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, or ``plants`` a
+    :class:`flexarm.distributed.PlantSource`) the plants run in chunks, one task each, and
+    only per-plant metrics come back (:func:`flexarm.distributed.compare_chunked`)."""
+    if client is not None or chunks is not None or not isinstance(plants, PlantBatch):
+        from flexarm.distributed import compare_chunked  # orchestration, entered on request
+
+        return compare_chunked(plants, designs, client=client, options=chunks, logged=logged,
+                               step=step, start=start, duration=duration, band=band,
+                               tail=tail, count=count, seed=seed)
     nominal = plants.nominal
     q = encoder_count(nominal, count)
     has_q = count is None

@@ -177,13 +177,16 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
                 maxfev: int = 150, simplex_step: float = 0.3, restarts: int = 1,
                 count: float | None = None,
                 seed: int = 0,
-                callback: Callable[[dict], Any] | None = None) -> Design:
+                callback: Callable[[dict], Any] | None = None,
+                client: Any = None, chunks: Any = None) -> Design:
     """Tune ``params`` (paths into ``scenario``, default K1..K4 and the friction
     compensation level) over ``plants`` (module doc); ``bounds``: path → (lo, hi) SI
     (default p0 ± 4|p0|, K1 in [p0/5, 5 p0], levels in [0, 5 c0]); ``callback`` receives
     {"nfev", "cost", "best", "params"} after every evaluation (progress). Returns a
     :class:`~flexarm.design.result.Design` whose scenario is ``scenario`` with the tuned
-    ``[controller]``."""
+    ``[controller]``. With a Dask ``client`` (or ``chunks``, a
+    :class:`flexarm.distributed.ChunkOptions`) each evaluation runs the plants in chunks,
+    one task each (:class:`flexarm.distributed.ChunkedTuneCost`)."""
     from scipy.optimize import minimize
 
     from flexarm.models.single_link import SingleLinkModel
@@ -231,9 +234,15 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         lo[i], hi[i] = a, b
     if len(plants) == 0:
         warn.append("no drawn plants: tuned on the nominal plant only")
-    cost = TuneCost(scenario, plants, params, step=step, start=start, duration=duration,
-                    band=band, quantile=quantile, weights=weights or {},
-                    hub_error_max=hub_error_max, count=count, seed=seed)
+    cost_kw = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
+                   weights=weights or {}, hub_error_max=hub_error_max, count=count, seed=seed)
+    if client is not None or chunks is not None:  # orchestration layer, entered on request
+        from flexarm.distributed import ChunkedTuneCost
+
+        cost = ChunkedTuneCost(scenario, plants, params, client=client, options=chunks,
+                               **cost_kw)
+    else:
+        cost = TuneCost(scenario, plants, params, **cost_kw)
     hist: list[float] = []
     best = {"cost": np.inf, "x": None}
     t0 = _time.perf_counter()

@@ -538,7 +538,8 @@ _init_jit = eqx.filter_jit(initial_carry)
 def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
                    *, seed: int = 0, in_axes: Any = 0,
                    batch_size: int | None = 512,
-                   check: bool = True) -> dict[str, np.ndarray]:
+                   check: bool = True, client: Any = None,
+                   chunks: Any = None) -> dict[str, np.ndarray]:
     """``vmap`` of :func:`simulate_loop` over the batched leaves of ``loop``.
 
     ``in_axes`` is a pytree prefix of ``loop`` telling which leaves carry a leading batch
@@ -548,8 +549,17 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     loop over equal chunks of at most that many rollouts, each chunk vectorised
     (``None``: all rollouts at once); the results do not depend on it. ``check=False``
     returns diverged rollouts (non-finite or beyond ±:data:`DIVERGENCE_LIMIT`) as they are
-    instead of raising :class:`SimulationDiverged` (a batch of uncertain plants flags them)."""
+    instead of raising :class:`SimulationDiverged` (a batch of uncertain plants flags them).
+    With a Dask ``client`` (or ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, for
+    the same chunks in-process) the rollouts run in chunks, one task each, and only
+    per-rollout reductions come back (a :class:`flexarm.distributed.BatchSummary`, the
+    trajectories only with ``chunks.trajectories``; :func:`flexarm.distributed.simulate_chunked`)."""
     check_filter_step(loop.sensors, loop.dt, loop.substeps)
+    if client is not None or chunks is not None:  # orchestration layer, entered on request
+        from flexarm.distributed import simulate_chunked
+
+        return simulate_chunked(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
+                                batch_size=batch_size, client=client, options=chunks)
     refs = _prepare_refs(references, n_samples)
     fn = _batched(in_axes, batch_size)
     xs, sig, meas, us, xf = fn(loop, np.asarray(x0, dtype=float), refs,

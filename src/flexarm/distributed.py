@@ -1,0 +1,948 @@
+"""Beyond one machine: many fits and very large plant batches on Dask (issue #27).
+
+The engine is ``dask.distributed`` (the optional extra ``pip install flexarm[distributed]``):
+the local machine by default, the same code on an existing scheduler (``tcp://host:8786``)
+or on a SLURM / PBS cluster through ``dask-jobqueue`` (docs/distributed.md). Without Dask
+everything runs in-process, and :func:`client_for` says so.
+
+**The client** (:func:`client_for`, :func:`session`): ``scheduler=None, workers=None``: no
+client, in-process; ``workers=N``: a ``LocalCluster`` of N *spawned* (not forked) worker
+processes, one thread each, on the loopback; ``scheduler="tcp://host:8786"``: that
+scheduler's workers. Every worker gets :class:`JaxWorkerSetup` (a worker plugin, so that a
+worker restarted after a crash gets it too): float64, JAX's persistent compilation cache in
+one folder per machine (:func:`compilation_cache_dir`: ``$FLEXARM_JAX_CACHE``, default
+``~/.cache/flexarm-jax``, the folder the CLI already uses), so a loop compiles once per
+machine and the other workers load it. A local cluster's workers start with the
+environment of :func:`worker_environment`: one XLA / BLAS thread each
+(``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``,
+``OMP_NUM_THREADS=1`` ...), and on a GPU no preallocation
+(``XLA_PYTHON_CLIENT_PREALLOCATE=false``, ``XLA_PYTHON_CLIENT_MEM_FRACTION`` when set in
+:class:`ClusterOptions`); the nanny restarts a worker above its ``memory_limit``
+(``"auto"``: the machine's memory / workers).
+
+**Large plant batches** (:func:`simulate_chunked`, :func:`compare_chunked`,
+:class:`ChunkedTuneCost`; entered from :func:`flexarm.sim.sampled.simulate_batch`,
+:func:`flexarm.design.compare.compare` and :func:`flexarm.design.tune.design_tune` with
+``client=``): the N plants are split into chunks of ``ChunkOptions.chunk`` plants, fixed by
+N and the chunk size only (never by the number of workers); each chunk is one ``vmap``
+batch on one worker, and only reductions come back (per-plant metrics, their quantiles,
+the unstable count; trajectories only with ``ChunkOptions.trajectories``): 10^6 plants
+never gather 10^6 trajectories. Seeds per chunk: chunk j of a lazily drawn batch
+(:class:`PlantSource`) draws its plants with the seed :func:`chunk_seed` (seed, j)
+(``numpy.random.SeedSequence([seed, j])``), the sensor noise keeps the batch's seed (one
+noise sequence shared by every rollout, as in :func:`~flexarm.sim.sampled.simulate_batch`).
+So the result is the same, bit for bit, in-process (``client=None``) and on 1 or 2 or
+any number of workers: the same chunks run the same compiled code on the same machine.
+
+**Many fits** (:func:`read_manifest`, :func:`fit_many`): one fit per manifest row, each fit
+one task; under ``DIR/<row id>/``: ``fit.json`` (the fit's JSON, written last, atomically:
+its presence marks the row finished), ``fitted.toml`` (the fitted scenario), ``plots/``
+(overlay figures); and ``DIR/summary.csv``, one line per row. A rerun skips finished rows
+and retries failed ones; a failing row is reported (``status = failed``, ``error``) and
+does not stop the others; a worker killed under a task is replaced by its nanny and the
+task rerun (Dask's ``allowed-failures``; ``retries=`` for exceptions).
+
+The manifest (CSV, one header line; ``#`` lines are comments; paths resolve against the
+manifest's folder; lists are ``;``-separated):
+
+* ``id``: the row's name and output folder (letters, digits, ``._-``);
+* ``preset``: ``servo_rig``, the data-sheet fit of a single-link servo rig
+  (:func:`flexarm.identification.time_domain.fit.fit`; the default without ``scenario``);
+* ``scenario``: a scenario (TOML path or built-in name) for the general fit
+  (:func:`~flexarm.identification.time_domain.general.fit_scenario`);
+* ``logs``: the run's log files (one session), ``a.txt;b.txt``;
+* ``log_format``: the logger's log-format TOML (columns, units, gains);
+* ``window``: the fit window ``START:STOP`` (s from each log's first sample);
+* ``validate_window``: a held-out window ``START:STOP`` predicted after the fit (servo rig);
+* ``sessions``: servo rig, a session index per log, ``0;0;1`` (default one session);
+* ``free``: general fit, the free parameters (paths into the scenario);
+* the servo rig's data sheet (SI): ``drive`` (``voltage`` or ``current``), ``gear_ratio``
+  K_g, ``motor_constant`` K_m (V·s/rad or N·m/A), ``armature_resistance`` R (Ω),
+  ``link_length`` L (m), ``voltage_limit`` (V), ``computation_delay`` (samples),
+  ``tip_sign`` (+1 or -1 when known), ``encoder_counts`` (per revolution when known);
+* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``).
+
+Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, error,
+n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
+signal ``fit%:<log>:<signal>`` (and ``held-out%:<log>:<signal>`` with a validate window).
+
+Layering: this module is an orchestration layer above design and identification (beside
+the CLI); the hooks in ``sim.sampled``, ``design.compare`` and ``design.tune`` import it
+only inside the function, when a client is given.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import functools
+import json
+import math
+import os
+import re
+import time as _time
+import warnings as _warnings
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["client_for", "session", "close", "have_dask", "ClusterOptions", "ChunkOptions",
+           "JaxWorkerSetup", "compilation_cache_dir", "worker_environment", "chunk_bounds",
+           "chunk_seed", "map_chunks", "simulate_chunked", "BatchSummary", "PlantSource",
+           "compare_chunked", "ChunkedTuneCost", "FitRow", "read_manifest", "fit_row",
+           "fit_many", "FitManyOptions", "ManifestError"]
+
+
+# =============================================================================== the client
+def have_dask() -> bool:
+    """True when ``dask.distributed`` can be imported."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+NO_DASK = ("dask.distributed is not installed (pip install 'flexarm[distributed]'): "
+           "running in-process")
+
+
+def compilation_cache_dir() -> Path:
+    """JAX's persistent compilation cache folder, one per machine: ``$FLEXARM_JAX_CACHE``,
+    default ``~/.cache/flexarm-jax`` (the CLI's)."""
+    return Path(os.environ.get("FLEXARM_JAX_CACHE", str(Path.home() / ".cache" / "flexarm-jax")))
+
+
+def enable_compilation_cache(cache_dir: str | Path | None = None,
+                             min_compile_seconds: float = 0.5) -> None:
+    """Point this process's JAX at the persistent compilation cache (compilations longer
+    than ``min_compile_seconds`` are stored); float64 on."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    try:
+        jax.config.update("jax_compilation_cache_dir", str(cache_dir or compilation_cache_dir()))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_seconds)
+    except Exception:  # an old jax without the options: run uncached
+        pass
+
+
+@dataclass(frozen=True)
+class ClusterOptions:
+    """How a local cluster's workers run (:func:`client_for`).
+
+    ``threads_per_worker``: 1 (a JAX loop is one thread; more workers, not threads);
+    ``memory_limit``: per worker, bytes or ``"4GiB"``, ``"auto"`` = machine memory /
+    workers (the nanny restarts a worker above 95 %); ``host``: the address the scheduler
+    and workers listen on (loopback by default: nothing leaves the machine);
+    ``dashboard_address``: None = no dashboard (``":8787"`` to get one); ``cache_dir``: the
+    compilation cache (default :func:`compilation_cache_dir`); ``xla_memory_fraction``:
+    on a GPU, each worker's share of the device memory (``XLA_PYTHON_CLIENT_MEM_FRACTION``;
+    None: JAX's default without preallocation)."""
+
+    threads_per_worker: int = 1
+    memory_limit: str | int | float = "auto"
+    host: str = "127.0.0.1"
+    dashboard_address: str | None = None
+    cache_dir: str | None = None
+    xla_memory_fraction: float | None = None
+
+
+def worker_environment(options: ClusterOptions | None = None) -> dict[str, str]:
+    """The environment a local cluster's worker processes start with (module doc)."""
+    o = options or ClusterOptions()
+    threads = str(max(1, int(o.threads_per_worker)))
+    env = {"JAX_ENABLE_X64": "1",
+           "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
+                         f" intra_op_parallelism_threads={threads}").strip(),
+           "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads,
+           "MKL_NUM_THREADS": threads,
+           "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
+           "FLEXARM_JAX_CACHE": str(o.cache_dir or compilation_cache_dir()),
+           "MPLBACKEND": "Agg"}
+    if o.xla_memory_fraction is not None:
+        env["XLA_PYTHON_CLIENT_MEM_FRACTION"] = f"{float(o.xla_memory_fraction):g}"
+    return env
+
+
+try:  # the plugin's base class, where dask is installed
+    from distributed.diagnostics.plugin import WorkerPlugin as _PluginBase
+except ImportError:  # pragma: no cover - without dask no worker runs it
+    _PluginBase = object
+
+
+class JaxWorkerSetup(_PluginBase):
+    """A Dask worker plugin: float64 and the shared persistent compilation cache in every
+    worker (also one restarted after a crash, or one of an existing scheduler)."""
+
+    name = "flexarm-jax-setup"
+
+    def __init__(self, cache_dir: str | None = None):
+        self.cache_dir = str(cache_dir or compilation_cache_dir())
+
+    def setup(self, worker=None):
+        os.environ.setdefault("MPLBACKEND", "Agg")
+        enable_compilation_cache(self.cache_dir)
+
+
+def client_for(scheduler: str | None = None, workers: int | None = None,
+               options: ClusterOptions | None = None):
+    """A Dask client, or None (in-process).
+
+    ``scheduler`` and ``workers`` both None: None, no Dask needed. ``workers=N``: a
+    ``LocalCluster`` of N spawned worker processes (:class:`ClusterOptions`; :func:`close`
+    closes both). ``scheduler="tcp://host:8786"``: a client of that scheduler. Without Dask
+    installed a warning says so and None is returned (the caller runs in-process)."""
+    if scheduler is not None and workers is not None:
+        raise ValueError(f"scheduler = {scheduler!r} and workers = {workers}: give one (an "
+                         "existing scheduler's address, or the number of local workers)")
+    if scheduler is None and workers is None:
+        return None
+    if not have_dask():
+        _warnings.warn(NO_DASK, RuntimeWarning, stacklevel=2)
+        return None
+    import dask
+    from distributed import Client, LocalCluster
+
+    o = options or ClusterOptions()
+    if workers is not None:
+        if int(workers) < 1:
+            raise ValueError(f"workers = {workers}: give 1 or more local worker processes")
+        with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
+                              "distributed.scheduler.allowed-failures": 3}):
+            cluster = LocalCluster(n_workers=int(workers),
+                                   threads_per_worker=o.threads_per_worker, processes=True,
+                                   host=o.host, dashboard_address=o.dashboard_address,
+                                   memory_limit=o.memory_limit, env=worker_environment(o))
+        client = Client(cluster, set_as_default=False)
+        client._flexarm_owns_cluster = True  # close() closes the cluster too
+    else:
+        if not re.match(r"^[a-z]+://", str(scheduler)):
+            raise ValueError(f"scheduler = {scheduler!r}: give the scheduler's address with "
+                             "its protocol, e.g. tcp://host:8786")
+        client = Client(scheduler, set_as_default=False)
+    client.register_plugin(JaxWorkerSetup(o.cache_dir))
+    return client
+
+
+def close(client) -> None:
+    """Close a client of :func:`client_for` and the local cluster it started (None: no-op)."""
+    if client is None:
+        return
+    cluster = getattr(client, "cluster", None) if getattr(
+        client, "_flexarm_owns_cluster", False) else None
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+@contextmanager
+def session(scheduler: str | None = None, workers: int | None = None,
+            options: ClusterOptions | None = None) -> Iterator[Any]:
+    """:func:`client_for` as a context: yields the client (or None) and closes it (and the
+    local cluster it started) on exit."""
+    client = client_for(scheduler, workers, options)
+    try:
+        yield client
+    finally:
+        close(client)
+
+
+# =============================================================================== chunks
+def chunk_bounds(n: int, chunk: int) -> list[tuple[int, int]]:
+    """[a, b) of each chunk of at most ``chunk`` of n items, in order."""
+    if chunk < 1:
+        raise ValueError(f"chunk = {chunk}: give a chunk size >= 1")
+    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+
+
+def chunk_seed(seed: int, j: int) -> int:
+    """The seed of chunk j of a batch drawn with ``seed``: ``SeedSequence([seed, j])``'s
+    first 32-bit word (independent streams per chunk, the same on every worker)."""
+    return int(np.random.SeedSequence([int(seed), int(j)]).generate_state(1)[0])
+
+
+def map_chunks(fn: Callable, args: Sequence[tuple], client=None, *, retries: int = 1,
+               shared: Mapping[str, Any] | None = None,
+               workers: Sequence[str] | None = None) -> list:
+    """``[fn(*a, **shared) for a in args]``, in-process (``client`` None) or as one task per
+    item on the client's workers (``shared`` sent once to every worker; ``workers``: only
+    these worker addresses), results in the order of ``args``."""
+    shared = dict(shared or {})
+    if client is None:
+        return [fn(*a, **shared) for a in args]
+    where = list(workers) if workers else None
+    if shared:
+        fut = client.scatter(shared, broadcast=True, hash=False, workers=where)
+        shared = dict(fut)
+    futures = [client.submit(fn, *a, **shared, pure=False, retries=retries, workers=where,
+                             allow_other_workers=False) for a in args]
+    return client.gather(futures)
+
+
+@dataclass(frozen=True)
+class ChunkOptions:
+    """``chunk``: plants (rollouts) per chunk, one vmap batch on one worker; ``trajectories``:
+    bring the trajectories back too (large: N × samples × signals); ``quantiles`` of the
+    per-plant reductions; ``retries`` of a chunk that raised; ``workers``: run the chunks
+    on these worker addresses only (e.g. the GPU workers; None: any)."""
+
+    chunk: int = 2000
+    trajectories: bool = False
+    quantiles: tuple[float, ...] = (0.05, 0.5, 0.95)
+    retries: int = 1
+    workers: tuple[str, ...] | None = None
+
+
+# ------------------------------------------------------------------ simulate_batch in chunks
+@dataclass
+class BatchSummary:
+    """What comes back from a chunked batch: ``per_rollout`` name → (N, ...) reductions
+    (:func:`rollout_summary` or the caller's ``reduce``), ``quantiles`` name → {q: value
+    over the finite rollouts}, ``unstable`` (rollouts that diverged), ``chunks``, and the
+    trajectories (as :func:`~flexarm.sim.sampled.simulate_batch` returns them) only when
+    asked for."""
+
+    per_rollout: dict[str, np.ndarray]
+    quantiles: dict[str, dict[float, np.ndarray]]
+    unstable: int
+    chunks: int
+    trajectories: dict[str, Any] | None = None
+
+
+def rollout_summary(out: dict) -> dict[str, np.ndarray]:
+    """Per rollout of a batch's output: ``diverged`` (non-finite or beyond ±1e6 SI),
+    ``final_signals`` (B, p), ``peak_abs_signals`` (B, p), ``rms_signals`` (B, p),
+    ``peak_abs_command`` (B, m)."""
+    from flexarm.sim.sampled import DIVERGENCE_LIMIT
+
+    s = np.asarray(out["signals"])
+    u = np.asarray(out["command"])
+    with np.errstate(invalid="ignore", over="ignore"):
+        return {"diverged": ~np.all(np.isfinite(s) & (np.abs(s) <= DIVERGENCE_LIMIT),
+                                    axis=(1, 2)),
+                "final_signals": s[:, -1, :], "peak_abs_signals": np.max(np.abs(s), axis=1),
+                "rms_signals": np.sqrt(np.mean(s ** 2, axis=1)),
+                "peak_abs_command": np.max(np.abs(u), axis=1)}
+
+
+def _batched_leaves(loop, in_axes):
+    """The loop's leaves, each one's batch axis (None: shared), the tree and the size."""
+    import equinox as eqx
+    import jax
+
+    is_none = lambda x: x is None  # noqa: E731
+    leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
+    axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
+    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
+    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes) if a is not None}
+    if len(sizes) != 1:
+        raise ValueError(f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
+                         if sizes else "in_axes batches no leaf of the loop")
+    return leaves, axes, treedef, sizes.pop()
+
+
+def _loop_chunk(leaves, axes, treedef, a: int, b: int):
+    import jax
+
+    return jax.tree.unflatten(treedef, [x if ax is None else np.take(np.asarray(x),
+                                                                     np.arange(a, b), axis=ax)
+                                        for x, ax in zip(leaves, axes)])
+
+
+def _simulate_chunk(loop, x0, references, n_samples, seed, in_axes, batch_size, reduce,
+                    trajectories):
+    from flexarm.sim.sampled import simulate_batch
+
+    out = simulate_batch(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
+                         batch_size=batch_size, check=False)
+    red = (reduce or rollout_summary)(out)
+    return red, (out if trajectories else None)
+
+
+def simulate_chunked(loop, x0, references: dict[str, Any], n_samples: int, *, seed: int = 0,
+                     in_axes: Any = 0, batch_size: int | None = 512, client=None,
+                     options: ChunkOptions | None = None,
+                     reduce: Callable[[dict], dict[str, np.ndarray]] | None = None
+                     ) -> BatchSummary:
+    """:func:`~flexarm.sim.sampled.simulate_batch` over chunks of ``options.chunk``
+    rollouts (the batched leaves of ``loop`` sliced), each chunk a task, only
+    ``reduce(out)`` (default :func:`rollout_summary`; a picklable function returning
+    per-rollout arrays) coming back; the sensor noise's ``seed`` is the batch's in every
+    chunk, so the result equals the unchunked batch's reductions. Diverged rollouts are
+    counted, not raised."""
+    o = options or ChunkOptions()
+    leaves, axes, treedef, size = _batched_leaves(loop, in_axes)
+    bounds = chunk_bounds(size, o.chunk)
+    x0 = np.asarray(x0, float)
+    refs = {k: np.asarray(v) for k, v in references.items()}
+    args = [(_loop_chunk(leaves, axes, treedef, a, b),) for a, b in bounds]
+    parts = map_chunks(_simulate_chunk, args, client, retries=o.retries, workers=o.workers,
+                       shared=dict(x0=x0, references=refs, n_samples=int(n_samples),
+                                   seed=int(seed), in_axes=in_axes, batch_size=batch_size,
+                                   reduce=reduce, trajectories=o.trajectories))
+    per = {k: np.concatenate([p[0][k] for p in parts]) for k in parts[0][0]}
+    traj = None
+    if o.trajectories:
+        outs = [p[1] for p in parts]
+        traj = {k: np.concatenate([d[k] for d in outs]) for k in outs[0] if k != "references"}
+        traj["references"] = outs[0]["references"]
+    bad = np.asarray(per.get("diverged", np.zeros(size, bool)), bool)
+    return BatchSummary(per, _quantiles(per, bad, o.quantiles), int(bad.sum()), len(bounds),
+                        traj)
+
+
+def _quantiles(per: dict[str, np.ndarray], bad: np.ndarray,
+               qs: Sequence[float]) -> dict[str, dict[float, np.ndarray]]:
+    out = {}
+    for k, v in per.items():
+        v = np.asarray(v)
+        if k == "diverged" or v.dtype == bool or v.ndim == 0:
+            continue
+        good = v[~bad] if v.shape[0] == bad.shape[0] else v
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("ignore", RuntimeWarning)
+            out[k] = {float(q): (np.nanquantile(good.astype(float), q, axis=0) if good.size
+                                 else np.full(v.shape[1:], np.nan)) for q in qs}
+    return out
+
+
+# ------------------------------------------------------------------ plants, lazily drawn
+@dataclass(frozen=True, eq=False)
+class PlantSource:
+    """N plants drawn chunk by chunk where they run: chunk j (plants [a, b)) is
+    ``draw(b - a, seed=chunk_seed(seed, j))`` (a :class:`~flexarm.design.plants.PlantBatch`),
+    so 10^6 plants never exist on the client. ``draw`` must be picklable (a module-level
+    function or a ``functools.partial`` of one): :meth:`from_fit` and :meth:`from_paths`
+    build it."""
+
+    draw: Callable[..., Any]
+    n: int
+    seed: int = 0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_fit(cls, result, n: int, *, seed: int = 0) -> "PlantSource":
+        """Plants drawn from a servo-rig fit's covariance
+        (:func:`flexarm.design.plants.from_fit`), chunk by chunk."""
+        from flexarm.design.plants import from_fit
+
+        return cls(functools.partial(from_fit, result), int(n), int(seed),
+                   {"source": "flexarm.design.plants.from_fit, seeds per chunk"})
+
+    @classmethod
+    def from_paths(cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *,
+                   seed: int = 0) -> "PlantSource":
+        """Independent draws (:func:`flexarm.design.plants.from_paths`), chunk by chunk."""
+        from flexarm.design.plants import from_paths
+
+        return cls(functools.partial(from_paths, scenario, dict(spread)), int(n), int(seed),
+                   {"source": "flexarm.design.plants.from_paths, seeds per chunk"})
+
+    def __len__(self) -> int:
+        return self.n
+
+    @functools.cached_property
+    def nominal(self):
+        """The nominal (fitted or given) scenario."""
+        return self.draw(1, seed=chunk_seed(self.seed, 0)).nominal
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.draw(1, seed=chunk_seed(self.seed, 0)).warnings)
+
+
+def _chunk_plants(plants, j: int, a: int, b: int):
+    """Chunk j's plants as a PlantBatch (the nominal plant and plants [a, b))."""
+    if isinstance(plants, PlantSource):
+        return plants.draw(b - a, seed=chunk_seed(plants.seed, j))
+    vals = {k: np.asarray(v)[a:b] for k, v in plants.values.items()}
+    coords = np.asarray(plants.coordinates)
+    return dataclasses.replace(plants, scenarios=list(plants.scenarios[a:b]), values=vals,
+                               coordinates=coords[a:b] if coords.shape[0] else coords)
+
+
+def _nominal_batch(plants):
+    """The nominal plant alone (the source's first draw supplies it)."""
+    from flexarm.design.plants import PlantBatch
+
+    return PlantBatch.nominal_only(plants.nominal)
+
+
+def _compare_chunk(plants, j, a, b, *, designs, kwargs, with_traces):
+    from flexarm.design.compare import compare
+
+    cmp = compare(_chunk_plants(plants, j, a, b), designs, **kwargs)
+    return ({name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
+            cmp.traces if with_traces else None, cmp.settings, list(cmp.warnings))
+
+
+def compare_chunked(plants, designs: Mapping[str, Any] | None = None, *, client=None,
+                    options: ChunkOptions | None = None, **kwargs):
+    """:func:`flexarm.design.compare.compare` over chunks of the plants (a drawn
+    :class:`~flexarm.design.plants.PlantBatch` sliced, or a :class:`PlantSource` drawn per
+    chunk), each chunk a task on the client's workers (None: in-process). Each chunk runs
+    the comparison on its plants and the nominal one and returns only the per-plant
+    metrics; the rows (nominal, median, worst, unstable, limit) are summarised over all
+    plants here, the same as one batch would give. The figures' 5–95 % tip band is the
+    first chunk's plants' (a sample of ``options.chunk`` plants), unless
+    ``options.trajectories`` (then each chunk's traces come back; the band stays the first
+    chunk's). ``kwargs``: compare's keywords."""
+    from flexarm.design.compare import Comparison, summarise
+
+    o = options or ChunkOptions()
+    bounds = chunk_bounds(len(plants), o.chunk) or [(0, 0)]
+    src = plants if isinstance(plants, PlantSource) or len(plants) else _nominal_batch(plants)
+    parts = map_chunks(_compare_chunk_any, [((src, j, a, b), j == 0 or o.trajectories)
+                                            for j, (a, b) in enumerate(bounds)],
+                       client, retries=o.retries, workers=o.workers,
+                       shared=dict(designs=designs, kwargs=kwargs))
+    per: dict[str, dict[str, np.ndarray]] = {}
+    for name in parts[0][0]:
+        per[name] = {k: np.concatenate([parts[0][0][name][k]] +
+                                       [p[0][name][k][1:] for p in parts[1:]])
+                     for k in parts[0][0][name]}
+    settings = dict(parts[0][2])
+    limit = float(settings["limit_V"])
+    rows = {name: summarise(m, limit) for name, m in per.items()}
+    settings.update(n_plants=len(plants), seed=int(getattr(plants, "seed", 0)),
+                    chunks=len(bounds), chunk=o.chunk,
+                    plants={**getattr(plants, "info", {}), "n": len(plants),
+                            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants"},
+                    band_plants="the first chunk's plants")
+    warn = list(dict.fromkeys(w for p in parts for w in p[3]))
+    return Comparison(rows, per, parts[0][1], settings, warn)
+
+
+def _compare_chunk_any(arg, with_traces, *, designs, kwargs):
+    return _compare_chunk(*arg, designs=designs, kwargs=kwargs, with_traces=with_traces)
+
+
+# ------------------------------------------------------------------ tuning over chunks
+_WORKER_COSTS: dict = {}
+
+
+def _tune_chunk(token, plants, j, a, b, p, *, scenario, paths, kwargs):
+    """Chunk j's per-plant costs at parameters p; the chunk's prepared plants are kept in
+    the worker between evaluations (keyed by ``token`` and j)."""
+    from flexarm.design.tune import TuneCost
+
+    key = (token, j)
+    cost = _WORKER_COSTS.get(key)
+    if cost is None:
+        cost = TuneCost(scenario, _chunk_plants(plants, j, a, b), paths, **kwargs)
+        _WORKER_COSTS.clear() if len(_WORKER_COSTS) > 64 else None
+        _WORKER_COSTS[key] = cost
+    _, c, m = cost.evaluate(p)
+    return c, {k: np.asarray(v) for k, v in m.items()}
+
+
+class ChunkedTuneCost:
+    """:class:`flexarm.design.tune.TuneCost` with the plants in chunks on a Dask client:
+    each evaluation is one task per chunk (its plants prepared once per worker and kept),
+    and the per-plant costs come back; the design cost is their ``quantile`` over the
+    nominal plant and all drawn plants, as with one batch."""
+
+    def __init__(self, scenario, plants, paths: Sequence[str], *, client=None,
+                 options: ChunkOptions | None = None, **kwargs):
+        from flexarm.design.tune import TuneCost
+
+        self.o = options or ChunkOptions()
+        self.client = client
+        self.nominal = TuneCost(scenario, _nominal_batch(plants), paths, **kwargs)
+        self.plants = plants
+        self.bounds = chunk_bounds(len(plants), self.o.chunk) or [(0, 0)]
+        self.token = f"{id(self)}-{_time.time_ns()}"
+        self.scenario_ = scenario
+        self.paths = list(paths)
+        self.kwargs = kwargs
+        self.quantile = kwargs["quantile"]
+        for k in ("q", "scn", "limit", "length", "delta", "horizon", "w", "names"):
+            setattr(self, k, getattr(self.nominal, k))
+        self.size = len(plants) + 1
+        self.nfev, self.seconds = 0, 0.0
+
+    @property
+    def base(self):  # the batch size, as TuneCost.base.size reports it
+        return dataclasses.make_dataclass("B", [("size", int)])(self.size)
+
+    def scenario(self, p):
+        return self.nominal.scenario(p)
+
+    def evaluate(self, p) -> tuple[float, np.ndarray, dict]:
+        t0 = _time.perf_counter()
+        self.scenario(p)  # a spec the schema refuses raises here, on the client
+        src = self.plants if len(self.plants) else _nominal_batch(self.plants)
+        parts = map_chunks(_tune_chunk, [(self.token, src, j, a, b, np.asarray(p, float))
+                                         for j, (a, b) in enumerate(self.bounds)],
+                           self.client, retries=self.o.retries, workers=self.o.workers,
+                           shared=dict(scenario=self.scenario_, paths=self.paths,
+                                       kwargs=self.kwargs))
+        c = np.concatenate([parts[0][0]] + [q[0][1:] for q in parts[1:]])
+        m = {k: np.concatenate([parts[0][1][k]] + [q[1][k][1:] for q in parts[1:]])
+             for k in parts[0][1]}
+        self.nfev += 1
+        self.seconds += _time.perf_counter() - t0
+        return float(np.quantile(c, self.quantile)), c, m
+
+
+# =============================================================================== many fits
+class ManifestError(ValueError):
+    """A manifest file or row that cannot be read (the message names the file, the row,
+    the column, the value and the fix)."""
+
+
+#: the manifest's columns (module doc), in order
+COLUMNS = ("id", "preset", "scenario", "logs", "log_format", "window", "validate_window",
+           "sessions", "free", "drive", "gear_ratio", "motor_constant", "armature_resistance",
+           "link_length", "voltage_limit", "computation_delay", "tip_sign", "encoder_counts",
+           "options")
+_FLOAT = ("gear_ratio", "motor_constant", "armature_resistance", "link_length", "voltage_limit")
+_INT = ("computation_delay", "tip_sign", "encoder_counts")
+PRESETS = ("servo_rig",)
+
+
+@dataclass(frozen=True)
+class FitRow:
+    """One manifest row, paths absolute (module doc for the columns)."""
+
+    id: str
+    logs: tuple[str, ...]
+    preset: str | None = None
+    scenario: str | None = None
+    log_format: str | None = None
+    window: tuple[float, float] | None = None
+    validate_window: tuple[float, float] | None = None
+    sessions: tuple[int, ...] | None = None
+    free: tuple[str, ...] | None = None
+    data_sheet: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+def _where(path, line, col) -> str:
+    return f"{path}: row {line}, column {col!r}"
+
+
+def _window(text: str, where: str) -> tuple[float, float] | None:
+    if not text:
+        return None
+    try:
+        a, b = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise ManifestError(f"{where} = {text!r}: expected START:STOP in seconds from the "
+                            "log's first sample, e.g. 0:5") from None
+    if not (b > a >= 0):
+        raise ManifestError(f"{where} = {text!r}: need 0 <= START < STOP (s)")
+    return a, b
+
+
+def option_value(text: str):
+    """A manifest option's value: true/false, none, an int, a float, else the text."""
+    t = text.strip()
+    if t.lower() in ("true", "false"):
+        return t.lower() == "true"
+    if t.lower() in ("none", "null"):
+        return None
+    for cast in (int, float):
+        try:
+            return cast(t)
+        except ValueError:
+            pass
+    return t
+
+
+def _resolve(base: Path, p: str) -> str:
+    q = Path(p).expanduser()
+    return str(q if q.is_absolute() else (base / q).resolve())
+
+
+def read_manifest(path: str | Path) -> list[FitRow]:
+    """The manifest's rows (module doc), paths resolved against its folder; raises
+    :class:`ManifestError` naming the file, row and column of what is wrong."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ManifestError(f"{path}: cannot read the manifest ({exc.strerror}); give a "
+                            "CSV file with the columns of flexarm.distributed") from None
+    base = path.resolve().parent
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ManifestError(f"{path}: no header line; the first line names the columns, "
+                            f"e.g. {','.join(COLUMNS[:6])}")
+    reader = csv.DictReader(lines)
+    head = [h.strip() for h in (reader.fieldnames or [])]
+    unknown = [h for h in head if h not in COLUMNS]
+    if unknown:
+        raise ManifestError(f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; the "
+                            f"columns are {', '.join(COLUMNS)}")
+    for need in ("id", "logs"):
+        if need not in head:
+            raise ManifestError(f"{path}: no column {need!r}; every manifest has id and logs")
+    rows, seen = [], set()
+    for i, raw in enumerate(reader, start=2):
+        r = {(k or "").strip(): (v or "").strip() for k, v in raw.items() if k is not None}
+        rid = r.get("id", "")
+        if not re.fullmatch(r"[A-Za-z0-9._-]+", rid or ""):
+            raise ManifestError(f"{_where(path, i, 'id')} = {rid!r}: give a folder name of "
+                                "letters, digits, '.', '_' or '-'")
+        if rid in seen:
+            raise ManifestError(f"{_where(path, i, 'id')} = {rid!r}: used by an earlier row; "
+                                "give each row its own id")
+        seen.add(rid)
+        logs = tuple(_resolve(base, x.strip()) for x in r.get("logs", "").split(";") if x.strip())
+        if not logs:
+            raise ManifestError(f"{_where(path, i, 'logs')} is empty: give the run's log "
+                                "files, ';'-separated")
+        for lg in logs:
+            if not Path(lg).is_file():
+                raise ManifestError(f"{_where(path, i, 'logs')}: {lg} is not a file; paths "
+                                    f"resolve against the manifest's folder {base}")
+        preset = r.get("preset") or None
+        scen = r.get("scenario") or None
+        if preset and scen:
+            raise ManifestError(f"{_where(path, i, 'preset')} = {preset!r} and scenario = "
+                                f"{scen!r}: give one (a preset, or a scenario for the general "
+                                "fit)")
+        if not preset and not scen:
+            preset = "servo_rig"
+        if preset and preset not in PRESETS:
+            raise ManifestError(f"{_where(path, i, 'preset')} = {preset!r}: choose "
+                                f"{', '.join(PRESETS)}, or give a scenario")
+        if scen:
+            from flexarm.specs.scenario import names_a_scenario
+
+            if Path(scen).suffix == ".toml" or not names_a_scenario(scen):
+                scen = _resolve(base, scen)
+        sheet: dict[str, Any] = {}
+        for k in _FLOAT + _INT + ("drive",):
+            v = r.get(k, "")
+            if not v:
+                continue
+            try:
+                sheet[k] = float(v) if k in _FLOAT else int(v) if k in _INT else v
+            except ValueError:
+                raise ManifestError(f"{_where(path, i, k)} = {v!r}: expected a "
+                                    f"{'number' if k in _FLOAT else 'whole number'}") from None
+        opts = {}
+        for item in (x for x in r.get("options", "").split(";") if x.strip()):
+            if "=" not in item:
+                raise ManifestError(f"{_where(path, i, 'options')}: {item!r} is not "
+                                    "key=value; e.g. seed=0;popsize=8")
+            k, v = item.split("=", 1)
+            opts[k.strip()] = option_value(v)
+        sess = None
+        if r.get("sessions"):
+            try:
+                sess = tuple(int(x) for x in r["sessions"].split(";") if x.strip())
+            except ValueError:
+                raise ManifestError(f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
+                                    "expected one whole number per log, e.g. 0;0;1") from None
+            if len(sess) != len(logs):
+                raise ManifestError(f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
+                                    f"{len(sess)} indices for {len(logs)} logs; give one per log")
+        free = tuple(x.strip() for x in r.get("free", "").split(";") if x.strip()) or None
+        fmt = _resolve(base, r["log_format"]) if r.get("log_format") else None
+        if fmt and not Path(fmt).is_file():
+            raise ManifestError(f"{_where(path, i, 'log_format')}: {fmt} is not a file; paths "
+                                f"resolve against the manifest's folder {base}")
+        rows.append(FitRow(rid, logs, preset if not scen else None, scen, fmt,
+                           _window(r.get("window", ""), _where(path, i, "window")),
+                           _window(r.get("validate_window", ""),
+                                   _where(path, i, "validate_window")),
+                           sess, free, sheet, opts))
+    return rows
+
+
+def fit_row(row: FitRow) -> tuple[Any, dict]:
+    """The one row → fit call (the merge with the one fit front door re-points it here):
+    the fit result and extras for its JSON (window, held-out fit %)."""
+    extra: dict[str, Any] = {}
+    if row.preset == "servo_rig":
+        from flexarm.identification.time_domain import fit, predict, read_bench_log
+
+        full = [read_bench_log(p, log_format=row.log_format) for p in row.logs]
+        logs = [g.window(*row.window) for g in full] if row.window else full
+        kw = {**row.data_sheet, **row.options}
+        if row.sessions is not None:
+            kw["sessions"] = list(row.sessions)
+        res = fit(logs, **kw)
+        if row.window:
+            extra["window_s"] = list(row.window)
+        if row.validate_window:
+            held = predict(res, [g.window(*row.validate_window) for g in full])
+            extra["held_out"] = {"window_s": list(row.validate_window),
+                                 "fit_percent": held["fit_percent"]}
+        return res, extra
+    from flexarm.identification.time_domain import FitOptions, fit_scenario
+    from flexarm.io.logformat import load_log
+    from flexarm.specs import load_scenario
+
+    logs = [load_log(p, row.log_format) for p in row.logs]
+    opts = FitOptions(windows=[row.window] * len(logs) if row.window else None,
+                      **row.options)
+    res = fit_scenario(load_scenario(row.scenario), logs, list(row.free) if row.free else None,
+                       opts)
+    return res, extra
+
+
+@dataclass(frozen=True)
+class FitManyOptions:
+    """``figures``: write each fit's overlay figures; ``retries``: reruns of a task that
+    raised outside the fit (a row's own error is caught and reported, not retried);
+    ``fit``: the row → fit function (default :func:`fit_row`; picklable)."""
+
+    figures: bool = True
+    retries: int = 2
+    fit: Callable[[FitRow], tuple[Any, dict]] | None = None
+
+
+def finished(directory: str | Path) -> dict | None:
+    """A finished row's JSON (``fit.json`` there and valid), or None."""
+    p = Path(directory) / "fit.json"
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) and d.get("flexarm_fit_many", {}).get("status") == "done" \
+        else None
+
+
+def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None) -> dict:
+    """One row on a worker: fit, write its files, return its summary record."""
+    from flexarm.io.write import write_json
+
+    folder = Path(out) / row.id
+    folder.mkdir(parents=True, exist_ok=True)
+    t0 = _time.perf_counter()
+    try:
+        res, extra = (fit or fit_row)(row)
+        d = {**res.to_dict(), **extra}
+    except Exception as exc:  # noqa: BLE001 - a failing row is reported, others go on
+        msg = _first_line(exc)
+        (folder / "error.txt").write_text(msg + "\n", encoding="utf-8")
+        return {"id": row.id, "status": "failed", "seconds": _time.perf_counter() - t0,
+                "error": msg}
+    # the fit stands even where its scenario or figures cannot be written (e.g. a rigid
+    # arm's servo-rig fit has no link for the scenario): a warning says so
+    notes = []
+    try:
+        res.write_scenario(folder / "fitted.toml", overwrite=True)
+    except Exception as exc:  # noqa: BLE001
+        notes.append(f"fitted scenario not written: {_first_line(exc)}")
+    if figures and hasattr(res, "plots"):
+        try:
+            res.plots(folder / "plots")
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"figures not written: {_first_line(exc)}")
+    d["warnings"] = list(d.get("warnings") or []) + notes
+    seconds = _time.perf_counter() - t0
+    d["flexarm_fit_many"] = {"status": "done", "row": dataclasses.asdict(row),
+                             "seconds": seconds, "host": os.uname().nodename, "pid": os.getpid()}
+    tmp = folder / "fit.json.part"
+    write_json(tmp, d, overwrite=True)
+    os.replace(tmp, folder / "fit.json")  # atomic: fit.json present = row finished
+    (folder / "error.txt").unlink(missing_ok=True)
+    return summary_record(row.id, d)
+
+
+def _first_line(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0]
+
+
+def summary_record(rid: str, d: dict, status: str = "done") -> dict:
+    """One summary line from a fit's JSON (the servo-rig fit's or the general fit's)."""
+    rec: dict[str, Any] = {"id": rid, "status": status,
+                           "seconds": d.get("flexarm_fit_many", {}).get("seconds",
+                                                                        d.get("seconds")),
+                           "error": "", "n_warnings": len(d.get("warnings", [])),
+                           "warnings": " | ".join(d.get("warnings", []))}
+    if "parameters" in d:  # the servo-rig fit
+        for k, p in d["parameters"].items():
+            rec[k], rec[f"{k}_std"] = p.get("value"), p.get("std")
+    else:
+        for k, v in d.get("params", {}).items():
+            rec[k], rec[f"{k}_std"] = v, d.get("std", {}).get(k)
+    for tag, fp in (("fit%", d.get("fit_percent", {})),
+                    ("held-out%", d.get("held_out", {}).get("fit_percent", {}))):
+        for log, sig in (fp or {}).items():
+            for s, v in (sig or {}).items():
+                rec[f"{tag}:{Path(log).name}:{s}"] = v
+    return rec
+
+
+def write_summary(path: str | Path, records: Sequence[dict]) -> Path:
+    """``summary.csv``: the fixed columns first, then every other column in first-seen
+    order; empty where a row has none."""
+    fixed = ["id", "status", "seconds", "error", "n_warnings", "warnings"]
+    cols = fixed + list(dict.fromkeys(k for r in records for k in r if k not in fixed))
+    path = Path(path)
+    tmp = path.with_suffix(".csv.part")
+    with tmp.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, cols, restval="")
+        w.writeheader()
+        for r in records:
+            w.writerow({k: _cell(v) for k, v in r.items()})
+    os.replace(tmp, path)
+    return path
+
+
+def _cell(v):
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(v)
+    return "" if v is None else v
+
+
+def fit_many(rows: Sequence[FitRow] | str | Path, client=None, out: str | Path = "fits", *,
+             options: FitManyOptions | None = None,
+             progress: Callable[[dict], None] | None = None) -> list[dict]:
+    """Fit every row (a manifest path or :func:`read_manifest`'s rows), each fit a task on
+    ``client``'s workers (None: one after the other in-process); finished rows (their
+    ``fit.json`` there and valid) are skipped, failed ones run again. Writes
+    ``out/<id>/...`` and ``out/summary.csv`` (module doc; rewritten as rows finish, so an
+    interrupted run leaves a summary of what finished); ``progress(record)`` after each
+    row. Returns the records in the manifest's order."""
+    o = options or FitManyOptions()
+    if isinstance(rows, (str, Path)):
+        rows = read_manifest(rows)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    recs: dict[str, dict] = {}
+    todo = []
+    for r in rows:
+        d = finished(out / r.id)
+        if d is not None:
+            recs[r.id] = summary_record(r.id, d, status="skipped (finished before)")
+        else:
+            todo.append(r)
+    order = [r.id for r in rows]
+
+    def done(rec):
+        recs[rec["id"]] = rec
+        if progress is not None:
+            progress(rec)
+        write_summary(out / "summary.csv", [recs[i] for i in order if i in recs])
+
+    if not todo:
+        write_summary(out / "summary.csv", [recs[i] for i in order])
+    if client is None:
+        for r in todo:
+            done(_run_fit_task(r, str(out), figures=o.figures, fit=o.fit))
+    else:
+        from distributed import as_completed
+
+        futs = {client.submit(_run_fit_task, r, str(out), figures=o.figures, fit=o.fit,
+                              pure=False, retries=o.retries,
+                              key=f"fit-{r.id}-{_time.time_ns()}"): r for r in todo}
+        with client.as_current():  # as_completed looks for the current client
+            for fut in as_completed(futs):
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # noqa: BLE001 - the task failed (e.g. killed 3 times)
+                    rec = {"id": futs[fut].id, "status": "failed", "seconds": None,
+                           "error": _first_line(exc)}
+                done(rec)
+    return [recs[i] for i in order]
