@@ -264,3 +264,27 @@ def test_fit_many_in_process_without_dask(tmp_path, monkeypatch):
 
 def _refuse(row):
     raise ValueError(f"refused {row.id}\nsecond line")
+
+
+def test_cli_fit_many_reports_a_failed_row_and_exits_1(tmp_path):
+    """``flexarm fit-many`` in-process: a row whose log is broken is reported as failed in
+    the table and summary.csv (the command exits 1), without a traceback; both
+    --scheduler and --workers is one line, exit 2."""
+    import csv
+    import subprocess
+    import sys
+
+    m = _manifest(tmp_path)
+    lines = m.read_text().splitlines()
+    m.write_text("\n".join([ln for ln in lines if not ln.startswith(("good,", "killer,"))])
+                 + "\n")
+    cmd = [sys.executable, "-m", "flexarm", "fit-many", str(m), "--out", str(tmp_path / "o"),
+           "--no-figures"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 1, r.stderr
+    assert "Traceback" not in r.stdout + r.stderr and "failed" in r.stdout
+    rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
+    assert [(x["id"], x["status"]) for x in rows] == [("bad", "failed")]
+    r2 = subprocess.run(cmd + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+                        capture_output=True, text=True, timeout=600)
+    assert r2.returncode == 2 and len(r2.stderr.strip().splitlines()) == 1

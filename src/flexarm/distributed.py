@@ -89,11 +89,13 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from flexarm.errors import FlexarmError
+
 __all__ = ["client_for", "session", "close", "have_dask", "ClusterOptions", "ChunkOptions",
            "JaxWorkerSetup", "compilation_cache_dir", "worker_environment", "chunk_bounds",
            "chunk_seed", "map_chunks", "simulate_chunked", "BatchSummary", "PlantSource",
            "compare_chunked", "ChunkedTuneCost", "FitRow", "read_manifest", "fit_row",
-           "fit_many", "FitManyOptions", "ManifestError"]
+           "fit_many", "FitManyOptions", "ManifestError", "ClusterError"]
 
 
 # =============================================================================== the client
@@ -188,6 +190,10 @@ class JaxWorkerSetup(_PluginBase):
         enable_compilation_cache(self.cache_dir)
 
 
+class ClusterError(FlexarmError, ValueError):
+    """A scheduler address or worker count that cannot be used (the message says which)."""
+
+
 def client_for(scheduler: str | None = None, workers: int | None = None,
                options: ClusterOptions | None = None):
     """A Dask client, or None (in-process).
@@ -197,7 +203,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
     closes both). ``scheduler="tcp://host:8786"``: a client of that scheduler. Without Dask
     installed a warning says so and None is returned (the caller runs in-process)."""
     if scheduler is not None and workers is not None:
-        raise ValueError(f"scheduler = {scheduler!r} and workers = {workers}: give one (an "
+        raise ClusterError(f"scheduler = {scheduler!r} and workers = {workers}: give one (an "
                          "existing scheduler's address, or the number of local workers)")
     if scheduler is None and workers is None:
         return None
@@ -210,7 +216,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
     o = options or ClusterOptions()
     if workers is not None:
         if int(workers) < 1:
-            raise ValueError(f"workers = {workers}: give 1 or more local worker processes")
+            raise ClusterError(f"workers = {workers}: give 1 or more local worker processes")
         with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
                               "distributed.scheduler.allowed-failures": 3}):
             cluster = LocalCluster(n_workers=int(workers),
@@ -221,7 +227,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
         client._flexarm_owns_cluster = True  # close() closes the cluster too
     else:
         if not re.match(r"^[a-z]+://", str(scheduler)):
-            raise ValueError(f"scheduler = {scheduler!r}: give the scheduler's address with "
+            raise ClusterError(f"scheduler = {scheduler!r}: give the scheduler's address with "
                              "its protocol, e.g. tcp://host:8786")
         client = Client(scheduler, set_as_default=False)
     client.register_plugin(JaxWorkerSetup(o.cache_dir))
@@ -590,7 +596,7 @@ class ChunkedTuneCost:
 
 
 # =============================================================================== many fits
-class ManifestError(ValueError):
+class ManifestError(FlexarmError, ValueError):
     """A manifest file or row that cannot be read (the message names the file, the row,
     the column, the value and the fix)."""
 

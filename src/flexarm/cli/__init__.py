@@ -17,7 +17,8 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
-from flexarm.cli import deploy, design, errors, fit, frequency, reproduce, scenarios, simulate
+from flexarm.cli import (deploy, design, distributed, errors, fit, frequency, reproduce,
+                         scenarios, simulate)
 
 
 class FlexarmGroup(TyperGroup):
@@ -89,6 +90,7 @@ app.command("excite")(frequency.excite)
 app.command("frf")(frequency.frf)
 app.command("tfest")(frequency.tfest)
 app.command("friction")(frequency.friction)
+app.command("fit-many")(distributed.fit_many)
 
 
 def main() -> None:  # pragma: no cover

@@ -18,15 +18,12 @@ err = Console(stderr=True)
 
 
 def enable_cache() -> None:
-    """JAX's persistent compilation cache, so repeated CLI runs skip recompiling."""
-    import jax
+    """JAX's persistent compilation cache, so repeated CLI runs skip recompiling: one
+    folder per machine, shared with Dask workers
+    (:func:`flexarm.distributed.enable_compilation_cache`, ``$FLEXARM_JAX_CACHE``)."""
+    from flexarm.distributed import enable_compilation_cache
 
-    cache = os.environ.get("FLEXARM_JAX_CACHE", str(Path.home() / ".cache" / "flexarm-jax"))
-    try:
-        jax.config.update("jax_compilation_cache_dir", cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    except Exception:  # an old jax without the option: run uncached
-        pass
+    enable_compilation_cache()
 
 
 def fold(text: str) -> str:

@@ -1,0 +1,58 @@
+"""``flexarm fit-many``: every row of a manifest fitted, on this machine or a Dask cluster
+(:func:`flexarm.distributed.fit_many`)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.table import Table
+
+from flexarm.cli.common import console, enable_cache, err, fail
+
+
+def fit_many(manifest: Annotated[Path, typer.Argument(
+                 help="manifest CSV: one fit a row (columns: docs/distributed.md)")],
+             out: Annotated[Path, typer.Option(
+                 "--out", help="folder of the results: <row id>/fit.json, fitted.toml, "
+                               "plots/, and summary.csv (a rerun skips finished rows)")],
+             scheduler: Annotated[Optional[str], typer.Option(
+                 help="a running Dask scheduler, e.g. tcp://host:8786")] = None,
+             workers: Annotated[Optional[int], typer.Option(
+                 help="start a local Dask cluster of N worker processes (default: run "
+                      "in-process, one fit after the other)")] = None,
+             no_figures: Annotated[bool, typer.Option(
+                 "--no-figures", help="skip each fit's overlay figures")] = False) -> None:
+    """Fit every row of MANIFEST (each row a task), write DIR/<id>/ and DIR/summary.csv;
+    finished rows are skipped and failed ones retried when run again. Exit 1 when a row
+    failed (the others still run)."""
+    import flexarm.distributed as fd
+
+    if scheduler is not None and workers is not None:
+        fail("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        fail(f"--workers {workers}: give 1 or more")
+    enable_cache()
+    rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
+
+    def progress(rec: dict) -> None:
+        console.print(f"{rec['id']}: {rec['status']}"
+                      + (f" ({rec['seconds']:.1f} s)" if rec.get("seconds") else "")
+                      + (f" {rec['error']}" if rec.get("error") else ""), highlight=False)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with fd.session(scheduler, workers) as client:
+            for w in caught:
+                if str(w.message) == fd.NO_DASK:
+                    err.print(str(w.message), highlight=False)
+            recs = fd.fit_many(rows, client, out, options=fd.FitManyOptions(
+                figures=not no_figures), progress=progress)
+    t = Table("row", "status", "seconds", title=f"fit-many: {out / 'summary.csv'}")
+    for r in recs:
+        t.add_row(r["id"], r["status"], "" if not r.get("seconds") else f"{r['seconds']:.1f}")
+    console.print(t)
+    if any(r["status"] == "failed" for r in recs):
+        raise typer.Exit(1)
