@@ -1,7 +1,8 @@
 """Physically derived guesses and bounds from the logs themselves.
 
-* Stuck intervals: the measured hub angle stays within one encoder step for >=
-  ``min_stuck`` s (a stuck hub dithers between two adjacent counts).
+* Stuck intervals: the measured hub angle does not change (or, for the link frequency,
+  stays within one encoder step: a stuck hub dithers between two counts) for >=
+  ``min_stuck`` s.
 * Link frequency ω_c: peak of the summed periodograms of the detrended tip deflection over
   the stuck intervals (the link rings at its hub-clamped frequency while the hub sticks);
   without stuck intervals, of the whole tip signal.
@@ -40,33 +41,50 @@ def controller_command(log: BenchLog) -> np.ndarray:
     return c.k1 * (log.columns["reference"] - th) - c.k2 * d - c.k3 * dth - c.k4 * dd
 
 
-def stuck_intervals(log: BenchLog, min_stuck: float = 0.25) -> list[tuple[int, int]]:
-    """Index ranges [i0, i1) where the measured hub angle stays within one step q of the
-    encoder (or converter): max − min ≤ q over the range. A stuck hub whose angle lies near
-    a count boundary dithers between two adjacent counts (vibration, the ringing link's
+def stuck_intervals(log: BenchLog, min_stuck: float = 0.25,
+                    dither: bool = False) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) where the measured hub angle stays constant (no change above
+    q/4 from one sample to the next, q the encoder's or converter's step) or, with
+    ``dither``, within one step: max − min ≤ q over the range. A stuck hub whose angle lies
+    near a count boundary dithers between two adjacent counts (vibration, the ringing link's
     torque), so a range that stays exactly constant would cut a stuck phase into pieces
     shorter than one period of the link (on a rig with heavy gear friction, 4/27: stuck
     phases of 1-3 s cut into 0.26 s pieces, whose spectral peak was the drift's at 0.3 Hz
-    instead of the link's 1.8 Hz). Unquantised angles: exactly constant."""
+    instead of the link's 1.8 Hz). The link-frequency
+    guess uses ``dither``; the friction guess and the rest reading keep the constant
+    ranges (with ``dither`` the synthetic open-loop acceptance fit moved, ζ −6 %)."""
     th = log.columns.get("motor_angle")
     if th is None:
         return []
-    th = np.asarray(th, float)
-    dth = np.diff(th)
-    q = float(np.median(np.abs(dth[dth != 0]))) if np.any(dth) else 0.0
-    band = 1.01 * q if q > 0 else 0.0
-    n_min, n = int(min_stuck / log.dt), len(th)
+    q = max(np.median(np.abs(np.diff(th)[np.diff(th) != 0])) if np.any(np.diff(th)) else 0, 0)
+    n_min = int(min_stuck / log.dt)
     out, k = [], 0
-    while k < n - 1:
-        lo = hi = th[k]
-        j = k + 1
-        while j < n:
-            lo, hi = min(lo, th[j]), max(hi, th[j])
-            if hi - lo > band:
-                break
-            j += 1
-        if j - k > n_min:
-            out.append((k, j))
+    if dither and q > 0:
+        th = np.asarray(th, float)
+        n = len(th)
+        while k < n - 1:
+            lo = hi = th[k]
+            j = k + 1
+            while j < n:
+                lo, hi = min(lo, th[j]), max(hi, th[j])
+                if hi - lo > 1.01 * q:
+                    break
+                j += 1
+            if j - k > n_min:
+                out.append((k, j))
+                k = j
+            else:
+                k += 1
+        return out
+    still = np.abs(np.diff(th)) <= 0.25 * q if q > 0 else np.diff(th) == 0
+    n = len(still)
+    while k < n:
+        if still[k]:
+            j = k
+            while j < n and still[j]:
+                j += 1
+            if j - k >= n_min:
+                out.append((k + 1, j + 1))
             k = j
         else:
             k += 1
@@ -97,7 +115,7 @@ def link_frequency(logs: list[BenchLog], fmin: float = 0.3, fmax: float = 60.0):
         d = log.columns.get("tip_deflection")
         if d is None or np.ptp(d) == 0:
             continue
-        for i0, i1 in stuck_intervals(log):
+        for i0, i1 in stuck_intervals(log, dither=True):
             segs.append((scipy.signal.detrend(d[i0:i1]), log.dt))
     if not segs:
         how = "whole"
@@ -167,10 +185,6 @@ def hub_inertia(logs: list[BenchLog], k_u: float, window: float = 0.025):
     return float(np.median(est)) if est else None
 
 
-#: the end of a stuck range left out of the held command (s): the hub channel's lag
-STICK_LEAD_S = 0.1
-
-
 def stick_torque(logs: list[BenchLog], k_u: float) -> float | None:
     """Largest |k_u u| held by a stuck, settled hub (N·m), or None."""
     vals = []
@@ -178,17 +192,9 @@ def stick_torque(logs: list[BenchLog], k_u: float) -> float | None:
         if log.controller is None and "voltage" not in log.columns:
             continue
         u = controller_command(log)
-        r = log.columns["reference"]
-        lead = int(round(STICK_LEAD_S / log.dt))
         for i0, i1 in stuck_intervals(log, 0.2):
-            # the command that held the hub: before a reference change inside the range
-            # and ``STICK_LEAD_S`` before its end (the hub channel lags the motion by tens
-            # of ms, so the last readings of a range may already belong to a breakaway)
-            ch = np.nonzero(np.abs(np.diff(r[i0:i1])) > 1e-9)[0]
-            end = (i0 + int(ch[0]) + 1 if ch.size else i1) - lead
-            k = slice(max(end - int(0.05 / log.dt), i0), end)
-            if end - i0 >= int(0.05 / log.dt):
-                vals.append(abs(k_u * float(np.median(u[k]))))
+            k = slice(max(i1 - int(0.05 / log.dt), i0), i1)
+            vals.append(abs(k_u * float(np.median(u[k]))))
     return max(vals) if vals else None
 
 
