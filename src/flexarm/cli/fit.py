@@ -70,7 +70,8 @@ def fit(ctx: typer.Context,
         window: o.Window = None,
         free: Annotated[Optional[list[str]], typer.Option(
             "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
-                           "(repeat), e.g. 'arm.joints[*].friction.coulomb'")] = None,
+                           "(repeat), e.g. 'arm.joints[*].friction.coulomb'; without it the "
+                           "scenario's preset free list runs (printed)")] = None,
         prior: Annotated[Optional[list[str]], typer.Option(
             "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the scenario's "
                             "value, ± REL_STD relative), e.g. "
@@ -78,8 +79,9 @@ def fit(ctx: typer.Context,
         segment: Annotated[Optional[float], typer.Option(
             "--segment", help="with SCENARIO: multiple-shooting segment length, s")] = None,
         channel: o.Channels = None,
-        max_nfev: Annotated[int, typer.Option(
-            "--max-nfev", help="with SCENARIO: least-squares budget")] = 30,
+        max_nfev: Annotated[Optional[int], typer.Option(
+            "--max-nfev", help="with SCENARIO: least-squares budget (default: the preset's, "
+                               "else 30)")] = None,
         validate_window: Annotated[Optional[str], typer.Option(
             "--validate-window",
             help="then predict this held-out part of every log (START:STOP, s; each part's "
@@ -345,7 +347,10 @@ def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:
 def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, segment,
                       channel, window, max_nfev, json_out, scenario_out, plots,
                       overwrite, report=None, ctx=None) -> None:
-    from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
+    from flexarm.identification.time_domain import predict_scenario
+    from flexarm.identification.time_domain.engine import fit as fit_engine
+    from flexarm.identification.time_domain.options import (Cost, FitOptions, Local, Priors,
+                                                             Shooting)
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -360,12 +365,19 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     folder = figures.enter_context(figure_folder(plots, report))
     try:
         glogs = _general_logs(logs, log_format)
-        opts = FitOptions(channels=chans, priors=priors, segment=segment, max_nfev=max_nfev,
-                          windows=[win] * len(glogs) if win else None)
+        # the options given; the rest (and, without --free, the free list) are the preset's
+        opts = FitOptions(cost=Cost(channels=chans) if chans else None,
+                          shooting=Shooting(segment=segment) if segment is not None else None,
+                          local=Local(max_nfev=max_nfev) if max_nfev is not None else None,
+                          priors=Priors(priors=priors) if priors else None,
+                          windows=[win] * len(glogs) if win else None, predict=False)
         with console.status("fitting") as status:
-            res = fit_scenario(sc, glogs, free or None, opts,
-                               progress=lambda m: progress(status, m), predict=False)
+            res = fit_engine(sc, glogs, free or None, opts,
+                             progress=lambda m: progress(status, m))
             status.update("predicting the logs with the fitted parameters")
+            console.print(f"free parameters ({len(res.free)}): {res.free_source}",
+                          highlight=False)
+            opts = opts.engine_options()
             pred = predict_scenario(res.scenario, glogs, opts,
                                     channels=list(opts.channels) if opts.channels else None,
                                     plots=folder, tag="fit")

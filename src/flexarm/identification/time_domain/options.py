@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -114,10 +115,27 @@ class ServoRig:
                     controller=self.controller, seed=self.seed)
 
 
+def _changed(group, over_base: bool):
+    """The (field, value) pairs of ``group`` to set on the engine's options: every field,
+    or, over a preset's options (``over_base``), only those changed from the group's
+    defaults, so ``Local(max_nfev=60)`` keeps the preset's tolerances."""
+    for f in dataclasses.fields(group):
+        v = getattr(group, f.name)
+        if not over_base:
+            yield f.name, v
+            continue
+        default = (f.default if f.default is not dataclasses.MISSING
+                   else f.default_factory() if f.default_factory is not dataclasses.MISSING
+                   else dataclasses.MISSING)
+        if default is dataclasses.MISSING or v != default:
+            yield f.name, v
+
+
 @dataclass
 class FitOptions:
     """Options of :func:`flexarm.fit`, grouped (module docstring). ``None`` groups take the
-    preset's (or the defaults)."""
+    preset's (or the defaults); over a preset, a group's fields left at their defaults
+    take the preset's too."""
 
     cost: Cost | None = None
     shooting: Shooting | None = None
@@ -140,11 +158,11 @@ class FitOptions:
         for g in groups:
             if g is None:
                 continue
-            for k, v in vars(g).items():
+            for k, v in _changed(g, base is not None):
                 setattr(flat, k, v)
         if self.global_de is not None:
             flat.global_stage = True
-            for k, v in vars(self.global_de).items():
+            for k, v in _changed(self.global_de, base is not None):
                 setattr(flat, k, v)
         if self.windows is not None:
             flat.windows = list(self.windows)

@@ -104,8 +104,23 @@ def for_scenario(scenario) -> Preset:
                       FitOptions(priors=dict(notes.get("priors", {}))))
     if scenario.name in BUILTIN:
         p = BUILTIN[scenario.name]()
-        # the registered preset's template is the built-in; a changed copy keeps its numbers
-        return Preset(p.name, scenario, p.free, p.options, p.engine, p.sheet)
+        # the registered preset's template is the built-in; a changed copy keeps its numbers,
+        # except free parameters it leaves at 0, which start at the preset's value (a fit in
+        # log space needs a non-zero start, e.g. link 1's damping)
+        from flexarm.specs.paths import get, parse_path, scenario_with
+
+        mine, theirs = scenario.model_dump(), p.scenario.model_dump()
+        starts = {}
+        for path in p.free:
+            if "*" in parse_path(path):
+                continue
+            try:
+                if get(mine, path) == 0 and get(theirs, path) != 0:
+                    starts[path] = get(theirs, path)
+            except Exception:  # noqa: BLE001 - a path the changed copy lacks: fitted as given
+                continue
+        sc = scenario_with(scenario, starts) if starts else scenario
+        return Preset(p.name, sc, p.free, p.options, p.engine, p.sheet)
     if scenario.sampling is None:
         raise ValueError(f"scenario {scenario.name!r} has no [sampling]: a continuous-time "
                          "[regulation] law is simulated (flexarm.simulate), not fitted to "
