@@ -21,7 +21,8 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
 #: the lab's data sheet (README of the data): geared voltage-driven servo, 0.45 m link
 SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-             armature_resistance=3.29, link_length=0.45, computation_delay=1)
+             armature_resistance=3.29, link_length=0.45, computation_delay=1,
+                    voltage_limit=10.0)  # the limit the tests' figures were measured at
 
 #: the 4/27 session's two runs (the fixture ``rotary_hard_session_fit`` fits them together)
 ROTARY_HARD = ("flexarm_K1_6", "flexarm_K1K2_6_-5")

@@ -34,7 +34,8 @@ def fit(ctx: typer.Context,
         link_length: o.LinkLength = None,
         gear_efficiency: o.GearEfficiency = 1.0,
         motor_efficiency: o.MotorEfficiency = 1.0,
-        voltage_limit: o.VoltageLimit = 10.0,
+        voltage_limit: o.VoltageLimit = None,
+        computation_delay: o.ComputationDelay = None,
         controller: o.Controller = None,
         mode: Annotated[str, typer.Option(
             help="closed_loop, or open_loop (replay the logged voltage)")] = "closed_loop",
@@ -123,7 +124,7 @@ def fit(ctx: typer.Context,
     kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
-              voltage_limit=voltage_limit, mode=mode, global_seconds=seconds,
+              voltage_limit=voltage_limit, computation_delay=computation_delay, mode=mode, global_seconds=seconds,
               sessions=sess, tip_sign=tip_sign, encoder_counts=encoder_counts,
               filters=parsing.filters(filter), delay_search=delay_search, polish_iter=polish_iter)
     res = res0 = held = None

@@ -20,7 +20,11 @@ ArmatureResistance = Annotated[Optional[float], typer.Option(help="R, ohm")]
 LinkLength = Annotated[Optional[float], typer.Option(help="link length, m")]
 GearEfficiency = Annotated[float, typer.Option()]
 MotorEfficiency = Annotated[float, typer.Option()]
-VoltageLimit = Annotated[float, typer.Option(help="amplifier limit, V")]
+VoltageLimit = Annotated[Optional[float], typer.Option(
+    help="amplifier limit, V (default: the log format's [controller] limit, else 10)")]
+ComputationDelay = Annotated[Optional[int], typer.Option(
+    help="samples between a sample and its command (default: where the declared law best "
+         "explains the logged command)")]
 
 # --- the data sheet of a physical structure fitted to an FRF (tfest, friction) ------------
 StructMotorConstant = Annotated[Optional[float], typer.Option(

@@ -159,6 +159,9 @@ def encoder_count(scenario, count: float | None = None) -> float:
             raise ValueError(f"count = {count!r} rad: the encoder count must be > 0")
         return float(count)
     q = sensor_quanta(scenario.sensors).get("motor_angle", 0.0)
+    if not q > 0:  # a fitted rig whose controller read finer than the log: its resolution
+        q = float((getattr(scenario, "notes", None) or {}).get("rig", {}).get(
+            "encoder_count", 0.0) or 0.0)
     if not q > 0:
         raise ValueError(f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
                          "(or bits and range), so the hub error cannot be given in encoder "

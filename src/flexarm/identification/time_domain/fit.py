@@ -65,6 +65,29 @@ def detect_quantum(x: np.ndarray) -> float:
     return 0.0
 
 
+def _computation_delay(logs, notes: list[str]) -> int:
+    """The samples between a sample and the command computed from it: the delay (0, 1, 2)
+    at which the declared law best explains the logged command, the most common over the
+    logs (:func:`~flexarm.identification.time_domain.controller_check.check_controller`);
+    0 where no log declares a law or the check fails."""
+    from flexarm.identification.time_domain.controller_check import check_controller
+
+    found = []
+    for g in logs:
+        if getattr(g, "gains", None) is None or "voltage" not in g.columns:
+            continue
+        try:
+            found.append(check_controller(g, use_regressed=True).delay)
+        except Exception as exc:  # noqa: BLE001 - a log the check cannot read: no vote
+            notes.append(f"{g.name}: controller check failed ({exc}); its delay not used")
+    if not found:
+        return 0
+    d = max(set(found), key=found.count)
+    notes.append(f"computation delay {d} sample(s): where the declared law best explains the "
+                 f"logged command ({found.count(d)} of {len(found)} logs)")
+    return int(d)
+
+
 def _finer_than_logged(log, q: float) -> bool:
     """Whether a logged hub rate shows that the logger read the angle more finely than
     the step ``q`` of the logged angle (the rate is not a multiple of q / T)."""
@@ -227,13 +250,13 @@ def _delay_ranges(hub, tip, max_delay: int, fixed) -> tuple[tuple[int, int], tup
 def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         motor_constant: float | None = None, armature_resistance: float | None = None,
         link_length: float | None = None, gear_efficiency: float = 1.0,
-        motor_efficiency: float = 1.0, voltage_limit: float = 10.0,
+        motor_efficiency: float = 1.0, voltage_limit: float | None = None,
         current_limit: float | None = None, mode: str = "closed_loop",
         controller: Any = None, sessions: Sequence[int] | None = None,
         friction: bool = True, encoder_counts: int | None = None,
         tip_sign: int | None = None, angle_delay: int | None = None,
         tip_delay: int | None = None, max_delay: int | None = None,
-        computation_delay: int = 0,
+        computation_delay: int | None = None,
         bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
         popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
         local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
@@ -241,6 +264,15 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
         filters: dict[str, float] | None = None, delay_search: str = "neighbours",
         estimates: bool = True) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
+
+    ``voltage_limit`` (V; A for a current drive without ``current_limit``): None takes the
+    amplifier limit the logs' format declares (``[controller] limit``), else 10 V with a
+    warning. ``computation_delay`` (samples between a sample and its command): None takes
+    the delay at which the declared law best explains the logged command
+    (:func:`~flexarm.identification.time_domain.controller_check.check_controller`, R² per
+    delay 0, 1, 2; 0 where the logs declare no law). Both, and the resolution of the logged
+    hub angle, go into the fitted scenario (:meth:`FitResult.write_scenario`), so a design
+    on it needs no further flag.
 
     ``logs``: paths or :class:`~flexarm.io.logs.Log` s; logs given together are one
     recording session (shared friction) unless ``sessions`` gives a session index per log
@@ -315,10 +347,27 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             # the logger rounds the angle it writes, but its own rate (from the angle it
             # read) is not a multiple of q / T: the controller read a finer angle
             q = 0.0
+    notes: list[str] = []
+    if voltage_limit is None:
+        declared = {float(g.voltage_limit) for g in blogs if getattr(g, "voltage_limit", None)}
+        if len(declared) == 1:
+            voltage_limit = declared.pop()
+        else:
+            voltage_limit = 10.0
+            notes.append("no amplifier limit given and the logs' format declares "
+                         + ("several" if declared else "none") + ": 10 V assumed "
+                         "(give voltage_limit, --voltage-limit, or [controller] limit in the "
+                         "log format)")
+    if computation_delay is None:
+        computation_delay = _computation_delay(blogs, notes) if mode == "closed_loop" else 0
+    q_logged = max((detect_quantum(g.columns["motor_angle"]) for g in blogs
+                    if "motor_angle" in g.columns), default=0.0)
     limit = voltage_limit if drive == "voltage" else (current_limit or voltage_limit)
     rig = make_rig(drive, gear_ratio, motor_constant, armature_resistance, link_length,
                    gear_efficiency, motor_efficiency, limit, q)
-    info: dict[str, Any] = {"encoder_quantum": q}
+    info: dict[str, Any] = {"encoder_quantum": q, "logged_resolution": q_logged,
+                            "voltage_limit": voltage_limit,
+                            "computation_delay": computation_delay, "notes": notes}
     if estimates:
         say("estimates: hub-to-tip model, hub delay, link frequency")
         est = _estimates(blogs, rig, max_delay, filters)
@@ -376,7 +425,8 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             filters=filt),
         seconds=time.perf_counter() - t_start, objective=obj)
     res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs)
-                        + _delay_order(res, space))
+                        + _delay_order(res, space)
+                        + [n for n in notes if n.startswith("no amplifier limit")])
     if interrupted:
         from flexarm.errors import FitInterrupted
 

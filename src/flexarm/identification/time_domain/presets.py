@@ -52,7 +52,7 @@ class DataSheet:
     link_length: float | None = None
     gear_efficiency: float = 1.0
     motor_efficiency: float = 1.0
-    voltage_limit: float = 10.0
+    voltage_limit: float | None = None
     current_limit: float | None = None
 
     def keywords(self) -> dict:
@@ -107,13 +107,11 @@ def for_scenario(scenario) -> Preset:
         # the registered preset's template is the built-in; a changed copy keeps its numbers,
         # except free parameters it leaves at 0, which start at the preset's value (a fit in
         # log space needs a non-zero start, e.g. link 1's damping)
-        from flexarm.specs.paths import get, parse_path, scenario_with
+        from flexarm.specs.paths import expand_paths, get, scenario_with
 
         mine, theirs = scenario.model_dump(), p.scenario.model_dump()
         starts = {}
-        for path in p.free:
-            if "*" in parse_path(path):
-                continue
+        for path in expand_paths(mine, p.free):
             try:
                 if get(mine, path) == 0 and get(theirs, path) != 0:
                     starts[path] = get(theirs, path)

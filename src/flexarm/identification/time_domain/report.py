@@ -317,6 +317,11 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "reference": ref}
     if ctrl is not None:
         d["controller"] = ctrl
+    q_log = float((res.stages.get("guesses") or {}).get("logged_resolution") or 0.0)
+    if q <= 0 and q_log > 0:
+        # the controller read a finer angle than the log holds (the fit left the encoder
+        # out); the logged resolution bounds its count for a design's quantisation check
+        d["notes"] = {"rig": {"encoder_count": q_log}}
     c = {"arm.motor.inertia": "kg*m^2, J: fitted hub inertia at the output shaft",
          "arm.motor.viscous": "N*m*s/rad, B: fitted viscous friction",
          "arm.motor.motor_constant": "V*s/rad, K_m (data sheet)",
@@ -327,7 +332,13 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
          "arm.friction.bias": "N*m, fitted constant bias torque",
          "arm.beam.damping_ratio": "fitted link damping ratio",
          "arm.beam.length": "m, link length (data sheet)",
-         "sampling.period": "s", "sampling.delay": "samples of computation delay",
+         "sampling.period": "s",
+         "sampling.delay": "samples of computation delay (given, or where the declared law "
+                           "best explains the logged command)",
+         "actuator.limit": "V, the amplifier limit (given, or the log format's [controller] "
+                           "limit)",
+         "notes.rig.encoder_count": "rad, the logged hub angle's resolution (the controller "
+                                    "read a finer one): the design's quantisation check",
          "sensors.motor_angle.delay": "samples, fitted",
          "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
          "sensors.tip_deflection.delay": "samples, fitted",
