@@ -24,7 +24,7 @@ def _oscillator_loop(channels):
     import jax.numpy as jnp
 
     from flexarm.control import discrete
-    from flexarm.sim.plant import Plant
+    from flexarm.models.plant import Plant
     from flexarm.sim.sampled import Actuator, SampledLoop, Sensors
 
     w = 2 * np.pi * 3.0

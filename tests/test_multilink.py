@@ -12,7 +12,7 @@ from pydantic import ValidationError
 from flexarm.control.regulation import law_zero
 from flexarm.sim.continuous import simulate_continuous
 from flexarm.models.multilink import build_multilink
-from flexarm.sim.plant import Plant
+from flexarm.models.plant import Plant
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, Payload, benchmark_arm
 
 G = 9.81

@@ -292,7 +292,7 @@ def _ramp_loop(channels, dt=2e-3):
     import jax.numpy as jnp
 
     from flexarm.control import discrete
-    from flexarm.sim.plant import Plant
+    from flexarm.models.plant import Plant
     from flexarm.sim.sampled import Actuator, SampledLoop, Sensors
 
     class Ramp(Plant):

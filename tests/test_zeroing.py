@@ -22,7 +22,7 @@ def _ramp_loop(channels):
     import jax.numpy as jnp
 
     from flexarm.control import discrete
-    from flexarm.sim.plant import Plant
+    from flexarm.models.plant import Plant
     from flexarm.sim.sampled import Actuator, SampledLoop, Sensors
 
     class Ramp(Plant):

@@ -23,31 +23,79 @@ The public face (everything else lives in the sub-packages, named after what the
 The data path, one way: a lab file → :func:`load_log` (one :class:`~flexarm.io.logs.Log`,
 with the controller the lab ran) → :func:`fit` → ``FitResult`` (``to_dict()`` is the JSON)
 → :func:`validate` / :func:`predict` → design.
+
+Importing flexarm is cheap: each public name loads its module on first use (PEP 562), so
+``import flexarm`` does not import JAX, SciPy, python-control or matplotlib.
+
+**Float64.** flexarm's models and simulations run JAX in float64. JAX has one, process-wide
+switch for it (``jax_enable_x64``); flexarm turns it on when it is imported: before JAX is
+imported, through JAX's own ``JAX_ENABLE_X64`` environment variable (an explicit value the
+user set is kept), and, if JAX is already imported, by ``jax.config.update``. Set
+``FLEXARM_ENABLE_X64=0`` to leave JAX's setting alone (flexarm's results then assume the
+float64 you provide; with float32 its tolerances do not hold).
 """
 
-import jax as _jax
+import importlib as _importlib
+import os as _os
+import sys as _sys
 
-_jax.config.update("jax_enable_x64", True)
 
-from flexarm.control.lqg import lqg  # noqa: E402
-from flexarm.control.trajectories import parabolic, quasi_parabolic  # noqa: E402
-from flexarm.control.wiener import wiener_feedforward  # noqa: E402
-import flexarm.design as design  # noqa: E402  (callable: the front door)
-from flexarm.identification import fit, predict, validate  # noqa: E402
-from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
-from flexarm.identification.frequency_domain.periodic import periodic_frf  # noqa: E402
-from flexarm.identification.frequency_domain.tfest import tfest  # noqa: E402
-from flexarm.io.logformat import load_log  # noqa: E402
-from flexarm.models.assembly import Arm  # noqa: E402
-from flexarm.models.linearize import linearize  # noqa: E402
-from flexarm.models.multilink import build_multilink  # noqa: E402
-from flexarm.models.single_link import SingleLinkModel  # noqa: E402
-from flexarm.sim.build import prepare, simulate  # noqa: E402
-from flexarm.sim.result import SimulationResult  # noqa: E402
-from flexarm.sim.sampled import simulate_batch  # noqa: E402
-from flexarm.specs import Scenario, builtin_scenarios, load_scenario  # noqa: E402
+def _enable_x64() -> None:
+    """Float64 in JAX, unless ``FLEXARM_ENABLE_X64=0`` (module docstring)."""
+    if _os.environ.get("FLEXARM_ENABLE_X64", "1") == "0":
+        return
+    if "jax" in _sys.modules:
+        _sys.modules["jax"].config.update("jax_enable_x64", True)
+    else:
+        _os.environ.setdefault("JAX_ENABLE_X64", "1")
 
-__version__ = "0.1.0"
+
+_enable_x64()
+
+#: public name -> the module that defines it (loaded on first use)
+_LAZY = {
+    "lqg": "flexarm.control.lqg",
+    "parabolic": "flexarm.control.trajectories",
+    "quasi_parabolic": "flexarm.control.trajectories",
+    "wiener_feedforward": "flexarm.control.wiener",
+    "fit": "flexarm.identification",
+    "predict": "flexarm.identification",
+    "validate": "flexarm.identification",
+    "identify": "flexarm.identification.frequency_domain.identify",
+    "periodic_frf": "flexarm.identification.frequency_domain.periodic",
+    "tfest": "flexarm.identification.frequency_domain.tfest",
+    "load_log": "flexarm.io.logformat",
+    "Arm": "flexarm.models.assembly",
+    "linearize": "flexarm.models.linearize",
+    "build_multilink": "flexarm.models.multilink",
+    "SingleLinkModel": "flexarm.models.single_link",
+    "prepare": "flexarm.sim.build",
+    "simulate": "flexarm.sim.build",
+    "SimulationResult": "flexarm.sim.result",
+    "simulate_batch": "flexarm.sim.sampled",
+    "Scenario": "flexarm.specs",
+    "builtin_scenarios": "flexarm.specs",
+    "load_scenario": "flexarm.specs",
+}
+
+
+def __getattr__(name: str):
+    if name == "design":  # the design package itself is callable (the front door)
+        mod = _importlib.import_module("flexarm.design")
+        globals()["design"] = mod
+        return mod
+    if name in _LAZY:
+        value = getattr(_importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'flexarm' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY, "design"])
+
+
+from flexarm.version import __version__  # noqa: E402
 
 __all__ = [
     "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",

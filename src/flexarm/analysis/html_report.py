@@ -199,7 +199,7 @@ class HtmlReport:
 
     # ------------------------------------------------------------------ output
     def html(self) -> str:
-        from flexarm import __version__
+        from flexarm.version import __version__
 
         now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
         meta = [("command", f"<code>{_e(self.command)}</code>" if self.command else

@@ -60,7 +60,7 @@ app = typer.Typer(cls=FlexarmGroup, add_completion=False, no_args_is_help=True,
 
 def _version(value: bool) -> None:
     if value:
-        from flexarm import __version__
+        from flexarm.version import __version__
 
         print(f"flexarm {__version__}")
         raise typer.Exit(0)

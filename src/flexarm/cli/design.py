@@ -170,8 +170,7 @@ def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | 
             fail(f"--fit-json {fit_json}: {exc}")
     if spread is None:
         return None
-    # LIBRARY: a private name of general.py; specs/paths.py (target map step 1) makes it public
-    from flexarm.identification.time_domain.general import _get, parse_path
+    from flexarm.specs.paths import get
 
     base = sc.model_dump(mode="json", exclude_none=True)
     out = {}
@@ -180,7 +179,7 @@ def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | 
         if not eq or not path:
             fail(f"--spread {item!r}: write PATH=STD, e.g. arm.motor.inertia=10%")
         try:
-            mean = float(_get(base, parse_path(path), path))
+            mean = float(get(base, path, "--spread"))
             std = (abs(mean) * float(val.strip()[:-1]) / 100 if val.strip().endswith("%")
                    else float(val))
         except (ValueError, TypeError) as exc:
@@ -234,8 +233,7 @@ def _check_options(method, methods, pole_domain, poles, q, r, observer_poles, in
 
 def _print_comparison(side, plants: int) -> None:
     """The step comparison as a table: nominal / median / worst per metric and controller."""
-    # LIBRARY: compare's private _fmt (one metric's text); wanted public (format_metric)
-    from flexarm.design.compare import METRICS, _fmt
+    from flexarm.design.compare import METRICS, format_metric
 
     drawn = side.settings["n_plants"] > 0
     cols = ("nominal", "median", "worst") if drawn else ("nominal",)
@@ -249,7 +247,7 @@ def _print_comparison(side, plants: int) -> None:
         tab.add_column("unstable")
     tab.add_column("limit ok")
     for name, row in side.rows.items():
-        tab.add_row(name, *[" / ".join(_fmt(row[k][m]) for k in cols) for m in METRICS],
+        tab.add_row(name, *[" / ".join(format_metric(row[k][m]) for k in cols) for m in METRICS],
                     *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
                     "yes" if row["limit_respected"] else "NO")
     console.print(tab)

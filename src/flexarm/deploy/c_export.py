@@ -695,7 +695,7 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     where it lies); ``controller``: a controller object to export instead of the
     scenario's ``[controller]`` (as :func:`flexarm.sim.build.prepare` takes it), with the
     scenario's period, actuator and sensors."""
-    from flexarm import __version__
+    from flexarm.version import __version__
     from flexarm.io.logs import signal_unit
     from flexarm.sim.build import prepare
 

@@ -233,7 +233,7 @@ class Comparison:
         for name, row in self.rows.items():
             cells = [name]
             for k in METRICS:
-                cells.append(" / ".join(_fmt(row[s][k]) for s in ("nominal", "median", "worst")))
+                cells.append(" / ".join(format_metric(row[s][k]) for s in ("nominal", "median", "worst")))
             cells += [f"{row['unstable']}/{row['n_plants']}",
                       "yes" if row["limit_respected"] else "NO"]
             body.append(cells)
@@ -301,7 +301,8 @@ class Comparison:
         return paths
 
 
-def _fmt(v) -> str:
+def format_metric(v) -> str:
+    """One metric's text: 3 significant digits, '-' where undefined, 'never' for ∞."""
     if v is None or (isinstance(v, float) and np.isnan(v)):
         return "-"
     if np.isinf(v):

@@ -54,7 +54,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.models.friction import Friction
-from flexarm.sim.plant import Plant
+from flexarm.models.plant import Plant
 
 
 def _mv(A: Array, x: Array) -> Array:

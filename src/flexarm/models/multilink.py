@@ -77,7 +77,7 @@ from jax import Array
 
 from flexarm.models.modes import LinkModes, link_modes
 from flexarm import layered
-from flexarm.sim.plant import Plant
+from flexarm.models.plant import Plant
 from flexarm.specs.multilink import MultiLinkArm
 
 

@@ -2,7 +2,7 @@
 
 The plant is integrated with a fixed step h = T / substeps by an explicit Runge–Kutta
 solver: RK4 by default (a diffrax tableau, its step written out in :func:`rk4_step` for
-speed), the others diffrax's. The plant's :meth:`~flexarm.sim.plant.Plant.project` is
+speed), the others diffrax's. The plant's :meth:`~flexarm.models.plant.Plant.project` is
 applied after every substep (stick events of Karnopp friction). Fixed steps do not
 locate friction switches: after a stick event the hub angle is accurate to about
 h·|ω| before it (docs/performance.md has the measured figures).
@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from flexarm.sim.plant import Plant
+from flexarm.models.plant import Plant
 
 
 class RK4(diffrax.AbstractERK):

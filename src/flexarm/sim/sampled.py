@@ -54,7 +54,7 @@ from jax import Array
 from flexarm.control.continuous_law import ContinuousLaw
 from flexarm.control.discrete import Controller
 from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
-from flexarm.sim.plant import Plant
+from flexarm.models.plant import Plant
 from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
 
 

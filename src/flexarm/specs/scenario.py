@@ -79,7 +79,7 @@ class Scenario(Spec):
     or ``controllers`` (``[[controllers]]``: several ``type = "lti"`` blocks, each at its own
     period, a multiple of the sampling period, driving its own outputs); for a
     multi-link arm under a continuous-time law, ``regulation`` (DLS eqs. 8, 30). Sensor
-    channels are named after the arm's signals (:attr:`flexarm.sim.plant.Plant.signal_names`;
+    channels are named after the arm's signals (:attr:`flexarm.models.plant.Plant.signal_names`;
     a single link: ``motor_angle``, ``tip_angle``, ``tip_deflection``, ``motor_velocity``;
     several links: ``theta_i``, ``theta_dot_i``, ``deflection_i``, ``deflection_angle_i``,
     ``tip_x``, ``tip_y``, ...)."""

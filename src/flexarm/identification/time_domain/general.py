@@ -99,14 +99,8 @@ __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "exp
 
 
 # ----------------------------------------------------------------------------- paths
-# the path language lives in flexarm.specs.paths; these names stay importable from here
-# (the CLI imports them) until the CLI is re-pointed
+# the path language: flexarm.specs.paths
 from flexarm.specs.paths import expand_paths, get as _path_get, parse_path, scenario_with  # noqa: E402,F401
-
-
-def _get(d: Any, keys: Sequence, path: str) -> Any:
-    """Deprecated: :func:`flexarm.specs.paths.get`."""
-    return _path_get(d, keys if keys is not None else path)
 
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
