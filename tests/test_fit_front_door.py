@@ -6,6 +6,7 @@ test_fit_scenario (a current drive with Coulomb friction, a sampled PD)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,8 @@ from flexarm.io.logs import Log, log_keys, write_log
 from flexarm.specs.paths import scenario_with
 
 from test_fit_scenario import staircase, two_mode_link
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -96,3 +99,31 @@ def test_grouped_options_map_onto_the_engine():
                       windows=[(0.0, 5.0)]).engine_options()
     assert (flat.residual_level, flat.segment, flat.windows, flat.global_stage) == (
         0.2, 3.0, [(0.0, 5.0)], False)
+
+
+@pytest.mark.slow
+def test_cli_fit_builtin_without_free_runs_the_preset_and_json_is_to_dict(tmp_path):
+    """Issue #23: ``flexarm fit quanser-two-link LOG --log-format ... --window a:b`` without
+    ``--free`` runs the preset's free list and says so; its ``--json`` is exactly
+    ``FitResult.to_dict()`` (read back by ``FitResult.from_dict``). A short window and a
+    small budget: this checks the path, not the fit's quality (test_two_link_fit does)."""
+    import json
+    import subprocess
+    import sys
+
+    from flexarm.identification.time_domain.result import FitResult
+
+    data = ROOT.parent / "shared" / "data" / "two-link-rig" / "lqr_full_10deg.mat"
+    if not data.exists():
+        pytest.skip(f"two-link workspace not found at {data} (../shared is absent)")
+    out = tmp_path / "fit.json"
+    r = subprocess.run([sys.executable, "-m", "flexarm", "fit", "quanser-two-link", str(data),
+                        "--log-format", str(ROOT / "examples" / "two-link-workspace.toml"),
+                        "--window", "0:5", "--max-nfev", "2", "--json", str(out)],
+                       capture_output=True, text=True, timeout=1200)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "free parameters (15): preset quanser-two-link" in r.stdout
+    d = json.loads(out.read_text())
+    assert d["free_source"] == "preset quanser-two-link" and len(d["free"]) == 15
+    back = FitResult.from_dict(d)
+    assert json.loads(json.dumps(back.to_dict())) == d

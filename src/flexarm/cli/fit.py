@@ -393,9 +393,10 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _fit_table(pred["fit_percent"], "whole-log prediction")
+    # the result carries the whole-log prediction and its figures: --json is res.to_dict()
+    res.fit_percent, res.plots = pred["fit_percent"], (pred["plots"] if plots is not None else [])
     if json_out is not None:
-        write_json(json_out, scenario_fit_document(res, pred, plots is not None),
-                   overwrite=overwrite)
+        write_json(json_out, res.to_dict(), overwrite=overwrite)
     if scenario_out is not None:
         res.write_scenario(scenario_out, overwrite=overwrite)
     with figures:
@@ -538,13 +539,6 @@ def interrupted_document(res, best) -> dict:
     else:
         d = {"message": "interrupted before any model was evaluated"}
     return {**mark, **d, **mark}
-
-
-def scenario_fit_document(res, pred: dict, with_plots: bool) -> dict:
-    """JSON LAYOUT of ``fit SCENARIO LOG... --json`` (the general fit): the fit's own
-    dictionary with the whole-log prediction's fit % and the figure paths (``--plots``)."""
-    return {**res.to_dict(), "fit_percent": pred["fit_percent"],
-            "plots": pred["plots"] if with_plots else []}
 
 
 def refit_document(res, free: list[str], rwin, log, after: dict) -> dict:
