@@ -70,12 +70,24 @@ def writable(option: str, path: Path, folder: Path) -> None:
              "folder you can write to")
 
 
+def _not_an_input(option: str, path: Path) -> None:
+    """Refuse an output path that is (inside) an input of the run
+    (:func:`flexarm.io.write.is_input`), --overwrite or not."""
+    from flexarm.io.write import is_input
+
+    src = is_input(path)
+    if src is not None:
+        fail(f"{option} {path}: is an input of this run ({src}); flexarm never writes over "
+             "an input, even with --overwrite; give another output path")
+
+
 def check_dir_option(option: str, path: Optional[Path]) -> None:
     """An output folder option: refuse, before any work, a path that is an existing file,
     lies below a file, or cannot be created or written (the folder itself may be missing:
     it is created with its parents)."""
     if path is None:
         return
+    _not_an_input(option, path)
     if path.exists() and not path.is_dir():
         fail(f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
              "several files into it), or move the file away")
@@ -96,6 +108,7 @@ def check_file_option(option: str, path: Optional[Path], overwrite: bool,
     --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
     if path is None:
         return
+    _not_an_input(option, path)
     if path.is_dir():
         fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. "
              f"{path / example}")
