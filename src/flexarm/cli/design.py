@@ -101,7 +101,7 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
     enable_cache()
     from flexarm.design import METHODS
     from flexarm.design.gate import GateOptions, design_checked
-    from flexarm.errors import FlexarmError, UnstableDesignError
+    from flexarm.errors import FlexarmError
 
     _check_options(method, METHODS, pole_domain, poles, q, r, observer_poles, integral,
                    disturbance, max_deflection, distance, fit_json, spread, plants,
@@ -180,10 +180,10 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
         err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False,
                   soft_wrap=True)
         if not accept_unstable:
-            try:
-                des.require_stable(False)
-            except UnstableDesignError as exc:
-                fail(f"{exc} (written to {out}; --accept-unstable keeps it)")
+            fail(f"the {method} design is not safe to run: {des.verdict}; written to {out} "
+                 "with its verdict (design.json, compare.md say why); redesign, or pass "
+                 "--accept-unstable to keep it (flexarm export-c then refuses it without "
+                 "--force)")
 
 
 def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | None:
