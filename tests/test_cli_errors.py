@@ -390,3 +390,31 @@ def test_guarded_declares_the_inputs_and_ends_an_interrupt_with_128_plus_the_sig
             with guarded():
                 raise exc
         assert info.value.exit_code == code
+
+
+def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_path,
+                                                                  monkeypatch):
+    """`tfest --json`: the final write fails (a full disk, simulated: OSError ENOSPC for
+    the path asked for); the result is saved as <stem>.rescued-<UTC>.json beside it, a
+    warning line names it, exit 0."""
+    import errno
+    import json
+
+    import flexarm.io.write as w
+
+    target = tmp_path / "t.json"
+    real = w.write_text
+
+    def full_disk(path, text, **kw):
+        if Path(path) == target:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, text, **kw)
+
+    monkeypatch.setattr(w, "write_text", full_disk)
+    r = runner.invoke(app, ["tfest", str(inputs / "frf.json"), "--poles", "2", "--zeros", "0",
+                            "--json", str(target)])
+    assert r.exit_code == 0, r.output
+    saved = list(tmp_path.glob("t.rescued-*.json"))
+    assert not target.exists() and len(saved) == 1
+    assert "No space left on device" in r.stderr and saved[0].name in r.stderr.replace("\n", "")
+    assert json.loads(saved[0].read_text())["den"]  # the fitted model, complete

@@ -265,5 +265,6 @@ def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> 
     from flexarm.io.write import save_or_rescue
 
     saved = save_or_rescue(path, data, overwrite=overwrite, writer=writer)
-    if saved.rescued:
-        warn(f"{option}: {saved.message()}")
+    if saved.rescued:  # one line (not wrapped): the path must be copyable
+        err.print(f"[yellow]warning:[/] {escape(option + ': ' + saved.message())}",
+                  highlight=False, soft_wrap=True)
