@@ -202,8 +202,10 @@ def guarded(*paths):
     --overwrite) and SIGINT / SIGTERM handled by :func:`flexarm.io.write.interruptible`
     (a second signal does not break the writing of a best result).  ``paths``: input files
     or folders, or lists of them; ``None`` and built-in scenario names (not files) are
-    skipped.  An interruption that reaches here ends the command with exit 128 + the
-    signal's number (130 for Ctrl-C, 143 for SIGTERM) and one line on stderr."""
+    skipped.  Yields the :class:`flexarm.io.write.Interruptible` state (``.signal``: the
+    first signal's name, for a command that catches the interruption itself and exits
+    128 + its number).  An interruption that reaches here ends the command with exit
+    128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM) and one line on stderr."""
     from flexarm.errors import Interrupted
     from flexarm.io import write
 
@@ -217,8 +219,8 @@ def guarded(*paths):
         err.print(f"{name} again: finishing the writing of the result first", highlight=False)
 
     try:
-        with write.interruptible(on_repeat=again), write.inputs(files):
-            yield
+        with write.interruptible(on_repeat=again) as state, write.inputs(files):
+            yield state
     except Interrupted as exc:
         err.print(f"interrupted by {exc.signal}", highlight=False)
         raise typer.Exit(128 + int(exc.number)) from None
