@@ -218,3 +218,49 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     print("with the right values:", right.verdict, right.gate)
     assert right.verdict == STABLE and right.gate["unstable"] <= 2, right.gate
     assert right.gate["limit"] == 5.0
+
+
+# ------------------------------------------------------------------ the command line
+def test_the_cli_gates_the_design_and_the_export(tmp_path):
+    """`flexarm design` on a rig whose amplifier gives only ±0.5 V for a 0.3 rad step (the
+    lqr command is 0.45 V in the linear design and reaches the clipping on the nominal plant,
+    whose loop then does not settle): design.json carries the verdict, the summary is
+    printed, exit 2; --accept-unstable exits 0 with the same verdict; `export-c` refuses it
+    in one line naming the verdict and --force (exit 2, nothing written); --force writes it
+    with the verdict as a #warning."""
+    import tomli_w
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    d = _rig()
+    d["actuator"]["limit"] = 0.5
+    sc = tmp_path / "lim.toml"
+    sc.write_bytes(tomli_w.dumps(d).encode())
+    runner = CliRunner()
+    out = tmp_path / "d"
+    r = runner.invoke(app, ["design", str(sc), "--out", str(out)])
+    assert r.exit_code == 2, r.output
+    verdict = json.loads((out / "design.json").read_text())["verdict"]
+    assert "the command reaches the ±0.5 limit on the nominal plant" in verdict
+    err = [ln for ln in r.stderr.splitlines() if ln.startswith("error: ")]
+    assert len(err) == 1 and verdict in err[0] and "--accept-unstable" in err[0], r.stderr
+    assert "verdict " + verdict in r.stderr and "Traceback" not in r.output
+    ok = runner.invoke(app, ["design", str(sc), "--out", str(tmp_path / "d2"),
+                             "--accept-unstable"])
+    assert ok.exit_code == 0, ok.output
+    assert json.loads((tmp_path / "d2" / "design.json").read_text())["verdict"] == verdict
+    c = tmp_path / "c"
+    r = runner.invoke(app, ["export-c", str(out), "--out", str(c)])
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1, r.output
+    assert verdict in lines[0] and "--force" in lines[0]
+    assert not c.exists() or not any(c.iterdir())
+    r = runner.invoke(app, ["export-c", str(out), "--out", str(c), "--force"])
+    assert r.exit_code == 0, r.output
+    assert "#warning" in (c / "controller.h").read_text()
+    # the gate's share is an option; a share outside [0, 1] is refused before any work
+    r = runner.invoke(app, ["design", str(sc), "--out", str(tmp_path / "d3"),
+                            "--max-unstable-share", "2"])
+    assert r.exit_code == 2 and "--max-unstable-share" in r.stderr
+    assert not (tmp_path / "d3").exists()

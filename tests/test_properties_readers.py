@@ -229,12 +229,6 @@ MATRIX = st.one_of(
                                                          max_size=2))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "found by this test, in flexarm.control.lti (not this issue's files): read_lti_file "
-    "raises IndexError for dt = [], TypeError for dt = null, and a ValueError without the "
-    "file name for A = ''; the rest of its errors are plain ValueErrors naming the file, not "
-    "FlexarmErrors. Fix: convert A..D and dt in one try that raises a FlexarmError naming "
-    "the file and the key; then remove this mark"))
 @FUZZ
 @given(st.dictionaries(st.sampled_from(["A", "B", "C", "D", "dt", "x"]), MATRIX, max_size=5))
 def test_controller_files_are_valid_or_one_clear_error(d):
@@ -264,12 +258,6 @@ def _frf_json() -> dict:
             "outputs": {"motor_angle": out}, "warnings": []}
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "found by this test, in flexarm.identification.frequency_domain.periodic (not this "
-    "issue's files): PeriodicFRF.from_json lets OverflowError ('Python int too large to "
-    "convert to C long') and IndexError ('too many indices for array') out for mutated "
-    "fields; its except clause catches only KeyError, TypeError, ValueError. Fix: catch "
-    "those too (and check the arrays' shapes against frequency_hz); then remove this mark"))
 @FUZZ
 @given(st.data())
 def test_frf_json_is_valid_or_one_clear_error(data):

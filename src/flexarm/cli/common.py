@@ -67,12 +67,24 @@ def writable(option: str, path: Path, folder: Path) -> None:
              "folder you can write to")
 
 
+def _not_an_input(option: str, path: Path) -> None:
+    """Refuse an output path that is (inside) an input of the run
+    (:func:`flexarm.io.write.is_input`), --overwrite or not."""
+    from flexarm.io.write import is_input
+
+    src = is_input(path)
+    if src is not None:
+        fail(f"{option} {path}: is an input of this run ({src}); flexarm never writes over "
+             "an input, even with --overwrite; give another output path")
+
+
 def check_dir_option(option: str, path: Optional[Path]) -> None:
     """An output folder option: refuse, before any work, a path that is an existing file,
     lies below a file, or cannot be created or written (the folder itself may be missing:
     it is created with its parents)."""
     if path is None:
         return
+    _not_an_input(option, path)
     if path.exists() and not path.is_dir():
         fail(f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
              "several files into it), or move the file away")
@@ -93,6 +105,7 @@ def check_file_option(option: str, path: Optional[Path], overwrite: bool,
     --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
     if path is None:
         return
+    _not_an_input(option, path)
     if path.is_dir():
         fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. "
              f"{path / example}")
@@ -177,3 +190,80 @@ def warn(message: str) -> None:
 def fmt(c: list[float]) -> str:
     """Numbers as ``[a, b, c]`` with 6 significant digits."""
     return "[" + ", ".join(f"{x:.6g}" for x in c) + "]"
+
+
+@contextlib.contextmanager
+def guarded(*paths):
+    """The run of one command (issue #25): its input files declared
+    (:func:`flexarm.io.write.inputs`: no writer of the run may write over them, even with
+    --overwrite) and SIGINT / SIGTERM handled by :func:`flexarm.io.write.interruptible`
+    (a second signal does not break the writing of a best result).  ``paths``: input files
+    or folders, or lists of them; ``None`` and built-in scenario names (not files) are
+    skipped.  Yields the :class:`flexarm.io.write.Interruptible` state (``.signal``: the
+    first signal's name, for a command that catches the interruption itself and exits
+    128 + its number).  An interruption that reaches here ends the command with exit
+    128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM) and one line on stderr."""
+    from flexarm.errors import Interrupted
+    from flexarm.io import write
+
+    files = []
+    for p in paths:
+        for q in (p if isinstance(p, (list, tuple)) else [p]):
+            if q is not None and Path(q).exists():
+                files.append(Path(q))
+
+    def again(name: str) -> None:
+        err.print(f"{name} again: finishing the writing of the result first", highlight=False)
+
+    try:
+        with write.interruptible(on_repeat=again) as state, write.inputs(files):
+            yield state
+    except Interrupted as exc:
+        err.print(f"interrupted by {exc.signal}", highlight=False)
+        raise typer.Exit(128 + int(exc.number)) from None
+    except KeyboardInterrupt:
+        err.print("interrupted by SIGINT", highlight=False)
+        raise typer.Exit(130) from None
+
+
+def guarded_command(*names: str):
+    """A command run inside :func:`guarded`, with the values of its parameters ``names``
+    (input files, folders or lists of them) declared as the run's inputs."""
+    import functools
+
+    def deco(f):
+        @functools.wraps(f)
+        def run(*args, **kwargs):
+            with guarded(*[kwargs.get(n) for n in names]):
+                return f(*args, **kwargs)
+        return run
+    return deco
+
+
+def output_folder(option: str, path: Optional[Path], overwrite: bool) -> Optional[Path]:
+    """A figure (or other output) folder, checked and created before any work by
+    :func:`flexarm.io.write.output_folder`: a folder holding files only with --overwrite,
+    never an input; refused as one line naming ``option``."""
+    if path is None:
+        return None
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import output_folder as _folder
+
+    check_dir_option(option, path)
+    try:
+        return _folder(path, overwrite=overwrite)
+    except FlexarmError as exc:
+        fail(f"{option} {exc}".replace("(pass overwrite=True, on the command line --overwrite)",
+                                       "(pass --overwrite to write into it)"))
+
+
+def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> None:
+    """The command's final write (:func:`flexarm.io.write.save_or_rescue`): written where
+    asked, or, when that fails (a full disk, a vanished folder), next to it and said so;
+    an input of the run is never written over (the rescue copy goes beside it)."""
+    from flexarm.io.write import save_or_rescue
+
+    saved = save_or_rescue(path, data, overwrite=overwrite, writer=writer)
+    if saved.rescued:  # one line (not wrapped): the path must be copyable
+        err.print(f"[yellow]warning:[/] {escape(option + ': ' + saved.message())}",
+                  highlight=False, soft_wrap=True)

@@ -7,24 +7,39 @@ from pathlib import Path
 
 import typer
 
-from flexarm.cli.common import check_dir_option, console, fail
+from flexarm.cli.common import check_dir_option, console, fail, guarded
 
 
 def export_c(design: str = typer.Argument(..., help="design directory (holding design.toml) or a scenario TOML / built-in name"),
              out: Path = typer.Option(..., "--out", help="folder for NAME.h and NAME.c"),
              precision: str = typer.Option("double", "--precision", help="double or float"),
              name: str = typer.Option("controller", "--name", help="C prefix and file name"),
-             overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c")) -> None:
+             overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c"),
+             force: bool = typer.Option(
+                 False, "--force",
+                 help="export a design whose gate verdict is not stable (the verdict goes "
+                      "into NAME.h as a #warning)")) -> None:
     """Write the [controller] of a design (or scenario) as C99 for a real-time target:
     NAME.h (state struct, NAME_init, NAME_step, channel order and units) and NAME.c (the
-    law, friction feedforward, saturation and D/A count); no dependencies."""
+    law, friction feedforward, saturation and D/A count); no dependencies.  A design whose
+    gate verdict (design.json) is not "stable" is refused (exit 2) unless --force."""
+    with guarded(design):
+        _export(design, out, precision, name, overwrite, force)
+
+
+def _export(design, out, precision, name, overwrite, force) -> None:
     from flexarm.deploy.c_export import ExportError, export_c as _export_c
-    from flexarm.errors import OutputExistsError
+    from flexarm.errors import OutputExistsError, UnstableDesignError
 
     check_dir_option("--out", out)
     try:
         code, paths = _export_c(design, out, name=name, precision=precision,
-                                overwrite=overwrite)
+                                overwrite=overwrite, force=force)
+    except UnstableDesignError as exc:
+        v = exc.value if exc.value is not None else getattr(exc.design, "verdict", None)
+        fail(f"{design}: the design gate's verdict is not stable ({v}); not exported; "
+             "redesign (design.json and compare.md say why), or pass --force to export it "
+             "with the verdict as a #warning in the header")
     except (ExportError, OutputExistsError) as exc:
         fail(str(exc))
     except ValueError as exc:

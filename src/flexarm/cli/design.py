@@ -12,8 +12,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, fail,
-                                load, outdir, progress, warn, write_report)
+from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, err,
+                                fail, fold, guarded, load, outdir, progress, warn,
+                                write_report)
 
 
 def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
@@ -58,6 +59,15 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                report: Optional[Path] = typer.Option(
                    None, "--report", help="write a self-contained HTML report (the designed "
                                           "controller, its figures, the step comparison)"),
+               accept_unstable: bool = typer.Option(
+                   False, "--accept-unstable",
+                   help="keep (and exit 0 with) a design the gate finds unsafe: unstable on the "
+                        "nominal plant, or on more than --max-unstable-share of the drawn "
+                        "plants, or reaching the command limit (its verdict is still written)"),
+               max_unstable_share: float = typer.Option(
+                   0.01, "--max-unstable-share",
+                   help="the largest share (0..1) of drawn plants that may be unstable or reach "
+                        "the limit before the design is refused"),
                overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
     """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
     period, its computation and sensor delays in the model): state feedback by LQR or pole
@@ -73,13 +83,32 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     --plants drawn plants (nominal / median / worst, unstable count, the limit).
     Writes design.toml (the scenario with the designed [controller]: flexarm simulate
     OUT/design.toml runs it), design.json (gains, poles, weights, figures, warnings),
-    compare.json / compare.md (the comparison) and its figures; --report an HTML page."""
+    compare.json / compare.md (the comparison) and its figures; --report an HTML page.
+    The design gate: a design unstable on the nominal plant or on more than
+    --max-unstable-share of the drawn plants, or whose command reaches the limit, is written
+    with its verdict, printed in red, and the command exits 2 unless --accept-unstable."""
+    with guarded(scenario, fit_json):
+        _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
+                disturbance, friction_compensation, max_deflection, distance, fit_json,
+                spread, plants, seed, encoder_counts, report, accept_unstable,
+                max_unstable_share, overwrite)
+
+
+def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
+            disturbance, friction_compensation, max_deflection, distance, fit_json, spread,
+            plants, seed, encoder_counts, report, accept_unstable, max_unstable_share,
+            overwrite) -> None:
     enable_cache()
-    from flexarm.design import METHODS, design
+    from flexarm.design import METHODS
+    from flexarm.design.gate import GateOptions, design_checked
+    from flexarm.errors import FlexarmError
 
     _check_options(method, METHODS, pole_domain, poles, q, r, observer_poles, integral,
                    disturbance, max_deflection, distance, fit_json, spread, plants,
                    encoder_counts)
+    if not (0.0 <= max_unstable_share <= 1.0):
+        fail(f"--max-unstable-share {max_unstable_share}: give a share in [0, 1], e.g. 0.01 "
+             "for 1 %")
     # the option values parsed before any work: a malformed one is refused first
     poles_v = parsing.complex_list(poles, "--poles")
     observer_v = parsing.complex_list(observer_poles, "--observer-poles")
@@ -102,34 +131,27 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         opts["poles"] = poles_v
     elif method == "lqr":
         opts.update(q=q_v, r=r_v)
-    from flexarm.design.compare import compare
-    from flexarm.design.plants import PlantBatch, from_paths
+    from flexarm.design.plants import from_paths
 
+    gate = GateOptions(max_unstable_share=max_unstable_share, accept_unstable=True)
     with console.status(f"designing ({method})...") as status:
         try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
             drawn = from_paths(sc, spread_d, plants, seed=seed) if spread_d else None
         except ValueError as exc:
             fail(f"--fit-json/--spread: {exc}")
-        if drawn is not None and method in ("lqr", "tune"):
-            opts.update(plants=drawn, count=count)
         if method == "tune":
             opts["callback"] = lambda e: progress(
                 status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}")
-        try:
-            des = design(sc, method, **opts)
+        progress(status, f"designing ({method}) and checking it with the scenario's "
+                          "controller on a reference step (nominal plant"
+                          f"{f' and {plants} drawn' if spread_d else ''})...")
+        try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
+            des = design_checked(sc, method, plants=drawn, count=count, gate=gate, **opts)
+        except FlexarmError:
+            raise
         except ValueError as exc:
             fail(f"{scenario}: {exc}")
-        batch = drawn if drawn is not None else PlantBatch.nominal_only(sc)
-        progress(status, "the scenario's controller and the design on a reference step "
-                          f"(nominal plant{f' and {plants} drawn' if spread_d else ''})...")
-        side = None
-        try:
-            side = compare(batch, {method: des}, logged="scenario", count=count,
-                           duration=max(3.0, float(sc.simulation.duration)))
-        except (ValueError, KeyError) as exc:
-            des.warnings.append(f"comparison not run: {exc}")
-    if side is not None:
-        des.info["comparison"] = side.to_dict()["rows"]
+    side = getattr(des, "comparison", None)
     files = des.write(out, overwrite=overwrite)
     if side is not None:
         from flexarm.io.write import write_json, write_text
@@ -139,7 +161,6 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                              overwrite=overwrite),
                   *side.figures(out, overwrite=overwrite)]
         _print_comparison(side, plants)
-        des.warnings.extend(w for w in side.warnings if w not in des.warnings)
     info = des.info
     if "model" in info:
         console.print(f"augmented model: {info['model']['n_augmented']} states "
@@ -154,6 +175,15 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
         write_report(design_report(des, figures=[p for p in files if str(p).endswith(".png")],
                                     comparison=side, command=command_line(ctx),
                                     inputs=[scenario]), report, overwrite)
+    if not des.stable:
+        colour = "yellow" if accept_unstable else "bold red"
+        err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False,
+                  soft_wrap=True)
+        if not accept_unstable:
+            fail(f"the {method} design is not safe to run: {des.verdict}; written to {out} "
+                 "with its verdict (design.json, compare.md say why); redesign, or pass "
+                 "--accept-unstable to keep it (flexarm export-c then refuses it without "
+                 "--force)")
 
 
 def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | None:

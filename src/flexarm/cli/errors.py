@@ -9,7 +9,9 @@ Exit codes of every ``flexarm`` command:
 * 2: a bad input: one line ``error: ...`` (the file or option, the value and the fix): a
   project error raised by the library, an option the command refuses, or an option or
   argument the parser refuses;
-* 130: interrupted (Ctrl-C); ``fit`` writes its best result first.
+* 128 + the signal's number: interrupted, 130 for Ctrl-C (SIGINT), 143 for SIGTERM
+  (:func:`flexarm.cli.common.guarded`, which every command runs in); ``fit`` writes its best
+  result first, and a second signal does not break that writing.
 """
 
 from __future__ import annotations

@@ -13,9 +13,11 @@ import typer
 from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, console, enable_cache, err,
-                                fail, fmt, load, warn)
+                                fail, fmt, guarded_command, load, output_folder, save_result,
+                                warn)
 
 
+@guarded_command("scenario")
 def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
                out: Path = typer.Option(..., "--out", help="folder for one CSV per experiment"),
                frequencies: Optional[str] = typer.Option(
@@ -47,6 +49,7 @@ def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or b
     console.print(f"wrote {len(paths)} experiment(s) into {out}/")
 
 
+@guarded_command("files", "column", "unit")
 def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one folder of them"),
              motor_constant: str = typer.Option(..., "--motor-constant",
                                                 help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"),
@@ -74,7 +77,7 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     bo = parsing.ints(beam_orders, "--beam-orders", 2, "0,2")
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
-    check_dir_option("--plots", plots)
+    plots = output_folder("--plots", plots, overwrite)
     src = files[0] if len(files) == 1 else files
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -88,7 +91,7 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
         warn(str(w.message))
     d = res.to_dict()
     if json_out is not None:
-        res.to_json(json_out, overwrite=overwrite)
+        save_result("--json", json_out, res.to_json(), overwrite)
     if plots is not None:
         res.bode_figures(plots)
     if scenario_out is not None:
@@ -115,6 +118,7 @@ def scenario_file(res, current_limit) -> dict:
     return frag
 
 
+@guarded_command()
 def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a generator plays)"),
            fs: float = typer.Option(..., "--fs", help="sampling rate, Hz"),
            period: int = typer.Option(..., "--period", help="samples per period"),
@@ -146,6 +150,7 @@ def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a gene
                   f"factor {e.crest_factor:.3f}; lines in {lines}")
 
 
+@guarded_command("logs", "log_format", "lines")
 def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"),
         log_format: Optional[Path] = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
         input: str = typer.Option("current", "--input", help="flexarm name of the input"),
@@ -160,17 +165,21 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                                    help="periodic (multisine over whole periods) or lpm "
                                         "(local polynomial method: non-periodic or transient records)"),
         json_out: o.JsonRequired = ...,
-        plots: o.Plots = None) -> None:
+        plots: o.Plots = None,
+        overwrite: o.Overwrite = False) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
     import warnings as _w
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.io.matfile import read_recording
     from flexarm.identification.frequency_domain.periodic import (combine_realisations, lpm_frf,
-                                                                  periodic_frf, plot_distortion)
+                                                                  periodic_frf, plot_bode,
+                                                                  plot_distortion)
     if method not in ("periodic", "lpm"):
         fail(f"--method {method!r}: choose periodic or lpm")
     n_period = None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
+    check_file_option("--json", json_out, overwrite, "frf.json")
+    plots = output_folder("--plots", plots, overwrite)
     from flexarm.io.logs import LogError
     try:
         with _w.catch_warnings(record=True) as caught:
@@ -201,11 +210,10 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
             warn(str(c.message))
     except (IdentificationError, LogError, OSError, ValueError) as exc:
         fail(str(exc))
-    from flexarm.io.write import write_json
-    write_json(json_out, frf_document(logs, res), overwrite=True)
+    save_result("--json", json_out, frf_document(logs, res), overwrite)
     if plots is not None:
-        plots.mkdir(parents=True, exist_ok=True)
         plot_distortion(res, plots / "frf-distortion.png")
+        plot_bode(res, plots / "frf-bode.png")
     if method == "lpm":
         console.print(f"LPM: {len(res.lines)} lines {res.frequency_hz[0]:g}–"
                       f"{res.frequency_hz[-1]:g} Hz from {res.period} samples; {res.verdict()}")
@@ -232,6 +240,7 @@ def structure_given(st, motor_constant, resistance, gear_ratio, efficiency, leng
     return given
 
 
+@guarded_command("frf_json")
 def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
           poles: Optional[int] = typer.Option(None, "--poles"),
           zeros: Optional[int] = typer.Option(None, "--zeros"),
@@ -258,7 +267,8 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                                        help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
           json_out: o.JsonRequired = ...,
-          plots: o.Plots = None) -> None:
+          plots: o.Plots = None,
+          overwrite: o.Overwrite = False) -> None:
     """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
     voltage-servo) to an FRF, weighted by its variances; JSON parameters.<name> = {value, std}."""
     import control as ct
@@ -268,6 +278,8 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
     from flexarm.identification.frequency_domain.tfest import TFEstError
     from flexarm.identification.frequency_domain.tfest import tfest as _tfest
+    check_file_option("--json", json_out, overwrite, "tfest.json")
+    plots = output_folder("--plots", plots, overwrite)
     try:
         d = json.loads(frf_json.read_text())
         f = np.asarray(d["frequency_hz"], float)
@@ -350,10 +362,16 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     except TFEstError as exc:
         fail(f"{frf_json}: {exc}")
     out = tfest_document(out, fit)
-    from flexarm.io.write import write_json
-    write_json(json_out, out, overwrite=True)
+    save_result("--json", json_out, out, overwrite)
     if plots is not None:
-        _tfest_figure(fit, f, outs, out, structure, plots)
+        from flexarm.identification.frequency_domain.tfest import plot_fit
+
+        if structure is not None:
+            chans = {n: chan(n) for n in out["outputs"]}
+            plot_fit(fit, f, {n: c[0] for n, c in chans.items()},
+                     {n: c[1] for n, c in chans.items()}, path=plots / "tfest.png")
+        else:
+            plot_fit(fit, f, {name: H}, {name: sd}, path=plots / "tfest.png")
     console.print(fit.verdict)
     for name, v in fit.parameters.items():
         extra = f", inflated ± {v['std_inflated']:.4g}" if "std_inflated" in v else ""
@@ -361,6 +379,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
         console.print(f"  {name} = {v['value']:.6g} ± {v['std']:.4g} ({kind}){extra}")
 
 
+@guarded_command("frf_json")
 def friction(frf_json: list[Path] = typer.Argument(
                  ..., help="FRF JSONs written by flexarm frf, one per amplitude (same "
                            "excitation lines, different levels)"),
@@ -373,7 +392,8 @@ def friction(frf_json: list[Path] = typer.Argument(
              length: o.StructLength = None,
              iterations: int = typer.Option(3, "--iterations",
                                             help="simulator corrections of the Bussgang start (0: none)"),
-             json_out: o.JsonRequired = ...) -> None:
+             json_out: o.JsonRequired = ...,
+             overwrite: o.Overwrite = False) -> None:
     """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
     structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v
     (Bussgang), then matched with flexarm's simulator of the fitted model with friction."""
@@ -388,6 +408,7 @@ def friction(frf_json: list[Path] = typer.Argument(
     from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
     from flexarm.identification.frequency_domain.tfest import TFEstError
 
+    check_file_option("--json", json_out, overwrite, "friction.json")
     if structure not in SIMULATORS:
         fail(f"--structure {structure!r}: the friction match simulates {', '.join(SIMULATORS)}")
     if len(frf_json) < 2:
@@ -433,8 +454,7 @@ def friction(frf_json: list[Path] = typer.Argument(
     for m in res["warnings"]:
         warn(m)
     res = friction_document(res, frf_json, fits)
-    from flexarm.io.write import write_json
-    write_json(json_out, res, overwrite=True)
+    save_result("--json", json_out, res, overwrite)
     c, v = res["coulomb"], res["viscous"]
     console.print(f"Coulomb {c['value']:.4g} ± {c['std']:.2g} {res['unit']}, viscous "
                   f"{v['value']:.4g} ± {v['std']:.2g} {res['damping_unit']} (correlation "
@@ -467,28 +487,3 @@ def friction_document(res: dict, frf_json: list[Path], fits: list) -> dict:
     """JSON LAYOUT of ``friction --json``: the match's result, its sources and the
     structure fitted to each record."""
     return {**res, "sources": [str(p) for p in frf_json], "fits": [f.to_json() for f in fits]}
-
-
-def _tfest_figure(fit, f, outs: dict, out: dict, structure: Optional[str], plots: Path) -> None:
-    """``tfest --plots``: data, model and |error| in dB over frequency (tfest.png)."""
-    import matplotlib  # LIBRARY: a figure function of tfest's result (no matplotlib.use)
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    plots.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(7, 4))
-    model = fit.response(2 * np.pi * f)
-    model = model if isinstance(model, dict) else {out["output"]: model}
-    for nm, g in model.items():
-        if nm not in outs or (structure is not None and nm not in out["outputs"]):
-            continue
-        H = np.asarray(outs[nm]["re"]) + 1j * np.asarray(outs[nm]["im"])
-        ax.semilogx(f, 20 * np.log10(np.abs(H)), ".", label=f"{nm} data")
-        ax.semilogx(f, 20 * np.log10(np.abs(g)), "-", label=f"{nm} model")
-        ax.semilogx(f, 20 * np.log10(np.abs(g - H)), ":", label=f"{nm} |error|")
-    ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("dB")
-    ax.legend(fontsize=7)
-    fig.savefig(plots / "tfest.png", dpi=120)
-    plt.close(fig)

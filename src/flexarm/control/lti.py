@@ -257,7 +257,7 @@ def _matrix(value: Any, name: str, where: str) -> np.ndarray:
     elif a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}: {name} must be a finite matrix (a list of rows); got shape "
+        raise ScenarioError(f"{where}: {name} must be a finite matrix (a list of rows); got shape "
                          f"{np.shape(value)}")
     return a
 
@@ -281,9 +281,12 @@ def _struct(node: Any) -> dict[str, Any] | None:
 def _numeric(v: Any, key: str, where: str) -> np.ndarray:
     while isinstance(v, np.ndarray) and v.dtype == object and v.size == 1:
         v = v.flat[0]
+    if v is None:
+        raise ScenarioError(f"{where}: field {key} is null; give a number or a matrix of "
+                            "numbers (or leave the field out)")
     try:
         a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ScenarioError(f"{where}: field {key} is not numeric ({type(v).__name__}); give "
                          "A, B, C, D as matrices of numbers") from None
     return a
@@ -358,15 +361,28 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
     for k in ("A", "B", "C", "D"):
         if k in raw:
             a = _numeric(raw[k], k, at)
-            out[k] = None if a.size == 0 and k != "D" else a
+            if a.size == 0 and k != "D":
+                out[k] = None
+                continue
+            try:
+                out[k] = _matrix(a, k, at)
+            except (TypeError, ValueError, IndexError, OverflowError) as exc:
+                raise ScenarioError(f"{at}: field {k}: {exc}", fix=(
+                    "give A, B, C, D as finite matrices of numbers (a list of rows)")) from None
     for k in ("dt", "Ts"):
         if k in raw and "dt" not in out:
             ts = _numeric(raw[k], k, at).ravel()
+            if ts.size != 1 or not math.isfinite(float(ts[0])):
+                shown = "empty" if ts.size == 0 else (
+                    f"{ts.size} numbers" if ts.size > 1 else f"{float(ts[0])!r}")
+                raise ScenarioError(f"{at}: field {k} is {shown}; give the controller's "
+                                    "sampling period as one number in s (e.g. 0.002), or "
+                                    "leave it out to run at the loop's period")
             # MATLAB writes Ts = 0 for a continuous system, -1 for an unspecified period
-            if ts.size and ts[0] == 0:
+            if ts[0] == 0:
                 raise ScenarioError(f"{at}: {k} = 0: a continuous-time system; discretise it "
                                  "(c2d) before exporting the block")
-            if ts.size and ts[0] > 0:
+            if ts[0] > 0:
                 out["dt"] = float(ts[0])
     if "D" not in out:
         raise ScenarioError(f"{at}: no D (the {'struct' if variable else 'file'} holds: "
@@ -383,27 +399,27 @@ def lti_matrices(A=None, B=None, C=None, D=None, *, n_in: int, n_out: int,
     """Check and complete (A, B, C, D) for ``n_in`` inputs and ``n_out`` outputs; missing
     A, B, C mean a static gain. Errors name the matrix, its shape and the expected one."""
     if D is None:
-        raise ValueError(f"{where}: D is missing; give D ({n_out} × {n_in}: outputs × inputs)")
+        raise ScenarioError(f"{where}: D is missing; give D ({n_out} × {n_in}: outputs × inputs)")
     D = _matrix(D, "D", where)
     if D.shape != (n_out, n_in):
-        raise ValueError(f"{where}: D is {D.shape[0]} × {D.shape[1]}, but the controller has "
+        raise ScenarioError(f"{where}: D is {D.shape[0]} × {D.shape[1]}, but the controller has "
                          f"{n_out} output(s) (outputs) and {n_in} input(s) (inputs): D must be "
                          f"{n_out} × {n_in}")
     if A is None and B is None and C is None:
         return np.zeros((0, 0)), np.zeros((0, n_in)), np.zeros((n_out, 0)), D
     if A is None or B is None or C is None:
-        raise ValueError(f"{where}: give A, B and C together (or none of them for a static "
+        raise ScenarioError(f"{where}: give A, B and C together (or none of them for a static "
                          "gain D)")
     A = np.asarray(A, float)
     A = A.reshape(1, 1) if A.ndim == 0 else A
     n = A.shape[0]
     if A.ndim != 2 or A.shape != (n, n):
-        raise ValueError(f"{where}: A is {A.shape}; it must be square (n × n)")
+        raise ScenarioError(f"{where}: A is {A.shape}; it must be square (n × n)")
     B = np.asarray(B, float).reshape(n, -1) if np.size(B) == n * n_in else _matrix(B, "B", where)
     C = np.asarray(C, float).reshape(-1, n) if np.size(C) == n * n_out else _matrix(C, "C", where)
     for name, M, shape in (("B", B, (n, n_in)), ("C", C, (n_out, n))):
         if M.shape != shape:
-            raise ValueError(f"{where}: {name} is {M.shape[0]} × {M.shape[1]}; with {n} "
+            raise ScenarioError(f"{where}: {name} is {M.shape[0]} × {M.shape[1]}; with {n} "
                              f"state(s), {n_in} input(s) and {n_out} output(s) it must be "
                              f"{shape[0]} × {shape[1]}")
     return A, B, C, D
@@ -417,7 +433,7 @@ def check_stable(A: np.ndarray, *, allow_unstable: bool = False,
     eig = np.linalg.eigvals(A)
     j = int(np.argmax(np.abs(eig)))
     if abs(eig[j]) > 1.0 + STABILITY_MARGIN:
-        raise ValueError(f"{where}: the controller is unstable: eigenvalue {eig[j]:.6g} of A has "
+        raise ScenarioError(f"{where}: the controller is unstable: eigenvalue {eig[j]:.6g} of A has "
                          f"|z| = {abs(eig[j]):.6g} > 1; check A (a continuous-time A? "
                          "discretise it), or set allow_unstable = true if it is meant")
 
@@ -429,7 +445,7 @@ def controller_period(dt: float | None, base: float, *, where: str = "[controlle
     r = dt / base
     k = round(r)
     if k < 1 or abs(r - k) > 1e-9 * max(1.0, k):
-        raise ValueError(f"{where}: dt = {dt:g} s is not a whole multiple of the loop's "
+        raise ScenarioError(f"{where}: dt = {dt:g} s is not a whole multiple of the loop's "
                          f"sampling period {base:g} s (ratio {r:.9g}); give dt = k·{base:g} s "
                          "(the controller runs every k samples, its output held in between)")
     return int(k)
@@ -447,7 +463,7 @@ def _signal_entries(signals, *, references, measured, where: str):
             elif measured is None or s in measured:
                 out.append(("measured", s))
             else:
-                raise ValueError(
+                raise ScenarioError(
                     f"{where}: signals[{j}] = {s!r} is neither a channel nor a number: give "
                     f"a measured channel ({', '.join(sorted(measured))}), a reference "
                     f"channel ({', '.join(sorted(references or ()))}) or a number")
@@ -455,7 +471,7 @@ def _signal_entries(signals, *, references, measured, where: str):
                 and math.isfinite(float(s)):
             out.append(("constant", float(s)))
         else:
-            raise ValueError(f"{where}: signals[{j}] = {s!r} is neither a channel nor a "
+            raise ScenarioError(f"{where}: signals[{j}] = {s!r} is neither a channel nor a "
                              "number: give a channel name or a finite number")
     return tuple(out)
 
@@ -476,7 +492,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
     the plant's inputs (``current_1``) or 1-based joint numbers; ``input_names``: the
     plant's input names."""
     if (inputs is None) == (signals is None):
-        raise ValueError(f"{where}: give inputs (+ setpoints) or signals, one of them")
+        raise ScenarioError(f"{where}: give inputs (+ setpoints) or signals, one of them")
     if signals is not None:
         sig = _signal_entries(signals, references=references, measured=measured, where=where)
         inputs, sp, n_in = (), (), len(sig)
@@ -485,7 +501,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
         inputs = list(inputs)
         setpoints = [None] * len(inputs) if setpoints is None else list(setpoints)
         if len(setpoints) != len(inputs):
-            raise ValueError(f"{where}: setpoints has {len(setpoints)} entries, inputs "
+            raise ScenarioError(f"{where}: setpoints has {len(setpoints)} entries, inputs "
                              f"{len(inputs)}: give one setpoint (a reference channel or 0) per "
                              "input")
         sp = []
@@ -495,7 +511,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
             elif isinstance(s, str):
                 sp.append(s)
             else:
-                raise ValueError(f"{where}: setpoint {s!r}: give a reference channel name or 0")
+                raise ScenarioError(f"{where}: setpoint {s!r}: give a reference channel name or 0")
         n_in = len(inputs)
     outs = []
     for o in outputs:
@@ -504,17 +520,17 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
         elif isinstance(o, (int, np.integer)) and not isinstance(o, bool) and 1 <= o <= len(input_names):
             outs.append(int(o) - 1)
         else:
-            raise ValueError(f"{where}: output {o!r} is not an input of the plant; give one of "
+            raise ScenarioError(f"{where}: output {o!r} is not an input of the plant; give one of "
                              f"{', '.join(input_names)} (or the joint number 1..{len(input_names)})")
     if len(set(outs)) != len(outs):
-        raise ValueError(f"{where}: outputs {list(outputs)} name a plant input twice")
+        raise ScenarioError(f"{where}: outputs {list(outputs)} name a plant input twice")
     if tf is not None:
         import control
 
         if isinstance(tf, tuple):
             tf = control.tf(tf[0], tf[1], dt if dt is not None else True)
         if tf.isctime():
-            raise ValueError(f"{where}: the system is continuous-time; discretise it first "
+            raise ScenarioError(f"{where}: the system is continuous-time; discretise it first "
                              "(e.g. sys.sample(T, method='tustin'))")
         if dt is None and tf.dt is not True and tf.dt:
             dt = float(tf.dt)
@@ -528,7 +544,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
     n = A.shape[0]
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, float).ravel()
     if x0.shape != (n,):
-        raise ValueError(f"{where}: initial_state has {x0.size} value(s); the controller has "
+        raise ScenarioError(f"{where}: initial_state has {x0.size} value(s); the controller has "
                          f"{n} state(s)")
     f = lambda a: jnp.asarray(np.asarray(a, float))  # noqa: E731
     return LTIController(f(A), f(B), f(C), f(D), f(x0), tuple(inputs), tuple(sp), tuple(outs),

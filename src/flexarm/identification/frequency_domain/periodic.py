@@ -144,14 +144,29 @@ class PeriodicFRF:
                 "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
                 "var": np.asarray(sp["var"], float), "M": int(sp["M"]),
                 "lines": np.arange(len(sp["re"][0])), "excited": np.asarray(d["lines"], int)}
+            if not names:
+                raise ValueError("'outputs': no output")
+            if f.ndim != 1 or f.size == 0 or not np.all(np.isfinite(f)):
+                raise ValueError(f"'frequency_hz': not a list of finite numbers ({f.ndim}-d, "
+                                 f"{f.size} values)")
+            for what, arr in (("re/im", G), ("noise_std", nstd), ("total_std", tstd)):
+                if arr is not None and arr.shape != (len(names), f.size):
+                    raise ValueError(f"'outputs' {what}: shape {arr.shape}, expected "
+                                     f"{(len(names), f.size)} (one value per output and "
+                                     "frequency)")
+            if len(np.asarray(d["lines"]).ravel()) != f.size:
+                raise ValueError(f"'lines': {len(np.asarray(d['lines']).ravel())} lines for "
+                                 f"{f.size} frequencies")
             frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * f,
                                                 inputs=[d["input"]], outputs=names)
             return cls(frd, G, f, np.asarray(d["lines"], int), names, d["input"], nstd, tstd,
                        dist, int(d["period_samples"]), float(d["fs_hz"]), int(d["periods_used"]),
                        int(d["transient_periods"]), spectra, list(d.get("warnings", [])))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError,
+                AttributeError) as exc:
             raise IdentificationError(f"{source}: not an FRF written by flexarm frf "
-                                      f"(missing or bad {exc})") from None
+                                      f"(missing or bad {exc})", file=source,
+                                      fix="give the JSON flexarm frf --json wrote") from None
 
     def _table(self) -> Table:
         """One row per output: |G| range (dB), median noise and total std relative to |G|."""
