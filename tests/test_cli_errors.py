@@ -110,6 +110,9 @@ CASES = [
     (MISSING, ["friction", "{d}/nope.json", "{d}/nope2.json", "--json", "{o}/fr.json"]),
     (JSON, ["friction", "{d}/bad.json", "{d}/bad.json", "--json", "{o}/fr.json"]),
     (PARSER, ["friction", "{d}/bad.json", "--iterations", "x", "--json", "{o}/fr.json"]),
+    (MISSING, ["fit-many", "{d}/nope.csv", "--out", "{o}/fm"]),
+    (LOG, ["fit-many", "{d}/bad.csv", "--out", "{o}/fm"]),
+    (OPTION, ["fit-many", "{d}/bad.csv", "--out", "{o}/fm", "--workers", "0"]),
 ]
 
 # the data sheet and the declared law of the simulated rotary rig's log (trial.csv)
