@@ -116,7 +116,17 @@ class Objective:
                 if name in g.outputs:
                     y[i] = pad(g.columns[name])
                     seg = g.columns[name][self.skip:n]
-                    sst = float(np.sum((seg - seg.mean()) ** 2))
+                    sst = float(np.sum((seg - seg.mean()) ** 2)) if seg.size else 0.0
+                    if not sst > 0:
+                        from flexarm.identification.time_domain.logs import FitInputError
+
+                        raise FitInputError(
+                            f"{g.where}: {name} does not vary over the {n - self.skip} samples "
+                            f"after the first {self.skip} ({n} in the log or window, one every "
+                            f"{g.dt:g} s), so it cannot be fitted",
+                            file=g.where, field=name,
+                            fix="give a longer window (the first samples are left out for the "
+                                "delay search), or check the time unit of the log format")
                     self.sst[i, j] = sst
                     w[i, self.skip:n] = 1.0 / sst
             if g.controller is not None:
