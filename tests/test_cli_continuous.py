@@ -79,15 +79,18 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
     reproduces the simulated run. Without it: one warning per file naming 'shoulder LQG'
     and --continuous, on stderr and in the JSON, and the shoulder's rates fit worse.
 
-    Tolerances: the one prediction (the general engine) starts each piece from the plant
-    state read off the logged sensor channels (the filters inverted, the rates from a local
-    polynomial over ±10 samples: flexarm.identification.time_domain.general), not from the
-    true simulated state the library replay reads (tests/test_continuous.py: > 99.8 % median,
-    > 99 % min there). That estimate's error decays with the loop; measured with continuous
-    (median / min over the pieces): θ1 99.95 / 99.89, θ̇1_f 99.64 / 99.33, α1_f 99.11 / 98.48,
-    α̇1_f 98.76 / 97.97, elbow channels 96.8–99.1 / 94.8–98.8 (see the report printed).
-    Asserted: median > 96 % and min > 94 % on every channel with --continuous, and the
-    loss without it on the shoulder's rates."""
+    Tolerances: those of the library replay (tests/test_continuous.py: median > 99.8 %,
+    min > 99 % over the pieces) on the channels it checks. The one prediction (the general
+    engine) starts each piece from the plant state read off the logged sensor channels of
+    the joined run (the digital filters inverted, rates from a local polynomial over ±10
+    samples across the piece boundary), not from the true simulated state the library
+    replay reads; what that estimate leaves shows most in the elbow's θ̇2_f (the 40 Hz
+    derivative of a quantised angle whose rate the elbow's static LQR does not hold):
+    measured 98.37 / 97.20 % (median / min), asserted > 97.5 / 96.5 for the channels the
+    library test leaves out. Measured with --continuous (median / min): θ1 100.00 / 99.99,
+    α1_f 99.95 / 99.90, θ̇1_f 99.88 / 99.58, α̇1_f 99.94 / 99.88, θ2 99.90 / 99.85,
+    α2_f 99.95 / 99.89, α̇2_f 99.93 / 99.87; without: 96.5 / 93.2 (α̇1_f), 97.0 / 89.8
+    (θ̇1_f), 98.8 / 83.8 (θ2), 96.3 / 84.0 (θ̇2_f)."""
     import scipy.io as sio
 
     run = build_lqg_stair(tmp_path)
@@ -122,8 +125,10 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
         for c in fc:
             print(f"  {c:14s} continuous {np.nanmedian(fc[c]):7.2f} / {np.nanmin(fc[c]):7.2f}"
                   f"   without {np.nanmedian(f0[c]):7.2f} / {np.nanmin(f0[c]):7.2f}")
+    checked = ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_2", "alpha_f_2")
     for c in fc:
-        assert np.nanmedian(fc[c]) > 96.0 and np.nanmin(fc[c]) > 94.0, (c, fc[c])
+        lo_med, lo_min = (99.8, 99.0) if c in checked else (97.5, 96.5)
+        assert np.nanmedian(fc[c]) > lo_med and np.nanmin(fc[c]) > lo_min, (c, fc[c])
     for c in ("theta_dot_f_1", "alpha_dot_f_1", "alpha_f_1"):
         assert np.nanmin(f0[c]) < np.nanmin(fc[c]) - 1.0, (c, f0[c], fc[c])
         assert np.nanmedian(f0[c]) < np.nanmedian(fc[c]), (c, f0[c], fc[c])

@@ -286,7 +286,8 @@ def validate(ctx: typer.Context,
     # DECISION (moves to the library's one predict): which prediction runs.
     if sc0.arm.kind == "multi_link" or refit is not None or cfile is not None or continuous:
         _validate_scenario_cli(sc0, logs, log_format, window, refit, refit_window, channel,
-                               json_out, plots, overwrite, report, ctx, continuous=continuous)
+                               json_out, plots, overwrite, report, ctx, continuous=continuous,
+                               cfile=cfile)
         return
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for a bench scenario's logs")
@@ -454,13 +455,18 @@ def _fit_table(fp: dict, title: str) -> None:
     names = sorted({k for d in fp.values() for k in d})
     t = Table(f"fit % ({title})", *names)
     for log, d in fp.items():
-        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if k in d else "-" for k in names))
+        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-"
+                                    for k in names))
     console.print(t)
 
 
 def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, channel,
                            json_out, plots, overwrite, report=None, ctx=None, *,
-                           continuous: bool = False) -> None:
+                           continuous: bool = False, cfile=None) -> None:
+    """The general path of ``validate`` (the one prediction,
+    :func:`flexarm.identification.time_domain.predict.predict`); ``sc`` already carries
+    ``cfile``'s controllers (for ``--refit``), and the prediction is given it too, so that
+    servo-rig logs with a declared law do not take the rig's replay."""
     from flexarm.identification.time_domain import FitOptions, fit_scenario
     from flexarm.identification.time_domain.general import friction_paths
     from flexarm.identification.time_domain.options import PredictOptions
@@ -485,7 +491,8 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
         glogs = _general_logs(logs, log_format)
         popts = PredictOptions(channels=list(ch) if ch else None,
                                windows=[win] * len(glogs) if win else None,
-                               continuous=continuous, plots=plots, tag="validate")
+                               continuous=continuous, controller=cfile, plots=plots,
+                               tag="validate")
         with console.status("predicting") as status, _state_warnings_quiet():
             before = predict(sc, glogs, popts)
             out = before.to_dict()

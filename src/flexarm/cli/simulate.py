@@ -102,7 +102,8 @@ def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Option
                            if win else None) for g in glogs]
         for path, rep in zip(logs, reps):
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
-            plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
+            if rep.fit_percent:  # a log where no channel moves has no fit % and no figure
+                plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
     except (LogError, ScenarioError, ValueError, SimulationDiverged) as exc:
         fail(str(exc))
     write_json(out / "replay.json", replay_document(sc, window, results), overwrite=True)

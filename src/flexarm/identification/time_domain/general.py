@@ -394,6 +394,29 @@ class _Engine:
         self.ctrl_inits = jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]),
                                        *inits)
 
+    def _context(self, li: int):
+        """The samples around log ``li``'s segment starts: (y (N, C), the log as a
+        :class:`~flexarm.io.logs.Log`, the log's first sample's index in them). With
+        ``continuous`` the logs joined in order, so that a log's start values, rates
+        (±``derivative_half_width`` samples) and filter states read the pieces before it;
+        else the log alone."""
+        L = self.logs[li]
+        if self.starts is None:
+            return L.y, L.log, 0
+        if getattr(self, "_joined", None) is None:
+            from flexarm.io.logs import Log
+
+            common = [k for k in self.logs[0].log.signals
+                      if all(k in M.log.signals for M in self.logs)]
+            n = sum(M.t.size for M in self.logs)
+            whole = Log(None, np.arange(n) * self.dt,
+                        {k: np.concatenate([np.asarray(M.log[k], float) for M in self.logs])
+                         for k in common})
+            offs = np.concatenate([[0], np.cumsum([M.t.size for M in self.logs])])
+            self._joined = (np.concatenate([M.y for M in self.logs]), whole, offs)
+        Y, whole, offs = self._joined
+        return Y, whole, int(offs[li])
+
     def assumed_starts(self) -> list[str]:
         """One warning per log and dynamic controller block that starts the log from its
         assumed ``initial_state`` (none with ``continuous``)
@@ -500,27 +523,19 @@ class _Engine:
         y0 = np.zeros((S, C))
         dy0 = np.zeros((S, C))
         sbuf = np.zeros((S, dmax + 1, C))
-        for s, (li, k0, _) in enumerate(self.seg):
-            L = self.logs[li]
-            N = L.t.size
+        for s, (li, k, _) in enumerate(self.seg):
+            Y, _, off = self._context(li)
+            N, k0 = Y.shape[0], k + off
             for c in range(C):
                 d = int(self.delays[c])
-                col = np.nan_to_num(L.y[:, c])
+                col = np.nan_to_num(Y[:, c])
                 y0[s, c] = col[min(N - 1, k0 + d)]
                 dy0[s, c] = _savgol_derivative(col[:, None], min(N - 1, k0 + d), h, self.dt)[0]
                 for j in range(dmax + 1):
                     sbuf[s, j, c] = col[min(N - 1, max(0, k0 - 1 - j + d))]
         self.seg_xd = np.zeros((S, 0, 0))
         if self.prep0.loop.sensors.digital:
-            self._digital_init(y0, dy0)
-            if self.starts is not None:  # continuous: a log's first sample's filter states
-                for s_, (li, k0, _) in enumerate(self.seg):  # from the run before it
-                    filt = self.starts[li].filters
-                    for j, c in enumerate(self.prep0.loop.sensors.digital):
-                        v = filt.get(self.names[c]) if k0 == 0 else None
-                        if v is not None:
-                            self.seg_xd[s_, j, :] = 0.0
-                            self.seg_xd[s_, j, :len(v)] = np.asarray(v, float)
+            self._digital_init(y0, dy0)  # (continuous: read on the joined logs, _context)
         self.y0, self.dy0, self.sbuf0 = y0, dy0, sbuf
         self.seg_log = np.array([r[0] for r in self.seg])
         self.seg_k0 = np.array([r[1] for r in self.seg])
@@ -548,11 +563,12 @@ class _Engine:
         h = self.options.derivative_half_width
         S = len(self.seg)
         xd = np.full((S, len(sens.digital), kmax), np.nan)
-        for s_, (li, k0, _) in enumerate(self.seg):
+        for s_, (li, kl, _) in enumerate(self.seg):
             L = self.logs[li]
-            N = L.t.size
+            _, whole, off = self._context(li)
+            N, k0 = len(whole), kl + off
             ks = list(range(max(0, k0 - h), min(N - 1, k0 + h + 1) + 1))
-            st = {k: filter_state_from_log(self.template.sensors, L.log, k, self.dt) for k in ks}
+            st = {k: filter_state_from_log(self.template.sensors, whole, k, self.dt) for k in ks}
             for j, c in enumerate(sens.digital):
                 name = self.names[c]
                 if name not in st[k0]:

@@ -120,7 +120,7 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
         raise ValueError("continuous: the servo rig's replay runs each log alone; a "
                          "scenario's own controller (or --controller FILE.toml) runs them "
                          "as one run")
-    if sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
+    if cfile is None and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
         return _predict_rig_scenario(sc, logs, keys, opts)
     return _predict_scenario(sc, logs, keys, opts)
 
