@@ -150,5 +150,8 @@ def test_simulate_log_replays_the_run_with_the_controller_file(tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads((out / "replay.json").read_text())
     fp = _per_channel(doc)
+    print("\nsimulate --log --continuous (median, min fit % over the ten files)")
+    for c in fp:
+        print(f"  {c:14s} {np.nanmedian(fp[c]):7.2f} / {np.nanmin(fp[c]):7.2f}")
     for c in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_2", "alpha_f_2"):
         assert np.nanmedian(fp[c]) > 99.8 and np.nanmin(fp[c]) > 99.0, (c, fp[c])
