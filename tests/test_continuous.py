@@ -191,22 +191,22 @@ def _write_pieces(folder: Path, res, n_piece: int) -> list[Path]:
     return paths
 
 
-@pytest.mark.slow
-@needs_data
-def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path, capsys):
-    """The acceptance test of issue #24 (module docstring), on the built-in quanser-two-link
-    scenario (the data-sheet model; no fit: the check is the replay's bookkeeping, not the
-    model). With ``continuous``, every piece reproduces the simulated run: the pieces start
-    from the logged state, the LQG's observer and the filters from their states run over
-    the pieces before; what remains is the encoder's rounding of the starting angle (the
-    logged θ is the quantised reading, |δθ| <= q/2 = 7.7e-6 rad), which the stable loop
-    does not grow beyond a few counts: asserted |Δθ1| <= 4 q and fit > 99.9 % on every
-    channel of every piece. Without it each piece warns, naming the block and
-    --continuous, and the LQG's observer starting at 0 costs fit (reported)."""
-    from flexarm.analysis.replay import replay_run
+class StairRun:
+    """The acceptance test's run, written out (:func:`build_lqg_stair`): the scenario with
+    the controller file's blocks, the controller TOML, the ten files in order, their log
+    format, the logs as read, the simulated run and the piece length (samples)."""
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def build_lqg_stair(tmp_path: Path) -> StairRun:
+    """Design the shoulder LQG, write the controller (.mat struct + TOML), simulate the
+    shared stair's setpoints under it and write the run as ten consecutive files in the
+    stair's layout (with the plant state, FORMAT_EXTRA); checks the run follows the stair.
+    Shared by this module's acceptance test and tests/test_cli_continuous.py."""
     from flexarm.io.logformat import load_log_format
     from flexarm.sim.build import simulate
-    from flexarm.sim.filters import ControllerStateWarning
     from flexarm.specs import load_scenario
     from flexarm.specs.scenario import load_controllers
 
@@ -244,9 +244,31 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
         "examples", "two-link-staircase.toml").read_text()
     fmt_text = fmt_text.replace('theta_ref_2 = "X2_meas[0]"',
                                 'theta_ref_2 = "X2_meas[0]"' + FORMAT_EXTRA)
-    (tmp_path / "fmt.toml").write_text(fmt_text)
-    fmt = load_log_format(tmp_path / "fmt.toml")
+    fmt_path = tmp_path / "fmt.toml"
+    fmt_path.write_text(fmt_text)
+    fmt = load_log_format(fmt_path)
     logs = [fmt.read(f) for f in files]
+    return StairRun(scenario=sc, base=base, controller_toml=ctrl_toml, files=files,
+                    format=fmt_path, logs=logs, truth=truth, n_piece=n_piece)
+
+
+@pytest.mark.slow
+@needs_data
+def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path, capsys):
+    """The acceptance test of issue #24 (module docstring), on the built-in quanser-two-link
+    scenario (the data-sheet model; no fit: the check is the replay's bookkeeping, not the
+    model). With ``continuous``, every piece reproduces the simulated run: the pieces start
+    from the logged state, the LQG's observer and the filters from their states run over
+    the pieces before; what remains is the encoder's rounding of the starting angle (the
+    logged θ is the quantised reading, |δθ| <= q/2 = 7.7e-6 rad), which the stable loop
+    does not grow beyond a few counts: asserted |Δθ1| <= 4 q and fit > 99.9 % on every
+    channel of every piece. Without it each piece warns, naming the block and
+    --continuous, and the LQG's observer starting at 0 costs fit (reported)."""
+    from flexarm.analysis.replay import replay_run
+    from flexarm.sim.filters import ControllerStateWarning
+
+    run = build_lqg_stair(tmp_path)
+    sc, logs, truth, n_piece = run.scenario, run.logs, run.truth, run.n_piece
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", ControllerStateWarning)
@@ -289,3 +311,17 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
     # the loss without continuous: the shoulder's signals fit worse in the median
     assert fit_0["alpha_dot_f_1"] < fit_c["alpha_dot_f_1"] - 1.0
     assert fit_0["theta_dot_f_1"] < fit_c["theta_dot_f_1"] - 1.0
+
+
+def test_continuous_predicts_whole_logs_only():
+    """continuous runs whole logs as one run: a window is refused in one line, in the one
+    prediction and in the general engine's options."""
+    from flexarm.identification.time_domain.general import FitOptions
+    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.predict import predict
+
+    lg = Log(Path("a.mat"), np.arange(5) * 2e-3, {"theta_1": np.zeros(5)})
+    with pytest.raises(ValueError, match=r"continuous .* whole logs; leave out windows"):
+        predict("quanser-two-link", [lg], PredictOptions(continuous=True, windows=[(0, 1)]))
+    with pytest.raises(ValueError, match=r"continuous .* whole logs; leave out windows"):
+        FitOptions(continuous=True, windows=[(0.0, 1.0)]).check()

@@ -8,6 +8,7 @@ item 4), which then replaces each of them by one call."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -20,6 +21,49 @@ from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, command_line, console,
                                 enable_cache, err, fail, figure_folder, load, progress,
                                 write_report)
+
+#: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
+ControllerOrFile = Annotated[Optional[str], typer.Option(
+    "--controller",
+    help="an existing FILE.toml: a controller file ([controller] or [[controllers]] tables "
+         "as in a scenario) replacing the scenario's controllers for this run; any other "
+         "value overrides the servo-rig logs' '# controller:' line, e.g. "
+         "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'")]
+Continuous = Annotated[bool, typer.Option(
+    "--continuous",
+    help="the logs, in order, are consecutive pieces of one run: each dynamic controller's "
+         "state (and the digital filters') carried from log to log; not with --window")]
+
+
+def controller_option(controller: Optional[str]):
+    """``--controller``: the controller file it names (library
+    :func:`flexarm.identification.time_domain.predict.controller_file`), or None when the
+    value is the servo rig's text law (or absent)."""
+    from flexarm.identification.time_domain.predict import controller_file
+    from flexarm.specs import ScenarioError
+
+    try:
+        return controller_file(controller)
+    except (ScenarioError, ValueError) as exc:
+        fail(f"--controller: {exc}")
+
+
+def with_controller_file(sc, cfile):
+    """The scenario with its controllers replaced by ``cfile`` (``--controller FILE.toml``)."""
+    from flexarm.specs import ScenarioError
+
+    if cfile is None:
+        return sc
+    try:
+        return sc.with_controllers(cfile)
+    except (ScenarioError, ValueError) as exc:
+        fail(str(exc))
+
+
+def check_continuous(continuous: bool, window: Optional[str]) -> None:
+    if continuous and window:
+        fail(f"--continuous runs whole logs as one run; --window {window} cuts each log: "
+             "give one or the other")
 
 
 def fit(ctx: typer.Context,
@@ -36,7 +80,8 @@ def fit(ctx: typer.Context,
         motor_efficiency: o.MotorEfficiency = 1.0,
         voltage_limit: o.VoltageLimit = None,
         computation_delay: o.ComputationDelay = None,
-        controller: o.Controller = None,
+        controller: ControllerOrFile = None,
+        continuous: Continuous = False,
         mode: Annotated[str, typer.Option(
             help="closed_loop, or open_loop (replay the logged voltage)")] = "closed_loop",
         no_friction: Annotated[bool, typer.Option(
@@ -98,11 +143,16 @@ def fit(ctx: typer.Context,
 
     # DECISION (issue #23 item 6: moves to the library): which fit runs. A scenario first
     # takes the general fit (fit_scenario), else the servo-rig data-sheet fit.
+    cfile = controller_option(controller)
+    check_continuous(continuous, window)
     if logs and names_a_scenario(str(logs[0])):
         _fit_scenario_cli(str(logs[0]), logs[1:], log_format, free, prior, segment, channel,
                           window, max_nfev, json_out, scenario_out, plots, overwrite, report,
-                          ctx)
+                          ctx, cfile=cfile, continuous=continuous)
         return
+    if cfile is not None or continuous:
+        fail("--controller FILE.toml and --continuous belong to the general fit: give the "
+             "scenario first, flexarm fit SCENARIO LOG... --controller FILE.toml")
     if free or prior or segment is not None or channel:
         fail("--free, --prior, --segment and --channel belong to the general fit: give the "
               "scenario first, flexarm fit SCENARIO LOG... --free PATH")
@@ -210,7 +260,8 @@ def validate(ctx: typer.Context,
              logs: Annotated[list[Path], typer.Argument(help="CSV logs to replay")],
              json_out: o.JsonOut = None,
              plots: o.Plots = None,
-             controller: o.Controller = None,
+             controller: ControllerOrFile = None,
+             continuous: Continuous = False,
              column: o.Column = None,
              unit: o.Unit = None,
              max_jitter: o.MaxJitter = 1e-3,
@@ -232,11 +283,14 @@ def validate(ctx: typer.Context,
     A multi-link scenario, or --refit, takes the general path (any arm, logs read by
     --log-format, the prediction from each log's logged state)."""
     enable_cache()
-    sc0 = load(scenario)
+    cfile = controller_option(controller)
+    check_continuous(continuous, window)
+    sc0 = with_controller_file(load(scenario), cfile)
     # DECISION (moves to the library's one predict): which prediction runs.
-    if sc0.arm.kind == "multi_link" or refit is not None:
+    if sc0.arm.kind == "multi_link" or refit is not None or cfile is not None or continuous:
         _validate_scenario_cli(sc0, logs, log_format, window, refit, refit_window, channel,
-                               json_out, plots, overwrite, report, ctx)
+                               json_out, plots, overwrite, report, ctx, continuous=continuous,
+                               cfile=cfile)
         return
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for a bench scenario's logs")
@@ -347,7 +401,8 @@ def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:
 
 def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, segment,
                       channel, window, max_nfev, json_out, scenario_out, plots,
-                      overwrite, report=None, ctx=None) -> None:
+                      overwrite, report=None, ctx=None, *, cfile=None,
+                      continuous: bool = False) -> None:
     from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain.engine import fit as fit_engine
     from flexarm.identification.time_domain.options import (Cost, FitOptions, Local, Priors,
@@ -361,7 +416,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     check_dir_option("--plots", plots)
     win = parsing.window(window, "--window")
     chans, priors = parsing.channels(channel), parsing.priors(prior)
-    sc = load(scenario)
+    sc = with_controller_file(load(scenario), cfile)
     figures = contextlib.ExitStack()
     folder = figures.enter_context(figure_folder(plots, report))
     try:
@@ -371,8 +426,9 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
                           shooting=Shooting(segment=segment) if segment is not None else None,
                           local=Local(max_nfev=max_nfev) if max_nfev is not None else None,
                           priors=Priors(priors=priors) if priors else None,
-                          windows=[win] * len(glogs) if win else None, predict=False)
-        with console.status("fitting") as status:
+                          windows=[win] * len(glogs) if win else None, predict=False,
+                          continuous=continuous)
+        with console.status("fitting") as status, _state_warnings_quiet():
             res = fit_engine(sc, glogs, free or None, opts,
                              progress=lambda m: progress(status, m))
             status.update("predicting the logs with the fitted parameters")
@@ -392,6 +448,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
     console.print(escape(res.message))
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+    _print_warnings(pred.get("warnings", []))
     _fit_table(pred["fit_percent"], "whole-log prediction")
     # the result carries the whole-log prediction and its figures: --json is res.to_dict()
     res.fit_percent, res.plots = pred["fit_percent"], (pred["plots"] if plots is not None else [])
@@ -413,14 +470,22 @@ def _fit_table(fp: dict, title: str) -> None:
     names = sorted({k for d in fp.values() for k in d})
     t = Table(f"fit % ({title})", *names)
     for log, d in fp.items():
-        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if k in d else "-" for k in names))
+        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-"
+                                    for k in names))
     console.print(t)
 
 
 def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, channel,
-                           json_out, plots, overwrite, report=None, ctx=None) -> None:
-    from flexarm.identification.time_domain import FitOptions, fit_scenario, predict_scenario
+                           json_out, plots, overwrite, report=None, ctx=None, *,
+                           continuous: bool = False, cfile=None) -> None:
+    """The general path of ``validate`` (the one prediction,
+    :func:`flexarm.identification.time_domain.predict.predict`); ``sc`` already carries
+    ``cfile``'s controllers (for ``--refit``), and the prediction is given it too, so that
+    servo-rig logs with a declared law do not take the rig's replay."""
+    from flexarm.identification.time_domain import FitOptions, fit_scenario
     from flexarm.identification.time_domain.general import friction_paths
+    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.predict import predict
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -432,32 +497,33 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
               "viscous friction) can be re-estimated")
     win = parsing.window(window, "--window")
     rwin = parsing.window(refit_window, "--refit-window")
-    out: dict = {}  # JSON LAYOUT: scenario_validate_document, refit_document
+    out: dict = {}  # the prediction's to_dict(); JSON LAYOUT: refit_document
     figures = contextlib.ExitStack()
     plots = figures.enter_context(figure_folder(plots, report))
     figs: list = []
     ch = parsing.channels(channel)
     try:
         glogs = _general_logs(logs, log_format)
-        opts = FitOptions(channels=ch, windows=[win] * len(glogs) if win else None)
-        with console.status("predicting") as status:
-            before = predict_scenario(sc, glogs, opts, channels=list(ch) if ch else None,
-                                      plots=plots, tag="validate")
-            out = scenario_validate_document(before)
-            figs += before["plots"]
+        popts = PredictOptions(channels=list(ch) if ch else None,
+                               windows=[win] * len(glogs) if win else None,
+                               continuous=continuous, controller=cfile, plots=plots,
+                               tag="validate")
+        with console.status("predicting") as status, _state_warnings_quiet():
+            before = predict(sc, glogs, popts)
+            out = before.to_dict()
+            figs += before.plots
             if refit:
                 status.update("re-estimating the joints' friction")
                 free = friction_paths(sc)  # DECISION: what --refit friction frees
                 res = fit_scenario(sc, glogs[:1], free, FitOptions(channels=ch, windows=[rwin]),
                                    predict=False)
-                after = predict_scenario(res.scenario, glogs, opts,
-                                         channels=list(ch) if ch else None, plots=plots,
-                                         tag="refit")
-                figs += after["plots"]
+                after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
+                figs += after.plots
                 out["refit"] = refit_document(res, free, rwin, logs[0], after)
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
+    _print_warnings(out["warnings"])
     _fit_table(out["fit_percent"], "scenario as given")
     if refit:
         t = Table("friction", "scenario", "refitted", "std")
@@ -477,6 +543,24 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
                                           inputs=[ctx.params["scenario"], *logs,
                                                   *(log_format or [])]),
                           report, overwrite)
+
+
+@contextlib.contextmanager
+def _state_warnings_quiet():
+    """The controllers' assumed-start warnings (ControllerStateWarning) are returned in the
+    results and printed once by :func:`_print_warnings`, not also as Python warnings."""
+    import warnings
+
+    from flexarm.sim.filters import ControllerStateWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ControllerStateWarning)
+        yield
+
+
+def _print_warnings(msgs) -> None:
+    for w in msgs:
+        err.print(f"[yellow]warning:[/yellow] {escape(w)}", highlight=False, soft_wrap=True)
 
 
 def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> None:
@@ -556,9 +640,3 @@ def bench_validate_document(out: dict, with_plots: bool) -> dict:
     library's validation dictionary, its figure list emptied when no ``--plots`` was asked
     (the figures then went to a report's temporary folder)."""
     return {**out, "plots": out["plots"] if with_plots else []}
-
-
-def scenario_validate_document(before: dict) -> dict:
-    """JSON LAYOUT of ``validate --json`` on the general path (a multi-link scenario, or
-    ``--refit``): the prediction's fit % (``refit`` added by :func:`refit_document`)."""
-    return {"fit_percent": before["fit_percent"]}

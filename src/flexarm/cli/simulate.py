@@ -25,6 +25,15 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
              log_format: LogFormatFile = None,
              window: Annotated[Optional[str], typer.Option(
                  help="replay this part of every log, START:STOP in s on its clock")] = None,
+             controller: Annotated[Optional[Path], typer.Option(
+                 "--controller", help="with --log: a controller FILE.toml ([controller] or "
+                                      "[[controllers]] tables as in a scenario) replacing "
+                                      "the scenario's controllers for the replay")] = None,
+             continuous: Annotated[bool, typer.Option(
+                 "--continuous", help="with --log: the logs, in order, are consecutive "
+                                      "pieces of one run; each dynamic controller's state "
+                                      "(and the digital filters') carried from log to log; "
+                                      "not with --window")] = False,
              ) -> None:
     """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json;
     with --log, replay logs on it and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
@@ -37,10 +46,13 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
 
     scs = [load(s) for s in scenario]
     out = outdir(out, overwrite)
+    if (controller is not None or continuous) and not log:
+        fail("--controller and --continuous belong to the replay: give the logs with --log")
     if log:
         if len(scs) != 1:
             fail("--log replays logs on one scenario; give exactly one SCENARIO")
-        replay_logs(scs[0], log, log_format, window, out)
+        replay_logs(scs[0], log, log_format, window, out, controller=controller,
+                    continuous=continuous)
         return
     if len(scs) == 1:
         console.print_json(json.dumps(write_simulation(scs[0], out, progress=True)))
@@ -58,24 +70,41 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
 
 
 def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optional[str],
-                out: Path) -> None:
-    """``simulate --log``: each log replayed on the scenario, fit % per channel, figures."""
-    from flexarm.analysis.replay import plot_replay, replay
+                out: Path, *, controller: Optional[Path] = None,
+                continuous: bool = False) -> None:
+    """``simulate --log``: each log replayed on the scenario, fit % per channel, figures;
+    ``controller``: a controller file replacing the scenario's controllers
+    (:func:`flexarm.specs.scenario.load_controllers`, :meth:`Scenario.with_controllers`);
+    ``continuous``: the logs as consecutive pieces of one run
+    (:func:`flexarm.analysis.replay.replay_run`)."""
+    from flexarm.analysis.replay import plot_replay, replay, replay_run
     from flexarm.errors import SimulationDiverged
     from flexarm.io.logformat import LogFormat, load_log_format
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
+    from flexarm.specs import ScenarioError
+    from flexarm.specs.scenario import load_controllers
 
+    if continuous and window:
+        fail(f"--continuous replays whole logs as one run; --window {window} cuts each log: "
+             "give one or the other")
     win = parsing.window(window, "--window")
     results = {}
     try:
+        if controller is not None:
+            sc = sc.with_controllers(load_controllers(controller))
         fmt = load_log_format(log_format) if log_format is not None else LogFormat()
-        for path in logs:
-            g = fmt.read(path)
-            rep = replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1]) if win else None)
+        glogs = [fmt.read(path) for path in logs]
+        if continuous:
+            reps = replay_run(sc, glogs, continuous=True)
+        else:
+            reps = [replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1])
+                           if win else None) for g in glogs]
+        for path, rep in zip(logs, reps):
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
-            plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
-    except (LogError, ValueError, SimulationDiverged) as exc:
+            if rep.fit_percent:  # a log where no channel moves has no fit % and no figure
+                plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
+    except (LogError, ScenarioError, ValueError, SimulationDiverged) as exc:
         fail(str(exc))
     write_json(out / "replay.json", replay_document(sc, window, results), overwrite=True)
     names = sorted({k for d in results.values() for k in d})

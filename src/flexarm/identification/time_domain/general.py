@@ -147,6 +147,11 @@ class FitOptions:
     scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
     polish: after the segment fit, refine on whole logs (each one simulation from its start;
     only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
+    continuous: the logs, in order, are consecutive pieces of one run: each log's dynamic
+    controller blocks start from the state reached by running them on the logged signals
+    of the logs before (and the digital filters from their states there)
+    (:func:`flexarm.sim.filters.continuous_starts`); without it they start each log from
+    their ``initial_state``. Whole logs only (no ``windows``).
     """
 
     channels: Mapping[str, float] | None = None
@@ -175,6 +180,7 @@ class FitOptions:
     initial: str = "log"
     substeps: int | None = None
     ties: Mapping[str, str] = field(default_factory=dict)
+    continuous: bool = False
 
     def check(self) -> None:
         if not self.bound_factor > 1:
@@ -188,6 +194,10 @@ class FitOptions:
             raise ValueError(f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
                              "from the logged state) or 'scenario' (a log's first sample "
                              "starts from the scenario's [initial] state)")
+        if self.continuous and self.windows is not None and any(
+                w is not None for w in self.windows):
+            raise ValueError("FitOptions: continuous (consecutive pieces of one run) runs "
+                             "whole logs; leave out windows (--window)")
         if self.segment is not None and not self.segment > 0:
             raise ValueError(f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
                              "(e.g. 2–5 s) or None for whole logs")
@@ -356,8 +366,61 @@ class _Engine:
         self.scale = (np.sqrt(np.array(list(self.channels.values()), float))
                       / (options.residual_level * self.spread)
                       * math.sqrt(self.dt / options.correlation_time))
+        self.ctrl_inits = None  # per-log controller start states (continuous)
+        self.starts = None
+        if options.continuous:
+            self._continuous()
         seg = options.segment if segment == "options" else segment
         self._segments(seg)
+
+    def _continuous(self) -> None:
+        """The logs as consecutive pieces of one run: each log's controller start state
+        (stacked over logs, for :func:`_warm`) and digital-filter states, from
+        :func:`flexarm.sim.filters.continuous_starts` run with the template's controller
+        (a controller whose gains depend on the free parameters keeps the template's
+        states)."""
+        from flexarm.sim.filters import continuous_starts, start_piece
+
+        loop = self.prep0.loop
+        self.starts = continuous_starts(loop, self.template.sensors,
+                                        [L.log for L in self.logs], self.dt)
+        inits = [start_piece(loop, st).controller.init() for st in self.starts]
+        self.ctrl_inits = jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]),
+                                       *inits)
+
+    def _context(self, li: int):
+        """The samples around log ``li``'s segment starts: (y (N, C), the log as a
+        :class:`~flexarm.io.logs.Log`, the log's first sample's index in them). With
+        ``continuous`` the logs joined in order, so that a log's start values, rates
+        (±``derivative_half_width`` samples) and filter states read the pieces before it;
+        else the log alone."""
+        L = self.logs[li]
+        if self.starts is None:
+            return L.y, L.log, 0
+        if getattr(self, "_joined", None) is None:
+            from flexarm.io.logs import Log
+
+            common = [k for k in self.logs[0].log.signals
+                      if all(k in M.log.signals for M in self.logs)]
+            n = sum(M.t.size for M in self.logs)
+            whole = Log(None, np.arange(n) * self.dt,
+                        {k: np.concatenate([np.asarray(M.log[k], float) for M in self.logs])
+                         for k in common})
+            offs = np.concatenate([[0], np.cumsum([M.t.size for M in self.logs])])
+            self._joined = (np.concatenate([M.y for M in self.logs]), whole, offs)
+        Y, whole, offs = self._joined
+        return Y, whole, int(offs[li])
+
+    def assumed_starts(self) -> list[str]:
+        """One warning per log and dynamic controller block that starts the log from its
+        assumed ``initial_state`` (none with ``continuous``)
+        (:func:`flexarm.sim.filters.warn_assumed_start`, which also issues them as
+        :class:`~flexarm.sim.filters.ControllerStateWarning`)."""
+        if self.options.continuous:
+            return []
+        from flexarm.sim.filters import warn_assumed_start
+
+        return [m for L in self.logs for m in warn_assumed_start(self.prep0.loop, L.name)]
 
     # ------------------------------------------------------------------ logs, segments
     def _read(self, log, window, key: str | None = None) -> _LogData:
@@ -454,19 +517,19 @@ class _Engine:
         y0 = np.zeros((S, C))
         dy0 = np.zeros((S, C))
         sbuf = np.zeros((S, dmax + 1, C))
-        for s, (li, k0, _) in enumerate(self.seg):
-            L = self.logs[li]
-            N = L.t.size
+        for s, (li, k, _) in enumerate(self.seg):
+            Y, _, off = self._context(li)
+            N, k0 = Y.shape[0], k + off
             for c in range(C):
                 d = int(self.delays[c])
-                col = np.nan_to_num(L.y[:, c])
+                col = np.nan_to_num(Y[:, c])
                 y0[s, c] = col[min(N - 1, k0 + d)]
                 dy0[s, c] = _savgol_derivative(col[:, None], min(N - 1, k0 + d), h, self.dt)[0]
                 for j in range(dmax + 1):
                     sbuf[s, j, c] = col[min(N - 1, max(0, k0 - 1 - j + d))]
         self.seg_xd = np.zeros((S, 0, 0))
         if self.prep0.loop.sensors.digital:
-            self._digital_init(y0, dy0)
+            self._digital_init(y0, dy0)  # (continuous: read on the joined logs, _context)
         self.y0, self.dy0, self.sbuf0 = y0, dy0, sbuf
         self.seg_log = np.array([r[0] for r in self.seg])
         self.seg_k0 = np.array([r[1] for r in self.seg])
@@ -494,11 +557,12 @@ class _Engine:
         h = self.options.derivative_half_width
         S = len(self.seg)
         xd = np.full((S, len(sens.digital), kmax), np.nan)
-        for s_, (li, k0, _) in enumerate(self.seg):
+        for s_, (li, kl, _) in enumerate(self.seg):
             L = self.logs[li]
-            N = L.t.size
+            _, whole, off = self._context(li)
+            N, k0 = len(whole), kl + off
             ks = list(range(max(0, k0 - h), min(N - 1, k0 + h + 1) + 1))
-            st = {k: filter_state_from_log(self.template.sensors, L.log, k, self.dt) for k in ks}
+            st = {k: filter_state_from_log(self.template.sensors, whole, k, self.dt) for k in ks}
             for j, c in enumerate(sens.digital):
                 name = self.names[c]
                 if name not in st[k0]:
@@ -564,7 +628,7 @@ class _Engine:
         depend on the free parameters), else per candidate."""
         nd = self.delay + 1
         args = (jnp.asarray(self.log_y), {k: jnp.asarray(v) for k, v in self.log_refs.items()},
-                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0))
+                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0), self.ctrl_inits)
         leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller,
                                                                      eqx.is_array))]
         same = all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in leaves)
@@ -654,19 +718,24 @@ def _state_from_log(loop, y0, dy0):
     return x0
 
 
-def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0):
+def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0, inits=None):
     """The controller run on the logged measured channels and references from each log's
     first sample: its state before each segment's first sample (S, ...) and the raw
-    commands of the nd samples before it (S, nd, m), newest first (0 before the log)."""
-    def warm(ly, lr):
+    commands of the nd samples before it (S, nd, m), newest first (0 before the log).
+    ``inits``: each log's controller state at its first sample, stacked over logs
+    (``continuous``); None: ``ctrl.init()`` for every log."""
+    def warm(ly, lr, c0):
         def step(cs, inp):
             m, r = inp
             cs2, u = ctrl.step(cs, {n: m[i] for i, n in enumerate(names)}, r)
             return cs2, (cs, u)
-        _, (cs_all, u_all) = jax.lax.scan(step, ctrl.init(), (ly, lr))
+        _, (cs_all, u_all) = jax.lax.scan(step, ctrl.init() if c0 is None else c0, (ly, lr))
         return cs_all, u_all
 
-    cs_all, u_all = jax.vmap(warm)(log_y, log_refs)
+    if inits is None:
+        cs_all, u_all = jax.vmap(lambda ly, lr: warm(ly, lr, None))(log_y, log_refs)
+    else:
+        cs_all, u_all = jax.vmap(warm)(log_y, log_refs, inits)
 
     def one(s_log, k0):
         cs = jax.tree.map(lambda a: a[s_log, k0], cs_all)
@@ -1018,6 +1087,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
     if channels is not None:
         opts.channels = {c: 1.0 for c in channels}
     eng = _Engine(scenario, logs, [], opts, segment=None)
+    state_warnings = eng.assumed_starts()
     sim = eng.run(np.zeros((1, 0)))[0]
     fp: dict[str, dict[str, float]] = {}
     traj: dict[str, dict[str, np.ndarray]] = {}
@@ -1032,7 +1102,8 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
         fp[L.name] = d
         traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
                         "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
-    out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes)}
+    out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes),
+           "warnings": state_warnings}
     if plots is not None:
         out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
     return out

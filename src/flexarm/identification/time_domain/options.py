@@ -145,6 +145,9 @@ class FitOptions:
     servo_rig: ServoRig | None = None
     windows: Sequence[tuple[float, float] | None] | None = None
     predict: bool = True
+    #: the logs, in order, are consecutive pieces of one run: controller and digital-filter
+    #: states carried from log to log (the general engine; whole logs only)
+    continuous: bool = False
 
     def engine_options(self, base=None):
         """The general engine's flat options (:class:`general.FitOptions`), starting from
@@ -166,6 +169,8 @@ class FitOptions:
                 setattr(flat, k, v)
         if self.windows is not None:
             flat.windows = list(self.windows)
+        if self.continuous:
+            flat.continuous = True
         return flat
 
 
@@ -176,10 +181,12 @@ class PredictOptions:
     ``channels``: the measured channels compared (None: every logged sensor channel);
     ``windows``: per log (t0, t1) s from its first sample, [t0, t1), or None;
     ``estimate_initial``: a servo-rig prediction refines each log's initial state on the
-    log itself (the model is not refitted); ``continuous``: controller and filter states
-    carried across consecutive files of one run (hook for multi-file runs); ``controller``:
-    overrides the logs' declared law; ``plots``: a folder for overlay PNGs, ``tag`` their
-    name."""
+    log itself (the model is not refitted); ``continuous``: the logs, in order, are
+    consecutive pieces of one run: controller and digital-filter states carried from piece
+    to piece (whole logs only); ``controller``: a controller file
+    (:class:`~flexarm.specs.scenario.ControllerFile` or the path of its ``.toml``) replacing
+    the scenario's controllers, or else a servo-rig text law overriding the logs' declared
+    law; ``plots``: a folder for overlay PNGs, ``tag`` their name."""
 
     channels: Sequence[str] | None = None
     windows: Sequence[tuple[float, float] | None] | None = None

@@ -16,6 +16,18 @@ single-link scenario predicting servo-rig logs (a declared state-feedback law, a
 (:func:`flexarm.identification.time_domain.validate.validate`). Logs are keyed by
 :func:`flexarm.io.logs.log_keys` (same file names in other folders stay apart).
 
+``PredictOptions.controller`` as a controller file (a
+:class:`~flexarm.specs.scenario.ControllerFile` from
+:func:`~flexarm.specs.scenario.load_controllers`, or the path of such a ``.toml``) replaces
+the scenario's controllers for the run (:meth:`~flexarm.specs.Scenario.with_controllers`);
+any other value is the servo rig's text law overriding the logs' ``# controller:`` line.
+``PredictOptions.continuous``: the logs, in order, are consecutive pieces of one run; each
+starts from its logged plant state and every dynamic controller block (and digital
+filter) from the state reached over the pieces before
+(:func:`flexarm.sim.filters.continuous_starts`, in the general engine). Without it, each
+log a dynamic controller starts from its assumed ``initial_state`` is a warning in
+:attr:`Prediction.warnings` naming the block and ``--continuous``.
+
 This replaces ``validate.validate``, ``fit.predict``, ``general.predict_scenario`` and
 ``analysis.replay.replay`` as the one entry (those stay as the engines behind it, or as
 deprecated aliases).
@@ -23,7 +35,7 @@ deprecated aliases).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -31,7 +43,7 @@ import numpy as np
 
 from flexarm.identification.time_domain.options import PredictOptions
 
-__all__ = ["Prediction", "predict", "overlay_figure", "write_overlays"]
+__all__ = ["Prediction", "predict", "controller_file", "overlay_figure", "write_overlays"]
 
 
 @dataclass
@@ -89,14 +101,46 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
         if len(opts.windows) != len(logs):
             raise ValueError(f"PredictOptions.windows has {len(opts.windows)} entries for "
                              f"{len(logs)} logs")
+        if opts.continuous and any(w is not None for w in opts.windows):
+            raise ValueError("PredictOptions: continuous (consecutive pieces of one run) "
+                             "predicts whole logs; leave out windows (--window)")
     keys = log_keys(logs)
+    cfile = controller_file(opts.controller)
     if _is_rig_fit(model):
+        if cfile is not None or opts.continuous:
+            raise ValueError("a servo-rig fit predicts with its own loop: a controller file "
+                             "and continuous need a scenario (flexarm validate SCENARIO ...)")
         return _predict_rig_fit(model, logs, keys, opts)
     sc = getattr(model, "scenario", model)
     sc = sc if isinstance(sc, Scenario) else load_scenario(sc)
-    if sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
+    if cfile is not None:
+        sc = sc.with_controllers(cfile)
+        opts = replace(opts, controller=None)
+    elif opts.continuous and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
+        raise ValueError("continuous: the servo rig's replay runs each log alone; a "
+                         "scenario's own controller (or --controller FILE.toml) runs them "
+                         "as one run")
+    if cfile is None and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
         return _predict_rig_scenario(sc, logs, keys, opts)
     return _predict_scenario(sc, logs, keys, opts)
+
+
+def controller_file(value: Any):
+    """``value`` as a controller file: a :class:`~flexarm.specs.scenario.ControllerFile`
+    as given, an existing ``.toml`` path read by
+    :func:`~flexarm.specs.scenario.load_controllers`; None for anything else (the servo
+    rig's text law, or nothing)."""
+    from flexarm.specs.scenario import ControllerFile, load_controllers
+
+    if isinstance(value, ControllerFile):
+        return value
+    if isinstance(value, (str, Path)) and str(value).lower().endswith(".toml"):
+        p = Path(value)
+        if p.is_file():
+            return load_controllers(p)
+        raise ValueError(f"controller {str(value)!r}: no such controller file (a TOML with "
+                         "[controller] or [[controllers]] tables); give an existing file")
+    return None
 
 
 def _windowed(logs, opts):
@@ -108,7 +152,8 @@ def _windowed(logs, opts):
 def _predict_scenario(sc, logs, keys, opts) -> Prediction:
     from flexarm.identification.time_domain.general import FitOptions, predict_scenario
 
-    fo = FitOptions(windows=list(opts.windows) if opts.windows is not None else None)
+    fo = FitOptions(windows=list(opts.windows) if opts.windows is not None else None,
+                    continuous=bool(opts.continuous))
     out = predict_scenario(sc, logs, fo, channels=list(opts.channels) if opts.channels else None)
     # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
     fp = dict(zip(keys, out["fit_percent"].values()))
@@ -117,7 +162,12 @@ def _predict_scenario(sc, logs, keys, opts) -> Prediction:
         t = np.asarray(tr["time"], float)
         traces[k] = {"time": t - t[0] if t.size else t, "measured": tr["measured"],
                      "simulated": tr["simulated"]}
-    pred = Prediction(sc.name, fp, traces, diverged={k: False for k in keys})
+    pred = Prediction(sc.name, fp, traces, warnings=list(out.get("warnings", [])),
+                      notes=list(dict.fromkeys(out.get("notes", []))),
+                      diverged={k: False for k in keys})
+    if opts.continuous:
+        pred.notes.append(f"continuous: the {len(keys)} logs replayed as consecutive pieces "
+                          "of one run (controller and filter states carried)")
     if opts.plots is not None:
         pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
     return pred
