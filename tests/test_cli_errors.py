@@ -119,7 +119,9 @@ CASES = [
 DS = ["--gear-ratio", "70", "--motor-constant", "7.68e-3", "--armature-resistance", "2.6",
       "--link-length", "0.42", "--gear-efficiency", "0.9", "--motor-efficiency", "0.69",
       "--controller", "state_feedback K1=6 K2=-40 K3=0.15 K4=0", "--seconds", "2"]
-LEAD = "wired in cli/fit.py / cli/simulate.py by the lead"
+LEAD = "not yet: simulate allocates before checking the duration (issue #25, open)"
+#: the fit's progress lines on stderr before an error (cli.common.progress)
+PROGRESS = {"estimates: hub-to-tip model, hub delay, link frequency"}
 FRF = ["--period", "500"]
 # (class, argv, a word the one line must hold, xfail reason or None)
 CASES_25 = [
@@ -145,10 +147,10 @@ CASES_25 = [
     (INPUT, ["tfest", "{d}/frf.json", "--poles", "2", "--zeros", "0", "--json",
              "{d}/frf.json", "--overwrite"], "is an input", None),
     (INPUT, ["fit", "{d}/trial.csv", *DS, "--json", "{d}/trial.csv", "--overwrite"],
-     "is an input", LEAD),
+     "is an input", None),
     (INPUT, ["validate", R, "{d}/trial.csv", "--controller", DS[-3], "--json",
              "{d}/trial.csv", "--overwrite"],
-     "is an input", LEAD),
+     "is an input", None),
     (EXISTS, ["frf", "{d}/rec.csv", *FRF, "--json", "{d}/not-frf.json"], "--overwrite", None),
     (EXISTS, ["frf", "{d}/rec.csv", *FRF, "--json", "{o}/f.json", "--plots", "{d}"],
      "--overwrite", None),
@@ -289,7 +291,9 @@ def test_bad_input_is_one_line_exit_2_no_traceback_inputs_unchanged(cls, argv, w
     before = _hashes(inputs)
     args = [a.replace("{d}", str(inputs)).replace("{o}", str(tmp_path)) for a in argv]
     r = runner.invoke(app, args)
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    # stderr: a long command's progress lines (stages, when stderr is not a terminal), then
+    # the error as the one last line
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip() and ln not in PROGRESS]
     assert r.exit_code == 2, (cls, r.exit_code, r.output)
     assert len(lines) == 1 and lines[0].startswith("error: "), (cls, r.stderr)
     assert word is None or word in lines[0], (word, lines[0])

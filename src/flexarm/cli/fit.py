@@ -19,7 +19,8 @@ from rich.table import Table
 from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (check_dir_option, check_file_option, command_line, console,
-                                enable_cache, err, fail, figure_folder, load, progress,
+                                enable_cache, err, fail, figure_folder, guarded_command, load,
+                                progress,
                                 write_report)
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
@@ -66,6 +67,7 @@ def check_continuous(continuous: bool, window: Optional[str]) -> None:
              "give one or the other")
 
 
+@guarded_command("logs", "log_format")
 def fit(ctx: typer.Context,
         logs: Annotated[list[Path], typer.Argument(
             help="closed-loop CSV logs of one recording session; or SCENARIO LOG...: a "
@@ -255,6 +257,7 @@ def _bench_figures(ctx, folder: Path, res, res0, held, validate_window, report, 
                                 extra_fit_percent=extra), report, overwrite)
 
 
+@guarded_command("scenario", "logs", "log_format")
 def validate(ctx: typer.Context,
              scenario: Annotated[str, typer.Argument(help="fitted scenario TOML")],
              logs: Annotated[list[Path], typer.Argument(help="CSV logs to replay")],
@@ -353,7 +356,7 @@ def bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
             out.append(log)
             continue
         chk = check_controller(log, use_regressed=use_regressed)
-        err.print(escape(chk.summary()))
+        console.print(escape(chk.summary()), highlight=False)
         out.append(chk.apply(log) if use_regressed else log)
     return out
 

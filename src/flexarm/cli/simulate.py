@@ -10,10 +10,11 @@ import typer
 from rich.table import Table
 
 from flexarm.cli import parsing
-from flexarm.cli.common import console, enable_cache, fail, load, outdir
+from flexarm.cli.common import console, guarded_command, enable_cache, fail, load, outdir
 from flexarm.cli.options import LogFormatFile, OverwriteOut
 
 
+@guarded_command("scenario", "log", "log_format")
 def simulate(scenario: Annotated[list[str], typer.Argument(
                  help="scenario TOML file(s) or built-in name(s)")],
              out: Annotated[Path, typer.Option(
