@@ -62,27 +62,3 @@ def rotary_whole_fit():
         pytest.skip(f"real rig logs not found at {ROTARY_DATA} (../shared is absent in a "
                     "user's clone; CI has it)")
     return _rotary_whole_fit
-
-
-#: the hard session of the rotary rig (4/27: heavy gear friction, a bias torque), fitted
-#: together as one session
-ROTARY_HARD_SESSION = ("flexarm_K1_6", "flexarm_K1K2_6_-5")
-
-
-@functools.lru_cache(maxsize=None)
-def _rotary_session_fit(names: tuple[str, ...]):
-    from flexarm.identification.time_domain import fit, read_bench_log
-
-    return fit([read_bench_log(ROTARY_DATA / n, log_format=ROTARY_FORMAT) for n in names],
-               **ROTARY_SHEET)
-
-
-@pytest.fixture(scope="session")
-def rotary_hard_session_fit():
-    """The servo-rig fit of the 4/27 session's two runs together (default options, the data
-    sheet only), one fit for the whole test session (treat it as read-only). Skips where
-    ../shared is absent."""
-    if not ROTARY_DATA.is_dir():
-        pytest.skip(f"real rig logs not found at {ROTARY_DATA} (../shared is absent in a "
-                    "user's clone; CI has it)")
-    return _rotary_session_fit(ROTARY_HARD_SESSION)

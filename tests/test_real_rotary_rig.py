@@ -24,9 +24,6 @@ SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
              armature_resistance=3.29, link_length=0.45, computation_delay=1,
                     voltage_limit=10.0)  # the limit the tests' figures were measured at
 
-#: the 4/27 session's two runs (the fixture ``rotary_hard_session_fit`` fits them together)
-ROTARY_HARD = ("flexarm_K1_6", "flexarm_K1K2_6_-5")
-
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(
     not DATA.is_dir(), reason=f"real rig logs not found at {DATA} (../shared is absent in a "
                               "user's clone; CI has it)")]
@@ -104,77 +101,3 @@ def test_rigid_session():
     for name, fp in {**res.fit_percent, **held["fit_percent"]}.items():
         assert fp["motor_angle"] >= 60.0, (name, fp)
         assert fp["tip_deflection"] is None
-
-
-def _stuck_ring_hz(name: str) -> list[tuple[float, float]]:
-    """(mean command V, ringing frequency Hz) of each stuck phase (the hub within 3 mrad,
-    three counts, of its first reading for more than 0.8 s): the tip's mean period between
-    upward zero crossings (25-sample moving average); from the log alone, independent of
-    the fit and of its stuck-phase detection."""
-    g = _log(name)
-    th, d, v = (g.columns[k] for k in ("motor_angle", "tip_deflection", "voltage"))
-    out, i, n = [], 0, len(th)
-    while i < n:
-        j = i
-        while j + 1 < n and abs(th[j + 1] - th[i]) <= 0.003:
-            j += 1
-        if (j - i) * g.dt > 0.8:
-            x = np.convolve(d[i:j] - d[i:j].mean(), np.ones(25) / 25, mode="valid")
-            up = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
-            if up.size >= 3:
-                out.append((float(v[i:j].mean()), (up.size - 1) / ((up[-1] - up[0]) * g.dt)))
-        i = j + 1
-    return out
-
-
-def test_hard_session_stuck_phases():
-    """What makes 4/27 hard, from the logs alone: the hub sticks for seconds (stuck phases
-    found within one encoder count, the hub dithering between two), the link rings in them
-    at its clamped frequency, 1.8 Hz (data sheet: nominal 1.8 Hz), and faster (> 1.9 Hz)
-    where the controller pushes the stuck gear train with > 0.3 V (the K1K2 run's stops
-    60 mrad short of the reference)."""
-    light, push = [], []
-    for name in ("flexarm_K1_6", "flexarm_K1K2_6_-5"):
-        for v, f in _stuck_ring_hz(name):
-            (push if abs(v) > 0.3 else light).append(f)
-    print("stuck-phase ringing, light push:", light, "pushed > 0.3 V:", push)
-    assert len(light) >= 3 and len(push) >= 2
-    assert all(1.7 < f < 1.85 for f in light), light
-    assert all(f > 1.9 for f in push), push
-
-
-def test_hard_session_training_fit(rotary_hard_session_fit):
-    """Issue #23 item 3: the 4/27 session (heavy gear friction, a bias torque) fitted on its
-    two runs together, default options, the data sheet only. Before the stuck-phase
-    detection tolerated the encoder's one-count dither, the link-frequency bounds came from
-    the drift (0.3 Hz) and the fit ended at tip 2-3 %. Thresholds: the issue's hub 80 %
-    (an independent gray-box fit reached 83-84 %) and, on the K1 run, tip 55 % (61 %);
-    the fitted clamped frequency where the stuck phases ring (1.7-2.0 Hz, measured above),
-    the tip channel lagging by tens of ms."""
-    res = rotary_hard_session_fit
-    print(res.summary())
-    fp = res.fit_percent
-    for name in ROTARY_HARD:
-        assert fp[name]["motor_angle"] >= 80.0, (name, fp)
-    assert fp["flexarm_K1_6"]["tip_deflection"] >= 55.0, fp
-    wc = res.params["link_frequency"]
-    assert 2 * np.pi * 1.7 < wc < 2 * np.pi * 2.0, wc
-    assert res.params["bias"] < 0  # the up-moves stop short, the down-moves overshoot
-    assert res.params["coulomb"] > 0.02  # several times units 6 and 7's
-    # the tip channel lags the hub's on such rigs; where the fit says otherwise it says so
-    d = res.delays
-    assert d["tip_deflection"] > d["motor_angle"] or any(
-        "below the motor_angle delay" in w for w in res.warnings), (d, res.warnings)
-    # a poor signal is called poor
-    for name in ROTARY_HARD:
-        if fp[name]["tip_deflection"] < 70:
-            assert any(w.startswith(f"{name}: fit") and "tip_deflection is low" in w
-                       for w in res.warnings), res.warnings
-
-
-@pytest.mark.xfail(strict=True, reason="issue #23 item 3 not met: the K1K2 run's tip "
-                   "rings at 1.92-1.97 Hz in its pushed stuck phases and 1.78 Hz in the "
-                   "others; the model's stuck hub clamps the link rigidly, one frequency")
-def test_hard_session_tip_k1k2(rotary_hard_session_fit):
-    fp = rotary_hard_session_fit.fit_percent
-    assert fp["flexarm_K1K2_6_-5"]["tip_deflection"] >= 55.0, fp
