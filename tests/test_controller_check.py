@@ -30,7 +30,12 @@ def test_every_rig_log_confirms_the_logged_law(path):
     decl = np.array(README_GAINS[path.name], float)
     ok = np.isfinite(c.regressed[0])
     assert ok[0] and ok[2]  # K1, K3 are always identifiable (the hub moves)
-    assert np.all(np.abs(c.regressed[0, ok] - decl[ok]) <= 0.1 * np.abs(decl[ok]) + 0.01)
+    # a gain declared 0 may regress to a small value: 0.01 V per unit of its signal for the
+    # hub terms (K1 V/rad, K3 V·s/rad); the tip terms K2, K4 multiply metres (|d| < 0.03 m
+    # on these links), so 0.03 V/m there is under 1 mV of command (flexarm_K1_6: K2 -0.011)
+    floor = np.array([0.01, 0.03, 0.01, 0.03])
+    assert np.all(np.abs(c.regressed[0, ok] - decl[ok])
+                  <= 0.1 * np.abs(decl[ok]) + floor[ok])
     # Saturation: the units that hit the amplifier show a plateau at 5 V (README: "saturates
     # at ±5 V on some units"); logged values are rounded to 1 mV.
     if c.saturation_limit is not None:

@@ -260,7 +260,10 @@ def test_design_on_the_fitted_unit6_rig(unit6_rig):
     counts, tip 3.34 s, 13 % overshoot, 7.5 V; design 0.12 counts, tip 1.01 s, 7 %, 8.9 V."""
     sc = unit6_rig
     des = flexarm.design(sc, "lqr")
-    assert des.info["model"]["n_augmented"] == 4 + 1 + 1 + 23 + 55
+    # the plant's 4 states, the integral of the input disturbance, the reference, one
+    # computation delay and the fitted sensor delays (samples) as shift registers
+    dh, dt_ = sc.sensors["motor_angle"].delay, sc.sensors["tip_deflection"].delay
+    assert des.info["model"]["n_augmented"] == 4 + 1 + 1 + dh + dt_
     assert des.info["separation_error"] < 1e-12
     cmp = compare(PlantBatch.nominal_only(sc), {"lqr": des}, logged="scenario", step=0.8,
                   start=0.5, duration=6.0)

@@ -193,7 +193,7 @@ def fit(ctx: typer.Context,
                 status.update("fitting again without joint friction")
                 res0 = run_fit(blogs, friction=False, **kw)
             if held_logs:
-                from flexarm.identification.time_domain import predict
+                from flexarm.identification.time_domain.fit import predict
 
                 status.update("predicting the held-out windows")
                 held = predict(res, held_logs)
