@@ -103,7 +103,9 @@ def test_computed_rates_equal_the_labs_logged_rates(scope_and_workspace):
     got, notes = computed_channels(sc.sensors, scope, sc.sampling.period)
     assert set(got) == {"theta_dot_f_1", "theta_dot_f_2", "alpha_dot_f_1", "alpha_dot_f_2"}
     assert len(notes) == 4
-    ref = ws.window(scope.time[0], scope.time[-1])
+    # the same samples: the window rule is [t0, t1) s from the log's first sample
+    t0 = scope.time[0] - ws.time[0]
+    ref = ws.window(t0, t0 + len(scope) * ws.dt - ws.dt / 2)
     assert len(ref) == len(scope)
     for j in (1, 2):
         e = np.abs(got[f"theta_dot_f_{j}"] - ref[f"theta_dot_f_{j}"])
