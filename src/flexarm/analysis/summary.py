@@ -177,28 +177,12 @@ def write_comparison(scenarios: list[Scenario], results: dict, out: Path) -> Pat
     return path
 
 
-LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
-        "quasistatic": "law_pd_quasistatic"}
-
-
 def run_regulation(scenario):
-    """Simulate a multi-link scenario's regulation (continuous time, RK4)."""
-    from flexarm.control import regulation as R
-    from flexarm.models.multilink import build_multilink
-    from flexarm.sim.continuous import simulate_continuous
+    """Simulate a multi-link scenario's regulation (continuous time, RK4): the model, the
+    law's parameters and the run (:func:`flexarm.sim.build.regulation_run`)."""
+    from flexarm.sim.build import regulation_run
 
-    reg = scenario.regulation
-    if reg is None:
-        raise ValueError(f"{scenario.name}: a multi-link scenario needs a [regulation] "
-                         "section to simulate")
-    model = build_multilink(scenario.arm)
-    params = R.regulation_params(model, np.diag(reg.kp), np.diag(reg.kd), reg.target,
-                                 theta_0=reg.initial, duration=reg.interpolation_time)
-    x0 = np.zeros(2 * model.n_q)
-    x0[:model.n_links] = reg.initial
-    run = simulate_continuous(model, getattr(R, LAWS[reg.law]), x0, reg.duration,
-                              reg.output_period, params=params, step=reg.step)
-    return model, params, run
+    return regulation_run(scenario)
 
 
 def write_regulation(scenario, out: Path) -> dict:

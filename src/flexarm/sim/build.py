@@ -350,8 +350,9 @@ REGULATION_LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
                    "quasistatic": "law_pd_quasistatic"}
 
 
-def simulate_regulation(scenario: Scenario) -> SimulationResult:
-    """A multi-link scenario's ``[regulation]``: the continuous-time law (DLS eq. (8)
+def regulation_run(scenario: Scenario) -> tuple:
+    """The multi-link model, the law's parameters and the run (the summary writer draws
+    from all three). A multi-link scenario's ``[regulation]``: the continuous-time law (DLS eq. (8)
     ``constant``, eq. (30) ``online`` / ``quasistatic``) u = sat(law(x, t)) on the arm from
     θ(0) = ``initial``, δ(0) = 0, θ̇(0) = 0, fixed-step RK4 (``step``), outputs every
     ``output_period`` over ``duration`` (:func:`flexarm.sim.continuous.simulate_continuous`)."""
@@ -372,7 +373,13 @@ def simulate_regulation(scenario: Scenario) -> SimulationResult:
     run = simulate_continuous(model, getattr(R, REGULATION_LAWS[reg.law]), x0, reg.duration,
                               reg.output_period, params=params, step=reg.step)
     run.title = scenario.name
-    return run
+    return model, params, run
+
+
+def simulate_regulation(scenario: Scenario) -> SimulationResult:
+    """A multi-link scenario's ``[regulation]`` law in continuous time
+    (:func:`regulation_run`'s run)."""
+    return regulation_run(scenario)[2]
 
 
 def simulate(scenario: Scenario, controller: discrete.Controller | None = None,
