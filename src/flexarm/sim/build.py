@@ -8,6 +8,7 @@ scenario → model → plant, controller, sensors, actuator → :func:`simulate_
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,11 +16,49 @@ import jax.numpy as jnp
 import numpy as np
 
 from flexarm.control import discrete
+from flexarm.errors import FlexarmError
 from flexarm.models.single_link import SingleLinkModel
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import Actuator, SampledLoop, Sensors, simulate_loop
 from flexarm.specs.experiment import Reference
 from flexarm.specs.scenario import Scenario
+
+
+#: the share of this machine's memory one simulation's result may take (the loop keeps the
+#: state, the measured signals and the command of every sample, and JAX a few copies)
+MEMORY_SHARE = 0.25
+#: 8-byte values kept per sample and state variable or signal, with the run's copies
+_BYTES_PER_VALUE = 8 * 4
+
+
+def _physical_memory() -> float:
+    """This machine's memory (bytes); 16 GiB where the OS does not say."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 16.0 * 2**30
+
+
+def sample_times(scenario: Scenario, dt: float, values_per_sample: int = 16) -> np.ndarray:
+    """The sample instants 0, dt, ... ≤ ``[simulation] duration`` (s), checked first against
+    this machine's memory: a run whose samples (``values_per_sample`` 8-byte values each,
+    with the copies the loop makes) would take more than :data:`MEMORY_SHARE` of it is
+    refused with one line naming the duration, the sample count and the fix, before any
+    array is allocated."""
+    duration = float(scenario.simulation.duration)
+    n = int(math.floor(duration / dt + 1e-9)) + 1
+    need = float(n) * max(int(values_per_sample), 1) * _BYTES_PER_VALUE
+    have = MEMORY_SHARE * _physical_memory()
+    if need > have:
+        longest = have / (max(int(values_per_sample), 1) * _BYTES_PER_VALUE) * dt
+        raise FlexarmError(
+            f"scenario {scenario.name!r}: {n:.3g} samples of {dt:g} s would need about "
+            f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of this machine's "
+            f"{have / MEMORY_SHARE / 2**30:.3g} GiB",
+            field="[simulation] duration (s)", value=duration,
+            fix=f"shorten it (at most about {longest:.3g} s here) or lengthen "
+                "[sampling] period")
+    return np.arange(n) * dt
 
 
 def reference_trajectory(ref: Reference):
@@ -224,8 +263,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
                          "(flexarm.simulate runs it; prepare builds sampled loops only)")
     arm, model = multi_link_arm(scenario.arm)
     dt = scenario.sampling.period
-    n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
-    t = np.arange(n) * dt
+    t = sample_times(scenario, dt, arm.n_states + 2 * arm.n_joints + len(scenario.sensors) + 8)
     spec = scenario.controller
     refs = _references(scenario, t, references)
     if controller is not None:
@@ -279,8 +317,7 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     model = SingleLinkModel.from_spec(scenario.arm, hold_tip=scenario.simulation.hold_tip)
     plant = model.plant()
     dt = scenario.sampling.period
-    n = int(math.floor(scenario.simulation.duration / dt + 1e-9)) + 1
-    t = np.arange(n) * dt
+    t = sample_times(scenario, dt, plant.n_states + len(scenario.sensors) + 8)
     refs = _references(scenario, t, references)
     ctrl = controller if controller is not None else scenario_controller(
         scenario, dt, input_names=plant.input_names, references=refs,
