@@ -353,9 +353,6 @@ def test_python_dash_m_flexarm_runs_the_cli():
     assert p.returncode == 0 and p.stdout.strip() == f"flexarm {__version__}", p.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="the fit's result keys are Path.name "
-                   "(identification/time_domain/report.py) and cli/fit.py does not key them "
-                   "by io.write.unique_keys yet: wired by the lead")
 def test_two_logs_of_the_same_name_are_two_entries(inputs, tmp_path):
     """Two `trial1.csv` in different folders: two result entries (keys relative to the
     common folder: a/trial1.csv, b/trial1.csv), not one that the second overwrote."""

@@ -50,7 +50,7 @@ def test_log_keys_keep_same_names_in_other_folders_apart(tmp_path):
     c = Log(tmp_path / "u7" / "other.csv", np.arange(3.0), {})
     assert log_keys([a, b, c]) == ["u6/run.csv", "u7/run.csv", "u7/other.csv"]
     assert log_keys([b, c]) == ["run.csv", "other.csv"]  # one folder: the file names
-    assert log_keys([a, a]) == ["run.csv#0", "run.csv#1"]  # the same file twice: numbered
+    assert log_keys([a, a]) == ["run.csv", "run.csv#2"]  # the same file twice: numbered
 
 
 def test_a_scenario_without_free_runs_its_preset_and_says_which():

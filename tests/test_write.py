@@ -150,14 +150,15 @@ def test_output_folder_is_not_written_into_without_overwrite(tmp_path):
         write.output_folder(d / "a.png", overwrite=True)
 
 
-def test_unique_keys_stems_then_relative_paths_then_numbers(tmp_path):
+def test_unique_keys_names_then_relative_paths_then_numbers(tmp_path):
     from flexarm.io.write import unique_keys
 
     a, b = tmp_path / "a" / "trial1.csv", tmp_path / "b" / "trial1.csv"
-    assert unique_keys([a, tmp_path / "a" / "trial2.csv"]) == ["trial1", "trial2"]
+    assert unique_keys([a, tmp_path / "a" / "trial2.csv"]) == ["trial1.csv", "trial2.csv"]
     assert unique_keys([a, b]) == ["a/trial1.csv", "b/trial1.csv"]
     assert unique_keys([a, b, a]) == ["a/trial1.csv", "b/trial1.csv", "a/trial1.csv#2"]
     assert unique_keys(["rig", "rig"]) == ["rig", "rig#2"]  # names, e.g. two scenarios
+    assert unique_keys([a, a]) == ["trial1.csv", "trial1.csv#2"]  # one file given twice
     keys = unique_keys([a, b, tmp_path / "c" / "d" / "trial1.csv"])
     assert len(set(keys)) == 3 and keys[2] == "c/d/trial1.csv"
 

@@ -261,26 +261,15 @@ class Log:
 
 
 def log_keys(logs: Sequence[Log]) -> list[str]:
-    """One unique key per log for results (fit %, traces): each file's path relative to the
-    logs' common folder (``"a.csv"`` when all lie in one folder; ``"unit6/run.csv"`` and
-    ``"unit7/run.csv"`` when the names repeat in different folders); a log without a file,
-    or a repeated key, gets ``"#i"`` (its 0-based position) appended."""
-    import os
+    """One unique key per log for results (fit %, traces, figures), by the one rule of
+    :func:`flexarm.io.write.unique_keys`: the file names when all differ (``"a.csv"``),
+    paths relative to the logs' common folder when names repeat in different folders
+    (``"unit6/run.csv"``, ``"unit7/run.csv"``), ``#2``, ``#3`` after a file given again; a
+    log without a file is keyed by its ``name``."""
+    from flexarm.io.write import unique_keys
 
-    paths = [getattr(g, "path", None) for g in logs]
-    files = [Path(p).resolve() for p in paths if p is not None]
-    base = Path(os.path.commonpath([str(f.parent) for f in files])) if files else None
-    keys: list[str] = []
-    for i, (g, p) in enumerate(zip(logs, paths)):
-        if p is None:
-            k = getattr(g, "name", "<log>") or "<log>"
-        else:
-            k = Path(p).resolve().relative_to(base).as_posix()
-        keys.append(k)
-    out = []
-    for i, k in enumerate(keys):
-        out.append(f"{k}#{i}" if keys.count(k) > 1 else k)
-    return out
+    return unique_keys([g.path if getattr(g, "path", None) is not None
+                        else (getattr(g, "name", "<log>") or "<log>") for g in logs])
 
 
 def unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,

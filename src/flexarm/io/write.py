@@ -254,24 +254,26 @@ def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
 
 # ------------------------------------------------------------------ unique result keys
 def unique_keys(paths: Sequence[str | os.PathLike]) -> list[str]:
-    """One key per input, in order, never two alike (result entries, figure names).
+    """One key per input, in order, never two alike (result entries, figure names): the one
+    rule every result keyed by input uses (:func:`flexarm.io.logs.log_keys` applies it to
+    logs).
 
-    Rule: the file names without extension (``Path.stem``) when they are all different
-    (what results were always keyed by); otherwise each input's path relative to the
-    inputs' common folder, ``/``-separated, extension kept (``a/trial1.csv``,
-    ``b/trial1.csv``); the same file given more than once gets ``#2``, ``#3``, ... after
-    its key.  Strings that are not files (scenario names) follow the same rule."""
+    Rule: the file names (``Path.name``, extension kept) when they are all different;
+    otherwise each input's path relative to the inputs' common folder, ``/``-separated
+    (``a/trial1.csv``, ``b/trial1.csv``); the same file given more than once gets ``#2``,
+    ``#3``, ... after its key.  Strings that are not files (scenario names) follow the
+    same rule."""
     ps = [Path(p) for p in paths]
-    keys = [p.stem for p in ps]
+    keys = [p.name or str(p) for p in ps]
     if len(set(keys)) < len(keys):
         res = [p.expanduser().resolve() for p in ps]
         try:
-            common = Path(os.path.commonpath([str(r) for r in res]))
+            common = Path(os.path.commonpath([str(r.parent) for r in res]))
         except ValueError:  # different drives
             common = None
         keys = []
         for r in res:
-            if common is not None and r != common:
+            if common is not None and r != common and r.is_relative_to(common):
                 keys.append(r.relative_to(common).as_posix())
             else:
                 keys.append(r.name)

@@ -48,6 +48,7 @@ from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, a
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.identification.time_domain.report import FitResult
+from flexarm.io.logs import log_keys
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
 
 
@@ -854,10 +855,11 @@ def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = 
         off = _local(obj, U, D, nfev, off0=off, free_params=False)["off"]
     tr, e, bad = obj.run(U[None], D[None], off[None])
     fp = obj.fit_percent(e[0])
-    out = {"fit_percent": {g.name: {"motor_angle": _pct(fp[i, 0]),
-                                    "tip_deflection": _pct(fp[i, 1])}
-                           for i, g in enumerate(blogs)},
-           "diverged": {g.name: bool(bad[0, i]) for i, g in enumerate(blogs)},
+    keys = log_keys(blogs)  # one key per log (same names in other folders apart)
+    out = {"fit_percent": {k: {"motor_angle": _pct(fp[i, 0]),
+                               "tip_deflection": _pct(fp[i, 1])}
+                           for i, k in enumerate(keys)},
+           "diverged": {k: bool(bad[0, i]) for i, k in enumerate(keys)},
            "traj": [a[0] for a in tr], "logs": blogs}
     return out
 

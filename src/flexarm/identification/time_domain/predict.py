@@ -198,10 +198,10 @@ def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
     for grp in groups:
         out = rig_predict(res, grp, estimate_initial=opts.estimate_initial,
                           controller=opts.controller)
+        got_fp, got_div = list(out["fit_percent"].values()), list(out["diverged"].values())
         for j, g in enumerate(out["logs"]):
             k = keys[i]
-            fp[k] = out["fit_percent"][g.name]
-            div[k] = out["diverged"][g.name]
+            fp[k], div[k] = got_fp[j], got_div[j]
             n = len(g)
             tr = out["traj"]
             sim = {"motor_angle": np.asarray(tr[0][j, :n]),

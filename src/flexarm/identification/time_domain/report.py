@@ -13,6 +13,7 @@ import tomli_w
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
 from flexarm.errors import OutputExistsError
+from flexarm.io.logs import log_keys
 from flexarm.io.write import save_figure, write_json, write_text
 
 
@@ -97,7 +98,7 @@ class FitResult:
                 sfx = "" if space.n_sessions == 1 else f"[{s}]"
                 der["static" + sfx] = params["coulomb" + sfx] + params["static_excess" + sfx]
         check_physical({**params, **der})
-        names = [g.name for g in logs]
+        names = log_keys(logs)  # one key per log (same names in other folders apart)
         fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
               for i, n in enumerate(names)}
         d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
@@ -389,7 +390,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for i, g in enumerate(logs):
+    for i, (g, key) in enumerate(zip(logs, log_keys(logs))):
         n = len(g)
         t = g.time - g.time[0]
         fig, ax = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
@@ -399,7 +400,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
             if col in g.columns:
                 a.plot(t, sc * g.columns[col], lw=0.9, label="measured")
             a.plot(t, sc * traj[k][i, :n], lw=0.9, label="simulated")
-            fp = fit_percent.get(g.name, {}).get(col)
+            fp = fit_percent.get(key, {}).get(col)
             a.set_ylabel(f"{col.replace('_', ' ')} [{unit}]")
             a.set_title(f"{col}: fit {fp:.1f} %" if fp is not None else col, fontsize=9)
             a.legend(loc="best", fontsize=8)
@@ -411,9 +412,9 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
         ax[2].legend(loc="best", fontsize=8)
         ax[2].grid(alpha=0.3)
         ax[2].set_xlabel("time [s]")
-        fig.suptitle(f"{g.name} ({tag})")
+        fig.suptitle(f"{key} ({tag})")
         fig.tight_layout()
-        p = out / f"{Path(g.name).stem}_{tag}.png"
+        p = out / f"{key.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png"
         save_figure(fig, p, overwrite=True, dpi=90)
         plt.close(fig)
         paths.append(p)
