@@ -135,15 +135,13 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     """Overlay figure: every compared channel, logged and simulated, with its fit %."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
 
     from flexarm.io.write import save_figure
 
     names = list(rep.fit_percent)
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 0.5), sharex=True,
+    fig = Figure(figsize=(10, 1.8 * len(names) + 0.5))
+    axes = fig.subplots(len(names), 1, sharex=True,
                              squeeze=False)
     t = rep.log.time - rep.log.time[0]
     for ax, k in zip(axes[:, 0], names):
@@ -155,4 +153,3 @@ def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     axes[-1, 0].set_xlabel("t (s)")
     fig.tight_layout()
     save_figure(fig, path, overwrite=overwrite, dpi=100)
-    plt.close(fig)

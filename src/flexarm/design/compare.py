@@ -252,17 +252,15 @@ class Comparison:
         """Overlay figures (PNG): ``compare_tip.png`` (tip angle on the nominal plant and
         the batch's 5–95 % band per controller), ``compare_hub_command.png`` (hub angle
         and command on the nominal plant)."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
 
         from flexarm.io.write import save_figure
 
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
         paths = []
-        fig, ax = plt.subplots(figsize=(8, 4.5))
+        fig = Figure(figsize=(8, 4.5))
+        ax = fig.subplots()
         for i, (name, tr) in enumerate(self.traces.items()):
             c = f"C{i}"
             if self.settings["n_plants"] > 0:
@@ -278,8 +276,8 @@ class Comparison:
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
         paths.append(save_figure(fig, out / "compare_tip.png", overwrite=overwrite, dpi=100))
-        plt.close(fig)
-        fig, ax = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
+        fig = Figure(figsize=(8, 6))
+        ax = fig.subplots(2, 1, sharex=True)
         for i, (name, tr) in enumerate(self.traces.items()):
             ax[0].plot(tr["time"], tr["hub_nominal"], color=f"C{i}", lw=1.0, label=name)
             ax[1].plot(tr["time"], tr["command_nominal"], color=f"C{i}", lw=0.8, label=name)
@@ -297,7 +295,6 @@ class Comparison:
         fig.tight_layout()
         paths.append(save_figure(fig, out / "compare_hub_command.png", overwrite=overwrite,
                                  dpi=100))
-        plt.close(fig)
         return paths
 
 

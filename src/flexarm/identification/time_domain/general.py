@@ -1111,10 +1111,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
 
 def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: str) -> list[Path]:
     """Measured vs simulated, one PNG per log with one panel per channel."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
 
     from flexarm.io.write import save_figure
 
@@ -1123,7 +1120,8 @@ def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: s
     paths = []
     for i, (name, tr) in enumerate(traj.items()):
         chans = list(tr["simulated"])
-        fig, ax = plt.subplots(len(chans), 1, sharex=True, figsize=(8, 2.2 * len(chans) + 0.6),
+        fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
+        ax = fig.subplots(len(chans), 1, sharex=True,
                                squeeze=False)
         for a, c in zip(ax[:, 0], chans):
             a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
@@ -1138,6 +1136,5 @@ def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: s
         stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name)
         p = out / f"{i:02d}_{stem}_{tag}.png"
         save_figure(fig, p, overwrite=True, dpi=90)
-        plt.close(fig)
         paths.append(p)
     return paths

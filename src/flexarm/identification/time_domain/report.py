@@ -382,10 +382,7 @@ def toml_with_comments(d: dict, comments: dict, header: list[str]) -> str:
 
 def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     """Measured vs simulated θ, d and the command for each log; PNG per log."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
 
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
@@ -393,7 +390,8 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     for i, (g, key) in enumerate(zip(logs, log_keys(logs))):
         n = len(g)
         t = g.time - g.time[0]
-        fig, ax = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
+        fig = Figure(figsize=(8, 7))
+        ax = fig.subplots(3, 1, sharex=True)
         ax[0].plot(t, g.columns["reference"], "k:", lw=0.8, label="reference")
         for a, col, k, unit, sc in ((ax[0], "motor_angle", 0, "rad", 1.0),
                                     (ax[1], "tip_deflection", 1, "mm", 1e3)):
@@ -416,7 +414,6 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
         fig.tight_layout()
         p = out / f"{key.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png"
         save_figure(fig, p, overwrite=True, dpi=90)
-        plt.close(fig)
         paths.append(p)
     return paths
 
