@@ -135,7 +135,7 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     """Overlay figure: every compared channel, logged and simulated, with its fit %."""
-    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
 
     from flexarm.io.write import save_figure
 

@@ -252,7 +252,7 @@ class Comparison:
         """Overlay figures (PNG): ``compare_tip.png`` (tip angle on the nominal plant and
         the batch's 5–95 % band per controller), ``compare_hub_command.png`` (hub angle
         and command on the nominal plant)."""
-        from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
+        from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
 
         from flexarm.io.write import save_figure
 

@@ -1111,7 +1111,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
 
 def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: str) -> list[Path]:
     """Measured vs simulated, one PNG per log with one panel per channel."""
-    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
 
     from flexarm.io.write import save_figure
 

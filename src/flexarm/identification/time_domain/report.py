@@ -382,7 +382,7 @@ def toml_with_comments(d: dict, comments: dict, header: list[str]) -> str:
 
 def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     """Measured vs simulated θ, d and the command for each log; PNG per log."""
-    from matplotlib.figure import Figure  # no pyplot: the caller\'s backend stays
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
 
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
