@@ -288,3 +288,34 @@ def test_cli_fit_many_reports_a_failed_row_and_exits_1(tmp_path):
     r2 = subprocess.run(cmd + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
                         capture_output=True, text=True, timeout=600)
     assert r2.returncode == 2 and len(r2.stderr.strip().splitlines()) == 1
+
+
+def test_cli_design_on_a_scheduler_equals_in_process(client, tmp_path):
+    """`flexarm design ... --scheduler ADDRESS` (the module's LocalCluster of 2 workers):
+    the comparison's rows equal those of the in-process run, 1e-12 relative (the plants
+    run in chunks with per-chunk seeds: the result does not depend on where they ran);
+    --scheduler with --workers is refused in one line."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    base = ["design", "rotary-flexible-link", "--method", "lqr", "--spread",
+            "arm.motor.inertia=10%,arm.friction.coulomb=20%", "--plants", "4",
+            "--accept-unstable"]
+    rows = {}
+    for tag, extra in (("local", []), ("dask", ["--scheduler", client.scheduler.address])):
+        r = CliRunner().invoke(app, [*base, "--out", str(tmp_path / tag), *extra])
+        assert r.exit_code == 0, r.output
+        rows[tag] = json.loads((tmp_path / tag / "compare.json").read_text())["rows"]
+    assert set(rows["dask"]) == set(rows["local"]) == {"scenario", "lqr"}
+    for name, row in rows["local"].items():
+        assert row["unstable"] == rows["dask"][name]["unstable"]
+        for s in ("nominal", "median", "worst"):
+            for k, v in row[s].items():
+                assert rows["dask"][name][s][k] == pytest.approx(v, rel=1e-12, nan_ok=True), \
+                    (name, s, k)
+    r = CliRunner().invoke(app, [*base, "--out", str(tmp_path / "x"), "--scheduler",
+                                 client.scheduler.address, "--workers", "2"])
+    assert r.exit_code == 2 and "not both" in r.output

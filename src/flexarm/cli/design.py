@@ -68,6 +68,12 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                    0.01, "--max-unstable-share",
                    help="the largest share (0..1) of drawn plants that may be unstable or reach "
                         "the limit before the design is refused"),
+               scheduler: Optional[str] = typer.Option(
+                   None, "--scheduler", help="run the drawn plants on a running Dask scheduler, "
+                                             "e.g. tcp://host:8786 (in chunks, one task each)"),
+               workers: Optional[int] = typer.Option(
+                   None, "--workers", help="run the drawn plants on a local Dask cluster of N "
+                                           "worker processes (default: in-process)"),
                overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
     """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
     period, its computation and sensor delays in the model): state feedback by LQR or pole
@@ -87,17 +93,21 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     The design gate: a design unstable on the nominal plant or on more than
     --max-unstable-share of the drawn plants, or whose command reaches the limit, is written
     with its verdict, printed in red, and the command exits 2 unless --accept-unstable."""
+    if scheduler is not None and workers is not None:
+        fail("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        fail(f"--workers {workers}: give 1 or more")
     with guarded(scenario, fit_json):
         _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
                 disturbance, friction_compensation, max_deflection, distance, fit_json,
                 spread, plants, seed, encoder_counts, report, accept_unstable,
-                max_unstable_share, overwrite)
+                max_unstable_share, overwrite, scheduler, workers)
 
 
 def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
             disturbance, friction_compensation, max_deflection, distance, fit_json, spread,
             plants, seed, encoder_counts, report, accept_unstable, max_unstable_share,
-            overwrite) -> None:
+            overwrite, scheduler=None, workers=None) -> None:
     enable_cache()
     from flexarm.design import METHODS
     from flexarm.design.gate import GateOptions, design_checked
@@ -145,8 +155,12 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
         progress(status, f"designing ({method}) and checking it with the scenario's "
                           "controller on a reference step (nominal plant"
                           f"{f' and {plants} drawn' if spread_d else ''})...")
+        from flexarm.distributed import session
+
         try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
-            des = design_checked(sc, method, plants=drawn, count=count, gate=gate, **opts)
+            with session(scheduler, workers) as client:  # None: in-process
+                des = design_checked(sc, method, plants=drawn, count=count, gate=gate,
+                                     client=client, **opts)
         except FlexarmError:
             raise
         except ValueError as exc:

@@ -99,7 +99,7 @@ def assess(comparison, name: str, options: GateOptions = GateOptions()) -> dict[
 
 def design_checked(scenario, method: str = "lqr", *, plants=None, count: float | None = None,
                    gate: GateOptions = GateOptions(), logged: str | None = "scenario",
-                   **options):
+                   client: Any = None, **options):
     """Design ``scenario``'s controller by ``method`` (:func:`flexarm.design.design`, with
     ``options``), compare it with the scenario's own controller (named ``logged``; None
     leaves it out) on the nominal plant and ``plants`` (a
@@ -108,7 +108,9 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
     Returns the :class:`~flexarm.design.result.Design` with ``verdict``, ``gate`` and
     ``comparison`` set (and the comparison's rows in ``info["comparison"]``); raises
     :class:`~flexarm.errors.UnstableDesignError` (``.design`` the design) when the verdict is
-    not ``"stable"`` unless ``gate.accept_unstable``."""
+    not ``"stable"`` unless ``gate.accept_unstable``.  ``client``: a Dask client
+    (:func:`flexarm.distributed.client_for`) on which the comparison (and a ``tune``'s
+    cost) runs the plants in chunks, one task each; None: in-process."""
     from flexarm.design import design
     from flexarm.design.compare import compare, encoder_count
     from flexarm.design.plants import PlantBatch
@@ -129,11 +131,14 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
     given = None if count is None else q
     if plants is not None and method in ("lqr", "tune"):
         options = {**options, "plants": plants, "count": given}
+    if client is not None and method == "tune":
+        options = {**options, "client": client}
     des = design(scenario, method, **options)
     batch = plants if plants is not None else PlantBatch.nominal_only(scenario)
     duration = gate.duration if gate.duration is not None else max(
         3.0, float(scenario.simulation.duration))
-    c = compare(batch, {method: des}, logged=logged, count=given, duration=duration)
+    c = compare(batch, {method: des}, logged=logged, count=given, duration=duration,
+                client=client)
     des.comparison = c
     des.info["comparison"] = c.to_dict()["rows"]
     des.warnings.extend(w for w in c.warnings if w not in des.warnings)
