@@ -101,6 +101,9 @@ def test_fit_two_logs_validate_third(fitted, logs, tmp_path):
     """
     res = fitted
     print(res.summary())
+    text, html = repr(res), res._repr_html_()  # reads as one table (issue #26)
+    assert all(len(line) <= 80 for line in text.splitlines()), text
+    assert html.count("<table") == 1 and f"{res.params['hub_inertia']:.4g}" in html
     allp = {**res.params, **res.derived}
     errs = {k: 100 * (allp[k] / v - 1) for k, v in TRUE.items()}
     errs["link_stiffness"] = 100 * (allp["link_stiffness"] / 1.2 - 1)

@@ -92,6 +92,17 @@ def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
     assert len(pred.traces["a/run.csv"]["time"]) == 1000  # [0, 2) s at 2 ms
     fig = flexarm.identification.time_domain.overlay_figure(pred, "a/run.csv")
     assert len(fig.axes) == len(pred.traces["a/run.csv"]["simulated"])
+    # how they read (issue #26): <= 80 columns, the numbers whole; one HTML table
+    from flexarm.display import fmt
+
+    for obj, numbers in ((res, [res.params["arm.joints[0].friction.coulomb"]]),
+                         (pred, [pred.fit_percent["a/run.csv"]["theta_1"]])):
+        text = repr(obj)
+        assert all(len(line) <= 80 for line in text.splitlines()), text
+        assert all(fmt(x) in text for x in numbers), text
+        html = obj._repr_html_()
+        assert html.count("<table") == 1 and all(fmt(x) in html for x in numbers)
+    assert "arm.joints[0].friction.coulomb" in repr(res) and "a/run.csv" in repr(pred)
 
 
 def test_grouped_options_map_onto_the_engine():

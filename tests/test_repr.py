@@ -191,3 +191,15 @@ def test_bode_figures(frf, tmp_path):
     )
     assert len(boxes) >= 3
     assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:], strict=False))
+
+
+def test_design_repr():
+    """A design reads as one table: method, rig, verdict, the controller's size."""
+    des = flexarm.design(flexarm.load_scenario("rotary-flexible-link"), "lqr")
+    text = repr(des)
+    check_text(text)
+    assert text.splitlines()[0] == "Design (lqr) of rotary-flexible-link"
+    h = cells(des._repr_html_())
+    assert h.tables == 1 and h.cells[h.cells.index("verdict") + 1] == "not checked"
+    c = des.controller
+    assert f"{c.ninputs} in, {c.noutputs} out, {c.nstates} states" in text

@@ -146,3 +146,28 @@ class Table:
             out.append(f"<tr><td colspan='{ncol}'><em>{e(n)}</em></td></tr>")
         out.append("</tbody></table>")
         return "".join(out)
+
+
+def fit_percent_lines(fit_percent: dict, digits: int = 1) -> list[str]:
+    """One line per log of a ``fit_percent`` mapping (log key → signal → fit %):
+    ``key: signal 98.1, signal 80.3`` (``–`` where the log lacks the signal); the notes of
+    the fit and prediction results' tables."""
+    out = []
+    for key, per in fit_percent.items():
+        cells = ", ".join(
+            f"{sig} {'–' if v is None else f'{float(v):.{digits}f}'}" for sig, v in per.items()
+        )
+        out.append(f"fit % {key}: {cells}")
+    return out
+
+
+def parameter_rows(values: dict, std: dict, units: dict | None = None) -> list[tuple]:
+    """Rows ``(name, value, ± std, std %, unit)`` of fitted parameters (``std`` missing or
+    NaN: ``–``); the body of the fit results' tables."""
+    rows = []
+    for k, v in values.items():
+        s = std.get(k)
+        s = None if s is None or (isinstance(s, float) and math.isnan(s)) else float(s)
+        rel = None if s is None or not v else 100.0 * s / abs(float(v))
+        rows.append((k, float(v), s, rel, (units or {}).get(k, "")))
+    return rows

@@ -71,6 +71,34 @@ class Design:
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
+    def _table(self):
+        from flexarm.display import Table
+
+        v = self.verdict if self.verdict is not None else "not checked"
+        rows: list[tuple] = [("method", self.method), ("rig", self.scenario.name),
+                             ("verdict", v)]
+        c = self.controller
+        if c is not None:
+            rows.append(("controller", f"{type(c).__name__}: {c.ninputs} in, {c.noutputs} "
+                                       f"out, {getattr(c, 'nstates', 0)} states, dt {c.dt}"))
+        g = self.gate
+        if g is not None and g.get("n_plants"):
+            rows.append(("unstable plants", f"{g['unstable']}/{g['n_plants']}"))
+            rows.append(("plants at the limit", f"{g['limit_reached']}/{g['n_plants']}"))
+        for k in ("model", "step"):
+            for kk, vv in (self.info.get(k) or {}).items():
+                if isinstance(vv, (int, float, str)) or (
+                        isinstance(vv, list) and len(vv) <= 4):
+                    rows.append((f"{k} {kk}", vv))
+        return Table(f"Design ({self.method}) of {self.scenario.name}", rows,
+                     notes=[f"warning: {w}" for w in self.warnings])
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
+
     def require_stable(self, accept_unstable: bool = False) -> "Design":
         """This design, or :class:`flexarm.errors.UnstableDesignError` when its verdict is
         not ``"stable"`` (not checked included) and ``accept_unstable`` is False."""

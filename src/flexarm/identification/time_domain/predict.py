@@ -68,6 +68,22 @@ class Prediction:
                        "diverged": self.diverged, "warnings": self.warnings,
                        "notes": self.notes, "plots": [str(p) for p in self.plots]})
 
+    def _table(self):
+        from flexarm.display import Table
+
+        sigs = list(dict.fromkeys(k for per in self.fit_percent.values() for k in per))
+        rows = [(key, *(per.get(s) for s in sigs)) for key, per in self.fit_percent.items()]
+        notes = [f"{k} diverged" for k, bad in self.diverged.items() if bad]
+        notes += [f"warning: {w}" for w in self.warnings] + list(self.notes)
+        return Table(f"Prediction by {self.scenario}: fit % per log and signal", rows,
+                     header=("log", *sigs), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
+
     def __getitem__(self, key: str):
         """Deprecated dict access (``validate(...)["fit_percent"]``), as the old
         validators returned dicts."""

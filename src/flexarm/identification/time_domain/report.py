@@ -224,6 +224,26 @@ class FitResult:
                      f"{self.stages['local']['seconds']:.1f} s)")
         return "\n".join(lines)
 
+    def _table(self):
+        from flexarm.display import Table, fit_percent_lines, parameter_rows
+
+        state = "converged" if self.converged else "NOT converged"
+        notes = [f"{state}: {self.message}",
+                 "delays (samples): " + ", ".join(f"{k} {v}" for k, v in self.delays.items()),
+                 *fit_percent_lines(self.fit_percent)]
+        notes += [f"warning: {w}" for w in self.warnings]
+        units = {k: UNITS.get(k.split("[")[0], "") for k in self.params}
+        return Table(f"FitResult of the servo rig ({self.settings.get('mode', 'fit')}): "
+                     f"{len(self.params)} parameters (SI)",
+                     parameter_rows(self.params, self.std, units),
+                     header=("parameter", "value", "std (HAC)", "std %", "unit"), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
+
     def scenario_dict(self) -> dict:
         """The fitted arm as a scenario dict (SI), for :func:`flexarm.specs.scenario_from_dict`."""
         return scenario_from_fit(self)[0]

@@ -55,6 +55,25 @@ class FitResult:
     plots: list[str] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
 
+    def _table(self):
+        from flexarm.display import Table, fit_percent_lines, parameter_rows
+
+        state = "converged" if self.converged else "NOT converged"
+        name = getattr(self.scenario, "name", "scenario")
+        notes = [f"{state}: {self.message}", *fit_percent_lines(self.fit_percent)]
+        notes += [f"warning: {w}" for w in self.warnings]
+        notes.append(f"free list: {self.free_source}; {self.nfev} evaluations, "
+                     f"{self.seconds:.1f} s")
+        return Table(f"FitResult of {name}: {len(self.free)} free parameters (SI)",
+                     parameter_rows(self.params, self.std),
+                     header=("parameter", "value", "std (HAC)", "std %", "unit"), notes=notes)
+
+    def __repr__(self) -> str:
+        return self._table().text()
+
+    def _repr_html_(self) -> str:
+        return self._table().html()
+
     def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
         from flexarm.io.write import write_toml
