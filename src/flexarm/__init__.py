@@ -38,6 +38,7 @@ float64 you provide; with float32 its tolerances do not hold).
 import importlib as _importlib
 import os as _os
 import sys as _sys
+import typing as _typing
 
 
 def _enable_x64() -> None:
@@ -77,6 +78,26 @@ _LAZY = {
     "builtin_scenarios": "flexarm.specs",
     "load_scenario": "flexarm.specs",
 }
+
+
+if _typing.TYPE_CHECKING:  # what the lazy names are, for type checkers and the API docs
+    from flexarm import design
+    from flexarm.control.lqg import lqg
+    from flexarm.control.trajectories import parabolic, quasi_parabolic
+    from flexarm.control.wiener import wiener_feedforward
+    from flexarm.identification import fit, predict, validate
+    from flexarm.identification.frequency_domain.identify import identify
+    from flexarm.identification.frequency_domain.periodic import periodic_frf
+    from flexarm.identification.frequency_domain.tfest import tfest
+    from flexarm.io.logformat import load_log
+    from flexarm.models.assembly import Arm
+    from flexarm.models.linearize import linearize
+    from flexarm.models.multilink import build_multilink
+    from flexarm.models.single_link import SingleLinkModel
+    from flexarm.sim.build import prepare, simulate
+    from flexarm.sim.result import SimulationResult
+    from flexarm.sim.sampled import simulate_batch
+    from flexarm.specs import Scenario, builtin_scenarios, load_scenario
 
 
 def __getattr__(name: str):
