@@ -31,6 +31,7 @@ def test_scenarios_page_is_generated_at_build_time():
     built = _hooks().expand(page)
     assert scenario_reference.MARKER not in built
     assert scenario_reference.reference() in built
+    assert "scenario-reference:begin" not in (ROOT / "README.md").read_text()
 
 
 def test_scenario_reference_covers_the_builtin_scenarios():
@@ -57,6 +58,15 @@ def test_readme_opens_with_the_two_commands():
     lines = (ROOT / "README.md").read_text().splitlines()
     block = lines[lines.index("```") + 1: lines.index("```", lines.index("```") + 1)]
     assert [ln.split()[0:2] for ln in block] == [["make", "demo"], ["make", "test"]]
+
+
+def test_readme_links_exist():
+    """Every relative link of the README points to a file of the repository."""
+    text = (ROOT / "README.md").read_text()
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert links
+    missing = [x for x in links if "://" not in x and not (ROOT / x).exists()]
+    assert not missing, missing
 
 
 def test_readme_c_loop_is_the_design_pages():
