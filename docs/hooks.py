@@ -2,7 +2,8 @@
 griffe ``extensions``). Standard library only at import.
 
 * ``<!-- scenario-reference -->`` in a page becomes the scenario-field reference that
-  ``tools/scenario_reference.py`` generates from the pydantic specs (the README's section);
+  ``tools/scenario_reference.py`` generates from the pydantic specs (docs/scenarios.md; no
+  copy of it is kept in the repository);
 * ``<!-- api: flexarm.PKG -->`` becomes one ``::: module`` block per public module of the
   package (found in ``src/``, so a module that is added, moved or removed needs no page edit);
 * ``<!-- include: FILE -->`` becomes the text of FILE (relative to the repository root);

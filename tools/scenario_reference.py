@@ -1,9 +1,11 @@
 """Generate the scenario-field reference (Markdown) from the pydantic specs.
 
     python tools/scenario_reference.py          # print it
-    python tools/scenario_reference.py --write  # rewrite the section of README.md
 
-tests/test_docs.py fails when README.md's section is not what this prints.
+The site's page docs/scenarios.md holds only the marker ``<!-- scenario-reference -->``:
+docs/hooks.py replaces it with :func:`reference` at every docs build, so no copy of the
+reference is kept in the repository to go stale (``--write``, which rewrote the README's
+copy, now only says so).
 """
 
 from __future__ import annotations
@@ -12,7 +14,6 @@ import inspect
 import sys
 import types
 import typing
-from pathlib import Path
 
 from pydantic import BaseModel
 
@@ -21,7 +22,8 @@ from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.nested import NestedController
 from flexarm.specs.quantity import Unit
 
-BEGIN, END = "<!-- scenario-reference:begin -->", "<!-- scenario-reference:end -->"
+#: the marker in a docs page that docs/hooks.py replaces with :func:`reference`
+MARKER = "<!-- scenario-reference -->"
 
 SECTIONS = [
     ("top level (single-link)", scenario.Scenario),
@@ -120,14 +122,10 @@ def reference() -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
-def write(readme: Path) -> None:
-    text = readme.read_text()
-    a, b = text.index(BEGIN) + len(BEGIN), text.index(END)
-    readme.write_text(text[:a] + "\n" + reference() + text[b:])
-
-
 if __name__ == "__main__":
     if "--write" in sys.argv:
-        write(Path(__file__).resolve().parents[1] / "README.md")
+        print("nothing to write: the scenario reference is generated at docs build time "
+              f"(docs/hooks.py replaces {MARKER} in docs/scenarios.md); `make docs` builds it",
+              file=sys.stderr)
     else:
         print(reference())
