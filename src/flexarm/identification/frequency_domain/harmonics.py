@@ -279,11 +279,11 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
     """
     if friction_shape not in ("measured", "ideal"):
         raise ValueError(f"friction_shape = {friction_shape!r}; choose 'measured' or 'ideal'")
-    name = log.name
+    name, where = log.name, log.where  # messages name the file by its full path
     if omega0 is None:
-        omega0 = estimate_frequency(log.time, log["reference"], name=name)
+        omega0 = estimate_frequency(log.time, log["reference"], name=where)
     start, stop, N = whole_periods(log.time, omega0, discard_periods=discard_periods,
-                                   name=name)
+                                   name=where)
     cols = list(log.signals) if columns is None else list(columns)
     ph = fourier_phasors(log.time, np.stack([log[c] for c in cols]), omega0, n_max,
                          window=(start, stop))
@@ -301,7 +301,7 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
         if level is not None:
             res.saturation = level
             frac = np.mean(np.abs(log["current"]) >= level * (1 - 1e-6))
-            _warn(f"{name}: the current looks saturated: flat at ±{level:.6g} A for "
+            _warn(f"{where}: the current looks saturated: flat at ±{level:.6g} A for "
                   f"{100 * frac:.1f} % of the samples; the model of FRB eqs. (1)-(5) does not "
                   "hold there (lower the excitation amplitude)", res.warnings)
     return res
