@@ -147,10 +147,10 @@ NOTEBOOKS["fit-rotary-rig"] = [
         "feedback, the voltage limit) is fitted from a template whose friction and hub "
         "inertia are off by 30 %; then, where the lab's logs are present, the rig's own "
         "log with the data-sheet pipeline.\n\n"
-        "API note: this uses today's `flexarm.fit(scenario, logs, free, options)` with "
-        "`flexarm.identification.time_domain.FitOptions`, `scenario_with` and "
-        "`synthetic.scenario_log`, and `flexarm.fit(logs, drive=..., ...)` with "
-        "`read_bench_log` for the real rig; the fit is being unified (issue #23).",
+        "Both go through the one fit, `flexarm.fit(scenario_or_preset, logs, free, "
+        "options)`: the simulated run with a scenario template and a free list, the real "
+        "rig with the servo-rig preset built from its data sheet "
+        "(`presets.servo_rig(DataSheet(...))`).",
     ),
     ("code", SETUP),
     (
@@ -196,13 +196,13 @@ NOTEBOOKS["fit-rotary-rig"] = [
         "if not REAL:\n"
         '    print("skipped: the real rotary-rig logs are not used here")\n'
         "else:\n"
-        "    from flexarm.identification.time_domain import read_bench_log\n\n"
-        '    real = read_bench_log(DATA / "rotary-rig" / "4PM_Group37_FlexArm_Unit6",\n'
-        '                          log_format=ROOT / "examples" / "quanser-rotflex.toml")\n'
-        '    fit = flexarm.fit([real.window(0, 5)], drive="voltage", gear_ratio=48.4,\n'
-        "                      motor_constant=0.0107, armature_resistance=3.29,\n"
-        "                      link_length=0.45, computation_delay=1)\n"
-        '    print(fit.summary() if hasattr(fit, "summary") else fit)',
+        "    from flexarm.identification.time_domain.presets import DataSheet, servo_rig\n\n"
+        '    real = flexarm.load_log(DATA / "rotary-rig" / "4PM_Group37_FlexArm_Unit6",\n'
+        '                            ROOT / "examples" / "quanser-rotflex.toml")\n'
+        '    rig = servo_rig(DataSheet(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,\n'
+        "                              armature_resistance=3.29, link_length=0.45))\n"
+        "    fit = flexarm.fit(rig, [real.window(0, 5)])\n"
+        "    print(fit)",
     ),
 ]
 
