@@ -9,10 +9,10 @@ everything runs in-process, and :func:`client_for` says so.
 client, in-process; ``workers=N``: a ``LocalCluster`` of N *spawned* (not forked) worker
 processes, one thread each, on the loopback; ``scheduler="tcp://host:8786"``: that
 scheduler's workers. Every worker gets :class:`JaxWorkerSetup` (a worker plugin, so that a
-worker restarted after a crash gets it too): float64, JAX's persistent compilation cache in
-one folder per machine (:func:`compilation_cache_dir`: ``$FLEXARM_JAX_CACHE``, default
-``~/.cache/flexarm-jax``, the folder the CLI already uses), so a loop compiles once per
-machine and the other workers load it. A local cluster's workers start with the
+worker restarted after a crash gets it too): float64 and, where ``$FLEXARM_JAX_CACHE``
+names a folder (one per machine; the CLI uses the same), JAX's persistent compilation cache,
+so a loop compiles once per machine and the other workers load it. The cache is opt-in
+(:data:`CACHE_NOTE`). A local cluster's workers start with the
 environment of :func:`worker_environment`: one XLA / BLAS thread each
 (``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``,
 ``OMP_NUM_THREADS=1`` ...), and on a GPU no preallocation
@@ -112,24 +112,41 @@ NO_DASK = ("dask.distributed is not installed (pip install 'flexarm[distributed]
            "running in-process")
 
 
-def compilation_cache_dir() -> Path:
-    """JAX's persistent compilation cache folder, one per machine: ``$FLEXARM_JAX_CACHE``,
-    default ``~/.cache/flexarm-jax`` (the CLI's)."""
-    return Path(os.environ.get("FLEXARM_JAX_CACHE", str(Path.home() / ".cache" / "flexarm-jax")))
+#: why the persistent compilation cache is opt-in (docs/distributed.md says the same)
+CACHE_NOTE = ("JAX's persistent compilation cache is off unless FLEXARM_JAX_CACHE names a "
+              "folder: with jaxlib 0.10.2 on the CPU, writing some of flexarm's compiled "
+              "loops to it aborts the process (XLA's executable serialisation, seen on the "
+              "two-link LQG replay), which no Python code can catch")
+
+
+def compilation_cache_dir() -> Path | None:
+    """JAX's persistent compilation cache folder: ``$FLEXARM_JAX_CACHE`` (one folder per
+    machine, e.g. ``~/.cache/flexarm-jax``); None (no cache) when it is unset, empty,
+    ``0`` or ``off`` (:data:`CACHE_NOTE`: why it is opt-in)."""
+    value = os.environ.get("FLEXARM_JAX_CACHE", "").strip()
+    if value.lower() in ("", "0", "off", "false", "no"):
+        return None
+    return Path(value).expanduser()
 
 
 def enable_compilation_cache(cache_dir: str | Path | None = None,
-                             min_compile_seconds: float = 0.5) -> None:
-    """Point this process's JAX at the persistent compilation cache (compilations longer
-    than ``min_compile_seconds`` are stored); float64 on."""
+                             min_compile_seconds: float = 0.5) -> bool:
+    """Float64 on, and this process's JAX pointed at the persistent compilation cache
+    ``cache_dir`` (default :func:`compilation_cache_dir`; compilations longer than
+    ``min_compile_seconds`` are stored). Returns whether a cache is in use: none when no
+    folder is given or configured (:data:`CACHE_NOTE`)."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    folder = cache_dir if cache_dir is not None else compilation_cache_dir()
+    if folder is None:
+        return False
     try:
-        jax.config.update("jax_compilation_cache_dir", str(cache_dir or compilation_cache_dir()))
+        jax.config.update("jax_compilation_cache_dir", str(folder))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_seconds)
     except Exception:  # an old jax without the options: run uncached
-        pass
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -141,7 +158,8 @@ class ClusterOptions:
     workers (the nanny restarts a worker above 95 %); ``host``: the address the scheduler
     and workers listen on (loopback by default: nothing leaves the machine);
     ``dashboard_address``: None = no dashboard (``":8787"`` to get one); ``cache_dir``: the
-    compilation cache (default :func:`compilation_cache_dir`); ``xla_memory_fraction``:
+    compilation cache (default :func:`compilation_cache_dir`: none unless
+    ``$FLEXARM_JAX_CACHE`` names a folder, :data:`CACHE_NOTE`); ``xla_memory_fraction``:
     on a GPU, each worker's share of the device memory (``XLA_PYTHON_CLIENT_MEM_FRACTION``;
     None: JAX's default without preallocation)."""
 
@@ -163,8 +181,9 @@ def worker_environment(options: ClusterOptions | None = None) -> dict[str, str]:
            "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads,
            "MKL_NUM_THREADS": threads,
            "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
-           "FLEXARM_JAX_CACHE": str(o.cache_dir or compilation_cache_dir()),
            "MPLBACKEND": "Agg"}
+    cache = o.cache_dir or compilation_cache_dir()
+    env["FLEXARM_JAX_CACHE"] = str(cache) if cache is not None else "off"
     if o.xla_memory_fraction is not None:
         env["XLA_PYTHON_CLIENT_MEM_FRACTION"] = f"{float(o.xla_memory_fraction):g}"
     return env
@@ -183,7 +202,8 @@ class JaxWorkerSetup(_PluginBase):
     name = "flexarm-jax-setup"
 
     def __init__(self, cache_dir: str | None = None):
-        self.cache_dir = str(cache_dir or compilation_cache_dir())
+        cache = cache_dir or compilation_cache_dir()
+        self.cache_dir = str(cache) if cache is not None else None
 
     def setup(self, worker=None):
         os.environ.setdefault("MPLBACKEND", "Agg")

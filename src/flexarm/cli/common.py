@@ -18,9 +18,10 @@ err = Console(stderr=True)
 
 
 def enable_cache() -> None:
-    """JAX's persistent compilation cache, so repeated CLI runs skip recompiling: one
-    folder per machine, shared with Dask workers
-    (:func:`flexarm.distributed.enable_compilation_cache`, ``$FLEXARM_JAX_CACHE``)."""
+    """JAX's persistent compilation cache where ``$FLEXARM_JAX_CACHE`` names a folder, so
+    repeated CLI runs skip recompiling (one folder per machine, shared with Dask workers;
+    :func:`flexarm.distributed.enable_compilation_cache`); off otherwise
+    (:data:`flexarm.distributed.CACHE_NOTE` says why); float64 either way."""
     from flexarm.distributed import enable_compilation_cache
 
     enable_compilation_cache()
