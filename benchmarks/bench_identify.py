@@ -21,7 +21,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "src"))
 
 import _frb_sim as sim  # noqa: E402
-
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
 
 TARGET_S = 1.0

@@ -7,7 +7,13 @@ import time
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.identification.time_domain import (
+    FitInputError,
+    fit,
+    parse_controller,
+    read_bench_log,
+    validate,
+)
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.identification.time_domain.report import check_physical
 from flexarm.identification.time_domain.synthetic import synthetic_log
@@ -204,13 +210,13 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import tempfile
+
     from bench_fit import GAINS, RIG, TRUE
 
     from flexarm.identification.time_domain import fit, validate
     from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
-
-    import tempfile
 
     sc = load_scenario("rotary-flexible-link")
     d = Path(tempfile.mkdtemp())
@@ -239,7 +245,11 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
     ~ 0.09 of it and must stay below 0.2 (√((1−ρ)/(1+ρ)) = 0.10 for the AR(1) channel)."""
     from scipy.signal import lfilter
 
-    from flexarm.identification.time_domain.uncertainty import bartlett_meat, hac_covariance, iid_covariance
+    from flexarm.identification.time_domain.uncertainty import (
+        bartlett_meat,
+        hac_covariance,
+        iid_covariance,
+    )
 
     rng = np.random.default_rng(1)
     g = rng.normal(size=(50, 3))

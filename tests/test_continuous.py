@@ -205,12 +205,12 @@ def build_lqg_stair(tmp_path: Path) -> StairRun:
     shared stair's setpoints under it and write the run as ten consecutive files in the
     stair's layout (with the plant state, FORMAT_EXTRA); checks the run follows the stair.
     Shared by this module's acceptance test and tests/test_cli_continuous.py."""
+    import scipy.io as sio
+
     from flexarm.io.logformat import load_log_format
     from flexarm.sim.build import simulate
     from flexarm.specs import load_scenario
     from flexarm.specs.scenario import load_controllers
-
-    import scipy.io as sio
 
     base = load_scenario("quanser-two-link")
     struct, design = _shoulder_lqg()

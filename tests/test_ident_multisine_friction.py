@@ -21,8 +21,13 @@ from flexarm.control.discrete import FunctionController
 from flexarm.identification.frequency_domain.excitation import multisine
 from flexarm.identification.frequency_domain.harmonics import IdentificationError
 from flexarm.identification.frequency_domain.multisine_friction import (
-    _play, coulomb_from_amplitudes, coulomb_from_bla_amplitudes, coulomb_from_distortion,
-    two_mass_scenario, velocity_rms)
+    _play,
+    coulomb_from_amplitudes,
+    coulomb_from_bla_amplitudes,
+    coulomb_from_distortion,
+    two_mass_scenario,
+    velocity_rms,
+)
 from flexarm.identification.frequency_domain.periodic import periodic_frf
 from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response
 from flexarm.sim.build import prepare
@@ -179,7 +184,6 @@ def test_sine_pairs_and_multisine_agree_on_the_frb_arm(tmp_path):
 
     sys.path.insert(0, str(Path(__file__).parent))
     from _helpers import scenario_dict
-
     from flexarm.identification.frequency_domain.experiments import SineDesign, run_sine_experiments
     from flexarm.identification.frequency_domain.identify import identify
 

@@ -6,8 +6,15 @@ import warnings
 import numpy as np
 import pytest
 
-from flexarm.identification.frequency_domain.excitation import (ExcitationError, crest_factor, multisine, prbs,
-                                      sine_pairs, swept_sine, write_excitation)
+from flexarm.identification.frequency_domain.excitation import (
+    ExcitationError,
+    crest_factor,
+    multisine,
+    prbs,
+    sine_pairs,
+    swept_sine,
+    write_excitation,
+)
 from flexarm.identification.frequency_domain.harmonics import IdentificationError
 from flexarm.identification.frequency_domain.periodic import detect_period, periodic_frf
 

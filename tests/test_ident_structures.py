@@ -8,8 +8,13 @@ import pytest
 
 from flexarm import linearize, load_scenario
 from flexarm.identification.frequency_domain.structures import (
-    FRB_SINGLE_MASS, STRUCTURES, VOLTAGE_SERVO, fit_structure, frb_single_mass_response,
-    voltage_servo_response)
+    FRB_SINGLE_MASS,
+    STRUCTURES,
+    VOLTAGE_SERVO,
+    fit_structure,
+    frb_single_mass_response,
+    voltage_servo_response,
+)
 from flexarm.identification.frequency_domain.tfest import TFEstError
 from flexarm.models.single_link import SingleLinkModel
 

@@ -3,16 +3,16 @@ them: the same numbers as the plain derivation, for one state and for a batch.""
 
 import math
 
+import control
 import jax
 import jax.numpy as jnp
-import control
 import numpy as np
 import pytest
 
-from flexarm.control import regulation as R
-from flexarm.sim.continuous import simulate_continuous, simulate_continuous_batch
-from flexarm.models.multilink import build_multilink
 from flexarm import layered as L
+from flexarm.control import regulation as R
+from flexarm.models.multilink import build_multilink
+from flexarm.sim.continuous import simulate_continuous, simulate_continuous_batch
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, benchmark_arm
 
 DEG = math.pi / 180

@@ -10,9 +10,9 @@ from numpy.polynomial.legendre import leggauss
 from pydantic import ValidationError
 
 from flexarm.control.regulation import law_zero
-from flexarm.sim.continuous import simulate_continuous
 from flexarm.models.multilink import build_multilink
 from flexarm.models.plant import Plant
+from flexarm.sim.continuous import simulate_continuous
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, Payload, benchmark_arm
 
 G = 9.81

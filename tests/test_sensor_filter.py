@@ -9,10 +9,10 @@ import pytest
 from pydantic import ValidationError
 from scipy import signal as sps
 
-from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.control import discrete
-from flexarm.sim.build import prepare
+from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.models.plant import Plant
+from flexarm.sim.build import prepare
 from flexarm.sim.sampled import Actuator, SampledLoop, Sensors, simulate_loop
 from flexarm.specs import load_scenario
 from flexarm.specs.experiment import Sensor

@@ -511,7 +511,6 @@ def test_lti_controller_bad_input():
 def test_lti_bad_input_through_the_scenario():
     """The same errors from a scenario file, naming [controller] and the fix."""
     from _helpers import scenario_dict
-
     from flexarm.sim.build import prepare
     from flexarm.specs import ScenarioError, scenario_from_dict
 

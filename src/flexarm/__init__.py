@@ -39,6 +39,8 @@ import importlib as _importlib
 import os as _os
 import sys as _sys
 
+from flexarm.version import __version__ as __version__  # the re-export: flexarm.__version__
+
 
 def _enable_x64() -> None:
     """Float64 in JAX, unless ``FLEXARM_ENABLE_X64=0`` (module docstring)."""
@@ -94,8 +96,6 @@ def __getattr__(name: str):
 def __dir__() -> list[str]:
     return sorted([*globals(), *_LAZY, "design"])
 
-
-from flexarm.version import __version__  # noqa: E402
 
 __all__ = [
     "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",

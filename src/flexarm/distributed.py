@@ -82,10 +82,11 @@ import os
 import re
 import time as _time
 import warnings as _warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -431,7 +432,7 @@ class PlantSource:
     info: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def from_fit(cls, result, n: int, *, seed: int = 0) -> "PlantSource":
+    def from_fit(cls, result, n: int, *, seed: int = 0) -> PlantSource:
         """Plants drawn from a servo-rig fit's covariance
         (:func:`flexarm.design.plants.from_fit`), chunk by chunk."""
         from flexarm.design.plants import from_fit
@@ -441,7 +442,7 @@ class PlantSource:
 
     @classmethod
     def from_paths(cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *,
-                   seed: int = 0) -> "PlantSource":
+                   seed: int = 0) -> PlantSource:
         """Independent draws (:func:`flexarm.design.plants.from_paths`), chunk by chunk."""
         from flexarm.design.plants import from_paths
 

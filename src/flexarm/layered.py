@@ -35,7 +35,7 @@ libm), since XLA:CPU's float64 ``sin``/``cos`` are scalar calls that no kernel v
 from __future__ import annotations
 
 import math
-from typing import Callable, Hashable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -59,7 +59,7 @@ class Sym:
 
     __slots__ = ("prog", "id")
 
-    def __init__(self, prog: "Program", i: int):
+    def __init__(self, prog: Program, i: int):
         self.prog = prog
         self.id = i
 

@@ -7,11 +7,11 @@ Everything inside flexarm is SI: kg, m, s, rad, A, V, N*m.
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
 
 import pint
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 ureg = pint.UnitRegistry()
 ureg.define("count = []")

@@ -22,12 +22,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
+from flexarm.metrics import fit_percent
 from flexarm.sim.build import prepare, to_result
-from flexarm.sim.filters import (PieceStart, computed_channels, continuous_starts,
-                                 filter_state_from_log, start_piece, warn_assumed_start,
-                                 with_filter_state)
+from flexarm.sim.filters import (
+    PieceStart,
+    computed_channels,
+    continuous_starts,
+    filter_state_from_log,
+    start_piece,
+    warn_assumed_start,
+    with_filter_state,
+)
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import check_zeroing, simulate_loop
 

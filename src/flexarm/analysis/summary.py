@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.metrics import step_metrics
 from flexarm.analysis.model_info import single_link_info
+from flexarm.io.write import save_figure, write_json
+from flexarm.metrics import step_metrics
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import Scenario, builtin_scenarios, load_scenario
-from flexarm.io.write import save_figure, write_json
 
 
 def simulate_with_progress(scenario: Scenario, progress: bool = False):

@@ -17,8 +17,17 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
-from flexarm.cli import (deploy, design, distributed, errors, fit, frequency, reproduce,
-                         scenarios, simulate)
+from flexarm.cli import (
+    deploy,
+    design,
+    distributed,
+    errors,
+    fit,
+    frequency,
+    reproduce,
+    scenarios,
+    simulate,
+)
 
 
 class FlexarmGroup(TyperGroup):

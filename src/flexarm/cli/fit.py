@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.markup import escape
@@ -18,13 +18,23 @@ from rich.table import Table
 
 from flexarm.cli import options as o
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_dir_option, check_file_option, command_line, console,
-                                enable_cache, err, fail, figure_folder, guarded_command, load,
-                                progress,
-                                write_report)
+from flexarm.cli.common import (
+    check_dir_option,
+    check_file_option,
+    command_line,
+    console,
+    enable_cache,
+    err,
+    fail,
+    figure_folder,
+    guarded_command,
+    load,
+    progress,
+    write_report,
+)
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
-ControllerOrFile = Annotated[Optional[str], typer.Option(
+ControllerOrFile = Annotated[str | None, typer.Option(
     "--controller",
     help="an existing FILE.toml: a controller file ([controller] or [[controllers]] tables "
          "as in a scenario) replacing the scenario's controllers for this run; any other "
@@ -36,7 +46,7 @@ Continuous = Annotated[bool, typer.Option(
          "state (and the digital filters') carried from log to log; not with --window")]
 
 
-def controller_option(controller: Optional[str]):
+def controller_option(controller: str | None):
     """``--controller``: the controller file it names (library
     :func:`flexarm.identification.time_domain.predict.controller_file`), or None when the
     value is the servo rig's text law (or absent)."""
@@ -61,7 +71,7 @@ def with_controller_file(sc, cfile):
         fail(str(exc))
 
 
-def check_continuous(continuous: bool, window: Optional[str]) -> None:
+def check_continuous(continuous: bool, window: str | None) -> None:
     if continuous and window:
         fail(f"--continuous runs whole logs as one run; --window {window} cuts each log: "
              "give one or the other")
@@ -97,14 +107,14 @@ def fit(ctx: typer.Context,
             help="also fit without joint friction and report both fits side by side")] = False,
         column: o.Column = None,
         unit: o.Unit = None,
-        sessions: Annotated[Optional[str], typer.Option(
+        sessions: Annotated[str | None, typer.Option(
             help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per "
                  "session")] = None,
-        tip_sign: Annotated[Optional[int], typer.Option(
+        tip_sign: Annotated[int | None, typer.Option(
             help="sign of the strain gauge, +1 or -1, if known")] = None,
-        encoder_counts: Annotated[Optional[int], typer.Option(
+        encoder_counts: Annotated[int | None, typer.Option(
             help="hub encoder counts per revolution (default: detected from the steps)")] = None,
-        filter: Annotated[Optional[list[str]], typer.Option(
+        filter: Annotated[list[str] | None, typer.Option(
             help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50")] = None,
         max_jitter: o.MaxJitter = 1e-3,
         delay_search: Annotated[str, typer.Option(
@@ -116,21 +126,21 @@ def fit(ctx: typer.Context,
         log_format: o.LogFormats = None,
         use_regressed_law: o.UseRegressedLaw = False,
         window: o.Window = None,
-        free: Annotated[Optional[list[str]], typer.Option(
+        free: Annotated[list[str] | None, typer.Option(
             "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
                            "(repeat), e.g. 'arm.joints[*].friction.coulomb'; without it the "
                            "scenario's preset free list runs (printed)")] = None,
-        prior: Annotated[Optional[list[str]], typer.Option(
+        prior: Annotated[list[str] | None, typer.Option(
             "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the scenario's "
                             "value, ± REL_STD relative), e.g. "
                             "'arm.joints[0].drive.torque_constant=0.3'")] = None,
-        segment: Annotated[Optional[float], typer.Option(
+        segment: Annotated[float | None, typer.Option(
             "--segment", help="with SCENARIO: multiple-shooting segment length, s")] = None,
         channel: o.Channels = None,
-        max_nfev: Annotated[Optional[int], typer.Option(
+        max_nfev: Annotated[int | None, typer.Option(
             "--max-nfev", help="with SCENARIO: least-squares budget (default: the preset's, "
                                "else 30)")] = None,
-        validate_window: Annotated[Optional[str], typer.Option(
+        validate_window: Annotated[str | None, typer.Option(
             "--validate-window",
             help="then predict this held-out part of every log (START:STOP, s; each part's "
                  "initial state estimated from its own data) and report its fit %")] = None,
@@ -161,9 +171,9 @@ def fit(ctx: typer.Context,
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for the bench fit (every log has one format)")
     log_format = Path(log_format[0]) if log_format else None
+    from flexarm.errors import FitInterrupted
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import fit as run_fit
-    from flexarm.errors import FitInterrupted
     from flexarm.io.write import write_json
 
     check_file_option("--json", json_out, overwrite)
@@ -216,7 +226,7 @@ def fit(ctx: typer.Context,
                            [*logs, *([log_format] if log_format else [])])
 
 
-def _print_bench_tables(res, res0, held, validate_window: Optional[str]) -> None:
+def _print_bench_tables(res, res0, held, validate_window: str | None) -> None:
     """The bench fit's tables: with and without friction, the held-out windows."""
     if res0 is not None:
         t = Table("log", "signal", "fit % with friction", "fit % without")
@@ -272,7 +282,7 @@ def validate(ctx: typer.Context,
              log_format: o.LogFormats = None,
              use_regressed_law: o.UseRegressedLaw = False,
              window: o.Window = None,
-             refit: Annotated[Optional[str], typer.Option(
+             refit: Annotated[str | None, typer.Option(
                  "--refit", help="'friction': re-estimate only the joints' friction on "
                                  "--refit-window of the first log, then validate with "
                                  "everything else fixed (reports both)")] = None,
@@ -361,7 +371,7 @@ def bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
     return out
 
 
-def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:
+def _general_logs(paths: list[Path], log_format: list[str] | None) -> list:
     """Read each log with its format: --log-format once per log (in order), one for all,
     or PATTERN=FILE (fnmatch on the file name; the first match wins)."""
     import fnmatch
@@ -408,8 +418,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
                       continuous: bool = False) -> None:
     from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain.engine import fit as fit_engine
-    from flexarm.identification.time_domain.options import (Cost, FitOptions, Local, Priors,
-                                                             Shooting)
+    from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -566,7 +575,7 @@ def _print_warnings(msgs) -> None:
         err.print(f"[yellow]warning:[/yellow] {escape(w)}", highlight=False, soft_wrap=True)
 
 
-def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> None:
+def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> None:
     """Ctrl-C during ``fit``: write the best result so far to --json (atomically), marked
     ``"interrupted": true, "status": "interrupted"``, say so in one line, exit 130 (the
     shell's code for SIGINT).  ``res``: the friction fit if it had finished (the

@@ -18,7 +18,8 @@ the error e = reference − measured; :func:`pd`, :func:`pid`, :func:`lead`,
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import control
 import equinox as eqx

@@ -180,7 +180,7 @@ class InnerLoop(Controller):
         return (x1n, x2n, xcn, th), jnp.reshape(u_fb + i_c, (1,))
 
     def with_switches(self, *, friction: bool | None = None,
-                      coupling: bool | None = None) -> "InnerLoop":
+                      coupling: bool | None = None) -> InnerLoop:
         """A copy with friction and/or coupling compensation turned on or off (FRB Figs.
         12, 13, 17). Same pytree structure: the compiled loop is reused."""
         out = self

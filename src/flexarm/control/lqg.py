@@ -33,6 +33,7 @@ its loop's poles (:func:`loop_poles`), and its
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import control
 import numpy as np
 

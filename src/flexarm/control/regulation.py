@@ -42,10 +42,8 @@ its front-end (one rollout or a batch of gain variations).
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import equinox as eqx
 import jax
@@ -53,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
 
 

@@ -57,15 +57,16 @@ and is not exported (the header says so for each filtered channel).
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 __all__ = ["CCode", "ExportError", "Part", "EXPORTERS", "exporter", "generate_c", "export_c",
            "load_design"]
@@ -210,14 +211,12 @@ def _dot(acc: str, terms: list[tuple[str, str]], indent: str) -> list[str]:
 
 # ----------------------------------------------------------------------------- kinds
 def _register_builtin() -> None:
-    from flexarm.control.discrete import LinearController
+    from flexarm.control.discrete import Cascade, LinearController, Sum
     from flexarm.control.friction_compensation import FrictionCompensated
-    from flexarm.control.lti import LTIController
-    from flexarm.control.state_feedback import StateFeedback
-
-    from flexarm.control.discrete import Cascade, Sum
     from flexarm.control.inner_loop import InnerLoop
+    from flexarm.control.lti import LTIController
     from flexarm.control.outer_loop import ReferenceChannel
+    from flexarm.control.state_feedback import StateFeedback
 
     exporter(LinearController)(_linear)
     exporter(LTIController)(_lti)
@@ -695,9 +694,9 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     where it lies); ``controller``: a controller object to export instead of the
     scenario's ``[controller]`` (as :func:`flexarm.sim.build.prepare` takes it), with the
     scenario's period, actuator and sensors."""
-    from flexarm.version import __version__
     from flexarm.io.logs import signal_unit
     from flexarm.sim.build import prepare
+    from flexarm.version import __version__
 
     name = _c_name(name)
     if precision not in PRECISIONS:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import sys
 import types
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from flexarm.design.gate import GateOptions, design_checked
 from flexarm.design.result import Design

@@ -38,9 +38,10 @@ it, nominal and every drawn plant): the law works inside the amplifier's range.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

@@ -72,8 +72,14 @@ import control
 import numpy as np
 import scipy.linalg
 
-from flexarm.control.lqg import (augment_delays, input_rows, integral_model, loop_poles,
-                                 lti_controller_spec, observer_controller)
+from flexarm.control.lqg import (
+    augment_delays,
+    input_rows,
+    integral_model,
+    loop_poles,
+    lti_controller_spec,
+    observer_controller,
+)
 from flexarm.design.result import Design
 
 __all__ = ["DesignModel", "design_model", "design_linear", "separation_check", "step_response"]

@@ -45,8 +45,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -103,7 +104,7 @@ class BatchLoop:
     prepared: Any  # the nominal plant's flexarm.sim.build.Prepared
     size: int
 
-    def with_controller(self, controller) -> "BatchLoop":
+    def with_controller(self, controller) -> BatchLoop:
         """The same plants under another controller (one :class:`Controller`, its leaves
         broadcast to every rollout): no plant is prepared again, and a controller of the
         same structure reuses the compiled batch."""
@@ -161,12 +162,12 @@ class PlantBatch:
         return len(self.scenarios)
 
     @classmethod
-    def nominal_only(cls, scenario) -> "PlantBatch":
+    def nominal_only(cls, scenario) -> PlantBatch:
         """The scenario alone, no drawn plants (a comparison on the nominal plant)."""
         return cls(scenario, [], {}, [], np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0, [],
                    {"source": "the nominal plant only", "n": 0})
 
-    def with_overrides(self, overrides: Mapping | None) -> "PlantBatch":
+    def with_overrides(self, overrides: Mapping | None) -> PlantBatch:
         """Every plant (and the nominal) with the same experiment changes (reference,
         duration, sensor quantum, controller) merged in (:func:`with_overrides`)."""
         if not overrides:

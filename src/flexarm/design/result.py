@@ -71,7 +71,7 @@ class Design:
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
-    def require_stable(self, accept_unstable: bool = False) -> "Design":
+    def require_stable(self, accept_unstable: bool = False) -> Design:
         """This design, or :class:`flexarm.errors.UnstableDesignError` when its verdict is
         not ``"stable"`` (not checked included) and ``accept_unstable`` is False."""
         if self.stable or accept_unstable:

@@ -49,12 +49,12 @@ from __future__ import annotations
 
 import copy
 import time as _time
-from typing import Any, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from flexarm.design.compare import (batch_metrics, build_controller, encoder_count,
-                                    experiment)
+from flexarm.design.compare import batch_metrics, build_controller, encoder_count, experiment
 from flexarm.design.plants import PlantBatch
 from flexarm.design.result import Design
 from flexarm.specs import paths as scenario_paths

@@ -72,16 +72,23 @@ fix. ``examples/quanser-rotflex.toml`` is a documented example.
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, Mapping
-
-from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
+from typing import Any, Literal
 
 import numpy as np
+from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
 
 from flexarm.io import matfile
-from flexarm.io.logs import (COMMENT_CHARS, STATE_FEEDBACK_GAINS, Log, LogError,
-                             known_names, read_log, signal_unit)
+from flexarm.io.logs import (
+    COMMENT_CHARS,
+    STATE_FEEDBACK_GAINS,
+    Log,
+    LogError,
+    known_names,
+    read_log,
+    signal_unit,
+)
 from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Count, Q, Spec
 from flexarm.units import UnitError, to_si, ureg
@@ -161,7 +168,7 @@ class ControllerFormat(Spec):
         return {k: _column_ref(k, x) for k, x in v.items()}
 
     @model_validator(mode="after")
-    def _complete(self) -> "ControllerFormat":
+    def _complete(self) -> ControllerFormat:
         units = GAIN_UNITS[self.kind]
         for where in ("gains", "gain_columns"):
             bad = [k for k in getattr(self, where) if k not in units]
@@ -283,7 +290,7 @@ class LogFormat(Spec):
         return v
 
     @model_validator(mode="after")
-    def _checked_are_mapped(self) -> "LogFormat":
+    def _checked_are_mapped(self) -> LogFormat:
         for k in [*self.checks.quantum, *self.checks.zero]:
             if k not in self.columns:
                 raise ValueError(f"[checks] names {k!r}, which [columns] does not map; "

@@ -50,9 +50,9 @@ from typing import Any
 import numpy as np
 
 from flexarm.errors import FlexarmError, OutputExistsError
-from flexarm.units import ureg
-from flexarm.io.write import atomic_open
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
+from flexarm.io.write import atomic_open
+from flexarm.units import ureg
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -227,7 +227,7 @@ class Log:
             return len(self.time)
         return len(next(iter(self.signals.values()))) if self.signals else 0
 
-    def window(self, t0: float, t1: float, *, min_samples: int = 2) -> "Log":
+    def window(self, t0: float, t1: float, *, min_samples: int = 2) -> Log:
         """The samples with t0 <= time − time[0] < t1 (s from the log's first sample; a
         bound on the sample grid takes that sample whatever the time stamps' rounding: bounds
         are compared to within 1e-6 sample) as a new :class:`Log` (arrays copied); the

@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.io.logs import Log, LogError, unit_factor, known_names, signal_unit
-from flexarm.units import ureg
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
+from flexarm.io.logs import Log, LogError, known_names, signal_unit, unit_factor
+from flexarm.units import ureg
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
 
@@ -66,7 +66,7 @@ class VarSpec:
     text: str
 
     @classmethod
-    def parse(cls, text: str, *, where: str = "") -> "VarSpec":
+    def parse(cls, text: str, *, where: str = "") -> VarSpec:
         m = _SPEC.match(text) if isinstance(text, str) else None
         if m is None:
             raise MatFileError(f"{where}: cannot read the variable spec {text!r}; write "

@@ -43,9 +43,10 @@ import os
 import signal
 import tempfile
 import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Callable, Iterable, Iterator, Sequence
+from typing import IO, Any
 
 from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
 
@@ -327,7 +328,7 @@ def save_or_rescue(path: str | os.PathLike, data: Any, *, overwrite: bool = Fals
         return Saved(path)
     except OSError as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     name = f"{path.stem}.rescued-{stamp}{path.suffix}"
     tried = []
     for folder in (path.parent, Path.cwd(), Path(tempfile.gettempdir())):

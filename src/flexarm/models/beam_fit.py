@@ -20,9 +20,8 @@ says so in ``LumpedBeamFit.converged`` / ``message``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import warnings
+from dataclasses import dataclass
 
 import control
 import numpy as np

@@ -41,7 +41,7 @@ class Friction(eqx.Module):
     bias: Array | float = 0.0
 
     @classmethod
-    def from_spec(cls, spec: FrictionSpec) -> "Friction":
+    def from_spec(cls, spec: FrictionSpec) -> Friction:
         return cls(
             model=spec.model, coulomb=spec.coulomb, static=spec.breakaway,
             stribeck_velocity=spec.stribeck_velocity,

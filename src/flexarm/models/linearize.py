@@ -19,7 +19,7 @@ indexing by name) work on the result.
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import control
 import jax

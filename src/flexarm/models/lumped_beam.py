@@ -69,7 +69,7 @@ class BeamBlock:
         gb, ct = self.transfer_functions()
         return _clean(control.minreal(ct / (1 - gb), tol=1e-6, verbose=False))
 
-    def held(self) -> "BeamBlock":
+    def held(self) -> BeamBlock:
         """The block with the tip translation held fixed (FRB Fig. 11 experiment)."""
         if self.tip_dof is None:
             raise ValueError(

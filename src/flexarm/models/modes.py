@@ -55,8 +55,6 @@ and the fixed quadrature is sized for it. Each computed set is checked a posteri
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -64,6 +62,8 @@ from typing import Literal
 import numpy as np
 from numpy.polynomial.legendre import leggauss
 from scipy.optimize import brentq
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 BETA_L_MAX = 150.0
 _CHECK_TOL = 1e-8

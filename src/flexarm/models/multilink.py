@@ -75,8 +75,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from flexarm.models.modes import LinkModes, link_modes
 from flexarm import layered
+from flexarm.models.modes import LinkModes, link_modes
 from flexarm.models.plant import Plant
 from flexarm.specs.multilink import MultiLinkArm
 

@@ -50,7 +50,7 @@ class SingleLinkModel:
     beam: BeamBlock
 
     @classmethod
-    def from_spec(cls, arm: SingleLinkArm, *, hold_tip: bool = False) -> "SingleLinkModel":
+    def from_spec(cls, arm: SingleLinkArm, *, hold_tip: bool = False) -> SingleLinkModel:
         J = arm.motor.inertia
         if isinstance(arm.beam, RigidBeam):
             J += rigid_beam_inertia(arm.beam)

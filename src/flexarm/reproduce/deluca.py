@@ -35,19 +35,19 @@ from __future__ import annotations
 import csv
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from flexarm.control import regulation as R
 from flexarm.errors import SimulationDiverged
+from flexarm.io.write import atomic_open, save_figure, write_text
+from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.sim.continuous import simulate_continuous
 from flexarm.sim.result import SimulationResult
-from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.specs.multilink import benchmark_arm
-from flexarm.io.write import atomic_open, save_figure, write_text
 
 DEG = math.pi / 180.0
 

@@ -29,16 +29,15 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import control
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import InnerLoopDesign, design_inner_loop
 from flexarm.control.outer_loop import (
     deflection_report,
@@ -49,12 +48,13 @@ from flexarm.control.outer_loop import (
 )
 from flexarm.control.trajectories import peak_deflection, quasi_parabolic
 from flexarm.control.wiener import wiener_feedforward
+from flexarm.io.write import atomic_open, save_figure, write_text
+from flexarm.metrics import step_metrics
 from flexarm.models.single_link import SingleLinkModel
 from flexarm.sim.build import Prepared, prepare, to_result
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
-from flexarm.io.write import atomic_open, save_figure, write_text
 
 __all__ = ["FeliuChoices", "run", "CHOICES"]
 

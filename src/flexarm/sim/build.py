@@ -23,7 +23,6 @@ from flexarm.sim.sampled import Actuator, SampledLoop, Sensors, simulate_loop
 from flexarm.specs.experiment import Reference
 from flexarm.specs.scenario import Scenario
 
-
 #: the share of this machine's memory one simulation's result may take (the loop keeps the
 #: state, the measured signals and the command of every sample, and JAX a few copies)
 MEMORY_SHARE = 0.25

@@ -25,7 +25,7 @@ rad, ``res.delta`` ([N,] T, n_δ) m, ``res.torque`` ([N,] T, n_links) N·m, ``re
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import jax.numpy as jnp
 import numpy as np

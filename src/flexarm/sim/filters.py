@@ -35,8 +35,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -44,8 +45,14 @@ import numpy as np
 
 from flexarm.control.discrete import Controller, LinearController, Sum
 from flexarm.control.friction_compensation import FrictionCompensated
-from flexarm.control.lti import (FILTER_KINDS, Blocks, LTIController, digital_filter,
-                                 input_history, run_state)
+from flexarm.control.lti import (
+    FILTER_KINDS,
+    Blocks,
+    LTIController,
+    digital_filter,
+    input_history,
+    run_state,
+)
 from flexarm.sim.sampled import SampledLoop, Sensors
 
 
@@ -296,7 +303,7 @@ class _LinearStarted(LinearController):
     x_start: Any = None
 
     @classmethod
-    def around(cls, b: LinearController, x) -> "_LinearStarted":
+    def around(cls, b: LinearController, x) -> _LinearStarted:
         return cls(b.A, b.B, b.C, b.D, b.measured, b.reference, jnp.asarray(x, float))
 
     def init(self):

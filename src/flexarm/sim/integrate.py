@@ -10,7 +10,8 @@ h·|ω| before it (docs/performance.md has the measured figures).
 
 from __future__ import annotations
 
-from typing import Callable, ClassVar
+from collections.abc import Callable
+from typing import ClassVar
 
 import diffrax
 import jax

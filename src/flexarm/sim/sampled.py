@@ -43,7 +43,8 @@ any batched leaves of the loop (parameter or gain variations).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -53,9 +54,9 @@ from jax import Array
 
 from flexarm.control.continuous_law import ContinuousLaw
 from flexarm.control.discrete import Controller
-from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
-from flexarm.models.plant import Plant
 from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
+from flexarm.models.plant import Plant
+from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
 
 
 class Sensors(eqx.Module):
@@ -88,7 +89,7 @@ class Sensors(eqx.Module):
 
     @classmethod
     def make(cls, plant: Plant, channels: dict[str, dict[str, Any]],
-             dt: float | None = None) -> "Sensors":
+             dt: float | None = None) -> Sensors:
         """Channels (name → a :class:`flexarm.specs.experiment.Sensor` as a dict) of
         ``plant``; ``dt`` the sample period (needed by digital filters with a cutoff)."""
         names = tuple(channels)
@@ -212,7 +213,7 @@ class FilteredPlant(Plant):
 
     @classmethod
     def around(cls, plant: Plant, index, gain: Array, omega: Array,
-               labels) -> "FilteredPlant":
+               labels) -> FilteredPlant:
         """``plant`` with one filter on each plant signal ``index[i]`` (gain ``gain[i]``,
         cutoff ``omega[i]`` rad/s), its state named ``filter_<labels[i]>``."""
         return cls(plant.state_names + tuple(f"filter_{lb}" for lb in labels),

@@ -10,9 +10,7 @@ at the base of link i; the payload sits at the tip of the last link. See
 from __future__ import annotations
 
 import math
-from typing import Literal
-
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -54,7 +52,7 @@ class Link(Spec):
     torsional_damping: Q("N*m*s/rad", ge=0) | None = None
 
     @model_validator(mode="after")
-    def _consistent(self) -> "Link":
+    def _consistent(self) -> Link:
         if self.model == "torsional":
             if self.mass is None or self.linear_density is not None:
                 raise ValueError("a torsional link needs mass (kg) (not linear_density)")
@@ -209,7 +207,7 @@ class MultiLinkArm(Spec):
     joints: list[Joint] | None = None
 
     @model_validator(mode="after")
-    def _consistent(self) -> "MultiLinkArm":
+    def _consistent(self) -> MultiLinkArm:
         n = len(self.links)
         if len(self.hubs) != n:
             raise ValueError(f"{n} links need {n} hubs (one per joint); got {len(self.hubs)}")
@@ -285,7 +283,7 @@ class JointPDController(Spec):
     measured: list[str] | None = None
 
     @model_validator(mode="after")
-    def _sizes(self) -> "JointPDController":
+    def _sizes(self) -> JointPDController:
         n = len(self.target)
         for name in ("kp", "kd", "friction_compensation", "measured"):
             v = getattr(self, name)

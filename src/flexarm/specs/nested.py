@@ -63,7 +63,7 @@ class NestedController(Spec):
         return "motor_angle"
 
     @model_validator(mode="after")
-    def _tip_source(self) -> "NestedController":
+    def _tip_source(self) -> NestedController:
         if self.tip == "tip_deflection" and self.deflection_to_angle == 0.0:
             raise ValueError("tip = 'tip_deflection' needs deflection_to_angle = 1/(gain·L) "
                              "(rad per unit of the channel), e.g. 1/0.42 for a gauge "

@@ -57,7 +57,7 @@ class RegulationSpec(Spec):
     interpolation_time: Q("s", ge=0) = 0.0
 
     @model_validator(mode="after")
-    def _sizes(self) -> "RegulationSpec":
+    def _sizes(self) -> RegulationSpec:
         n = len(self.target)
         for name in ("initial", "kp", "kd"):
             if len(getattr(self, name)) != n:
@@ -124,8 +124,8 @@ class Scenario(Spec):
                        if isinstance(s, str) and s in refs)
         return out
 
-    def with_controllers(self, tables: "ControllerFile | dict[str, Any]",
-                         source: str | None = None) -> "Scenario":
+    def with_controllers(self, tables: ControllerFile | dict[str, Any],
+                         source: str | None = None) -> Scenario:
         """This scenario with its controllers replaced by ``tables`` (a
         :class:`ControllerFile` from :func:`load_controllers`, or a dict with a
         ``controller`` table or a ``controllers`` list as in a scenario TOML); validated
@@ -148,7 +148,7 @@ class Scenario(Spec):
                                                 f"{self.name!r})")
 
     @model_validator(mode="after")
-    def _check_controllers(self) -> "Scenario":
+    def _check_controllers(self) -> Scenario:
         if self.controller is not None and self.controllers is not None:
             raise ValueError("give [controller] (one block) or [[controllers]] (several), "
                              "not both")
@@ -198,7 +198,7 @@ class Scenario(Spec):
         return self
 
     @model_validator(mode="after")
-    def _check_names(self) -> "Scenario":
+    def _check_names(self) -> Scenario:
         if self.arm.kind == "single_link":
             for name in ("sampling", "simulation"):
                 if getattr(self, name) is None:
@@ -245,7 +245,7 @@ class Scenario(Spec):
         return _scenario_table(self).html()
 
 
-def _scenario_table(sc: "Scenario"):
+def _scenario_table(sc: Scenario):
     """The rows of :meth:`Scenario.__repr__` (:class:`flexarm.display.Table`)."""
     from flexarm.display import Table
 
@@ -312,7 +312,7 @@ class ControllerFile(Spec):
                                 Field(discriminator="type")]] | None = None
 
     @model_validator(mode="after")
-    def _one(self) -> "ControllerFile":
+    def _one(self) -> ControllerFile:
         if (self.controller is None) == (self.controllers is None):
             raise ValueError("give [controller] (one block) or [[controllers]] (several): "
                              + ("both given" if self.controller is not None else

@@ -24,8 +24,6 @@ different columns of one log share a time origin; ratios of phasors do not depen
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
 import warnings
 from collections.abc import Iterable, Sequence
@@ -33,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 from flexarm.io.logs import Log
 
 

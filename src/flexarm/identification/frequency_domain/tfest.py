@@ -40,8 +40,6 @@ are fitted with the same cost by :func:`flexarm.identification.frequency_domain.
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 from dataclasses import dataclass, field
 
 import control
@@ -50,6 +48,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from flexarm.display import Table
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 
 class TFEstError(FlexarmError, ValueError):

@@ -47,8 +47,8 @@ from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
 
 from flexarm.identification.time_domain.logs import GAINS, FitInputError
-from flexarm.io.logs import Log
 from flexarm.identification.time_domain.uncertainty import hac_covariance
+from flexarm.io.logs import Log
 
 #: Seconds after a reference step left out (the logged command's glitch).
 GLITCH_S = 0.02

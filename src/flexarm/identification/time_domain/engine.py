@@ -20,8 +20,9 @@ continuation), called through its keyword interface with the preset's data sheet
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions
 from flexarm.identification.time_domain.presets import Preset, for_scenario

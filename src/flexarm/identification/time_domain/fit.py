@@ -35,21 +35,30 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from flexarm.identification.time_domain import estimates as _est
 from flexarm.identification.time_domain import guesses
-from flexarm.identification.time_domain.global_stage import GlobalResult, differential_evolution_stage
-from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.global_stage import (
+    GlobalResult,
+    differential_evolution_stage,
+)
+from flexarm.identification.time_domain.logs import (
+    PERIOD_TOL,
+    FitInputError,
+    as_bench_log,
+    check_closed_loop,
+)
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.identification.time_domain.report import FitResult
-from flexarm.io.logs import log_keys
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
+from flexarm.io.logs import log_keys
 
 
 def detect_quantum(x: np.ndarray) -> float:

@@ -80,17 +80,18 @@ import copy
 import math
 import re
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
+from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
@@ -100,7 +101,8 @@ __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "exp
 
 # ----------------------------------------------------------------------------- paths
 # the path language: flexarm.specs.paths
-from flexarm.specs.paths import expand_paths, get as _path_get, parse_path, scenario_with  # noqa: E402,F401
+from flexarm.specs.paths import expand_paths, parse_path, scenario_with  # noqa: E402,F401
+from flexarm.specs.paths import get as _path_get
 
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
@@ -233,8 +235,7 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
 
 
 # ----------------------------------------------------------------------------- result
-from flexarm.identification.time_domain.result import (FitResult, drop_none as _drop_none,  # noqa: E402,F401
-                                                       finite as _finite)
+from flexarm.identification.time_domain.result import FitResult  # noqa: E402,F401
 
 #: Deprecated name of :class:`~flexarm.identification.time_domain.result.FitResult`.
 ScenarioFit = FitResult

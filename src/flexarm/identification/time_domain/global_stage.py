@@ -11,8 +11,8 @@ coordinates (``integrality``).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import differential_evolution

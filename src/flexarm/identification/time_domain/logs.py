@@ -19,8 +19,9 @@ Deprecated names kept for the CLI and the servo-rig tests until they are re-poin
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

@@ -28,8 +28,8 @@ import numpy as np
 from flexarm.identification.time_domain import guesses
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_cost, closed_loop_run
 from flexarm.identification.time_domain.logs import FitInputError
-from flexarm.io.logs import Log
 from flexarm.identification.time_domain.params import ParamSpace
+from flexarm.io.logs import Log
 from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
@@ -222,7 +222,7 @@ class Objective:
         """Whether the simulated converters round (an encoder or tip-sensor quantum > 0)."""
         return bool(self.rig.encoder_quantum > 0 or self.rig.tip_quantum > 0)
 
-    def unquantised(self) -> "Objective":
+    def unquantised(self) -> Objective:
         """The same objective with the simulated converters' rounding off (a shallow copy
         sharing the data). With rounding the controller in the simulated loop reads whole
         counts, so the cost jumps wherever a count flips: along any one parameter it is

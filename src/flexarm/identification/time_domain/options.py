@@ -23,8 +23,9 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 __all__ = ["Cost", "Shooting", "Local", "GlobalDE", "Priors", "ServoRig", "FitOptions",
            "PredictOptions"]

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import tomli_w
 
+from flexarm.errors import OutputExistsError
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
-from flexarm.errors import OutputExistsError
 from flexarm.io.logs import log_keys
 from flexarm.io.write import save_figure, write_json, write_text
 
@@ -79,7 +79,7 @@ class FitResult:
     @classmethod
     def build(cls, *, logs, rig, space, U, D, offsets, std_u, fit_percent, diverged, traj,
               glob, local, info, settings, seconds, objective,
-              std_iid_u=None) -> "FitResult":
+              std_iid_u=None) -> FitResult:
         params, std, std_iid = {}, {}, {}
         if std_iid_u is None:
             std_iid_u = np.full(len(space.defs), np.nan)
@@ -170,7 +170,7 @@ class FitResult:
                                 "Both ignore the jumps of stick-slip and structural bias",
         })
 
-    def document(self, *, without_friction: "FitResult | None" = None,
+    def document(self, *, without_friction: FitResult | None = None,
                  window: tuple[float, float] | None = None, held_out: Any = None,
                  held_window: tuple[float, float] | None = None) -> dict:
         """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`

@@ -77,7 +77,7 @@ class FitResult:
         return finite(d)
 
     @classmethod
-    def from_dict(cls, d: dict, scenario: Any = None) -> "FitResult":
+    def from_dict(cls, d: dict, scenario: Any = None) -> FitResult:
         """A result read back from :meth:`to_dict`'s document (``scenario``: the fitted
         scenario, e.g. ``load_scenario`` of the ``--scenario-out`` file; the document does
         not hold it). Nulls read back as NaN (std) and the correlation as an array."""

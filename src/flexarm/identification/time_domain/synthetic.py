@@ -8,8 +8,8 @@ reference, voltage, motor_angle, tip_deflection; a ``# controller:`` line.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -30,13 +30,16 @@ for the held-out predictions).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
-                                                        predict_scenario)
+from flexarm.identification.time_domain.general import (
+    FitOptions,
+    ScenarioFit,
+    predict_scenario,
+)
 from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")

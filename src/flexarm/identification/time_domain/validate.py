@@ -12,14 +12,20 @@ delay, divided by the sensor gain (a link ringing at t = 0 is normal).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from flexarm.control.state_feedback import from_spec
 from flexarm.identification.time_domain import guesses
-from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.logs import (
+    PERIOD_TOL,
+    FitInputError,
+    as_bench_log,
+    check_closed_loop,
+)
 from flexarm.identification.time_domain.report import overlay_plots
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import SimulationDiverged, simulate_loop
