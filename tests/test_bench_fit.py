@@ -39,7 +39,7 @@ def logs(tmp_path_factory):
     sc = load_scenario("rotary-flexible-link")
     return [synthetic_log(sc, g, d / f"log{i}.csv", duration=6.0, period=3.0,
                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05)))]
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05), strict=True))]
 
 
 @pytest.fixture(scope="module")
@@ -222,7 +222,7 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     d = Path(tempfile.mkdtemp())
     logs = [synthetic_log(sc, g, d / f"log{i}.csv", duration=10.0, period=3.0,
                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05)))]
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05), strict=True))]
     res = fit(logs[:2], **RIG, popsize=8, maxiter=30, global_seconds=4.0, local_nfev=80)
     got = {**res.params, **res.derived}
     for name, true in TRUE.items():
@@ -426,7 +426,7 @@ def test_filtered_tip_sensor_known_cutoff(tmp_path):
     scf = sc.model_copy(update={"sensors": sens})
     flogs = [synthetic_log(scf, g, tmp_path / f"filt{i}.csv", duration=6.0, period=3.0,
                            amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-             for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1)))]
+             for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1), strict=True))]
     res = fit(flogs, **{**RIG, "filters": {"tip_deflection": 15.0}}, popsize=8, maxiter=25,
               global_seconds=4.0, delay_search="both", polish_iter=20)
     p = {**res.params, **res.derived}

@@ -66,7 +66,7 @@ def test_states_at_each_piece_are_the_states_of_one_run():
     whole = _stepped(blk, meas, refs)
     cuts = [0, 17, 30, 50]
     logs = [Log(None, np.arange(b - a) * 1e-3, {"y1": y1[a:b], "y2": y2[a:b], "r": r[a:b]})
-            for a, b in zip(cuts[:-1], cuts[1:])]
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     starts = continuous_starts(_Loop(blk), {}, logs, 1e-3)
     assert [s.sample for s in starts] == cuts[:-1]
     for s in starts:

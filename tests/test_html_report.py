@@ -104,7 +104,7 @@ def _check_in_browser(page: Path, tmp: Path, n_figures: int) -> None:
     info, shot = _render(page, tmp)
     assert len(info["images"]) == n_figures
     assert _ink(shot) > 0.01, "the screenshot is blank"
-    for s, im in zip(srcs, info["images"]):
+    for s, im in zip(srcs, info["images"], strict=True):
         src = Image.open(io.BytesIO(base64.b64decode(s)))
         assert im["ok"] and (im["w"], im["h"]) == src.size, im
         x, y = round(im["x"]), round(im["y"])

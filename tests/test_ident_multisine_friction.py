@@ -82,7 +82,7 @@ def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
         odd.append(float(np.mean([b.odd_db for b in bands])))
     # the BLA departs from the linear FRF monotonically with C_f (measured rms relative
     # error 0.8, 1.1, 4.6, 18 % at C_f = 0, 0.02, 0.1, 0.4 A) ...
-    assert all(a < b for a, b in zip(errs, errs[1:])), errs
+    assert all(a < b for a, b in zip(errs, errs[1:], strict=False)), errs
     # ... and without friction it is the linear FRF within the noise: the rms of the error
     # in noise standard deviations is ~1 (χ² with 2F dof; the ZOH formula is exact to
     # (ωT)²/24 < 1e-3 here; measured 1.05) → bound 1.5
@@ -94,7 +94,7 @@ def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
     # then rising strictly with C_f; at 0.02 A already detected in every band below 95 Hz
     assert all(b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"]
                if np.isfinite(b.odd_db))
-    assert all(a < b for a, b in zip(odd, odd[1:])), odd
+    assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
     assert all(b.odd_db - b.noise_db > 6.0 for b in records[0.02].distortion["motor_angle"]
                if np.isfinite(b.odd_db) and b.band_hz[1] < 95)
 
@@ -419,8 +419,8 @@ def test_rotary_rig_bla_and_odd_distortion(rotary):
         errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / z / G0["motor_angle"] - 1) ** 2))))
         odd.append(float(np.mean([b.odd_db for b in frf.distortion["motor_angle"]
                                   if np.isfinite(b.odd_db)])))
-    assert all(a < b for a, b in zip(errs, errs[1:])), errs
-    assert all(a < b for a, b in zip(odd, odd[1:])), odd
+    assert all(a < b for a, b in zip(errs, errs[1:], strict=False)), errs
+    assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
     # frictionless: the BLA is the linear FRF within the noise (rms error in noise standard
     # deviations ~1 for a χ² with 2F dof; ZOH divided out exactly; measured 1.01) → 1.5
     f0 = recs[0.0]

@@ -122,7 +122,7 @@ def test_voltage_servo_coverage_and_cost():
                       for k, v in truth.items()])
         costs.append(f.cost)
     rate = np.mean(cover, axis=0)
-    assert np.all((rate >= 0.88) & (rate <= 1.0)), dict(zip(truth, rate))
+    assert np.all((rate >= 0.88) & (rate <= 1.0)), dict(zip(truth, rate, strict=True))
     assert abs(np.mean(costs) - f.expected_cost) < 3 * f.cost_std / np.sqrt(100)
 
 

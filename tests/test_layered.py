@@ -79,7 +79,7 @@ def test_plant_rhs_equals_the_plain_solve(arm):
         return jnp.linalg.solve(B, P._forces(x[:nq], x[nq:], u, h))
 
     rhs = jax.jit(lambda plant, x, u: plant.rhs(x, u))
-    for x, u in zip(xs, us):
+    for x, u in zip(xs, us, strict=True):
         ref = plain(jnp.asarray(x), jnp.asarray(u))
         got = rhs(P, jnp.asarray(x), jnp.asarray(u))
         np.testing.assert_allclose(got[nq:], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())

@@ -146,7 +146,7 @@ def test_energies_equal_direct_integration_over_the_beams(bench):
     t, w = leggauss(40)
     X = [0.5 * lk.length * (t + 1) for lk in arm.links]
     W = [0.5 * lk.length * w for lk in arm.links]
-    PHI = [m.shape(x) for m, x in zip(bench.modes, X)]
+    PHI = [m.shape(x) for m, x in zip(bench.modes, X, strict=True)]
 
     def points(q):
         n = bench.n_links

@@ -151,7 +151,7 @@ def test_hold_tip_scenario_runs_and_initial_deflection_is_static():
     p = m.plant()
     import jax.numpy as jnp
 
-    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1)))))
+    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1))), strict=True))
     assert sig["motor_angle"] == pytest.approx(0.3)
     assert sig["tip_deflection"] == pytest.approx(0.01, rel=1e-12)
     # the static shape under a tip force: the internal forces K w act at the tip only

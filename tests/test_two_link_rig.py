@@ -333,7 +333,7 @@ def test_digital_filters_in_the_loop_match_an_independent_recursion(how):
     loop = _ramp_loop(chans)
     n = 2000
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    meas = dict(zip(loop.sensors.names, out["measured"].T))
+    meas = dict(zip(loop.sensors.names, out["measured"].T, strict=True))
     y = meas["s"]
     t = np.arange(n) * 2e-3
     np.testing.assert_allclose(y, np.round((0.1 + 0.3 * t) / q) * q, atol=1e-12)
@@ -370,7 +370,7 @@ def test_filter_state_settable_and_read_from_a_log():
     loop = _ramp_loop({k: v.model_dump() for k, v in specs.items()})
     n, k = 1500, 700
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    log = Log(None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T)))
+    log = Log(None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T, strict=True)))
     states = filter_state_from_log(specs, log, k, 2e-3)
     assert set(states) == {"lp", "lpr", "d"}
     later = simulate_loop(with_filter_state(loop, states), out["states"][k], {}, n - k)
@@ -417,7 +417,7 @@ def _ctrl(**kw):
 def _steps(ctrl, ys, rs):
     state = ctrl.init()
     us = []
-    for y, r in zip(ys, rs):
+    for y, r in zip(ys, rs, strict=True):
         state, u = ctrl.step(state, {"y1": y[0], "y2": y[1]}, {"r": r})
         us.append(np.asarray(u))
     return np.array(us)
@@ -648,7 +648,7 @@ def _close(a, b, path=""):
             _close(a[k], b[k], f"{path}.{k}")
     elif isinstance(a, (list, tuple)):
         assert len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
             _close(x, y, f"{path}[{i}]")
     elif isinstance(a, float) or isinstance(b, float):
         assert a == pytest.approx(b, rel=1e-12, abs=1e-300), path

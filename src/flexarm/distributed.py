@@ -344,8 +344,8 @@ def _batched_leaves(loop, in_axes):
     is_none = lambda x: x is None  # noqa: E731
     leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
     axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
-    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
-    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes) if a is not None}
+    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes, strict=False) if a is not None}
     if len(sizes) != 1:
         raise ValueError(f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
                          if sizes else "in_axes batches no leaf of the loop")
@@ -357,7 +357,7 @@ def _loop_chunk(leaves, axes, treedef, a: int, b: int):
 
     return jax.tree.unflatten(treedef, [x if ax is None else np.take(np.asarray(x),
                                                                      np.arange(a, b), axis=ax)
-                                        for x, ax in zip(leaves, axes)])
+                                        for x, ax in zip(leaves, axes, strict=False)])
 
 
 def _simulate_chunk(loop, x0, references, n_samples, seed, in_axes, batch_size, reduce,

@@ -376,7 +376,7 @@ def _matvec(M: list, v: list) -> list:
     out = []
     for row in M:
         t = 0.0
-        for m, x in zip(row, v):
+        for m, x in zip(row, v, strict=False):
             t = t + m * x
         out.append(t)
     return out
@@ -431,6 +431,6 @@ def solve_spd(A: Sequence[Sequence], b: Sequence, block: int = 3) -> list:
             for j in later:
                 t = t - S[i][j] * y[j]
             rhs.append(t)
-        for i, v in zip(K, _matvec(adj, rhs)):
+        for i, v in zip(K, _matvec(adj, rhs), strict=False):
             y[i] = v * r
     return y

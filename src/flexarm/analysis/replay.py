@@ -136,7 +136,7 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
     used = set(sc.references) | sc.controller_references()
     p = prepare(sc, references={k: logs[0][k] for k in used if k in logs[0].signals})
     starts = continuous_starts(p.loop, sc.sensors, logs, dt)
-    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts)]
+    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts, strict=True)]
 
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):
@@ -150,7 +150,7 @@ def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     axes = fig.subplots(len(names), 1, sharex=True,
                              squeeze=False)
     t = rep.log.time - rep.log.time[0]
-    for ax, k in zip(axes[:, 0], names):
+    for ax, k in zip(axes[:, 0], names, strict=True):
         ax.plot(t, rep.log[k], "k", lw=0.8, label="log")
         ax.plot(t, rep.result.measured[k], "C1", lw=0.8, label="simulated")
         ax.set_ylabel(k, fontsize=8)

@@ -75,7 +75,7 @@ def _controlled_signal(spec) -> str:
     if spec is None:
         return "motor_angle"
     if getattr(spec, "type", None) == "lti":
-        return next((i for i, s in zip(spec.inputs, spec.setpoints or [])
+        return next((i for i, s in zip(spec.inputs, spec.setpoints or [], strict=False)
                      if s == "reference"), spec.inputs[0])
     return getattr(spec, "measured", None) or "motor_angle"
 
@@ -116,7 +116,7 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
         "sampling_period_s": scenario.sampling.period,
         "final_joint_error_rad": err[-1].tolist(),
         "final_joint_error_counts": [None if not np.isfinite(c) else float(e / c)
-                                     for e, c in zip(err[-1], count)],
+                                     for e, c in zip(err[-1], count, strict=True)],
         "final_link_deflection_m": [float(res[f"deflection_{j + 1}"][-1])
                                     for j in range(res.n_links)],
         "peak_command": np.abs(res.command).max(axis=0).tolist(),

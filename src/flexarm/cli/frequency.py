@@ -450,9 +450,9 @@ def friction(frf_json: list[Path] = typer.Argument(
         idx = [frf.outputs.index(n) for n in names]
         try:
             fit = fit_structure(st, 2 * np.pi * frf.frequency_hz,
-                                {n: frf.response[i] for n, i in zip(names, idx)},
+                                {n: frf.response[i] for n, i in zip(names, idx, strict=True)},
                                 {n: (frf.total_std if frf.total_std is not None
-                                     else frf.noise_std)[i] for n, i in zip(names, idx)},
+                                     else frf.noise_std)[i] for n, i in zip(names, idx, strict=True)},
                                 given=given)
         except TFEstError as exc:
             fail(f"{path}: {exc}")

@@ -135,7 +135,7 @@ class Sum(Controller):
 
     def step(self, state, measured, reference):
         new, total = [], None
-        for p, s in zip(self.parts, state):
+        for p, s in zip(self.parts, state, strict=True):
             s2, u = p.step(s, measured, reference)
             new.append(s2)
             total = u if total is None else total + u

@@ -222,7 +222,7 @@ class LTIController(Controller):
                               if kind == "reference" else jnp.asarray(float(v))
                               for kind, v in self.signals])
         return jnp.stack([(reference[s] if s is not None else 0.0) - measured[i]
-                          for i, s in zip(self.inputs, self.setpoints)])
+                          for i, s in zip(self.inputs, self.setpoints, strict=True)])
 
     def step(self, state, measured, reference):
         x, held, k = state

@@ -277,7 +277,7 @@ def alpha_bound(model: MultiLinkModel, theta_low, theta_high, delta_max, *,
         return -float(_gjac_norms(model.plant, jnp.asarray(q[None, :]))[0])
 
     for k in np.argsort(vals)[::-1][:refine]:
-        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi)),
+        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
                        options={"maxiter": 50})
         nev += res.nfev
         if -res.fun > alpha:

@@ -284,7 +284,7 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         ins = [f"{v:.17g}" if kind == "constant" else str(v) for kind, v in ctrl.signals]
         form = f"e = the block's input vector ({', '.join(ins)})"
     else:
-        ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints)]
+        ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints, strict=True)]
         form = f"e = setpoint - measured ({', '.join(ins)})"
     label = "" if ctrl.name in ("controller", "[controller]") else f" {ctrl.name}"
     part = Part(law=[f"LTIController{label}: {form}; "
@@ -315,7 +315,7 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
                    else ctx.lit(v))
             note = f"{kind} {v}" if kind != "constant" else "constant"
             body.append(f"e[{j}] = {src};  /* {note} */")
-    for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints)):
+    for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints, strict=True)):
         r = ctx.ref(sp) if sp is not None else "0"
         body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {sp or '0'} - {inp} */")
     body.append(f"for (i = 0; i < {m}; ++i) {{")

@@ -215,7 +215,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
     k = len(names)
     std_u = np.asarray([result.std[nm] / abs(float(d.dphys_du(U[i]))) if
                         abs(float(d.dphys_du(U[i]))) > 0 else np.nan
-                        for i, (nm, d) in enumerate(zip(names, defs))])
+                        for i, (nm, d) in enumerate(zip(names, defs, strict=True))])
     cov = result.stages.get("local", {}).get("covariance_unit")
     warnings: list[str] = []
     if cov is not None:
@@ -249,7 +249,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
         if not np.all(lower_ok | (z >= 0.0)):
             return None
         p = {nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
-             for i, (nm, d) in enumerate(zip(names, defs))}
+             for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
         first = lambda m: p.get(m, p.get(f"{m}[0]", 0.0))  # noqa: E731
         der = derived({m: first(m) for m in ("hub_inertia", "link_frequency", "link_inertia")
                        if m in p or f"{m}[0]" in p}, length)
@@ -282,7 +282,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
                          "the spreads with from_paths")
     Z = np.asarray(draws)
     values = {nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
-              for i, (nm, d) in enumerate(zip(names, defs))}
+              for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
     nominal = result.scenario()
     info = {"source": source, "n": n, "seed": seed, "drawn": tried,
             "rejected_fraction": 1.0 - n / tried if tried else 0.0,
@@ -324,8 +324,8 @@ def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200
             s2 = math.log1p((s / m) ** 2)
             Z[:, i] = math.copysign(1.0, m) * np.exp(
                 math.log(abs(m)) - s2 / 2 + math.sqrt(s2) * E[:, i])
-    scen = [scenario_with(scenario, dict(zip(names, Z[j]))) for j in range(n)]
-    nominal = scenario_with(scenario, dict(zip(names, mean)))
+    scen = [scenario_with(scenario, dict(zip(names, Z[j], strict=True))) for j in range(n)]
+    nominal = scenario_with(scenario, dict(zip(names, mean, strict=True)))
     return PlantBatch(nominal, scen, {p: Z[:, i] for i, p in enumerate(names)}, names, Z,
                       mean, std, seed, [], {"source": "independent draws, eq. (2)", "n": n,
                                             "seed": seed})

@@ -119,7 +119,7 @@ class TuneCost:
     def scenario(self, p: Sequence[float]):
         """The rig scenario with the parameters at ``p`` (validated)."""
         d = copy.deepcopy(self.template)
-        for path, v in zip(self.paths, p):
+        for path, v in zip(self.paths, p, strict=False):
             _set(d, path, v)
         return self._validate(d)
 
@@ -258,7 +258,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
             best.update(cost=J, x=np.array(x))
         if callback is not None:
             callback({"nfev": len(hist), "cost": J, "best": best["cost"],
-                      "params": dict(zip(params, map(float, p)))})
+                      "params": dict(zip(params, map(float, p), strict=True))})
         return J
 
     J0 = f(np.zeros(len(params)))
@@ -271,7 +271,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
             break
         simplex = np.vstack([x_start, x_start + simplex_step * np.eye(len(params))])
         simplex = np.clip(simplex, xb[0], xb[1])
-        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1])),
+        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1], strict=True)),
                        options={"maxfev": left if r == restarts else
                                 max(left // (restarts + 1 - r), len(params) + 2),
                                 "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-4})
@@ -286,7 +286,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     if not stable.all():
         warn.append(f"{int((~stable).sum())} of {stable.size} plants (nominal included) do "
                     "not settle within the tuning run with the tuned gains")
-    for p, v, a, b in zip(params, pbest, lo, hi):
+    for p, v, a, b in zip(params, pbest, lo, hi, strict=True):
         if np.isclose(v, a, rtol=1e-9, atol=1e-12) or np.isclose(v, b, rtol=1e-9, atol=1e-12):
             warn.append(f"{p} = {v:.4g} lies at a bound of [{a:.4g}, {b:.4g}]; widen it with "
                         f"bounds={{'{p}': (lo, hi)}}")

@@ -367,7 +367,7 @@ class LogFormat(Spec):
                 ctrl = StateFeedbackController(
                     type="state_feedback", rate="filtered" if fc.tau > 0 else "backward",
                     rate_time_constant=fc.tau,
-                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]))))
+                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]), strict=True)))
             except Exception as exc:
                 raise LogFormatError(f"{log.where}: gains at the first sample: {exc}") from None
         elif "controller" in log.meta:

@@ -211,7 +211,7 @@ class Log:
             return []
         change = np.flatnonzero(np.any(np.diff(self.gains, axis=0) != 0, axis=1)) + 1
         edges = [0, *change.tolist(), len(self)]
-        return list(zip(edges[:-1], edges[1:]))
+        return list(zip(edges[:-1], edges[1:], strict=True))
 
     def __getitem__(self, column: str) -> np.ndarray:
         if column == "time":
@@ -252,7 +252,7 @@ class Log:
         ctrl = self.controller
         if ctrl is not None and gains is not None and hasattr(ctrl, "model_copy"):
             ctrl = ctrl.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                   map(float, gains[0]))))
+                                                   map(float, gains[0]), strict=True)))
         return replace(self, time=self.time[keep].copy(),
                        signals={c: x[keep].copy() for c, x in self.signals.items()},
                        comments=list(self.comments), meta=dict(self.meta),

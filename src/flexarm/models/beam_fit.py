@@ -57,7 +57,7 @@ class LumpedBeamFit:
         return LumpedBeam(length=self.length, flexural_rigidity=self.flexural_rigidity,
                           damping_ratio=damping_ratio,
                           masses=[{"mass": m, "position": p}
-                                  for m, p in zip(self.masses, self.positions)])
+                                  for m, p in zip(self.masses, self.positions, strict=False)])
 
 
 def _coefs(tf: control.TransferFunction) -> tuple[np.ndarray, np.ndarray]:
@@ -81,7 +81,7 @@ def fit_lumped_beam(tip_tf: control.TransferFunction, static_coupling: float,
     def build(p):
         EI, *ms = np.exp(p)
         return LumpedBeam(length=L, flexural_rigidity=EI, masses=[
-            {"mass": m, "position": f * L} for m, f in zip(ms, fractions)])
+            {"mass": m, "position": f * L} for m, f in zip(ms, fractions, strict=False)])
 
     n_res = len(tnum) + len(tden) - 1 - sum(1 for c in (*tnum[1:], *tden[1:]) if c == 0)
 

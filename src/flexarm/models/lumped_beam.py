@@ -159,7 +159,7 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
     masses = np.array([merged[p][0] for p in pos])
     rot = np.array([merged[p][1] for p in pos])
     # generalised DOFs: translations at every mass, slopes where rotary inertia counts
-    dof_pos = list(pos) + [p for p, j in zip(pos, rot) if j > 0]
+    dof_pos = list(pos) + [p for p, j in zip(pos, rot, strict=True) if j > 0]
     dof_slope = [False] * len(pos) + [True] * int(np.sum(rot > 0))
     dof_mass = list(masses) + [j for j in rot if j > 0]
     dof_pos, dof_slope, dof_mass = np.array(dof_pos), np.array(dof_slope), np.array(dof_mass)

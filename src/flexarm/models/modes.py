@@ -131,7 +131,7 @@ class LinkModes:
         beta = self.beta_l / self.length
         return np.stack([
             _shape(c, b, bl, x, derivative)
-            for c, b, bl in zip(self.coeffs, beta, self.beta_l)
+            for c, b, bl in zip(self.coeffs, beta, self.beta_l, strict=False)
         ]) if self.n_modes else np.zeros((0, len(x)))
 
 

@@ -112,7 +112,7 @@ def _add(*ts):
 
 
 def _dot(u, v):
-    return _add(*(_mul(a, b) for a, b in zip(u, v)))
+    return _add(*(_mul(a, b) for a, b in zip(u, v, strict=False)))
 
 
 def _chol_solve_lists(A, b):
@@ -334,8 +334,8 @@ class MultiLinkPlant(Plant):
             mt = self.link_mass[i] + self.hub_mass[i] if i > 0 else self.link_mass[i]
             d = self.link_d[i]
             c, s = layered.cos(alpha), layered.sin(alpha)
-            Ax = [_add(_mul(c, x), _mul(s, y)) for x, y in zip(Jx, Jy)]
-            Ay = [_add(_mul(-1.0, s, x), _mul(c, y)) for x, y in zip(Jx, Jy)]
+            Ax = [_add(_mul(c, x), _mul(s, y)) for x, y in zip(Jx, Jy, strict=True)]
+            Ay = [_add(_mul(-1.0, s, x), _mul(c, y)) for x, y in zip(Jx, Jy, strict=True)]
             ad = _dot(a, qd)
             ad2 = _mul(ad, ad)
             y = [_mul(d, t) for t in a]
@@ -374,9 +374,9 @@ class MultiLinkPlant(Plant):
             for j, k in enumerate(idx):
                 tip[k] = fi[j]
             tx = [_mul(-1.0, W, t) for t in a]
-            ty = [_add(_mul(ell, t), f) for t, f in zip(a, tip)]
-            Jx, Jy = ([_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty)],
-                      [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty)])
+            ty = [_add(_mul(ell, t), f) for t, f in zip(a, tip, strict=True)]
+            Jx, Jy = ([_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty, strict=True)],
+                      [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty, strict=True)])
             lx, ly = _add(_mul(-1.0, ad2, ell), _mul(-2.0, ad, Wd)), _mul(-1.0, ad2, W)
             accx = _add(accx, _mul(c, lx), _mul(-1.0, s, ly))
             accy = _add(accy, _mul(s, lx), _mul(c, ly))
@@ -741,7 +741,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
     coordinate of a torsional link), modal integrals, stiffness and damping, and the plant."""
     loads = _tip_loads(arm)
     modes = []
-    for i, (lk, (M, J)) in enumerate(zip(arm.links, loads)):
+    for i, (lk, (M, J)) in enumerate(zip(arm.links, loads, strict=True)):
         if lk.model == "torsional":
             modes.append(torsional_modes(lk))
             continue
@@ -777,7 +777,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
 
     Dm = np.zeros((nd, nd))
     k = 0
-    for lk, m in zip(arm.links, modes):
+    for lk, m in zip(arm.links, modes, strict=True):
         Dm[k:k + m.n_modes, k:k + m.n_modes] = damping(lk, m)
         k += m.n_modes
 

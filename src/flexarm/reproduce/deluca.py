@@ -270,7 +270,7 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
                 "EI_matching_delta_d1": EI,
                 **{f"delta_d{k + 1}_at_match": float(v) for k, v in enumerate(dd_match)},
                 **{f"ratio{k + 1}_at_match": float(v / pp) for k, (v, pp)
-                   in enumerate(zip(dd_match, paper))},
+                   in enumerate(zip(dd_match, paper, strict=False))},
             })
     rows.append({k: ("paper" if k == "modes" else "" if k == "normalisation" else math.nan)
                  for k in rows[0]})

@@ -152,7 +152,7 @@ def _rk4_stages(f: Callable[[Array, Array], Array], x: Array, t, h, *, unroll: b
     the same sums in the same order."""
     if unroll:
         acc, kk = jnp.zeros_like(x), jnp.zeros_like(x)
-        for a, w in zip(_RK4_A, _RK4_W):
+        for a, w in zip(_RK4_A, _RK4_W, strict=True):
             kk = f(x + a * h * kk, t + a * h)
             acc = acc + w * kk
         return x + h * acc

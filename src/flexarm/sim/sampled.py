@@ -109,7 +109,7 @@ class Sensors(eqx.Module):
             if int(channels[n].get("bits", 0)) > 0 else 0.0 for n in names
         ]
         bw = [float(channels[n].get("bandwidth", 0.0) or 0.0) for n in names]
-        for n, f in zip(names, bw):
+        for n, f in zip(names, bw, strict=True):
             if not (f >= 0 and np.isfinite(f)):
                 raise ValueError(f"sensor {n!r}: bandwidth = {f!r} Hz; give the low-pass "
                                  "cutoff as a finite number >= 0 Hz (0 = no filter)")
@@ -161,7 +161,7 @@ def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
 def check_zeroing(sensors: Sensors, n_samples: int, dt: float, where: str = "the run") -> None:
     """Raise ValueError naming ``where`` (a log file) and the channel when a zeroing window
     is not shorter than the run: the channel would read 0 throughout."""
-    for c, k in zip(sensors.zeroed, sensors.zero_n):
+    for c, k in zip(sensors.zeroed, sensors.zero_n, strict=True):
         if k >= n_samples:
             raise ValueError(
                 f"{where}: sensors.{sensors.names[c]}.zeroing = {k * dt:g} s ({k} samples) is "
@@ -600,8 +600,8 @@ def _batched(in_axes, batch_size: int | None):
         leaves, treedef = jax.tree.flatten(loop, is_leaf=_is_none)
         axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=_is_none),
                                is_leaf=_is_none)
-        axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
-        sizes = {x.shape[a] for x, a in zip(leaves, axes) if a is not None}
+        axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+        sizes = {x.shape[a] for x, a in zip(leaves, axes, strict=False) if a is not None}
         if len(sizes) != 1 or max(sizes) <= batch_size:
             return vmapped(loop, x0, refs, noise)
         size = sizes.pop()
@@ -619,10 +619,10 @@ def _batched(in_axes, batch_size: int | None):
 
         def one_chunk(batched):
             it = iter(batched)
-            chunk = [x if a is None else next(it) for x, a in zip(leaves, axes)]
+            chunk = [x if a is None else next(it) for x, a in zip(leaves, axes, strict=False)]
             return vmapped0(jax.tree.unflatten(treedef, chunk), x0, refs, noise)
 
-        out = jax.lax.map(one_chunk, [chunked(x, a) for x, a in zip(leaves, axes)
+        out = jax.lax.map(one_chunk, [chunked(x, a) for x, a in zip(leaves, axes, strict=False)
                                       if a is not None])
         return jax.tree.map(lambda o: o.reshape((o.shape[0] * o.shape[1],) + o.shape[2:])[:size],
                             out)
@@ -656,7 +656,7 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     leaf_axes = tuple(a.v for a in jax.tree.leaves(full, is_leaf=lambda a: isinstance(a, _Axis)))
     if any(a not in (None, 0) for a in leaf_axes):
         raise ValueError("axes must be 0 (batched along the first axis) or None")
-    sizes = {int(x.shape[0]) for x, a in zip(leaves, leaf_axes) if a is not None}
+    sizes = {int(x.shape[0]) for x, a in zip(leaves, leaf_axes, strict=False) if a is not None}
     if len(sizes) != 1:
         raise ValueError(f"the batched parameters disagree on the batch size: {sorted(sizes)}"
                          if sizes else "axes batches no parameter (give 0 on the batched leaves)")
@@ -670,7 +670,7 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     def padded(x):
         return x if pad == 0 else jnp.concatenate([x, jnp.repeat(x[-1:], pad, 0)])
 
-    leaves = [x if a is None else padded(x) for x, a in zip(leaves, leaf_axes)]
+    leaves = [x if a is None else padded(x) for x, a in zip(leaves, leaf_axes, strict=False)]
     x0 = padded(x0) if x0.ndim == 2 else x0
     batched = eqx.tree_at(lambda lp: lp.controller.params, loop,
                           jax.tree.unflatten(treedef, leaves))
@@ -690,13 +690,13 @@ class _Axis:
 def _run_law_batch(loop: SampledLoop, x0: Array, refs, leaf_axes: tuple, chunk: int):
     law = loop.controller
     leaves, treedef = jax.tree.flatten(law.params)
-    size = next(x.shape[0] for x, a in zip(leaves, leaf_axes) if a is not None)
+    size = next(x.shape[0] for x, a in zip(leaves, leaf_axes, strict=False) if a is not None)
     n = next(iter(refs.values())).shape[0]
     noise = jnp.zeros((n, 0))
 
     def one_chunk(c):
         lv = [x if a is None else jax.lax.dynamic_slice_in_dim(x, c * chunk, chunk, 0)
-              for x, a in zip(leaves, leaf_axes)]
+              for x, a in zip(leaves, leaf_axes, strict=False)]
         ctrl = ContinuousLaw(law.law, jax.tree.unflatten(treedef, lv), law.dt, law.n_inputs,
                              None, leaf_axes)
         xc = (jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T if x0.ndim == 2

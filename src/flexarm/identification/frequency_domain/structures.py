@@ -473,7 +473,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
 
     def unpack(x):
         p = dict(p0)
-        for f, v in zip(free, x):
+        for f, v in zip(free, x, strict=True):
             p[f] = float(np.exp(v)) if f in st.log else v * scale[f]
         return p
 
@@ -527,7 +527,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     cov_all = D @ cov_x @ D.T
     vals = all_values(x)
     params = {n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
-              for i, (n, v) in enumerate(zip(names, vals))}
+              for i, (n, v) in enumerate(zip(names, vals, strict=False))}
     exp = F - n_par / 2 if known else None
     params = inflate_std(params, cost, F, n_par, exp)
     return StructuredFit(st.name, params, cost, exp, np.sqrt(exp) if exp is not None else None,

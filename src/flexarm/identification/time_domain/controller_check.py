@@ -140,7 +140,7 @@ class ControllerCheck:
             reg = np.where(np.isfinite(self.regressed[s]), self.regressed[s], self.declared[s])
             g[a:b] = reg
         c = log.controller.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                      map(float, g[0]))))
+                                                      map(float, g[0]), strict=True)))
         return replace(log, controller=c, gains=g)
 
 

@@ -226,7 +226,7 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     # the seed's delays: the middle of a range set by a trusted estimate, else the
     # smallest delay searched
     from_est = (hub is not None and hub.trusted, tip is not None and tip.trusted)
-    mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est)]
+    mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est, strict=True)]
     d0 = np.array([delays[0] if delays[0] is not None else mid[0],
                    delays[1] if delays[1] is not None else mid[1],
                    ((sign or 1) + 1) // 2])
@@ -477,7 +477,7 @@ def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace
             moved[space.names[i]] = [[d.lo, d.hi], [lo, hi]]
         new = replace(space, defs=defs)
         U1 = np.array([nd.to_unit(od.to_phys(u)) for od, nd, u in
-                       zip(space.defs, defs, loc["U"])])
+                       zip(space.defs, defs, loc["U"], strict=False)])
         say(f"widening the bounds of {', '.join(moved)} and refitting")
         obj.space = new
         loc2 = _local_continued(obj, np.clip(U1, 0.0, 1.0), D, local_nfev, off0=loc["off"])

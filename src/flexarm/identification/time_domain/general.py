@@ -287,7 +287,7 @@ class _Engine:
         if len(set(self.free)) != len(self.free):
             raise ValueError(f"free parameters listed twice: {self.free}")
         self.keys = [parse_path(p) for p in self.free]
-        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free)])
+        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free, strict=True)])
         # priors and bounds may name paths with [*] too: one entry per element
         if any("[*]" in p for p in list(options.priors) + list(options.bounds)):
             options = copy.copy(options)
@@ -337,7 +337,7 @@ class _Engine:
 
         keys = log_keys(logs)  # unique per log: same file names in other folders stay apart
         self.logs = [self._read(log, w, k if getattr(log, "path", None) is not None else None)
-                     for log, w, k in zip(logs, wins, keys)]
+                     for log, w, k in zip(logs, wins, keys, strict=True)]
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
@@ -637,7 +637,7 @@ class _Engine:
             ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
             key = "warm"
             if key not in self._cache or not all(
-                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves)):
+                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves, strict=False)):
                 self._cache[key] = ([x.copy() for x in leaves],
                                     _warm_jit(ctrl0, self.names, nd, *args))
             return self._cache[key][1], True
@@ -683,7 +683,7 @@ class _Engine:
         for li, L in enumerate(self.logs):
             rows = np.nonzero(self.seg_log == li)[0]
             d = {}
-            for j, c in zip(self.cidx, self.channels):
+            for j, c in zip(self.cidx, self.channels, strict=True):
                 m = self.seg_mask[rows, :, j]
                 if not m.any():
                     continue
@@ -693,7 +693,7 @@ class _Engine:
 
 
 def _cols(L: _LogData, names) -> list[str]:
-    return [n for n, p in zip(names, L.present) if p]
+    return [n for n, p in zip(names, L.present, strict=False) if p]
 
 
 # ----------------------------------------------------------------------------- JAX core
@@ -839,7 +839,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
             return np.sum(R * R, axis=1)
 
         res = differential_evolution(
-            f, list(zip(eng.lo, eng.hi)), popsize=options.popsize, maxiter=options.maxiter,
+            f, list(zip(eng.lo, eng.hi, strict=True)), popsize=options.popsize, maxiter=options.maxiter,
             seed=options.seed, tol=1e-3, updating="deferred", vectorized=True, polish=False,
             init="latinhypercube", x0=z0, mutation=(0.5, 1.0), recombination=0.7)
         z0 = np.asarray(res.x)
@@ -900,7 +900,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
             else {"fit_percent": {}})
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
-    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0))), std, corr,
+    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0), strict=True)), std, corr,
                        warnings, pred["fit_percent"], seg_fp, fitted, converged, msg,
                        int(res.nfev), float(2 * res.cost), time.perf_counter() - t_start,
                        stages, pred)
@@ -1095,14 +1095,14 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
     for s, (li, k0, ln) in enumerate(eng.seg):
         L = eng.logs[li]
         d, tr = {}, {}
-        for j, c in zip(eng.cidx, eng.channels):
+        for j, c in zip(eng.cidx, eng.channels, strict=True):
             tr[c] = sim[s, :ln, j]
             m = eng.seg_mask[s, :ln, j]
             if m.any():
                 d[c] = round(_fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]), 2)
         fp[L.name] = d
         traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
-                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
+                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels, strict=True)}}
     out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes),
            "warnings": state_warnings}
     if plots is not None:
@@ -1124,7 +1124,7 @@ def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: s
         fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
         ax = fig.subplots(len(chans), 1, sharex=True,
                                squeeze=False)
-        for a, c in zip(ax[:, 0], chans):
+        for a, c in zip(ax[:, 0], chans, strict=True):
             a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
             a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
             fpv = fit_percent.get(name, {}).get(c)

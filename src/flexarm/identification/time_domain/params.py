@@ -119,7 +119,7 @@ class ParamSpace:
     def discrete_bounds(self) -> list[tuple[int, int]]:
         """Bounds of the integer DE coordinates: angle delay, tip delay, sign (0/1)."""
         b = []
-        for fixed, rng in zip(self.fixed_delays, self.delay_ranges):
+        for fixed, rng in zip(self.fixed_delays, self.delay_ranges, strict=True):
             if fixed is not None:
                 b.append((fixed, fixed))
             else:
@@ -130,7 +130,7 @@ class ParamSpace:
 
     def physical(self, u: np.ndarray) -> dict[str, np.ndarray]:
         """Unit coordinates (..., n_cont) → dict of physical values keyed by :attr:`names`."""
-        return {n: d.to_phys(u[..., i]) for i, (n, d) in enumerate(zip(self.names, self.defs))}
+        return {n: d.to_phys(u[..., i]) for i, (n, d) in enumerate(zip(self.names, self.defs, strict=True))}
 
     def session_values(self, u: np.ndarray, name: str) -> np.ndarray:
         """(..., n_sessions) physical values of a per-session parameter."""

@@ -83,7 +83,7 @@ class FitResult:
         params, std, std_iid = {}, {}, {}
         if std_iid_u is None:
             std_iid_u = np.full(len(space.defs), np.nan)
-        for i, (name, d) in enumerate(zip(space.names, space.defs)):
+        for i, (name, d) in enumerate(zip(space.names, space.defs, strict=True)):
             params[name] = float(d.to_phys(U[i]))
             std[name] = float(abs(d.dphys_du(U[i])) * std_u[i])
             std_iid[name] = float(abs(d.dphys_du(U[i])) * std_iid_u[i])
@@ -145,7 +145,7 @@ class FitResult:
             # (space.names order): plants drawn from the fit (flexarm.design.plants)
             stages["local"]["covariance_unit"] = np.asarray(local["cov_u"]).tolist()
         stages["local"]["hac_bandwidth_samples"] = {
-            n: m for n, m in zip(names, local.get("bandwidth", []))}
+            n: m for n, m in zip(names, local.get("bandwidth", []), strict=False)}
         return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
                    ini, rig, list(logs), traj, seconds, std_iid, space, np.asarray(U),
                    np.asarray(D))
@@ -387,7 +387,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for i, (g, key) in enumerate(zip(logs, log_keys(logs))):
+    for i, (g, key) in enumerate(zip(logs, log_keys(logs), strict=True)):
         n = len(g)
         t = g.time - g.time[0]
         fig = Figure(figsize=(8, 7))

@@ -140,7 +140,7 @@ def held_out_report(scenario, data: str | Path, examples: str | Path, *,
                             channels=ch, plots=plots, tag="last52s")
     steps = predict_scenario(scenario, list(logs["held_steps"].values()), FitOptions(),
                              channels=ch, plots=plots, tag="steps")
-    per_step = dict(zip(logs["held_steps"], steps["fit_percent"].values()))
+    per_step = dict(zip(logs["held_steps"], steps["fit_percent"].values(), strict=False))
     med = {c: float(np.median([d[c] for d in per_step.values() if c in d])) for c in ch}
     return {"last_52s": next(iter(last["fit_percent"].values())), "steps": per_step,
             "steps_median": {c: round(v, 2) for c, v in med.items()},

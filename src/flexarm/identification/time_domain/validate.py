@@ -110,7 +110,7 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
         blogs.append(log)
         trajs.append(traj)
     if plots is not None:
-        for log, tr in zip(blogs, trajs):
+        for log, tr in zip(blogs, trajs, strict=True):
             result["plots"] += [str(q) for q in overlay_plots(
                 plots, [log], tr, result["fit_percent"], "validate")]
     return result
