@@ -75,7 +75,7 @@ def _linear(frf):
 @pytest.mark.slow
 def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
     errs, odd = [], []
-    for cf, frf in sorted(records.items()):
+    for _cf, frf in sorted(records.items()):
         G0 = _linear(frf)
         errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / G0 - 1) ** 2))))
         bands = [b for b in frf.distortion["motor_angle"] if np.isfinite(b.odd_db)]
@@ -267,7 +267,7 @@ def test_coulomb_from_the_bla_amplitude_dependence(amplitudes):
     the Gaussian assumption corrected the truth lies within 3 standard deviations with no
     allowance. Measured 0.1009 ± 0.019 A and 0.0197 ± 0.0038 A·s/rad; mismatch 0.15 std."""
     sv, d, sd = [], [], []
-    for rms, (frf, fit) in amplitudes.items():
+    for _rms, (frf, fit) in amplitudes.items():
         sv.append(velocity_rms(frf))
         d.append(fit.parameters["motor_viscous"]["value"])
         sd.append(fit.parameters["motor_viscous"].get("std_inflated",
@@ -413,7 +413,7 @@ def test_rotary_rig_bla_and_odd_distortion(rotary):
     from flexarm.identification.frequency_domain.structures import voltage_servo_response
     recs, _, _ = rotary
     errs, odd = [], []
-    for cf, frf in sorted(recs.items()):
+    for _cf, frf in sorted(recs.items()):
         z = _rot_zoh(frf)
         G0 = voltage_servo_response({**ROT_TRUE, **ROT_GIVEN}, 2 * np.pi * frf.frequency_hz)
         errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / z / G0["motor_angle"] - 1) ** 2))))

@@ -167,7 +167,7 @@ def test_energies_equal_direct_integration_over_the_beams(bench):
     def energies(q, qd):
         (out, pe, ae), (dout, dpe, dae) = jax.jvp(points, (q,), (qd,))
         T = U = 0.0
-        for i, ((r, p, a), (dr, dp, da)) in enumerate(zip(out, dout)):
+        for i, ((r, p, _a), (dr, dp, da)) in enumerate(zip(out, dout, strict=True)):
             rho = arm.links[i].rho
             T += 0.5 * rho * jnp.sum(W[i] * jnp.sum(dr**2, axis=0))
             U += rho * G * jnp.sum(W[i] * r[1])

@@ -115,9 +115,9 @@ def test_result_is_python_control_style(tmp_path):
     path = res.to_csv(tmp_path / "log.csv")
     with pytest.raises(FileExistsError):
         res.to_csv(path)
-    lines = [l for l in path.read_text().splitlines() if not l.startswith("#")]
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
     assert lines[0] == "time,reference,current,motor_angle,tip_angle"
-    body = "\n".join(l for l in path.read_text().splitlines() if not l.startswith("#"))
+    body = "\n".join(line for line in path.read_text().splitlines() if not line.startswith("#"))
     import io
 
     data = np.genfromtxt(io.StringIO(body), delimiter=",", names=True)

@@ -103,7 +103,7 @@ def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: flo
         return d
     F0, _ = _newton_parts(plant, theta, jnp.zeros(plant.n_delta))
     scale = 1.0 + float(np.linalg.norm(F0))
-    for it in range(max_iter):
+    for _ in range(max_iter):
         F, Jm = (np.asarray(a) for a in _newton_parts(plant, theta, jnp.asarray(d)))
         if np.linalg.norm(F) <= tol * scale:
             return d

@@ -316,7 +316,7 @@ def summarise(m: dict[str, np.ndarray], limit: float) -> dict[str, Any]:
     st = np.asarray(m["stable"][1:], bool)
     n = st.size
     med, worst = {}, {}
-    for k, (_, _, how) in METRICS.items():
+    for k, (_, _, _how) in METRICS.items():
         v = np.where(st, drawn[k], np.inf) if k == "tip_settling_s" else drawn[k]
         v = np.where(np.isnan(v), np.inf, v)
         med[k] = float(np.median(v)) if n else float("nan")

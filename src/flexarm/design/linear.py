@@ -274,7 +274,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
         spl[i] = spl[j]
 
     scales = []
-    for i, c in enumerate(chans):
+    for i, _c in enumerate(chans):
         if i in tracked or i in follow:
             scales.append(amp[chans[follow.get(i, i)]] * abs(gains[i]))
         else:

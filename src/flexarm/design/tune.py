@@ -296,8 +296,8 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     info = {
         "optimiser": "scipy.optimize.minimize(method='Nelder-Mead'), scaled coordinates "
                      "(x = (p - p0)/|p0|), bounds clipped",
-        "parameters": {p: {"start": float(a), "tuned": float(b), "bounds": [float(l), float(h)]}
-                       for p, a, b, l, h in zip(params, p0, pbest, lo, hi)},
+        "parameters": {p: {"start": float(a), "tuned": float(b), "bounds": [float(low), float(high)]}
+                       for p, a, b, low, high in zip(params, p0, pbest, lo, hi, strict=True)},
         "cost": {"start": float(J0), "tuned": float(Jb), "quantile": quantile,
                  "weights": cost.w, "hub_error_max_counts": hub_error_max,
                  "band_fraction": band, "definition": "see flexarm.design.tune"},

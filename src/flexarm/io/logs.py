@@ -567,7 +567,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     if n < min_samples:
         raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} "
                        "needed")
-    for ours, (j, sign) in index.items():
+    for _ours, (j, sign) in index.items():
         if sign < 0:
             data[:, j] = -data[:, j]
     factors = {name: unit_factor(path, name, units[name], known, source)

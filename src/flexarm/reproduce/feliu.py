@@ -320,9 +320,11 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
         _row(rows, f"rise90_{k}", f"time to 90 % without {k[3:]} compensation / with "
              f"(Fig. {fig})", "ratio", 1.0, rise[k] / rise["all"],
              "paper: the transient is the same")
-    lin = lambda ax: ax.plot(c.move_start + design.time,  # noqa: E731
-                             1e3 * c.inner_step * design.response, "--",
-                             label="linear design (theoretical)")
+
+    def lin(ax):
+        return ax.plot(c.move_start + design.time, 1e3 * c.inner_step * design.response, "--",
+                       label="linear design (theoretical)")
+
     figs.append(_figure(runs["all"], "Fig. 11. Theoretical and experimental step responses "
                         "of inner loop (single mass)", out / "fig11_inner_step_single_mass.png",
                         ("reference", "motor_angle"), xmax=0.3, extra=lin))

@@ -179,7 +179,7 @@ def _rate_filter(log: Log) -> tuple[dict[str, float], dict[str, float]]:
         b = np.diff(log.columns[pos]) / T
         v = log.columns[vel][1:]
 
-        def cost(tau):
+        def cost(tau, b=b, v=v):  # this iteration's b, v bound (B023)
             a = tau / (tau + T)
             f = lfilter([1 - a], [1, -a], b, zi=[a * v[0]])[0]
             return float(np.mean((v - f) ** 2))

@@ -458,7 +458,7 @@ class _Engine:
                 y[:, j] = np.asarray(sig[n], float)
                 present[j] = True
         refs = {}
-        for k, v in self.prep0.references.items():
+        for k, _v in self.prep0.references.items():
             if k in sig:
                 refs[k] = np.asarray(sig[k], float)
             else:
@@ -537,9 +537,11 @@ class _Engine:
         self.seg_scn = np.array([r[1] == 0 and self.logs[r[0]].from_scenario for r in self.seg])
         self._cache: dict = {}
         Nmax = max(1, int(self.seg_k0.max()) + 1)
-        fit_n = lambda a: (a[:Nmax] if a.shape[0] >= Nmax else  # noqa: E731
-                           np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1),
-                                  mode="edge"))
+
+        def fit_n(a):
+            return (a[:Nmax] if a.shape[0] >= Nmax else
+                    np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1), mode="edge"))
+
         self.log_y = np.stack([fit_n(np.nan_to_num(L.y)) for L in self.logs])
         self.log_refs = {k: np.stack([fit_n(L.refs[k]) for L in self.logs])
                          for k in self.prep0.references}
@@ -603,20 +605,20 @@ class _Engine:
                                         jnp.zeros_like(loop.actuator.quantum)))
         return loop, np.stack([p.x0 for p in preps])
 
-    def run(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+    def run(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         """Simulated measured channels (P, S, M, C) of the candidates ``Z`` (P, n), with the
-        segments' plant states offset by ``O`` (P, S, n_x) (× :attr:`state_scale`)."""
+        segments' plant states offset by ``offsets`` (P, S, n_x) (× :attr:`state_scale`)."""
         out = []
         B = max(1, self.options.max_batch)
         nx = self.prep0.loop.plant.n_states
-        if O is None:
-            O = np.zeros((Z.shape[0], len(self.seg), nx))
-        O = O * self.state_scale
+        if offsets is None:
+            offsets = np.zeros((Z.shape[0], len(self.seg), nx))
+        offsets = offsets * self.state_scale
         for a in range(0, Z.shape[0], B):
             loop, x0s = self.loops(Z[a:a + B])
             warm, shared = self._warm(loop)
             out.append(np.asarray(_run_segments(
-                loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
+                loop, jnp.asarray(x0s), jnp.asarray(offsets[a:a + B]), warm, shared,
                 {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
                 jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
                 jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn),
@@ -657,9 +659,9 @@ class _Engine:
             self._state_scale = np.where(rms > 0, rms, fill)
         return self._state_scale
 
-    def residuals(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+    def residuals(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         """Stacked residuals (P, m): data, eq. (1), segment by segment, then priors, eq. (2)."""
-        sim = self.run(Z, O)[..., self.cidx]
+        sim = self.run(Z, offsets)[..., self.cidx]
         y = self.seg_y[..., self.cidx]
         m = self.seg_mask[..., self.cidx]
         r = np.where(m[None], (sim - y[None]) * self.scale, 0.0)
@@ -790,8 +792,9 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
 @eqx.filter_jit
 def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
                   seg_xd, seg_scn, seg_k0):
-    f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
-                                              sbuf0, seg_xd, seg_scn, seg_k0)
+    def f(lp, x0, off, w):
+        return _one_candidate(lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0)
+
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
         loop, x0s, offsets, warm)
 
@@ -910,7 +913,7 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
            o0: np.ndarray | None = None, progress=None):
     """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
     columns are simulated with the point itself as one batch. With ``states``, each
-    segment's start state is estimated too (multiple shooting's node states): offsets O
+    segment's start state is estimated too (multiple shooting's node states): offsets
     (S, n_x) in units of :attr:`_Engine.state_scale`; the segments are independent, so one
     simulation perturbing state i in every segment gives the S columns of state i (a
     block-sparse Jacobian, solved by LSMR)."""
@@ -926,26 +929,26 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
 
     def split(v):
         z = v[:n]
-        O = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
-        return z, O
+        off = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
+        return z, off
 
     def point(v):
         key = v.tobytes()
         if key not in cache:
-            z, O = split(v)
+            z, off = split(v)
             cache.clear()
-            cache[key] = {"r": eng.residuals(z[None], O[None])[0]}
+            cache[key] = {"r": eng.residuals(z[None], off[None])[0]}
         return cache[key]
 
     def jac(v):
         c = point(v)
         if "J" in c:
             return c["J"]
-        z, O = split(v)
+        z, off = split(v)
         h = np.where(z + step > eng.hi, -step, step)
         Z = np.tile(z, (n + nx, 1))
         Z[np.arange(n), np.arange(n)] += h
-        OO = np.tile(O, (n + nx, 1, 1))
+        OO = np.tile(off, (n + nx, 1, 1))
         for i in range(nx):
             OO[n + i, :, i] += step
         R = eng.residuals(Z, OO)
@@ -984,7 +987,7 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
                         gtol=1e-10)
     r, J = batch(res.x)
     J = J.toarray() if nx else J
-    z, O = split(res.x)
+    z, off = split(res.x)
     Jz = J[:, :n]
     if nx:  # profile the state offsets out (Frisch–Waugh), segment by segment
         Jz = Jz.copy()
@@ -997,7 +1000,7 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
             "message": str(res.message), "segments": S, "state_offsets": S * nx,
             "seconds": round(time.perf_counter() - t0, 2)}
     res.x = z
-    res.offsets = O
+    res.offsets = off
     return res, r, Jz, info
 
 

@@ -108,7 +108,7 @@ class Objective:
         self.sst = np.zeros((L, 2))
         for i, g in enumerate(logs):
             n = min(len(g), N)
-            pad = lambda a: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
+            pad = lambda a, n=n: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
             ref[i] = pad(g.columns["reference"])
             if "voltage" in g.columns:
                 volt[i] = pad(g.columns["voltage"])
