@@ -76,7 +76,8 @@ def main():
     sd = {k: 0.02 * np.abs(r[k]) for k in G}
     t_sv, fsv = best_of(lambda: fit_structure("voltage-servo", ws, G, sd, given=given))
     print(f"voltage-servo ML fit, 2 outputs x 60 lines, 6 parameters: {t_sv * 1e3:.1f} ms "
-          f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, 4 delay starts)")
+          f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, "
+          "4 delay starts)")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""Coulomb friction from ω0/3ω0 pairs (flexarm.identification.frequency_domain.coulomb, FRB eqs. (2)-(6))."""
+"""Coulomb friction from ω0/3ω0 pairs (flexarm.identification.frequency_domain.coulomb,
+FRB eqs. (2)-(6))."""
 
 from __future__ import annotations
 

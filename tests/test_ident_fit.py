@@ -1,6 +1,7 @@
 """Transfer-function fit of the sine pipeline (flexarm.tfest with the log-ratio cost of FRB eq. (6))
 and the identification pipeline
-(flexarm.identification.frequency_domain.identify) on data of an independent simulation (tests/_frb_sim.py)."""
+(flexarm.identification.frequency_domain.identify) on data of an independent simulation
+(tests/_frb_sim.py)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Excitation design (flexarm.identification.frequency_domain.excitation) and the periodic FRF / distortion analysis
+"""Excitation design (flexarm.identification.frequency_domain.excitation) and the periodic FRF /
+distortion analysis
 (flexarm.identification.frequency_domain.periodic) on signals whose answer is known exactly."""
 
 import warnings

@@ -1,5 +1,5 @@
-"""flexarm.identification.frequency_domain.tfest: the frequency-domain fit on FRDs of known systems (exact on
-noise-free data; calibrated intervals and cost under noise of known variance) and the
+"""flexarm.identification.frequency_domain.tfest: the frequency-domain fit on FRDs of known systems
+(exact on noise-free data; calibrated intervals and cost under noise of known variance) and the
 two-mass structure."""
 
 import control

@@ -28,7 +28,8 @@ from flexarm.cli.common import (
 
 
 def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
-               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's gains over plants drawn from the fit's uncertainty)"),
+               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's "
+                                   "gains over plants drawn from the fit's uncertainty)"),
                out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
                q: str | None = typer.Option(
                    None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "

@@ -348,8 +348,9 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
 
     KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
     be a single gain shared by the batch, a scalar or an (n,) diagonal. Returns ``(params, axes)``
-    for :func:`flexarm.sim.continuous.simulate_continuous_batch`: params with KP, KD of shape (N, n, n), axes with 0
-    on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d) are shared)."""
+    for :func:`flexarm.sim.continuous.simulate_continuous_batch`: params with KP, KD of shape
+    (N, n, n), axes with 0 on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d)
+    are shared)."""
     n = model.n_links
     base = regulation_params(model, np.eye(n), np.eye(n), theta_d, theta_0=theta_0,
                              duration=duration, newton_iterations=newton_iterations)

@@ -11,7 +11,8 @@ Inner hub loop (FRB Sec. IV, Fig. 4), in the drive's command units (A or V)
     Design model FRB eq. (9): θm/u = k_u / (s (J s + V)) with, for a geared voltage servo,
     V = B_eq + η K_g² K_m²/R_m (back-EMF) and k_u = η K_g K_m/R_m (N·m/V); for a current
     drive k_u = K (N·m/A) (:func:`~flexarm.control.inner_loop.motor_design_model`).
-    ZOH, the scenario's computation delay plus the hub sensor's delay; G_cm1(1) = ``dc_gain`` with the peak-command rule
+    ZOH, the scenario's computation delay plus the hub sensor's delay; G_cm1(1) = ``dc_gain`` with
+    the peak-command rule
     peak |u_fb| <= G_cm1(1)·step <= limit − ĉ·bending − c_f (the drive's limit, V or A;
     :func:`~flexarm.control.inner_loop.design_inner_loop`).
     c_f = F_c / k_u: the scenario's Coulomb level in command units (FRB Sec. III-B).

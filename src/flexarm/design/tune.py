@@ -19,12 +19,12 @@ and the N drawn plants.
 Cost. Per plant j (metrics of :func:`flexarm.design.compare.batch_metrics`, T_h the
 duration after the step, band b·|Δ|):
 
-    c_j = t_s,j / T_h                                     tip settling to ±b|Δ| of its final value
-        + w_os · OS_j / 100                                tip overshoot (% of the step)
-        + w_ss · max(0, e_j − e_max)                       hub steady-state error (counts) beyond e_max
-        + w_u · t_lim,j / T_h                              time at the voltage limit
-        + w_osc · rms_j / (b|Δ| L)                         residual tip oscillation (tail rms of d)
-        + w_ch · ch_j / 0.1 V                              command chatter (rms change per sample)
+    c_j = t_s,j / T_h                           tip settling to ±b|Δ| of its final value
+        + w_os · OS_j / 100                      tip overshoot (% of the step)
+        + w_ss · max(0, e_j − e_max)             hub steady-state error (counts) beyond e_max
+        + w_u · t_lim,j / T_h                    time at the voltage limit
+        + w_osc · rms_j / (b|Δ| L)               residual tip oscillation (tail rms of d)
+        + w_ch · ch_j / 0.1 V                    command chatter (rms change per sample)
 
 with a plant that does not settle within the run charged t_s = T_h (1 + ε_j / (b|Δ|)),
 ε_j the largest |θ_t − θ̄_t| over the last quarter (so the optimiser still sees which way

@@ -496,8 +496,8 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
         sentence saying why, added to the message when one is missing.
     delimiter, comment, skip_rows:
         Field delimiter: one character, ``" "`` for runs of whitespace, or ``None`` /
-        ``"auto"`` to sniff it on the first data row (see :data:`DELIMITERS`); the characters that start a comment line, and lines skipped
-        at the top before anything is read.
+        ``"auto"`` to sniff it on the first data row (see :data:`DELIMITERS`); the characters that
+        start a comment line, and lines skipped at the top before anything is read.
     extra:
         Further column names ``columns`` and ``units`` may use, with their SI units
         (``{"K1": "V/rad"}``).

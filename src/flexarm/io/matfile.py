@@ -44,7 +44,8 @@ from flexarm.units import ureg
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
 
 
-#: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not returned.
+#: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not
+#: returned.
 COUNTER = "sample_counter"
 
 

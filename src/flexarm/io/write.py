@@ -208,7 +208,8 @@ def write_json(path: str | Path, data: Any, *, overwrite: bool = False, indent: 
                default: Callable[[Any], Any] | None = None) -> Path:
     """``json.dumps(data, indent=indent, default=default)`` plus a newline, atomically.
     Non-finite floats are written as ``json`` does (``NaN``, ``Infinity``); callers that
-    want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).  The text is
+    want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).
+    The text is
     built before the file is opened, so a value that cannot be serialised leaves no file."""
     return write_text(path, json.dumps(data, indent=indent, default=default) + "\n",
                       overwrite=overwrite)

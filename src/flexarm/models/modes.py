@@ -1,4 +1,5 @@
-"""Assumed modes of one flexible link: clamped-mass (or clamped-free) Euler–Bernoulli eigenfunctions.
+"""Assumed modes of one flexible link: clamped-mass (or clamped-free) Euler–Bernoulli
+eigenfunctions.
 
 A uniform link of length ℓ (m), linear density ρ (kg/m) and flexural rigidity EI (N·m²) is
 clamped at its joint (x = 0) and carries at its tip (x = ℓ) the mass M_L (kg) and the
@@ -242,7 +243,8 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
     # root from below; refuse early what cannot be resolved.
     if (n_modes - 0.5) * math.pi > BETA_L_MAX + math.pi:
         raise ModeError(
-            f"{n_modes} modes asked: mode {n_modes} would have βℓ ≈ {(n_modes - 0.5) * math.pi:.0f} "
+            f"{n_modes} modes asked: mode {n_modes} would have "
+            f"βℓ ≈ {(n_modes - 0.5) * math.pi:.0f} "
             f"> {BETA_L_MAX:g}, beyond what is resolved here (wavelength < ℓ/24, outside "
             "Euler–Bernoulli validity); use fewer modes"
         )

@@ -49,9 +49,11 @@ p̈_vp = J̇_p q̇ propagated along the chain,
 integrals closing the integrals over each link. With P = R(α_i)ᵀ(p̈_vp,i − γ), (A_x; A_y) =
 R(α_i)ᵀ J_p,i and y_i = d_i a_i + v-row:
 
-    B = B₀ + Σ_i [ m̄_i J_p,iᵀJ_p,i + sym(A_yᵀ y_i − vᵀδ_i A_xᵀ a_i) + δ_iᵀZδ_i a_iᵀa_i ] + m_p J_p,eᵀJ_p,e
+    B = B₀ + Σ_i [ m̄_i J_p,iᵀJ_p,i + sym(A_yᵀ y_i − vᵀδ_i A_xᵀ a_i) + δ_iᵀZδ_i a_iᵀa_i ]
+        + m_p J_p,eᵀJ_p,e
     c + g = Σ_i [ m̄_i J_p,iᵀ(p̈_vp,i − γ) − A_xᵀ(α̇²d + 2α̇ vᵀδ̇) − A_yᵀ α̇² vᵀδ
-                  + a_iᵀ(d P_y − vᵀδ P_x + 2α̇ δᵀZδ̇) ] + [0; v P_y − α̇² Zδ]_i + m_p J_p,eᵀ(p̈_vp,e − γ)
+                  + a_iᵀ(d P_y − vᵀδ P_x + 2α̇ δᵀZδ̇) ] + [0; v P_y − α̇² Zδ]_i
+            + m_p J_p,eᵀ(p̈_vp,e − γ)
 
 (m̄_i = m_i + m_hi, B₀ the constant rotary-inertia, ∫ρxφ and Z terms). The expressions are
 traced as scalars, skipping structural zeros. For the right-hand side they are recorded once

@@ -5,7 +5,8 @@ The experiment (paper, Sec. "Simulation results"): the two-link arm hanging at r
 θ(0) = (−90°, 0), δ(0) = 0, is brought to θ_d = (−45°, 0) by the PD law with constant gravity
 compensation, eq. (8),
 
-    u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d),     K_P = diag(18, 18) N·m/rad, K_D = diag(10, 2) N·m·s/rad,
+    u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d),
+    K_P = diag(18, 18) N·m/rad, K_D = diag(10, 2) N·m·s/rad,
 
 where δ_d solves eq. (9), K δ_d + g_δ(θ_d, δ_d) = 0. The paper reports δ_d, that (θ_d, δ_d) is
 reached "well within 2 s" (its Fig. 2), a large initial effort and constant gravity-holding
@@ -541,7 +542,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
             rows.append(_row(f"gain sweep K_P×{e['factor']:g}", "stable, larger initial torque",
                              "diverged", "", e["error"][:120]))
         else:
-            rows.append(_row(f"gain sweep K_P×{e['factor']:g}, K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
+            rows.append(_row(f"gain sweep K_P×{e['factor']:g}, "
+                             f"K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
                              "stable, larger initial torque", e["u0_norm"], "N·m (‖u(0)‖)",
                              f"|θ − θ_d| {e['theta_err_deg_t_final']:.3g}° at {cfg.t_final:g} s, "
                              f"{e['theta_err_deg_end']:.3g}° at {cfg.sweep_t_final:g} s; conditions "

@@ -136,7 +136,8 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
     :func:`flexarm.control.regulation.regulation_params_batch`. ``x0``: (n_x,) shared, or
     (N, n_x) one per rollout. The
     batch runs in the one loop with the state carried batch-last, in chunks of ``chunk``
-    rollouts (:func:`flexarm.sim.sampled.simulate_law_batch`). Gains are traced: any sweep of the same size compiles once.
+    rollouts (:func:`flexarm.sim.sampled.simulate_law_batch`). Gains are traced: any sweep of the
+    same size compiles once.
     Returns one :class:`SimulationResult` holding the N rollouts as python-control traces;
     a run that diverges is flagged in ``diverged`` rather than raised."""
     plant = model.plant

@@ -554,7 +554,8 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     With a Dask ``client`` (or ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, for
     the same chunks in-process) the rollouts run in chunks, one task each, and only
     per-rollout reductions come back (a :class:`flexarm.distributed.BatchSummary`, the
-    trajectories only with ``chunks.trajectories``; :func:`flexarm.distributed.simulate_chunked`)."""
+    trajectories only with ``chunks.trajectories``;
+    :func:`flexarm.distributed.simulate_chunked`)."""
     check_filter_step(loop.sensors, loop.dt, loop.substeps)
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import simulate_chunked
@@ -641,7 +642,8 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     kernel over the chunk, and the law is vmapped over it. Chunks of ``chunk`` rollouts run
     one after the other (``lax.map``: a chunk's working set stays in cache); the batch is
     padded to a whole number of chunks with copies of the last rollout. The plant's
-    parameters are shared; x0 is (n_x,), shared, or (N, n_x), one per rollout. This layout measured 3.9 ms per rollout against
+    parameters are shared; x0 is (n_x,), shared, or (N, n_x), one per rollout. This layout measured
+    3.9 ms per rollout against
     13.4 ms for :func:`simulate_batch`'s vmap on the De Luca arm (docs/performance.md).
 
     Returns states (N, n, n_x), signals (N, n, p) and applied commands (N, n, m) at the

@@ -17,7 +17,8 @@ and the angles are logged. Per frequency:
   kd = (2 ζ ω_c J − V)/K — a high gain, as the paper asks, within what the sampling
   period and the computation delay allow.
 
-Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.frequency_domain.coulomb` can estimate C_f.
+Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.frequency_domain.coulomb`
+can estimate C_f.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.io.logs`) per sinusoidal
 experiment of the motor-position loop:
 
-1. harmonics of every log (:mod:`flexarm.identification.frequency_domain.harmonics`): ω0 from the reference,
-   fundamental and odd harmonics of θm, θt, i over the last whole periods;
+1. harmonics of every log (:mod:`flexarm.identification.frequency_domain.harmonics`): ω0 from the
+   reference, fundamental and odd harmonics of θm, θt, i over the last whole periods;
 2. Coulomb level C_f (A) from every ω0 / 3ω0 pair, eqs. (4)-(6) with the corrected phase of
    (4) (:mod:`flexarm.identification.frequency_domain.coulomb`), averaged over the pairs;
 3. motor response G_m = θm/i raw and corrected by eq. (7), beam response G_b = θt/θm
@@ -133,8 +133,8 @@ class IdentificationResult:
     @property
     def motor_tf(self) -> control.TransferFunction:
         """G_m(s) = θm/i (rad/A): the structured physical fit if ``structured=True``
-        (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected data (raw if C_f
-        is unknown)."""
+        (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected
+        data (raw if C_f is unknown)."""
         return self.physical.motor_tf if self.use_physical else self.motor_fit.tf
 
     @property
@@ -450,7 +450,8 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         "the velocity of the motor and, hence, the shape of the Coulomb friction");
         ``"ideal"``: the square wave in phase with the fundamental, as eqs. (3)-(7) print.
     structured:
-        Use the joint fit of J, V, C, C_f (:mod:`flexarm.identification.frequency_domain.physical`) as ``motor_tf``
+        Use the joint fit of J, V, C, C_f (:mod:`flexarm.identification.frequency_domain.physical`)
+        as ``motor_tf``
         and for the parameters. It is always computed and reported (``physical_fit``)
         when the beam has one mode (``beam_orders == (0, 2)``: C_t = C (θm − θt)); it is
         the better choice where friction dominates the low-frequency current and the

@@ -200,7 +200,8 @@ TWO_MASS_STRUCTURE = Structure(
                          "load_viscous": p0["total_inertia"] * w.min(),
                          "delay_s": 1 / w.max(), "shaft_damping": 0.01},
     derived=two_mass_derived,
-    units="per unit of the input's torque constant (A·s²/rad for a current input and angles in rad)")
+    units="per unit of the input's torque constant (A·s²/rad for a current input and angles "
+          "in rad)")
 
 
 # --- FRB single-mass arm: eqs. (1), (12), (13) ------------------------------------------

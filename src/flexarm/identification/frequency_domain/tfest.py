@@ -35,7 +35,8 @@ Frequencies are scaled, s̃ = s/ω_s (ω_s the geometric mean of the data's), wh
 5. Order selection (:func:`tfest_orders`): AIC = 2V + 2n_θ, BIC = 2V + n_θ ln 2F.
 
 Physical structures (the two-mass drive, FRB's single-mass arm, the voltage-driven servo)
-are fitted with the same cost by :func:`flexarm.identification.frequency_domain.structures.fit_structure`.
+are fitted with the same cost by
+:func:`flexarm.identification.frequency_domain.structures.fit_structure`.
 """
 
 from __future__ import annotations
@@ -171,7 +172,8 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
         return (f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
                 f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
                 "to the noise level (model errors or nonlinear distortion); the standard "
-                f"deviations 'std' hold for noise only, 'std_inflated' (× {np.sqrt(cost / expected):.3g}) "
+                "deviations 'std' hold for noise only, 'std_inflated' "
+                f"(× {np.sqrt(cost / expected):.3g}) "
                 "treat the misfit as extra noise" + extra)
     if cost < lo:
         return (f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "

@@ -28,7 +28,8 @@ with |u| ≥ 0.99 · limit is taken as saturated.
 
 A gain disagrees with the declaration when the difference matters (it moves the command by
 more than 1 % of the command's rms) and either its sign is opposite or it is off by more
-than max(10 %, 4 σ); that is a :class:`~flexarm.identification.time_domain.logs.FitInputError` naming the gain,
+than max(10 %, 4 σ); that is a :class:`~flexarm.identification.time_domain.logs.FitInputError`
+naming the gain,
 unless ``use_regressed=True`` (``--use-regressed-law``): then :meth:`ControllerCheck.apply`
 gives the log with the regressed gains.
 

@@ -1,4 +1,5 @@
-"""``flexarm.identification.time_domain``: time-domain identification of a bench arm from closed-loop logs.
+"""``flexarm.identification.time_domain``: time-domain identification of a bench arm from
+closed-loop logs.
 
 Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
 resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
@@ -9,7 +10,8 @@ initial link state, by minimising the closed-loop simulation output error
 
 1. guesses and bounds from the data (:mod:`flexarm.identification.time_domain.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (:mod:`flexarm.identification.time_domain.global_stage`);
+   on the first ``global_seconds`` of each log
+   (:mod:`flexarm.identification.time_domain.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
    columns are simulated in one batch; it also refines each log's initial tip and hub
@@ -27,8 +29,8 @@ initial link state, by minimising the closed-loop simulation output error
 4. uncertainty from the final Jacobian J and residuals r: the reported ``std`` is the
    Newey–West sandwich (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹, Ŝ the Bartlett-weighted autocovariance of the
    scores Jᵀ_t r_t per log, its bandwidth 10 residual correlation times
-   (:mod:`flexarm.identification.time_domain.uncertainty`): output-error residuals persist for many samples and
-   the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
+   (:mod:`flexarm.identification.time_domain.uncertainty`): output-error residuals persist for many
+   samples and the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
 """
 
 from __future__ import annotations
@@ -140,8 +142,8 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
            delays, bounds: dict | None, info: dict,
            est: dict | None = None) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
     """Bounds from the data (see :mod:`flexarm.identification.time_domain.guesses` and
-    :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap estimates
-    (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
+    :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap
+    estimates (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
     frequency estimates), which narrow the search where they are trusted."""
     est = est or {}
     tip, hub = est.get("tip"), est.get("hub")
@@ -313,13 +315,16 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     −2 % to −10 % at 4× the cost); continued, sampling periods changed by ±1e-12 and
     1e-10 give the same delays and every parameter within 1.4 %.
     ``estimates`` (default True): first the cheap estimates of
-    :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link frequency), which set
+    :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link
+    frequency), which set
     the delay search ranges (± 6 samples around them, up to ``max_delay``, default
     150 ms), the bounds of ω_c, J and the tip gain, the gauge's sign and, unless
     ``filters`` names the tip channel, its low-pass; False: the guesses of
-    :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay`` searched.
+    :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay``
+    searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
-    filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.identification.time_domain.closed_loop`).
+    filters, e.g. ``{"tip_deflection": 50.0}``
+    (:mod:`flexarm.identification.time_domain.closed_loop`).
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -576,8 +581,8 @@ TIP_FILTER_MIN_SAMPLES = 3
 
 
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
-    """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model with the
-    tip channel's lag relative to the hub, the hub delay, the link frequency), and the
+    """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model
+    with the tip channel's lag relative to the hub, the hub delay, the link frequency), and the
     tip low-pass cutoff to use when the user gave none and the model is trusted."""
     known = "tip_deflection" in (filters or {})  # given, 0 (no filter) included
     tip = _est.tip_model(blogs, rig.length, max_lag=max_delay)
@@ -670,7 +675,8 @@ TIP_OFFSET_WARN = 0.02
 
 def _tip_offsets(blogs) -> list[str]:
     """Warnings for logs whose tip sensor reads away from zero at rest (see
-    :func:`flexarm.identification.time_domain.guesses.tip_rest_reading`): the model has no sensor offset."""
+    :func:`flexarm.identification.time_domain.guesses.tip_rest_reading`): the model has no sensor
+    offset."""
     out = []
     for g in blogs:
         r = guesses.tip_rest_reading(g)

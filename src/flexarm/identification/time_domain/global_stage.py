@@ -4,8 +4,8 @@ Stick-slip makes the output-error cost piecewise and jumpy, so a gradient method
 from nominal values stalls. Differential evolution (seeded, ``updating='deferred'``,
 ``vectorized=True``) hands each whole generation to :meth:`Objective.cost`, which
 simulates it in one batched JAX call. Continuous parameters live in [0, 1] (see
-:mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are integer
-coordinates (``integrality``).
+:mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are
+integer coordinates (``integrality``).
 """
 
 from __future__ import annotations

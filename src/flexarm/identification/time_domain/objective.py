@@ -1,6 +1,7 @@
 """The output-error objective of a bench fit, evaluated for a whole population at once.
 
-For parameters p the log's loop is closed in simulation (:mod:`flexarm.identification.time_domain.closed_loop`)
+For parameters p the log's loop is closed in simulation
+(:mod:`flexarm.identification.time_domain.closed_loop`)
 and compared with the log on the measured hub angle θ and tip deflection d:
 
     V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
@@ -8,13 +9,14 @@ and compared with the log on the measured hub angle θ and tip deflection d:
 (each signal weighted by its spread; the first ``skip`` samples, where the simulated
 sensor delay lines still hold the initial value, are left out). fit % per log and signal
 is 100 (1 − ‖y − ŷ‖/‖y − mean y‖). Sensor low-pass filters of known cutoff (``filters``,
-Hz) are simulated in front of the converters (:mod:`flexarm.identification.time_domain.closed_loop`).
+Hz) are simulated in front of the converters
+(:mod:`flexarm.identification.time_domain.closed_loop`).
 
 Each log's initial state: hub angle and rate from its first samples; the link's tip
 deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
 delay), from a parabola through samples k ... k + 20 (fitted through the known tip filter,
-:func:`flexarm.identification.time_domain.guesses.initial_tip_at`), divided by the tip gain g; the local
-stage refines the latter two per log.
+:func:`flexarm.identification.time_domain.guesses.initial_tip_at`), divided by the tip gain g; the
+local stage refines the latter two per log.
 """
 
 from __future__ import annotations

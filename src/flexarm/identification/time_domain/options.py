@@ -177,7 +177,8 @@ class FitOptions:
 
 @dataclass
 class PredictOptions:
-    """Options of :func:`flexarm.validate` / :func:`~flexarm.identification.time_domain.predict.predict`.
+    """Options of :func:`flexarm.validate` /
+    :func:`~flexarm.identification.time_domain.predict.predict`.
 
     ``channels``: the measured channels compared (None: every logged sensor channel);
     ``windows``: per log (t0, t1) s from its first sample, [t0, t1), or None;

@@ -1,5 +1,6 @@
 """The physical parameter vector of a bench fit: names, units, bounds, scales, and its
-mapping to the model numbers of :mod:`flexarm.identification.time_domain.closed_loop` and to a scenario.
+mapping to the model numbers of :mod:`flexarm.identification.time_domain.closed_loop` and to a
+scenario.
 
 Estimated (SI): hub inertia J (kg·m², equivalent at the output shaft), hub-clamped link
 frequency ω_c (rad/s), link inertia J_l (kg·m²; stiffness C = J_l ω_c²), link damping

@@ -4,7 +4,7 @@
 Each log (or its window, [t0, t1) s from its first sample) is simulated once with its own
 references and the controller it ran, and compared per measured signal by
 
-    fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                           (:func:`flexarm.metrics.fit_percent`)
+    fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                    (:func:`flexarm.metrics.fit_percent`)
 
 The model is a scenario (any arm: the one engine's whole-run prediction,
 :func:`flexarm.identification.time_domain.general.predict_scenario`, from the scenario's

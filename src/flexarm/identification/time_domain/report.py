@@ -44,8 +44,8 @@ class FitResult:
     ``std``: the reported standard errors, from the Newey–West (HAC) sandwich covariance
     (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹ with Ŝ = Σ_logs Σ_|k|<=M w_k Σ_t g_t g_{t+k}ᵀ, g_t = Σ_channels J_tᵀ r_t
     and Bartlett weights w_k = 1 − |k|/(M+1), M = 10 residual correlation times per log
-    (:mod:`flexarm.identification.time_domain.uncertainty`), mapped to physical units by |dp/du|. They are
-    reported because the output-error residuals are strongly autocorrelated (model error,
+    (:mod:`flexarm.identification.time_domain.uncertainty`), mapped to physical units by |dp/du|.
+    They are reported because the output-error residuals are strongly autocorrelated (model error,
     filtered sensors, encoder quantisation of a slow hub), which the textbook estimate
     ignores. ``std_iid``: that textbook s² (JᵀJ)⁻¹, s² = ‖r‖²/(m − n), kept for
     comparison (the previous AR(1)-inflated value is ``std_iid`` · √((1+ρ)/(1−ρ)) with
