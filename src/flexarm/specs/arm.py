@@ -4,6 +4,11 @@ All values are stored in SI (kg, m, s, rad, A, V, N*m). Equation numbers refer t
 Feliu, Rattan & Brown (1993), "FRB".
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Annotated, Literal
@@ -133,6 +138,8 @@ class LumpedBeam(Spec):
             return self.flexural_rigidity
         import math
 
+        # without flexural_rigidity both are given (validated)
+        assert self.youngs_modulus is not None and self.wire_diameter is not None
         return self.youngs_modulus * math.pi * self.wire_diameter**4 / 64.0
 
 

@@ -9,6 +9,11 @@ derivative s/(τ s + 1) with τ = ``rate_time_constant`` (s). See
 k2 = k4 = 0.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Literal

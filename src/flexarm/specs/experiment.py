@@ -4,6 +4,11 @@ Sensor channels are named after the signals of the plant (``motor_angle``, ``tip
 ``tip_deflection``, ``motor_velocity``); see :mod:`flexarm.sim.sampled`.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Literal
