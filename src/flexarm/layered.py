@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Hashable, Iterable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -355,7 +356,7 @@ def _apply(op: str, a: list):
 
 
 # --------------------------------------------------------------------------- small SPD solve
-def _adjugate(P: list) -> tuple[list, object]:
+def _adjugate(P: list) -> tuple[list, Any]:
     """Adjugate and determinant of a symmetric 1×1, 2×2 or 3×3 block (lists of scalars)."""
     b = len(P)
     if b == 1:

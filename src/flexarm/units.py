@@ -8,6 +8,7 @@ Everything inside flexarm is SI: kg, m, s, rad, A, V, N*m.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pint
 
@@ -83,6 +84,6 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _dims(q: pint.Quantity) -> str:
+def _dims(q: Any) -> str:  # a pint quantity (of one of pint's Quantity classes)
     d = str(q.dimensionality)
     return "dimensionless" if d == "dimensionless" else d

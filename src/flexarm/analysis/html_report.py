@@ -158,11 +158,11 @@ class HtmlReport:
         (a parameter the data hardly determine) is marked."""
         body, low = [], []
         for i, (name, v, s, unit) in enumerate(rows):
-            ok = s is not None and math.isfinite(float(s))
+            sf = float(s) if s is not None else math.nan
             rel = _rel(v, s)
             if rel is not None and rel > POOR_RELATIVE_STD:
                 low.append((i, 4))
-            body.append((name, float(v), float(s) if ok else None, unit or "", rel))
+            body.append((name, float(v), sf if math.isfinite(sf) else None, unit or "", rel))
         return self.table(("parameter", "value", f"± {std_label}", "unit", "relative std [%]"),
                           body, low=low, formats={2: ".2g", 4: ".3g"})
 

@@ -87,8 +87,10 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
         log = Log(log.path, log.time, {**log.signals, **extra}, list(log.comments),
                   dict(log.meta), list(log.skipped), list(log.notes) + notes)
     full, k0 = log, 0
+    assert full.time is not None  # checked above
     if window is not None:
         log = log.window(*window)
+        assert log.time is not None  # a window of a log with time
         k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
@@ -149,7 +151,9 @@ def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     fig = Figure(figsize=(10, 1.8 * len(names) + 0.5))
     axes = fig.subplots(len(names), 1, sharex=True,
                              squeeze=False)
-    t = rep.log.time - rep.log.time[0]
+    time = rep.log.time
+    assert time is not None  # replay() refuses a log without time
+    t = time - time[0]
     for ax, k in zip(axes[:, 0], names, strict=True):
         ax.plot(t, rep.log[k], "k", lw=0.8, label="log")
         ax.plot(t, rep.result.measured[k], "C1", lw=0.8, label="simulated")

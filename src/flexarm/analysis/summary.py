@@ -17,6 +17,7 @@ from flexarm.specs import Scenario, builtin_scenarios, load_scenario
 def simulate_with_progress(scenario: Scenario, progress: bool = False):
     """Simulate a scenario, with a rich progress bar for long runs."""
     p = prepare(scenario)
+    assert scenario.simulation is not None  # prepare() builds sampled-data loops only
     seed = scenario.simulation.seed
     if not progress or p.n_samples <= 20000:
         return to_result(p, simulate_loop(p.loop, p.x0, p.references, p.n_samples, seed=seed))
@@ -48,6 +49,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
             return write_regulation(scenario, out)
         return write_multilink(scenario, out, progress)[0]
     res = simulate_with_progress(scenario, progress)
+    assert scenario.sampling is not None  # a single-link scenario has one (validated)
     name = scenario.name
     res.to_csv(out / f"{name}.csv", overwrite=True)
     fig = res.plot_arm()
@@ -106,6 +108,7 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
     ``<name>.csv`` (every state and command), ``<name>.png`` (:func:`plot_joints`) and
     ``<name>.summary.json``; returns (summary, result)."""
     res = simulate_with_progress(scenario, progress)
+    assert scenario.sampling is not None  # simulated in the sampled-data loop
     name = scenario.name
     res.to_csv(out / f"{name}.csv", overwrite=True)
     plot_joints({name: (scenario, res)}, out / f"{name}.png")

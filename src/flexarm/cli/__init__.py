@@ -12,7 +12,7 @@ internal error exits 1 with the traceback in a log file (:mod:`flexarm.cli.error
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Any
+from typing import Annotated, Any, cast
 
 import typer
 from typer.core import TyperGroup
@@ -52,7 +52,7 @@ class FlexarmGroup(TyperGroup):
             rv = super().main(*args, standalone_mode=False, **kwargs)
         except typer.TyperException as exc:
             if type(exc).__name__ == "NoArgsIsHelpError":  # bare `flexarm`: the help
-                exc.show()
+                cast(Any, exc).show()  # click's UsageError.show; TyperException has none
                 sys.exit(0)
             sys.exit(errors.usage_error(exc))
         except typer.Abort:

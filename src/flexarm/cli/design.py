@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.markup import escape
@@ -139,6 +140,7 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
     spread_d = plant_spread(sc, fit_json, spread)
     out = outdir(out, overwrite)
     count = 2 * math.pi / encoder_counts if encoder_counts else None
+    opts: dict[str, Any]  # each method's own keyword arguments
     if method == "nested":
         opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
                 if v is not None}

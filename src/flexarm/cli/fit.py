@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, cast
 
 import typer
 from rich.markup import escape
@@ -32,6 +32,10 @@ from flexarm.cli.common import (
     progress,
     write_report,
 )
+
+if TYPE_CHECKING:
+    from flexarm.identification.time_domain.predict import Prediction
+    from flexarm.identification.time_domain.result import FitResult
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
 ControllerOrFile = Annotated[str | None, typer.Option(
@@ -170,7 +174,7 @@ def fit(ctx: typer.Context,
               "scenario first, flexarm fit SCENARIO LOG... --free PATH")
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for the bench fit (every log has one format)")
-    log_format = Path(log_format[0]) if log_format else None
+    fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.errors import FitInterrupted
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import fit as run_fit
@@ -183,7 +187,7 @@ def fit(ctx: typer.Context,
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
     sess = parsing.int_list(sessions, "--sessions")
-    kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
+    kw: dict[str, Any] = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
               voltage_limit=voltage_limit, computation_delay=computation_delay, mode=mode, global_seconds=seconds,
@@ -192,7 +196,7 @@ def fit(ctx: typer.Context,
     res = res0 = held = None
     win, vwin = parsing.window(window, "--window"), parsing.window(validate_window, "--validate-window")
     try:
-        full = bench_logs(logs, column, unit, controller, max_jitter, log_format,
+        full = bench_logs(logs, column, unit, controller, max_jitter, fmt_file,
                            use_regressed_law)
         blogs = [g.window(*win) for g in full] if win else full
         held_logs = [g.window(*vwin) for g in full] if vwin else []
@@ -223,7 +227,7 @@ def fit(ctx: typer.Context,
     with figure_folder(plots, report) as folder:
         if folder is not None:
             _bench_figures(ctx, folder, res, res0, held, validate_window, report, overwrite,
-                           [*logs, *([log_format] if log_format else [])])
+                           [*logs, *([fmt_file] if fmt_file else [])])
 
 
 def _print_bench_tables(res, res0, held, validate_window: str | None) -> None:
@@ -307,7 +311,7 @@ def validate(ctx: typer.Context,
         return
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for a bench scenario's logs")
-    log_format = Path(log_format[0]) if log_format else None
+    fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import validate as run_validate
 
@@ -318,7 +322,7 @@ def validate(ctx: typer.Context,
     with figure_folder(plots, report) as folder:
         try:
             win = parsing.window(window, "--window")
-            blogs = bench_logs(logs, column, unit, controller, max_jitter, log_format,
+            blogs = bench_logs(logs, column, unit, controller, max_jitter, fmt_file,
                                 use_regressed_law)
             out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs,
                                plots=folder)
@@ -330,7 +334,7 @@ def validate(ctx: typer.Context,
             write_report(validate_report(out, scenario=scenario, figures=out["plots"],
                                           command=command_line(ctx),
                                           inputs=[scenario, *logs,
-                                                  *([log_format] if log_format else [])]),
+                                                  *([fmt_file] if fmt_file else [])]),
                           report, overwrite)
         out = bench_validate_document(out, plots is not None)
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
@@ -441,8 +445,9 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
                           windows=[win] * len(glogs) if win else None, predict=False,
                           continuous=continuous)
         with console.status("fitting") as status, _state_warnings_quiet():
-            res = fit_engine(sc, glogs, free or None, opts,
-                             progress=lambda m: progress(status, m))
+            # a scenario (not the servo-rig preset) runs the general engine: its FitResult
+            res = cast("FitResult", fit_engine(sc, glogs, free or None, opts,
+                                               progress=lambda m: progress(status, m)))
             status.update("predicting the logs with the fitted parameters")
             console.print(f"free parameters ({len(res.free)}): {res.free_source}",
                           highlight=False)
@@ -472,6 +477,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
         if report is not None:
             from flexarm.analysis.html_report import fit_report
 
+            assert ctx is not None  # the command passes its context
             write_report(fit_report(res, figures=pred["plots"], command=command_line(ctx),
                                      inputs=[scenario, *logs, *(log_format or [])],
                                      fit_percent=pred["fit_percent"]),
@@ -550,6 +556,7 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
         if report is not None:
             from flexarm.analysis.html_report import validate_report
 
+            assert ctx is not None  # the command passes its context
             write_report(validate_report(out, scenario=sc.name, figures=figs,
                                           command=command_line(ctx),
                                           inputs=[ctx.params["scenario"], *logs,
@@ -575,7 +582,7 @@ def _print_warnings(msgs) -> None:
         err.print(f"[yellow]warning:[/yellow] {escape(w)}", highlight=False, soft_wrap=True)
 
 
-def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> None:
+def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> NoReturn:
     """Ctrl-C during ``fit``: write the best result so far to --json (atomically), marked
     ``"interrupted": true, "status": "interrupted"``, say so in one line, exit 130 (the
     shell's code for SIGINT).  ``res``: the friction fit if it had finished (the
@@ -637,7 +644,7 @@ def interrupted_document(res, best) -> dict:
     return {**mark, **d, **mark}
 
 
-def refit_document(res, free: list[str], rwin, log, after: dict) -> dict:
+def refit_document(res, free: list[str], rwin, log, after: Prediction) -> dict:
     """JSON LAYOUT of the ``refit`` entry of ``validate --refit friction --json``."""
     return {"window_s": list(rwin), "log": str(log),
             "params": {p: res.params[p] for p in free},

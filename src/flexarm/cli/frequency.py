@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import cast
 
 import typer
 
@@ -83,8 +84,9 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.identification.frequency_domain.identify import identify as run_identify
 
-    mo = parsing.ints(motor_orders, "--motor-orders", 2, "2,4")
-    bo = parsing.ints(beam_orders, "--beam-orders", 2, "0,2")
+    # count=2: two whole numbers each
+    mo = cast("tuple[int, int]", parsing.ints(motor_orders, "--motor-orders", 2, "2,4"))
+    bo = cast("tuple[int, int]", parsing.ints(beam_orders, "--beam-orders", 2, "0,2"))
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     plots = output_folder("--plots", plots, overwrite)
@@ -174,7 +176,7 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         method: str = typer.Option("periodic", "--method",
                                    help="periodic (multisine over whole periods) or lpm "
                                         "(local polynomial method: non-periodic or transient records)"),
-        json_out: o.JsonRequired = ...,
+        json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
         plots: o.Plots = None,
         overwrite: o.Overwrite = False) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
@@ -280,7 +282,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
                                        help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
-          json_out: o.JsonRequired = ...,
+          json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
           plots: o.Plots = None,
           overwrite: o.Overwrite = False) -> None:
     """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
@@ -407,7 +409,7 @@ def friction(frf_json: list[Path] = typer.Argument(
              length: o.StructLength = None,
              iterations: int = typer.Option(3, "--iterations",
                                             help="simulator corrections of the Bussgang start (0: none)"),
-             json_out: o.JsonRequired = ...,
+             json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
              overwrite: o.Overwrite = False) -> None:
     """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
     structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v

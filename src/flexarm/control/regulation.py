@@ -44,6 +44,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -369,12 +370,18 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     kp, kd = stack(KP, "KP"), stack(KD, "KD")
     if kp is None and kd is None:
         raise ValueError("KP or KD must hold a batch: (N, n) diagonals or (N, n, n) matrices")
-    N = (kp if kp is not None else kd).shape[0]
+    if kp is not None:
+        N = kp.shape[0]
+    else:
+        assert kd is not None  # one of them holds the batch (checked above)
+        N = kd.shape[0]
     if kp is not None and kd is not None and kd.shape[0] != N:
         raise ValueError(f"KP holds {N} gains and KD {kd.shape[0]}")
     kp = np.broadcast_to(_gain(KP, n, "KP"), (N, n, n)) if kp is None else kp
     kd = np.broadcast_to(_gain(KD, n, "KD"), (N, n, n)) if kd is None else kd
     params = eqx.tree_at(lambda p: (p.KP, p.KD), base, (jnp.asarray(kp), jnp.asarray(kd)))
-    axes = RegulationParams(plant=None, KP=0, KD=0, theta_d=None, delta_d=None, g_d=None,
-                            theta_0=None, duration=None, newton_iterations=newton_iterations)
+    # the vmap axes of each field (0: batched, None: shared), in a RegulationParams of axes
+    axes = cast(Any, RegulationParams)(plant=None, KP=0, KD=0, theta_d=None, delta_d=None,
+                                       g_d=None, theta_0=None, duration=None,
+                                       newton_iterations=newton_iterations)
     return params, axes

@@ -66,6 +66,7 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
         if k == max_rounds:
             break
         des = design_linear(scenario, "lqr", **{**options, "r": (4 * np.asarray(r)).tolist()})
+    assert best is not None  # one round at least (max_rounds >= 0)
     fails, des, kept = best
     if fails != (False, 0):
         h = history[kept]

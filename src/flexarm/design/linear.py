@@ -126,7 +126,7 @@ class DesignModel:
         return self.continuous.nstates
 
 
-def _amplitude(scenario, ref: str) -> float:
+def _amplitude(scenario, ref: str | None) -> float:
     spec = scenario.reference if ref == "reference" else scenario.references.get(ref)
     a = abs(float(getattr(spec, "amplitude", 0.0) or 0.0)) if spec is not None else 0.0
     return a if a > 0 else 0.1
@@ -345,7 +345,7 @@ def _poles_z(poles, domain: str, dt: float, what: str) -> np.ndarray:
                          f"{abs(np.exp(bad * dt) if domain == 's' else bad):.6g} >= 1); give "
                          + ("poles with a negative real part" if domain == "s" else
                             "poles inside the unit circle"))
-    for x in z[np.abs(z.imag) > 1e-12]:
+    for x in z[np.abs(np.imag(z)) > 1e-12]:
         if not np.any(np.abs(z - np.conj(x)) < 1e-9 * max(1.0, abs(x))):
             raise ValueError(f"{what}: the complex pole {x:.6g} has no conjugate; give both")
     return z

@@ -116,14 +116,14 @@ class TuneCost:
         self.nfev = 0
         self.seconds = 0.0
 
-    def scenario(self, p: Sequence[float]):
+    def scenario(self, p: Sequence[float] | np.ndarray):
         """The rig scenario with the parameters at ``p`` (validated)."""
         d = copy.deepcopy(self.template)
         for path, v in zip(self.paths, p, strict=False):
             _set(d, path, v)
         return self._validate(d)
 
-    def evaluate(self, p: Sequence[float]) -> tuple[float, np.ndarray, dict]:
+    def evaluate(self, p: Sequence[float] | np.ndarray) -> tuple[float, np.ndarray, dict]:
         t0 = _time.perf_counter()
         spec = self.scenario(p).controller
         bl = self.base.with_controller(build_controller(self.base, spec, self.scn))
@@ -234,7 +234,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         lo[i], hi[i] = a, b
     if len(plants) == 0:
         warn.append("no drawn plants: tuned on the nominal plant only")
-    cost_kw = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
+    cost_kw: dict[str, Any] = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
                    weights=weights or {}, hub_error_max=hub_error_max, count=count, seed=seed)
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import ChunkedTuneCost
@@ -307,5 +307,6 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         "evaluations": len(hist), "seconds": seconds,
         "seconds_per_evaluation": cost.seconds / max(cost.nfev, 1),
         "history": [float(h) for h in hist], "restarts": restarts, "message": messages}
+    assert tuned.sampling is not None  # the rig scenario is a sampled-data one
     return Design("tune", tuned, _linear_part(tuned.controller, float(tuned.sampling.period)),
                   info, warn + list(plants.warnings))

@@ -69,12 +69,17 @@ Problems are :class:`LogFormatError` naming the format file, the field, the valu
 fix. ``examples/quanser-rotflex.toml`` is a documented example.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
@@ -324,15 +329,16 @@ class LogFormat(Spec):
                                      f"{', '.join(missing)}; map it to a variable (e.g. "
                                      f"time = \"logsout.time\")")
             variables = matfile.load_mat(path)
-            log = matfile.read_mat(path, {**cols, **gain_cols}, uts, variables=variables,
-                                   source=self.source)
+            # a .mat log's gain columns are variable specs (strings), as its [columns]
+            mat_cols = cast("dict[str, str]", {**cols, **gain_cols})
+            log = matfile.read_mat(path, mat_cols, uts, variables=variables, source=self.source)
             quanta = {k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
                       if isinstance(q, str) else float(q)
                       for k, q in self.checks.quantum.items()}
         else:
-            extra = {k: signal_unit(k) for k in [*cols, *uts] if signal_unit(k) is not None}
+            extra = {k: u for k in [*cols, *uts] if (u := signal_unit(k)) is not None}
             extra.update(STATE_FEEDBACK_GAINS)
-            text = dict(delimiter=self.delimiter_char, comment=self.comment,
+            text: dict[str, Any] = dict(delimiter=self.delimiter_char, comment=self.comment,
                         skip_rows=self.skip_rows, source=where)
             text.update(kw)
             log = read_log(path, {**cols, **gain_cols} or None, uts or None,
@@ -428,6 +434,7 @@ class LogFormat(Spec):
             parts[f] = sub.read(f, required=("time",) if "time" in cols else (), **kw)
         t_file = next(f for f, c in files.items() if "time" in c)
         time = parts[t_file].time
+        assert time is not None  # read with required=("time",)
         n = len(time)
         for f, g in parts.items():
             if len(g) != n:
@@ -602,7 +609,7 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
     else:
         if "k1" not in num:
             raise LogError(f"{source}: state_feedback controller without K1")
-        g = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
+        g: dict[str, Any] = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
     try:
         return StateFeedbackController(type="state_feedback", rate=rate,
                                        rate_time_constant=num.get("tau", 0.0), **g)

@@ -45,7 +45,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -180,7 +180,8 @@ class Log:
     @property
     def dt(self) -> float:
         """Sampling period (s): the median time step."""
-        return float(np.median(np.diff(self.time)))
+        # (a log without time: numpy's error, as before)
+        return float(np.median(np.diff(cast(np.ndarray, self.time))))
 
     @property
     def name(self) -> str:
@@ -215,7 +216,7 @@ class Log:
 
     def __getitem__(self, column: str) -> np.ndarray:
         if column == "time":
-            return self.time
+            return cast(np.ndarray, self.time)  # None for a .mat log that maps no time
         try:
             return self.signals[column]
         except KeyError:
@@ -268,7 +269,7 @@ def log_keys(logs: Sequence[Log]) -> list[str]:
     log without a file is keyed by its ``name``."""
     from flexarm.io.write import unique_keys
 
-    return unique_keys([g.path if getattr(g, "path", None) is not None
+    return unique_keys([p if (p := getattr(g, "path", None)) is not None
                         else (getattr(g, "name", "<log>") or "<log>") for g in logs])
 
 
@@ -522,6 +523,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
             meta[key.strip()] = value.strip()
     plain_header = lay.header is not None and not lay.header_is_comment
     if plain_header:
+        assert lay.header is not None
         ncol = len(lay.header)
     elif lay.rows:
         counts = np.bincount([len(f) for _, f in lay.rows])
@@ -539,8 +541,8 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
             raise LogError(f"{path}: {source or 'columns'}: {taken[j]!r} and {ours!r} both name file "
                            f"column {j + 1}; each column can be read once")
         taken[j] = ours
-    use_header = lay.header is not None and len(lay.header) == ncol
-    names = [taken.get(j, _norm(lay.header[j]) if use_header else f"col{j + 1}")
+    header = lay.header if lay.header is not None and len(lay.header) == ncol else None
+    names = [taken.get(j, _norm(header[j]) if header is not None else f"col{j + 1}")
              for j in range(ncol)]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

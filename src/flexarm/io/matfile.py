@@ -34,6 +34,7 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -155,7 +156,7 @@ def _child(node, name: str):
         return node.get(name)
     if isinstance(node, np.ndarray) and node.dtype == object and node.size == 1:
         node = node.flat[0]
-    if hasattr(node, "_fieldnames") and name in node._fieldnames:
+    if hasattr(node, "_fieldnames") and name in cast(Any, node)._fieldnames:
         return getattr(node, name)
     return None
 

@@ -218,9 +218,13 @@ def static_coupling(beam: LumpedBeam) -> float:
     pos, is_slope, mass = [], [], []
     for m in beam.masses:
         p = L if m.position is None else m.position
-        pos.append(p), is_slope.append(False), mass.append(m.mass)
+        pos.append(p)
+        is_slope.append(False)
+        mass.append(m.mass)
         if m.joint == "clamped" and m.rotary_inertia > 0:
-            pos.append(p), is_slope.append(True), mass.append(m.rotary_inertia)
+            pos.append(p)
+            is_slope.append(True)
+            mass.append(m.rotary_inertia)
     pos, is_slope, mass = np.array(pos), np.array(is_slope), np.array(mass)
     xbar = np.where(is_slope, 1.0, pos)
     c_tip = cantilever_flexibility(np.append(pos, L), np.append(is_slope, False), beam.EI)[-1, :-1]

@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.polynomial.legendre import leggauss
@@ -185,8 +185,11 @@ def _roots(n: int, mu: float, eta: float) -> np.ndarray:
         if d[k] == 0.0:
             roots.append(float(grid[k]))
         elif d[k] * d[k + 1] < 0.0:
-            roots.append(brentq(lambda b: float(frequency_determinant(b, mu, eta)),
-                                grid[k], grid[k + 1], xtol=1e-15, rtol=1e-15, maxiter=200))
+            root: Any = brentq(lambda b: float(frequency_determinant(b, mu, eta)),
+                               grid[k], grid[k + 1], xtol=1e-15,
+                               rtol=1e-15,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                               maxiter=200)
+            roots.append(root)
         if len(roots) == n:
             break
     if len(roots) < n:
@@ -268,7 +271,8 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
 
     xq, wq = _quadrature(ell, bl[-1] if n_modes else 1.0)
     raw = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
-                    coeffs, *(np.zeros(n_modes) for _ in range(4)),
+                    coeffs, np.zeros(n_modes), np.zeros(n_modes), np.zeros(n_modes),
+                    np.zeros(n_modes),
                     np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
     phi = raw.shape(xq)
     phi_l = raw.shape(ell)[:, 0]
@@ -278,7 +282,7 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
     coeffs = coeffs * scale[:, None]
     modes = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
                       coeffs, phi_l * scale, dphi_l * scale,
-                      *(np.zeros(n_modes) for _ in range(2)),
+                      np.zeros(n_modes), np.zeros(n_modes),
                       np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
     phi = modes.shape(xq)
     d2 = modes.shape(xq, 2)

@@ -70,6 +70,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -121,7 +122,7 @@ def _chol_solve_lists(A, b):
     """Unrolled Cholesky solve of A y = b; A a list of rows of scalars, b a list."""
     n = len(b)
     L = [[0.0] * n for _ in range(n)]
-    inv = [0.0] * n
+    inv: list[Any] = [0.0] * n  # 1/√s: JAX scalars
     for j in range(n):
         s = A[j][j]
         for k in range(j):
@@ -217,15 +218,17 @@ class MultiLinkPlant(Plant):
         (p_{n+1}, ṗ_{n+1}, angle, rate). With qd None the rates are None."""
         n = self.n_links
         th, dl = q[:n], q[n:]
-        thd = None if qd is None else qd[:n]
-        dld = None if qd is None else qd[n:]
-        alpha, alphad = th[0], (None if qd is None else thd[0])
+        # the rates: arrays with qd, None without (every use is under "if qd is not None")
+        thd: Any = None if qd is None else qd[:n]
+        dld: Any = None if qd is None else qd[n:]
+        alpha = th[0]
+        alphad: Any = None if qd is None else thd[0]
         p = jnp.zeros(2)
-        pd = None if qd is None else jnp.zeros(2)
+        pd: Any = None if qd is None else jnp.zeros(2)
         links = []
         for i, sl in enumerate(self._slices()):
             di = dl[sl]
-            ddi = None if qd is None else dld[sl]
+            ddi: Any = None if qd is None else dld[sl]
             links.append((alpha, alphad, p, pd, di, ddi, sl))
             if sl.stop > sl.start:
                 wl = self.phi_tip[sl] @ di
@@ -322,10 +325,11 @@ class MultiLinkPlant(Plant):
                     if not _is_zero(t):
                         Bm[j][k] = _add(Bm[j][k], t)
 
-        h = [0.0] * nq
-        a = [0.0] * nq
-        Jx = [0.0] * nq
-        Jy = [0.0] * nq
+        # rows of symbolic scalars (JAX arrays or layered leaves), 0.0 where structurally zero
+        h: list[Any] = [0.0] * nq
+        a: list[Any] = [0.0] * nq
+        Jx: list[Any] = [0.0] * nq
+        Jy: list[Any] = [0.0] * nq
         accx = accy = 0.0
         g0x, g0y = gamma
         alpha = q[0]
@@ -372,7 +376,7 @@ class MultiLinkPlant(Plant):
                 h[k] = _add(h[k], _mul(vi[j], Py), _mul(-1.0, ad2, Zd[j]))
             # next joint: position Jacobian and velocity-product acceleration
             ell = self.lengths[i]
-            tip = [0.0] * nq
+            tip: list[Any] = [0.0] * nq
             for j, k in enumerate(idx):
                 tip[k] = fi[j]
             tx = [_mul(-1.0, W, t) for t in a]
@@ -396,7 +400,7 @@ class MultiLinkPlant(Plant):
         gx, gy = _add(accx, _mul(-1.0, g0x)), _add(accy, _mul(-1.0, g0y))
         for k in range(nq):
             h[k] = _add(h[k], _mul(mp, gx, Jx[k]), _mul(mp, gy, Jy[k]))
-        B = [[None] * nq for _ in range(nq)]
+        B: list[list[Any]] = [[None] * nq for _ in range(nq)]
         for j in range(nq):
             for k in range(j, nq):
                 B[j][k] = B[k][j] = _add(Bm[j][k], self.B0[j, k])
@@ -535,6 +539,20 @@ class _SymbolicPlant:
 
     _slices = MultiLinkPlant._slices
     _terms_lists = MultiLinkPlant._terms_lists
+    # the fields of _PARAM_FIELDS, set in __init__ (object arrays of leaves), for the checker
+    lengths: Any
+    link_mass: Any
+    link_d: Any
+    hub_mass: Any
+    payload_mass: Any
+    phi_tip: Any
+    dphi_tip: Any
+    v: Any
+    Z: Any
+    K: Any
+    D: Any
+    B0: Any
+    gamma: Any
 
     def __init__(self, prog: layered.Program, n_modes: tuple[int, ...]):
         self.n_modes = n_modes
@@ -544,13 +562,13 @@ class _SymbolicPlant:
                   "payload_mass": (), "phi_tip": (nd,), "dphi_tip": (nd,), "v": (nd,),
                   "Z": (nd, nd), "K": (nd, nd), "D": (nd, nd), "B0": (nq, nq), "gamma": (2,)}
         for name in _PARAM_FIELDS:
-            shape = shapes[name]
+            shape: tuple[int, ...] = shapes[name]
             if shape == ():
                 setattr(self, name, prog.leaf((name, ())))
                 continue
             arr = np.empty(shape, dtype=object)
             for idx in np.ndindex(shape):
-                arr[idx] = prog.leaf((name, idx if len(idx) > 1 else idx[0]))
+                arr[idx] = prog.leaf((name, idx[0] if len(idx) == 1 else idx))
             setattr(self, name, arr)
 
     @property

@@ -39,6 +39,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -125,8 +126,8 @@ class DeLucaConfig:
         return np.asarray(self.theta_d_deg, float) * DEG
 
     def model(self, **overrides) -> MultiLinkModel:
-        kw = dict(flexural_rigidity=self.flexural_rigidity, mode_type=self.mode_type,
-                  damping_ratio=self.damping_ratio)
+        kw: dict[str, Any] = dict(flexural_rigidity=self.flexural_rigidity,
+                                  mode_type=self.mode_type, damping_ratio=self.damping_ratio)
         kw.update(overrides)
         EI = kw.pop("flexural_rigidity")
         return build_multilink(benchmark_arm(EI, **kw))
@@ -259,7 +260,9 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
 
             lo, hi = cfg.convention_EI_bracket
             try:
-                EI = brentq(d11, lo, hi, xtol=1e-6, rtol=1e-8)
+                EI = brentq(d11, lo, hi,
+                            rtol=1e-8,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                            xtol=1e-6)
                 m = cfg.model(mode_type=mt, flexural_rigidity=EI)
                 dd_match = R.residual_deflection(m, cfg.theta_d) / _mode_scale(m, norm)
             except (ValueError, R.RegulationError):
@@ -457,7 +460,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
 
     say("large gains: interpolating trajectory, numerical limit")
     f, fk = cfg.remedy_factor, cfg.remedy_factor ** cfg.sweep_kd_exponent
-    remedy, remedy_runs = {"factor": f}, {}
+    remedy: dict[str, Any] = {"factor": f}
+    remedy_runs = {}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
         pr = R.regulation_params(model, KP * f, KD * fk, th_d, theta_0=cfg.theta_0, duration=dur)
         r = _simulate(model, R.law_pd_constant, cfg, pr, cfg.sweep_t_final)
@@ -469,7 +473,7 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
                         "delta_err_frac_t_final": float(e_d[k2])}
         remedy_runs[f"K_P×{f:g}, {name}"] = r
     fu = cfg.unstable_factor
-    unstable = {"factor": fu}
+    unstable: dict[str, Any] = {"factor": fu}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
         pu = R.regulation_params(model, KP * fu, KD * fu ** cfg.sweep_kd_exponent, th_d,
                                  theta_0=cfg.theta_0, duration=dur)

@@ -55,6 +55,7 @@ from flexarm.sim.build import Prepared, prepare, to_result
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
+from flexarm.specs.arm import SingleLinkArm
 
 __all__ = ["FeliuChoices", "run", "CHOICES"]
 
@@ -145,6 +146,7 @@ def _with_duration(scenario, duration: float):
 
 def _simulate(p: Prepared, plant, controller, refs: dict[str, np.ndarray]) -> SimulationResult:
     loop = eqx.tree_at(lambda lp: (lp.plant, lp.controller), p.loop, (plant, controller))
+    assert p.scenario.simulation is not None  # a prepared scenario is a sampled-data one
     out = simulate_loop(loop, p.x0, refs, p.n_samples, seed=p.scenario.simulation.seed)
     return to_result(p, out)
 
@@ -261,6 +263,7 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     # ---- the arms
     sc1 = _with_duration(load_scenario(c.scenarios[0]), c.duration_single)
     sc2 = _with_duration(load_scenario(c.scenarios[1]), c.duration_two_mass)
+    assert isinstance(sc1.arm, SingleLinkArm) and isinstance(sc2.arm, SingleLinkArm)  # FRB's
     m1, m2 = SingleLinkModel.from_spec(sc1.arm), SingleLinkModel.from_spec(sc2.arm)
     held1 = SingleLinkModel.from_spec(sc1.arm, hold_tip=True)
     held2 = SingleLinkModel.from_spec(sc2.arm, hold_tip=True)

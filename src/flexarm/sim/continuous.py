@@ -26,6 +26,7 @@ rad, ``res.delta`` ([N,] T, n_δ) m, ``res.torque`` ([N,] T, n_links) N·m, ``re
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import cast
 
 import jax.numpy as jnp
 import numpy as np
@@ -48,7 +49,8 @@ def law_loop(model: MultiLinkModel, law: Callable, params, dt: float, substeps: 
     return sampled.SampledLoop(
         plant, ContinuousLaw(law, params, jnp.asarray(float(dt)), plant.n_inputs),
         sampled.Sensors.make(plant, {}), sampled.Actuator(limit, jnp.zeros_like(limit)),
-        jnp.asarray(float(dt)), int(substeps), 0, solver, tuple(tolerances))
+        jnp.asarray(float(dt)), int(substeps), 0, solver,
+        cast("tuple[float, float]", tuple(tolerances)))  # (rtol, atol)
 
 
 def _result(loop, ts, xs, sig, us, title: str, diverged=None) -> SimulationResult:

@@ -44,19 +44,23 @@ any batched leaves of the loop (parameter or gain variations).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jax.typing import ArrayLike
 
 from flexarm.control.continuous_law import ContinuousLaw
 from flexarm.control.discrete import Controller
 from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
 from flexarm.models.plant import Plant
 from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
+
+if TYPE_CHECKING:
+    from flexarm.distributed import BatchSummary
 
 
 class Sensors(eqx.Module):
@@ -183,7 +187,7 @@ def filter_substeps(bandwidth_hz: float, dt: float) -> int:
     return int(np.ceil(2 * np.pi * bandwidth_hz * dt / FILTER_STEP_LIMIT))
 
 
-def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
+def check_filter_step(sensors: Sensors, dt: float | Array, substeps: int) -> None:
     """Raise ValueError naming the channel when a sensor filter is too fast for the
     integration substep dt / substeps (ω_f h > :data:`FILTER_STEP_LIMIT`)."""
     if not sensors.filtered:
@@ -234,6 +238,7 @@ class FilteredPlant(Plant):
 
 
 def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
+    assert sens.omega is not None  # set with the filtered channels (Sensors.make)
     return FilteredPlant.around(plant, [sens.index[c] for c in sens.filtered],
                                 jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega,
                                 [sens.names[c] for c in sens.filtered])
@@ -332,6 +337,8 @@ def _zeroing_step(sens: Sensors, z: tuple, y: Array) -> tuple[Array, tuple]:
 def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
     """The digital filters' initial states (at rest on the first reading y0 where not set)
     and the channels' first outputs."""
+    # the digital filters' arrays are set with the digital channels (Sensors.make)
+    assert sens.fA is not None and sens.fB is not None and sens.fx0 is not None
     ys = _pick(y0, sens.digital)
     k = sens.fA.shape[-1]
     rest = jax.vmap(lambda A, B, y: jnp.linalg.solve(jnp.eye(k) - A, B * y))(sens.fA, sens.fB, ys)
@@ -341,6 +348,7 @@ def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
 
 def _digital_out(sens: Sensors, xd: Array, y: Array) -> Array:
     """The channels' readings with the digitally filtered ones replaced by v = C ξ + D y."""
+    assert sens.fC is not None and sens.fD is not None  # set with the digital channels
     ys = _pick(y, sens.digital)
     v = jnp.sum(sens.fC * xd, axis=-1) + sens.fD * ys
     slot = {c: j for j, c in enumerate(sens.digital)}
@@ -387,6 +395,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         # a continuous law: sat(u_held + law(x, t)) at every stage (control/continuous_law)
 
         def command(y, t):
+            assert law is not None  # integrate returned above without a law
             uc = law.command(y[:n_x], t)
             trail = (1,) * (uc.ndim - 1)  # a batch carried batch-last: (m, B)
             lim = act.limit.reshape(act.limit.shape + trail)
@@ -416,6 +425,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             xd = carry[pos]
             ys = _pick(y, sens.digital)
             y = _digital_out(sens, xd, y)
+            assert sens.fA is not None and sens.fB is not None
             extra = (jnp.einsum("ijk,ik->ij", sens.fA, xd) + sens.fB * ys[:, None],)
         if sens.zeroed:
             extra += (z_next,)
@@ -468,7 +478,7 @@ def _run_from_x0(loop: SampledLoop, x0: Array, refs, noise, block: int = 1):
     return recs + (carry[0],)
 
 
-def _sensor_noise(seed: Array, n_samples: int, n_channels: int) -> Array:
+def _sensor_noise(seed: ArrayLike, n_samples: int, n_channels: int) -> Array:
     return jax.random.normal(jax.random.PRNGKey(seed), (n_samples, n_channels))
 
 
@@ -479,7 +489,8 @@ def _run_seeded(loop: SampledLoop, x0: Array, refs: dict[str, Array], seed: Arra
                         _block_size(loop))
 
 
-_run_all = eqx.filter_jit(_run_seeded)
+# compiled; its callers pass NumPy arrays, which the jit turns into the Arrays above
+_run_all: Callable[..., Any] = eqx.filter_jit(_run_seeded)
 
 
 def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
@@ -540,7 +551,7 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
                    *, seed: int = 0, in_axes: Any = 0,
                    batch_size: int | None = 512,
                    check: bool = True, client: Any = None,
-                   chunks: Any = None) -> dict[str, np.ndarray]:
+                   chunks: Any = None) -> dict[str, np.ndarray] | BatchSummary:
     """``vmap`` of :func:`simulate_loop` over the batched leaves of ``loop``.
 
     ``in_axes`` is a pytree prefix of ``loop`` telling which leaves carry a leading batch
@@ -678,7 +689,7 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
                           jax.tree.unflatten(treedef, leaves))
     refs = _prepare_refs({}, n_samples)
     xs, sig, us = _run_law_batch(batched, x0, refs, leaf_axes, chunk)
-    return tuple(np.asarray(a)[:size] for a in (xs, sig, us))
+    return np.asarray(xs)[:size], np.asarray(sig)[:size], np.asarray(us)[:size]
 
 
 class _Axis:
@@ -691,6 +702,7 @@ class _Axis:
 @eqx.filter_jit
 def _run_law_batch(loop: SampledLoop, x0: Array, refs, leaf_axes: tuple, chunk: int):
     law = loop.controller
+    assert isinstance(law, ContinuousLaw)  # simulate_law_batch's loop runs a continuous law
     leaves, treedef = jax.tree.flatten(law.params)
     size = next(x.shape[0] for x, a in zip(leaves, leaf_axes, strict=False) if a is not None)
     n = next(iter(refs.values())).shape[0]

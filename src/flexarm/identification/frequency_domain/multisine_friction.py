@@ -47,7 +47,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -166,16 +168,16 @@ def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int,
 class _Simulator:
     """How a fitted structure is simulated with Coulomb friction at the (output) shaft."""
 
-    scenario: object  # (params, C_f, fs, n) → scenario dict
+    scenario: Callable[..., dict]  # (params, C_f, fs, n) → scenario dict
     viscous: str  # the BLA's viscous parameter that holds the friction's Bussgang share
-    rigid: object  # params → (total inertia, damping besides ``viscous``): slowest decay
-    derived: object  # params → dict with resonance_hz, resonance_damping
-    torque: object  # params → torque per unit of input (scales the C_f grid)
+    rigid: Callable[..., Any]  # params → (total inertia, damping besides ``viscous``): slowest decay
+    derived: Callable[..., dict]  # params → dict with resonance_hz, resonance_damping
+    torque: Callable[..., Any]  # params → torque per unit of input (scales the C_f grid)
     input: str  # the reference channel the open-loop 'controller' plays
     unit: str  # of C_f
     damping_unit: str  # of ``viscous``
     where: str
-    friction_torque: object = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
+    friction_torque: Callable[..., Any] = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
 
 
 def _two_mass_rigid(p):
@@ -254,7 +256,7 @@ def _odd_lines(frf: PeriodicFRF) -> np.ndarray:
     return odd
 
 
-def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
+def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
     kmin, kmax = int(frf.lines.min()), int(frf.lines.max())
     edges = [kmin]
     while edges[-1] * 2 < kmax:

@@ -250,7 +250,7 @@ def _dft_periods(x: np.ndarray, P: int, M0: int) -> np.ndarray:
 
 
 def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
-                 period: int | None = None, lines: Sequence[int] | None = None,
+                 period: int | None = None, lines: Sequence[int] | np.ndarray | None = None,
                  transient_periods: int | None = None, input_name: str = "input",
                  source: str = "<data>", detrend: bool = True,
                  require_distortion: bool = False) -> PeriodicFRF:
@@ -541,13 +541,15 @@ def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>")
     noise = np.sqrt(np.sum(np.stack([r.noise_std for r in rs]) ** 2, axis=0)) / R
     total = np.sqrt(np.sum(np.abs(G - Gm) ** 2, axis=0) / (R * (R - 1)))
     dist = None
-    if all(r.distortion is not None for r in rs):
+    dists = [r.distortion for r in rs]
+    if all(d is not None for d in dists):
         def pmean(vals):
             v = [x for x in vals if math.isfinite(x)]
             return 10 * math.log10(np.mean([10 ** (x / 10) for x in v])) if v else math.nan
         dist = {n: [Band(bs[0].band_hz, pmean([b.odd_db for b in bs]),
                          pmean([b.even_db for b in bs]), pmean([b.noise_db for b in bs]))
-                    for bs in zip(*(r.distortion[n] for r in rs), strict=False)] for n in first.outputs}
+                    for bs in zip(*(d[n] for d in dists if d is not None), strict=False)]
+                for n in first.outputs}
     frd = control.FrequencyResponseData(Gm[:, None, :], 2 * np.pi * first.frequency_hz,
                                         inputs=[first.input], outputs=first.outputs)
     notes = [w for r in rs for w in r.warnings]

@@ -70,8 +70,8 @@ def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunc
         rhs.append(K * i * wt)
     A = np.array(rows)
     b = np.array(rhs)
-    A2 = np.vstack([A.real, A.imag])
-    b2 = np.concatenate([b.real, b.imag])
+    A2 = np.vstack([np.real(A), np.imag(A)])
+    b2 = np.concatenate([np.real(b), np.imag(b)])
     x, *_ = np.linalg.lstsq(A2, b2, rcond=None)
     r = b2 - A2 @ x
     dof = max(len(b2) - 4, 1)

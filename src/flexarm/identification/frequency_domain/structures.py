@@ -58,7 +58,7 @@ class Structure:
     log: frozenset[str]
     outputs: tuple[str, ...]
     response: Callable[[dict, np.ndarray], dict[str, np.ndarray]]
-    guess: Callable[[np.ndarray, dict, dict], dict]
+    guess: Callable[[np.ndarray, dict, dict], dict | list[dict]]  # one start or candidates
     scale: Callable[[dict, np.ndarray], dict]
     derived: Callable[[dict], dict] = lambda p: {}
     given: dict[str, str] = field(default_factory=dict)  # name → meaning and unit
@@ -497,6 +497,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
                             xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None  # one start at least
     # The bounded solver creeps towards an optimum that lies on a bound (a delay or a
     # viscous term that is truly 0: steps shrink with the distance to the bound). An
     # unbounded Levenberg–Marquardt polish from its solution is kept when it lowers the

@@ -185,7 +185,7 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
 def _frd_data(frd, output: int, input: int, std):
     omega = np.asarray(frd.omega, float)
     data = frd.frequency_response(omega) if not hasattr(frd, "frdata") else None
-    H = np.asarray(frd.frdata if hasattr(frd, "frdata") else data.complex, complex)
+    H = np.asarray(frd.frdata if data is None else data.complex, complex)
     H = H.reshape(frd.noutputs, frd.ninputs, -1)[output, input]
     if std is not None:
         std = np.asarray(std, float)
@@ -222,6 +222,7 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=30):
             break
         d_prev = np.polynomial.polynomial.polyval(s, a)
     # N for the best fit with the stabilised D (linear in b): Σ |w (N/D − Hr)|²
+    assert a is not None and b is not None  # one iteration at least
     dv = np.polynomial.polynomial.polyval(s, a)
     A = pw[:, : nz + 1] / dv[:, None] * w[:, None]
     b = np.linalg.lstsq(np.vstack([A.real, A.imag]),
@@ -312,7 +313,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
 
     def resid(x):
         e = cresid(*unpack(x))
-        return np.concatenate([e.real, e.imag])
+        return np.concatenate([np.real(e), np.imag(e)])
 
     def jac(x):
         bb, aa, tau = unpack(x)
@@ -332,13 +333,14 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
             if fit_tau:
                 cols.append(-1j * omega * Hm / ws)
             J = np.column_stack(cols) * w[:, None]
-        return np.vstack([J.real, J.imag])
+        return np.vstack([np.real(J), np.imag(J)])
 
     # delay parameter in units of 1/ω_s (scaled like the coefficients)
     x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
     unstable: list[complex] = []
     for _attempt in range(3):
-        sol = least_squares(resid, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
+        sol = least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
+                            jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                             xtol=1e-15, ftol=1e-15, gtol=1e-15)
         x = sol.x
         a_fit = np.r_[x[nb:nb + nd], 1.0]

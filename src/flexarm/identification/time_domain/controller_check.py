@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
@@ -167,7 +168,8 @@ def _robust_fit(A: np.ndarray, y: np.ndarray):
     r0 = y - A @ b0
     scale = max(1.4826 * float(np.median(np.abs(r0 - np.median(r0)))), 1e-3)
     sol = least_squares(lambda b: A @ b - y, b0, loss="huber", f_scale=scale,
-                        jac=lambda b: A, method="trf")
+                        jac=lambda b: A,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+                        method="trf")
     return sol.x, y - A @ sol.x
 
 
@@ -185,7 +187,7 @@ def _rate_filter(log: Log) -> tuple[dict[str, float], dict[str, float]]:
             f = lfilter([1 - a], [1, -a], b, zi=[a * v[0]])[0]
             return float(np.mean((v - f) ** 2))
 
-        res = minimize_scalar(cost, bounds=(0.0, 200 * T), method="bounded",
+        res: Any = minimize_scalar(cost, bounds=(0.0, 200 * T), method="bounded",
                               options={"xatol": 1e-2 * T})
         taus[vel] = float(res.x)
         r2s[vel] = 1.0 - res.fun / float(np.var(v))
@@ -270,6 +272,7 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
         r2_by[m] = r2
         if best is None or r2 > best[0]:
             best = (r2, m, reg, se, limit, sat, glitch_mask, used, Xm)
+    assert best is not None  # one delay at least (checked above)
     r2, m, reg, se, limit, sat, glitch_mask, used, Xm = best
     declared = np.array([log.gains[a] for a, _ in segs])
     taus, tr2 = _rate_filter(log)

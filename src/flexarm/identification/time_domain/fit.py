@@ -110,8 +110,9 @@ def _finer_than_logged(log, q: float) -> bool:
     return bool(np.median(np.abs(k - np.round(k))) > 0.05)
 
 
-def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resistance: float,
-             link_length: float, gear_efficiency: float, motor_efficiency: float,
+def make_rig(drive: str, gear_ratio: float, motor_constant: float | None,
+             armature_resistance: float | None, link_length: float | None,
+             gear_efficiency: float, motor_efficiency: float,
              limit: float, encoder_quantum: float, tip_quantum: float = 0.0) -> Rig:
     """Drive gains from the data sheet: voltage drive k_u = η_g η_m K_g K_m / R,
     k_ω = k_u K_g K_m; current drive k_u = η_g η_m K_g K_m, k_ω = 0."""
@@ -119,6 +120,7 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
                     ("link_length", link_length)):
         if v is None or not v > 0:
             raise FitInputError(f"fit: field {name!r} = {v!r}: give the data-sheet value (> 0)")
+    assert motor_constant is not None and link_length is not None  # checked just above
     eta = gear_efficiency * motor_efficiency
     if drive == "voltage":
         if armature_resistance is None or not armature_resistance > 0:
@@ -149,7 +151,7 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     tip, hub = est.get("tip"), est.get("hub")
     fb = (est.get("frequency") or {}).get("bounds")
     if fb:
-        wc_b = tuple(fb)
+        wc_b = (fb[0], fb[1])  # (lo, hi)
         wc = tip.omega_c if tip is not None and tip.trusted else math.sqrt(fb[0] * fb[1])
         info["link_frequency_guess"] = {"value": wc, "from": "estimates"}
     else:
@@ -216,7 +218,7 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     ranges = _delay_ranges(hub, tip, max_delay, delays)
     info["delay_ranges"] = {"motor_angle": ranges[0], "tip_deflection": ranges[1]}
     space = ParamSpace(defs, n_sessions, max(r[1] for r in ranges), sign, friction,
-                       tuple(delays), delay_ranges=ranges)
+                       (delays[0], delays[1]), delay_ranges=ranges)
     zeta0 = float(np.clip(tip.zeta, 0.003, 0.25)) if tip is not None and tip.trusted else 0.03
     B0 = (float(np.clip(hub.viscous, 0.0, B_hi)) if hub is not None and hub.trusted
           and hub.viscous is not None else 0.05 * B_hi)
@@ -364,7 +366,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             q = 0.0
     notes: list[str] = []
     if voltage_limit is None:
-        declared = {float(g.voltage_limit) for g in blogs if getattr(g, "voltage_limit", None)}
+        declared = {float(v) for v in (getattr(g, "voltage_limit", None) for g in blogs) if v}
         if len(declared) == 1:
             voltage_limit = declared.pop()
         else:
@@ -402,7 +404,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
-    common = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
+    common: dict[str, Any] = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
                   wc_guess=wc_guess, filters=filt)
     obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
     say(f"global stage: {space.n_cont} continuous + discrete parameters, "
@@ -648,6 +650,7 @@ def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: in
             trials[int(dd)] = r["cost"]
             if best is None or r["cost"] < best[0]["cost"]:
                 best = (r, Dk)
+    assert best is not None  # D[1] itself is always tried
     r, Dk = best
     return {"D": Dk, "U": r["U"], "off": r["off"], "trials": trials}
 
@@ -726,7 +729,8 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
         return obj.cost(Us, np.tile(D, (X.shape[0], 1)), np.tile(off, (X.shape[0], 1, 1)))
 
     c0 = float(f(U[idx][:, None])[0])
-    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, seed=seed, tol=0.0,
+    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, tol=0.0,
+                                 seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
                                  updating="deferred", vectorized=True, polish=False,
                                  x0=U[idx], mutation=(0.5, 1.0), recombination=0.7)
     if res.fun >= c0:
@@ -809,7 +813,8 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
         return cache[key]
 
     t0 = time.perf_counter()
-    res = least_squares(lambda z: batch(z)[0], z0[free], jac=lambda z: batch(z)[1],
+    res = least_squares(lambda z: batch(z)[0], z0[free],
+                        jac=lambda z: batch(z)[1],  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                         bounds=(lo[free], hi[free]), method="trf", x_scale=1.0,
                         max_nfev=max_nfev, ftol=1e-6, xtol=1e-6, gtol=1e-8)
     r, Jac = batch(res.x)

@@ -83,7 +83,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
@@ -275,7 +275,7 @@ class _Engine:
     """Logs cut into segments, the batched run of candidate parameter vectors, residuals."""
 
     def __init__(self, scenario, logs: Sequence, free: Sequence[str], options: FitOptions,
-                 segment: float | None = "options"):
+                 segment: float | Literal["options"] | None = "options"):
         options.check()
         if options.substeps is not None and scenario.simulation is not None:
             scenario = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
@@ -843,7 +843,8 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
 
         res = differential_evolution(
             f, list(zip(eng.lo, eng.hi, strict=True)), popsize=options.popsize, maxiter=options.maxiter,
-            seed=options.seed, tol=1e-3, updating="deferred", vectorized=True, polish=False,
+            seed=options.seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
+            tol=1e-3, updating="deferred", vectorized=True, polish=False,
             init="latinhypercube", x0=z0, mutation=(0.5, 1.0), recombination=0.7)
         z0 = np.asarray(res.x)
         stages["global"] = {"cost": float(res.fun), "nfev": int(res.nfev), "generations":
@@ -980,7 +981,8 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
-    res = least_squares(lambda v: point(v)["r"], v0, jac=jac,
+    res = least_squares(lambda v: point(v)["r"], v0,
+                        jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                         bounds=(lo, hi), method="trf", x_scale=1.0,
                         tr_solver="lsmr" if nx else "exact",
                         max_nfev=options.max_nfev, ftol=options.ftol, xtol=options.xtol,
@@ -1094,7 +1096,7 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
     state_warnings = eng.assumed_starts()
     sim = eng.run(np.zeros((1, 0)))[0]
     fp: dict[str, dict[str, float]] = {}
-    traj: dict[str, dict[str, np.ndarray]] = {}
+    traj: dict[str, dict[str, Any]] = {}  # time, and the simulated / measured channels
     for s, (li, k0, ln) in enumerate(eng.seg):
         L = eng.logs[li]
         d, tr = {}, {}

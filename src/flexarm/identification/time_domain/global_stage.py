@@ -72,7 +72,8 @@ def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray,
     x0 = np.concatenate([np.clip(u0, 0, 1), np.asarray(d0, float)[free]])
     t0 = time.perf_counter()
     res = differential_evolution(
-        f, bounds, popsize=popsize, maxiter=maxiter, seed=seed, tol=tol, atol=0.0,
+        f, bounds, popsize=popsize, maxiter=maxiter, tol=tol, atol=0.0,
+        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
         updating="deferred", vectorized=True, polish=False, init="latinhypercube",
         integrality=integrality, x0=x0, mutation=(0.5, 1.0), recombination=0.7,
         callback=cb)

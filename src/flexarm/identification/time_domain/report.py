@@ -57,7 +57,7 @@ class FitResult:
     std: dict[str, float]
     derived: dict[str, float]
     delays: dict[str, int]
-    fit_percent: dict[str, dict[str, float]]
+    fit_percent: dict[str, dict[str, float | None]]  # None: not finite
     converged: bool
     message: str
     warnings: list[str]
@@ -259,7 +259,7 @@ def _r(v) -> float | None:
     return None if v is None or not np.isfinite(v) else round(float(v), 3)
 
 
-def _jsonable(x):
+def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -288,7 +288,7 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     T = log0.dt
     q = rig.encoder_quantum
     rigid = "link_frequency" not in p
-    sensors = {"motor_angle": {"delay": res.delays["motor_angle"]}}
+    sensors: dict[str, dict[str, Any]] = {"motor_angle": {"delay": res.delays["motor_angle"]}}
     if not rigid:
         sensors["tip_deflection"] = {"gain": p["tip_gain"],
                                      "delay": res.delays["tip_deflection"]}

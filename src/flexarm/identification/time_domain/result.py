@@ -102,7 +102,7 @@ class FitResult:
                    {k: v for k, v in d.items() if k not in known})
 
 
-def finite(x):
+def finite(x: Any) -> Any:
     """JSON-ready: non-finite floats as None, recursively."""
     if isinstance(x, dict):
         return {k: finite(v) for k, v in x.items()}

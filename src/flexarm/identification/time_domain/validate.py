@@ -39,6 +39,8 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
     ``"traces"``: per log ``time``, ``measured``, ``simulated``). The servo-rig replay
     behind :func:`flexarm.identification.time_domain.predict.predict`, the one entry."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    # a single-link rig scenario: [sampling] and [simulation] (validated)
+    assert sc.sampling is not None and sc.simulation is not None
     result: dict[str, Any] = {"scenario": sc.name, "fit_percent": {}, "plots": []}
     blogs, trajs = [], []
     for x in logs:
@@ -105,6 +107,7 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
             sim = {c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection"))
                    if c in names}
             sim["command"] = traj[2][0]
+            assert log.time is not None  # a bench log has its time (as_bench_log)
             result.setdefault("traces", []).append(
                 {"time": log.time - log.time[0], "measured": meas, "simulated": sim})
         blogs.append(log)
