@@ -621,6 +621,37 @@ def test_cli_simulate_replays_a_mat_log(tmp_path, synthetic_log):
     assert r.exit_code == 2 and "nope.mat" in r.output
 
 
+def test_cli_simulate_window_counts_from_the_logs_first_sample(tmp_path, synthetic_log):
+    """``--window START:STOP`` is in s from the log's first sample (the one window rule of
+    io.logs.Log.window, which replay applies): a log whose clock starts at 100 s replays
+    its first 2 s as the log starting at 0 does (the CLI added the first time stamp
+    again, and the window fell outside such a log)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    sc, log = synthetic_log
+    X1 = np.column_stack([log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")])
+    X2 = np.column_stack([log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")])
+    R1 = np.column_stack([log["theta_ref_1"]] + [0 * log.time] * 3)
+    R2 = np.column_stack([log["theta_ref_2"]] + [0 * log.time] * 3)
+    fps = []
+    for t0 in (0.0, 100.0):
+        f = tmp_path / f"s{t0:g}.mat"
+        sio.savemat(f, {"time": log.time + t0, "X1_meas": X1, "X1_ref": R1, "X2_sim": X2,
+                        "X2_meas": R2})
+        out = tmp_path / f"o{t0:g}"
+        r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(out),
+                                     "--log", str(f), "--log-format", str(STAIRCASE),
+                                     "--window", "0:2"])
+        assert r.exit_code == 0, r.output
+        fps.append(json.loads((out / "replay.json").read_text())["fit_percent"][str(f)])
+    assert fps[1] == fps[0]
+    assert fps[1]["theta_1"] == pytest.approx(100.0, abs=1e-4)
+
+
 @pytest.mark.slow
 @needs_data
 def test_data_sheet_replay_of_the_102_s_run(run_log):

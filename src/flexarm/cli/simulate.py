@@ -99,8 +99,7 @@ def replay_logs(sc, logs: list[Path], log_format: Path | None, window: str | Non
         if continuous:
             reps = replay_run(sc, glogs, continuous=True)
         else:
-            reps = [replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1])
-                           if win else None) for g in glogs]
+            reps = [replay(sc, g, window=win) for g in glogs]  # [t0, t1) s from the first sample
         for path, rep in zip(logs, reps, strict=True):
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
             if rep.fit_percent:  # a log where no channel moves has no fit % and no figure
