@@ -77,7 +77,7 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
                           for r in recs))
     a, b = (res[k]["records"] for k in res)
     worst = 0.0
-    for ra, rb in zip(a, b):
+    for ra, rb in zip(a, b, strict=False):
         for k, v in ra.items():
             if k.endswith("_std") or not isinstance(v, float) or k in ("seconds",):
                 continue

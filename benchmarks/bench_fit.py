@@ -34,7 +34,7 @@ def main():
     d = Path(tempfile.mkdtemp())
     logs = [synthetic_log(sc, g, d / f"log{i}.csv", duration=10.0, period=3.0,
                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05)))]
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05), strict=True))]
     t = time.perf_counter()
     res = fit(logs, **RIG, popsize=8, maxiter=30, global_seconds=4.0)
     wall = time.perf_counter() - t

@@ -62,8 +62,10 @@ def main():
           f"baseline generic rational fit (5 poles, 2 zeros, delay): {t_tf * 1e3:.1f} ms")
 
     # the voltage-servo structure (the rotary rig), 2 outputs x 60 lines, 6 parameters, 2 % noise
-    from flexarm.identification.frequency_domain.structures import (fit_structure,
-                                                                    voltage_servo_response)
+    from flexarm.identification.frequency_domain.structures import (
+        fit_structure,
+        voltage_servo_response,
+    )
     given = dict(motor_constant=7.68e-3, armature_resistance=2.6, gear_ratio=70.0,
                  efficiency=0.621, length=0.42)
     true = dict(hub_inertia=2.08e-3, hub_viscous=4e-3, link_stiffness=1.2, link_inertia=3.5e-3,
@@ -74,7 +76,8 @@ def main():
     sd = {k: 0.02 * np.abs(r[k]) for k in G}
     t_sv, fsv = best_of(lambda: fit_structure("voltage-servo", ws, G, sd, given=given))
     print(f"voltage-servo ML fit, 2 outputs x 60 lines, 6 parameters: {t_sv * 1e3:.1f} ms "
-          f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, 4 delay starts)")
+          f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, "
+          "4 delay starts)")
 
 
 if __name__ == "__main__":

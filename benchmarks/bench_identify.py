@@ -2,8 +2,8 @@
 
 Generates the experiments (5 ω0/3ω0 pairs, 1.6 to 39 rad/s, sampled at 1 kHz) with the
 independent simulation of the test suite (tests/_frb_sim.py) into a temporary folder, then
-times :func:`flexarm.identification.frequency_domain.identify.identify` on them (reading the CSVs, harmonic analysis,
-Coulomb estimate, corrections, both fits, J/V/C).  Target: under 1 s.
+times :func:`flexarm.identification.frequency_domain.identify.identify` on them (reading the CSVs,
+harmonic analysis, Coulomb estimate, corrections, both fits, J/V/C).  Target: under 1 s.
 
 Run: ``python benchmarks/bench_identify.py`` (from the repository root).
 """
@@ -21,7 +21,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "src"))
 
 import _frb_sim as sim  # noqa: E402
-
 from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
 
 TARGET_S = 1.0

@@ -198,15 +198,17 @@ def main() -> None:
     agree = np.abs(base_theta - run.theta).max()
 
     print(f"  compile (first call, incl. one run)      {compile_s:9.2f} s")
-    print(f"  flexarm single rollout (public call)     {single_s * 1e3:9.1f} ms (CPU {single_c * 1e3:.1f} ms)")
+    print(f"  flexarm single rollout (public call)     {single_s * 1e3:9.1f} ms "
+          f"(CPU {single_c * 1e3:.1f} ms)")
     print(f"  flexarm single rollout (jit core)        {core_s * 1e3:9.1f} ms")
     print(f"  flexarm batch of {N}: compile+first run {batch_compile:9.2f} s")
-    print(f"  flexarm batch of {N}: total             {batch_s:9.2f} s, {per_rollout * 1e3:.2f} ms per "
-          f"rollout (CPU {per_rollout_c * 1e3:.2f} ms; chunks of {args.chunk}; run {mid} = its "
-          f"single run to {batch_err:.1e})"
+    print(f"  flexarm batch of {N}: total             {batch_s:9.2f} s, "
+          f"{per_rollout * 1e3:.2f} ms per rollout (CPU {per_rollout_c * 1e3:.2f} ms; "
+          f"chunks of {args.chunk}; run {mid} = its single run to {batch_err:.1e})"
           f"{'' if not bout.diverged.any() else f'; {bout.diverged.sum()} diverged'}")
-    print(f"  NumPy RHS + solve_ivp (baseline)         {base_s * 1e3:9.1f} ms (CPU {base_c * 1e3:.0f} ms; {nfev} RHS "
-          f"evaluations; max |θ − θ_flexarm| = {agree:.1e} rad over the run)")
+    print(f"  NumPy RHS + solve_ivp (baseline)         {base_s * 1e3:9.1f} ms "
+          f"(CPU {base_c * 1e3:.0f} ms; {nfev} RHS evaluations; "
+          f"max |θ − θ_flexarm| = {agree:.1e} rad over the run)")
     r1, r1c = base_s / single_s, base_c / single_c
     r2, r2c = single_s / per_rollout, single_c / per_rollout_c
     print(f"  single speed-up vs baseline:  {r1:7.1f}x wall, {r1c:.1f}x CPU  "

@@ -3,8 +3,9 @@ global and local stages, friction polish) on real 10 s logs of ../shared/data/ro
 read with examples/quanser-rotflex.toml, data-sheet values only. Target (issue #23): a
 rotary session of two 10 s logs in at most 30 s on 2 quiet cores; the hard session of 4/27
 (heavy gear friction, two runs fitted together) is timed beside the easier ones. Baseline
-printed beside it: the same fit with the guesses-only search (``estimates=False``) over the same delay range, which the earlier
-default could not do in time (the issue measured ~160 s per session at max_delay=90).
+printed beside it: the same fit with the guesses-only search (``estimates=False``) over the same
+delay range, which the earlier default could not do in time (the issue measured ~160 s per
+session at max_delay=90).
 
 Run: python benchmarks/bench_real_fit.py
 """

@@ -84,7 +84,8 @@ def main() -> None:
     sc = load_scenario("feliu-single-mass")
     p = prepare(sc)
     n = p.n_samples
-    print(f"single-mass arm, PD motor loop with friction: {n} samples of {sc.sampling.period*1e3:g} ms, "
+    print(f"single-mass arm, PD motor loop with friction: {n} samples of "
+          f"{sc.sampling.period*1e3:g} ms, "
           f"{sc.simulation.substeps} RK4 substeps, 12-bit converters, one-period delay")
 
     t0 = time.perf_counter()
@@ -131,8 +132,10 @@ def main() -> None:
           f"(agrees with flexarm to {agree:.2e} rad max over the run)")
     r1 = base / single
     r2 = single / per_rollout
-    print(f"  single speed-up vs baseline: {r1:7.1f}x   (target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})")
-    print(f"  batch per rollout vs single: {r2:7.1f}x   (target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})")
+    print(f"  single speed-up vs baseline: {r1:7.1f}x   "
+          f"(target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})")
+    print(f"  batch per rollout vs single: {r2:7.1f}x   "
+          f"(target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,6 @@ standard deviations, the warnings, and fit % per signal held out."""
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -18,8 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from flexarm.identification.time_domain.two_link import (fit_two_link,  # noqa: E402
-                                                         held_out_report)
+from flexarm.identification.time_domain.two_link import fit_two_link, held_out_report  # noqa: E402
 
 DATA = ROOT.parents[0] / "shared" / "data" / "two-link-rig"
 EXAMPLES = ROOT / "examples"

@@ -85,7 +85,8 @@ def main() -> None:
             for k in range(args.repeat):
                 for side, tree in (("old", old_tree), ("new", ROOT)):
                     text = run(tree, script)
-                    print(f"===== {script}, {side} ({args.commit if side == 'old' else head + ' + working tree'}), "
+                    which = args.commit if side == "old" else head + " + working tree"
+                    print(f"===== {script}, {side} ({which}), "
                           f"run {k + 1}/{args.repeat}, load {os.getloadavg()[0]:.1f}\n{text}")
                     for label, v in figures(text).items():
                         best[side][label] = min(v, best[side].get(label, float("inf")))

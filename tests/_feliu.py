@@ -1,6 +1,6 @@
 """Shared, cached pieces of the FRB control tests (one inner-loop design per session)."""
 
-from functools import lru_cache
+from functools import cache
 
 import equinox as eqx
 
@@ -23,7 +23,7 @@ def model(name: str = "feliu-single-mass", hold_tip: bool = False) -> SingleLink
     return SingleLinkModel.from_spec(load_scenario(name).arm, hold_tip=hold_tip)
 
 
-@lru_cache(maxsize=None)
+@cache
 def design():
     """The inner-loop design of FRB Sec. VI-B.2: T = 3 ms, one sample of delay,
     G_cm1(1) = 15 A/rad, checked at the 200 mrad step of Fig. 11, no overshoot."""

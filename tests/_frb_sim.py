@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -160,7 +160,7 @@ PAPER_PAIRS = ((1.6, 4.8), (2.4, 7.2), (3.5, 10.5), (4.4, 13.2), (13.0, 39.0))
 SECOND_PAIRS = ((1.5, 4.5), (2.3, 6.9), (4.0, 12.0), (5.6, 16.8), (12.5, 37.5))
 
 
-@lru_cache(maxsize=None)
+@cache
 def experiment(arm: Arm, w: float, periods: int = 20):
     return simulate(arm, w, periods=periods)
 

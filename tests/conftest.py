@@ -46,7 +46,7 @@ ROTARY_SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
                     voltage_limit=10.0)  # the limit the tests' figures were measured at
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _rotary_whole_fit(name: str):
     from flexarm.identification.time_domain import fit, read_bench_log
 

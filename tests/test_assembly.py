@@ -112,7 +112,7 @@ def test_torsional_link_frequency():
     assert w == pytest.approx(math.sqrt(K * (J_h + J0) / (J_h * J0)), rel=1e-12)
     # its deflection angle signal is α itself
     sig = dict(zip(model.plant.signal_names,
-                   np.asarray(model.plant.signals(jnp.asarray([0.1, 0.02, 0, 0]), jnp.zeros(1)))))
+                   np.asarray(model.plant.signals(jnp.asarray([0.1, 0.02, 0, 0]), jnp.zeros(1))), strict=True))
     assert sig["deflection_angle_1"] == pytest.approx(0.02, rel=1e-15)
 
 

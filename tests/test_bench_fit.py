@@ -7,7 +7,13 @@ import time
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import FitInputError, fit, parse_controller, read_bench_log, validate
+from flexarm.identification.time_domain import (
+    FitInputError,
+    fit,
+    parse_controller,
+    read_bench_log,
+    validate,
+)
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.identification.time_domain.report import check_physical
 from flexarm.identification.time_domain.synthetic import synthetic_log
@@ -33,7 +39,7 @@ def logs(tmp_path_factory):
     sc = load_scenario("rotary-flexible-link")
     return [synthetic_log(sc, g, d / f"log{i}.csv", duration=6.0, period=3.0,
                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05)))]
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05), strict=True))]
 
 
 @pytest.fixture(scope="module")
@@ -207,19 +213,19 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import tempfile
+
     from bench_fit import GAINS, RIG, TRUE
 
     from flexarm.identification.time_domain import fit, validate
     from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
-    import tempfile
-
     sc = load_scenario("rotary-flexible-link")
     d = Path(tempfile.mkdtemp())
     logs = [synthetic_log(sc, g, d / f"log{i}.csv", duration=10.0, period=3.0,
                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05)))]
+            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05), strict=True))]
     res = fit(logs[:2], **RIG, popsize=8, maxiter=30, global_seconds=4.0, local_nfev=80)
     got = {**res.params, **res.derived}
     for name, true in TRUE.items():
@@ -242,7 +248,11 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
     ~ 0.09 of it and must stay below 0.2 (√((1−ρ)/(1+ρ)) = 0.10 for the AR(1) channel)."""
     from scipy.signal import lfilter
 
-    from flexarm.identification.time_domain.uncertainty import bartlett_meat, hac_covariance, iid_covariance
+    from flexarm.identification.time_domain.uncertainty import (
+        bartlett_meat,
+        hac_covariance,
+        iid_covariance,
+    )
 
     rng = np.random.default_rng(1)
     g = rng.normal(size=(50, 3))
@@ -419,7 +429,7 @@ def test_filtered_tip_sensor_known_cutoff(tmp_path):
     scf = sc.model_copy(update={"sensors": sens})
     flogs = [synthetic_log(scf, g, tmp_path / f"filt{i}.csv", duration=6.0, period=3.0,
                            amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-             for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1)))]
+             for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1), strict=True))]
     res = fit(flogs, **{**RIG, "filters": {"tip_deflection": 15.0}}, popsize=8, maxiter=25,
               global_seconds=4.0, delay_search="both", polish_iter=20)
     p = {**res.params, **res.derived}

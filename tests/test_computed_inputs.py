@@ -64,7 +64,7 @@ def test_computed_rates_equal_the_simulators_filter_outputs():
     loop = _oscillator_loop({k: v.model_dump() for k, v in specs.items()})
     n = 1500
     out = simulate_loop(loop, np.array([0.2, 0.0]), {}, n)
-    meas = dict(zip(loop.sensors.names, out["measured"].T))
+    meas = dict(zip(loop.sensors.names, out["measured"].T, strict=True))
     log = Log(Path("osc.csv"), np.arange(n) * DT, {"s": meas["s"], "lp": meas["lp"]})
     got, notes = computed_channels(specs, log, DT)
     assert set(got) == {"lpr", "d"}

@@ -66,7 +66,7 @@ def test_states_at_each_piece_are_the_states_of_one_run():
     whole = _stepped(blk, meas, refs)
     cuts = [0, 17, 30, 50]
     logs = [Log(None, np.arange(b - a) * 1e-3, {"y1": y1[a:b], "y2": y2[a:b], "r": r[a:b]})
-            for a, b in zip(cuts[:-1], cuts[1:])]
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     starts = continuous_starts(_Loop(blk), {}, logs, 1e-3)
     assert [s.sample for s in starts] == cuts[:-1]
     for s in starts:
@@ -205,12 +205,12 @@ def build_lqg_stair(tmp_path: Path) -> StairRun:
     shared stair's setpoints under it and write the run as ten consecutive files in the
     stair's layout (with the plant state, FORMAT_EXTRA); checks the run follows the stair.
     Shared by this module's acceptance test and tests/test_cli_continuous.py."""
+    import scipy.io as sio
+
     from flexarm.io.logformat import load_log_format
     from flexarm.sim.build import simulate
     from flexarm.specs import load_scenario
     from flexarm.specs.scenario import load_controllers
-
-    import scipy.io as sio
 
     base = load_scenario("quanser-two-link")
     struct, design = _shoulder_lqg()

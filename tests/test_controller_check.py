@@ -10,7 +10,6 @@ import pytest
 from flexarm.identification.time_domain.controller_check import check_controller
 from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
 from flexarm.io.logformat import load_log_format, log_format_from_dict
-
 from test_logformat import EXAMPLE, README_GAINS, RIG_FILES, needs_data
 
 

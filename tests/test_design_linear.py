@@ -15,8 +15,8 @@ import flexarm
 from flexarm.cli import app
 from flexarm.control.lqg import integral_model, loop_poles
 from flexarm.design.compare import compare
-from flexarm.design.plants import PlantBatch
 from flexarm.design.linear import design_linear, design_model, step_response
+from flexarm.design.plants import PlantBatch
 from flexarm.specs.scenario import scenario_from_dict
 
 COUNT = 2 * math.pi / 4096  # the rotary rig's hub encoder (4096 counts per turn)

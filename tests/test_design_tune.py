@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import flexarm
-from flexarm.metrics import step_metrics
 from flexarm.design import compare as cmp
 from flexarm.design import plants as pl
 from flexarm.design.tune import TuneCost, design_tune
+from flexarm.metrics import step_metrics
 
 COUNT = 1e-3  # rad: the rig logs' resolution (README: every value rounded to 1 mrad)
 

@@ -594,7 +594,8 @@ N_REAL = 4000
                     reason=f"real rig logs not found at {DATA} (../shared is absent)")
 def test_c_matches_python_on_the_real_unit6_log(tmp_path):
     """The real unit 6 run (its first 4 s: 4000 samples of 1-mrad / 1-mm rounded hub angle,
-    gauge and reference, with reference steps) as the input sequence: the lab's own law (logged gains 8, −8.5, 1.5, 1.5;
+    gauge and reference, with reference steps) as the input sequence: the lab's own law (logged
+    gains 8, −8.5, 1.5, 1.5;
     rates filtered with the logger's τ = 3.3 ms from controller_check; ±5 V) with
     friction compensation, exported and compiled. Double: 1e-12 V and the derived bound;
     float: the derived bound (module docstring)."""

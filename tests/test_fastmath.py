@@ -1,7 +1,7 @@
 """flexarm.fastmath: vectorisable float64 sine and cosine against the platform libm."""
 
-import numpy as np
 import jax
+import numpy as np
 import pytest
 
 from flexarm import fastmath

@@ -13,13 +13,17 @@ import pytest
 
 import flexarm
 from flexarm.identification.time_domain import presets
-from flexarm.identification.time_domain.options import (Cost, FitOptions, Local,
-                                                        PredictOptions, Shooting)
+from flexarm.identification.time_domain.options import (
+    Cost,
+    FitOptions,
+    Local,
+    PredictOptions,
+    Shooting,
+)
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.io.logs import Log, log_keys, write_log
 from flexarm.specs.paths import scenario_with
-
 from test_fit_scenario import staircase, two_mode_link
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 from flexarm.identification.time_domain import FitOptions, fit_scenario
-from flexarm.specs.paths import (expand_paths, parse_path,
-                                  scenario_with)
 from flexarm.identification.time_domain.synthetic import scenario_log
+from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.scenario import load_scenario, scenario_from_dict
 
 #: the template's values are the truth times these factors (cycled over the free list)
@@ -173,8 +172,8 @@ def test_cli_fit_and_validate_refit_friction(tmp_path):
     from typer.testing import CliRunner
 
     from flexarm.cli import app
-    from flexarm.io.logs import write_log
     from flexarm.identification.time_domain.general import _drop_none
+    from flexarm.io.logs import write_log
     from flexarm.io.write import write_toml
 
     truth = two_mode_link()

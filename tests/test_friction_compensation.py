@@ -27,7 +27,7 @@ def test_wrapper_adds_level_times_sign():
     c = friction_compensated(fb, 0.5, dt=1e-3, quantum=1e-3)
     st = c.init()
     us = []
-    for k, th in enumerate([0.0, 0.01, 0.02, 0.02]):
+    for _k, th in enumerate([0.0, 0.01, 0.02, 0.02]):
         st, u = c.step(st, {"motor_angle": jnp.asarray(th)}, {"reference": jnp.asarray(1.0)})
         us.append(float(u[0]))
     fb_u = [2.0 * (1.0 - th) for th in (0.0, 0.01, 0.02, 0.02)]

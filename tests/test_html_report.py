@@ -35,8 +35,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from flexarm.analysis.html_report import (HtmlReport, design_report, figure_data_uri,
-                                          fit_report)
+from flexarm.analysis.html_report import HtmlReport, design_report, figure_data_uri, fit_report
 from flexarm.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,7 +104,7 @@ def _check_in_browser(page: Path, tmp: Path, n_figures: int) -> None:
     info, shot = _render(page, tmp)
     assert len(info["images"]) == n_figures
     assert _ink(shot) > 0.01, "the screenshot is blank"
-    for s, im in zip(srcs, info["images"]):
+    for s, im in zip(srcs, info["images"], strict=True):
         src = Image.open(io.BytesIO(base64.b64decode(s)))
         assert im["ok"] and (im["w"], im["h"]) == src.size, im
         x, y = round(im["x"]), round(im["y"])
@@ -297,12 +296,11 @@ def test_general_fit_and_refit_validate_reports(tmp_path):
     """The general path (flexarm fit SCENARIO LOG --free ..., validate --refit friction)
     with --report, on test_fit_scenario's synthetic two-mode link: the report's fitted
     values, std and fit % are the JSON's, and the refitted friction table is there."""
-    from test_fit_scenario import scenario_with, staircase, two_mode_link
-
     from flexarm.identification.time_domain.general import _drop_none
     from flexarm.identification.time_domain.synthetic import scenario_log
     from flexarm.io.logs import write_log
     from flexarm.io.write import write_toml
+    from test_fit_scenario import scenario_with, staircase, two_mode_link
 
     truth = two_mode_link()
     t = np.arange(1501) * 0.002

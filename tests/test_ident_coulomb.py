@@ -1,4 +1,5 @@
-"""Coulomb friction from ω0/3ω0 pairs (flexarm.identification.frequency_domain.coulomb, FRB eqs. (2)-(6))."""
+"""Coulomb friction from ω0/3ω0 pairs (flexarm.identification.frequency_domain.coulomb,
+FRB eqs. (2)-(6))."""
 
 from __future__ import annotations
 
@@ -39,8 +40,11 @@ def test_square_wave_harmonics_and_corrected_phase_of_eq4(phi):
         assert abs(X3 - printed) > 0.1
 
 
-def _pair(w0, cf=CF, th1=0.3 * np.exp(0.7j), th3=0.002 * np.exp(1.1j),
-          th1p=0.05 * np.exp(-0.4j)):
+#: the default phasors of _pair: θ1, θ3 and θ'1 of the paper's arm
+TH1, TH3, TH1P = 0.3 * np.exp(0.7j), 0.002 * np.exp(1.1j), 0.05 * np.exp(-0.4j)
+
+
+def _pair(w0, cf=CF, th1=TH1, th3=TH3, th1p=TH1P):
     """The five phasors of eqs. (3)-(5) for the linear part G of the paper's arm."""
     i3 = GINV(3j * w0) * th3 + cf * square_wave_phasor(th1, 3)
     i1p = GINV(3j * w0) * th1p + cf * square_wave_phasor(th1p, 1)

@@ -1,29 +1,37 @@
 """Transfer-function fit of the sine pipeline (flexarm.tfest with the log-ratio cost of FRB eq. (6))
 and the identification pipeline
-(flexarm.identification.frequency_domain.identify) on data of an independent simulation (tests/_frb_sim.py)."""
+(flexarm.identification.frequency_domain.identify) on data of an independent simulation
+(tests/_frb_sim.py)."""
 
 from __future__ import annotations
 
 import json
 import shutil
 
+import control
 import numpy as np
 import pytest
 
 import _frb_sim as sim
-from flexarm.identification.frequency_domain.harmonics import IdentificationError, IdentificationWarning
+from flexarm.identification.frequency_domain.harmonics import (
+    IdentificationError,
+    IdentificationWarning,
+)
 from flexarm.identification.frequency_domain.identify import identify
-import control
-
-from flexarm.identification.frequency_domain.tfest import (TFEstError, tf_coefficients,
-                                                           tf_response, tfest)
+from flexarm.identification.frequency_domain.tfest import (
+    TFEstError,
+    tf_coefficients,
+    tf_response,
+    tfest,
+)
+from flexarm.specs.arm import SingleLinkArm
 
 
 def fit_tf(w, H, n_zeros, n_poles, integrators=0):
     """The pipeline's fit (identify.py): tfest, log-ratio cost, no variances."""
     return tfest(control.frd(np.asarray(H, complex), np.asarray(w, float)), n_poles, n_zeros,
                  integrators=integrators, cost="log")
-from flexarm.specs.arm import SingleLinkArm
+
 
 # FRB eqs. (12), (13), as printed (θm in rad, i in A).
 EQ12_NUM = 394.94 * np.array([1.0, 0.06, 43.75])

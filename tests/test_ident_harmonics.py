@@ -135,7 +135,10 @@ def test_measured_friction_shape():
     """sign(θ̇m) rebuilt from θm's harmonics: for a pure sinusoid it is eq. (2)'s square
     wave, 4/(nπ) e^{j(n∠θ1 + π/2)}; a third harmonic in θm shifts its zero crossings and
     with them the friction's fundamental."""
-    from flexarm.identification.frequency_domain.harmonics import ideal_friction_phasor, measured_friction_shape
+    from flexarm.identification.frequency_domain.harmonics import (
+        ideal_friction_phasor,
+        measured_friction_shape,
+    )
 
     w, T = 3.0, 1e-4
     t = np.arange(int(20 * 2 * np.pi / w / T)) * T  # whole periods up to one sample

@@ -64,7 +64,7 @@ def test_column_and_unit_mapping(tmp_path):
     t, s = _rows()
     p = tmp_path / "mapped.csv"
     rows = [f"{1e3 * ti:.9g},{r:.9g},{1e3 * i:.9g},{m:.9g},{tt:.9g}" for ti, r, i, m, tt in
-            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"])]
+            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True)]
     _csv(p, header="t_ms,reference,i_m,motor_angle,tip_angle", rows=rows)
     before = _sha(p)
     log = read_log(p, columns={"current": "i_m", "time": "t_ms"},
@@ -77,7 +77,7 @@ def test_column_and_unit_mapping(tmp_path):
     # encoder counts: a scaled unit (4096 counts per turn), 1 count = 2π/4096 rad
     counts = tmp_path / "counts.csv"
     rows = [f"{ti:.9g},{r:.9g},{i:.9g},{m * 4096 / (2 * np.pi):.12g},{tt:.9g}" for ti, r, i, m, tt in
-            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"])]
+            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True)]
     _csv(counts, header="time,reference,current,motor_angle,tip_angle", rows=rows)
     log = read_log(counts, units={"motor_angle": "turn/4096"})
     np.testing.assert_allclose(log["motor_angle"], s["motor_angle"], rtol=1e-10, atol=1e-15)

@@ -11,9 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from flexarm.cli import app
-from flexarm.io.logformat import load_log_format
 from flexarm.identification.frequency_domain.periodic import periodic_frf
 from flexarm.identification.frequency_domain.structures import fit_two_mass
+from flexarm.io.logformat import load_log_format
 
 ROOT = Path(__file__).resolve().parents[1]
 MAT = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench" / "MultisineTypeB.mat"

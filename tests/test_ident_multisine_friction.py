@@ -21,8 +21,13 @@ from flexarm.control.discrete import FunctionController
 from flexarm.identification.frequency_domain.excitation import multisine
 from flexarm.identification.frequency_domain.harmonics import IdentificationError
 from flexarm.identification.frequency_domain.multisine_friction import (
-    _play, coulomb_from_amplitudes, coulomb_from_bla_amplitudes, coulomb_from_distortion,
-    two_mass_scenario, velocity_rms)
+    _play,
+    coulomb_from_amplitudes,
+    coulomb_from_bla_amplitudes,
+    coulomb_from_distortion,
+    two_mass_scenario,
+    velocity_rms,
+)
 from flexarm.identification.frequency_domain.periodic import periodic_frf
 from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response
 from flexarm.sim.build import prepare
@@ -70,14 +75,14 @@ def _linear(frf):
 @pytest.mark.slow
 def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
     errs, odd = [], []
-    for cf, frf in sorted(records.items()):
+    for _cf, frf in sorted(records.items()):
         G0 = _linear(frf)
         errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / G0 - 1) ** 2))))
         bands = [b for b in frf.distortion["motor_angle"] if np.isfinite(b.odd_db)]
         odd.append(float(np.mean([b.odd_db for b in bands])))
     # the BLA departs from the linear FRF monotonically with C_f (measured rms relative
     # error 0.8, 1.1, 4.6, 18 % at C_f = 0, 0.02, 0.1, 0.4 A) ...
-    assert all(a < b for a, b in zip(errs, errs[1:])), errs
+    assert all(a < b for a, b in zip(errs, errs[1:], strict=False)), errs
     # ... and without friction it is the linear FRF within the noise: the rms of the error
     # in noise standard deviations is ~1 (χ² with 2F dof; the ZOH formula is exact to
     # (ωT)²/24 < 1e-3 here; measured 1.05) → bound 1.5
@@ -89,7 +94,7 @@ def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
     # then rising strictly with C_f; at 0.02 A already detected in every band below 95 Hz
     assert all(b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"]
                if np.isfinite(b.odd_db))
-    assert all(a < b for a, b in zip(odd, odd[1:])), odd
+    assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
     assert all(b.odd_db - b.noise_db > 6.0 for b in records[0.02].distortion["motor_angle"]
                if np.isfinite(b.odd_db) and b.band_hz[1] < 95)
 
@@ -179,7 +184,6 @@ def test_sine_pairs_and_multisine_agree_on_the_frb_arm(tmp_path):
 
     sys.path.insert(0, str(Path(__file__).parent))
     from _helpers import scenario_dict
-
     from flexarm.identification.frequency_domain.experiments import SineDesign, run_sine_experiments
     from flexarm.identification.frequency_domain.identify import identify
 
@@ -263,7 +267,7 @@ def test_coulomb_from_the_bla_amplitude_dependence(amplitudes):
     the Gaussian assumption corrected the truth lies within 3 standard deviations with no
     allowance. Measured 0.1009 ± 0.019 A and 0.0197 ± 0.0038 A·s/rad; mismatch 0.15 std."""
     sv, d, sd = [], [], []
-    for rms, (frf, fit) in amplitudes.items():
+    for _rms, (frf, fit) in amplitudes.items():
         sv.append(velocity_rms(frf))
         d.append(fit.parameters["motor_viscous"]["value"])
         sd.append(fit.parameters["motor_viscous"].get("std_inflated",
@@ -409,14 +413,14 @@ def test_rotary_rig_bla_and_odd_distortion(rotary):
     from flexarm.identification.frequency_domain.structures import voltage_servo_response
     recs, _, _ = rotary
     errs, odd = [], []
-    for cf, frf in sorted(recs.items()):
+    for _cf, frf in sorted(recs.items()):
         z = _rot_zoh(frf)
         G0 = voltage_servo_response({**ROT_TRUE, **ROT_GIVEN}, 2 * np.pi * frf.frequency_hz)
         errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / z / G0["motor_angle"] - 1) ** 2))))
         odd.append(float(np.mean([b.odd_db for b in frf.distortion["motor_angle"]
                                   if np.isfinite(b.odd_db)])))
-    assert all(a < b for a, b in zip(errs, errs[1:])), errs
-    assert all(a < b for a, b in zip(odd, odd[1:])), odd
+    assert all(a < b for a, b in zip(errs, errs[1:], strict=False)), errs
+    assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
     # frictionless: the BLA is the linear FRF within the noise (rms error in noise standard
     # deviations ~1 for a χ² with 2F dof; ZOH divided out exactly; measured 1.01) → 1.5
     f0 = recs[0.0]

@@ -1,4 +1,5 @@
-"""Excitation design (flexarm.identification.frequency_domain.excitation) and the periodic FRF / distortion analysis
+"""Excitation design (flexarm.identification.frequency_domain.excitation) and the periodic FRF /
+distortion analysis
 (flexarm.identification.frequency_domain.periodic) on signals whose answer is known exactly."""
 
 import warnings
@@ -6,8 +7,15 @@ import warnings
 import numpy as np
 import pytest
 
-from flexarm.identification.frequency_domain.excitation import (ExcitationError, crest_factor, multisine, prbs,
-                                      sine_pairs, swept_sine, write_excitation)
+from flexarm.identification.frequency_domain.excitation import (
+    ExcitationError,
+    crest_factor,
+    multisine,
+    prbs,
+    sine_pairs,
+    swept_sine,
+    write_excitation,
+)
 from flexarm.identification.frequency_domain.harmonics import IdentificationError
 from flexarm.identification.frequency_domain.periodic import detect_period, periodic_frf
 

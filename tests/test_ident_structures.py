@@ -8,8 +8,13 @@ import pytest
 
 from flexarm import linearize, load_scenario
 from flexarm.identification.frequency_domain.structures import (
-    FRB_SINGLE_MASS, STRUCTURES, VOLTAGE_SERVO, fit_structure, frb_single_mass_response,
-    voltage_servo_response)
+    FRB_SINGLE_MASS,
+    STRUCTURES,
+    VOLTAGE_SERVO,
+    fit_structure,
+    frb_single_mass_response,
+    voltage_servo_response,
+)
 from flexarm.identification.frequency_domain.tfest import TFEstError
 from flexarm.models.single_link import SingleLinkModel
 
@@ -117,7 +122,7 @@ def test_voltage_servo_coverage_and_cost():
                       for k, v in truth.items()])
         costs.append(f.cost)
     rate = np.mean(cover, axis=0)
-    assert np.all((rate >= 0.88) & (rate <= 1.0)), dict(zip(truth, rate))
+    assert np.all((rate >= 0.88) & (rate <= 1.0)), dict(zip(truth, rate, strict=True))
     assert abs(np.mean(costs) - f.expected_cost) < 3 * f.cost_std / np.sqrt(100)
 
 

@@ -1,9 +1,9 @@
-"""flexarm.identification.frequency_domain.tfest: the frequency-domain fit on FRDs of known systems (exact on
-noise-free data; calibrated intervals and cost under noise of known variance) and the
+"""flexarm.identification.frequency_domain.tfest: the frequency-domain fit on FRDs of known systems
+(exact on noise-free data; calibrated intervals and cost under noise of known variance) and the
 two-mass structure."""
 
-import numpy as np
 import control
+import numpy as np
 import pytest
 
 from flexarm.identification.frequency_domain.structures import fit_two_mass, two_mass_response

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from _feliu import COUNT, LBIN, design, held_prepared, model
-from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import coupling_filter, design_inner_loop, inner_loop
+from flexarm.metrics import step_metrics
 from flexarm.sim.build import run_prepared
 
 DT = 0.003

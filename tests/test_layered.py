@@ -3,16 +3,16 @@ them: the same numbers as the plain derivation, for one state and for a batch.""
 
 import math
 
+import control
 import jax
 import jax.numpy as jnp
-import control
 import numpy as np
 import pytest
 
-from flexarm.control import regulation as R
-from flexarm.sim.continuous import simulate_continuous, simulate_continuous_batch
-from flexarm.models.multilink import build_multilink
 from flexarm import layered as L
+from flexarm.control import regulation as R
+from flexarm.models.multilink import build_multilink
+from flexarm.sim.continuous import simulate_continuous, simulate_continuous_batch
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, benchmark_arm
 
 DEG = math.pi / 180
@@ -79,7 +79,7 @@ def test_plant_rhs_equals_the_plain_solve(arm):
         return jnp.linalg.solve(B, P._forces(x[:nq], x[nq:], u, h))
 
     rhs = jax.jit(lambda plant, x, u: plant.rhs(x, u))
-    for x, u in zip(xs, us):
+    for x, u in zip(xs, us, strict=True):
         ref = plain(jnp.asarray(x), jnp.asarray(u))
         got = rhs(P, jnp.asarray(x), jnp.asarray(u))
         np.testing.assert_allclose(got[nq:], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())

@@ -77,7 +77,8 @@ def _sources():
 
 def _private_uses(tree: ast.AST, module: str) -> list[str]:
     out = []
-    aliases = {}  # local name → flexarm module, from "import flexarm.x as y" / "from flexarm import x"
+    # local name → flexarm module, from "import flexarm.x as y" / "from flexarm import x"
+    aliases = {}
     for line, mod, names in _imports(tree, module):
         if names is None:
             continue
@@ -150,13 +151,19 @@ KNOWN_PRIVATE = {
     'flexarm.analysis.summary: from flexarm.sim.result import _unit',
     'flexarm.control.outer_loop: from flexarm.control.trajectories import _deflection_signal',
     'flexarm.control.trajectories: from flexarm.control.wiener import _siso_polys',
-    'flexarm.design.plants: from flexarm.sim.build import _measured_names',  # needs a public sim.build.measured_names (ctrlblocks: Controller.measured_signals)
-    'flexarm.identification.frequency_domain.coulomb: from flexarm.identification.frequency_domain.harmonics import _warn',
-    'flexarm.identification.frequency_domain.identify: from flexarm.identification.frequency_domain.harmonics import _warn',
-    'flexarm.identification.time_domain.general: from flexarm.sim.build import _measured_names',  # fitcore: needs public names in sim (sampled.scan/quantise, build.measured_names)
-    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _quantise',  # fitcore: needs public names in sim (sampled.scan/quantise, build.measured_names)
-    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _scan',  # fitcore: needs public names in sim (sampled.scan/quantise, build.measured_names)
-    'flexarm.io.logformat: from flexarm.specs.scenario import _format_errors',  # fitcore: needs a public specs.scenario.format_errors
+    # needs a public sim.build.measured_names (ctrlblocks: Controller.measured_signals)
+    'flexarm.design.plants: from flexarm.sim.build import _measured_names',
+    'flexarm.identification.frequency_domain.coulomb: '
+    'from flexarm.identification.frequency_domain.harmonics import _warn',
+    'flexarm.identification.frequency_domain.identify: '
+    'from flexarm.identification.frequency_domain.harmonics import _warn',
+    # fitcore: the next three need public names in sim (sampled.scan/quantise,
+    # build.measured_names)
+    'flexarm.identification.time_domain.general: from flexarm.sim.build import _measured_names',
+    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _quantise',
+    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _scan',
+    # fitcore: needs a public specs.scenario.format_errors
+    'flexarm.io.logformat: from flexarm.specs.scenario import _format_errors',
     'flexarm.models.single_link: from flexarm.models.lumped_beam import _clean',
     'flexarm.sim.continuous: flexarm.sim.sampled._prepare_refs',
     'flexarm.sim.continuous: flexarm.sim.sampled._run_all',

@@ -10,9 +10,9 @@ from numpy.polynomial.legendre import leggauss
 from pydantic import ValidationError
 
 from flexarm.control.regulation import law_zero
-from flexarm.sim.continuous import simulate_continuous
 from flexarm.models.multilink import build_multilink
 from flexarm.models.plant import Plant
+from flexarm.sim.continuous import simulate_continuous
 from flexarm.specs.multilink import Hub, Link, MultiLinkArm, Payload, benchmark_arm
 
 G = 9.81
@@ -146,7 +146,7 @@ def test_energies_equal_direct_integration_over_the_beams(bench):
     t, w = leggauss(40)
     X = [0.5 * lk.length * (t + 1) for lk in arm.links]
     W = [0.5 * lk.length * w for lk in arm.links]
-    PHI = [m.shape(x) for m, x in zip(bench.modes, X)]
+    PHI = [m.shape(x) for m, x in zip(bench.modes, X, strict=True)]
 
     def points(q):
         n = bench.n_links
@@ -167,7 +167,7 @@ def test_energies_equal_direct_integration_over_the_beams(bench):
     def energies(q, qd):
         (out, pe, ae), (dout, dpe, dae) = jax.jvp(points, (q,), (qd,))
         T = U = 0.0
-        for i, ((r, p, a), (dr, dp, da)) in enumerate(zip(out, dout)):
+        for i, ((r, p, _a), (dr, dp, da)) in enumerate(zip(out, dout, strict=True)):
             rho = arm.links[i].rho
             T += 0.5 * rho * jnp.sum(W[i] * jnp.sum(dr**2, axis=0))
             U += rho * G * jnp.sum(W[i] * r[1])

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from _feliu import COUNT, design, model, scenario
-from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import inner_loop
 from flexarm.control.outer_loop import (
     deflection_report,
@@ -17,6 +16,7 @@ from flexarm.control.outer_loop import (
 )
 from flexarm.control.trajectories import parabolic, quasi_parabolic
 from flexarm.control.wiener import feedforward_signal, wiener_feedforward
+from flexarm.metrics import step_metrics
 from flexarm.reproduce.feliu import CHOICES, _mode_amplitudes, _modes
 from flexarm.sim.build import prepare, run_prepared
 

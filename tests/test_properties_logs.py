@@ -27,7 +27,6 @@ from hypothesis import strategies as st
 
 from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
 from flexarm.io.logs import LogError, read_log
-
 from test_logformat import EXAMPLE
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True, database=None,

@@ -21,8 +21,7 @@ from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from flexarm.specs import builtin_scenarios, load_scenario  # noqa: E402
-from flexarm.specs.scenario import (MultiLinkScenario, Scenario, ScenarioError,  # noqa: E402
-                                    scenario_from_dict)
+from flexarm.specs.scenario import MultiLinkScenario, Scenario, ScenarioError, scenario_from_dict  # noqa: E402
 
 BASES = {name: tomllib.loads(p.read_text()) for name, p in sorted(builtin_scenarios().items())}
 

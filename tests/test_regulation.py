@@ -14,8 +14,8 @@ import pytest
 
 from flexarm.control import regulation as R
 from flexarm.errors import SimulationDiverged
-from flexarm.sim.continuous import simulate_continuous
 from flexarm.models.multilink import build_multilink
+from flexarm.sim.continuous import simulate_continuous
 from flexarm.specs.multilink import benchmark_arm
 
 DEG = math.pi / 180

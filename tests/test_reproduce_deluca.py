@@ -84,7 +84,7 @@ def test_larger_gains_converge_with_larger_initial_torque(result):
     assert [e["factor"] for e in sweep] == list(D.quick_config().sweep_factors)
     assert not any(e["diverged"] for e in sweep)
     u0 = [e["u0_norm"] for e in sweep]
-    assert all(b > a for a, b in zip(u0, u0[1:]))
+    assert all(b > a for a, b in zip(u0, u0[1:], strict=False))
     assert all(e["theta_err_deg_end"] < 0.5 for e in sweep)
     rem = result["remedy"]
     assert rem["quintic"]["peak_abs_u"] < 0.2 * rem["step"]["peak_abs_u"]

@@ -115,9 +115,9 @@ def test_result_is_python_control_style(tmp_path):
     path = res.to_csv(tmp_path / "log.csv")
     with pytest.raises(FileExistsError):
         res.to_csv(path)
-    lines = [l for l in path.read_text().splitlines() if not l.startswith("#")]
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
     assert lines[0] == "time,reference,current,motor_angle,tip_angle"
-    body = "\n".join(l for l in path.read_text().splitlines() if not l.startswith("#"))
+    body = "\n".join(line for line in path.read_text().splitlines() if not line.startswith("#"))
     import io
 
     data = np.genfromtxt(io.StringIO(body), delimiter=",", names=True)
@@ -151,7 +151,7 @@ def test_hold_tip_scenario_runs_and_initial_deflection_is_static():
     p = m.plant()
     import jax.numpy as jnp
 
-    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1)))))
+    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1))), strict=True))
     assert sig["motor_angle"] == pytest.approx(0.3)
     assert sig["tip_deflection"] == pytest.approx(0.01, rel=1e-12)
     # the static shape under a tip force: the internal forces K w act at the tip only

@@ -81,7 +81,7 @@ def test_two_mass_fit_is_reproducible_and_predicts_eq_15():
     assert np.max(np.abs(fit.residuals)) < 1e-11
     assert fit.flexural_rigidity == pytest.approx(beam.flexural_rigidity, rel=1e-6)
     assert fit.length == beam.length
-    for m_fit, m in zip(fit.masses, beam.masses):
+    for m_fit, m in zip(fit.masses, beam.masses, strict=True):
         assert m_fit == pytest.approx(m.mass, rel=1e-6)
     num, den = coefs(lumped_beam_block(fit.spec()).coupling_tf())
     # eq. (15): 2.05274 (1591.625 + 2 s²)/(1682.575 + s²) lb*in/rad

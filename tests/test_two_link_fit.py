@@ -9,8 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain.two_link import (CHANNELS, fit_two_link,
-                                                         held_out_report)
+from flexarm.identification.time_domain.two_link import CHANNELS, fit_two_link, held_out_report
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "two-link-rig"

@@ -333,7 +333,7 @@ def test_digital_filters_in_the_loop_match_an_independent_recursion(how):
     loop = _ramp_loop(chans)
     n = 2000
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    meas = dict(zip(loop.sensors.names, out["measured"].T))
+    meas = dict(zip(loop.sensors.names, out["measured"].T, strict=True))
     y = meas["s"]
     t = np.arange(n) * 2e-3
     np.testing.assert_allclose(y, np.round((0.1 + 0.3 * t) / q) * q, atol=1e-12)
@@ -370,7 +370,7 @@ def test_filter_state_settable_and_read_from_a_log():
     loop = _ramp_loop({k: v.model_dump() for k, v in specs.items()})
     n, k = 1500, 700
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    log = Log(None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T)))
+    log = Log(None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T, strict=True)))
     states = filter_state_from_log(specs, log, k, 2e-3)
     assert set(states) == {"lp", "lpr", "d"}
     later = simulate_loop(with_filter_state(loop, states), out["states"][k], {}, n - k)
@@ -417,7 +417,7 @@ def _ctrl(**kw):
 def _steps(ctrl, ys, rs):
     state = ctrl.init()
     us = []
-    for y, r in zip(ys, rs):
+    for y, r in zip(ys, rs, strict=True):
         state, u = ctrl.step(state, {"y1": y[0], "y2": y[1]}, {"r": r})
         us.append(np.asarray(u))
     return np.array(us)
@@ -511,7 +511,6 @@ def test_lti_controller_bad_input():
 def test_lti_bad_input_through_the_scenario():
     """The same errors from a scenario file, naming [controller] and the fix."""
     from _helpers import scenario_dict
-
     from flexarm.sim.build import prepare
     from flexarm.specs import ScenarioError, scenario_from_dict
 
@@ -622,6 +621,37 @@ def test_cli_simulate_replays_a_mat_log(tmp_path, synthetic_log):
     assert r.exit_code == 2 and "nope.mat" in r.output
 
 
+def test_cli_simulate_window_counts_from_the_logs_first_sample(tmp_path, synthetic_log):
+    """``--window START:STOP`` is in s from the log's first sample (the one window rule of
+    io.logs.Log.window, which replay applies): a log whose clock starts at 100 s replays
+    its first 2 s as the log starting at 0 does (the CLI added the first time stamp
+    again, and the window fell outside such a log)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+
+    sc, log = synthetic_log
+    X1 = np.column_stack([log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")])
+    X2 = np.column_stack([log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")])
+    R1 = np.column_stack([log["theta_ref_1"]] + [0 * log.time] * 3)
+    R2 = np.column_stack([log["theta_ref_2"]] + [0 * log.time] * 3)
+    fps = []
+    for t0 in (0.0, 100.0):
+        f = tmp_path / f"s{t0:g}.mat"
+        sio.savemat(f, {"time": log.time + t0, "X1_meas": X1, "X1_ref": R1, "X2_sim": X2,
+                        "X2_meas": R2})
+        out = tmp_path / f"o{t0:g}"
+        r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(out),
+                                     "--log", str(f), "--log-format", str(STAIRCASE),
+                                     "--window", "0:2"])
+        assert r.exit_code == 0, r.output
+        fps.append(json.loads((out / "replay.json").read_text())["fit_percent"][str(f)])
+    assert fps[1] == fps[0]
+    assert fps[1]["theta_1"] == pytest.approx(100.0, abs=1e-4)
+
+
 @pytest.mark.slow
 @needs_data
 def test_data_sheet_replay_of_the_102_s_run(run_log):
@@ -649,7 +679,7 @@ def _close(a, b, path=""):
             _close(a[k], b[k], f"{path}.{k}")
     elif isinstance(a, (list, tuple)):
         assert len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
             _close(x, y, f"{path}[{i}]")
     elif isinstance(a, float) or isinstance(b, float):
         assert a == pytest.approx(b, rel=1e-12, abs=1e-300), path

@@ -8,8 +8,14 @@ import stat
 import pytest
 
 from flexarm.errors import OutputExistsError
-from flexarm.io.write import (atomic_open, save_figure, write_bytes, write_json, write_text,
-                           write_toml)
+from flexarm.io.write import (
+    atomic_open,
+    save_figure,
+    write_bytes,
+    write_json,
+    write_text,
+    write_toml,
+)
 
 
 def _leftovers(folder):

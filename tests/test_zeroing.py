@@ -56,7 +56,7 @@ def test_zeroing_of_a_ramp_is_analytic():
     assert loop.sensors.zeroed == (0, 2) and loop.sensors.zero_n == (50, 50)
     n = 400
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    meas = dict(zip(loop.sensors.names, out["measured"].T))
+    meas = dict(zip(loop.sensors.names, out["measured"].T, strict=True))
     t = np.arange(n) * DT
     want = np.where(np.arange(n) < 50, 0.0, 0.3 * (t - 49 * DT / 2))
     np.testing.assert_allclose(meas["z"], want, rtol=0, atol=1e-12)

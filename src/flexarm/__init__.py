@@ -38,7 +38,34 @@ float64 you provide; with float32 its tolerances do not hold).
 import importlib as _importlib
 import os as _os
 import sys as _sys
-import typing as _typing
+from typing import TYPE_CHECKING
+
+from flexarm.version import __version__ as __version__  # the re-export: flexarm.__version__
+
+if TYPE_CHECKING:  # the lazy names below, for type checkers and editors (not run)
+    from flexarm import design as design
+    from flexarm.control.lqg import lqg as lqg
+    from flexarm.control.trajectories import parabolic as parabolic
+    from flexarm.control.trajectories import quasi_parabolic as quasi_parabolic
+    from flexarm.control.wiener import wiener_feedforward as wiener_feedforward
+    from flexarm.identification import fit as fit
+    from flexarm.identification import predict as predict
+    from flexarm.identification import validate as validate
+    from flexarm.identification.frequency_domain.identify import identify as identify
+    from flexarm.identification.frequency_domain.periodic import periodic_frf as periodic_frf
+    from flexarm.identification.frequency_domain.tfest import tfest as tfest
+    from flexarm.io.logformat import load_log as load_log
+    from flexarm.models.assembly import Arm as Arm
+    from flexarm.models.linearize import linearize as linearize
+    from flexarm.models.multilink import build_multilink as build_multilink
+    from flexarm.models.single_link import SingleLinkModel as SingleLinkModel
+    from flexarm.sim.build import prepare as prepare
+    from flexarm.sim.build import simulate as simulate
+    from flexarm.sim.result import SimulationResult as SimulationResult
+    from flexarm.sim.sampled import simulate_batch as simulate_batch
+    from flexarm.specs import Scenario as Scenario
+    from flexarm.specs import builtin_scenarios as builtin_scenarios
+    from flexarm.specs import load_scenario as load_scenario
 
 
 def _enable_x64() -> None:
@@ -80,26 +107,6 @@ _LAZY = {
 }
 
 
-if _typing.TYPE_CHECKING:  # what the lazy names are, for type checkers and the API docs
-    from flexarm import design
-    from flexarm.control.lqg import lqg
-    from flexarm.control.trajectories import parabolic, quasi_parabolic
-    from flexarm.control.wiener import wiener_feedforward
-    from flexarm.identification import fit, predict, validate
-    from flexarm.identification.frequency_domain.identify import identify
-    from flexarm.identification.frequency_domain.periodic import periodic_frf
-    from flexarm.identification.frequency_domain.tfest import tfest
-    from flexarm.io.logformat import load_log
-    from flexarm.models.assembly import Arm
-    from flexarm.models.linearize import linearize
-    from flexarm.models.multilink import build_multilink
-    from flexarm.models.single_link import SingleLinkModel
-    from flexarm.sim.build import prepare, simulate
-    from flexarm.sim.result import SimulationResult
-    from flexarm.sim.sampled import simulate_batch
-    from flexarm.specs import Scenario, builtin_scenarios, load_scenario
-
-
 def __getattr__(name: str):
     if name == "design":  # the design package itself is callable (the front door)
         mod = _importlib.import_module("flexarm.design")
@@ -115,8 +122,6 @@ def __getattr__(name: str):
 def __dir__() -> list[str]:
     return sorted([*globals(), *_LAZY, "design"])
 
-
-from flexarm.version import __version__  # noqa: E402
 
 __all__ = [
     "Arm", "Scenario", "SimulationResult", "SingleLinkModel", "build_multilink",

@@ -82,10 +82,11 @@ import os
 import re
 import time as _time
 import warnings as _warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -189,10 +190,13 @@ def worker_environment(options: ClusterOptions | None = None) -> dict[str, str]:
     return env
 
 
-try:  # the plugin's base class, where dask is installed
+if TYPE_CHECKING:  # the checker sees the one base class (dask is in the lock)
     from distributed.diagnostics.plugin import WorkerPlugin as _PluginBase
-except ImportError:  # pragma: no cover - without dask no worker runs it
-    _PluginBase = object
+else:
+    try:  # the plugin's base class, where dask is installed
+        from distributed.diagnostics.plugin import WorkerPlugin as _PluginBase
+    except ImportError:  # pragma: no cover - without dask no worker runs it
+        _PluginBase = object
 
 
 class JaxWorkerSetup(_PluginBase):
@@ -230,7 +234,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
     if not have_dask():
         _warnings.warn(NO_DASK, RuntimeWarning, stacklevel=2)
         return None
-    import dask
+    import dask.config
     from distributed import Client, LocalCluster
 
     o = options or ClusterOptions()
@@ -241,10 +245,13 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
                               "distributed.scheduler.allowed-failures": 3}):
             cluster = LocalCluster(n_workers=int(workers),
                                    threads_per_worker=o.threads_per_worker, processes=True,
-                                   host=o.host, dashboard_address=o.dashboard_address,
+                                   host=o.host,
+                                   # dask: None means no dashboard (annotated str only)
+                                   dashboard_address=o.dashboard_address,  # pyright: ignore[reportArgumentType]
                                    memory_limit=o.memory_limit, env=worker_environment(o))
         client = Client(cluster, set_as_default=False)
-        client._flexarm_owns_cluster = True  # close() closes the cluster too
+        # close() closes the cluster too (a flag of flexarm's on dask's Client)
+        client._flexarm_owns_cluster = True  # pyright: ignore[reportAttributeAccessIssue]
     else:
         if not re.match(r"^[a-z]+://", str(scheduler)):
             raise ClusterError(f"scheduler = {scheduler!r}: give the scheduler's address with "
@@ -363,8 +370,8 @@ def _batched_leaves(loop, in_axes):
     is_none = lambda x: x is None  # noqa: E731
     leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
     axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
-    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
-    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes) if a is not None}
+    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes, strict=False) if a is not None}
     if len(sizes) != 1:
         raise ValueError(f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
                          if sizes else "in_axes batches no leaf of the loop")
@@ -376,15 +383,17 @@ def _loop_chunk(leaves, axes, treedef, a: int, b: int):
 
     return jax.tree.unflatten(treedef, [x if ax is None else np.take(np.asarray(x),
                                                                      np.arange(a, b), axis=ax)
-                                        for x, ax in zip(leaves, axes)])
+                                        for x, ax in zip(leaves, axes, strict=False)])
 
 
 def _simulate_chunk(loop, x0, references, n_samples, seed, in_axes, batch_size, reduce,
                     trajectories):
     from flexarm.sim.sampled import simulate_batch
 
-    out = simulate_batch(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
-                         batch_size=batch_size, check=False)
+    # no client or chunks: the arrays themselves
+    out = cast("dict[str, np.ndarray]",
+               simulate_batch(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
+                              batch_size=batch_size, check=False))
     red = (reduce or rollout_summary)(out)
     return red, (out if trajectories else None)
 
@@ -451,7 +460,7 @@ class PlantSource:
     info: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def from_fit(cls, result, n: int, *, seed: int = 0) -> "PlantSource":
+    def from_fit(cls, result, n: int, *, seed: int = 0) -> PlantSource:
         """Plants drawn from a servo-rig fit's covariance
         (:func:`flexarm.design.plants.from_fit`), chunk by chunk."""
         from flexarm.design.plants import from_fit
@@ -461,7 +470,7 @@ class PlantSource:
 
     @classmethod
     def from_paths(cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *,
-                   seed: int = 0) -> "PlantSource":
+                   seed: int = 0) -> PlantSource:
         """Independent draws (:func:`flexarm.design.plants.from_paths`), chunk by chunk."""
         from flexarm.design.plants import from_paths
 
@@ -572,6 +581,16 @@ class ChunkedTuneCost:
     and the per-plant costs come back; the design cost is their ``quantile`` over the
     nominal plant and all drawn plants, as with one batch."""
 
+    # copied from the nominal TuneCost in __init__
+    q: Any
+    scn: Any
+    limit: Any
+    length: Any
+    delta: Any
+    horizon: Any
+    w: Any
+    names: Any
+
     def __init__(self, scenario, plants, paths: Sequence[str], *, client=None,
                  options: ChunkOptions | None = None, **kwargs):
         from flexarm.design.tune import TuneCost
@@ -672,9 +691,9 @@ def option_value(text: str):
         return t.lower() == "true"
     if t.lower() in ("none", "null"):
         return None
-    for cast in (int, float):
+    for convert in (int, float):
         try:
-            return cast(t)
+            return convert(t)
         except ValueError:
             pass
     return t
@@ -807,6 +826,7 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
     from flexarm.io.logformat import load_log
     from flexarm.specs import load_scenario
 
+    assert row.scenario is not None  # a row without a preset names its scenario (read_manifest)
     logs = [load_log(p, row.log_format) for p in row.logs]
     opts = FitOptions(windows=[row.window] * len(logs) if row.window else None,
                       **row.options)

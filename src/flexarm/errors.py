@@ -100,7 +100,7 @@ def _shown(text: str, part: Any) -> bool:
     return part is not None and str(part) in text
 
 
-def _compose(exc: "FlexarmError", msg: str) -> str:
+def _compose(exc: FlexarmError, msg: str) -> str:
     """``<file>: <field> = <value>: <msg>; <fix>``, the parts ``msg`` does not show."""
     head = []
     if exc.file and not _shown(msg, exc.file):
@@ -139,7 +139,7 @@ def internal_error_report(exc: BaseException, folder: str | os.PathLike) -> Path
     to ``folder/flexarm-error-<UTC time>-<pid>.log`` (the folder is created) and return
     that path; the CLI names it in its one line (:func:`one_line` with ``log=``).  A
     folder that cannot be written falls back to the system's temporary folder."""
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     try:
         from importlib.metadata import version
 

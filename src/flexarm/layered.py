@@ -35,7 +35,8 @@ libm), since XLA:CPU's float64 ``sin``/``cos`` are scalar calls that no kernel v
 from __future__ import annotations
 
 import math
-from typing import Callable, Hashable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -59,7 +60,7 @@ class Sym:
 
     __slots__ = ("prog", "id")
 
-    def __init__(self, prog: "Program", i: int):
+    def __init__(self, prog: Program, i: int):
         self.prog = prog
         self.id = i
 
@@ -355,7 +356,7 @@ def _apply(op: str, a: list):
 
 
 # --------------------------------------------------------------------------- small SPD solve
-def _adjugate(P: list) -> tuple[list, object]:
+def _adjugate(P: list) -> tuple[list, Any]:
     """Adjugate and determinant of a symmetric 1×1, 2×2 or 3×3 block (lists of scalars)."""
     b = len(P)
     if b == 1:
@@ -376,7 +377,7 @@ def _matvec(M: list, v: list) -> list:
     out = []
     for row in M:
         t = 0.0
-        for m, x in zip(row, v):
+        for m, x in zip(row, v, strict=False):
             t = t + m * x
         out.append(t)
     return out
@@ -431,6 +432,6 @@ def solve_spd(A: Sequence[Sequence], b: Sequence, block: int = 3) -> list:
             for j in later:
                 t = t - S[i][j] * y[j]
             rhs.append(t)
-        for i, v in zip(K, _matvec(adj, rhs)):
+        for i, v in zip(K, _matvec(adj, rhs), strict=False):
             y[i] = v * r
     return y

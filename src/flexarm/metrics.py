@@ -31,7 +31,7 @@ def step_metrics(t: np.ndarray, y: np.ndarray, reference: np.ndarray, *, band: f
     t, y, r = (np.asarray(a, float) for a in (t, y, reference))
     if t_step is None:
         jumps = np.nonzero(np.abs(np.diff(r)) > 0)[0]
-        t_step = t[jumps[0] + 1] if jumps.size else t[0]
+        t_step = float(t[jumps[0] + 1] if jumps.size else t[0])
     y0 = float(y[np.searchsorted(t, t_step) - 1]) if np.searchsorted(t, t_step) > 0 else float(y[0])
     goal = float(r[-1]) if target is None else float(target)
     step = goal - y0

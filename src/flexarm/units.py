@@ -7,11 +7,12 @@ Everything inside flexarm is SI: kg, m, s, rad, A, V, N*m.
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
+from typing import Any
 
 import pint
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 ureg = pint.UnitRegistry()
 ureg.define("count = []")
@@ -83,6 +84,6 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _dims(q: pint.Quantity) -> str:
+def _dims(q: Any) -> str:  # a pint quantity (of one of pint's Quantity classes)
     d = str(q.dimensionality)
     return "dimensionless" if d == "dimensionless" else d

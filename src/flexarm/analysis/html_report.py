@@ -33,9 +33,10 @@ import datetime as _dt
 import html
 import io
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 from flexarm.io.write import write_text
 
@@ -119,17 +120,17 @@ class HtmlReport:
     n_figures: int = 0
 
     # ------------------------------------------------------------------ building blocks
-    def heading(self, text: str) -> "HtmlReport":
+    def heading(self, text: str) -> HtmlReport:
         self.parts.append(f"<h2>{_e(text)}</h2>")
         return self
 
-    def text(self, text: str, *, pre: bool = False) -> "HtmlReport":
+    def text(self, text: str, *, pre: bool = False) -> HtmlReport:
         self.parts.append(f"<pre>{_e(text)}</pre>" if pre else f"<p>{_e(text)}</p>")
         return self
 
     def table(self, header: Sequence[str], rows: Iterable[Sequence[Any]], *,
               low: Iterable[tuple[int, int]] = (),
-              formats: Mapping[int, str] | None = None) -> "HtmlReport":
+              formats: Mapping[int, str] | None = None) -> HtmlReport:
         """A table; numbers (int/float, None as –) right-aligned, with 5 significant digits
         or ``formats[column]``; ``low``: (row, column) cells to mark."""
         low = set(low)
@@ -151,22 +152,22 @@ class HtmlReport:
         return self
 
     def parameters(self, rows: Iterable[tuple[str, float, float | None, str]], *,
-                   std_label: str = "std") -> "HtmlReport":
+                   std_label: str = "std") -> HtmlReport:
         """(name, value, std, unit) rows as value ± std (2 significant digits), unit,
         relative std 100 σ/|value| %; a relative std over :data:`POOR_RELATIVE_STD` %
         (a parameter the data hardly determine) is marked."""
         body, low = [], []
         for i, (name, v, s, unit) in enumerate(rows):
-            ok = s is not None and math.isfinite(float(s))
+            sf = float(s) if s is not None else math.nan
             rel = _rel(v, s)
             if rel is not None and rel > POOR_RELATIVE_STD:
                 low.append((i, 4))
-            body.append((name, float(v), float(s) if ok else None, unit or "", rel))
+            body.append((name, float(v), sf if math.isfinite(sf) else None, unit or "", rel))
         return self.table(("parameter", "value", f"± {std_label}", "unit", "relative std [%]"),
                           body, low=low, formats={2: ".2g", 4: ".3g"})
 
     def fit_percent(self, fp: Mapping[str, Mapping[str, float | None]],
-                    title: str | None = None) -> "HtmlReport":
+                    title: str | None = None) -> HtmlReport:
         """fit % per log (rows) and signal (columns); values under :data:`LOW_FIT_PERCENT`
         marked."""
         if title:
@@ -185,7 +186,7 @@ class HtmlReport:
                    formats={j: ".1f" for j in range(1, len(signals) + 1)})
         return self
 
-    def figures(self, figs: Iterable[Any], captions: Sequence[str] | None = None) -> "HtmlReport":
+    def figures(self, figs: Iterable[Any], captions: Sequence[str] | None = None) -> HtmlReport:
         """Embed figures (see :func:`figure_data_uri`); a path's caption is its file name."""
         figs = list(figs)
         for k, f in enumerate(figs):

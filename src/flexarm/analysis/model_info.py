@@ -38,7 +38,7 @@ def tf_dict(g: control.TransferFunction) -> dict:
 
 def _cplx(r: np.ndarray) -> list:
     r = np.asarray(r, complex)
-    r = r[np.lexsort((r.imag, r.real))]
+    r = r[np.lexsort((np.imag(r), np.real(r)))]
     return [{"re": float(z.real), "im": float(z.imag)} for z in r]
 
 

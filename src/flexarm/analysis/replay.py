@@ -22,12 +22,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.metrics import fit_percent
 from flexarm.io.logs import Log
+from flexarm.metrics import fit_percent
 from flexarm.sim.build import prepare, to_result
-from flexarm.sim.filters import (PieceStart, computed_channels, continuous_starts,
-                                 filter_state_from_log, start_piece, warn_assumed_start,
-                                 with_filter_state)
+from flexarm.sim.filters import (
+    PieceStart,
+    computed_channels,
+    continuous_starts,
+    filter_state_from_log,
+    start_piece,
+    warn_assumed_start,
+    with_filter_state,
+)
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import check_zeroing, simulate_loop
 
@@ -81,8 +87,10 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
         log = Log(log.path, log.time, {**log.signals, **extra}, list(log.comments),
                   dict(log.meta), list(log.skipped), list(log.notes) + notes)
     full, k0 = log, 0
+    assert full.time is not None  # checked above
     if window is not None:
         log = log.window(*window)
+        assert log.time is not None  # a window of a log with time
         k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
@@ -130,7 +138,7 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
     used = set(sc.references) | sc.controller_references()
     p = prepare(sc, references={k: logs[0][k] for k in used if k in logs[0].signals})
     starts = continuous_starts(p.loop, sc.sensors, logs, dt)
-    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts)]
+    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts, strict=True)]
 
 
 def plot_replay(rep: Replay, path, *, overwrite: bool = False):
@@ -143,8 +151,10 @@ def plot_replay(rep: Replay, path, *, overwrite: bool = False):
     fig = Figure(figsize=(10, 1.8 * len(names) + 0.5))
     axes = fig.subplots(len(names), 1, sharex=True,
                              squeeze=False)
-    t = rep.log.time - rep.log.time[0]
-    for ax, k in zip(axes[:, 0], names):
+    time = rep.log.time
+    assert time is not None  # replay() refuses a log without time
+    t = time - time[0]
+    for ax, k in zip(axes[:, 0], names, strict=True):
         ax.plot(t, rep.log[k], "k", lw=0.8, label="log")
         ax.plot(t, rep.result.measured[k], "C1", lw=0.8, label="simulated")
         ax.set_ylabel(k, fontsize=8)

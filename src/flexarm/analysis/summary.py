@@ -6,17 +6,18 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.metrics import step_metrics
 from flexarm.analysis.model_info import single_link_info
+from flexarm.io.write import save_figure, write_json
+from flexarm.metrics import step_metrics
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import Scenario, builtin_scenarios, load_scenario
-from flexarm.io.write import save_figure, write_json
 
 
 def simulate_with_progress(scenario: Scenario, progress: bool = False):
     """Simulate a scenario, with a rich progress bar for long runs."""
     p = prepare(scenario)
+    assert scenario.simulation is not None  # prepare() builds sampled-data loops only
     seed = scenario.simulation.seed
     if not progress or p.n_samples <= 20000:
         return to_result(p, simulate_loop(p.loop, p.x0, p.references, p.n_samples, seed=seed))
@@ -48,6 +49,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
             return write_regulation(scenario, out)
         return write_multilink(scenario, out, progress)[0]
     res = simulate_with_progress(scenario, progress)
+    assert scenario.sampling is not None  # a single-link scenario has one (validated)
     name = scenario.name
     res.to_csv(out / f"{name}.csv", overwrite=True)
     fig = res.plot_arm()
@@ -75,7 +77,7 @@ def _controlled_signal(spec) -> str:
     if spec is None:
         return "motor_angle"
     if getattr(spec, "type", None) == "lti":
-        return next((i for i, s in zip(spec.inputs, spec.setpoints or [])
+        return next((i for i, s in zip(spec.inputs, spec.setpoints or [], strict=False)
                      if s == "reference"), spec.inputs[0])
     return getattr(spec, "measured", None) or "motor_angle"
 
@@ -106,6 +108,7 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
     ``<name>.csv`` (every state and command), ``<name>.png`` (:func:`plot_joints`) and
     ``<name>.summary.json``; returns (summary, result)."""
     res = simulate_with_progress(scenario, progress)
+    assert scenario.sampling is not None  # simulated in the sampled-data loop
     name = scenario.name
     res.to_csv(out / f"{name}.csv", overwrite=True)
     plot_joints({name: (scenario, res)}, out / f"{name}.png")
@@ -116,7 +119,7 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
         "sampling_period_s": scenario.sampling.period,
         "final_joint_error_rad": err[-1].tolist(),
         "final_joint_error_counts": [None if not np.isfinite(c) else float(e / c)
-                                     for e, c in zip(err[-1], count)],
+                                     for e, c in zip(err[-1], count, strict=True)],
         "final_link_deflection_m": [float(res[f"deflection_{j + 1}"][-1])
                                     for j in range(res.n_links)],
         "peak_command": np.abs(res.command).max(axis=0).tolist(),

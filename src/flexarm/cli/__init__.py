@@ -12,13 +12,22 @@ internal error exits 1 with the traceback in a log file (:mod:`flexarm.cli.error
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Any
+from typing import Annotated, Any, cast
 
 import typer
 from typer.core import TyperGroup
 
-from flexarm.cli import (deploy, design, distributed, errors, fit, frequency, reproduce,
-                         scenarios, simulate)
+from flexarm.cli import (
+    deploy,
+    design,
+    distributed,
+    errors,
+    fit,
+    frequency,
+    reproduce,
+    scenarios,
+    simulate,
+)
 
 
 class FlexarmGroup(TyperGroup):
@@ -43,7 +52,7 @@ class FlexarmGroup(TyperGroup):
             rv = super().main(*args, standalone_mode=False, **kwargs)
         except typer.TyperException as exc:
             if type(exc).__name__ == "NoArgsIsHelpError":  # bare `flexarm`: the help
-                exc.show()
+                cast(Any, exc).show()  # click's UsageError.show; TyperException has none
                 sys.exit(0)
             sys.exit(errors.usage_error(exc))
         except typer.Abort:

@@ -7,7 +7,7 @@ import contextlib
 import os
 import tempfile
 from pathlib import Path
-from typing import NoReturn, Optional
+from typing import NoReturn
 
 import typer
 from rich.console import Console
@@ -79,7 +79,7 @@ def _not_an_input(option: str, path: Path) -> None:
              "an input, even with --overwrite; give another output path")
 
 
-def check_dir_option(option: str, path: Optional[Path]) -> None:
+def check_dir_option(option: str, path: Path | None) -> None:
     """An output folder option: refuse, before any work, a path that is an existing file,
     lies below a file, or cannot be created or written (the folder itself may be missing:
     it is created with its parents)."""
@@ -100,7 +100,7 @@ def check_dir_option(option: str, path: Optional[Path]) -> None:
     writable(option, path, anc)
 
 
-def check_file_option(option: str, path: Optional[Path], overwrite: bool,
+def check_file_option(option: str, path: Path | None, overwrite: bool,
                       example: str = "result.json") -> None:
     """An output file option: refuse, before any work, a folder, an existing file (unless
     --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
@@ -154,7 +154,7 @@ def command_line(ctx: typer.Context) -> str:
 
 
 @contextlib.contextmanager
-def figure_folder(plots: Optional[Path], report: Optional[Path]):
+def figure_folder(plots: Path | None, report: Path | None):
     """Where the figures go: --plots, else (a report needs them) a temporary folder removed
     after the report is written; None when neither is asked for."""
     if plots is not None or report is None:
@@ -164,7 +164,7 @@ def figure_folder(plots: Optional[Path], report: Optional[Path]):
             yield Path(d)
 
 
-def write_report(rep, path: Optional[Path], overwrite: bool) -> None:
+def write_report(rep, path: Path | None, overwrite: bool) -> None:
     """Write an :class:`flexarm.analysis.html_report.HtmlReport` to --report."""
     from flexarm.errors import OutputExistsError
 
@@ -241,7 +241,7 @@ def guarded_command(*names: str):
     return deco
 
 
-def output_folder(option: str, path: Optional[Path], overwrite: bool) -> Optional[Path]:
+def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | None:
     """A figure (or other output) folder, checked and created before any work by
     :func:`flexarm.io.write.output_folder`: a folder holding files only with --overwrite,
     never an input; refused as one line naming ``option``."""

@@ -28,7 +28,8 @@ def export_c(design: str = typer.Argument(..., help="design directory (holding d
 
 
 def _export(design, out, precision, name, overwrite, force) -> None:
-    from flexarm.deploy.c_export import ExportError, export_c as _export_c
+    from flexarm.deploy.c_export import ExportError
+    from flexarm.deploy.c_export import export_c as _export_c
     from flexarm.errors import OutputExistsError, UnstableDesignError
 
     check_dir_option("--out", out)

@@ -5,58 +5,70 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Optional
+from typing import Any
 
 import typer
 from rich.markup import escape
 from rich.table import Table
 
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_file_option, command_line, console, enable_cache, err,
-                                fail, fold, guarded, load, outdir, progress, warn,
-                                write_report)
+from flexarm.cli.common import (
+    check_file_option,
+    command_line,
+    console,
+    enable_cache,
+    err,
+    fail,
+    guarded,
+    load,
+    outdir,
+    progress,
+    warn,
+    write_report,
+)
 
 
 def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
-               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's gains over plants drawn from the fit's uncertainty)"),
+               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's "
+                                   "gains over plants drawn from the fit's uncertainty)"),
                out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
-               q: Optional[str] = typer.Option(
+               q: str | None = typer.Option(
                    None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
                                      "integrator) or one number per channel; default Bryson"),
-               r: Optional[str] = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
-               poles: Optional[str] = typer.Option(
+               r: str | None = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
+               poles: str | None = typer.Option(
                    None, "--poles", help="place: closed-loop poles of the arm's states (+ integrators), "
                                          "e.g. '-20+15j,-20-15j,-30,-40'"),
-               observer_poles: Optional[str] = typer.Option(
+               observer_poles: str | None = typer.Option(
                    None, "--observer-poles", help="observer poles of the arm's states (default: Kalman predictor)"),
                pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
                integral: bool = typer.Option(False, "--integral/--no-integral",
                                              help="integrators of the tracked channels' errors (LQI)"),
-               disturbance: Optional[bool] = typer.Option(
+               disturbance: bool | None = typer.Option(
                    None, "--disturbance/--no-disturbance",
                    help="estimate and cancel a constant input disturbance (integral action; "
                         "default: on unless --integral)"),
                friction_compensation: bool = typer.Option(
                    True, "--friction-compensation/--no-friction-compensation",
                    help="Coulomb feedforward C_f / k_u from the scenario's friction"),
-               max_deflection: Optional[float] = typer.Option(
+               max_deflection: float | None = typer.Option(
                    None, "--max-deflection", help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)"),
-               distance: Optional[float] = typer.Option(
+               distance: float | None = typer.Option(
                    None, "--distance", help="nested: the tip move, rad (default the scenario's reference amplitude)"),
-               fit_json: Optional[Path] = typer.Option(
+               fit_json: Path | None = typer.Option(
                    None, "--fit-json", help="the fit's JSON (flexarm fit --json) of the rig whose "
                                             "--scenario-out is SCENARIO: plants drawn from its "
                                             "standard deviations (tune; and the comparison)"),
-               spread: Optional[str] = typer.Option(
+               spread: str | None = typer.Option(
                    None, "--spread", help="plants drawn from PATH=STD,... (SI; STD may end in % of "
                                           "the scenario's value), e.g. "
                                           "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'"),
                plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
                seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
-               encoder_counts: Optional[int] = typer.Option(
+               encoder_counts: int | None = typer.Option(
                    None, "--encoder-counts", help="counts per turn of the hub encoder, where the "
                                                   "scenario's hub sensor has no quantum (errors in counts)"),
-               report: Optional[Path] = typer.Option(
+               report: Path | None = typer.Option(
                    None, "--report", help="write a self-contained HTML report (the designed "
                                           "controller, its figures, the step comparison)"),
                accept_unstable: bool = typer.Option(
@@ -68,10 +80,10 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
                    0.01, "--max-unstable-share",
                    help="the largest share (0..1) of drawn plants that may be unstable or reach "
                         "the limit before the design is refused"),
-               scheduler: Optional[str] = typer.Option(
+               scheduler: str | None = typer.Option(
                    None, "--scheduler", help="run the drawn plants on a running Dask scheduler, "
                                              "e.g. tcp://host:8786 (in chunks, one task each)"),
-               workers: Optional[int] = typer.Option(
+               workers: int | None = typer.Option(
                    None, "--workers", help="run the drawn plants on a local Dask cluster of N "
                                            "worker processes (default: in-process)"),
                overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
@@ -128,6 +140,7 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
     spread_d = plant_spread(sc, fit_json, spread)
     out = outdir(out, overwrite)
     count = 2 * math.pi / encoder_counts if encoder_counts else None
+    opts: dict[str, Any]  # each method's own keyword arguments
     if method == "nested":
         opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
                 if v is not None}
@@ -200,7 +213,7 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
                  "--force)")
 
 
-def plant_spread(sc, fit_json: Optional[Path], spread: Optional[str]) -> dict | None:
+def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
     """Scenario path → (mean, std) for the plant draws of ``design``: from the fit's JSON
     (:func:`flexarm.identification.time_domain.report.scenario_spread`) or ``--spread``."""
     if fit_json is not None:

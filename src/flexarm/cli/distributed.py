@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -18,9 +18,9 @@ def fit_many(manifest: Annotated[Path, typer.Argument(
              out: Annotated[Path, typer.Option(
                  "--out", help="folder of the results: <row id>/fit.json, fitted.toml, "
                                "plots/, and summary.csv (a rerun skips finished rows)")],
-             scheduler: Annotated[Optional[str], typer.Option(
+             scheduler: Annotated[str | None, typer.Option(
                  help="a running Dask scheduler, e.g. tcp://host:8786")] = None,
-             workers: Annotated[Optional[int], typer.Option(
+             workers: Annotated[int | None, typer.Option(
                  help="start a local Dask cluster of N worker processes (default: run "
                       "in-process, one fit after the other)")] = None,
              no_figures: Annotated[bool, typer.Option(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, cast
 
 import typer
 from rich.markup import escape
@@ -18,13 +18,27 @@ from rich.table import Table
 
 from flexarm.cli import options as o
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_dir_option, check_file_option, command_line, console,
-                                enable_cache, err, fail, figure_folder, guarded_command, load,
-                                progress,
-                                write_report)
+from flexarm.cli.common import (
+    check_dir_option,
+    check_file_option,
+    command_line,
+    console,
+    enable_cache,
+    err,
+    fail,
+    figure_folder,
+    guarded_command,
+    load,
+    progress,
+    write_report,
+)
+
+if TYPE_CHECKING:
+    from flexarm.identification.time_domain.predict import Prediction
+    from flexarm.identification.time_domain.result import FitResult
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
-ControllerOrFile = Annotated[Optional[str], typer.Option(
+ControllerOrFile = Annotated[str | None, typer.Option(
     "--controller",
     help="an existing FILE.toml: a controller file ([controller] or [[controllers]] tables "
          "as in a scenario) replacing the scenario's controllers for this run; any other "
@@ -36,7 +50,7 @@ Continuous = Annotated[bool, typer.Option(
          "state (and the digital filters') carried from log to log; not with --window")]
 
 
-def controller_option(controller: Optional[str]):
+def controller_option(controller: str | None):
     """``--controller``: the controller file it names (library
     :func:`flexarm.identification.time_domain.predict.controller_file`), or None when the
     value is the servo rig's text law (or absent)."""
@@ -61,7 +75,7 @@ def with_controller_file(sc, cfile):
         fail(str(exc))
 
 
-def check_continuous(continuous: bool, window: Optional[str]) -> None:
+def check_continuous(continuous: bool, window: str | None) -> None:
     if continuous and window:
         fail(f"--continuous runs whole logs as one run; --window {window} cuts each log: "
              "give one or the other")
@@ -97,14 +111,14 @@ def fit(ctx: typer.Context,
             help="also fit without joint friction and report both fits side by side")] = False,
         column: o.Column = None,
         unit: o.Unit = None,
-        sessions: Annotated[Optional[str], typer.Option(
+        sessions: Annotated[str | None, typer.Option(
             help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per "
                  "session")] = None,
-        tip_sign: Annotated[Optional[int], typer.Option(
+        tip_sign: Annotated[int | None, typer.Option(
             help="sign of the strain gauge, +1 or -1, if known")] = None,
-        encoder_counts: Annotated[Optional[int], typer.Option(
+        encoder_counts: Annotated[int | None, typer.Option(
             help="hub encoder counts per revolution (default: detected from the steps)")] = None,
-        filter: Annotated[Optional[list[str]], typer.Option(
+        filter: Annotated[list[str] | None, typer.Option(
             help="known analog low-pass cutoff of a sensor, Hz: tip_deflection=50")] = None,
         max_jitter: o.MaxJitter = 1e-3,
         delay_search: Annotated[str, typer.Option(
@@ -116,21 +130,21 @@ def fit(ctx: typer.Context,
         log_format: o.LogFormats = None,
         use_regressed_law: o.UseRegressedLaw = False,
         window: o.Window = None,
-        free: Annotated[Optional[list[str]], typer.Option(
+        free: Annotated[list[str] | None, typer.Option(
             "--free", help="with SCENARIO: a parameter to fit, as a path into the scenario "
                            "(repeat), e.g. 'arm.joints[*].friction.coulomb'; without it the "
                            "scenario's preset free list runs (printed)")] = None,
-        prior: Annotated[Optional[list[str]], typer.Option(
+        prior: Annotated[list[str] | None, typer.Option(
             "--prior", help="with SCENARIO: PATH=REL_STD, a data-sheet prior (the scenario's "
                             "value, ± REL_STD relative), e.g. "
                             "'arm.joints[0].drive.torque_constant=0.3'")] = None,
-        segment: Annotated[Optional[float], typer.Option(
+        segment: Annotated[float | None, typer.Option(
             "--segment", help="with SCENARIO: multiple-shooting segment length, s")] = None,
         channel: o.Channels = None,
-        max_nfev: Annotated[Optional[int], typer.Option(
+        max_nfev: Annotated[int | None, typer.Option(
             "--max-nfev", help="with SCENARIO: least-squares budget (default: the preset's, "
                                "else 30)")] = None,
-        validate_window: Annotated[Optional[str], typer.Option(
+        validate_window: Annotated[str | None, typer.Option(
             "--validate-window",
             help="then predict this held-out part of every log (START:STOP, s; each part's "
                  "initial state estimated from its own data) and report its fit %")] = None,
@@ -160,10 +174,10 @@ def fit(ctx: typer.Context,
               "scenario first, flexarm fit SCENARIO LOG... --free PATH")
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for the bench fit (every log has one format)")
-    log_format = Path(log_format[0]) if log_format else None
+    fmt_file = Path(log_format[0]) if log_format else None
+    from flexarm.errors import FitInterrupted
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import fit as run_fit
-    from flexarm.errors import FitInterrupted
     from flexarm.io.write import write_json
 
     check_file_option("--json", json_out, overwrite)
@@ -173,7 +187,7 @@ def fit(ctx: typer.Context,
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
     sess = parsing.int_list(sessions, "--sessions")
-    kw = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
+    kw: dict[str, Any] = dict(drive=drive, gear_ratio=gear_ratio, motor_constant=motor_constant,
               armature_resistance=armature_resistance, link_length=link_length,
               gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
               voltage_limit=voltage_limit, computation_delay=computation_delay, mode=mode, global_seconds=seconds,
@@ -182,7 +196,7 @@ def fit(ctx: typer.Context,
     res = res0 = held = None
     win, vwin = parsing.window(window, "--window"), parsing.window(validate_window, "--validate-window")
     try:
-        full = bench_logs(logs, column, unit, controller, max_jitter, log_format,
+        full = bench_logs(logs, column, unit, controller, max_jitter, fmt_file,
                            use_regressed_law)
         blogs = [g.window(*win) for g in full] if win else full
         held_logs = [g.window(*vwin) for g in full] if vwin else []
@@ -213,10 +227,10 @@ def fit(ctx: typer.Context,
     with figure_folder(plots, report) as folder:
         if folder is not None:
             _bench_figures(ctx, folder, res, res0, held, validate_window, report, overwrite,
-                           [*logs, *([log_format] if log_format else [])])
+                           [*logs, *([fmt_file] if fmt_file else [])])
 
 
-def _print_bench_tables(res, res0, held, validate_window: Optional[str]) -> None:
+def _print_bench_tables(res, res0, held, validate_window: str | None) -> None:
     """The bench fit's tables: with and without friction, the held-out windows."""
     if res0 is not None:
         t = Table("log", "signal", "fit % with friction", "fit % without")
@@ -272,7 +286,7 @@ def validate(ctx: typer.Context,
              log_format: o.LogFormats = None,
              use_regressed_law: o.UseRegressedLaw = False,
              window: o.Window = None,
-             refit: Annotated[Optional[str], typer.Option(
+             refit: Annotated[str | None, typer.Option(
                  "--refit", help="'friction': re-estimate only the joints' friction on "
                                  "--refit-window of the first log, then validate with "
                                  "everything else fixed (reports both)")] = None,
@@ -297,7 +311,7 @@ def validate(ctx: typer.Context,
         return
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for a bench scenario's logs")
-    log_format = Path(log_format[0]) if log_format else None
+    fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import validate as run_validate
 
@@ -308,7 +322,7 @@ def validate(ctx: typer.Context,
     with figure_folder(plots, report) as folder:
         try:
             win = parsing.window(window, "--window")
-            blogs = bench_logs(logs, column, unit, controller, max_jitter, log_format,
+            blogs = bench_logs(logs, column, unit, controller, max_jitter, fmt_file,
                                 use_regressed_law)
             out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs,
                                plots=folder)
@@ -320,7 +334,7 @@ def validate(ctx: typer.Context,
             write_report(validate_report(out, scenario=scenario, figures=out["plots"],
                                           command=command_line(ctx),
                                           inputs=[scenario, *logs,
-                                                  *([log_format] if log_format else [])]),
+                                                  *([fmt_file] if fmt_file else [])]),
                           report, overwrite)
         out = bench_validate_document(out, plots is not None)
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
@@ -361,7 +375,7 @@ def bench_logs(paths: list[Path], column, unit, controller, max_jitter: float,
     return out
 
 
-def _general_logs(paths: list[Path], log_format: Optional[list[str]]) -> list:
+def _general_logs(paths: list[Path], log_format: list[str] | None) -> list:
     """Read each log with its format: --log-format once per log (in order), one for all,
     or PATTERN=FILE (fnmatch on the file name; the first match wins)."""
     import fnmatch
@@ -408,8 +422,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
                       continuous: bool = False) -> None:
     from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain.engine import fit as fit_engine
-    from flexarm.identification.time_domain.options import (Cost, FitOptions, Local, Priors,
-                                                             Shooting)
+    from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -432,8 +445,9 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
                           windows=[win] * len(glogs) if win else None, predict=False,
                           continuous=continuous)
         with console.status("fitting") as status, _state_warnings_quiet():
-            res = fit_engine(sc, glogs, free or None, opts,
-                             progress=lambda m: progress(status, m))
+            # a scenario (not the servo-rig preset) runs the general engine: its FitResult
+            res = cast("FitResult", fit_engine(sc, glogs, free or None, opts,
+                                               progress=lambda m: progress(status, m)))
             status.update("predicting the logs with the fitted parameters")
             console.print(f"free parameters ({len(res.free)}): {res.free_source}",
                           highlight=False)
@@ -463,6 +477,7 @@ def _fit_scenario_cli(scenario: str, logs: list[Path], log_format, free, prior, 
         if report is not None:
             from flexarm.analysis.html_report import fit_report
 
+            assert ctx is not None  # the command passes its context
             write_report(fit_report(res, figures=pred["plots"], command=command_line(ctx),
                                      inputs=[scenario, *logs, *(log_format or [])],
                                      fit_percent=pred["fit_percent"]),
@@ -541,6 +556,7 @@ def _validate_scenario_cli(sc, logs, log_format, window, refit, refit_window, ch
         if report is not None:
             from flexarm.analysis.html_report import validate_report
 
+            assert ctx is not None  # the command passes its context
             write_report(validate_report(out, scenario=sc.name, figures=figs,
                                           command=command_line(ctx),
                                           inputs=[ctx.params["scenario"], *logs,
@@ -566,7 +582,7 @@ def _print_warnings(msgs) -> None:
         err.print(f"[yellow]warning:[/yellow] {escape(w)}", highlight=False, soft_wrap=True)
 
 
-def _fit_interrupted(json_out: Optional[Path], overwrite: bool, res, best) -> None:
+def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> NoReturn:
     """Ctrl-C during ``fit``: write the best result so far to --json (atomically), marked
     ``"interrupted": true, "status": "interrupted"``, say so in one line, exit 130 (the
     shell's code for SIGINT).  ``res``: the friction fit if it had finished (the
@@ -628,7 +644,7 @@ def interrupted_document(res, best) -> dict:
     return {**mark, **d, **mark}
 
 
-def refit_document(res, free: list[str], rwin, log, after: dict) -> dict:
+def refit_document(res, free: list[str], rwin, log, after: Prediction) -> dict:
     """JSON LAYOUT of the ``refit`` entry of ``validate --refit friction --json``."""
     return {"window_s": list(rwin), "log": str(log),
             "params": {p: res.params[p] for p in free},

@@ -6,26 +6,37 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
+from typing import cast
 
 import typer
 
 from flexarm.cli import options as o
 from flexarm.cli import parsing
-from flexarm.cli.common import (check_dir_option, check_file_option, console, enable_cache, err,
-                                fail, fmt, guarded_command, load, output_folder, save_result,
-                                warn)
+from flexarm.cli.common import (
+    check_dir_option,
+    check_file_option,
+    console,
+    enable_cache,
+    err,
+    fail,
+    fmt,
+    guarded_command,
+    load,
+    output_folder,
+    save_result,
+    warn,
+)
 
 
 @guarded_command("scenario")
 def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
                out: Path = typer.Option(..., "--out", help="folder for one CSV per experiment"),
-               frequencies: Optional[str] = typer.Option(
+               frequencies: str | None = typer.Option(
                    None, help="excitation frequencies in rad/s, comma separated; give ω0 "
                    "and 3ω0 pairs (default: pairs chosen from the model)"),
                periods: int = typer.Option(20, help="whole periods recorded per experiment"),
-               kp: Optional[float] = typer.Option(None, help="PD gain, command units per rad"),
-               kd: Optional[float] = typer.Option(None, help="PD gain, command units*s/rad"),
+               kp: float | None = typer.Option(None, help="PD gain, command units per rad"),
+               kd: float | None = typer.Option(None, help="PD gain, command units*s/rad"),
                overwrite: bool = typer.Option(False, help="replace existing CSV files")) -> None:
     """Sine experiments on the simulated arm, as FRB Sec. II-A: one CSV per frequency."""
     enable_cache()
@@ -54,15 +65,15 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
              motor_constant: str = typer.Option(..., "--motor-constant",
                                                 help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"),
              json_out: o.JsonOut = None,
-             plots: Optional[Path] = typer.Option(None, help="folder for the Bode figures"),
-             scenario_out: Optional[Path] = typer.Option(
+             plots: Path | None = typer.Option(None, help="folder for the Bode figures"),
+             scenario_out: Path | None = typer.Option(
                  None, "--scenario-out", help="write the identified arm as a scenario TOML"),
-             current_limit: Optional[str] = typer.Option(None, help="amplifier limit for the scenario"),
-             column: Optional[list[str]] = typer.Option(None, help="map a column: current=i_m"),
-             unit: Optional[list[str]] = typer.Option(None, help="a column's unit: current=mA"),
+             current_limit: str | None = typer.Option(None, help="amplifier limit for the scenario"),
+             column: list[str] | None = typer.Option(None, help="map a column: current=i_m"),
+             unit: list[str] | None = typer.Option(None, help="a column's unit: current=mA"),
              motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
              beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
-             structured: Optional[bool] = typer.Option(
+             structured: bool | None = typer.Option(
                  None, "--structured/--free",
                  help="G_m from the joint fit of J, V, C, C_f, or the paper's free fit to the "
                       "corrected data (default: joint fit for a one-mode beam)"),
@@ -70,11 +81,12 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
     import warnings
 
-    from flexarm.identification.frequency_domain.identify import identify as run_identify
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
+    from flexarm.identification.frequency_domain.identify import identify as run_identify
 
-    mo = parsing.ints(motor_orders, "--motor-orders", 2, "2,4")
-    bo = parsing.ints(beam_orders, "--beam-orders", 2, "0,2")
+    # count=2: two whole numbers each
+    mo = cast("tuple[int, int]", parsing.ints(motor_orders, "--motor-orders", 2, "2,4"))
+    bo = cast("tuple[int, int]", parsing.ints(beam_orders, "--beam-orders", 2, "0,2"))
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     plots = output_folder("--plots", plots, overwrite)
@@ -152,29 +164,33 @@ def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a gene
 
 @guarded_command("logs", "log_format", "lines")
 def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"),
-        log_format: Optional[Path] = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
+        log_format: Path | None = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
         input: str = typer.Option("current", "--input", help="flexarm name of the input"),
         output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
         period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
         lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
-        reference: Optional[str] = typer.Option(
+        reference: str | None = typer.Option(
             None, "--reference", help="closed loop, with --method lpm: the reference's flexarm "
                                       "name; G = G_yr/G_ur (indirect). Periodic data need none: "
                                       "the ratio of period means is already Ȳ/Ū = (Ȳ/R̄)/(Ū/R̄)"),
         method: str = typer.Option("periodic", "--method",
                                    help="periodic (multisine over whole periods) or lpm "
                                         "(local polynomial method: non-periodic or transient records)"),
-        json_out: o.JsonRequired = ...,
+        json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
         plots: o.Plots = None,
         overwrite: o.Overwrite = False) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
     import warnings as _w
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
+    from flexarm.identification.frequency_domain.periodic import (
+        combine_realisations,
+        lpm_frf,
+        periodic_frf,
+        plot_bode,
+        plot_distortion,
+    )
     from flexarm.io.matfile import read_recording
-    from flexarm.identification.frequency_domain.periodic import (combine_realisations, lpm_frf,
-                                                                  periodic_frf, plot_bode,
-                                                                  plot_distortion)
     if method not in ("periodic", "lpm"):
         fail(f"--method {method!r}: choose periodic or lpm")
     n_period = None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
@@ -242,19 +258,19 @@ def structure_given(st, motor_constant, resistance, gear_ratio, efficiency, leng
 
 @guarded_command("frf_json")
 def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
-          poles: Optional[int] = typer.Option(None, "--poles"),
-          zeros: Optional[int] = typer.Option(None, "--zeros"),
+          poles: int | None = typer.Option(None, "--poles"),
+          zeros: int | None = typer.Option(None, "--zeros"),
           integrators: int = typer.Option(0, "--integrators"),
           delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
-          structure: Optional[str] = typer.Option(
+          structure: str | None = typer.Option(
               None, "--structure", help="physical structure: two-mass, frb-single-mass "
                                         "(needs --motor-constant) or voltage-servo (needs "
                                         "--motor-constant, --resistance, --gear-ratio, --efficiency)"),
-          output: Optional[str] = typer.Option(
+          output: str | None = typer.Option(
               None, "--output", help="output(s) to fit: one for a rational model; for a "
                                      "structure a comma list (default: every output of the "
                                      "FRF the structure has)"),
-          free: Optional[str] = typer.Option(None, "--free", help="structure: comma list of "
+          free: str | None = typer.Option(None, "--free", help="structure: comma list of "
                                              "the parameters fitted (default all)"),
           fixed: list[str] = typer.Option([], "--fix", help="structure: NAME=VALUE held "
                                           "(SI; with --free, the value of a parameter not fitted)"),
@@ -266,7 +282,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
           coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
                                        help="the Coulomb level from the odd distortion "
                                             "(simulates the fitted model; a few seconds)"),
-          json_out: o.JsonRequired = ...,
+          json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
           plots: o.Plots = None,
           overwrite: o.Overwrite = False) -> None:
     """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
@@ -326,7 +342,8 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
 
                 from flexarm.identification.frequency_domain.harmonics import IdentificationError
                 from flexarm.identification.frequency_domain.multisine_friction import (
-                    coulomb_from_distortion)
+                    coulomb_from_distortion,
+                )
                 from flexarm.identification.frequency_domain.periodic import PeriodicFRF
                 err.print("Coulomb level from the odd distortion: simulating the fitted model ...")
                 try:
@@ -392,7 +409,7 @@ def friction(frf_json: list[Path] = typer.Argument(
              length: o.StructLength = None,
              iterations: int = typer.Option(3, "--iterations",
                                             help="simulator corrections of the Bussgang start (0: none)"),
-             json_out: o.JsonRequired = ...,
+             json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
              overwrite: o.Overwrite = False) -> None:
     """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
     structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v
@@ -403,7 +420,9 @@ def friction(frf_json: list[Path] = typer.Argument(
 
     from flexarm.identification.frequency_domain.harmonics import IdentificationError
     from flexarm.identification.frequency_domain.multisine_friction import (
-        SIMULATORS, coulomb_from_bla_amplitudes)
+        SIMULATORS,
+        coulomb_from_bla_amplitudes,
+    )
     from flexarm.identification.frequency_domain.periodic import PeriodicFRF
     from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
     from flexarm.identification.frequency_domain.tfest import TFEstError
@@ -433,9 +452,9 @@ def friction(frf_json: list[Path] = typer.Argument(
         idx = [frf.outputs.index(n) for n in names]
         try:
             fit = fit_structure(st, 2 * np.pi * frf.frequency_hz,
-                                {n: frf.response[i] for n, i in zip(names, idx)},
+                                {n: frf.response[i] for n, i in zip(names, idx, strict=True)},
                                 {n: (frf.total_std if frf.total_std is not None
-                                     else frf.noise_std)[i] for n, i in zip(names, idx)},
+                                     else frf.noise_std)[i] for n, i in zip(names, idx, strict=True)},
                                 given=given)
         except TFEstError as exc:
             fail(f"{path}: {exc}")

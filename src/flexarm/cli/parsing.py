@@ -5,7 +5,6 @@ value and an example (exit 2), never a traceback."""
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 from flexarm.cli.common import fail
 
@@ -107,7 +106,7 @@ def weights(text: str | None, option: str):
              f"e.g. {option} motor_angle=1e3,tip_deflection=10")
 
 
-def channels(channel: Optional[list[str]]) -> dict | None:
+def channels(channel: list[str] | None) -> dict | None:
     """``--channel NAME`` or ``NAME=WEIGHT`` (repeated) → {name: weight}."""
     if not channel:
         return None
@@ -121,7 +120,7 @@ def channels(channel: Optional[list[str]]) -> dict | None:
     return out
 
 
-def priors(prior: Optional[list[str]]) -> dict:
+def priors(prior: list[str] | None) -> dict:
     """``--prior PATH=REL_STD`` (repeated) → {path: relative std}."""
     out = {}
     for x in prior or []:

@@ -8,8 +8,15 @@ from pathlib import Path
 import typer
 
 from flexarm.cli import parsing
-from flexarm.cli.common import check_dir_option, check_file_option, console, enable_cache, err, fail, outdir
-
+from flexarm.cli.common import (
+    check_dir_option,
+    check_file_option,
+    console,
+    enable_cache,
+    err,
+    fail,
+    outdir,
+)
 
 REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
                  "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example"}

@@ -6,7 +6,6 @@ import json
 from typing import Annotated
 
 import typer
-
 from rich.markup import escape
 from rich.table import Table
 

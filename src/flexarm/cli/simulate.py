@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
 
 from flexarm.cli import parsing
-from flexarm.cli.common import console, guarded_command, enable_cache, fail, load, outdir
+from flexarm.cli.common import console, enable_cache, fail, guarded_command, load, outdir
 from flexarm.cli.options import LogFormatFile, OverwriteOut
 
 
@@ -20,13 +20,13 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
              out: Annotated[Path, typer.Option(
                  "--out", help="folder for CSV, figures and summary")],
              overwrite: OverwriteOut = False,
-             log: Annotated[Optional[list[Path]], typer.Option(
+             log: Annotated[list[Path] | None, typer.Option(
                  "--log", help="replay this log (.mat or text; repeat for several): its "
                                "setpoints, initial state, fit % per logged channel")] = None,
              log_format: LogFormatFile = None,
-             window: Annotated[Optional[str], typer.Option(
+             window: Annotated[str | None, typer.Option(
                  help="replay this part of every log, START:STOP in s on its clock")] = None,
-             controller: Annotated[Optional[Path], typer.Option(
+             controller: Annotated[Path | None, typer.Option(
                  "--controller", help="with --log: a controller FILE.toml ([controller] or "
                                       "[[controllers]] tables as in a scenario) replacing "
                                       "the scenario's controllers for the replay")] = None,
@@ -70,8 +70,8 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
     console.print_json(json.dumps(summaries))
 
 
-def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Optional[str],
-                out: Path, *, controller: Optional[Path] = None,
+def replay_logs(sc, logs: list[Path], log_format: Path | None, window: str | None,
+                out: Path, *, controller: Path | None = None,
                 continuous: bool = False) -> None:
     """``simulate --log``: each log replayed on the scenario, fit % per channel, figures;
     ``controller``: a controller file replacing the scenario's controllers
@@ -99,9 +99,8 @@ def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Option
         if continuous:
             reps = replay_run(sc, glogs, continuous=True)
         else:
-            reps = [replay(sc, g, window=(g.time[0] + win[0], g.time[0] + win[1])
-                           if win else None) for g in glogs]
-        for path, rep in zip(logs, reps):
+            reps = [replay(sc, g, window=win) for g in glogs]  # [t0, t1) s from the first sample
+        for path, rep in zip(logs, reps, strict=True):
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
             if rep.fit_percent:  # a log where no channel moves has no fit % and no figure
                 plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
@@ -115,7 +114,7 @@ def replay_logs(sc, logs: list[Path], log_format: Optional[Path], window: Option
     console.print(t)
 
 
-def replay_document(sc, window: Optional[str], results: dict) -> dict:
+def replay_document(sc, window: str | None, results: dict) -> dict:
     """JSON LAYOUT (to move into the library's prediction result's ``to_dict()``):
     ``replay.json`` of ``simulate --log``."""
     return {"scenario": sc.name, "window": window, "fit_percent": results}

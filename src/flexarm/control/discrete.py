@@ -18,7 +18,8 @@ the error e = reference − measured; :func:`pd`, :func:`pid`, :func:`lead`,
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import control
 import equinox as eqx
@@ -134,7 +135,7 @@ class Sum(Controller):
 
     def step(self, state, measured, reference):
         new, total = [], None
-        for p, s in zip(self.parts, state):
+        for p, s in zip(self.parts, state, strict=True):
             s2, u = p.step(s, measured, reference)
             new.append(s2)
             total = u if total is None else total + u

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import cast
 
 import control
 import equinox as eqx
@@ -180,7 +181,7 @@ class InnerLoop(Controller):
         return (x1n, x2n, xcn, th), jnp.reshape(u_fb + i_c, (1,))
 
     def with_switches(self, *, friction: bool | None = None,
-                      coupling: bool | None = None) -> "InnerLoop":
+                      coupling: bool | None = None) -> InnerLoop:
         """A copy with friction and/or coupling compensation turned on or off (FRB Figs.
         12, 13, 17). Same pytree structure: the compiled loop is reused."""
         out = self
@@ -493,7 +494,8 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
         raise ValueError(f"min_root must be in [-0.99, 0.99); got {min_root!r}")
     bounds = [(lo, 0.99)] * 4
     best = scipy.optimize.differential_evolution(
-        cost, bounds, popsize=popsize, maxiter=maxiter, tol=1e-8, seed=seed,
+        cost, bounds, popsize=popsize, maxiter=maxiter, tol=1e-8,
+        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
         vectorized=True, updating="deferred", polish=False)
     polish = scipy.optimize.minimize(
         lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]), best.x,
@@ -518,6 +520,7 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
         )
     g1 = _comp(p[0], p[1], dc_gain, dt)
     g2 = _comp(p[2], p[3], 1.0, dt)
+    ts = cast(float, ts)  # a NumPy float: _settling of one response
     return InnerLoopDesign(g1, g2, dt, int(delay), float(dc_gain), ts, band, max(over, 0.0),
                            float(step),
                            peak * step, avail, i_max, i_coup, i_fric, p, ev.time, theta, cs,

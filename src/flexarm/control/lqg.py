@@ -1,6 +1,7 @@
 """A discrete observer-based (LQG) controller for any arm, acting on the tracking error.
 
-Design model: the arm's linear model ẋ = A x + B u, y = C x (:func:`flexarm.models.linearize.linearize`,
+Design model: the arm's linear model ẋ = A x + B u, y = C x
+(:func:`flexarm.models.linearize.linearize`,
 joint friction left out), sampled with a zero-order hold at the controller period T:
 x⁺ = A_d x + B_d u, y = C x. Then
 
@@ -33,6 +34,7 @@ its loop's poles (:func:`loop_poles`), and its
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import control
 import numpy as np
 

@@ -139,8 +139,10 @@ def digital_filter(spec: Any, dt: float | None, *, where: str = "filter") -> Dig
         if how == "forward_euler":
             A, B, D = np.eye(2) + dt * Ac, dt * Bc, 0.0
         elif how in ("zoh", "tustin"):
-            A, B2, C2, D2, _ = sps.cont2discrete((Ac, Bc[:, None], C[None, :], np.zeros((1, 1))),
-                                                 dt, method="zoh" if how == "zoh" else "bilinear")
+            # (A, B, C, D, dt); scipy's return type is inferred from its branches
+            ssd: Any = sps.cont2discrete((Ac, Bc[:, None], C[None, :], np.zeros((1, 1))),
+                                         dt, method="zoh" if how == "zoh" else "bilinear")
+            A, B2, C2, D2, _ = ssd
             B, C, D = B2[:, 0], C2[0], float(D2[0, 0])
         else:
             raise ValueError(f"{where}: discretisation = {how!r}; give forward_euler, zoh or "
@@ -222,7 +224,7 @@ class LTIController(Controller):
                               if kind == "reference" else jnp.asarray(float(v))
                               for kind, v in self.signals])
         return jnp.stack([(reference[s] if s is not None else 0.0) - measured[i]
-                          for i, s in zip(self.inputs, self.setpoints)])
+                          for i, s in zip(self.inputs, self.setpoints, strict=True)])
 
     def step(self, state, measured, reference):
         x, held, k = state
@@ -390,7 +392,8 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
                          "D (outputs × inputs) and A, B, C when it has states: add the "
                          "field D (zeros for a strictly proper block)")
     if all(out.get(k) is None for k in "ABC"):
-        out.pop("A", None), out.pop("B", None), out.pop("C", None)
+        for k in "ABC":
+            out.pop(k, None)
     return out
 
 
@@ -498,6 +501,7 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
         inputs, sp, n_in = (), (), len(sig)
     else:
         sig = None
+        assert inputs is not None  # one of inputs and signals (checked above)
         inputs = list(inputs)
         setpoints = [None] * len(inputs) if setpoints is None else list(setpoints)
         if len(setpoints) != len(inputs):

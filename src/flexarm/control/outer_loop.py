@@ -30,8 +30,8 @@ raises when the peak exceeds the limit.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import control
 import equinox as eqx

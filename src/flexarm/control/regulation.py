@@ -42,10 +42,9 @@ its front-end (one rollout or a batch of gain variations).
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -53,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 from flexarm.models.multilink import MultiLinkModel, MultiLinkPlant, chol_solve
 
 
@@ -104,7 +104,7 @@ def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: flo
         return d
     F0, _ = _newton_parts(plant, theta, jnp.zeros(plant.n_delta))
     scale = 1.0 + float(np.linalg.norm(F0))
-    for it in range(max_iter):
+    for _ in range(max_iter):
         F, Jm = (np.asarray(a) for a in _newton_parts(plant, theta, jnp.asarray(d)))
         if np.linalg.norm(F) <= tol * scale:
             return d
@@ -278,7 +278,7 @@ def alpha_bound(model: MultiLinkModel, theta_low, theta_high, delta_max, *,
         return -float(_gjac_norms(model.plant, jnp.asarray(q[None, :]))[0])
 
     for k in np.argsort(vals)[::-1][:refine]:
-        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi)),
+        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
                        options={"maxiter": 50})
         nev += res.nfev
         if -res.fun > alpha:
@@ -349,8 +349,9 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
 
     KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
     be a single gain shared by the batch, a scalar or an (n,) diagonal. Returns ``(params, axes)``
-    for :func:`flexarm.sim.continuous.simulate_continuous_batch`: params with KP, KD of shape (N, n, n), axes with 0
-    on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d) are shared)."""
+    for :func:`flexarm.sim.continuous.simulate_continuous_batch`: params with KP, KD of shape
+    (N, n, n), axes with 0 on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d)
+    are shared)."""
     n = model.n_links
     base = regulation_params(model, np.eye(n), np.eye(n), theta_d, theta_0=theta_0,
                              duration=duration, newton_iterations=newton_iterations)
@@ -369,12 +370,18 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     kp, kd = stack(KP, "KP"), stack(KD, "KD")
     if kp is None and kd is None:
         raise ValueError("KP or KD must hold a batch: (N, n) diagonals or (N, n, n) matrices")
-    N = (kp if kp is not None else kd).shape[0]
+    if kp is not None:
+        N = kp.shape[0]
+    else:
+        assert kd is not None  # one of them holds the batch (checked above)
+        N = kd.shape[0]
     if kp is not None and kd is not None and kd.shape[0] != N:
         raise ValueError(f"KP holds {N} gains and KD {kd.shape[0]}")
     kp = np.broadcast_to(_gain(KP, n, "KP"), (N, n, n)) if kp is None else kp
     kd = np.broadcast_to(_gain(KD, n, "KD"), (N, n, n)) if kd is None else kd
     params = eqx.tree_at(lambda p: (p.KP, p.KD), base, (jnp.asarray(kp), jnp.asarray(kd)))
-    axes = RegulationParams(plant=None, KP=0, KD=0, theta_d=None, delta_d=None, g_d=None,
-                            theta_0=None, duration=None, newton_iterations=newton_iterations)
+    # the vmap axes of each field (0: batched, None: shared), in a RegulationParams of axes
+    axes = cast(Any, RegulationParams)(plant=None, KP=0, KD=0, theta_d=None, delta_d=None,
+                                       g_d=None, theta_0=None, duration=None,
+                                       newton_iterations=newton_iterations)
     return params, axes

@@ -205,6 +205,7 @@ def quasi_parabolic(
     if max_snap is not None:
         s = _positive(max_snap, "max_snap", "rad/s⁴")
     else:
+        assert rounding_time is not None  # one of the two (checked above)
         tr = _positive(rounding_time, "rounding_time", "s")
         s = 4.0 * a / tr**2
     tau1 = 2.0 * math.sqrt(a / s)
@@ -261,12 +262,12 @@ def _deflection_signal(
     _, nden = _siso_polys(n, "N(s)")
     _, gnden = _siso_polys(gn, "G_b(s) N(s)")
     poles = np.concatenate([np.roots(nden), np.roots(gnden)]).astype(complex)
-    if np.any(poles.real >= -1e-9 * np.maximum(1.0, np.abs(poles))):
+    if np.any(np.real(poles) >= -1e-9 * np.maximum(1.0, np.abs(poles))):
         raise ValueError(
             "G_b(s) N(s) keeps poles on the imaginary axis or in the right half-plane "
             "(N does not cancel the plant's undamped modes): the deflection does not decay"
         )
-    settle = 10.0 / np.min(-poles.real) if poles.size else 0.0
+    settle = 10.0 / np.min(-np.real(poles)) if poles.size else 0.0
     settle = min(settle, 10.0 * trajectory.duration)
     if dt is None:
         fast = np.max(np.abs(np.concatenate([poles, _zeros(plant), _zeros(n)])), initial=1.0)

@@ -149,10 +149,11 @@ def _merge_multiple(r: np.ndarray) -> np.ndarray:
     clusters = [[z] for z in r]
 
     def spread_ok(c: list) -> tuple[bool, complex]:
-        c = np.asarray(c)
-        mid = c.mean()
-        scale = max(abs(mid), np.max(np.abs(c)))
-        return bool(np.max(np.abs(c - mid)) <= _CLUSTER_SPREAD * _EPS ** (1 / c.size) * scale), mid
+        arr = np.asarray(c)
+        mid = arr.mean()
+        scale = max(abs(mid), np.max(np.abs(arr)))
+        return (bool(np.max(np.abs(arr - mid)) <= _CLUSTER_SPREAD * _EPS ** (1 / arr.size) * scale),
+                mid)
 
     while True:
         best = None
@@ -180,9 +181,9 @@ def _merge_multiple(r: np.ndarray) -> np.ndarray:
 def _classify(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split roots into (open LHP, imaginary axis, open RHP)."""
     tol = _AXIS_RTOL * np.maximum(1.0, np.abs(r))
-    lhp = r[r.real < -tol]
-    rhp = r[r.real > tol]
-    axis = r[np.abs(r.real) <= tol]
+    lhp = r[np.real(r) < -tol]
+    rhp = r[np.real(r) > tol]
+    axis = r[np.abs(np.real(r)) <= tol]
     return lhp, axis, rhp
 
 
@@ -201,9 +202,9 @@ def _cancel(a: np.ndarray, b: np.ndarray, rtol: float = 1e-7) -> tuple[np.ndarra
     counts: a double root of ``a`` cancels at most two of ``b``). Multiple roots from
     :func:`_roots` are exactly equal, so an m-fold common factor leaves nothing behind.
     """
-    a, rest = list(np.asarray(a, complex)), list(np.asarray(b, complex))
+    roots_a, rest = list(np.asarray(a, complex)), list(np.asarray(b, complex))
     keep, n = [], 0
-    for z in a:
+    for z in roots_a:
         if rest:
             d = np.abs(np.asarray(rest) - z)
             j = int(np.argmin(d))
@@ -400,8 +401,9 @@ def split_improper(n: control.TransferFunction) -> tuple[np.ndarray, control.Tra
 
 
 def _derivative_getter(reference: object, t: np.ndarray) -> Callable[[int], np.ndarray]:
-    if hasattr(reference, "derivative") and callable(reference.derivative):
-        return lambda k: np.asarray(reference.derivative(t, k), dtype=float)
+    derivative = getattr(reference, "derivative", None)
+    if derivative is not None and callable(derivative):
+        return lambda k: np.asarray(derivative(t, k), dtype=float)
     if callable(reference):
         return lambda k: np.asarray(reference(t, k), dtype=float)
     samples = np.asarray(reference, dtype=float)
@@ -474,8 +476,8 @@ def _real_quadratics(roots: np.ndarray) -> list[np.ndarray]:
     """Group roots closed under conjugation into real monic factors of degree ≤ 2."""
     roots = np.asarray(roots, complex)
     tol = 1e-9 * np.maximum(1.0, np.abs(roots))
-    cplx = roots[(roots.imag > tol)]
-    real = np.sort(roots[np.abs(roots.imag) <= tol].real)
+    cplx = roots[(np.imag(roots) > tol)]
+    real = np.sort(np.real(roots[np.abs(np.imag(roots)) <= tol]))
     out = [np.array([1.0, -2.0 * z.real, abs(z) ** 2]) for z in cplx]
     for i in range(0, real.size - 1, 2):
         out.append(np.array([1.0, -(real[i] + real[i + 1]), real[i] * real[i + 1]]))
@@ -553,4 +555,5 @@ def discretize_feedforward(
             raise ValueError("discretised N(s)F(s) is improper; increase the filter order")
         sec = control.tf2ss(control.tf(nz, pz, dt))
         sys = sec if sys is None else control.series(sys, sec)
+    assert sys is not None  # one section at least: N(s)F(s) has poles
     return gain * sys

@@ -57,15 +57,16 @@ and is not exported (the header says so for each filtered channel).
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 __all__ = ["CCode", "ExportError", "Part", "EXPORTERS", "exporter", "generate_c", "export_c",
            "load_design"]
@@ -210,14 +211,12 @@ def _dot(acc: str, terms: list[tuple[str, str]], indent: str) -> list[str]:
 
 # ----------------------------------------------------------------------------- kinds
 def _register_builtin() -> None:
-    from flexarm.control.discrete import LinearController
+    from flexarm.control.discrete import Cascade, LinearController, Sum
     from flexarm.control.friction_compensation import FrictionCompensated
-    from flexarm.control.lti import LTIController
-    from flexarm.control.state_feedback import StateFeedback
-
-    from flexarm.control.discrete import Cascade, Sum
     from flexarm.control.inner_loop import InnerLoop
+    from flexarm.control.lti import LTIController
     from flexarm.control.outer_loop import ReferenceChannel
+    from flexarm.control.state_feedback import StateFeedback
 
     exporter(LinearController)(_linear)
     exporter(LTIController)(_lti)
@@ -285,7 +284,7 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         ins = [f"{v:.17g}" if kind == "constant" else str(v) for kind, v in ctrl.signals]
         form = f"e = the block's input vector ({', '.join(ins)})"
     else:
-        ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints)]
+        ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints, strict=True)]
         form = f"e = setpoint - measured ({', '.join(ins)})"
     label = "" if ctrl.name in ("controller", "[controller]") else f" {ctrl.name}"
     part = Part(law=[f"LTIController{label}: {form}; "
@@ -316,7 +315,7 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
                    else ctx.lit(v))
             note = f"{kind} {v}" if kind != "constant" else "constant"
             body.append(f"e[{j}] = {src};  /* {note} */")
-    for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints)):
+    for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints, strict=True)):
         r = ctx.ref(sp) if sp is not None else "0"
         body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {sp or '0'} - {inp} */")
     body.append(f"for (i = 0; i < {m}; ++i) {{")
@@ -695,9 +694,9 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     where it lies); ``controller``: a controller object to export instead of the
     scenario's ``[controller]`` (as :func:`flexarm.sim.build.prepare` takes it), with the
     scenario's period, actuator and sensors."""
-    from flexarm.version import __version__
     from flexarm.io.logs import signal_unit
     from flexarm.sim.build import prepare
+    from flexarm.version import __version__
 
     name = _c_name(name)
     if precision not in PRECISIONS:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import sys
 import types
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from flexarm.design.gate import GateOptions, design_checked
 from flexarm.design.result import Design
@@ -65,6 +66,7 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
         if k == max_rounds:
             break
         des = design_linear(scenario, "lqr", **{**options, "r": (4 * np.asarray(r)).tolist()})
+    assert best is not None  # one round at least (max_rounds >= 0)
     fails, des, kept = best
     if fails != (False, 0):
         h = history[kept]

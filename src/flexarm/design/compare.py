@@ -38,9 +38,10 @@ it, nominal and every drawn plant): the law works inside the amplifier's range.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -315,7 +316,7 @@ def summarise(m: dict[str, np.ndarray], limit: float) -> dict[str, Any]:
     st = np.asarray(m["stable"][1:], bool)
     n = st.size
     med, worst = {}, {}
-    for k, (_, _, how) in METRICS.items():
+    for k, (_, _, _how) in METRICS.items():
         v = np.where(st, drawn[k], np.inf) if k == "tip_settling_s" else drawn[k]
         v = np.where(np.isnan(v), np.inf, v)
         med[k] = float(np.median(v)) if n else float("nan")

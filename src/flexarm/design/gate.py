@@ -135,6 +135,7 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
         options = {**options, "client": client}
     des = design(scenario, method, **options)
     batch = plants if plants is not None else PlantBatch.nominal_only(scenario)
+    assert scenario.simulation is not None  # design needs a sampled-data scenario
     duration = gate.duration if gate.duration is not None else max(
         3.0, float(scenario.simulation.duration))
     c = compare(batch, {method: des}, logged=logged, count=given, duration=duration,

@@ -72,8 +72,14 @@ import control
 import numpy as np
 import scipy.linalg
 
-from flexarm.control.lqg import (augment_delays, input_rows, integral_model, loop_poles,
-                                 lti_controller_spec, observer_controller)
+from flexarm.control.lqg import (
+    augment_delays,
+    input_rows,
+    integral_model,
+    loop_poles,
+    lti_controller_spec,
+    observer_controller,
+)
 from flexarm.design.result import Design
 
 __all__ = ["DesignModel", "design_model", "design_linear", "separation_check", "step_response"]
@@ -120,7 +126,7 @@ class DesignModel:
         return self.continuous.nstates
 
 
-def _amplitude(scenario, ref: str) -> float:
+def _amplitude(scenario, ref: str | None) -> float:
     spec = scenario.reference if ref == "reference" else scenario.references.get(ref)
     a = abs(float(getattr(spec, "amplitude", 0.0) or 0.0)) if spec is not None else 0.0
     return a if a > 0 else 0.1
@@ -195,7 +201,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
 
     quanta_all = sensor_quanta({c: Sensor.model_validate(spec_of[c]) for c in chans})
     signals = [spec_of[c].get("signal") or c for c in chans]
-    for c, s in zip(chans, signals):
+    for c, s in zip(chans, signals, strict=True):
         if s not in arm.signal_names:
             raise ValueError(f"sensor {c!r}: the arm has no signal {s!r}; its signals: "
                              f"{', '.join(arm.signal_names)}")
@@ -234,14 +240,14 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     if setpoints is not None:
         sp = dict(setpoints)
     elif getattr(ctrl, "type", None) == "lti" and ctrl.setpoints is not None:
-        sp = {i: s for i, s in zip(ctrl.inputs, ctrl.setpoints) if isinstance(s, str)}
+        sp = {i: s for i, s in zip(ctrl.inputs, ctrl.setpoints, strict=True) if isinstance(s, str)}
     elif scenario.arm.kind != "multi_link":
-        hub = next((c for c, s in zip(chans, signals) if s == "motor_angle"), None)
+        hub = next((c for c, s in zip(chans, signals, strict=True) if s == "motor_angle"), None)
         sp = {hub: "reference"} if hub else {}
     else:
         for j in range(arm.n_joints):
             ref = f"theta_ref_{j + 1}"
-            c = next((c for c, s in zip(chans, signals) if s == f"theta_{j + 1}"), None)
+            c = next((c for c, s in zip(chans, signals, strict=True) if s == f"theta_{j + 1}"), None)
             if c is not None and ref in scenario.references:
                 sp[c] = ref
     sp = {c: r for c, r in sp.items() if c is not None and c in chans}
@@ -268,7 +274,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
         spl[i] = spl[j]
 
     scales = []
-    for i, c in enumerate(chans):
+    for i, _c in enumerate(chans):
         if i in tracked or i in follow:
             scales.append(amp[chans[follow.get(i, i)]] * abs(gains[i]))
         else:
@@ -339,7 +345,7 @@ def _poles_z(poles, domain: str, dt: float, what: str) -> np.ndarray:
                          f"{abs(np.exp(bad * dt) if domain == 's' else bad):.6g} >= 1); give "
                          + ("poles with a negative real part" if domain == "s" else
                             "poles inside the unit circle"))
-    for x in z[np.abs(z.imag) > 1e-12]:
+    for x in z[np.abs(np.imag(z)) > 1e-12]:
         if not np.any(np.abs(z - np.conj(x)) < 1e-9 * max(1.0, abs(x))):
             raise ValueError(f"{what}: the complex pole {x:.6g} has no conjugate; give both")
     return z
@@ -367,7 +373,7 @@ def _weights_matrix(w, n: int, what: str) -> np.ndarray:
 def _channel_weights(dm: DesignModel, q, integral: bool) -> tuple[dict, dict]:
     """Per channel (and per integrator ``int_<channel>``) the weight q_i = 1/s_i² (Bryson),
     overridden by ``q`` (dict name → weight, or one number per channel [+ integrators])."""
-    w = {c: 1.0 / s**2 if s > 0 else 0.0 for c, s in zip(dm.channels, dm.scales)}
+    w = {c: 1.0 / s**2 if s > 0 else 0.0 for c, s in zip(dm.channels, dm.scales, strict=True)}
     wi = {f"int_{dm.channels[i]}": 1.0 / (INTEGRAL_TIME * dm.scales[i])**2
           for i in dm.tracked} if integral else {}
     if q is None:
@@ -388,7 +394,7 @@ def _channel_weights(dm: DesignModel, q, integral: bool) -> tuple[dict, dict]:
         if vals.size != len(keys):
             raise ValueError(f"q: {vals.size} numbers; give {len(keys)} ({', '.join(keys)}) or "
                              "name them, e.g. motor_angle=1e3")
-        for k, v in zip(keys, vals):
+        for k, v in zip(keys, vals, strict=True):
             (w if k in w else wi)[k] = float(v)
     for k, v in {**w, **wi}.items():
         if not (v >= 0 and np.isfinite(v)):
@@ -476,7 +482,7 @@ def _regulator(dm: DesignModel, Ar, Br, idx, method, q, r, poles, pole_domain, r
         return np.asarray(K), {"q": w, "q_integral": wi, "r": np.diag(R).tolist(),
                                "rule": ("Bryson (1/scale²)" if q is None and r is None
                                         else "given"),
-                               "scales": dict(zip(dm.channels, dm.scales))}, None
+                               "scales": dict(zip(dm.channels, dm.scales, strict=True))}, None
     zp = _poles_z(poles, pole_domain, dm.dt, "poles")
     if zp.size != nx + ni:
         raise ValueError(f"poles: {zp.size} given; give {nx + ni}: one per state of the "
@@ -534,7 +540,7 @@ def _observer(dm: DesignModel, plant, level, observer_poles, pole_domain, warnin
                              + "; the delay registers get z = 0")
         L = _place(A.T, C.T, np.concatenate([zo, np.zeros(ne - zo.size)]), "observer_poles").T
         return L, {"kind": "placed", "poles": [[float(x.real), float(x.imag)] for x in zo]}
-    V = np.array([s**2 + qq**2 / 12 for s, qq in zip(dm.noise, dm.quanta)])
+    V = np.array([s**2 + qq**2 / 12 for s, qq in zip(dm.noise, dm.quanta, strict=True)])
     for i, v in enumerate(V):
         if v <= 0:
             V[i] = (1e-3 * dm.scales[i])**2
@@ -736,8 +742,8 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
                   "n_disturbances": nd, "two_dof": two_dof,
                   "n_controller": ctrl.nstates, "period": dm.dt,
                   "computation_delay": dm.computation_delay,
-                  "sensor_delays": dict(zip(dm.channels, dm.sensor_delays)),
-                  "measured": dm.channels, "setpoints": dict(zip(dm.channels, dm.setpoints))},
+                  "sensor_delays": dict(zip(dm.channels, dm.sensor_delays, strict=True)),
+                  "measured": dm.channels, "setpoints": dict(zip(dm.channels, dm.setpoints, strict=True))},
         "weights": weights,
         "K": K.tolist(), "L": L.tolist(),
         "regulator_poles": _pole_table(reg, dm.dt),

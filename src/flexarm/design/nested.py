@@ -11,7 +11,8 @@ Inner hub loop (FRB Sec. IV, Fig. 4), in the drive's command units (A or V)
     Design model FRB eq. (9): θm/u = k_u / (s (J s + V)) with, for a geared voltage servo,
     V = B_eq + η K_g² K_m²/R_m (back-EMF) and k_u = η K_g K_m/R_m (N·m/V); for a current
     drive k_u = K (N·m/A) (:func:`~flexarm.control.inner_loop.motor_design_model`).
-    ZOH, the scenario's computation delay plus the hub sensor's delay; G_cm1(1) = ``dc_gain`` with the peak-command rule
+    ZOH, the scenario's computation delay plus the hub sensor's delay; G_cm1(1) = ``dc_gain`` with
+    the peak-command rule
     peak |u_fb| <= G_cm1(1)·step <= limit − ĉ·bending − c_f (the drive's limit, V or A;
     :func:`~flexarm.control.inner_loop.design_inner_loop`).
     c_f = F_c / k_u: the scenario's Coulomb level in command units (FRB Sec. III-B).
@@ -271,6 +272,8 @@ def design_nested(scenario, *, distance: float | None = None,
     if sc.arm.kind != "single_link":
         raise ValueError(f"scenario {sc.name!r}: design_nested is Feliu's single-link scheme; "
                          f"this arm has {len(sc.arm.links)} links")
+    # a single-link scenario has [sampling] and [simulation] (validated)
+    assert sc.sampling is not None and sc.simulation is not None
     dt, delay = float(sc.sampling.period), int(sc.sampling.delay)
     hub = sc.sensors.get("motor_angle")
     hub_delay = int(hub.delay) if hub is not None else 0
@@ -394,6 +397,7 @@ def design_nested(scenario, *, distance: float | None = None,
             traj = quasi_parabolic(dist, float(acceleration), **kw)
             n = wiener_feedforward(gb, traj.laplace_model())
         defl_lin = peak_deflection(gb, n, traj)
+        assert traj.max_snap is not None  # a quasi-parabolic move has one
         s_val = float(traj.max_snap)
     # the move through the designed loops (linear): what the sizing limits
     defl_loop, u_move = _move_profile(model, n, traj, gb, t_inner, hub_delay, c_hat,
@@ -466,6 +470,7 @@ def design_nested(scenario, *, distance: float | None = None,
 
     # ---- run it: the inner loop alone with the tip held (FRB Fig. 11), and the move
     h_step = step if inner_step is None else float(inner_step)
+    assert designed.simulation is not None  # sc's, with the run's duration
     held = designed.model_copy(update={
         "controller": spec.model_copy(update={"gcb_num": [0.0], "gcb_den": [1.0],
                                               "feedforward_num": [1.0],

@@ -45,8 +45,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -103,7 +104,7 @@ class BatchLoop:
     prepared: Any  # the nominal plant's flexarm.sim.build.Prepared
     size: int
 
-    def with_controller(self, controller) -> "BatchLoop":
+    def with_controller(self, controller) -> BatchLoop:
         """The same plants under another controller (one :class:`Controller`, its leaves
         broadcast to every rollout): no plant is prepared again, and a controller of the
         same structure reuses the compiled batch."""
@@ -126,8 +127,10 @@ class BatchLoop:
         returned as they are (flagged by :func:`diverged`), not raised."""
         from flexarm.sim.sampled import simulate_batch
 
-        return simulate_batch(self.loop, self.x0, self.references, len(self.time), seed=seed,
-                              check=False)
+        # no client or chunks: the arrays themselves
+        return cast("dict[str, np.ndarray]",
+                    simulate_batch(self.loop, self.x0, self.references, len(self.time),
+                                   seed=seed, check=False))
 
 
 def diverged(out: dict) -> np.ndarray:
@@ -161,12 +164,12 @@ class PlantBatch:
         return len(self.scenarios)
 
     @classmethod
-    def nominal_only(cls, scenario) -> "PlantBatch":
+    def nominal_only(cls, scenario) -> PlantBatch:
         """The scenario alone, no drawn plants (a comparison on the nominal plant)."""
         return cls(scenario, [], {}, [], np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0, [],
                    {"source": "the nominal plant only", "n": 0})
 
-    def with_overrides(self, overrides: Mapping | None) -> "PlantBatch":
+    def with_overrides(self, overrides: Mapping | None) -> PlantBatch:
         """Every plant (and the nominal) with the same experiment changes (reference,
         duration, sensor quantum, controller) merged in (:func:`with_overrides`)."""
         if not overrides:
@@ -214,7 +217,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
     k = len(names)
     std_u = np.asarray([result.std[nm] / abs(float(d.dphys_du(U[i]))) if
                         abs(float(d.dphys_du(U[i]))) > 0 else np.nan
-                        for i, (nm, d) in enumerate(zip(names, defs))])
+                        for i, (nm, d) in enumerate(zip(names, defs, strict=True))])
     cov = result.stages.get("local", {}).get("covariance_unit")
     warnings: list[str] = []
     if cov is not None:
@@ -248,7 +251,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
         if not np.all(lower_ok | (z >= 0.0)):
             return None
         p = {nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
-             for i, (nm, d) in enumerate(zip(names, defs))}
+             for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
         first = lambda m: p.get(m, p.get(f"{m}[0]", 0.0))  # noqa: E731
         der = derived({m: first(m) for m in ("hub_inertia", "link_frequency", "link_inertia")
                        if m in p or f"{m}[0]" in p}, length)
@@ -281,7 +284,7 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
                          "the spreads with from_paths")
     Z = np.asarray(draws)
     values = {nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
-              for i, (nm, d) in enumerate(zip(names, defs))}
+              for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
     nominal = result.scenario()
     info = {"source": source, "n": n, "seed": seed, "drawn": tried,
             "rejected_fraction": 1.0 - n / tried if tried else 0.0,
@@ -323,8 +326,8 @@ def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200
             s2 = math.log1p((s / m) ** 2)
             Z[:, i] = math.copysign(1.0, m) * np.exp(
                 math.log(abs(m)) - s2 / 2 + math.sqrt(s2) * E[:, i])
-    scen = [scenario_with(scenario, dict(zip(names, Z[j]))) for j in range(n)]
-    nominal = scenario_with(scenario, dict(zip(names, mean)))
+    scen = [scenario_with(scenario, dict(zip(names, Z[j], strict=True))) for j in range(n)]
+    nominal = scenario_with(scenario, dict(zip(names, mean, strict=True)))
     return PlantBatch(nominal, scen, {p: Z[:, i] for i, p in enumerate(names)}, names, Z,
                       mean, std, seed, [], {"source": "independent draws, eq. (2)", "n": n,
                                             "seed": seed})

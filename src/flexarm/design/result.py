@@ -99,7 +99,7 @@ class Design:
     def _repr_html_(self) -> str:
         return self._table().html()
 
-    def require_stable(self, accept_unstable: bool = False) -> "Design":
+    def require_stable(self, accept_unstable: bool = False) -> Design:
         """This design, or :class:`flexarm.errors.UnstableDesignError` when its verdict is
         not ``"stable"`` (not checked included) and ``accept_unstable`` is False."""
         if self.stable or accept_unstable:

@@ -19,12 +19,12 @@ and the N drawn plants.
 Cost. Per plant j (metrics of :func:`flexarm.design.compare.batch_metrics`, T_h the
 duration after the step, band b·|Δ|):
 
-    c_j = t_s,j / T_h                                     tip settling to ±b|Δ| of its final value
-        + w_os · OS_j / 100                                tip overshoot (% of the step)
-        + w_ss · max(0, e_j − e_max)                       hub steady-state error (counts) beyond e_max
-        + w_u · t_lim,j / T_h                              time at the voltage limit
-        + w_osc · rms_j / (b|Δ| L)                         residual tip oscillation (tail rms of d)
-        + w_ch · ch_j / 0.1 V                              command chatter (rms change per sample)
+    c_j = t_s,j / T_h                           tip settling to ±b|Δ| of its final value
+        + w_os · OS_j / 100                      tip overshoot (% of the step)
+        + w_ss · max(0, e_j − e_max)             hub steady-state error (counts) beyond e_max
+        + w_u · t_lim,j / T_h                    time at the voltage limit
+        + w_osc · rms_j / (b|Δ| L)               residual tip oscillation (tail rms of d)
+        + w_ch · ch_j / 0.1 V                    command chatter (rms change per sample)
 
 with a plant that does not settle within the run charged t_s = T_h (1 + ε_j / (b|Δ|)),
 ε_j the largest |θ_t − θ̄_t| over the last quarter (so the optimiser still sees which way
@@ -49,12 +49,12 @@ from __future__ import annotations
 
 import copy
 import time as _time
-from typing import Any, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from flexarm.design.compare import (batch_metrics, build_controller, encoder_count,
-                                    experiment)
+from flexarm.design.compare import batch_metrics, build_controller, encoder_count, experiment
 from flexarm.design.plants import PlantBatch
 from flexarm.design.result import Design
 from flexarm.specs import paths as scenario_paths
@@ -116,14 +116,14 @@ class TuneCost:
         self.nfev = 0
         self.seconds = 0.0
 
-    def scenario(self, p: Sequence[float]):
+    def scenario(self, p: Sequence[float] | np.ndarray):
         """The rig scenario with the parameters at ``p`` (validated)."""
         d = copy.deepcopy(self.template)
-        for path, v in zip(self.paths, p):
+        for path, v in zip(self.paths, p, strict=False):
             _set(d, path, v)
         return self._validate(d)
 
-    def evaluate(self, p: Sequence[float]) -> tuple[float, np.ndarray, dict]:
+    def evaluate(self, p: Sequence[float] | np.ndarray) -> tuple[float, np.ndarray, dict]:
         t0 = _time.perf_counter()
         spec = self.scenario(p).controller
         bl = self.base.with_controller(build_controller(self.base, spec, self.scn))
@@ -234,7 +234,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         lo[i], hi[i] = a, b
     if len(plants) == 0:
         warn.append("no drawn plants: tuned on the nominal plant only")
-    cost_kw = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
+    cost_kw: dict[str, Any] = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
                    weights=weights or {}, hub_error_max=hub_error_max, count=count, seed=seed)
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import ChunkedTuneCost
@@ -258,7 +258,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
             best.update(cost=J, x=np.array(x))
         if callback is not None:
             callback({"nfev": len(hist), "cost": J, "best": best["cost"],
-                      "params": dict(zip(params, map(float, p)))})
+                      "params": dict(zip(params, map(float, p), strict=True))})
         return J
 
     J0 = f(np.zeros(len(params)))
@@ -271,7 +271,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
             break
         simplex = np.vstack([x_start, x_start + simplex_step * np.eye(len(params))])
         simplex = np.clip(simplex, xb[0], xb[1])
-        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1])),
+        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1], strict=True)),
                        options={"maxfev": left if r == restarts else
                                 max(left // (restarts + 1 - r), len(params) + 2),
                                 "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-4})
@@ -286,7 +286,7 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     if not stable.all():
         warn.append(f"{int((~stable).sum())} of {stable.size} plants (nominal included) do "
                     "not settle within the tuning run with the tuned gains")
-    for p, v, a, b in zip(params, pbest, lo, hi):
+    for p, v, a, b in zip(params, pbest, lo, hi, strict=True):
         if np.isclose(v, a, rtol=1e-9, atol=1e-12) or np.isclose(v, b, rtol=1e-9, atol=1e-12):
             warn.append(f"{p} = {v:.4g} lies at a bound of [{a:.4g}, {b:.4g}]; widen it with "
                         f"bounds={{'{p}': (lo, hi)}}")
@@ -296,8 +296,8 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     info = {
         "optimiser": "scipy.optimize.minimize(method='Nelder-Mead'), scaled coordinates "
                      "(x = (p - p0)/|p0|), bounds clipped",
-        "parameters": {p: {"start": float(a), "tuned": float(b), "bounds": [float(l), float(h)]}
-                       for p, a, b, l, h in zip(params, p0, pbest, lo, hi)},
+        "parameters": {p: {"start": float(a), "tuned": float(b), "bounds": [float(low), float(high)]}
+                       for p, a, b, low, high in zip(params, p0, pbest, lo, hi, strict=True)},
         "cost": {"start": float(J0), "tuned": float(Jb), "quantile": quantile,
                  "weights": cost.w, "hub_error_max_counts": hub_error_max,
                  "band_fraction": band, "definition": "see flexarm.design.tune"},
@@ -307,5 +307,6 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         "evaluations": len(hist), "seconds": seconds,
         "seconds_per_evaluation": cost.seconds / max(cost.nfev, 1),
         "history": [float(h) for h in hist], "restarts": restarts, "message": messages}
+    assert tuned.sampling is not None  # the rig scenario is a sampled-data one
     return Design("tune", tuned, _linear_part(tuned.controller, float(tuned.sampling.period)),
                   info, warn + list(plants.warnings))

@@ -21,8 +21,8 @@ of a ``.mat`` file) and the value.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 

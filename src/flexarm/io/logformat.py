@@ -69,19 +69,31 @@ Problems are :class:`LogFormatError` naming the format file, the field, the valu
 fix. ``examples/quanser-rotflex.toml`` is a documented example.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, Mapping
-
-from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
+from typing import Any, Literal, cast
 
 import numpy as np
+from pydantic import PrivateAttr, ValidationError, field_validator, model_validator
 
 from flexarm.io import matfile
-from flexarm.io.logs import (COMMENT_CHARS, STATE_FEEDBACK_GAINS, Log, LogError,
-                             known_names, read_log, signal_unit)
+from flexarm.io.logs import (
+    COMMENT_CHARS,
+    STATE_FEEDBACK_GAINS,
+    Log,
+    LogError,
+    known_names,
+    read_log,
+    signal_unit,
+)
 from flexarm.specs.controllers_bench import StateFeedbackController
 from flexarm.specs.quantity import Count, Q, Spec
 from flexarm.units import UnitError, to_si, ureg
@@ -161,7 +173,7 @@ class ControllerFormat(Spec):
         return {k: _column_ref(k, x) for k, x in v.items()}
 
     @model_validator(mode="after")
-    def _complete(self) -> "ControllerFormat":
+    def _complete(self) -> ControllerFormat:
         units = GAIN_UNITS[self.kind]
         for where in ("gains", "gain_columns"):
             bad = [k for k in getattr(self, where) if k not in units]
@@ -283,7 +295,7 @@ class LogFormat(Spec):
         return v
 
     @model_validator(mode="after")
-    def _checked_are_mapped(self) -> "LogFormat":
+    def _checked_are_mapped(self) -> LogFormat:
         for k in [*self.checks.quantum, *self.checks.zero]:
             if k not in self.columns:
                 raise ValueError(f"[checks] names {k!r}, which [columns] does not map; "
@@ -317,15 +329,16 @@ class LogFormat(Spec):
                                      f"{', '.join(missing)}; map it to a variable (e.g. "
                                      f"time = \"logsout.time\")")
             variables = matfile.load_mat(path)
-            log = matfile.read_mat(path, {**cols, **gain_cols}, uts, variables=variables,
-                                   source=self.source)
+            # a .mat log's gain columns are variable specs (strings), as its [columns]
+            mat_cols = cast("dict[str, str]", {**cols, **gain_cols})
+            log = matfile.read_mat(path, mat_cols, uts, variables=variables, source=self.source)
             quanta = {k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
                       if isinstance(q, str) else float(q)
                       for k, q in self.checks.quantum.items()}
         else:
-            extra = {k: signal_unit(k) for k in [*cols, *uts] if signal_unit(k) is not None}
+            extra = {k: u for k in [*cols, *uts] if (u := signal_unit(k)) is not None}
             extra.update(STATE_FEEDBACK_GAINS)
-            text = dict(delimiter=self.delimiter_char, comment=self.comment,
+            text: dict[str, Any] = dict(delimiter=self.delimiter_char, comment=self.comment,
                         skip_rows=self.skip_rows, source=where)
             text.update(kw)
             log = read_log(path, {**cols, **gain_cols} or None, uts or None,
@@ -360,7 +373,7 @@ class LogFormat(Spec):
                 ctrl = StateFeedbackController(
                     type="state_feedback", rate="filtered" if fc.tau > 0 else "backward",
                     rate_time_constant=fc.tau,
-                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]))))
+                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]), strict=True)))
             except Exception as exc:
                 raise LogFormatError(f"{log.where}: gains at the first sample: {exc}") from None
         elif "controller" in log.meta:
@@ -421,6 +434,7 @@ class LogFormat(Spec):
             parts[f] = sub.read(f, required=("time",) if "time" in cols else (), **kw)
         t_file = next(f for f, c in files.items() if "time" in c)
         time = parts[t_file].time
+        assert time is not None  # read with required=("time",)
         n = len(time)
         for f, g in parts.items():
             if len(g) != n:
@@ -595,7 +609,7 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
     else:
         if "k1" not in num:
             raise LogError(f"{source}: state_feedback controller without K1")
-        g = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
+        g: dict[str, Any] = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
     try:
         return StateFeedbackController(type="state_feedback", rate=rate,
                                        rate_time_constant=num.get("tau", 0.0), **g)

@@ -45,14 +45,14 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from flexarm.errors import FlexarmError, OutputExistsError
-from flexarm.units import ureg
-from flexarm.io.write import atomic_open
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
+from flexarm.io.write import atomic_open
+from flexarm.units import ureg
 
 #: Required columns and their SI units.
 REQUIRED: dict[str, str] = {
@@ -180,7 +180,8 @@ class Log:
     @property
     def dt(self) -> float:
         """Sampling period (s): the median time step."""
-        return float(np.median(np.diff(self.time)))
+        # (a log without time: numpy's error, as before)
+        return float(np.median(np.diff(cast(np.ndarray, self.time))))
 
     @property
     def name(self) -> str:
@@ -211,11 +212,11 @@ class Log:
             return []
         change = np.flatnonzero(np.any(np.diff(self.gains, axis=0) != 0, axis=1)) + 1
         edges = [0, *change.tolist(), len(self)]
-        return list(zip(edges[:-1], edges[1:]))
+        return list(zip(edges[:-1], edges[1:], strict=True))
 
     def __getitem__(self, column: str) -> np.ndarray:
         if column == "time":
-            return self.time
+            return cast(np.ndarray, self.time)  # None for a .mat log that maps no time
         try:
             return self.signals[column]
         except KeyError:
@@ -227,7 +228,7 @@ class Log:
             return len(self.time)
         return len(next(iter(self.signals.values()))) if self.signals else 0
 
-    def window(self, t0: float, t1: float, *, min_samples: int = 2) -> "Log":
+    def window(self, t0: float, t1: float, *, min_samples: int = 2) -> Log:
         """The samples with t0 <= time − time[0] < t1 (s from the log's first sample; a
         bound on the sample grid takes that sample whatever the time stamps' rounding: bounds
         are compared to within 1e-6 sample) as a new :class:`Log` (arrays copied); the
@@ -252,7 +253,7 @@ class Log:
         ctrl = self.controller
         if ctrl is not None and gains is not None and hasattr(ctrl, "model_copy"):
             ctrl = ctrl.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                   map(float, gains[0]))))
+                                                   map(float, gains[0]), strict=True)))
         return replace(self, time=self.time[keep].copy(),
                        signals={c: x[keep].copy() for c, x in self.signals.items()},
                        comments=list(self.comments), meta=dict(self.meta),
@@ -268,7 +269,7 @@ def log_keys(logs: Sequence[Log]) -> list[str]:
     log without a file is keyed by its ``name``."""
     from flexarm.io.write import unique_keys
 
-    return unique_keys([g.path if getattr(g, "path", None) is not None
+    return unique_keys([p if (p := getattr(g, "path", None)) is not None
                         else (getattr(g, "name", "<log>") or "<log>") for g in logs])
 
 
@@ -496,8 +497,8 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
         sentence saying why, added to the message when one is missing.
     delimiter, comment, skip_rows:
         Field delimiter: one character, ``" "`` for runs of whitespace, or ``None`` /
-        ``"auto"`` to sniff it on the first data row (see :data:`DELIMITERS`); the characters that start a comment line, and lines skipped
-        at the top before anything is read.
+        ``"auto"`` to sniff it on the first data row (see :data:`DELIMITERS`); the characters that
+        start a comment line, and lines skipped at the top before anything is read.
     extra:
         Further column names ``columns`` and ``units`` may use, with their SI units
         (``{"K1": "V/rad"}``).
@@ -522,6 +523,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
             meta[key.strip()] = value.strip()
     plain_header = lay.header is not None and not lay.header_is_comment
     if plain_header:
+        assert lay.header is not None
         ncol = len(lay.header)
     elif lay.rows:
         counts = np.bincount([len(f) for _, f in lay.rows])
@@ -539,8 +541,8 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
             raise LogError(f"{path}: {source or 'columns'}: {taken[j]!r} and {ours!r} both name file "
                            f"column {j + 1}; each column can be read once")
         taken[j] = ours
-    use_header = lay.header is not None and len(lay.header) == ncol
-    names = [taken.get(j, _norm(lay.header[j]) if use_header else f"col{j + 1}")
+    header = lay.header if lay.header is not None and len(lay.header) == ncol else None
+    names = [taken.get(j, _norm(header[j]) if header is not None else f"col{j + 1}")
              for j in range(ncol)]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -567,7 +569,7 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     if n < min_samples:
         raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} "
                        "needed")
-    for ours, (j, sign) in index.items():
+    for _ours, (j, sign) in index.items():
         if sign < 0:
             data[:, j] = -data[:, j]
     factors = {name: unit_factor(path, name, units[name], known, source)

@@ -34,17 +34,19 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
-from flexarm.io.logs import Log, LogError, unit_factor, known_names, signal_unit
-from flexarm.units import ureg
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
+from flexarm.io.logs import Log, LogError, known_names, signal_unit, unit_factor
+from flexarm.units import ureg
 
 _SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
 
 
-#: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not returned.
+#: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not
+#: returned.
 COUNTER = "sample_counter"
 
 
@@ -66,7 +68,7 @@ class VarSpec:
     text: str
 
     @classmethod
-    def parse(cls, text: str, *, where: str = "") -> "VarSpec":
+    def parse(cls, text: str, *, where: str = "") -> VarSpec:
         m = _SPEC.match(text) if isinstance(text, str) else None
         if m is None:
             raise MatFileError(f"{where}: cannot read the variable spec {text!r}; write "
@@ -154,7 +156,7 @@ def _child(node, name: str):
         return node.get(name)
     if isinstance(node, np.ndarray) and node.dtype == object and node.size == 1:
         node = node.flat[0]
-    if hasattr(node, "_fieldnames") and name in node._fieldnames:
+    if hasattr(node, "_fieldnames") and name in cast(Any, node)._fieldnames:
         return getattr(node, name)
     return None
 

@@ -43,9 +43,10 @@ import os
 import signal
 import tempfile
 import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Callable, Iterable, Iterator, Sequence
+from typing import IO, Any
 
 from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
 
@@ -207,7 +208,8 @@ def write_json(path: str | Path, data: Any, *, overwrite: bool = False, indent: 
                default: Callable[[Any], Any] | None = None) -> Path:
     """``json.dumps(data, indent=indent, default=default)`` plus a newline, atomically.
     Non-finite floats are written as ``json`` does (``NaN``, ``Infinity``); callers that
-    want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).  The text is
+    want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).
+    The text is
     built before the file is opened, so a value that cannot be serialised leaves no file."""
     return write_text(path, json.dumps(data, indent=indent, default=default) + "\n",
                       overwrite=overwrite)
@@ -327,7 +329,7 @@ def save_or_rescue(path: str | os.PathLike, data: Any, *, overwrite: bool = Fals
         return Saved(path)
     except OSError as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     name = f"{path.stem}.rescued-{stamp}{path.suffix}"
     tried = []
     for folder in (path.parent, Path.cwd(), Path(tempfile.gettempdir())):

@@ -222,7 +222,7 @@ class Arm(Plant):
         """Joints inside their stick band |θ̇| < Δv (Karnopp models only)."""
         return jnp.stack([(jnp.abs(om[j]) < fr.velocity_tolerance) if k
                           else jnp.zeros_like(om[j], dtype=bool)
-                          for j, (fr, k) in enumerate(zip(self.frictions, self._karnopp()))])
+                          for j, (fr, k) in enumerate(zip(self.frictions, self._karnopp(), strict=True))])
 
     def _derivative(self, xb, f, aux):
         if self.kind == "single":
@@ -330,7 +330,7 @@ def multi_link_arm(spec) -> tuple[Arm, Any]:
     nums = [joint_numbers(j) for j in joints]
     if any(n.added_inertia for n in nums):
         hubs = [h.model_copy(update={"inertia": h.inertia + n.added_inertia})
-                for h, n in zip(spec.hubs, nums)]
+                for h, n in zip(spec.hubs, nums, strict=False)]
         spec = spec.model_copy(update={"hubs": hubs})
     model = build_multilink(spec)
     body = model.plant

@@ -20,9 +20,8 @@ says so in ``LumpedBeamFit.converged`` / ``message``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import warnings
+from dataclasses import dataclass
 
 import control
 import numpy as np
@@ -55,10 +54,11 @@ class LumpedBeamFit:
         return float((64 * self.flexural_rigidity / (np.pi * youngs_modulus)) ** 0.25)
 
     def spec(self, damping_ratio: float = 0.0) -> LumpedBeam:
-        return LumpedBeam(length=self.length, flexural_rigidity=self.flexural_rigidity,
-                          damping_ratio=damping_ratio,
-                          masses=[{"mass": m, "position": p}
-                                  for m, p in zip(self.masses, self.positions)])
+        return LumpedBeam.model_validate(dict(
+            length=self.length, flexural_rigidity=self.flexural_rigidity,
+            damping_ratio=damping_ratio,
+            masses=[{"mass": m, "position": p}
+                    for m, p in zip(self.masses, self.positions, strict=False)]))
 
 
 def _coefs(tf: control.TransferFunction) -> tuple[np.ndarray, np.ndarray]:
@@ -81,8 +81,8 @@ def fit_lumped_beam(tip_tf: control.TransferFunction, static_coupling: float,
 
     def build(p):
         EI, *ms = np.exp(p)
-        return LumpedBeam(length=L, flexural_rigidity=EI, masses=[
-            {"mass": m, "position": f * L} for m, f in zip(ms, fractions)])
+        return LumpedBeam.model_validate(dict(length=L, flexural_rigidity=EI, masses=[
+            {"mass": m, "position": f * L} for m, f in zip(ms, fractions, strict=False)]))
 
     n_res = len(tnum) + len(tden) - 1 - sum(1 for c in (*tnum[1:], *tden[1:]) if c == 0)
 

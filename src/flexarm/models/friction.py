@@ -41,7 +41,7 @@ class Friction(eqx.Module):
     bias: Array | float = 0.0
 
     @classmethod
-    def from_spec(cls, spec: FrictionSpec) -> "Friction":
+    def from_spec(cls, spec: FrictionSpec) -> Friction:
         return cls(
             model=spec.model, coulomb=spec.coulomb, static=spec.breakaway,
             stribeck_velocity=spec.stribeck_velocity,
@@ -65,6 +65,7 @@ class Friction(eqx.Module):
         if self.model == "none":
             return jnp.zeros_like(omega), jnp.zeros((0,) + jnp.shape(omega))
         if self.model == "lugre":
+            assert z is not None  # LuGre has its one state
             zz = z[0]
             g = self._level(omega) / self.stiffness
             zdot = omega - jnp.abs(omega) * zz / g

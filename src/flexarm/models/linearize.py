@@ -19,7 +19,7 @@ indexing by name) work on the result.
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import control
 import jax
@@ -39,7 +39,8 @@ def frictionless(arm: Arm) -> Arm:
     return dataclasses.replace(arm, frictions=none, state_names=names)
 
 
-def linearize(arm: Arm, x0: Sequence[float] | None = None, u0: Sequence[float] | None = None,
+def linearize(arm: Arm, x0: Sequence[float] | np.ndarray | None = None,
+              u0: Sequence[float] | np.ndarray | None = None,
               outputs: Sequence[str] | None = None) -> control.StateSpace:
     """The continuous-time linear model of ``arm`` (friction left out) about the state
     ``x0`` (default: rest at zero) and command ``u0`` (default zero), with the signals

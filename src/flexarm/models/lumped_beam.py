@@ -69,7 +69,7 @@ class BeamBlock:
         gb, ct = self.transfer_functions()
         return _clean(control.minreal(ct / (1 - gb), tol=1e-6, verbose=False))
 
-    def held(self) -> "BeamBlock":
+    def held(self) -> BeamBlock:
         """The block with the tip translation held fixed (FRB Fig. 11 experiment)."""
         if self.tip_dof is None:
             raise ValueError(
@@ -159,7 +159,7 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
     masses = np.array([merged[p][0] for p in pos])
     rot = np.array([merged[p][1] for p in pos])
     # generalised DOFs: translations at every mass, slopes where rotary inertia counts
-    dof_pos = list(pos) + [p for p, j in zip(pos, rot) if j > 0]
+    dof_pos = list(pos) + [p for p, j in zip(pos, rot, strict=True) if j > 0]
     dof_slope = [False] * len(pos) + [True] * int(np.sum(rot > 0))
     dof_mass = list(masses) + [j for j in rot if j > 0]
     dof_pos, dof_slope, dof_mass = np.array(dof_pos), np.array(dof_slope), np.array(dof_mass)
@@ -218,9 +218,13 @@ def static_coupling(beam: LumpedBeam) -> float:
     pos, is_slope, mass = [], [], []
     for m in beam.masses:
         p = L if m.position is None else m.position
-        pos.append(p), is_slope.append(False), mass.append(m.mass)
+        pos.append(p)
+        is_slope.append(False)
+        mass.append(m.mass)
         if m.joint == "clamped" and m.rotary_inertia > 0:
-            pos.append(p), is_slope.append(True), mass.append(m.rotary_inertia)
+            pos.append(p)
+            is_slope.append(True)
+            mass.append(m.rotary_inertia)
     pos, is_slope, mass = np.array(pos), np.array(is_slope), np.array(mass)
     xbar = np.where(is_slope, 1.0, pos)
     c_tip = cantilever_flexibility(np.append(pos, L), np.append(is_slope, False), beam.EI)[-1, :-1]

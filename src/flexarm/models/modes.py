@@ -1,4 +1,5 @@
-"""Assumed modes of one flexible link: clamped-mass (or clamped-free) Euler–Bernoulli eigenfunctions.
+"""Assumed modes of one flexible link: clamped-mass (or clamped-free) Euler–Bernoulli
+eigenfunctions.
 
 A uniform link of length ℓ (m), linear density ρ (kg/m) and flexural rigidity EI (N·m²) is
 clamped at its joint (x = 0) and carries at its tip (x = ℓ) the mass M_L (kg) and the
@@ -55,15 +56,15 @@ and the fixed quadrature is sized for it. Each computed set is checked a posteri
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.polynomial.legendre import leggauss
 from scipy.optimize import brentq
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 BETA_L_MAX = 150.0
 _CHECK_TOL = 1e-8
@@ -131,7 +132,7 @@ class LinkModes:
         beta = self.beta_l / self.length
         return np.stack([
             _shape(c, b, bl, x, derivative)
-            for c, b, bl in zip(self.coeffs, beta, self.beta_l)
+            for c, b, bl in zip(self.coeffs, beta, self.beta_l, strict=False)
         ]) if self.n_modes else np.zeros((0, len(x)))
 
 
@@ -184,8 +185,11 @@ def _roots(n: int, mu: float, eta: float) -> np.ndarray:
         if d[k] == 0.0:
             roots.append(float(grid[k]))
         elif d[k] * d[k + 1] < 0.0:
-            roots.append(brentq(lambda b: float(frequency_determinant(b, mu, eta)),
-                                grid[k], grid[k + 1], xtol=1e-15, rtol=1e-15, maxiter=200))
+            root: Any = brentq(lambda b: float(frequency_determinant(b, mu, eta)),
+                               grid[k], grid[k + 1], xtol=1e-15,
+                               rtol=1e-15,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                               maxiter=200)
+            roots.append(root)
         if len(roots) == n:
             break
     if len(roots) < n:
@@ -242,7 +246,8 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
     # root from below; refuse early what cannot be resolved.
     if (n_modes - 0.5) * math.pi > BETA_L_MAX + math.pi:
         raise ModeError(
-            f"{n_modes} modes asked: mode {n_modes} would have βℓ ≈ {(n_modes - 0.5) * math.pi:.0f} "
+            f"{n_modes} modes asked: mode {n_modes} would have "
+            f"βℓ ≈ {(n_modes - 0.5) * math.pi:.0f} "
             f"> {BETA_L_MAX:g}, beyond what is resolved here (wavelength < ℓ/24, outside "
             "Euler–Bernoulli validity); use fewer modes"
         )
@@ -266,7 +271,8 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
 
     xq, wq = _quadrature(ell, bl[-1] if n_modes else 1.0)
     raw = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
-                    coeffs, *(np.zeros(n_modes) for _ in range(4)),
+                    coeffs, np.zeros(n_modes), np.zeros(n_modes), np.zeros(n_modes),
+                    np.zeros(n_modes),
                     np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
     phi = raw.shape(xq)
     phi_l = raw.shape(ell)[:, 0]
@@ -276,7 +282,7 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
     coeffs = coeffs * scale[:, None]
     modes = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
                       coeffs, phi_l * scale, dphi_l * scale,
-                      *(np.zeros(n_modes) for _ in range(2)),
+                      np.zeros(n_modes), np.zeros(n_modes),
                       np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
     phi = modes.shape(xq)
     d2 = modes.shape(xq, 2)

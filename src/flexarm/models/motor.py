@@ -26,7 +26,7 @@ class Drive(eqx.Module):
     limit: Array | float
 
     @classmethod
-    def from_spec(cls, motor: CurrentMotor | VoltageMotor) -> "Drive":
+    def from_spec(cls, motor: CurrentMotor | VoltageMotor) -> Drive:
         if isinstance(motor, CurrentMotor):
             return cls("current", motor.torque_constant, 0.0, motor.current_limit)
         ke = motor.gear_ratio * motor.motor_constant

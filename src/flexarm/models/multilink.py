@@ -49,9 +49,11 @@ p̈_vp = J̇_p q̇ propagated along the chain,
 integrals closing the integrals over each link. With P = R(α_i)ᵀ(p̈_vp,i − γ), (A_x; A_y) =
 R(α_i)ᵀ J_p,i and y_i = d_i a_i + v-row:
 
-    B = B₀ + Σ_i [ m̄_i J_p,iᵀJ_p,i + sym(A_yᵀ y_i − vᵀδ_i A_xᵀ a_i) + δ_iᵀZδ_i a_iᵀa_i ] + m_p J_p,eᵀJ_p,e
+    B = B₀ + Σ_i [ m̄_i J_p,iᵀJ_p,i + sym(A_yᵀ y_i − vᵀδ_i A_xᵀ a_i) + δ_iᵀZδ_i a_iᵀa_i ]
+        + m_p J_p,eᵀJ_p,e
     c + g = Σ_i [ m̄_i J_p,iᵀ(p̈_vp,i − γ) − A_xᵀ(α̇²d + 2α̇ vᵀδ̇) − A_yᵀ α̇² vᵀδ
-                  + a_iᵀ(d P_y − vᵀδ P_x + 2α̇ δᵀZδ̇) ] + [0; v P_y − α̇² Zδ]_i + m_p J_p,eᵀ(p̈_vp,e − γ)
+                  + a_iᵀ(d P_y − vᵀδ P_x + 2α̇ δᵀZδ̇) ] + [0; v P_y − α̇² Zδ]_i
+            + m_p J_p,eᵀ(p̈_vp,e − γ)
 
 (m̄_i = m_i + m_hi, B₀ the constant rotary-inertia, ∫ρxφ and Z terms). The expressions are
 traced as scalars, skipping structural zeros. For the right-hand side they are recorded once
@@ -68,6 +70,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -75,8 +78,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from flexarm.models.modes import LinkModes, link_modes
 from flexarm import layered
+from flexarm.models.modes import LinkModes, link_modes
 from flexarm.models.plant import Plant
 from flexarm.specs.multilink import MultiLinkArm
 
@@ -112,14 +115,14 @@ def _add(*ts):
 
 
 def _dot(u, v):
-    return _add(*(_mul(a, b) for a, b in zip(u, v)))
+    return _add(*(_mul(a, b) for a, b in zip(u, v, strict=False)))
 
 
 def _chol_solve_lists(A, b):
     """Unrolled Cholesky solve of A y = b; A a list of rows of scalars, b a list."""
     n = len(b)
     L = [[0.0] * n for _ in range(n)]
-    inv = [0.0] * n
+    inv: list[Any] = [0.0] * n  # 1/√s: JAX scalars
     for j in range(n):
         s = A[j][j]
         for k in range(j):
@@ -215,15 +218,17 @@ class MultiLinkPlant(Plant):
         (p_{n+1}, ṗ_{n+1}, angle, rate). With qd None the rates are None."""
         n = self.n_links
         th, dl = q[:n], q[n:]
-        thd = None if qd is None else qd[:n]
-        dld = None if qd is None else qd[n:]
-        alpha, alphad = th[0], (None if qd is None else thd[0])
+        # the rates: arrays with qd, None without (every use is under "if qd is not None")
+        thd: Any = None if qd is None else qd[:n]
+        dld: Any = None if qd is None else qd[n:]
+        alpha = th[0]
+        alphad: Any = None if qd is None else thd[0]
         p = jnp.zeros(2)
-        pd = None if qd is None else jnp.zeros(2)
+        pd: Any = None if qd is None else jnp.zeros(2)
         links = []
         for i, sl in enumerate(self._slices()):
             di = dl[sl]
-            ddi = None if qd is None else dld[sl]
+            ddi: Any = None if qd is None else dld[sl]
             links.append((alpha, alphad, p, pd, di, ddi, sl))
             if sl.stop > sl.start:
                 wl = self.phi_tip[sl] @ di
@@ -320,10 +325,11 @@ class MultiLinkPlant(Plant):
                     if not _is_zero(t):
                         Bm[j][k] = _add(Bm[j][k], t)
 
-        h = [0.0] * nq
-        a = [0.0] * nq
-        Jx = [0.0] * nq
-        Jy = [0.0] * nq
+        # rows of symbolic scalars (JAX arrays or layered leaves), 0.0 where structurally zero
+        h: list[Any] = [0.0] * nq
+        a: list[Any] = [0.0] * nq
+        Jx: list[Any] = [0.0] * nq
+        Jy: list[Any] = [0.0] * nq
         accx = accy = 0.0
         g0x, g0y = gamma
         alpha = q[0]
@@ -334,8 +340,8 @@ class MultiLinkPlant(Plant):
             mt = self.link_mass[i] + self.hub_mass[i] if i > 0 else self.link_mass[i]
             d = self.link_d[i]
             c, s = layered.cos(alpha), layered.sin(alpha)
-            Ax = [_add(_mul(c, x), _mul(s, y)) for x, y in zip(Jx, Jy)]
-            Ay = [_add(_mul(-1.0, s, x), _mul(c, y)) for x, y in zip(Jx, Jy)]
+            Ax = [_add(_mul(c, x), _mul(s, y)) for x, y in zip(Jx, Jy, strict=True)]
+            Ay = [_add(_mul(-1.0, s, x), _mul(c, y)) for x, y in zip(Jx, Jy, strict=True)]
             ad = _dot(a, qd)
             ad2 = _mul(ad, ad)
             y = [_mul(d, t) for t in a]
@@ -370,13 +376,13 @@ class MultiLinkPlant(Plant):
                 h[k] = _add(h[k], _mul(vi[j], Py), _mul(-1.0, ad2, Zd[j]))
             # next joint: position Jacobian and velocity-product acceleration
             ell = self.lengths[i]
-            tip = [0.0] * nq
+            tip: list[Any] = [0.0] * nq
             for j, k in enumerate(idx):
                 tip[k] = fi[j]
             tx = [_mul(-1.0, W, t) for t in a]
-            ty = [_add(_mul(ell, t), f) for t, f in zip(a, tip)]
-            Jx, Jy = ([_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty)],
-                      [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty)])
+            ty = [_add(_mul(ell, t), f) for t, f in zip(a, tip, strict=True)]
+            Jx, Jy = ([_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty, strict=True)],
+                      [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty, strict=True)])
             lx, ly = _add(_mul(-1.0, ad2, ell), _mul(-2.0, ad, Wd)), _mul(-1.0, ad2, W)
             accx = _add(accx, _mul(c, lx), _mul(-1.0, s, ly))
             accy = _add(accy, _mul(s, lx), _mul(c, ly))
@@ -394,7 +400,7 @@ class MultiLinkPlant(Plant):
         gx, gy = _add(accx, _mul(-1.0, g0x)), _add(accy, _mul(-1.0, g0y))
         for k in range(nq):
             h[k] = _add(h[k], _mul(mp, gx, Jx[k]), _mul(mp, gy, Jy[k]))
-        B = [[None] * nq for _ in range(nq)]
+        B: list[list[Any]] = [[None] * nq for _ in range(nq)]
         for j in range(nq):
             for k in range(j, nq):
                 B[j][k] = B[k][j] = _add(Bm[j][k], self.B0[j, k])
@@ -533,6 +539,20 @@ class _SymbolicPlant:
 
     _slices = MultiLinkPlant._slices
     _terms_lists = MultiLinkPlant._terms_lists
+    # the fields of _PARAM_FIELDS, set in __init__ (object arrays of leaves), for the checker
+    lengths: Any
+    link_mass: Any
+    link_d: Any
+    hub_mass: Any
+    payload_mass: Any
+    phi_tip: Any
+    dphi_tip: Any
+    v: Any
+    Z: Any
+    K: Any
+    D: Any
+    B0: Any
+    gamma: Any
 
     def __init__(self, prog: layered.Program, n_modes: tuple[int, ...]):
         self.n_modes = n_modes
@@ -542,13 +562,13 @@ class _SymbolicPlant:
                   "payload_mass": (), "phi_tip": (nd,), "dphi_tip": (nd,), "v": (nd,),
                   "Z": (nd, nd), "K": (nd, nd), "D": (nd, nd), "B0": (nq, nq), "gamma": (2,)}
         for name in _PARAM_FIELDS:
-            shape = shapes[name]
+            shape: tuple[int, ...] = shapes[name]
             if shape == ():
                 setattr(self, name, prog.leaf((name, ())))
                 continue
             arr = np.empty(shape, dtype=object)
             for idx in np.ndindex(shape):
-                arr[idx] = prog.leaf((name, idx if len(idx) > 1 else idx[0]))
+                arr[idx] = prog.leaf((name, idx[0] if len(idx) == 1 else idx))
             setattr(self, name, arr)
 
     @property
@@ -741,7 +761,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
     coordinate of a torsional link), modal integrals, stiffness and damping, and the plant."""
     loads = _tip_loads(arm)
     modes = []
-    for i, (lk, (M, J)) in enumerate(zip(arm.links, loads)):
+    for i, (lk, (M, J)) in enumerate(zip(arm.links, loads, strict=True)):
         if lk.model == "torsional":
             modes.append(torsional_modes(lk))
             continue
@@ -777,7 +797,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
 
     Dm = np.zeros((nd, nd))
     k = 0
-    for lk, m in zip(arm.links, modes):
+    for lk, m in zip(arm.links, modes, strict=True):
         Dm[k:k + m.n_modes, k:k + m.n_modes] = damping(lk, m)
         k += m.n_modes
 

@@ -17,6 +17,7 @@ one-link case of :class:`flexarm.models.assembly.Arm` (:meth:`SingleLinkModel.pl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import control
 import jax.numpy as jnp
@@ -50,7 +51,7 @@ class SingleLinkModel:
     beam: BeamBlock
 
     @classmethod
-    def from_spec(cls, arm: SingleLinkArm, *, hold_tip: bool = False) -> "SingleLinkModel":
+    def from_spec(cls, arm: SingleLinkArm, *, hold_tip: bool = False) -> SingleLinkModel:
         J = arm.motor.inertia
         if isinstance(arm.beam, RigidBeam):
             J += rigid_beam_inertia(arm.beam)
@@ -95,7 +96,7 @@ class SingleLinkModel:
         names = body_names + (("friction_z",) if self.friction.n_states else ())
         body = SingleLinkBody(J=self.J, Ab=jnp.asarray(b.A), Bb=jnp.asarray(b.B),
                               Cb=jnp.asarray(b.C), Db=jnp.asarray(b.D), state_names=body_names)
-        def vec(v):  # plain numbers stay Python floats: constants in the compiled loop
+        def vec(v) -> Any:  # plain numbers stay Python floats: constants in the compiled loop
             if isinstance(v, (int, float, np.floating, np.integer)):
                 return (float(v),)
             return jnp.reshape(jnp.asarray(v, dtype=float), (1,))
@@ -113,6 +114,7 @@ class SingleLinkModel:
         zb = np.zeros(b.n_states)
         if b.mass_dofs:
             n = b.mass_dofs
+            assert b.xbar is not None and b.tip_shape is not None  # set for a lumped beam
             # absolute coordinates y = x̄ θm + w, w the static shape of the tip deflection;
             # the link at rest relative to the hub: ẏ = x̄ θ̇m
             zb[:n] = b.xbar * motor_angle + b.tip_shape * tip_deflection

@@ -5,7 +5,8 @@ The experiment (paper, Sec. "Simulation results"): the two-link arm hanging at r
 θ(0) = (−90°, 0), δ(0) = 0, is brought to θ_d = (−45°, 0) by the PD law with constant gravity
 compensation, eq. (8),
 
-    u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d),     K_P = diag(18, 18) N·m/rad, K_D = diag(10, 2) N·m·s/rad,
+    u = K_P (θ_d − θ) − K_D θ̇ + g_θ(θ_d, δ_d),
+    K_P = diag(18, 18) N·m/rad, K_D = diag(10, 2) N·m·s/rad,
 
 where δ_d solves eq. (9), K δ_d + g_δ(θ_d, δ_d) = 0. The paper reports δ_d, that (θ_d, δ_d) is
 reached "well within 2 s" (its Fig. 2), a large initial effort and constant gravity-holding
@@ -35,19 +36,20 @@ from __future__ import annotations
 import csv
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
 import numpy as np
 
 from flexarm.control import regulation as R
 from flexarm.errors import SimulationDiverged
+from flexarm.io.write import atomic_open, save_figure, write_text
+from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.sim.continuous import simulate_continuous
 from flexarm.sim.result import SimulationResult
-from flexarm.models.multilink import MultiLinkModel, build_multilink
 from flexarm.specs.multilink import benchmark_arm
-from flexarm.io.write import atomic_open, save_figure, write_text
 
 DEG = math.pi / 180.0
 
@@ -124,8 +126,8 @@ class DeLucaConfig:
         return np.asarray(self.theta_d_deg, float) * DEG
 
     def model(self, **overrides) -> MultiLinkModel:
-        kw = dict(flexural_rigidity=self.flexural_rigidity, mode_type=self.mode_type,
-                  damping_ratio=self.damping_ratio)
+        kw: dict[str, Any] = dict(flexural_rigidity=self.flexural_rigidity,
+                                  mode_type=self.mode_type, damping_ratio=self.damping_ratio)
         kw.update(overrides)
         EI = kw.pop("flexural_rigidity")
         return build_multilink(benchmark_arm(EI, **kw))
@@ -258,7 +260,9 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
 
             lo, hi = cfg.convention_EI_bracket
             try:
-                EI = brentq(d11, lo, hi, xtol=1e-6, rtol=1e-8)
+                EI = brentq(d11, lo, hi,
+                            rtol=1e-8,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                            xtol=1e-6)
                 m = cfg.model(mode_type=mt, flexural_rigidity=EI)
                 dd_match = R.residual_deflection(m, cfg.theta_d) / _mode_scale(m, norm)
             except (ValueError, R.RegulationError):
@@ -270,7 +274,7 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
                 "EI_matching_delta_d1": EI,
                 **{f"delta_d{k + 1}_at_match": float(v) for k, v in enumerate(dd_match)},
                 **{f"ratio{k + 1}_at_match": float(v / pp) for k, (v, pp)
-                   in enumerate(zip(dd_match, paper))},
+                   in enumerate(zip(dd_match, paper, strict=False))},
             })
     rows.append({k: ("paper" if k == "modes" else "" if k == "normalisation" else math.nan)
                  for k in rows[0]})
@@ -456,7 +460,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
 
     say("large gains: interpolating trajectory, numerical limit")
     f, fk = cfg.remedy_factor, cfg.remedy_factor ** cfg.sweep_kd_exponent
-    remedy, remedy_runs = {"factor": f}, {}
+    remedy: dict[str, Any] = {"factor": f}
+    remedy_runs = {}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
         pr = R.regulation_params(model, KP * f, KD * fk, th_d, theta_0=cfg.theta_0, duration=dur)
         r = _simulate(model, R.law_pd_constant, cfg, pr, cfg.sweep_t_final)
@@ -468,7 +473,7 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
                         "delta_err_frac_t_final": float(e_d[k2])}
         remedy_runs[f"K_P×{f:g}, {name}"] = r
     fu = cfg.unstable_factor
-    unstable = {"factor": fu}
+    unstable: dict[str, Any] = {"factor": fu}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
         pu = R.regulation_params(model, KP * fu, KD * fu ** cfg.sweep_kd_exponent, th_d,
                                  theta_0=cfg.theta_0, duration=dur)
@@ -541,7 +546,8 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
             rows.append(_row(f"gain sweep K_P×{e['factor']:g}", "stable, larger initial torque",
                              "diverged", "", e["error"][:120]))
         else:
-            rows.append(_row(f"gain sweep K_P×{e['factor']:g}, K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
+            rows.append(_row(f"gain sweep K_P×{e['factor']:g}, "
+                             f"K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
                              "stable, larger initial torque", e["u0_norm"], "N·m (‖u(0)‖)",
                              f"|θ − θ_d| {e['theta_err_deg_t_final']:.3g}° at {cfg.t_final:g} s, "
                              f"{e['theta_err_deg_end']:.3g}° at {cfg.sweep_t_final:g} s; conditions "

@@ -29,16 +29,15 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import control
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.metrics import step_metrics
 from flexarm.control.inner_loop import InnerLoopDesign, design_inner_loop
 from flexarm.control.outer_loop import (
     deflection_report,
@@ -49,12 +48,14 @@ from flexarm.control.outer_loop import (
 )
 from flexarm.control.trajectories import peak_deflection, quasi_parabolic
 from flexarm.control.wiener import wiener_feedforward
+from flexarm.io.write import atomic_open, save_figure, write_text
+from flexarm.metrics import step_metrics
 from flexarm.models.single_link import SingleLinkModel
 from flexarm.sim.build import Prepared, prepare, to_result
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
-from flexarm.io.write import atomic_open, save_figure, write_text
+from flexarm.specs.arm import SingleLinkArm
 
 __all__ = ["FeliuChoices", "run", "CHOICES"]
 
@@ -145,6 +146,7 @@ def _with_duration(scenario, duration: float):
 
 def _simulate(p: Prepared, plant, controller, refs: dict[str, np.ndarray]) -> SimulationResult:
     loop = eqx.tree_at(lambda lp: (lp.plant, lp.controller), p.loop, (plant, controller))
+    assert p.scenario.simulation is not None  # a prepared scenario is a sampled-data one
     out = simulate_loop(loop, p.x0, refs, p.n_samples, seed=p.scenario.simulation.seed)
     return to_result(p, out)
 
@@ -261,6 +263,7 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     # ---- the arms
     sc1 = _with_duration(load_scenario(c.scenarios[0]), c.duration_single)
     sc2 = _with_duration(load_scenario(c.scenarios[1]), c.duration_two_mass)
+    assert isinstance(sc1.arm, SingleLinkArm) and isinstance(sc2.arm, SingleLinkArm)  # FRB's
     m1, m2 = SingleLinkModel.from_spec(sc1.arm), SingleLinkModel.from_spec(sc2.arm)
     held1 = SingleLinkModel.from_spec(sc1.arm, hold_tip=True)
     held2 = SingleLinkModel.from_spec(sc2.arm, hold_tip=True)
@@ -320,9 +323,11 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
         _row(rows, f"rise90_{k}", f"time to 90 % without {k[3:]} compensation / with "
              f"(Fig. {fig})", "ratio", 1.0, rise[k] / rise["all"],
              "paper: the transient is the same")
-    lin = lambda ax: ax.plot(c.move_start + design.time,  # noqa: E731
-                             1e3 * c.inner_step * design.response, "--",
-                             label="linear design (theoretical)")
+
+    def lin(ax):
+        return ax.plot(c.move_start + design.time, 1e3 * c.inner_step * design.response, "--",
+                       label="linear design (theoretical)")
+
     figs.append(_figure(runs["all"], "Fig. 11. Theoretical and experimental step responses "
                         "of inner loop (single mass)", out / "fig11_inner_step_single_mass.png",
                         ("reference", "motor_angle"), xmax=0.3, extra=lin))

@@ -20,9 +20,10 @@ from flexarm.errors import FlexarmError
 from flexarm.models.single_link import SingleLinkModel
 from flexarm.sim.result import SimulationResult
 from flexarm.sim.sampled import Actuator, SampledLoop, Sensors, simulate_loop
-from flexarm.specs.experiment import Reference
+from flexarm.specs.arm import SingleLinkArm
+from flexarm.specs.experiment import LTIControllerSpec, Reference
+from flexarm.specs.multilink import MultiLinkArm
 from flexarm.specs.scenario import Scenario
-
 
 #: the share of this machine's memory one simulation's result may take (the loop keeps the
 #: state, the measured signals and the command of every sample, and JAX a few copies)
@@ -45,6 +46,7 @@ def sample_times(scenario: Scenario, dt: float, values_per_sample: int = 16) -> 
     with the copies the loop makes) would take more than :data:`MEMORY_SHARE` of it is
     refused with one line naming the duration, the sample count and the fix, before any
     array is allocated."""
+    assert scenario.simulation is not None  # [sampling] and [simulation] come together
     duration = float(scenario.simulation.duration)
     n = int(math.floor(duration / dt + 1e-9)) + 1
     need = float(n) * max(int(values_per_sample), 1) * _BYTES_PER_VALUE
@@ -69,8 +71,10 @@ def reference_trajectory(ref: Reference):
 
     sign = 1.0 if ref.amplitude > 0 else -1.0
     if ref.type == "parabolic":
+        assert ref.acceleration is not None  # a moving reference has one (validated)
         traj = parabolic(abs(ref.amplitude), ref.acceleration)
     elif ref.type == "quasi_parabolic":
+        assert ref.acceleration is not None
         traj = quasi_parabolic(abs(ref.amplitude), ref.acceleration, max_snap=ref.snap)
     else:
         raise ValueError(f"reference.type = {ref.type!r} is not a point-to-point move")
@@ -111,6 +115,7 @@ def scenario_controller(scenario: Scenario, dt: float, *, input_names, reference
 
     blocks = []
     for i, spec in enumerate(scenario.controllers):
+        assert isinstance(spec, LTIControllerSpec)  # [[controllers]]: lti blocks (validated)
         where = f"[[controllers]][{i}]" + (f" ({spec.name})" if spec.name else "")
         blocks.append(lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names),
                                     references=references, measured=measured, where=where))
@@ -261,6 +266,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
         raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation]; a "
                          "multi-link arm without them runs its [regulation] law "
                          "(flexarm.simulate runs it; prepare builds sampled loops only)")
+    assert scenario.simulation is not None  # [sampling] and [simulation] come together
     arm, model = multi_link_arm(scenario.arm)
     dt = scenario.sampling.period
     t = sample_times(scenario, dt, arm.n_states + 2 * arm.n_joints + len(scenario.sensors) + 8)
@@ -314,6 +320,9 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     replaces reference channels (arrays at the sample instants)."""
     if scenario.arm.kind == "multi_link":
         return _prepare_multi(scenario, controller, references)
+    # a single-link scenario has [sampling] and [simulation] and a single-link arm (validated)
+    assert scenario.sampling is not None and scenario.simulation is not None
+    assert isinstance(scenario.arm, SingleLinkArm)
     model = SingleLinkModel.from_spec(scenario.arm, hold_tip=scenario.simulation.hold_tip)
     plant = model.plant()
     dt = scenario.sampling.period
@@ -361,6 +370,7 @@ def _walk(c):
 
 def run_prepared(p: Prepared) -> SimulationResult:
     """Simulate a prepared scenario."""
+    assert p.scenario.simulation is not None  # a prepared scenario is a sampled-data one
     out = simulate_loop(p.loop, p.x0, p.references, p.n_samples, seed=p.scenario.simulation.seed)
     return to_result(p, out)
 
@@ -369,6 +379,7 @@ def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationRes
     """Wrap raw simulator arrays: one rollout, rollout ``index`` of a batch, or (index None
     on :func:`~flexarm.sim.sampled.simulate_batch`'s arrays) the whole batch as one result."""
     pick = (lambda a: a) if index is None else (lambda a: a[index])
+    assert p.scenario.sampling is not None  # a prepared scenario is a sampled-data one
     sig = pick(out["signals"])
     meas = pick(out["measured"])
     plant = p.loop.plant
@@ -402,6 +413,7 @@ def regulation_run(scenario: Scenario) -> tuple:
         raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation] and no "
                          "[regulation]; give a sampled loop ([sampling], [simulation], "
                          "[controller]) or a [regulation] law to simulate")
+    assert isinstance(scenario.arm, MultiLinkArm)  # [regulation] is multi-link only (validated)
     model = build_multilink(scenario.arm)
     params = R.regulation_params(model, np.diag(reg.kp), np.diag(reg.kd), reg.target,
                                  theta_0=reg.initial, duration=reg.interpolation_time)

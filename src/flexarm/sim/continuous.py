@@ -25,7 +25,8 @@ rad, ``res.delta`` ([N,] T, n_δ) m, ``res.torque`` ([N,] T, n_links) N·m, ``re
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
+from typing import cast
 
 import jax.numpy as jnp
 import numpy as np
@@ -48,7 +49,8 @@ def law_loop(model: MultiLinkModel, law: Callable, params, dt: float, substeps: 
     return sampled.SampledLoop(
         plant, ContinuousLaw(law, params, jnp.asarray(float(dt)), plant.n_inputs),
         sampled.Sensors.make(plant, {}), sampled.Actuator(limit, jnp.zeros_like(limit)),
-        jnp.asarray(float(dt)), int(substeps), 0, solver, tuple(tolerances))
+        jnp.asarray(float(dt)), int(substeps), 0, solver,
+        cast("tuple[float, float]", tuple(tolerances)))  # (rtol, atol)
 
 
 def _result(loop, ts, xs, sig, us, title: str, diverged=None) -> SimulationResult:
@@ -136,7 +138,8 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
     :func:`flexarm.control.regulation.regulation_params_batch`. ``x0``: (n_x,) shared, or
     (N, n_x) one per rollout. The
     batch runs in the one loop with the state carried batch-last, in chunks of ``chunk``
-    rollouts (:func:`flexarm.sim.sampled.simulate_law_batch`). Gains are traced: any sweep of the same size compiles once.
+    rollouts (:func:`flexarm.sim.sampled.simulate_law_batch`). Gains are traced: any sweep of the
+    same size compiles once.
     Returns one :class:`SimulationResult` holding the N rollouts as python-control traces;
     a run that diverges is flagged in ``diverged`` rather than raised."""
     plant = model.plant

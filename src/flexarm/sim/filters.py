@@ -35,8 +35,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -44,8 +45,14 @@ import numpy as np
 
 from flexarm.control.discrete import Controller, LinearController, Sum
 from flexarm.control.friction_compensation import FrictionCompensated
-from flexarm.control.lti import (FILTER_KINDS, Blocks, LTIController, digital_filter,
-                                 input_history, run_state)
+from flexarm.control.lti import (
+    FILTER_KINDS,
+    Blocks,
+    LTIController,
+    digital_filter,
+    input_history,
+    run_state,
+)
 from flexarm.sim.sampled import SampledLoop, Sensors
 
 
@@ -179,9 +186,9 @@ def _block_name(block: Controller, i: int) -> str:
     return getattr(block, "name", None) or f"{type(block).__name__} #{i}"
 
 
-def dynamic_blocks(ctrl: Controller) -> list[tuple[str, Controller]]:
+def dynamic_blocks(ctrl: Controller) -> list[tuple[str, LTIController | LinearController]]:
     """The controller's blocks that have a state (name, block), in order."""
-    found: list[Controller] = []
+    found: list[LTIController | LinearController] = []
 
     def visit(b):
         if (isinstance(b, LTIController) and b.dynamic) or (
@@ -296,7 +303,7 @@ class _LinearStarted(LinearController):
     x_start: Any = None
 
     @classmethod
-    def around(cls, b: LinearController, x) -> "_LinearStarted":
+    def around(cls, b: LinearController, x) -> _LinearStarted:
         return cls(b.A, b.B, b.C, b.D, b.measured, b.reference, jnp.asarray(x, float))
 
     def init(self):
@@ -351,8 +358,8 @@ def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
     default = {"gain": 1.0, "delay": 0.0, "zeroing": 0.0, "cutoff": 0.0, "damping": 0.9}
 
     def same(a: dict, b: dict, keys) -> bool:
-        return all(float(a.get(k) if a.get(k) is not None else default[k])
-                   == float(b.get(k) if b.get(k) is not None else default[k]) for k in keys)
+        return all(float(va if (va := a.get(k)) is not None else default[k])
+                   == float(vb if (vb := b.get(k)) is not None else default[k]) for k in keys)
 
     out: dict[str, np.ndarray] = {}
     notes: list[str] = []

@@ -10,7 +10,8 @@ h·|ω| before it (docs/performance.md has the measured figures).
 
 from __future__ import annotations
 
-from typing import Callable, ClassVar
+from collections.abc import Callable
+from typing import ClassVar
 
 import diffrax
 import jax
@@ -120,13 +121,17 @@ def integrate_law(plant: Plant, x: Array, command: Callable[[Array, Array], Arra
             return plant.project(y, y1, command(y1, t + h))
 
         return jax.lax.fori_loop(0, substeps, body, x)
-    term = diffrax.ODETerm(lambda t, y, args: plant.rhs(y, command(y, t)))
+    def vector_field(t, y, args):
+        return plant.rhs(y, command(y, t))
+
+    term = diffrax.ODETerm(vector_field)
     if type(solver) is Tsit5:
         rtol, atol = tolerances
         sol = diffrax.diffeqsolve(
             term, diffrax.Tsit5(), t0, t0 + substeps * h, h, x,
             stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
             max_steps=TSIT5_MAX_STEPS, throw=False)
+        assert sol.ys is not None  # saved at t1 (diffeqsolve's default)
         return jnp.where(sol.result == diffrax.RESULTS.successful, sol.ys[-1], jnp.nan)
 
     def step(i, y):
@@ -151,7 +156,7 @@ def _rk4_stages(f: Callable[[Array, Array], Array], x: Array, t, h, *, unroll: b
     the same sums in the same order."""
     if unroll:
         acc, kk = jnp.zeros_like(x), jnp.zeros_like(x)
-        for a, w in zip(_RK4_A, _RK4_W):
+        for a, w in zip(_RK4_A, _RK4_W, strict=True):
             kk = f(x + a * h * kk, t + a * h)
             acc = acc + w * kk
         return x + h * acc

@@ -43,19 +43,24 @@ any batched leaves of the loop (parameter or gain variations).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jax.typing import ArrayLike
 
 from flexarm.control.continuous_law import ContinuousLaw
 from flexarm.control.discrete import Controller
-from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
-from flexarm.models.plant import Plant
 from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
+from flexarm.models.plant import Plant
+from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
+
+if TYPE_CHECKING:
+    from flexarm.distributed import BatchSummary
 
 
 class Sensors(eqx.Module):
@@ -88,7 +93,7 @@ class Sensors(eqx.Module):
 
     @classmethod
     def make(cls, plant: Plant, channels: dict[str, dict[str, Any]],
-             dt: float | None = None) -> "Sensors":
+             dt: float | None = None) -> Sensors:
         """Channels (name → a :class:`flexarm.specs.experiment.Sensor` as a dict) of
         ``plant``; ``dt`` the sample period (needed by digital filters with a cutoff)."""
         names = tuple(channels)
@@ -108,7 +113,7 @@ class Sensors(eqx.Module):
             if int(channels[n].get("bits", 0)) > 0 else 0.0 for n in names
         ]
         bw = [float(channels[n].get("bandwidth", 0.0) or 0.0) for n in names]
-        for n, f in zip(names, bw):
+        for n, f in zip(names, bw, strict=True):
             if not (f >= 0 and np.isfinite(f)):
                 raise ValueError(f"sensor {n!r}: bandwidth = {f!r} Hz; give the low-pass "
                                  "cutoff as a finite number >= 0 Hz (0 = no filter)")
@@ -160,7 +165,7 @@ def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
 def check_zeroing(sensors: Sensors, n_samples: int, dt: float, where: str = "the run") -> None:
     """Raise ValueError naming ``where`` (a log file) and the channel when a zeroing window
     is not shorter than the run: the channel would read 0 throughout."""
-    for c, k in zip(sensors.zeroed, sensors.zero_n):
+    for c, k in zip(sensors.zeroed, sensors.zero_n, strict=True):
         if k >= n_samples:
             raise ValueError(
                 f"{where}: sensors.{sensors.names[c]}.zeroing = {k * dt:g} s ({k} samples) is "
@@ -182,7 +187,7 @@ def filter_substeps(bandwidth_hz: float, dt: float) -> int:
     return int(np.ceil(2 * np.pi * bandwidth_hz * dt / FILTER_STEP_LIMIT))
 
 
-def check_filter_step(sensors: Sensors, dt: float, substeps: int) -> None:
+def check_filter_step(sensors: Sensors, dt: float | Array, substeps: int) -> None:
     """Raise ValueError naming the channel when a sensor filter is too fast for the
     integration substep dt / substeps (ω_f h > :data:`FILTER_STEP_LIMIT`)."""
     if not sensors.filtered:
@@ -212,7 +217,7 @@ class FilteredPlant(Plant):
 
     @classmethod
     def around(cls, plant: Plant, index, gain: Array, omega: Array,
-               labels) -> "FilteredPlant":
+               labels) -> FilteredPlant:
         """``plant`` with one filter on each plant signal ``index[i]`` (gain ``gain[i]``,
         cutoff ``omega[i]`` rad/s), its state named ``filter_<labels[i]>``."""
         return cls(plant.state_names + tuple(f"filter_{lb}" for lb in labels),
@@ -233,6 +238,7 @@ class FilteredPlant(Plant):
 
 
 def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
+    assert sens.omega is not None  # set with the filtered channels (Sensors.make)
     return FilteredPlant.around(plant, [sens.index[c] for c in sens.filtered],
                                 jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega,
                                 [sens.names[c] for c in sens.filtered])
@@ -331,6 +337,8 @@ def _zeroing_step(sens: Sensors, z: tuple, y: Array) -> tuple[Array, tuple]:
 def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
     """The digital filters' initial states (at rest on the first reading y0 where not set)
     and the channels' first outputs."""
+    # the digital filters' arrays are set with the digital channels (Sensors.make)
+    assert sens.fA is not None and sens.fB is not None and sens.fx0 is not None
     ys = _pick(y0, sens.digital)
     k = sens.fA.shape[-1]
     rest = jax.vmap(lambda A, B, y: jnp.linalg.solve(jnp.eye(k) - A, B * y))(sens.fA, sens.fB, ys)
@@ -340,6 +348,7 @@ def _digital_initial(sens: Sensors, y0: Array) -> tuple[Array, Array]:
 
 def _digital_out(sens: Sensors, xd: Array, y: Array) -> Array:
     """The channels' readings with the digitally filtered ones replaced by v = C ξ + D y."""
+    assert sens.fC is not None and sens.fD is not None  # set with the digital channels
     ys = _pick(y, sens.digital)
     v = jnp.sum(sens.fC * xd, axis=-1) + sens.fD * ys
     slot = {c: j for j, c in enumerate(sens.digital)}
@@ -386,6 +395,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         # a continuous law: sat(u_held + law(x, t)) at every stage (control/continuous_law)
 
         def command(y, t):
+            assert law is not None  # integrate returned above without a law
             uc = law.command(y[:n_x], t)
             trail = (1,) * (uc.ndim - 1)  # a batch carried batch-last: (m, B)
             lim = act.limit.reshape(act.limit.shape + trail)
@@ -415,6 +425,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             xd = carry[pos]
             ys = _pick(y, sens.digital)
             y = _digital_out(sens, xd, y)
+            assert sens.fA is not None and sens.fB is not None
             extra = (jnp.einsum("ijk,ik->ij", sens.fA, xd) + sens.fB * ys[:, None],)
         if sens.zeroed:
             extra += (z_next,)
@@ -467,7 +478,7 @@ def _run_from_x0(loop: SampledLoop, x0: Array, refs, noise, block: int = 1):
     return recs + (carry[0],)
 
 
-def _sensor_noise(seed: Array, n_samples: int, n_channels: int) -> Array:
+def _sensor_noise(seed: ArrayLike, n_samples: int, n_channels: int) -> Array:
     return jax.random.normal(jax.random.PRNGKey(seed), (n_samples, n_channels))
 
 
@@ -478,7 +489,8 @@ def _run_seeded(loop: SampledLoop, x0: Array, refs: dict[str, Array], seed: Arra
                         _block_size(loop))
 
 
-_run_all = eqx.filter_jit(_run_seeded)
+# compiled; its callers pass NumPy arrays, which the jit turns into the Arrays above
+_run_all: Callable[..., Any] = eqx.filter_jit(_run_seeded)
 
 
 def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
@@ -539,7 +551,7 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
                    *, seed: int = 0, in_axes: Any = 0,
                    batch_size: int | None = 512,
                    check: bool = True, client: Any = None,
-                   chunks: Any = None) -> dict[str, np.ndarray]:
+                   chunks: Any = None) -> dict[str, np.ndarray] | BatchSummary:
     """``vmap`` of :func:`simulate_loop` over the batched leaves of ``loop``.
 
     ``in_axes`` is a pytree prefix of ``loop`` telling which leaves carry a leading batch
@@ -553,7 +565,8 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     With a Dask ``client`` (or ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, for
     the same chunks in-process) the rollouts run in chunks, one task each, and only
     per-rollout reductions come back (a :class:`flexarm.distributed.BatchSummary`, the
-    trajectories only with ``chunks.trajectories``; :func:`flexarm.distributed.simulate_chunked`)."""
+    trajectories only with ``chunks.trajectories``;
+    :func:`flexarm.distributed.simulate_chunked`)."""
     check_filter_step(loop.sensors, loop.dt, loop.substeps)
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import simulate_chunked
@@ -599,8 +612,8 @@ def _batched(in_axes, batch_size: int | None):
         leaves, treedef = jax.tree.flatten(loop, is_leaf=_is_none)
         axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=_is_none),
                                is_leaf=_is_none)
-        axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes)]
-        sizes = {x.shape[a] for x, a in zip(leaves, axes) if a is not None}
+        axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+        sizes = {x.shape[a] for x, a in zip(leaves, axes, strict=False) if a is not None}
         if len(sizes) != 1 or max(sizes) <= batch_size:
             return vmapped(loop, x0, refs, noise)
         size = sizes.pop()
@@ -618,10 +631,10 @@ def _batched(in_axes, batch_size: int | None):
 
         def one_chunk(batched):
             it = iter(batched)
-            chunk = [x if a is None else next(it) for x, a in zip(leaves, axes)]
+            chunk = [x if a is None else next(it) for x, a in zip(leaves, axes, strict=False)]
             return vmapped0(jax.tree.unflatten(treedef, chunk), x0, refs, noise)
 
-        out = jax.lax.map(one_chunk, [chunked(x, a) for x, a in zip(leaves, axes)
+        out = jax.lax.map(one_chunk, [chunked(x, a) for x, a in zip(leaves, axes, strict=False)
                                       if a is not None])
         return jax.tree.map(lambda o: o.reshape((o.shape[0] * o.shape[1],) + o.shape[2:])[:size],
                             out)
@@ -640,7 +653,8 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     kernel over the chunk, and the law is vmapped over it. Chunks of ``chunk`` rollouts run
     one after the other (``lax.map``: a chunk's working set stays in cache); the batch is
     padded to a whole number of chunks with copies of the last rollout. The plant's
-    parameters are shared; x0 is (n_x,), shared, or (N, n_x), one per rollout. This layout measured 3.9 ms per rollout against
+    parameters are shared; x0 is (n_x,), shared, or (N, n_x), one per rollout. This layout measured
+    3.9 ms per rollout against
     13.4 ms for :func:`simulate_batch`'s vmap on the De Luca arm (docs/performance.md).
 
     Returns states (N, n, n_x), signals (N, n, p) and applied commands (N, n, m) at the
@@ -655,7 +669,7 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     leaf_axes = tuple(a.v for a in jax.tree.leaves(full, is_leaf=lambda a: isinstance(a, _Axis)))
     if any(a not in (None, 0) for a in leaf_axes):
         raise ValueError("axes must be 0 (batched along the first axis) or None")
-    sizes = {int(x.shape[0]) for x, a in zip(leaves, leaf_axes) if a is not None}
+    sizes = {int(x.shape[0]) for x, a in zip(leaves, leaf_axes, strict=False) if a is not None}
     if len(sizes) != 1:
         raise ValueError(f"the batched parameters disagree on the batch size: {sorted(sizes)}"
                          if sizes else "axes batches no parameter (give 0 on the batched leaves)")
@@ -669,13 +683,13 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     def padded(x):
         return x if pad == 0 else jnp.concatenate([x, jnp.repeat(x[-1:], pad, 0)])
 
-    leaves = [x if a is None else padded(x) for x, a in zip(leaves, leaf_axes)]
+    leaves = [x if a is None else padded(x) for x, a in zip(leaves, leaf_axes, strict=False)]
     x0 = padded(x0) if x0.ndim == 2 else x0
     batched = eqx.tree_at(lambda lp: lp.controller.params, loop,
                           jax.tree.unflatten(treedef, leaves))
     refs = _prepare_refs({}, n_samples)
     xs, sig, us = _run_law_batch(batched, x0, refs, leaf_axes, chunk)
-    return tuple(np.asarray(a)[:size] for a in (xs, sig, us))
+    return np.asarray(xs)[:size], np.asarray(sig)[:size], np.asarray(us)[:size]
 
 
 class _Axis:
@@ -688,14 +702,15 @@ class _Axis:
 @eqx.filter_jit
 def _run_law_batch(loop: SampledLoop, x0: Array, refs, leaf_axes: tuple, chunk: int):
     law = loop.controller
+    assert isinstance(law, ContinuousLaw)  # simulate_law_batch's loop runs a continuous law
     leaves, treedef = jax.tree.flatten(law.params)
-    size = next(x.shape[0] for x, a in zip(leaves, leaf_axes) if a is not None)
+    size = next(x.shape[0] for x, a in zip(leaves, leaf_axes, strict=False) if a is not None)
     n = next(iter(refs.values())).shape[0]
     noise = jnp.zeros((n, 0))
 
     def one_chunk(c):
         lv = [x if a is None else jax.lax.dynamic_slice_in_dim(x, c * chunk, chunk, 0)
-              for x, a in zip(leaves, leaf_axes)]
+              for x, a in zip(leaves, leaf_axes, strict=False)]
         ctrl = ContinuousLaw(law.law, jax.tree.unflatten(treedef, lv), law.dt, law.n_inputs,
                              None, leaf_axes)
         xc = (jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T if x0.ndim == 2

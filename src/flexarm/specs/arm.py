@@ -4,6 +4,11 @@ All values are stored in SI (kg, m, s, rad, A, V, N*m). Equation numbers refer t
 Feliu, Rattan & Brown (1993), "FRB".
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Annotated, Literal
@@ -72,7 +77,7 @@ class Friction(Spec):
         return self.coulomb if self.static is None else self.static
 
     @model_validator(mode="after")
-    def _static_above_coulomb(self) -> "Friction":
+    def _static_above_coulomb(self) -> Friction:
         if self.static is not None and self.static < self.coulomb:
             raise ValueError(
                 f"static (breakaway) friction {self.static:g} N*m is below the Coulomb "
@@ -107,7 +112,7 @@ class LumpedBeam(Spec):
     masses: list[PointMass] = Field(min_length=1)
 
     @model_validator(mode="after")
-    def _stiffness_given_once(self) -> "LumpedBeam":
+    def _stiffness_given_once(self) -> LumpedBeam:
         wire = self.wire_diameter is not None or self.youngs_modulus is not None
         if self.flexural_rigidity is None and not (
             self.wire_diameter is not None and self.youngs_modulus is not None
@@ -133,6 +138,8 @@ class LumpedBeam(Spec):
             return self.flexural_rigidity
         import math
 
+        # without flexural_rigidity both are given (validated)
+        assert self.youngs_modulus is not None and self.wire_diameter is not None
         return self.youngs_modulus * math.pi * self.wire_diameter**4 / 64.0
 
 
@@ -151,7 +158,7 @@ class TransferFunctionBeam(Spec):
     length: Q("m", gt=0) | None = None
 
     @model_validator(mode="after")
-    def _coupling_given(self) -> "TransferFunctionBeam":
+    def _coupling_given(self) -> TransferFunctionBeam:
         if self.stiffness is None and self.coupling_num is None:
             raise ValueError("give stiffness (C) or coupling_num/coupling_den")
         if (self.coupling_num is None) != (self.coupling_den is None):

@@ -9,6 +9,11 @@ derivative s/(τ s + 1) with τ = ``rate_time_constant`` (s). See
 k2 = k4 = 0.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Literal
@@ -37,7 +42,7 @@ class StateFeedbackController(Spec):
         return "motor_angle"
 
     @model_validator(mode="after")
-    def _filter_has_tau(self) -> "StateFeedbackController":
+    def _filter_has_tau(self) -> StateFeedbackController:
         if self.rate == "filtered" and not self.rate_time_constant > 0:
             raise ValueError("rate = 'filtered' needs rate_time_constant > 0 s "
                              "(e.g. 0.02 s for a 50 rad/s derivative filter)")

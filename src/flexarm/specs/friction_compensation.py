@@ -9,6 +9,11 @@ channel whose backward difference v̂ tells moving from resting (default the hub
 ``velocity_deadband`` (rad/s; default half an encoder count per sample).
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from flexarm.specs.quantity import Q, Spec

@@ -21,6 +21,11 @@ strain gauge, θt = θm + ``deflection_to_angle`` · d (``deflection_to_angle`` 
 rad per unit of the channel, the gauge's calibration gain and the link length).
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 from typing import Literal
@@ -63,7 +68,7 @@ class NestedController(Spec):
         return "motor_angle"
 
     @model_validator(mode="after")
-    def _tip_source(self) -> "NestedController":
+    def _tip_source(self) -> NestedController:
         if self.tip == "tip_deflection" and self.deflection_to_angle == 0.0:
             raise ValueError("tip = 'tip_deflection' needs deflection_to_angle = 1/(gain·L) "
                              "(rad per unit of the channel), e.g. 1/0.42 for a gauge "

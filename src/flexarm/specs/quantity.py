@@ -11,8 +11,15 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, FiniteFloat,
-                      PlainSerializer)
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    PlainSerializer,
+)
 
 from flexarm.units import UnitError, to_si
 

@@ -4,6 +4,11 @@
 whose lines name the field, the value given and what is expected.
 """
 
+# Field types built by calls (Q("rad", gt=0), Count(...), Coefficients(...)) are what
+# pydantic reads at runtime; a static checker cannot take a call as a type, so pyright's
+# invalid-type-form check is off for this module (flexarm.specs.quantity).
+# pyright: reportInvalidTypeForm=false
+
 from __future__ import annotations
 
 import re
@@ -57,7 +62,7 @@ class RegulationSpec(Spec):
     interpolation_time: Q("s", ge=0) = 0.0
 
     @model_validator(mode="after")
-    def _sizes(self) -> "RegulationSpec":
+    def _sizes(self) -> RegulationSpec:
         n = len(self.target)
         for name in ("initial", "kp", "kd"):
             if len(getattr(self, name)) != n:
@@ -124,8 +129,8 @@ class Scenario(Spec):
                        if isinstance(s, str) and s in refs)
         return out
 
-    def with_controllers(self, tables: "ControllerFile | dict[str, Any]",
-                         source: str | None = None) -> "Scenario":
+    def with_controllers(self, tables: ControllerFile | dict[str, Any],
+                         source: str | None = None) -> Scenario:
         """This scenario with its controllers replaced by ``tables`` (a
         :class:`ControllerFile` from :func:`load_controllers`, or a dict with a
         ``controller`` table or a ``controllers`` list as in a scenario TOML); validated
@@ -148,7 +153,7 @@ class Scenario(Spec):
                                                 f"{self.name!r})")
 
     @model_validator(mode="after")
-    def _check_controllers(self) -> "Scenario":
+    def _check_controllers(self) -> Scenario:
         if self.controller is not None and self.controllers is not None:
             raise ValueError("give [controller] (one block) or [[controllers]] (several), "
                              "not both")
@@ -198,7 +203,7 @@ class Scenario(Spec):
         return self
 
     @model_validator(mode="after")
-    def _check_names(self) -> "Scenario":
+    def _check_names(self) -> Scenario:
         if self.arm.kind == "single_link":
             for name in ("sampling", "simulation"):
                 if getattr(self, name) is None:
@@ -245,7 +250,7 @@ class Scenario(Spec):
         return _scenario_table(self).html()
 
 
-def _scenario_table(sc: "Scenario"):
+def _scenario_table(sc: Scenario):
     """The rows of :meth:`Scenario.__repr__` (:class:`flexarm.display.Table`)."""
     from flexarm.display import Table
 
@@ -312,7 +317,7 @@ class ControllerFile(Spec):
                                 Field(discriminator="type")]] | None = None
 
     @model_validator(mode="after")
-    def _one(self) -> "ControllerFile":
+    def _one(self) -> ControllerFile:
         if (self.controller is None) == (self.controllers is None):
             raise ValueError("give [controller] (one block) or [[controllers]] (several): "
                              + ("both given" if self.controller is not None else

@@ -40,6 +40,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -130,7 +131,7 @@ def estimate_pair(ph: PairPhasors, *, scale: float | None = None, omega: float =
     costs = np.array([ph.cost(math.exp(u)) for u in grid])
     k = int(np.argmin(costs))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
-    res = minimize_scalar(lambda u: ph.cost(math.exp(u)), bounds=(a, b), method="bounded",
+    res: Any = minimize_scalar(lambda u: ph.cost(math.exp(u)), bounds=(a, b), method="bounded",
                           options={"xatol": 1e-12, "maxiter": 500})
     if not res.success:
         warnings.warn(

@@ -21,12 +21,12 @@ Crest factor = max|u| / rms(u).  :func:`write_excitation` writes the signal thro
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 KINDS = ("full", "odd", "random-odd")
 PHASES = ("schroeder", "random", "min-crest")

@@ -17,7 +17,8 @@ and the angles are logged. Per frequency:
   kd = (2 ζ ω_c J − V)/K — a high gain, as the paper asks, within what the sampling
   period and the computation delay allow.
 
-Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.frequency_domain.coulomb` can estimate C_f.
+Frequencies come in ω0 / 3ω0 pairs so that :mod:`flexarm.identification.frequency_domain.coulomb`
+can estimate C_f.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from flexarm.models.single_link import SingleLinkModel
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import Scenario
+from flexarm.specs.arm import SingleLinkArm
 
 
 @dataclass(frozen=True)
@@ -112,6 +114,9 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
     """Run one experiment per frequency; write ``sine_<ω>rad_s.csv`` files into ``out_dir``.
     Returns the paths. Refuses to replace existing files unless ``overwrite``."""
     out = Path(out_dir)
+    # FRB's sine experiments: a single-link scenario, with [sampling] and [simulation]
+    assert isinstance(scenario.arm, SingleLinkArm)
+    assert scenario.sampling is not None and scenario.simulation is not None
     model = SingleLinkModel.from_spec(scenario.arm)
     dt = scenario.sampling.period
     freqs = list(design.frequencies) or default_frequencies(model)
@@ -141,6 +146,7 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         sc = scenario.model_copy(update={
             "simulation": scenario.simulation.model_copy(update={"duration": (n - 1) * dt})})
         p = prepare(sc, controller=ctrl)
+        assert sc.simulation is not None  # scenario's, with this run's duration
         t = p.time
         ramp_t = design.ramp_periods * period
         env = np.where(t < ramp_t, 0.5 * (1 - np.cos(np.pi * np.clip(t / ramp_t, 0, 1))), 1.0)

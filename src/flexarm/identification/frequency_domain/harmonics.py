@@ -24,15 +24,15 @@ different columns of one log share a time origin; ratios of phasors do not depen
 
 from __future__ import annotations
 
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
-
 import math
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 from flexarm.io.logs import Log
 
 
@@ -280,12 +280,12 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
     if friction_shape not in ("measured", "ideal"):
         raise ValueError(f"friction_shape = {friction_shape!r}; choose 'measured' or 'ideal'")
     name, where = log.name, log.where  # messages name the file by its full path
+    t = cast(np.ndarray, log.time)  # (a log without time: the error as before)
     if omega0 is None:
-        omega0 = estimate_frequency(log.time, log["reference"], name=where)
-    start, stop, N = whole_periods(log.time, omega0, discard_periods=discard_periods,
-                                   name=where)
+        omega0 = estimate_frequency(t, log["reference"], name=where)
+    start, stop, N = whole_periods(t, omega0, discard_periods=discard_periods, name=where)
     cols = list(log.signals) if columns is None else list(columns)
-    ph = fourier_phasors(log.time, np.stack([log[c] for c in cols]), omega0, n_max,
+    ph = fourier_phasors(t, np.stack([log[c] for c in cols]), omega0, n_max,
                          window=(start, stop))
     held = set(held)
     hold = zoh_factor(omega0 * np.arange(n_max + 1), log.dt)
@@ -293,7 +293,7 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
                            stop=stop, phasors={c: ph[k] * (hold if c in held else 1.0)
                                                for k, c in enumerate(cols)})
     if friction_shape == "measured" and "motor_angle" in res.phasors:
-        res.friction_shape = measured_friction_shape(log.time[start:stop],
+        res.friction_shape = measured_friction_shape(t[start:stop],
                                                      res.phasors["motor_angle"], omega0, n_max)
         res.friction_shape_kind = "measured"
     if "current" in log.signals:

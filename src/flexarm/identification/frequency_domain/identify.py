@@ -3,8 +3,8 @@
 Pipeline of :func:`identify`, one CSV log (:mod:`flexarm.io.logs`) per sinusoidal
 experiment of the motor-position loop:
 
-1. harmonics of every log (:mod:`flexarm.identification.frequency_domain.harmonics`): ω0 from the reference,
-   fundamental and odd harmonics of θm, θt, i over the last whole periods;
+1. harmonics of every log (:mod:`flexarm.identification.frequency_domain.harmonics`): ω0 from the
+   reference, fundamental and odd harmonics of θm, θt, i over the last whole periods;
 2. Coulomb level C_f (A) from every ω0 / 3ω0 pair, eqs. (4)-(6) with the corrected phase of
    (4) (:mod:`flexarm.identification.frequency_domain.coulomb`), averaged over the pairs;
 3. motor response G_m = θm/i raw and corrected by eq. (7), beam response G_b = θt/θm
@@ -34,7 +34,7 @@ import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import control
 import numpy as np
@@ -66,6 +66,10 @@ from flexarm.io.write import save_figure, write_text
 from flexarm.units import UnitError, to_si
 
 
+@overload
+def _cx(z: None) -> None: ...
+@overload
+def _cx(z: complex) -> dict[str, float]: ...
 def _cx(z: complex | None) -> dict[str, float] | None:
     if z is None:
         return None
@@ -133,9 +137,12 @@ class IdentificationResult:
     @property
     def motor_tf(self) -> control.TransferFunction:
         """G_m(s) = θm/i (rad/A): the structured physical fit if ``structured=True``
-        (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected data (raw if C_f
-        is unknown)."""
-        return self.physical.motor_tf if self.use_physical else self.motor_fit.tf
+        (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected
+        data (raw if C_f is unknown)."""
+        if self.use_physical:
+            assert self.physical is not None  # use_physical is set with a physical fit
+            return self.physical.motor_tf
+        return self.motor_fit.tf
 
     @property
     def motor_tf_corrected_fit(self) -> control.TransferFunction:
@@ -197,6 +204,9 @@ class IdentificationResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (SI units; complex numbers as {re, im})."""
         fr = self.response
+        # tfest sets every fit's relative error
+        assert self.motor_fit.relative_error is not None
+        assert self.beam_fit.relative_error is not None
         roles = self._roles()
         by_name = {a.name: a for a in self.analyses}
         per = []
@@ -450,7 +460,8 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         "the velocity of the motor and, hence, the shape of the Coulomb friction");
         ``"ideal"``: the square wave in phase with the fundamental, as eqs. (3)-(7) print.
     structured:
-        Use the joint fit of J, V, C, C_f (:mod:`flexarm.identification.frequency_domain.physical`) as ``motor_tf``
+        Use the joint fit of J, V, C, C_f (:mod:`flexarm.identification.frequency_domain.physical`)
+        as ``motor_tf``
         and for the parameters. It is always computed and reported (``physical_fit``)
         when the beam has one mode (``beam_orders == (0, 2)``: C_t = C (θm − θt)); it is
         the better choice where friction dominates the low-frequency current and the
@@ -516,6 +527,7 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
             mfit_raw = fit_tf(fr.omega, fr.motor_raw, nz, npl, integrators=motor_integrators)
         except (TFEstError, ValueError) as exc:
             _warn(f"no fit to the raw motor response: {exc}", warnings_)
+    assert mfit.relative_error is not None  # tfest sets it
     worst = int(np.argmax(mfit.relative_error))
     if mfit.relative_error[worst] > 0.2:
         _warn(f"{fr.names[worst]}: the free fit of G_m is {100 * mfit.relative_error[worst]:.0f} % "
@@ -539,7 +551,9 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     use_phys = bool(structured) and phys is not None
     if structured and phys is None and cf is not None:
         _warn("no structured fit is available: using the free fit", warnings_)
+    params: dict[str, Any]
     if use_phys:
+        assert phys is not None  # use_phys needs one
         params = {"inertia": phys.inertia, "viscous": phys.viscous,
                   "stiffness": phys.stiffness,
                   "method": "structured physical fit (flexarm.identification.frequency_domain.physical)"}

@@ -47,7 +47,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -166,16 +168,16 @@ def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int,
 class _Simulator:
     """How a fitted structure is simulated with Coulomb friction at the (output) shaft."""
 
-    scenario: object  # (params, C_f, fs, n) → scenario dict
+    scenario: Callable[..., dict]  # (params, C_f, fs, n) → scenario dict
     viscous: str  # the BLA's viscous parameter that holds the friction's Bussgang share
-    rigid: object  # params → (total inertia, damping besides ``viscous``): slowest decay
-    derived: object  # params → dict with resonance_hz, resonance_damping
-    torque: object  # params → torque per unit of input (scales the C_f grid)
+    rigid: Callable[..., Any]  # params → (total inertia, damping besides ``viscous``): slowest decay
+    derived: Callable[..., dict]  # params → dict with resonance_hz, resonance_damping
+    torque: Callable[..., Any]  # params → torque per unit of input (scales the C_f grid)
     input: str  # the reference channel the open-loop 'controller' plays
     unit: str  # of C_f
     damping_unit: str  # of ``viscous``
     where: str
-    friction_torque: object = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
+    friction_torque: Callable[..., Any] = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
 
 
 def _two_mass_rigid(p):
@@ -254,13 +256,13 @@ def _odd_lines(frf: PeriodicFRF) -> np.ndarray:
     return odd
 
 
-def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[np.ndarray]:
+def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
     kmin, kmax = int(frf.lines.min()), int(frf.lines.max())
     edges = [kmin]
     while edges[-1] * 2 < kmax:
         edges.append(edges[-1] * 2)
     edges.append(kmax + 1)
-    return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:])]
+    return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: str = "two-mass",
@@ -542,7 +544,7 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
     count = 0
     d_sim = np.zeros_like(d)
     for _ in range(max(int(iterations), 0)):
-        for i, (frf, fit) in enumerate(zip(frfs, fits)):
+        for i, (frf, fit) in enumerate(zip(frfs, fits, strict=True)):
             outs = tuple(o for o in fit.outputs if o in _SIGNAL)
             p = {**fit.given, **fit.values, sim.viscous: max(float(x[0]), 0.0)}
             rec = simulate_record(frf, p, max(float(x[1]), 0.0), structure, outputs=outs)
@@ -558,7 +560,7 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
             f2 = fit_structure(structure, w,
                                {o: rec.response[j] / zoh for j, o in enumerate(outs)},
                                {o: (frf.total_std if frf.total_std is not None
-                                    else frf.noise_std)[kk] for o, kk in zip(outs, k)},
+                                    else frf.noise_std)[kk] for o, kk in zip(outs, k, strict=True)},
                                free=fit.free, initial={n: fit.values[n] for n in names},
                                given=fit.given)
             d_sim[i] = f2.parameters[sim.viscous]["value"]
@@ -581,7 +583,7 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
             "correlation": float(cov[0, 1] / (s[0] * s[1])),
             "bussgang": {"coulomb": start["coulomb_current"], "viscous": start["viscous"]},
             "records": [{"velocity_rms": float(a), "damping": float(b), "damping_std": float(c),
-                         "damping_simulated": float(e)} for a, b, c, e in zip(sv, d, sd, d_sim)],
+                         "damping_simulated": float(e)} for a, b, c, e in zip(sv, d, sd, d_sim, strict=True)],
             "mismatch": mismatch, "iterations": int(iterations), "simulations": count,
             "method": "BLA viscous damping per amplitude; Bussgang start, then matched by "
                       f"flexarm's simulator of the fitted {structure} model with Coulomb "

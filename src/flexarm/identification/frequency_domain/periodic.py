@@ -138,7 +138,7 @@ class PeriodicFRF:
                 fl = lambda v: math.nan if v is None else float(v)  # noqa: E731
                 dist = {n: [Band(tuple(b), fl(o), fl(e), fl(z)) for b, o, e, z in zip(
                     *(d["outputs"][n]["distortion"][k] for k in ("band_hz", "odd_db", "even_db",
-                                                                "noise_db")))] for n in names}
+                                                                "noise_db")), strict=False)] for n in names}
             sp = d.get("spectra")
             spectra = {} if not sp else {
                 "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
@@ -250,7 +250,7 @@ def _dft_periods(x: np.ndarray, P: int, M0: int) -> np.ndarray:
 
 
 def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
-                 period: int | None = None, lines: Sequence[int] | None = None,
+                 period: int | None = None, lines: Sequence[int] | np.ndarray | None = None,
                  transient_periods: int | None = None, input_name: str = "input",
                  source: str = "<data>", detrend: bool = True,
                  require_distortion: bool = False) -> PeriodicFRF:
@@ -541,13 +541,15 @@ def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>")
     noise = np.sqrt(np.sum(np.stack([r.noise_std for r in rs]) ** 2, axis=0)) / R
     total = np.sqrt(np.sum(np.abs(G - Gm) ** 2, axis=0) / (R * (R - 1)))
     dist = None
-    if all(r.distortion is not None for r in rs):
+    dists = [r.distortion for r in rs]
+    if all(d is not None for d in dists):
         def pmean(vals):
             v = [x for x in vals if math.isfinite(x)]
             return 10 * math.log10(np.mean([10 ** (x / 10) for x in v])) if v else math.nan
         dist = {n: [Band(bs[0].band_hz, pmean([b.odd_db for b in bs]),
                          pmean([b.even_db for b in bs]), pmean([b.noise_db for b in bs]))
-                    for bs in zip(*(r.distortion[n] for r in rs))] for n in first.outputs}
+                    for bs in zip(*(d[n] for d in dists if d is not None), strict=False)]
+                for n in first.outputs}
     frd = control.FrequencyResponseData(Gm[:, None, :], 2 * np.pi * first.frequency_hz,
                                         inputs=[first.input], outputs=first.outputs)
     notes = [w for r in rs for w in r.warnings]
@@ -577,7 +579,7 @@ def plot_distortion(res: PeriodicFRF, path=None):
         fig = Figure(figsize=(8, 3.2 * len(res.outputs)))
         axes = fig.subplots(len(res.outputs), 1, squeeze=False)
         db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
-        for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
+        for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs, strict=True)):
             ax.plot(res.frequency_hz, db(res.response[j]), "k+", label="FRF")
             ax.plot(res.frequency_hz, db(res.noise_std[j]), "g-", lw=0.8, label="noise std")
             if res.total_std is not None:
@@ -592,7 +594,7 @@ def plot_distortion(res: PeriodicFRF, path=None):
     odd = bool(np.all(exc % 2 == 1))
     fig = Figure(figsize=(8, 3.2 * len(res.outputs)))
     axes = fig.subplots(len(res.outputs), 1, squeeze=False)
-    for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs)):
+    for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs, strict=True)):
         y = sp["mean"][1 + j]
         n = np.sqrt(sp["var"][1 + j] / sp["M"])
         db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731

@@ -10,7 +10,8 @@ one pinned mass, FRB eq. (13) and (16) — eq. (1) at the fundamental of each ex
     K i(ω) = (−J ω² + j V ω + C (1 − G_b(jω))) θm(ω) + (4 C_f/π) j e^{j∠θm(ω)},
 
 is linear in (J, V, C, C_f) (the last term: the friction shape's fundamental, measured from
-the motor velocity by default, :meth:`HarmonicAnalysis.friction`), with G_b identified separately (friction does not distort
+the motor velocity by default, :meth:`HarmonicAnalysis.friction`), with G_b identified separately
+(friction does not distort
 θt/θm). Stacking real and imaginary parts of all experiments, each row weighted by
 1/|K i(ω)| (relative error), gives them by one least squares; their spread comes from the
 residual and (AᵀA)⁻¹. The implied G_m = K/(J s² + V s + C (1 − G_b)).
@@ -69,8 +70,8 @@ def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunc
         rhs.append(K * i * wt)
     A = np.array(rows)
     b = np.array(rhs)
-    A2 = np.vstack([A.real, A.imag])
-    b2 = np.concatenate([b.real, b.imag])
+    A2 = np.vstack([np.real(A), np.imag(A)])
+    b2 = np.concatenate([np.real(b), np.imag(b)])
     x, *_ = np.linalg.lstsq(A2, b2, rcond=None)
     r = b2 - A2 @ x
     dof = max(len(b2) - 4, 1)

@@ -58,7 +58,7 @@ class Structure:
     log: frozenset[str]
     outputs: tuple[str, ...]
     response: Callable[[dict, np.ndarray], dict[str, np.ndarray]]
-    guess: Callable[[np.ndarray, dict, dict], dict]
+    guess: Callable[[np.ndarray, dict, dict], dict | list[dict]]  # one start or candidates
     scale: Callable[[dict, np.ndarray], dict]
     derived: Callable[[dict], dict] = lambda p: {}
     given: dict[str, str] = field(default_factory=dict)  # name → meaning and unit
@@ -200,7 +200,8 @@ TWO_MASS_STRUCTURE = Structure(
                          "load_viscous": p0["total_inertia"] * w.min(),
                          "delay_s": 1 / w.max(), "shaft_damping": 0.01},
     derived=two_mass_derived,
-    units="per unit of the input's torque constant (A·s²/rad for a current input and angles in rad)")
+    units="per unit of the input's torque constant (A·s²/rad for a current input and angles "
+          "in rad)")
 
 
 # --- FRB single-mass arm: eqs. (1), (12), (13) ------------------------------------------
@@ -473,7 +474,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
 
     def unpack(x):
         p = dict(p0)
-        for f, v in zip(free, x):
+        for f, v in zip(free, x, strict=True):
             p[f] = float(np.exp(v)) if f in st.log else v * scale[f]
         return p
 
@@ -496,6 +497,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
                             xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
         if best is None or sol.cost < best.cost:
             best = sol
+    assert best is not None  # one start at least
     # The bounded solver creeps towards an optimum that lies on a bound (a delay or a
     # viscous term that is truly 0: steps shrink with the distance to the bound). An
     # unbounded Levenberg–Marquardt polish from its solution is kept when it lowers the
@@ -527,7 +529,7 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     cov_all = D @ cov_x @ D.T
     vals = all_values(x)
     params = {n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
-              for i, (n, v) in enumerate(zip(names, vals))}
+              for i, (n, v) in enumerate(zip(names, vals, strict=False))}
     exp = F - n_par / 2 if known else None
     params = inflate_std(params, cost, F, n_par, exp)
     return StructuredFit(st.name, params, cost, exp, np.sqrt(exp) if exp is not None else None,

@@ -35,12 +35,11 @@ Frequencies are scaled, s̃ = s/ω_s (ω_s the geometric mean of the data's), wh
 5. Order selection (:func:`tfest_orders`): AIC = 2V + 2n_θ, BIC = 2V + n_θ ln 2F.
 
 Physical structures (the two-mass drive, FRB's single-mass arm, the voltage-driven servo)
-are fitted with the same cost by :func:`flexarm.identification.frequency_domain.structures.fit_structure`.
+are fitted with the same cost by
+:func:`flexarm.identification.frequency_domain.structures.fit_structure`.
 """
 
 from __future__ import annotations
-
-from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 from dataclasses import dataclass, field
 
@@ -50,6 +49,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from flexarm.display import Table
+from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
 
 class TFEstError(FlexarmError, ValueError):
@@ -172,7 +172,8 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
         return (f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
                 f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
                 "to the noise level (model errors or nonlinear distortion); the standard "
-                f"deviations 'std' hold for noise only, 'std_inflated' (× {np.sqrt(cost / expected):.3g}) "
+                "deviations 'std' hold for noise only, 'std_inflated' "
+                f"(× {np.sqrt(cost / expected):.3g}) "
                 "treat the misfit as extra noise" + extra)
     if cost < lo:
         return (f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "
@@ -184,7 +185,7 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
 def _frd_data(frd, output: int, input: int, std):
     omega = np.asarray(frd.omega, float)
     data = frd.frequency_response(omega) if not hasattr(frd, "frdata") else None
-    H = np.asarray(frd.frdata if hasattr(frd, "frdata") else data.complex, complex)
+    H = np.asarray(frd.frdata if data is None else data.complex, complex)
     H = H.reshape(frd.noutputs, frd.ninputs, -1)[output, input]
     if std is not None:
         std = np.asarray(std, float)
@@ -221,6 +222,7 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=30):
             break
         d_prev = np.polynomial.polynomial.polyval(s, a)
     # N for the best fit with the stabilised D (linear in b): Σ |w (N/D − Hr)|²
+    assert a is not None and b is not None  # one iteration at least
     dv = np.polynomial.polynomial.polyval(s, a)
     A = pw[:, : nz + 1] / dv[:, None] * w[:, None]
     b = np.linalg.lstsq(np.vstack([A.real, A.imag]),
@@ -311,7 +313,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
 
     def resid(x):
         e = cresid(*unpack(x))
-        return np.concatenate([e.real, e.imag])
+        return np.concatenate([np.real(e), np.imag(e)])
 
     def jac(x):
         bb, aa, tau = unpack(x)
@@ -331,13 +333,14 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
             if fit_tau:
                 cols.append(-1j * omega * Hm / ws)
             J = np.column_stack(cols) * w[:, None]
-        return np.vstack([J.real, J.imag])
+        return np.vstack([np.real(J), np.imag(J)])
 
     # delay parameter in units of 1/ω_s (scaled like the coefficients)
     x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
     unstable: list[complex] = []
     for _attempt in range(3):
-        sol = least_squares(resid, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
+        sol = least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
+                            jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                             xtol=1e-15, ftol=1e-15, gtol=1e-15)
         x = sol.x
         a_fit = np.r_[x[nb:nb + nd], 1.0]

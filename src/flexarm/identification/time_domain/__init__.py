@@ -10,20 +10,27 @@ servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` 
 ``BenchLog`` / ``read_bench_log`` the old log type and reader, ``RigFitResult`` the servo
 pipeline's result."""
 
-from flexarm.identification.time_domain.general import (ScenarioFit, fit_scenario,
-                                                        predict_scenario)
-from flexarm.identification.time_domain.general import FitOptions
-from flexarm.identification.time_domain.logs import (BenchLog, FitInputError, load_rig_log,
-                                                     parse_controller, read_bench_log)
+# last: the submodules `fit` and `predict` share these names, and importing a submodule binds
+# its name on the package; the servo-rig functions are what these names mean here
+from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
+from flexarm.identification.time_domain.general import (
+                                                        FitOptions,
+                                                        ScenarioFit,
+                                                        fit_scenario,
+                                                        predict_scenario,
+)
+from flexarm.identification.time_domain.logs import (
+                                                        BenchLog,
+                                                        FitInputError,
+                                                        load_rig_log,
+                                                        parse_controller,
+                                                        read_bench_log,
+)
 from flexarm.identification.time_domain.options import PredictOptions
 from flexarm.identification.time_domain.predict import Prediction, overlay_figure
 from flexarm.identification.time_domain.report import FitResult as RigFitResult
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.validate import validate
-
-# last: the submodules `fit` and `predict` share these names, and importing a submodule binds
-# its name on the package; the servo-rig functions are what these names mean here
-from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
 
 __all__ = ["BenchLog", "FitInputError", "FitOptions", "FitResult", "PredictOptions",
            "Prediction", "RigFitResult", "ScenarioFit", "fit", "fit_scenario", "load_rig_log",

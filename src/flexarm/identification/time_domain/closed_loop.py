@@ -39,8 +39,8 @@ Sensor delays of D samples (up to tens of milliseconds on real rigs) are a ring 
 ``n_buf`` >= D + 1 samples per channel, read at (k − D) mod n_buf (one gather, whatever
 the delay), filled at the start with the initial reading as in
 :func:`flexarm.sim.sampled.simulate_loop`; the initial state is read from the log at
-k = D (:class:`flexarm.identification.time_domain.objective.Objective`). (Feeding the controller the log's own
-readings while a delay line fills was tried: it moved the synthetic acceptance fits into
+k = D (:class:`flexarm.identification.time_domain.objective.Objective`). (Feeding the controller the
+log's own readings while a delay line fills was tried: it moved the synthetic acceptance fits into
 other local minima, ζ −44 %, and changed the real units' held-out fit % by < 1 point.)
 
 :func:`closed_loop_cost` accumulates, inside the scan, the squared output errors of the

@@ -28,7 +28,8 @@ with |u| ≥ 0.99 · limit is taken as saturated.
 
 A gain disagrees with the declaration when the difference matters (it moves the command by
 more than 1 % of the command's rms) and either its sign is opposite or it is off by more
-than max(10 %, 4 σ); that is a :class:`~flexarm.identification.time_domain.logs.FitInputError` naming the gain,
+than max(10 %, 4 σ); that is a :class:`~flexarm.identification.time_domain.logs.FitInputError`
+naming the gain,
 unless ``use_regressed=True`` (``--use-regressed-law``): then :meth:`ControllerCheck.apply`
 gives the log with the regressed gains.
 
@@ -41,14 +42,15 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
 
 from flexarm.identification.time_domain.logs import GAINS, FitInputError
-from flexarm.io.logs import Log
 from flexarm.identification.time_domain.uncertainty import hac_covariance
+from flexarm.io.logs import Log
 
 #: Seconds after a reference step left out (the logged command's glitch).
 GLITCH_S = 0.02
@@ -140,7 +142,7 @@ class ControllerCheck:
             reg = np.where(np.isfinite(self.regressed[s]), self.regressed[s], self.declared[s])
             g[a:b] = reg
         c = log.controller.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                      map(float, g[0]))))
+                                                      map(float, g[0]), strict=True)))
         return replace(log, controller=c, gains=g)
 
 
@@ -166,7 +168,8 @@ def _robust_fit(A: np.ndarray, y: np.ndarray):
     r0 = y - A @ b0
     scale = max(1.4826 * float(np.median(np.abs(r0 - np.median(r0)))), 1e-3)
     sol = least_squares(lambda b: A @ b - y, b0, loss="huber", f_scale=scale,
-                        jac=lambda b: A, method="trf")
+                        jac=lambda b: A,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+                        method="trf")
     return sol.x, y - A @ sol.x
 
 
@@ -179,12 +182,12 @@ def _rate_filter(log: Log) -> tuple[dict[str, float], dict[str, float]]:
         b = np.diff(log.columns[pos]) / T
         v = log.columns[vel][1:]
 
-        def cost(tau):
+        def cost(tau, b=b, v=v):  # this iteration's b, v bound (B023)
             a = tau / (tau + T)
             f = lfilter([1 - a], [1, -a], b, zi=[a * v[0]])[0]
             return float(np.mean((v - f) ** 2))
 
-        res = minimize_scalar(cost, bounds=(0.0, 200 * T), method="bounded",
+        res: Any = minimize_scalar(cost, bounds=(0.0, 200 * T), method="bounded",
                               options={"xatol": 1e-2 * T})
         taus[vel] = float(res.x)
         r2s[vel] = 1.0 - res.fun / float(np.var(v))
@@ -269,6 +272,7 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
         r2_by[m] = r2
         if best is None or r2 > best[0]:
             best = (r2, m, reg, se, limit, sat, glitch_mask, used, Xm)
+    assert best is not None  # one delay at least (checked above)
     r2, m, reg, se, limit, sat, glitch_mask, used, Xm = best
     declared = np.array([log.gains[a] for a, _ in segs])
     taus, tr2 = _rate_filter(log)

@@ -20,8 +20,9 @@ continuation), called through its keyword interface with the preset's data sheet
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions
 from flexarm.identification.time_domain.presets import Preset, for_scenario
@@ -68,5 +69,5 @@ def _servo_rig(preset: Preset, logs, options, progress):
     kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
     logs = [as_bench_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
-        logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows)]
+        logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
     return rig_fit(logs, progress=progress, **kw)

@@ -39,6 +39,7 @@ delays.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.signal
@@ -107,9 +108,12 @@ def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
     a = 2 * np.pi * fc
     num = [-gL * a, 0.0, 0.0]
     den = np.polymul([1.0, 2 * z * wc, wc * wc], [1.0, a])
-    b, aa, _ = scipy.signal.cont2discrete((num, den), dt, method="zoh")
+    # scipy's return types are inferred from its branches: (num, den, dt), and y alone here
+    tfd: Any = scipy.signal.cont2discrete((num, den), dt, method="zoh")
+    b, aa, _ = tfd
     x = np.concatenate([np.full(lag, th[0]), th[:len(th) - lag]]) - th[0]
-    return scipy.signal.lfilter(np.ravel(b), aa, x)
+    y: Any = scipy.signal.lfilter(np.ravel(b), aa, x)
+    return y
 
 
 def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
@@ -162,6 +166,7 @@ def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
         if best is None or c < best[2]:
             best = (lag, p, c)
     # refine the lag around the best coarse one
+    assert best is not None  # lag 0 at least was tried
     lag0, p0, c0 = best
     for lag in range(max(0, lag0 - step + 1), min(max_lag, lag0 + step - 1) + 1):
         if lag in profile:
@@ -189,6 +194,7 @@ def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
     max_delay = int(round(MAX_DELAY_S / dt)) if max_delay is None else int(max_delay)
     W = max(int(round(window / dt)), 5)
     use_tip = tip is not None and tip.trusted
+    tip_lag = tip.lag if tip is not None and use_tip else 0
     # per log, once: hub angle and rate, the integrals of the command, of the rate's sign
     # and of the tip deflection (None without a tip channel)
     series = []
@@ -207,14 +213,14 @@ def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
         ys, Xs = [], []
         for th, w, Iu, sg, Id in series:
             N = len(th)
-            k0 = np.arange(5, N - D - W - (tip.lag if use_tip else 0) - 5, max(W // 4, 1))
+            k0 = np.arange(5, N - D - W - tip_lag - 5, max(W // 4, 1))
             if k0.size < 10:
                 continue
             k1 = k0 + W
             ys.append(w[k1 + D] - w[k0 + D])
             cols = [Iu[k1] - Iu[k0], -(th[k1 + D] - th[k0 + D]), -(sg[k1 + D] - sg[k0 + D])]
             if Id is not None:
-                cols.append(Id[k1 + D + tip.lag] - Id[k0 + D + tip.lag])
+                cols.append(Id[k1 + D + tip_lag] - Id[k0 + D + tip_lag])
             elif use_tip:
                 cols.append(np.zeros(k0.size))
             Xs.append(np.column_stack(cols))
@@ -229,7 +235,7 @@ def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
     ok = {D: r for D, r in profile.items() if coef[D][0] > 0 and coef[D][1] > 0}
     if not ok:
         return HubDelay(None, float("nan"), False, None, None, profile)
-    D = max(ok, key=ok.get)
+    D = max(ok, key=lambda d: ok[d])
     r2 = ok[D]
     med = float(np.median(list(profile.values())))
     trusted = bool(r2 >= HUB_R2_MIN and r2 - med > 0.1 * max(r2, 1e-9))

@@ -1,4 +1,5 @@
-"""``flexarm.identification.time_domain``: time-domain identification of a bench arm from closed-loop logs.
+"""``flexarm.identification.time_domain``: time-domain identification of a bench arm from
+closed-loop logs.
 
 Given what a data sheet gives (drive, gear ratio K_g, motor constant K_m, armature
 resistance R, efficiencies, link length L), estimate the hub inertia, link stiffness,
@@ -9,7 +10,8 @@ initial link state, by minimising the closed-loop simulation output error
 
 1. guesses and bounds from the data (:mod:`flexarm.identification.time_domain.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (:mod:`flexarm.identification.time_domain.global_stage`);
+   on the first ``global_seconds`` of each log
+   (:mod:`flexarm.identification.time_domain.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
    columns are simulated in one batch; it also refines each log's initial tip and hub
@@ -27,29 +29,38 @@ initial link state, by minimising the closed-loop simulation output error
 4. uncertainty from the final Jacobian J and residuals r: the reported ``std`` is the
    Newey–West sandwich (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹, Ŝ the Bartlett-weighted autocovariance of the
    scores Jᵀ_t r_t per log, its bandwidth 10 residual correlation times
-   (:mod:`flexarm.identification.time_domain.uncertainty`): output-error residuals persist for many samples and
-   the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
+   (:mod:`flexarm.identification.time_domain.uncertainty`): output-error residuals persist for many
+   samples and the textbook s² (JᵀJ)⁻¹ (kept as ``std_iid``) is then 10-30× too small.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from flexarm.identification.time_domain import estimates as _est
 from flexarm.identification.time_domain import guesses
-from flexarm.identification.time_domain.global_stage import GlobalResult, differential_evolution_stage
-from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.global_stage import (
+    GlobalResult,
+    differential_evolution_stage,
+)
+from flexarm.identification.time_domain.logs import (
+    PERIOD_TOL,
+    FitInputError,
+    as_bench_log,
+    check_closed_loop,
+)
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.identification.time_domain.report import FitResult
-from flexarm.io.logs import log_keys
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
+from flexarm.io.logs import log_keys
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -99,8 +110,9 @@ def _finer_than_logged(log, q: float) -> bool:
     return bool(np.median(np.abs(k - np.round(k))) > 0.05)
 
 
-def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resistance: float,
-             link_length: float, gear_efficiency: float, motor_efficiency: float,
+def make_rig(drive: str, gear_ratio: float, motor_constant: float | None,
+             armature_resistance: float | None, link_length: float | None,
+             gear_efficiency: float, motor_efficiency: float,
              limit: float, encoder_quantum: float, tip_quantum: float = 0.0) -> Rig:
     """Drive gains from the data sheet: voltage drive k_u = η_g η_m K_g K_m / R,
     k_ω = k_u K_g K_m; current drive k_u = η_g η_m K_g K_m, k_ω = 0."""
@@ -108,6 +120,7 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float, armature_resi
                     ("link_length", link_length)):
         if v is None or not v > 0:
             raise FitInputError(f"fit: field {name!r} = {v!r}: give the data-sheet value (> 0)")
+    assert motor_constant is not None and link_length is not None  # checked just above
     eta = gear_efficiency * motor_efficiency
     if drive == "voltage":
         if armature_resistance is None or not armature_resistance > 0:
@@ -131,14 +144,14 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
            delays, bounds: dict | None, info: dict,
            est: dict | None = None) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
     """Bounds from the data (see :mod:`flexarm.identification.time_domain.guesses` and
-    :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap estimates
-    (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
+    :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap
+    estimates (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
     frequency estimates), which narrow the search where they are trusted."""
     est = est or {}
     tip, hub = est.get("tip"), est.get("hub")
     fb = (est.get("frequency") or {}).get("bounds")
     if fb:
-        wc_b = tuple(fb)
+        wc_b = (fb[0], fb[1])  # (lo, hi)
         wc = tip.omega_c if tip is not None and tip.trusted else math.sqrt(fb[0] * fb[1])
         info["link_frequency_guess"] = {"value": wc, "from": "estimates"}
     else:
@@ -205,7 +218,7 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     ranges = _delay_ranges(hub, tip, max_delay, delays)
     info["delay_ranges"] = {"motor_angle": ranges[0], "tip_deflection": ranges[1]}
     space = ParamSpace(defs, n_sessions, max(r[1] for r in ranges), sign, friction,
-                       tuple(delays), delay_ranges=ranges)
+                       (delays[0], delays[1]), delay_ranges=ranges)
     zeta0 = float(np.clip(tip.zeta, 0.003, 0.25)) if tip is not None and tip.trusted else 0.03
     B0 = (float(np.clip(hub.viscous, 0.0, B_hi)) if hub is not None and hub.trusted
           and hub.viscous is not None else 0.05 * B_hi)
@@ -217,7 +230,7 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     # the seed's delays: the middle of a range set by a trusted estimate, else the
     # smallest delay searched
     from_est = (hub is not None and hub.trusted, tip is not None and tip.trusted)
-    mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est)]
+    mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est, strict=True)]
     d0 = np.array([delays[0] if delays[0] is not None else mid[0],
                    delays[1] if delays[1] is not None else mid[1],
                    ((sign or 1) + 1) // 2])
@@ -304,13 +317,16 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     −2 % to −10 % at 4× the cost); continued, sampling periods changed by ±1e-12 and
     1e-10 give the same delays and every parameter within 1.4 %.
     ``estimates`` (default True): first the cheap estimates of
-    :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link frequency), which set
+    :mod:`flexarm.identification.time_domain.estimates` (hub → tip model, hub delay, link
+    frequency), which set
     the delay search ranges (± 6 samples around them, up to ``max_delay``, default
     150 ms), the bounds of ω_c, J and the tip gain, the gauge's sign and, unless
     ``filters`` names the tip channel, its low-pass; False: the guesses of
-    :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay`` searched.
+    :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay``
+    searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
-    filters, e.g. ``{"tip_deflection": 50.0}`` (:mod:`flexarm.identification.time_domain.closed_loop`).
+    filters, e.g. ``{"tip_deflection": 50.0}``
+    (:mod:`flexarm.identification.time_domain.closed_loop`).
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -350,7 +366,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             q = 0.0
     notes: list[str] = []
     if voltage_limit is None:
-        declared = {float(g.voltage_limit) for g in blogs if getattr(g, "voltage_limit", None)}
+        declared = {float(v) for v in (getattr(g, "voltage_limit", None) for g in blogs) if v}
         if len(declared) == 1:
             voltage_limit = declared.pop()
         else:
@@ -388,7 +404,7 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
-    common = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
+    common: dict[str, Any] = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
                   wc_guess=wc_guess, filters=filt)
     obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
     say(f"global stage: {space.n_cont} continuous + discrete parameters, "
@@ -468,7 +484,7 @@ def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace
             moved[space.names[i]] = [[d.lo, d.hi], [lo, hi]]
         new = replace(space, defs=defs)
         U1 = np.array([nd.to_unit(od.to_phys(u)) for od, nd, u in
-                       zip(space.defs, defs, loc["U"])])
+                       zip(space.defs, defs, loc["U"], strict=False)])
         say(f"widening the bounds of {', '.join(moved)} and refitting")
         obj.space = new
         loc2 = _local_continued(obj, np.clip(U1, 0.0, 1.0), D, local_nfev, off0=loc["off"])
@@ -567,8 +583,8 @@ TIP_FILTER_MIN_SAMPLES = 3
 
 
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
-    """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model with the
-    tip channel's lag relative to the hub, the hub delay, the link frequency), and the
+    """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model
+    with the tip channel's lag relative to the hub, the hub delay, the link frequency), and the
     tip low-pass cutoff to use when the user gave none and the model is trusted."""
     known = "tip_deflection" in (filters or {})  # given, 0 (no filter) included
     tip = _est.tip_model(blogs, rig.length, max_lag=max_delay)
@@ -634,6 +650,7 @@ def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: in
             trials[int(dd)] = r["cost"]
             if best is None or r["cost"] < best[0]["cost"]:
                 best = (r, Dk)
+    assert best is not None  # D[1] itself is always tried
     r, Dk = best
     return {"D": Dk, "U": r["U"], "off": r["off"], "trials": trials}
 
@@ -661,7 +678,8 @@ TIP_OFFSET_WARN = 0.02
 
 def _tip_offsets(blogs) -> list[str]:
     """Warnings for logs whose tip sensor reads away from zero at rest (see
-    :func:`flexarm.identification.time_domain.guesses.tip_rest_reading`): the model has no sensor offset."""
+    :func:`flexarm.identification.time_domain.guesses.tip_rest_reading`): the model has no sensor
+    offset."""
     out = []
     for g in blogs:
         r = guesses.tip_rest_reading(g)
@@ -711,7 +729,8 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
         return obj.cost(Us, np.tile(D, (X.shape[0], 1)), np.tile(off, (X.shape[0], 1, 1)))
 
     c0 = float(f(U[idx][:, None])[0])
-    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, seed=seed, tol=0.0,
+    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, tol=0.0,
+                                 seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
                                  updating="deferred", vectorized=True, polish=False,
                                  x0=U[idx], mutation=(0.5, 1.0), recombination=0.7)
     if res.fun >= c0:
@@ -794,7 +813,8 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
         return cache[key]
 
     t0 = time.perf_counter()
-    res = least_squares(lambda z: batch(z)[0], z0[free], jac=lambda z: batch(z)[1],
+    res = least_squares(lambda z: batch(z)[0], z0[free],
+                        jac=lambda z: batch(z)[1],  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                         bounds=(lo[free], hi[free]), method="trf", x_scale=1.0,
                         max_nfev=max_nfev, ftol=1e-6, xtol=1e-6, gtol=1e-8)
     r, Jac = batch(res.x)

@@ -80,17 +80,18 @@ import copy
 import math
 import re
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flexarm.metrics import fit_percent as _fitpct
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
+from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
@@ -100,7 +101,8 @@ __all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "exp
 
 # ----------------------------------------------------------------------------- paths
 # the path language: flexarm.specs.paths
-from flexarm.specs.paths import expand_paths, get as _path_get, parse_path, scenario_with  # noqa: E402,F401
+from flexarm.specs.paths import expand_paths, parse_path, scenario_with  # noqa: E402,F401
+from flexarm.specs.paths import get as _path_get
 
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
@@ -233,8 +235,7 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
 
 
 # ----------------------------------------------------------------------------- result
-from flexarm.identification.time_domain.result import (FitResult, drop_none as _drop_none,  # noqa: E402,F401
-                                                       finite as _finite)
+from flexarm.identification.time_domain.result import FitResult  # noqa: E402,F401
 
 #: Deprecated name of :class:`~flexarm.identification.time_domain.result.FitResult`.
 ScenarioFit = FitResult
@@ -274,7 +275,7 @@ class _Engine:
     """Logs cut into segments, the batched run of candidate parameter vectors, residuals."""
 
     def __init__(self, scenario, logs: Sequence, free: Sequence[str], options: FitOptions,
-                 segment: float | None = "options"):
+                 segment: float | Literal["options"] | None = "options"):
         options.check()
         if options.substeps is not None and scenario.simulation is not None:
             scenario = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
@@ -286,7 +287,7 @@ class _Engine:
         if len(set(self.free)) != len(self.free):
             raise ValueError(f"free parameters listed twice: {self.free}")
         self.keys = [parse_path(p) for p in self.free]
-        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free)])
+        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free, strict=True)])
         # priors and bounds may name paths with [*] too: one entry per element
         if any("[*]" in p for p in list(options.priors) + list(options.bounds)):
             options = copy.copy(options)
@@ -336,7 +337,7 @@ class _Engine:
 
         keys = log_keys(logs)  # unique per log: same file names in other folders stay apart
         self.logs = [self._read(log, w, k if getattr(log, "path", None) is not None else None)
-                     for log, w, k in zip(logs, wins, keys)]
+                     for log, w, k in zip(logs, wins, keys, strict=True)]
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
@@ -457,7 +458,7 @@ class _Engine:
                 y[:, j] = np.asarray(sig[n], float)
                 present[j] = True
         refs = {}
-        for k, v in self.prep0.references.items():
+        for k, _v in self.prep0.references.items():
             if k in sig:
                 refs[k] = np.asarray(sig[k], float)
             else:
@@ -536,9 +537,11 @@ class _Engine:
         self.seg_scn = np.array([r[1] == 0 and self.logs[r[0]].from_scenario for r in self.seg])
         self._cache: dict = {}
         Nmax = max(1, int(self.seg_k0.max()) + 1)
-        fit_n = lambda a: (a[:Nmax] if a.shape[0] >= Nmax else  # noqa: E731
-                           np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1),
-                                  mode="edge"))
+
+        def fit_n(a):
+            return (a[:Nmax] if a.shape[0] >= Nmax else
+                    np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1), mode="edge"))
+
         self.log_y = np.stack([fit_n(np.nan_to_num(L.y)) for L in self.logs])
         self.log_refs = {k: np.stack([fit_n(L.refs[k]) for L in self.logs])
                          for k in self.prep0.references}
@@ -602,20 +605,20 @@ class _Engine:
                                         jnp.zeros_like(loop.actuator.quantum)))
         return loop, np.stack([p.x0 for p in preps])
 
-    def run(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+    def run(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         """Simulated measured channels (P, S, M, C) of the candidates ``Z`` (P, n), with the
-        segments' plant states offset by ``O`` (P, S, n_x) (× :attr:`state_scale`)."""
+        segments' plant states offset by ``offsets`` (P, S, n_x) (× :attr:`state_scale`)."""
         out = []
         B = max(1, self.options.max_batch)
         nx = self.prep0.loop.plant.n_states
-        if O is None:
-            O = np.zeros((Z.shape[0], len(self.seg), nx))
-        O = O * self.state_scale
+        if offsets is None:
+            offsets = np.zeros((Z.shape[0], len(self.seg), nx))
+        offsets = offsets * self.state_scale
         for a in range(0, Z.shape[0], B):
             loop, x0s = self.loops(Z[a:a + B])
             warm, shared = self._warm(loop)
             out.append(np.asarray(_run_segments(
-                loop, jnp.asarray(x0s), jnp.asarray(O[a:a + B]), warm, shared,
+                loop, jnp.asarray(x0s), jnp.asarray(offsets[a:a + B]), warm, shared,
                 {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
                 jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
                 jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn),
@@ -636,7 +639,7 @@ class _Engine:
             ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
             key = "warm"
             if key not in self._cache or not all(
-                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves)):
+                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves, strict=False)):
                 self._cache[key] = ([x.copy() for x in leaves],
                                     _warm_jit(ctrl0, self.names, nd, *args))
             return self._cache[key][1], True
@@ -656,9 +659,9 @@ class _Engine:
             self._state_scale = np.where(rms > 0, rms, fill)
         return self._state_scale
 
-    def residuals(self, Z: np.ndarray, O: np.ndarray | None = None) -> np.ndarray:
+    def residuals(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         """Stacked residuals (P, m): data, eq. (1), segment by segment, then priors, eq. (2)."""
-        sim = self.run(Z, O)[..., self.cidx]
+        sim = self.run(Z, offsets)[..., self.cidx]
         y = self.seg_y[..., self.cidx]
         m = self.seg_mask[..., self.cidx]
         r = np.where(m[None], (sim - y[None]) * self.scale, 0.0)
@@ -682,7 +685,7 @@ class _Engine:
         for li, L in enumerate(self.logs):
             rows = np.nonzero(self.seg_log == li)[0]
             d = {}
-            for j, c in zip(self.cidx, self.channels):
+            for j, c in zip(self.cidx, self.channels, strict=True):
                 m = self.seg_mask[rows, :, j]
                 if not m.any():
                     continue
@@ -692,7 +695,7 @@ class _Engine:
 
 
 def _cols(L: _LogData, names) -> list[str]:
-    return [n for n, p in zip(names, L.present) if p]
+    return [n for n, p in zip(names, L.present, strict=False) if p]
 
 
 # ----------------------------------------------------------------------------- JAX core
@@ -789,8 +792,9 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
 @eqx.filter_jit
 def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
                   seg_xd, seg_scn, seg_k0):
-    f = lambda lp, x0, off, w: _one_candidate(lp, x0, off, w, seg_refs, y0, dy0,  # noqa: E731
-                                              sbuf0, seg_xd, seg_scn, seg_k0)
+    def f(lp, x0, off, w):
+        return _one_candidate(lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0)
+
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
         loop, x0s, offsets, warm)
 
@@ -838,8 +842,9 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
             return np.sum(R * R, axis=1)
 
         res = differential_evolution(
-            f, list(zip(eng.lo, eng.hi)), popsize=options.popsize, maxiter=options.maxiter,
-            seed=options.seed, tol=1e-3, updating="deferred", vectorized=True, polish=False,
+            f, list(zip(eng.lo, eng.hi, strict=True)), popsize=options.popsize, maxiter=options.maxiter,
+            seed=options.seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
+            tol=1e-3, updating="deferred", vectorized=True, polish=False,
             init="latinhypercube", x0=z0, mutation=(0.5, 1.0), recombination=0.7)
         z0 = np.asarray(res.x)
         stages["global"] = {"cost": float(res.fun), "nfev": int(res.nfev), "generations":
@@ -899,7 +904,7 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
             else {"fit_percent": {}})
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
-    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0))), std, corr,
+    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0), strict=True)), std, corr,
                        warnings, pred["fit_percent"], seg_fp, fitted, converged, msg,
                        int(res.nfev), float(2 * res.cost), time.perf_counter() - t_start,
                        stages, pred)
@@ -909,7 +914,7 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
            o0: np.ndarray | None = None, progress=None):
     """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
     columns are simulated with the point itself as one batch. With ``states``, each
-    segment's start state is estimated too (multiple shooting's node states): offsets O
+    segment's start state is estimated too (multiple shooting's node states): offsets
     (S, n_x) in units of :attr:`_Engine.state_scale`; the segments are independent, so one
     simulation perturbing state i in every segment gives the S columns of state i (a
     block-sparse Jacobian, solved by LSMR)."""
@@ -925,26 +930,26 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
 
     def split(v):
         z = v[:n]
-        O = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
-        return z, O
+        off = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
+        return z, off
 
     def point(v):
         key = v.tobytes()
         if key not in cache:
-            z, O = split(v)
+            z, off = split(v)
             cache.clear()
-            cache[key] = {"r": eng.residuals(z[None], O[None])[0]}
+            cache[key] = {"r": eng.residuals(z[None], off[None])[0]}
         return cache[key]
 
     def jac(v):
         c = point(v)
         if "J" in c:
             return c["J"]
-        z, O = split(v)
+        z, off = split(v)
         h = np.where(z + step > eng.hi, -step, step)
         Z = np.tile(z, (n + nx, 1))
         Z[np.arange(n), np.arange(n)] += h
-        OO = np.tile(O, (n + nx, 1, 1))
+        OO = np.tile(off, (n + nx, 1, 1))
         for i in range(nx):
             OO[n + i, :, i] += step
         R = eng.residuals(Z, OO)
@@ -976,14 +981,15 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
-    res = least_squares(lambda v: point(v)["r"], v0, jac=jac,
+    res = least_squares(lambda v: point(v)["r"], v0,
+                        jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
                         bounds=(lo, hi), method="trf", x_scale=1.0,
                         tr_solver="lsmr" if nx else "exact",
                         max_nfev=options.max_nfev, ftol=options.ftol, xtol=options.xtol,
                         gtol=1e-10)
     r, J = batch(res.x)
     J = J.toarray() if nx else J
-    z, O = split(res.x)
+    z, off = split(res.x)
     Jz = J[:, :n]
     if nx:  # profile the state offsets out (Frisch–Waugh), segment by segment
         Jz = Jz.copy()
@@ -996,7 +1002,7 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
             "message": str(res.message), "segments": S, "state_offsets": S * nx,
             "seconds": round(time.perf_counter() - t0, 2)}
     res.x = z
-    res.offsets = O
+    res.offsets = off
     return res, r, Jz, info
 
 
@@ -1090,18 +1096,18 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
     state_warnings = eng.assumed_starts()
     sim = eng.run(np.zeros((1, 0)))[0]
     fp: dict[str, dict[str, float]] = {}
-    traj: dict[str, dict[str, np.ndarray]] = {}
+    traj: dict[str, dict[str, Any]] = {}  # time, and the simulated / measured channels
     for s, (li, k0, ln) in enumerate(eng.seg):
         L = eng.logs[li]
         d, tr = {}, {}
-        for j, c in zip(eng.cidx, eng.channels):
+        for j, c in zip(eng.cidx, eng.channels, strict=True):
             tr[c] = sim[s, :ln, j]
             m = eng.seg_mask[s, :ln, j]
             if m.any():
                 d[c] = round(_fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]), 2)
         fp[L.name] = d
         traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
-                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels)}}
+                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels, strict=True)}}
     out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes),
            "warnings": state_warnings}
     if plots is not None:
@@ -1123,7 +1129,7 @@ def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: s
         fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
         ax = fig.subplots(len(chans), 1, sharex=True,
                                squeeze=False)
-        for a, c in zip(ax[:, 0], chans):
+        for a, c in zip(ax[:, 0], chans, strict=True):
             a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
             a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
             fpv = fit_percent.get(name, {}).get(c)

@@ -4,15 +4,15 @@ Stick-slip makes the output-error cost piecewise and jumpy, so a gradient method
 from nominal values stalls. Differential evolution (seeded, ``updating='deferred'``,
 ``vectorized=True``) hands each whole generation to :meth:`Objective.cost`, which
 simulates it in one batched JAX call. Continuous parameters live in [0, 1] (see
-:mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are integer
-coordinates (``integrality``).
+:mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are
+integer coordinates (``integrality``).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import differential_evolution
@@ -72,7 +72,8 @@ def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray,
     x0 = np.concatenate([np.clip(u0, 0, 1), np.asarray(d0, float)[free]])
     t0 = time.perf_counter()
     res = differential_evolution(
-        f, bounds, popsize=popsize, maxiter=maxiter, seed=seed, tol=tol, atol=0.0,
+        f, bounds, popsize=popsize, maxiter=maxiter, tol=tol, atol=0.0,
+        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
         updating="deferred", vectorized=True, polish=False, init="latinhypercube",
         integrality=integrality, x0=x0, mutation=(0.5, 1.0), recombination=0.7,
         callback=cb)

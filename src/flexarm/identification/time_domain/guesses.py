@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.signal
 
@@ -115,8 +117,10 @@ def tip_gain(logs: list[Log], wc: float, length: float, zeta: float = 0.03):
             continue
         T = log.dt
         acc = np.gradient(np.gradient(th, T), T)
-        sysd = scipy.signal.cont2discrete(([1.0], [1.0, 2 * zeta * wc, wc**2]), T, "bilinear")
-        x = scipy.signal.lfilter(np.ravel(sysd[0]), sysd[1], -length * acc)
+        # (num, den, dt) and y alone here: scipy's return types are inferred from its branches
+        sysd: Any = scipy.signal.cont2discrete(([1.0], [1.0, 2 * zeta * wc, wc**2]), T,
+                                               "bilinear")
+        x: Any = scipy.signal.lfilter(np.ravel(sysd[0]), sysd[1], -length * acc)
         x, dd = x - x.mean(), d - d.mean()
         num += x @ dd
         den += x @ x

@@ -19,8 +19,9 @@ Deprecated names kept for the CLI and the servo-rig tests until they are re-poin
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -140,7 +141,7 @@ def check_closed_loop(log: Log) -> None:
 
 
 def write_bench_log(path: str | Path, time: np.ndarray, columns: Mapping[str, np.ndarray], *,
-                    comments: list[str] = (), overwrite: bool = False,
+                    comments: Sequence[str] = (), overwrite: bool = False,
                     fmt: str = "%.12g") -> Path:
     """Deprecated: :func:`flexarm.io.logs.write_log` (errors as :class:`FitInputError`)."""
     try:

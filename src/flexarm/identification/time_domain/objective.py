@@ -1,6 +1,7 @@
 """The output-error objective of a bench fit, evaluated for a whole population at once.
 
-For parameters p the log's loop is closed in simulation (:mod:`flexarm.identification.time_domain.closed_loop`)
+For parameters p the log's loop is closed in simulation
+(:mod:`flexarm.identification.time_domain.closed_loop`)
 and compared with the log on the measured hub angle θ and tip deflection d:
 
     V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
@@ -8,13 +9,14 @@ and compared with the log on the measured hub angle θ and tip deflection d:
 (each signal weighted by its spread; the first ``skip`` samples, where the simulated
 sensor delay lines still hold the initial value, are left out). fit % per log and signal
 is 100 (1 − ‖y − ŷ‖/‖y − mean y‖). Sensor low-pass filters of known cutoff (``filters``,
-Hz) are simulated in front of the converters (:mod:`flexarm.identification.time_domain.closed_loop`).
+Hz) are simulated in front of the converters
+(:mod:`flexarm.identification.time_domain.closed_loop`).
 
 Each log's initial state: hub angle and rate from its first samples; the link's tip
 deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
 delay), from a parabola through samples k ... k + 20 (fitted through the known tip filter,
-:func:`flexarm.identification.time_domain.guesses.initial_tip_at`), divided by the tip gain g; the local
-stage refines the latter two per log.
+:func:`flexarm.identification.time_domain.guesses.initial_tip_at`), divided by the tip gain g; the
+local stage refines the latter two per log.
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ import numpy as np
 from flexarm.identification.time_domain import guesses
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_cost, closed_loop_run
 from flexarm.identification.time_domain.logs import FitInputError
-from flexarm.io.logs import Log
 from flexarm.identification.time_domain.params import ParamSpace
+from flexarm.io.logs import Log
 from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
@@ -108,7 +110,7 @@ class Objective:
         self.sst = np.zeros((L, 2))
         for i, g in enumerate(logs):
             n = min(len(g), N)
-            pad = lambda a: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
+            pad = lambda a, n=n: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
             ref[i] = pad(g.columns["reference"])
             if "voltage" in g.columns:
                 volt[i] = pad(g.columns["voltage"])
@@ -222,7 +224,7 @@ class Objective:
         """Whether the simulated converters round (an encoder or tip-sensor quantum > 0)."""
         return bool(self.rig.encoder_quantum > 0 or self.rig.tip_quantum > 0)
 
-    def unquantised(self) -> "Objective":
+    def unquantised(self) -> Objective:
         """The same objective with the simulated converters' rounding off (a shallow copy
         sharing the data). With rounding the controller in the simulated loop reads whole
         counts, so the cost jumps wherever a count flips: along any one parameter it is

@@ -23,8 +23,9 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 __all__ = ["Cost", "Shooting", "Local", "GlobalDE", "Priors", "ServoRig", "FitOptions",
            "PredictOptions"]
@@ -176,7 +177,8 @@ class FitOptions:
 
 @dataclass
 class PredictOptions:
-    """Options of :func:`flexarm.validate` / :func:`~flexarm.identification.time_domain.predict.predict`.
+    """Options of :func:`flexarm.validate` /
+    :func:`~flexarm.identification.time_domain.predict.predict`.
 
     ``channels``: the measured channels compared (None: every logged sensor channel);
     ``windows``: per log (t0, t1) s from its first sample, [t0, t1), or None;

@@ -1,5 +1,6 @@
 """The physical parameter vector of a bench fit: names, units, bounds, scales, and its
-mapping to the model numbers of :mod:`flexarm.identification.time_domain.closed_loop` and to a scenario.
+mapping to the model numbers of :mod:`flexarm.identification.time_domain.closed_loop` and to a
+scenario.
 
 Estimated (SI): hub inertia J (kg·m², equivalent at the output shaft), hub-clamped link
 frequency ω_c (rad/s), link inertia J_l (kg·m²; stiffness C = J_l ω_c²), link damping
@@ -119,7 +120,7 @@ class ParamSpace:
     def discrete_bounds(self) -> list[tuple[int, int]]:
         """Bounds of the integer DE coordinates: angle delay, tip delay, sign (0/1)."""
         b = []
-        for fixed, rng in zip(self.fixed_delays, self.delay_ranges):
+        for fixed, rng in zip(self.fixed_delays, self.delay_ranges, strict=True):
             if fixed is not None:
                 b.append((fixed, fixed))
             else:
@@ -130,7 +131,7 @@ class ParamSpace:
 
     def physical(self, u: np.ndarray) -> dict[str, np.ndarray]:
         """Unit coordinates (..., n_cont) → dict of physical values keyed by :attr:`names`."""
-        return {n: d.to_phys(u[..., i]) for i, (n, d) in enumerate(zip(self.names, self.defs))}
+        return {n: d.to_phys(u[..., i]) for i, (n, d) in enumerate(zip(self.names, self.defs, strict=True))}
 
     def session_values(self, u: np.ndarray, name: str) -> np.ndarray:
         """(..., n_sessions) physical values of a per-session parameter."""

@@ -4,7 +4,7 @@
 Each log (or its window, [t0, t1) s from its first sample) is simulated once with its own
 references and the controller it ran, and compared per measured signal by
 
-    fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                           (:func:`flexarm.metrics.fit_percent`)
+    fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                    (:func:`flexarm.metrics.fit_percent`)
 
 The model is a scenario (any arm: the one engine's whole-run prediction,
 :func:`flexarm.identification.time_domain.general.predict_scenario`, from the scenario's
@@ -35,9 +35,10 @@ deprecated aliases).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -162,7 +163,7 @@ def controller_file(value: Any):
 def _windowed(logs, opts):
     if opts.windows is None:
         return list(logs)
-    return [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows)]
+    return [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=True)]
 
 
 def _predict_scenario(sc, logs, keys, opts) -> Prediction:
@@ -172,9 +173,9 @@ def _predict_scenario(sc, logs, keys, opts) -> Prediction:
                     continuous=bool(opts.continuous))
     out = predict_scenario(sc, logs, fo, channels=list(opts.channels) if opts.channels else None)
     # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
-    fp = dict(zip(keys, out["fit_percent"].values()))
+    fp = dict(zip(keys, out["fit_percent"].values(), strict=False))
     traces = {}
-    for k, tr in zip(keys, out["trajectories"].values()):
+    for k, tr in zip(keys, out["trajectories"].values(), strict=False):
         t = np.asarray(tr["time"], float)
         traces[k] = {"time": t - t[0] if t.size else t, "measured": tr["measured"],
                      "simulated": tr["simulated"]}
@@ -193,7 +194,7 @@ def _predict_rig_scenario(sc, logs, keys, opts) -> Prediction:
     from flexarm.identification.time_domain.validate import validate
 
     fp, traces = {}, {}
-    for k, g in zip(keys, _windowed(logs, opts)):
+    for k, g in zip(keys, _windowed(logs, opts), strict=True):
         out = validate(sc, [g], controller=opts.controller, traces=True)
         fp[k] = next(iter(out["fit_percent"].values()))
         traces[k] = out["traces"][0]
@@ -247,7 +248,7 @@ def overlay_figure(prediction: Prediction, key: str, fig=None):
     chans = list(tr["simulated"])
     fig = fig or Figure(figsize=(8, 2.2 * len(chans) + 0.6))
     ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
-    for a, c in zip(ax, chans):
+    for a, c in zip(ax, chans, strict=True):
         if c in tr["measured"]:
             a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
         a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")

@@ -19,8 +19,9 @@ engine) as one :class:`Preset`:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 __all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUILTIN"]
 
@@ -95,8 +96,11 @@ BUILTIN: dict[str, Callable[[], Preset]] = {"quanser-two-link": two_link}
 def for_scenario(scenario) -> Preset:
     """The preset of a scenario: its ``[notes.fit]`` (free, priors), else the one registered
     under its name, else its joints' friction levels (Coulomb, breakaway, viscous)."""
-    from flexarm.identification.time_domain.general import (FitOptions, friction_paths,
-                                                            scenario_fit_notes)
+    from flexarm.identification.time_domain.general import (
+        FitOptions,
+        friction_paths,
+        scenario_fit_notes,
+    )
 
     notes = scenario_fit_notes(scenario)
     if notes.get("free"):

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import tomli_w
 
+from flexarm.errors import OutputExistsError
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
-from flexarm.errors import OutputExistsError
 from flexarm.io.logs import log_keys
 from flexarm.io.write import save_figure, write_json, write_text
 
@@ -44,8 +44,8 @@ class FitResult:
     ``std``: the reported standard errors, from the Newey–West (HAC) sandwich covariance
     (JᵀJ)⁻¹ Ŝ (JᵀJ)⁻¹ with Ŝ = Σ_logs Σ_|k|<=M w_k Σ_t g_t g_{t+k}ᵀ, g_t = Σ_channels J_tᵀ r_t
     and Bartlett weights w_k = 1 − |k|/(M+1), M = 10 residual correlation times per log
-    (:mod:`flexarm.identification.time_domain.uncertainty`), mapped to physical units by |dp/du|. They are
-    reported because the output-error residuals are strongly autocorrelated (model error,
+    (:mod:`flexarm.identification.time_domain.uncertainty`), mapped to physical units by |dp/du|.
+    They are reported because the output-error residuals are strongly autocorrelated (model error,
     filtered sensors, encoder quantisation of a slow hub), which the textbook estimate
     ignores. ``std_iid``: that textbook s² (JᵀJ)⁻¹, s² = ‖r‖²/(m − n), kept for
     comparison (the previous AR(1)-inflated value is ``std_iid`` · √((1+ρ)/(1−ρ)) with
@@ -57,7 +57,7 @@ class FitResult:
     std: dict[str, float]
     derived: dict[str, float]
     delays: dict[str, int]
-    fit_percent: dict[str, dict[str, float]]
+    fit_percent: dict[str, dict[str, float | None]]  # None: not finite
     converged: bool
     message: str
     warnings: list[str]
@@ -79,11 +79,11 @@ class FitResult:
     @classmethod
     def build(cls, *, logs, rig, space, U, D, offsets, std_u, fit_percent, diverged, traj,
               glob, local, info, settings, seconds, objective,
-              std_iid_u=None) -> "FitResult":
+              std_iid_u=None) -> FitResult:
         params, std, std_iid = {}, {}, {}
         if std_iid_u is None:
             std_iid_u = np.full(len(space.defs), np.nan)
-        for i, (name, d) in enumerate(zip(space.names, space.defs)):
+        for i, (name, d) in enumerate(zip(space.names, space.defs, strict=True)):
             params[name] = float(d.to_phys(U[i]))
             std[name] = float(abs(d.dphys_du(U[i])) * std_u[i])
             std_iid[name] = float(abs(d.dphys_du(U[i])) * std_iid_u[i])
@@ -145,7 +145,7 @@ class FitResult:
             # (space.names order): plants drawn from the fit (flexarm.design.plants)
             stages["local"]["covariance_unit"] = np.asarray(local["cov_u"]).tolist()
         stages["local"]["hac_bandwidth_samples"] = {
-            n: m for n, m in zip(names, local.get("bandwidth", []))}
+            n: m for n, m in zip(names, local.get("bandwidth", []), strict=False)}
         return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
                    ini, rig, list(logs), traj, seconds, std_iid, space, np.asarray(U),
                    np.asarray(D))
@@ -170,7 +170,7 @@ class FitResult:
                                 "Both ignore the jumps of stick-slip and structural bias",
         })
 
-    def document(self, *, without_friction: "FitResult | None" = None,
+    def document(self, *, without_friction: FitResult | None = None,
                  window: tuple[float, float] | None = None, held_out: Any = None,
                  held_window: tuple[float, float] | None = None) -> dict:
         """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`
@@ -279,7 +279,7 @@ def _r(v) -> float | None:
     return None if v is None or not np.isfinite(v) else round(float(v), 3)
 
 
-def _jsonable(x):
+def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -308,7 +308,7 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     T = log0.dt
     q = rig.encoder_quantum
     rigid = "link_frequency" not in p
-    sensors = {"motor_angle": {"delay": res.delays["motor_angle"]}}
+    sensors: dict[str, dict[str, Any]] = {"motor_angle": {"delay": res.delays["motor_angle"]}}
     if not rigid:
         sensors["tip_deflection"] = {"gain": p["tip_gain"],
                                      "delay": res.delays["tip_deflection"]}
@@ -407,7 +407,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for i, (g, key) in enumerate(zip(logs, log_keys(logs))):
+    for i, (g, key) in enumerate(zip(logs, log_keys(logs), strict=True)):
         n = len(g)
         t = g.time - g.time[0]
         fig = Figure(figsize=(8, 7))

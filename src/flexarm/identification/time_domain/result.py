@@ -96,7 +96,7 @@ class FitResult:
         return finite(d)
 
     @classmethod
-    def from_dict(cls, d: dict, scenario: Any = None) -> "FitResult":
+    def from_dict(cls, d: dict, scenario: Any = None) -> FitResult:
         """A result read back from :meth:`to_dict`'s document (``scenario``: the fitted
         scenario, e.g. ``load_scenario`` of the ``--scenario-out`` file; the document does
         not hold it). Nulls read back as NaN (std) and the correlation as an array."""
@@ -121,7 +121,7 @@ class FitResult:
                    {k: v for k, v in d.items() if k not in known})
 
 
-def finite(x):
+def finite(x: Any) -> Any:
     """JSON-ready: non-finite floats as None, recursively."""
     if isinstance(x, dict):
         return {k: finite(v) for k, v in x.items()}

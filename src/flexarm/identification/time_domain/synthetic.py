@@ -8,8 +8,8 @@ reference, voltage, motor_angle, tip_deflection; a ``# controller:`` line.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -19,7 +19,8 @@ from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 
 
-def synthetic_log(scenario, gains: Sequence[float], path: str | Path, *, duration: float = 4.0,
+def synthetic_log(scenario, gains: tuple[float, float, float, float], path: str | Path, *,
+                  duration: float = 4.0,
                   amplitude: float | Sequence[float] = 0.5, period: float = 2.0, start: float = 0.3,
                   tip0: float = 0.01, tip_rate0: float = 0.0, seed: int = 0,
                   overwrite: bool = True) -> Path:

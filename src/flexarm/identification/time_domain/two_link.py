@@ -30,13 +30,17 @@ for the held-out predictions).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
+from typing import Any, cast
 
 import numpy as np
 
-from flexarm.identification.time_domain.general import (FitOptions, ScenarioFit, fit_scenario,
-                                                        predict_scenario)
+from flexarm.identification.time_domain.general import (
+    FitOptions,
+    ScenarioFit,
+    predict_scenario,
+)
 from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
@@ -90,7 +94,7 @@ def template(friction: bool = True):
 
 
 def default_options(**kw) -> FitOptions:
-    base = dict(channels={c: 1.0 for c in CHANNELS}, priors=dict(PRIORS), ties=dict(TIES),
+    base: dict[str, Any] = dict(channels={c: 1.0 for c in CHANNELS}, priors=dict(PRIORS), ties=dict(TIES),
                 segment=3.0, substeps=2, max_nfev=25, bound_factor=4.0,
                 residual_level=0.2, correlation_time=0.5,
                 bounds={"arm.links[0].torsional_damping": (1e-3, 10.0),
@@ -122,8 +126,9 @@ def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = Tru
             options.bounds = {k: v for k, v in options.bounds.items() if "friction" not in k}
         preset.options = options
     wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
-    return engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
-                      Grouped(windows=wins, predict=False), progress=progress)
+    # the two-link preset runs the general engine: a ScenarioFit (not the servo rig's result)
+    return cast(ScenarioFit, engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
+                                        Grouped(windows=wins, predict=False), progress=progress))
 
 
 def held_out_report(scenario, data: str | Path, examples: str | Path, *,
@@ -137,7 +142,7 @@ def held_out_report(scenario, data: str | Path, examples: str | Path, *,
                             channels=ch, plots=plots, tag="last52s")
     steps = predict_scenario(scenario, list(logs["held_steps"].values()), FitOptions(),
                              channels=ch, plots=plots, tag="steps")
-    per_step = dict(zip(logs["held_steps"], steps["fit_percent"].values()))
+    per_step = dict(zip(logs["held_steps"], steps["fit_percent"].values(), strict=False))
     med = {c: float(np.median([d[c] for d in per_step.values() if c in d])) for c in ch}
     return {"last_52s": next(iter(last["fit_percent"].values())), "steps": per_step,
             "steps_median": {c: round(v, 2) for c, v in med.items()},

@@ -103,15 +103,15 @@ def hac_covariance(r: np.ndarray, J: np.ndarray, *, factor: float = BANDWIDTH_FA
     A = np.linalg.pinv(Jf.T @ Jf)
     S = np.zeros((p, p))
     Ms = []
-    for l in range(L):
-        used = np.nonzero(np.any(r[:, l] != 0, axis=0) | np.any(J[:, l] != 0, axis=(0, 2)))[0]
+    for li in range(L):
+        used = np.nonzero(np.any(r[:, li] != 0, axis=0) | np.any(J[:, li] != 0, axis=(0, 2)))[0]
         if used.size == 0:
             Ms.append(0)
             continue
         a, b = used[0], used[-1] + 1
-        rl = r[:, l, a:b]
+        rl = r[:, li, a:b]
         M = bandwidth(rl, factor, max_fraction)
-        g = np.einsum("ct,ctp->tp", rl, J[:, l, a:b])
+        g = np.einsum("ct,ctp->tp", rl, J[:, li, a:b])
         fb = M / (b - a)
         S += bartlett_meat(g, M) / (1.0 - fb + fb**2 / 3.0)
         Ms.append(M)

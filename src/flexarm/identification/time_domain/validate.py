@@ -12,14 +12,20 @@ delay, divided by the sensor gain (a link ringing at t = 0 is normal).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from flexarm.control.state_feedback import from_spec
 from flexarm.identification.time_domain import guesses
-from flexarm.identification.time_domain.logs import PERIOD_TOL, FitInputError, as_bench_log, check_closed_loop
+from flexarm.identification.time_domain.logs import (
+    PERIOD_TOL,
+    FitInputError,
+    as_bench_log,
+    check_closed_loop,
+)
 from flexarm.identification.time_domain.report import overlay_plots
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import SimulationDiverged, simulate_loop
@@ -33,6 +39,8 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
     ``"traces"``: per log ``time``, ``measured``, ``simulated``). The servo-rig replay
     behind :func:`flexarm.identification.time_domain.predict.predict`, the one entry."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    # a single-link rig scenario: [sampling] and [simulation] (validated)
+    assert sc.sampling is not None and sc.simulation is not None
     result: dict[str, Any] = {"scenario": sc.name, "fit_percent": {}, "plots": []}
     blogs, trajs = [], []
     for x in logs:
@@ -99,12 +107,13 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
             sim = {c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection"))
                    if c in names}
             sim["command"] = traj[2][0]
+            assert log.time is not None  # a bench log has its time (as_bench_log)
             result.setdefault("traces", []).append(
                 {"time": log.time - log.time[0], "measured": meas, "simulated": sim})
         blogs.append(log)
         trajs.append(traj)
     if plots is not None:
-        for log, tr in zip(blogs, trajs):
+        for log, tr in zip(blogs, trajs, strict=True):
             result["plots"] += [str(q) for q in overlay_plots(
                 plots, [log], tr, result["fit_percent"], "validate")]
     return result
