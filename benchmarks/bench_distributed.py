@@ -71,10 +71,11 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
             t1 = time.perf_counter()
             recs = fd.fit_many(rows, client, d, options=fd.FitManyOptions(figures=False))
         res[label] = {"wall_s": time.perf_counter() - t0, "startup_s": t1 - t0, "records": recs}
-        print(f"fit-many {label}: {res[label]['wall_s']:.1f} s wall "
-              f"(cluster start {t1 - t0:.1f} s); "
-              + ", ".join(f"{r['id']} {r['status']} {float(r['seconds'] or 0):.1f} s"
-                          for r in recs))
+        print(
+            f"fit-many {label}: {res[label]['wall_s']:.1f} s wall "
+            f"(cluster start {t1 - t0:.1f} s); "
+            + ", ".join(f"{r['id']} {r['status']} {float(r['seconds'] or 0):.1f} s" for r in recs)
+        )
     a, b = (res[k]["records"] for k in res)
     worst = 0.0
     for ra, rb in zip(a, b, strict=False):
@@ -85,8 +86,10 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
             if isinstance(w, float) and np.isfinite(v) and v != 0:
                 worst = max(worst, abs(w - v) / abs(v))
     ta, tb = (res[k]["wall_s"] for k in res)
-    print(f"fit-many: in-process {ta:.1f} s, {workers} workers {tb:.1f} s, speed-up "
-          f"{ta / tb:.2f}x; largest relative parameter difference {worst:.2e}")
+    print(
+        f"fit-many: in-process {ta:.1f} s, {workers} workers {tb:.1f} s, speed-up "
+        f"{ta / tb:.2f}x; largest relative parameter difference {worst:.2e}"
+    )
     return res
 
 
@@ -112,12 +115,15 @@ def bench_compare(n: int, chunk: int, workers: int, option: dict) -> dict:
                 wall = time.perf_counter() - t
         out[label] = {"wall_s": wall, "peak_mb": mem.peak / 2**20, "cmp": c}
         row_ = c.rows["logged controller"]
-        print(f"compare over {n} plants, chunks of {chunk}, {label}: {wall:.1f} s wall, "
-              f"{n / wall:.0f} plants/s, client peak +{mem.peak / 2**20:.0f} MB; unstable "
-              f"{row_['unstable']}, median settling {row_['median']['tip_settling_s']:.3g} s")
+        print(
+            f"compare over {n} plants, chunks of {chunk}, {label}: {wall:.1f} s wall, "
+            f"{n / wall:.0f} plants/s, client peak +{mem.peak / 2**20:.0f} MB; unstable "
+            f"{row_['unstable']}, median settling {row_['median']['tip_settling_s']:.3g} s"
+        )
     a, b = (v["cmp"].per_plant["logged controller"] for v in out.values())
-    same = all(np.array_equal(np.asarray(a[k], float), np.asarray(b[k], float), equal_nan=True)
-               for k in a)
+    same = all(
+        np.array_equal(np.asarray(a[k], float), np.asarray(b[k], float), equal_nan=True) for k in a
+    )
     print(f"per-plant metrics bit-identical in-process vs LocalCluster({workers}): {same}")
     return out
 
@@ -128,8 +134,12 @@ def main(argv=None) -> int:
     ap.add_argument("--plants", type=int, default=100_000)
     ap.add_argument("--chunk", type=int, default=2000)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--option", action="append", default=[],
-                    help="a fit keyword for every row, key=value (e.g. seconds=2)")
+    ap.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        help="a fit keyword for every row, key=value (e.g. seconds=2)",
+    )
     ap.add_argument("--skip-fits", action="store_true")
     ap.add_argument("--skip-compare", action="store_true")
     ap.add_argument("--out", type=Path, default=None)

@@ -31,8 +31,15 @@ def main():
     fs, P = 2500.0, 2500
     e = multisine(P, fs, 11, 250, kind="random-odd", rms=10.0, periods=20, seed=0)
     u = e.signal[0]
-    p = dict(total_inertia=0.0095, inertia_ratio=1.0, resonance_hz=76.0, shaft_damping=0.01,
-             motor_viscous=0.05, load_viscous=0.08, delay_s=1.2e-4)
+    p = dict(
+        total_inertia=0.0095,
+        inertia_ratio=1.0,
+        resonance_hz=76.0,
+        shaft_damping=0.01,
+        motor_viscous=0.05,
+        load_viscous=0.08,
+        delay_s=1.2e-4,
+    )
     U = np.fft.rfft(u[:P])
     f = np.arange(len(U)) * fs / P
     Gm, Gl = two_mass_response(p, 2 * np.pi * np.maximum(f, 1e-3))
@@ -47,37 +54,71 @@ def main():
     def plain():
         out = []
         for x in (un, ym, yl):
-            out.append(np.mean([np.fft.rfft(x[m * P:(m + 1) * P]) / P for m in range(20)], axis=0))
+            out.append(
+                np.mean([np.fft.rfft(x[m * P : (m + 1) * P]) / P for m in range(20)], axis=0)
+            )
         return out[1][e.excited] / out[0][e.excited]
+
     t_plain, _ = best_of(plain)
     w = 2 * np.pi * res.frequency_hz
-    t_fit, fit = best_of(lambda: fit_two_mass(w, res.response[0], res.response[1],
-                                              motor_std=res.total_std[0], load_std=res.total_std[1]))
-    t_tf, _ = best_of(lambda: tfest(control.frd(res.response[0], w), 5, 2, integrators=2,
-                                    delay=True, std=res.total_std[0]))
-    print(f"FRF + distortion + BLA, 50 000 samples x 3 channels: {t_frf * 1e3:.1f} ms "
-          f"(baseline, FRF only, plain per-period FFT loop: {t_plain * 1e3:.1f} ms)")
-    print(f"two-mass ML fit, 2 outputs x {len(w)} lines, 7 parameters: {t_fit * 1e3:.1f} ms "
-          f"(cost {fit.cost:.1f}, expected {fit.expected_cost:.1f}); "
-          f"baseline generic rational fit (5 poles, 2 zeros, delay): {t_tf * 1e3:.1f} ms")
+    t_fit, fit = best_of(
+        lambda: fit_two_mass(
+            w,
+            res.response[0],
+            res.response[1],
+            motor_std=res.total_std[0],
+            load_std=res.total_std[1],
+        )
+    )
+    t_tf, _ = best_of(
+        lambda: tfest(
+            control.frd(res.response[0], w), 5, 2, integrators=2, delay=True, std=res.total_std[0]
+        )
+    )
+    print(
+        f"FRF + distortion + BLA, 50 000 samples x 3 channels: {t_frf * 1e3:.1f} ms "
+        f"(baseline, FRF only, plain per-period FFT loop: {t_plain * 1e3:.1f} ms)"
+    )
+    print(
+        f"two-mass ML fit, 2 outputs x {len(w)} lines, 7 parameters: {t_fit * 1e3:.1f} ms "
+        f"(cost {fit.cost:.1f}, expected {fit.expected_cost:.1f}); "
+        f"baseline generic rational fit (5 poles, 2 zeros, delay): {t_tf * 1e3:.1f} ms"
+    )
 
     # the voltage-servo structure (the rotary rig), 2 outputs x 60 lines, 6 parameters, 2 % noise
     from flexarm.identification.frequency_domain.structures import (
         fit_structure,
         voltage_servo_response,
     )
-    given = dict(motor_constant=7.68e-3, armature_resistance=2.6, gear_ratio=70.0,
-                 efficiency=0.621, length=0.42)
-    true = dict(hub_inertia=2.08e-3, hub_viscous=4e-3, link_stiffness=1.2, link_inertia=3.5e-3,
-                link_damping=3.9e-3, delay_s=5e-4)
+
+    given = dict(
+        motor_constant=7.68e-3,
+        armature_resistance=2.6,
+        gear_ratio=70.0,
+        efficiency=0.621,
+        length=0.42,
+    )
+    true = dict(
+        hub_inertia=2.08e-3,
+        hub_viscous=4e-3,
+        link_stiffness=1.2,
+        link_inertia=3.5e-3,
+        link_damping=3.9e-3,
+        delay_s=5e-4,
+    )
     ws = 2 * np.pi * np.geomspace(0.2, 50, 60)
     r = voltage_servo_response({**true, **given}, ws)
-    G = {k: r[k] * (1 + 0.02 * rng.standard_normal(ws.size)) for k in ("motor_angle", "tip_deflection")}
+    G = {
+        k: r[k] * (1 + 0.02 * rng.standard_normal(ws.size))
+        for k in ("motor_angle", "tip_deflection")
+    }
     sd = {k: 0.02 * np.abs(r[k]) for k in G}
     t_sv, fsv = best_of(lambda: fit_structure("voltage-servo", ws, G, sd, given=given))
-    print(f"voltage-servo ML fit, 2 outputs x 60 lines, 6 parameters: {t_sv * 1e3:.1f} ms "
-          f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, "
-          "4 delay starts)")
+    print(
+        f"voltage-servo ML fit, 2 outputs x 60 lines, 6 parameters: {t_sv * 1e3:.1f} ms "
+        f"(cost {fsv.cost:.1f}, expected {fsv.expected_cost:.1f}; 10 start candidates, "
+        "4 delay starts)"
+    )
 
 
 if __name__ == "__main__":

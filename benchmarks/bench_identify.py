@@ -34,19 +34,25 @@ def main() -> int:
         files = sim.write_experiments(folder, sim.PAPER_ARM, sim.PAPER_PAIRS, periods=20)
         t_gen = time.perf_counter() - t0
         rows = sum(sum(1 for _ in open(f)) - 3 for f in files)
-        print(f"generated {len(files)} experiments of 20 periods ({rows} samples at 1 kHz) "
-              f"in {t_gen:.1f} s")
+        print(
+            f"generated {len(files)} experiments of 20 periods ({rows} samples at 1 kHz) "
+            f"in {t_gen:.1f} s"
+        )
         times = []
         for _ in range(REPEATS):
             t0 = time.perf_counter()
             res = identify(folder, sim.PAPER_ARM.K)
             times.append(time.perf_counter() - t0)
     best, med = min(times), statistics.median(times)
-    print(f"identify(): best {best:.3f} s, median {med:.3f} s over {REPEATS} runs "
-          f"(target < {TARGET_S:g} s: {'met' if best < TARGET_S else 'NOT met'})")
-    print(f"  C_f = {res.coulomb_current:.5f} A (simulated 0.132 A), "
-          f"J = {res.parameters['inertia']:.4e} kg m^2, C = {res.parameters['stiffness']:.4f} "
-          "N m/rad")
+    print(
+        f"identify(): best {best:.3f} s, median {med:.3f} s over {REPEATS} runs "
+        f"(target < {TARGET_S:g} s: {'met' if best < TARGET_S else 'NOT met'})"
+    )
+    print(
+        f"  C_f = {res.coulomb_current:.5f} A (simulated 0.132 A), "
+        f"J = {res.parameters['inertia']:.4e} kg m^2, C = {res.parameters['stiffness']:.4f} "
+        "N m/rad"
+    )
     return 0
 
 

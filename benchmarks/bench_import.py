@@ -24,14 +24,17 @@ def timed(code: str) -> float:
 def main(n: int = 5) -> None:
     base = [timed("pass") for _ in range(n)]
     imp = [timed("import flexarm") for _ in range(n)]
-    use = [timed("import flexarm; flexarm.load_scenario('feliu-single-mass'); "
-                 "flexarm.simulate") for _ in range(n)]
+    use = [
+        timed("import flexarm; flexarm.load_scenario('feliu-single-mass'); flexarm.simulate")
+        for _ in range(n)
+    ]
     b = min(base)
     print(f"python start-up alone: {1e3 * b:.0f} ms (best of {n})")
-    print(f"import flexarm: {1e3 * (min(imp) - b):.0f} ms best, "
-          f"{1e3 * (statistics.median(imp) - b):.0f} ms median (start-up subtracted)")
-    print(f"import + first use of load_scenario and simulate: "
-          f"{1e3 * (min(use) - b):.0f} ms best")
+    print(
+        f"import flexarm: {1e3 * (min(imp) - b):.0f} ms best, "
+        f"{1e3 * (statistics.median(imp) - b):.0f} ms median (start-up subtracted)"
+    )
+    print(f"import + first use of load_scenario and simulate: {1e3 * (min(use) - b):.0f} ms best")
 
 
 if __name__ == "__main__":

@@ -78,7 +78,7 @@ class NumpyArm:
             c, s = math.cos(alpha), math.sin(alpha)
             Ax, Ay = c * Jx + s * Jy, c * Jy - s * Jx
             ad = a @ qd
-            di, ddi = q[n + sl.start:n + sl.stop], qd[n + sl.start:n + sl.stop]
+            di, ddi = q[n + sl.start : n + sl.stop], qd[n + sl.start : n + sl.stop]
             v, phi = self.v[sl], self.phi[sl]
             Zd = self.Z[sl, sl] @ di
             vd, W, dZd = v @ di, phi @ di, di @ Zd
@@ -94,9 +94,17 @@ class NumpyArm:
             gx, gy = accx - self.gx, accy - self.gy
             Px, Py = c * gx + s * gy, c * gy - s * gx
             ad2 = ad * ad
-            h += U.T @ np.array([mt * gx, mt * gy, -ad2 * vd, 0.0, -(ad2 * d + 2 * ad * vdd),
-                                 d * Py - vd * Px + 2 * ad * dZdd])
-            h[n + sl.start:n + sl.stop] += v * Py - ad2 * Zd
+            h += U.T @ np.array(
+                [
+                    mt * gx,
+                    mt * gy,
+                    -ad2 * vd,
+                    0.0,
+                    -(ad2 * d + 2 * ad * vdd),
+                    d * Py - vd * Px + 2 * ad * dZdd,
+                ]
+            )
+            h[n + sl.start : n + sl.stop] += v * Py - ad2 * Zd
             tx, ty = -W * a, ell * a + self.tip[i]
             Jx, Jy = Jx + c * tx - s * ty, Jy + s * tx + c * ty
             lx, ly = -ad2 * ell - 2 * ad * Wd, -ad2 * W
@@ -145,9 +153,11 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=1000, help="rollouts in the batch (default 1000)")
     ap.add_argument("--chunk", type=int, default=128, help="rollouts per chunk (default 128)")
     args = ap.parse_args()
-    print(f"two-link De Luca arm, PD law (8), RK4 {STEP * 1e3:g} ms, {T_FINAL:g} s "
-          f"({int(T_FINAL / STEP)} steps); load average {os.getloadavg()[0]:.1f} on "
-          f"{os.cpu_count()} cores")
+    print(
+        f"two-link De Luca arm, PD law (8), RK4 {STEP * 1e3:g} ms, {T_FINAL:g} s "
+        f"({int(T_FINAL / STEP)} steps); load average {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} cores"
+    )
     model = build_multilink(benchmark_arm())
     arm = NumpyArm(model)
     rng = np.random.default_rng(0)
@@ -170,8 +180,12 @@ def main() -> None:
     compile_s = time.perf_counter() - t0
     single_s, single_c = best_of(single, 7)
     loop = C.law_loop(model, R.law_pd_constant, p, DT, int(round(DT / STEP)))
-    core_args = (loop, jnp.asarray(x0), sampled._prepare_refs({}, int(round(T_FINAL / DT)) + 1),
-                 np.asarray(0, dtype=np.int64))
+    core_args = (
+        loop,
+        jnp.asarray(x0),
+        sampled._prepare_refs({}, int(round(T_FINAL / DT)) + 1),
+        np.asarray(0, dtype=np.int64),
+    )
     core_s, _ = best_of(lambda: jax.block_until_ready(sampled._run_all(*core_args)), 7)
 
     N = args.batch
@@ -180,8 +194,17 @@ def main() -> None:
     dt_batch = 1e-2  # outputs every 10 ms (the integration step stays 0.1 ms)
 
     def batch():
-        return C.simulate_continuous_batch(model, R.law_pd_constant, x0, T_FINAL, dt_batch,
-                                           params=pb, axes=axes, step=STEP, chunk=args.chunk)
+        return C.simulate_continuous_batch(
+            model,
+            R.law_pd_constant,
+            x0,
+            T_FINAL,
+            dt_batch,
+            params=pb,
+            axes=axes,
+            step=STEP,
+            chunk=args.chunk,
+        )
 
     t0 = time.perf_counter()
     bout = batch()
@@ -190,7 +213,9 @@ def main() -> None:
     per_rollout, per_rollout_c = batch_s / N, batch_c / N
     mid = N // 2
     pm = R.regulation_params(model, scale[mid] * KP, scale[mid] * KD, THETA_D)
-    check = C.simulate_continuous(model, R.law_pd_constant, x0, T_FINAL, dt_batch, params=pm, step=STEP)
+    check = C.simulate_continuous(
+        model, R.law_pd_constant, x0, T_FINAL, dt_batch, params=pm, step=STEP
+    )
     batch_err = np.abs(bout.state_array[mid] - check.state_array).max()
 
     (base_s, base_c), base_theta, nfev = numpy_baseline(model, np.asarray(p.g_d))
@@ -198,23 +223,33 @@ def main() -> None:
     agree = np.abs(base_theta - run.theta).max()
 
     print(f"  compile (first call, incl. one run)      {compile_s:9.2f} s")
-    print(f"  flexarm single rollout (public call)     {single_s * 1e3:9.1f} ms "
-          f"(CPU {single_c * 1e3:.1f} ms)")
+    print(
+        f"  flexarm single rollout (public call)     {single_s * 1e3:9.1f} ms "
+        f"(CPU {single_c * 1e3:.1f} ms)"
+    )
     print(f"  flexarm single rollout (jit core)        {core_s * 1e3:9.1f} ms")
     print(f"  flexarm batch of {N}: compile+first run {batch_compile:9.2f} s")
-    print(f"  flexarm batch of {N}: total             {batch_s:9.2f} s, "
-          f"{per_rollout * 1e3:.2f} ms per rollout (CPU {per_rollout_c * 1e3:.2f} ms; "
-          f"chunks of {args.chunk}; run {mid} = its single run to {batch_err:.1e})"
-          f"{'' if not bout.diverged.any() else f'; {bout.diverged.sum()} diverged'}")
-    print(f"  NumPy RHS + solve_ivp (baseline)         {base_s * 1e3:9.1f} ms "
-          f"(CPU {base_c * 1e3:.0f} ms; {nfev} RHS evaluations; "
-          f"max |θ − θ_flexarm| = {agree:.1e} rad over the run)")
+    print(
+        f"  flexarm batch of {N}: total             {batch_s:9.2f} s, "
+        f"{per_rollout * 1e3:.2f} ms per rollout (CPU {per_rollout_c * 1e3:.2f} ms; "
+        f"chunks of {args.chunk}; run {mid} = its single run to {batch_err:.1e})"
+        f"{'' if not bout.diverged.any() else f'; {bout.diverged.sum()} diverged'}"
+    )
+    print(
+        f"  NumPy RHS + solve_ivp (baseline)         {base_s * 1e3:9.1f} ms "
+        f"(CPU {base_c * 1e3:.0f} ms; {nfev} RHS evaluations; "
+        f"max |θ − θ_flexarm| = {agree:.1e} rad over the run)"
+    )
     r1, r1c = base_s / single_s, base_c / single_c
     r2, r2c = single_s / per_rollout, single_c / per_rollout_c
-    print(f"  single speed-up vs baseline:  {r1:7.1f}x wall, {r1c:.1f}x CPU  "
-          f"(target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})")
-    print(f"  batch per rollout vs single:  {r2:7.1f}x wall, {r2c:.1f}x CPU  "
-          f"(target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})")
+    print(
+        f"  single speed-up vs baseline:  {r1:7.1f}x wall, {r1c:.1f}x CPU  "
+        f"(target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})"
+    )
+    print(
+        f"  batch per rollout vs single:  {r2:7.1f}x wall, {r2c:.1f}x CPU  "
+        f"(target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})"
+    )
 
 
 if __name__ == "__main__":

@@ -21,8 +21,14 @@ from flexarm.identification.time_domain import fit, read_bench_log
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rotary-rig"
 FORMAT = ROOT / "examples" / "quanser-rotflex.toml"
-SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-             armature_resistance=3.29, link_length=0.45, computation_delay=1)
+SHEET = dict(
+    drive="voltage",
+    gear_ratio=48.4,
+    motor_constant=0.0107,
+    armature_resistance=3.29,
+    link_length=0.45,
+    computation_delay=1,
+)
 
 
 def run(names, **kw):
@@ -36,17 +42,21 @@ def main() -> int:
     if not DATA.is_dir():
         print(f"skipped: {DATA} not found (../shared is absent)")
         return 0
-    cases = {"flexible unit 6, one 10 s log": ["4PM_Group37_FlexArm_Unit6"],
-             "rigid session 4/25, two 10 s logs": ["rigidarm_K1_6", "rigidarm_K1_8"],
-             "hard session 4/27, two 10 s logs": ["flexarm_K1_6", "flexarm_K1K2_6_-5"]}
+    cases = {
+        "flexible unit 6, one 10 s log": ["4PM_Group37_FlexArm_Unit6"],
+        "rigid session 4/25, two 10 s logs": ["rigidarm_K1_6", "rigidarm_K1_8"],
+        "hard session 4/27, two 10 s logs": ["flexarm_K1_6", "flexarm_K1K2_6_-5"],
+    }
     for what, names in cases.items():
         run(names[:1])  # compile once (JIT), as a second fit in one process would
         sec, res = run(names)
         fp = {k: {s: v for s, v in d.items() if v is not None} for k, d in res.fit_percent.items()}
         print(f"{what}: {sec:.1f} s (target <= 30 s), delays {res.delays}, fit % {fp}")
     sec0, res0 = run(cases["flexible unit 6, one 10 s log"], estimates=False, max_delay=150)
-    print(f"baseline, guesses-only search over 0-150 ms (unit 6): {sec0:.1f} s, delays "
-          f"{res0.delays}, fit % {res0.fit_percent}")
+    print(
+        f"baseline, guesses-only search over 0-150 ms (unit 6): {sec0:.1f} s, delays "
+        f"{res0.delays}, fit % {res0.fit_percent}"
+    )
     return 0
 
 

@@ -84,9 +84,11 @@ def main() -> None:
     sc = load_scenario("feliu-single-mass")
     p = prepare(sc)
     n = p.n_samples
-    print(f"single-mass arm, PD motor loop with friction: {n} samples of "
-          f"{sc.sampling.period*1e3:g} ms, "
-          f"{sc.simulation.substeps} RK4 substeps, 12-bit converters, one-period delay")
+    print(
+        f"single-mass arm, PD motor loop with friction: {n} samples of "
+        f"{sc.sampling.period * 1e3:g} ms, "
+        f"{sc.simulation.substeps} RK4 substeps, 12-bit converters, one-period delay"
+    )
 
     t0 = time.perf_counter()
     out = simulate_loop(p.loop, p.x0, p.references, n)
@@ -102,8 +104,11 @@ def main() -> None:
     kd = np.linspace(0.2, 0.4, N_BATCH)
     ctrls = discrete.pd(jnp.asarray(kp), jnp.asarray(kd), sc.sampling.period)
     stacked = discrete.LinearController(
-        jnp.broadcast_to(ctrls.A, (N_BATCH, 1, 1)), jnp.broadcast_to(ctrls.B, (N_BATCH, 1)),
-        jnp.reshape(ctrls.C, (N_BATCH, 1)), ctrls.D)
+        jnp.broadcast_to(ctrls.A, (N_BATCH, 1, 1)),
+        jnp.broadcast_to(ctrls.B, (N_BATCH, 1)),
+        jnp.reshape(ctrls.C, (N_BATCH, 1)),
+        ctrls.D,
+    )
     loop = eqx.tree_at(lambda lp: lp.controller, p.loop, stacked)
     axes = jax.tree.map(lambda _: None, loop)
     axes = eqx.tree_at(lambda lp: lp.controller, axes, discrete.LinearController(0, 0, 0, 0))
@@ -113,29 +118,42 @@ def main() -> None:
     batch = best_of(lambda: simulate_batch(loop, p.x0, p.references, n, in_axes=axes), 5)
     per_rollout = batch / N_BATCH
     mid = N_BATCH // 2
-    check = simulate_loop(eqx.tree_at(lambda lp: lp.controller, p.loop,
-                                      discrete.pd(kp[mid], kd[mid], sc.sampling.period)),
-                          p.x0, p.references, n)
+    check = simulate_loop(
+        eqx.tree_at(
+            lambda lp: lp.controller, p.loop, discrete.pd(kp[mid], kd[mid], sc.sampling.period)
+        ),
+        p.x0,
+        p.references,
+        n,
+    )
     batch_err = np.max(np.abs(bout["signals"][mid, :, 0] - check["signals"][:, 0]))
 
     base = best_of(lambda: numpy_scipy_baseline(sc, p), 2)
     _, base_theta = numpy_scipy_baseline(sc, p)
     agree = np.max(np.abs(base_theta - out["signals"][:, 0]))
 
-    print(f"  compile (first call, incl. run)      {compile_s*1e3:9.1f} ms")
-    print(f"  flexarm single rollout (public call) {single*1e3:9.3f} ms")
-    print(f"  flexarm single rollout (jit core)    {core_s*1e3:9.3f} ms")
+    print(f"  compile (first call, incl. run)      {compile_s * 1e3:9.1f} ms")
+    print(f"  flexarm single rollout (public call) {single * 1e3:9.3f} ms")
+    print(f"  flexarm single rollout (jit core)    {core_s * 1e3:9.3f} ms")
     print(f"  flexarm batch of {N_BATCH}: compile      {batch_compile:9.2f} s")
-    print(f"  flexarm batch of {N_BATCH}: total        {batch*1e3:9.1f} ms, "
-          f"{per_rollout*1e3:.4f} ms per rollout (matches single runs to {batch_err:.1e} rad)")
-    print(f"  NumPy RHS + solve_ivp (baseline)     {base*1e3:9.1f} ms "
-          f"(agrees with flexarm to {agree:.2e} rad max over the run)")
+    print(
+        f"  flexarm batch of {N_BATCH}: total        {batch * 1e3:9.1f} ms, "
+        f"{per_rollout * 1e3:.4f} ms per rollout (matches single runs to {batch_err:.1e} rad)"
+    )
+    print(
+        f"  NumPy RHS + solve_ivp (baseline)     {base * 1e3:9.1f} ms "
+        f"(agrees with flexarm to {agree:.2e} rad max over the run)"
+    )
     r1 = base / single
     r2 = single / per_rollout
-    print(f"  single speed-up vs baseline: {r1:7.1f}x   "
-          f"(target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})")
-    print(f"  batch per rollout vs single: {r2:7.1f}x   "
-          f"(target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})")
+    print(
+        f"  single speed-up vs baseline: {r1:7.1f}x   "
+        f"(target >= 20x: {'PASS' if r1 >= 20 else 'FAIL'})"
+    )
+    print(
+        f"  batch per rollout vs single: {r2:7.1f}x   "
+        f"(target >=  5x: {'PASS' if r2 >= 5 else 'FAIL'})"
+    )
 
 
 if __name__ == "__main__":

@@ -26,10 +26,18 @@ EXAMPLES = ROOT / "examples"
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--no-friction", action="store_true", help="fit without joint friction")
-    ap.add_argument("--json", type=Path, default=None,
-                    help="write the figures as JSON (and overlay figures beside it)")
-    ap.add_argument("--scenario-out", type=Path, default=None,
-                    help="write the fitted scenario TOML (for flexarm validate --refit friction)")
+    ap.add_argument(
+        "--json",
+        type=Path,
+        default=None,
+        help="write the figures as JSON (and overlay figures beside it)",
+    )
+    ap.add_argument(
+        "--scenario-out",
+        type=Path,
+        default=None,
+        help="write the fitted scenario TOML (for flexarm validate --refit friction)",
+    )
     a = ap.parse_args()
     if not DATA.exists():
         sys.exit(f"no rig data at {DATA}")
@@ -41,8 +49,9 @@ def main() -> None:
         print(f"  {p:45s} {res.template[p]:12.5g} -> {res.params[p]:12.5g} ± {res.std[p]:.3g}")
     for w in res.warnings:
         print("  warning:", w)
-    rep = held_out_report(res.scenario, DATA, EXAMPLES,
-                          plots=None if a.json is None else a.json.with_suffix(""))
+    rep = held_out_report(
+        res.scenario, DATA, EXAMPLES, plots=None if a.json is None else a.json.with_suffix("")
+    )
     for k, v in rep.items():
         print(k, v)
     if a.scenario_out is not None:
@@ -50,8 +59,9 @@ def main() -> None:
     if a.json is not None:
         from flexarm.io.write import write_json
 
-        write_json(a.json, {"seconds": t_fit, "fit": res.to_dict(), "held_out": rep},
-                   overwrite=True)
+        write_json(
+            a.json, {"seconds": t_fit, "fit": res.to_dict(), "held_out": rep}, overwrite=True
+        )
 
 
 if __name__ == "__main__":

@@ -43,8 +43,13 @@ def export(commit: str, dest: Path) -> Path:
 
 def run(tree: Path, script: str) -> str:
     env = dict(os.environ, PYTHONPATH=str(tree / "src"))
-    out = subprocess.run([sys.executable, str(tree / "benchmarks" / script)], env=env,
-                         capture_output=True, text=True, cwd=tree)
+    out = subprocess.run(
+        [sys.executable, str(tree / "benchmarks" / script)],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=tree,
+    )
     if out.returncode != 0:
         return out.stdout + out.stderr + f"\n[exit {out.returncode}]"
     return out.stdout
@@ -54,8 +59,11 @@ def figures(text: str) -> dict[str, float]:
     """label → value in ms of every printed line that holds a time (first number)."""
     found = {}
     for line in text.splitlines():
-        m = re.match(r"^\s{2,}(?P<label>[A-Za-z][^:]*?(?::[^\d]*?)?)\s+(?P<value>\d+(?:\.\d+)?)\s*"
-                     r"(?P<unit>ms|s)\b(?P<rest>.*)$", line)
+        m = re.match(
+            r"^\s{2,}(?P<label>[A-Za-z][^:]*?(?::[^\d]*?)?)\s+(?P<value>\d+(?:\.\d+)?)\s*"
+            r"(?P<unit>ms|s)\b(?P<rest>.*)$",
+            line,
+        )
         if not m:
             continue
         label, value = m["label"].strip(), float(m["value"])
@@ -78,16 +86,19 @@ def main() -> None:
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         old_tree = export(args.commit, Path(tmp))
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
         for script in args.scripts:
             best = {"old": {}, "new": {}}
             for k in range(args.repeat):
                 for side, tree in (("old", old_tree), ("new", ROOT)):
                     text = run(tree, script)
                     which = args.commit if side == "old" else head + " + working tree"
-                    print(f"===== {script}, {side} ({which}), "
-                          f"run {k + 1}/{args.repeat}, load {os.getloadavg()[0]:.1f}\n{text}")
+                    print(
+                        f"===== {script}, {side} ({which}), "
+                        f"run {k + 1}/{args.repeat}, load {os.getloadavg()[0]:.1f}\n{text}"
+                    )
                     for label, v in figures(text).items():
                         best[side][label] = min(v, best[side].get(label, float("inf")))
             print(f"----- {script}: best of {args.repeat} (ms), new / old")

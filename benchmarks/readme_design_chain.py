@@ -27,8 +27,16 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("FLEXARM_DATA") or ROOT.parent / "shared" / "data") / "rotary-rig"
-SHEET = ["--gear-ratio", "48.4", "--motor-constant", "0.0107", "--armature-resistance",
-         "3.29", "--link-length", "0.45"]
+SHEET = [
+    "--gear-ratio",
+    "48.4",
+    "--motor-constant",
+    "0.0107",
+    "--armature-resistance",
+    "3.29",
+    "--link-length",
+    "0.45",
+]
 RIGS = {"unit 6": "4PM_Group37_FlexArm_Unit6", "unit 7": "Unit7_Flex_trial1.csv"}
 METHODS = ("lqr", "nested", "tune")
 
@@ -36,8 +44,9 @@ METHODS = ("lqr", "nested", "tune")
 def flexarm(*args: str, cwd: Path) -> tuple[int, float, str]:
     """Run ``flexarm ARGS`` (this interpreter's); exit code, seconds, its last lines."""
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "flexarm", *args], cwd=cwd, text=True,
-                       capture_output=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "flexarm", *args], cwd=cwd, text=True, capture_output=True
+    )
     tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-3:])
     return p.returncode, time.perf_counter() - t0, tail
 
@@ -61,19 +70,39 @@ def main() -> int:
     for rig, name in RIGS.items():
         d = a.out / rig.replace(" ", "")
         d.mkdir(exist_ok=True)
-        code, s, tail = flexarm("fit", str(DATA / name), "--log-format",
-                                str(ROOT / "examples" / "quanser-rotflex.toml"), *SHEET,
-                                "--json", "fit.json", "--scenario-out", "rig.toml",
-                                "--overwrite", cwd=d)
+        code, s, tail = flexarm(
+            "fit",
+            str(DATA / name),
+            "--log-format",
+            str(ROOT / "examples" / "quanser-rotflex.toml"),
+            *SHEET,
+            "--json",
+            "fit.json",
+            "--scenario-out",
+            "rig.toml",
+            "--overwrite",
+            cwd=d,
+        )
         steps.append((rig, "fit", code, s, ""))
         print(f"{rig}: fit exit {code} in {s:.0f} s", flush=True)
         if code != 0:
             print(tail)
             continue
         for m in METHODS:
-            code, s, tail = flexarm("design", "rig.toml", "--method", m, "--out", f"out/{m}",
-                                    "--fit-json", "fit.json", "--plants", str(a.plants),
-                                    "--overwrite", cwd=d)
+            code, s, tail = flexarm(
+                "design",
+                "rig.toml",
+                "--method",
+                m,
+                "--out",
+                f"out/{m}",
+                "--fit-json",
+                "fit.json",
+                "--plants",
+                str(a.plants),
+                "--overwrite",
+                cwd=d,
+            )
             dj = d / "out" / m / "design.json"
             verdict = json.loads(dj.read_text()).get("verdict") if dj.exists() else None
             steps.append((rig, f"design {m}", code, s, verdict))
@@ -85,21 +114,24 @@ def main() -> int:
                     if ctrl != m and (rig, ctrl) in {(t[0], t[1]) for t in table}:
                         continue
                     table.append((rig, ctrl, r))
-            code, s, tail = flexarm("export-c", f"out/{m}", "--out", f"c/{m}", "--overwrite",
-                                    cwd=d)
+            code, s, tail = flexarm("export-c", f"out/{m}", "--out", f"c/{m}", "--overwrite", cwd=d)
             steps.append((rig, f"export-c {m}", code, s, tail.splitlines()[-1] if code else ""))
             print(f"{rig}: export-c {m} exit {code}", flush=True)
     print("\n| rig | step | exit | seconds | verdict / message |\n|---|---|---|---|---|")
     for rig, step, code, s, v in steps:
         print(f"| {rig} | {step} | {code} | {s:.0f} | {v or ''} |")
-    print("\n| rig | controller | hub error [counts] | tip settling 2 % [s] | tip overshoot [%]"
-          " | peak [V] | unstable |\n|---|---|---|---|---|---|---|")
+    print(
+        "\n| rig | controller | hub error [counts] | tip settling 2 % [s] | tip overshoot [%]"
+        " | peak [V] | unstable |\n|---|---|---|---|---|---|---|"
+    )
     for rig, ctrl, r in table:
         med, worst = r["median"], r["worst"]
-        print(f"| {rig} | {ctrl} | {fmt(med['hub_error_counts'])} "
-              f"({fmt(worst['hub_error_counts'])}) | {fmt(med['tip_settling_s'])} "
-              f"({fmt(worst['tip_settling_s'])}) | {fmt(med['tip_overshoot_pct'])} | "
-              f"{fmt(worst['peak_command_V'])} | {r['unstable']}/{r['n_plants']} |")
+        print(
+            f"| {rig} | {ctrl} | {fmt(med['hub_error_counts'])} "
+            f"({fmt(worst['hub_error_counts'])}) | {fmt(med['tip_settling_s'])} "
+            f"({fmt(worst['tip_settling_s'])}) | {fmt(med['tip_overshoot_pct'])} | "
+            f"{fmt(worst['peak_command_V'])} | {r['unstable']}/{r['n_plants']} |"
+        )
     return 0
 
 

@@ -99,8 +99,8 @@ NOTEBOOKS["reproduce"] = [
         'ax.semilogx(w, 20 * np.log10(np.abs(N(1j * w))), label="N (eq. 11)")\n'
         'ax.set_xlabel("ω (rad/s)")\n'
         'ax.set_ylabel("dB")\n'
-        'ax.legend()\n'
-        'ax.grid(alpha=0.3)\n'
+        "ax.legend()\n"
+        "ax.grid(alpha=0.3)\n"
         "fig",
     ),
     (
@@ -134,7 +134,7 @@ NOTEBOOKS["reproduce"] = [
         'ax.axhline(-45, color="k", lw=0.5)\n'
         'ax.set_xlabel("time (s)")\n'
         'ax.set_ylabel("joint angle (deg)")\n'
-        'ax.grid(alpha=0.3)\n'
+        "ax.grid(alpha=0.3)\n"
         "fig",
     ),
 ]
@@ -186,9 +186,9 @@ NOTEBOOKS["fit-rotary-rig"] = [
         '    ax.plot(tr["time"], tr["measured"][name], ".", ms=1, label="log")\n'
         '    ax.plot(tr["time"], y, label="fitted model")\n'
         "    ax.set_ylabel(name)\n"
-        'axes[0].legend()\n'
+        "axes[0].legend()\n"
         'axes[-1].set_xlabel("time (s)")\n'
-        'fig',
+        "fig",
     ),
     ("md", "## The real rig (where the lab's logs are present)"),
     (
@@ -249,9 +249,9 @@ NOTEBOOKS["fit-two-link-rig"] = [
         '    ax.plot(tr["time"], tr["measured"][name], ".", ms=1, label="log")\n'
         '    ax.plot(tr["time"], tr["simulated"][name], label="fitted model")\n'
         '    ax.set_ylabel(f"{name} (rad)")\n'
-        'axes[0].legend()\n'
+        "axes[0].legend()\n"
         'axes[-1].set_xlabel("time (s)")\n'
-        'fig',
+        "fig",
     ),
     ("md", "## The real rig (where the lab's workspace is present)"),
     (
@@ -352,8 +352,8 @@ NOTEBOOKS["design-export"] = [
         'ax.plot(ours.time, ours["reference"], "k--", lw=0.8, label="reference")\n'
         'ax.set_xlabel("time (s)")\n'
         'ax.set_ylabel("tip angle (rad)")\n'
-        'ax.legend()\n'
-        'fig',
+        "ax.legend()\n"
+        "fig",
     ),
     (
         "code",

@@ -15,8 +15,9 @@ LBIN = 0.112984829027616  # N·m per lbf·in
 
 def scenario(name: str, duration: float):
     sc = load_scenario(name)
-    return sc.model_copy(update={"simulation": sc.simulation.model_copy(
-        update={"duration": duration})})
+    return sc.model_copy(
+        update={"simulation": sc.simulation.model_copy(update={"duration": duration})}
+    )
 
 
 def model(name: str = "feliu-single-mass", hold_tip: bool = False) -> SingleLinkModel:
@@ -27,8 +28,9 @@ def model(name: str = "feliu-single-mass", hold_tip: bool = False) -> SingleLink
 def design():
     """The inner-loop design of FRB Sec. VI-B.2: T = 3 ms, one sample of delay,
     G_cm1(1) = 15 A/rad, checked at the 200 mrad step of Fig. 11, no overshoot."""
-    return design_inner_loop(model(hold_tip=True), 0.003, 1, dc_gain=15.0, step=0.2,
-                             band=0.02, max_overshoot=0.0, seed=0)
+    return design_inner_loop(
+        model(hold_tip=True), 0.003, 1, dc_gain=15.0, step=0.2, band=0.02, max_overshoot=0.0, seed=0
+    )
 
 
 def held_prepared(name: str, controller, duration: float):

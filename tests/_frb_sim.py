@@ -97,20 +97,29 @@ def amplitude(arm: Arm, w: float) -> float:
 def _linear_initial_state(arm: Arm, w: float, a: float) -> np.ndarray:
     """State at t = 0 on the frictionless, unsaturated linear periodic solution."""
     J, V, C, K = arm.J, arm.V, arm.C, arm.K
-    A = np.array([
-        [0, 1, 0, 0],
-        [-(K * arm.kp + C) / J, -(V + K * arm.kd) / J, C / J, 0],
-        [0, 0, 0, 1],
-        [arm.wb2, 0, -arm.wb2, -arm.b],
-    ])
+    A = np.array(
+        [
+            [0, 1, 0, 0],
+            [-(K * arm.kp + C) / J, -(V + K * arm.kd) / J, C / J, 0],
+            [0, 0, 0, 1],
+            [arm.wb2, 0, -arm.wb2, -arm.b],
+        ]
+    )
     B = np.array([0, K * arm.kp / J, 0, 0])
     X = np.linalg.solve(1j * w * np.eye(4) - A, B * (-1j * a))  # r = Re{-j a e^{jwt}}
     return X.real
 
 
-def simulate(arm: Arm, w: float, *, a: float | None = None, periods: int = 20,
-             rate: float = 1000.0, coulomb_current: float | None = None,
-             eps_fraction: float = 0.02):
+def simulate(
+    arm: Arm,
+    w: float,
+    *,
+    a: float | None = None,
+    periods: int = 20,
+    rate: float = 1000.0,
+    coulomb_current: float | None = None,
+    eps_fraction: float = 0.02,
+):
     """Simulate one experiment; returns (t, dict of signals) sampled at ``rate``."""
     a = amplitude(arm, w) if a is None else a
     cf = arm.coulomb_current if coulomb_current is None else coulomb_current
@@ -133,15 +142,22 @@ def simulate(arm: Arm, w: float, *, a: float | None = None, periods: int = 20,
     T = 2 * math.pi / w
     n = int(math.floor(periods * T * rate)) + 1
     t = np.arange(n) / rate
-    sol = solve_ivp(rhs, (0.0, t[-1]), _linear_initial_state(arm, w, a), method="LSODA",
-                    t_eval=t, rtol=1e-7, atol=1e-10, max_step=T / 50)
+    sol = solve_ivp(
+        rhs,
+        (0.0, t[-1]),
+        _linear_initial_state(arm, w, a),
+        method="LSODA",
+        t_eval=t,
+        rtol=1e-7,
+        atol=1e-10,
+        max_step=T / 50,
+    )
     if not sol.success:
         raise RuntimeError(sol.message)
     th, om, tt, ot = sol.y
     kpv = kp * (a * np.sin(w * t) - th) - kd * om
     i = np.clip(kpv, -imax, imax)
-    return t, {"reference": a * np.sin(w * t), "current": i, "motor_angle": th,
-               "tip_angle": tt}
+    return t, {"reference": a * np.sin(w * t), "current": i, "motor_angle": th, "tip_angle": tt}
 
 
 def write_csv(path: Path, t, sig, comments=()):
@@ -150,8 +166,9 @@ def write_csv(path: Path, t, sig, comments=()):
         for c in comments:
             f.write(f"# {c}\n")
         f.write("time,reference,current,motor_angle,tip_angle\n")
-        data = np.column_stack([t, sig["reference"], sig["current"], sig["motor_angle"],
-                                sig["tip_angle"]])
+        data = np.column_stack(
+            [t, sig["reference"], sig["current"], sig["motor_angle"], sig["tip_angle"]]
+        )
         np.savetxt(f, data, delimiter=",", fmt="%.12g")
 
 
@@ -188,8 +205,9 @@ def experiment_dir(tmp_path_factory, which: str = "paper") -> Path:
     """A session-wide folder of simulated experiment CSVs (``paper`` or ``second`` arm),
     written once per test session (files are not to be modified by tests)."""
     if which not in _DIRS:
-        arm, pairs = {"paper": (PAPER_ARM, PAPER_PAIRS),
-                      "second": (SECOND_ARM, SECOND_PAIRS)}[which]
+        arm, pairs = {"paper": (PAPER_ARM, PAPER_PAIRS), "second": (SECOND_ARM, SECOND_PAIRS)}[
+            which
+        ]
         folder = tmp_path_factory.mktemp(f"frb_{which}")
         write_experiments(folder, arm, pairs)
         _DIRS[which] = folder
@@ -199,5 +217,8 @@ def experiment_dir(tmp_path_factory, which: str = "paper") -> Path:
 def file_hashes(folder: Path) -> dict[str, str]:
     import hashlib
 
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(Path(folder).iterdir()) if p.is_file()}
+    return {
+        p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(Path(folder).iterdir())
+        if p.is_file()
+    }

@@ -16,13 +16,19 @@ def scenario(name: str = "feliu-single-mass", **patch):
     """A built-in scenario with sections patched: patch(arm={'friction': {...}}) etc."""
     d = scenario_dict(name)
     for section, values in patch.items():
-        _merge(d.setdefault(section, {}), values) if isinstance(values, dict) else d.__setitem__(section, values)
+        _merge(d.setdefault(section, {}), values) if isinstance(values, dict) else d.__setitem__(
+            section, values
+        )
     return scenario_from_dict(d)
 
 
 def _merge(d: dict, new: dict) -> None:
     for k, v in new.items():
-        if isinstance(v, dict) and isinstance(d.get(k), dict) and not {"model", "type", "drive"} & set(v):
+        if (
+            isinstance(v, dict)
+            and isinstance(d.get(k), dict)
+            and not {"model", "type", "drive"} & set(v)
+        ):
             _merge(d[k], v)
         else:
             d[k] = v
@@ -30,4 +36,6 @@ def _merge(d: dict, new: dict) -> None:
 
 def constant_command(u: float) -> FunctionController:
     """Open loop: the same command at every sample."""
-    return FunctionController(lambda p, s, m, r: (s, jnp.reshape(p, (1,))), jnp.asarray(u), jnp.zeros(()))
+    return FunctionController(
+        lambda p, s, m, r: (s, jnp.reshape(p, (1,))), jnp.asarray(u), jnp.zeros(())
+    )

@@ -9,8 +9,9 @@ jax.config.update("jax_enable_x64", True)
 try:  # property tests (tests/test_properties_*.py): repeatable, bounded, no example database
     from hypothesis import settings
 
-    settings.register_profile("flexarm", derandomize=True, database=None, deadline=None,
-                              print_blob=True)
+    settings.register_profile(
+        "flexarm", derandomize=True, database=None, deadline=None, print_blob=True
+    )
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "flexarm"))
 except ImportError:  # the property test files skip themselves
     pass
@@ -33,17 +34,26 @@ def skip_without_data(sub: str = "") -> Path:
     """``DATA / sub``, or skip the calling test saying where the logs were looked for."""
     path = DATA / sub
     if not path.exists():
-        pytest.skip(f"real lab logs not found at {path} (set FLEXARM_DATA to the folder "
-                    "that holds rotary-rig/, two-link-rig/, motor-bench/)")
+        pytest.skip(
+            f"real lab logs not found at {path} (set FLEXARM_DATA to the folder "
+            "that holds rotary-rig/, two-link-rig/, motor-bench/)"
+        )
     return path
+
 
 #: the rotary-rig logs (../shared/data/rotary-rig: absent in a user's clone, present in CI)
 ROTARY_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 ROTARY_FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
 #: the lab's data sheet (README of the data): geared voltage-driven servo, 0.45 m link
-ROTARY_SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-                    armature_resistance=3.29, link_length=0.45, computation_delay=1,
-                    voltage_limit=10.0)  # the limit the tests' figures were measured at
+ROTARY_SHEET = dict(
+    drive="voltage",
+    gear_ratio=48.4,
+    motor_constant=0.0107,
+    armature_resistance=3.29,
+    link_length=0.45,
+    computation_delay=1,
+    voltage_limit=10.0,
+)  # the limit the tests' figures were measured at
 
 
 @functools.cache
@@ -59,6 +69,8 @@ def rotary_whole_fit():
     data sheet, one fit per log for the whole test session (the design, tuning and report
     tests share it; treat the result as read-only). Skips where ../shared is absent."""
     if not ROTARY_DATA.is_dir():
-        pytest.skip(f"real rig logs not found at {ROTARY_DATA} (../shared is absent in a "
-                    "user's clone; CI has it)")
+        pytest.skip(
+            f"real rig logs not found at {ROTARY_DATA} (../shared is absent in a "
+            "user's clone; CI has it)"
+        )
     return _rotary_whole_fit

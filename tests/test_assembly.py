@@ -33,12 +33,15 @@ def test_single_link_arm_is_the_written_out_plant():
         x = rng.normal(size=arm.n_states) * 0.1
         u = rng.normal(size=1)
         hub = x[:2]
-        zb = x[2:2 + b.n_states]
+        zb = x[2 : 2 + b.n_states]
         yb = b.C @ zb + b.D @ hub
         tau_a = m.drive.k_u * u[0] - (m.drive.k_omega + m.V) * hub[1] - yb[1] + m.friction.bias
         fr = m.friction
-        f = (np.clip(tau_a, -fr.static, fr.static) if abs(hub[1]) < fr.velocity_tolerance
-             else fr.coulomb * np.sign(hub[1]))
+        f = (
+            np.clip(tau_a, -fr.static, fr.static)
+            if abs(hub[1]) < fr.velocity_tolerance
+            else fr.coulomb * np.sign(hub[1])
+        )
         want = np.concatenate([[hub[1], (tau_a - f) / m.J], b.A @ zb + b.B @ hub])
         got = np.asarray(arm.rhs(jnp.asarray(x), jnp.asarray(u)))
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
@@ -49,18 +52,29 @@ def test_multi_link_torque_sources_are_the_body():
     arm, model = multi_link_arm(benchmark_arm())
     x = model.state(theta=[-1.2, 0.4], delta=[1e-3, -2e-4, 5e-4, 1e-4], theta_dot=[0.3, -0.2])
     u = np.array([1.5, -0.7])
-    np.testing.assert_array_equal(np.asarray(arm.rhs(jnp.asarray(x), jnp.asarray(u))),
-                                  np.asarray(model.plant.rhs(jnp.asarray(x), jnp.asarray(u))))
+    np.testing.assert_array_equal(
+        np.asarray(arm.rhs(jnp.asarray(x), jnp.asarray(u))),
+        np.asarray(model.plant.rhs(jnp.asarray(x), jnp.asarray(u))),
+    )
     assert arm.input_names == ("torque_1", "torque_2")
 
 
 def _geared(friction: dict | None = None, drive: str = "current") -> MultiLinkArm:
     spec = benchmark_arm()
-    d = ({"drive": "current", "torque_constant": 2.0, "current_limit": 3.0} if drive == "current"
-         else {"drive": "voltage", "motor_constant": 0.03, "armature_resistance": 2.0,
-               "gear_ratio": 50, "rotor_inertia": 4e-6})
-    j = Joint.model_validate({"drive": d, "viscous": 0.05,
-                              "friction": friction or {"model": "none"}})
+    d = (
+        {"drive": "current", "torque_constant": 2.0, "current_limit": 3.0}
+        if drive == "current"
+        else {
+            "drive": "voltage",
+            "motor_constant": 0.03,
+            "armature_resistance": 2.0,
+            "gear_ratio": 50,
+            "rotor_inertia": 4e-6,
+        }
+    )
+    j = Joint.model_validate(
+        {"drive": d, "viscous": 0.05, "friction": friction or {"model": "none"}}
+    )
     return spec.model_copy(update={"joints": [j, j]})
 
 
@@ -71,8 +85,9 @@ def test_drives_and_mobility_columns():
     x = model.state(theta=[-1.2, 0.4], delta=[1e-3, -2e-4, 5e-4, 1e-4], theta_dot=[0.3, -0.2])
     i = np.array([0.5, -0.25])
     want = model.rhs(x, 2.0 * i - 0.05 * x[6:8])
-    np.testing.assert_allclose(np.asarray(arm.rhs(jnp.asarray(x), jnp.asarray(i))), want,
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(arm.rhs(jnp.asarray(x), jnp.asarray(i))), want, rtol=1e-12, atol=1e-12
+    )
     qdd, G = arm.body.acceleration_and_mobility(jnp.asarray(x), jnp.asarray(2.0 * i))
     Binv = np.linalg.inv(model.mass_matrix(x[:6]))
     np.testing.assert_allclose(np.asarray(G), Binv[:2], rtol=1e-10, atol=1e-12 * np.abs(Binv).max())
@@ -103,16 +118,23 @@ def test_torsional_link_frequency():
     """A rigid link of inertia J_0 on a torsional spring K, driven by a free hub J_h:
     ω² = K (J_h + J_0) / (J_h J_0) (the two-inertia oscillator)."""
     J_h, J0, K = 0.02, 0.05, 3.0
-    arm = MultiLinkArm(links=[Link(model="torsional", length=0.4, mass=0.5, inertia=J0,
-                                   torsional_stiffness=K)],
-                       hubs=[Hub(inertia=J_h)], gravity=0.0)
+    arm = MultiLinkArm(
+        links=[Link(model="torsional", length=0.4, mass=0.5, inertia=J0, torsional_stiffness=K)],
+        hubs=[Hub(inertia=J_h)],
+        gravity=0.0,
+    )
     model = build_multilink(arm)
     A = np.asarray(jax.jacfwd(lambda x: model.plant.rhs(x, jnp.zeros(1)))(jnp.zeros(4)))
     w = np.sort(np.abs(np.linalg.eigvals(A).imag))[-1]
     assert w == pytest.approx(math.sqrt(K * (J_h + J0) / (J_h * J0)), rel=1e-12)
     # its deflection angle signal is α itself
-    sig = dict(zip(model.plant.signal_names,
-                   np.asarray(model.plant.signals(jnp.asarray([0.1, 0.02, 0, 0]), jnp.zeros(1))), strict=True))
+    sig = dict(
+        zip(
+            model.plant.signal_names,
+            np.asarray(model.plant.signals(jnp.asarray([0.1, 0.02, 0, 0]), jnp.zeros(1))),
+            strict=True,
+        )
+    )
     assert sig["deflection_angle_1"] == pytest.approx(0.02, rel=1e-15)
 
 

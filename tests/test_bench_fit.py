@@ -21,25 +21,54 @@ from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
 
-RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resistance=2.6,
-           link_length=0.42, gear_efficiency=0.9, motor_efficiency=0.69,
-           # the synthetic rig latches its encoder at the sample instant and its gauge
-           # has no low-pass filter: both known, as a user gives what the data sheet says
-           # (delays of a few samples): the earlier protocol, every delay 0...5 searched
-           # with the guesses' bounds (the real-log tests use the default estimates)
-           angle_delay=0, filters={"tip_deflection": 0.0}, max_delay=5, estimates=False)
+RIG = dict(
+    drive="voltage",
+    gear_ratio=70,
+    motor_constant=7.68e-3,
+    armature_resistance=2.6,
+    link_length=0.42,
+    gear_efficiency=0.9,
+    motor_efficiency=0.69,
+    # the synthetic rig latches its encoder at the sample instant and its gauge
+    # has no low-pass filter: both known, as a user gives what the data sheet says
+    # (delays of a few samples): the earlier protocol, every delay 0...5 searched
+    # with the guesses' bounds (the real-log tests use the default estimates)
+    angle_delay=0,
+    filters={"tip_deflection": 0.0},
+    max_delay=5,
+    estimates=False,
+)
 GAINS = [(6, -40, 0.15, 0), (8, -60, 0.2, -0.5), (5, -20, 0.12, 0)]
-TRUE = {"hub_inertia": 2.08e-3, "link_inertia": 3.5e-3, "link_frequency": np.sqrt(1.2 / 3.5e-3),
-        "link_damping": 0.03, "coulomb": 0.03, "tip_gain": 1.0}
+TRUE = {
+    "hub_inertia": 2.08e-3,
+    "link_inertia": 3.5e-3,
+    "link_frequency": np.sqrt(1.2 / 3.5e-3),
+    "link_damping": 0.03,
+    "coulomb": 0.03,
+    "tip_gain": 1.0,
+}
 
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
     d = tmp_path_factory.mktemp("bench")
     sc = load_scenario("rotary-flexible-link")
-    return [synthetic_log(sc, g, d / f"log{i}.csv", duration=6.0, period=3.0,
-                          amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05), strict=True))]
+    return [
+        synthetic_log(
+            sc,
+            g,
+            d / f"log{i}.csv",
+            duration=6.0,
+            period=3.0,
+            amplitude=(0.5, 0.15),
+            tip0=t0,
+            tip_rate0=v0,
+            seed=i,
+        )
+        for i, (g, t0, v0) in enumerate(
+            zip(GAINS, (0.01, -0.008, 0.006), (0.0, 0.1, -0.05), strict=True)
+        )
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -62,26 +91,63 @@ def test_fast_loop_equals_flexarm_simulator():
     wc2 = 3 * EI / L**3 / m
     ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
     n = p.n_samples
-    const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3, q_th=2 * np.pi / 4096,
-                        q_d=0.0, limit=10.0, vel_tol=1e-3))
+    const = as_jax(
+        dict(
+            dt=1e-3,
+            length=L,
+            k_u=ku,
+            k_omega=ku * 70 * 7.68e-3,
+            q_th=2 * np.pi / 4096,
+            q_d=0.0,
+            limit=10.0,
+            vel_tol=1e-3,
+        )
+    )
     # the simulator's own readings as the "log": the fast loop reads the log while a
     # channel's delay line fills (k < delay), which then equals the simulator's initial
     # delay-line contents
     names = p.loop.sensors.names
     meas = np.asarray(out["measured"])
-    data = as_jax(dict(ref=p.references["reference"][None],
-                       y_th=meas[:, names.index("motor_angle")][None],
-                       y_d=meas[:, names.index("tip_deflection")][None],
-                       w_th=np.zeros((1, n)), w_d=np.zeros((1, n)),
-                       volt=np.zeros((1, n)), K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
-    model = as_jax({k: np.full((1, 1), v) for k, v in dict(
-        J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04, bias=0.0,
-        gain=1.0, dth=0, dd=2, th0=0.0, om0=0.0, w0=0.01, wd0=0.0).items()})
+    data = as_jax(
+        dict(
+            ref=p.references["reference"][None],
+            y_th=meas[:, names.index("motor_angle")][None],
+            y_d=meas[:, names.index("tip_deflection")][None],
+            w_th=np.zeros((1, n)),
+            w_d=np.zeros((1, n)),
+            volt=np.zeros((1, n)),
+            K=np.array([[6.0, -40.0, 0.15, 0.0]]),
+            tau=np.zeros(1),
+        )
+    )
+    model = as_jax(
+        {
+            k: np.full((1, 1), v)
+            for k, v in dict(
+                J=2.08e-3,
+                B=4e-3,
+                wc2=wc2,
+                c2z=0.06 * np.sqrt(wc2),
+                JlL=m * L,
+                Fc=0.03,
+                Fs=0.04,
+                bias=0.0,
+                gain=1.0,
+                dth=0,
+                dd=2,
+                th0=0.0,
+                om0=0.0,
+                w0=0.01,
+                wd0=0.0,
+            ).items()
+        }
+    )
     tr, _ = closed_loop_run(model, data, const)
     names = p.loop.sensors.names
     for k, sig in enumerate(("motor_angle", "tip_deflection")):
-        np.testing.assert_allclose(np.asarray(tr[k])[:, 0, 0],
-                                   out["measured"][:, names.index(sig)], atol=1e-9)
+        np.testing.assert_allclose(
+            np.asarray(tr[k])[:, 0, 0], out["measured"][:, names.index(sig)], atol=1e-9
+        )
     np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], out["command"][:, 0], atol=1e-9)
 
 
@@ -174,8 +240,13 @@ def test_bad_inputs(tmp_path, logs):
     head = "time,reference,voltage,motor_angle,tip_deflection\n"
     rows = [f"{k * 1e-3:.3f},0,0,{0.001 * k},{0.0}" for k in range(100)]
     with pytest.raises(FitInputError, match="no usable output column"):
-        read_bench_log(_write(tmp_path / "a.csv", "time,reference,voltage,tip_deflection\n" +
-                              "\n".join(f"{k * 1e-3:.3f},0,0,0" for k in range(100))))
+        read_bench_log(
+            _write(
+                tmp_path / "a.csv",
+                "time,reference,voltage,tip_deflection\n"
+                + "\n".join(f"{k * 1e-3:.3f},0,0,0" for k in range(100)),
+            )
+        )
     bad = rows.copy()
     bad[50] = "0.049,0,0,0,0"
     with pytest.raises(FitInputError, match="b.csv.*time (repeats|decreases)"):
@@ -223,9 +294,22 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
 
     sc = load_scenario("rotary-flexible-link")
     d = Path(tempfile.mkdtemp())
-    logs = [synthetic_log(sc, g, d / f"log{i}.csv", duration=10.0, period=3.0,
-                          amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-            for i, (g, t0, v0) in enumerate(zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05), strict=True))]
+    logs = [
+        synthetic_log(
+            sc,
+            g,
+            d / f"log{i}.csv",
+            duration=10.0,
+            period=3.0,
+            amplitude=(0.5, 0.15),
+            tip0=t0,
+            tip_rate0=v0,
+            seed=i,
+        )
+        for i, (g, t0, v0) in enumerate(
+            zip(GAINS, (0.01, -0.008, 0.006), (0, 0.1, -0.05), strict=True)
+        )
+    ]
     res = fit(logs[:2], **RIG, popsize=8, maxiter=30, global_seconds=4.0, local_nfev=80)
     got = {**res.params, **res.derived}
     for name, true in TRUE.items():
@@ -269,8 +353,12 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
     Jf = J.reshape(-1, 3)
     est, hac, iid = [], [], []
     for _ in range(400):
-        e = np.stack([lfilter([1.0], [1.0, -0.98], rng.normal(size=(L, N)), axis=-1),
-                      3 * rng.normal(size=(L, N))])
+        e = np.stack(
+            [
+                lfilter([1.0], [1.0, -0.98], rng.normal(size=(L, N)), axis=-1),
+                3 * rng.normal(size=(L, N)),
+            ]
+        )
         b = np.linalg.lstsq(Jf, e.ravel(), rcond=None)[0]
         r = e.ravel() - Jf @ b
         cov, M = hac_covariance(r.reshape(2, L, N), J)
@@ -299,7 +387,8 @@ def test_fit_reports_hac_and_iid_std(fitted):
         assert np.isfinite(res.std[k]) and np.isfinite(res.std_iid[k]), k
         assert res.std[k] >= res.std_iid[k], (k, res.std[k], res.std_iid[k])
         assert d[k]["std"] == pytest.approx(res.std[k]) and d[k]["std_iid"] == pytest.approx(
-            res.std_iid[k])
+            res.std_iid[k]
+        )
     assert all(m > 1 for m in res.stages["local"]["hac_bandwidth_samples"].values())
     assert "std (HAC)" in res.summary()
 
@@ -318,16 +407,54 @@ def test_open_loop_replay_recovers_the_parameters(logs):
     L, m, EI = 0.42, 0.019841, 0.168
     wc2 = 3 * EI / L**3 / m
     ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
-    const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3,
-                        q_th=2 * np.pi / 4096, q_d=0.0, limit=10.0, vel_tol=1e-3))
+    const = as_jax(
+        dict(
+            dt=1e-3,
+            length=L,
+            k_u=ku,
+            k_omega=ku * 70 * 7.68e-3,
+            q_th=2 * np.pi / 4096,
+            q_d=0.0,
+            limit=10.0,
+            vel_tol=1e-3,
+        )
+    )
     z = np.zeros((1, n))
     # the log's readings, which the loop reads while a channel's delay line fills
-    data = as_jax(dict(ref=g.columns["reference"][None], y_th=g.columns["motor_angle"][None],
-                       y_d=g.columns["tip_deflection"][None], w_th=z, w_d=z,
-                       volt=g.columns["voltage"][None], K=np.zeros((1, 4)), tau=np.zeros(1)))
-    model = as_jax({k: np.full((1, 1), v) for k, v in dict(
-        J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04,
-        bias=0.0, gain=1.0, dth=0, dd=2, th0=0.0, om0=0.0, w0=0.01, wd0=0.0).items()})
+    data = as_jax(
+        dict(
+            ref=g.columns["reference"][None],
+            y_th=g.columns["motor_angle"][None],
+            y_d=g.columns["tip_deflection"][None],
+            w_th=z,
+            w_d=z,
+            volt=g.columns["voltage"][None],
+            K=np.zeros((1, 4)),
+            tau=np.zeros(1),
+        )
+    )
+    model = as_jax(
+        {
+            k: np.full((1, 1), v)
+            for k, v in dict(
+                J=2.08e-3,
+                B=4e-3,
+                wc2=wc2,
+                c2z=0.06 * np.sqrt(wc2),
+                JlL=m * L,
+                Fc=0.03,
+                Fs=0.04,
+                bias=0.0,
+                gain=1.0,
+                dth=0,
+                dd=2,
+                th0=0.0,
+                om0=0.0,
+                w0=0.01,
+                wd0=0.0,
+            ).items()
+        }
+    )
     tr, _ = closed_loop_run(model, data, const, open_loop=True)
     np.testing.assert_allclose(np.asarray(tr[0])[:, 0, 0], g.columns["motor_angle"], atol=1e-9)
     np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], g.columns["voltage"], atol=0)
@@ -361,12 +488,38 @@ def test_two_sessions_share_mechanics_fit_friction_per_session(logs, tmp_path):
     gain +1.0 %, F_c +0.4 % / −1.1 %. ζ within 10 %, not 5 %: each session sees one 6 s
     log with two ringdowns, and optimiser versions put it between +2.8 % and +8.5 %."""
     sc = load_scenario("rotary-flexible-link")
-    sc1 = sc.model_copy(update={"arm": sc.arm.model_copy(update={"friction": (
-        sc.arm.friction.model_copy(update={"coulomb": 0.05, "static": 0.065}))})})
-    log1 = synthetic_log(sc1, GAINS[1], tmp_path / "session1.csv", duration=6.0, period=3.0,
-                         amplitude=(0.5, 0.15), tip0=-0.008, tip_rate0=0.1, seed=7)
-    res = fit([logs[0], log1], **RIG, sessions=[0, 1], popsize=8, maxiter=25,
-              global_seconds=4.0, delay_search="both", polish_iter=20)
+    sc1 = sc.model_copy(
+        update={
+            "arm": sc.arm.model_copy(
+                update={
+                    "friction": (
+                        sc.arm.friction.model_copy(update={"coulomb": 0.05, "static": 0.065})
+                    )
+                }
+            )
+        }
+    )
+    log1 = synthetic_log(
+        sc1,
+        GAINS[1],
+        tmp_path / "session1.csv",
+        duration=6.0,
+        period=3.0,
+        amplitude=(0.5, 0.15),
+        tip0=-0.008,
+        tip_rate0=0.1,
+        seed=7,
+    )
+    res = fit(
+        [logs[0], log1],
+        **RIG,
+        sessions=[0, 1],
+        popsize=8,
+        maxiter=25,
+        global_seconds=4.0,
+        delay_search="both",
+        polish_iter=20,
+    )
     print(res.summary())
     # the tip delay within one sample of the truth (2): the delay search is a discrete choice
     # between two close minima (full-log costs 1.3e-4 at 2, 2.6e-4 at 1) that the chaotic
@@ -376,10 +529,19 @@ def test_two_sessions_share_mechanics_fit_friction_per_session(logs, tmp_path):
     assert res.delays["motor_angle"] == 0, res.delays
     assert abs(res.delays["tip_deflection"] - 2) <= 1, res.stages["guesses"]
     p = {**res.params, **res.derived}
-    mech = {k: 100 * (p[k] / TRUE[k] - 1) for k in
-            ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")}
-    fric = {s: {"coulomb": p[f"coulomb[{s}]"], "static": p[f"static[{s}]"],
-                "viscous": p[f"viscous[{s}]"], "bias": p[f"bias[{s}]"]} for s in (0, 1)}
+    mech = {
+        k: 100 * (p[k] / TRUE[k] - 1)
+        for k in ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")
+    }
+    fric = {
+        s: {
+            "coulomb": p[f"coulomb[{s}]"],
+            "static": p[f"static[{s}]"],
+            "viscous": p[f"viscous[{s}]"],
+            "bias": p[f"bias[{s}]"],
+        }
+        for s in (0, 1)
+    }
     print("mechanics errors %:", {k: round(v, 2) for k, v in mech.items()}, "friction:", fric)
     for k, e in mech.items():
         assert abs(e) < (10.0 if k == "link_damping" else 5.0), (k, e)
@@ -399,11 +561,21 @@ def test_open_loop_replay_of_one_log_finds_the_tip_delay(logs):
     +0.4, −0.2, −0.6 %). ζ within 20 %, not 10 %: measured −4.2 % here, but −13 % in an
     optimiser version whose costs were as low -- one log has two ringdowns of the stuck
     hub, a weakly determined ζ."""
-    res = fit(logs[:1], **RIG, mode="open_loop", popsize=8, maxiter=20, global_seconds=4.0,
-              delay_search="both", polish_iter=20)
+    res = fit(
+        logs[:1],
+        **RIG,
+        mode="open_loop",
+        popsize=8,
+        maxiter=20,
+        global_seconds=4.0,
+        delay_search="both",
+        polish_iter=20,
+    )
     p = {**res.params, **res.derived}
-    errs = {k: 100 * (p[k] / TRUE[k] - 1) for k in
-            ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")}
+    errs = {
+        k: 100 * (p[k] / TRUE[k] - 1)
+        for k in ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")
+    }
     print("errors %:", {k: round(v, 2) for k, v in errs.items()}, res.stages["guesses"])
     assert res.delays == {"motor_angle": 0, "tip_deflection": 2}, res.stages["guesses"]
     prof = res.stages["guesses"]["tip_delay_profile"]
@@ -427,14 +599,34 @@ def test_filtered_tip_sensor_known_cutoff(tmp_path):
     sens = dict(sc.sensors)
     sens["tip_deflection"] = sens["tip_deflection"].model_copy(update={"bandwidth": 15.0})
     scf = sc.model_copy(update={"sensors": sens})
-    flogs = [synthetic_log(scf, g, tmp_path / f"filt{i}.csv", duration=6.0, period=3.0,
-                           amplitude=(0.5, 0.15), tip0=t0, tip_rate0=v0, seed=i)
-             for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1), strict=True))]
-    res = fit(flogs, **{**RIG, "filters": {"tip_deflection": 15.0}}, popsize=8, maxiter=25,
-              global_seconds=4.0, delay_search="both", polish_iter=20)
+    flogs = [
+        synthetic_log(
+            scf,
+            g,
+            tmp_path / f"filt{i}.csv",
+            duration=6.0,
+            period=3.0,
+            amplitude=(0.5, 0.15),
+            tip0=t0,
+            tip_rate0=v0,
+            seed=i,
+        )
+        for i, (g, t0, v0) in enumerate(zip(GAINS[:2], (0.01, -0.008), (0.0, 0.1), strict=True))
+    ]
+    res = fit(
+        flogs,
+        **{**RIG, "filters": {"tip_deflection": 15.0}},
+        popsize=8,
+        maxiter=25,
+        global_seconds=4.0,
+        delay_search="both",
+        polish_iter=20,
+    )
     p = {**res.params, **res.derived}
-    errs = {k: 100 * (p[k] / TRUE[k] - 1) for k in
-            ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")}
+    errs = {
+        k: 100 * (p[k] / TRUE[k] - 1)
+        for k in ("hub_inertia", "link_inertia", "link_frequency", "link_damping", "tip_gain")
+    }
     print("errors %:", {k: round(v, 2) for k, v in errs.items()}, res.stages["guesses"])
     assert res.delays == {"motor_angle": 0, "tip_deflection": 2}, res.stages["guesses"]
     for k, e in errs.items():
@@ -456,8 +648,9 @@ def test_initial_tip_through_the_filter():
     w = 2 * np.pi * 15.0
     t = np.arange(40) * 1e-3
     y = 0.01 + 0.2 * (t + np.expm1(-w * t) / w)
-    log = BenchLog(None, np.arange(42) * 1e-3,
-                   {"tip_deflection": np.concatenate([[0.0, 0.0], y])}, {}, None)
+    log = BenchLog(
+        None, np.arange(42) * 1e-3, {"tip_deflection": np.concatenate([[0.0, 0.0], y])}, {}, None
+    )
     d0, v0 = initial_tip_at(log, 2, cutoff=15.0)
     assert abs(d0 - 0.01) < 1e-9 and abs(v0 - 0.2) < 1e-9, (d0, v0)
     d1, v1 = initial_tip_at(log, 2)
@@ -496,8 +689,14 @@ def test_parameter_at_a_bound_is_widened_and_refitted(logs):
     """Bounds that exclude the truth (ω_c true 18.5 rad/s, range given as 10...15): the
     local stage ends at 15, the range is widened (×3) and the refit finds ω_c within 5 %
     (the tolerance of the acceptance protocol above), with a warning saying so."""
-    res = fit(logs[:2], **RIG, popsize=8, maxiter=15, global_seconds=4.0,
-              bounds={"link_frequency": (10.0, 15.0)})
+    res = fit(
+        logs[:2],
+        **RIG,
+        popsize=8,
+        maxiter=15,
+        global_seconds=4.0,
+        bounds={"link_frequency": (10.0, 15.0)},
+    )
     true = TRUE["link_frequency"]
     print(res.stages["guesses"].get("widened"), res.params["link_frequency"], true)
     assert res.stages["guesses"]["widened"]

@@ -79,8 +79,21 @@ def test_validate_true_model_on_its_own_log_and_fit_without_controller(tmp_path)
     lines = [ln for ln in log.read_text().splitlines() if not ln.startswith("# controller")]
     bare = tmp_path / "bare.csv"
     bare.write_text("\n".join(lines) + "\n")
-    r = runner.invoke(app, ["fit", str(bare), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
-                            "--armature-resistance", "2.6", "--link-length", "0.42"])
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(bare),
+            "--gear-ratio",
+            "70",
+            "--motor-constant",
+            "7.68e-3",
+            "--armature-resistance",
+            "2.6",
+            "--link-length",
+            "0.42",
+        ],
+    )
     assert r.exit_code == 2 and "no controller declared" in said(r) and "bare.csv" in said(r)
 
 
@@ -116,7 +129,7 @@ def test_multilink_regulation_joint_count_is_checked(tmp_path):
 
     src = builtin_scenarios()["deluca-two-link"].read_text()
     bad = tmp_path / "bad.toml"
-    bad.write_text(src.replace('kp = [18.0, 18.0]', 'kp = [18.0]'))
+    bad.write_text(src.replace("kp = [18.0, 18.0]", "kp = [18.0]"))
     r = runner.invoke(app, ["info", str(bad)])
     assert r.exit_code == 2 and "kp has 1 entries; target has 2" in said(r)
 
@@ -127,13 +140,39 @@ def test_fit_reports_with_and_without_friction(tmp_path):
     from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 
-    log = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
-                        tmp_path / "b.csv", duration=4.0, amplitude=(0.5, 0.15), period=3.0)
+    log = synthetic_log(
+        load_scenario("rotary-flexible-link"),
+        [6.0, -3.0, 0.213, 0.0],
+        tmp_path / "b.csv",
+        duration=4.0,
+        amplitude=(0.5, 0.15),
+        period=3.0,
+    )
     j = tmp_path / "f.json"
-    r = runner.invoke(app, ["fit", str(log), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
-                            "--armature-resistance", "2.6", "--link-length", "0.42",
-                            "--gear-efficiency", "0.9", "--motor-efficiency", "0.69",
-                            "--seconds", "2", "--compare-no-friction", "--json", str(j)])
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(log),
+            "--gear-ratio",
+            "70",
+            "--motor-constant",
+            "7.68e-3",
+            "--armature-resistance",
+            "2.6",
+            "--link-length",
+            "0.42",
+            "--gear-efficiency",
+            "0.9",
+            "--motor-efficiency",
+            "0.69",
+            "--seconds",
+            "2",
+            "--compare-no-friction",
+            "--json",
+            str(j),
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert "fit % without" in said(r)
     d = json.loads(j.read_text())
@@ -149,55 +188,104 @@ def test_fit_and_validate_read_logs_in_other_names_and_units(tmp_path):
     from flexarm.io.logs import read_log, write_log
     from flexarm.specs import load_scenario
 
-    si = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
-                       tmp_path / "si.csv", duration=2.0)
+    si = synthetic_log(
+        load_scenario("rotary-flexible-link"),
+        [6.0, -3.0, 0.213, 0.0],
+        tmp_path / "si.csv",
+        duration=2.0,
+    )
     log = read_log(si, required=("time", "reference"))
     s = log.signals
-    rig = write_log(tmp_path / "rig.csv", log.time,
-                    {"ref_deg": np.degrees(s["reference"]), "Vm": s["voltage"],
-                     "theta_deg": np.degrees(s["motor_angle"]),
-                     "strain_mm": 1e3 * s["tip_deflection"]},
-                    comments=log.comments, required=("time",), fmt="%.17g")
-    maps = ["--column", "reference=ref_deg", "--column", "voltage=Vm",
-            "--column", "motor_angle=theta_deg", "--column", "tip_deflection=strain_mm",
-            "--unit", "reference=deg", "--unit", "motor_angle=deg", "--unit", "tip_deflection=mm"]
+    rig = write_log(
+        tmp_path / "rig.csv",
+        log.time,
+        {
+            "ref_deg": np.degrees(s["reference"]),
+            "Vm": s["voltage"],
+            "theta_deg": np.degrees(s["motor_angle"]),
+            "strain_mm": 1e3 * s["tip_deflection"],
+        },
+        comments=log.comments,
+        required=("time",),
+        fmt="%.17g",
+    )
+    maps = [
+        "--column",
+        "reference=ref_deg",
+        "--column",
+        "voltage=Vm",
+        "--column",
+        "motor_angle=theta_deg",
+        "--column",
+        "tip_deflection=strain_mm",
+        "--unit",
+        "reference=deg",
+        "--unit",
+        "motor_angle=deg",
+        "--unit",
+        "tip_deflection=mm",
+    ]
     fits = {}
     for name, path, extra in (("si", si, []), ("rig", rig, maps)):
         j = tmp_path / f"{name}.json"
-        r = runner.invoke(app, ["validate", "rotary-flexible-link", str(path), "--json", str(j), *extra])
+        r = runner.invoke(
+            app, ["validate", "rotary-flexible-link", str(path), "--json", str(j), *extra]
+        )
         assert r.exit_code == 0, r.output
         fits[name] = json.loads(j.read_text())["fit_percent"][path.name]
     for sig in ("motor_angle", "tip_deflection"):
         assert fits["rig"][sig] == pytest.approx(fits["si"][sig], abs=1e-6)
     r = runner.invoke(app, ["validate", "rotary-flexible-link", str(rig)])
-    assert r.exit_code == 2 and "rig.csv" in said(r)          # unmapped: names the file
+    assert r.exit_code == 2 and "rig.csv" in said(r)  # unmapped: names the file
     # a logger whose time stamps jitter by +-2 % of the period (the controller did not)
     jit = log.time + 0.02 * log.dt * np.random.default_rng(0).uniform(-1, 1, len(log.time))
-    jittered = write_log(tmp_path / "jit.csv", jit, s, comments=log.comments,
-                         required=("time",), fmt="%.17g")
+    jittered = write_log(
+        tmp_path / "jit.csv", jit, s, comments=log.comments, required=("time",), fmt="%.17g"
+    )
     r = runner.invoke(app, ["validate", "rotary-flexible-link", str(jittered)])
     assert r.exit_code == 2 and "non-uniform sampling" in said(r) and "--max-jitter" in said(r)
     j = tmp_path / "jit.json"
-    r = runner.invoke(app, ["validate", "rotary-flexible-link", str(jittered), "--max-jitter",
-                            "0.05", "--json", str(j)])
+    r = runner.invoke(
+        app,
+        [
+            "validate",
+            "rotary-flexible-link",
+            str(jittered),
+            "--max-jitter",
+            "0.05",
+            "--json",
+            str(j),
+        ],
+    )
     assert r.exit_code == 0, r.output
     got = json.loads(j.read_text())["fit_percent"]["jit.csv"]
-    for sig in ("motor_angle", "tip_deflection"):           # same samples, same replay
+    for sig in ("motor_angle", "tip_deflection"):  # same samples, same replay
         assert got[sig] == pytest.approx(fits["si"][sig], abs=1e-6)
-    rig_args = ["fit", str(rig), "--gear-ratio", "70", "--motor-constant", "7.68e-3",
-                "--armature-resistance", "2.6", "--link-length", "0.42", *maps]
+    rig_args = [
+        "fit",
+        str(rig),
+        "--gear-ratio",
+        "70",
+        "--motor-constant",
+        "7.68e-3",
+        "--armature-resistance",
+        "2.6",
+        "--link-length",
+        "0.42",
+        *maps,
+    ]
     r = runner.invoke(app, [*rig_args, "--tip-sign", "2"])
     assert r.exit_code == 2 and "--tip-sign 2" in said(r)
     r = runner.invoke(app, [*rig_args, "--sessions", "0,x"])
     assert r.exit_code == 2 and "--sessions" in said(r)
     r = runner.invoke(app, [*rig_args, "--sessions", "0,1"])
-    assert r.exit_code == 2 and "sessions" in said(r)          # two indices for one log
+    assert r.exit_code == 2 and "sessions" in said(r)  # two indices for one log
     r = runner.invoke(app, [*rig_args, "--filter", "tip_deflection=fast"])
     assert r.exit_code == 2 and "--filter tip_deflection=fast" in said(r)
     r = runner.invoke(app, [*rig_args, "--delay-search", "all"])
     assert r.exit_code == 2 and "delay_search" in said(r) and "both" in said(r)
     r = runner.invoke(app, [*rig_args, "--filter", "strain=50"])
-    assert r.exit_code == 2 and "strain" in said(r)            # unknown channel, named
+    assert r.exit_code == 2 and "strain" in said(r)  # unknown channel, named
 
 
 # ---------------------------------------------------------------- output paths (issue #12)
@@ -226,8 +314,9 @@ def test_out_folder_below_a_file_exits_2(tmp_path):
 
 
 def test_json_option_given_a_folder_exits_2(tmp_path):
-    r = runner.invoke(app, ["identify", str(tmp_path / "x.csv"), "--motor-constant", "1",
-                            "--json", str(tmp_path)])
+    r = runner.invoke(
+        app, ["identify", str(tmp_path / "x.csv"), "--motor-constant", "1", "--json", str(tmp_path)]
+    )
     assert r.exit_code == 2, r.output
     assert "--json" in said(r) and "is a folder, not a file" in said(r)
 
@@ -245,16 +334,18 @@ def test_scenario_out_below_a_file_and_plots_a_file_exit_2(tmp_path):
     f.write_text("x")
     r = runner.invoke(app, ["fit", str(tmp_path / "x.csv"), "--scenario-out", str(f / "arm.toml")])
     assert r.exit_code == 2 and "--scenario-out" in said(r) and "is a file, not a folder" in said(r)
-    r = runner.invoke(app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"),
-                            "--plots", str(f)])
+    r = runner.invoke(
+        app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"), "--plots", str(f)]
+    )
     assert r.exit_code == 2 and "--plots" in said(r) and "is a file, not a folder" in said(r)
 
 
 def test_existing_json_is_refused_without_overwrite(tmp_path):
     j = tmp_path / "v.json"
     j.write_text("{}")
-    r = runner.invoke(app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"),
-                            "--json", str(j)])
+    r = runner.invoke(
+        app, ["validate", "feliu-single-mass", str(tmp_path / "x.csv"), "--json", str(j)]
+    )
     assert r.exit_code == 2 and "--json" in said(r) and "--overwrite" in said(r)
     assert j.read_text() == "{}"
 
@@ -268,8 +359,13 @@ def test_unwritable_output_folder_exits_2(tmp_path, monkeypatch):
     ro.mkdir()
     ro.chmod(0o500)
     real = os.access
-    monkeypatch.setattr(os, "access", lambda p, mode, **kw:
-                        False if os.path.realpath(p) == os.path.realpath(ro) else real(p, mode, **kw))
+    monkeypatch.setattr(
+        os,
+        "access",
+        lambda p, mode, **kw: (
+            False if os.path.realpath(p) == os.path.realpath(ro) else real(p, mode, **kw)
+        ),
+    )
     try:
         r = runner.invoke(app, ["simulate", "feliu-single-mass", "--out", str(ro / "sim")])
         assert r.exit_code == 2 and "--out" in said(r) and "permission denied" in said(r)
@@ -283,8 +379,11 @@ class _FakeFit:
     """The smallest object with the fit result's JSON method."""
 
     def to_dict(self):
-        return {"converged": False, "message": "global stage, generation 3",
-                "parameters": {"J": {"value": 1.5e-3}}}
+        return {
+            "converged": False,
+            "message": "global stage, generation 3",
+            "parameters": {"J": {"value": 1.5e-3}},
+        }
 
 
 def _interrupting_fit(monkeypatch, result):
@@ -361,9 +460,12 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     from flexarm.specs import load_scenario
 
     sc = load_scenario("rotary-flexible-link")
-    logs = [synthetic_log(sc, g, tmp_path / f"{i}.csv", duration=10.0, period=3.0,
-                          amplitude=(0.5, 0.15), seed=i)
-            for i, g in enumerate(([6.0, -40.0, 0.15, 0.0], [8.0, -60.0, 0.2, -0.5]))]
+    logs = [
+        synthetic_log(
+            sc, g, tmp_path / f"{i}.csv", duration=10.0, period=3.0, amplitude=(0.5, 0.15), seed=i
+        )
+        for i, g in enumerate(([6.0, -40.0, 0.15, 0.0], [8.0, -60.0, 0.2, -0.5]))
+    ]
     out = tmp_path / "out"
     out.mkdir()
     j = out / "fit.json"
@@ -371,14 +473,38 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     # (`nohup make test &` from a script) has SIGINT ignored, an ignored signal stays ignored
     # across fork and exec, and Python then installs no handler (issue #25). Done in the
     # child's own code, not a preexec_fn (which forks a multithreaded JAX process)
-    restore = ("import runpy, signal, sys; "
-               "signal.signal(signal.SIGINT, signal.default_int_handler); "
-               "sys.argv[0] = 'flexarm'; runpy.run_module('flexarm.cli', run_name='__main__')")
-    cmd = [sys.executable, "-c", restore, "fit", *map(str, logs), "--gear-ratio", "70",
-           "--motor-constant", "7.68e-3", "--armature-resistance", "2.6", "--link-length",
-           "0.42", "--json", str(j), "--delay-search", "both", "--polish-iter", "20"]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    restore = (
+        "import runpy, signal, sys; "
+        "signal.signal(signal.SIGINT, signal.default_int_handler); "
+        "sys.argv[0] = 'flexarm'; runpy.run_module('flexarm.cli', run_name='__main__')"
+    )
+    cmd = [
+        sys.executable,
+        "-c",
+        restore,
+        "fit",
+        *map(str, logs),
+        "--gear-ratio",
+        "70",
+        "--motor-constant",
+        "7.68e-3",
+        "--armature-resistance",
+        "2.6",
+        "--link-length",
+        "0.42",
+        "--json",
+        str(j),
+        "--delay-search",
+        "both",
+        "--polish-iter",
+        "20",
+    ]
+    p = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     # interrupted in the global stage, once it has a best point (this fit, two 10 s logs
     # with two delay starts and a long friction polish, runs on long after that)
     for line in p.stderr:  # stages are printed as lines when stderr is not a terminal

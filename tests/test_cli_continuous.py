@@ -22,8 +22,9 @@ from test_continuous import STAIR, build_lqg_stair
 
 runner = CliRunner()
 
-needs_data = pytest.mark.skipif(not STAIR.is_dir(), reason="needs ../shared/data/two-link-rig "
-                                "(the lab's stair and workspace)")
+needs_data = pytest.mark.skipif(
+    not STAIR.is_dir(), reason="needs ../shared/data/two-link-rig (the lab's stair and workspace)"
+)
 
 
 def said(r) -> str:
@@ -39,14 +40,23 @@ def test_continuous_with_window_is_refused_in_one_line():
 
 
 def test_simulate_continuous_needs_log_and_no_window(tmp_path):
-    r = runner.invoke(app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "o"),
-                            "--continuous"])
+    r = runner.invoke(
+        app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "o"), "--continuous"]
+    )
     assert r.exit_code == 2 and "--log" in said(r), r.output
 
 
 def test_a_missing_controller_toml_is_named(tmp_path):
-    r = runner.invoke(app, ["validate", "quanser-two-link", str(tmp_path / "x.mat"),
-                            "--controller", str(tmp_path / "nope.toml")])
+    r = runner.invoke(
+        app,
+        [
+            "validate",
+            "quanser-two-link",
+            str(tmp_path / "x.mat"),
+            "--controller",
+            str(tmp_path / "nope.toml"),
+        ],
+    )
     assert r.exit_code == 2, r.output
     assert "nope.toml" in said(r) and "no such controller file" in said(r)
 
@@ -65,8 +75,7 @@ def test_a_text_law_keeps_its_servo_rig_meaning():
 def _per_channel(doc: dict) -> dict[str, np.ndarray]:
     fp = doc["fit_percent"]
     chans = sorted({c for d in fp.values() for c in d})
-    return {c: np.array([np.nan if d.get(c) is None else d[c] for d in fp.values()])
-            for c in chans}
+    return {c: np.array([np.nan if d.get(c) is None else d[c] for d in fp.values()]) for c in chans}
 
 
 @pytest.mark.slow
@@ -96,16 +105,25 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
     run = build_lqg_stair(tmp_path)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    decoy = {k: np.asarray(v) for k, v in sio.loadmat(tmp_path / "shoulder.mat",
-                                                     simplify_cells=True)["lqg_ss"].items()}
+    decoy = {
+        k: np.asarray(v)
+        for k, v in sio.loadmat(tmp_path / "shoulder.mat", simplify_cells=True)["lqg_ss"].items()
+    }
     decoy["D"] = 0.0 * decoy["D"]  # a controller that does nothing: the run would not follow
     decoy["C"] = 0.0 * decoy["C"]
     sio.savemat(elsewhere / "shoulder.mat", {"lqg_ss": decoy})
     monkeypatch.chdir(elsewhere)
 
     files = [str(f) for f in run.files]
-    common = ["validate", "quanser-two-link", *files, "--log-format", str(run.format),
-              "--controller", os.path.relpath(run.controller_toml, elsewhere)]
+    common = [
+        "validate",
+        "quanser-two-link",
+        *files,
+        "--log-format",
+        str(run.format),
+        "--controller",
+        os.path.relpath(run.controller_toml, elsewhere),
+    ]
     r = runner.invoke(app, [*common, "--continuous", "--json", "cont.json"])
     assert r.exit_code == 0, r.output
     cont = json.loads(Path("cont.json").read_text())
@@ -123,8 +141,10 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
     with capsys.disabled():
         print("\nvalidate --continuous / without (median, min fit % over the ten files)")
         for c in fc:
-            print(f"  {c:14s} continuous {np.nanmedian(fc[c]):7.2f} / {np.nanmin(fc[c]):7.2f}"
-                  f"   without {np.nanmedian(f0[c]):7.2f} / {np.nanmin(f0[c]):7.2f}")
+            print(
+                f"  {c:14s} continuous {np.nanmedian(fc[c]):7.2f} / {np.nanmin(fc[c]):7.2f}"
+                f"   without {np.nanmedian(f0[c]):7.2f} / {np.nanmin(f0[c]):7.2f}"
+            )
     checked = ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_2", "alpha_f_2")
     for c in fc:
         lo_med, lo_min = (99.8, 99.0) if c in checked else (97.5, 96.5)
@@ -142,8 +162,17 @@ def test_simulate_log_replays_the_run_with_the_controller_file(tmp_path):
     the tolerance of tests/test_continuous.py (median > 99.8 %, min > 99 % per channel)."""
     run = build_lqg_stair(tmp_path)
     out = tmp_path / "out"
-    args = ["simulate", "quanser-two-link", "--out", str(out), "--log-format", str(run.format),
-            "--controller", str(run.controller_toml), "--continuous"]
+    args = [
+        "simulate",
+        "quanser-two-link",
+        "--out",
+        str(out),
+        "--log-format",
+        str(run.format),
+        "--controller",
+        str(run.controller_toml),
+        "--continuous",
+    ]
     for f in run.files:
         args += ["--log", str(f)]
     r = runner.invoke(app, args)

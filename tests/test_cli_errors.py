@@ -38,8 +38,8 @@ STAMPS = "bad .mat time stamps (all zero, swapped, repeated)"
 INPUT = "an output pointed at an input, with --overwrite"
 EXISTS = "an existing output without --overwrite"
 
-S = "feliu-single-mass"          # a built-in single-link scenario (bench path)
-R = "rotary-flexible-link"       # a built-in voltage-servo rig
+S = "feliu-single-mass"  # a built-in single-link scenario (bench path)
+R = "rotary-flexible-link"  # a built-in voltage-servo rig
 EXCITE = ["--fs", "1000", "--period", "1000", "--f-min", "1", "--f-max", "10"]
 
 # (class, argv); {d}: the folder of inputs (hashed before and after), {o}: an output folder
@@ -51,8 +51,10 @@ CASES = [
     (TOML, ["simulate", "{d}/bad.toml", "--out", "{o}/sim"]),
     (MISSING, ["simulate", S, "--out", "{o}/sim", "--log", "{d}/nope.csv"]),
     (LOG, ["simulate", S, "--out", "{o}/sim", "--log", "{d}/bad.csv"]),
-    (TOML, ["simulate", S, "--out", "{o}/sim", "--log", "{d}/bad.csv", "--log-format",
-            "{d}/bad.toml"]),
+    (
+        TOML,
+        ["simulate", S, "--out", "{o}/sim", "--log", "{d}/bad.csv", "--log-format", "{d}/bad.toml"],
+    ),
     (OPTION, ["simulate", S, "--out", "{o}/sim", "--log", "{d}/bad.csv", "--window", "5:x"]),
     (MISSING, ["design", "{d}/nope.toml", "--out", "{o}/d"]),
     (TOML, ["design", "{d}/bad.toml", "--out", "{o}/d"]),
@@ -65,8 +67,10 @@ CASES = [
     (CHOICE, ["design", S, "--method", "magic", "--out", "{o}/d"]),
     (MISSING, ["scenario-from-mat", "{d}/nope.mat", "--out", "{o}/s.toml"]),
     (MAT, ["scenario-from-mat", "{d}/garbage.mat", "--out", "{o}/s.toml"]),
-    (OPTION, ["scenario-from-mat", "{d}/garbage.mat", "--out", "{o}/s.toml",
-              "--current-limits", "1,x"]),
+    (
+        OPTION,
+        ["scenario-from-mat", "{d}/garbage.mat", "--out", "{o}/s.toml", "--current-limits", "1,x"],
+    ),
     (CHOICE, ["reproduce", "nobody", "--out", "{o}/r"]),
     (OUTPUT, ["demo", "--out", "{d}/bad.csv"]),
     (OUTPUT, ["simulate", S, "--out", "{d}/bad.csv/sim"]),
@@ -95,8 +99,21 @@ CASES = [
     (MISSING, ["export-c", "{d}/nope", "--out", "{o}/c"]),
     (TOML, ["export-c", "{d}/bad.toml", "--out", "{o}/c"]),
     (CHOICE, ["excite", "{o}/x.csv", *EXCITE, "--kind", "bogus"]),
-    (PARSER, ["excite", "{o}/x.csv", "--fs", "fast", "--period", "1000", "--f-min", "1",
-              "--f-max", "10"]),
+    (
+        PARSER,
+        [
+            "excite",
+            "{o}/x.csv",
+            "--fs",
+            "fast",
+            "--period",
+            "1000",
+            "--f-min",
+            "1",
+            "--f-max",
+            "10",
+        ],
+    ),
     (MISSING, ["frf", "{d}/nope.csv", "--json", "{o}/f.json"]),
     (LOG, ["frf", "{d}/bad.csv", "--json", "{o}/f.json"]),
     (TOML, ["frf", "{d}/bad.csv", "--log-format", "{d}/bad.toml", "--json", "{o}/f.json"]),
@@ -105,8 +122,7 @@ CASES = [
     (OPTION, ["frf", "{d}/bad.csv", "--period", "lots", "--json", "{o}/f.json"]),
     (MISSING, ["tfest", "{d}/nope.json", "--poles", "2", "--zeros", "0", "--json", "{o}/t.json"]),
     (JSON, ["tfest", "{d}/bad.json", "--poles", "2", "--zeros", "0", "--json", "{o}/t.json"]),
-    (JSON, ["tfest", "{d}/not-frf.json", "--poles", "2", "--zeros", "0", "--json",
-            "{o}/t.json"]),
+    (JSON, ["tfest", "{d}/not-frf.json", "--poles", "2", "--zeros", "0", "--json", "{o}/t.json"]),
     (MISSING, ["friction", "{d}/nope.json", "{d}/nope2.json", "--json", "{o}/fr.json"]),
     (JSON, ["friction", "{d}/bad.json", "{d}/bad.json", "--json", "{o}/fr.json"]),
     (PARSER, ["friction", "{d}/bad.json", "--iterations", "x", "--json", "{o}/fr.json"]),
@@ -116,9 +132,24 @@ CASES = [
 ]
 
 # the data sheet and the declared law of the simulated rotary rig's log (trial.csv)
-DS = ["--gear-ratio", "70", "--motor-constant", "7.68e-3", "--armature-resistance", "2.6",
-      "--link-length", "0.42", "--gear-efficiency", "0.9", "--motor-efficiency", "0.69",
-      "--controller", "state_feedback K1=6 K2=-40 K3=0.15 K4=0", "--seconds", "2"]
+DS = [
+    "--gear-ratio",
+    "70",
+    "--motor-constant",
+    "7.68e-3",
+    "--armature-resistance",
+    "2.6",
+    "--link-length",
+    "0.42",
+    "--gear-efficiency",
+    "0.9",
+    "--motor-efficiency",
+    "0.69",
+    "--controller",
+    "state_feedback K1=6 K2=-40 K3=0.15 K4=0",
+    "--seconds",
+    "2",
+]
 #: the fit's progress lines on stderr before an error (cli.common.progress)
 PROGRESS = {"estimates: hub-to-tip model, hub delay, link frequency"}
 FRF = ["--period", "500"]
@@ -128,45 +159,116 @@ CASES_25 = [
     (CONTROLLER, ["simulate", "{d}/ctrl-shape.toml", "--out", "{o}/s"], "D is 2 × 2", None),
     (CONTROLLER, ["simulate", "{d}/ctrl-unstable.toml", "--out", "{o}/s"], "unstable", None),
     (DURATION, ["simulate", "{d}/duration.toml", "--out", "{o}/s"], "duration", None),
-    (WINDOW, ["fit", "{d}/trial.csv", *DS, "--window", "0:0.07", "--json", "{o}/f.json"],
-     "window", None),
-    (TIME_UNIT, ["fit", "{d}/trial.csv", *DS, "--unit", "time=ms", "--json", "{o}/f.json"],
-     "time", None),
-    (DAMAGED, ["frf", "{d}/damaged73.mat", "--log-format", "{d}/mat.toml", "--json",
-               "{o}/f.json"], "damaged73.mat", None),
+    (
+        WINDOW,
+        ["fit", "{d}/trial.csv", *DS, "--window", "0:0.07", "--json", "{o}/f.json"],
+        "window",
+        None,
+    ),
+    (
+        TIME_UNIT,
+        ["fit", "{d}/trial.csv", *DS, "--unit", "time=ms", "--json", "{o}/f.json"],
+        "time",
+        None,
+    ),
+    (
+        DAMAGED,
+        ["frf", "{d}/damaged73.mat", "--log-format", "{d}/mat.toml", "--json", "{o}/f.json"],
+        "damaged73.mat",
+        None,
+    ),
     (ABSURD, ["frf", "{d}/huge.csv", *FRF, "--json", "{o}/f.json"], "1e+308", None),
-    (STAMPS, ["frf", "{d}/t-zeros.mat", "--log-format", "{d}/mat.toml", "--json",
-              "{o}/f.json"], "time stamps are 0", None),
-    (STAMPS, ["frf", "{d}/t-swap.mat", "--log-format", "{d}/mat.toml", "--json",
-              "{o}/f.json"], "swapped", None),
-    (STAMPS, ["frf", "{d}/t-repeat.mat", "--log-format", "{d}/mat.toml", "--json",
-              "{o}/f.json"], "time repeats", None),
-    (INPUT, ["frf", "{d}/rec.csv", *FRF, "--json", "{d}/rec.csv", "--overwrite"],
-     "is an input", None),
-    (INPUT, ["tfest", "{d}/frf.json", "--poles", "2", "--zeros", "0", "--json",
-             "{d}/frf.json", "--overwrite"], "is an input", None),
-    (INPUT, ["fit", "{d}/trial.csv", *DS, "--json", "{d}/trial.csv", "--overwrite"],
-     "is an input", None),
-    (INPUT, ["validate", R, "{d}/trial.csv", "--controller", DS[-3], "--json",
-             "{d}/trial.csv", "--overwrite"],
-     "is an input", None),
+    (
+        STAMPS,
+        ["frf", "{d}/t-zeros.mat", "--log-format", "{d}/mat.toml", "--json", "{o}/f.json"],
+        "time stamps are 0",
+        None,
+    ),
+    (
+        STAMPS,
+        ["frf", "{d}/t-swap.mat", "--log-format", "{d}/mat.toml", "--json", "{o}/f.json"],
+        "swapped",
+        None,
+    ),
+    (
+        STAMPS,
+        ["frf", "{d}/t-repeat.mat", "--log-format", "{d}/mat.toml", "--json", "{o}/f.json"],
+        "time repeats",
+        None,
+    ),
+    (
+        INPUT,
+        ["frf", "{d}/rec.csv", *FRF, "--json", "{d}/rec.csv", "--overwrite"],
+        "is an input",
+        None,
+    ),
+    (
+        INPUT,
+        [
+            "tfest",
+            "{d}/frf.json",
+            "--poles",
+            "2",
+            "--zeros",
+            "0",
+            "--json",
+            "{d}/frf.json",
+            "--overwrite",
+        ],
+        "is an input",
+        None,
+    ),
+    (
+        INPUT,
+        ["fit", "{d}/trial.csv", *DS, "--json", "{d}/trial.csv", "--overwrite"],
+        "is an input",
+        None,
+    ),
+    (
+        INPUT,
+        [
+            "validate",
+            R,
+            "{d}/trial.csv",
+            "--controller",
+            DS[-3],
+            "--json",
+            "{d}/trial.csv",
+            "--overwrite",
+        ],
+        "is an input",
+        None,
+    ),
     (EXISTS, ["frf", "{d}/rec.csv", *FRF, "--json", "{d}/not-frf.json"], "--overwrite", None),
-    (EXISTS, ["frf", "{d}/rec.csv", *FRF, "--json", "{o}/f.json", "--plots", "{d}"],
-     "--overwrite", None),
-    (EXISTS, ["tfest", "{d}/frf.json", "--poles", "2", "--zeros", "0", "--json",
-              "{d}/not-frf.json"], "--overwrite", None),
-    (EXISTS, ["friction", "{d}/frf.json", "{d}/frf.json", "--json", "{d}/not-frf.json"],
-     "--overwrite", None),
+    (
+        EXISTS,
+        ["frf", "{d}/rec.csv", *FRF, "--json", "{o}/f.json", "--plots", "{d}"],
+        "--overwrite",
+        None,
+    ),
+    (
+        EXISTS,
+        ["tfest", "{d}/frf.json", "--poles", "2", "--zeros", "0", "--json", "{d}/not-frf.json"],
+        "--overwrite",
+        None,
+    ),
+    (
+        EXISTS,
+        ["friction", "{d}/frf.json", "{d}/frf.json", "--json", "{d}/not-frf.json"],
+        "--overwrite",
+        None,
+    ),
 ]
 
 
 def _rows():
-    rows = [pytest.param(c, a, None, id=" ".join(a[:1] + [c.split(" (")[0]]) + f"-{i}")
-            for i, (c, a) in enumerate(CASES)]
+    rows = [
+        pytest.param(c, a, None, id=" ".join(a[:1] + [c.split(" (")[0]]) + f"-{i}")
+        for i, (c, a) in enumerate(CASES)
+    ]
     for i, (c, a, word, xf) in enumerate(CASES_25):
         marks = [pytest.mark.xfail(strict=True, reason=xf)] if xf else []
-        rows.append(pytest.param(c, a, word, marks=marks,
-                                 id=f"{a[0]} #25 {c.split(' (')[0]}-{i}"))
+        rows.append(pytest.param(c, a, word, marks=marks, id=f"{a[0]} #25 {c.split(' (')[0]}-{i}"))
     return rows
 
 
@@ -177,11 +279,10 @@ def _periodic(path: Path, spike: bool = False):
 
     t = np.arange(2000) / 1000.0
     u = sum(np.cos(2 * np.pi * k * 2.0 * t + k) for k in range(1, 20, 2))
-    y = np.convolve(u, [0.1, 0.05, 0.02])[:len(u)]
+    y = np.convolve(u, [0.1, 0.05, 0.02])[: len(u)]
     if spike:
         y[700] = 1e308
-    np.savetxt(path, np.c_[t, u, y], delimiter=",", header="time,current,motor_angle",
-               comments="")
+    np.savetxt(path, np.c_[t, u, y], delimiter=",", header="time,current,motor_angle", comments="")
     return t, u, y
 
 
@@ -228,14 +329,26 @@ def _inputs_25(d: Path) -> None:
         (d / name).write_bytes(tomli_w.dumps(x).encode())
 
     # positive feedback of the hub angle and no amplifier limit: the loop grows without bound
-    scenario("diverge.toml", **{"controller.k1": -1e6, "actuator.limit": 1e12,
-                                "arm.motor.voltage_limit": 1e12, "simulation.duration": 3.0})
+    scenario(
+        "diverge.toml",
+        **{
+            "controller.k1": -1e6,
+            "actuator.limit": 1e12,
+            "arm.motor.voltage_limit": 1e12,
+            "simulation.duration": 3.0,
+        },
+    )
     scenario("duration.toml", **{"simulation.duration": 1e9})  # 1e12 samples
     (d / "ctrl-shape.json").write_text(json.dumps({"D": [[1.0, 2.0], [3.0, 4.0]]}))
-    (d / "ctrl-unstable.json").write_text(json.dumps(
-        {"A": [[2.0]], "B": [[1.0]], "C": [[1.0]], "D": [[0.0]]}))
-    lti = {"type": "lti", "inputs": ["motor_angle"], "setpoints": ["reference"],
-           "outputs": ["voltage"]}
+    (d / "ctrl-unstable.json").write_text(
+        json.dumps({"A": [[2.0]], "B": [[1.0]], "C": [[1.0]], "D": [[0.0]]})
+    )
+    lti = {
+        "type": "lti",
+        "inputs": ["motor_angle"],
+        "setpoints": ["reference"],
+        "outputs": ["voltage"],
+    }
     scenario("ctrl-shape.toml", controller={**lti, "file": "ctrl-shape.json"})
     scenario("ctrl-unstable.toml", controller={**lti, "file": "ctrl-unstable.json"})
     # a closed-loop log of the rig (its own simulation, 1 s)
@@ -276,17 +389,27 @@ def test_the_table_covers_every_command_and_every_class():
 
     commands = set(get_command(app).commands)
     assert {argv[0] for _, argv in CASES} == commands
-    assert {c for c, _ in CASES} == {MISSING, OPTION, PARSER, TOML, LOG, MAT, JSON, CHOICE,
-                                     OUTPUT}
+    assert {c for c, _ in CASES} == {MISSING, OPTION, PARSER, TOML, LOG, MAT, JSON, CHOICE, OUTPUT}
     # issue #25: 10 more classes, 19 more rows; 19 classes in all
-    assert {c for c, *_ in CASES_25} == {DIVERGE, CONTROLLER, DURATION, WINDOW, TIME_UNIT,
-                                         DAMAGED, ABSURD, STAMPS, INPUT, EXISTS}
+    assert {c for c, *_ in CASES_25} == {
+        DIVERGE,
+        CONTROLLER,
+        DURATION,
+        WINDOW,
+        TIME_UNIT,
+        DAMAGED,
+        ABSURD,
+        STAMPS,
+        INPUT,
+        EXISTS,
+    }
     assert len({c for c, _ in CASES} | {c for c, *_ in CASES_25}) == 19
 
 
 @pytest.mark.parametrize("cls, argv, word", _rows())
-def test_bad_input_is_one_line_exit_2_no_traceback_inputs_unchanged(cls, argv, word, inputs,
-                                                                   tmp_path):
+def test_bad_input_is_one_line_exit_2_no_traceback_inputs_unchanged(
+    cls, argv, word, inputs, tmp_path
+):
     before = _hashes(inputs)
     args = [a.replace("{d}", str(inputs)).replace("{o}", str(tmp_path)) for a in argv]
     r = runner.invoke(app, args)
@@ -312,8 +435,9 @@ def test_an_internal_error_is_one_line_naming_a_log_with_the_traceback(tmp_path,
     r = runner.invoke(app, ["scenarios"])
     assert r.exit_code == 1, r.output
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("internal error: RuntimeError: the list "
-                                                   "of scenarios: broke"), r.stderr
+    assert len(lines) == 1 and lines[0].startswith(
+        "internal error: RuntimeError: the list of scenarios: broke"
+    ), r.stderr
     logs = list((tmp_path / "logs").iterdir())
     assert len(logs) == 1 and str(logs[0]) in lines[0]
     text = logs[0].read_text()
@@ -332,8 +456,9 @@ def test_a_project_error_escaping_a_command_is_one_line_exit_2(monkeypatch):
     monkeypatch.setattr(flexarm.specs, "builtin_scenarios", broken)
     r = runner.invoke(app, ["scenarios"])
     assert r.exit_code == 2, r.output
-    assert r.stderr.strip() == ("error: trial1.csv: column 'time', row 3: 'x' is not a "
-                                "number; fix the row")
+    assert r.stderr.strip() == (
+        "error: trial1.csv: column 'time', row 3: 'x' is not a number; fix the row"
+    )
 
 
 def test_version():
@@ -348,8 +473,13 @@ def test_python_dash_m_flexarm_runs_the_cli():
 
     src = str(Path(__file__).resolve().parents[1] / "src")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
-    p = subprocess.run([sys.executable, "-m", "flexarm", "--version"], capture_output=True,
-                       text=True, env=env, timeout=120)
+    p = subprocess.run(
+        [sys.executable, "-m", "flexarm", "--version"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert p.returncode == 0 and p.stdout.strip() == f"flexarm {__version__}", p.stderr
 
 
@@ -363,8 +493,17 @@ def test_two_logs_of_the_same_name_are_two_entries(inputs, tmp_path):
         (tmp_path / sub).mkdir()
         shutil.copy(inputs / "trial.csv", tmp_path / sub / "trial1.csv")
     out = tmp_path / "f.json"
-    r = runner.invoke(app, ["fit", str(tmp_path / "a" / "trial1.csv"),
-                            str(tmp_path / "b" / "trial1.csv"), *DS, "--json", str(out)])
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(tmp_path / "a" / "trial1.csv"),
+            str(tmp_path / "b" / "trial1.csv"),
+            *DS,
+            "--json",
+            str(out),
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert set(json.loads(out.read_text())["fit_percent"]) == {"a/trial1.csv", "b/trial1.csv"}
 
@@ -387,16 +526,17 @@ def test_guarded_declares_the_inputs_and_ends_an_interrupt_with_128_plus_the_sig
         write_text(tmp_path / "out.json", "{}")
     assert log.read_text() == "time\n0\n"
     write_text(log, "y", overwrite=True)  # outside, a file like any other
-    for exc, code in ((Interrupted("stopped by SIGTERM", signal="SIGTERM", number=15), 143),
-                      (KeyboardInterrupt(), 130)):
+    for exc, code in (
+        (Interrupted("stopped by SIGTERM", signal="SIGTERM", number=15), 143),
+        (KeyboardInterrupt(), 130),
+    ):
         with pytest.raises(typer.Exit) as info:
             with guarded():
                 raise exc
         assert info.value.exit_code == code
 
 
-def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_path,
-                                                                  monkeypatch):
+def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_path, monkeypatch):
     """`tfest --json`: the final write fails (a full disk, simulated: OSError ENOSPC for
     the path asked for); the result is saved as <stem>.rescued-<UTC>.json beside it, a
     warning line names it, exit 0."""
@@ -414,8 +554,10 @@ def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_p
         return real(path, text, **kw)
 
     monkeypatch.setattr(w, "write_text", full_disk)
-    r = runner.invoke(app, ["tfest", str(inputs / "frf.json"), "--poles", "2", "--zeros", "0",
-                            "--json", str(target)])
+    r = runner.invoke(
+        app,
+        ["tfest", str(inputs / "frf.json"), "--poles", "2", "--zeros", "0", "--json", str(target)],
+    )
     assert r.exit_code == 0, r.output
     saved = list(tmp_path.glob("t.rescued-*.json"))
     assert not target.exists() and len(saved) == 1

@@ -14,8 +14,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "two-link-rig"
 RUN = DATA / "lqr_full_10deg.mat"
-needs_data = pytest.mark.skipif(not RUN.is_file(), reason=f"real two-link rig data not found "
-                                f"at {DATA} (../shared is absent in a user's clone)")
+needs_data = pytest.mark.skipif(
+    not RUN.is_file(),
+    reason=f"real two-link rig data not found at {DATA} (../shared is absent in a user's clone)",
+)
 DT = 2e-3
 
 
@@ -39,8 +41,9 @@ def _oscillator_loop(channels):
     plant = Osc(("p", "v"), ("s",), ("u",))
     sens = Sensors.make(plant, channels, DT)
     ctrl = discrete.from_transfer_function(([0.0], [1.0]), DT, measured="s")
-    return SampledLoop(plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])),
-                       jnp.asarray(DT), 20)
+    return SampledLoop(
+        plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])), jnp.asarray(DT), 20
+    )
 
 
 def test_computed_rates_equal_the_simulators_filter_outputs():
@@ -56,11 +59,14 @@ def test_computed_rates_equal_the_simulators_filter_outputs():
 
     q = 1e-5
     f2 = {"kind": "lowpass2", "cutoff": "2 Hz", "damping": 0.9}
-    specs = {"s": Sensor(quantum=q, delay=1),
-             "lp": Sensor(signal="s", quantum=q, filter=f2),
-             "lpr": Sensor(signal="s", quantum=q, filter={**f2, "kind": "lowpass2_rate"}),
-             "d": Sensor(signal="s", quantum=q, delay=3,
-                         filter={"kind": "derivative2", "cutoff": "40 Hz"})}
+    specs = {
+        "s": Sensor(quantum=q, delay=1),
+        "lp": Sensor(signal="s", quantum=q, filter=f2),
+        "lpr": Sensor(signal="s", quantum=q, filter={**f2, "kind": "lowpass2_rate"}),
+        "d": Sensor(
+            signal="s", quantum=q, delay=3, filter={"kind": "derivative2", "cutoff": "40 Hz"}
+        ),
+    }
     loop = _oscillator_loop({k: v.model_dump() for k, v in specs.items()})
     n = 1500
     out = simulate_loop(loop, np.array([0.2, 0.0]), {}, n)
@@ -72,8 +78,9 @@ def test_computed_rates_equal_the_simulators_filter_outputs():
     for name in ("lpr", "d"):
         scale = np.abs(meas[name]).max()
         assert scale > 0.1
-        np.testing.assert_allclose(got[name][:-1], meas[name][:-1], rtol=0,
-                                   atol=1e-10 * scale, err_msg=name)
+        np.testing.assert_allclose(
+            got[name][:-1], meas[name][:-1], rtol=0, atol=1e-10 * scale, err_msg=name
+        )
     # a channel neither rule defines (no unfiltered reading, no sibling) is left out
     got2, _ = computed_channels({k: specs[k] for k in ("lp", "d")}, {"lp": meas["lp"]}, DT)
     assert got2 == {}
@@ -85,8 +92,10 @@ def scope_and_workspace():
         pytest.skip(f"real two-link rig data not found at {DATA}")
     from flexarm.io.logformat import load_log
 
-    return (load_log(RUN, ROOT / "examples" / "two-link-scope.toml"),
-            load_log(RUN, ROOT / "examples" / "two-link-workspace.toml"))
+    return (
+        load_log(RUN, ROOT / "examples" / "two-link-scope.toml"),
+        load_log(RUN, ROOT / "examples" / "two-link-workspace.toml"),
+    )
 
 
 @needs_data

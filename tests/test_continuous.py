@@ -27,8 +27,18 @@ from flexarm.sim.filters import continuous_starts, dynamic_blocks
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "two-link-rig"
 STAIR = DATA / "lqr-stair"
 #: the stair's files in the order of the run (README: 0 → 5 → −5 → ... → −30 → 0°)
-ORDER = ["0deg_run01", "5deg_run01", "neg_5deg_run01", "10deg_run01", "neg_10deg_run01",
-         "20deg_run01", "neg_20deg_run01", "30deg_run01", "neg_30deg_run01", "0deg_run02"]
+ORDER = [
+    "0deg_run01",
+    "5deg_run01",
+    "neg_5deg_run01",
+    "10deg_run01",
+    "neg_10deg_run01",
+    "20deg_run01",
+    "neg_20deg_run01",
+    "30deg_run01",
+    "neg_30deg_run01",
+    "0deg_run02",
+]
 
 
 class _Loop:
@@ -58,15 +68,26 @@ def test_states_at_each_piece_are_the_states_of_one_run():
     rng = np.random.default_rng(3)
     n = 50
     y1, y2, r = rng.normal(size=(3, n))
-    blk = lti_controller([[0.5, 0.1], [0.0, 0.8]], [[1.0, 0.0, 0.3], [0.5, -1.0, 0.0]],
-                         [[0.3, -0.2]], [[2.0, -1.0, 0.5]], signals=["y1", "y2", "r"],
-                         references={"r"}, outputs=[2], input_names=("current_1", "current_2"),
-                         dt=3e-3, base_dt=1e-3, name="block")
+    blk = lti_controller(
+        [[0.5, 0.1], [0.0, 0.8]],
+        [[1.0, 0.0, 0.3], [0.5, -1.0, 0.0]],
+        [[0.3, -0.2]],
+        [[2.0, -1.0, 0.5]],
+        signals=["y1", "y2", "r"],
+        references={"r"},
+        outputs=[2],
+        input_names=("current_1", "current_2"),
+        dt=3e-3,
+        base_dt=1e-3,
+        name="block",
+    )
     meas, refs = {"y1": y1, "y2": y2}, {"r": r}
     whole = _stepped(blk, meas, refs)
     cuts = [0, 17, 30, 50]
-    logs = [Log(None, np.arange(b - a) * 1e-3, {"y1": y1[a:b], "y2": y2[a:b], "r": r[a:b]})
-            for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    logs = [
+        Log(None, np.arange(b - a) * 1e-3, {"y1": y1[a:b], "y2": y2[a:b], "r": r[a:b]})
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+    ]
     starts = continuous_starts(_Loop(blk), {}, logs, 1e-3)
     assert [s.sample for s in starts] == cuts[:-1]
     for s in starts:
@@ -80,22 +101,36 @@ def test_states_at_each_piece_are_the_states_of_one_run():
     [(name, _)] = dynamic_blocks(c)
     starts = continuous_starts(_Loop(c), {}, logs, 1e-3)
     for s in starts:
-        np.testing.assert_allclose(s.controllers[name][0], np.asarray(whole[s.sample]),
-                                   rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(
+            s.controllers[name][0], np.asarray(whole[s.sample]), rtol=1e-12, atol=1e-14
+        )
 
 
 def test_a_log_without_the_blocks_inputs_is_named():
-    blk = lti_controller([[0.5]], [[1.0]], [[1.0]], [[0.0]], inputs=["y1"], outputs=[1],
-                         input_names=("current_1",), base_dt=1e-3, name="shoulder LQG")
+    blk = lti_controller(
+        [[0.5]],
+        [[1.0]],
+        [[1.0]],
+        [[0.0]],
+        inputs=["y1"],
+        outputs=[1],
+        input_names=("current_1",),
+        base_dt=1e-3,
+        name="shoulder LQG",
+    )
     logs = [Log(Path("a.mat"), np.arange(5) * 1e-3, {"y2": np.zeros(5)})]
-    with pytest.raises(ValueError, match=r"a.mat: no y1, an input of shoulder LQG, whose state "
-                                         r"is run over the logs \(continuous\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"a.mat: no y1, an input of shoulder LQG, whose state "
+        r"is run over the logs \(continuous\)",
+    ):
         continuous_starts(_Loop(blk), {}, logs, 1e-3)
 
 
 # ----------------------------------------------------------------------------- acceptance
-needs_data = pytest.mark.skipif(not STAIR.is_dir(), reason="needs ../shared/data/two-link-rig "
-                                "(the lab's stair and workspace)")
+needs_data = pytest.mark.skipif(
+    not STAIR.is_dir(), reason="needs ../shared/data/two-link-rig (the lab's stair and workspace)"
+)
 
 SIGNALS = ["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_ref_1", 0, 0, 0]
 
@@ -122,18 +157,34 @@ def _shoulder_lqg(dt: float = 0.01):
     A[6, 7], A[7, 0], A[7, 6], A[7, 7] = 1.0, wc * wc, -wc * wc, -2 * z * wc
     B = np.vstack([B1, np.zeros((4, 1))])
     C = np.eye(8)[[0, 4, 7, 5]]
-    plant = control.ss(A, B, C, np.zeros((4, 1)), inputs=["current_1"],
-                       outputs=["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1"])
+    plant = control.ss(
+        A,
+        B,
+        C,
+        np.zeros((4, 1)),
+        inputs=["current_1"],
+        outputs=["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1"],
+    )
     q = 2 * np.pi / 409600
-    design = lqg(plant, dt, Q=[2500, 1, 1, 100, 1e-6, 1e-6, 1e-6, 1e-6], R=10,
-                 W=[1e-8, 1e-6, 1e-4, 1e-3, 1e-10, 1e-10, 1e-10, 1e-10],
-                 V=[q * q / 12, 1e-8, 1e-4, 1e-6])
+    design = lqg(
+        plant,
+        dt,
+        Q=[2500, 1, 1, 100, 1e-6, 1e-6, 1e-6, 1e-6],
+        R=10,
+        W=[1e-8, 1e-6, 1e-4, 1e-3, 1e-10, 1e-10, 1e-10, 1e-10],
+        V=[q * q / 12, 1e-8, 1e-4, 1e-6],
+    )
     K = design.controller
     M = np.zeros((4, 8))
     M[0, 0], M[0, 4] = -1.0, 1.0
     M[1, 1] = M[2, 2] = M[3, 3] = -1.0
-    return {"A": np.asarray(K.A), "B": np.asarray(K.B) @ M, "C": np.asarray(K.C),
-            "D": np.asarray(K.D) @ M, "Ts": dt}, design
+    return {
+        "A": np.asarray(K.A),
+        "B": np.asarray(K.B) @ M,
+        "C": np.asarray(K.C),
+        "D": np.asarray(K.D) @ M,
+        "Ts": dt,
+    }, design
 
 
 def _controller_toml(folder: Path, struct: dict, k2: np.ndarray) -> Path:
@@ -142,12 +193,28 @@ def _controller_toml(folder: Path, struct: dict, k2: np.ndarray) -> Path:
 
     sio.savemat(folder / "shoulder.mat", {"lqg_ss": struct})
     rho = float(np.abs(np.linalg.eigvals(struct["A"])).max())
-    tables = {"controllers": [
-        {"name": "shoulder LQG", "type": "lti", "file": "shoulder.mat", "variable": "lqg_ss",
-         "signals": SIGNALS, "outputs": ["current_1"], "allow_unstable": rho > 1},
-        {"name": "elbow LQR", "type": "lti", "dt": "2 ms", "outputs": ["current_2"],
-         "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
-         "setpoints": ["theta_ref_2", 0, 0, 0], "D": [list(map(float, k2))]}]}
+    tables = {
+        "controllers": [
+            {
+                "name": "shoulder LQG",
+                "type": "lti",
+                "file": "shoulder.mat",
+                "variable": "lqg_ss",
+                "signals": SIGNALS,
+                "outputs": ["current_1"],
+                "allow_unstable": rho > 1,
+            },
+            {
+                "name": "elbow LQR",
+                "type": "lti",
+                "dt": "2 ms",
+                "outputs": ["current_2"],
+                "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
+                "setpoints": ["theta_ref_2", 0, 0, 0],
+                "D": [list(map(float, k2))],
+            },
+        ]
+    }
     path = folder / "ctrl.toml"
     path.write_bytes(tomli_w.dumps(tables).encode())
     return path
@@ -183,10 +250,19 @@ def _write_pieces(folder: Path, res, n_piece: int) -> list[Path]:
     for i, name in enumerate(ORDER):
         sl = slice(i * n_piece, (i + 1) * n_piece)
         p = folder / f"lqg_step_{name}.mat"
-        sio.savemat(p, {"time": (np.arange(n_piece) * 2e-3)[:, None], "X1_meas": x1[sl],
-                        "X1_ref": np.c_[ref1[sl], np.zeros((n_piece, 3))], "X2_sim": x2[sl],
-                        "X2_meas": np.zeros((n_piece, 4)), "X1_state": s1[sl],
-                        "X2_state": s2[sl], "controller": "lqg"})
+        sio.savemat(
+            p,
+            {
+                "time": (np.arange(n_piece) * 2e-3)[:, None],
+                "X1_meas": x1[sl],
+                "X1_ref": np.c_[ref1[sl], np.zeros((n_piece, 3))],
+                "X2_sim": x2[sl],
+                "X2_meas": np.zeros((n_piece, 4)),
+                "X1_state": s1[sl],
+                "X2_state": s2[sl],
+                "controller": "lqg",
+            },
+        )
         paths.append(p)
     return paths
 
@@ -225,13 +301,15 @@ def build_lqg_stair(tmp_path: Path) -> StairRun:
     ref1 = np.concatenate(refs)
     n = len(ref1)
     sim = sc.simulation.model_copy(update={"duration": (n - 1) * 2e-3})
-    truth = simulate(sc.model_copy(update={"simulation": sim}),
-                     references={"theta_ref_1": ref1, "theta_ref_2": np.zeros(n)})
+    truth = simulate(
+        sc.model_copy(update={"simulation": sim}),
+        references={"theta_ref_1": ref1, "theta_ref_2": np.zeros(n)},
+    )
     # the loop is stable and follows the stair: every step ends within 2.5° of its target
     # (measured: at most 1.93°, short of it as the lab's LQR stops short: the drive's
     # stiction against a law without integral action), and moved at least half the step
-    ends = truth.measured["theta_1"][n_piece - 1::n_piece]
-    targets = ref1[n_piece - 1::n_piece]
+    ends = truth.measured["theta_1"][n_piece - 1 :: n_piece]
+    targets = ref1[n_piece - 1 :: n_piece]
     assert np.all(np.abs(ends - targets) < np.deg2rad(2.5)), np.rad2deg(ends)
     steps = np.diff(np.r_[0.0, targets])
     moved = np.diff(np.r_[0.0, ends])
@@ -240,16 +318,30 @@ def build_lqg_stair(tmp_path: Path) -> StairRun:
     out = tmp_path / "run"
     out.mkdir()
     files = _write_pieces(out, truth, n_piece)
-    fmt_text = Path(__file__).resolve().parents[1].joinpath(
-        "examples", "two-link-staircase.toml").read_text()
-    fmt_text = fmt_text.replace('theta_ref_2 = "X2_meas[0]"',
-                                'theta_ref_2 = "X2_meas[0]"' + FORMAT_EXTRA)
+    fmt_text = (
+        Path(__file__)
+        .resolve()
+        .parents[1]
+        .joinpath("examples", "two-link-staircase.toml")
+        .read_text()
+    )
+    fmt_text = fmt_text.replace(
+        'theta_ref_2 = "X2_meas[0]"', 'theta_ref_2 = "X2_meas[0]"' + FORMAT_EXTRA
+    )
     fmt_path = tmp_path / "fmt.toml"
     fmt_path.write_text(fmt_text)
     fmt = load_log_format(fmt_path)
     logs = [fmt.read(f) for f in files]
-    return StairRun(scenario=sc, base=base, controller_toml=ctrl_toml, files=files,
-                    format=fmt_path, logs=logs, truth=truth, n_piece=n_piece)
+    return StairRun(
+        scenario=sc,
+        base=base,
+        controller_toml=ctrl_toml,
+        files=files,
+        format=fmt_path,
+        logs=logs,
+        truth=truth,
+        n_piece=n_piece,
+    )
 
 
 @pytest.mark.slow
@@ -273,8 +365,11 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
     with warnings.catch_warnings():
         warnings.simplefilter("error", ControllerStateWarning)
         cont = replay_run(sc, logs, continuous=True)
-    with pytest.warns(ControllerStateWarning, match=r"controller 'shoulder LQG' is dynamic "
-                      r"\(8 state\(s\)\).*pass --continuous") as rec:
+    with pytest.warns(
+        ControllerStateWarning,
+        match=r"controller 'shoulder LQG' is dynamic "
+        r"\(8 state\(s\)\).*pass --continuous",
+    ) as rec:
         cold = replay_run(sc, logs, continuous=False)
     assert len([w for w in rec if issubclass(w.category, ControllerStateWarning)]) == len(logs)
 
@@ -283,8 +378,11 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
     worst = 0.0
     for i, rep in enumerate(cont):
         sl = slice(i * n_piece, (i + 1) * n_piece)
-        worst = max(worst, float(np.max(np.abs(rep.result.measured["theta_1"]
-                                               - truth.measured["theta_1"][sl]))))
+        worst = max(
+            worst,
+            float(np.max(np.abs(rep.result.measured["theta_1"] - truth.measured["theta_1"][sl]))),
+        )
+
     # fit % per piece (a piece where a channel does not move, e.g. θ1 in the first rest,
     # has none: NaN, left out)
     def fits(reps, k):
@@ -295,13 +393,16 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
     min_c = {k: float(np.nanmin(fits(cont, k))) for k in chans}
     with capsys.disabled():
         for k in chans:
-            print(k, "continuous", np.round(fits(cont, k), 3), "without",
-                  np.round(fits(cold, k), 2))
+            print(
+                k, "continuous", np.round(fits(cont, k), 3), "without", np.round(fits(cold, k), 2)
+            )
     with capsys.disabled():
         print(f"\nmax |Δθ1| continuous = {worst:.3g} rad ({worst / q:.2f} counts)")
         for k in chans:
-            print(f"  {k:14s} fit % median: continuous {fit_c[k]:8.3f} (min {min_c[k]:8.3f}),"
-                  f" without {fit_0[k]:8.3f}")
+            print(
+                f"  {k:14s} fit % median: continuous {fit_c[k]:8.3f} (min {min_c[k]:8.3f}),"
+                f" without {fit_0[k]:8.3f}"
+            )
     assert worst <= 4 * q
     # what remains are count flips of the encoders (the pieces start from the quantised
     # angle): they show most in θ̇_f, the 40 Hz derivative of the reading, where one count

@@ -71,16 +71,14 @@ def model():
     return build_multilink(benchmark_arm())
 
 
-@pytest.mark.parametrize("law, duration", [(R.law_pd_constant, 0.0),
-                                           (R.law_pd_quasistatic, 1.0)])
+@pytest.mark.parametrize("law, duration", [(R.law_pd_constant, 0.0), (R.law_pd_quasistatic, 1.0)])
 def test_loop_equals_plain_rk4_of_the_law(model, law, duration):
     # De Luca's reproduction: law (8) from the hanging arm over 2 s (dt 1 ms, 10 RK4 steps of
     # 0.1 ms), and law (30b) (Newton steps inside the law) on the quintic reference
     # (time-dependent). Same method, same steps: they differ by the rounding of the stage
     # sums, amplified over 20 000 steps; the measured gap is <= 1e-14, the bound
     # 1e-9 is the tolerance.
-    p = R.regulation_params(model, [18, 18], [10, 2], THETA_D, theta_0=THETA_0,
-                            duration=duration)
+    p = R.regulation_params(model, [18, 18], [10, 2], THETA_D, theta_0=THETA_0, duration=duration)
     x0 = model.state(theta=THETA_0)
     run = simulate_continuous(model, law, x0, 2.0, 1e-3, params=p)
     xs, us = plain_rk4(model.plant, law, p, x0, 1e-3, 10, 2000)
@@ -90,8 +88,9 @@ def test_loop_equals_plain_rk4_of_the_law(model, law, duration):
     assert dx < 1e-9 and du < 1e-9
     # the applied torque at t = 0 is the law at x0 (eq. 8: K_P (θ_d − θ0) + g_θ(θ_d, δ_d))
     if law is R.law_pd_constant:
-        np.testing.assert_allclose(run.torque[0], 18 * 45 * DEG * np.array([1, 0]) + p.g_d,
-                                   rtol=1e-12)
+        np.testing.assert_allclose(
+            run.torque[0], 18 * 45 * DEG * np.array([1, 0]) + p.g_d, rtol=1e-12
+        )
 
 
 def test_held_command_of_a_sampled_part_is_added(model):
@@ -103,11 +102,14 @@ def test_held_command_of_a_sampled_part_is_added(model):
     x0 = model.state(theta=THETA_0)
     loop = law_loop(model, R.law_pd_constant, p, 1e-3, 10)
     ff = FunctionController(lambda prm, s, m, r: (s, prm), c, jnp.zeros(()))
-    with_part = eqx.tree_at(lambda lp: lp.controller, loop,
-                            ContinuousLaw(R.law_pd_constant, p, loop.dt, 2, ff))
-    shifted = eqx.tree_at(lambda lp: lp.controller, loop,
-                          ContinuousLaw(lambda prm, x, t: R.law_pd_constant(prm, x, t) + c,
-                                        p, loop.dt, 2))
+    with_part = eqx.tree_at(
+        lambda lp: lp.controller, loop, ContinuousLaw(R.law_pd_constant, p, loop.dt, 2, ff)
+    )
+    shifted = eqx.tree_at(
+        lambda lp: lp.controller,
+        loop,
+        ContinuousLaw(lambda prm, x, t: R.law_pd_constant(prm, x, t) + c, p, loop.dt, 2),
+    )
     a = sampled.simulate_loop(with_part, x0, {}, 500)
     b = sampled.simulate_loop(shifted, x0, {}, 500)
     np.testing.assert_allclose(a["states"], b["states"], rtol=0, atol=1e-12)
@@ -129,8 +131,7 @@ def test_sampled_controller_through_the_law_path_equals_the_hold_path():
     zero = ContinuousLaw(lambda prm, x, t: jnp.zeros(m), None, p.loop.dt, m, p.loop.controller)
     refs = {k: v[:n] for k, v in p.references.items()}
     held = sampled.simulate_loop(p.loop, p.x0, refs, n)
-    law = sampled.simulate_loop(eqx.tree_at(lambda lp: lp.controller, p.loop, zero),
-                                p.x0, refs, n)
+    law = sampled.simulate_loop(eqx.tree_at(lambda lp: lp.controller, p.loop, zero), p.x0, refs, n)
     dx = np.abs(held["states"] - law["states"]).max()
     print(f"\nsampled PD: hold path vs law path, 1 s with stiction: {dx:.1e}")
     assert dx < 1e-9
@@ -145,8 +146,18 @@ def test_adaptive_tsit5_through_the_loop_agrees_with_rk4(model):
     # the states (<= 1e-10). Their gap (measured 2e-13 on q) must stay below 1e-9 rad/m.
     p = R.regulation_params(model, [18, 18], [10, 2], THETA_D)
     x0 = model.state(theta=THETA_0)
-    ts = simulate_continuous(model, R.law_pd_constant, x0, 0.5, 5e-3, params=p,
-                             method="tsit5", rtol=1e-10, atol=1e-12, step=1e-4)
+    ts = simulate_continuous(
+        model,
+        R.law_pd_constant,
+        x0,
+        0.5,
+        5e-3,
+        params=p,
+        method="tsit5",
+        rtol=1e-10,
+        atol=1e-12,
+        step=1e-4,
+    )
     r25 = simulate_continuous(model, R.law_pd_constant, x0, 0.5, 5e-3, params=p, step=2.5e-5)
     r50 = simulate_continuous(model, R.law_pd_constant, x0, 0.5, 5e-3, params=p, step=5e-5)
     rk_err = np.abs(r25.state_array - r50.state_array).max() / 15
@@ -160,8 +171,7 @@ def test_batch_is_one_result_and_checks_its_input(model):
     scale = np.array([0.9, 1.1])
     pb, axes = R.regulation_params_batch(model, np.outer(scale, [18, 18]), [10, 2], THETA_D)
     x0 = model.state(theta=THETA_0)
-    out = simulate_continuous_batch(model, R.law_pd_constant, x0, 0.1, 1e-2, params=pb,
-                                    axes=axes)
+    out = simulate_continuous_batch(model, R.law_pd_constant, x0, 0.1, 1e-2, params=pb, axes=axes)
     assert out.is_batch and out["theta_1"].shape == (2, 11) and out.theta.shape == (2, 11, 2)
     one = out.run(1)
     p1 = R.regulation_params(model, [1.1 * 18] * 2, [10, 2], THETA_D)
@@ -174,25 +184,33 @@ def test_batch_is_one_result_and_checks_its_input(model):
         out.to_csv("never.csv")
     # one initial state per rollout: rollout 1 from x0 equals the shared-x0 batch's
     x0s = np.stack([model.state(theta=[-80 * DEG, 0.0]), x0])
-    per = simulate_continuous_batch(model, R.law_pd_constant, x0s, 0.1, 1e-2, params=pb,
-                                    axes=axes, chunk=1)
+    per = simulate_continuous_batch(
+        model, R.law_pd_constant, x0s, 0.1, 1e-2, params=pb, axes=axes, chunk=1
+    )
     np.testing.assert_allclose(per.state_array[1], one.state_array, rtol=0, atol=1e-12)
     np.testing.assert_allclose(per.state_array[0, 0], x0s[0], rtol=0, atol=0)
     with pytest.raises(ValueError, match=r"x0 must be \(12,\) or \(N, 12\)"):
-        simulate_continuous_batch(model, R.law_pd_constant, np.zeros(4), 0.1, 1e-2,
-                                  params=pb, axes=axes)
+        simulate_continuous_batch(
+            model, R.law_pd_constant, np.zeros(4), 0.1, 1e-2, params=pb, axes=axes
+        )
     with pytest.raises(ValueError, match="x0 holds 3 initial states; the batch has 2"):
-        simulate_continuous_batch(model, R.law_pd_constant, np.zeros((3, 12)), 0.1, 1e-2,
-                                  params=pb, axes=axes)
+        simulate_continuous_batch(
+            model, R.law_pd_constant, np.zeros((3, 12)), 0.1, 1e-2, params=pb, axes=axes
+        )
     # the loop's generic batch (vmap over the batched gains, batch first) runs the same
     # rollouts as the batch-last layout: rounding only (1e-12)
     loop = law_loop(model, R.law_pd_constant, pb, 1e-2, 100)
-    in_axes = eqx.tree_at(lambda lp: lp.controller.params, jax.tree.map(lambda _: None, loop),
-                          axes, is_leaf=lambda a: a is None)
+    in_axes = eqx.tree_at(
+        lambda lp: lp.controller.params,
+        jax.tree.map(lambda _: None, loop),
+        axes,
+        is_leaf=lambda a: a is None,
+    )
     vb = sampled.simulate_batch(loop, x0, {}, 11, in_axes=in_axes)
     np.testing.assert_allclose(vb["states"], out.state_array, rtol=0, atol=1e-12)
     np.testing.assert_allclose(vb["command"], out.torque, rtol=0, atol=1e-10)
-    with_sensor = eqx.tree_at(lambda lp: lp.sensors, loop,
-                              sampled.Sensors.make(model.plant, {"theta_1": {}}))
+    with_sensor = eqx.tree_at(
+        lambda lp: lp.sensors, loop, sampled.Sensors.make(model.plant, {"theta_1": {}})
+    )
     with pytest.raises(ValueError, match="ContinuousLaw alone"):
         sampled.simulate_law_batch(with_sensor, x0, 11, axes)

@@ -55,11 +55,28 @@ def test_signals_vector_is_the_error_form_reordered():
     Bw, Dw = B4 @ M, D4 @ M
     Dw[0, 7] = d8
     Bw[:, 7] = [0.1, -0.2]
-    err = lti_controller(A, B4, C, D4, inputs=["y1", "y2", "y3", "y4"],
-                         setpoints=["r", 0, 0, 0], outputs=[1], input_names=INPUTS,
-                         base_dt=1e-3)
-    blk = lti_controller(A, Bw, C, Dw, signals=["y1", "y2", "y3", "y4", "r", 0, 0, 0.5],
-                         references={"r"}, outputs=[1], input_names=INPUTS, base_dt=1e-3)
+    err = lti_controller(
+        A,
+        B4,
+        C,
+        D4,
+        inputs=["y1", "y2", "y3", "y4"],
+        setpoints=["r", 0, 0, 0],
+        outputs=[1],
+        input_names=INPUTS,
+        base_dt=1e-3,
+    )
+    blk = lti_controller(
+        A,
+        Bw,
+        C,
+        Dw,
+        signals=["y1", "y2", "y3", "y4", "r", 0, 0, 0.5],
+        references={"r"},
+        outputs=[1],
+        input_names=INPUTS,
+        base_dt=1e-3,
+    )
     assert blk.measured_signals == ("y1", "y2", "y3", "y4")
     assert blk.reference_signals == ("r",)
     meas, refs = _seq()
@@ -73,8 +90,17 @@ def test_signals_vector_is_the_error_form_reordered():
     np.testing.assert_allclose(u_blk[:, 0], want, rtol=1e-12, atol=1e-13)
     np.testing.assert_array_equal(u_blk[:, 1], 0.0)
     # without the constant column the two forms are one controller
-    blk0 = lti_controller(A, B4 @ M, C, D4 @ M, signals=["y1", "y2", "y3", "y4", "r", 0, 0, 0],
-                          references={"r"}, outputs=[1], input_names=INPUTS, base_dt=1e-3)
+    blk0 = lti_controller(
+        A,
+        B4 @ M,
+        C,
+        D4 @ M,
+        signals=["y1", "y2", "y3", "y4", "r", 0, 0, 0],
+        references={"r"},
+        outputs=[1],
+        input_names=INPUTS,
+        base_dt=1e-3,
+    )
     np.testing.assert_allclose(_steps(blk0, meas, refs), u_err, rtol=1e-12, atol=1e-13)
 
 
@@ -92,12 +118,17 @@ def _write_all(folder: Path, Ts=0.01) -> dict[str, tuple[str, str | None]]:
         for k, v in st.items():
             g.create_dataset(k, data=np.atleast_2d(np.asarray(v, float)).T)
     np.savez(folder / "blk.npz", **{f"lqg_ss.{k}": v for k, v in st.items()})
-    (folder / "blk.json").write_text(json.dumps({"lqg_ss": {k: np.asarray(v).tolist()
-                                                            for k, v in st.items()}}))
+    (folder / "blk.json").write_text(
+        json.dumps({"lqg_ss": {k: np.asarray(v).tolist() for k, v in st.items()}})
+    )
     sio.savemat(folder / "top.mat", st)
-    return {"v5": ("v5.mat", "lqg_ss"), "v73": ("v73.mat", "lqg_ss"),
-            "npz": ("blk.npz", "lqg_ss"), "json": ("blk.json", "lqg_ss"),
-            "top": ("top.mat", None)}
+    return {
+        "v5": ("v5.mat", "lqg_ss"),
+        "v73": ("v73.mat", "lqg_ss"),
+        "npz": ("blk.npz", "lqg_ss"),
+        "json": ("blk.json", "lqg_ss"),
+        "top": ("top.mat", None),
+    }
 
 
 def test_file_and_variable_select_the_struct_in_every_format(tmp_path):
@@ -108,8 +139,13 @@ def test_file_and_variable_select_the_struct_in_every_format(tmp_path):
         for k, want in (("A", A), ("B", B4), ("C", C), ("D", D4)):
             np.testing.assert_array_equal(np.atleast_2d(got[k]), want, err_msg=f"{label} {k}")
         assert got["dt"] == 0.01, label
-        spec = LTIControllerSpec(type="lti", file=str(tmp_path / f), variable=var,
-                                 signals=["y1", "y2", "y3", "y4"], outputs=["current_1"])
+        spec = LTIControllerSpec(
+            type="lti",
+            file=str(tmp_path / f),
+            variable=var,
+            signals=["y1", "y2", "y3", "y4"],
+            outputs=["current_1"],
+        )
         assert lti_from_spec(spec, base_dt=1e-3, input_names=INPUTS).every == 10
 
 
@@ -124,8 +160,13 @@ def test_relative_file_is_read_from_the_scenarios_folder(tmp_path, monkeypatch):
     np.savez(tmp_path / "blk.npz", D=[[-99.0]])  # the wrong one, where a cwd lookup finds it
     d = load_scenario("rotary-flexible-link").model_dump(mode="json", exclude_none=True)
     d["simulation"]["duration"] = 0.01
-    d["controller"] = {"type": "lti", "file": "blk.npz", "inputs": ["motor_angle"],
-                       "setpoints": ["reference"], "outputs": ["voltage"]}
+    d["controller"] = {
+        "type": "lti",
+        "file": "blk.npz",
+        "inputs": ["motor_angle"],
+        "setpoints": ["reference"],
+        "outputs": ["voltage"],
+    }
     import tomli_w
 
     (sub / "sc.toml").write_bytes(tomli_w.dumps(d).encode())
@@ -143,13 +184,34 @@ def _two_link_dict() -> dict:
 
 def _blocks(K) -> list[dict]:
     K = np.asarray(K)
-    return [{"type": "lti", "name": "shoulder", "dt": 0.01, "outputs": ["current_1"],
-             "signals": ["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1",
-                         "theta_ref_1", 0, 0, 0],
-             "D": [list(-K[0, :4]) + [K[0, 0], 0, 0, 0]]},
-            {"type": "lti", "name": "elbow", "dt": 0.002, "outputs": ["current_2"],
-             "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
-             "setpoints": ["theta_ref_2", 0, 0, 0], "D": [list(K[1, 4:])]}]
+    return [
+        {
+            "type": "lti",
+            "name": "shoulder",
+            "dt": 0.01,
+            "outputs": ["current_1"],
+            "signals": [
+                "theta_1",
+                "alpha_f_1",
+                "theta_dot_f_1",
+                "alpha_dot_f_1",
+                "theta_ref_1",
+                0,
+                0,
+                0,
+            ],
+            "D": [list(-K[0, :4]) + [K[0, 0], 0, 0, 0]],
+        },
+        {
+            "type": "lti",
+            "name": "elbow",
+            "dt": 0.002,
+            "outputs": ["current_2"],
+            "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
+            "setpoints": ["theta_ref_2", 0, 0, 0],
+            "D": [list(K[1, 4:])],
+        },
+    ]
 
 
 def test_controller_file_replaces_the_scenarios_controllers(tmp_path):
@@ -169,8 +231,11 @@ def test_controller_file_replaces_the_scenarios_controllers(tmp_path):
     assert sc2.controller is None and [c.name for c in sc2.controllers] == ["shoulder", "elbow"]
     assert sc2.controller_references() == {"theta_ref_1", "theta_ref_2"}
     # a single [controller] table too
-    (tmp_path / "one.toml").write_bytes(tomli_w.dumps(
-        {"controller": sc.controller.model_dump(mode="json", exclude_none=True)}).encode())
+    (tmp_path / "one.toml").write_bytes(
+        tomli_w.dumps(
+            {"controller": sc.controller.model_dump(mode="json", exclude_none=True)}
+        ).encode()
+    )
     sc3 = sc2.with_controllers(load_controllers(tmp_path / "one.toml"))
     assert sc3.controllers is None and sc3.controller == sc.controller
 
@@ -204,14 +269,19 @@ def test_bad_input_names_the_file_the_field_the_value_and_the_fix(tmp_path):
     d["controllers"] = _blocks(K)
     d["controllers"][0]["dt"] = 0.005 + 1e-4
     msg = _error(d, tmp_path)
-    assert "controllers[0].dt = 0.0051 s is not a whole multiple of the sampling period " \
-           "0.002 s" in msg and "bad.toml" in msg and "e.g. 0.006 s" in msg
+    assert (
+        "controllers[0].dt = 0.0051 s is not a whole multiple of the sampling period 0.002 s" in msg
+        and "bad.toml" in msg
+        and "e.g. 0.006 s" in msg
+    )
 
     d["controllers"] = _blocks(K)
     d["controllers"][1]["outputs"] = [1]
     msg = _error(d, tmp_path)
-    assert "controllers[1].outputs: 1 is driven by controllers[0] already; two controllers " \
-           "cannot drive one output" in msg
+    assert (
+        "controllers[1].outputs: 1 is driven by controllers[0] already; two controllers "
+        "cannot drive one output" in msg
+    )
 
     d["controllers"] = _blocks(K)
     d["controllers"][1] = {"type": "pd", "kp": 1.0}
@@ -224,9 +294,12 @@ def test_bad_input_names_the_file_the_field_the_value_and_the_fix(tmp_path):
     import tomli_w
 
     (tmp_path / "noD.toml").write_bytes(tomli_w.dumps(d).encode())
-    with pytest.raises(ScenarioError, match=r"\[\[controllers\]\]\[0\] \(shoulder\) file = "
-                       r"'.*noD.mat', variable = 'lqg_ss': no D \(the struct holds: A, B, C, "
-                       r"Ts\).*add the field D"):
+    with pytest.raises(
+        ScenarioError,
+        match=r"\[\[controllers\]\]\[0\] \(shoulder\) file = "
+        r"'.*noD.mat', variable = 'lqg_ss': no D \(the struct holds: A, B, C, "
+        r"Ts\).*add the field D",
+    ):
         prepare(load_scenario(tmp_path / "noD.toml"))
     d["controllers"][0]["variable"] = "lqr_ss"
     (tmp_path / "noD.toml").write_bytes(tomli_w.dumps(d).encode())
@@ -234,8 +307,11 @@ def test_bad_input_names_the_file_the_field_the_value_and_the_fix(tmp_path):
         prepare(load_scenario(tmp_path / "noD.toml"))
 
     (tmp_path / "empty.toml").write_text('[sampling]\nperiod = "1 ms"\n')
-    with pytest.raises(ScenarioError, match=r"empty.toml: .*controller file.*\n.*sampling: "
-                                            r"unknown key"):
+    with pytest.raises(
+        ScenarioError,
+        match=r"empty.toml: .*controller file.*\n.*sampling: "
+        r"unknown key",
+    ):
         load_controllers(tmp_path / "empty.toml")
     (tmp_path / "none.toml").write_text("")
     with pytest.raises(ScenarioError, match=r"none.toml(.|\n)*the file has neither"):

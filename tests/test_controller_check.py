@@ -22,8 +22,10 @@ def test_every_rig_log_confirms_the_logged_law(path):
     gain within the check's own 10 % of the README's table (+0.01 for gains declared 0)."""
     log = read_bench_log(path, log_format=EXAMPLE)
     c = check_controller(log)
-    print(f"\n{path.name}: R² {c.r2:.5f}, delay {c.delay}, by delay {c.r2_by_delay}, "
-          f"saturation {c.saturation_limit}")
+    print(
+        f"\n{path.name}: R² {c.r2:.5f}, delay {c.delay}, by delay {c.r2_by_delay}, "
+        f"saturation {c.saturation_limit}"
+    )
     assert c.r2 > 0.999 and not c.disagreements
     assert c.rates == "logged"
     decl = np.array(README_GAINS[path.name], float)
@@ -33,8 +35,7 @@ def test_every_rig_log_confirms_the_logged_law(path):
     # hub terms (K1 V/rad, K3 V·s/rad); the tip terms K2, K4 multiply metres (|d| < 0.03 m
     # on these links), so 0.03 V/m there is under 1 mV of command (flexarm_K1_6: K2 -0.011)
     floor = np.array([0.01, 0.03, 0.01, 0.03])
-    assert np.all(np.abs(c.regressed[0, ok] - decl[ok])
-                  <= 0.1 * np.abs(decl[ok]) + floor[ok])
+    assert np.all(np.abs(c.regressed[0, ok] - decl[ok]) <= 0.1 * np.abs(decl[ok]) + floor[ok])
     # Saturation: the units that hit the amplifier show a plateau at 5 V (README: "saturates
     # at ±5 V on some units"); logged values are rounded to 1 mV.
     if c.saturation_limit is not None:
@@ -55,8 +56,10 @@ def test_saturation_detected_where_the_command_plateaus():
 def test_wrong_k2_sign_is_rejected_naming_k2():
     by = {p.name: p for p in RIG_FILES}
     fmt = load_log_format(EXAMPLE).model_dump()
-    fmt["controller"] = {"kind": "state_feedback",
-                         "gains": {"K1": 8, "K2": 8.5, "K3": 1.5, "K4": 1.5}}  # K2 sign flipped
+    fmt["controller"] = {
+        "kind": "state_feedback",
+        "gains": {"K1": 8, "K2": 8.5, "K3": 1.5, "K4": 1.5},
+    }  # K2 sign flipped
     wrong = log_format_from_dict(fmt, "wrong-k2.toml")
     log = read_bench_log(by["4PM_Group37_FlexArm_Unit6"], log_format=wrong)
     with pytest.raises(FitInputError) as e:
@@ -81,8 +84,14 @@ def synthetic_delay1(tmp_path_factory):
 
     sc = load_scenario("rotary-flexible-link")
     sc = sc.model_copy(update={"sampling": sc.sampling.model_copy(update={"delay": 1})})
-    return synthetic_log(sc, (6.0, -3.0, 0.2, 0.05), tmp_path_factory.mktemp("cc") / "d1.csv",
-                         duration=2.0, period=1.0, amplitude=0.3)
+    return synthetic_log(
+        sc,
+        (6.0, -3.0, 0.2, 0.05),
+        tmp_path_factory.mktemp("cc") / "d1.csv",
+        duration=2.0,
+        period=1.0,
+        amplitude=0.3,
+    )
 
 
 def test_synthetic_log_gains_and_one_sample_delay_recovered(synthetic_delay1):
@@ -103,17 +112,23 @@ def test_gain_segments_regressed_separately(synthetic_delay1, tmp_path):
     g = log.gains.copy()
     g[1000:, 0] = 7.0  # a declaration that changes although the simulated law did not
     from dataclasses import replace
-    with pytest.raises(FitInputError, match=r"K1 \(samples 1000-2001\): declared 7 V/rad, "
-                                            r"regressed 6 "):
+
+    with pytest.raises(
+        FitInputError,
+        match=r"K1 \(samples 1000-2001\): declared 7 V/rad, "
+        r"regressed 6 ",
+    ):
         check_controller(replace(log, gains=g))
 
 
 def test_check_needs_voltage_and_gains(synthetic_delay1):
     log = read_bench_log(synthetic_delay1)
     from dataclasses import replace
+
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'voltage'"):
-        check_controller(replace(log, signals={k: v for k, v in log.columns.items()
-                                               if k != "voltage"}))
+        check_controller(
+            replace(log, signals={k: v for k, v in log.columns.items() if k != "voltage"})
+        )
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'controller': no declared law"):
         check_controller(replace(log, controller=None, gains=None))
 
@@ -128,11 +143,15 @@ def test_cli_fit_checks_the_law_before_fitting(tmp_path):
 
     by = {p.name: p for p in RIG_FILES}
     wrong = tmp_path / "wrong.toml"
-    wrong.write_text(EXAMPLE.read_text().replace(
-        "gain_columns = { K1 = 8, K2 = 9, K3 = 10, K4 = 11 }",
-        "gain_columns = { K1 = 8, K2 = -9, K3 = 10, K4 = 11 }"))
-    res = CliRunner().invoke(app, ["fit", str(by["Unit7_Flex_trial1.csv"]),
-                                   "--log-format", str(wrong)])
+    wrong.write_text(
+        EXAMPLE.read_text().replace(
+            "gain_columns = { K1 = 8, K2 = 9, K3 = 10, K4 = 11 }",
+            "gain_columns = { K1 = 8, K2 = -9, K3 = 10, K4 = 11 }",
+        )
+    )
+    res = CliRunner().invoke(
+        app, ["fit", str(by["Unit7_Flex_trial1.csv"]), "--log-format", str(wrong)]
+    )
     out = res.output + (res.stderr if res.stderr_bytes is not None else "")
     assert res.exit_code != 0
     assert "K2: declared 1 V/m, regressed -1" in " ".join(out.split())

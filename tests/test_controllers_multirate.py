@@ -21,14 +21,36 @@ def _scenario(duration=0.2):
     K = np.asarray(d.pop("controller")["D"])
     Dw = list(-K[0, :4]) + [K[0, 0], 0.0, 0.0, 0.0]
     d["controllers"] = [
-        {"type": "lti", "name": "shoulder", "dt": "10 ms", "outputs": ["current_1"],
-         "signals": ["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_ref_1",
-                     0, 0, 0],
-         "A": [[0.9, 0.05], [0.0, 0.8]], "B": [[0.02] * 8, [-0.01] * 8],
-         "C": [[0.3, -0.2]], "D": [Dw]},
-        {"type": "lti", "name": "elbow", "dt": "2 ms", "outputs": ["current_2"],
-         "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
-         "setpoints": ["theta_ref_2", 0, 0, 0], "D": [list(K[1, 4:])]}]
+        {
+            "type": "lti",
+            "name": "shoulder",
+            "dt": "10 ms",
+            "outputs": ["current_1"],
+            "signals": [
+                "theta_1",
+                "alpha_f_1",
+                "theta_dot_f_1",
+                "alpha_dot_f_1",
+                "theta_ref_1",
+                0,
+                0,
+                0,
+            ],
+            "A": [[0.9, 0.05], [0.0, 0.8]],
+            "B": [[0.02] * 8, [-0.01] * 8],
+            "C": [[0.3, -0.2]],
+            "D": [Dw],
+        },
+        {
+            "type": "lti",
+            "name": "elbow",
+            "dt": "2 ms",
+            "outputs": ["current_2"],
+            "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
+            "setpoints": ["theta_ref_2", 0, 0, 0],
+            "D": [list(K[1, 4:])],
+        },
+    ]
     return scenario_from_dict(d), K
 
 
@@ -51,12 +73,24 @@ def test_each_block_updates_at_its_own_period_and_holds_between():
     want = np.zeros((len(res.time), 2))
     for k in range(len(res.time)):
         if k % 5 == 0:
-            w = np.r_[m["theta_1"][k], m["alpha_f_1"][k], m["theta_dot_f_1"][k],
-                      m["alpha_dot_f_1"][k], r["theta_ref_1"][k], 0, 0, 0]
+            w = np.r_[
+                m["theta_1"][k],
+                m["alpha_f_1"][k],
+                m["theta_dot_f_1"][k],
+                m["alpha_dot_f_1"][k],
+                r["theta_ref_1"][k],
+                0,
+                0,
+                0,
+            ]
             held = C @ x + Dw @ w
             x = A @ x + B @ w
-        e2 = np.r_[r["theta_ref_2"][k] - m["theta_2"][k], -m["alpha_f_2"][k],
-                   -m["theta_dot_f_2"][k], -m["alpha_dot_f_2"][k]]
+        e2 = np.r_[
+            r["theta_ref_2"][k] - m["theta_2"][k],
+            -m["alpha_f_2"][k],
+            -m["theta_dot_f_2"][k],
+            -m["alpha_dot_f_2"][k],
+        ]
         want[k] = [held[0], K[1, 4:] @ e2]
     assert np.abs(want[:, 0]).max() < 0.94  # the shoulder's holds are not hidden by saturation
     want = np.clip(want, [-0.94, -1.2], [0.94, 1.2])
@@ -74,8 +108,9 @@ def test_the_period_comes_from_the_file_when_dt_is_not_given(tmp_path):
     sc, _ = _scenario()
     d = sc.model_dump(mode="json", exclude_none=True)
     sh = d["controllers"][0]
-    sio.savemat(tmp_path / "sh.mat", {"K": {k: np.asarray(sh.pop(k)) for k in "ABCD"}
-                                      | {"Ts": 0.01}})
+    sio.savemat(
+        tmp_path / "sh.mat", {"K": {k: np.asarray(sh.pop(k)) for k in "ABCD"} | {"Ts": 0.01}}
+    )
     sh.pop("dt")
     sh.update(file=str(tmp_path / "sh.mat"), variable="K")
     blocks = prepare(scenario_from_dict(d)).loop.controller

@@ -26,8 +26,13 @@ class _Cmp:
 
     def __init__(self, nominal_stable, stable, at_limit, limit=5.0):
         stable = np.asarray(stable, bool)
-        self.rows = {"d": {"nominal_stable": nominal_stable, "n_plants": stable.size,
-                           "unstable": int((~stable).sum())}}
+        self.rows = {
+            "d": {
+                "nominal_stable": nominal_stable,
+                "n_plants": stable.size,
+                "unstable": int((~stable).sum()),
+            }
+        }
         self.per_plant = {"d": {"time_at_limit_s": np.asarray(at_limit, float)}}
         self.settings = {"limit_V": limit}
 
@@ -46,18 +51,23 @@ def test_assess_counts_the_shares_against_the_stated_limit():
     assert assess(_Cmp(True, two, zero_lim), "d")["verdict"] == STABLE
     g = assess(_Cmp(True, three, zero_lim), "d")
     assert g["verdict"] == "unstable on 3 of 200 drawn plants (1.5 % > 1 %)" and g["unstable"] == 3
-    assert assess(_Cmp(True, three, zero_lim), "d", GateOptions(max_unstable_share=0.02)
-                  )["verdict"] == STABLE
+    assert (
+        assess(_Cmp(True, three, zero_lim), "d", GateOptions(max_unstable_share=0.02))["verdict"]
+        == STABLE
+    )
     lim = zero_lim.copy()
     lim[1:4] = 0.01  # three drawn plants at the limit for 10 ms
     assert assess(_Cmp(True, ok, lim), "d")["verdict"] == (
-        "the command reaches the ±5 limit on 3 of 200 drawn plants (1.5 % > 1 %)")
+        "the command reaches the ±5 limit on 3 of 200 drawn plants (1.5 % > 1 %)"
+    )
     assert assess(_Cmp(True, ok, lim), "d", GateOptions(check_limit=False))["verdict"] == STABLE
     lim0 = zero_lim.copy()
     lim0[0] = 0.001
     g = assess(_Cmp(False, np.ones(0, bool), lim0[:1]), "d")  # nominal plant only
-    assert g["reasons"] == ["unstable on the nominal plant",
-                            "the command reaches the ±5 limit on the nominal plant"]
+    assert g["reasons"] == [
+        "unstable on the nominal plant",
+        "the command reaches the ±5 limit on the nominal plant",
+    ]
     with pytest.raises(FlexarmError, match="max_unstable_share"):
         GateOptions(max_unstable_share=1.5)
 
@@ -81,11 +91,11 @@ def wrong_gauge_sign():
     return rig, PlantBatch.nominal_only(wired)
 
 
-def test_an_unstable_design_is_refused_accepted_written_and_gated_in_c(wrong_gauge_sign,
-                                                                       tmp_path):
+def test_an_unstable_design_is_refused_accepted_written_and_gated_in_c(wrong_gauge_sign, tmp_path):
     rig, plants = wrong_gauge_sign
-    with pytest.raises(UnstableDesignError, match="not safe to run: unstable on the nominal "
-                                                  "plant") as info:
+    with pytest.raises(
+        UnstableDesignError, match="not safe to run: unstable on the nominal plant"
+    ) as info:
         design_checked(rig, "lqr", plants=plants)
     des = info.value.design
     assert des is not None and des.verdict.startswith("unstable on the nominal plant")
@@ -114,12 +124,16 @@ def test_an_unstable_design_is_refused_accepted_written_and_gated_in_c(wrong_gau
     code, paths = export_c(out, c_out, name="ctl", force=True)
     header = paths[0].read_text()
     guard = header.index("#define CTL_H\n")
-    warn = header.index('#warning "flexarm: lqr/design.toml: design verdict: unstable on the '
-                        'nominal plant')
+    warn = header.index(
+        '#warning "flexarm: lqr/design.toml: design verdict: unstable on the nominal plant'
+    )
     assert guard < warn < header.index("#endif")
     if CC is not None:  # every build says it
-        r = subprocess.run([CC, "-std=gnu99", "-c", str(paths[1]), "-o",
-                            str(tmp_path / "ctl.o")], capture_output=True, text=True)
+        r = subprocess.run(
+            [CC, "-std=gnu99", "-c", str(paths[1]), "-o", str(tmp_path / "ctl.o")],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
         assert "design verdict: unstable on the nominal plant" in r.stderr
 
@@ -175,11 +189,31 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     if not log.is_file():
         pytest.skip(f"real rig log not found at {log} (../shared is absent in a user's clone)")
     rig, fj = tmp_path / "rig.toml", tmp_path / "fit.json"
-    r = CliRunner().invoke(app, [
-        "fit", str(log), "--log-format", str(ROTARY_FORMAT), "--gear-ratio", "48.4",
-        "--motor-constant", "0.0107", "--armature-resistance", "3.29", "--link-length", "0.45",
-        "--window", "0:5", "--validate-window", "5:10", "--json", str(fj),
-        "--scenario-out", str(rig)])
+    r = CliRunner().invoke(
+        app,
+        [
+            "fit",
+            str(log),
+            "--log-format",
+            str(ROTARY_FORMAT),
+            "--gear-ratio",
+            "48.4",
+            "--motor-constant",
+            "0.0107",
+            "--armature-resistance",
+            "3.29",
+            "--link-length",
+            "0.45",
+            "--window",
+            "0:5",
+            "--validate-window",
+            "5:10",
+            "--json",
+            str(fj),
+            "--scenario-out",
+            str(rig),
+        ],
+    )
     assert r.exit_code == 0, r.output
 
     def chain(sc, data, tag):
@@ -196,8 +230,11 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
         _, paths = export_c(tmp_path / tag, tmp_path / f"c_{tag}", name="rig")
         assert "#warning" not in paths[0].read_text()
         if CC is not None:
-            cc = subprocess.run([CC, "-std=c99", "-Wall", "-c", str(paths[1]), "-o",
-                                 str(tmp_path / f"{tag}.o")], capture_output=True, text=True)
+            cc = subprocess.run(
+                [CC, "-std=c99", "-Wall", "-c", str(paths[1]), "-o", str(tmp_path / f"{tag}.o")],
+                capture_output=True,
+                text=True,
+            )
             assert cc.returncode == 0 and not cc.stderr, cc.stderr
         return des
 
@@ -205,16 +242,24 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     print("README chain:", readme.verdict, readme.gate)
     # what the fitted scenario must carry
     blog = read_bench_log(log, log_format=ROTARY_FORMAT).window(0, 5)
-    res = fit([blog], drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-              armature_resistance=3.29, link_length=0.45, computation_delay=1,
-              voltage_limit=blog.voltage_limit)
+    res = fit(
+        [blog],
+        drive="voltage",
+        gear_ratio=48.4,
+        motor_constant=0.0107,
+        armature_resistance=3.29,
+        link_length=0.45,
+        computation_delay=1,
+        voltage_limit=blog.voltage_limit,
+    )
     assert blog.voltage_limit == 5.0
     d = res.scenario_dict()
     ma = d["sensors"]["motor_angle"]
     ma.pop("bits", None), ma.pop("range", None)
     ma["quantum"] = 1e-3
-    right = chain(scenario_from_dict(d), json.loads(json.dumps(res.to_dict(), default=float)),
-                  "right")
+    right = chain(
+        scenario_from_dict(d), json.loads(json.dumps(res.to_dict(), default=float)), "right"
+    )
     print("with the right values:", right.verdict, right.gate)
     assert right.verdict == STABLE and right.gate["unstable"] <= 2, right.gate
     assert right.gate["limit"] == 5.0
@@ -246,8 +291,7 @@ def test_the_cli_gates_the_design_and_the_export(tmp_path):
     err = [ln for ln in r.stderr.splitlines() if ln.startswith("error: ")]
     assert len(err) == 1 and verdict in err[0] and "--accept-unstable" in err[0], r.stderr
     assert "verdict " + verdict in r.stderr and "Traceback" not in r.output
-    ok = runner.invoke(app, ["design", str(sc), "--out", str(tmp_path / "d2"),
-                             "--accept-unstable"])
+    ok = runner.invoke(app, ["design", str(sc), "--out", str(tmp_path / "d2"), "--accept-unstable"])
     assert ok.exit_code == 0, ok.output
     assert json.loads((tmp_path / "d2" / "design.json").read_text())["verdict"] == verdict
     c = tmp_path / "c"
@@ -260,7 +304,8 @@ def test_the_cli_gates_the_design_and_the_export(tmp_path):
     assert r.exit_code == 0, r.output
     assert "#warning" in (c / "controller.h").read_text()
     # the gate's share is an option; a share outside [0, 1] is refused before any work
-    r = runner.invoke(app, ["design", str(sc), "--out", str(tmp_path / "d3"),
-                            "--max-unstable-share", "2"])
+    r = runner.invoke(
+        app, ["design", str(sc), "--out", str(tmp_path / "d3"), "--max-unstable-share", "2"]
+    )
     assert r.exit_code == 2 and "--max-unstable-share" in r.stderr
     assert not (tmp_path / "d3").exists()

@@ -67,8 +67,12 @@ def test_augmented_model_is_the_sampled_loop():
         r = flexarm.simulate(scenario_from_dict(d))
         lin = step_response(dm, des.controller, len(r.time))
         y = {k: np.asarray(r.outputs)[i] for i, k in enumerate(r.output_labels)}
-        errs.append(max(np.abs(y["motor_angle"] - lin["y"][:, 0]).max(),
-                        np.abs(y["tip_deflection"] - lin["y"][:, 1]).max()))
+        errs.append(
+            max(
+                np.abs(y["motor_angle"] - lin["y"][:, 0]).max(),
+                np.abs(y["tip_deflection"] - lin["y"][:, 1]).max(),
+            )
+        )
         # the loop applies the command one sample late (computation delay 1)
         u = np.asarray(r.inputs).reshape(-1)
         np.testing.assert_allclose(u[1:], lin["u"][:-1, 0], rtol=0, atol=1e-6 * np.abs(u).max())
@@ -92,8 +96,10 @@ def test_augmented_model_two_link_error_is_cubic():
     d["simulation"]["duration"] = 1.0
     del d["controller"]
     A = 0.1
-    d["references"] = {"theta_ref_1": {"type": "step", "amplitude": A},
-                       "theta_ref_2": {"type": "step", "amplitude": A / 2}}
+    d["references"] = {
+        "theta_ref_1": {"type": "step", "amplitude": A},
+        "theta_ref_2": {"type": "step", "amplitude": A / 2},
+    }
     sc = scenario_from_dict(d)
     des = flexarm.design(sc, "lqr")
     assert des.info["step"]["peak_command"][0] <= 0.9 * 0.94 + 1e-9  # no saturation
@@ -101,13 +107,16 @@ def test_augmented_model_two_link_error_is_cubic():
     ratio = []
     for a in (A / 4, A / 2, A):
         d2 = des.scenario.model_dump(mode="json", exclude_none=True)
-        d2["references"] = {"theta_ref_1": {"type": "step", "amplitude": a},
-                            "theta_ref_2": {"type": "step", "amplitude": a / 2}}
+        d2["references"] = {
+            "theta_ref_1": {"type": "step", "amplitude": a},
+            "theta_ref_2": {"type": "step", "amplitude": a / 2},
+        }
         r = flexarm.simulate(scenario_from_dict(d2))
         lin = step_response(dm, des.controller, len(r.time), {"theta_1": a, "theta_2": a / 2})
         y = {k: np.asarray(r.outputs)[i] for i, k in enumerate(r.output_labels)}
-        e = max(np.abs(y["theta_1"] - lin["y"][:, 0]).max(),
-                np.abs(y["theta_2"] - lin["y"][:, 1]).max())
+        e = max(
+            np.abs(y["theta_1"] - lin["y"][:, 0]).max(), np.abs(y["theta_2"] - lin["y"][:, 1]).max()
+        )
         ratio.append(e / a**3)
         if a == A / 4:
             assert e < 1e-3 * a, e
@@ -139,8 +148,11 @@ def test_place_gives_the_designed_poles():
         assert np.abs(cl - w).min() < 1e-8, w
     # two degrees of freedom: both channels against 0, the hub against the reference
     assert des.controller.dt == T
-    assert list(des.controller.input_labels) == ["e_motor_angle", "e_tip_deflection",
-                                                 "e_motor_angle_ref"]
+    assert list(des.controller.input_labels) == [
+        "e_motor_angle",
+        "e_tip_deflection",
+        "e_motor_angle_ref",
+    ]
     assert des.scenario.controller.inputs == ["motor_angle", "tip_deflection", "motor_angle"]
     assert des.scenario.controller.setpoints == [0, 0, "reference"]
     # the observer (Kalman predictor) is stable and so is the loop
@@ -161,7 +173,8 @@ def test_lqr_friction_compensation_stops_within_one_count(integral):
     sc = scenario_from_dict(_rotary())
     des = flexarm.design(sc, "lqr", integral=integral)
     assert des.info["friction_compensation"]["level"] == pytest.approx(
-        0.03 / (0.9 * 0.69 * 70 * 7.68e-3 / 2.6), rel=1e-12)
+        0.03 / (0.9 * 0.69 * 70 * 7.68e-3 / 2.6), rel=1e-12
+    )
     assert des.info["model"]["n_disturbances"] == (0 if integral else 1)
     assert not des.warnings, des.warnings
     assert des.info["separation_error"] < 1e-12
@@ -169,8 +182,10 @@ def test_lqr_friction_compensation_stops_within_one_count(integral):
     new = flexarm.simulate(des.scenario)
     e_own = (0.3 - np.asarray(own.outputs)[0, -1]) / COUNT
     e_new = (0.3 - np.asarray(new.outputs)[0, -1]) / COUNT
-    print(f"hub error: scenario's controller {e_own:.2f} counts, lqr design {e_new:.2f} counts; "
-          f"peak command {np.abs(np.asarray(new.inputs)).max():.2f} V")
+    print(
+        f"hub error: scenario's controller {e_own:.2f} counts, lqr design {e_new:.2f} counts; "
+        f"peak command {np.abs(np.asarray(new.inputs)).max():.2f} V"
+    )
     assert abs(e_own) > 2
     assert abs(e_new) <= 1.0
     assert np.abs(np.asarray(new.inputs)).max() < 10.0 - 1e-9
@@ -198,12 +213,28 @@ def test_bad_options_say_what_to_give():
 def test_cli_design_writes_a_scenario_that_runs(tmp_path):
     runner = CliRunner()
     out = tmp_path / "d"
-    res = runner.invoke(app, ["design", "rotary-flexible-link", "--method", "place", "--poles",
-                              "-12+9j,-12-9j,-30+25j,-30-25j", "--out", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--method",
+            "place",
+            "--poles",
+            "-12+9j,-12-9j,-30+25j,-30-25j",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
-    assert {p.name for p in out.iterdir()} == {"design.toml", "design.json", "compare.json",
-                                               "compare.md", "compare_tip.png",
-                                               "compare_hub_command.png"}
+    assert {p.name for p in out.iterdir()} == {
+        "design.toml",
+        "design.json",
+        "compare.json",
+        "compare.md",
+        "compare_tip.png",
+        "compare_hub_command.png",
+    }
     info = json.loads((out / "design.json").read_text())["info"]
     assert info["placement_error"] < 1e-8
     # the step on the nominal plant: the command never reaches the 10 V limit
@@ -213,14 +244,35 @@ def test_cli_design_writes_a_scenario_that_runs(tmp_path):
     # nothing overwritten without --overwrite; bad options name the option and the fix
     again = runner.invoke(app, ["design", "rotary-flexible-link", "--out", str(out)])
     assert again.exit_code == 2 and "--overwrite" in again.output
-    bad = runner.invoke(app, ["design", "rotary-flexible-link", "--method", "place",
-                              "--poles", "-1,x", "--out", str(tmp_path / "b")])
+    bad = runner.invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--method",
+            "place",
+            "--poles",
+            "-1,x",
+            "--out",
+            str(tmp_path / "b"),
+        ],
+    )
     assert bad.exit_code == 2 and "--poles" in bad.output and "'x' is not a number" in bad.output
-    bad = runner.invoke(app, ["design", "rotary-flexible-link", "--method", "nope",
-                              "--out", str(tmp_path / "b")])
+    bad = runner.invoke(
+        app, ["design", "rotary-flexible-link", "--method", "nope", "--out", str(tmp_path / "b")]
+    )
     assert bad.exit_code == 2 and "--method 'nope'" in bad.output
-    bad = runner.invoke(app, ["design", "rotary-flexible-link", "--integral", "--disturbance",
-                              "--out", str(tmp_path / "b")])
+    bad = runner.invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--integral",
+            "--disturbance",
+            "--out",
+            str(tmp_path / "b"),
+        ],
+    )
     assert bad.exit_code == 2 and "choose one" in bad.output
 
 
@@ -265,8 +317,14 @@ def test_design_on_the_fitted_unit6_rig(unit6_rig):
     dh, dt_ = sc.sensors["motor_angle"].delay, sc.sensors["tip_deflection"].delay
     assert des.info["model"]["n_augmented"] == 4 + 1 + 1 + dh + dt_
     assert des.info["separation_error"] < 1e-12
-    cmp = compare(PlantBatch.nominal_only(sc), {"lqr": des}, logged="scenario", step=0.8,
-                  start=0.5, duration=6.0)
+    cmp = compare(
+        PlantBatch.nominal_only(sc),
+        {"lqr": des},
+        logged="scenario",
+        step=0.8,
+        start=0.5,
+        duration=6.0,
+    )
     print(cmp.table("text"))
     own, new = cmp.rows["scenario"]["nominal"], cmp.rows["lqr"]["nominal"]
     assert abs(new["hub_error_counts"]) <= 1.0
@@ -282,11 +340,11 @@ def test_current_drive_and_a_tip_angle_channel():
     separates (matrices to 1e-12)."""
     sc = flexarm.load_scenario("feliu-single-mass")
     des = flexarm.design(sc, "lqr")
-    assert des.info["model"]["setpoints"] == {"motor_angle": "reference",
-                                              "tip_angle": "reference"}
+    assert des.info["model"]["setpoints"] == {"motor_angle": "reference", "tip_angle": "reference"}
     m = sc.arm.motor
     assert des.info["friction_compensation"]["level"] == pytest.approx(
-        sc.arm.friction.coulomb / m.torque_constant, rel=1e-12)
+        sc.arm.friction.coulomb / m.torque_constant, rel=1e-12
+    )
     assert des.info["model"]["n_augmented"] == 4 + 1
     assert des.info["separation_error"] < 1e-12
     assert np.abs(loop_poles(design_model(sc).augmented, des.controller)).max() < 1.0
@@ -315,8 +373,11 @@ def test_disturbance_estimate_is_integral_action():
         ends[dist] = th
         if not dist:
             c = des.controller
-            G1 = (np.asarray(c.C) @ np.linalg.solve(np.eye(c.nstates) - np.asarray(c.A),
-                                                    np.asarray(c.B)) + np.asarray(c.D))[0]
+            G1 = (
+                np.asarray(c.C)
+                @ np.linalg.solve(np.eye(c.nstates) - np.asarray(c.A), np.asarray(c.B))
+                + np.asarray(c.D)
+            )[0]
             # inputs (e_motor_angle, e_tip_deflection, e_motor_angle_ref) at rest, tip at 0:
             # (−θ, 0, r − θ); solve G1·(−θ, 0, r − θ) = −τ_b / k_u for θ
             theta = (G1[2] * 0.3 + 0.02 / k_u) / (G1[0] + G1[2])

@@ -26,8 +26,12 @@ def _rotary():
     return flexarm.load_scenario("rotary-flexible-link")
 
 
-SPREAD = {"arm.friction.coulomb": (0.03, 0.006), "arm.motor.inertia": (2.08e-3, 2e-4),
-          "arm.beam.damping_ratio": (0.03, 0.01), "sensors.tip_deflection.gain": (1.0, 0.05)}
+SPREAD = {
+    "arm.friction.coulomb": (0.03, 0.006),
+    "arm.motor.inertia": (2.08e-3, 2e-4),
+    "arm.beam.damping_ratio": (0.03, 0.01),
+    "sensors.tip_deflection.gain": (1.0, 0.05),
+}
 
 
 # ----------------------------------------------------------------------------- plants
@@ -50,7 +54,8 @@ def test_from_paths_moments_and_physical():
     j = 17
     assert b.scenarios[j].arm.friction.coulomb == pytest.approx(b.values["arm.friction.coulomb"][j])
     assert b.scenarios[j].sensors["tip_deflection"].gain == pytest.approx(
-        b.values["sensors.tip_deflection.gain"][j])
+        b.values["sensors.tip_deflection.gain"][j]
+    )
     # seeded: the same seed gives the same plants
     b2 = pl.from_paths(_rotary(), SPREAD, 5, seed=3)
     np.testing.assert_array_equal(b2.coordinates, b.coordinates[:5])
@@ -64,8 +69,9 @@ def test_from_paths_bad_input_names_the_path():
 
 
 # ----------------------------------------------------------------------------- compare
-def _independent_metrics(res, step: float, start: float, q: float, band: float, tail: float,
-                         length: float, limit: float):
+def _independent_metrics(
+    res, step: float, start: float, q: float, band: float, tail: float, length: float, limit: float
+):
     """The metrics of design/compare.py from one plain flexarm.simulate run, computed
     here by other code: flexarm.metrics.step_metrics for the overshoot, a loop
     backwards in time for the settling."""
@@ -75,8 +81,8 @@ def _independent_metrics(res, step: float, start: float, q: float, band: float, 
     u = np.abs(np.asarray(res.command)).reshape(len(t), -1)[:, 0]
     n = len(t)
     last = n // 20
-    hub = float(np.mean(np.abs(step - th[n - last:]))) / q
-    final = float(np.mean(tip[n - last:]))
+    hub = float(np.mean(np.abs(step - th[n - last :]))) / q
+    final = float(np.mean(tip[n - last :]))
     k0 = int(np.argmax(t >= start - 1e-12))
     ts = 0.0
     for k in range(n - 1, k0 - 1, -1):
@@ -84,14 +90,19 @@ def _independent_metrics(res, step: float, start: float, q: float, band: float, 
             ts = math.nan if k == n - 1 else float(t[k + 1] - t[k0])
             break
     over = 100 * step_metrics(t, tip, r).overshoot
-    dd = d[n - int(round(tail * n)):]
+    dd = d[n - int(round(tail * n)) :]
     osc = 1e3 * float(np.sqrt(np.mean((dd - dd.mean()) ** 2)))
     us = np.asarray(res.command).reshape(len(t), -1)[:, 0]
     chatter = math.sqrt(sum((us[k] - us[k - 1]) ** 2 for k in range(1, n)) / (n - 1))
-    return {"hub_error_counts": hub, "tip_settling_s": ts, "tip_overshoot_pct": over,
-            "tip_oscillation_mm": osc, "peak_command_V": float(u.max()),
-            "time_at_limit_s": float(np.sum(u >= limit * (1 - 1e-9)) * (t[1] - t[0])),
-            "command_chatter_V": chatter}
+    return {
+        "hub_error_counts": hub,
+        "tip_settling_s": ts,
+        "tip_overshoot_pct": over,
+        "tip_oscillation_mm": osc,
+        "peak_command_V": float(u.max()),
+        "time_at_limit_s": float(np.sum(u >= limit * (1 - 1e-9)) * (t[1] - t[0])),
+        "command_chatter_V": chatter,
+    }
 
 
 def test_compare_nominal_equals_plain_simulation(tmp_path):
@@ -125,7 +136,8 @@ def test_compare_nominal_equals_plain_simulation(tmp_path):
     # JSON dict, markdown table and figures
     dd = c.to_dict()
     assert dd["rows"]["logged controller"]["nominal"]["peak_command_V"] == pytest.approx(
-        ind["peak_command_V"])
+        ind["peak_command_V"]
+    )
     assert c.table().count("\n") == 3  # header, rule, two controllers
     paths = c.figures(tmp_path)
     assert all(p.stat().st_size > 5000 for p in paths)
@@ -156,19 +168,32 @@ def test_tune_lowers_the_batch_cost_and_is_reproducible(tmp_path):
     print(info["cost"], info["parameters"])
     assert des.method == "tune" and len(seen) == info["evaluations"] >= 25
     assert info["cost"]["tuned"] < info["cost"]["start"]
-    fresh = TuneCost(des.scenario, b, list(info["parameters"]), step=0.3, start=0.1,
-                     duration=1.5, band=0.02, quantile=0.9, weights={}, hub_error_max=1.0,
-                     count=None, seed=0)
+    fresh = TuneCost(
+        des.scenario,
+        b,
+        list(info["parameters"]),
+        step=0.3,
+        start=0.1,
+        duration=1.5,
+        band=0.02,
+        quantile=0.9,
+        weights={},
+        hub_error_max=1.0,
+        count=None,
+        seed=0,
+    )
     p = [v["tuned"] for v in info["parameters"].values()]
     assert fresh.evaluate(p)[0] == pytest.approx(info["cost"]["tuned"], rel=1e-12)
     assert des.scenario.controller.friction_compensation is not None
     # written as a scenario file that loads with the tuned gains
     des.write(tmp_path / "d")
     back = flexarm.load_scenario(tmp_path / "d" / "design.toml")
-    assert back.controller.k1 == pytest.approx(info["parameters"]["controller.k1"]["tuned"],
-                                               rel=1e-15)
+    assert back.controller.k1 == pytest.approx(
+        info["parameters"]["controller.k1"]["tuned"], rel=1e-15
+    )
     assert back.controller.friction_compensation.level == pytest.approx(
-        info["parameters"]["controller.friction_compensation.level"]["tuned"], rel=1e-15)
+        info["parameters"]["controller.friction_compensation.level"]["tuned"], rel=1e-15
+    )
     # the linear part against the controller itself
     import control
 
@@ -178,8 +203,9 @@ def test_tune_lowers_the_batch_cost_and_is_reproducible(tmp_path):
     rng = np.random.default_rng(0)
     r, th, dd = rng.normal(size=(3, 50))
     sys = des.controller
-    _, y = control.forced_response(sys, np.arange(50) * T, np.vstack([r, th, dd]),
-                                   X0=[th[0], dd[0]])
+    _, y = control.forced_response(
+        sys, np.arange(50) * T, np.vstack([r, th, dd]), X0=[th[0], dd[0]]
+    )
     c = from_spec(des.scenario.controller, T)
     s = c.init()
     out = []
@@ -253,15 +279,19 @@ def _acceptance(res, tag):
 
     b = pl.from_fit(res, 200, seed=0)
     des = {"tuned": design_tune(b.nominal, b, count=COUNT, maxfev=300)}
-    rig = pl.with_overrides(b.nominal, {"sensors": {"motor_angle": {
-        "quantum": COUNT, "bits": None, "range": None}}})
+    rig = pl.with_overrides(
+        b.nominal, {"sensors": {"motor_angle": {"quantum": COUNT, "bits": None, "range": None}}}
+    )
     des["lqr"] = flexarm.design(rig, "lqr", plants=b, count=COUNT)  # robust over the batch
     des["nested"] = flexarm.design(rig, "nested")
     c = cmp.compare(b, des, duration=6.0, count=COUNT)
     t = des["tuned"]
-    print(f"\n{tag}: tuned gains", {k: round(v["tuned"], 4) for k, v in t.info["parameters"].items()},
-          f"cost {t.info['cost']['start']:.3f} -> {t.info['cost']['tuned']:.3f},",
-          f"{t.info['evaluations']} evaluations, {t.info['seconds']:.1f} s")
+    print(
+        f"\n{tag}: tuned gains",
+        {k: round(v["tuned"], 4) for k, v in t.info["parameters"].items()},
+        f"cost {t.info['cost']['start']:.3f} -> {t.info['cost']['tuned']:.3f},",
+        f"{t.info['evaluations']} evaluations, {t.info['seconds']:.1f} s",
+    )
     print(c.table("markdown"))
     return c
 
@@ -299,7 +329,8 @@ def test_designs_meet_issue_targets(unit, request):
             "stable": row["unstable"] == 0 and row["nominal_stable"],
             "limit": row["limit_respected"],
             "settling": row["median"]["tip_settling_s"] <= 0.7 * log["median"]["tip_settling_s"],
-            "hub": row["median"]["hub_error_counts"] <= 1.0}
+            "hub": row["median"]["hub_error_counts"] <= 1.0,
+        }
         missed |= {(name, k) for k, ok in checks.items() if not ok}
     assert missed == KNOWN_MISSES[unit], (sorted(missed), {n: c.rows[n]["median"] for n in c.rows})
 
@@ -313,8 +344,15 @@ def test_tune_any_controller_by_path_and_bad_input():
     d["controller"] = {"type": "pd", "kp": 6.0, "kd": 0.05}
     sc = scenario_from_dict(d)
     b = pl.from_paths(sc, SPREAD, 3, seed=4)
-    des = design_tune(sc, b, params=["controller.kp", "controller.kd"], step=0.3,
-                      duration=1.0, maxfev=12, restarts=0)
+    des = design_tune(
+        sc,
+        b,
+        params=["controller.kp", "controller.kd"],
+        step=0.3,
+        duration=1.0,
+        maxfev=12,
+        restarts=0,
+    )
     info = des.info
     assert des.scenario.controller.type == "pd" and des.controller is None
     assert des.scenario.controller.friction_compensation is None
@@ -323,8 +361,15 @@ def test_tune_any_controller_by_path_and_bad_input():
     with pytest.raises(ValueError, match="controller.*has no 'kq'"):
         design_tune(sc, b, params=["controller.kq"], step=0.3, duration=1.0, maxfev=3)
     with pytest.raises(ValueError, match=r"bounds\['controller.k1'\]"):
-        design_tune(sc, b, params=["controller.kp"], bounds={"controller.k1": (0, 1)},
-                    step=0.3, duration=1.0, maxfev=3)
+        design_tune(
+            sc,
+            b,
+            params=["controller.kp"],
+            bounds={"controller.k1": (0, 1)},
+            step=0.3,
+            duration=1.0,
+            maxfev=3,
+        )
 
 
 def test_cli_design_tune_over_drawn_plants(tmp_path):
@@ -339,21 +384,46 @@ def test_cli_design_tune_over_drawn_plants(tmp_path):
     from flexarm.cli import app
 
     out = tmp_path / "t"
-    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
-                                 "--spread", "arm.motor.inertia=10%,arm.friction.coulomb=20%",
-                                 "--plants", "6", "--out", str(out)])
+    r = CliRunner().invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--method",
+            "tune",
+            "--spread",
+            "arm.motor.inertia=10%,arm.friction.coulomb=20%",
+            "--plants",
+            "6",
+            "--out",
+            str(out),
+        ],
+    )
     assert r.exit_code == 0, r.output
     rows = json.loads((out / "compare.json").read_text())["rows"]
     assert rows["tune"]["median"]["hub_error_counts"] <= 1.0, rows["tune"]
     assert rows["scenario"]["median"]["hub_error_counts"] > 5.0, rows["scenario"]
     assert rows["tune"]["unstable"] == 0 and rows["tune"]["limit_respected"]
     assert {"compare_tip.png", "compare_hub_command.png", "design.toml"} <= {
-        p.name for p in out.iterdir()}
-    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
-                                 "--out", str(tmp_path / "u")])
+        p.name for p in out.iterdir()
+    }
+    r = CliRunner().invoke(
+        app, ["design", "rotary-flexible-link", "--method", "tune", "--out", str(tmp_path / "u")]
+    )
     assert r.exit_code == 2 and "--fit-json" in r.output
-    r = CliRunner().invoke(app, ["design", "rotary-flexible-link", "--method", "tune",
-                                 "--spread", "arm.motor.nope=10%", "--out", str(tmp_path / "v")])
+    r = CliRunner().invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--method",
+            "tune",
+            "--spread",
+            "arm.motor.nope=10%",
+            "--out",
+            str(tmp_path / "v"),
+        ],
+    )
     assert r.exit_code == 2 and "nope" in r.output
 
 
@@ -366,19 +436,25 @@ def test_scenario_spread_from_a_fit_json():
 
     sc = flexarm.load_scenario("rotary-flexible-link")
     L = sc.arm.beam.length
-    fit = {"parameters": {
-        "hub_inertia": {"value": 2.08e-3, "std": 1e-4}, "viscous": {"value": 4e-3, "std": 4e-4},
-        "coulomb": {"value": 0.03, "std": 0.003}, "link_damping": {"value": 0.03, "std": 0.01},
-        "link_frequency": {"value": 18.5, "std": 0.37}, "link_inertia": {"value": 3.5e-3,
-                                                                       "std": 3.5e-4},
-        "tip_gain": {"value": 1.0, "std": None}}}
+    fit = {
+        "parameters": {
+            "hub_inertia": {"value": 2.08e-3, "std": 1e-4},
+            "viscous": {"value": 4e-3, "std": 4e-4},
+            "coulomb": {"value": 0.03, "std": 0.003},
+            "link_damping": {"value": 0.03, "std": 0.01},
+            "link_frequency": {"value": 18.5, "std": 0.37},
+            "link_inertia": {"value": 3.5e-3, "std": 3.5e-4},
+            "tip_gain": {"value": 1.0, "std": None},
+        }
+    }
     sp = scenario_spread(fit, sc)
     assert sp["arm.motor.inertia"] == (sc.arm.motor.inertia, 1e-4)
     assert sp["arm.friction.static"][1] == sp["arm.friction.coulomb"][1] == 0.003
     assert sp["arm.beam.masses[0].mass"][1] == pytest.approx(3.5e-4 / L**2, rel=1e-12)
     ei = sc.arm.beam.flexural_rigidity
     assert sp["arm.beam.flexural_rigidity"][1] == pytest.approx(
-        ei * math.hypot(2 * 0.02, 0.1), rel=1e-12)
+        ei * math.hypot(2 * 0.02, 0.1), rel=1e-12
+    )
     assert "sensors.tip_deflection.gain" not in sp  # no std: not drawn
     with pytest.raises(Exception, match="no 'parameters'"):
         scenario_spread({}, sc)

@@ -29,17 +29,30 @@ import flexarm
 from flexarm import distributed as fd
 
 #: the tests that start workers; the in-process paths run without Dask
-needs_dask = pytest.mark.skipif(not fd.have_dask(), reason="dask.distributed is not "
-                                "installed (pip install 'flexarm[distributed]')")
+needs_dask = pytest.mark.skipif(
+    not fd.have_dask(),
+    reason="dask.distributed is not installed (pip install 'flexarm[distributed]')",
+)
 
-SPREAD = {"arm.friction.coulomb": (0.03, 0.006), "arm.motor.inertia": (2.08e-3, 2e-4),
-          "arm.beam.damping_ratio": (0.03, 0.01), "sensors.tip_deflection.gain": (1.0, 0.05)}
+SPREAD = {
+    "arm.friction.coulomb": (0.03, 0.006),
+    "arm.motor.inertia": (2.08e-3, 2e-4),
+    "arm.beam.damping_ratio": (0.03, 0.01),
+    "sensors.tip_deflection.gain": (1.0, 0.05),
+}
 #: the synthetic rig of tests/test_bench_fit.py (its data sheet, delays known)
-RIG = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3, armature_resistance=2.6,
-           link_length=0.42)
-FAST = "gear_efficiency=0.9;motor_efficiency=0.69;angle_delay=0;tip_delay=0;max_delay=3;" \
-       "estimates=false;popsize=4;maxiter=1;global_seconds=0.5;local_nfev=3;polish_iter=0;" \
-       "delay_nfev=1"
+RIG = dict(
+    drive="voltage",
+    gear_ratio=70,
+    motor_constant=7.68e-3,
+    armature_resistance=2.6,
+    link_length=0.42,
+)
+FAST = (
+    "gear_efficiency=0.9;motor_efficiency=0.69;angle_delay=0;tip_delay=0;max_delay=3;"
+    "estimates=false;popsize=4;maxiter=1;global_seconds=0.5;local_nfev=3;polish_iter=0;"
+    "delay_nfev=1"
+)
 
 
 @pytest.fixture(scope="module")
@@ -73,8 +86,7 @@ def _batch():
     from flexarm.design import plants as pl
 
     sc = flexarm.load_scenario("rotary-flexible-link")
-    b = pl.from_paths(sc, SPREAD, 5, seed=1).with_overrides(
-        {"simulation": {"duration": 0.4}})
+    b = pl.from_paths(sc, SPREAD, 5, seed=1).with_overrides({"simulation": {"duration": 0.4}})
     return b.loop()  # nominal + 5 plants: 6 rollouts, two chunks of 3
 
 
@@ -89,8 +101,9 @@ def test_chunked_batch_is_bit_identical_in_process_1_and_2_workers(client):
     here = simulate_batch(*args, seed=3, chunks=opts)
     workers = sorted(client.scheduler_info()["workers"])
     assert len(workers) == 2
-    one = simulate_batch(*args, seed=3, client=client,
-                         chunks=fd.ChunkOptions(chunk=3, workers=(workers[0],)))
+    one = simulate_batch(
+        *args, seed=3, client=client, chunks=fd.ChunkOptions(chunk=3, workers=(workers[0],))
+    )
     two = simulate_batch(*args, seed=3, client=client, chunks=opts)
     assert here.chunks == two.chunks == 2 and here.trajectories is None
     for k, v in here.per_rollout.items():
@@ -103,11 +116,11 @@ def test_chunked_batch_is_bit_identical_in_process_1_and_2_workers(client):
     med = np.median(here.per_rollout["peak_abs_signals"][~plain["diverged"]], axis=0)
     np.testing.assert_allclose(here.quantiles["peak_abs_signals"][0.5], med, rtol=1e-12)
     # trajectories only on request, then the same as the unchunked batch's
-    full = simulate_batch(*args, seed=3, client=client,
-                          chunks=fd.ChunkOptions(chunk=3, trajectories=True))
+    full = simulate_batch(
+        *args, seed=3, client=client, chunks=fd.ChunkOptions(chunk=3, trajectories=True)
+    )
     ref = simulate_batch(*args, seed=3, check=False)
-    np.testing.assert_allclose(full.trajectories["signals"], ref["signals"], rtol=1e-12,
-                               atol=1e-15)
+    np.testing.assert_allclose(full.trajectories["signals"], ref["signals"], rtol=1e-12, atol=1e-15)
 
 
 def test_compare_in_chunks_equals_one_batch():
@@ -123,8 +136,12 @@ def test_compare_in_chunks_equals_one_batch():
     name = "logged controller"
     assert chunked.settings["chunks"] == 2 and chunked.rows[name]["n_plants"] == 4
     for k, v in one.per_plant[name].items():
-        np.testing.assert_allclose(np.asarray(chunked.per_plant[name][k], float),
-                                   np.asarray(v, float), rtol=1e-12, err_msg=k)
+        np.testing.assert_allclose(
+            np.asarray(chunked.per_plant[name][k], float),
+            np.asarray(v, float),
+            rtol=1e-12,
+            err_msg=k,
+        )
     assert chunked.rows[name]["unstable"] == one.rows[name]["unstable"]
     for s in ("nominal", "median", "worst"):
         for k, v in one.rows[name][s].items():
@@ -139,8 +156,17 @@ def test_tune_cost_in_chunks_equals_one_batch():
 
     sc = flexarm.load_scenario("rotary-flexible-link")
     b = pl.from_paths(sc, SPREAD, 4, seed=1)
-    kw = dict(step=0.3, start=0.1, duration=0.8, band=0.02, quantile=0.9, weights={},
-              hub_error_max=1.0, count=None, seed=0)
+    kw = dict(
+        step=0.3,
+        start=0.1,
+        duration=0.8,
+        band=0.02,
+        quantile=0.9,
+        weights={},
+        hub_error_max=1.0,
+        count=None,
+        seed=0,
+    )
     paths = ["controller.k1", "controller.k3"]
     one = TuneCost(sc, b, paths, **kw)
     chunked = fd.ChunkedTuneCost(sc, b, paths, options=fd.ChunkOptions(chunk=2), **kw)
@@ -159,18 +185,29 @@ def _manifest(tmp: Path) -> Path:
     sc = flexarm.load_scenario("rotary-flexible-link")
     logs = tmp / "logs"
     logs.mkdir()
-    synthetic_log(sc, (6, -40, 0.15, 0), logs / "a.csv", duration=1.5, period=1.0,
-                  amplitude=(0.5, 0.15), tip0=0.01, seed=0)
+    synthetic_log(
+        sc,
+        (6, -40, 0.15, 0),
+        logs / "a.csv",
+        duration=1.5,
+        period=1.0,
+        amplitude=(0.5, 0.15),
+        tip0=0.01,
+        seed=0,
+    )
     (logs / "broken.csv").write_text("this is not a log\n1,2\n")
-    sheet = ",".join(str(RIG[k]) for k in ("drive", "gear_ratio", "motor_constant",
-                                           "armature_resistance", "link_length"))
+    sheet = ",".join(
+        str(RIG[k])
+        for k in ("drive", "gear_ratio", "motor_constant", "armature_resistance", "link_length")
+    )
     m = tmp / "manifest.csv"
     m.write_text(
         "# a small synthetic manifest\n"
         "id,preset,logs,drive,gear_ratio,motor_constant,armature_resistance,link_length,options\n"
         f"good,servo_rig,logs/a.csv,{sheet},{FAST}\n"
         f"bad,servo_rig,logs/broken.csv,{sheet},{FAST}\n"
-        f"killer,servo_rig,logs/a.csv,{sheet},{FAST}\n")
+        f"killer,servo_rig,logs/a.csv,{sheet},{FAST}\n"
+    )
     return m
 
 
@@ -198,8 +235,10 @@ def test_read_manifest_resolves_paths_and_names_bad_cells(tmp_path):
     assert rows[0].data_sheet["gear_ratio"] == 70.0 and rows[0].options["popsize"] == 4
     assert rows[0].options["estimates"] is False
     general = tmp_path / "general.csv"
-    general.write_text("id,scenario,logs,free,window\n"
-                       "g,rotary-flexible-link,logs/a.csv,arm.friction.coulomb;arm.motor.inertia,0:1\n")
+    general.write_text(
+        "id,scenario,logs,free,window\n"
+        "g,rotary-flexible-link,logs/a.csv,arm.friction.coulomb;arm.motor.inertia,0:1\n"
+    )
     (g,) = fd.read_manifest(general)
     assert g.scenario == "rotary-flexible-link" and g.preset is None and g.window == (0.0, 1.0)
     assert g.free == ("arm.friction.coulomb", "arm.motor.inertia")
@@ -220,8 +259,7 @@ def test_read_manifest_resolves_paths_and_names_bad_cells(tmp_path):
 def test_fit_many_killed_worker_failed_row_and_resume(client, tmp_path):
     m = _manifest(tmp_path)
     out = tmp_path / "fits"
-    recs = fd.fit_many(m, client, out, options=fd.FitManyOptions(figures=False,
-                                                                 fit=_killing_fit))
+    recs = fd.fit_many(m, client, out, options=fd.FitManyOptions(figures=False, fit=_killing_fit))
     st = {r["id"]: r for r in recs}
     assert (tmp_path / "logs" / "killed-once").exists()  # the worker was killed once
     assert st["good"]["status"] == "done" and st["killer"]["status"] == "done", st
@@ -238,11 +276,13 @@ def test_fit_many_killed_worker_failed_row_and_resume(client, tmp_path):
     assert float(summary[0]["hub_inertia"]) == pytest.approx(st["good"]["hub_inertia"])
     assert any(k.startswith("fit%:a.csv:") for k in summary[0])
     # a rerun (in-process) skips the finished rows and tries the failed one again
-    again = fd.fit_many(m, None, out, options=fd.FitManyOptions(figures=False,
-                                                                fit=_counting_fit))
+    again = fd.fit_many(m, None, out, options=fd.FitManyOptions(figures=False, fit=_counting_fit))
     assert (tmp_path / "logs" / "attempts.txt").read_text().split() == ["bad"]
-    assert [r["status"] for r in again] == ["skipped (finished before)", "failed",
-                                            "skipped (finished before)"]
+    assert [r["status"] for r in again] == [
+        "skipped (finished before)",
+        "failed",
+        "skipped (finished before)",
+    ]
     assert again[0]["hub_inertia"] == st["good"]["hub_inertia"]
 
 
@@ -255,8 +295,9 @@ def test_fit_many_in_process_without_dask(tmp_path, monkeypatch):
         warnings.simplefilter("always")
         client = fd.client_for(workers=2)
     assert client is None and "not installed" in str(w[0].message)
-    recs = fd.fit_many(m, client, tmp_path / "out",
-                       options=fd.FitManyOptions(figures=False, fit=_refuse))
+    recs = fd.fit_many(
+        m, client, tmp_path / "out", options=fd.FitManyOptions(figures=False, fit=_refuse)
+    )
     assert [r["status"] for r in recs] == ["failed"] * 3
     assert recs[0]["error"] == "ValueError: refused good"
     assert (tmp_path / "out" / "good" / "error.txt").read_text().strip() == recs[0]["error"]
@@ -276,17 +317,28 @@ def test_cli_fit_many_reports_a_failed_row_and_exits_1(tmp_path):
 
     m = _manifest(tmp_path)
     lines = m.read_text().splitlines()
-    m.write_text("\n".join([ln for ln in lines if not ln.startswith(("good,", "killer,"))])
-                 + "\n")
-    cmd = [sys.executable, "-m", "flexarm", "fit-many", str(m), "--out", str(tmp_path / "o"),
-           "--no-figures"]
+    m.write_text("\n".join([ln for ln in lines if not ln.startswith(("good,", "killer,"))]) + "\n")
+    cmd = [
+        sys.executable,
+        "-m",
+        "flexarm",
+        "fit-many",
+        str(m),
+        "--out",
+        str(tmp_path / "o"),
+        "--no-figures",
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert r.returncode == 1, r.stderr
     assert "Traceback" not in r.stdout + r.stderr and "failed" in r.stdout
     rows = list(csv.DictReader(open(tmp_path / "o" / "summary.csv")))
     assert [(x["id"], x["status"]) for x in rows] == [("bad", "failed")]
-    r2 = subprocess.run(cmd + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
-                        capture_output=True, text=True, timeout=600)
+    r2 = subprocess.run(
+        cmd + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r2.returncode == 2 and len(r2.stderr.strip().splitlines()) == 1
 
 
@@ -301,9 +353,17 @@ def test_cli_design_on_a_scheduler_equals_in_process(client, tmp_path):
 
     from flexarm.cli import app
 
-    base = ["design", "rotary-flexible-link", "--method", "lqr", "--spread",
-            "arm.motor.inertia=10%,arm.friction.coulomb=20%", "--plants", "4",
-            "--accept-unstable"]
+    base = [
+        "design",
+        "rotary-flexible-link",
+        "--method",
+        "lqr",
+        "--spread",
+        "arm.motor.inertia=10%,arm.friction.coulomb=20%",
+        "--plants",
+        "4",
+        "--accept-unstable",
+    ]
     rows = {}
     for tag, extra in (("local", []), ("dask", ["--scheduler", client.scheduler.address])):
         r = CliRunner().invoke(app, [*base, "--out", str(tmp_path / tag), *extra])
@@ -314,8 +374,21 @@ def test_cli_design_on_a_scheduler_equals_in_process(client, tmp_path):
         assert row["unstable"] == rows["dask"][name]["unstable"]
         for s in ("nominal", "median", "worst"):
             for k, v in row[s].items():
-                assert rows["dask"][name][s][k] == pytest.approx(v, rel=1e-12, nan_ok=True), \
-                    (name, s, k)
-    r = CliRunner().invoke(app, [*base, "--out", str(tmp_path / "x"), "--scheduler",
-                                 client.scheduler.address, "--workers", "2"])
+                assert rows["dask"][name][s][k] == pytest.approx(v, rel=1e-12, nan_ok=True), (
+                    name,
+                    s,
+                    k,
+                )
+    r = CliRunner().invoke(
+        app,
+        [
+            *base,
+            "--out",
+            str(tmp_path / "x"),
+            "--scheduler",
+            client.scheduler.address,
+            "--workers",
+            "2",
+        ],
+    )
     assert r.exit_code == 2 and "not both" in r.output

@@ -56,7 +56,7 @@ def test_scenario_reference_covers_the_builtin_scenarios():
 
 def test_readme_opens_with_the_two_commands():
     lines = (ROOT / "README.md").read_text().splitlines()
-    block = lines[lines.index("```") + 1: lines.index("```", lines.index("```") + 1)]
+    block = lines[lines.index("```") + 1 : lines.index("```", lines.index("```") + 1)]
     assert [ln.split()[0:2] for ln in block] == [["make", "demo"], ["make", "test"]]
 
 
@@ -93,4 +93,4 @@ def test_multilink_example_runs():
     sweep = env["sweep"]
     assert not sweep.diverged.any()
     peaks = abs(sweep.torque[:, 0]).max(axis=1)
-    assert peaks[0] < peaks[1] < peaks[2]       # larger gains, larger initial torques (DLS)
+    assert peaks[0] < peaks[1] < peaks[2]  # larger gains, larger initial torques (DLS)

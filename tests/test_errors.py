@@ -25,7 +25,8 @@ def _error_classes():
         mod = ".".join(f.relative_to(SRC.parent).with_suffix("").parts).removesuffix(".__init__")
         for node in tree.body:
             if isinstance(node, ast.ClassDef) and node.name.endswith(
-                    ("Error", "Diverged", "Interrupted")):
+                ("Error", "Diverged", "Interrupted")
+            ):
                 out.append((mod, node.name))
     return out
 
@@ -34,8 +35,16 @@ def test_every_project_error_is_a_flexarm_error_and_keeps_its_second_base():
     classes = _error_classes()
     # the ones the issue lists are among them (the scan found the tree)
     names = {n for _, n in classes}
-    assert {"ScenarioError", "LogError", "FitInputError", "ExportError", "UnitError",
-            "TFEstError", "MatFileError", "LogFormatError"} <= names, names
+    assert {
+        "ScenarioError",
+        "LogError",
+        "FitInputError",
+        "ExportError",
+        "UnitError",
+        "TFEstError",
+        "MatFileError",
+        "LogFormatError",
+    } <= names, names
     for mod, name in classes:
         cls = getattr(importlib.import_module(mod), name)
         if name == "Interrupted":  # a signal, deliberately not an error (errors.py)
@@ -57,13 +66,23 @@ def test_every_project_error_is_a_flexarm_error_and_keeps_its_second_base():
 
 
 def test_one_line_adds_file_field_value_and_fix_once():
-    e = FlexarmError("must be > 0", file="rig.toml", field="arm.motor.inertia", value=-1.0,
-                     fix="give the data-sheet value")
-    assert one_line(e) == ("rig.toml: arm.motor.inertia = -1.0: must be > 0; give the "
-                           "data-sheet value")
+    e = FlexarmError(
+        "must be > 0",
+        file="rig.toml",
+        field="arm.motor.inertia",
+        value=-1.0,
+        fix="give the data-sheet value",
+    )
+    assert one_line(e) == (
+        "rig.toml: arm.motor.inertia = -1.0: must be > 0; give the data-sheet value"
+    )
     # parts the message already shows are not repeated
-    e = FlexarmError("rig.toml: arm.motor.inertia = -1 must be > 0", file="rig.toml",
-                     field="arm.motor.inertia", value=-1)
+    e = FlexarmError(
+        "rig.toml: arm.motor.inertia = -1 must be > 0",
+        file="rig.toml",
+        field="arm.motor.inertia",
+        value=-1,
+    )
     assert one_line(e) == "rig.toml: arm.motor.inertia = -1 must be > 0"
     # several lines (a scenario's list of problems) become one
     from flexarm.specs import ScenarioError

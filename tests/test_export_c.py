@@ -61,8 +61,10 @@ from flexarm.specs import load_scenario
 from flexarm.specs.scenario import scenario_from_dict
 
 CC = next((c for c in ("cc", "gcc", "clang") if shutil.which(c)), None)
-needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH: "
-                              "the generated C cannot be compiled here")
+needs_cc = pytest.mark.skipif(
+    CC is None,
+    reason="no C compiler (cc, gcc or clang) on PATH: the generated C cannot be compiled here",
+)
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
 
 #: the rotary rig's Coulomb level in volts: C_f / (η_g η_m K_g K_m / R_m)
@@ -70,8 +72,13 @@ CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
 FC_LEVEL = 0.03 / (0.9 * 0.69 * 70 * 7.68e-3 / 2.6)
 
 
-def _rig(controller: dict | None = None, *, bits: int = 0, duration: float = 0.8,
-         extra: dict | None = None):
+def _rig(
+    controller: dict | None = None,
+    *,
+    bits: int = 0,
+    duration: float = 0.8,
+    extra: dict | None = None,
+):
     """The rotary rig with ``controller``, a 0.8 s run with the reference 0, stepping to
     0.5 rad at 0.3 s and back to 0 at 0.6 s (a square wave of period 0.6 s)."""
     d = load_scenario("rotary-flexible-link").model_dump(mode="json", exclude_none=True)
@@ -95,13 +102,26 @@ def _lqg_controller(dt: float = 1e-3) -> dict:
     arm = SingleLinkModel.from_spec(sc.arm).plant()
     lin = linearize(arm, outputs=["motor_angle", "tip_deflection"])
     n = lin.nstates
-    design = lqg(lin, dt, Q=np.r_[50.0, 0.1, np.full(n - 2, 1.0)], R=1.0,
-                 W=np.full(n, 1e-6), V=[(2 * np.pi / 4096) ** 2 / 12, 4e-10])
+    design = lqg(
+        lin,
+        dt,
+        Q=np.r_[50.0, 0.1, np.full(n - 2, 1.0)],
+        R=1.0,
+        W=np.full(n, 1e-6),
+        V=[(2 * np.pi / 4096) ** 2 / 12, 4e-10],
+    )
     K = design.controller
-    return {"type": "lti", "A": np.asarray(K.A).tolist(), "B": np.asarray(K.B).tolist(),
-            "C": np.asarray(K.C).tolist(), "D": np.asarray(K.D).tolist(), "dt": dt,
-            "inputs": ["motor_angle", "tip_deflection"], "setpoints": ["reference", 0],
-            "outputs": ["voltage"]}
+    return {
+        "type": "lti",
+        "A": np.asarray(K.A).tolist(),
+        "B": np.asarray(K.B).tolist(),
+        "C": np.asarray(K.C).tolist(),
+        "D": np.asarray(K.D).tolist(),
+        "dt": dt,
+        "inputs": ["motor_angle", "tip_deflection"],
+        "setpoints": ["reference", 0],
+        "outputs": ["voltage"],
+    }
 
 
 def _fc(**kw) -> dict:
@@ -110,8 +130,11 @@ def _fc(**kw) -> dict:
 
 #: a second-order C(z): a PD with its derivative filtered (pole 0.8) and a lag (pole
 #: 0.995, zero 0.99): (36 z − 34.8)/(z − 0.8) · (z − 0.99)/(z − 0.995), DC gain 12 V/rad
-_TF = {"type": "tf", "num": np.convolve([36.0, -34.8], [1.0, -0.99]).tolist(),
-       "den": np.convolve([1.0, -0.8], [1.0, -0.995]).tolist()}
+_TF = {
+    "type": "tf",
+    "num": np.convolve([36.0, -34.8], [1.0, -0.99]).tolist(),
+    "den": np.convolve([1.0, -0.8], [1.0, -0.995]).tolist(),
+}
 
 #: case → (controller spec or a function giving it, D/A bits); None: the rig's own state
 #: feedback (backward-difference rates, no D/A count)
@@ -122,14 +145,31 @@ CASES = {
     "tf_fc": ({**_TF, **_fc(rest_deadband=1.0)}, 0),
     "state_feedback": (None, 0),
     "state_feedback_filtered_fc": (
-        {"type": "state_feedback", "k1": 6.0, "k2": -40.0, "k3": 0.15, "k4": 0.0,
-         "rate": "filtered", "rate_time_constant": 0.005, **_fc()}, 10),
+        {
+            "type": "state_feedback",
+            "k1": 6.0,
+            "k2": -40.0,
+            "k3": 0.15,
+            "k4": 0.0,
+            "rate": "filtered",
+            "rate_time_constant": 0.005,
+            **_fc(),
+        },
+        10,
+    ),
     "lti_lqg_fc": (lambda: {**_lqg_controller(), **_fc()}, 0),
     "lti_lqg_every2_fc": (lambda: {**_lqg_controller(2e-3), **_fc()}, 12),
     # u = 6 (r − θ) − 40 · (0 − d): the rig's gains without rates, as a static gain D
-    "lti_static": ({"type": "lti", "D": [[6.0, -40.0]], "inputs": ["motor_angle",
-                    "tip_deflection"], "setpoints": ["reference", 0], "outputs": ["voltage"]},
-                   0),
+    "lti_static": (
+        {
+            "type": "lti",
+            "D": [[6.0, -40.0]],
+            "inputs": ["motor_angle", "tip_deflection"],
+            "setpoints": ["reference", 0],
+            "outputs": ["voltage"],
+        },
+        0,
+    ),
 }
 
 
@@ -155,10 +195,16 @@ def _nested():
     from flexarm.control.outer_loop import tip_loop
 
     dt = 1e-3
-    inner = inner_loop(control.tf([40.0, -38.0], [1.0, -0.5], dt),
-                       control.tf([0.5, 0.0], [1.0, -0.5], dt), dt=dt, torque_constant=1.0,
-                       coulomb=FC_LEVEL, coupling=2.0, angle_resolution=2 * np.pi / 4096,
-                       reference="motor_reference")
+    inner = inner_loop(
+        control.tf([40.0, -38.0], [1.0, -0.5], dt),
+        control.tf([0.5, 0.0], [1.0, -0.5], dt),
+        dt=dt,
+        torque_constant=1.0,
+        coulomb=FC_LEVEL,
+        coupling=2.0,
+        angle_resolution=2 * np.pi / 4096,
+        reference="motor_reference",
+    )
     ctrl = tip_loop(inner, control.tf([0.3, -0.27], [1.0, -0.8], dt), dt)
     sc = _rig(None)
     n = int(round(sc.simulation.duration / dt)) + 1
@@ -187,14 +233,36 @@ def _two_link_blocks():
         r.update(period=1.0, start=0.0)
     K = np.asarray(d.pop("controller")["D"])
     d["controllers"] = [
-        {"type": "lti", "name": "shoulder", "dt": 0.01, "outputs": ["current_1"],
-         "signals": ["theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_ref_1",
-                     0.5, 0, 0],
-         "A": [[0.9, 0.05], [0.0, 0.8]], "B": [[0.02] * 8, [-0.01] * 8], "C": [[0.3, -0.2]],
-         "D": [list(-K[0, :4]) + [K[0, 0], 0.01, 0.0, 0.0]]},
-        {"type": "lti", "name": "elbow", "dt": 0.002, "outputs": ["current_2"],
-         "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
-         "setpoints": ["theta_ref_2", 0, 0, 0], "D": [list(K[1, 4:])]}]
+        {
+            "type": "lti",
+            "name": "shoulder",
+            "dt": 0.01,
+            "outputs": ["current_1"],
+            "signals": [
+                "theta_1",
+                "alpha_f_1",
+                "theta_dot_f_1",
+                "alpha_dot_f_1",
+                "theta_ref_1",
+                0.5,
+                0,
+                0,
+            ],
+            "A": [[0.9, 0.05], [0.0, 0.8]],
+            "B": [[0.02] * 8, [-0.01] * 8],
+            "C": [[0.3, -0.2]],
+            "D": [list(-K[0, :4]) + [K[0, 0], 0.01, 0.0, 0.0]],
+        },
+        {
+            "type": "lti",
+            "name": "elbow",
+            "dt": 0.002,
+            "outputs": ["current_2"],
+            "inputs": ["theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"],
+            "setpoints": ["theta_ref_2", 0, 0, 0],
+            "D": [list(K[1, 4:])],
+        },
+    ]
     return scenario_from_dict(d)
 
 
@@ -261,8 +329,9 @@ def _rounding_bound(A, B, C, D, x, w, unit: float) -> np.ndarray:
     phi = np.zeros((N, n, n))  # phi[j] = Φ(k, j+1) for j < k
     for k in range(N):
         if k:
-            out[k] += np.einsum("jmi,ji->m", np.abs(np.einsum("mi,jil->jml", C[k], phi[:k])),
-                                xi[:k])
+            out[k] += np.einsum(
+                "jmi,ji->m", np.abs(np.einsum("mi,jil->jml", C[k], phi[:k])), xi[:k]
+            )
         phi[:k] = np.einsum("il,jlm->jim", A[k], phi[:k])
         phi[k] = np.eye(n)
     return out
@@ -295,9 +364,21 @@ def _reference(case: str) -> dict:
     fb = ctrl.feedback if isinstance(ctrl, FrictionCompensated) else ctrl
     y_fb, fb_states = _run_python(fb, meas, refs) if fb is not ctrl else (y, states)
     jac = _jacobians(fb, fb_states, meas, refs)
-    out = dict(scenario=sc, given=given, ctrl=ctrl, meas=meas, refs=refs, y=y, y_fb=y_fb, jac=jac,
-               limit=limit, q=q, u=_actuate(y, limit, q), sim_command=np.asarray(res.command),
-               delay=sc.sampling.delay)
+    out = dict(
+        scenario=sc,
+        given=given,
+        ctrl=ctrl,
+        meas=meas,
+        refs=refs,
+        y=y,
+        y_fb=y_fb,
+        jac=jac,
+        limit=limit,
+        q=q,
+        u=_actuate(y, limit, q),
+        sim_command=np.asarray(res.command),
+        delay=sc.sampling.delay,
+    )
     _CACHE[case] = out
     return out
 
@@ -336,11 +417,15 @@ def _run_c(folder: Path, meas: dict, refs: dict) -> np.ndarray:
     rows = "\n".join(" ".join(repr(float(c[k])) for c in cols) for k in range(n))
     (folder / "input.txt").write_text(f"{n}\n{rows}\n")
     exe = folder / "driver"
-    cp = subprocess.run([CC, *CFLAGS, "-o", str(exe), str(folder / "driver.c"),
-                         str(folder / "ctl.c")], capture_output=True, text=True)
+    cp = subprocess.run(
+        [CC, *CFLAGS, "-o", str(exe), str(folder / "driver.c"), str(folder / "ctl.c")],
+        capture_output=True,
+        text=True,
+    )
     assert cp.returncode == 0, f"the generated C does not compile:\n{cp.stderr}"
-    run = subprocess.run([str(exe), str(folder / "input.txt")], capture_output=True,
-                         text=True, check=True)
+    run = subprocess.run(
+        [str(exe), str(folder / "input.txt")], capture_output=True, text=True, check=True
+    )
     return np.loadtxt(run.stdout.splitlines(), ndmin=2)
 
 
@@ -378,9 +463,15 @@ def _allowed(ref: dict, unit: float) -> tuple[np.ndarray, np.ndarray]:
 # ----------------------------------------------------------------------------- tests
 @needs_cc
 @pytest.mark.parametrize("precision", ["double", "float"])
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow)
-                                  if c in ("lti_mimo_two_link", "controllers_two_link_multirate")
-                                  else c for c in CASES])
+@pytest.mark.parametrize(
+    "case",
+    [
+        pytest.param(c, marks=pytest.mark.slow)
+        if c in ("lti_mimo_two_link", "controllers_two_link_multirate")
+        else c
+        for c in CASES
+    ],
+)
 def test_c_matches_python(case, precision, tmp_path):
     ref = _reference(case)
     sc = ref["scenario"]
@@ -391,19 +482,22 @@ def test_c_matches_python(case, precision, tmp_path):
     u_py = ref["u"]
     assert u_c.shape == u_py.shape
     diff = np.abs(u_c - u_py)
-    unit = 2.0 ** -53 if precision == "double" else 2.0 ** -24
+    unit = 2.0**-53 if precision == "double" else 2.0**-24
     bound, jump = _allowed(ref, unit)
     allowed = bound + jump
     worst = int(np.argmax(diff - allowed))
     assert np.all(diff <= allowed), (
         f"{case} {precision}: |u_C - u_Py| = {diff.ravel()[worst]:.3g} V at sample {worst}, "
-        f"above the rounding bound {allowed.ravel()[worst]:.3g} V")
+        f"above the rounding bound {allowed.ravel()[worst]:.3g} V"
+    )
     smooth = (jump == 0) & (bound > 0)  # bound 0: both exact (diff 0 asserted above)
     ratio = np.max(diff[smooth] / bound[smooth])
-    print(f"{case} {precision}: max |u_C - u_Py| = {diff.max():.3g}; rounding bound "
-          f"{bound.max():.3g} (command units), max ratio {ratio:.3g} "
-          f"(samples without a possible flip); samples where a decision may flip "
-          f"{np.count_nonzero(jump)}, flipped {np.count_nonzero(diff > bound)}")
+    print(
+        f"{case} {precision}: max |u_C - u_Py| = {diff.max():.3g}; rounding bound "
+        f"{bound.max():.3g} (command units), max ratio {ratio:.3g} "
+        f"(samples without a possible flip); samples where a decision may flip "
+        f"{np.count_nonzero(jump)}, flipped {np.count_nonzero(diff > bound)}"
+    )
     if precision == "double":
         # same operations in the same order: agreement to 1e-12 V (derived bound above)
         assert diff.max() <= 1e-12, f"{case}: max |u_C - u_Py| = {diff.max():.3g} V"
@@ -435,16 +529,17 @@ def test_friction_sign_switches_on_the_recorded_sequence():
     """The sequences exercise the branches of the sign rule: moving both ways, at rest
     pushed by the feedback (both ways where the hub stops on both sides of the reference),
     and idle at rest within the rest deadband (tf_fc: 1 V)."""
-    for case, rest_signs, idle in (("pid_fc_dac", {-1.0, 1.0}, False),
-                                   ("tf_fc", {-1.0, 1.0}, True),
-                                   ("lti_lqg_fc", {-1.0, 1.0}, False)):
+    for case, rest_signs, idle in (
+        ("pid_fc_dac", {-1.0, 1.0}, False),
+        ("tf_fc", {-1.0, 1.0}, True),
+        ("lti_lqg_fc", {-1.0, 1.0}, False),
+    ):
         ref = _reference(case)
         ctrl = ref["ctrl"]
         th = np.asarray(ref["meas"]["motor_angle"])
         v = np.diff(th, prepend=th[0]) / float(ctrl.dt)
         vdb = float(ctrl.velocity_deadband[0])
-        sigma = np.asarray(friction_sign(v, ref["y_fb"][:, 0], vdb,
-                                         float(ctrl.rest_deadband[0])))
+        sigma = np.asarray(friction_sign(v, ref["y_fb"][:, 0], vdb, float(ctrl.rest_deadband[0])))
         moving = np.abs(v) > vdb
         assert {-1.0, 1.0} <= set(sigma[moving].tolist()), case
         assert rest_signs <= set(sigma[~moving].tolist()), case
@@ -453,8 +548,9 @@ def test_friction_sign_switches_on_the_recorded_sequence():
             held = ~moving & (u_fb > 0) & (u_fb <= float(ctrl.rest_deadband[0]))
             assert np.count_nonzero(held) > 0 and np.all(sigma[held] == 0), case
         # the Python wrapper is u_fb + c σ with this σ (to 1e-12 V: the same operations)
-        np.testing.assert_allclose(ref["y"][:, 0], ref["y_fb"][:, 0] + FC_LEVEL * sigma,
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            ref["y"][:, 0], ref["y_fb"][:, 0] + FC_LEVEL * sigma, rtol=0, atol=1e-12
+        )
 
 
 @needs_cc
@@ -486,12 +582,13 @@ def test_cli_exports_the_lqg_design_and_the_rig_state_feedback(tmp_path):
         assert np.max(np.abs(u_c - ref["u"])) <= 1e-12
     # --precision float through the CLI: the same channels, float arithmetic
     out = tmp_path / "c_float"
-    r = runner.invoke(app, ["export-c", str(design), "--out", str(out), "--name", "ctl",
-                            "--precision", "float"])
+    r = runner.invoke(
+        app, ["export-c", str(design), "--out", str(out), "--name", "ctl", "--precision", "float"]
+    )
     assert r.exit_code == 0, r.output
     assert "typedef float ctl_real;" in (out / "ctl.h").read_text()
     ref = _reference("lti_lqg_fc")
-    bound, jump = _allowed(ref, 2.0 ** -24)
+    bound, jump = _allowed(ref, 2.0**-24)
     assert np.all(np.abs(_run_c(out, ref["meas"], ref["refs"]) - ref["u"]) <= bound + jump)
 
 
@@ -512,13 +609,16 @@ def test_bad_input_errors(tmp_path):
     sc = _rig(None)
     # a controller kind without an exporter (a user's JAX law), even nested in a Sum:
     # named, with the kinds that are
-    law = discrete.FunctionController(lambda p, s, m, r: (s, p * (r["reference"]
-                                                                  - m["motor_angle"])),
-                                      1.0, jnp.zeros(()))
+    law = discrete.FunctionController(
+        lambda p, s, m, r: (s, p * (r["reference"] - m["motor_angle"])), 1.0, jnp.zeros(())
+    )
     two = discrete.Sum(discrete.pd(1.0, 0.0, 1e-3), law)
-    with pytest.raises(ExportError, match=r"the controller given: controller "
-                                          r"FunctionController cannot be exported.*"
-                                          r"LTIController.*StateFeedback"):
+    with pytest.raises(
+        ExportError,
+        match=r"the controller given: controller "
+        r"FunctionController cannot be exported.*"
+        r"LTIController.*StateFeedback",
+    ):
         generate_c(sc, controller=two)
     runner = CliRunner()
     # a folder without design.toml
@@ -529,23 +629,25 @@ def test_bad_input_errors(tmp_path):
     # a scenario kind without an exporter, through the CLI: named with the scenario
     r = runner.invoke(app, ["export-c", "deluca-two-link-geared", "--out", str(tmp_path / "o3")])
     assert r.exit_code == 2
-    assert "[controller] type = 'joint_pd': controller JointPD cannot be exported" in \
-        " ".join(r.output.split())
+    assert "[controller] type = 'joint_pd': controller JointPD cannot be exported" in " ".join(
+        r.output.split()
+    )
     # an existing output without --overwrite, then with it
     out = tmp_path / "o2"
     r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out)])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out)])
     assert r.exit_code == 2 and "controller.h" in r.output and "--overwrite" in r.output
-    r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out),
-                            "--overwrite"])
+    r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out), "--overwrite"])
     assert r.exit_code == 0, r.output
     # a name that is no C identifier, an unknown precision
-    r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out),
-                            "--name", "2fast"])
+    r = runner.invoke(
+        app, ["export-c", "rotary-flexible-link", "--out", str(out), "--name", "2fast"]
+    )
     assert r.exit_code == 2 and "'2fast' is not a usable C identifier" in r.output
-    r = runner.invoke(app, ["export-c", "rotary-flexible-link", "--out", str(out),
-                            "--precision", "half"])
+    r = runner.invoke(
+        app, ["export-c", "rotary-flexible-link", "--out", str(out), "--precision", "half"]
+    )
     assert r.exit_code == 2 and "give double or float" in r.output
     # a scenario without [controller]
     d = load_scenario("rotary-flexible-link").model_dump(mode="json", exclude_none=True)
@@ -561,20 +663,32 @@ def test_readme_c_example_compiles(tmp_path):
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     block = readme.split("## Deploying a controller in C")[1].split("```c\n")[1].split("```")[0]
     export_c("rotary-flexible-link", tmp_path, name="rig")
-    stubs = ("#include <stdio.h>\n#define GAUGE_M_PER_V 0.01\n"
-             "static long encoder_counts(void) { return 0; }\n"
-             "static double strain_gauge_volts(void) { return 0.0; }\n"
-             "static double setpoint_rad(void) { return 0.0; }\n"
-             "static double last_u = -1.0;\n"
-             "static void dac_write_volts(double v) { last_u = v; }\n")
-    main = ("\nint main(void) { control_start(); control_tick(); printf(\"%.17g\\n\", last_u);"
-            " return 0; }\n")
+    stubs = (
+        "#include <stdio.h>\n#define GAUGE_M_PER_V 0.01\n"
+        "static long encoder_counts(void) { return 0; }\n"
+        "static double strain_gauge_volts(void) { return 0.0; }\n"
+        "static double setpoint_rad(void) { return 0.0; }\n"
+        "static double last_u = -1.0;\n"
+        "static void dac_write_volts(double v) { last_u = v; }\n"
+    )
+    main = (
+        '\nint main(void) { control_start(); control_tick(); printf("%.17g\\n", last_u);'
+        " return 0; }\n"
+    )
     src = tmp_path / "loop.c"
-    src.write_text(stubs + block.replace("void control_start", "static void control_start")
-                   .replace("void control_tick", "static void control_tick") + main)
+    src.write_text(
+        stubs
+        + block.replace("void control_start", "static void control_start").replace(
+            "void control_tick", "static void control_tick"
+        )
+        + main
+    )
     exe = tmp_path / "loop"
-    cp = subprocess.run([CC, *CFLAGS, "-o", str(exe), str(src), str(tmp_path / "rig.c")],
-                        capture_output=True, text=True)
+    cp = subprocess.run(
+        [CC, *CFLAGS, "-o", str(exe), str(src), str(tmp_path / "rig.c")],
+        capture_output=True,
+        text=True,
+    )
     assert cp.returncode == 0, cp.stderr
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     assert float(out) == 0.0  # at rest on the reference: K1·0 − K2·0 − K3·0 − K4·0
@@ -590,8 +704,10 @@ N_REAL = 4000
 
 @needs_cc
 @pytest.mark.slow
-@pytest.mark.skipif(not (DATA / "4PM_Group37_FlexArm_Unit6").is_file(),
-                    reason=f"real rig logs not found at {DATA} (../shared is absent)")
+@pytest.mark.skipif(
+    not (DATA / "4PM_Group37_FlexArm_Unit6").is_file(),
+    reason=f"real rig logs not found at {DATA} (../shared is absent)",
+)
 def test_c_matches_python_on_the_real_unit6_log(tmp_path):
     """The real unit 6 run (its first 4 s: 4000 samples of 1-mrad / 1-mm rounded hub angle,
     gauge and reference, with reference steps) as the input sequence: the lab's own law (logged
@@ -603,20 +719,39 @@ def test_c_matches_python_on_the_real_unit6_log(tmp_path):
 
     log = read_bench_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)
     k1, k2, k3, k4 = (float(g) for g in np.asarray(log.gains)[0])
-    sc = _rig({"type": "state_feedback", "k1": k1, "k2": k2, "k3": k3, "k4": k4,
-               "rate": "filtered", "rate_time_constant": 3.3e-3, **_fc()},
-              extra={"actuator": {"bits": 0, "limit": 5.0}})
+    sc = _rig(
+        {
+            "type": "state_feedback",
+            "k1": k1,
+            "k2": k2,
+            "k3": k3,
+            "k4": k4,
+            "rate": "filtered",
+            "rate_time_constant": 3.3e-3,
+            **_fc(),
+        },
+        extra={"actuator": {"bits": 0, "limit": 5.0}},
+    )
     ctrl = prepare(sc).loop.controller
     c = {k: np.asarray(v)[:N_REAL] for k, v in log.columns.items()}
     assert len(np.unique(c["reference"])) >= 2  # a reference step inside the window
-    meas = {"motor_angle": jnp.asarray(c["motor_angle"]),
-            "tip_deflection": jnp.asarray(c["tip_deflection"])}
+    meas = {
+        "motor_angle": jnp.asarray(c["motor_angle"]),
+        "tip_deflection": jnp.asarray(c["tip_deflection"]),
+    }
     refs = {"reference": jnp.asarray(c["reference"])}
     y, _ = _run_python(ctrl, meas, refs)
     y_fb, fb_states = _run_python(ctrl.feedback, meas, refs)
-    ref = dict(ctrl=ctrl, meas=meas, refs=refs, y=y, y_fb=y_fb,
-               jac=_jacobians(ctrl.feedback, fb_states, meas, refs),
-               limit=np.array([5.0]), q=np.array([0.0]))
+    ref = dict(
+        ctrl=ctrl,
+        meas=meas,
+        refs=refs,
+        y=y,
+        y_fb=y_fb,
+        jac=_jacobians(ctrl.feedback, fb_states, meas, refs),
+        limit=np.array([5.0]),
+        q=np.array([0.0]),
+    )
     u_py = _actuate(y, ref["limit"], ref["q"])
     assert np.count_nonzero(np.abs(u_py) == 5.0) > 0  # the run saturates: clip exercised
     th = c["motor_angle"]
@@ -625,7 +760,7 @@ def test_c_matches_python_on_the_real_unit6_log(tmp_path):
     moving = np.abs(v) > float(ctrl.velocity_deadband[0])
     assert {-1.0, 1.0} <= set(sigma[moving].tolist())  # the sign rule switches on real data
     assert {-1.0, 1.0} <= set(sigma[~moving].tolist())
-    for precision, unit in (("double", 2.0 ** -53), ("float", 2.0 ** -24)):
+    for precision, unit in (("double", 2.0**-53), ("float", 2.0**-24)):
         out = tmp_path / precision
         generate_c(sc, name="ctl", precision=precision).write(out)
         u_c = _run_c(out, meas, refs)
@@ -634,6 +769,8 @@ def test_c_matches_python_on_the_real_unit6_log(tmp_path):
         assert np.all(diff <= bound + jump), precision
         if precision == "double":
             assert diff.max() <= 1e-12
-        print(f"unit 6 log, {precision}: max |u_C - u_Py| = {diff.max():.3g} V, bound "
-              f"{bound.max():.3g} V, possible flips {np.count_nonzero(jump)}, flipped "
-              f"{np.count_nonzero(diff > bound)}")
+        print(
+            f"unit 6 log, {precision}: max |u_C - u_Py| = {diff.max():.3g} V, bound "
+            f"{bound.max():.3g} V, possible flips {np.count_nonzero(jump)}, flipped "
+            f"{np.count_nonzero(diff > bound)}"
+        )

@@ -34,16 +34,17 @@ def short_run(tmp_path_factory):
     """3 s of the two-mode link on a staircase, written twice under one file name in two
     folders (the keys must keep them apart); the template's Coulomb level 30 % high."""
     truth = two_mode_link()
-    truth = truth.model_copy(update={"simulation": truth.simulation.model_copy(
-        update={"duration": 3.0})})
+    truth = truth.model_copy(
+        update={"simulation": truth.simulation.model_copy(update={"duration": 3.0})}
+    )
     t = np.arange(1501) * 0.002
-    log = scenario_log(truth, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)},
-                       seed=2)
+    log = scenario_log(truth, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)}, seed=2)
     d = tmp_path_factory.mktemp("runs")
     for f in ("a", "b"):
         (d / f).mkdir()
-    paths = [write_log(d / f / "run.csv", log.time, log.signals, required=("time",))
-             for f in ("a", "b")]
+    paths = [
+        write_log(d / f / "run.csv", log.time, log.signals, required=("time",)) for f in ("a", "b")
+    ]
     template = scenario_with(truth, {"arm.joints[0].friction.coulomb": 0.026})
     return truth, template, paths
 
@@ -84,23 +85,27 @@ def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
     out = res.write_scenario(tmp_path / "fitted.toml")
     again = flexarm.load_scenario(out)
     assert again.arm.joints[0].friction.coulomb == pytest.approx(
-        res.params["arm.joints[0].friction.coulomb"], rel=1e-12)
+        res.params["arm.joints[0].friction.coulomb"], rel=1e-12
+    )
     # the one prediction of the fitted model: fit % per log key and signal, the truth's
     # own prediction as the reference (noise only)
     pred = flexarm.validate(res, paths, PredictOptions(windows=[(0.0, 2.0), None]))
     ref = flexarm.validate(truth, paths, PredictOptions(windows=[(0.0, 2.0), None]))
     assert set(pred.fit_percent) == {"a/run.csv", "b/run.csv"}
     for k in pred.fit_percent:
-        assert pred.fit_percent[k]["theta_1"] == pytest.approx(ref.fit_percent[k]["theta_1"],
-                                                               abs=1.0)
+        assert pred.fit_percent[k]["theta_1"] == pytest.approx(
+            ref.fit_percent[k]["theta_1"], abs=1.0
+        )
     assert len(pred.traces["a/run.csv"]["time"]) == 1000  # [0, 2) s at 2 ms
     fig = flexarm.identification.time_domain.overlay_figure(pred, "a/run.csv")
     assert len(fig.axes) == len(pred.traces["a/run.csv"]["simulated"])
     # how they read (issue #26): <= 80 columns, the numbers whole; one HTML table
     from flexarm.display import fmt
 
-    for obj, numbers in ((res, [res.params["arm.joints[0].friction.coulomb"]]),
-                         (pred, [pred.fit_percent["a/run.csv"]["theta_1"]])):
+    for obj, numbers in (
+        (res, [res.params["arm.joints[0].friction.coulomb"]]),
+        (pred, [pred.fit_percent["a/run.csv"]["theta_1"]]),
+    ):
         text = repr(obj)
         assert all(len(line) <= 80 for line in text.splitlines()), text
         assert all(fmt(x) in text for x in numbers), text
@@ -110,10 +115,15 @@ def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
 
 
 def test_grouped_options_map_onto_the_engine():
-    flat = FitOptions(cost=Cost(residual_level=0.2), shooting=Shooting(segment=3.0),
-                      windows=[(0.0, 5.0)]).engine_options()
+    flat = FitOptions(
+        cost=Cost(residual_level=0.2), shooting=Shooting(segment=3.0), windows=[(0.0, 5.0)]
+    ).engine_options()
     assert (flat.residual_level, flat.segment, flat.windows, flat.global_stage) == (
-        0.2, 3.0, [(0.0, 5.0)], False)
+        0.2,
+        3.0,
+        [(0.0, 5.0)],
+        False,
+    )
 
 
 @pytest.mark.slow
@@ -132,10 +142,27 @@ def test_cli_fit_builtin_without_free_runs_the_preset_and_json_is_to_dict(tmp_pa
     if not data.exists():
         pytest.skip(f"two-link workspace not found at {data} (../shared is absent)")
     out = tmp_path / "fit.json"
-    r = subprocess.run([sys.executable, "-m", "flexarm", "fit", "quanser-two-link", str(data),
-                        "--log-format", str(ROOT / "examples" / "two-link-workspace.toml"),
-                        "--window", "0:5", "--max-nfev", "2", "--json", str(out)],
-                       capture_output=True, text=True, timeout=1200)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flexarm",
+            "fit",
+            "quanser-two-link",
+            str(data),
+            "--log-format",
+            str(ROOT / "examples" / "two-link-workspace.toml"),
+            "--window",
+            "0:5",
+            "--max-nfev",
+            "2",
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1200,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "free parameters (15): preset quanser-two-link" in r.stdout
     d = json.loads(out.read_text())

@@ -27,31 +27,49 @@ def staircase(t: np.ndarray, steps, hold: float) -> np.ndarray:
 def two_mode_link():
     """A one-link multi_link arm: one assumed-modes link with 2 modes, a current drive,
     joint Coulomb friction (breakaway = Coulomb level), viscous friction, a sampled PD."""
-    return scenario_from_dict({
-        "name": "two-mode-link",
-        "arm": {"kind": "multi_link", "gravity": 0.0,
-                "links": [{"length": 0.5, "linear_density": 0.2, "flexural_rigidity": 2.0,
-                           "modes": 2, "damping_ratio": 0.01}],
+    return scenario_from_dict(
+        {
+            "name": "two-mode-link",
+            "arm": {
+                "kind": "multi_link",
+                "gravity": 0.0,
+                "links": [
+                    {
+                        "length": 0.5,
+                        "linear_density": 0.2,
+                        "flexural_rigidity": 2.0,
+                        "modes": 2,
+                        "damping_ratio": 0.01,
+                    }
+                ],
                 "hubs": [{"inertia": 0.02}],
                 "payload": {"mass": 0.05, "inertia": 1e-5},
-                "joints": [{"viscous": 0.01,
-                            "drive": {"drive": "current", "torque_constant": 0.5,
-                                      "current_limit": 3.0},
-                            "friction": {"model": "coulomb", "coulomb": 0.02}}]},
-        "sampling": {"period": 0.002},
-        "simulation": {"duration": 6.0, "substeps": 4},
-        "sensors": {"theta_1": {"bits": 16, "range": 2 * np.pi, "noise": 1e-4},
-                    "deflection_1": {"bits": 14, "range": 0.1, "noise": 2e-5}},
-        "controller": {"type": "pd", "kp": 1.0, "kd": 0.08, "measured": "theta_1"},
-    })
+                "joints": [
+                    {
+                        "viscous": 0.01,
+                        "drive": {"drive": "current", "torque_constant": 0.5, "current_limit": 3.0},
+                        "friction": {"model": "coulomb", "coulomb": 0.02},
+                    }
+                ],
+            },
+            "sampling": {"period": 0.002},
+            "simulation": {"duration": 6.0, "substeps": 4},
+            "sensors": {
+                "theta_1": {"bits": 16, "range": 2 * np.pi, "noise": 1e-4},
+                "deflection_1": {"bits": 14, "range": 0.1, "noise": 2e-5},
+            },
+            "controller": {"type": "pd", "kp": 1.0, "kd": 0.08, "measured": "theta_1"},
+        }
+    )
 
 
 def _recover(truth, free, ref, options, seed=1):
     log = scenario_log(truth, {"reference": ref}, seed=seed)
     d = truth.model_dump()
     true = {p: float(_get(d, p)) for p in free}
-    template = scenario_with(truth, {p: v * PERTURB[i % len(PERTURB)]
-                                     for i, (p, v) in enumerate(true.items())})
+    template = scenario_with(
+        truth, {p: v * PERTURB[i % len(PERTURB)] for i, (p, v) in enumerate(true.items())}
+    )
     res = fit_scenario(template, [log], free, options)
     err = {p: res.params[p] / true[p] - 1 for p in free}
     return res, err
@@ -65,10 +83,17 @@ def _get(d, path):
 
 def test_paths_parse_and_expand():
     d = load_scenario("deluca-two-link-geared").model_dump()
-    assert parse_path("arm.joints[1].friction.coulomb") == ["arm", "joints", 1, "friction",
-                                                             "coulomb"]
+    assert parse_path("arm.joints[1].friction.coulomb") == [
+        "arm",
+        "joints",
+        1,
+        "friction",
+        "coulomb",
+    ]
     assert expand_paths(d, ["arm.joints[*].friction.coulomb"]) == [
-        "arm.joints[0].friction.coulomb", "arm.joints[1].friction.coulomb"]
+        "arm.joints[0].friction.coulomb",
+        "arm.joints[1].friction.coulomb",
+    ]
     with pytest.raises(ValueError, match="arm.links has no 5"):
         fit_scenario(load_scenario("deluca-two-link-geared"), [], ["arm.links[5].mass"])
     with pytest.raises(ValueError, match="not a path"):
@@ -84,9 +109,14 @@ def test_two_mode_link_recovered_within_5_percent():
     truth = two_mode_link()
     t = np.arange(3001) * 0.002
     ref = staircase(t, [0.0, 0.4, -0.1, 0.6, 0.05, -0.3, 0.2, 0.0], 0.75)
-    free = ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous",
-            "arm.links[0].flexural_rigidity", "arm.hubs[0].inertia",
-            "arm.joints[0].drive.torque_constant", "arm.links[0].damping_ratio"]
+    free = [
+        "arm.joints[0].friction.coulomb",
+        "arm.joints[0].viscous",
+        "arm.links[0].flexural_rigidity",
+        "arm.hubs[0].inertia",
+        "arm.joints[0].drive.torque_constant",
+        "arm.links[0].damping_ratio",
+    ]
     res, err = _recover(truth, free, ref, FitOptions(segment=0.5, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # the whole-run prediction of the fitted model matches the log (noise only: > 97 %)
@@ -107,14 +137,26 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
     sc = load_scenario("feliu-single-mass")
     fr = sc.arm.friction.model_copy(update={"static": None})
     sens = {k: v.model_copy(update={"bits": 14}) for k, v in sc.sensors.items()}
-    truth = sc.model_copy(update={
-        "arm": sc.arm.model_copy(update={"friction": fr}), "sensors": sens,
-        "simulation": sc.simulation.model_copy(update={"duration": 8.2})})
+    truth = sc.model_copy(
+        update={
+            "arm": sc.arm.model_copy(update={"friction": fr}),
+            "sensors": sens,
+            "simulation": sc.simulation.model_copy(update={"duration": 8.2}),
+        }
+    )
     t = np.arange(2734) * sc.sampling.period
-    ref = np.where(t < 4.0, 0.3 * np.sin(2 * np.pi * 0.5 * t) + 0.15 * np.sin(2 * np.pi * 1.3 * t),
-                   staircase(t - 4.0, [0.0, 0.4, -0.1, 0.6, 0.05, -0.3], 0.7))
-    free = ["arm.motor.inertia", "arm.motor.viscous", "arm.friction.coulomb",
-            "arm.beam.youngs_modulus", "arm.beam.masses[0].mass"]
+    ref = np.where(
+        t < 4.0,
+        0.3 * np.sin(2 * np.pi * 0.5 * t) + 0.15 * np.sin(2 * np.pi * 1.3 * t),
+        staircase(t - 4.0, [0.0, 0.4, -0.1, 0.6, 0.05, -0.3], 0.7),
+    )
+    free = [
+        "arm.motor.inertia",
+        "arm.motor.viscous",
+        "arm.friction.coulomb",
+        "arm.beam.youngs_modulus",
+        "arm.beam.masses[0].mass",
+    ]
     res, err = _recover(truth, free, ref, FitOptions(segment=0.6, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # a pinned tip mass on a massless wire: only ω² = 3EI/(L³m) and the coupling C = 3EI/L
@@ -124,8 +166,11 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
 
 def test_bad_input_names_the_field_and_value():
     truth = two_mode_link()
-    log = scenario_log(truth.model_copy(update={"simulation": truth.simulation.model_copy(
-        update={"duration": 0.2})}))
+    log = scenario_log(
+        truth.model_copy(
+            update={"simulation": truth.simulation.model_copy(update={"duration": 0.2})}
+        )
+    )
     free = ["arm.hubs[0].inertia"]
     with pytest.raises(ValueError, match=r"bounds\['arm.hubs\[0\].inertia'\].*does not contain"):
         fit_scenario(truth, [log], free, FitOptions(bounds={"arm.hubs[0].inertia": (0.03, 0.05)}))
@@ -140,8 +185,9 @@ def test_bad_input_names_the_field_and_value():
         fit_scenario(truth, [slow], free)
     with pytest.raises(ValueError, match="relative standard deviation"):
         fit_scenario(truth, [log], free, FitOptions(priors={"arm.hubs[0].inertia": 0.0}))
-    blind = log.__class__(log.path, log.time, {k: v for k, v in log.signals.items()
-                                               if k != "theta_1"})
+    blind = log.__class__(
+        log.path, log.time, {k: v for k, v in log.signals.items() if k != "theta_1"}
+    )
     with pytest.raises(ValueError, match="no column 'theta_1', which the controller"):
         fit_scenario(truth, [blind], free, FitOptions(channels={"deflection_1": 1.0}))
 
@@ -152,11 +198,23 @@ def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():
     starts from the scenario's state: with initial="log" the gain would scale the start
     deflection read off the log, which the data do see.)"""
     truth = two_mode_link()
-    log = scenario_log(truth.model_copy(update={"simulation": truth.simulation.model_copy(
-        update={"duration": 0.5})}), {"reference": np.full(251, 0.2)})
-    res = fit_scenario(truth, [log], ["sensors.deflection_1.gain"],
-                       FitOptions(channels={"theta_1": 1.0}, initial="scenario", priors={
-                           "sensors.deflection_1.gain": 0.25}, max_nfev=5))
+    log = scenario_log(
+        truth.model_copy(
+            update={"simulation": truth.simulation.model_copy(update={"duration": 0.5})}
+        ),
+        {"reference": np.full(251, 0.2)},
+    )
+    res = fit_scenario(
+        truth,
+        [log],
+        ["sensors.deflection_1.gain"],
+        FitOptions(
+            channels={"theta_1": 1.0},
+            initial="scenario",
+            priors={"sensors.deflection_1.gain": 0.25},
+            max_nfev=5,
+        ),
+    )
     assert res.params["sensors.deflection_1.gain"] == pytest.approx(1.0, abs=1e-9)
     assert res.std["sensors.deflection_1.gain"] == pytest.approx(0.25, rel=1e-6)
 
@@ -179,30 +237,55 @@ def test_cli_fit_and_validate_refit_friction(tmp_path):
     truth = two_mode_link()
     t = np.arange(1501) * 0.002
     ref = staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)
-    short = truth.model_copy(update={"simulation": truth.simulation.model_copy(
-        update={"duration": 3.0})})
+    short = truth.model_copy(
+        update={"simulation": truth.simulation.model_copy(update={"duration": 3.0})}
+    )
     log = scenario_log(short, {"reference": ref}, seed=2)
     path = write_log(tmp_path / "run.csv", log.time, log.signals, required=("time",))
     wrong = scenario_with(short, {"arm.joints[0].friction.coulomb": 0.026})
     sc_path = tmp_path / "template.toml"
     write_toml(sc_path, _drop_none(wrong.model_dump()))
     runner = CliRunner()
-    r = runner.invoke(app, ["fit", str(sc_path), str(path), "--free", "arm.hubs[0].inertia",
-                            "--free", "arm.joints[0].friction.coulomb", "--json",
-                            str(tmp_path / "fit.json"), "--max-nfev", "20"])
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(sc_path),
+            str(path),
+            "--free",
+            "arm.hubs[0].inertia",
+            "--free",
+            "arm.joints[0].friction.coulomb",
+            "--json",
+            str(tmp_path / "fit.json"),
+            "--max-nfev",
+            "20",
+        ],
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "fit.json").read_text())
     assert d["params"]["arm.hubs[0].inertia"] == pytest.approx(0.02, rel=0.05)
     assert d["params"]["arm.joints[0].friction.coulomb"] == pytest.approx(0.02, rel=0.05)
-    r = runner.invoke(app, ["validate", str(sc_path), str(path), "--refit", "friction",
-                            "--refit-window", "0:3", "--json", str(tmp_path / "val.json")])
+    r = runner.invoke(
+        app,
+        [
+            "validate",
+            str(sc_path),
+            str(path),
+            "--refit",
+            "friction",
+            "--refit-window",
+            "0:3",
+            "--json",
+            str(tmp_path / "val.json"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     v = json.loads((tmp_path / "val.json").read_text())
     assert v["refit"]["params"]["arm.joints[0].friction.coulomb"] == pytest.approx(0.02, rel=0.05)
     before = v["fit_percent"]["run.csv" if "run.csv" in v["fit_percent"] else str(path)]
     after = v["refit"]["fit_percent"][next(iter(v["refit"]["fit_percent"]))]
     assert after["theta_1"] > before["theta_1"]
-
 
 
 @pytest.mark.slow  # ~1 min: a two-link arm with stick-slip, 8 channels, segments
@@ -214,18 +297,29 @@ def test_two_link_rig_model_recovered_from_segments_started_on_the_log():
     controller run over the log) with node offsets: the stiffnesses, torque constants and
     the shoulder's Coulomb level come back within 5 %."""
     sc = load_scenario("quanser-two-link")
-    truth = sc.model_copy(update={"simulation": sc.simulation.model_copy(
-        update={"duration": 9.0})})
-    free = ["arm.links[0].torsional_stiffness", "arm.links[1].torsional_stiffness",
-            "arm.joints[0].drive.torque_constant", "arm.joints[1].drive.torque_constant",
-            "arm.joints[0].friction.coulomb"]
+    truth = sc.model_copy(update={"simulation": sc.simulation.model_copy(update={"duration": 9.0})})
+    free = [
+        "arm.links[0].torsional_stiffness",
+        "arm.links[1].torsional_stiffness",
+        "arm.joints[0].drive.torque_constant",
+        "arm.joints[1].drive.torque_constant",
+        "arm.joints[0].friction.coulomb",
+    ]
     d = truth.model_dump()
     true = {p: float(_get(d, p)) for p in free}
     log = scenario_log(truth, seed=0)
     template = scenario_with(truth, {p: v * PERTURB[i] for i, (p, v) in enumerate(true.items())})
-    res = fit_scenario(template, [log], free, FitOptions(
-        segment=1.5, substeps=4, max_nfev=30,
-        channels={c: 1.0 for c in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")}),
-        predict=False)
+    res = fit_scenario(
+        template,
+        [log],
+        free,
+        FitOptions(
+            segment=1.5,
+            substeps=4,
+            max_nfev=30,
+            channels={c: 1.0 for c in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")},
+        ),
+        predict=False,
+    )
     err = {p: res.params[p] / true[p] - 1 for p in free}
     assert all(abs(e) < 0.05 for e in err.values()), err

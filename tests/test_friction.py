@@ -12,10 +12,11 @@ FS = 0.288288 * 0.112984829027616  # N*m, breakaway
 
 
 def run(model: str, current: float, tip_deflection: float = 0.0, **friction):
-    sc = scenario(arm={"friction": {"model": model, "coulomb": "0.25 lbf*in", "static": FS,
-                                    **friction}},
-                  simulation={"duration": "10 s", "substeps": 10},
-                  initial={"tip_deflection": tip_deflection})
+    sc = scenario(
+        arm={"friction": {"model": model, "coulomb": "0.25 lbf*in", "static": FS, **friction}},
+        simulation={"duration": "10 s", "substeps": 10},
+        initial={"tip_deflection": tip_deflection},
+    )
     return simulate(sc, controller=constant_command(current))
 
 

@@ -42,8 +42,13 @@ def _rotary(compensate: bool):
     d["simulation"]["duration"] = 3.0
     d["reference"] = {"type": "step", "amplitude": 0.3, "start": 0.1}
     m = d["arm"]["motor"]
-    k_u = (m["gear_efficiency"] * m["motor_efficiency"] * m["gear_ratio"]
-           * m["motor_constant"] / m["armature_resistance"])  # N·m per V at stall
+    k_u = (
+        m["gear_efficiency"]
+        * m["motor_efficiency"]
+        * m["gear_ratio"]
+        * m["motor_constant"]
+        / m["armature_resistance"]
+    )  # N·m per V at stall
     if compensate:
         d["controller"]["friction_compensation"] = {"level": d["arm"]["friction"]["coulomb"] / k_u}
     return flexarm.simulate(scenario_from_dict(d)), d, k_u
@@ -60,5 +65,9 @@ def test_scenario_friction_compensation_removes_the_stiction_offset():
     assert 2 * q < abs(e0) <= band + q, (e0 / q, band / q)
     # with the compensation the feedback needs only to exceed F_s − C_f: the band shrinks
     # by C_f / F_s (= 0.75 here) and the compensation pushes the last counts
-    assert abs(e1) <= (d["arm"]["friction"]["static"] - d["arm"]["friction"]["coulomb"]) / (
-        d["controller"]["k1"] * k_u) + q, e1 / q
+    assert (
+        abs(e1)
+        <= (d["arm"]["friction"]["static"] - d["arm"]["friction"]["coulomb"])
+        / (d["controller"]["k1"] * k_u)
+        + q
+    ), e1 / q

@@ -25,16 +25,17 @@ def _tool(name: str) -> str:
         return str(here)
     found = shutil.which(name)
     if found is None:
-        pytest.skip(f"{name} is not installed (neither beside {sys.executable} nor on PATH): "
-                    "install the [test] extra (make test does)")
+        pytest.skip(
+            f"{name} is not installed (neither beside {sys.executable} nor on PATH): "
+            "install the [test] extra (make test does)"
+        )
     return found
 
 
 def _run(cmd: list[str], timeout: float) -> None:
     """Run ``cmd`` from the repository root; fail with its output unless it exits 0."""
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
-    assert p.returncode == 0, (f"{' '.join(cmd)} exited {p.returncode}:\n"
-                               f"{p.stdout}\n{p.stderr}")
+    assert p.returncode == 0, f"{' '.join(cmd)} exited {p.returncode}:\n{p.stdout}\n{p.stderr}"
 
 
 def test_ruff_check_is_clean():

@@ -45,8 +45,13 @@ runner = CliRunner()
 
 # ----------------------------------------------------------------------------- browser
 def _chromium() -> str | None:
-    for name in (os.environ.get("FLEXARM_CHROMIUM"), "chromium", "chromium-browser",
-                 "google-chrome", "google-chrome-stable"):
+    for name in (
+        os.environ.get("FLEXARM_CHROMIUM"),
+        "chromium",
+        "chromium-browser",
+        "google-chrome",
+        "google-chrome-stable",
+    ):
         if name and shutil.which(name):
             return shutil.which(name)
     return None
@@ -55,8 +60,9 @@ def _chromium() -> str | None:
 needs_browser = pytest.mark.skipif(
     _chromium() is None,
     reason="no headless Chromium found (Debian/Ubuntu: apt-get install chromium; `make test` "
-           "installs it when CI=true and it runs as root; or set FLEXARM_CHROMIUM to the "
-           "browser's path)")
+    "installs it when CI=true and it runs as root; or set FLEXARM_CHROMIUM to the "
+    "browser's path)",
+)
 
 _PROBE = """<script>addEventListener('load', () => {
 const r = [...document.images].map(i => {const b = i.getBoundingClientRect();
@@ -77,19 +83,35 @@ def _render(page: Path, tmp: Path):
     from PIL import Image
 
     probe = tmp / "probe.html"
-    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", _PROBE + "</body>"),
-                     encoding="utf-8")
-    base = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-            "--force-device-scale-factor=1", f"--user-data-dir={tmp / 'profile'}"]
-    dom = subprocess.run(base + ["--virtual-time-budget=10000", "--window-size=1200,1000",
-                                 "--dump-dom", probe.as_uri()],
-                         capture_output=True, text=True, timeout=120)
+    probe.write_text(
+        page.read_text(encoding="utf-8").replace("</body>", _PROBE + "</body>"), encoding="utf-8"
+    )
+    base = [
+        _chromium(),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--force-device-scale-factor=1",
+        f"--user-data-dir={tmp / 'profile'}",
+    ]
+    dom = subprocess.run(
+        base
+        + ["--virtual-time-budget=10000", "--window-size=1200,1000", "--dump-dom", probe.as_uri()],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     m = re.search(r'<pre id="img-check">(.*?)</pre>', dom.stdout, re.S)
     assert m, f"the probe did not run in Chromium: {dom.stderr[-2000:]}"
     info = json.loads(html.unescape(m.group(1)))
     shot = tmp / "shot.png"
-    subprocess.run(base + [f"--window-size=1200,{info['height']}", f"--screenshot={shot}",
-                           page.resolve().as_uri()], capture_output=True, timeout=120)
+    subprocess.run(
+        base
+        + [f"--window-size=1200,{info['height']}", f"--screenshot={shot}", page.resolve().as_uri()],
+        capture_output=True,
+        timeout=120,
+    )
     assert shot.is_file(), f"Chromium wrote no screenshot of {page}"
     return info, Image.open(shot)
 
@@ -127,10 +149,15 @@ def _figure():
 
 def test_report_is_self_contained_escaped_and_its_tables_hold_the_numbers(tmp_path):
     fig = _figure()
-    rep = HtmlReport("t <1>", command="flexarm fit 'a b.csv'", inputs=["/x/a b.csv"],
-                     warnings=["<script>alert(1)</script> fit 12.0 % is low"])
-    rep.parameters([("J", 2.0e-3, 1.0e-4, "kg*m**2"), ("c", 0.5, 0.4, "N*m"),
-                    ("d", 1.0, float("nan"), "")])
+    rep = HtmlReport(
+        "t <1>",
+        command="flexarm fit 'a b.csv'",
+        inputs=["/x/a b.csv"],
+        warnings=["<script>alert(1)</script> fit 12.0 % is low"],
+    )
+    rep.parameters(
+        [("J", 2.0e-3, 1.0e-4, "kg*m**2"), ("c", 0.5, 0.4, "N*m"), ("d", 1.0, float("nan"), "")]
+    )
     rep.fit_percent({"/x/a.csv": {"motor_angle": 97.34, "tip_deflection": 12.0}}, "fit")
     rep.figures([fig], ["overlay"])
     page = rep.write(tmp_path / "r.html")
@@ -181,18 +208,29 @@ def test_design_report_shows_controller_poles_info_comparison_and_figures(tmp_pa
     sc = load_scenario("rotary-flexible-link")
     # a discrete system with known poles 0.5 and 0.9 (its state matrix is diagonal)
     lin = control.ss(np.diag([0.5, 0.9]), [[1.0], [1.0]], [[1.0, 2.0]], [[0.0]], dt=0.001)
-    d = Design("lqr", sc, lin, info={"gains": [6.0, -3.0, 0.213, 0.0], "cost": 1.25,
-                                     "trace": {"iterations": list(range(20))}},
-               warnings=["saturates in 3 of 200 plants"])
+    d = Design(
+        "lqr",
+        sc,
+        lin,
+        info={
+            "gains": [6.0, -3.0, 0.213, 0.0],
+            "cost": 1.25,
+            "trace": {"iterations": list(range(20))},
+        },
+        warnings=["saturates in 3 of 200 plants"],
+    )
     # the comparison as design/compare's Comparison.rows: controller -> nested metrics
-    rows = {"logged": {"median": {"hub_error_counts": 7.0}, "unstable": 0},
-            "lqr": {"median": {"hub_error_counts": 0.5}, "unstable": 2}}
-    page = design_report(d, figures=[_figure()], command="flexarm design x --method lqr",
-                         comparison=rows).write(tmp_path / "d.html")
+    rows = {
+        "logged": {"median": {"hub_error_counts": 7.0}, "unstable": 0},
+        "lqr": {"median": {"hub_error_counts": 0.5}, "unstable": 2},
+    }
+    page = design_report(
+        d, figures=[_figure()], command="flexarm design x --method lqr", comparison=rows
+    ).write(tmp_path / "d.html")
     text = page.read_text()
     assert "flexarm design --method lqr: " + sc.name in text
     assert "|poles| (discrete; &lt; 1 stable): 0.5, 0.9" in text
-    assert "[6, -3, 0.213, 0]" in text and "<td class=\"num\">1.25</td>" in text
+    assert "[6, -3, 0.213, 0]" in text and '<td class="num">1.25</td>' in text
     assert "saturates in 3 of 200 plants" in text.split('class="warnings"')[1]
     assert "<th>median.hub_error_counts</th><th>unstable</th>" in text
     assert _cells(text, "lqr")[1:] == ["0.5", "2"] and _cells(text, "logged")[1:] == ["7", "0"]
@@ -204,8 +242,20 @@ def test_design_report_shows_controller_poles_info_comparison_and_figures(tmp_pa
 
 
 # ----------------------------------------------------------------------------- CLI, synthetic
-SYN = ["--gear-ratio", "70", "--motor-constant", "7.68e-3", "--armature-resistance", "2.6",
-       "--link-length", "0.42", "--gear-efficiency", "0.9", "--motor-efficiency", "0.69"]
+SYN = [
+    "--gear-ratio",
+    "70",
+    "--motor-constant",
+    "7.68e-3",
+    "--armature-resistance",
+    "2.6",
+    "--link-length",
+    "0.42",
+    "--gear-efficiency",
+    "0.9",
+    "--motor-efficiency",
+    "0.69",
+]
 
 
 @pytest.fixture(scope="module")
@@ -216,14 +266,43 @@ def synthetic(tmp_path_factory):
     from flexarm.specs import load_scenario
 
     d = tmp_path_factory.mktemp("report")
-    log = synthetic_log(load_scenario("rotary-flexible-link"), [6.0, -3.0, 0.213, 0.0],
-                        d / "b.csv", duration=4.0, amplitude=(0.5, 0.15), period=3.0)
-    r = runner.invoke(app, ["fit", str(log), *SYN, "--seconds", "2", "--json",
-                            str(d / "fit.json"), "--scenario-out", str(d / "fit.toml"),
-                            "--report", str(d / "fit.html")])
+    log = synthetic_log(
+        load_scenario("rotary-flexible-link"),
+        [6.0, -3.0, 0.213, 0.0],
+        d / "b.csv",
+        duration=4.0,
+        amplitude=(0.5, 0.15),
+        period=3.0,
+    )
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(log),
+            *SYN,
+            "--seconds",
+            "2",
+            "--json",
+            str(d / "fit.json"),
+            "--scenario-out",
+            str(d / "fit.toml"),
+            "--report",
+            str(d / "fit.html"),
+        ],
+    )
     assert r.exit_code == 0, r.output
-    r = runner.invoke(app, ["validate", str(d / "fit.toml"), str(log), "--json",
-                            str(d / "v.json"), "--report", str(d / "v.html")])
+    r = runner.invoke(
+        app,
+        [
+            "validate",
+            str(d / "fit.toml"),
+            str(log),
+            "--json",
+            str(d / "v.json"),
+            "--report",
+            str(d / "v.html"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     return d, log
 
@@ -247,8 +326,9 @@ def test_fit_report_holds_the_fit_and_the_command(synthetic):
         assert float(c[2]) == pytest.approx(p["std"], rel=0.06)  # '.2g': half a unit in 10
         assert float(c[4]) == pytest.approx(100 * p["std"] / abs(p["value"]), rel=1e-2)
     for sig, v in res["fit_percent"]["b.csv"].items():  # '.1f'
-        assert float(_cells(text, "b.csv")[1 + list(res["fit_percent"]["b.csv"]).index(sig)]) \
-            == pytest.approx(v, abs=0.051)
+        assert float(
+            _cells(text, "b.csv")[1 + list(res["fit_percent"]["b.csv"]).index(sig)]
+        ) == pytest.approx(v, abs=0.051)
     # the true model fits its own noisy, quantised log (test_bench_fit: > 95 % both)
     assert min(res["fit_percent"]["b.csv"].values()) > 95
     cmd = re.search(r"<code>(flexarm fit .*?)</code>", text).group(1)
@@ -266,17 +346,21 @@ def test_validate_report_and_refused_overwrite(synthetic):
     fp = json.loads((d / "v.json").read_text())["fit_percent"]["b.csv"]
     c = _cells(text, "b.csv")
     assert [float(x) for x in c[1:]] == pytest.approx(
-        [fp["motor_angle"], fp["tip_deflection"]], abs=0.051)
+        [fp["motor_angle"], fp["tip_deflection"]], abs=0.051
+    )
     assert json.loads((d / "v.json").read_text())["plots"] == []  # no --plots: none kept
     before = (d / "v.html").read_bytes()
-    r = runner.invoke(app, ["validate", str(d / "fit.toml"), str(log), "--report",
-                            str(d / "v.html")])
+    r = runner.invoke(
+        app, ["validate", str(d / "fit.toml"), str(log), "--report", str(d / "v.html")]
+    )
     assert r.exit_code == 2
     said = " ".join(r.output.split())
     assert f"--report {d / 'v.html'}: exists; pass --overwrite" in said
     assert (d / "v.html").read_bytes() == before
-    r = runner.invoke(app, ["validate", str(d / "fit.toml"), str(log), "--report",
-                            str(d / "v.html"), "--overwrite"])
+    r = runner.invoke(
+        app,
+        ["validate", str(d / "fit.toml"), str(log), "--report", str(d / "v.html"), "--overwrite"],
+    )
     assert r.exit_code == 0 and (d / "v.html").read_bytes() != before
     r = runner.invoke(app, ["validate", str(d / "fit.toml"), str(log), "--report", str(d)])
     assert r.exit_code == 2 and "is a folder, not a file" in " ".join(r.output.split())
@@ -304,30 +388,62 @@ def test_general_fit_and_refit_validate_reports(tmp_path):
 
     truth = two_mode_link()
     t = np.arange(1501) * 0.002
-    short = truth.model_copy(update={"simulation": truth.simulation.model_copy(
-        update={"duration": 3.0})})
+    short = truth.model_copy(
+        update={"simulation": truth.simulation.model_copy(update={"duration": 3.0})}
+    )
     log = scenario_log(short, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 0.75)}, seed=2)
     path = write_log(tmp_path / "run.csv", log.time, log.signals, required=("time",))
     sc_path = tmp_path / "template.toml"
-    write_toml(sc_path, _drop_none(scenario_with(
-        short, {"arm.joints[0].friction.coulomb": 0.026}).model_dump()))
+    write_toml(
+        sc_path,
+        _drop_none(scenario_with(short, {"arm.joints[0].friction.coulomb": 0.026}).model_dump()),
+    )
     coul = "arm.joints[0].friction.coulomb"
-    r = runner.invoke(app, ["fit", str(sc_path), str(path), "--free", "arm.hubs[0].inertia",
-                            "--free", coul, "--json", str(tmp_path / "fit.json"),
-                            "--max-nfev", "20", "--report", str(tmp_path / "fit.html")])
+    r = runner.invoke(
+        app,
+        [
+            "fit",
+            str(sc_path),
+            str(path),
+            "--free",
+            "arm.hubs[0].inertia",
+            "--free",
+            coul,
+            "--json",
+            str(tmp_path / "fit.json"),
+            "--max-nfev",
+            "20",
+            "--report",
+            str(tmp_path / "fit.html"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "fit.json").read_text())
     text = (tmp_path / "fit.html").read_text()
     c = _cells(text, coul)
     assert [float(x) for x in c[1:4]] == pytest.approx(
-        [d["template"][coul], d["params"][coul], d["std"][coul]], rel=0.05)  # '.2g' std
+        [d["template"][coul], d["params"][coul], d["std"][coul]], rel=0.05
+    )  # '.2g' std
     fp = next(iter(d["fit_percent"].values()))
     row = _cells(text, "run.csv")
     assert [float(x) for x in row[1:]] == pytest.approx(list(fp.values()), abs=0.051)
     assert text.count("<img ") == len(d["fit_percent"]) >= 1
-    r = runner.invoke(app, ["validate", str(sc_path), str(path), "--refit", "friction",
-                            "--refit-window", "0:3", "--json", str(tmp_path / "v.json"),
-                            "--report", str(tmp_path / "v.html")])
+    r = runner.invoke(
+        app,
+        [
+            "validate",
+            str(sc_path),
+            str(path),
+            "--refit",
+            "friction",
+            "--refit-window",
+            "0:3",
+            "--json",
+            str(tmp_path / "v.json"),
+            "--report",
+            str(tmp_path / "v.html"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     v = json.loads((tmp_path / "v.json").read_text())
     text = (tmp_path / "v.html").read_text()
@@ -343,8 +459,9 @@ def test_the_browser_check_fails_on_a_broken_or_blank_figure(tmp_path):
     from PIL import Image
 
     good = HtmlReport("t").figures([_figure()])
-    broken = good.html().replace("data:image/png;base64,",
-                                 "data:image/png;base64," + base64.b64encode(b"no png").decode(), 1)
+    broken = good.html().replace(
+        "data:image/png;base64,", "data:image/png;base64," + base64.b64encode(b"no png").decode(), 1
+    )
     (tmp_path / "b.html").write_text(broken)
     info, _ = _render(tmp_path / "b.html", tmp_path)
     assert [im["ok"] for im in info["images"]] == [False]
@@ -363,8 +480,12 @@ def unit6(tmp_path_factory, rotary_whole_fit):
     d = tmp_path_factory.mktemp("unit6")
     path = DATA / "4PM_Group37_FlexArm_Unit6"
     res = rotary_whole_fit(path.name)
-    page = fit_report(res, figures=res.plots(d), command="flexarm.identification.fit "
-                      "(tests/test_html_report.py)", inputs=[path]).write(d / "unit6.html")
+    page = fit_report(
+        res,
+        figures=res.plots(d),
+        command="flexarm.identification.fit (tests/test_html_report.py)",
+        inputs=[path],
+    ).write(d / "unit6.html")
     return res, page
 
 
@@ -378,8 +499,9 @@ def test_unit6_fit_report_shows_its_figures_in_chromium(unit6, tmp_path):
     assert fp["motor_angle"] >= 95 and fp["tip_deflection"] >= 80
     c = _cells(text, "4PM_Group37_FlexArm_Unit6")
     assert float(c[1]) == pytest.approx(fp["motor_angle"], abs=0.051)
-    assert float(_cells(text, "hub_inertia")[1]) == pytest.approx(res.params["hub_inertia"],
-                                                                  rel=1e-4)
+    assert float(_cells(text, "hub_inertia")[1]) == pytest.approx(
+        res.params["hub_inertia"], rel=1e-4
+    )
     if _chromium() is None:
         pytest.skip("no headless Chromium found (apt-get install chromium)")
     _check_in_browser(page, tmp_path, 1)

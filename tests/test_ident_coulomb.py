@@ -72,21 +72,27 @@ def _analytic_log(w, th1, th3, cf, i_extra=0.0, name="x.csv", t0=0.123, periods=
     def re(X, n):
         return np.real(X * np.exp(1j * n * w * t))
 
-    sig = {"reference": abs(th1) * np.sin(w * t + 0.2),
-           "current": 0.01 + re(i1, 1) + re(i3, 3) + re(i5, 5),
-           "motor_angle": 0.02 + re(th1, 1) + re(th3, 3),
-           "tip_angle": re(th1 * 0.8, 1)}
+    sig = {
+        "reference": abs(th1) * np.sin(w * t + 0.2),
+        "current": 0.01 + re(i1, 1) + re(i3, 3) + re(i5, 5),
+        "motor_angle": 0.02 + re(th1, 1) + re(th3, 3),
+        "tip_angle": re(th1 * 0.8, 1),
+    }
     return Log(path=name, time=t, signals=sig)
 
 
 def test_estimator_exact_on_analytic_time_signals():
     """Signals built from eqs. (3)-(5), arbitrary time origins, non-integer samples per
     period: harmonic analysis + estimator give C_f to 1e-6."""
-    logs = [_analytic_log(2.2, 0.3 * np.exp(0.7j), 0.003 * np.exp(1.1j), CF, name="a.csv"),
-            _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
-            _analytic_log(1.3, 0.5 * np.exp(-1.2j), 0.001 * np.exp(2.5j), CF, name="c.csv"),
-            _analytic_log(3.9, 0.2 * np.exp(0.9j), 0.0, CF, name="d.csv", t0=0.5)]
-    est = estimate_coulomb([analyse_log(lg, held=(), friction_shape="ideal") for lg in logs])  # samples of a continuous current, not a held command
+    logs = [
+        _analytic_log(2.2, 0.3 * np.exp(0.7j), 0.003 * np.exp(1.1j), CF, name="a.csv"),
+        _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
+        _analytic_log(1.3, 0.5 * np.exp(-1.2j), 0.001 * np.exp(2.5j), CF, name="c.csv"),
+        _analytic_log(3.9, 0.2 * np.exp(0.9j), 0.0, CF, name="d.csv", t0=0.5),
+    ]
+    est = estimate_coulomb(
+        [analyse_log(lg, held=(), friction_shape="ideal") for lg in logs]
+    )  # samples of a continuous current, not a held command
     assert [e.omega for e in est.pairs] == pytest.approx([2.2, 1.3], rel=1e-9)
     assert [e.partner_name for e in est.pairs] == ["b.csv", "d.csv"]
     for e in est.pairs:
@@ -97,8 +103,16 @@ def test_estimator_exact_on_analytic_time_signals():
 
 def test_partner_matching_tolerance_is_one_percent():
     def logs(factor):
-        return [analyse_log(_analytic_log(2.0, 0.3, 0.0, CF, name="base.csv"), held=(), friction_shape="ideal"),
-                analyse_log(_analytic_log(6.0 * factor, 0.04, 0.0, CF, name="p.csv"), held=(), friction_shape="ideal")]
+        return [
+            analyse_log(
+                _analytic_log(2.0, 0.3, 0.0, CF, name="base.csv"), held=(), friction_shape="ideal"
+            ),
+            analyse_log(
+                _analytic_log(6.0 * factor, 0.04, 0.0, CF, name="p.csv"),
+                held=(),
+                friction_shape="ideal",
+            ),
+        ]
 
     est = estimate_coulomb(logs(1.009))
     assert len(est.pairs) == 1 and est.pairs[0].partner_omega == pytest.approx(6.054)
@@ -111,9 +125,11 @@ def test_partner_matching_tolerance_is_one_percent():
 
 
 def test_missing_partner_warns_naming_frequency_and_continues():
-    logs = [_analytic_log(2.2, 0.3 * np.exp(0.7j), 0.003 * np.exp(1.1j), CF, name="a.csv"),
-            _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
-            _analytic_log(5.0, 0.1 * np.exp(0.1j), 0.0, CF, name="lonely.csv")]
+    logs = [
+        _analytic_log(2.2, 0.3 * np.exp(0.7j), 0.003 * np.exp(1.1j), CF, name="a.csv"),
+        _analytic_log(6.6, 0.04 * np.exp(0.3j), 0.0, CF, name="b.csv", t0=1.7),
+        _analytic_log(5.0, 0.1 * np.exp(0.1j), 0.0, CF, name="lonely.csv"),
+    ]
     with pytest.warns(IdentificationWarning) as rec:
         est = estimate_coulomb([analyse_log(lg, held=(), friction_shape="ideal") for lg in logs])
     msgs = [str(r.message) for r in rec]
@@ -144,8 +160,9 @@ def test_cost_is_finite_where_cf_prime_vanishes():
     """A pair without third-harmonic response (θm and i at 3ω0 both zero) has C_f' = 0
     for every trial C_f: eq. (6) is ln 0 there. The search gets a finite cost (so Brent's
     parabolic steps stay defined), ends at the bound of its grid and says so."""
-    ph = PairPhasors(theta1=0.1 + 0j, theta3=0j, current3=0j, theta1_partner=0.05 + 0j,
-                     current1_partner=0.2 + 0j)
+    ph = PairPhasors(
+        theta1=0.1 + 0j, theta3=0j, current3=0j, theta1_partner=0.05 + 0j, current1_partner=0.2 + 0j
+    )
     assert ph.cf_prime(0.1) == 0
     assert math.isfinite(ph.cost(0.1)) and ph.cost(0.1) > 1e5
     e = estimate_pair(ph)

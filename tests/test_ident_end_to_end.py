@@ -39,7 +39,7 @@ def compare(got_coefs, true_tf):
     pair = lambda p: np.abs(p[np.abs(p.imag) > 1e-9])  # noqa: E731
     low = lambda p: np.sort(np.abs(p[(np.abs(p.imag) <= 1e-9) & (np.abs(p) > 1e-9)]))  # noqa: E731
     z_err = np.max(np.abs(zg / zt - 1)) if len(zg) == len(zt) else np.inf
-    res_err = (np.max(np.abs(pair(pg) / pair(pt)[0] - 1)) if len(pair(pg)) else np.inf)
+    res_err = np.max(np.abs(pair(pg) / pair(pt)[0] - 1)) if len(pair(pg)) else np.inf
     lo_g, lo_t = low(pg), low(pt)
     low_err = float(np.abs(lo_g[0] / lo_t[0] - 1)) if len(lo_g) else np.inf
     return z_err, res_err, low_err
@@ -56,10 +56,23 @@ def run_pipeline(tmp_path, data: dict, K_text: str):
     out = {}
     for label, extra in (("free", ["--free"]), ("structured", [])):
         j = tmp_path / f"{label}.json"
-        r = runner.invoke(app, ["identify", str(exp), "--motor-constant", K_text,
-                                "--json", str(j), "--plots", str(tmp_path / "plots"),
-                                "--scenario-out", str(tmp_path / f"{label}.toml"),
-                                "--overwrite"] + extra)
+        r = runner.invoke(
+            app,
+            [
+                "identify",
+                str(exp),
+                "--motor-constant",
+                K_text,
+                "--json",
+                str(j),
+                "--plots",
+                str(tmp_path / "plots"),
+                "--scenario-out",
+                str(tmp_path / f"{label}.toml"),
+                "--overwrite",
+            ]
+            + extra,
+        )
         assert r.exit_code == 0, r.output
         out[label] = json.loads(j.read_text())
     assert (tmp_path / "plots" / "motor_bode.png").exists()
@@ -74,8 +87,11 @@ def noisy(data: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def paper(tmp_path_factory):
-    return run_pipeline(tmp_path_factory.mktemp("paper"),
-                        noisy(scenario_dict("feliu-single-mass-identified")), "2.184 lbf*in/A")
+    return run_pipeline(
+        tmp_path_factory.mktemp("paper"),
+        noisy(scenario_dict("feliu-single-mass-identified")),
+        "2.184 lbf*in/A",
+    )
 
 
 def test_paper_arm_end_to_end(paper):
@@ -101,8 +117,9 @@ def test_paper_arm_end_to_end(paper):
 def test_second_arm_end_to_end(tmp_path):
     """Every parameter differs from the paper's: J, V, C, K, C_f, beam frequency."""
     d = noisy(scenario_dict("feliu-single-mass-identified"))
-    d["arm"]["motor"].update(inertia=1.1e-3, viscous=3.0e-3, torque_constant=0.35,
-                             current_limit=5.0)
+    d["arm"]["motor"].update(
+        inertia=1.1e-3, viscous=3.0e-3, torque_constant=0.35, current_limit=5.0
+    )
     d["arm"]["friction"].update(coulomb=0.08 * 0.35, static=0.08 * 0.35)  # 0.08 A
     d["arm"]["beam"].update(stiffness=0.15, tip_num=[90.0], tip_den=[1.0, 0.1, 90.0])
     out, sc = run_pipeline(tmp_path, d, "0.35")

@@ -29,8 +29,13 @@ from flexarm.specs.arm import SingleLinkArm
 
 def fit_tf(w, H, n_zeros, n_poles, integrators=0):
     """The pipeline's fit (identify.py): tfest, log-ratio cost, no variances."""
-    return tfest(control.frd(np.asarray(H, complex), np.asarray(w, float)), n_poles, n_zeros,
-                 integrators=integrators, cost="log")
+    return tfest(
+        control.frd(np.asarray(H, complex), np.asarray(w, float)),
+        n_poles,
+        n_zeros,
+        integrators=integrators,
+        cost="log",
+    )
 
 
 # FRB eqs. (12), (13), as printed (θm in rad, i in A).
@@ -87,7 +92,10 @@ def test_log_cost_with_variances_matches_ml():
     ml = tfest(frd, 2, 0, std=sd)
     lg = tfest(frd, 2, 0, std=sd, cost="log")
     for k in ("b0", "a0", "a1"):
-        assert abs(lg.parameters[k]["value"] - ml.parameters[k]["value"]) < 0.5 * ml.parameters[k]["std"]
+        assert (
+            abs(lg.parameters[k]["value"] - ml.parameters[k]["value"])
+            < 0.5 * ml.parameters[k]["std"]
+        )
         assert lg.parameters[k]["std"] == pytest.approx(ml.parameters[k]["std"], rel=0.05)
     assert lg.expected_cost == ml.expected_cost == 40 - 3 / 2
     assert "accepted" in lg.verdict and "accepted" in ml.verdict
@@ -96,8 +104,9 @@ def test_log_cost_with_variances_matches_ml():
 
 
 def test_fit_refuses_too_few_frequencies():
-    with pytest.raises(TFEstError, match="2 frequencies give 4 real equations, not more than "
-                                         "the 6 parameters"):
+    with pytest.raises(
+        TFEstError, match="2 frequencies give 4 real equations, not more than the 6 parameters"
+    ):
         fit_tf([1.0, 2.0], [1.0 + 1j, 0.5j], 2, 4, integrators=1)
 
 
@@ -112,7 +121,9 @@ def paper_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def paper(paper_dir):
     before = sim.file_hashes(paper_dir)
-    res = identify(paper_dir, "2.184 lbf*in/A", structured=False)  # catalogue K; the paper's free fit
+    res = identify(
+        paper_dir, "2.184 lbf*in/A", structured=False
+    )  # catalogue K; the paper's free fit
     assert sim.file_hashes(paper_dir) == before  # the input files are left unchanged
     return res
 
@@ -157,8 +168,9 @@ def test_raw_data_fit_misses_the_resonance(paper):
     fr = paper.response
     k = np.argmin(np.abs(fr.omega - w_peak))
     assert abs(fr.motor_raw[k]) < 0.3 * g_true
-    assert abs(fr.motor_corrected[k]) == pytest.approx(abs(sim.PAPER_ARM.Gm(1j * fr.omega[k])),
-                                                       rel=0.05)
+    assert abs(fr.motor_corrected[k]) == pytest.approx(
+        abs(sim.PAPER_ARM.Gm(1j * fr.omega[k])), rel=0.05
+    )
 
 
 def test_paper_arm_physical_parameters_and_scenario(paper):
@@ -183,13 +195,21 @@ def test_paper_arm_physical_parameters_and_scenario(paper):
 
 def test_json_summary_and_bode_figures(paper, tmp_path):
     d = json.loads(paper.to_json())
-    for key in ("coulomb_current", "coulomb_torque", "coulomb_current_per_frequency",
-                "motor_tf", "beam_tf", "frequency_response", "warnings"):
+    for key in (
+        "coulomb_current",
+        "coulomb_torque",
+        "coulomb_current_per_frequency",
+        "motor_tf",
+        "beam_tf",
+        "frequency_response",
+        "warnings",
+    ):
         assert key in d
     assert d["coulomb_current"] == pytest.approx(paper.coulomb_current)
     assert len(d["coulomb_current_per_frequency"]) == len(sim.PAPER_PAIRS)
     assert [e["omega"] for e in d["coulomb_current_per_frequency"]] == pytest.approx(
-        [p[0] for p in sim.PAPER_PAIRS], rel=1e-6)
+        [p[0] for p in sim.PAPER_PAIRS], rel=1e-6
+    )
     assert d["motor_tf"]["den"][-1] == 0.0 and len(d["motor_tf"]["den"]) == 5
     assert len(d["beam_tf"]["num"]) == 1 and len(d["beam_tf"]["den"]) == 3
     fr = d["frequency_response"]
@@ -220,8 +240,9 @@ def test_missing_partner_warns_and_still_returns_the_response(paper_dir, tmp_pat
     with pytest.warns(IdentificationWarning) as rec:
         res = identify(sub, 0.24676)
     msgs = [str(r.message) for r in rec]
-    assert any("sine_013.00.csv" in m and "ω0 = 13 rad/s" in m and "39 rad/s" in m
-               for m in msgs), msgs
+    assert any("sine_013.00.csv" in m and "ω0 = 13 rad/s" in m and "39 rad/s" in m for m in msgs), (
+        msgs
+    )
     assert len(res.coulomb.pairs) == len(sim.PAPER_PAIRS) - 1
     assert len(res.response.omega) == len(files) - 1
     assert res.coulomb_current == pytest.approx(0.132, rel=0.10)
@@ -238,8 +259,7 @@ def test_missing_partner_warns_and_still_returns_the_response(paper_dir, tmp_pat
     assert "no ω0/3ω0 pair" in text and "raw" in text
     d = res.to_dict()
     assert d["coulomb_current"] is None and d["motor_tf_fitted_to"] == "raw"
-    assert all(e["motor_corrected"] is None and e["motor_raw"] for e in
-               d["frequency_response"])
+    assert all(e["motor_corrected"] is None and e["motor_raw"] for e in d["frequency_response"])
     assert len(d["frequency_response"]) == 4
 
 

@@ -20,19 +20,30 @@ from flexarm.identification.frequency_domain.harmonics import (
 from flexarm.io.logs import Log, read_log, write_log
 
 W0 = 2.345678  # rad/s: 2678.6... samples per period at 1 kHz, not a whole number
-PHASORS = {0: 0.03, 1: 0.7 * np.exp(0.4j), 2: 0.01j, 3: 0.05 * np.exp(-2.1j),
-           5: 0.02 * np.exp(1.3j)}
+PHASORS = {
+    0: 0.03,
+    1: 0.7 * np.exp(0.4j),
+    2: 0.01j,
+    3: 0.05 * np.exp(-2.1j),
+    5: 0.02 * np.exp(1.3j),
+}
 
 
 def _signal(t, w, ph):
-    return sum((np.real(X * np.exp(1j * n * w * t)) if n else np.real(X) * np.ones_like(t))
-               for n, X in ph.items())
+    return sum(
+        (np.real(X * np.exp(1j * n * w * t)) if n else np.real(X) * np.ones_like(t))
+        for n, X in ph.items()
+    )
 
 
 def _log(t0=0.37, periods=6.4, w=W0, rate=1000.0, path=None, current=None):
     t = t0 + np.arange(int(periods * 2 * math.pi / w * rate)) / rate
-    sig = {"reference": 0.5 * np.sin(w * t + 0.3), "current": _signal(t, w, PHASORS),
-           "motor_angle": 0.2 * np.sin(w * t), "tip_angle": 0.1 * np.cos(w * t)}
+    sig = {
+        "reference": 0.5 * np.sin(w * t + 0.3),
+        "current": _signal(t, w, PHASORS),
+        "motor_angle": 0.2 * np.sin(w * t),
+        "tip_angle": 0.1 * np.cos(w * t),
+    }
     if current is not None:
         sig["current"] = current(t)
     return Log(path=path, time=t, signals=sig)
@@ -89,8 +100,11 @@ def test_constant_reference_is_an_error(tmp_path):
     log = _log()
     log.signals["reference"] = np.zeros(len(log))
     log.path = tmp_path / "flat_reference.csv"
-    with pytest.raises(IdentificationError, match=r"flat_reference\.csv: the reference is "
-                                                  r"constant"):
+    with pytest.raises(
+        IdentificationError,
+        match=r"flat_reference\.csv: the reference is "
+        r"constant",
+    ):
         analyse_log(log)
 
 
@@ -146,7 +160,9 @@ def test_measured_friction_shape():
     X[1] = 0.8 * np.exp(0.4j)
     S = measured_friction_shape(t, X, w, 5)
     for n in (1, 3, 5):
-        assert abs(S[n] - ideal_friction_phasor(X[1], n)) < 2e-3 * abs(ideal_friction_phasor(X[1], n))
+        assert abs(S[n] - ideal_friction_phasor(X[1], n)) < 2e-3 * abs(
+            ideal_friction_phasor(X[1], n)
+        )
     assert abs(S[2]) < 1e-3
     X[3] = 0.05 * np.exp(1.0j)
     S3 = measured_friction_shape(t, X, w, 5)

@@ -14,17 +14,24 @@ HEADER = "time,reference,current,motor_angle,tip_angle"
 
 def _rows(n=50, dt=1e-3, w=5.0):
     t = np.arange(n) * dt
-    return t, {"reference": 0.1 * np.sin(w * t), "current": 0.5 * np.cos(w * t),
-               "motor_angle": 0.1 * np.sin(w * t - 0.1), "tip_angle": 0.05 * np.sin(w * t)}
+    return t, {
+        "reference": 0.1 * np.sin(w * t),
+        "current": 0.5 * np.cos(w * t),
+        "motor_angle": 0.1 * np.sin(w * t - 0.1),
+        "tip_angle": 0.05 * np.sin(w * t),
+    }
 
 
 def _csv(path, header=HEADER, rows=None, comments=(), n=50):
     t, s = _rows(n)
     lines = [f"# {c}" for c in comments] + [header]
     if rows is None:
-        rows = [",".join(f"{v:.9g}" for v in r) for r in
-                np.column_stack([t, s["reference"], s["current"], s["motor_angle"],
-                                 s["tip_angle"]])]
+        rows = [
+            ",".join(f"{v:.9g}" for v in r)
+            for r in np.column_stack(
+                [t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"]]
+            )
+        ]
     path.write_text("\n".join(lines + list(rows)) + "\n")
     return path
 
@@ -41,8 +48,14 @@ def test_round_trip_with_comments_meta_and_extra_columns(tmp_path):
     log = read_log(p)
     assert log.meta == {"omega": "5.0", "rig": "air table"}
     assert log.comments == ["omega: 5.0", "rig: air table"]
-    assert list(log.signals) == ["reference", "current", "motor_angle", "tip_angle",
-                                 "voltage", "motor_velocity"]
+    assert list(log.signals) == [
+        "reference",
+        "current",
+        "motor_angle",
+        "tip_angle",
+        "voltage",
+        "motor_velocity",
+    ]
     for k, v in s.items():
         np.testing.assert_allclose(log[k], v, rtol=1e-11, atol=1e-14)
     assert log.dt == pytest.approx(1e-3, rel=1e-9)
@@ -63,21 +76,32 @@ def test_write_refuses_to_overwrite(tmp_path):
 def test_column_and_unit_mapping(tmp_path):
     t, s = _rows()
     p = tmp_path / "mapped.csv"
-    rows = [f"{1e3 * ti:.9g},{r:.9g},{1e3 * i:.9g},{m:.9g},{tt:.9g}" for ti, r, i, m, tt in
-            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True)]
+    rows = [
+        f"{1e3 * ti:.9g},{r:.9g},{1e3 * i:.9g},{m:.9g},{tt:.9g}"
+        for ti, r, i, m, tt in zip(
+            t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True
+        )
+    ]
     _csv(p, header="t_ms,reference,i_m,motor_angle,tip_angle", rows=rows)
     before = _sha(p)
-    log = read_log(p, columns={"current": "i_m", "time": "t_ms"},
-                   units={"current": "mA", "time": "ms"})
+    log = read_log(
+        p, columns={"current": "i_m", "time": "t_ms"}, units={"current": "mA", "time": "ms"}
+    )
     np.testing.assert_allclose(log["current"], s["current"], rtol=1e-8)
     np.testing.assert_allclose(log.time, t, atol=1e-12)
     assert _sha(p) == before  # never modified
-    with pytest.raises(LogError, match=r"mapped\.csv: cannot convert column 'current' from 'kg' to A"):
+    with pytest.raises(
+        LogError, match=r"mapped\.csv: cannot convert column 'current' from 'kg' to A"
+    ):
         read_log(p, columns={"current": "i_m", "time": "t_ms"}, units={"current": "kg"})
     # encoder counts: a scaled unit (4096 counts per turn), 1 count = 2π/4096 rad
     counts = tmp_path / "counts.csv"
-    rows = [f"{ti:.9g},{r:.9g},{i:.9g},{m * 4096 / (2 * np.pi):.12g},{tt:.9g}" for ti, r, i, m, tt in
-            zip(t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True)]
+    rows = [
+        f"{ti:.9g},{r:.9g},{i:.9g},{m * 4096 / (2 * np.pi):.12g},{tt:.9g}"
+        for ti, r, i, m, tt in zip(
+            t, s["reference"], s["current"], s["motor_angle"], s["tip_angle"], strict=True
+        )
+    ]
     _csv(counts, header="time,reference,current,motor_angle,tip_angle", rows=rows)
     log = read_log(counts, units={"motor_angle": "turn/4096"})
     np.testing.assert_allclose(log["motor_angle"], s["motor_angle"], rtol=1e-10, atol=1e-15)
@@ -94,9 +118,14 @@ def test_missing_column_lists_found_expected_and_mapping(tmp_path):
     assert "--column current=" in msg
 
 
-@pytest.mark.parametrize("bad, what", [("abc", "'abc' is not a number"),
-                                       ("", "an empty field is not a number"),
-                                       ("nan", "value is NaN")])
+@pytest.mark.parametrize(
+    "bad, what",
+    [
+        ("abc", "'abc' is not a number"),
+        ("", "an empty field is not a number"),
+        ("nan", "value is NaN"),
+    ],
+)
 def test_bad_value_names_column_and_row(tmp_path, bad, what):
     p = tmp_path / "bad_value.csv"
     _csv(p, comments=["omega: 5"])

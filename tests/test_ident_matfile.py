@@ -18,20 +18,39 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "motor-bench"
 def v5(tmp_path):
     n = 40
     t = np.arange(n) * 400  # microseconds
-    log = {"time": np.arange(n) * 4e-4,
-           "signals": {"values": np.column_stack([np.arange(n), -np.arange(n)]).astype(float)}}
+    log = {
+        "time": np.arange(n) * 4e-4,
+        "signals": {"values": np.column_stack([np.arange(n), -np.arange(n)]).astype(float)},
+    }
     p = tmp_path / "rec.mat"
-    sio.savemat(p, {"time": t[:, None].astype(np.int32), "iq": np.sin(t)[:, None],
-                    "th": np.cos(t)[None, :], "logsout": log, "short": np.ones(5),
-                    "bad": np.r_[np.ones(10), np.nan, np.ones(n - 11)]})
+    sio.savemat(
+        p,
+        {
+            "time": t[:, None].astype(np.int32),
+            "iq": np.sin(t)[:, None],
+            "th": np.cos(t)[None, :],
+            "logsout": log,
+            "short": np.ones(5),
+            "bad": np.r_[np.ones(10), np.nan, np.ones(n - 11)],
+        },
+    )
     return p, t
 
 
 def test_v5_variables_structs_sign_units(v5):
     p, t = v5
-    r = read_mat(p, {"time": "time", "current": "iq", "motor_angle": "-th",
-                     "a": "logsout[1]", "b": "logsout.signals.values[0]", "tt": "logsout.time"},
-                 {"time": "us", "motor_angle": "deg"})
+    r = read_mat(
+        p,
+        {
+            "time": "time",
+            "current": "iq",
+            "motor_angle": "-th",
+            "a": "logsout[1]",
+            "b": "logsout.signals.values[0]",
+            "tt": "logsout.time",
+        },
+        {"time": "us", "motor_angle": "deg"},
+    )
     # exact: unit factors are exact decimal/π ratios, reading is a copy
     np.testing.assert_allclose(r.time, t * 1e-6, rtol=1e-15)
     np.testing.assert_allclose(r["current"], np.sin(t), rtol=0)
@@ -40,17 +59,20 @@ def test_v5_variables_structs_sign_units(v5):
     np.testing.assert_array_equal(r["b"], np.arange(40.0))
 
 
-@pytest.mark.parametrize("cols, words", [
-    ({"current": "nothere"}, ["rec.mat", "current", "no variable 'nothere'", "iq 40x1"]),
-    ({"current": "iq[2]"}, ["rec.mat", "column 2 does not exist", "1 column"]),
-    ({"current": "-iq[1]"}, ["column 1 does not exist"]),
-    ({"current": "logsout.nope"}, ["no field 'nope'", "signals"]),
-    ({"current": "logsout.signals"}, ["struct without signals.values"]),
-    ({"current": "iq", "x": "short"}, ["different lengths", "current 40", "x 5"]),
-    ({"current": "bad"}, ["NaN", "sample 10", "current"]),
-    ({"current": "logsout"}, ["2 columns"]),
-    ({"current": "1abc"}, ["cannot read the variable spec"]),
-])
+@pytest.mark.parametrize(
+    "cols, words",
+    [
+        ({"current": "nothere"}, ["rec.mat", "current", "no variable 'nothere'", "iq 40x1"]),
+        ({"current": "iq[2]"}, ["rec.mat", "column 2 does not exist", "1 column"]),
+        ({"current": "-iq[1]"}, ["column 1 does not exist"]),
+        ({"current": "logsout.nope"}, ["no field 'nope'", "signals"]),
+        ({"current": "logsout.signals"}, ["struct without signals.values"]),
+        ({"current": "iq", "x": "short"}, ["different lengths", "current 40", "x 5"]),
+        ({"current": "bad"}, ["NaN", "sample 10", "current"]),
+        ({"current": "logsout"}, ["2 columns"]),
+        ({"current": "1abc"}, ["cannot read the variable spec"]),
+    ],
+)
 def test_v5_errors_name_file_and_field(v5, cols, words):
     with pytest.raises(MatFileError) as e:
         read_mat(v5[0], cols)

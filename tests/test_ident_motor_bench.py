@@ -27,8 +27,12 @@ def frf():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = fmt.read(MAT)
-        return periodic_frf(r["current"], {"motor_angle": r["motor_angle"],
-                                           "load_angle": r["load_angle"]}, 2500.0, source=str(MAT))
+        return periodic_frf(
+            r["current"],
+            {"motor_angle": r["motor_angle"], "load_angle": r["load_angle"]},
+            2500.0,
+            source=str(MAT),
+        )
 
 
 def test_frf_design_and_distortion(frf):
@@ -54,7 +58,7 @@ def test_two_mass_fit_physics(frf):
     # it, within the 4 Hz line spacing
     n = np.abs(G[0]) * w**2
     fa = frf.frequency_hz[np.argmin(n)]
-    fr = frf.frequency_hz[np.argmin(n) + np.argmax(n[np.argmin(n):])]
+    fr = frf.frequency_hz[np.argmin(n) + np.argmax(n[np.argmin(n) :])]
     assert abs(p["antiresonance_hz"] - fa) < 4 and abs(p["resonance_hz"] - fr) < 4
     # rigid-body check, independent of the fit: J ≈ 1/(ω²|G_m|) at the lowest line, where the
     # shaft is stiff (ω/ω_a ~ 0.25 → a (ω/ω_a)² ~ 6 % effect, the damping a few % more)
@@ -74,21 +78,48 @@ def test_two_mass_fit_physics(frf):
 @pytest.mark.slow
 def test_cli_frf_and_tfest_json(frf, tmp_path):
     run = CliRunner()
-    r = run.invoke(app, ["frf", str(MAT), "--log-format", str(ROOT / "examples" / "motor-bench.toml"),
-                         "--input", "current", "--output", "motor_angle,load_angle",
-                         "--json", str(tmp_path / "frf.json")])
+    r = run.invoke(
+        app,
+        [
+            "frf",
+            str(MAT),
+            "--log-format",
+            str(ROOT / "examples" / "motor-bench.toml"),
+            "--input",
+            "current",
+            "--output",
+            "motor_angle,load_angle",
+            "--json",
+            str(tmp_path / "frf.json"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "frf.json").read_text())
     o = d["outputs"]["load_angle"]
     assert {"re", "im", "noise_std", "total_std", "distortion"} <= set(o)
     assert set(o["distortion"]) == {"band_hz", "odd_db", "even_db", "noise_db"}
-    r = run.invoke(app, ["tfest", str(tmp_path / "frf.json"), "--structure", "two-mass",
-                         "--json", str(tmp_path / "tm.json")])
+    r = run.invoke(
+        app,
+        [
+            "tfest",
+            str(tmp_path / "frf.json"),
+            "--structure",
+            "two-mass",
+            "--json",
+            str(tmp_path / "tm.json"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     t = json.loads((tmp_path / "tm.json").read_text())
     assert {"cost", "expected_cost", "verdict", "parameters"} <= set(t)
-    assert {"total_inertia", "inertia_ratio", "antiresonance_hz", "resonance_hz",
-            "resonance_damping", "delay_s"} <= set(t["parameters"])
+    assert {
+        "total_inertia",
+        "inertia_ratio",
+        "antiresonance_hz",
+        "resonance_hz",
+        "resonance_damping",
+        "delay_s",
+    } <= set(t["parameters"])
     # rejected fit: raw and inflated standard deviations side by side, said which is which
     assert "rejected" in t["verdict"] and "std_inflated" in t["std_note"]
     p = t["parameters"]["resonance_hz"]
@@ -101,12 +132,26 @@ def test_cli_frf_and_tfest_json(frf, tmp_path):
     c = t["coulomb"]
     cf = t["parameters"]["coulomb_current"]
     assert c["detected"] and cf["value"] == c["value"]
-    bound = ((t["parameters"]["motor_viscous"]["value"] + t["parameters"]["load_viscous"]["value"])
-             * c["velocity_rms"] / np.sqrt(2 / np.pi))
+    bound = (
+        (t["parameters"]["motor_viscous"]["value"] + t["parameters"]["load_viscous"]["value"])
+        * c["velocity_rms"]
+        / np.sqrt(2 / np.pi)
+    )
     assert 0 < cf["value"] < bound
     assert 0 < cf["std"] < 0.2 * cf["value"]
     # friction at the motor alone cannot explain the BLA's damping split: said so
     assert any("equivalent damping" in w for w in c["warnings"])
-    r = run.invoke(app, ["frf", str(MAT), "--log-format", str(ROOT / "examples" / "motor-bench.toml"),
-                         "--output", "tip", "--json", str(tmp_path / "x.json")])
+    r = run.invoke(
+        app,
+        [
+            "frf",
+            str(MAT),
+            "--log-format",
+            str(ROOT / "examples" / "motor-bench.toml"),
+            "--output",
+            "tip",
+            "--json",
+            str(tmp_path / "x.json"),
+        ],
+    )
     assert r.exit_code == 2 and "no signal 'tip'" in r.output

@@ -35,8 +35,15 @@ from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import scenario_from_dict
 
 FS, P, PERIODS = 1000.0, 1000, 7
-TRUE = dict(total_inertia=0.01, inertia_ratio=1.0, resonance_hz=40.0, shaft_damping=0.02,
-            motor_viscous=0.02, load_viscous=0.02, delay_s=0.0)
+TRUE = dict(
+    total_inertia=0.01,
+    inertia_ratio=1.0,
+    resonance_hz=40.0,
+    shaft_damping=0.02,
+    motor_viscous=0.02,
+    load_viscous=0.02,
+    delay_s=0.0,
+)
 NOISE = 2e-5  # rad, motor encoder noise (per sample)
 
 
@@ -50,14 +57,21 @@ def record(cf: float, rms: float = 2.0):
     d["simulation"]["seed"] = 11
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prep = prepare(scenario_from_dict(d), controller=FunctionController(
-            fn=_play, params=None, state0=jnp.zeros(0)), references={"current": u})
+        prep = prepare(
+            scenario_from_dict(d),
+            controller=FunctionController(fn=_play, params=None, state0=jnp.zeros(0)),
+            references={"current": u},
+        )
     out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples, seed=11)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return periodic_frf(out["command"][:, 0], {"motor_angle": out["measured"][:, 0],
-                                                   "load_angle": out["measured"][:, 1]}, FS,
-                            period=P, transient_periods=1)
+        return periodic_frf(
+            out["command"][:, 0],
+            {"motor_angle": out["measured"][:, 0], "load_angle": out["measured"][:, 1]},
+            FS,
+            period=P,
+            transient_periods=1,
+        )
 
 
 @pytest.fixture(scope="module")
@@ -92,11 +106,15 @@ def test_bla_tends_to_the_linear_frf_and_odd_distortion_grows(records):
     # odd distortion (mean over the bands, dB re the output; measured -51, -43, -32, -19 dB):
     # without friction at the noise level in every band (below DETECT_DB = 6 dB above it),
     # then rising strictly with C_f; at 0.02 A already detected in every band below 95 Hz
-    assert all(b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"]
-               if np.isfinite(b.odd_db))
+    assert all(
+        b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"] if np.isfinite(b.odd_db)
+    )
     assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
-    assert all(b.odd_db - b.noise_db > 6.0 for b in records[0.02].distortion["motor_angle"]
-               if np.isfinite(b.odd_db) and b.band_hz[1] < 95)
+    assert all(
+        b.odd_db - b.noise_db > 6.0
+        for b in records[0.02].distortion["motor_angle"]
+        if np.isfinite(b.odd_db) and b.band_hz[1] < 95
+    )
 
 
 def _fit(frf, std):
@@ -107,9 +125,21 @@ def _fit(frf, std):
     zoh = (1 - np.exp(-sT)) / sT
     G = frf.response / zoh
     s = std / np.abs(zoh)
-    return fit_two_mass(w, G[0], G[1], motor_std=s[0], load_std=s[1],
-                        free=("total_inertia", "inertia_ratio", "resonance_hz", "shaft_damping",
-                              "motor_viscous", "load_viscous"))
+    return fit_two_mass(
+        w,
+        G[0],
+        G[1],
+        motor_std=s[0],
+        load_std=s[1],
+        free=(
+            "total_inertia",
+            "inertia_ratio",
+            "resonance_hz",
+            "shaft_damping",
+            "motor_viscous",
+            "load_viscous",
+        ),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -201,22 +231,34 @@ def test_sine_pairs_and_multisine_agree_on_the_frb_arm(tmp_path):
     d["simulation"]["duration"] = (len(u) - 1) * T
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prep = prepare(scenario_from_dict(d), controller=FunctionController(
-            fn=_play, params=None, state0=jnp.zeros(0)), references={"current": u})
+        prep = prepare(
+            scenario_from_dict(d),
+            controller=FunctionController(fn=_play, params=None, state0=jnp.zeros(0)),
+            references={"current": u},
+        )
     out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples)
-    frf = periodic_frf(out["command"][:, 0], {"motor_angle": out["measured"][:, 0],
-                                               "load_angle": out["measured"][:, 1]}, 1 / T,
-                       period=P, transient_periods=3)
+    frf = periodic_frf(
+        out["command"][:, 0],
+        {"motor_angle": out["measured"][:, 0], "load_angle": out["measured"][:, 1]},
+        1 / T,
+        period=P,
+        transient_periods=3,
+    )
     w = 2 * np.pi * frf.frequency_hz
-    fit = fit_two_mass(w, frf.response[0], frf.response[1], motor_std=frf.total_std[0],
-                       load_std=frf.total_std[1])
+    fit = fit_two_mass(
+        w, frf.response[0], frf.response[1], motor_std=frf.total_std[0], load_std=frf.total_std[1]
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ms = coulomb_from_distortion(frf, fit.values)
     assert cf_sine == pytest.approx(0.132, rel=0.10)  # the sine path on its own (FRB)
     assert ms.detected
     assert abs(ms.coulomb_current - cf_sine) < 2 * math.hypot(ms.std, sd_sine), (
-        ms.coulomb_current, ms.std, cf_sine, sd_sine)
+        ms.coulomb_current,
+        ms.std,
+        cf_sine,
+        sd_sine,
+    )
     # the BLA's motor damping is the viscous V/K plus the friction's Bussgang share
     V_K = 0.01216 / 2.184  # (lbf·in·s/rad)/(lbf·in/A) = A·s/rad
     assert ms.motor_viscous_bla == pytest.approx(V_K + ms.equivalent_damping, rel=0.25)
@@ -228,22 +270,35 @@ def test_sine_pairs_and_multisine_agree_on_the_frb_arm(tmp_path):
     # above, and its C_f (A) agrees with the sine path as the two-mass path does (measured
     # 0.153 ± 0.021 A for both).
     from flexarm.identification.frequency_domain.structures import fit_structure
-    frb = fit_structure("frb-single-mass", w, {"motor_angle": frf.response[0],
-                                               "tip_angle": frf.response[1]},
-                        {"motor_angle": frf.total_std[0], "tip_angle": frf.total_std[1]},
-                        given={"motor_constant": K})
+
+    frb = fit_structure(
+        "frb-single-mass",
+        w,
+        {"motor_angle": frf.response[0], "tip_angle": frf.response[1]},
+        {"motor_angle": frf.total_std[0], "tip_angle": frf.total_std[1]},
+        given={"motor_constant": K},
+    )
     lbin = 0.112984829027616
-    truth = {"hub_inertia": 0.005529 * lbin, "link_stiffness": 0.674 * lbin,
-             "tip_inertia": 0.674 * lbin / 43.75}
+    truth = {
+        "hub_inertia": 0.005529 * lbin,
+        "link_stiffness": 0.674 * lbin,
+        "tip_inertia": 0.674 * lbin / 43.75,
+    }
     for k, v in truth.items():
         assert frb.values[k] == pytest.approx(v, rel=0.05), k
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mf = coulomb_from_distortion(frf, {**frb.given, **frb.values}, structure="frb-single-mass")
     assert mf.detected and mf.unit == "A"
-    assert frb.values["hub_viscous"] == pytest.approx(0.01216 * lbin + mf.equivalent_damping, rel=0.25)
+    assert frb.values["hub_viscous"] == pytest.approx(
+        0.01216 * lbin + mf.equivalent_damping, rel=0.25
+    )
     assert abs(mf.coulomb_current - cf_sine) < 2 * math.hypot(mf.std, sd_sine), (
-        mf.coulomb_current, mf.std, cf_sine, sd_sine)
+        mf.coulomb_current,
+        mf.std,
+        cf_sine,
+        sd_sine,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -270,16 +325,20 @@ def test_coulomb_from_the_bla_amplitude_dependence(amplitudes):
     for _rms, (frf, fit) in amplitudes.items():
         sv.append(velocity_rms(frf))
         d.append(fit.parameters["motor_viscous"]["value"])
-        sd.append(fit.parameters["motor_viscous"].get("std_inflated",
-                                                      fit.parameters["motor_viscous"]["std"]))
+        sd.append(
+            fit.parameters["motor_viscous"].get(
+                "std_inflated", fit.parameters["motor_viscous"]["std"]
+            )
+        )
     r = coulomb_from_amplitudes(sv, d, sd)
     c, v = r["coulomb_current"], r["viscous"]
     assert abs(c["value"] - 0.1) < 3 * c["std"] + 0.015, r
     assert abs(v["value"] - TRUE["motor_viscous"]) < 3 * v["std"] + 0.003, r
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m = coulomb_from_bla_amplitudes([f for f, _ in amplitudes.values()],
-                                        [g for _, g in amplitudes.values()], "two-mass")
+        m = coulomb_from_bla_amplitudes(
+            [f for f, _ in amplitudes.values()], [g for _, g in amplitudes.values()], "two-mass"
+        )
     assert abs(m["coulomb"]["value"] - 0.1) < 3 * m["coulomb"]["std"], m
     assert abs(m["viscous"]["value"] - TRUE["motor_viscous"]) < 3 * m["viscous"]["std"], m
     assert m["mismatch"] < 1.0 and m["simulations"] == 9 and not m["warnings"]
@@ -300,13 +359,25 @@ def test_cli_friction_from_several_amplitudes(amplitudes, tmp_path):
     from typer.testing import CliRunner
 
     from flexarm.cli import app
+
     paths = []
     for rms, (frf, _) in amplitudes.items():
         paths.append(tmp_path / f"frf-{rms:g}.json")
         paths[-1].write_text(json.dumps(frf.to_json()))
     run = CliRunner()
-    res = run.invoke(app, ["friction", *map(str, paths), "--structure", "two-mass",
-                           "--iterations", "1", "--json", str(tmp_path / "f.json")])
+    res = run.invoke(
+        app,
+        [
+            "friction",
+            *map(str, paths),
+            "--structure",
+            "two-mass",
+            "--iterations",
+            "1",
+            "--json",
+            str(tmp_path / "f.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     out = json.loads((tmp_path / "f.json").read_text())
     c = out["coulomb"]
@@ -315,14 +386,33 @@ def test_cli_friction_from_several_amplitudes(amplitudes, tmp_path):
     assert "Coulomb" in res.output
     res = run.invoke(app, ["friction", str(paths[0]), "--json", str(tmp_path / "g.json")])
     assert res.exit_code != 0 and "two or more" in res.output
-    res = run.invoke(app, ["friction", *map(str, paths[1:2] * 2), "--iterations", "0",
-                           "--json", str(tmp_path / "h.json")])
+    res = run.invoke(
+        app,
+        [
+            "friction",
+            *map(str, paths[1:2] * 2),
+            "--iterations",
+            "0",
+            "--json",
+            str(tmp_path / "h.json"),
+        ],
+    )
     assert res.exit_code != 0 and "different amplitudes" in res.output
     # 2.0 and 2.1 A rms: C_f's std (~0.2 A) dwarfs it; said so (Bussgang only, no simulation)
     close = record(0.1, 2.1)
     (tmp_path / "close.json").write_text(json.dumps(close.to_json()))
-    res = run.invoke(app, ["friction", str(paths[1]), str(tmp_path / "close.json"),
-                           "--iterations", "0", "--json", str(tmp_path / "k.json")])
+    res = run.invoke(
+        app,
+        [
+            "friction",
+            str(paths[1]),
+            str(tmp_path / "close.json"),
+            "--iterations",
+            "0",
+            "--json",
+            str(tmp_path / "k.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     k = json.loads((tmp_path / "k.json").read_text())
     assert any("cannot tell Coulomb friction from viscous damping" in w for w in k["warnings"])
@@ -341,11 +431,21 @@ def test_cli_friction_from_several_amplitudes(amplitudes, tmp_path):
 # noise estimate cannot see; the strain gauge without its 2-sample delay: the structure
 # has one delay for all outputs).
 ROT_FS, ROT_P, ROT_PERIODS, ROT_RMS = 1000.0, 4000, 6, 2.0
-ROT_GIVEN = dict(motor_constant=7.68e-3, armature_resistance=2.6, gear_ratio=70.0,
-                 efficiency=0.9 * 0.69, length=0.42)
-ROT_TRUE = dict(hub_inertia=2.08e-3, hub_viscous=4e-3, link_stiffness=1.2,
-                link_inertia=0.019841 * 0.42**2,
-                link_damping=2 * 0.03 * math.sqrt(1.2 * 0.019841 * 0.42**2), delay_s=0.0)
+ROT_GIVEN = dict(
+    motor_constant=7.68e-3,
+    armature_resistance=2.6,
+    gear_ratio=70.0,
+    efficiency=0.9 * 0.69,
+    length=0.42,
+)
+ROT_TRUE = dict(
+    hub_inertia=2.08e-3,
+    hub_viscous=4e-3,
+    link_stiffness=1.2,
+    link_inertia=0.019841 * 0.42**2,
+    link_damping=2 * 0.03 * math.sqrt(1.2 * 0.019841 * 0.42**2),
+    delay_s=0.0,
+)
 
 
 def rotary_record(cf: float):
@@ -361,23 +461,30 @@ def rotary_record(cf: float):
     ex = multisine(ROT_P, ROT_FS, 0.25, 20, kind="random-odd", rms=ROT_RMS, seed=3)
     u = np.tile(ex.signal[0, :ROT_P], ROT_PERIODS)
     d = scenario_dict("rotary-flexible-link")
-    d["arm"]["friction"] = ({"model": "coulomb", "coulomb": cf, "static": cf} if cf
-                            else {"model": "none"})
+    d["arm"]["friction"] = (
+        {"model": "coulomb", "coulomb": cf, "static": cf} if cf else {"model": "none"}
+    )
     d["sensors"] = {"motor_angle": {"noise": 2e-4}, "tip_deflection": {"noise": 2e-5}}
     d["simulation"].update(duration=(len(u) - 1) / ROT_FS, seed=7)
     d.pop("controller")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prep = prepare(scenario_from_dict(d), controller=FunctionController(
-            fn=_play, params=None, state0=jnp.zeros(0)), references={"voltage": u})
+        prep = prepare(
+            scenario_from_dict(d),
+            controller=FunctionController(fn=_play, params=None, state0=jnp.zeros(0)),
+            references={"voltage": u},
+        )
     out = simulate_loop(prep.loop, prep.x0, prep.references, prep.n_samples, seed=7)
     names = prep.loop.sensors.names
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return periodic_frf(out["command"][:, 0],
-                            {k: out["measured"][:, names.index(k)]
-                             for k in ("motor_angle", "tip_deflection")},
-                            ROT_FS, period=ROT_P, transient_periods=1)
+        return periodic_frf(
+            out["command"][:, 0],
+            {k: out["measured"][:, names.index(k)] for k in ("motor_angle", "tip_deflection")},
+            ROT_FS,
+            period=ROT_P,
+            transient_periods=1,
+        )
 
 
 def _rot_zoh(frf):
@@ -390,14 +497,20 @@ def rotary():
     """Records at C_f = 0, 5, 15, 30 mN·m (30: the scenario's own), the voltage-servo fit
     to the 30 mN·m BLA (ZOH divided out, delay held at 0) and its Coulomb estimate."""
     from flexarm.identification.frequency_domain.structures import fit_structure
+
     recs = {cf: rotary_record(cf) for cf in (0.0, 0.005, 0.015, 0.03)}
     frf = recs[0.03]
     z = _rot_zoh(frf)
     G, s = frf.response / z, frf.total_std / np.abs(z)
-    fit = fit_structure("voltage-servo", 2 * np.pi * frf.frequency_hz,
-                        {"motor_angle": G[0], "tip_deflection": G[1]},
-                        {"motor_angle": s[0], "tip_deflection": s[1]}, given=ROT_GIVEN,
-                        free=[k for k in ROT_TRUE if k != "delay_s"], initial={"delay_s": 0.0})
+    fit = fit_structure(
+        "voltage-servo",
+        2 * np.pi * frf.frequency_hz,
+        {"motor_angle": G[0], "tip_deflection": G[1]},
+        {"motor_angle": s[0], "tip_deflection": s[1]},
+        given=ROT_GIVEN,
+        free=[k for k in ROT_TRUE if k != "delay_s"],
+        initial={"delay_s": 0.0},
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         est = coulomb_from_distortion(frf, {**fit.given, **fit.values}, structure="voltage-servo")
@@ -411,14 +524,20 @@ def test_rotary_rig_bla_and_odd_distortion(rotary):
     the odd distortion grows with C_f. Measured rms relative BLA error 0.05, 1.7, 5.2,
     10.3 % and mean odd level −77, −38, −28, −22 dB for C_f = 0, 5, 15, 30 mN·m."""
     from flexarm.identification.frequency_domain.structures import voltage_servo_response
+
     recs, _, _ = rotary
     errs, odd = [], []
     for _cf, frf in sorted(recs.items()):
         z = _rot_zoh(frf)
         G0 = voltage_servo_response({**ROT_TRUE, **ROT_GIVEN}, 2 * np.pi * frf.frequency_hz)
-        errs.append(float(np.sqrt(np.mean(np.abs(frf.response[0] / z / G0["motor_angle"] - 1) ** 2))))
-        odd.append(float(np.mean([b.odd_db for b in frf.distortion["motor_angle"]
-                                  if np.isfinite(b.odd_db)])))
+        errs.append(
+            float(np.sqrt(np.mean(np.abs(frf.response[0] / z / G0["motor_angle"] - 1) ** 2)))
+        )
+        odd.append(
+            float(
+                np.mean([b.odd_db for b in frf.distortion["motor_angle"] if np.isfinite(b.odd_db)])
+            )
+        )
     assert all(a < b for a, b in zip(errs, errs[1:], strict=False)), errs
     assert all(a < b for a, b in zip(odd, odd[1:], strict=False)), odd
     # frictionless: the BLA is the linear FRF within the noise (rms error in noise standard
@@ -428,11 +547,15 @@ def test_rotary_rig_bla_and_odd_distortion(rotary):
     G0 = voltage_servo_response({**ROT_TRUE, **ROT_GIVEN}, 2 * np.pi * f0.frequency_hz)
     zs = np.abs(f0.response[0] / z - G0["motor_angle"]) / (f0.noise_std[0] / np.abs(z))
     assert np.sqrt(np.mean(zs**2)) < 1.5
-    assert all(b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"]
-               if np.isfinite(b.odd_db))
+    assert all(
+        b.odd_db - b.noise_db < 6.0 for b in f0.distortion["motor_angle"] if np.isfinite(b.odd_db)
+    )
     # 5 mN·m (0.4 % of the 1.28 N·m stall torque) is already detected in every band ≥ 1 Hz
-    assert all(b.odd_db - b.noise_db > 6.0 for b in recs[0.005].distortion["motor_angle"]
-               if np.isfinite(b.odd_db))
+    assert all(
+        b.odd_db - b.noise_db > 6.0
+        for b in recs[0.005].distortion["motor_angle"]
+        if np.isfinite(b.odd_db)
+    )
 
 
 @pytest.mark.slow

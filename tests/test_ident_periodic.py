@@ -65,7 +65,9 @@ def test_prbs_sweep_pairs_and_writer(tmp_path):
     assert sine_pairs([2.0]) == [(2.0, 6.0)]
     e = multisine(P, FS, 10, 50, kind="random-odd", periods=2)
     log, lines = write_excitation(tmp_path / "ms.csv", e)
-    assert "crest_factor" in log.read_text() and lines.read_text().count("excited") == len(e.excited)
+    assert "crest_factor" in log.read_text() and lines.read_text().count("excited") == len(
+        e.excited
+    )
     with pytest.raises(FileExistsError):
         write_excitation(tmp_path / "ms.csv", e)
 
@@ -111,8 +113,10 @@ def test_distortion_from_cubic_and_transient_and_partial_period():
     lin = periodic_frf(u, {"y": ylin + noise}, FS, period=P)
     odd = periodic_frf(u, {"y": ylin + 0.05 * ylin**3 + noise}, FS, period=P)
     even = periodic_frf(u, {"y": ylin + 0.05 * ylin**2 + noise}, FS, period=P)
-    b_lin, b_odd, b_even = (np.array([[b.odd_db, b.even_db, b.noise_db] for b in r.distortion["y"]])
-                            for r in (lin, odd, even))
+    b_lin, b_odd, b_even = (
+        np.array([[b.odd_db, b.even_db, b.noise_db] for b in r.distortion["y"]])
+        for r in (lin, odd, even)
+    )
     # bands without odd (or even) detection lines hold NaN: compared with nanmax / nanmin
     assert np.nanmax(b_lin[:, :2] - b_lin[:, 2:]) < 6 and "no distortion" in lin.verdict()
     assert np.nanmin(b_odd[:, 0] - b_odd[:, 2]) > 20 and "symmetric" in odd.verdict()
@@ -123,7 +127,9 @@ def test_distortion_from_cubic_and_transient_and_partial_period():
     yt = ylin.copy()
     yt[:P] += np.exp(-np.arange(P) / 50.0)
     with pytest.warns(UserWarning, match="100 trailing sample"):
-        r = periodic_frf(np.r_[u, u[:100]], {"y": np.r_[yt, yt[:100]] + np.r_[noise, noise[:100]]}, FS)
+        r = periodic_frf(
+            np.r_[u, u[:100]], {"y": np.r_[yt, yt[:100]] + np.r_[noise, noise[:100]]}, FS
+        )
     assert r.transient_periods == 1 and r.periods_used == 5
 
 
@@ -210,8 +216,21 @@ def test_cli_frf_several_realisations(tmp_path):
         write_log(f, np.arange(len(u)) / FS, {"current": u, "motor_angle": y}, required=("time",))
         files.append(str(f))
     out = tmp_path / "frf.json"
-    res = CliRunner().invoke(app, ["frf", *files, "--input", "current", "--output", "motor_angle",
-                                   "--period", str(P), "--json", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "frf",
+            *files,
+            "--input",
+            "current",
+            "--output",
+            "motor_angle",
+            "--period",
+            str(P),
+            "--json",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     d = json.loads(out.read_text())
     assert d["realisations"] == 3 and d["source"] == files
@@ -222,14 +241,34 @@ def test_cli_frf_several_realisations(tmp_path):
     bb, aa = scipy.signal.cheby1(4, 1, 0.2)
     un = rng.standard_normal(8000)
     yn = scipy.signal.lfilter(bb, aa, un) + 0.01 * rng.standard_normal(un.size)
-    write_log(tmp_path / "noise.csv", np.arange(un.size) / FS, {"current": un, "motor_angle": yn},
-              required=("time",))
-    res2 = CliRunner().invoke(app, ["frf", str(tmp_path / "noise.csv"), "--input", "current", "--output",
-                                    "motor_angle", "--method", "lpm", "--json",
-                                    str(tmp_path / "lpm.json"), "--plots", str(tmp_path / "p")])
+    write_log(
+        tmp_path / "noise.csv",
+        np.arange(un.size) / FS,
+        {"current": un, "motor_angle": yn},
+        required=("time",),
+    )
+    res2 = CliRunner().invoke(
+        app,
+        [
+            "frf",
+            str(tmp_path / "noise.csv"),
+            "--input",
+            "current",
+            "--output",
+            "motor_angle",
+            "--method",
+            "lpm",
+            "--json",
+            str(tmp_path / "lpm.json"),
+            "--plots",
+            str(tmp_path / "p"),
+        ],
+    )
     assert res2.exit_code == 0, res2.output
     d2 = json.loads((tmp_path / "lpm.json").read_text())
-    G2 = np.asarray(d2["outputs"]["motor_angle"]["re"]) + 1j * np.asarray(d2["outputs"]["motor_angle"]["im"])
+    G2 = np.asarray(d2["outputs"]["motor_angle"]["re"]) + 1j * np.asarray(
+        d2["outputs"]["motor_angle"]["im"]
+    )
     _, Gt = scipy.signal.freqz(bb, aa, worN=2 * np.pi * np.asarray(d2["frequency_hz"]) / FS)
     z2 = np.abs(G2 - Gt) / np.asarray(d2["outputs"]["motor_angle"]["noise_std"])
     assert np.sqrt(np.mean(z2**2)) < 1.6  # as in the LPM test: rms ≈ 1.12
@@ -241,11 +280,29 @@ def test_cli_frf_several_realisations(tmp_path):
     rr, vv = rng.standard_normal(8000), 0.3 * rng.standard_normal(8000)
     ycl = scipy.signal.lfilter(kk * bb, den, rr) + scipy.signal.lfilter(aa, den, vv)
     ucl = scipy.signal.lfilter(kk * aa, den, rr) - scipy.signal.lfilter(kk * aa, den, vv)
-    write_log(tmp_path / "cl.csv", np.arange(rr.size) / FS,
-              {"current": ucl, "motor_angle": ycl, "reference": rr}, required=("time",))
-    res3 = CliRunner().invoke(app, ["frf", str(tmp_path / "cl.csv"), "--method", "lpm",
-                                    "--input", "current", "--output", "motor_angle",
-                                    "--reference", "reference", "--json", str(tmp_path / "cl.json")])
+    write_log(
+        tmp_path / "cl.csv",
+        np.arange(rr.size) / FS,
+        {"current": ucl, "motor_angle": ycl, "reference": rr},
+        required=("time",),
+    )
+    res3 = CliRunner().invoke(
+        app,
+        [
+            "frf",
+            str(tmp_path / "cl.csv"),
+            "--method",
+            "lpm",
+            "--input",
+            "current",
+            "--output",
+            "motor_angle",
+            "--reference",
+            "reference",
+            "--json",
+            str(tmp_path / "cl.json"),
+        ],
+    )
     assert res3.exit_code == 0, res3.output
     d3 = json.loads((tmp_path / "cl.json").read_text())
     assert "indirect through the reference" in d3["warnings"][-1]
@@ -281,7 +338,9 @@ def test_local_polynomial_method_on_a_transient_record():
     assert 0.7 < np.sqrt(np.mean(z**2)) < 1.6, np.sqrt(np.mean(z**2))
     U, Y = np.fft.rfft(u), np.fft.rfft(y)
     plain = Y[res.lines] / U[res.lines]
-    assert np.sqrt(np.mean(np.abs(plain - Gt) ** 2)) > 3 * np.sqrt(np.mean(np.abs(res.response[0] - Gt) ** 2))
+    assert np.sqrt(np.mean(np.abs(plain - Gt) ** 2)) > 3 * np.sqrt(
+        np.mean(np.abs(res.response[0] - Gt) ** 2)
+    )
     with pytest.raises(IdentificationError, match="degrees of freedom"):
         lpm_frf(u, {"y": y}, FS, order=2, half_width=2)
     # a periodic random-odd multisine of 4 periods: its record DFT is zero off every 4th

@@ -88,8 +88,15 @@ def test_order_selection_and_errors():
 
 
 def test_two_mass_noise_free_and_noisy():
-    p = dict(total_inertia=0.02, inertia_ratio=1.3, resonance_hz=80.0, shaft_damping=0.03,
-             motor_viscous=0.01, load_viscous=0.005, delay_s=3e-4)
+    p = dict(
+        total_inertia=0.02,
+        inertia_ratio=1.3,
+        resonance_hz=80.0,
+        shaft_damping=0.03,
+        motor_viscous=0.01,
+        load_viscous=0.005,
+        delay_s=3e-4,
+    )
     w = 2 * np.pi * np.arange(13, 250, 4.0)
     Gm, Gl = two_mass_response(p, w)
     f = fit_two_mass(w, Gm, Gl)
@@ -104,9 +111,18 @@ def test_two_mass_noise_free_and_noisy():
         assert abs(f.parameters[k]["value"] - v) < 4 * f.parameters[k]["std"], k
     assert "accepted" in f.verdict
     assert not any("std_inflated" in v for v in f.parameters.values())  # only when rejected
-    fixed = fit_two_mass(w, Gm, Gl, free=("total_inertia", "inertia_ratio", "resonance_hz"),
-                         initial={"delay_s": 3e-4, "motor_viscous": 0.01, "load_viscous": 0.005,
-                                  "shaft_damping": 0.03})
+    fixed = fit_two_mass(
+        w,
+        Gm,
+        Gl,
+        free=("total_inertia", "inertia_ratio", "resonance_hz"),
+        initial={
+            "delay_s": 3e-4,
+            "motor_viscous": 0.01,
+            "load_viscous": 0.005,
+            "shaft_damping": 0.03,
+        },
+    )
     assert fixed.n_parameters == 3 and fixed.parameters["delay_s"]["std"] == 0.0
     with pytest.raises(TFEstError, match="unknown parameter"):
         fit_two_mass(w, Gm, Gl, free=("stiffness",))

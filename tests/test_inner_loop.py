@@ -30,7 +30,8 @@ def test_design_meets_the_paper_constraints():
     assert g1_inf <= 15.0 * (1 + 1e-6)
     # the compensation current is subtracted from the limit
     assert d.available_current == pytest.approx(
-        4.12 - d.coupling_current - d.friction_current, rel=1e-12)
+        4.12 - d.coupling_current - d.friction_current, rel=1e-12
+    )
     assert d.friction_current == pytest.approx(0.132, rel=1e-3)
 
 
@@ -57,9 +58,14 @@ def fig11():
     ctrl = design().controller(model(), angle_resolution=COUNT)
     p = held_prepared("feliu-single-mass", ctrl, 0.4)
     p.references["reference"] = np.where(p.time >= 0.0, STEP, 0.0)
-    return {k: _sim(p, ctrl.with_switches(friction=f, coupling=c))
-            for k, f, c in (("all", True, True), ("no_friction", False, True),
-                            ("no_coupling", True, False))}
+    return {
+        k: _sim(p, ctrl.with_switches(friction=f, coupling=c))
+        for k, f, c in (
+            ("all", True, True),
+            ("no_friction", False, True),
+            ("no_coupling", True, False),
+        )
+    }
 
 
 def test_fig11_settles_fast_with_zero_steady_state_error(fig11):
@@ -70,8 +76,9 @@ def test_fig11_settles_fast_with_zero_steady_state_error(fig11):
     assert np.max(np.abs(r["current"])) <= 4.12
     assert np.max(np.abs(r["tip_angle"])) < 1e-12  # the tip is held
     # the coupling torque of the 200 mrad bend is there and compensated
-    assert r["coupling_torque"][-1] == pytest.approx(model().coupling_tf().dcgain() * STEP,
-                                                     rel=0.02)
+    assert r["coupling_torque"][-1] == pytest.approx(
+        model().coupling_tf().dcgain() * STEP, rel=0.02
+    )
 
 
 def test_without_compensation_an_error_remains_and_the_transient_stays(fig11):
@@ -88,8 +95,9 @@ def test_without_compensation_an_error_remains_and_the_transient_stays(fig11):
 
 def test_friction_sign_rule():
     """σ = sgn v̂ while moving; at rest sgn u_fb beyond the deadband, else 0."""
-    ctrl = inner_loop(15.0, 1.0, dt=DT, torque_constant=1.0, coulomb=0.1, coupling=0.0,
-                      angle_resolution=COUNT)
+    ctrl = inner_loop(
+        15.0, 1.0, dt=DT, torque_constant=1.0, coulomb=0.1, coupling=0.0, angle_resolution=COUNT
+    )
     step = ctrl.step
     meas = lambda th: {"motor_angle": jnp.asarray(th), "tip_angle": jnp.asarray(0.0)}  # noqa: E731
     s0 = ctrl.init()
@@ -111,15 +119,21 @@ def test_friction_sign_rule():
 
 def test_coupling_feedforward_from_the_bending():
     ctrl = inner_loop(15.0, 1.0, dt=DT, torque_constant=2.0, coulomb=0.0, coupling=0.3)
-    _, u = ctrl.step(ctrl.init(), {"motor_angle": jnp.asarray(0.5), "tip_angle": jnp.asarray(0.2)},
-                     {"reference": jnp.asarray(0.5)})
+    _, u = ctrl.step(
+        ctrl.init(),
+        {"motor_angle": jnp.asarray(0.5), "tip_angle": jnp.asarray(0.2)},
+        {"reference": jnp.asarray(0.5)},
+    )
     assert float(u[0]) == pytest.approx(0.3 * 0.3 / 2.0)  # Ĉ (θm − θt) / K
 
 
 def test_dc_gain_violating_the_current_limit_is_refused():
-    with pytest.raises(ValueError, match=r"current limit violated: dc_gain G_cm1\(1\) = 30 "
-                       r"A/rad × step 0.2 rad = 6 A peak exceeds the available 3.927 A .*"
-                       r"by 2.073 A"):
+    with pytest.raises(
+        ValueError,
+        match=r"current limit violated: dc_gain G_cm1\(1\) = 30 "
+        r"A/rad × step 0.2 rad = 6 A peak exceeds the available 3.927 A .*"
+        r"by 2.073 A",
+    ):
         design_inner_loop(model(hold_tip=True), DT, 1, dc_gain=30.0, step=0.2)
     # the paper's own 400 mrad / 6 A does not fit its 4.12 A amplifier either
     with pytest.raises(ValueError, match=r"6 A peak exceeds the available 3.867 A"):

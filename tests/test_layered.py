@@ -33,20 +33,21 @@ def test_program_folds_shares_and_emits_the_same_values():
     p = L.Program()
     x, y = p.leaf("x"), p.leaf("y")
     assert (x * 1.0) is x and (x * 0.0) == 0.0 and (0.0 + x) is x
-    assert (x * y).id == (y * x).id                      # hash-consed, commutative
+    assert (x * y).id == (y * x).id  # hash-consed, commutative
     s = L.sin(x) * y
     outs = [s + L.cos(y) / (1.0 + x * x), s * s - L.rsqrt(2.0 + y * y), -x + 3.0 * s]
     assert p.n_layers(outs, share=0) >= 1
 
     def direct(xv, yv):
         s = np.sin(xv) * yv
-        return np.array([s + np.cos(yv) / (1 + xv * xv), s * s - 1 / np.sqrt(2 + yv * yv),
-                         -xv + 3 * s])
+        return np.array(
+            [s + np.cos(yv) / (1 + xv * xv), s * s - 1 / np.sqrt(2 + yv * yv), -xv + 3 * s]
+        )
 
     vals = {"x": jnp.asarray(0.3), "y": jnp.asarray(-1.7)}
     got = jax.jit(lambda v: p.emit(outs, v.__getitem__, share=0))(vals)
     np.testing.assert_allclose(got, direct(0.3, -1.7), rtol=1e-14)
-    xb, yb = np.linspace(-1, 1, 11), np.linspace(2, 3, 11)   # trailing batch, > 8 outputs path
+    xb, yb = np.linspace(-1, 1, 11), np.linspace(2, 3, 11)  # trailing batch, > 8 outputs path
     gotb = p.emit(outs * 4, {"x": jnp.asarray(xb), "y": jnp.asarray(yb)}.__getitem__, share=2)
     np.testing.assert_allclose(gotb[:3], direct(xb, yb), rtol=1e-14)
     np.testing.assert_allclose(gotb[9:12], direct(xb, yb), rtol=1e-14)
@@ -60,17 +61,31 @@ def test_plant_rhs_equals_the_plain_solve(arm):
         spec = benchmark_arm()
     else:
         spec = MultiLinkArm(
-            links=[Link(length=0.4, linear_density=0.5, flexural_rigidity=20, modes=2),
-                   Link(length=0.3, linear_density=0.3, modes=0),
-                   Link(length=0.3, linear_density=0.2, flexural_rigidity=8, modes=3,
-                        mode_type="clamped_free", damping_ratio=0.02)],
-            hubs=[Hub(inertia=0.05), Hub(mass=0.5, inertia=0.02), Hub(mass=0.3, inertia=0.01)])
+            links=[
+                Link(length=0.4, linear_density=0.5, flexural_rigidity=20, modes=2),
+                Link(length=0.3, linear_density=0.3, modes=0),
+                Link(
+                    length=0.3,
+                    linear_density=0.2,
+                    flexural_rigidity=8,
+                    modes=3,
+                    mode_type="clamped_free",
+                    damping_ratio=0.02,
+                ),
+            ],
+            hubs=[Hub(inertia=0.05), Hub(mass=0.5, inertia=0.02), Hub(mass=0.3, inertia=0.01)],
+        )
     model = build_multilink(spec)
     P, nq = model.plant, model.n_q
     rng = np.random.default_rng(1)
-    xs = np.concatenate([rng.uniform(-3, 3, (5, model.n_links)),
-                         rng.uniform(-0.05, 0.05, (5, model.n_delta)),
-                         rng.normal(size=(5, nq))], axis=1)
+    xs = np.concatenate(
+        [
+            rng.uniform(-3, 3, (5, model.n_links)),
+            rng.uniform(-0.05, 0.05, (5, model.n_delta)),
+            rng.normal(size=(5, nq)),
+        ],
+        axis=1,
+    )
     us = rng.normal(size=(5, model.n_links))
 
     @jax.jit
@@ -84,10 +99,11 @@ def test_plant_rhs_equals_the_plain_solve(arm):
         got = rhs(P, jnp.asarray(x), jnp.asarray(u))
         np.testing.assert_allclose(got[nq:], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
         np.testing.assert_array_equal(got[:nq], x[nq:])
-    batched = rhs(P, jnp.asarray(xs.T), jnp.asarray(us.T))     # (n_x, batch): batch last
+    batched = rhs(P, jnp.asarray(xs.T), jnp.asarray(us.T))  # (n_x, batch): batch last
     for k in range(5):
-        np.testing.assert_allclose(batched[:, k], rhs(P, jnp.asarray(xs[k]), jnp.asarray(us[k])),
-                                   rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(
+            batched[:, k], rhs(P, jnp.asarray(xs[k]), jnp.asarray(us[k])), rtol=1e-13, atol=1e-13
+        )
 
 
 def test_batch_of_gain_variations_equals_single_runs():
@@ -96,8 +112,9 @@ def test_batch_of_gain_variations_equals_single_runs():
     scale = np.array([0.8, 1.0, 1.3])
     pb, axes = R.regulation_params_batch(model, np.outer(scale, [18, 18]), [10, 2], theta_d)
     x0 = model.state(theta=[-90 * DEG, 0.0])
-    out = simulate_continuous_batch(model, R.law_pd_constant, x0, 0.2, 1e-2, params=pb,
-                                    axes=axes, chunk=2)          # 3 runs: one padded chunk
+    out = simulate_continuous_batch(
+        model, R.law_pd_constant, x0, 0.2, 1e-2, params=pb, axes=axes, chunk=2
+    )  # 3 runs: one padded chunk
     assert out.state_array.shape == (3, 21, 12) and out.torque.shape == (3, 21, 2)
     assert not out.diverged.any()
     # python-control's trace layout: (n, traces, T)
@@ -128,8 +145,9 @@ def test_continuous_run_to_csv_round_trip(tmp_path):
 
     model = build_multilink(benchmark_arm())
     p = R.regulation_params(model, [18, 18], [10, 2], [-45 * DEG, 0.0])
-    run = simulate_continuous(model, R.law_pd_constant, model.state(theta=[-90 * DEG, 0.0]),
-                              0.1, 1e-2, params=p)
+    run = simulate_continuous(
+        model, R.law_pd_constant, model.state(theta=[-90 * DEG, 0.0]), 0.1, 1e-2, params=p
+    )
     path = run.to_csv(tmp_path / "run.csv")
     log = read_log(path, required=("time",), min_samples=2)
     assert list(log.signals) == [*run.state_names, "torque_1", "torque_2"]

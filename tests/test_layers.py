@@ -22,8 +22,19 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src" / "flexarm"
 
 #: docs/architecture.md, first line: the layers left to right.
-ORDER = ["io", "specs", "models", "control", "sim", "identification", "design", "deploy",
-         "analysis", "reproduce", "cli"]
+ORDER = [
+    "io",
+    "specs",
+    "models",
+    "control",
+    "sim",
+    "identification",
+    "design",
+    "deploy",
+    "analysis",
+    "reproduce",
+    "cli",
+]
 RANK = {"io": 0, "specs": 0, **{name: i for i, name in enumerate(ORDER) if i >= 2}}
 ROOT = {"units", "errors", "metrics", "fastmath", "layered"}
 #: the package's own front door re-exports every layer
@@ -59,7 +70,7 @@ def _imports(tree: ast.AST, module: str):
                     yield node.lineno, a.name, None
         elif isinstance(node, ast.ImportFrom):
             if node.level:  # relative: resolve against this module's package
-                base = pkg[:len(pkg) - node.level + (1 if _is_pkg(module) else 0)]
+                base = pkg[: len(pkg) - node.level + (1 if _is_pkg(module) else 0)]
                 mod = ".".join(base + ([node.module] if node.module else []))
             else:
                 mod = node.module or ""
@@ -99,9 +110,14 @@ def _private_uses(tree: ast.AST, module: str) -> list[str]:
                 if a.name.startswith("flexarm.") and a.asname:
                     aliases[a.asname] = a.name
     for node in ast.walk(tree):
-        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-                and node.value.id in aliases and node.attr.startswith("_")
-                and not node.attr.startswith("__") and aliases[node.value.id] != module):
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in aliases
+            and node.attr.startswith("_")
+            and not node.attr.startswith("__")
+            and aliases[node.value.id] != module
+        ):
             out.append(f"{module}:{node.lineno}: {aliases[node.value.id]}.{node.attr}")
     return out
 
@@ -117,14 +133,19 @@ def _layer_breaks(tree: ast.AST, module: str) -> list[str]:
         return []
     out = []
     for line, mod, names in _imports(tree, module):
-        targets = [mod] if names is None else [
-            f"{mod}.{n}" if _is_module(f"{mod}.{n}") else mod for n in names]
+        targets = (
+            [mod]
+            if names is None
+            else [f"{mod}.{n}" if _is_module(f"{mod}.{n}") else mod for n in names]
+        )
         for t in set(targets):
             them = _layer(t)
             if them is None:  # "from flexarm import x": the front door
                 if me in ROOT or RANK.get(me, 99) < RANK["cli"]:
-                    out.append(f"{module}:{line}: imports the package front door ({t}: "
-                               f"{', '.join(names or [])})")
+                    out.append(
+                        f"{module}:{line}: imports the package front door ({t}: "
+                        f"{', '.join(names or [])})"
+                    )
                 continue
             if them in ROOT:
                 continue
@@ -148,25 +169,25 @@ def _scan(check) -> list[str]:
 #: Findings in files other helpers own (reported to the lead, fixed in their branches);
 #: every entry must still be found (a fixed one is removed here), and nothing else may be.
 KNOWN_PRIVATE = {
-    'flexarm.analysis.summary: from flexarm.sim.result import _unit',
-    'flexarm.control.outer_loop: from flexarm.control.trajectories import _deflection_signal',
-    'flexarm.control.trajectories: from flexarm.control.wiener import _siso_polys',
+    "flexarm.analysis.summary: from flexarm.sim.result import _unit",
+    "flexarm.control.outer_loop: from flexarm.control.trajectories import _deflection_signal",
+    "flexarm.control.trajectories: from flexarm.control.wiener import _siso_polys",
     # needs a public sim.build.measured_names (ctrlblocks: Controller.measured_signals)
-    'flexarm.design.plants: from flexarm.sim.build import _measured_names',
-    'flexarm.identification.frequency_domain.coulomb: '
-    'from flexarm.identification.frequency_domain.harmonics import _warn',
-    'flexarm.identification.frequency_domain.identify: '
-    'from flexarm.identification.frequency_domain.harmonics import _warn',
+    "flexarm.design.plants: from flexarm.sim.build import _measured_names",
+    "flexarm.identification.frequency_domain.coulomb: "
+    "from flexarm.identification.frequency_domain.harmonics import _warn",
+    "flexarm.identification.frequency_domain.identify: "
+    "from flexarm.identification.frequency_domain.harmonics import _warn",
     # fitcore: the next three need public names in sim (sampled.scan/quantise,
     # build.measured_names)
-    'flexarm.identification.time_domain.general: from flexarm.sim.build import _measured_names',
-    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _quantise',
-    'flexarm.identification.time_domain.general: from flexarm.sim.sampled import _scan',
+    "flexarm.identification.time_domain.general: from flexarm.sim.build import _measured_names",
+    "flexarm.identification.time_domain.general: from flexarm.sim.sampled import _quantise",
+    "flexarm.identification.time_domain.general: from flexarm.sim.sampled import _scan",
     # fitcore: needs a public specs.scenario.format_errors
-    'flexarm.io.logformat: from flexarm.specs.scenario import _format_errors',
-    'flexarm.models.single_link: from flexarm.models.lumped_beam import _clean',
-    'flexarm.sim.continuous: flexarm.sim.sampled._prepare_refs',
-    'flexarm.sim.continuous: flexarm.sim.sampled._run_all',
+    "flexarm.io.logformat: from flexarm.specs.scenario import _format_errors",
+    "flexarm.models.single_link: from flexarm.models.lumped_beam import _clean",
+    "flexarm.sim.continuous: flexarm.sim.sampled._prepare_refs",
+    "flexarm.sim.continuous: flexarm.sim.sampled._run_all",
 }
 KNOWN_LAYER: set[str] = set()
 
@@ -179,8 +200,10 @@ def test_no_module_imports_another_modules_private_name():
 
 def test_known_findings_are_still_there():
     """A fixed finding leaves the known lists (so the lists only shrink)."""
-    gone = sorted((KNOWN_PRIVATE - {_key(f) for f in _scan(_private_uses)})
-                  | (KNOWN_LAYER - {_key(f) for f in _scan(_layer_breaks)}))
+    gone = sorted(
+        (KNOWN_PRIVATE - {_key(f) for f in _scan(_private_uses)})
+        | (KNOWN_LAYER - {_key(f) for f in _scan(_layer_breaks)})
+    )
     assert not gone, "fixed; remove from KNOWN_PRIVATE / KNOWN_LAYER:\n" + "\n".join(gone)
 
 
@@ -199,13 +222,16 @@ def _key(finding: str) -> str:
 
 def test_the_checks_find_what_they_look_for():
     """The scanner is not blind: a private import and a layer break in a made-up module."""
-    tree = ast.parse("from flexarm.sim.sampled import _scan\nimport flexarm.design.result\n"
-                     "from flexarm.sim import sampled as S\nx = S._run_all\n")
+    tree = ast.parse(
+        "from flexarm.sim.sampled import _scan\nimport flexarm.design.result\n"
+        "from flexarm.sim import sampled as S\nx = S._run_all\n"
+    )
     assert any("_scan" in f for f in _private_uses(tree, "flexarm.models.fake"))
     assert any("_run_all" in f for f in _private_uses(tree, "flexarm.models.fake"))
     assert any("design" in f for f in _layer_breaks(tree, "flexarm.models.fake"))
-    assert not _layer_breaks(ast.parse("from flexarm.models.assembly import Arm"),
-                             "flexarm.sim.fake")
+    assert not _layer_breaks(
+        ast.parse("from flexarm.models.assembly import Arm"), "flexarm.sim.fake"
+    )
 
 
 @pytest.mark.parametrize("doc", ["docs/architecture.md"])

@@ -15,8 +15,7 @@ M = RHO * ELL
 
 def analytic_clamped_mass(b, mu):
     """1 + cos b cosh b + μ b (cos b sinh b − sin b cosh b), divided by cosh b."""
-    return (1.0 / math.cosh(b) + math.cos(b)
-            + mu * b * (math.cos(b) * math.tanh(b) - math.sin(b)))
+    return 1.0 / math.cosh(b) + math.cos(b) + mu * b * (math.cos(b) * math.tanh(b) - math.sin(b))
 
 
 def test_clamped_free_matches_classical_roots():
@@ -43,8 +42,11 @@ def test_tip_mass_lowers_frequencies_and_solves_analytic_equation(ratio):
 def test_normalisation_orthogonality_and_stiffness():
     Ml, Jl = 1.2, 0.13383
     modes = link_modes(ELL, RHO, EI, 4, tip_mass=Ml, tip_inertia=Jl)
-    gen = modes.Z + Ml * np.outer(modes.tip_value, modes.tip_value) \
+    gen = (
+        modes.Z
+        + Ml * np.outer(modes.tip_value, modes.tip_value)
         + Jl * np.outer(modes.tip_slope, modes.tip_slope)
+    )
     np.testing.assert_allclose(gen, M * np.eye(4), atol=1e-10 * M)
     np.testing.assert_allclose(modes.modal_mass, M, rtol=1e-12)
     kjj = modes.omega**2 * M
@@ -62,10 +64,31 @@ def test_normalisation_orthogonality_and_stiffness():
 def _fe_frequencies(Ml, Jl, n_el=60):
     """Hermite beam elements with tip mass and inertia: independent check of the BCs."""
     h = ELL / n_el
-    k = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                              [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-    m = RHO * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                                  [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
+    k = (
+        EI
+        / h**3
+        * np.array(
+            [
+                [12, 6 * h, -12, 6 * h],
+                [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                [-12, -6 * h, 12, -6 * h],
+                [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+            ]
+        )
+    )
+    m = (
+        RHO
+        * h
+        / 420
+        * np.array(
+            [
+                [156, 22 * h, 54, -13 * h],
+                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                [54, 13 * h, 156, -22 * h],
+                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+            ]
+        )
+    )
     nd = 2 * (n_el + 1)
     K = np.zeros((nd, nd))
     Mm = np.zeros((nd, nd))

@@ -38,13 +38,19 @@ def test_multifile_log_equals_the_single_file_log(tmp_path):
     N = 300
     t = 7.0 + np.arange(N) * 2e-3
     rng = np.random.default_rng(0)
-    data = {v: np.column_stack([t, rng.normal(size=N), rng.normal(size=N)])
-            for v in ("data_th11", "data_th12", "data_Im1")}
+    data = {
+        v: np.column_stack([t, rng.normal(size=N), rng.normal(size=N)])
+        for v in ("data_th11", "data_th12", "data_Im1")
+    }
     sio.savemat(tmp_path / "run.mat", data)
     for v, a in data.items():
         sio.savemat(tmp_path / f"run_{v}.mat", {v: a})
-    names = {"theta_ref_1": "data_th11[1]", "theta_1": "data_th11[2]",
-             "alpha_f_1": "data_th12[2]", "current_1": "data_Im1[1]"}
+    names = {
+        "theta_ref_1": "data_th11[1]",
+        "theta_1": "data_th11[2]",
+        "alpha_f_1": "data_th12[2]",
+        "current_1": "data_Im1[1]",
+    }
     units = {"theta_ref_1": "deg", "theta_1": "deg", "alpha_f_1": "deg"}
     single = log_format_from_dict({"columns": {"time": "data_Im1[0]", **names}, "units": units})
     one = single.read(tmp_path / "run.mat")
@@ -58,9 +64,15 @@ def test_multifile_log_equals_the_single_file_log(tmp_path):
                 np.testing.assert_array_equal(many[k], one[k], err_msg=k)
     # a relative file without {stem} is taken in the given path's folder; plain entries
     # come from the given file itself
-    mixed = log_format_from_dict({"columns": {
-        "time": "data_th11[0]", "theta_1": "data_th11[2]",
-        "alpha_f_1": {"file": "run_data_th12.mat", "column": "data_th12[2]"}}})
+    mixed = log_format_from_dict(
+        {
+            "columns": {
+                "time": "data_th11[0]",
+                "theta_1": "data_th11[2]",
+                "alpha_f_1": {"file": "run_data_th12.mat", "column": "data_th12[2]"},
+            }
+        }
+    )
     got = mixed.read(tmp_path / "run_data_th11.mat")
     np.testing.assert_array_equal(got["alpha_f_1"], data["data_th12"][:, 2])
 
@@ -69,13 +81,17 @@ def test_multifile_bad_input_names_both_files(tmp_path):
     N = 100
     t = np.arange(N) * 2e-3
     a = np.column_stack([t, t, t])
-    fmt = log_format_from_dict({"columns": _split_format(
-        {"theta_1": "a[2]", "alpha_f_1": "b[2]"}, "a")})
+    fmt = log_format_from_dict(
+        {"columns": _split_format({"theta_1": "a[2]", "alpha_f_1": "b[2]"}, "a")}
+    )
     # another time base in one file: both files named, the sample and the two times
     sio.savemat(tmp_path / "x_a.mat", {"a": a})
     sio.savemat(tmp_path / "x_b.mat", {"b": np.column_stack([t + 0.5, t, t])})
-    with pytest.raises(LogFormatError, match=r"x_b\.mat: its time .*differs from the log's "
-                                             r"time in .*x_a\.mat at sample 0: 0\.5 s vs 0 s"):
+    with pytest.raises(
+        LogFormatError,
+        match=r"x_b\.mat: its time .*differs from the log's "
+        r"time in .*x_a\.mat at sample 0: 0\.5 s vs 0 s",
+    ):
         fmt.read(tmp_path / "x")
     # another length
     sio.savemat(tmp_path / "y_a.mat", {"a": a})
@@ -100,8 +116,9 @@ def test_the_rigs_scope_captures_as_one_file_per_signal(tmp_path):
     for v in {c.split("[")[0] for c in cols.values()}:
         sio.savemat(tmp_path / f"cap_{v}.mat", {v: raw[v]})
     split = fmt.model_dump()
-    split["columns"] = _split_format({k: v for k, v in cols.items() if k != "time"},
-                                     cols["time"].split("[")[0])
+    split["columns"] = _split_format(
+        {k: v for k, v in cols.items() if k != "time"}, cols["time"].split("[")[0]
+    )
     split["checks"] = {"quantum": {"theta_1": 2 * np.pi / 409600, "theta_2": 2 * np.pi / 204800}}
     many = log_format_from_dict(split).read(tmp_path / "cap")
     one = fmt.read(RUN)

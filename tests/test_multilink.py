@@ -26,8 +26,13 @@ def bench():
 def random_states(model, n, seed=0):
     rng = np.random.default_rng(seed)
     nq = model.n_q
-    q = np.concatenate([rng.uniform(-math.pi, math.pi, (n, model.n_links)),
-                        rng.uniform(-0.05, 0.05, (n, model.n_delta))], axis=1)
+    q = np.concatenate(
+        [
+            rng.uniform(-math.pi, math.pi, (n, model.n_links)),
+            rng.uniform(-0.05, 0.05, (n, model.n_delta)),
+        ],
+        axis=1,
+    )
     qd = rng.normal(0.0, 1.0, (n, nq))
     return q, qd
 
@@ -35,9 +40,17 @@ def random_states(model, n, seed=0):
 # ------------------------------------------------------------------ specs
 def test_spec_reads_units_and_builds():
     arm = MultiLinkArm(
-        links=[Link(length="50 cm", mass="100 g", flexural_rigidity="15 N*m**2", modes=2),
-               Link(length="0.5 m", linear_density="0.2 kg/m", flexural_rigidity=15, modes=1,
-                    mode_type="clamped_free", damping_ratio=0.02)],
+        links=[
+            Link(length="50 cm", mass="100 g", flexural_rigidity="15 N*m**2", modes=2),
+            Link(
+                length="0.5 m",
+                linear_density="0.2 kg/m",
+                flexural_rigidity=15,
+                modes=1,
+                mode_type="clamped_free",
+                damping_ratio=0.02,
+            ),
+        ],
         hubs=[Hub(inertia="0.1 kg*m**2"), Hub(mass="1 kg", inertia=0.1)],
         payload=Payload(mass="100 g", inertia=0.0005),
         torque_limit=["5 N*m", 2.0],
@@ -45,11 +58,23 @@ def test_spec_reads_units_and_builds():
     assert arm.links[0].rho == pytest.approx(0.2) and arm.links[0].length == pytest.approx(0.5)
     model = build_multilink(arm)
     assert model.n_modes == (2, 1)
-    assert model.plant.state_names[:5] == ("theta_1", "theta_2", "delta_1_1", "delta_1_2",
-                                           "delta_2_1")
+    assert model.plant.state_names[:5] == (
+        "theta_1",
+        "theta_2",
+        "delta_1_1",
+        "delta_1_2",
+        "delta_2_1",
+    )
     assert model.plant.signal_names[5:] == (
-        "tip_x", "tip_y", "theta_dot_1", "theta_dot_2", "deflection_1",
-        "deflection_2", "deflection_angle_1", "deflection_angle_2")
+        "tip_x",
+        "tip_y",
+        "theta_dot_1",
+        "theta_dot_2",
+        "deflection_1",
+        "deflection_2",
+        "deflection_angle_1",
+        "deflection_angle_2",
+    )
     np.testing.assert_allclose(model.plant.command_limit, [5.0, 2.0])
     m2 = model.modes[1]
     np.testing.assert_allclose(model.D[2, 2], 2 * 0.02 * m2.omega[0] * m2.mass, rtol=1e-12)
@@ -84,9 +109,14 @@ def test_mass_matrix_spd_and_terms_equal_autodiff(bench):
 
     @jax.jit
     def terms(q, qd):
-        return (jax.vmap(P.mass_matrix)(q), jax.vmap(P.mass_matrix_autodiff)(q),
-                jax.vmap(P.coriolis)(q, qd), jax.vmap(P.coriolis_autodiff)(q, qd),
-                jax.vmap(P.gravity)(q), jax.vmap(P.gravity_autodiff)(q))
+        return (
+            jax.vmap(P.mass_matrix)(q),
+            jax.vmap(P.mass_matrix_autodiff)(q),
+            jax.vmap(P.coriolis)(q, qd),
+            jax.vmap(P.coriolis_autodiff)(q, qd),
+            jax.vmap(P.gravity)(q),
+            jax.vmap(P.gravity_autodiff)(q),
+        )
 
     B, Bad, c, cad, g, gad = (np.asarray(a) for a in terms(q, qd))
     np.testing.assert_allclose(B, np.swapaxes(B, 1, 2), atol=1e-15)
@@ -100,12 +130,14 @@ def test_three_links_mixed_rigid_and_flexible():
     """Any number of links and modes: rigid link 1, 3 clamped-mass modes on link 2, one
     clamped-free mode on link 3; B and g against autodiff, q̈ against a LAPACK solve."""
     arm = MultiLinkArm(
-        links=[Link(length=0.4, linear_density=0.3, modes=0),
-               Link(length=0.5, linear_density=0.2, flexural_rigidity=10, modes=3),
-               Link(length=0.3, mass=0.05, flexural_rigidity=2, modes=1,
-                    mode_type="clamped_free")],
+        links=[
+            Link(length=0.4, linear_density=0.3, modes=0),
+            Link(length=0.5, linear_density=0.2, flexural_rigidity=10, modes=3),
+            Link(length=0.3, mass=0.05, flexural_rigidity=2, modes=1, mode_type="clamped_free"),
+        ],
         hubs=[Hub(inertia=0.05), Hub(mass=0.5, inertia=0.02), Hub(mass=0.3, inertia=0.01)],
-        payload=Payload(mass=0.05, inertia=1e-4))
+        payload=Payload(mass=0.05, inertia=1e-4),
+    )
     model = build_multilink(arm)
     assert model.n_modes == (0, 3, 1) and model.n_q == 7
     q, qd = random_states(model, 1, seed=4)
@@ -115,8 +147,14 @@ def test_three_links_mixed_rigid_and_flexible():
 
     @jax.jit
     def terms(q, qd, u):
-        return (P.mass_matrix(q), P.mass_matrix_autodiff(q), P.gravity(q), P.gravity_autodiff(q),
-                P.coriolis(q, qd), P.rhs(jnp.concatenate([q, qd]), u))
+        return (
+            P.mass_matrix(q),
+            P.mass_matrix_autodiff(q),
+            P.gravity(q),
+            P.gravity_autodiff(q),
+            P.coriolis(q, qd),
+            P.rhs(jnp.concatenate([q, qd]), u),
+        )
 
     B, Bad, g, gad, c, xdot = (np.asarray(a) for a in terms(q, qd, u))
     np.testing.assert_allclose(B, Bad, atol=1e-13)
@@ -153,7 +191,7 @@ def test_energies_equal_direct_integration_over_the_beams(bench):
         alpha, p, k = q[0], jnp.zeros(2), n
         out = []
         for i, m in enumerate(bench.modes):
-            d = q[k:k + m.n_modes]
+            d = q[k : k + m.n_modes]
             k += m.n_modes
             c, s = jnp.cos(alpha), jnp.sin(alpha)
             wx = jnp.asarray(PHI[i]).T @ d
@@ -194,22 +232,30 @@ def test_rigid_two_link_equals_textbook(bench):
     assert model.n_q == 2
     l1 = l2 = 0.5
     rho, mh2, Jh, mp, Jp = 0.2, 1.0, 0.1, 0.1, 0.0005
-    I1 = Jh + rho * l1**3 / 3                      # body 1 about joint 1
+    I1 = Jh + rho * l1**3 / 3  # body 1 about joint 1
     m1a1 = rho * l1**2 / 2
-    m2 = mh2 + rho * l2 + mp                        # body 2: hub 2, link 2, payload
+    m2 = mh2 + rho * l2 + mp  # body 2: hub 2, link 2, payload
     m2a2 = rho * l2**2 / 2 + mp * l2
-    I2 = Jh + rho * l2**3 / 3 + mp * l2**2 + Jp     # body 2 about joint 2
+    I2 = Jh + rho * l2**3 / 3 + mp * l2**2 + Jp  # body 2 about joint 2
     rng = np.random.default_rng(3)
     for _ in range(5):
         th = rng.uniform(-math.pi, math.pi, 2)
         thd = rng.normal(0, 2, 2)
         c2, s2 = math.cos(th[1]), math.sin(th[1])
-        B = np.array([[I1 + I2 + m2 * l1**2 + 2 * l1 * m2a2 * c2, I2 + l1 * m2a2 * c2],
-                      [I2 + l1 * m2a2 * c2, I2]])
+        B = np.array(
+            [
+                [I1 + I2 + m2 * l1**2 + 2 * l1 * m2a2 * c2, I2 + l1 * m2a2 * c2],
+                [I2 + l1 * m2a2 * c2, I2],
+            ]
+        )
         h = l1 * m2a2 * s2
         c = np.array([-h * (2 * thd[0] * thd[1] + thd[1] ** 2), h * thd[0] ** 2])
-        g = G * np.array([(m1a1 + m2 * l1) * math.cos(th[0]) + m2a2 * math.cos(th.sum()),
-                          m2a2 * math.cos(th.sum())])
+        g = G * np.array(
+            [
+                (m1a1 + m2 * l1) * math.cos(th[0]) + m2a2 * math.cos(th.sum()),
+                m2a2 * math.cos(th.sum()),
+            ]
+        )
         np.testing.assert_allclose(model.mass_matrix(th), B, rtol=1e-13)
         np.testing.assert_allclose(model.coriolis(th, thd), c, atol=1e-13)
         np.testing.assert_allclose(model.gravity(th), g, atol=1e-13)
@@ -230,7 +276,7 @@ def test_plant_protocol_and_signals(bench):
     xd = xs.copy()
     xd[:, 2:6] = [1e-3, -2e-4, 5e-4, 1e-4]
     sig = np.asarray(jax.vmap(lambda x: P.signals(x, jnp.zeros(2)))(jnp.asarray(xd)))
-    w = [bench.modes[i].tip_value @ xd[0, 2 + 2 * i:4 + 2 * i] for i in range(2)]
+    w = [bench.modes[i].tip_value @ xd[0, 2 + 2 * i : 4 + 2 * i] for i in range(2)]
     np.testing.assert_allclose(sig[0, 10:12], w, rtol=1e-14)
     np.testing.assert_allclose(sig[0, 12:14], np.asarray(w) / 0.5, rtol=1e-14)
     # hanging straight down is an equilibrium with zero torque: ẋ = 0
@@ -245,11 +291,17 @@ def test_plant_protocol_and_signals(bench):
 @pytest.mark.parametrize("gravity", [0.0, G])
 def test_energy_conserved_without_damping_and_input(gravity):
     model = build_multilink(benchmark_arm(gravity=gravity))
-    x0 = model.state(theta=[-1.0, 0.6], delta=[0.03, -0.002, 0.004, 0.0001],
-                     theta_dot=[1.0, -2.0], delta_dot=[0.1, 0.0, -0.05, 0.0])
+    x0 = model.state(
+        theta=[-1.0, 0.6],
+        delta=[0.03, -0.002, 0.004, 0.0001],
+        theta_dot=[1.0, -2.0],
+        delta_dot=[0.1, 0.0, -0.05, 0.0],
+    )
     run = simulate_continuous(model, law_zero, x0, 10.0, 5e-3, params=model.plant, step=5e-5)
     E = model.energy(run.state_array)
-    Tkin = np.asarray(jax.vmap(model.plant.kinetic_energy)(run.state_array[:, :6], run.state_array[:, 6:]))
+    Tkin = np.asarray(
+        jax.vmap(model.plant.kinetic_energy)(run.state_array[:, :6], run.state_array[:, 6:])
+    )
     drift = np.abs(E - E[0]).max() / Tkin.max()
     print(f"g = {gravity}: energy drift over 10 s {drift:.2e} of max T = {Tkin.max():.3g} J")
     assert drift < 1e-6

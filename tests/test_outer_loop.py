@@ -44,8 +44,11 @@ def test_parabolic_sizing_from_the_design_deflection():
 
 
 def test_trajectory_that_breaks_the_deflection_limit_is_refused():
-    with pytest.raises(ValueError, match=r"deflection limit not met: peak .* exceeds "
-                       r"max_deflection_rad = 0.4 rad by 0.1\d* rad"):
+    with pytest.raises(
+        ValueError,
+        match=r"deflection limit not met: peak .* exceeds "
+        r"max_deflection_rad = 0.4 rad by 0.1\d* rad",
+    ):
         size_parabolic(G13, 1.0, 0.5, 0.4)
     with pytest.raises(ValueError, match="second-order"):
         size_parabolic(G14, 1.0, 0.2, 0.4)
@@ -100,8 +103,9 @@ def _tip_run(name, gcb, n, traj, duration, advance):
     m = model(name)
     inner = design().controller(m, angle_resolution=COUNT, reference="motor_reference")
     p = prepare(scenario(name, duration), controller=tip_loop(inner, gcb, DT))
-    p.references.update(trajectory_references(n, traj, p.time, start=CHOICES.move_start,
-                                              advance=advance))
+    p.references.update(
+        trajectory_references(n, traj, p.time, start=CHOICES.move_start, advance=advance)
+    )
     return run_prepared(p)
 
 
@@ -109,12 +113,19 @@ def test_single_mass_tip_loop_fig14():
     """Paper's G_cb, parabolic move sized for 200 mrad: settles within 0.3 s (paper
     0.22 s) and keeps |θm − θt| within 400 mrad."""
     c = CHOICES
-    traj, n, _ = size_parabolic(model().beam_tf(), c.single_distance, c.design_deflection,
-                                c.max_deflection)
+    traj, n, _ = size_parabolic(
+        model().beam_tf(), c.single_distance, c.design_deflection, c.max_deflection
+    )
     gcb = pid_zpk(c.gcb_gain, c.gcb_zeros, c.gcb_pole, DT)
     r = _tip_run("feliu-single-mass", gcb, n, traj, c.duration_single, design().lag)
-    m = step_metrics(r.time, r["tip_angle"], r["reference"], band=0.02,
-                     t_step=c.move_start, target=c.single_distance)
+    m = step_metrics(
+        r.time,
+        r["tip_angle"],
+        r["reference"],
+        band=0.02,
+        t_step=c.move_start,
+        target=c.single_distance,
+    )
     assert m.settling_time <= 0.3
     assert np.max(np.abs(r["motor_angle"] - r["tip_angle"])) <= 0.4
     tip_count = np.pi / 4096  # 180° over 12 bits
@@ -127,20 +138,20 @@ def test_two_mass_tip_loop_fig18():
     0.4 s (paper 0.3 s)."""
     c = CHOICES
     gb = model("feliu-two-mass").beam_tf()
-    traj = quasi_parabolic(c.two_mass_distance, c.two_mass_acceleration,
-                           max_snap=c.two_mass_snap)
+    traj = quasi_parabolic(c.two_mass_distance, c.two_mass_acceleration, max_snap=c.two_mass_snap)
     n = wiener_feedforward(gb, traj.laplace_model())
     d = c.two_mass_distance
     t_end = c.move_start + traj.duration
     amp = {}
     for key, nn in (("wiener", n), ("rigid", control.tf([1.0], [1.0]))):
-        r = _tip_run("feliu-two-mass", c.two_mass_pd, nn, traj, c.duration_two_mass,
-                     design().lag)
-        amp[key] = _mode_amplitudes(r.time, r["tip_angle"], d, t_end + c.ripple_fit_delay,
-                                    _modes(gb))
+        r = _tip_run("feliu-two-mass", c.two_mass_pd, nn, traj, c.duration_two_mass, design().lag)
+        amp[key] = _mode_amplitudes(
+            r.time, r["tip_angle"], d, t_end + c.ripple_fit_delay, _modes(gb)
+        )
         if key == "wiener":
-            m = step_metrics(r.time, r["tip_angle"], r["reference"], band=0.05,
-                             t_step=c.move_start, target=d)
+            m = step_metrics(
+                r.time, r["tip_angle"], r["reference"], band=0.05, t_step=c.move_start, target=d
+            )
             assert m.settling_time <= 0.4
             after = r.time > t_end
             assert np.max(np.abs(r["tip_angle"][after] - d)) < 0.03 * d

@@ -29,8 +29,13 @@ from flexarm.identification.time_domain.logs import FitInputError, read_bench_lo
 from flexarm.io.logs import LogError, read_log
 from test_logformat import EXAMPLE
 
-FUZZ = settings(max_examples=60, deadline=None, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=60,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 _DIR = Path(tempfile.mkdtemp(prefix="flexarm-fuzz-"))
 
 
@@ -85,8 +90,7 @@ def test_random_bytes(data):
 
 #: finite numbers within the tightest physical range a mapped column gets (a voltage:
 #: |x| <= 1e5 V, flexarm.io.checks.RANGES); beyond it a reader refuses the value
-NUMBERS = st.floats(min_value=-1e5, max_value=1e5, allow_nan=False, allow_infinity=False,
-                    width=64)
+NUMBERS = st.floats(min_value=-1e5, max_value=1e5, allow_nan=False, allow_infinity=False, width=64)
 
 
 @st.composite
@@ -98,14 +102,21 @@ def csv_logs(draw):
     delim = draw(st.sampled_from([",", ";", "\t", " ", "  "]))
     nl = draw(st.sampled_from(["\n", "\r\n", "\r"]))
     names = ["time"] + [f"c{j}" for j in range(ncol)]
-    t0 = draw(st.integers(-10**6, 10**6))
+    t0 = draw(st.integers(-(10**6), 10**6))
     step = draw(st.sampled_from([1, 2, 5, 10]))
     time = t0 + step * np.arange(n, dtype=float)
-    vals = np.array(draw(st.lists(st.lists(NUMBERS, min_size=ncol, max_size=ncol),
-                                  min_size=n, max_size=n)), float).reshape(n, ncol)
-    comments = draw(st.lists(st.sampled_from(["# note: x", "% logger 1", "#", "% a;b,c",
-                                                 "# form\x0cfeed\x1e\u2028"]),
-                             max_size=3))
+    vals = np.array(
+        draw(st.lists(st.lists(NUMBERS, min_size=ncol, max_size=ncol), min_size=n, max_size=n)),
+        float,
+    ).reshape(n, ncol)
+    comments = draw(
+        st.lists(
+            st.sampled_from(
+                ["# note: x", "% logger 1", "#", "% a;b,c", "# form\x0cfeed\x1e\u2028"]
+            ),
+            max_size=3,
+        )
+    )
     lines = comments + [delim.join(names)]
     lines += [delim.join(repr(float(v)) for v in (time[k], *vals[k])) for k in range(n)]
     bom = draw(st.sampled_from(["", "\ufeff"]))
@@ -122,8 +133,14 @@ def test_valid_logs_give_back_exactly_what_was_written(case):
     for j, name in enumerate(names[1:]):
         np.testing.assert_array_equal(log[name], vals[:, j])
     # by column number, with the sign flipped, and the time in ms
-    log = read_log(p, {"time": 1, "voltage": f"-{len(names)}"}, {"time": "ms"},
-                   required=("time",), min_samples=2, max_jitter=1e-9)
+    log = read_log(
+        p,
+        {"time": 1, "voltage": f"-{len(names)}"},
+        {"time": "ms"},
+        required=("time",),
+        min_samples=2,
+        max_jitter=1e-9,
+    )
     np.testing.assert_allclose(log.time, time * 1e-3, rtol=1e-15)
     np.testing.assert_array_equal(log["voltage"], -vals[:, -1])
 
@@ -140,11 +157,11 @@ def test_damaged_logs_fail_naming_file_and_line(case, data):
     how = data.draw(st.sampled_from(["cut", "text", "dup"]))
     row = k - first - 1
     if how == "cut":
-        body = "\n".join(lines[:k]) + "\n" + lines[k][:data.draw(st.integers(0, len(lines[k])))]
+        body = "\n".join(lines[:k]) + "\n" + lines[k][: data.draw(st.integers(0, len(lines[k])))]
     elif how == "text":
-        body = "\n".join(lines[:k] + [lines[k] + "x"] + lines[k + 1:])
+        body = "\n".join(lines[:k] + [lines[k] + "x"] + lines[k + 1 :])
     else:
-        body = "\n".join(lines[:k + 1] + [lines[k]] + lines[k + 1:])
+        body = "\n".join(lines[: k + 1] + [lines[k]] + lines[k + 1 :])
     p = _file(body, "damaged.csv")
     try:
         log = read_log(p, required=("time",), min_samples=2, max_jitter=1e-9)

@@ -36,22 +36,36 @@ def logu(lo, hi):
 @st.composite
 def arms(draw, damping=True):
     L = draw(logu(0.05, 2.0))
-    fr = draw(st.lists(st.sampled_from([0.25, 0.5, 0.75, 1.0]), min_size=1, max_size=3,
-                       unique=True))
+    fr = draw(
+        st.lists(st.sampled_from([0.25, 0.5, 0.75, 1.0]), min_size=1, max_size=3, unique=True)
+    )
     pos = sorted(f * L for f in fr)
     masses = [{"mass": draw(logu(1e-3, 1.0)), "position": p} for p in pos]
     drive = draw(st.sampled_from(["current", "voltage"]))
-    motor = {"drive": drive, "inertia": draw(logu(1e-5, 1e-1)),
-             "viscous": draw(st.sampled_from([0.0, draw(logu(1e-5, 1e-1))]))}
+    motor = {
+        "drive": drive,
+        "inertia": draw(logu(1e-5, 1e-1)),
+        "viscous": draw(st.sampled_from([0.0, draw(logu(1e-5, 1e-1))])),
+    }
     if drive == "current":
         motor.update(torque_constant=draw(logu(1e-2, 1.0)), current_limit=5.0)
     else:
-        motor.update(motor_constant=draw(logu(1e-3, 0.1)), armature_resistance=draw(logu(0.5, 20)),
-                     gear_ratio=draw(logu(1, 100)), voltage_limit=10.0)
-    beam = {"model": "lumped", "length": L, "flexural_rigidity": draw(logu(1e-2, 1e2)),
-            "damping_ratio": draw(st.floats(0.0, 0.1)) if damping else 0.0, "masses": masses}
-    return SingleLinkArm.model_validate({"motor": motor, "friction": {"model": "none"},
-                                         "beam": beam})
+        motor.update(
+            motor_constant=draw(logu(1e-3, 0.1)),
+            armature_resistance=draw(logu(0.5, 20)),
+            gear_ratio=draw(logu(1, 100)),
+            voltage_limit=10.0,
+        )
+    beam = {
+        "model": "lumped",
+        "length": L,
+        "flexural_rigidity": draw(logu(1e-2, 1e2)),
+        "damping_ratio": draw(st.floats(0.0, 0.1)) if damping else 0.0,
+        "masses": masses,
+    }
+    return SingleLinkArm.model_validate(
+        {"motor": motor, "friction": {"model": "none"}, "beam": beam}
+    )
 
 
 def energy(arm: SingleLinkArm, x: np.ndarray) -> np.ndarray:
@@ -64,10 +78,13 @@ def energy(arm: SingleLinkArm, x: np.ndarray) -> np.ndarray:
     lo, hi = np.minimum.outer(p, p), np.maximum.outer(p, p)
     K = np.linalg.inv(lo**2 * (3 * hi - lo) / (6 * b.EI))
     n = len(p)
-    th, om, y, yd = x[:, 0], x[:, 1], x[:, 2:2 + n], x[:, 2 + n:2 + 2 * n]
+    th, om, y, yd = x[:, 0], x[:, 1], x[:, 2 : 2 + n], x[:, 2 + n : 2 + 2 * n]
     w = y - np.outer(th, p)
-    return (0.5 * arm.motor.inertia * om**2 + 0.5 * np.sum(m * yd**2, axis=1)
-            + 0.5 * np.einsum("ti,ij,tj->t", w, K, w))
+    return (
+        0.5 * arm.motor.inertia * om**2
+        + 0.5 * np.sum(m * yd**2, axis=1)
+        + 0.5 * np.einsum("ti,ij,tj->t", w, K, w)
+    )
 
 
 @settings(max_examples=12)
@@ -81,8 +98,13 @@ def test_unforced_frictionless_single_link_loses_energy(arm, seed):
     plant = model.plant()
     rng = np.random.default_rng(seed)
     n = len(arm.beam.masses)
-    x0 = np.concatenate([[rng.normal(), rng.normal()], rng.normal(size=n) * 0.01 * arm.beam.length,
-                         rng.normal(size=n)])
+    x0 = np.concatenate(
+        [
+            [rng.normal(), rng.normal()],
+            rng.normal(size=n) * 0.01 * arm.beam.length,
+            rng.normal(size=n),
+        ]
+    )
     A, _, _ = _lin(plant, len(x0))  # fastest mode of the whole arm (hub included)
     wmax = max(float(np.max(np.abs(np.linalg.eigvals(A)))), 1e-3)
     h = 0.1 / wmax
@@ -91,7 +113,7 @@ def test_unforced_frictionless_single_link_loses_energy(arm, seed):
     E = energy(arm, np.asarray(xs))
     assert np.all(np.isfinite(E)) and E[0] > 0
     inc = np.diff(E)
-    assert np.all(inc <= 10 * 1e-7 * E[0] + 1e-12 * E[0]), (inc.max() / E[0])
+    assert np.all(inc <= 10 * 1e-7 * E[0] + 1e-12 * E[0]), inc.max() / E[0]
     if arm.beam.damping_ratio == 0 and arm.motor.viscous == 0 and arm.motor.drive == "current":
         # conservative: RK4 only loses (ω h)⁶/72 per step
         assert E[-1] >= E[0] * (1 - 600 * 1e-7)
@@ -105,12 +127,16 @@ def _lin(plant, nx):
     return A, B, C
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "found by this test, not fixed yet: models.lumped_beam._clean zeroes coefficients below "
-    "1e-11 of the largest one, so for a light hub (J = 1e-5 kg m^2) with a stiff short beam "
-    "the s^4 coefficient of G_m's denominator is dropped and G_m loses its resonance "
-    "(returned (0.0096 s^2 + 1.49e4)/s^2 instead of poles at +-3211j, zeros at +-1247j); "
-    "fix: trim on frequency-scaled coefficients"))
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "found by this test, not fixed yet: models.lumped_beam._clean zeroes coefficients below "
+        "1e-11 of the largest one, so for a light hub (J = 1e-5 kg m^2) with a stiff short beam "
+        "the s^4 coefficient of G_m's denominator is dropped and G_m loses its resonance "
+        "(returned (0.0096 s^2 + 1.49e4)/s^2 instead of poles at +-3211j, zeros at +-1247j); "
+        "fix: trim on frequency-scaled coefficients"
+    ),
+)
 @settings(max_examples=12)
 @given(arms())
 def test_transfer_functions_match_the_linearised_plant(arm):
@@ -138,19 +164,30 @@ def multilink_arms(draw):
     from flexarm.specs.multilink import MultiLinkArm
 
     n = draw(st.integers(1, 3))
-    links = [{"length": draw(logu(0.1, 2.0)), "linear_density": draw(logu(0.05, 5.0)),
-              "flexural_rigidity": draw(logu(0.5, 500.0)), "modes": draw(st.integers(0, 2)),
-              "mode_type": draw(st.sampled_from(["clamped_mass", "clamped_free"]))}
-             for _ in range(n)]
+    links = [
+        {
+            "length": draw(logu(0.1, 2.0)),
+            "linear_density": draw(logu(0.05, 5.0)),
+            "flexural_rigidity": draw(logu(0.5, 500.0)),
+            "modes": draw(st.integers(0, 2)),
+            "mode_type": draw(st.sampled_from(["clamped_mass", "clamped_free"])),
+        }
+        for _ in range(n)
+    ]
     hubs = [{"mass": draw(logu(1e-3, 5.0)), "inertia": draw(logu(1e-4, 0.5))} for _ in range(n)]
-    payload = {"mass": draw(st.sampled_from([0.0, 0.1, 1.0])),
-               "inertia": draw(st.sampled_from([0.0, 1e-3]))}
+    payload = {
+        "mass": draw(st.sampled_from([0.0, 0.1, 1.0])),
+        "inertia": draw(st.sampled_from([0.0, 1e-3])),
+    }
     return MultiLinkArm.model_validate({"links": links, "hubs": hubs, "payload": payload})
 
 
 @settings(max_examples=8)
-@given(multilink_arms(), st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=3),
-       st.integers(0, 2**31 - 1))
+@given(
+    multilink_arms(),
+    st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=3),
+    st.integers(0, 2**31 - 1),
+)
 def test_multilink_mass_matrix_is_symmetric_positive_definite(arm, angles, seed):
     """B(q) = B(q)ᵀ to round-off (1e-12 of its norm) and its smallest eigenvalue > 0, at
     random joint angles and random deflections (a few per cent of the link length)."""
@@ -159,8 +196,8 @@ def test_multilink_mass_matrix_is_symmetric_positive_definite(arm, angles, seed)
     model = build_multilink(arm)
     p = model.plant
     q = np.zeros(p.n_q)
-    q[:p.n_links] = angles[:p.n_links]
-    q[p.n_links:] = np.random.default_rng(seed).normal(size=p.n_delta) * 0.02
+    q[: p.n_links] = angles[: p.n_links]
+    q[p.n_links :] = np.random.default_rng(seed).normal(size=p.n_delta) * 0.02
     Bq = np.asarray(p.mass_matrix(jnp.asarray(q)))
     nrm = np.linalg.norm(Bq)
     assert np.max(np.abs(Bq - Bq.T)) <= 1e-12 * nrm

@@ -24,11 +24,18 @@ from flexarm.io.logformat import LogFormat, load_log_format, log_format_from_dic
 
 sio = pytest.importorskip("scipy.io")
 
-FUZZ = settings(max_examples=40, deadline=None, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 _DIR = Path(tempfile.mkdtemp(prefix="flexarm-fuzz-readers-"))
-FMT = log_format_from_dict({"columns": {"time": "t", "motor_angle": "th", "voltage": "u",
-                                        "sample_counter": "n"}}, source="fuzz format")
+FMT = log_format_from_dict(
+    {"columns": {"time": "t", "motor_angle": "th", "voltage": "u", "sample_counter": "n"}},
+    source="fuzz format",
+)
 
 
 def _named(exc: BaseException, path) -> None:
@@ -74,9 +81,9 @@ def mat_signals(draw):
     elif kind == "swap":
         t[[k, k + 1]] = t[[k + 1, k]]
     elif kind == "decrease":
-        t[k + 1:] -= 0.5
+        t[k + 1 :] -= 0.5
     elif kind == "jitter":
-        t[k + 1:] += 3e-4
+        t[k + 1 :] += 3e-4
     elif kind == "huge":
         t = t + 1e300
     th = np.array(draw(st.lists(VALUES, min_size=n, max_size=n)))
@@ -85,8 +92,7 @@ def mat_signals(draw):
     c = (start + np.arange(n)) % 65536  # a 16-bit counter: may wrap
     if draw(st.booleans()):
         c[-1] = c[0]  # an irregular row
-    return {"t": t[:, None], "th": th[:, None], "u": u[:, None],
-            "n": c[:, None].astype(np.uint16)}
+    return {"t": t[:, None], "th": th[:, None], "u": u[:, None], "n": c[:, None].astype(np.uint16)}
 
 
 @FUZZ
@@ -103,28 +109,62 @@ def test_wrapping_16_bit_counter_is_unwrapped_not_lost_samples(tmp_path):
     n = 50
     c = (65520 + np.arange(n)) % 65536
     p = tmp_path / "wrap.mat"
-    sio.savemat(p, {"t": np.arange(n)[:, None] * 1e-3, "th": np.zeros((n, 1)),
-                    "u": np.zeros((n, 1)), "n": c[:, None].astype(np.uint16)})
+    sio.savemat(
+        p,
+        {
+            "t": np.arange(n)[:, None] * 1e-3,
+            "th": np.zeros((n, 1)),
+            "u": np.zeros((n, 1)),
+            "n": c[:, None].astype(np.uint16),
+        },
+    )
     log = FMT.read(p)
     assert len(log) == n  # no row dropped, no "samples were lost"
     # and a .mat file's time stamps are checked as a text log's are
-    sio.savemat(p, {"t": np.zeros((n, 1)), "th": np.zeros((n, 1)), "u": np.zeros((n, 1)),
-                    "n": c[:, None].astype(np.uint16)})
+    sio.savemat(
+        p,
+        {
+            "t": np.zeros((n, 1)),
+            "th": np.zeros((n, 1)),
+            "u": np.zeros((n, 1)),
+            "n": c[:, None].astype(np.uint16),
+        },
+    )
     with pytest.raises(FlexarmError, match="all 50 time stamps are 0"):
         FMT.read(p)
     t = np.arange(n) * 1e-3
     t[[10, 11]] = t[[11, 10]]
-    sio.savemat(p, {"t": t[:, None], "th": np.zeros((n, 1)), "u": np.zeros((n, 1)),
-                    "n": c[:, None].astype(np.uint16)})
-    with pytest.raises(FlexarmError, match=r"time decreases at sample 11 .*sample 10 and "
-                                           r"sample 11 are swapped"):
+    sio.savemat(
+        p,
+        {
+            "t": t[:, None],
+            "th": np.zeros((n, 1)),
+            "u": np.zeros((n, 1)),
+            "n": c[:, None].astype(np.uint16),
+        },
+    )
+    with pytest.raises(
+        FlexarmError,
+        match=r"time decreases at sample 11 .*sample 10 and "
+        r"sample 11 are swapped",
+    ):
         FMT.read(p)
     th = np.zeros(n)
     th[7] = 1e308
-    sio.savemat(p, {"t": np.arange(n)[:, None] * 1e-3, "th": th[:, None],
-                    "u": np.zeros((n, 1)), "n": c[:, None].astype(np.uint16)})
-    with pytest.raises(FlexarmError, match=r"column motor_angle \('th'\), sample 7: 1e\+308 "
-                                           r"is beyond the physical range"):
+    sio.savemat(
+        p,
+        {
+            "t": np.arange(n)[:, None] * 1e-3,
+            "th": th[:, None],
+            "u": np.zeros((n, 1)),
+            "n": c[:, None].astype(np.uint16),
+        },
+    )
+    with pytest.raises(
+        FlexarmError,
+        match=r"column motor_angle \('th'\), sample 7: 1e\+308 "
+        r"is beyond the physical range",
+    ):
         FMT.read(p)
 
 
@@ -133,12 +173,20 @@ def test_wrapping_16_bit_counter_is_unwrapped_not_lost_samples(tmp_path):
 def test_damaged_v5_mat_files_are_one_clear_error(data):
     p = _DIR / "damaged5.mat"
     n = 20
-    sio.savemat(p, {"t": np.arange(n)[:, None] * 1e-3, "th": np.zeros((n, 1)),
-                    "u": np.ones((n, 1)), "n": np.arange(n)[:, None]})
+    sio.savemat(
+        p,
+        {
+            "t": np.arange(n)[:, None] * 1e-3,
+            "th": np.zeros((n, 1)),
+            "u": np.ones((n, 1)),
+            "n": np.arange(n)[:, None],
+        },
+    )
     raw = bytearray(p.read_bytes())
     cut = data.draw(st.integers(0, len(raw)))
-    flips = data.draw(st.lists(st.tuples(st.integers(0, len(raw) - 1), st.integers(0, 255)),
-                               max_size=6))
+    flips = data.draw(
+        st.lists(st.tuples(st.integers(0, len(raw) - 1), st.integers(0, 255)), max_size=6)
+    )
     for i, b in flips:
         raw[i] = b
     p.write_bytes(bytes(raw[:cut]) if data.draw(st.booleans()) else bytes(raw))
@@ -151,8 +199,12 @@ def test_damaged_v5_mat_files_are_one_clear_error(data):
 def _v73(path: Path, n: int = 20) -> None:
     h5py = pytest.importorskip("h5py")
     with h5py.File(path, "w") as f:
-        for name, x in (("t", np.arange(n) * 1e-3), ("th", np.linspace(0, 1, n)),
-                        ("u", np.ones(n)), ("n", np.arange(n, dtype=float))):
+        for name, x in (
+            ("t", np.arange(n) * 1e-3),
+            ("th", np.linspace(0, 1, n)),
+            ("u", np.ones(n)),
+            ("n", np.arange(n, dtype=float)),
+        ):
             f.create_dataset(name, data=x[None, :])
             f[name].attrs["MATLAB_class"] = np.bytes_("double")
 
@@ -164,9 +216,10 @@ def test_damaged_v73_mat_files_are_one_clear_error(data):
     _v73(p)
     raw = bytearray(p.read_bytes())
     if data.draw(st.booleans()):
-        raw = raw[:data.draw(st.integers(9, len(raw) - 1))]  # cut short (keeps the signature)
-    for i, b in data.draw(st.lists(st.tuples(st.integers(8, len(raw) - 1),
-                                             st.integers(0, 255)), max_size=8)):
+        raw = raw[: data.draw(st.integers(9, len(raw) - 1))]  # cut short (keeps the signature)
+    for i, b in data.draw(
+        st.lists(st.tuples(st.integers(8, len(raw) - 1), st.integers(0, 255)), max_size=8)
+    ):
         raw[i] = b
     p.write_bytes(bytes(raw))
     log = _read_or_named(FMT.read, p)
@@ -185,19 +238,56 @@ def test_a_truncated_v73_file_names_the_file(tmp_path):
 
 # ------------------------------------------------------------------ log-format files
 FORMAT_VALUES = st.one_of(
-    st.integers(-3, 20), st.text(max_size=8), st.floats(allow_nan=True),
-    st.booleans(), st.lists(st.integers(0, 5), max_size=3),
-    st.dictionaries(st.sampled_from(["K1", "x", "time"]), st.integers(0, 9), max_size=2))
+    st.integers(-3, 20),
+    st.text(max_size=8),
+    st.floats(allow_nan=True),
+    st.booleans(),
+    st.lists(st.integers(0, 5), max_size=3),
+    st.dictionaries(st.sampled_from(["K1", "x", "time"]), st.integers(0, 9), max_size=2),
+)
 
 
 @FUZZ
-@given(st.dictionaries(
-    st.sampled_from(["columns", "units", "controller", "checks", "delimiter", "comment",
-                     "skip_rows", "description", "nonsense"]),
-    st.one_of(FORMAT_VALUES, st.dictionaries(
-        st.sampled_from(["time", "motor_angle", "voltage", "kind", "gain_columns", "limit",
-                         "rate", "quantum", "zero", "K1", "bogus"]), FORMAT_VALUES,
-        max_size=4)), max_size=5))
+@given(
+    st.dictionaries(
+        st.sampled_from(
+            [
+                "columns",
+                "units",
+                "controller",
+                "checks",
+                "delimiter",
+                "comment",
+                "skip_rows",
+                "description",
+                "nonsense",
+            ]
+        ),
+        st.one_of(
+            FORMAT_VALUES,
+            st.dictionaries(
+                st.sampled_from(
+                    [
+                        "time",
+                        "motor_angle",
+                        "voltage",
+                        "kind",
+                        "gain_columns",
+                        "limit",
+                        "rate",
+                        "quantum",
+                        "zero",
+                        "K1",
+                        "bogus",
+                    ]
+                ),
+                FORMAT_VALUES,
+                max_size=4,
+            ),
+        ),
+        max_size=5,
+    )
+)
 def test_log_format_files_are_valid_or_one_clear_error(d):
     import tomli_w
 
@@ -224,9 +314,12 @@ def test_log_format_files_of_any_content(data):
 # ------------------------------------------------------------------ controller files
 MATRIX = st.one_of(
     st.lists(st.lists(st.floats(-5, 5), min_size=1, max_size=3), min_size=1, max_size=3),
-    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=4), st.none(),
-    st.lists(st.integers(), max_size=2), st.dictionaries(st.text(max_size=2), st.integers(),
-                                                         max_size=2))
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=4),
+    st.none(),
+    st.lists(st.integers(), max_size=2),
+    st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
+)
 
 
 @FUZZ
@@ -241,10 +334,15 @@ def test_controller_files_are_valid_or_one_clear_error(d):
 
     def read(path):
         m = read_lti_file(path, where=f"[controller] file {str(path)!r}")
-        return lti_controller(**{k: v for k, v in m.items() if k in "ABCD"},
-                              inputs=["motor_angle"], outputs=["voltage"], dt=m.get("dt"),
-                              input_names=("voltage",), base_dt=1e-3,
-                              where=f"[controller] file {str(path)!r}")
+        return lti_controller(
+            **{k: v for k, v in m.items() if k in "ABCD"},
+            inputs=["motor_angle"],
+            outputs=["voltage"],
+            dt=m.get("dt"),
+            input_names=("voltage",),
+            base_dt=1e-3,
+            where=f"[controller] file {str(path)!r}",
+        )
 
     _read_or_named(read, p)
 
@@ -253,9 +351,17 @@ def test_controller_files_are_valid_or_one_clear_error(d):
 def _frf_json() -> dict:
     f = [1.0, 2.0, 4.0]
     out = {"re": [1.0, 0.5, 0.1], "im": [-0.1, -0.4, -0.2], "noise_std": [0.01] * 3}
-    return {"input": "current", "frequency_hz": f, "lines": [1, 2, 4], "period_samples": 100,
-            "fs_hz": 100.0, "periods_used": 4, "transient_periods": 1,
-            "outputs": {"motor_angle": out}, "warnings": []}
+    return {
+        "input": "current",
+        "frequency_hz": f,
+        "lines": [1, 2, 4],
+        "period_samples": 100,
+        "fs_hz": 100.0,
+        "periods_used": 4,
+        "transient_periods": 1,
+        "outputs": {"motor_angle": out},
+        "warnings": [],
+    }
 
 
 @FUZZ
@@ -265,13 +371,32 @@ def test_frf_json_is_valid_or_one_clear_error(data):
 
     d = _frf_json()
     for _ in range(data.draw(st.integers(1, 3))):
-        path = data.draw(st.sampled_from(
-            [("input",), ("frequency_hz",), ("lines",), ("period_samples",), ("fs_hz",),
-             ("outputs",), ("outputs", "motor_angle"), ("outputs", "motor_angle", "re"),
-             ("outputs", "motor_angle", "noise_std"), ("periods_used",)]))
-        value = data.draw(st.one_of(
-            st.none(), st.text(max_size=3), st.floats(allow_nan=True, allow_infinity=True),
-            st.lists(st.floats(allow_nan=True), max_size=4), st.just({}), st.just("drop")))
+        path = data.draw(
+            st.sampled_from(
+                [
+                    ("input",),
+                    ("frequency_hz",),
+                    ("lines",),
+                    ("period_samples",),
+                    ("fs_hz",),
+                    ("outputs",),
+                    ("outputs", "motor_angle"),
+                    ("outputs", "motor_angle", "re"),
+                    ("outputs", "motor_angle", "noise_std"),
+                    ("periods_used",),
+                ]
+            )
+        )
+        value = data.draw(
+            st.one_of(
+                st.none(),
+                st.text(max_size=3),
+                st.floats(allow_nan=True, allow_infinity=True),
+                st.lists(st.floats(allow_nan=True), max_size=4),
+                st.just({}),
+                st.just("drop"),
+            )
+        )
         node = d
         for k in path[:-1]:
             node = node.get(k) if isinstance(node, dict) else None

@@ -51,35 +51,90 @@ def _copy(d):
 # what a user may wrongly write for a quantity (TOML-representable, except that tomllib
 # reads integers of any size): non-finite and extreme numbers get their own branch so
 # that every field meets them within the bounded examples
-specials = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0, -1.0, -1e-300, 1e308,
-                            10**400, -(10**400), 2**63, 0.5, 1.5, 3])
+specials = st.sampled_from(
+    [
+        math.nan,
+        math.inf,
+        -math.inf,
+        0.0,
+        -0.0,
+        -1.0,
+        -1e-300,
+        1e308,
+        10**400,
+        -(10**400),
+        2**63,
+        0.5,
+        1.5,
+        3,
+    ]
+)
 bad_values = st.one_of(
     specials,
     st.lists(specials, min_size=1, max_size=3),
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(),
     st.booleans(),
-    st.sampled_from(["", "abc", "1 kg", "-3 m", "2 in", "0.5 lbf*in", "400 mrad", "1e999 m",
-                     "nan", "inf s", "5 Hz", "100 rad/s", "3 ms", "1 kg*m**2", "7 V*s/rad",
-                     "12 bits", "1 / 0", "kg", "1 m m", "((", "1 degC", "current", "voltage",
-                     "lumped", "pd", "step", "coulomb", "motor_angle", "tip_angle",
-                     "1e400 kg", "10**400 m", "0 s", "-0.5"]),
+    st.sampled_from(
+        [
+            "",
+            "abc",
+            "1 kg",
+            "-3 m",
+            "2 in",
+            "0.5 lbf*in",
+            "400 mrad",
+            "1e999 m",
+            "nan",
+            "inf s",
+            "5 Hz",
+            "100 rad/s",
+            "3 ms",
+            "1 kg*m**2",
+            "7 V*s/rad",
+            "12 bits",
+            "1 / 0",
+            "kg",
+            "1 m m",
+            "((",
+            "1 degC",
+            "current",
+            "voltage",
+            "lumped",
+            "pd",
+            "step",
+            "coulomb",
+            "motor_angle",
+            "tip_angle",
+            "1e400 kg",
+            "10**400 m",
+            "0 s",
+            "-0.5",
+        ]
+    ),
     st.text(max_size=12),
-    st.just({}), st.just({"x": 1}),
+    st.just({}),
+    st.just({"x": 1}),
 )
 #: whole sections a user may write instead of the built-in ones: every controller type,
 #: complete, with extreme or non-finite numbers
 coeffs = st.lists(specials, min_size=1, max_size=3)
 controllers = st.one_of(
     st.fixed_dictionaries({"type": st.just("pd"), "kp": specials, "kd": specials}),
-    st.fixed_dictionaries({"type": st.just("pid"), "kp": specials, "ki": specials,
-                           "kd": specials}),
-    st.fixed_dictionaries({"type": st.just("lead"), "gain": specials, "zero": specials,
-                           "pole": specials}),
+    st.fixed_dictionaries({"type": st.just("pid"), "kp": specials, "ki": specials, "kd": specials}),
+    st.fixed_dictionaries(
+        {"type": st.just("lead"), "gain": specials, "zero": specials, "pole": specials}
+    ),
     st.fixed_dictionaries({"type": st.just("tf"), "num": coeffs, "den": coeffs}),
-    st.fixed_dictionaries({"type": st.just("state_feedback"), "k1": specials, "k2": specials,
-                           "rate": st.sampled_from(["backward", "filtered"]),
-                           "rate_time_constant": specials}),
+    st.fixed_dictionaries(
+        {
+            "type": st.just("state_feedback"),
+            "k1": specials,
+            "k2": specials,
+            "rate": st.sampled_from(["backward", "filtered"]),
+            "rate_time_constant": specials,
+        }
+    ),
 )
 
 
@@ -93,8 +148,9 @@ def mutated(draw):
         paths = _leaves(data)
         path = draw(st.sampled_from(paths))
         parent = _get(data, path[:-1])
-        how = draw(st.sampled_from(["replace", "replace", "replace", "delete", "unknown",
-                                    "controller"]))
+        how = draw(
+            st.sampled_from(["replace", "replace", "replace", "delete", "unknown", "controller"])
+        )
         if how == "controller" and "arm" in data and data["arm"].get("kind") != "multi_link":
             data["controller"] = draw(controllers)
             path = ("controller",)

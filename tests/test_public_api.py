@@ -17,8 +17,20 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 def test_every_public_name_resolves():
     for name in flexarm.__all__:
         assert getattr(flexarm, name) is not None, name
-    for name in ("Arm", "fit", "validate", "simulate", "simulate_batch", "load_log",
-                 "linearize", "lqg", "tfest", "periodic_frf", "identify", "load_scenario"):
+    for name in (
+        "Arm",
+        "fit",
+        "validate",
+        "simulate",
+        "simulate_batch",
+        "load_log",
+        "linearize",
+        "lqg",
+        "tfest",
+        "periodic_frf",
+        "identify",
+        "load_scenario",
+    ):
         assert name in flexarm.__all__
 
 
@@ -29,8 +41,11 @@ def test_fit_says_which_form_it_needs():
         flexarm.fit(["log.csv"], free=["arm.hubs[0].inertia"])
 
 
-@pytest.mark.skipif(not DATA.is_dir(), reason=f"two-link rig data not found at {DATA} "
-                    "(../shared is absent in a user's clone; CI has it)")
+@pytest.mark.skipif(
+    not DATA.is_dir(),
+    reason=f"two-link rig data not found at {DATA} "
+    "(../shared is absent in a user's clone; CI has it)",
+)
 def test_load_log_is_the_format_reader():
     """flexarm.load_log(path, format) returns exactly what the format's own reader does."""
     from flexarm.io.logformat import load_log_format

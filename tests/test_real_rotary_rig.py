@@ -20,13 +20,24 @@ from flexarm.identification.time_domain import fit, predict, read_bench_log
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
 #: the lab's data sheet (README of the data): geared voltage-driven servo, 0.45 m link
-SHEET = dict(drive="voltage", gear_ratio=48.4, motor_constant=0.0107,
-             armature_resistance=3.29, link_length=0.45, computation_delay=1,
-                    voltage_limit=10.0)  # the limit the tests' figures were measured at
+SHEET = dict(
+    drive="voltage",
+    gear_ratio=48.4,
+    motor_constant=0.0107,
+    armature_resistance=3.29,
+    link_length=0.45,
+    computation_delay=1,
+    voltage_limit=10.0,
+)  # the limit the tests' figures were measured at
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"real rig logs not found at {DATA} (../shared is absent in a "
-                              "user's clone; CI has it)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        not DATA.is_dir(),
+        reason=f"real rig logs not found at {DATA} (../shared is absent in a "
+        "user's clone; CI has it)",
+    ),
+]
 
 
 def _log(name: str):
@@ -56,8 +67,11 @@ def _report(res, held):
     print(res.summary())
     print("held-out fit %:", held["fit_percent"])
     est = res.stages["guesses"]["estimates"]
-    print("estimates:", {k: v for k, v in est["tip_model"].items() if k != "profile"},
-          {k: v for k, v in est["hub_delay"].items() if k != "profile"})
+    print(
+        "estimates:",
+        {k: v for k, v in est["tip_model"].items() if k != "profile"},
+        {k: v for k, v in est["hub_delay"].items() if k != "profile"},
+    )
 
 
 def test_unit6_held_out(unit6):

@@ -57,8 +57,9 @@ def test_residual_deflection_eq9(model, params):
 
 
 def test_pd_law_8_reaches_the_target_within_2s(model, params, x0, run8):
-    np.testing.assert_allclose(run8.torque[0], 18 * 45 * DEG * np.array([1, 0]) + params.g_d,
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        run8.torque[0], 18 * 45 * DEG * np.array([1, 0]) + params.g_d, rtol=1e-12
+    )
     k = 2000
     assert run8.time[k] == pytest.approx(2.0)
     eth = np.abs(run8.theta[k] - THETA_D) / DEG
@@ -77,8 +78,10 @@ def test_pd_law_8_steady_torque_is_gravity_torque(model, params, x0):
     du = np.abs(run.torque - np.asarray(params.g_d)).max(axis=1)
     last = run.time >= 14.5
     settled = run.time[np.nonzero(du > 1e-3)[0][-1]]
-    print(f"\n|u − g_θ(θ_d, δ_d)| over the last 0.5 s: {du[last].max():.2e} N·m; "
-          f"within 1e-3 after t = {settled:.2f} s")
+    print(
+        f"\n|u − g_θ(θ_d, δ_d)| over the last 0.5 s: {du[last].max():.2e} N·m; "
+        f"within 1e-3 after t = {settled:.2f} s"
+    )
     assert du[last].max() < 1e-3
 
 
@@ -91,8 +94,10 @@ def test_law_30_smaller_initial_torque_and_converges(model, params, x0):
         return [(law(p, x0, 0.0), law(p, xd, 0.0)) for law in laws]
 
     (u8, e8), (ua, ea), (ub, eb) = torques(params, jnp.asarray(x0), jnp.asarray(xd))
-    print(f"\n|u(0)|: (8) {np.linalg.norm(u8):.4f}, (30a) {np.linalg.norm(ua):.4f}, "
-          f"(30b) {np.linalg.norm(ub):.4f} N·m")
+    print(
+        f"\n|u(0)|: (8) {np.linalg.norm(u8):.4f}, (30a) {np.linalg.norm(ua):.4f}, "
+        f"(30b) {np.linalg.norm(ub):.4f} N·m"
+    )
     assert np.linalg.norm(ua) < np.linalg.norm(u8)
     assert np.linalg.norm(ub) < np.linalg.norm(u8)
     for e in (e8, ea, eb):  # at the target every law holds the arm with g_θ(θ_d, δ_d)
@@ -105,12 +110,15 @@ def test_law_30_smaller_initial_torque_and_converges(model, params, x0):
 
 def test_alpha_and_sufficient_conditions(model, params, run8):
     alpha, k = R.alpha_along(model, run8.state_array)
-    q = run8.state_array[:, :model.n_q]
-    region = R.alpha_bound(model, q[:, :2].min(0), q[:, :2].max(0),
-                           np.abs(q[:, 2:]).max(0), n_samples=2000, refine=2)
+    q = run8.state_array[:, : model.n_q]
+    region = R.alpha_bound(
+        model, q[:, :2].min(0), q[:, :2].max(0), np.abs(q[:, 2:]).max(0), n_samples=2000, refine=2
+    )
     cond = R.stability_conditions(model, [18, 18], alpha)
-    print(f"\nα a posteriori = {alpha:.4f} at t = {run8.time[k]:.3f} s (paper: 17.67); over the "
-          f"box around the run α = {region.alpha:.4f}\n{cond.summary()}")
+    print(
+        f"\nα a posteriori = {alpha:.4f} at t = {run8.time[k]:.3f} s (paper: 17.67); over the "
+        f"box around the run α = {region.alpha:.4f}\n{cond.summary()}"
+    )
     assert region.alpha >= alpha * (1 - 1e-9)
     assert cond.lambda_min_K == pytest.approx(np.diag(model.K).min(), rel=1e-9)
     assert cond.holds_14 and cond.holds_15
@@ -126,8 +134,10 @@ def test_interpolating_trajectory_lowers_the_peak_torque(model, params, x0, run8
     run = simulate_continuous(model, R.law_pd_constant, x0, 2.0, 1e-3, params=p)
     peak, peak_step = np.abs(run.torque).max(), np.abs(run8.torque).max()
     eth = np.abs(run.theta[-1] - THETA_D) / DEG
-    print(f"\npeak |u|: step {peak_step:.3f}, quintic over 1 s {peak:.3f} N·m; "
-          f"|θ − θ_d| at 2 s {eth} deg")
+    print(
+        f"\npeak |u|: step {peak_step:.3f}, quintic over 1 s {peak:.3f} N·m; "
+        f"|θ − θ_d| at 2 s {eth} deg"
+    )
     assert peak < 0.5 * peak_step
     assert eth.max() < 1.0  # the move ends at 1 s; 0.49 deg left at 2 s (step: 0.27 deg)
 
@@ -152,8 +162,9 @@ def test_bad_regulation_input(model):
     with pytest.raises(ValueError, match="theta_0"):
         R.regulation_params(model, 18, 10, THETA_D, duration=1.0)
     with pytest.raises(ValueError, match="method"):
-        simulate_continuous(model, R.law_pd_constant, np.zeros(12), 1.0, 1e-3,
-                            params=None, method="euler")
+        simulate_continuous(
+            model, R.law_pd_constant, np.zeros(12), 1.0, 1e-3, params=None, method="euler"
+        )
     p = R.regulation_params(model, 18, 10, THETA_D)
     with pytest.raises(ValueError, match=r"x0 has 4 values; this arm's state has 12: theta_1"):
         simulate_continuous(model, R.law_pd_constant, np.zeros(4), 1.0, 1e-3, params=p)

@@ -22,8 +22,11 @@ def result(tmp_path_factory):
     msgs = []
     with warnings.catch_warnings():
         warnings.simplefilter("error", D.StabilityConditionWarning)  # the paper's gains pass
-        res = D.run(out, progress=lambda done, total, what: msgs.append((done, total, what)),
-                    config=D.quick_config())
+        res = D.run(
+            out,
+            progress=lambda done, total, what: msgs.append((done, total, what)),
+            config=D.quick_config(),
+        )
     assert [m[0] for m in msgs] == list(range(len(msgs))) and msgs[-1][0] < msgs[-1][1]
     return res
 
@@ -55,17 +58,19 @@ def test_residual_deflection_and_steady_torque(result):
     dd, g_d = np.asarray(result["delta_d"]), np.asarray(result["g_d"])
     theta_d = D.quick_config().theta_d
     q = np.concatenate([theta_d, dd])
-    assert np.abs(model.K @ dd + model.gravity(q)[2:]).max() < 1e-10          # eq. (9)
+    assert np.abs(model.K @ dd + model.gravity(q)[2:]).max() < 1e-10  # eq. (9)
     np.testing.assert_allclose(g_d, R.gravity_torque(model, theta_d, dd), rtol=1e-12)
     steady = result["steady"]
-    assert steady["max_abs_diff_end"] < D.quick_config().torque_tol           # u(∞) = g_θ(θ_d, δ_d)
+    assert steady["max_abs_diff_end"] < D.quick_config().torque_tol  # u(∞) = g_θ(θ_d, δ_d)
     assert row(result, "steady torque")["ours"] == steady["max_abs_diff_end"]
 
 
 def test_target_reached_at_2s(result):
     at = result["at_t_final"]
-    print(f"\nt = 2 s: |θ − θ_d| = {at['theta_err_deg']:.3f}°, ‖δ − δ_d‖/‖δ_d‖ = "
-          f"{at['delta_err_frac']:.4f}; settling {result['settling']}")
+    print(
+        f"\nt = 2 s: |θ − θ_d| = {at['theta_err_deg']:.3f}°, ‖δ − δ_d‖/‖δ_d‖ = "
+        f"{at['delta_err_frac']:.4f}; settling {result['settling']}"
+    )
     assert at["theta_err_deg"] < 0.5
     assert at["delta_err_frac"] < 0.02
     assert result["settling"]["theta_s"] < 2.0 and result["settling"]["delta_s"] < 2.0
@@ -76,7 +81,7 @@ def test_law_30_lowers_the_initial_effort(result):
     laws = result["laws"]
     assert laws["(30a)"]["u0_norm"] < laws["(8)"]["u0_norm"]
     assert laws["(30b)"]["u0_norm"] < laws["(8)"]["u0_norm"]
-    assert laws["(30a)"]["theta_err_deg_t_final"] < 2.0    # very similar results: converging
+    assert laws["(30a)"]["theta_err_deg_t_final"] < 2.0  # very similar results: converging
 
 
 def test_larger_gains_converge_with_larger_initial_torque(result):
@@ -109,5 +114,5 @@ def test_gains_failing_the_conditions_warn_and_still_run(tmp_path):
     assert any("(15)" in m and "λ_min(K_P) = 5" in m and "short by 3." in m for m in text)
     assert any("(14)" in m and "short by" in m for m in text)
     assert res["warnings"] and not res["conditions"]["along"]["holds_15"]
-    assert math.isfinite(res["at_t_final"]["theta_err_deg"])           # it ran
+    assert math.isfinite(res["at_t_final"]["theta_err_deg"])  # it ran
     assert (tmp_path / "deluca_table.csv").exists()

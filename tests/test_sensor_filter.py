@@ -26,7 +26,7 @@ class Oscillator(Plant):
     w: float
 
     def rhs(self, x, u):
-        return jnp.stack([x[1], -self.w**2 * x[0]])
+        return jnp.stack([x[1], -(self.w**2) * x[0]])
 
     def signals(self, x, u):
         return x[:1]
@@ -45,8 +45,9 @@ class Ramp(Plant):
 def _open_loop(plant, fc, n, x0, **sensor):
     sens = Sensors.make(plant, {"s": {"bandwidth": fc, **sensor}})
     ctrl = discrete.from_transfer_function(([0.0], [1.0]), T, measured="s")
-    loop = SampledLoop(plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])),
-                       jnp.asarray(T), SUB)
+    loop = SampledLoop(
+        plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])), jnp.asarray(T), SUB
+    )
     return simulate_loop(loop, np.asarray(x0), {}, n)
 
 
@@ -65,8 +66,10 @@ def test_sine_gain_and_phase_are_the_first_order_filters():
     A = np.stack([np.sin(w * t[keep]), np.cos(w * t[keep])], 1)
     a, b = np.linalg.lstsq(A, out["measured"][keep, 0], rcond=None)[0]
     gain, phase = math.hypot(a, b), math.atan2(b, a)
-    print(f"gain {gain:.12f} (analytic {1 / math.sqrt(1 + (f / fc) ** 2):.12f}), "
-          f"phase {math.degrees(phase):.9f} deg (analytic {-math.degrees(math.atan(f / fc)):.9f})")
+    print(
+        f"gain {gain:.12f} (analytic {1 / math.sqrt(1 + (f / fc) ** 2):.12f}), "
+        f"phase {math.degrees(phase):.9f} deg (analytic {-math.degrees(math.atan(f / fc)):.9f})"
+    )
     assert gain == pytest.approx(1 / math.sqrt(1 + (f / fc) ** 2), abs=1e-9)
     assert phase == pytest.approx(-math.atan(f / fc), abs=1e-9)
     # the unfiltered channel is the sine itself
@@ -101,24 +104,32 @@ def test_noise_is_added_after_the_filter_and_quantised():
     noisy = _open_loop(plant, fc, n, [0.0], gain=2.0, noise=1e-3)
     t = np.arange(n) * T
     tau = 1 / (2 * np.pi * fc)
-    np.testing.assert_allclose(clean["measured"][:, 0], 2 * (t - tau * (1 - np.exp(-t / tau))),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        clean["measured"][:, 0], 2 * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12
+    )
     sd = np.std(noisy["measured"][:, 0] - clean["measured"][:, 0])
     assert sd == pytest.approx(1e-3, rel=0.1)  # 1001 samples: sd of the sd estimate 2.2 %
     q = 2.0 / 2**8
     quant = _open_loop(plant, fc, n, [0.0], gain=2.0, bits=8, range=2.0)
-    np.testing.assert_array_equal(quant["measured"][:, 0],
-                                  np.round(clean["measured"][:, 0] / q) * q)
+    np.testing.assert_array_equal(
+        quant["measured"][:, 0], np.round(clean["measured"][:, 0] / q) * q
+    )
 
 
 def _rotary(duration=2.0, period=None, **tip):
     sc = load_scenario("rotary-flexible-link")
-    sensors = {k: v.model_copy(update={"noise": 0.0, **(tip if k == "tip_deflection" else {})})
-               for k, v in sc.sensors.items()}
+    sensors = {
+        k: v.model_copy(update={"noise": 0.0, **(tip if k == "tip_deflection" else {})})
+        for k, v in sc.sensors.items()
+    }
     sampling = sc.sampling.model_copy(update={"period": period or sc.sampling.period})
-    return sc.model_copy(update={"sensors": sensors, "sampling": sampling,
-                                 "simulation": sc.simulation.model_copy(
-                                     update={"duration": duration})})
+    return sc.model_copy(
+        update={
+            "sensors": sensors,
+            "sampling": sampling,
+            "simulation": sc.simulation.model_copy(update={"duration": duration}),
+        }
+    )
 
 
 def test_closed_loop_with_a_filtered_tip_sensor():
@@ -141,21 +152,25 @@ def test_closed_loop_with_a_filtered_tip_sensor():
         tip = p.loop.plant.signal_names.index("tip_deflection")
         d = p.scenario.sensors["tip_deflection"].delay
         true_tip = b["signals"][:, tip]
-        _, yf, _ = sps.lsim(([[-wf]], [[wf]], [[1.0]], [[0.0]]), true_tip, p.time,
-                            X0=[true_tip[0]], interp=True)
+        _, yf, _ = sps.lsim(
+            ([[-wf]], [[wf]], [[1.0]], [[0.0]]), true_tip, p.time, X0=[true_tip[0]], interp=True
+        )
         meas = b["measured"][:, p.loop.sensors.names.index("tip_deflection")]
         errs.append(np.max(np.abs(meas[d:] - yf[:-d])) / np.ptp(true_tip))
         if period == 1e-3:
             filtered = b
-    print(f"filtered tip vs lsim: {errs[0]:.3e} (T = 1 ms), {errs[1]:.3e} (0.5 ms) of the "
-          f"swing, ratio {errs[0] / errs[1]:.3f}")
+    print(
+        f"filtered tip vs lsim: {errs[0]:.3e} (T = 1 ms), {errs[1]:.3e} (0.5 ms) of the "
+        f"swing, ratio {errs[0] / errs[1]:.3f}"
+    )
     assert errs[0] < 2e-4
     assert 3.5 < errs[0] / errs[1] < 4.5
     ref = prepare(_rotary())
     a = simulate_loop(ref.loop, ref.x0, ref.references, ref.n_samples)
     hub = ref.loop.plant.signal_names.index("motor_angle")
-    diff = (np.max(np.abs(a["signals"][:, hub] - filtered["signals"][:, hub]))
-            / np.ptp(a["signals"][:, hub]))
+    diff = np.max(np.abs(a["signals"][:, hub] - filtered["signals"][:, hub])) / np.ptp(
+        a["signals"][:, hub]
+    )
     print(f"hub angle, filtered vs unfiltered tip sensor: max diff {diff:.3%} of the swing")
     assert diff > 1e-3
 
@@ -200,21 +215,58 @@ def test_fast_bench_loop_equals_simulator_with_filters():
     wc2 = 3 * EI / L**3 / m
     ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
     n = p.n_samples
-    const = as_jax(dict(dt=1e-3, length=L, k_u=ku, k_omega=ku * 70 * 7.68e-3,
-                        q_th=2 * np.pi / 4096, q_d=0.0, limit=10.0, vel_tol=1e-3,
-                        omega_th=2 * np.pi * fth, omega_d=2 * np.pi * fd))
+    const = as_jax(
+        dict(
+            dt=1e-3,
+            length=L,
+            k_u=ku,
+            k_omega=ku * 70 * 7.68e-3,
+            q_th=2 * np.pi / 4096,
+            q_d=0.0,
+            limit=10.0,
+            vel_tol=1e-3,
+            omega_th=2 * np.pi * fth,
+            omega_d=2 * np.pi * fd,
+        )
+    )
     z = np.zeros((1, n))
     names = p.loop.sensors.names
     meas = np.asarray(out["measured"])  # the loop reads the "log" while a delay line fills
-    data = as_jax(dict(ref=p.references["reference"][None],
-                       y_th=meas[:, names.index("motor_angle")][None],
-                       y_d=meas[:, names.index("tip_deflection")][None], w_th=z, w_d=z,
-                       volt=z, K=np.array([[6.0, -40.0, 0.15, 0.0]]), tau=np.zeros(1)))
-    model = as_jax({k: np.full((1, 1), v) for k, v in dict(
-        J=2.08e-3, B=4e-3, wc2=wc2, c2z=0.06 * np.sqrt(wc2), JlL=m * L, Fc=0.03, Fs=0.04,
-        bias=0.0, gain=1.0, dth=0, dd=2, th0=0.0, om0=0.0, w0=0.01, wd0=0.0).items()})
-    tr, _ = closed_loop_run(model, data, const, substeps=p.loop.substeps,
-                            filters=(True, True))
+    data = as_jax(
+        dict(
+            ref=p.references["reference"][None],
+            y_th=meas[:, names.index("motor_angle")][None],
+            y_d=meas[:, names.index("tip_deflection")][None],
+            w_th=z,
+            w_d=z,
+            volt=z,
+            K=np.array([[6.0, -40.0, 0.15, 0.0]]),
+            tau=np.zeros(1),
+        )
+    )
+    model = as_jax(
+        {
+            k: np.full((1, 1), v)
+            for k, v in dict(
+                J=2.08e-3,
+                B=4e-3,
+                wc2=wc2,
+                c2z=0.06 * np.sqrt(wc2),
+                JlL=m * L,
+                Fc=0.03,
+                Fs=0.04,
+                bias=0.0,
+                gain=1.0,
+                dth=0,
+                dd=2,
+                th0=0.0,
+                om0=0.0,
+                w0=0.01,
+                wd0=0.0,
+            ).items()
+        }
+    )
+    tr, _ = closed_loop_run(model, data, const, substeps=p.loop.substeps, filters=(True, True))
     names = p.loop.sensors.names
     worst = 0.0
     for k, sig in enumerate(("motor_angle", "tip_deflection")):
@@ -231,19 +283,32 @@ def test_fit_filters_keyword_is_checked(tmp_path):
     from flexarm.identification.time_domain import FitInputError, fit
     from flexarm.identification.time_domain.objective import check_filters
 
-    assert check_filters({"tip_deflection": 50}, 1e-3, 2) == {"motor_angle": 0.0,
-                                                              "tip_deflection": 50.0}
+    assert check_filters({"tip_deflection": 50}, 1e-3, 2) == {
+        "motor_angle": 0.0,
+        "tip_deflection": 50.0,
+    }
     head = "time,reference,voltage,motor_angle,tip_deflection\n"
     rows = "\n".join(f"{k * 1e-3:.3f},0,0,{0.001 * k},0" for k in range(100))
     log = tmp_path / "a.csv"
     log.write_text("# controller: state_feedback K1=6 K2=-40 K3=0.15 K4=0\n" + head + rows)
-    rig = dict(drive="voltage", gear_ratio=70, motor_constant=7.68e-3,
-               armature_resistance=2.6, link_length=0.42)
-    with pytest.raises(FitInputError, match=r"field 'filters' has channel 'tip_angle'.*"
-                                            r"not known; use 'motor_angle' or 'tip_deflection'"):
+    rig = dict(
+        drive="voltage",
+        gear_ratio=70,
+        motor_constant=7.68e-3,
+        armature_resistance=2.6,
+        link_length=0.42,
+    )
+    with pytest.raises(
+        FitInputError,
+        match=r"field 'filters' has channel 'tip_angle'.*"
+        r"not known; use 'motor_angle' or 'tip_deflection'",
+    ):
         fit([log], **rig, filters={"tip_angle": 30.0})
     with pytest.raises(FitInputError, match=r"field 'filters\['tip_deflection'\]' = -5: .*>= 0"):
         fit([log], **rig, filters={"tip_deflection": -5})
-    with pytest.raises(FitInputError, match=r"'filters\['motor_angle'\]' = 200 Hz is too fast"
-                                            r".*substeps >= 3"):
+    with pytest.raises(
+        FitInputError,
+        match=r"'filters\['motor_angle'\]' = 200 Hz is too fast"
+        r".*substeps >= 3",
+    ):
         fit([log], **rig, filters={"motor_angle": 200.0})

@@ -18,11 +18,13 @@ KP, KD, T = 15.0, 0.3, 0.003
 
 
 def linear_scenario(step=0.02, friction="none", bits=0):
-    return scenario(arm={"friction": {"model": friction, "coulomb": FS, "static": FS}},
-                    sensors={"motor_angle": {"bits": bits}, "tip_angle": {"bits": 0}},
-                    actuator={"bits": 0},
-                    reference={"type": "step", "amplitude": step, "start": 0.0},
-                    controller={"type": "pd", "kp": KP, "kd": KD, "measured": "motor_angle"})
+    return scenario(
+        arm={"friction": {"model": friction, "coulomb": FS, "static": FS}},
+        sensors={"motor_angle": {"bits": bits}, "tip_angle": {"bits": 0}},
+        actuator={"bits": 0},
+        reference={"type": "step", "amplitude": step, "start": 0.0},
+        controller={"type": "pd", "kp": KP, "kd": KD, "measured": "motor_angle"},
+    )
 
 
 def test_pd_loop_without_friction_matches_the_linear_model():
@@ -63,15 +65,17 @@ def test_batch_of_gains_equals_single_runs():
     kps = np.array([5.0, 10.0, 20.0])
     ctrls = [discrete.pd(k, KD, T) for k in kps]
     stacked = discrete.LinearController(
-        jnp.stack([c.A for c in ctrls]), jnp.stack([c.B for c in ctrls]),
-        jnp.stack([c.C for c in ctrls]), jnp.stack([c.D for c in ctrls]))
+        jnp.stack([c.A for c in ctrls]),
+        jnp.stack([c.B for c in ctrls]),
+        jnp.stack([c.C for c in ctrls]),
+        jnp.stack([c.D for c in ctrls]),
+    )
     import equinox as eqx
     import jax
 
     loop = eqx.tree_at(lambda lp: lp.controller, p.loop, stacked)
     axes = jax.tree.map(lambda _: None, loop)
-    axes = eqx.tree_at(lambda lp: lp.controller, axes,
-                       discrete.LinearController(0, 0, 0, 0))
+    axes = eqx.tree_at(lambda lp: lp.controller, axes, discrete.LinearController(0, 0, 0, 0))
     out = simulate_batch(loop, p.x0, p.references, p.n_samples, in_axes=axes)
     for i, c in enumerate(ctrls):
         single = simulate(sc, controller=c)
@@ -80,8 +84,12 @@ def test_batch_of_gains_equals_single_runs():
 
 
 def test_converters_noise_and_delays():
-    sc = scenario(sensors={"motor_angle": {"bits": 12, "range": "360 deg", "noise": 1e-3},
-                           "tip_angle": {"delay": 3, "bits": 0}})
+    sc = scenario(
+        sensors={
+            "motor_angle": {"bits": 12, "range": "360 deg", "noise": 1e-3},
+            "tip_angle": {"delay": 3, "bits": 0},
+        }
+    )
     a, b = simulate(sc), simulate(sc)
     np.testing.assert_array_equal(a.measured["motor_angle"], b.measured["motor_angle"])  # seeded
     count = 2 * np.pi / 4096
@@ -99,8 +107,9 @@ def test_converters_noise_and_delays():
 
 
 def test_unstable_loop_raises_with_time_and_signal():
-    sc = scenario(actuator={"limit": 1e9, "bits": 0},
-                  controller={"type": "pd", "kp": 2000.0, "kd": 5.0})
+    sc = scenario(
+        actuator={"limit": 1e9, "bits": 0}, controller={"type": "pd", "kp": 2000.0, "kd": 5.0}
+    )
     with pytest.raises(SimulationDiverged, match=r"diverged at t = .* signal '\w+'"):
         simulate(sc)
 
@@ -125,13 +134,24 @@ def test_result_is_python_control_style(tmp_path):
 
 
 def test_voltage_drive_pd_reaches_the_step():
-    sc = scenario(arm={"motor": {"drive": "voltage", "inertia": 2e-3, "viscous": 4e-3,
-                                 "motor_constant": 7.68e-3, "armature_resistance": 2.6,
-                                 "gear_ratio": 70, "voltage_limit": 10.0},
-                       "friction": {"model": "none"},
-                       "beam": {"model": "rigid", "length": 0.3, "masses": [{"mass": 0.05}]}},
-                  actuator={"bits": 0}, sampling={"period": 0.001, "delay": 0},
-                  controller={"type": "pd", "kp": 20.0, "kd": 0.5})
+    sc = scenario(
+        arm={
+            "motor": {
+                "drive": "voltage",
+                "inertia": 2e-3,
+                "viscous": 4e-3,
+                "motor_constant": 7.68e-3,
+                "armature_resistance": 2.6,
+                "gear_ratio": 70,
+                "voltage_limit": 10.0,
+            },
+            "friction": {"model": "none"},
+            "beam": {"model": "rigid", "length": 0.3, "masses": [{"mass": 0.05}]},
+        },
+        actuator={"bits": 0},
+        sampling={"period": 0.001, "delay": 0},
+        controller={"type": "pd", "kp": 20.0, "kd": 0.5},
+    )
     res = simulate(sc)
     assert res.input_names == ("voltage",)
     assert res["motor_angle"][-1] == pytest.approx(0.4, rel=0.01)
@@ -151,13 +171,15 @@ def test_hold_tip_scenario_runs_and_initial_deflection_is_static():
     p = m.plant()
     import jax.numpy as jnp
 
-    sig = dict(zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1))), strict=True))
+    sig = dict(
+        zip(p.signal_names, np.asarray(p.signals(jnp.asarray(x0), jnp.zeros(1))), strict=True)
+    )
     assert sig["motor_angle"] == pytest.approx(0.3)
     assert sig["tip_deflection"] == pytest.approx(0.01, rel=1e-12)
     # the static shape under a tip force: the internal forces K w act at the tip only
     # (M⁻¹K w from the block, w = y − x̄ θm); released, the link then rings
     n = m.beam.mass_dofs
-    w = x0[2:2 + n] - m.beam.xbar * 0.3
+    w = x0[2 : 2 + n] - m.beam.xbar * 0.3
     f = -m.beam.A[n:, :n] @ w
     tip = m.beam.tip_dof
     assert np.max(np.abs(np.delete(f, tip))) < 1e-9 * abs(f[tip])

@@ -16,12 +16,24 @@ def coefs(g):
 
 
 def paper_arm(**beam) -> SingleLinkArm:
-    return SingleLinkArm.model_validate(dict(
-        motor=dict(drive="current", inertia="0.005529 lbf*in*s**2",
-                   viscous="0.01216 lbf*in*s/rad", torque_constant="2.184 lbf*in/A",
-                   current_limit="4.12 A"),
-        beam=beam or dict(model="transfer_function", stiffness="0.674 lbf*in/rad",
-                          tip_num=[43.75], tip_den=[1, 0.06, 43.75])))
+    return SingleLinkArm.model_validate(
+        dict(
+            motor=dict(
+                drive="current",
+                inertia="0.005529 lbf*in*s**2",
+                viscous="0.01216 lbf*in*s/rad",
+                torque_constant="2.184 lbf*in/A",
+                current_limit="4.12 A",
+            ),
+            beam=beam
+            or dict(
+                model="transfer_function",
+                stiffness="0.674 lbf*in/rad",
+                tip_num=[43.75],
+                tip_den=[1, 0.06, 43.75],
+            ),
+        )
+    )
 
 
 def test_motor_tf_from_paper_parameters_is_eq_12():
@@ -60,7 +72,8 @@ def test_two_mass_scenario_reproduces_eq_14():
     # structure: one pair of real zeros ±a, a in the right half-plane; two modes
     zeros = np.roots(num)
     assert np.allclose(zeros.imag, 0) and np.sort(zeros.real) == pytest.approx(
-        [-np.sqrt(1273.3), np.sqrt(1273.3)], rel=1e-2)
+        [-np.sqrt(1273.3), np.sqrt(1273.3)], rel=1e-2
+    )
     poles = np.roots(den)
     assert len(poles) == 4 and np.allclose(poles.real, 0, atol=1e-6)
 
@@ -85,8 +98,9 @@ def test_two_mass_fit_is_reproducible_and_predicts_eq_15():
         assert m_fit == pytest.approx(m.mass, rel=1e-6)
     num, den = coefs(lumped_beam_block(fit.spec()).coupling_tf())
     # eq. (15): 2.05274 (1591.625 + 2 s²)/(1682.575 + s²) lb*in/rad
-    np.testing.assert_allclose(num, np.array([2 * 2.05274, 0, 2.05274 * 1591.625]) * LBF_IN,
-                               rtol=2e-3, atol=1e-9)
+    np.testing.assert_allclose(
+        num, np.array([2 * 2.05274, 0, 2.05274 * 1591.625]) * LBF_IN, rtol=2e-3, atol=1e-9
+    )
     np.testing.assert_allclose(den, [1, 0, 1682.575], rtol=2e-3, atol=1e-9)
 
 
@@ -96,8 +110,10 @@ def test_two_mass_fit_does_not_depend_on_the_start():
     (residuals ~1e-14 through a Jacobian of condition < 1e3) leaves ~1e-11; a rank-
     deficient fit (ℓ free) differed by 1e-1 between these starts."""
     L = load_scenario("feliu-two-mass").arm.beam.length
-    fits = [fit_lumped_beam(PAPER_14, 1.941 * LBF_IN, (0.5, 1.0), L, guess=g)
-            for g in [(0.02, 0.05), (2.0, 5.0), (2e-4, 5e-4)]]
+    fits = [
+        fit_lumped_beam(PAPER_14, 1.941 * LBF_IN, (0.5, 1.0), L, guess=g)
+        for g in [(0.02, 0.05), (2.0, 5.0), (2e-4, 5e-4)]
+    ]
     for f in fits[1:]:
         assert f.flexural_rigidity == pytest.approx(fits[0].flexural_rigidity, rel=1e-10)
         assert f.masses == pytest.approx(fits[0].masses, rel=1e-10)
@@ -126,19 +142,34 @@ def test_two_mass_fit_bad_input_and_no_solution():
     with pytest.raises(ValueError, match="static_coupling"):
         fit_lumped_beam(PAPER_14, float("nan"), (0.5, 1.0), 0.3)
     with pytest.warns(RuntimeWarning, match="fit_lumped_beam.*guess"):
-        fit = fit_lumped_beam(control.tf([-45.475, 0, 45.475 * 2546.6], PAPER_14.den[0][0]),
-                              1.941 * LBF_IN, (0.5, 1.0), 0.3)
+        fit = fit_lumped_beam(
+            control.tf([-45.475, 0, 45.475 * 2546.6], PAPER_14.den[0][0]),
+            1.941 * LBF_IN,
+            (0.5, 1.0),
+            0.3,
+        )
     assert not fit.converged
     assert np.all(np.isfinite(fit.residuals))
 
 
 def test_voltage_drive_rigid_link_is_the_textbook_servo():
     """θ/v = η K_g K_m / R / (s (J s + V + η K_g² K_m² / R)) for a rigid link."""
-    arm = SingleLinkArm.model_validate(dict(
-        motor=dict(drive="voltage", inertia=2e-3, viscous=4e-3, motor_constant=7.68e-3,
-                   armature_resistance=2.6, gear_ratio=70, gear_efficiency=0.9,
-                   motor_efficiency=0.69, voltage_limit=10),
-        beam=dict(model="rigid", length=0.3)))
+    arm = SingleLinkArm.model_validate(
+        dict(
+            motor=dict(
+                drive="voltage",
+                inertia=2e-3,
+                viscous=4e-3,
+                motor_constant=7.68e-3,
+                armature_resistance=2.6,
+                gear_ratio=70,
+                gear_efficiency=0.9,
+                motor_efficiency=0.69,
+                voltage_limit=10,
+            ),
+            beam=dict(model="rigid", length=0.3),
+        )
+    )
     num, den = coefs(SingleLinkModel.from_spec(arm).motor_tf())
     eta, kg, km, R, J, V = 0.9 * 0.69, 70, 7.68e-3, 2.6, 2e-3, 4e-3
     expected_num = eta * kg * km / R / J
@@ -151,8 +182,12 @@ def test_clamped_tip_inertia_matches_beam_element_stiffness():
     """A clamped tip mass with rotary inertia: the hub-held frequencies equal those of
     the textbook cantilever element K = EI/L³ [[12, −6L], [−6L, 4L²]]."""
     EI, L, m, Jr = 2.0, 0.5, 0.3, 4e-3
-    arm = paper_arm(model="lumped", length=L, flexural_rigidity=EI,
-                    masses=[dict(mass=m, rotary_inertia=Jr, joint="clamped")])
+    arm = paper_arm(
+        model="lumped",
+        length=L,
+        flexural_rigidity=EI,
+        masses=[dict(mass=m, rotary_inertia=Jr, joint="clamped")],
+    )
     model = SingleLinkModel.from_spec(arm)
     w_ours = np.sort(np.abs(np.linalg.eigvals(model.beam.A).imag))[::2]
     K = EI / L**3 * np.array([[12, -6 * L], [-6 * L, 4 * L**2]])
@@ -162,8 +197,17 @@ def test_clamped_tip_inertia_matches_beam_element_stiffness():
 
 def test_unstable_or_improper_tf_beam_rejected():
     with pytest.raises(ValueError, match="right half-plane"):
-        SingleLinkModel.from_spec(paper_arm(model="transfer_function", stiffness=0.07,
-                                            tip_num=[1.0], tip_den=[1, -0.1, 4]))
+        SingleLinkModel.from_spec(
+            paper_arm(
+                model="transfer_function", stiffness=0.07, tip_num=[1.0], tip_den=[1, -0.1, 4]
+            )
+        )
     with pytest.raises(ValueError, match="proper"):
-        SingleLinkModel.from_spec(paper_arm(model="transfer_function", stiffness=0.07,
-                                            tip_num=[1.0, 0, 0, 0], tip_den=[1, 0.1, 4]))
+        SingleLinkModel.from_spec(
+            paper_arm(
+                model="transfer_function",
+                stiffness=0.07,
+                tip_num=[1.0, 0, 0, 0],
+                tip_den=[1, 0.1, 4],
+            )
+        )

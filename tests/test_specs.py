@@ -56,8 +56,12 @@ def test_non_positive_inertia(value):
 
 def test_non_positive_stiffness():
     d = base()
-    d["arm"]["beam"] = {"model": "lumped", "length": "7 in", "flexural_rigidity": "-2 N*m**2",
-                        "masses": [{"mass": "55 g"}]}
+    d["arm"]["beam"] = {
+        "model": "lumped",
+        "length": "7 in",
+        "flexural_rigidity": "-2 N*m**2",
+        "masses": [{"mass": "55 g"}],
+    }
     msg = _error(d)
     assert "arm.beam.lumped.flexural_rigidity" in msg or "flexural_rigidity" in msg
     assert "must be > 0" in msg

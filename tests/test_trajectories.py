@@ -67,7 +67,8 @@ def test_quasi_parabolic_profile():
     away &= t < tr.duration - 3 * (t[1] - t[0])
     for k in range(4):  # finite differences away from the snap's jumps
         np.testing.assert_allclose(
-            np.gradient(tr.derivative(t, k), t)[away], tr.derivative(t, k + 1)[away],
+            np.gradient(tr.derivative(t, k), t)[away],
+            tr.derivative(t, k + 1)[away],
             atol=1e-6 * peaks[k + 1],
         )
     with pytest.raises(ValueError, match="order 5"):

@@ -15,9 +15,12 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "two-link-rig"
 EXAMPLES = ROOT / "examples"
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(not (DATA / "lqr_full_10deg.mat").exists(),
-                                 reason=f"two-link rig data not found at {DATA}")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        not (DATA / "lqr_full_10deg.mat").exists(), reason=f"two-link rig data not found at {DATA}"
+    ),
+]
 
 #: the last 52 s (shoulder, shoulder link, elbow, elbow link), fit %: issue #23 keeps the
 #: split as it was (98.9 / 80.2 / 97.1 / 78.4 measured before the one engine), so the
@@ -29,8 +32,10 @@ TARGETS = {"theta_1": 98.0, "alpha_f_1": 80.0, "theta_2": 97.0, "alpha_f_2": 78.
 def fitted():
     res = fit_two_link(DATA, EXAMPLES)
     rep = held_out_report(res.scenario, DATA, EXAMPLES)
-    print(f"\ntwo-link split ({res.free_source}, {res.seconds:.0f} s): last 52 s "
-          f"{rep['last_52s']}, steps' medians {rep['steps_median']}")
+    print(
+        f"\ntwo-link split ({res.free_source}, {res.seconds:.0f} s): last 52 s "
+        f"{rep['last_52s']}, steps' medians {rep['steps_median']}"
+    )
     return res, rep
 
 
@@ -63,8 +68,10 @@ def test_fit_reports_std_correlations_and_stays_physical(fitted):
         assert res.params[p] > 0 and (i in undetermined or np.isfinite(res.std[p])), p
     # breakaway at or above the Coulomb level at both joints (Karnopp, enforced by the fit)
     for j in (0, 1):
-        assert (res.params[f"arm.joints[{j}].friction.static"]
-                >= res.params[f"arm.joints[{j}].friction.coulomb"] - 1e-12)
+        assert (
+            res.params[f"arm.joints[{j}].friction.static"]
+            >= res.params[f"arm.joints[{j}].friction.coulomb"] - 1e-12
+        )
     # every held-out step is reported per signal (the medians are what #17 asks for)
     assert set(rep["steps_median"]) == set(CHANNELS)
 
@@ -84,8 +91,7 @@ def test_prediction_from_the_logged_state_equals_replay():
 
     sc = load_scenario("quanser-two-link")
     run = load_split(DATA, EXAMPLES)["run"]
-    ours = predict_scenario(sc, [run], FitOptions(windows=[(50.0, 102.0)]),
-                            channels=list(CHANNELS))
+    ours = predict_scenario(sc, [run], FitOptions(windows=[(50.0, 102.0)]), channels=list(CHANNELS))
     theirs = replay(sc, run, window=(50.0, run.time[-1]))
     got = next(iter(ours["fit_percent"].values()))
     for c in CHANNELS:
@@ -110,8 +116,12 @@ def test_our_lqg_on_the_fitted_rig(fitted):
     sc, r, u_pre = rig_lqg(res.scenario, log)
     peak = np.abs(u_pre).max(0)
     at_limit = (np.abs(u_pre) >= [0.94, 1.2]).sum(0) * 0.01
-    print("LQG on the fitted rig: peak command before saturation (A)", peak,
-          "time at the limit (s)", at_limit)
+    print(
+        "LQG on the fitted rig: peak command before saturation (A)",
+        peak,
+        "time at the limit (s)",
+        at_limit,
+    )
     assert np.all(peak < [0.94, 1.2])
     Fs = np.array([j.friction.static for j in sc.arm.joints])
     for j in range(2):

@@ -29,11 +29,23 @@ STAIRCASE = ROOT / "examples" / "two-link-staircase.toml"
 KE_D1, KE_D2 = 2 * np.pi / 409600, 2 * np.pi / 204800
 
 needs_data = pytest.mark.skipif(
-    not RUN.is_file(), reason=f"real two-link rig data not found at {DATA} (../shared is "
-                              "absent in a user's clone; CI has it)")
+    not RUN.is_file(),
+    reason=f"real two-link rig data not found at {DATA} (../shared is "
+    "absent in a user's clone; CI has it)",
+)
 
-CHANNELS = {"theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1", "theta_ref_1",
-            "theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2", "theta_ref_2"}
+CHANNELS = {
+    "theta_1",
+    "alpha_f_1",
+    "theta_dot_f_1",
+    "alpha_dot_f_1",
+    "theta_ref_1",
+    "theta_2",
+    "alpha_f_2",
+    "theta_dot_f_2",
+    "alpha_dot_f_2",
+    "theta_ref_2",
+}
 
 
 @pytest.fixture(scope="module")
@@ -62,8 +74,7 @@ def test_workspace_layout_loads_with_the_shipped_format(run_log, raw):
     # the variable named "_sim"
     np.testing.assert_array_equal(log["theta_2"], raw["stage2_X2_sim"].signals.values[:, 0])
     np.testing.assert_array_equal(log["theta_ref_2"], raw["stage2_X2_meas"].signals.values[:, 0])
-    np.testing.assert_array_equal(log["alpha_dot_f_1"],
-                                  raw["stage1_X1_meas"].signals.values[:, 3])
+    np.testing.assert_array_equal(log["alpha_dot_f_1"], raw["stage1_X1_meas"].signals.values[:, 3])
     # the setpoints are the README's square waves: ±25° and ±10° (exact in the file, to the
     # last bit of the deg → rad conversion)
     assert np.abs(log["theta_ref_1"]).max() == pytest.approx(np.deg2rad(25), rel=1e-12)
@@ -74,8 +85,10 @@ def test_workspace_layout_loads_with_the_shipped_format(run_log, raw):
 def test_scope_captures_are_a_second_log_of_the_same_samples(run_log):
     scope = load_log_format(SCOPE).read(RUN)
     assert len(scope) == 10000  # README: the last 20 s at 2 ms
-    w = run_log.window(scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
-                       scope.time[-1] - run_log.time[0] + run_log.dt)
+    w = run_log.window(
+        scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
+        scope.time[-1] - run_log.time[0] + run_log.dt,
+    )
     np.testing.assert_array_equal(w.time, scope.time)
     # the scope's degrees are the workspace's radians (converted by [units]); the file
     # holds rad·180/π rounded to double: agreement to 1e-12 relative of the range
@@ -115,8 +128,14 @@ def test_loader_catches_the_swapped_elbow_variables():
     with pytest.raises(LogFormatError) as e:
         fmt.read(RUN)
     msg = str(e.value)
-    for w in ("lqr_full_10deg.mat", "theta_2", "stage2_X2_meas[0]", "not an encoder reading",
-              "naive.toml", "setpoint"):
+    for w in (
+        "lqr_full_10deg.mat",
+        "theta_2",
+        "stage2_X2_meas[0]",
+        "not an encoder reading",
+        "naive.toml",
+        "setpoint",
+    ):
         assert w in msg, w
     # the rate columns of the setpoint are zero: a check of the right mapping passes, of the
     # swapped one fails
@@ -137,13 +156,28 @@ def test_mat_log_format_synthetic(tmp_path):
     t = np.arange(n) * 2e-3
     th = np.round(np.sin(t * 20) / q) * q
     p = tmp_path / "ws.mat"
-    sio.savemat(p, {"X": {"time": t, "signals": {"values": np.column_stack([th, 2 * th])}},
-                    "S": {"time": t, "blockName": "scope"}, "deg": np.rad2deg(th),
-                    "Q": q})
-    fmt = log_format_from_dict({"columns": {"time": "X.time", "theta_1": "X[0]",
-                                            "alpha_f_1": "-X[1]", "theta_2": "deg"},
-                                "units": {"theta_2": "deg"},
-                                "checks": {"quantum": {"theta_1": "Q", "theta_2": q}}}, "f.toml")
+    sio.savemat(
+        p,
+        {
+            "X": {"time": t, "signals": {"values": np.column_stack([th, 2 * th])}},
+            "S": {"time": t, "blockName": "scope"},
+            "deg": np.rad2deg(th),
+            "Q": q,
+        },
+    )
+    fmt = log_format_from_dict(
+        {
+            "columns": {
+                "time": "X.time",
+                "theta_1": "X[0]",
+                "alpha_f_1": "-X[1]",
+                "theta_2": "deg",
+            },
+            "units": {"theta_2": "deg"},
+            "checks": {"quantum": {"theta_1": "Q", "theta_2": q}},
+        },
+        "f.toml",
+    )
     log = fmt.read(p)
     np.testing.assert_array_equal(log["alpha_f_1"], -2 * th)
     np.testing.assert_allclose(log["theta_2"], th, rtol=1e-14, atol=1e-17)  # deg → rad
@@ -162,8 +196,13 @@ def test_mat_log_format_synthetic(tmp_path):
         log_format_from_dict({"columns": {"thet_1": "X[0]"}}, "h.toml")
     # a check on a channel the format does not map
     with pytest.raises(LogFormatError, match="theta_9"):
-        log_format_from_dict({"columns": {"time": "X.time", "theta_1": "X[0]"},
-                              "checks": {"quantum": {"theta_9": 1e-3}}}, "i.toml")
+        log_format_from_dict(
+            {
+                "columns": {"time": "X.time", "theta_1": "X[0]"},
+                "checks": {"quantum": {"theta_9": 1e-3}},
+            },
+            "i.toml",
+        )
     # the time column is required
     with pytest.raises(LogFormatError, match="maps no time"):
         log_format_from_dict({"columns": {"theta_1": "X[0]"}}, "j.toml").read(p)
@@ -171,9 +210,20 @@ def test_mat_log_format_synthetic(tmp_path):
 
 # ------------------------------------------------------------------ 2. the built-in scenario
 #: the workspace's parameters (lqr_full_10deg.mat), for checks that need no data folder
-SHEET = dict(J11=0.06353616, J12=0.170434272, J21=0.00301955, J22=0.006438700964166668,
-             Ks1=39.957193021017844, Ks2=6.857750992455394, Ktg1=8.925, Ktg2=0.87,
-             B11=4.0, B21=1.5, B12=0.0, B22=0.085608)
+SHEET = dict(
+    J11=0.06353616,
+    J12=0.170434272,
+    J21=0.00301955,
+    J22=0.006438700964166668,
+    Ks1=39.957193021017844,
+    Ks2=6.857750992455394,
+    Ktg1=8.925,
+    Ktg2=0.87,
+    B11=4.0,
+    B21=1.5,
+    B12=0.0,
+    B22=0.085608,
+)
 
 
 @pytest.fixture(scope="module")
@@ -236,7 +286,7 @@ def test_scenario_is_listed_and_stages_are_the_lab_models(rig):
     np.testing.assert_allclose(A, A2, rtol=1e-12, atol=1e-12 * np.abs(A2).max())
     np.testing.assert_allclose(B[:, 1], B2, rtol=1e-12)
     # the stage eigenvalues (free hub: two-inertia oscillator) are the lab model's
-    for Ast, Alab in (( _stage(rig, [0, 2])[0], A1), (A, A2)):
+    for Ast, Alab in ((_stage(rig, [0, 2])[0], A1), (A, A2)):
         e1 = np.sort_complex(np.linalg.eigvals(Ast))
         e2 = np.sort_complex(np.linalg.eigvals(Alab))
         np.testing.assert_allclose(e1, e2, rtol=1e-10, atol=1e-10)
@@ -307,8 +357,9 @@ def _ramp_loop(channels, dt=2e-3):
     plant = Ramp(("p",), ("s",), ("u",))
     sens = Sensors.make(plant, channels, dt)
     ctrl = discrete.from_transfer_function(([0.0], [1.0]), dt, measured=next(iter(channels)))
-    return SampledLoop(plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])),
-                       jnp.asarray(dt), 2)
+    return SampledLoop(
+        plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])), jnp.asarray(dt), 2
+    )
 
 
 @pytest.mark.parametrize("how", ["forward_euler", "zoh", "tustin"])
@@ -323,13 +374,22 @@ def test_digital_filters_in_the_loop_match_an_independent_recursion(how):
 
     q = 1e-4
     f2 = {"kind": "lowpass2", "cutoff": 2.0, "damping": 0.9, "discretisation": how}
-    chans = {"s": {"quantum": q},
-             "lp": {"signal": "s", "quantum": q, "filter": f2},
-             "lpr": {"signal": "s", "quantum": q, "filter": {**f2, "kind": "lowpass2_rate"}},
-             "d": {"signal": "s", "quantum": q,
-                   "filter": {"kind": "derivative2", "cutoff": 40.0, "damping": 0.9,
-                              "discretisation": how}},
-             "tf": {"signal": "s", "filter": {"kind": "tf", "num": [0.5, 0.0], "den": [1.0, -0.5]}}}
+    chans = {
+        "s": {"quantum": q},
+        "lp": {"signal": "s", "quantum": q, "filter": f2},
+        "lpr": {"signal": "s", "quantum": q, "filter": {**f2, "kind": "lowpass2_rate"}},
+        "d": {
+            "signal": "s",
+            "quantum": q,
+            "filter": {
+                "kind": "derivative2",
+                "cutoff": 40.0,
+                "damping": 0.9,
+                "discretisation": how,
+            },
+        },
+        "tf": {"signal": "s", "filter": {"kind": "tf", "num": [0.5, 0.0], "den": [1.0, -0.5]}},
+    }
     loop = _ramp_loop(chans)
     n = 2000
     out = simulate_loop(loop, np.array([0.1]), {}, n)
@@ -338,10 +398,9 @@ def test_digital_filters_in_the_loop_match_an_independent_recursion(how):
     t = np.arange(n) * 2e-3
     np.testing.assert_allclose(y, np.round((0.1 + 0.3 * t) / q) * q, atol=1e-12)
     for name in ("lp", "lpr", "d", "tf"):
-        v, _ = digital_filter(chans[name]["filter"], 2e-3).run(
-            y if name != "tf" else 0.1 + 0.3 * t)
+        v, _ = digital_filter(chans[name]["filter"], 2e-3).run(y if name != "tf" else 0.1 + 0.3 * t)
         np.testing.assert_allclose(meas[name], v, rtol=1e-12, atol=1e-12, err_msg=name)
-    assert meas["lp"][0] == pytest.approx(0.1, abs=1e-15)   # at rest on the first reading
+    assert meas["lp"][0] == pytest.approx(0.1, abs=1e-15)  # at rest on the first reading
     assert abs(meas["lpr"][0]) < 1e-14 and abs(meas["d"][0]) < 1e-12  # round-off of the solve
     # settled: the rate kinds read the ramp's rate (forward Euler and Tustin map s = 0 to
     # z = 1 and see the samples of a ramp; zoh filters the held staircase, whose rate at
@@ -364,19 +423,25 @@ def test_filter_state_settable_and_read_from_a_log():
     from flexarm.specs.experiment import Sensor
 
     f2 = {"kind": "lowpass2", "cutoff": 2.0, "damping": 0.9}
-    specs = {"s": Sensor(), "lp": Sensor(signal="s", filter=f2),
-             "lpr": Sensor(signal="s", filter={**f2, "kind": "lowpass2_rate"}),
-             "d": Sensor(signal="s", filter={"kind": "derivative2", "cutoff": "40 Hz"})}
+    specs = {
+        "s": Sensor(),
+        "lp": Sensor(signal="s", filter=f2),
+        "lpr": Sensor(signal="s", filter={**f2, "kind": "lowpass2_rate"}),
+        "d": Sensor(signal="s", filter={"kind": "derivative2", "cutoff": "40 Hz"}),
+    }
     loop = _ramp_loop({k: v.model_dump() for k, v in specs.items()})
     n, k = 1500, 700
     out = simulate_loop(loop, np.array([0.1]), {}, n)
-    log = Log(None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T, strict=True)))
+    log = Log(
+        None, np.arange(n) * 2e-3, dict(zip(loop.sensors.names, out["measured"].T, strict=True))
+    )
     states = filter_state_from_log(specs, log, k, 2e-3)
     assert set(states) == {"lp", "lpr", "d"}
     later = simulate_loop(with_filter_state(loop, states), out["states"][k], {}, n - k)
     for j, name in enumerate(loop.sensors.names):
-        np.testing.assert_allclose(later["measured"][:, j], out["measured"][k:, j],
-                                   rtol=1e-9, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(
+            later["measured"][:, j], out["measured"][k:, j], rtol=1e-9, atol=1e-12, err_msg=name
+        )
     # without its sibling, a lowpass2 state comes from the forward-Euler difference of its
     # own output (exact), a rate state from the filter run over the unfiltered reading
     alone = {n_: specs[n_] for n_ in ("s", "lp", "d")}
@@ -400,17 +465,25 @@ def test_bad_filter_specs_are_named():
     with pytest.raises(ValueError, match="quantum .* or bits"):
         Sensor(quantum=1e-3, bits=12)
     # forward Euler of a 200 Hz filter at 2 ms is unstable: named, with the remedy
-    with pytest.raises(ValueError, match=r"sensor 'x': filter: the discrete filter is not stable.*tustin"):
-        digital_filter({"kind": "lowpass2", "cutoff": 200.0, "damping": 0.9}, 2e-3,
-                       where="sensor 'x': filter")
+    with pytest.raises(
+        ValueError, match=r"sensor 'x': filter: the discrete filter is not stable.*tustin"
+    ):
+        digital_filter(
+            {"kind": "lowpass2", "cutoff": 200.0, "damping": 0.9}, 2e-3, where="sensor 'x': filter"
+        )
 
 
 # ------------------------------------------------------------------ 4. LTI controller
 def _ctrl(**kw):
     from flexarm.control.lti import lti_controller
 
-    base = dict(inputs=["y1", "y2"], setpoints=["r", 0], outputs=["current_1"],
-                input_names=("current_1", "current_2"), base_dt=1e-3)
+    base = dict(
+        inputs=["y1", "y2"],
+        setpoints=["r", 0],
+        outputs=["current_1"],
+        input_names=("current_1", "current_2"),
+        base_dt=1e-3,
+    )
     return lti_controller(**{**base, **kw})
 
 
@@ -471,8 +544,9 @@ def test_lti_controller_from_python_control_and_files(tmp_path):
     (tmp_path / "c.json").write_text(json.dumps({"A": A, "B": B, "C": C, "D": D, "dt": 2e-3}))
     sio.savemat(tmp_path / "c.mat", {"A": A, "B": B, "C": C, "D": D, "dt": 2e-3})
     for f in ("c.npz", "c.json", "c.mat"):
-        spec = LTIControllerSpec(type="lti", file=str(tmp_path / f), inputs=["y1", "y2"],
-                                 setpoints=["r", 0], outputs=[1])
+        spec = LTIControllerSpec(
+            type="lti", file=str(tmp_path / f), inputs=["y1", "y2"], setpoints=["r", 0], outputs=[1]
+        )
         c = lti_from_spec(spec, base_dt=1e-3, input_names=("current_1", "current_2"))
         assert c.every == 2
         np.testing.assert_allclose(_steps(c, ys, rs), want, rtol=1e-12, err_msg=f)
@@ -494,8 +568,11 @@ def test_lti_controller_bad_input():
         _ctrl(D=[[1.0, 2.0, 3.0]])
     with pytest.raises(ValueError, match=r"B is 1 × 3.*must be 1 × 2"):
         _ctrl(A=[[0.5]], B=[[1.0, 2.0, 3.0]], C=[[1.0]], D=[[0.0, 0.0]])
-    with pytest.raises(ValueError, match=r"dt = 0.0025 s is not a whole multiple of the loop's "
-                                         r"sampling period 0.001 s"):
+    with pytest.raises(
+        ValueError,
+        match=r"dt = 0.0025 s is not a whole multiple of the loop's "
+        r"sampling period 0.001 s",
+    ):
         _ctrl(D=[[1.0, 0.0]], dt=2.5e-3)
     with pytest.raises(ValueError, match=r"unstable: eigenvalue 1\.1.*allow_unstable"):
         _ctrl(A=[[1.1]], B=[[1.0, 0.0]], C=[[1.0]], D=[[0.0, 0.0]])
@@ -515,7 +592,10 @@ def test_lti_bad_input_through_the_scenario():
     from flexarm.specs import ScenarioError, scenario_from_dict
 
     base = scenario_dict("quanser-two-link")
-    bad = {**base, "controller": {**base["controller"], "D": [r[:7] for r in base["controller"]["D"]]}}
+    bad = {
+        **base,
+        "controller": {**base["controller"], "D": [r[:7] for r in base["controller"]["D"]]},
+    }
     with pytest.raises(ValueError, match=r"\[controller\]: D is 2 × 7.*8 input\(s\)"):
         prepare(scenario_from_dict(bad))
     bad = {**base, "controller": {**base["controller"], "dt": "3 ms"}}
@@ -539,14 +619,17 @@ def test_lab_law_reproduces_the_logged_current(run_log, rig):
     import jax
 
     scope = load_log_format(SCOPE).read(RUN)
-    w = run_log.window(scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
-                       scope.time[-1] - run_log.time[0] + run_log.dt)
+    w = run_log.window(
+        scope.time[0] - run_log.time[0],  # [t0, t1) s from the first sample
+        scope.time[-1] - run_log.time[0] + run_log.dt,
+    )
     ctrl = rig.loop.controller
     meas = {k: w[k] for k in ctrl.inputs}
     refs = {k: w[k] for k in ctrl.reference_signals}
     _, u = jax.vmap(lambda m, r: ctrl.step(ctrl.init(), m, r))(meas, refs)
-    u = np.clip(np.asarray(u), -np.asarray(rig.loop.actuator.limit),
-                np.asarray(rig.loop.actuator.limit))
+    u = np.clip(
+        np.asarray(u), -np.asarray(rig.loop.actuator.limit), np.asarray(rig.loop.actuator.limit)
+    )
     for j in (0, 1):
         err = np.abs(u[:, j] - scope[f"current_{j + 1}"])
         assert err.max() <= 1e-12, (j, err.max(), w.time[np.argmax(err)])
@@ -565,8 +648,11 @@ def synthetic_log(rig):
     sc = sc.model_copy(update={"simulation": sc.simulation.model_copy(update={"duration": 3.0})})
     p = prepare(sc)
     res = run_prepared(p)
-    sig = {**{k: np.asarray(v) for k, v in res.measured.items()},
-           "theta_ref_1": p.references["theta_ref_1"], "theta_ref_2": p.references["theta_ref_2"]}
+    sig = {
+        **{k: np.asarray(v) for k, v in res.measured.items()},
+        "theta_ref_1": p.references["theta_ref_1"],
+        "theta_ref_2": p.references["theta_ref_2"],
+    }
     return sc, Log(None, np.asarray(p.time), sig)
 
 
@@ -578,8 +664,16 @@ def test_replay_of_the_scenarios_own_log_is_exact(synthetic_log):
 
     sc, log = synthetic_log
     rep = replay(sc, log)
-    assert set(rep.fit_percent) == {"theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1",
-                                    "theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2"}
+    assert set(rep.fit_percent) == {
+        "theta_1",
+        "alpha_f_1",
+        "theta_dot_f_1",
+        "alpha_dot_f_1",
+        "theta_2",
+        "alpha_f_2",
+        "theta_dot_f_2",
+        "alpha_dot_f_2",
+    }
     for k, v in rep.fit_percent.items():
         assert v == pytest.approx(100.0, abs=1e-6), k
     # the log's step must be the scenario's sampling period
@@ -600,24 +694,52 @@ def test_cli_simulate_replays_a_mat_log(tmp_path, synthetic_log):
     from flexarm.cli import app
 
     sc, log = synthetic_log
-    X1 = np.column_stack([log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")])
-    X2 = np.column_stack([log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")])
+    X1 = np.column_stack(
+        [log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")]
+    )
+    X2 = np.column_stack(
+        [log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")]
+    )
     R1 = np.column_stack([log["theta_ref_1"]] + [0 * log.time] * 3)
     R2 = np.column_stack([log["theta_ref_2"]] + [0 * log.time] * 3)
-    sio.savemat(tmp_path / "s.mat", {"time": log.time, "X1_meas": X1, "X1_ref": R1,
-                                      "X2_sim": X2, "X2_meas": R2})
-    r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "o"),
-                                 "--log", str(tmp_path / "s.mat"), "--log-format",
-                                 str(STAIRCASE), "--window", "0:2"])
+    sio.savemat(
+        tmp_path / "s.mat",
+        {"time": log.time, "X1_meas": X1, "X1_ref": R1, "X2_sim": X2, "X2_meas": R2},
+    )
+    r = CliRunner().invoke(
+        app,
+        [
+            "simulate",
+            "quanser-two-link",
+            "--out",
+            str(tmp_path / "o"),
+            "--log",
+            str(tmp_path / "s.mat"),
+            "--log-format",
+            str(STAIRCASE),
+            "--window",
+            "0:2",
+        ],
+    )
     assert r.exit_code == 0, r.output
     got = json.loads((tmp_path / "o" / "replay.json").read_text())["fit_percent"]
     fp = got[str(tmp_path / "s.mat")]
     assert fp["theta_1"] == pytest.approx(100.0, abs=1e-4)  # rounded to 0.01 in the JSON
     assert (tmp_path / "o" / "replay-s.png").stat().st_size > 10_000
     # a log that is not there: exit 2, one line naming it
-    r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(tmp_path / "p"),
-                                 "--log", str(tmp_path / "nope.mat"), "--log-format",
-                                 str(STAIRCASE)])
+    r = CliRunner().invoke(
+        app,
+        [
+            "simulate",
+            "quanser-two-link",
+            "--out",
+            str(tmp_path / "p"),
+            "--log",
+            str(tmp_path / "nope.mat"),
+            "--log-format",
+            str(STAIRCASE),
+        ],
+    )
     assert r.exit_code == 2 and "nope.mat" in r.output
 
 
@@ -633,19 +755,36 @@ def test_cli_simulate_window_counts_from_the_logs_first_sample(tmp_path, synthet
     from flexarm.cli import app
 
     sc, log = synthetic_log
-    X1 = np.column_stack([log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")])
-    X2 = np.column_stack([log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")])
+    X1 = np.column_stack(
+        [log[k] for k in ("theta_1", "alpha_f_1", "theta_dot_f_1", "alpha_dot_f_1")]
+    )
+    X2 = np.column_stack(
+        [log[k] for k in ("theta_2", "alpha_f_2", "theta_dot_f_2", "alpha_dot_f_2")]
+    )
     R1 = np.column_stack([log["theta_ref_1"]] + [0 * log.time] * 3)
     R2 = np.column_stack([log["theta_ref_2"]] + [0 * log.time] * 3)
     fps = []
     for t0 in (0.0, 100.0):
         f = tmp_path / f"s{t0:g}.mat"
-        sio.savemat(f, {"time": log.time + t0, "X1_meas": X1, "X1_ref": R1, "X2_sim": X2,
-                        "X2_meas": R2})
+        sio.savemat(
+            f, {"time": log.time + t0, "X1_meas": X1, "X1_ref": R1, "X2_sim": X2, "X2_meas": R2}
+        )
         out = tmp_path / f"o{t0:g}"
-        r = CliRunner().invoke(app, ["simulate", "quanser-two-link", "--out", str(out),
-                                     "--log", str(f), "--log-format", str(STAIRCASE),
-                                     "--window", "0:2"])
+        r = CliRunner().invoke(
+            app,
+            [
+                "simulate",
+                "quanser-two-link",
+                "--out",
+                str(out),
+                "--log",
+                str(f),
+                "--log-format",
+                str(STAIRCASE),
+                "--window",
+                "0:2",
+            ],
+        )
         assert r.exit_code == 0, r.output
         fps.append(json.loads((out / "replay.json").read_text())["fit_percent"][str(f)])
     assert fps[1] == fps[0]
@@ -704,8 +843,9 @@ def test_scenario_from_the_workspace_is_the_builtin(tmp_path):
     for sec in ("arm", "sensors", "controller", "sampling", "references"):
         _close(a[sec], b[sec], sec)
     sio.savemat(tmp_path / "w.mat", {"J11": 1.0})
-    r = CliRunner().invoke(app, ["scenario-from-mat", str(tmp_path / "w.mat"), "--out",
-                                 str(tmp_path / "t.toml")])
+    r = CliRunner().invoke(
+        app, ["scenario-from-mat", str(tmp_path / "w.mat"), "--out", str(tmp_path / "t.toml")]
+    )
     assert r.exit_code == 2 and "J12" in r.output and "w.mat" in r.output
 
 
@@ -716,8 +856,14 @@ def test_controller_state_from_the_log_before_a_window():
     from flexarm.io.logs import Log
 
     rng = np.random.default_rng(2)
-    ctrl = _ctrl(A=[[0.5, 0.1], [0.0, 0.8]], B=[[1.0, 0.0], [0.5, -1.0]], C=[[0.3, -0.2]],
-                 D=[[2.0, -1.0]], dt=2e-3, x0=[0.2, 0.0])
+    ctrl = _ctrl(
+        A=[[0.5, 0.1], [0.0, 0.8]],
+        B=[[1.0, 0.0], [0.5, -1.0]],
+        C=[[0.3, -0.2]],
+        D=[[2.0, -1.0]],
+        dt=2e-3,
+        x0=[0.2, 0.0],
+    )
     n, k = 40, 25
     ys, rs = rng.normal(size=(n, 2)), rng.normal(size=n)
     log = Log(None, np.arange(n) * 1e-3, {"y1": ys[:, 0], "y2": ys[:, 1], "r": rs})

@@ -143,7 +143,9 @@ def test_closed_forms_nmp():
     # ISE by the exact impulse response on a grid and Simpson's rule: h = 5e-4 s against
     # a pole at −1 gives an O(h⁴) error ~1e-14, truncation at 40 s e^(−80): 1e-10
     # (measured 5e-14).
-    assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / S**2), 1 / S**2) == pytest.approx(2.0, rel=1e-10)
+    assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / S**2), 1 / S**2) == pytest.approx(
+        2.0, rel=1e-10
+    )
     assert ise(G_NMP, wiener_feedforward(G_NMP, 1 / (S * (S + 1))), 1 / (S * (S + 1))) == (
         pytest.approx(0.5, rel=1e-10)
     )
@@ -181,8 +183,10 @@ def sympy_wiener(g, u):
             plus += term
     num, den = (sp.Poly(x, s) for x in sp.fraction(sp.cancel(plus / (g * bnr / bn * u))))
     lc = den.LC()
-    return (np.array([float(c / lc) for c in num.all_coeffs()]),
-            np.array([float(c / lc) for c in den.all_coeffs()]))
+    return (
+        np.array([float(c / lc) for c in num.all_coeffs()]),
+        np.array([float(c / lc) for c in den.all_coeffs()]),
+    )
 
 
 _s = SYM_S
@@ -204,8 +208,11 @@ SHARED = [
     ((_s - 1) ** 2 / (_s + 2) ** 3, 1 / (_s * (_s + 2)), None),
     ((_s - 1) ** 2 / (_s + 2) ** 3, 1 / (_s**2 * (_s + 2) ** 2), None),
     # shared lightly damped pair, and a reference zero on the plant pole −3
-    ((2 - _s) * (_s + 4) / ((_s**2 + sp.Rational(2, 5) * _s + 4) * (_s + 3)),
-     (_s + 3) / (_s * (_s**2 + sp.Rational(2, 5) * _s + 4)), None),
+    (
+        (2 - _s) * (_s + 4) / ((_s**2 + sp.Rational(2, 5) * _s + 4) * (_s + 3)),
+        (_s + 3) / (_s * (_s**2 + sp.Rational(2, 5) * _s + 4)),
+        None,
+    ),
 ]
 
 

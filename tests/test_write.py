@@ -123,11 +123,17 @@ def test_an_input_is_never_written_over_even_with_overwrite(tmp_path):
     (tmp_path / "link.csv").symlink_to(log)
     os.link(log, tmp_path / "hard.csv")
     with write.inputs([log, None]):
-        for target in (log, tmp_path / "data" / ".." / "data" / "trial1.csv",
-                       tmp_path / "link.csv", tmp_path / "hard.csv"):
-            for w in (lambda p: write.write_text(p, "x", overwrite=True),
-                      lambda p: write.write_json(p, {"a": 1}, overwrite=True),
-                      lambda p: write.write_bytes(p, b"x", overwrite=True)):
+        for target in (
+            log,
+            tmp_path / "data" / ".." / "data" / "trial1.csv",
+            tmp_path / "link.csv",
+            tmp_path / "hard.csv",
+        ):
+            for w in (
+                lambda p: write.write_text(p, "x", overwrite=True),
+                lambda p: write.write_json(p, {"a": 1}, overwrite=True),
+                lambda p: write.write_bytes(p, b"x", overwrite=True),
+            ):
                 with pytest.raises(InputOverwriteError, match="is an input of this run") as e:
                     w(target)
                 assert isinstance(e.value, FlexarmError)

@@ -35,8 +35,9 @@ def _ramp_loop(channels):
     plant = Ramp(("p",), ("s",), ("u",))
     sens = Sensors.make(plant, channels, DT)
     ctrl = discrete.from_transfer_function(([0.0], [1.0]), DT, measured=next(iter(channels)))
-    return SampledLoop(plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])),
-                       jnp.asarray(DT), 2)
+    return SampledLoop(
+        plant, ctrl, sens, Actuator(jnp.asarray([1.0]), jnp.asarray([0.0])), jnp.asarray(DT), 2
+    )
 
 
 def test_zeroing_of_a_ramp_is_analytic():
@@ -49,8 +50,11 @@ def test_zeroing_of_a_ramp_is_analytic():
     from flexarm.specs.experiment import Sensor
 
     f2 = {"kind": "lowpass2", "cutoff": "2 Hz", "damping": 0.9}
-    specs = {"z": Sensor(signal="s", zeroing="100 ms"), "s": Sensor(),
-             "zf": Sensor(signal="s", zeroing="0.1 s", filter=f2)}
+    specs = {
+        "z": Sensor(signal="s", zeroing="100 ms"),
+        "s": Sensor(),
+        "zf": Sensor(signal="s", zeroing="0.1 s", filter=f2),
+    }
     assert specs["z"].zeroing == pytest.approx(0.1)
     loop = _ramp_loop({k: v.model_dump() for k, v in specs.items()})
     assert loop.sensors.zeroed == (0, 2) and loop.sensors.zero_n == (50, 50)
@@ -72,11 +76,17 @@ def test_zeroing_bad_input_names_the_field():
     from flexarm.specs.experiment import Sensor
 
     loop = _ramp_loop({"z": Sensor(signal="s", zeroing="1 s").model_dump()})
-    with pytest.raises(ValueError, match=r"sensors\.z\.zeroing = 1 s \(500 samples\) is not "
-                                         r"shorter than the run \(300 samples.*set zeroing = 0"):
+    with pytest.raises(
+        ValueError,
+        match=r"sensors\.z\.zeroing = 1 s \(500 samples\) is not "
+        r"shorter than the run \(300 samples.*set zeroing = 0",
+    ):
         simulate_loop(loop, np.array([0.1]), {}, 300)
-    with pytest.raises(ValueError, match=r"sensors\.z\.zeroing = 0\.0005 s is shorter than one "
-                                         r"sample"):
+    with pytest.raises(
+        ValueError,
+        match=r"sensors\.z\.zeroing = 0\.0005 s is shorter than one "
+        r"sample",
+    ):
         _ramp_loop({"z": Sensor(signal="s", zeroing="0.5 ms").model_dump()})
     with pytest.raises(ValueError, match=r"(?s)zeroing.*must be >= 0 s"):
         Sensor(zeroing="-1 s")
@@ -89,11 +99,19 @@ def test_zeroing_bad_input_names_the_field():
     sens["alpha_f_1"] = sens["alpha_f_1"].model_copy(update={"zeroing": 1.0})
     sc = sc.model_copy(update={"sensors": sens})
     n = 200
-    log = Log(Path("piece07.mat"), np.arange(n) * DT,
-              {k: np.zeros(n) for k in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2",
-                                        "theta_ref_1", "theta_ref_2")})
-    with pytest.raises(ValueError, match=r"piece07\.mat: sensors\.alpha_f_1\.zeroing = 1 s "
-                                         r"\(500 samples\) is not shorter than the log"):
+    log = Log(
+        Path("piece07.mat"),
+        np.arange(n) * DT,
+        {
+            k: np.zeros(n)
+            for k in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2", "theta_ref_1", "theta_ref_2")
+        },
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"piece07\.mat: sensors\.alpha_f_1\.zeroing = 1 s "
+        r"\(500 samples\) is not shorter than the log",
+    ):
         replay(sc, log)
 
 
@@ -134,21 +152,28 @@ def test_replay_and_predict_apply_the_zeroing():
     sens = dict(sc.sensors)
     for k in ("alpha_f_1", "alpha_dot_f_1"):
         sens[k] = sens[k].model_copy(update={"zeroing": 0.5})
-    scz = sc.model_copy(update={"sensors": sens, "simulation": sc.simulation.model_copy(
-        update={"duration": 3.0})})
+    scz = sc.model_copy(
+        update={"sensors": sens, "simulation": sc.simulation.model_copy(update={"duration": 3.0})}
+    )
     p = prepare(scz)
     res = to_result(p, simulate_loop(p.loop, p.x0, p.references, p.n_samples))
     n = p.n_samples
     a = res.measured["alpha_f_1"]
     assert np.all(a[:251] == 0.0) and np.abs(a).max() > 1e-3
-    log = Log(Path("zeroed.csv"), np.arange(n) * DT,
-              {**{k: np.asarray(v) for k, v in res.measured.items()},
-               **{k: np.asarray(p.references[k]) for k in ("theta_ref_1", "theta_ref_2")}})
+    log = Log(
+        Path("zeroed.csv"),
+        np.arange(n) * DT,
+        {
+            **{k: np.asarray(v) for k, v in res.measured.items()},
+            **{k: np.asarray(p.references[k]) for k in ("theta_ref_1", "theta_ref_2")},
+        },
+    )
     rep = replay(scz, log)
     assert min(rep.fit_percent.values()) > 99.999, rep.fit_percent
     opts = FitOptions(initial="scenario")
     with_z = predict_scenario(scz, [log], opts)["fit_percent"]["zeroed.csv"]
     assert min(with_z.values()) > 99.999, with_z
-    without = predict_scenario(sc.model_copy(update={"simulation": scz.simulation}), [log],
-                               opts)["fit_percent"]["zeroed.csv"]
+    without = predict_scenario(sc.model_copy(update={"simulation": scz.simulation}), [log], opts)[
+        "fit_percent"
+    ]["zeroed.csv"]
     assert without["alpha_f_1"] < with_z["alpha_f_1"] - 5, without

@@ -92,11 +92,32 @@ import numpy as np
 
 from flexarm.errors import FlexarmError
 
-__all__ = ["client_for", "session", "close", "have_dask", "ClusterOptions", "ChunkOptions",
-           "JaxWorkerSetup", "compilation_cache_dir", "worker_environment", "chunk_bounds",
-           "chunk_seed", "map_chunks", "simulate_chunked", "BatchSummary", "PlantSource",
-           "compare_chunked", "ChunkedTuneCost", "FitRow", "read_manifest", "fit_row",
-           "fit_many", "FitManyOptions", "ManifestError", "ClusterError"]
+__all__ = [
+    "client_for",
+    "session",
+    "close",
+    "have_dask",
+    "ClusterOptions",
+    "ChunkOptions",
+    "JaxWorkerSetup",
+    "compilation_cache_dir",
+    "worker_environment",
+    "chunk_bounds",
+    "chunk_seed",
+    "map_chunks",
+    "simulate_chunked",
+    "BatchSummary",
+    "PlantSource",
+    "compare_chunked",
+    "ChunkedTuneCost",
+    "FitRow",
+    "read_manifest",
+    "fit_row",
+    "fit_many",
+    "FitManyOptions",
+    "ManifestError",
+    "ClusterError",
+]
 
 
 # =============================================================================== the client
@@ -109,15 +130,18 @@ def have_dask() -> bool:
     return True
 
 
-NO_DASK = ("dask.distributed is not installed (pip install 'flexarm[distributed]'): "
-           "running in-process")
+NO_DASK = (
+    "dask.distributed is not installed (pip install 'flexarm[distributed]'): running in-process"
+)
 
 
 #: why the persistent compilation cache is opt-in (docs/distributed.md says the same)
-CACHE_NOTE = ("JAX's persistent compilation cache is off unless FLEXARM_JAX_CACHE names a "
-              "folder: with jaxlib 0.10.2 on the CPU, writing some of flexarm's compiled "
-              "loops to it aborts the process (XLA's executable serialisation, seen on the "
-              "two-link LQG replay), which no Python code can catch")
+CACHE_NOTE = (
+    "JAX's persistent compilation cache is off unless FLEXARM_JAX_CACHE names a "
+    "folder: with jaxlib 0.10.2 on the CPU, writing some of flexarm's compiled "
+    "loops to it aborts the process (XLA's executable serialisation, seen on the "
+    "two-link LQG replay), which no Python code can catch"
+)
 
 
 def compilation_cache_dir() -> Path | None:
@@ -130,8 +154,9 @@ def compilation_cache_dir() -> Path | None:
     return Path(value).expanduser()
 
 
-def enable_compilation_cache(cache_dir: str | Path | None = None,
-                             min_compile_seconds: float = 0.5) -> bool:
+def enable_compilation_cache(
+    cache_dir: str | Path | None = None, min_compile_seconds: float = 0.5
+) -> bool:
     """Float64 on, and this process's JAX pointed at the persistent compilation cache
     ``cache_dir`` (default :func:`compilation_cache_dir`; compilations longer than
     ``min_compile_seconds`` are stored). Returns whether a cache is in use: none when no
@@ -176,13 +201,18 @@ def worker_environment(options: ClusterOptions | None = None) -> dict[str, str]:
     """The environment a local cluster's worker processes start with (module doc)."""
     o = options or ClusterOptions()
     threads = str(max(1, int(o.threads_per_worker)))
-    env = {"JAX_ENABLE_X64": "1",
-           "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
-                         f" intra_op_parallelism_threads={threads}").strip(),
-           "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads,
-           "MKL_NUM_THREADS": threads,
-           "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
-           "MPLBACKEND": "Agg"}
+    env = {
+        "JAX_ENABLE_X64": "1",
+        "XLA_FLAGS": (
+            os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
+            f" intra_op_parallelism_threads={threads}"
+        ).strip(),
+        "OMP_NUM_THREADS": threads,
+        "OPENBLAS_NUM_THREADS": threads,
+        "MKL_NUM_THREADS": threads,
+        "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
+        "MPLBACKEND": "Agg",
+    }
     cache = o.cache_dir or compilation_cache_dir()
     env["FLEXARM_JAX_CACHE"] = str(cache) if cache is not None else "off"
     if o.xla_memory_fraction is not None:
@@ -218,8 +248,9 @@ class ClusterError(FlexarmError, ValueError):
     """A scheduler address or worker count that cannot be used (the message says which)."""
 
 
-def client_for(scheduler: str | None = None, workers: int | None = None,
-               options: ClusterOptions | None = None):
+def client_for(
+    scheduler: str | None = None, workers: int | None = None, options: ClusterOptions | None = None
+):
     """A Dask client, or None (in-process).
 
     ``scheduler`` and ``workers`` both None: None, no Dask needed. ``workers=N``: a
@@ -227,8 +258,10 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
     closes both). ``scheduler="tcp://host:8786"``: a client of that scheduler. Without Dask
     installed a warning says so and None is returned (the caller runs in-process)."""
     if scheduler is not None and workers is not None:
-        raise ClusterError(f"scheduler = {scheduler!r} and workers = {workers}: give one (an "
-                         "existing scheduler's address, or the number of local workers)")
+        raise ClusterError(
+            f"scheduler = {scheduler!r} and workers = {workers}: give one (an "
+            "existing scheduler's address, or the number of local workers)"
+        )
     if scheduler is None and workers is None:
         return None
     if not have_dask():
@@ -241,21 +274,31 @@ def client_for(scheduler: str | None = None, workers: int | None = None,
     if workers is not None:
         if int(workers) < 1:
             raise ClusterError(f"workers = {workers}: give 1 or more local worker processes")
-        with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
-                              "distributed.scheduler.allowed-failures": 3}):
-            cluster = LocalCluster(n_workers=int(workers),
-                                   threads_per_worker=o.threads_per_worker, processes=True,
-                                   host=o.host,
-                                   # dask: None means no dashboard (annotated str only)
-                                   dashboard_address=o.dashboard_address,  # pyright: ignore[reportArgumentType]
-                                   memory_limit=o.memory_limit, env=worker_environment(o))
+        with dask.config.set(
+            {
+                "distributed.worker.multiprocessing-method": "spawn",
+                "distributed.scheduler.allowed-failures": 3,
+            }
+        ):
+            cluster = LocalCluster(
+                n_workers=int(workers),
+                threads_per_worker=o.threads_per_worker,
+                processes=True,
+                host=o.host,
+                # dask: None means no dashboard (annotated str only)
+                dashboard_address=o.dashboard_address,  # pyright: ignore[reportArgumentType]
+                memory_limit=o.memory_limit,
+                env=worker_environment(o),
+            )
         client = Client(cluster, set_as_default=False)
         # close() closes the cluster too (a flag of flexarm's on dask's Client)
         client._flexarm_owns_cluster = True  # pyright: ignore[reportAttributeAccessIssue]
     else:
         if not re.match(r"^[a-z]+://", str(scheduler)):
-            raise ClusterError(f"scheduler = {scheduler!r}: give the scheduler's address with "
-                             "its protocol, e.g. tcp://host:8786")
+            raise ClusterError(
+                f"scheduler = {scheduler!r}: give the scheduler's address with "
+                "its protocol, e.g. tcp://host:8786"
+            )
         client = Client(scheduler, set_as_default=False)
     client.register_plugin(JaxWorkerSetup(o.cache_dir))
     return client
@@ -265,16 +308,20 @@ def close(client) -> None:
     """Close a client of :func:`client_for` and the local cluster it started (None: no-op)."""
     if client is None:
         return
-    cluster = getattr(client, "cluster", None) if getattr(
-        client, "_flexarm_owns_cluster", False) else None
+    cluster = (
+        getattr(client, "cluster", None)
+        if getattr(client, "_flexarm_owns_cluster", False)
+        else None
+    )
     client.close()
     if cluster is not None:
         cluster.close()
 
 
 @contextmanager
-def session(scheduler: str | None = None, workers: int | None = None,
-            options: ClusterOptions | None = None) -> Iterator[Any]:
+def session(
+    scheduler: str | None = None, workers: int | None = None, options: ClusterOptions | None = None
+) -> Iterator[Any]:
     """:func:`client_for` as a context: yields the client (or None) and closes it (and the
     local cluster it started) on exit."""
     client = client_for(scheduler, workers, options)
@@ -298,9 +345,15 @@ def chunk_seed(seed: int, j: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(j)]).generate_state(1)[0])
 
 
-def map_chunks(fn: Callable, args: Sequence[tuple], client=None, *, retries: int = 1,
-               shared: Mapping[str, Any] | None = None,
-               workers: Sequence[str] | None = None) -> list:
+def map_chunks(
+    fn: Callable,
+    args: Sequence[tuple],
+    client=None,
+    *,
+    retries: int = 1,
+    shared: Mapping[str, Any] | None = None,
+    workers: Sequence[str] | None = None,
+) -> list:
     """``[fn(*a, **shared) for a in args]``, in-process (``client`` None) or as one task per
     item on the client's workers (``shared`` sent once to every worker; ``workers``: only
     these worker addresses), results in the order of ``args``."""
@@ -311,8 +364,12 @@ def map_chunks(fn: Callable, args: Sequence[tuple], client=None, *, retries: int
     if shared:
         fut = client.scatter(shared, broadcast=True, hash=False, workers=where)
         shared = dict(fut)
-    futures = [client.submit(fn, *a, **shared, pure=False, retries=retries, workers=where,
-                             allow_other_workers=False) for a in args]
+    futures = [
+        client.submit(
+            fn, *a, **shared, pure=False, retries=retries, workers=where, allow_other_workers=False
+        )
+        for a in args
+    ]
     return client.gather(futures)
 
 
@@ -355,11 +412,13 @@ def rollout_summary(out: dict) -> dict[str, np.ndarray]:
     s = np.asarray(out["signals"])
     u = np.asarray(out["command"])
     with np.errstate(invalid="ignore", over="ignore"):
-        return {"diverged": ~np.all(np.isfinite(s) & (np.abs(s) <= DIVERGENCE_LIMIT),
-                                    axis=(1, 2)),
-                "final_signals": s[:, -1, :], "peak_abs_signals": np.max(np.abs(s), axis=1),
-                "rms_signals": np.sqrt(np.mean(s ** 2, axis=1)),
-                "peak_abs_command": np.max(np.abs(u), axis=1)}
+        return {
+            "diverged": ~np.all(np.isfinite(s) & (np.abs(s) <= DIVERGENCE_LIMIT), axis=(1, 2)),
+            "final_signals": s[:, -1, :],
+            "peak_abs_signals": np.max(np.abs(s), axis=1),
+            "rms_signals": np.sqrt(np.mean(s**2, axis=1)),
+            "peak_abs_command": np.max(np.abs(u), axis=1),
+        }
 
 
 def _batched_leaves(loop, in_axes):
@@ -370,39 +429,67 @@ def _batched_leaves(loop, in_axes):
     is_none = lambda x: x is None  # noqa: E731
     leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
     axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
-    axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+    axes = [
+        a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)
+    ]
     sizes = {int(x.shape[a]) for x, a in zip(leaves, axes, strict=False) if a is not None}
     if len(sizes) != 1:
-        raise ValueError(f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
-                         if sizes else "in_axes batches no leaf of the loop")
+        raise ValueError(
+            f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
+            if sizes
+            else "in_axes batches no leaf of the loop"
+        )
     return leaves, axes, treedef, sizes.pop()
 
 
 def _loop_chunk(leaves, axes, treedef, a: int, b: int):
     import jax
 
-    return jax.tree.unflatten(treedef, [x if ax is None else np.take(np.asarray(x),
-                                                                     np.arange(a, b), axis=ax)
-                                        for x, ax in zip(leaves, axes, strict=False)])
+    return jax.tree.unflatten(
+        treedef,
+        [
+            x if ax is None else np.take(np.asarray(x), np.arange(a, b), axis=ax)
+            for x, ax in zip(leaves, axes, strict=False)
+        ],
+    )
 
 
-def _simulate_chunk(loop, x0, references, n_samples, seed, in_axes, batch_size, reduce,
-                    trajectories):
+def _simulate_chunk(
+    loop, x0, references, n_samples, seed, in_axes, batch_size, reduce, trajectories
+):
     from flexarm.sim.sampled import simulate_batch
 
     # no client or chunks: the arrays themselves
-    out = cast("dict[str, np.ndarray]",
-               simulate_batch(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
-                              batch_size=batch_size, check=False))
+    out = cast(
+        "dict[str, np.ndarray]",
+        simulate_batch(
+            loop,
+            x0,
+            references,
+            n_samples,
+            seed=seed,
+            in_axes=in_axes,
+            batch_size=batch_size,
+            check=False,
+        ),
+    )
     red = (reduce or rollout_summary)(out)
     return red, (out if trajectories else None)
 
 
-def simulate_chunked(loop, x0, references: dict[str, Any], n_samples: int, *, seed: int = 0,
-                     in_axes: Any = 0, batch_size: int | None = 512, client=None,
-                     options: ChunkOptions | None = None,
-                     reduce: Callable[[dict], dict[str, np.ndarray]] | None = None
-                     ) -> BatchSummary:
+def simulate_chunked(
+    loop,
+    x0,
+    references: dict[str, Any],
+    n_samples: int,
+    *,
+    seed: int = 0,
+    in_axes: Any = 0,
+    batch_size: int | None = 512,
+    client=None,
+    options: ChunkOptions | None = None,
+    reduce: Callable[[dict], dict[str, np.ndarray]] | None = None,
+) -> BatchSummary:
     """:func:`~flexarm.sim.sampled.simulate_batch` over chunks of ``options.chunk``
     rollouts (the batched leaves of ``loop`` sliced), each chunk a task, only
     ``reduce(out)`` (default :func:`rollout_summary`; a picklable function returning
@@ -415,10 +502,23 @@ def simulate_chunked(loop, x0, references: dict[str, Any], n_samples: int, *, se
     x0 = np.asarray(x0, float)
     refs = {k: np.asarray(v) for k, v in references.items()}
     args = [(_loop_chunk(leaves, axes, treedef, a, b),) for a, b in bounds]
-    parts = map_chunks(_simulate_chunk, args, client, retries=o.retries, workers=o.workers,
-                       shared=dict(x0=x0, references=refs, n_samples=int(n_samples),
-                                   seed=int(seed), in_axes=in_axes, batch_size=batch_size,
-                                   reduce=reduce, trajectories=o.trajectories))
+    parts = map_chunks(
+        _simulate_chunk,
+        args,
+        client,
+        retries=o.retries,
+        workers=o.workers,
+        shared=dict(
+            x0=x0,
+            references=refs,
+            n_samples=int(n_samples),
+            seed=int(seed),
+            in_axes=in_axes,
+            batch_size=batch_size,
+            reduce=reduce,
+            trajectories=o.trajectories,
+        ),
+    )
     per = {k: np.concatenate([p[0][k] for p in parts]) for k in parts[0][0]}
     traj = None
     if o.trajectories:
@@ -426,12 +526,12 @@ def simulate_chunked(loop, x0, references: dict[str, Any], n_samples: int, *, se
         traj = {k: np.concatenate([d[k] for d in outs]) for k in outs[0] if k != "references"}
         traj["references"] = outs[0]["references"]
     bad = np.asarray(per.get("diverged", np.zeros(size, bool)), bool)
-    return BatchSummary(per, _quantiles(per, bad, o.quantiles), int(bad.sum()), len(bounds),
-                        traj)
+    return BatchSummary(per, _quantiles(per, bad, o.quantiles), int(bad.sum()), len(bounds), traj)
 
 
-def _quantiles(per: dict[str, np.ndarray], bad: np.ndarray,
-               qs: Sequence[float]) -> dict[str, dict[float, np.ndarray]]:
+def _quantiles(
+    per: dict[str, np.ndarray], bad: np.ndarray, qs: Sequence[float]
+) -> dict[str, dict[float, np.ndarray]]:
     out = {}
     for k, v in per.items():
         v = np.asarray(v)
@@ -440,8 +540,14 @@ def _quantiles(per: dict[str, np.ndarray], bad: np.ndarray,
         good = v[~bad] if v.shape[0] == bad.shape[0] else v
         with _warnings.catch_warnings():
             _warnings.simplefilter("ignore", RuntimeWarning)
-            out[k] = {float(q): (np.nanquantile(good.astype(float), q, axis=0) if good.size
-                                 else np.full(v.shape[1:], np.nan)) for q in qs}
+            out[k] = {
+                float(q): (
+                    np.nanquantile(good.astype(float), q, axis=0)
+                    if good.size
+                    else np.full(v.shape[1:], np.nan)
+                )
+                for q in qs
+            }
     return out
 
 
@@ -465,17 +571,26 @@ class PlantSource:
         (:func:`flexarm.design.plants.from_fit`), chunk by chunk."""
         from flexarm.design.plants import from_fit
 
-        return cls(functools.partial(from_fit, result), int(n), int(seed),
-                   {"source": "flexarm.design.plants.from_fit, seeds per chunk"})
+        return cls(
+            functools.partial(from_fit, result),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_fit, seeds per chunk"},
+        )
 
     @classmethod
-    def from_paths(cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *,
-                   seed: int = 0) -> PlantSource:
+    def from_paths(
+        cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *, seed: int = 0
+    ) -> PlantSource:
         """Independent draws (:func:`flexarm.design.plants.from_paths`), chunk by chunk."""
         from flexarm.design.plants import from_paths
 
-        return cls(functools.partial(from_paths, scenario, dict(spread)), int(n), int(seed),
-                   {"source": "flexarm.design.plants.from_paths, seeds per chunk"})
+        return cls(
+            functools.partial(from_paths, scenario, dict(spread)),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_paths, seeds per chunk"},
+        )
 
     def __len__(self) -> int:
         return self.n
@@ -496,8 +611,12 @@ def _chunk_plants(plants, j: int, a: int, b: int):
         return plants.draw(b - a, seed=chunk_seed(plants.seed, j))
     vals = {k: np.asarray(v)[a:b] for k, v in plants.values.items()}
     coords = np.asarray(plants.coordinates)
-    return dataclasses.replace(plants, scenarios=list(plants.scenarios[a:b]), values=vals,
-                               coordinates=coords[a:b] if coords.shape[0] else coords)
+    return dataclasses.replace(
+        plants,
+        scenarios=list(plants.scenarios[a:b]),
+        values=vals,
+        coordinates=coords[a:b] if coords.shape[0] else coords,
+    )
 
 
 def _nominal_batch(plants):
@@ -511,12 +630,22 @@ def _compare_chunk(plants, j, a, b, *, designs, kwargs, with_traces):
     from flexarm.design.compare import compare
 
     cmp = compare(_chunk_plants(plants, j, a, b), designs, **kwargs)
-    return ({name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
-            cmp.traces if with_traces else None, cmp.settings, list(cmp.warnings))
+    return (
+        {name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
+        cmp.traces if with_traces else None,
+        cmp.settings,
+        list(cmp.warnings),
+    )
 
 
-def compare_chunked(plants, designs: Mapping[str, Any] | None = None, *, client=None,
-                    options: ChunkOptions | None = None, **kwargs):
+def compare_chunked(
+    plants,
+    designs: Mapping[str, Any] | None = None,
+    *,
+    client=None,
+    options: ChunkOptions | None = None,
+    **kwargs,
+):
     """:func:`flexarm.design.compare.compare` over chunks of the plants (a drawn
     :class:`~flexarm.design.plants.PlantBatch` sliced, or a :class:`PlantSource` drawn per
     chunk), each chunk a task on the client's workers (None: in-process). Each chunk runs
@@ -531,23 +660,35 @@ def compare_chunked(plants, designs: Mapping[str, Any] | None = None, *, client=
     o = options or ChunkOptions()
     bounds = chunk_bounds(len(plants), o.chunk) or [(0, 0)]
     src = plants if isinstance(plants, PlantSource) or len(plants) else _nominal_batch(plants)
-    parts = map_chunks(_compare_chunk_any, [((src, j, a, b), j == 0 or o.trajectories)
-                                            for j, (a, b) in enumerate(bounds)],
-                       client, retries=o.retries, workers=o.workers,
-                       shared=dict(designs=designs, kwargs=kwargs))
+    parts = map_chunks(
+        _compare_chunk_any,
+        [((src, j, a, b), j == 0 or o.trajectories) for j, (a, b) in enumerate(bounds)],
+        client,
+        retries=o.retries,
+        workers=o.workers,
+        shared=dict(designs=designs, kwargs=kwargs),
+    )
     per: dict[str, dict[str, np.ndarray]] = {}
     for name in parts[0][0]:
-        per[name] = {k: np.concatenate([parts[0][0][name][k]] +
-                                       [p[0][name][k][1:] for p in parts[1:]])
-                     for k in parts[0][0][name]}
+        per[name] = {
+            k: np.concatenate([parts[0][0][name][k]] + [p[0][name][k][1:] for p in parts[1:]])
+            for k in parts[0][0][name]
+        }
     settings = dict(parts[0][2])
     limit = float(settings["limit_V"])
     rows = {name: summarise(m, limit) for name, m in per.items()}
-    settings.update(n_plants=len(plants), seed=int(getattr(plants, "seed", 0)),
-                    chunks=len(bounds), chunk=o.chunk,
-                    plants={**getattr(plants, "info", {}), "n": len(plants),
-                            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants"},
-                    band_plants="the first chunk's plants")
+    settings.update(
+        n_plants=len(plants),
+        seed=int(getattr(plants, "seed", 0)),
+        chunks=len(bounds),
+        chunk=o.chunk,
+        plants={
+            **getattr(plants, "info", {}),
+            "n": len(plants),
+            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants",
+        },
+        band_plants="the first chunk's plants",
+    )
     warn = list(dict.fromkeys(w for p in parts for w in p[3]))
     return Comparison(rows, per, parts[0][1], settings, warn)
 
@@ -591,8 +732,16 @@ class ChunkedTuneCost:
     w: Any
     names: Any
 
-    def __init__(self, scenario, plants, paths: Sequence[str], *, client=None,
-                 options: ChunkOptions | None = None, **kwargs):
+    def __init__(
+        self,
+        scenario,
+        plants,
+        paths: Sequence[str],
+        *,
+        client=None,
+        options: ChunkOptions | None = None,
+        **kwargs,
+    ):
         from flexarm.design.tune import TuneCost
 
         self.o = options or ChunkOptions()
@@ -621,14 +770,22 @@ class ChunkedTuneCost:
         t0 = _time.perf_counter()
         self.scenario(p)  # a spec the schema refuses raises here, on the client
         src = self.plants if len(self.plants) else _nominal_batch(self.plants)
-        parts = map_chunks(_tune_chunk, [(self.token, src, j, a, b, np.asarray(p, float))
-                                         for j, (a, b) in enumerate(self.bounds)],
-                           self.client, retries=self.o.retries, workers=self.o.workers,
-                           shared=dict(scenario=self.scenario_, paths=self.paths,
-                                       kwargs=self.kwargs))
+        parts = map_chunks(
+            _tune_chunk,
+            [
+                (self.token, src, j, a, b, np.asarray(p, float))
+                for j, (a, b) in enumerate(self.bounds)
+            ],
+            self.client,
+            retries=self.o.retries,
+            workers=self.o.workers,
+            shared=dict(scenario=self.scenario_, paths=self.paths, kwargs=self.kwargs),
+        )
         c = np.concatenate([parts[0][0]] + [q[0][1:] for q in parts[1:]])
-        m = {k: np.concatenate([parts[0][1][k]] + [q[1][k][1:] for q in parts[1:]])
-             for k in parts[0][1]}
+        m = {
+            k: np.concatenate([parts[0][1][k]] + [q[1][k][1:] for q in parts[1:]])
+            for k in parts[0][1]
+        }
         self.nfev += 1
         self.seconds += _time.perf_counter() - t0
         return float(np.quantile(c, self.quantile)), c, m
@@ -641,10 +798,27 @@ class ManifestError(FlexarmError, ValueError):
 
 
 #: the manifest's columns (module doc), in order
-COLUMNS = ("id", "preset", "scenario", "logs", "log_format", "window", "validate_window",
-           "sessions", "free", "drive", "gear_ratio", "motor_constant", "armature_resistance",
-           "link_length", "voltage_limit", "computation_delay", "tip_sign", "encoder_counts",
-           "options")
+COLUMNS = (
+    "id",
+    "preset",
+    "scenario",
+    "logs",
+    "log_format",
+    "window",
+    "validate_window",
+    "sessions",
+    "free",
+    "drive",
+    "gear_ratio",
+    "motor_constant",
+    "armature_resistance",
+    "link_length",
+    "voltage_limit",
+    "computation_delay",
+    "tip_sign",
+    "encoder_counts",
+    "options",
+)
 _FLOAT = ("gear_ratio", "motor_constant", "armature_resistance", "link_length", "voltage_limit")
 _INT = ("computation_delay", "tip_sign", "encoder_counts")
 PRESETS = ("servo_rig",)
@@ -677,8 +851,10 @@ def _window(text: str, where: str) -> tuple[float, float] | None:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        raise ManifestError(f"{where} = {text!r}: expected START:STOP in seconds from the "
-                            "log's first sample, e.g. 0:5") from None
+        raise ManifestError(
+            f"{where} = {text!r}: expected START:STOP in seconds from the "
+            "log's first sample, e.g. 0:5"
+        ) from None
     if not (b > a >= 0):
         raise ManifestError(f"{where} = {text!r}: need 0 <= START < STOP (s)")
     return a, b
@@ -711,19 +887,25 @@ def read_manifest(path: str | Path) -> list[FitRow]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ManifestError(f"{path}: cannot read the manifest ({exc.strerror}); give a "
-                            "CSV file with the columns of flexarm.distributed") from None
+        raise ManifestError(
+            f"{path}: cannot read the manifest ({exc.strerror}); give a "
+            "CSV file with the columns of flexarm.distributed"
+        ) from None
     base = path.resolve().parent
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
-        raise ManifestError(f"{path}: no header line; the first line names the columns, "
-                            f"e.g. {','.join(COLUMNS[:6])}")
+        raise ManifestError(
+            f"{path}: no header line; the first line names the columns, "
+            f"e.g. {','.join(COLUMNS[:6])}"
+        )
     reader = csv.DictReader(lines)
     head = [h.strip() for h in (reader.fieldnames or [])]
     unknown = [h for h in head if h not in COLUMNS]
     if unknown:
-        raise ManifestError(f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; the "
-                            f"columns are {', '.join(COLUMNS)}")
+        raise ManifestError(
+            f"{path}: unknown column(s) {', '.join(map(repr, unknown))}; the "
+            f"columns are {', '.join(COLUMNS)}"
+        )
     for need in ("id", "logs"):
         if need not in head:
             raise ManifestError(f"{path}: no column {need!r}; every manifest has id and logs")
@@ -732,31 +914,42 @@ def read_manifest(path: str | Path) -> list[FitRow]:
         r = {(k or "").strip(): (v or "").strip() for k, v in raw.items() if k is not None}
         rid = r.get("id", "")
         if not re.fullmatch(r"[A-Za-z0-9._-]+", rid or ""):
-            raise ManifestError(f"{_where(path, i, 'id')} = {rid!r}: give a folder name of "
-                                "letters, digits, '.', '_' or '-'")
+            raise ManifestError(
+                f"{_where(path, i, 'id')} = {rid!r}: give a folder name of "
+                "letters, digits, '.', '_' or '-'"
+            )
         if rid in seen:
-            raise ManifestError(f"{_where(path, i, 'id')} = {rid!r}: used by an earlier row; "
-                                "give each row its own id")
+            raise ManifestError(
+                f"{_where(path, i, 'id')} = {rid!r}: used by an earlier row; "
+                "give each row its own id"
+            )
         seen.add(rid)
         logs = tuple(_resolve(base, x.strip()) for x in r.get("logs", "").split(";") if x.strip())
         if not logs:
-            raise ManifestError(f"{_where(path, i, 'logs')} is empty: give the run's log "
-                                "files, ';'-separated")
+            raise ManifestError(
+                f"{_where(path, i, 'logs')} is empty: give the run's log files, ';'-separated"
+            )
         for lg in logs:
             if not Path(lg).is_file():
-                raise ManifestError(f"{_where(path, i, 'logs')}: {lg} is not a file; paths "
-                                    f"resolve against the manifest's folder {base}")
+                raise ManifestError(
+                    f"{_where(path, i, 'logs')}: {lg} is not a file; paths "
+                    f"resolve against the manifest's folder {base}"
+                )
         preset = r.get("preset") or None
         scen = r.get("scenario") or None
         if preset and scen:
-            raise ManifestError(f"{_where(path, i, 'preset')} = {preset!r} and scenario = "
-                                f"{scen!r}: give one (a preset, or a scenario for the general "
-                                "fit)")
+            raise ManifestError(
+                f"{_where(path, i, 'preset')} = {preset!r} and scenario = "
+                f"{scen!r}: give one (a preset, or a scenario for the general "
+                "fit)"
+            )
         if not preset and not scen:
             preset = "servo_rig"
         if preset and preset not in PRESETS:
-            raise ManifestError(f"{_where(path, i, 'preset')} = {preset!r}: choose "
-                                f"{', '.join(PRESETS)}, or give a scenario")
+            raise ManifestError(
+                f"{_where(path, i, 'preset')} = {preset!r}: choose "
+                f"{', '.join(PRESETS)}, or give a scenario"
+            )
         if scen:
             from flexarm.specs.scenario import names_a_scenario
 
@@ -770,13 +963,17 @@ def read_manifest(path: str | Path) -> list[FitRow]:
             try:
                 sheet[k] = float(v) if k in _FLOAT else int(v) if k in _INT else v
             except ValueError:
-                raise ManifestError(f"{_where(path, i, k)} = {v!r}: expected a "
-                                    f"{'number' if k in _FLOAT else 'whole number'}") from None
+                raise ManifestError(
+                    f"{_where(path, i, k)} = {v!r}: expected a "
+                    f"{'number' if k in _FLOAT else 'whole number'}"
+                ) from None
         opts = {}
         for item in (x for x in r.get("options", "").split(";") if x.strip()):
             if "=" not in item:
-                raise ManifestError(f"{_where(path, i, 'options')}: {item!r} is not "
-                                    "key=value; e.g. seed=0;popsize=8")
+                raise ManifestError(
+                    f"{_where(path, i, 'options')}: {item!r} is not "
+                    "key=value; e.g. seed=0;popsize=8"
+                )
             k, v = item.split("=", 1)
             opts[k.strip()] = option_value(v)
         sess = None
@@ -784,21 +981,37 @@ def read_manifest(path: str | Path) -> list[FitRow]:
             try:
                 sess = tuple(int(x) for x in r["sessions"].split(";") if x.strip())
             except ValueError:
-                raise ManifestError(f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
-                                    "expected one whole number per log, e.g. 0;0;1") from None
+                raise ManifestError(
+                    f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
+                    "expected one whole number per log, e.g. 0;0;1"
+                ) from None
             if len(sess) != len(logs):
-                raise ManifestError(f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
-                                    f"{len(sess)} indices for {len(logs)} logs; give one per log")
+                raise ManifestError(
+                    f"{_where(path, i, 'sessions')} = {r['sessions']!r}: "
+                    f"{len(sess)} indices for {len(logs)} logs; give one per log"
+                )
         free = tuple(x.strip() for x in r.get("free", "").split(";") if x.strip()) or None
         fmt = _resolve(base, r["log_format"]) if r.get("log_format") else None
         if fmt and not Path(fmt).is_file():
-            raise ManifestError(f"{_where(path, i, 'log_format')}: {fmt} is not a file; paths "
-                                f"resolve against the manifest's folder {base}")
-        rows.append(FitRow(rid, logs, preset if not scen else None, scen, fmt,
-                           _window(r.get("window", ""), _where(path, i, "window")),
-                           _window(r.get("validate_window", ""),
-                                   _where(path, i, "validate_window")),
-                           sess, free, sheet, opts))
+            raise ManifestError(
+                f"{_where(path, i, 'log_format')}: {fmt} is not a file; paths "
+                f"resolve against the manifest's folder {base}"
+            )
+        rows.append(
+            FitRow(
+                rid,
+                logs,
+                preset if not scen else None,
+                scen,
+                fmt,
+                _window(r.get("window", ""), _where(path, i, "window")),
+                _window(r.get("validate_window", ""), _where(path, i, "validate_window")),
+                sess,
+                free,
+                sheet,
+                opts,
+            )
+        )
     return rows
 
 
@@ -819,8 +1032,10 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
             extra["window_s"] = list(row.window)
         if row.validate_window:
             held = predict(res, [g.window(*row.validate_window) for g in full])
-            extra["held_out"] = {"window_s": list(row.validate_window),
-                                 "fit_percent": held["fit_percent"]}
+            extra["held_out"] = {
+                "window_s": list(row.validate_window),
+                "fit_percent": held["fit_percent"],
+            }
         return res, extra
     from flexarm.identification.time_domain import FitOptions, fit_scenario
     from flexarm.io.logformat import load_log
@@ -828,10 +1043,10 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
 
     assert row.scenario is not None  # a row without a preset names its scenario (read_manifest)
     logs = [load_log(p, row.log_format) for p in row.logs]
-    opts = FitOptions(windows=[row.window] * len(logs) if row.window else None,
-                      **row.options)
-    res = fit_scenario(load_scenario(row.scenario), logs, list(row.free) if row.free else None,
-                       opts)
+    opts = FitOptions(windows=[row.window] * len(logs) if row.window else None, **row.options)
+    res = fit_scenario(
+        load_scenario(row.scenario), logs, list(row.free) if row.free else None, opts
+    )
     return res, extra
 
 
@@ -853,8 +1068,9 @@ def finished(directory: str | Path) -> dict | None:
         d = json.loads(p.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    return d if isinstance(d, dict) and d.get("flexarm_fit_many", {}).get("status") == "done" \
-        else None
+    return (
+        d if isinstance(d, dict) and d.get("flexarm_fit_many", {}).get("status") == "done" else None
+    )
 
 
 def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None) -> dict:
@@ -870,8 +1086,12 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
     except Exception as exc:  # noqa: BLE001 - a failing row is reported, others go on
         msg = _first_line(exc)
         (folder / "error.txt").write_text(msg + "\n", encoding="utf-8")
-        return {"id": row.id, "status": "failed", "seconds": _time.perf_counter() - t0,
-                "error": msg}
+        return {
+            "id": row.id,
+            "status": "failed",
+            "seconds": _time.perf_counter() - t0,
+            "error": msg,
+        }
     # the fit stands even where its scenario or figures cannot be written (e.g. a rigid
     # arm's servo-rig fit has no link for the scenario): a warning says so
     notes = []
@@ -886,8 +1106,13 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
             notes.append(f"figures not written: {_first_line(exc)}")
     d["warnings"] = list(d.get("warnings") or []) + notes
     seconds = _time.perf_counter() - t0
-    d["flexarm_fit_many"] = {"status": "done", "row": dataclasses.asdict(row),
-                             "seconds": seconds, "host": os.uname().nodename, "pid": os.getpid()}
+    d["flexarm_fit_many"] = {
+        "status": "done",
+        "row": dataclasses.asdict(row),
+        "seconds": seconds,
+        "host": os.uname().nodename,
+        "pid": os.getpid(),
+    }
     tmp = folder / "fit.json.part"
     write_json(tmp, d, overwrite=True)
     os.replace(tmp, folder / "fit.json")  # atomic: fit.json present = row finished
@@ -901,19 +1126,24 @@ def _first_line(exc: BaseException) -> str:
 
 def summary_record(rid: str, d: dict, status: str = "done") -> dict:
     """One summary line from a fit's JSON (the servo-rig fit's or the general fit's)."""
-    rec: dict[str, Any] = {"id": rid, "status": status,
-                           "seconds": d.get("flexarm_fit_many", {}).get("seconds",
-                                                                        d.get("seconds")),
-                           "error": "", "n_warnings": len(d.get("warnings", [])),
-                           "warnings": " | ".join(d.get("warnings", []))}
+    rec: dict[str, Any] = {
+        "id": rid,
+        "status": status,
+        "seconds": d.get("flexarm_fit_many", {}).get("seconds", d.get("seconds")),
+        "error": "",
+        "n_warnings": len(d.get("warnings", [])),
+        "warnings": " | ".join(d.get("warnings", [])),
+    }
     if "parameters" in d:  # the servo-rig fit
         for k, p in d["parameters"].items():
             rec[k], rec[f"{k}_std"] = p.get("value"), p.get("std")
     else:
         for k, v in d.get("params", {}).items():
             rec[k], rec[f"{k}_std"] = v, d.get("std", {}).get(k)
-    for tag, fp in (("fit%", d.get("fit_percent", {})),
-                    ("held-out%", d.get("held_out", {}).get("fit_percent", {}))):
+    for tag, fp in (
+        ("fit%", d.get("fit_percent", {})),
+        ("held-out%", d.get("held_out", {}).get("fit_percent", {})),
+    ):
         for log, sig in (fp or {}).items():
             for s, v in (sig or {}).items():
                 rec[f"{tag}:{Path(log).name}:{s}"] = v
@@ -942,9 +1172,14 @@ def _cell(v):
     return "" if v is None else v
 
 
-def fit_many(rows: Sequence[FitRow] | str | Path, client=None, out: str | Path = "fits", *,
-             options: FitManyOptions | None = None,
-             progress: Callable[[dict], None] | None = None) -> list[dict]:
+def fit_many(
+    rows: Sequence[FitRow] | str | Path,
+    client=None,
+    out: str | Path = "fits",
+    *,
+    options: FitManyOptions | None = None,
+    progress: Callable[[dict], None] | None = None,
+) -> list[dict]:
     """Fit every row (a manifest path or :func:`read_manifest`'s rows), each fit a task on
     ``client``'s workers (None: one after the other in-process); finished rows (their
     ``fit.json`` there and valid) are skipped, failed ones run again. Writes
@@ -980,15 +1215,29 @@ def fit_many(rows: Sequence[FitRow] | str | Path, client=None, out: str | Path =
     else:
         from distributed import as_completed
 
-        futs = {client.submit(_run_fit_task, r, str(out), figures=o.figures, fit=o.fit,
-                              pure=False, retries=o.retries,
-                              key=f"fit-{r.id}-{_time.time_ns()}"): r for r in todo}
+        futs = {
+            client.submit(
+                _run_fit_task,
+                r,
+                str(out),
+                figures=o.figures,
+                fit=o.fit,
+                pure=False,
+                retries=o.retries,
+                key=f"fit-{r.id}-{_time.time_ns()}",
+            ): r
+            for r in todo
+        }
         with client.as_current():  # as_completed looks for the current client
             for fut in as_completed(futs):
                 try:
                     rec = fut.result()
                 except Exception as exc:  # noqa: BLE001 - the task failed (e.g. killed 3 times)
-                    rec = {"id": futs[fut].id, "status": "failed", "seconds": None,
-                           "error": _first_line(exc)}
+                    rec = {
+                        "id": futs[fut].id,
+                        "status": "failed",
+                        "seconds": None,
+                        "error": _first_line(exc),
+                    }
                 done(rec)
     return [recs[i] for i in order]

@@ -22,9 +22,17 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FlexarmError", "SimulationDiverged", "OutputExistsError", "InputOverwriteError",
-           "FitInterrupted", "Interrupted", "UnstableDesignError", "one_line",
-           "internal_error_report"]
+__all__ = [
+    "FlexarmError",
+    "SimulationDiverged",
+    "OutputExistsError",
+    "InputOverwriteError",
+    "FitInterrupted",
+    "Interrupted",
+    "UnstableDesignError",
+    "one_line",
+    "internal_error_report",
+]
 
 
 class FlexarmError(Exception):
@@ -36,8 +44,14 @@ class FlexarmError(Exception):
     ``<file>: <field> = <value>: <message>; <fix>``, each part only where given and not
     already in the message; :func:`one_line` puts a message of several lines on one."""
 
-    def __init__(self, *args: Any, file: str | os.PathLike | None = None,
-                 field: str | None = None, value: Any = None, fix: str | None = None):
+    def __init__(
+        self,
+        *args: Any,
+        file: str | os.PathLike | None = None,
+        field: str | None = None,
+        value: Any = None,
+        fix: str | None = None,
+    ):
         super().__init__(*args)
         self.file = None if file is None else str(file)
         self.field = field
@@ -106,8 +120,11 @@ def _compose(exc: FlexarmError, msg: str) -> str:
     if exc.file and not _shown(msg, exc.file):
         head.append(exc.file)
     if exc.field and not _shown(msg, exc.field):
-        head.append(exc.field if exc.value is None or _shown(msg, exc.value)
-                    else f"{exc.field} = {exc.value!r}")
+        head.append(
+            exc.field
+            if exc.value is None or _shown(msg, exc.value)
+            else f"{exc.field} = {exc.value!r}"
+        )
     elif exc.value is not None and not _shown(msg, exc.value):
         head.append(f"got {exc.value!r}")
     text = ": ".join([*head, msg]) if msg else ": ".join(head)
@@ -127,8 +144,11 @@ def one_line(exc: BaseException, log: str | os.PathLike | None = None) -> str:
     msg = "; ".join(s.strip() for s in str(exc).splitlines() if s.strip())
     if isinstance(exc, FlexarmError):
         return msg or type(exc).__name__
-    text = f"internal error: {type(exc).__name__}: {msg}" if msg else \
-        f"internal error: {type(exc).__name__}"
+    text = (
+        f"internal error: {type(exc).__name__}: {msg}"
+        if msg
+        else f"internal error: {type(exc).__name__}"
+    )
     if log is not None:
         text += f" (traceback in {log})"
     return text
@@ -146,10 +166,13 @@ def internal_error_report(exc: BaseException, folder: str | os.PathLike) -> Path
         ver = version("flexarm")
     except Exception:  # noqa: BLE001 - a report must not fail on a missing distribution
         ver = "unknown"
-    text = "".join([
-        f"flexarm {ver}, Python {sys.version.split()[0]}, {stamp}\n",
-        "command: " + " ".join(sys.argv) + "\n\n",
-        *traceback.format_exception(type(exc), exc, exc.__traceback__)])
+    text = "".join(
+        [
+            f"flexarm {ver}, Python {sys.version.split()[0]}, {stamp}\n",
+            "command: " + " ".join(sys.argv) + "\n\n",
+            *traceback.format_exception(type(exc), exc, exc.__traceback__),
+        ]
+    )
     import tempfile
 
     for base in (Path(folder), Path(tempfile.gettempdir())):

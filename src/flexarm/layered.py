@@ -43,8 +43,17 @@ import jax.numpy as jnp
 
 from flexarm import fastmath
 
-_WEIGHT = {"add": 1, "sub": 1, "mul": 1, "neg": 1,
-           "div": 8, "sqrt": 8, "rsqrt": 8, "sin": 16, "cos": 16}
+_WEIGHT = {
+    "add": 1,
+    "sub": 1,
+    "mul": 1,
+    "neg": 1,
+    "div": 8,
+    "sqrt": 8,
+    "rsqrt": 8,
+    "sin": 16,
+    "cos": 16,
+}
 _EXPENSIVE = frozenset({"div", "sqrt", "rsqrt", "sin", "cos"})
 _COMMUTATIVE = frozenset({"add", "mul"})
 
@@ -102,6 +111,7 @@ def _unary_fn(op: str, pyfn: Callable, jfn: Callable):
         if _is_num(a):
             return float(pyfn(a))
         return jfn(a)
+
     f.__name__ = op
     f.__doc__ = f"{op}(a) for a Sym, a Python number or a JAX value."
     return f
@@ -119,8 +129,8 @@ class Program:
     def __init__(self):
         self.ops: list[str] = []
         self.args: list[tuple] = []
-        self.keys: dict[int, Hashable] = {}   # leaf id -> key
-        self.const: dict[int, float] = {}     # const id -> value
+        self.keys: dict[int, Hashable] = {}  # leaf id -> key
+        self.const: dict[int, float] = {}  # const id -> value
         self._memo: dict[tuple, int] = {}
 
     # ------------------------------------------------------------ building
@@ -149,13 +159,20 @@ class Program:
             i = self._new("const", (), ("const", v))
             self.const[i] = v
             return i
-        raise TypeError(f"a symbolic program cannot take a {type(a).__name__} operand; "
-                        "only Sym and Python numbers")
+        raise TypeError(
+            f"a symbolic program cannot take a {type(a).__name__} operand; "
+            "only Sym and Python numbers"
+        )
 
     def unary(self, op: str, a):
         if _is_num(a):
-            return {"neg": lambda v: -v, "sin": math.sin, "cos": math.cos, "sqrt": math.sqrt,
-                    "rsqrt": lambda v: 1.0 / math.sqrt(v)}[op](float(a))
+            return {
+                "neg": lambda v: -v,
+                "sin": math.sin,
+                "cos": math.cos,
+                "sqrt": math.sqrt,
+                "rsqrt": lambda v: 1.0 / math.sqrt(v),
+            }[op](float(a))
         ia = self._id(a)
         if op == "neg" and self.ops[ia] == "neg":
             return Sym(self, self.args[ia][0])
@@ -243,8 +260,15 @@ class Program:
         return max(layer.values(), default=0)
 
     # ------------------------------------------------------------ emission
-    def emit(self, outputs: Sequence, values: Callable[[Hashable], object], *,
-             share: int = 2, max_tree: int = 400, barrier: bool = True) -> jax.Array:
+    def emit(
+        self,
+        outputs: Sequence,
+        values: Callable[[Hashable], object],
+        *,
+        share: int = 2,
+        max_tree: int = 400,
+        barrier: bool = True,
+    ) -> jax.Array:
         """The outputs as one JAX array of shape (len(outputs), *batch).
 
         ``values(key)`` gives the JAX value of each leaf (called once per leaf): scalars, or
@@ -295,7 +319,7 @@ class Program:
             else:
                 outs.append(float(o))
         vec, depth = _stack(outs)
-        return _flat(vec, depth)[:len(outs)]
+        return _flat(vec, depth)[: len(outs)]
 
 
 _FAN = 8  # XLA on CPU fuses a concatenate of at most 8 operands
@@ -315,7 +339,7 @@ def _stack(vals: list):
             return jnp.stack(rows), depth
         pad = jnp.zeros_like(rows[0])
         rows = rows + [pad] * (-len(rows) % _FAN)
-        rows = [jnp.stack(rows[k:k + _FAN]) for k in range(0, len(rows), _FAN)]
+        rows = [jnp.stack(rows[k : k + _FAN]) for k in range(0, len(rows), _FAN)]
         depth += 1
 
 
@@ -368,8 +392,10 @@ def _adjugate(P: list) -> tuple[list, Any]:
         (p00, p01, p02), (_, p11, p12), (_, _, p22) = P
         c00, c01, c02 = p11 * p22 - p12 * p12, p02 * p12 - p01 * p22, p01 * p12 - p02 * p11
         c11, c12, c22 = p00 * p22 - p02 * p02, p01 * p02 - p00 * p12, p00 * p11 - p01 * p01
-        return ([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]],
-                p00 * c00 + p01 * c01 + p02 * c02)
+        return (
+            [[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]],
+            p00 * c00 + p01 * c01 + p02 * c02,
+        )
     raise ValueError(f"block size {b} not in 1..3")
 
 
@@ -406,7 +432,7 @@ def solve_spd(A: Sequence[Sequence], b: Sequence, block: int = 3) -> list:
         adj, det = _adjugate([[S[i][j] for j in K] for i in K])
         r = 1.0 / det
         inv_parts.append((adj, r))
-        rest = [i for blk in blocks[kb + 1:] for i in blk]
+        rest = [i for blk in blocks[kb + 1 :] for i in blk]
         # G = adj(S_KK) S_K,rest and g = adj(S_KK) f_K (shared by every update below)
         G = {j: _matvec(adj, [S[i][j] for i in K]) for j in rest}
         g = _matvec(adj, [f[i] for i in K])
@@ -425,7 +451,7 @@ def solve_spd(A: Sequence[Sequence], b: Sequence, block: int = 3) -> list:
     for kb in reversed(range(len(blocks))):
         K = blocks[kb]
         adj, r = inv_parts[kb]
-        later = [j for blk in blocks[kb + 1:] for j in blk]
+        later = [j for blk in blocks[kb + 1 :] for j in blk]
         rhs = []
         for i in K:
             t = f[i]

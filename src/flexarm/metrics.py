@@ -25,8 +25,15 @@ class StepMetrics:
         return asdict(self)
 
 
-def step_metrics(t: np.ndarray, y: np.ndarray, reference: np.ndarray, *, band: float = 0.02,
-                 target: float | None = None, t_step: float | None = None) -> StepMetrics:
+def step_metrics(
+    t: np.ndarray,
+    y: np.ndarray,
+    reference: np.ndarray,
+    *,
+    band: float = 0.02,
+    target: float | None = None,
+    t_step: float | None = None,
+) -> StepMetrics:
     """Metrics of a response ``y`` to a step in ``reference`` (both sampled at ``t``)."""
     t, y, r = (np.asarray(a, float) for a in (t, y, reference))
     if t_step is None:
@@ -47,8 +54,7 @@ def step_metrics(t: np.ndarray, y: np.ndarray, reference: np.ndarray, *, band: f
     else:
         ts = float(t[outside[-1] + 1] - t_step)
     over = float(np.max((y[after] - goal) * np.sign(step)) / abs(step)) if step else 0.0
-    return StepMetrics(step, final, goal - final, ts, max(over, 0.0),
-                       float(np.max(np.abs(y - y0))))
+    return StepMetrics(step, final, goal - final, ts, max(over, 0.0), float(np.max(np.abs(y - y0))))
 
 
 def ripple(t: np.ndarray, y: np.ndarray, *, after: float, goal: float) -> float:

@@ -54,8 +54,7 @@ def to_si(value: object, unit: str, *, field: str = "value") -> float:
             q = ureg.Quantity(text)
         except Exception as exc:  # pint raises several exception types
             raise UnitError(
-                f"{field}: cannot read {value!r} as a quantity ({exc}); "
-                f"write e.g. '1.5 {unit}'"
+                f"{field}: cannot read {value!r} as a quantity ({exc}); write e.g. '1.5 {unit}'"
             ) from None
         target = ureg.Quantity(1.0, unit)
         if not isinstance(q, pint.Quantity):

@@ -40,8 +40,15 @@ from typing import Any
 
 from flexarm.io.write import write_text
 
-__all__ = ["HtmlReport", "fit_report", "validate_report", "design_report", "figure_data_uri",
-           "LOW_FIT_PERCENT", "POOR_RELATIVE_STD"]
+__all__ = [
+    "HtmlReport",
+    "fit_report",
+    "validate_report",
+    "design_report",
+    "figure_data_uri",
+    "LOW_FIT_PERCENT",
+    "POOR_RELATIVE_STD",
+]
 
 #: fit % below this is marked (the bench fit warns below it: report.FitResult.build)
 LOW_FIT_PERCENT = 80.0
@@ -79,16 +86,20 @@ def figure_data_uri(fig: Any) -> str:
             raise FileNotFoundError(f"report figure {p}: no such file")
         mime = {".png": "image/png", ".svg": "image/svg+xml"}.get(p.suffix.lower())
         if mime is None:
-            raise ValueError(f"report figure {p}: a {p.suffix or 'suffix-less'} file cannot be "
-                             "embedded; give a .png or .svg figure (or a matplotlib Figure)")
+            raise ValueError(
+                f"report figure {p}: a {p.suffix or 'suffix-less'} file cannot be "
+                "embedded; give a .png or .svg figure (or a matplotlib Figure)"
+            )
         data = p.read_bytes()
     elif hasattr(fig, "savefig"):
         buf = io.BytesIO()
         fig.savefig(buf, format="png")
         data, mime = buf.getvalue(), "image/png"
     else:
-        raise TypeError(f"report figure: cannot embed a {type(fig).__name__}; give a "
-                        "matplotlib Figure, a .png/.svg path or PNG bytes")
+        raise TypeError(
+            f"report figure: cannot embed a {type(fig).__name__}; give a "
+            "matplotlib Figure, a .png/.svg path or PNG bytes"
+        )
     return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
 
 
@@ -128,15 +139,23 @@ class HtmlReport:
         self.parts.append(f"<pre>{_e(text)}</pre>" if pre else f"<p>{_e(text)}</p>")
         return self
 
-    def table(self, header: Sequence[str], rows: Iterable[Sequence[Any]], *,
-              low: Iterable[tuple[int, int]] = (),
-              formats: Mapping[int, str] | None = None) -> HtmlReport:
+    def table(
+        self,
+        header: Sequence[str],
+        rows: Iterable[Sequence[Any]],
+        *,
+        low: Iterable[tuple[int, int]] = (),
+        formats: Mapping[int, str] | None = None,
+    ) -> HtmlReport:
         """A table; numbers (int/float, None as –) right-aligned, with 5 significant digits
         or ``formats[column]``; ``low``: (row, column) cells to mark."""
         low = set(low)
         formats = formats or {}
-        out = ["<table><thead><tr>" + "".join(f"<th>{_e(h)}</th>" for h in header)
-               + "</tr></thead><tbody>"]
+        out = [
+            "<table><thead><tr>"
+            + "".join(f"<th>{_e(h)}</th>" for h in header)
+            + "</tr></thead><tbody>"
+        ]
         for i, row in enumerate(rows):
             cells = []
             for j, v in enumerate(row):
@@ -151,8 +170,9 @@ class HtmlReport:
         self.parts.append("".join(out))
         return self
 
-    def parameters(self, rows: Iterable[tuple[str, float, float | None, str]], *,
-                   std_label: str = "std") -> HtmlReport:
+    def parameters(
+        self, rows: Iterable[tuple[str, float, float | None, str]], *, std_label: str = "std"
+    ) -> HtmlReport:
         """(name, value, std, unit) rows as value ± std (2 significant digits), unit,
         relative std 100 σ/|value| %; a relative std over :data:`POOR_RELATIVE_STD` %
         (a parameter the data hardly determine) is marked."""
@@ -163,11 +183,16 @@ class HtmlReport:
             if rel is not None and rel > POOR_RELATIVE_STD:
                 low.append((i, 4))
             body.append((name, float(v), sf if math.isfinite(sf) else None, unit or "", rel))
-        return self.table(("parameter", "value", f"± {std_label}", "unit", "relative std [%]"),
-                          body, low=low, formats={2: ".2g", 4: ".3g"})
+        return self.table(
+            ("parameter", "value", f"± {std_label}", "unit", "relative std [%]"),
+            body,
+            low=low,
+            formats={2: ".2g", 4: ".3g"},
+        )
 
-    def fit_percent(self, fp: Mapping[str, Mapping[str, float | None]],
-                    title: str | None = None) -> HtmlReport:
+    def fit_percent(
+        self, fp: Mapping[str, Mapping[str, float | None]], title: str | None = None
+    ) -> HtmlReport:
         """fit % per log (rows) and signal (columns); values under :data:`LOW_FIT_PERCENT`
         marked."""
         if title:
@@ -182,20 +207,30 @@ class HtmlReport:
                 if v is not None and float(v) < LOW_FIT_PERCENT:
                     low.append((i, j))
             rows.append(row)
-        self.table(["log"] + [f"{s} fit [%]" for s in signals], rows, low=low,
-                   formats={j: ".1f" for j in range(1, len(signals) + 1)})
+        self.table(
+            ["log"] + [f"{s} fit [%]" for s in signals],
+            rows,
+            low=low,
+            formats={j: ".1f" for j in range(1, len(signals) + 1)},
+        )
         return self
 
     def figures(self, figs: Iterable[Any], captions: Sequence[str] | None = None) -> HtmlReport:
         """Embed figures (see :func:`figure_data_uri`); a path's caption is its file name."""
         figs = list(figs)
         for k, f in enumerate(figs):
-            cap = (captions[k] if captions is not None and k < len(captions) else
-                   Path(f).name if isinstance(f, (str, Path)) else f"figure {self.n_figures + 1}")
+            cap = (
+                captions[k]
+                if captions is not None and k < len(captions)
+                else Path(f).name
+                if isinstance(f, (str, Path))
+                else f"figure {self.n_figures + 1}"
+            )
             self.n_figures += 1
             self.parts.append(
                 f'<figure><img src="{figure_data_uri(f)}" alt="{_e(cap)}" '
-                f'id="figure-{self.n_figures}"><figcaption>{_e(cap)}</figcaption></figure>')
+                f'id="figure-{self.n_figures}"><figcaption>{_e(cap)}</figcaption></figure>'
+            )
         return self
 
     # ------------------------------------------------------------------ output
@@ -203,23 +238,36 @@ class HtmlReport:
         from flexarm.version import __version__
 
         now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
-        meta = [("command", f"<code>{_e(self.command)}</code>" if self.command else
-                 "(not run from the command line)"),
-                ("flexarm", _e(__version__)), ("written", _e(now))]
+        meta = [
+            (
+                "command",
+                f"<code>{_e(self.command)}</code>"
+                if self.command
+                else "(not run from the command line)",
+            ),
+            ("flexarm", _e(__version__)),
+            ("written", _e(now)),
+        ]
         if self.inputs:
             meta.append(("inputs", "<br>".join(_input(p) for p in self.inputs)))
         head = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in meta)
         if self.warnings:
-            warn = ('<div class="warnings" id="warnings"><h2>Warnings</h2><ul>'
-                    + "".join(f"<li>{_e(w)}</li>" for w in self.warnings) + "</ul></div>")
+            warn = (
+                '<div class="warnings" id="warnings"><h2>Warnings</h2><ul>'
+                + "".join(f"<li>{_e(w)}</li>" for w in self.warnings)
+                + "</ul></div>"
+            )
         else:
             warn = '<p class="ok" id="warnings">No warnings.</p>'
-        return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-                "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-                f"<meta name=\"generator\" content=\"flexarm {_e(__version__)}\">"
-                f"<title>{_e(self.title)}</title><style>{_CSS}</style></head><body>\n"
-                f"<h1>{_e(self.title)}</h1>\n<table class=\"meta\">{head}</table>\n{warn}\n"
-                + "\n".join(self.parts) + "\n</body></html>\n")
+        return (
+            '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            '<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<meta name="generator" content="flexarm {_e(__version__)}">'
+            f"<title>{_e(self.title)}</title><style>{_CSS}</style></head><body>\n"
+            f'<h1>{_e(self.title)}</h1>\n<table class="meta">{head}</table>\n{warn}\n'
+            + "\n".join(self.parts)
+            + "\n</body></html>\n"
+        )
 
     def write(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """Write the page to ``path`` (atomically; an existing file only with ``overwrite``)."""
@@ -234,10 +282,15 @@ def _input(p: str | Path) -> str:
 
 
 # ---------------------------------------------------------------------- fit / validate
-def fit_report(result: Any, *, figures: Iterable[Any] = (), command: str | None = None,
-               inputs: Sequence[str | Path] | None = None,
-               fit_percent: Mapping[str, Mapping] | None = None,
-               extra_fit_percent: Mapping[str, Mapping] | None = None) -> HtmlReport:
+def fit_report(
+    result: Any,
+    *,
+    figures: Iterable[Any] = (),
+    command: str | None = None,
+    inputs: Sequence[str | Path] | None = None,
+    fit_percent: Mapping[str, Mapping] | None = None,
+    extra_fit_percent: Mapping[str, Mapping] | None = None,
+) -> HtmlReport:
     """The report of a time-domain fit: a bench fit
     (:class:`~flexarm.identification.time_domain.report.FitResult`: parameters ± HAC std
     with units, derived values, sensor delays, fit % per log and signal, status and
@@ -247,39 +300,65 @@ def fit_report(result: Any, *, figures: Iterable[Any] = (), command: str | None 
     whole-log prediction when it was made separately); ``extra_fit_percent``: further fit %
     tables by title (held-out windows, the fit without friction)."""
     if hasattr(result, "free"):  # ScenarioFit
-        rep = HtmlReport(f"flexarm fit: {result.scenario.name}", command,
-                         list(inputs or ()), list(result.warnings))
+        rep = HtmlReport(
+            f"flexarm fit: {result.scenario.name}",
+            command,
+            list(inputs or ()),
+            list(result.warnings),
+        )
         if not result.converged:
             m = result.message
-            rep.warnings.insert(0, m if m.upper().startswith("NOT CONVERGED")
-                                else f"not converged: {m}")
+            rep.warnings.insert(
+                0, m if m.upper().startswith("NOT CONVERGED") else f"not converged: {m}"
+            )
         rep.heading("Status").text(result.message)
         rep.heading("Fitted parameters (SI units of the scenario)")
-        rep.table(("parameter", "template", "fitted", "± std", "relative std [%]"),
-                  [(p, result.template[p], result.params[p], result.std.get(p),
-                    _rel(result.params[p], result.std.get(p))) for p in result.free],
-                  formats={3: ".2g", 4: ".3g"})
+        rep.table(
+            ("parameter", "template", "fitted", "± std", "relative std [%]"),
+            [
+                (
+                    p,
+                    result.template[p],
+                    result.params[p],
+                    result.std.get(p),
+                    _rel(result.params[p], result.std.get(p)),
+                )
+                for p in result.free
+            ],
+            formats={3: ".2g", 4: ".3g"},
+        )
         fp = fit_percent or result.prediction.get("fit_percent") or result.fit_percent
         rep.fit_percent(fp, "Fit % (whole-log prediction)")
     else:  # the bench FitResult
         from flexarm.identification.time_domain.params import UNITS
 
         logs = [getattr(g, "path", None) or g.name for g in result.logs]
-        rep = HtmlReport("flexarm fit: " + ", ".join(Path(str(n)).name for n in logs),
-                         command, list(inputs if inputs is not None else logs),
-                         list(result.warnings))
+        rep = HtmlReport(
+            "flexarm fit: " + ", ".join(Path(str(n)).name for n in logs),
+            command,
+            list(inputs if inputs is not None else logs),
+            list(result.warnings),
+        )
         if not result.converged:
             rep.warnings.insert(0, result.message)
         st = result.settings
         rep.heading("Status").text(
             f"{result.message}. Mode {st.get('mode')}, joint friction "
-            f"{'on' if st.get('friction') else 'off'}, {result.seconds:.1f} s.")
+            f"{'on' if st.get('friction') else 'off'}, {result.seconds:.1f} s."
+        )
         rep.heading("Fitted parameters")
-        rep.parameters(((k, v, result.std.get(k), UNITS.get(k.split("[")[0], ""))
-                        for k, v in result.params.items()), std_label="std (HAC)")
-        rep.text("std: Newey–West (HAC) sandwich standard deviations (the residuals are "
-                 "autocorrelated); a local linearisation that ignores the jumps of "
-                 "stick-slip and any bias of the model structure.")
+        rep.parameters(
+            (
+                (k, v, result.std.get(k), UNITS.get(k.split("[")[0], ""))
+                for k, v in result.params.items()
+            ),
+            std_label="std (HAC)",
+        )
+        rep.text(
+            "std: Newey–West (HAC) sandwich standard deviations (the residuals are "
+            "autocorrelated); a local linearisation that ignores the jumps of "
+            "stick-slip and any bias of the model structure."
+        )
         if result.derived:
             rep.heading("Derived values")
             rep.table(("quantity", "value [SI]"), list(result.derived.items()))
@@ -295,29 +374,47 @@ def fit_report(result: Any, *, figures: Iterable[Any] = (), command: str | None 
     return rep
 
 
-def validate_report(result: Mapping[str, Any], *, scenario: str | None = None,
-                    figures: Iterable[Any] = (), command: str | None = None,
-                    inputs: Sequence[str | Path] = ()) -> HtmlReport:
+def validate_report(
+    result: Mapping[str, Any],
+    *,
+    scenario: str | None = None,
+    figures: Iterable[Any] = (),
+    command: str | None = None,
+    inputs: Sequence[str | Path] = (),
+) -> HtmlReport:
     """The report of a validation (the dict of :func:`flexarm.identification.validate`
     or of the CLI's general path): fit % per log and signal of the scenario as given and,
     after a friction refit, the refitted friction ± std and the fit % again."""
     name = scenario or result.get("scenario") or "scenario"
-    rep = HtmlReport(f"flexarm validate: {Path(str(name)).name}", command, list(inputs),
-                     list(result.get("warnings", [])))
+    rep = HtmlReport(
+        f"flexarm validate: {Path(str(name)).name}",
+        command,
+        list(inputs),
+        list(result.get("warnings", [])),
+    )
     rep.fit_percent(result["fit_percent"], "Fit % per log and signal (parameters fixed)")
-    low = [f"{Path(str(log)).name}: fit {v:.1f} % on {s} is low"
-           for log, d in result["fit_percent"].items() for s, v in d.items()
-           if v is not None and v < LOW_FIT_PERCENT]
+    low = [
+        f"{Path(str(log)).name}: fit {v:.1f} % on {s} is low"
+        for log, d in result["fit_percent"].items()
+        for s, v in d.items()
+        if v is not None and v < LOW_FIT_PERCENT
+    ]
     rep.warnings += low
     refit = result.get("refit")
     if refit:
         rep.warnings += list(refit.get("warnings", []))
-        rep.heading(f"Friction refitted on {refit.get('window_s')} s of "
-                    f"{Path(str(refit.get('log', ''))).name}")
-        rep.table(("parameter", "scenario", "refitted", "± std", "relative std [%]"),
-                  [(p, refit["template"][p], v, refit["std"].get(p),
-                    _rel(v, refit["std"].get(p))) for p, v in refit["params"].items()],
-                  formats={3: ".2g", 4: ".3g"})
+        rep.heading(
+            f"Friction refitted on {refit.get('window_s')} s of "
+            f"{Path(str(refit.get('log', ''))).name}"
+        )
+        rep.table(
+            ("parameter", "scenario", "refitted", "± std", "relative std [%]"),
+            [
+                (p, refit["template"][p], v, refit["std"].get(p), _rel(v, refit["std"].get(p)))
+                for p, v in refit["params"].items()
+            ],
+            formats={3: ".2g", 4: ".3g"},
+        )
         rep.fit_percent(refit["fit_percent"], "Fit % with the refitted friction")
     figs = list(figures)
     if figs:
@@ -335,9 +432,14 @@ def _rel(v: Any, s: Any) -> float | None:
 
 
 # ---------------------------------------------------------------------- design
-def design_report(design: Any, *, figures: Iterable[Any] = (), command: str | None = None,
-                  inputs: Sequence[str | Path] = (),
-                  comparison: Any = None) -> HtmlReport:
+def design_report(
+    design: Any,
+    *,
+    figures: Iterable[Any] = (),
+    command: str | None = None,
+    inputs: Sequence[str | Path] = (),
+    comparison: Any = None,
+) -> HtmlReport:
     """The report of a controller design (:class:`flexarm.design.result.Design`): method,
     the rig's scenario, the designed ``[controller]`` table, the linear part (poles of
     its state matrix, or the transfer function), the method's figures in ``design.info``
@@ -349,8 +451,12 @@ def design_report(design: Any, *, figures: Iterable[Any] = (), command: str | No
     import json
 
     sc = design.scenario
-    rep = HtmlReport(f"flexarm design --method {design.method}: {sc.name}", command,
-                     list(inputs), list(design.warnings))
+    rep = HtmlReport(
+        f"flexarm design --method {design.method}: {sc.name}",
+        command,
+        list(inputs),
+        list(design.warnings),
+    )
     rep.heading("Designed controller")
     ctrl = sc.model_dump(mode="json", exclude_none=True).get("controller", {})
     rep.table(("field", "value"), [(k, _short(v)) for k, v in _flatten(ctrl)])
@@ -360,12 +466,20 @@ def design_report(design: Any, *, figures: Iterable[Any] = (), command: str | No
         rep.text(_lti_text(lin), pre=True)
     if design.info:
         rep.heading("Design figures")
-        scalars = [(k, v) for k, v in _flatten(design.info) if not isinstance(v, (dict, list))
-                   or (isinstance(v, list) and len(v) <= 8
-                       and all(not isinstance(x, (dict, list)) for x in v))]
+        scalars = [
+            (k, v)
+            for k, v in _flatten(design.info)
+            if not isinstance(v, (dict, list))
+            or (
+                isinstance(v, list)
+                and len(v) <= 8
+                and all(not isinstance(x, (dict, list)) for x in v)
+            )
+        ]
         rep.table(("quantity", "value"), [(k, _short(v)) for k, v in scalars])
-        rest = {k: v for k, v in design.info.items()
-                if k not in {s.split(".")[0] for s, _ in scalars}}
+        rest = {
+            k: v for k, v in design.info.items() if k not in {s.split(".")[0] for s, _ in scalars}
+        }
         if rest:
             rep.text(json.dumps(rest, indent=1, default=str)[:20000], pre=True)
     if comparison is not None:
@@ -428,8 +542,7 @@ def _lti_text(sys: Any) -> str:
         p = np.asarray(sys.poles())
         lines.append("poles: " + ", ".join(f"{z.real:.5g}{z.imag:+.5g}j" for z in p))
         if getattr(sys, "dt", None):
-            lines.append("|poles| (discrete; < 1 stable): "
-                         + ", ".join(f"{abs(z):.5g}" for z in p))
+            lines.append("|poles| (discrete; < 1 stable): " + ", ".join(f"{abs(z):.5g}" for z in p))
     except Exception as exc:  # a law without poles (e.g. a static gain of zero order)
         lines.append(f"poles: not available ({exc})")
     lines.append(str(sys))

@@ -47,8 +47,13 @@ def _wn(r: np.ndarray) -> list[dict]:
     for z in np.asarray(r, complex):
         if z.imag > 1e-12 or (abs(z.imag) <= 1e-12 and abs(z) > 1e-12):
             wn = abs(z)
-            out.append({"wn_rad_s": float(wn), "hz": float(wn / (2 * np.pi)),
-                        "damping_ratio": float(-z.real / wn)})
+            out.append(
+                {
+                    "wn_rad_s": float(wn),
+                    "hz": float(wn / (2 * np.pi)),
+                    "damping_ratio": float(-z.real / wn),
+                }
+            )
     return sorted(out, key=lambda d: d["wn_rad_s"])
 
 
@@ -59,19 +64,33 @@ def single_link_info(model: SingleLinkModel) -> dict:
     info = {
         "kind": "single_link",
         "drive": d.kind,
-        "hub": {"inertia_kg_m2": model.J, "viscous_N_m_s_per_rad": model.V,
-                "torque_per_command": float(d.k_u), "back_emf_damping_N_m_s_per_rad": float(d.k_omega),
-                "command_limit": float(d.limit), "command_unit": u},
-        "friction": {"model": model.friction.model, "coulomb_N_m": float(model.friction.coulomb),
-                     "breakaway_N_m": float(model.friction.static),
-                     "coulomb_command": float(model.friction.coulomb) / float(d.k_u)},
+        "hub": {
+            "inertia_kg_m2": model.J,
+            "viscous_N_m_s_per_rad": model.V,
+            "torque_per_command": float(d.k_u),
+            "back_emf_damping_N_m_s_per_rad": float(d.k_omega),
+            "command_limit": float(d.limit),
+            "command_unit": u,
+        },
+        "friction": {
+            "model": model.friction.model,
+            "coulomb_N_m": float(model.friction.coulomb),
+            "breakaway_N_m": float(model.friction.static),
+            "coulomb_command": float(model.friction.coulomb) / float(d.k_u),
+        },
         "transfer_functions": {
-            "motor": {"description": f"G_m(s) = motor angle [rad] / command [{u}] (FRB eq. 12)",
-                      **tf_dict(model.motor_tf())},
-            "beam": {"description": "G_b(s) = tip angle / motor angle (FRB eqs. 13, 14)",
-                     **tf_dict(model.beam_tf())},
-            "coupling": {"description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)",
-                         **tf_dict(model.coupling_tf())},
+            "motor": {
+                "description": f"G_m(s) = motor angle [rad] / command [{u}] (FRB eq. 12)",
+                **tf_dict(model.motor_tf()),
+            },
+            "beam": {
+                "description": "G_b(s) = tip angle / motor angle (FRB eqs. 13, 14)",
+                **tf_dict(model.beam_tf()),
+            },
+            "coupling": {
+                "description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)",
+                **tf_dict(model.coupling_tf()),
+            },
             "tip": {"description": f"tip angle [rad] / command [{u}]", **tf_dict(model.tip_tf())},
         },
     }
@@ -93,15 +112,19 @@ def multilink_info(scenario) -> dict:
     model = build_multilink(scenario.arm)
     links = []
     for i, m in enumerate(model.modes):
-        links.append({
-            "link": i + 1, "modes": len(m.omega), "mode_type": m.mode_type,
-            "frequencies_hz": (np.asarray(m.omega) / (2 * np.pi)).tolist(),
-            "beta_l": np.asarray(m.beta_l).tolist(),
-            "phi_end": np.asarray(m.tip_value).tolist(),
-            "phi_prime_end_per_m": np.asarray(m.tip_slope).tolist(),
-            "stiffness_k_ij_N_per_m": np.asarray(m.K).tolist(),
-            "tip_load": {"mass_kg": m.tip_mass, "inertia_kg_m2": m.tip_inertia},
-        })
+        links.append(
+            {
+                "link": i + 1,
+                "modes": len(m.omega),
+                "mode_type": m.mode_type,
+                "frequencies_hz": (np.asarray(m.omega) / (2 * np.pi)).tolist(),
+                "beta_l": np.asarray(m.beta_l).tolist(),
+                "phi_end": np.asarray(m.tip_value).tolist(),
+                "phi_prime_end_per_m": np.asarray(m.tip_slope).tolist(),
+                "stiffness_k_ij_N_per_m": np.asarray(m.K).tolist(),
+                "tip_load": {"mass_kg": m.tip_mass, "inertia_kg_m2": m.tip_inertia},
+            }
+        )
     info = {"kind": "multi_link", "links": links, "gravity_m_s2": scenario.arm.gravity}
     reg = scenario.regulation
     if reg is not None:
@@ -113,16 +136,31 @@ def multilink_info(scenario) -> dict:
         a = alpha_bound(model, lo, hi, dmax)
         cond = stability_conditions(model, np.diag(reg.kp), a.alpha)
         info["target"] = {
-            "theta_d_rad": th_d.tolist(), "delta_d_m": np.asarray(d_d).tolist(),
+            "theta_d_rad": th_d.tolist(),
+            "delta_d_m": np.asarray(d_d).tolist(),
             "gravity_torque_at_target_N_m": np.asarray(gravity_torque(model, th_d, d_d)).tolist(),
-            "alpha": {"value": a.alpha, "region": {"theta_low": lo.tolist(), "theta_high": hi.tolist(),
-                                                   "delta_max": dmax.tolist()},
-                      "note": "largest ||dg/dq||_2 found over the region (eq. 6)"},
+            "alpha": {
+                "value": a.alpha,
+                "region": {
+                    "theta_low": lo.tolist(),
+                    "theta_high": hi.tolist(),
+                    "delta_max": dmax.tolist(),
+                },
+                "note": "largest ||dg/dq||_2 found over the region (eq. 6)",
+            },
             "conditions": {
-                "14": {"statement": "lambda_min(K) > alpha", "lambda_min_K": cond.lambda_min_K,
-                       "holds": cond.holds_14, "margin": cond.margin_14},
-                "15": {"statement": "lambda_min(K_P) > alpha", "lambda_min_KP": cond.lambda_min_KP,
-                       "holds": cond.holds_15, "margin": cond.margin_15},
+                "14": {
+                    "statement": "lambda_min(K) > alpha",
+                    "lambda_min_K": cond.lambda_min_K,
+                    "holds": cond.holds_14,
+                    "margin": cond.margin_14,
+                },
+                "15": {
+                    "statement": "lambda_min(K_P) > alpha",
+                    "lambda_min_KP": cond.lambda_min_KP,
+                    "holds": cond.holds_15,
+                    "margin": cond.margin_15,
+                },
             },
         }
     return info

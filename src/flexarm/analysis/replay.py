@@ -60,12 +60,16 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
     """The plant state at the log's first sample (module docstring)."""
     model, arm = prepared.model, prepared.loop.plant
     if getattr(model, "n_links", None) is None:
-        raise ValueError("replay reads the initial state of multi-link arms (theta_j, "
-                         "alpha_j, ...); a single-link scenario takes it from [initial]")
+        raise ValueError(
+            "replay reads the initial state of multi-link arms (theta_j, "
+            "alpha_j, ...); a single-link scenario takes it from [initial]"
+        )
     n = model.n_links
     if any(m != 1 for m in model.n_modes):
-        raise ValueError("replay: the initial deflection is read as one angle α_j per link "
-                         f"(torsional links); this arm has modes {model.n_modes}")
+        raise ValueError(
+            "replay: the initial deflection is read as one angle α_j per link "
+            f"(torsional links); this arm has modes {model.n_modes}"
+        )
     th = [_first(log, [f"theta_{j}"]) for j in range(1, n + 1)]
     al = [_first(log, [f"alpha_{j}", f"alpha_f_{j}"]) for j in range(1, n + 1)]
     thd = [_first(log, [f"theta_dot_{j}", f"theta_dot_f_{j}"]) for j in range(1, n + 1)]
@@ -74,8 +78,13 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
     return np.concatenate([x, np.zeros(arm.n_states - len(x))])
 
 
-def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
-           start: PieceStart | None = None) -> Replay:
+def replay(
+    scenario,
+    log: Log,
+    *,
+    window: tuple[float, float] | None = None,
+    start: PieceStart | None = None,
+) -> Replay:
     """Simulate ``scenario`` over ``log`` (or its ``window`` [t0, t1) in s from the log's
     first sample) and compare every measured channel the log holds. ``start``: the
     controllers' and filters' states at the log's first sample (:func:`replay_run`)."""
@@ -84,8 +93,15 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
     extra, notes = computed_channels(scenario.sensors, log, scenario.sampling.period)
     logged = set(log.signals)
     if extra:
-        log = Log(log.path, log.time, {**log.signals, **extra}, list(log.comments),
-                  dict(log.meta), list(log.skipped), list(log.notes) + notes)
+        log = Log(
+            log.path,
+            log.time,
+            {**log.signals, **extra},
+            list(log.comments),
+            dict(log.meta),
+            list(log.skipped),
+            list(log.notes) + notes,
+        )
     full, k0 = log, 0
     assert full.time is not None  # checked above
     if window is not None:
@@ -94,8 +110,10 @@ def replay(scenario, log: Log, *, window: tuple[float, float] | None = None,
         k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
     if abs(log.dt - dt) > 1e-6 * dt:
-        raise ValueError(f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "
-                         f"sampling period {dt:g} s; resample the log or change [sampling]")
+        raise ValueError(
+            f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "
+            f"sampling period {dt:g} s; resample the log or change [sampling]"
+        )
     n = len(log)
     duration = (n - 1) * dt
     sim = scenario.simulation.model_copy(update={"duration": duration})
@@ -149,8 +167,7 @@ def plot_replay(rep: Replay, path, *, overwrite: bool = False):
 
     names = list(rep.fit_percent)
     fig = Figure(figsize=(10, 1.8 * len(names) + 0.5))
-    axes = fig.subplots(len(names), 1, sharex=True,
-                             squeeze=False)
+    axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)
     time = rep.log.time
     assert time is not None  # replay() refuses a log without time
     t = time - time[0]

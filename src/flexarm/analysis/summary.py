@@ -25,21 +25,34 @@ def simulate_with_progress(scenario: Scenario, progress: bool = False):
 
     with Progress() as bar:
         task = bar.add_task(f"simulating {scenario.name}", total=p.n_samples)
-        out = simulate_loop(p.loop, p.x0, p.references, p.n_samples, seed=seed,
-                            progress=lambda done, total: bar.update(task, completed=done))
+        out = simulate_loop(
+            p.loop,
+            p.x0,
+            p.references,
+            p.n_samples,
+            seed=seed,
+            progress=lambda done, total: bar.update(task, completed=done),
+        )
     return to_result(p, out)
 
 
 def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
     """Step metrics for a step reference; tracking errors for other references."""
     if scenario.reference.type == "step":
-        return {"step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
-                "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict()}
+        return {
+            "step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
+            "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict(),
+        }
     e = res["reference"] - res[ctrl]
-    return {"tracking": {"signal": ctrl, "reference": scenario.reference.type,
-                         "rms_error": float(np.sqrt(np.mean(e**2))),
-                         "max_abs_error": float(np.max(np.abs(e))),
-                         "peak_tip_deflection": float(np.max(np.abs(res["tip_deflection"])))}}
+    return {
+        "tracking": {
+            "signal": ctrl,
+            "reference": scenario.reference.type,
+            "rms_error": float(np.sqrt(np.mean(e**2))),
+            "max_abs_error": float(np.max(np.abs(e))),
+            "peak_tip_deflection": float(np.max(np.abs(res["tip_deflection"]))),
+        }
+    }
 
 
 def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> dict:
@@ -77,8 +90,14 @@ def _controlled_signal(spec) -> str:
     if spec is None:
         return "motor_angle"
     if getattr(spec, "type", None) == "lti":
-        return next((i for i, s in zip(spec.inputs, spec.setpoints or [], strict=False)
-                     if s == "reference"), spec.inputs[0])
+        return next(
+            (
+                i
+                for i, s in zip(spec.inputs, spec.setpoints or [], strict=False)
+                if s == "reference"
+            ),
+            spec.inputs[0],
+        )
     return getattr(spec, "measured", None) or "motor_angle"
 
 
@@ -118,10 +137,13 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
         "samples": len(res.time),
         "sampling_period_s": scenario.sampling.period,
         "final_joint_error_rad": err[-1].tolist(),
-        "final_joint_error_counts": [None if not np.isfinite(c) else float(e / c)
-                                     for e, c in zip(err[-1], count, strict=True)],
-        "final_link_deflection_m": [float(res[f"deflection_{j + 1}"][-1])
-                                    for j in range(res.n_links)],
+        "final_joint_error_counts": [
+            None if not np.isfinite(c) else float(e / c)
+            for e, c in zip(err[-1], count, strict=True)
+        ],
+        "final_link_deflection_m": [
+            float(res[f"deflection_{j + 1}"][-1]) for j in range(res.n_links)
+        ],
         "peak_command": np.abs(res.command).max(axis=0).tolist(),
         "command_names": list(res.input_names),
         "files": [f"{name}.csv", f"{name}.png"],
@@ -146,11 +168,13 @@ def plot_joints(runs: dict, path: Path) -> None:
             c = count[j] if np.isfinite(count[j]) else 1e-3
             ax[0, j].plot(res.time, err[:, j] / c, lw=1.2, label=label)
             ax[1, j].plot(res.time, 1e3 * res[f"deflection_{j + 1}"], lw=1.0, label=label)
-            ax[2, j].step(res.time, res.command[:, j], where="post", lw=0.7, alpha=0.8,
-                          label=label)
+            ax[2, j].step(res.time, res.command[:, j], where="post", lw=0.7, alpha=0.8, label=label)
     for j in range(n):
-        unit = "encoder counts" if np.isfinite(joint_counts(next(iter(runs.values()))[0], n)[j]) \
+        unit = (
+            "encoder counts"
+            if np.isfinite(joint_counts(next(iter(runs.values()))[0], n)[j])
             else "mrad"
+        )
         ax[0, j].set_yscale("symlog", linthresh=1.0, linscale=0.6)
         ax[0, j].axhspan(-1, 1, color="0.85", zorder=0, label="±1 count")
         ax[0, j].axhline(0.0, c="k", lw=0.6)
@@ -217,11 +241,16 @@ def write_regulation(scenario, out: Path) -> dict:
     th_err = np.degrees(np.abs(run.theta[-1] - np.asarray(params.theta_d)))
     dd = np.asarray(params.delta_d)
     summary = {
-        "scenario": name, "law": scenario.regulation.law,
+        "scenario": name,
+        "law": scenario.regulation.law,
         "final_theta_error_deg": th_err.tolist(),
-        "final_delta_m": run.delta[-1].tolist(), "delta_d_m": dd.tolist(),
-        "final_delta_relative_error": float(np.linalg.norm(run.delta[-1] - dd) / np.linalg.norm(dd)),
-        "initial_torque_N_m": run.torque[0].tolist(), "final_torque_N_m": run.torque[-1].tolist(),
+        "final_delta_m": run.delta[-1].tolist(),
+        "delta_d_m": dd.tolist(),
+        "final_delta_relative_error": float(
+            np.linalg.norm(run.delta[-1] - dd) / np.linalg.norm(dd)
+        ),
+        "initial_torque_N_m": run.torque[0].tolist(),
+        "final_torque_N_m": run.torque[-1].tolist(),
         "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
         "files": [path.name, f"{name}.png"],
     }
@@ -246,22 +275,30 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
             m = s["step_metrics"]
             ts = m["settling_time"]
             settle = "never (within the record)" if ts is None else f"{ts:.3g} s"
-            console.print(f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                          f"{settle}, steady-state error {m['steady_state_error']:.3g} "
-                          f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}")
+            console.print(
+                f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
+                f"{settle}, steady-state error {m['steady_state_error']:.3g} "
+                f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}"
+            )
         elif "tracking" in s:
             tr = s["tracking"]
-            console.print(f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
-                          f"{tr['rms_error']:.3g} rad, peak tip deflection "
-                          f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
-                          f"{s['command_unit']}")
+            console.print(
+                f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
+                f"{tr['rms_error']:.3g} rad, peak tip deflection "
+                f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
+                f"{s['command_unit']}"
+            )
         elif "final_joint_error_counts" in s:
-            console.print(f"[bold]{name}[/]: final joint errors {s['final_joint_error_counts']} "
-                          f"counts, peak commands {np.round(s['peak_command'], 2)} "
-                          f"({', '.join(s['command_names'])})")
+            console.print(
+                f"[bold]{name}[/]: final joint errors {s['final_joint_error_counts']} "
+                f"counts, peak commands {np.round(s['peak_command'], 2)} "
+                f"({', '.join(s['command_names'])})"
+            )
         else:
-            console.print(f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
-                          f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m")
+            console.print(
+                f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
+                f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m"
+            )
     for rname, run in (reproductions or {}).items():
         console.print(f"[bold]reproducing {rname}[/] ...")
         results[f"reproduce_{rname}"] = run(out / rname)

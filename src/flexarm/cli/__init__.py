@@ -41,8 +41,9 @@ class FlexarmGroup(TyperGroup):
         except errors.project_errors() as exc:
             raise typer.Exit(errors.bad_input(exc)) from None
         except Exception as exc:
-            raise typer.Exit(errors.internal_error(exc, " ".join(["flexarm", *sys.argv[1:]])
-                                                   if sys.argv else "")) from None
+            raise typer.Exit(
+                errors.internal_error(exc, " ".join(["flexarm", *sys.argv[1:]]) if sys.argv else "")
+            ) from None
 
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         """Parser errors as one line too (typer prints a boxed usage panel)."""
@@ -61,10 +62,13 @@ class FlexarmGroup(TyperGroup):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-app = typer.Typer(cls=FlexarmGroup, add_completion=False, no_args_is_help=True,
-                  rich_markup_mode=None,  # help texts as written: rich markup ate [words]
-                  help="Model, identify, simulate and control flexible-link arms with joint "
-                       "friction.")
+app = typer.Typer(
+    cls=FlexarmGroup,
+    add_completion=False,
+    no_args_is_help=True,
+    rich_markup_mode=None,  # help texts as written: rich markup ate [words]
+    help="Model, identify, simulate and control flexible-link arms with joint friction.",
+)
 
 
 def _version(value: bool) -> None:
@@ -76,9 +80,14 @@ def _version(value: bool) -> None:
 
 
 @app.callback()
-def _root(version: Annotated[bool, typer.Option(
-        "--version", callback=_version, is_eager=True,
-        help="print flexarm's version and exit")] = False) -> None:
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="print flexarm's version and exit"
+        ),
+    ] = False,
+) -> None:
     """Model, identify, simulate and control flexible-link arms with joint friction."""
 
 

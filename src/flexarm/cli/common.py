@@ -33,7 +33,7 @@ def fold(text: str) -> str:
     out = ""
     for line in (" ".join(ln.split()) for ln in str(text).splitlines()):
         if line:
-            out += (line if not out else (" " if out.endswith(":") else "; ") + line)
+            out += line if not out else (" " if out.endswith(":") else "; ") + line
     return out
 
 
@@ -64,8 +64,10 @@ def load(scenario: str):
 def writable(option: str, path: Path, folder: Path) -> None:
     """``folder`` (where ``path`` will be made) must be a writable folder."""
     if not os.access(folder, os.W_OK | os.X_OK):
-        fail(f"{option} {path}: cannot write into {folder} (permission denied); choose a "
-             "folder you can write to")
+        fail(
+            f"{option} {path}: cannot write into {folder} (permission denied); choose a "
+            "folder you can write to"
+        )
 
 
 def _not_an_input(option: str, path: Path) -> None:
@@ -75,8 +77,10 @@ def _not_an_input(option: str, path: Path) -> None:
 
     src = is_input(path)
     if src is not None:
-        fail(f"{option} {path}: is an input of this run ({src}); flexarm never writes over "
-             "an input, even with --overwrite; give another output path")
+        fail(
+            f"{option} {path}: is an input of this run ({src}); flexarm never writes over "
+            "an input, even with --overwrite; give another output path"
+        )
 
 
 def check_dir_option(option: str, path: Path | None) -> None:
@@ -87,35 +91,41 @@ def check_dir_option(option: str, path: Path | None) -> None:
         return
     _not_an_input(option, path)
     if path.exists() and not path.is_dir():
-        fail(f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
-             "several files into it), or move the file away")
+        fail(
+            f"{option} {path}: is a file, not a folder; give a folder name (flexarm writes "
+            "several files into it), or move the file away"
+        )
     anc = path
     while not anc.exists():
         if anc.parent == anc:
             break
         anc = anc.parent
     if not anc.is_dir():
-        fail(f"{option} {path}: {anc} is a file, so the folder cannot be created there; "
-             "give a path below a folder")
+        fail(
+            f"{option} {path}: {anc} is a file, so the folder cannot be created there; "
+            "give a path below a folder"
+        )
     writable(option, path, anc)
 
 
-def check_file_option(option: str, path: Path | None, overwrite: bool,
-                      example: str = "result.json") -> None:
+def check_file_option(
+    option: str, path: Path | None, overwrite: bool, example: str = "result.json"
+) -> None:
     """An output file option: refuse, before any work, a folder, an existing file (unless
     --overwrite), a missing or non-folder parent, or a parent that cannot be written."""
     if path is None:
         return
     _not_an_input(option, path)
     if path.is_dir():
-        fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. "
-             f"{path / example}")
+        fail(f"{option} {path}: is a folder, not a file; give a file name, e.g. {path / example}")
     if path.exists() and not overwrite:
         fail(f"{option} {path}: exists; pass --overwrite to replace it")
     parent = path.parent
     if not parent.exists():
-        fail(f"{option} {path}: the folder {parent} does not exist; create it first "
-             f"(mkdir -p {parent})")
+        fail(
+            f"{option} {path}: the folder {parent} does not exist; create it first "
+            f"(mkdir -p {parent})"
+        )
     if not parent.is_dir():
         fail(f"{option} {path}: {parent} is a file, not a folder; give a path in a folder")
     writable(option, path, parent)
@@ -209,7 +219,7 @@ def guarded(*paths):
 
     files = []
     for p in paths:
-        for q in (p if isinstance(p, (list, tuple)) else [p]):
+        for q in p if isinstance(p, (list, tuple)) else [p]:
             if q is not None and Path(q).exists():
                 files.append(Path(q))
 
@@ -237,7 +247,9 @@ def guarded_command(*names: str):
         def run(*args, **kwargs):
             with guarded(*[kwargs.get(n) for n in names]):
                 return f(*args, **kwargs)
+
         return run
+
     return deco
 
 
@@ -254,8 +266,12 @@ def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | Non
     try:
         return _folder(path, overwrite=overwrite)
     except FlexarmError as exc:
-        fail(f"{option} {exc}".replace("(pass overwrite=True, on the command line --overwrite)",
-                                       "(pass --overwrite to write into it)"))
+        fail(
+            f"{option} {exc}".replace(
+                "(pass overwrite=True, on the command line --overwrite)",
+                "(pass --overwrite to write into it)",
+            )
+        )
 
 
 def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> None:
@@ -266,5 +282,8 @@ def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> 
 
     saved = save_or_rescue(path, data, overwrite=overwrite, writer=writer)
     if saved.rescued:  # one line (not wrapped): the path must be copyable
-        err.print(f"[yellow]warning:[/] {escape(option + ': ' + saved.message())}",
-                  highlight=False, soft_wrap=True)
+        err.print(
+            f"[yellow]warning:[/] {escape(option + ': ' + saved.message())}",
+            highlight=False,
+            soft_wrap=True,
+        )

@@ -10,15 +10,21 @@ import typer
 from flexarm.cli.common import check_dir_option, console, fail, guarded
 
 
-def export_c(design: str = typer.Argument(..., help="design directory (holding design.toml) or a scenario TOML / built-in name"),
-             out: Path = typer.Option(..., "--out", help="folder for NAME.h and NAME.c"),
-             precision: str = typer.Option("double", "--precision", help="double or float"),
-             name: str = typer.Option("controller", "--name", help="C prefix and file name"),
-             overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c"),
-             force: bool = typer.Option(
-                 False, "--force",
-                 help="export a design whose gate verdict is not stable (the verdict goes "
-                      "into NAME.h as a #warning)")) -> None:
+def export_c(
+    design: str = typer.Argument(
+        ..., help="design directory (holding design.toml) or a scenario TOML / built-in name"
+    ),
+    out: Path = typer.Option(..., "--out", help="folder for NAME.h and NAME.c"),
+    precision: str = typer.Option("double", "--precision", help="double or float"),
+    name: str = typer.Option("controller", "--name", help="C prefix and file name"),
+    overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c"),
+    force: bool = typer.Option(
+        False,
+        "--force",
+        help="export a design whose gate verdict is not stable (the verdict goes "
+        "into NAME.h as a #warning)",
+    ),
+) -> None:
     """Write the [controller] of a design (or scenario) as C99 for a real-time target:
     NAME.h (state struct, NAME_init, NAME_step, channel order and units) and NAME.c (the
     law, friction feedforward, saturation and D/A count); no dependencies.  A design whose
@@ -34,19 +40,28 @@ def _export(design, out, precision, name, overwrite, force) -> None:
 
     check_dir_option("--out", out)
     try:
-        code, paths = _export_c(design, out, name=name, precision=precision,
-                                overwrite=overwrite, force=force)
+        code, paths = _export_c(
+            design, out, name=name, precision=precision, overwrite=overwrite, force=force
+        )
     except UnstableDesignError as exc:
         v = exc.value if exc.value is not None else getattr(exc.design, "verdict", None)
-        fail(f"{design}: the design gate's verdict is not stable ({v}); not exported; "
-             "redesign (design.json and compare.md say why), or pass --force to export it "
-             "with the verdict as a #warning in the header")
+        fail(
+            f"{design}: the design gate's verdict is not stable ({v}); not exported; "
+            "redesign (design.json and compare.md say why), or pass --force to export it "
+            "with the verdict as a #warning in the header"
+        )
     except (ExportError, OutputExistsError) as exc:
         fail(str(exc))
     except ValueError as exc:
         fail(f"{design}: {exc}")
-    console.print_json(json.dumps({
-        "files": [str(p) for p in paths], "precision": code.precision,
-        "measured": [f"{n} ({u})" for n, u in code.measured],
-        "reference": [f"{n} ({u})" for n, u in code.references],
-        "u": [f"{n} ({u})" for n, u in code.outputs]}))
+    console.print_json(
+        json.dumps(
+            {
+                "files": [str(p) for p in paths],
+                "precision": code.precision,
+                "measured": [f"{n} ({u})" for n, u in code.measured],
+                "reference": [f"{n} ({u})" for n, u in code.references],
+                "u": [f"{n} ({u})" for n, u in code.outputs],
+            }
+        )
+    )

@@ -28,65 +28,118 @@ from flexarm.cli.common import (
 )
 
 
-def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="scenario TOML file or built-in name (a fitted rig's scenario)"),
-               method: str = typer.Option("lqr", "--method", help="lqr, place, nested (Feliu's two loops) or tune (the controller's "
-                                   "gains over plants drawn from the fit's uncertainty)"),
-               out: Path = typer.Option(..., "--out", help="folder for design.toml, design.json and the step figure"),
-               q: str | None = typer.Option(
-                   None, "--q", help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
-                                     "integrator) or one number per channel; default Bryson"),
-               r: str | None = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
-               poles: str | None = typer.Option(
-                   None, "--poles", help="place: closed-loop poles of the arm's states (+ integrators), "
-                                         "e.g. '-20+15j,-20-15j,-30,-40'"),
-               observer_poles: str | None = typer.Option(
-                   None, "--observer-poles", help="observer poles of the arm's states (default: Kalman predictor)"),
-               pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
-               integral: bool = typer.Option(False, "--integral/--no-integral",
-                                             help="integrators of the tracked channels' errors (LQI)"),
-               disturbance: bool | None = typer.Option(
-                   None, "--disturbance/--no-disturbance",
-                   help="estimate and cancel a constant input disturbance (integral action; "
-                        "default: on unless --integral)"),
-               friction_compensation: bool = typer.Option(
-                   True, "--friction-compensation/--no-friction-compensation",
-                   help="Coulomb feedforward C_f / k_u from the scenario's friction"),
-               max_deflection: float | None = typer.Option(
-                   None, "--max-deflection", help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)"),
-               distance: float | None = typer.Option(
-                   None, "--distance", help="nested: the tip move, rad (default the scenario's reference amplitude)"),
-               fit_json: Path | None = typer.Option(
-                   None, "--fit-json", help="the fit's JSON (flexarm fit --json) of the rig whose "
-                                            "--scenario-out is SCENARIO: plants drawn from its "
-                                            "standard deviations (tune; and the comparison)"),
-               spread: str | None = typer.Option(
-                   None, "--spread", help="plants drawn from PATH=STD,... (SI; STD may end in % of "
-                                          "the scenario's value), e.g. "
-                                          "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'"),
-               plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
-               seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
-               encoder_counts: int | None = typer.Option(
-                   None, "--encoder-counts", help="counts per turn of the hub encoder, where the "
-                                                  "scenario's hub sensor has no quantum (errors in counts)"),
-               report: Path | None = typer.Option(
-                   None, "--report", help="write a self-contained HTML report (the designed "
-                                          "controller, its figures, the step comparison)"),
-               accept_unstable: bool = typer.Option(
-                   False, "--accept-unstable",
-                   help="keep (and exit 0 with) a design the gate finds unsafe: unstable on the "
-                        "nominal plant, or on more than --max-unstable-share of the drawn "
-                        "plants, or reaching the command limit (its verdict is still written)"),
-               max_unstable_share: float = typer.Option(
-                   0.01, "--max-unstable-share",
-                   help="the largest share (0..1) of drawn plants that may be unstable or reach "
-                        "the limit before the design is refused"),
-               scheduler: str | None = typer.Option(
-                   None, "--scheduler", help="run the drawn plants on a running Dask scheduler, "
-                                             "e.g. tcp://host:8786 (in chunks, one task each)"),
-               workers: int | None = typer.Option(
-                   None, "--workers", help="run the drawn plants on a local Dask cluster of N "
-                                           "worker processes (default: in-process)"),
-               overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+def design_cmd(
+    ctx: typer.Context,
+    scenario: str = typer.Argument(
+        ..., help="scenario TOML file or built-in name (a fitted rig's scenario)"
+    ),
+    method: str = typer.Option(
+        "lqr",
+        "--method",
+        help="lqr, place, nested (Feliu's two loops) or tune (the controller's "
+        "gains over plants drawn from the fit's uncertainty)",
+    ),
+    out: Path = typer.Option(
+        ..., "--out", help="folder for design.toml, design.json and the step figure"
+    ),
+    q: str | None = typer.Option(
+        None,
+        "--q",
+        help="lqr output weights, CHANNEL=W,... (int_CHANNEL for an "
+        "integrator) or one number per channel; default Bryson",
+    ),
+    r: str | None = typer.Option(None, "--r", help="lqr command weight(s); default 1/limit²"),
+    poles: str | None = typer.Option(
+        None,
+        "--poles",
+        help="place: closed-loop poles of the arm's states (+ integrators), "
+        "e.g. '-20+15j,-20-15j,-30,-40'",
+    ),
+    observer_poles: str | None = typer.Option(
+        None,
+        "--observer-poles",
+        help="observer poles of the arm's states (default: Kalman predictor)",
+    ),
+    pole_domain: str = typer.Option("s", "--pole-domain", help="s (rad/s, z = exp(sT)) or z"),
+    integral: bool = typer.Option(
+        False, "--integral/--no-integral", help="integrators of the tracked channels' errors (LQI)"
+    ),
+    disturbance: bool | None = typer.Option(
+        None,
+        "--disturbance/--no-disturbance",
+        help="estimate and cancel a constant input disturbance (integral action; "
+        "default: on unless --integral)",
+    ),
+    friction_compensation: bool = typer.Option(
+        True,
+        "--friction-compensation/--no-friction-compensation",
+        help="Coulomb feedforward C_f / k_u from the scenario's friction",
+    ),
+    max_deflection: float | None = typer.Option(
+        None,
+        "--max-deflection",
+        help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)",
+    ),
+    distance: float | None = typer.Option(
+        None,
+        "--distance",
+        help="nested: the tip move, rad (default the scenario's reference amplitude)",
+    ),
+    fit_json: Path | None = typer.Option(
+        None,
+        "--fit-json",
+        help="the fit's JSON (flexarm fit --json) of the rig whose "
+        "--scenario-out is SCENARIO: plants drawn from its "
+        "standard deviations (tune; and the comparison)",
+    ),
+    spread: str | None = typer.Option(
+        None,
+        "--spread",
+        help="plants drawn from PATH=STD,... (SI; STD may end in % of "
+        "the scenario's value), e.g. "
+        "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'",
+    ),
+    plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
+    seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
+    encoder_counts: int | None = typer.Option(
+        None,
+        "--encoder-counts",
+        help="counts per turn of the hub encoder, where the "
+        "scenario's hub sensor has no quantum (errors in counts)",
+    ),
+    report: Path | None = typer.Option(
+        None,
+        "--report",
+        help="write a self-contained HTML report (the designed "
+        "controller, its figures, the step comparison)",
+    ),
+    accept_unstable: bool = typer.Option(
+        False,
+        "--accept-unstable",
+        help="keep (and exit 0 with) a design the gate finds unsafe: unstable on the "
+        "nominal plant, or on more than --max-unstable-share of the drawn "
+        "plants, or reaching the command limit (its verdict is still written)",
+    ),
+    max_unstable_share: float = typer.Option(
+        0.01,
+        "--max-unstable-share",
+        help="the largest share (0..1) of drawn plants that may be unstable or reach "
+        "the limit before the design is refused",
+    ),
+    scheduler: str | None = typer.Option(
+        None,
+        "--scheduler",
+        help="run the drawn plants on a running Dask scheduler, "
+        "e.g. tcp://host:8786 (in chunks, one task each)",
+    ),
+    workers: int | None = typer.Option(
+        None,
+        "--workers",
+        help="run the drawn plants on a local Dask cluster of N "
+        "worker processes (default: in-process)",
+    ),
+    overwrite: bool = typer.Option(False, help="write into a non-empty --out folder"),
+) -> None:
     """Design a discrete controller for a scenario's rig (linearised at rest, sampled at its
     period, its computation and sensor delays in the model): state feedback by LQR or pole
     placement with a Kalman (or placed) predictor, the reference as a state (two degrees of
@@ -110,27 +163,88 @@ def design_cmd(ctx: typer.Context, scenario: str = typer.Argument(..., help="sce
     if workers is not None and workers < 1:
         fail(f"--workers {workers}: give 1 or more")
     with guarded(scenario, fit_json):
-        _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
-                disturbance, friction_compensation, max_deflection, distance, fit_json,
-                spread, plants, seed, encoder_counts, report, accept_unstable,
-                max_unstable_share, overwrite, scheduler, workers)
+        _design(
+            ctx,
+            scenario,
+            method,
+            out,
+            q,
+            r,
+            poles,
+            observer_poles,
+            pole_domain,
+            integral,
+            disturbance,
+            friction_compensation,
+            max_deflection,
+            distance,
+            fit_json,
+            spread,
+            plants,
+            seed,
+            encoder_counts,
+            report,
+            accept_unstable,
+            max_unstable_share,
+            overwrite,
+            scheduler,
+            workers,
+        )
 
 
-def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain, integral,
-            disturbance, friction_compensation, max_deflection, distance, fit_json, spread,
-            plants, seed, encoder_counts, report, accept_unstable, max_unstable_share,
-            overwrite, scheduler=None, workers=None) -> None:
+def _design(
+    ctx,
+    scenario,
+    method,
+    out,
+    q,
+    r,
+    poles,
+    observer_poles,
+    pole_domain,
+    integral,
+    disturbance,
+    friction_compensation,
+    max_deflection,
+    distance,
+    fit_json,
+    spread,
+    plants,
+    seed,
+    encoder_counts,
+    report,
+    accept_unstable,
+    max_unstable_share,
+    overwrite,
+    scheduler=None,
+    workers=None,
+) -> None:
     enable_cache()
     from flexarm.design import METHODS
     from flexarm.design.gate import GateOptions, design_checked
     from flexarm.errors import FlexarmError
 
-    _check_options(method, METHODS, pole_domain, poles, q, r, observer_poles, integral,
-                   disturbance, max_deflection, distance, fit_json, spread, plants,
-                   encoder_counts)
+    _check_options(
+        method,
+        METHODS,
+        pole_domain,
+        poles,
+        q,
+        r,
+        observer_poles,
+        integral,
+        disturbance,
+        max_deflection,
+        distance,
+        fit_json,
+        spread,
+        plants,
+        encoder_counts,
+    )
     if not (0.0 <= max_unstable_share <= 1.0):
-        fail(f"--max-unstable-share {max_unstable_share}: give a share in [0, 1], e.g. 0.01 "
-             "for 1 %")
+        fail(
+            f"--max-unstable-share {max_unstable_share}: give a share in [0, 1], e.g. 0.01 for 1 %"
+        )
     # the option values parsed before any work: a malformed one is refused first
     poles_v = parsing.complex_list(poles, "--poles")
     observer_v = parsing.complex_list(observer_poles, "--observer-poles")
@@ -142,14 +256,21 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
     count = 2 * math.pi / encoder_counts if encoder_counts else None
     opts: dict[str, Any]  # each method's own keyword arguments
     if method == "nested":
-        opts = {k: v for k, v in (("max_deflection", max_deflection), ("distance", distance))
-                if v is not None}
+        opts = {
+            k: v
+            for k, v in (("max_deflection", max_deflection), ("distance", distance))
+            if v is not None
+        }
     elif method == "tune":
         opts = {}  # the plants below (tune needs --fit-json or --spread: checked above)
     else:
-        opts = dict(integral=integral, disturbance=disturbance,
-                    friction_compensation=friction_compensation, pole_domain=pole_domain,
-                    observer_poles=observer_v)
+        opts = dict(
+            integral=integral,
+            disturbance=disturbance,
+            friction_compensation=friction_compensation,
+            pole_domain=pole_domain,
+            observer_poles=observer_v,
+        )
     if method == "place":
         opts["poles"] = poles_v
     elif method == "lqr":
@@ -164,16 +285,21 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
             fail(f"--fit-json/--spread: {exc}")
         if method == "tune":
             opts["callback"] = lambda e: progress(
-                status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}")
-        progress(status, f"designing ({method}) and checking it with the scenario's "
-                          "controller on a reference step (nominal plant"
-                          f"{f' and {plants} drawn' if spread_d else ''})...")
+                status, f"tuning: {e['nfev']} batch runs, best cost {e['best']:.4g}"
+            )
+        progress(
+            status,
+            f"designing ({method}) and checking it with the scenario's "
+            "controller on a reference step (nominal plant"
+            f"{f' and {plants} drawn' if spread_d else ''})...",
+        )
         from flexarm.distributed import session
 
         try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
             with session(scheduler, workers) as client:  # None: in-process
-                des = design_checked(sc, method, plants=drawn, count=count, gate=gate,
-                                     client=client, **opts)
+                des = design_checked(
+                    sc, method, plants=drawn, count=count, gate=gate, client=client, **opts
+                )
         except FlexarmError:
             raise
         except ValueError as exc:
@@ -183,34 +309,46 @@ def _design(ctx, scenario, method, out, q, r, poles, observer_poles, pole_domain
     if side is not None:
         from flexarm.io.write import write_json, write_text
 
-        files += [write_json(out / "compare.json", side.to_dict(), overwrite=overwrite),
-                  write_text(out / "compare.md", side.table("markdown") + "\n",
-                             overwrite=overwrite),
-                  *side.figures(out, overwrite=overwrite)]
+        files += [
+            write_json(out / "compare.json", side.to_dict(), overwrite=overwrite),
+            write_text(out / "compare.md", side.table("markdown") + "\n", overwrite=overwrite),
+            *side.figures(out, overwrite=overwrite),
+        ]
         _print_comparison(side, plants)
     info = des.info
     if "model" in info:
-        console.print(f"augmented model: {info['model']['n_augmented']} states "
-                      f"(arm {info['model']['n_arm']}); linear peak command "
-                      f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}")
+        console.print(
+            f"augmented model: {info['model']['n_augmented']} states "
+            f"(arm {info['model']['n_arm']}); linear peak command "
+            f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}"
+        )
     for w in des.warnings:
         warn(w)
     console.print("wrote " + ", ".join(str(p) for p in files))
     if report is not None:
         from flexarm.analysis.html_report import design_report
 
-        write_report(design_report(des, figures=[p for p in files if str(p).endswith(".png")],
-                                    comparison=side, command=command_line(ctx),
-                                    inputs=[scenario]), report, overwrite)
+        write_report(
+            design_report(
+                des,
+                figures=[p for p in files if str(p).endswith(".png")],
+                comparison=side,
+                command=command_line(ctx),
+                inputs=[scenario],
+            ),
+            report,
+            overwrite,
+        )
     if not des.stable:
         colour = "yellow" if accept_unstable else "bold red"
-        err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False,
-                  soft_wrap=True)
+        err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False, soft_wrap=True)
         if not accept_unstable:
-            fail(f"the {method} design is not safe to run: {des.verdict}; written to {out} "
-                 "with its verdict (design.json, compare.md say why); redesign, or pass "
-                 "--accept-unstable to keep it (flexarm export-c then refuses it without "
-                 "--force)")
+            fail(
+                f"the {method} design is not safe to run: {des.verdict}; written to {out} "
+                "with its verdict (design.json, compare.md say why); redesign, or pass "
+                "--accept-unstable to keep it (flexarm export-c then refuses it without "
+                "--force)"
+            )
 
 
 def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
@@ -237,8 +375,11 @@ def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
             fail(f"--spread {item!r}: write PATH=STD, e.g. arm.motor.inertia=10%")
         try:
             mean = float(get(base, path, "--spread"))
-            std = (abs(mean) * float(val.strip()[:-1]) / 100 if val.strip().endswith("%")
-                   else float(val))
+            std = (
+                abs(mean) * float(val.strip()[:-1]) / 100
+                if val.strip().endswith("%")
+                else float(val)
+            )
         except (ValueError, TypeError) as exc:
             fail(f"--spread {item!r}: {exc}")
         if not (math.isfinite(std) and std >= 0):
@@ -247,9 +388,23 @@ def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
     return out
 
 
-def _check_options(method, methods, pole_domain, poles, q, r, observer_poles, integral,
-                   disturbance, max_deflection, distance, fit_json, spread, plants,
-                   encoder_counts) -> None:
+def _check_options(
+    method,
+    methods,
+    pole_domain,
+    poles,
+    q,
+    r,
+    observer_poles,
+    integral,
+    disturbance,
+    max_deflection,
+    distance,
+    fit_json,
+    spread,
+    plants,
+    encoder_counts,
+) -> None:
     """The option combinations ``design`` accepts (refused before any work).
 
     DECISION: the library's ``design()`` checks its own arguments too; these checks name
@@ -259,25 +414,39 @@ def _check_options(method, methods, pole_domain, poles, q, r, observer_poles, in
     if pole_domain not in ("s", "z"):
         fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
     if method == "place" and poles is None:
-        fail("--method place needs --poles (the closed-loop poles of the arm's states, "
-              "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
-              "the model's states in design.json)")
+        fail(
+            "--method place needs --poles (the closed-loop poles of the arm's states, "
+            "e.g. --poles '-20+15j,-20-15j,-30,-40'; flexarm design ... --method lqr shows "
+            "the model's states in design.json)"
+        )
     if method != "place" and poles is not None:
         fail(f"--poles: only with --method place (got --method {method})")
     if method == "place" and (q is not None or r is not None):
         fail("--q/--r: only with --method lqr (place takes --poles)")
     if method == "nested":
-        given = [o for o, v in (("--q", q), ("--r", r), ("--observer-poles", observer_poles),
-                                ("--integral", integral or None), ("--disturbance", disturbance))
-                 if v is not None]
+        given = [
+            o
+            for o, v in (
+                ("--q", q),
+                ("--r", r),
+                ("--observer-poles", observer_poles),
+                ("--integral", integral or None),
+                ("--disturbance", disturbance),
+            )
+            if v is not None
+        ]
         if given:
-            fail(f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
-                  "--max-deflection and --distance)")
+            fail(
+                f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
+                "--max-deflection and --distance)"
+            )
     elif max_deflection is not None or distance is not None:
         fail("--max-deflection/--distance: only with --method nested")
     if method == "tune" and fit_json is None and spread is None:
-        fail("--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
-              "--spread PATH=STD,...")
+        fail(
+            "--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
+            "--spread PATH=STD,..."
+        )
     if fit_json is not None and spread is not None:
         fail("--fit-json and --spread both give the plants' spread; choose one")
     if plants < 1:
@@ -294,9 +463,14 @@ def _print_comparison(side, plants: int) -> None:
 
     drawn = side.settings["n_plants"] > 0
     cols = ("nominal", "median", "worst") if drawn else ("nominal",)
-    tab = Table(title=(f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
-                       f"over {plants} drawn plants" if drawn else
-                       f"a {side.settings['step_rad']:g} rad step on the nominal plant"))
+    tab = Table(
+        title=(
+            f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
+            f"over {plants} drawn plants"
+            if drawn
+            else f"a {side.settings['step_rad']:g} rad step on the nominal plant"
+        )
+    )
     tab.add_column("controller")
     for title, unit, _ in METRICS.values():
         tab.add_column(escape(f"{title} [{unit}]"))  # rich markup ate "[s]"
@@ -304,7 +478,10 @@ def _print_comparison(side, plants: int) -> None:
         tab.add_column("unstable")
     tab.add_column("limit ok")
     for name, row in side.rows.items():
-        tab.add_row(name, *[" / ".join(format_metric(row[k][m]) for k in cols) for m in METRICS],
-                    *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
-                    "yes" if row["limit_respected"] else "NO")
+        tab.add_row(
+            name,
+            *[" / ".join(format_metric(row[k][m]) for k in cols) for m in METRICS],
+            *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
+            "yes" if row["limit_respected"] else "NO",
+        )
     console.print(tab)

@@ -13,18 +13,32 @@ from rich.table import Table
 from flexarm.cli.common import console, enable_cache, err, fail
 
 
-def fit_many(manifest: Annotated[Path, typer.Argument(
-                 help="manifest CSV: one fit a row (columns: docs/distributed.md)")],
-             out: Annotated[Path, typer.Option(
-                 "--out", help="folder of the results: <row id>/fit.json, fitted.toml, "
-                               "plots/, and summary.csv (a rerun skips finished rows)")],
-             scheduler: Annotated[str | None, typer.Option(
-                 help="a running Dask scheduler, e.g. tcp://host:8786")] = None,
-             workers: Annotated[int | None, typer.Option(
-                 help="start a local Dask cluster of N worker processes (default: run "
-                      "in-process, one fit after the other)")] = None,
-             no_figures: Annotated[bool, typer.Option(
-                 "--no-figures", help="skip each fit's overlay figures")] = False) -> None:
+def fit_many(
+    manifest: Annotated[
+        Path, typer.Argument(help="manifest CSV: one fit a row (columns: docs/distributed.md)")
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="folder of the results: <row id>/fit.json, fitted.toml, "
+            "plots/, and summary.csv (a rerun skips finished rows)",
+        ),
+    ],
+    scheduler: Annotated[
+        str | None, typer.Option(help="a running Dask scheduler, e.g. tcp://host:8786")
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="start a local Dask cluster of N worker processes (default: run "
+            "in-process, one fit after the other)"
+        ),
+    ] = None,
+    no_figures: Annotated[
+        bool, typer.Option("--no-figures", help="skip each fit's overlay figures")
+    ] = False,
+) -> None:
     """Fit every row of MANIFEST (each row a task), write DIR/<id>/ and DIR/summary.csv;
     finished rows are skipped and failed ones retried when run again. Exit 1 when a row
     failed (the others still run)."""
@@ -38,9 +52,12 @@ def fit_many(manifest: Annotated[Path, typer.Argument(
     rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
 
     def progress(rec: dict) -> None:
-        console.print(f"{rec['id']}: {rec['status']}"
-                      + (f" ({rec['seconds']:.1f} s)" if rec.get("seconds") else "")
-                      + (f" {rec['error']}" if rec.get("error") else ""), highlight=False)
+        console.print(
+            f"{rec['id']}: {rec['status']}"
+            + (f" ({rec['seconds']:.1f} s)" if rec.get("seconds") else "")
+            + (f" {rec['error']}" if rec.get("error") else ""),
+            highlight=False,
+        )
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -48,8 +65,13 @@ def fit_many(manifest: Annotated[Path, typer.Argument(
             for w in caught:
                 if str(w.message) == fd.NO_DASK:
                     err.print(str(w.message), highlight=False)
-            recs = fd.fit_many(rows, client, out, options=fd.FitManyOptions(
-                figures=not no_figures), progress=progress)
+            recs = fd.fit_many(
+                rows,
+                client,
+                out,
+                options=fd.FitManyOptions(figures=not no_figures),
+                progress=progress,
+            )
     t = Table("row", "status", "seconds", title=f"fit-many: {out / 'summary.csv'}")
     for r in recs:
         t.add_row(r["id"], r["status"], "" if not r.get("seconds") else f"{r['seconds']:.1f}")

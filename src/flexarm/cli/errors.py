@@ -65,16 +65,25 @@ def internal_error(exc: BaseException, command: str = "") -> int:
     try:
         where = str(internal_error_report(exc, log_dir()))
     except OSError as exc2:
-        err.print(f"[bold red]internal error:[/] {escape(fold(f'{type(exc).__name__}: {exc}'))}"
-                  f" (the traceback could not be saved: {escape(str(exc2))}; it follows)",
-                  highlight=False, soft_wrap=True)
-        err.print("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)),
-                  markup=False, highlight=False)
+        err.print(
+            f"[bold red]internal error:[/] {escape(fold(f'{type(exc).__name__}: {exc}'))}"
+            f" (the traceback could not be saved: {escape(str(exc2))}; it follows)",
+            highlight=False,
+            soft_wrap=True,
+        )
+        err.print(
+            "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)),
+            markup=False,
+            highlight=False,
+        )
         return EXIT_INTERNAL
     msg = fold(f"{type(exc).__name__}: {exc}")
-    err.print(f"[bold red]internal error:[/] {escape(msg)} (a flexarm bug: the traceback "
-              f"is in {escape(where)}; please report it with that file)", highlight=False,
-              soft_wrap=True)
+    err.print(
+        f"[bold red]internal error:[/] {escape(msg)} (a flexarm bug: the traceback "
+        f"is in {escape(where)}; please report it with that file)",
+        highlight=False,
+        soft_wrap=True,
+    )
     return EXIT_INTERNAL
 
 
@@ -83,6 +92,9 @@ def usage_error(exc: typer.TyperException) -> int:
     unknown option): one line with the command's ``--help``; the exit code (2)."""
     ctx = getattr(exc, "ctx", None)
     where = f" (see {ctx.command_path} --help)" if ctx is not None else ""
-    err.print(f"[bold red]error:[/] {escape(fold(exc.format_message()))}{escape(where)}",
-              highlight=False, soft_wrap=True)
+    err.print(
+        f"[bold red]error:[/] {escape(fold(exc.format_message()))}{escape(where)}",
+        highlight=False,
+        soft_wrap=True,
+    )
     return exc.exit_code

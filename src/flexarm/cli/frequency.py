@@ -29,15 +29,19 @@ from flexarm.cli.common import (
 
 
 @guarded_command("scenario")
-def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
-               out: Path = typer.Option(..., "--out", help="folder for one CSV per experiment"),
-               frequencies: str | None = typer.Option(
-                   None, help="excitation frequencies in rad/s, comma separated; give ω0 "
-                   "and 3ω0 pairs (default: pairs chosen from the model)"),
-               periods: int = typer.Option(20, help="whole periods recorded per experiment"),
-               kp: float | None = typer.Option(None, help="PD gain, command units per rad"),
-               kd: float | None = typer.Option(None, help="PD gain, command units*s/rad"),
-               overwrite: bool = typer.Option(False, help="replace existing CSV files")) -> None:
+def experiment(
+    scenario: str = typer.Argument(..., help="scenario TOML file or built-in name"),
+    out: Path = typer.Option(..., "--out", help="folder for one CSV per experiment"),
+    frequencies: str | None = typer.Option(
+        None,
+        help="excitation frequencies in rad/s, comma separated; give ω0 "
+        "and 3ω0 pairs (default: pairs chosen from the model)",
+    ),
+    periods: int = typer.Option(20, help="whole periods recorded per experiment"),
+    kp: float | None = typer.Option(None, help="PD gain, command units per rad"),
+    kd: float | None = typer.Option(None, help="PD gain, command units*s/rad"),
+    overwrite: bool = typer.Option(False, help="replace existing CSV files"),
+) -> None:
     """Sine experiments on the simulated arm, as FRB Sec. II-A: one CSV per frequency."""
     enable_cache()
     from rich.progress import Progress
@@ -46,38 +50,50 @@ def experiment(scenario: str = typer.Argument(..., help="scenario TOML file or b
 
     check_dir_option("--out", out)
     sc = load(scenario)
-    design = SineDesign(frequencies=parsing.floats(frequencies, "--frequencies"), periods=periods,
-                        kp=kp, kd=kd)
+    design = SineDesign(
+        frequencies=parsing.floats(frequencies, "--frequencies"), periods=periods, kp=kp, kd=kd
+    )
     try:
         with Progress(console=err) as bar:
             task = bar.add_task("experiments", total=None)
             paths = run_sine_experiments(
-                sc, out, design, overwrite=overwrite,
-                progress=lambda label, d, tot: bar.update(task, description=label,
-                                                          completed=d, total=tot))
+                sc,
+                out,
+                design,
+                overwrite=overwrite,
+                progress=lambda label, d, tot: bar.update(
+                    task, description=label, completed=d, total=tot
+                ),
+            )
     except (ValueError, FileExistsError) as exc:
         fail(str(exc))
     console.print(f"wrote {len(paths)} experiment(s) into {out}/")
 
 
 @guarded_command("files", "column", "unit")
-def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one folder of them"),
-             motor_constant: str = typer.Option(..., "--motor-constant",
-                                                help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"),
-             json_out: o.JsonOut = None,
-             plots: Path | None = typer.Option(None, help="folder for the Bode figures"),
-             scenario_out: Path | None = typer.Option(
-                 None, "--scenario-out", help="write the identified arm as a scenario TOML"),
-             current_limit: str | None = typer.Option(None, help="amplifier limit for the scenario"),
-             column: list[str] | None = typer.Option(None, help="map a column: current=i_m"),
-             unit: list[str] | None = typer.Option(None, help="a column's unit: current=mA"),
-             motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
-             beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
-             structured: bool | None = typer.Option(
-                 None, "--structured/--free",
-                 help="G_m from the joint fit of J, V, C, C_f, or the paper's free fit to the "
-                      "corrected data (default: joint fit for a one-mode beam)"),
-             overwrite: bool = typer.Option(False, help="replace existing output files")) -> None:
+def identify(
+    files: list[Path] = typer.Argument(..., help="CSV logs, or one folder of them"),
+    motor_constant: str = typer.Option(
+        ..., "--motor-constant", help="K, e.g. 0.24676 (N*m/A) or '2.184 lbf*in/A'"
+    ),
+    json_out: o.JsonOut = None,
+    plots: Path | None = typer.Option(None, help="folder for the Bode figures"),
+    scenario_out: Path | None = typer.Option(
+        None, "--scenario-out", help="write the identified arm as a scenario TOML"
+    ),
+    current_limit: str | None = typer.Option(None, help="amplifier limit for the scenario"),
+    column: list[str] | None = typer.Option(None, help="map a column: current=i_m"),
+    unit: list[str] | None = typer.Option(None, help="a column's unit: current=mA"),
+    motor_orders: str = typer.Option("2,4", help="zeros,poles of G_m (poles incl. the integrator)"),
+    beam_orders: str = typer.Option("0,2", help="zeros,poles of G_b"),
+    structured: bool | None = typer.Option(
+        None,
+        "--structured/--free",
+        help="G_m from the joint fit of J, V, C, C_f, or the paper's free fit to the "
+        "corrected data (default: joint fit for a one-mode beam)",
+    ),
+    overwrite: bool = typer.Option(False, help="replace existing output files"),
+) -> None:
     """Identify G_m, G_b and Coulomb friction from sine experiments (FRB Sec. II)."""
     import warnings
 
@@ -94,9 +110,15 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            res = run_identify(src, motor_constant, motor_orders=mo, beam_orders=bo,
-                               columns=parsing.pairs(column, "column") or None,
-                               units=parsing.pairs(unit, "unit") or None, structured=structured)
+            res = run_identify(
+                src,
+                motor_constant,
+                motor_orders=mo,
+                beam_orders=bo,
+                columns=parsing.pairs(column, "column") or None,
+                units=parsing.pairs(unit, "unit") or None,
+                structured=structured,
+            )
     except (IdentificationError, ValueError) as exc:
         fail(str(exc))
     for w in caught:
@@ -111,10 +133,15 @@ def identify(files: list[Path] = typer.Argument(..., help="CSV logs, or one fold
 
         write_toml(scenario_out, scenario_file(res, current_limit), overwrite=overwrite)
     cf = d["coulomb_current"]
-    console.print(f"Coulomb friction: {cf:.4g} A ({d['coulomb_torque']:.4g} N*m)" if cf is not None
-                  else "Coulomb friction: not estimated (no ω0/3ω0 pair)")
-    console.print(f"G_m num = {fmt(d['motor_tf']['num'])}\n    den = {fmt(d['motor_tf']['den'])}"
-                  f"  ({d['motor_tf_method']})")
+    console.print(
+        f"Coulomb friction: {cf:.4g} A ({d['coulomb_torque']:.4g} N*m)"
+        if cf is not None
+        else "Coulomb friction: not estimated (no ω0/3ω0 pair)"
+    )
+    console.print(
+        f"G_m num = {fmt(d['motor_tf']['num'])}\n    den = {fmt(d['motor_tf']['den'])}"
+        f"  ({d['motor_tf_method']})"
+    )
     console.print(f"G_b num = {fmt(d['beam_tf']['num'])}\n    den = {fmt(d['beam_tf']['den'])}")
 
 
@@ -122,63 +149,97 @@ def scenario_file(res, current_limit) -> dict:
     """An identified arm as a complete scenario (the rest from the FRB defaults)."""
     frag = res.to_scenario_dict(current_limit=current_limit)
     frag["notes"] = {k: str(v) for k, v in frag.get("notes", {}).items()}
-    frag.update({"sampling": {"period": float(res.logs[0].dt), "delay": 1},
-                 "simulation": {"duration": 2.0, "substeps": 10},
-                 "reference": {"type": "step", "amplitude": 0.2},
-                 "controller": {"type": "pd", "kp": 10.0, "kd": 0.2}})
+    frag.update(
+        {
+            "sampling": {"period": float(res.logs[0].dt), "delay": 1},
+            "simulation": {"duration": 2.0, "substeps": 10},
+            "reference": {"type": "step", "amplitude": 0.2},
+            "controller": {"type": "pd", "kp": 10.0, "kd": 0.2},
+        }
+    )
     frag["arm"].pop("kind", None)
     return frag
 
 
 @guarded_command()
-def excite(out: Path = typer.Argument(..., help="CSV to write (the signal a generator plays)"),
-           fs: float = typer.Option(..., "--fs", help="sampling rate, Hz"),
-           period: int = typer.Option(..., "--period", help="samples per period"),
-           f_min: float = typer.Option(..., "--f-min", help="lowest line, Hz"),
-           f_max: float = typer.Option(..., "--f-max", help="highest line, Hz"),
-           kind: str = typer.Option("random-odd", help="full | odd | random-odd | prbs | sweep"),
-           grid: str = typer.Option("linear", help="linear | log"),
-           phases: str = typer.Option("random", help="schroeder | random | min-crest"),
-           rms: float = typer.Option(1.0, help="rms of the signal (multisine)"),
-           periods: int = typer.Option(2, help="periods to play"),
-           realisations: int = typer.Option(1, help="realisations (new random phases)"),
-           seed: int = typer.Option(0),
-           overwrite: bool = typer.Option(False, help="replace existing files")) -> None:
+def excite(
+    out: Path = typer.Argument(..., help="CSV to write (the signal a generator plays)"),
+    fs: float = typer.Option(..., "--fs", help="sampling rate, Hz"),
+    period: int = typer.Option(..., "--period", help="samples per period"),
+    f_min: float = typer.Option(..., "--f-min", help="lowest line, Hz"),
+    f_max: float = typer.Option(..., "--f-max", help="highest line, Hz"),
+    kind: str = typer.Option("random-odd", help="full | odd | random-odd | prbs | sweep"),
+    grid: str = typer.Option("linear", help="linear | log"),
+    phases: str = typer.Option("random", help="schroeder | random | min-crest"),
+    rms: float = typer.Option(1.0, help="rms of the signal (multisine)"),
+    periods: int = typer.Option(2, help="periods to play"),
+    realisations: int = typer.Option(1, help="realisations (new random phases)"),
+    seed: int = typer.Option(0),
+    overwrite: bool = typer.Option(False, help="replace existing files"),
+) -> None:
     """Design an excitation: writes OUT and OUT-lines.csv (excited and detection lines)."""
     import numpy as np
 
     from flexarm.identification.frequency_domain import excitation as ex
+
     try:
         if kind == "sweep":
             e = ex.swept_sine(period, fs, f_min, f_max, amplitude=rms * np.sqrt(2), periods=periods)
         else:
-            e = ex.multisine(period, fs, f_min, f_max, kind=kind, grid=grid, phases=phases,
-                             rms=rms, periods=periods, realisations=realisations, seed=seed)
+            e = ex.multisine(
+                period,
+                fs,
+                f_min,
+                f_max,
+                kind=kind,
+                grid=grid,
+                phases=phases,
+                rms=rms,
+                periods=periods,
+                realisations=realisations,
+                seed=seed,
+            )
         log, lines = ex.write_excitation(out, e, overwrite=overwrite)
     except (ValueError, FileExistsError) as exc:
         fail(str(exc))
-    console.print(f"{log}: {e.signal.shape[1]} samples × {e.signal.shape[0]} realisation(s), "
-                  f"{len(e.excited)} excited and {len(e.detection)} detection lines, crest "
-                  f"factor {e.crest_factor:.3f}; lines in {lines}")
+    console.print(
+        f"{log}: {e.signal.shape[1]} samples × {e.signal.shape[0]} realisation(s), "
+        f"{len(e.excited)} excited and {len(e.detection)} detection lines, crest "
+        f"factor {e.crest_factor:.3f}; lines in {lines}"
+    )
 
 
 @guarded_command("logs", "log_format", "lines")
-def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"),
-        log_format: Path | None = typer.Option(None, "--log-format", help="TOML with [columns] and [units]"),
-        input: str = typer.Option("current", "--input", help="flexarm name of the input"),
-        output: str = typer.Option("motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"),
-        period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
-        lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
-        reference: str | None = typer.Option(
-            None, "--reference", help="closed loop, with --method lpm: the reference's flexarm "
-                                      "name; G = G_yr/G_ur (indirect). Periodic data need none: "
-                                      "the ratio of period means is already Ȳ/Ū = (Ȳ/R̄)/(Ū/R̄)"),
-        method: str = typer.Option("periodic", "--method",
-                                   help="periodic (multisine over whole periods) or lpm "
-                                        "(local polynomial method: non-periodic or transient records)"),
-        json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
-        plots: o.Plots = None,
-        overwrite: o.Overwrite = False) -> None:
+def frf(
+    logs: list[Path] = typer.Argument(
+        ..., help="periodic recordings (.mat or CSV); several: one realisation each, robust BLA"
+    ),
+    log_format: Path | None = typer.Option(
+        None, "--log-format", help="TOML with [columns] and [units]"
+    ),
+    input: str = typer.Option("current", "--input", help="flexarm name of the input"),
+    output: str = typer.Option(
+        "motor_angle", "--output", help="flexarm name(s) of the outputs, comma-separated"
+    ),
+    period: str = typer.Option("auto", "--period", help="samples per period, or auto"),
+    lines: str = typer.Option("auto", "--lines", help="CSV of lines (from excite), or auto"),
+    reference: str | None = typer.Option(
+        None,
+        "--reference",
+        help="closed loop, with --method lpm: the reference's flexarm "
+        "name; G = G_yr/G_ur (indirect). Periodic data need none: "
+        "the ratio of period means is already Ȳ/Ū = (Ȳ/R̄)/(Ū/R̄)",
+    ),
+    method: str = typer.Option(
+        "periodic",
+        "--method",
+        help="periodic (multisine over whole periods) or lpm "
+        "(local polynomial method: non-periodic or transient records)",
+    ),
+    json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
+    plots: o.Plots = None,
+    overwrite: o.Overwrite = False,
+) -> None:
     """Nonparametric FRF, noise, odd/even distortion and the BLA of a periodic recording."""
     import warnings as _w
 
@@ -191,12 +252,16 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         plot_distortion,
     )
     from flexarm.io.matfile import read_recording
+
     if method not in ("periodic", "lpm"):
         fail(f"--method {method!r}: choose periodic or lpm")
-    n_period = None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
+    n_period = (
+        None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
+    )
     check_file_option("--json", json_out, overwrite, "frf.json")
     plots = output_folder("--plots", plots, overwrite)
     from flexarm.io.logs import LogError
+
     try:
         with _w.catch_warnings(record=True) as caught:
             _w.simplefilter("always")
@@ -212,16 +277,33 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
                     if n not in sig:
                         fail(f"{log}: no signal {n!r}; mapped: {', '.join(sig)}")
                 if method == "lpm":
-                    results.append(lpm_frf(sig[input], {n: sig[n] for n in names}, fs,
-                                           input_name=input, source=str(log),
-                                           reference=sig[reference] if reference else None))
+                    results.append(
+                        lpm_frf(
+                            sig[input],
+                            {n: sig[n] for n in names},
+                            fs,
+                            input_name=input,
+                            source=str(log),
+                            reference=sig[reference] if reference else None,
+                        )
+                    )
                     continue
-                results.append(periodic_frf(
-                    sig[input], {n: sig[n] for n in names}, fs,
-                    period=n_period, lines=ex_lines,
-                    input_name=input, source=str(log)))
-            res = results[0] if len(results) == 1 else combine_realisations(
-                results, source=", ".join(map(str, logs)))
+                results.append(
+                    periodic_frf(
+                        sig[input],
+                        {n: sig[n] for n in names},
+                        fs,
+                        period=n_period,
+                        lines=ex_lines,
+                        input_name=input,
+                        source=str(log),
+                    )
+                )
+            res = (
+                results[0]
+                if len(results) == 1
+                else combine_realisations(results, source=", ".join(map(str, logs)))
+            )
         for c in caught:
             warn(str(c.message))
     except (IdentificationError, LogError, OSError, ValueError) as exc:
@@ -231,22 +313,36 @@ def frf(logs: list[Path] = typer.Argument(..., help="periodic recordings (.mat o
         plot_distortion(res, plots / "frf-distortion.png")
         plot_bode(res, plots / "frf-bode.png")
     if method == "lpm":
-        console.print(f"LPM: {len(res.lines)} lines {res.frequency_hz[0]:g}–"
-                      f"{res.frequency_hz[-1]:g} Hz from {res.period} samples; {res.verdict()}")
+        console.print(
+            f"LPM: {len(res.lines)} lines {res.frequency_hz[0]:g}–"
+            f"{res.frequency_hz[-1]:g} Hz from {res.period} samples; {res.verdict()}"
+        )
         return
-    console.print(f"{len(res.lines)} excited lines {res.frequency_hz[0]:g}–{res.frequency_hz[-1]:g} Hz, "
-                  f"period {res.period} samples, {res.periods_used} periods used "
-                  f"({res.transient_periods} transient); {res.verdict()}")
+    console.print(
+        f"{len(res.lines)} excited lines {res.frequency_hz[0]:g}–{res.frequency_hz[-1]:g} Hz, "
+        f"period {res.period} samples, {res.periods_used} periods used "
+        f"({res.transient_periods} transient); {res.verdict()}"
+    )
 
 
 def structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length) -> dict:
     """The known constants of a structure from the CLI's data-sheet options; a clear error
     for a missing or a foreign option."""
-    given = {"motor_constant": motor_constant, "armature_resistance": resistance,
-             "gear_ratio": gear_ratio, "efficiency": efficiency, "length": length}
+    given = {
+        "motor_constant": motor_constant,
+        "armature_resistance": resistance,
+        "gear_ratio": gear_ratio,
+        "efficiency": efficiency,
+        "length": length,
+    }
     given = {k: v for k, v in given.items() if v is not None}
-    opt = {"motor_constant": "--motor-constant", "armature_resistance": "--resistance",
-           "gear_ratio": "--gear-ratio", "efficiency": "--efficiency", "length": "--length"}
+    opt = {
+        "motor_constant": "--motor-constant",
+        "armature_resistance": "--resistance",
+        "gear_ratio": "--gear-ratio",
+        "efficiency": "--efficiency",
+        "length": "--length",
+    }
     extra = [opt[k] for k in given if k not in st.given and k not in st.optional_given]
     if extra:
         fail(f"--structure {st.name} takes no {', '.join(extra)}")
@@ -257,34 +353,49 @@ def structure_given(st, motor_constant, resistance, gear_ratio, efficiency, leng
 
 
 @guarded_command("frf_json")
-def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
-          poles: int | None = typer.Option(None, "--poles"),
-          zeros: int | None = typer.Option(None, "--zeros"),
-          integrators: int = typer.Option(0, "--integrators"),
-          delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
-          structure: str | None = typer.Option(
-              None, "--structure", help="physical structure: two-mass, frb-single-mass "
-                                        "(needs --motor-constant) or voltage-servo (needs "
-                                        "--motor-constant, --resistance, --gear-ratio, --efficiency)"),
-          output: str | None = typer.Option(
-              None, "--output", help="output(s) to fit: one for a rational model; for a "
-                                     "structure a comma list (default: every output of the "
-                                     "FRF the structure has)"),
-          free: str | None = typer.Option(None, "--free", help="structure: comma list of "
-                                             "the parameters fitted (default all)"),
-          fixed: list[str] = typer.Option([], "--fix", help="structure: NAME=VALUE held "
-                                          "(SI; with --free, the value of a parameter not fitted)"),
-          motor_constant: o.StructMotorConstant = None,
-          resistance: o.StructResistance = None,
-          gear_ratio: o.StructGearRatio = None,
-          efficiency: o.StructEfficiency = None,
-          length: o.StructLength = None,
-          coulomb: bool = typer.Option(True, "--coulomb/--no-coulomb",
-                                       help="the Coulomb level from the odd distortion "
-                                            "(simulates the fitted model; a few seconds)"),
-          json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
-          plots: o.Plots = None,
-          overwrite: o.Overwrite = False) -> None:
+def tfest(
+    frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
+    poles: int | None = typer.Option(None, "--poles"),
+    zeros: int | None = typer.Option(None, "--zeros"),
+    integrators: int = typer.Option(0, "--integrators"),
+    delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
+    structure: str | None = typer.Option(
+        None,
+        "--structure",
+        help="physical structure: two-mass, frb-single-mass "
+        "(needs --motor-constant) or voltage-servo (needs "
+        "--motor-constant, --resistance, --gear-ratio, --efficiency)",
+    ),
+    output: str | None = typer.Option(
+        None,
+        "--output",
+        help="output(s) to fit: one for a rational model; for a "
+        "structure a comma list (default: every output of the "
+        "FRF the structure has)",
+    ),
+    free: str | None = typer.Option(
+        None, "--free", help="structure: comma list of the parameters fitted (default all)"
+    ),
+    fixed: list[str] = typer.Option(
+        [],
+        "--fix",
+        help="structure: NAME=VALUE held (SI; with --free, the value of a parameter not fitted)",
+    ),
+    motor_constant: o.StructMotorConstant = None,
+    resistance: o.StructResistance = None,
+    gear_ratio: o.StructGearRatio = None,
+    efficiency: o.StructEfficiency = None,
+    length: o.StructLength = None,
+    coulomb: bool = typer.Option(
+        True,
+        "--coulomb/--no-coulomb",
+        help="the Coulomb level from the odd distortion "
+        "(simulates the fitted model; a few seconds)",
+    ),
+    json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
+    plots: o.Plots = None,
+    overwrite: o.Overwrite = False,
+) -> None:
     """Fit a transfer function or a physical structure (two-mass, frb-single-mass,
     voltage-servo) to an FRF, weighted by its variances; JSON parameters.<name> = {value, std}."""
     import control as ct
@@ -294,6 +405,7 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
     from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
     from flexarm.identification.frequency_domain.tfest import TFEstError
     from flexarm.identification.frequency_domain.tfest import tfest as _tfest
+
     check_file_option("--json", json_out, overwrite, "tfest.json")
     plots = output_folder("--plots", plots, overwrite)
     try:
@@ -314,15 +426,22 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
             if structure not in STRUCTURES:
                 fail(f"--structure {structure!r}: choose one of {', '.join(STRUCTURES)}")
             st = STRUCTURES[structure]
-            names = ([n.strip() for n in output.split(",") if n.strip()] if output
-                     else [n for n in st.outputs if n in outs])
+            names = (
+                [n.strip() for n in output.split(",") if n.strip()]
+                if output
+                else [n for n in st.outputs if n in outs]
+            )
             for n in names:
                 if n not in outs:
-                    fail(f"{frf_json}: --output {n!r} is not in the FRF; outputs: {', '.join(outs)}")
+                    fail(
+                        f"{frf_json}: --output {n!r} is not in the FRF; outputs: {', '.join(outs)}"
+                    )
             if not names:
-                fail(f"{frf_json}: none of the FRF's outputs ({', '.join(outs)}) is an output "
-                      f"of the {structure} structure ({', '.join(st.outputs)}); name them with "
-                      "flexarm frf --output")
+                fail(
+                    f"{frf_json}: none of the FRF's outputs ({', '.join(outs)}) is an output "
+                    f"of the {structure} structure ({', '.join(st.outputs)}); name them with "
+                    "flexarm frf --output"
+                )
             given = structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
             held = {}
             for item in fixed:
@@ -332,10 +451,15 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                 except ValueError:
                     fail(f"--fix {item!r}: write NAME=VALUE with a number (SI units)")
             chans = {n: chan(n) for n in names}
-            fit = fit_structure(st, w, {n: c[0] for n, c in chans.items()},
-                                {n: c[1] for n, c in chans.items()},
-                                free=[x.strip() for x in free.split(",")] if free else None,
-                                initial=held or None, given=given)
+            fit = fit_structure(
+                st,
+                w,
+                {n: c[0] for n, c in chans.items()},
+                {n: c[1] for n, c in chans.items()},
+                free=[x.strip() for x in free.split(",")] if free else None,
+                initial=held or None,
+                given=given,
+            )
             out = fit.to_json()  # structure, units, given, free, outputs, cost, parameters
             if structure in SIMULATORS and coulomb and d.get("spectra") and "motor_angle" in outs:
                 import warnings as _w
@@ -345,35 +469,46 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
                     coulomb_from_distortion,
                 )
                 from flexarm.identification.frequency_domain.periodic import PeriodicFRF
+
                 err.print("Coulomb level from the odd distortion: simulating the fitted model ...")
                 try:
                     with _w.catch_warnings(record=True) as caught:
                         _w.simplefilter("always")
                         cf = coulomb_from_distortion(
                             PeriodicFRF.from_json(d, str(frf_json)),
-                            {**fit.given, **fit.values}, structure=structure,
-                            progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
+                            {**fit.given, **fit.values},
+                            structure=structure,
+                            progress=lambda i, n: err.print(f"  simulation {i}", end="\r"),
+                        )
                     for c in caught:
                         if "IdentificationWarning" in type(c.message).__name__:
                             warn(str(c.message))
                     err.print("")
                     fit.parameters["coulomb_current" if cf.unit == "A" else "coulomb_torque"] = {
-                        "value": cf.coulomb_current, "std": cf.std}
+                        "value": cf.coulomb_current,
+                        "std": cf.std,
+                    }
                     out["coulomb"] = cf.to_json()
                 except IdentificationError as exc:
                     warn(f"no Coulomb level: {exc}")
                     out["coulomb"] = {"error": str(exc)}
             elif structure in SIMULATORS and coulomb and "motor_angle" in outs:
-                err.print("note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
-                          "several realisations, or written by an older flexarm frf)")
+                err.print(
+                    "note: no Coulomb level: the FRF JSON has no period spectra (LPM, "
+                    "several realisations, or written by an older flexarm frf)"
+                )
         elif structure is None and poles is not None and zeros is not None:
             name = output or next(iter(outs))
             if name not in outs:
                 fail(f"{frf_json}: --output {name!r} is not in the FRF; outputs: {', '.join(outs)}")
             H, sd = chan(name)
             fit = _tfest(ct.frd(H, w), poles, zeros, integrators=integrators, delay=delay, std=sd)
-            out = {"output": name, "num": fit.tf.num[0][0].tolist(), "den": fit.tf.den[0][0].tolist(),
-                   "unstable_poles": [str(p) for p in fit.unstable_poles]}
+            out = {
+                "output": name,
+                "num": fit.tf.num[0][0].tolist(),
+                "den": fit.tf.den[0][0].tolist(),
+                "unstable_poles": [str(p) for p in fit.unstable_poles],
+            }
         else:
             fail(f"give --poles N --zeros M, or --structure ({', '.join(STRUCTURES)})")
     except TFEstError as exc:
@@ -385,8 +520,13 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
 
         if structure is not None:
             chans = {n: chan(n) for n in out["outputs"]}
-            plot_fit(fit, f, {n: c[0] for n, c in chans.items()},
-                     {n: c[1] for n, c in chans.items()}, path=plots / "tfest.png")
+            plot_fit(
+                fit,
+                f,
+                {n: c[0] for n, c in chans.items()},
+                {n: c[1] for n, c in chans.items()},
+                path=plots / "tfest.png",
+            )
         else:
             plot_fit(fit, f, {name: H}, {name: sd}, path=plots / "tfest.png")
     console.print(fit.verdict)
@@ -397,20 +537,26 @@ def tfest(frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf
 
 
 @guarded_command("frf_json")
-def friction(frf_json: list[Path] = typer.Argument(
-                 ..., help="FRF JSONs written by flexarm frf, one per amplitude (same "
-                           "excitation lines, different levels)"),
-             structure: str = typer.Option("two-mass", "--structure",
-                                           help="two-mass, frb-single-mass or voltage-servo"),
-             motor_constant: o.StructMotorConstant = None,
-             resistance: o.StructResistance = None,
-             gear_ratio: o.StructGearRatio = None,
-             efficiency: o.StructEfficiency = None,
-             length: o.StructLength = None,
-             iterations: int = typer.Option(3, "--iterations",
-                                            help="simulator corrections of the Bussgang start (0: none)"),
-             json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
-             overwrite: o.Overwrite = False) -> None:
+def friction(
+    frf_json: list[Path] = typer.Argument(
+        ...,
+        help="FRF JSONs written by flexarm frf, one per amplitude (same "
+        "excitation lines, different levels)",
+    ),
+    structure: str = typer.Option(
+        "two-mass", "--structure", help="two-mass, frb-single-mass or voltage-servo"
+    ),
+    motor_constant: o.StructMotorConstant = None,
+    resistance: o.StructResistance = None,
+    gear_ratio: o.StructGearRatio = None,
+    efficiency: o.StructEfficiency = None,
+    length: o.StructLength = None,
+    iterations: int = typer.Option(
+        3, "--iterations", help="simulator corrections of the Bussgang start (0: none)"
+    ),
+    json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
+    overwrite: o.Overwrite = False,
+) -> None:
     """Coulomb friction and viscous damping from the amplitude dependence of the BLA: the
     structure fitted to each record's BLA, its viscous damping regressed on 1/σ_v
     (Bussgang), then matched with flexarm's simulator of the fitted model with friction."""
@@ -431,8 +577,10 @@ def friction(frf_json: list[Path] = typer.Argument(
     if structure not in SIMULATORS:
         fail(f"--structure {structure!r}: the friction match simulates {', '.join(SIMULATORS)}")
     if len(frf_json) < 2:
-        fail("flexarm friction needs two or more FRF JSONs at different amplitudes (one "
-              "amplitude: flexarm tfest --structure ... gives C_f from the odd distortion)")
+        fail(
+            "flexarm friction needs two or more FRF JSONs at different amplitudes (one "
+            "amplitude: flexarm tfest --structure ... gives C_f from the odd distortion)"
+        )
     st = STRUCTURES[structure]
     given = structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
     frfs, fits = [], []
@@ -443,19 +591,28 @@ def friction(frf_json: list[Path] = typer.Argument(
         except (OSError, ValueError, KeyError, IdentificationError) as exc:
             fail(f"{path}: not an FRF JSON from flexarm frf ({exc})")
         if not frf.spectra:
-            fail(f"{path}: the FRF JSON has no period spectra (LPM or several realisations): "
-                  "the record cannot be replayed by the simulator")
+            fail(
+                f"{path}: the FRF JSON has no period spectra (LPM or several realisations): "
+                "the record cannot be replayed by the simulator"
+            )
         names = [n for n in st.outputs if n in frf.outputs]
         if "motor_angle" not in names:
-            fail(f"{path}: no motor_angle output (outputs: {', '.join(frf.outputs)}); the "
-                  "velocity rms and the friction are taken at the motor")
+            fail(
+                f"{path}: no motor_angle output (outputs: {', '.join(frf.outputs)}); the "
+                "velocity rms and the friction are taken at the motor"
+            )
         idx = [frf.outputs.index(n) for n in names]
         try:
-            fit = fit_structure(st, 2 * np.pi * frf.frequency_hz,
-                                {n: frf.response[i] for n, i in zip(names, idx, strict=True)},
-                                {n: (frf.total_std if frf.total_std is not None
-                                     else frf.noise_std)[i] for n, i in zip(names, idx, strict=True)},
-                                given=given)
+            fit = fit_structure(
+                st,
+                2 * np.pi * frf.frequency_hz,
+                {n: frf.response[i] for n, i in zip(names, idx, strict=True)},
+                {
+                    n: (frf.total_std if frf.total_std is not None else frf.noise_std)[i]
+                    for n, i in zip(names, idx, strict=True)
+                },
+                given=given,
+            )
         except TFEstError as exc:
             fail(f"{path}: {exc}")
         frfs.append(frf)
@@ -465,8 +622,12 @@ def friction(frf_json: list[Path] = typer.Argument(
         with _w.catch_warnings():
             _w.simplefilter("ignore")  # all of them are in res["warnings"]
             res = coulomb_from_bla_amplitudes(
-                frfs, fits, structure, iterations=iterations,
-                progress=lambda i, n: err.print(f"  simulation {i}", end="\r"))
+                frfs,
+                fits,
+                structure,
+                iterations=iterations,
+                progress=lambda i, n: err.print(f"  simulation {i}", end="\r"),
+            )
         err.print("")
     except IdentificationError as exc:
         fail(str(exc))
@@ -475,30 +636,46 @@ def friction(frf_json: list[Path] = typer.Argument(
     res = friction_document(res, frf_json, fits)
     save_result("--json", json_out, res, overwrite)
     c, v = res["coulomb"], res["viscous"]
-    console.print(f"Coulomb {c['value']:.4g} ± {c['std']:.2g} {res['unit']}, viscous "
-                  f"{v['value']:.4g} ± {v['std']:.2g} {res['damping_unit']} (correlation "
-                  f"{res['correlation']:.2f}; Bussgang start {res['bussgang']['coulomb']['value']:.4g})")
+    console.print(
+        f"Coulomb {c['value']:.4g} ± {c['std']:.2g} {res['unit']}, viscous "
+        f"{v['value']:.4g} ± {v['std']:.2g} {res['damping_unit']} (correlation "
+        f"{res['correlation']:.2f}; Bussgang start {res['bussgang']['coulomb']['value']:.4g})"
+    )
 
 
 # --- JSON LAYOUT ---------------------------------------------------------------------------
 # The documents `frf`, `tfest` and `friction` write, assembled here; they belong to the
 # library's results (PeriodicFRF, the tfest/structure fit, the friction match).
 
+
 def frf_document(logs: list[Path], res) -> dict:
     """JSON LAYOUT of ``frf --json``: the source(s), the realisation count and the FRF."""
-    return {"source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
-            "realisations": len(logs), **res.to_json()}
+    return {
+        "source": [str(x) for x in logs] if len(logs) > 1 else str(logs[0]),
+        "realisations": len(logs),
+        **res.to_json(),
+    }
 
 
 def tfest_document(out: dict, fit) -> dict:
     """JSON LAYOUT of ``tfest --json``: the model's own entries plus the cost, its check
     and the parameters with their standard deviations (and what those mean)."""
-    out = {**out, "cost": fit.cost, "expected_cost": fit.expected_cost,
-           "cost_std": fit.cost_std, "verdict": fit.verdict, "parameters": fit.parameters}
+    out = {
+        **out,
+        "cost": fit.cost,
+        "expected_cost": fit.expected_cost,
+        "cost_std": fit.cost_std,
+        "verdict": fit.verdict,
+        "parameters": fit.parameters,
+    }
     inflated = any("std_inflated" in v for v in fit.parameters.values())
-    out["std_note"] = ("'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
-                       "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
-                       "rejected)" if inflated else "'std': from the noise (or BLA) variances")
+    out["std_note"] = (
+        "'std': from the noise (or BLA) variances alone; 'std_inflated': std × "
+        "sqrt(cost/expected_cost), the misfit counted as extra noise (the fit is "
+        "rejected)"
+        if inflated
+        else "'std': from the noise (or BLA) variances"
+    )
     return out
 
 

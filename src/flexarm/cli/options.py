@@ -14,61 +14,110 @@ import typer
 # --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
 Drive = Annotated[str, typer.Option(help="voltage or current")]
 GearRatio = Annotated[float, typer.Option(help="K_g")]
-MotorConstant = Annotated[float | None, typer.Option(
-    help="K_m, V*s/rad (voltage) or N*m/A (current)")]
+MotorConstant = Annotated[
+    float | None, typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)")
+]
 ArmatureResistance = Annotated[float | None, typer.Option(help="R, ohm")]
 LinkLength = Annotated[float | None, typer.Option(help="link length, m")]
 GearEfficiency = Annotated[float, typer.Option()]
 MotorEfficiency = Annotated[float, typer.Option()]
-VoltageLimit = Annotated[float | None, typer.Option(
-    help="amplifier limit, V (default: the log format's [controller] limit, else 10)")]
-ComputationDelay = Annotated[int | None, typer.Option(
-    help="samples between a sample and its command (default: where the declared law best "
-         "explains the logged command)")]
+VoltageLimit = Annotated[
+    float | None,
+    typer.Option(help="amplifier limit, V (default: the log format's [controller] limit, else 10)"),
+]
+ComputationDelay = Annotated[
+    int | None,
+    typer.Option(
+        help="samples between a sample and its command (default: where the declared law best "
+        "explains the logged command)"
+    ),
+]
 
 # --- the data sheet of a physical structure fitted to an FRF (tfest, friction) ------------
-StructMotorConstant = Annotated[float | None, typer.Option(
-    "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)")]
-StructResistance = Annotated[float | None, typer.Option(
-    "--resistance", help="voltage-servo: R_m (ohm)")]
+StructMotorConstant = Annotated[
+    float | None,
+    typer.Option(
+        "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"
+    ),
+]
+StructResistance = Annotated[
+    float | None, typer.Option("--resistance", help="voltage-servo: R_m (ohm)")
+]
 StructGearRatio = Annotated[float | None, typer.Option("--gear-ratio", help="voltage-servo: K_g")]
-StructEfficiency = Annotated[float | None, typer.Option(
-    "--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)")]
-StructLength = Annotated[float | None, typer.Option(
-    "--length", help="voltage-servo: link length L (m), for a tip_deflection output")]
+StructEfficiency = Annotated[
+    float | None,
+    typer.Option("--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)"),
+]
+StructLength = Annotated[
+    float | None,
+    typer.Option("--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
+]
 
 # --- how a log is read ---------------------------------------------------------------------
-LogFormats = Annotated[list[str] | None, typer.Option(
-    "--log-format", help="the logger's log-format TOML (columns, units, gains); with a "
-                         "scenario: once per log, or PATTERN=FILE by file name")]
-LogFormatFile = Annotated[Path | None, typer.Option(
-    "--log-format", help="the logs' log-format TOML ([columns], [units]; examples/)")]
-Column = Annotated[list[str] | None, typer.Option(
-    help="map a column to the log's name: motor_angle=theta")]
-Unit = Annotated[list[str] | None, typer.Option(
-    help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm")]
-Window = Annotated[str | None, typer.Option(
-    help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5")]
-MaxJitter = Annotated[float, typer.Option(
-    help="accepted relative deviation of a time step from the median step")]
-Controller = Annotated[str | None, typer.Option(
-    help="overrides the logs' '# controller:' line, e.g. "
-         "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'")]
-UseRegressedLaw = Annotated[bool, typer.Option(
-    "--use-regressed-law", help="use the law regressed on the logged command where it "
-                                "disagrees with the declared one")]
-Channels = Annotated[list[str] | None, typer.Option(
-    "--channel", help="a measured channel to fit or compare, NAME or NAME=WEIGHT (repeat; "
-                      "default: every logged sensor channel)")]
+LogFormats = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--log-format",
+        help="the logger's log-format TOML (columns, units, gains); with a "
+        "scenario: once per log, or PATTERN=FILE by file name",
+    ),
+]
+LogFormatFile = Annotated[
+    Path | None,
+    typer.Option("--log-format", help="the logs' log-format TOML ([columns], [units]; examples/)"),
+]
+Column = Annotated[
+    list[str] | None, typer.Option(help="map a column to the log's name: motor_angle=theta")
+]
+Unit = Annotated[
+    list[str] | None,
+    typer.Option(help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm"),
+]
+Window = Annotated[
+    str | None,
+    typer.Option(
+        help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5"
+    ),
+]
+MaxJitter = Annotated[
+    float, typer.Option(help="accepted relative deviation of a time step from the median step")
+]
+Controller = Annotated[
+    str | None,
+    typer.Option(
+        help="overrides the logs' '# controller:' line, e.g. "
+        "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"
+    ),
+]
+UseRegressedLaw = Annotated[
+    bool,
+    typer.Option(
+        "--use-regressed-law",
+        help="use the law regressed on the logged command where it disagrees with the declared one",
+    ),
+]
+Channels = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--channel",
+        help="a measured channel to fit or compare, NAME or NAME=WEIGHT (repeat; "
+        "default: every logged sensor channel)",
+    ),
+]
 
 # --- outputs -------------------------------------------------------------------------------
 JsonOut = Annotated[Path | None, typer.Option("--json", help="write the result as JSON")]
 JsonRequired = Annotated[Path, typer.Option("--json", help="JSON result")]
 Plots = Annotated[Path | None, typer.Option(help="folder for figures")]
-Report = Annotated[Path | None, typer.Option(
-    "--report", help="write a self-contained HTML report (figures embedded), e.g. result.html")]
-ScenarioOut = Annotated[Path | None, typer.Option(
-    "--scenario-out", help="write the fitted (identified) scenario TOML")]
+Report = Annotated[
+    Path | None,
+    typer.Option(
+        "--report", help="write a self-contained HTML report (figures embedded), e.g. result.html"
+    ),
+]
+ScenarioOut = Annotated[
+    Path | None, typer.Option("--scenario-out", help="write the fitted (identified) scenario TOML")
+]
 Out = Annotated[Path, typer.Option("--out", help="output folder")]
 Overwrite = Annotated[bool, typer.Option(help="replace existing output files")]
 OverwriteOut = Annotated[bool, typer.Option(help="write into a non-empty --out folder")]

@@ -16,8 +16,10 @@ def window(text: str | None, option: str) -> tuple[float, float] | None:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        fail(f"{option} {text!r}: expected START:STOP in seconds from the log's first "
-             "sample, e.g. 0:5")
+        fail(
+            f"{option} {text!r}: expected START:STOP in seconds from the log's first "
+            "sample, e.g. 0:5"
+        )
     if not (math.isfinite(a) and math.isfinite(b) and b > a >= 0):
         fail(f"{option} {text!r}: need 0 <= START < STOP (s)")
     return a, b
@@ -63,8 +65,10 @@ def ints(text: str, option: str, count: int | None = None, example: str = "2,4")
         out = ()
     if not out or (count is not None and len(out) != count) or min(out) < 0:
         n = f"{count} " if count is not None else ""
-        fail(f"{option} {text!r}: expected {n}whole numbers >= 0 separated by commas, "
-             f"e.g. {option} {example}")
+        fail(
+            f"{option} {text!r}: expected {n}whole numbers >= 0 separated by commas, "
+            f"e.g. {option} {example}"
+        )
     return out
 
 
@@ -87,8 +91,10 @@ def complex_list(text: str | None, option: str) -> list[complex] | None:
         try:
             out.append(complex(item.replace("i", "j")))
         except ValueError:
-            fail(f"{option} {text!r}: {item!r} is not a number; give comma-separated poles, "
-                 f"e.g. {option} '-20+15j,-20-15j,-30'")
+            fail(
+                f"{option} {text!r}: {item!r} is not a number; give comma-separated poles, "
+                f"e.g. {option} '-20+15j,-20-15j,-30'"
+            )
     return out
 
 
@@ -102,8 +108,10 @@ def weights(text: str | None, option: str):
             return {k: float(v) for k, v in (t.split("=", 1) for t in items)}
         return [float(t) for t in items]
     except ValueError:
-        fail(f"{option} {text!r}: give numbers (one per channel) or CHANNEL=WEIGHT pairs, "
-             f"e.g. {option} motor_angle=1e3,tip_deflection=10")
+        fail(
+            f"{option} {text!r}: give numbers (one per channel) or CHANNEL=WEIGHT pairs, "
+            f"e.g. {option} motor_angle=1e3,tip_deflection=10"
+        )
 
 
 def channels(channel: list[str] | None) -> dict | None:
@@ -130,8 +138,10 @@ def priors(prior: list[str] | None) -> dict:
         except ValueError:
             path = ""
         if not path:
-            fail(f"--prior {x!r}: expected PATH=REL_STD, e.g. "
-                 "'arm.joints[0].drive.torque_constant=0.3'")
+            fail(
+                f"--prior {x!r}: expected PATH=REL_STD, e.g. "
+                "'arm.joints[0].drive.torque_constant=0.3'"
+            )
     return out
 
 

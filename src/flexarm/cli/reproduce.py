@@ -18,8 +18,10 @@ from flexarm.cli.common import (
     outdir,
 )
 
-REPRODUCTIONS = {"feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
-                 "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example"}
+REPRODUCTIONS = {
+    "feliu": "Feliu, Rattan & Brown 1993, Figs. 11-19",
+    "deluca": "De Luca & Siciliano 1993, Fig. 2 and the example",
+}
 
 
 def reproduction(name: str):
@@ -46,9 +48,11 @@ def run_reproduction(name: str, out: Path) -> dict:
         return run(out, progress=progress)
 
 
-def reproduce(paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
-              out: Path = typer.Option(..., "--out", help="folder for figures and the table"),
-              overwrite: bool = typer.Option(False, help="write into a non-empty --out folder")) -> None:
+def reproduce(
+    paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
+    out: Path = typer.Option(..., "--out", help="folder for figures and the table"),
+    overwrite: bool = typer.Option(False, help="write into a non-empty --out folder"),
+) -> None:
     """Re-run a paper's experiments on the simulated arms: figures, and a table of each
     reported quantity, the paper's value, ours and the ratio."""
     enable_cache()
@@ -61,7 +65,11 @@ def reproduce(paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
     console.print(f"wrote {out}/ ({len(res.get('figures', []))} figures)")
 
 
-def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder (flexarm's own; rewritten)")) -> None:
+def demo(
+    out: Path = typer.Option(
+        Path("out/demo"), "--out", help="output folder (flexarm's own; rewritten)"
+    ),
+) -> None:
     """The main job on the built-in default: model, simulations and figures into --out."""
     enable_cache()
     from flexarm.analysis.summary import run_demo
@@ -70,16 +78,24 @@ def demo(out: Path = typer.Option(Path("out/demo"), "--out", help="output folder
     out.mkdir(parents=True, exist_ok=True)
     import importlib.util
 
-    reps = {n: (lambda d, n=n: run_reproduction(n, d)) for n in REPRODUCTIONS
-            if importlib.util.find_spec(f"flexarm.reproduce.{n}") is not None}
+    reps = {
+        n: (lambda d, n=n: run_reproduction(n, d))
+        for n in REPRODUCTIONS
+        if importlib.util.find_spec(f"flexarm.reproduce.{n}") is not None
+    }
     run_demo(out, console, reproductions=reps)
 
 
-def scenario_from_mat(workspace: Path = typer.Argument(..., help="the lab's MATLAB workspace (.mat) of a two-link flexible arm"),
-                      out: Path = typer.Option(..., "--out", help="scenario TOML to write"),
-                      current_limits: str = typer.Option(
-                          "0.94,1.2", help="the amplifiers' current limits per joint, A (not in the file)"),
-                      overwrite: bool = typer.Option(False, help="replace an existing --out file")) -> None:
+def scenario_from_mat(
+    workspace: Path = typer.Argument(
+        ..., help="the lab's MATLAB workspace (.mat) of a two-link flexible arm"
+    ),
+    out: Path = typer.Option(..., "--out", help="scenario TOML to write"),
+    current_limits: str = typer.Option(
+        "0.94,1.2", help="the amplifiers' current limits per joint, A (not in the file)"
+    ),
+    overwrite: bool = typer.Option(False, help="replace an existing --out file"),
+) -> None:
     """A two-link scenario (quanser-two-link's layout) from a lab workspace's parameters."""
     from flexarm.io.logs import LogError
     from flexarm.io.workspace import scenario_from_workspace

@@ -23,8 +23,10 @@ def scenarios() -> None:
     console.print(t)
 
 
-def info(scenario: ScenarioArg,
-         as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False) -> None:
+def info(
+    scenario: ScenarioArg,
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False,
+) -> None:
     """The arm's linear model: transfer functions, poles, zeros, frequencies, gains."""
     from flexarm.analysis.model_info import multilink_info, single_link_info
     from flexarm.models.single_link import SingleLinkModel
@@ -47,12 +49,16 @@ def info(scenario: ScenarioArg,
         console.print(f"  num = {fmt(tf['num'])}\n  den = {fmt(tf['den'])}", markup=False)
         for w in tf["natural_frequencies_rad_s"]:
             kind = "real pole" if w["damping_ratio"] >= 1 - 1e-12 else "pole pair"
-            console.print(f"  {kind}: {w['wn_rad_s']:.5g} rad/s ({w['hz']:.4g} Hz), "
-                          f"damping {w['damping_ratio']:.3g}")
+            console.print(
+                f"  {kind}: {w['wn_rad_s']:.5g} rad/s ({w['hz']:.4g} Hz), "
+                f"damping {w['damping_ratio']:.3g}"
+            )
         if tf["right_half_plane_zeros"]:
-            console.print("  right-half-plane zeros: "
-                          f"{[round(z['re'], 5) for z in tf['right_half_plane_zeros']]}",
-                          markup=False)
+            console.print(
+                "  right-half-plane zeros: "
+                f"{[round(z['re'], 5) for z in tf['right_half_plane_zeros']]}",
+                markup=False,
+            )
         console.print(f"  static gain: {tf['static_gain']:.6g} ({escape(tf['static_gain_note'])})")
 
 
@@ -62,14 +68,20 @@ def print_multilink(sc, data: dict) -> None:
     for ln in data["links"]:
         console.print(f"\n[bold]link {ln['link']}[/] ({ln['modes']} {ln['mode_type']} modes)")
         console.print(f"  frequencies [Hz]: {fmt(ln['frequencies_hz'])}", markup=False)
-        console.print(f"  phi(l): {fmt(ln['phi_end'])}   phi'(l) [1/m]: "
-                      f"{fmt(ln['phi_prime_end_per_m'])}", markup=False)
-        console.print("  k_ij [N/m]: " + ", ".join(fmt(r) for r in ln["stiffness_k_ij_N_per_m"]),
-                      markup=False)
+        console.print(
+            f"  phi(l): {fmt(ln['phi_end'])}   phi'(l) [1/m]: {fmt(ln['phi_prime_end_per_m'])}",
+            markup=False,
+        )
+        console.print(
+            "  k_ij [N/m]: " + ", ".join(fmt(r) for r in ln["stiffness_k_ij_N_per_m"]), markup=False
+        )
     tg = data.get("target")
     if tg:
         console.print(f"\ndelta_d [m] (eq. 9): {fmt(tg['delta_d_m'])}", markup=False)
         console.print(f"alpha (eq. 6): {tg['alpha']['value']:.5g}")
         for k, c in tg["conditions"].items():
-            console.print(f"({k}) {c['statement']}: {'holds' if c['holds'] else 'FAILS'} "
-                          f"(margin {c['margin']:+.4g})", markup=False)
+            console.print(
+                f"({k}) {c['statement']}: {'holds' if c['holds'] else 'FAILS'} "
+                f"(margin {c['margin']:+.4g})",
+                markup=False,
+            )

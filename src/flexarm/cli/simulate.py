@@ -15,27 +15,44 @@ from flexarm.cli.options import LogFormatFile, OverwriteOut
 
 
 @guarded_command("scenario", "log", "log_format")
-def simulate(scenario: Annotated[list[str], typer.Argument(
-                 help="scenario TOML file(s) or built-in name(s)")],
-             out: Annotated[Path, typer.Option(
-                 "--out", help="folder for CSV, figures and summary")],
-             overwrite: OverwriteOut = False,
-             log: Annotated[list[Path] | None, typer.Option(
-                 "--log", help="replay this log (.mat or text; repeat for several): its "
-                               "setpoints, initial state, fit % per logged channel")] = None,
-             log_format: LogFormatFile = None,
-             window: Annotated[str | None, typer.Option(
-                 help="replay this part of every log, START:STOP in s on its clock")] = None,
-             controller: Annotated[Path | None, typer.Option(
-                 "--controller", help="with --log: a controller FILE.toml ([controller] or "
-                                      "[[controllers]] tables as in a scenario) replacing "
-                                      "the scenario's controllers for the replay")] = None,
-             continuous: Annotated[bool, typer.Option(
-                 "--continuous", help="with --log: the logs, in order, are consecutive "
-                                      "pieces of one run; each dynamic controller's state "
-                                      "(and the digital filters') carried from log to log; "
-                                      "not with --window")] = False,
-             ) -> None:
+def simulate(
+    scenario: Annotated[
+        list[str], typer.Argument(help="scenario TOML file(s) or built-in name(s)")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="folder for CSV, figures and summary")],
+    overwrite: OverwriteOut = False,
+    log: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--log",
+            help="replay this log (.mat or text; repeat for several): its "
+            "setpoints, initial state, fit % per logged channel",
+        ),
+    ] = None,
+    log_format: LogFormatFile = None,
+    window: Annotated[
+        str | None, typer.Option(help="replay this part of every log, START:STOP in s on its clock")
+    ] = None,
+    controller: Annotated[
+        Path | None,
+        typer.Option(
+            "--controller",
+            help="with --log: a controller FILE.toml ([controller] or "
+            "[[controllers]] tables as in a scenario) replacing "
+            "the scenario's controllers for the replay",
+        ),
+    ] = None,
+    continuous: Annotated[
+        bool,
+        typer.Option(
+            "--continuous",
+            help="with --log: the logs, in order, are consecutive "
+            "pieces of one run; each dynamic controller's state "
+            "(and the digital filters') carried from log to log; "
+            "not with --window",
+        ),
+    ] = False,
+) -> None:
     """Simulate a scenario's closed loop: CSV (exchange format), PNG figure, summary.json;
     with --log, replay logs on it and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
 
@@ -52,8 +69,9 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
     if log:
         if len(scs) != 1:
             fail("--log replays logs on one scenario; give exactly one SCENARIO")
-        replay_logs(scs[0], log, log_format, window, out, controller=controller,
-                    continuous=continuous)
+        replay_logs(
+            scs[0], log, log_format, window, out, controller=controller, continuous=continuous
+        )
         return
     if len(scs) == 1:
         console.print_json(json.dumps(write_simulation(scs[0], out, progress=True)))
@@ -70,9 +88,16 @@ def simulate(scenario: Annotated[list[str], typer.Argument(
     console.print_json(json.dumps(summaries))
 
 
-def replay_logs(sc, logs: list[Path], log_format: Path | None, window: str | None,
-                out: Path, *, controller: Path | None = None,
-                continuous: bool = False) -> None:
+def replay_logs(
+    sc,
+    logs: list[Path],
+    log_format: Path | None,
+    window: str | None,
+    out: Path,
+    *,
+    controller: Path | None = None,
+    continuous: bool = False,
+) -> None:
     """``simulate --log``: each log replayed on the scenario, fit % per channel, figures;
     ``controller``: a controller file replacing the scenario's controllers
     (:func:`flexarm.specs.scenario.load_controllers`, :meth:`Scenario.with_controllers`);
@@ -87,8 +112,10 @@ def replay_logs(sc, logs: list[Path], log_format: Path | None, window: str | Non
     from flexarm.specs.scenario import load_controllers
 
     if continuous and window:
-        fail(f"--continuous replays whole logs as one run; --window {window} cuts each log: "
-             "give one or the other")
+        fail(
+            f"--continuous replays whole logs as one run; --window {window} cuts each log: "
+            "give one or the other"
+        )
     win = parsing.window(window, "--window")
     results = {}
     try:

@@ -77,28 +77,52 @@ def _lin(A, B, C, D, measured: str, reference: str) -> LinearController:
     return LinearController(f(A), f(B), f(C), f(D), measured, reference)
 
 
-def pd(kp: float, kd: float, dt: float, *, measured: str = "motor_angle",
-       reference: str = "reference") -> LinearController:
+def pd(
+    kp: float, kd: float, dt: float, *, measured: str = "motor_angle", reference: str = "reference"
+) -> LinearController:
     """u_k = kp e_k + kd (e_k − e_{k−1}) / T  (backward-difference derivative)."""
     return _lin([[0.0]], [1.0], [-kd / dt], kp + kd / dt, measured, reference)
 
 
-def pid(kp: float, ki: float, kd: float, dt: float, *, measured: str = "motor_angle",
-        reference: str = "reference") -> LinearController:
+def pid(
+    kp: float,
+    ki: float,
+    kd: float,
+    dt: float,
+    *,
+    measured: str = "motor_angle",
+    reference: str = "reference",
+) -> LinearController:
     """u_k = kp e_k + ki T Σ_{j<=k} e_j + kd (e_k − e_{k−1}) / T  (backward rectangles)."""
-    return _lin([[1.0, 0.0], [0.0, 0.0]], [dt, 1.0], [ki, -kd / dt],
-                kp + ki * dt + kd / dt, measured, reference)
+    return _lin(
+        [[1.0, 0.0], [0.0, 0.0]],
+        [dt, 1.0],
+        [ki, -kd / dt],
+        kp + ki * dt + kd / dt,
+        measured,
+        reference,
+    )
 
 
-def lead(gain: float, zero: float, pole: float, *, measured: str = "motor_angle",
-         reference: str = "reference") -> LinearController:
+def lead(
+    gain: float,
+    zero: float,
+    pole: float,
+    *,
+    measured: str = "motor_angle",
+    reference: str = "reference",
+) -> LinearController:
     """u = gain (z − zero)/(z − pole) e, i.e. x⁺ = pole x + e, u = gain((pole − zero) x + e)."""
     return _lin([[pole]], [1.0], [gain * (pole - zero)], gain, measured, reference)
 
 
-def from_transfer_function(tf: control.TransferFunction | tuple, dt: float | None = None, *,
-                           measured: str = "motor_angle",
-                           reference: str = "reference") -> LinearController:
+def from_transfer_function(
+    tf: control.TransferFunction | tuple,
+    dt: float | None = None,
+    *,
+    measured: str = "motor_angle",
+    reference: str = "reference",
+) -> LinearController:
     """Any proper discrete SISO transfer function C(z) (python-control, or (num, den) in
     descending powers of z) acting on the error."""
     if not isinstance(tf, control.TransferFunction):

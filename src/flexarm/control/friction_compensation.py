@@ -64,8 +64,7 @@ class FrictionCompensated(Controller):
         return tuple(dict.fromkeys(inner + self.measured))
 
     def init(self):
-        return (self.feedback.init(), jnp.zeros(len(self.measured)),
-                jnp.zeros((), dtype=bool))
+        return (self.feedback.init(), jnp.zeros(len(self.measured)), jnp.zeros((), dtype=bool))
 
     def step(self, state, measured: Signals, reference: Signals):
         inner, prev, started = state
@@ -77,9 +76,16 @@ class FrictionCompensated(Controller):
         return (inner, th, jnp.ones((), dtype=bool)), u_fb + self.level * sigma
 
 
-def friction_compensated(feedback: Controller, level, *, dt: float, measured=("motor_angle",),
-                         quantum=0.0, velocity_deadband=None,
-                         rest_deadband=0.0) -> FrictionCompensated:
+def friction_compensated(
+    feedback: Controller,
+    level,
+    *,
+    dt: float,
+    measured=("motor_angle",),
+    quantum=0.0,
+    velocity_deadband=None,
+    rest_deadband=0.0,
+) -> FrictionCompensated:
     """Build a :class:`FrictionCompensated`. ``level``: c per output (A or V; a number for
     one output); ``quantum``: the encoder count of each measured angle (rad), giving the
     default ``velocity_deadband`` = quantum / (2 T) (below half a count per sample the joint
@@ -89,5 +95,6 @@ def friction_compensated(feedback: Controller, level, *, dt: float, measured=("m
     f = lambda v: jnp.broadcast_to(jnp.asarray(v, dtype=float), (m,))  # noqa: E731
     if velocity_deadband is None:
         velocity_deadband = 0.5 * jnp.asarray(quantum, dtype=float) / dt
-    return FrictionCompensated(feedback, f(level), f(velocity_deadband), f(rest_deadband),
-                               jnp.asarray(float(dt)), measured)
+    return FrictionCompensated(
+        feedback, f(level), f(velocity_deadband), f(rest_deadband), jnp.asarray(float(dt)), measured
+    )

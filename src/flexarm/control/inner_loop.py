@@ -114,8 +114,9 @@ def coupling_filter(coupling, dt: float, *, margin: float = 1e-3) -> control.Tra
     zp = np.roots(np.asarray(h.den[0][0], float))
     bad = np.abs(zp) > 1.0 - margin
     if np.any(bad):
-        where = ", ".join(f"{p:.4g}" for p in (sp[bad] if sp is not None and sp.size == zp.size
-                                                 else zp[bad]))
+        where = ", ".join(
+            f"{p:.4g}" for p in (sp[bad] if sp is not None and sp.size == zp.size else zp[bad])
+        )
         raise ValueError(
             "the coupling transfer function cannot be implemented: poles at "
             f"{where} ({'s' if sp is not None else 'z'}-plane) give |z| = "
@@ -177,11 +178,14 @@ class InnerLoop(Controller):
         xcn, c_hat = self._lin(self.coupling, xc, th - measured["tip_angle"])
         v = (th - th_prev) / self.dt
         sigma = friction_sign(v, u_fb, self.velocity_deadband, self.rest_deadband)
-        i_c = (self.coupling_on * c_hat + self.friction_on * self.coulomb * sigma) / self.torque_constant
+        i_c = (
+            self.coupling_on * c_hat + self.friction_on * self.coulomb * sigma
+        ) / self.torque_constant
         return (x1n, x2n, xcn, th), jnp.reshape(u_fb + i_c, (1,))
 
-    def with_switches(self, *, friction: bool | None = None,
-                      coupling: bool | None = None) -> InnerLoop:
+    def with_switches(
+        self, *, friction: bool | None = None, coupling: bool | None = None
+    ) -> InnerLoop:
         """A copy with friction and/or coupling compensation turned on or off (FRB Figs.
         12, 13, 17). Same pytree structure: the compiled loop is reused."""
         out = self
@@ -192,11 +196,22 @@ class InnerLoop(Controller):
         return out
 
 
-def inner_loop(gcm1, gcm2, *, dt: float, torque_constant: float, coulomb: float = 0.0,
-               coupling=0.0, friction_compensation: bool = True,
-               coupling_compensation: bool = True, angle_resolution: float = 0.0,
-               velocity_deadband: float | None = None, rest_deadband: float | None = None,
-               reference: str = "reference", initial_motor_angle: float = 0.0) -> InnerLoop:
+def inner_loop(
+    gcm1,
+    gcm2,
+    *,
+    dt: float,
+    torque_constant: float,
+    coulomb: float = 0.0,
+    coupling=0.0,
+    friction_compensation: bool = True,
+    coupling_compensation: bool = True,
+    angle_resolution: float = 0.0,
+    velocity_deadband: float | None = None,
+    rest_deadband: float | None = None,
+    reference: str = "reference",
+    initial_motor_angle: float = 0.0,
+) -> InnerLoop:
     """Build an :class:`InnerLoop`.
 
     Parameters
@@ -222,10 +237,20 @@ def inner_loop(gcm1, gcm2, *, dt: float, torque_constant: float, coulomb: float 
     if rest_deadband is None:
         rest_deadband = 0.5 * q * abs(float(np.real(control.dcgain(g1))))
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    return InnerLoop(_realise(g1), _realise(g2), _realise(h), f(torque_constant),
-                     f(coulomb), f(float(friction_compensation)),
-                     f(float(coupling_compensation)), f(velocity_deadband),
-                     f(rest_deadband), f(dt), f(initial_motor_angle), reference)
+    return InnerLoop(
+        _realise(g1),
+        _realise(g2),
+        _realise(h),
+        f(torque_constant),
+        f(coulomb),
+        f(float(friction_compensation)),
+        f(float(coupling_compensation)),
+        f(velocity_deadband),
+        f(rest_deadband),
+        f(dt),
+        f(initial_motor_angle),
+        reference,
+    )
 
 
 # ------------------------------------------------------------------------ design
@@ -280,7 +305,8 @@ class InnerLoopDesign:
         """θm/θ_mr of the linear design loop (discrete, delay included)."""
         plant = _plant_tf(model, self.dt, self.delay)
         return control.minreal(
-            control.feedback(self.gcm1 * plant, self.gcm2), tol=1e-9, verbose=False)
+            control.feedback(self.gcm1 * plant, self.gcm2), tol=1e-9, verbose=False
+        )
 
     def controller(self, model, **kw) -> InnerLoop:
         """An :class:`InnerLoop` for ``model`` (K, C_f from the model; coupling gain the
@@ -309,8 +335,7 @@ class _StepEvaluator:
     """Linear step response of Fig. 4 on eq. (9), sampled with ZOH, with ``delay``
     samples of delay; θm also between samples (``sub`` points per period)."""
 
-    def __init__(self, J: float, V: float, K: float, dt: float, delay: int, n: int,
-                 sub: int = 10):
+    def __init__(self, J: float, V: float, K: float, dt: float, delay: int, n: int, sub: int = 10):
         A = np.array([[0.0, 1.0], [0.0, -V / J]])
         B = np.array([0.0, K / J])
 
@@ -381,8 +406,9 @@ class _StepEvaluator:
         cs = np.einsum("kpm,pm->kp", xs, cu) + du
         ua = np.einsum("kpm,pm->kp", xs, ca) + da
         # θ(t_k + j T/sub) = Φ_j[0] (θ_k, ω_k) + Γ_j[0] u_a,k, all fine points at once
-        theta = (np.einsum("jc,kpc->kjp", self.Phi, xs[:, :, :2])
-                 + np.einsum("j,kp->kjp", self.Gam, ua)).reshape(self.n * self.sub, P)
+        theta = (
+            np.einsum("jc,kpc->kjp", self.Phi, xs[:, :, :2]) + np.einsum("j,kp->kjp", self.Gam, ua)
+        ).reshape(self.n * self.sub, P)
         if single:
             return theta[:, 0], cs[:, 0]
         return theta, cs
@@ -407,13 +433,25 @@ def _settling(t: np.ndarray, y: np.ndarray, band: float) -> np.ndarray:
     return np.where(any_out, ts, 0.0)
 
 
-def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0,
-                      current_limit: float | None = None, step: float = 0.4,
-                      bending: float | None = None, coupling_gain: float | None = None,
-                      coulomb: float | None = None, band: float = 0.02,
-                      max_overshoot: float = 0.0, horizon: float = 0.3, popsize: int = 15,
-                      maxiter: int = 200, seed: int = 0,
-                      min_root: float = -0.99) -> InnerLoopDesign:
+def design_inner_loop(
+    model,
+    dt: float,
+    delay: int = 1,
+    *,
+    dc_gain: float = 15.0,
+    current_limit: float | None = None,
+    step: float = 0.4,
+    bending: float | None = None,
+    coupling_gain: float | None = None,
+    coulomb: float | None = None,
+    band: float = 0.02,
+    max_overshoot: float = 0.0,
+    horizon: float = 0.3,
+    popsize: int = 15,
+    maxiter: int = 200,
+    seed: int = 0,
+    min_root: float = -0.99,
+) -> InnerLoopDesign:
     r"""Minimum-settling-time G_cm1(z), G_cm2(z) for the motor loop (FRB Sec. VI-B.2).
 
     G_cm1(z) = k1 (z − a1)/(z − b1), G_cm2(z) = k2 (z − a2)/(z − b2), searched over the
@@ -445,15 +483,23 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
     no stable loop meeting the peak rule was found.
     """
     J, V, K = motor_design_model(model)
-    for name, val in (("dt", dt), ("dc_gain", dc_gain), ("step", step), ("band", band),
-                      ("horizon", horizon)):
+    for name, val in (
+        ("dt", dt),
+        ("dc_gain", dc_gain),
+        ("step", step),
+        ("band", band),
+        ("horizon", horizon),
+    ):
         if not (math.isfinite(val) and val > 0):
             raise ValueError(f"{name} must be positive and finite; got {val!r}")
     if int(delay) != delay or delay < 0:
         raise ValueError(f"delay must be a whole number of samples >= 0; got {delay!r}")
     i_max = float(model.drive.limit) if current_limit is None else float(current_limit)
-    c_hat = (float(np.real(control.dcgain(model.coupling_tf()))) if coupling_gain is None
-             else float(coupling_gain))
+    c_hat = (
+        float(np.real(control.dcgain(model.coupling_tf())))
+        if coupling_gain is None
+        else float(coupling_gain)
+    )
     c_f = float(model.friction.coulomb) if coulomb is None else float(coulomb)
     bend = step if bending is None else float(bending)
     i_coup = abs(c_hat * bend) / K
@@ -494,15 +540,27 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
         raise ValueError(f"min_root must be in [-0.99, 0.99); got {min_root!r}")
     bounds = [(lo, 0.99)] * 4
     best = scipy.optimize.differential_evolution(
-        cost, bounds, popsize=popsize, maxiter=maxiter, tol=1e-8,
+        cost,
+        bounds,
+        popsize=popsize,
+        maxiter=maxiter,
+        tol=1e-8,
         seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-        vectorized=True, updating="deferred", polish=False)
+        vectorized=True,
+        updating="deferred",
+        polish=False,
+    )
     polish = scipy.optimize.minimize(
-        lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]), best.x,
-        method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200})
-    search_message = (f"differential evolution: {best.message} "
-                      f"({'converged' if best.success else 'not converged'}); Nelder–Mead "
-                      f"polish: {polish.message}")
+        lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]),
+        best.x,
+        method="Nelder-Mead",
+        options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200},
+    )
+    search_message = (
+        f"differential evolution: {best.message} "
+        f"({'converged' if best.success else 'not converged'}); Nelder–Mead "
+        f"polish: {polish.message}"
+    )
     if polish.fun < best.fun:
         best = polish
     p = np.clip(best.x, lo, 0.99)
@@ -521,7 +579,24 @@ def design_inner_loop(model, dt: float, delay: int = 1, *, dc_gain: float = 15.0
     g1 = _comp(p[0], p[1], dc_gain, dt)
     g2 = _comp(p[2], p[3], 1.0, dt)
     ts = cast(float, ts)  # a NumPy float: _settling of one response
-    return InnerLoopDesign(g1, g2, dt, int(delay), float(dc_gain), ts, band, max(over, 0.0),
-                           float(step),
-                           peak * step, avail, i_max, i_coup, i_fric, p, ev.time, theta, cs,
-                           search_message)
+    return InnerLoopDesign(
+        g1,
+        g2,
+        dt,
+        int(delay),
+        float(dc_gain),
+        ts,
+        band,
+        max(over, 0.0),
+        float(step),
+        peak * step,
+        avail,
+        i_max,
+        i_coup,
+        i_fric,
+        p,
+        ev.time,
+        theta,
+        cs,
+        search_message,
+    )

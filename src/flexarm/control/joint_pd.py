@@ -76,11 +76,21 @@ def joint_pd_from_spec(spec, arm, model, dt: float) -> JointPD:
         g = np.asarray(gravity_torque(model, th_d, delta_d), float)[:n]
     else:
         g = np.zeros(n)
-    cf = np.zeros(n) if spec.friction_compensation is None else np.asarray(
-        spec.friction_compensation, float)
+    cf = (
+        np.zeros(n)
+        if spec.friction_compensation is None
+        else np.asarray(spec.friction_compensation, float)
+    )
     f = lambda v: jnp.asarray(np.asarray(v, float))  # noqa: E731
-    return JointPD(kp=f(spec.kp), kd=f(spec.kd), target=f(th_d), gravity=f(g), coulomb=f(cf),
-                   k_u=jnp.asarray(arm.k_u), dt=jnp.asarray(float(dt)),
-                   velocity_deadband=jnp.asarray(spec.velocity_deadband),
-                   rest_deadband=jnp.asarray(spec.rest_deadband),
-                   measured=tuple(spec.measured or [f"theta_{i + 1}" for i in range(n)]))
+    return JointPD(
+        kp=f(spec.kp),
+        kd=f(spec.kd),
+        target=f(th_d),
+        gravity=f(g),
+        coulomb=f(cf),
+        k_u=jnp.asarray(arm.k_u),
+        dt=jnp.asarray(float(dt)),
+        velocity_deadband=jnp.asarray(spec.velocity_deadband),
+        rest_deadband=jnp.asarray(spec.rest_deadband),
+        measured=tuple(spec.measured or [f"theta_{i + 1}" for i in range(n)]),
+    )

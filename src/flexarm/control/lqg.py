@@ -58,8 +58,10 @@ def _weight(w, n: int, what: str) -> np.ndarray:
     if a.ndim == 1:
         a = np.diag(a)
     if a.shape != (n, n):
-        raise ValueError(f"lqg: {what} has shape {a.shape}; expected ({n}, {n}) (or {n} "
-                         "diagonal entries, or one number)")
+        raise ValueError(
+            f"lqg: {what} has shape {a.shape}; expected ({n}, {n}) (or {n} "
+            "diagonal entries, or one number)"
+        )
     if not np.all(np.isfinite(a)) or np.any(np.linalg.eigvalsh((a + a.T) / 2) < -1e-12):
         raise ValueError(f"lqg: {what} must be finite and positive semi-definite")
     return a
@@ -74,8 +76,10 @@ def lqg(plant: control.StateSpace, dt: float, Q, R, W, V) -> LQGDesign:
     covariance (the sensors' variances: e.g. an encoder's q²/12). Each may be a matrix,
     its diagonal, or one number."""
     if not plant.isctime():
-        raise ValueError("lqg: give the continuous-time linear model (it is sampled here "
-                         "with a zero-order hold at dt)")
+        raise ValueError(
+            "lqg: give the continuous-time linear model (it is sampled here "
+            "with a zero-order hold at dt)"
+        )
     if not dt > 0:
         raise ValueError(f"lqg: dt = {dt!r}; give the controller period in s (> 0)")
     n, m, p = plant.nstates, plant.ninputs, plant.noutputs
@@ -86,16 +90,29 @@ def lqg(plant: control.StateSpace, dt: float, Q, R, W, V) -> LQGDesign:
     K, _, _ = control.dlqr(Ad, Bd, Q, R)
     L, _, _ = control.dlqe(Ad, np.eye(n), C, W, V)
     K, L = np.asarray(K), np.asarray(L)
-    ctrl = observer_controller(control.ss(Ad, Bd, C, np.zeros((p, m)), dt,
-                                          inputs=list(plant.input_labels),
-                                          outputs=list(plant.output_labels)), K, L, name="lqg")
-    return LQGDesign(ctrl, K, L, sysd, np.linalg.eigvals(Ad - Bd @ K),
-                     np.linalg.eigvals(Ad - L @ C))
+    ctrl = observer_controller(
+        control.ss(
+            Ad,
+            Bd,
+            C,
+            np.zeros((p, m)),
+            dt,
+            inputs=list(plant.input_labels),
+            outputs=list(plant.output_labels),
+        ),
+        K,
+        L,
+        name="lqg",
+    )
+    return LQGDesign(
+        ctrl, K, L, sysd, np.linalg.eigvals(Ad - Bd @ K), np.linalg.eigvals(Ad - L @ C)
+    )
 
 
 # ----------------------------------------------------------------- delays and integral action
-def augment_delays(sysd: control.StateSpace, input_delay: int = 0,
-                   output_delays=None) -> control.StateSpace:
+def augment_delays(
+    sysd: control.StateSpace, input_delay: int = 0, output_delays=None
+) -> control.StateSpace:
     """The sampled model x⁺ = A x + B u, y = C x with the loop's pure delays as shift
     registers (states), as :mod:`flexarm.sim.sampled` applies them:
 
@@ -113,8 +130,10 @@ def augment_delays(sysd: control.StateSpace, input_delay: int = 0,
     n, m, p = A.shape[0], B.shape[1], C.shape[0]
     od = [0] * p if output_delays is None else [int(d) for d in output_delays]
     if len(od) != p or min(od, default=0) < 0 or int(input_delay) < 0:
-        raise ValueError(f"augment_delays: input_delay = {input_delay!r} and output_delays = "
-                         f"{output_delays!r}; give whole samples >= 0, one delay per output ({p})")
+        raise ValueError(
+            f"augment_delays: input_delay = {input_delay!r} and output_delays = "
+            f"{output_delays!r}; give whole samples >= 0, one delay per output ({p})"
+        )
     dc = int(input_delay)
     N = n + m * dc + sum(od)
     Aa, Ba, Ca = np.zeros((N, N)), np.zeros((N, m)), np.zeros((p, N))
@@ -142,9 +161,17 @@ def augment_delays(sysd: control.StateSpace, input_delay: int = 0,
         Ca[i, k + d - 1] = 1.0
         names += [f"{sysd.output_labels[i]}[k-{j}]" for j in range(1, d + 1)]
         k += d
-    return control.ss(Aa, Ba, Ca, np.zeros((p, m)), sysd.dt, states=names,
-                      inputs=list(sysd.input_labels), outputs=list(sysd.output_labels),
-                      name="augmented model")
+    return control.ss(
+        Aa,
+        Ba,
+        Ca,
+        np.zeros((p, m)),
+        sysd.dt,
+        states=names,
+        inputs=list(sysd.input_labels),
+        outputs=list(sysd.output_labels),
+        name="augmented model",
+    )
 
 
 def integral_model(plant: control.StateSpace, integral) -> tuple[np.ndarray, np.ndarray]:
@@ -162,8 +189,9 @@ def integral_model(plant: control.StateSpace, integral) -> tuple[np.ndarray, np.
     return Ar, Br
 
 
-def observer_controller(plant: control.StateSpace, K, L, *, integral=(), reference=None,
-                        name: str = "lqg") -> control.StateSpace:
+def observer_controller(
+    plant: control.StateSpace, K, L, *, integral=(), reference=None, name: str = "lqg"
+) -> control.StateSpace:
     """The observer-based controller e → u of the discrete model ``plant`` (x⁺ = A x + B u,
     y = C x): predictor x̂⁺ = A x̂ + B u + L (y − C x̂) on y = −e (module docstring), and,
     for the outputs ``integral`` (indices), integrators q⁺ = q + T e_i of the errors;
@@ -195,26 +223,38 @@ def observer_controller(plant: control.StateSpace, K, L, *, integral=(), referen
     outs = list(plant.output_labels)
     if reference is None:
         S = np.eye(p)[idx].reshape(ni, p)
-        return control.ss(Ac, np.vstack([-L, T * S]), Cc, np.zeros((m, p)), plant.dt,
-                          inputs=[f"e_{k}" for k in outs], outputs=list(plant.input_labels),
-                          name=name)
+        return control.ss(
+            Ac,
+            np.vstack([-L, T * S]),
+            Cc,
+            np.zeros((m, p)),
+            plant.dt,
+            inputs=[f"e_{k}" for k in outs],
+            outputs=list(plant.input_labels),
+            name=name,
+        )
     tracked, Z = list(reference[0]), np.asarray(reference[1], float)
     nt = len(tracked)
     Z = Z.reshape(n, nt)
     if not set(idx) <= set(tracked):
-        raise ValueError(f"observer_controller: integral {idx} must be tracked outputs "
-                         f"{tracked}")
+        raise ValueError(f"observer_controller: integral {idx} must be tracked outputs {tracked}")
     St = np.eye(p)[tracked].reshape(nt, p)
     KZ = Kx @ Z  # (m, nt): r = e_r − St e_y
     Sq = np.zeros((ni, nt))
     for j, i in enumerate(idx):
         Sq[j, tracked.index(i)] = 1.0
-    Bc = np.vstack([np.hstack([-L - B @ KZ @ St, B @ KZ]),
-                    np.hstack([np.zeros((ni, p)), T * Sq])])
+    Bc = np.vstack([np.hstack([-L - B @ KZ @ St, B @ KZ]), np.hstack([np.zeros((ni, p)), T * Sq])])
     Dc = np.hstack([-KZ @ St, KZ])
-    return control.ss(Ac, Bc, Cc, Dc, plant.dt,
-                      inputs=[f"e_{k}" for k in outs] + [f"e_{outs[i]}_ref" for i in tracked],
-                      outputs=list(plant.input_labels), name=name)
+    return control.ss(
+        Ac,
+        Bc,
+        Cc,
+        Dc,
+        plant.dt,
+        inputs=[f"e_{k}" for k in outs] + [f"e_{outs[i]}_ref" for i in tracked],
+        outputs=list(plant.input_labels),
+        name=name,
+    )
 
 
 def input_rows(plant: control.StateSpace, controller: control.StateSpace) -> np.ndarray:
@@ -235,8 +275,9 @@ def loop_poles(plant: control.StateSpace, controller: control.StateSpace) -> np.
     """Eigenvalues of the discrete ``plant`` (x⁺ = A x + B u, y = C x) in closed loop with
     ``controller`` (e → u) on e = −M y, references at 0 (M: :func:`input_rows`)."""
     Ad, Bd, C = (np.asarray(a) for a in (plant.A, plant.B, plant.C))
-    Ac, Bc, Cc, Dc = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
-                                               controller.D))
+    Ac, Bc, Cc, Dc = (
+        np.asarray(a) for a in (controller.A, controller.B, controller.C, controller.D)
+    )
     MC = input_rows(plant, controller) @ C
     # u = Cc ξ − Dc M C x;  x⁺ = Ad x + Bd u ;  ξ⁺ = Ac ξ − Bc M C x
     top = np.hstack([Ad - Bd @ Dc @ MC, Bd @ Cc])
@@ -258,15 +299,23 @@ def lti_controller_spec(controller: control.StateSpace, inputs, setpoints) -> di
     eigenvalue outside the unit circle (an observer-based controller may)."""
     A = np.asarray(controller.A)
     rho = float(np.abs(np.linalg.eigvals(A)).max()) if A.size else 0.0
-    return {"type": "lti", "dt": float(controller.dt), "A": A.tolist(),
-            "B": np.asarray(controller.B).tolist(), "C": np.asarray(controller.C).tolist(),
-            "D": np.asarray(controller.D).tolist(), "inputs": list(inputs),
-            "setpoints": [s if s else 0 for s in setpoints],
-            "outputs": list(controller.output_labels), "allow_unstable": bool(rho > 1.0)}
+    return {
+        "type": "lti",
+        "dt": float(controller.dt),
+        "A": A.tolist(),
+        "B": np.asarray(controller.B).tolist(),
+        "C": np.asarray(controller.C).tolist(),
+        "D": np.asarray(controller.D).tolist(),
+        "inputs": list(inputs),
+        "setpoints": [s if s else 0 for s in setpoints],
+        "outputs": list(controller.output_labels),
+        "allow_unstable": bool(rho > 1.0),
+    }
 
 
-def scenario_lqg(scenario, dt: float, *, measured: dict[str, str], setpoints: dict[str, str],
-                 Q, R, W, V, x0=None):
+def scenario_lqg(
+    scenario, dt: float, *, measured: dict[str, str], setpoints: dict[str, str], Q, R, W, V, x0=None
+):
     """An LQG design (:func:`lqg`) for a multi-link scenario's arm, and the scenario with it as
     its ``[controller]`` (``type = "lti"``, period ``dt``) and the sensor channels it reads.
 
@@ -288,10 +337,16 @@ def scenario_lqg(scenario, dt: float, *, measured: dict[str, str], setpoints: di
     for c in chans:
         if c in sensors:
             continue
-        same = [s for s in sensors.values() if (s.get("signal") or "") == measured[c]
-                and "filter" not in s]
-        sensors[c] = {"signal": measured[c], **({"quantum": same[0]["quantum"]}
-                                                if same and "quantum" in same[0] else {})}
-    data["controller"] = lti_controller_spec(design.controller, chans,
-                                             [setpoints.get(c, 0) for c in chans])
+        same = [
+            s
+            for s in sensors.values()
+            if (s.get("signal") or "") == measured[c] and "filter" not in s
+        ]
+        sensors[c] = {
+            "signal": measured[c],
+            **({"quantum": same[0]["quantum"]} if same and "quantum" in same[0] else {}),
+        }
+    data["controller"] = lti_controller_spec(
+        design.controller, chans, [setpoints.get(c, 0) for c in chans]
+    )
     return design, scenario_from_dict(data, f"{scenario.name} with an LQG at {dt:g} s")

@@ -117,19 +117,28 @@ def digital_filter(spec: Any, dt: float | None, *, where: str = "filter") -> Dig
         den = np.atleast_1d(np.asarray(_get(spec, "den"), float))
         num, den = np.trim_zeros(num, "f"), np.trim_zeros(den, "f")
         if len(den) == 0 or len(num) > len(den):
-            raise ValueError(f"{where}: num = {list(num)}, den = {list(den)} is not a proper "
-                             "transfer function in z (numerator degree <= denominator's)")
+            raise ValueError(
+                f"{where}: num = {list(num)}, den = {list(den)} is not a proper "
+                "transfer function in z (numerator degree <= denominator's)"
+            )
         if len(den) == 1:
-            A, B, C, D = np.zeros((0, 0)), np.zeros(0), np.zeros(0), float(num[-1] / den[0]) if len(num) else 0.0
+            A, B, C, D = (
+                np.zeros((0, 0)),
+                np.zeros(0),
+                np.zeros(0),
+                float(num[-1] / den[0]) if len(num) else 0.0,
+            )
         else:
             A, B, C, D = sps.tf2ss(num, den)
             A, B, C, D = A, B[:, 0], C[0], float(D[0, 0])
-        filt = DigitalFilter(np.asarray(A, float), np.asarray(B, float), np.asarray(C, float),
-                             D, "tf", "none")
+        filt = DigitalFilter(
+            np.asarray(A, float), np.asarray(B, float), np.asarray(C, float), D, "tf", "none"
+        )
     elif kind in FILTER_KINDS:
         if dt is None or not dt > 0:
-            raise ValueError(f"{where}: a {kind!r} filter needs the sample period to be "
-                             "discretised")
+            raise ValueError(
+                f"{where}: a {kind!r} filter needs the sample period to be discretised"
+            )
         w = 2 * math.pi * float(_get(spec, "cutoff"))
         z = float(_get(spec, "damping", 0.9))
         Ac = np.array([[0.0, 1.0], [-w * w, -2 * z * w]])
@@ -140,28 +149,38 @@ def digital_filter(spec: Any, dt: float | None, *, where: str = "filter") -> Dig
             A, B, D = np.eye(2) + dt * Ac, dt * Bc, 0.0
         elif how in ("zoh", "tustin"):
             # (A, B, C, D, dt); scipy's return type is inferred from its branches
-            ssd: Any = sps.cont2discrete((Ac, Bc[:, None], C[None, :], np.zeros((1, 1))),
-                                         dt, method="zoh" if how == "zoh" else "bilinear")
+            ssd: Any = sps.cont2discrete(
+                (Ac, Bc[:, None], C[None, :], np.zeros((1, 1))),
+                dt,
+                method="zoh" if how == "zoh" else "bilinear",
+            )
             A, B2, C2, D2, _ = ssd
             B, C, D = B2[:, 0], C2[0], float(D2[0, 0])
         else:
-            raise ValueError(f"{where}: discretisation = {how!r}; give forward_euler, zoh or "
-                             "tustin")
-        filt = DigitalFilter(np.asarray(A, float), np.asarray(B, float), np.asarray(C, float),
-                             float(D), kind, how)
+            raise ValueError(
+                f"{where}: discretisation = {how!r}; give forward_euler, zoh or tustin"
+            )
+        filt = DigitalFilter(
+            np.asarray(A, float), np.asarray(B, float), np.asarray(C, float), float(D), kind, how
+        )
     else:
-        raise ValueError(f"{where}: kind = {kind!r}; give one of "
-                         f"{', '.join([*FILTER_KINDS, 'tf'])}")
+        raise ValueError(
+            f"{where}: kind = {kind!r}; give one of {', '.join([*FILTER_KINDS, 'tf'])}"
+        )
     if filt.order:
         eig = np.linalg.eigvals(filt.A)
         j = int(np.argmax(np.abs(eig)))
         if abs(eig[j]) >= 1.0:
-            hint = (f" (forward Euler needs ω·T small: 2π·{_get(spec, 'cutoff')} Hz·{dt:g} s "
-                    "is too large; use discretisation = \"tustin\")"
-                    if _get(spec, "discretisation", "forward_euler") == "forward_euler"
-                    and kind != "tf" else "")
-            raise ValueError(f"{where}: the discrete filter is not stable: eigenvalue "
-                             f"{eig[j]:.6g} of A has |z| = {abs(eig[j]):.6g} >= 1{hint}")
+            hint = (
+                f" (forward Euler needs ω·T small: 2π·{_get(spec, 'cutoff')} Hz·{dt:g} s "
+                'is too large; use discretisation = "tustin")'
+                if _get(spec, "discretisation", "forward_euler") == "forward_euler" and kind != "tf"
+                else ""
+            )
+            raise ValueError(
+                f"{where}: the discrete filter is not stable: eigenvalue "
+                f"{eig[j]:.6g} of A has |z| = {abs(eig[j]):.6g} >= 1{hint}"
+            )
     return filt
 
 
@@ -220,11 +239,22 @@ class LTIController(Controller):
     def input_vector(self, measured, reference):
         """w_k from the sample's measured and reference signals (dicts of scalars)."""
         if self.signals is not None:
-            return jnp.stack([measured[v] if kind == "measured" else reference[v]
-                              if kind == "reference" else jnp.asarray(float(v))
-                              for kind, v in self.signals])
-        return jnp.stack([(reference[s] if s is not None else 0.0) - measured[i]
-                          for i, s in zip(self.inputs, self.setpoints, strict=True)])
+            return jnp.stack(
+                [
+                    measured[v]
+                    if kind == "measured"
+                    else reference[v]
+                    if kind == "reference"
+                    else jnp.asarray(float(v))
+                    for kind, v in self.signals
+                ]
+            )
+        return jnp.stack(
+            [
+                (reference[s] if s is not None else 0.0) - measured[i]
+                for i, s in zip(self.inputs, self.setpoints, strict=True)
+            ]
+        )
 
     def step(self, state, measured, reference):
         x, held, k = state
@@ -248,8 +278,9 @@ class Blocks(Sum):
 
     def __init__(self, *parts: Controller, names=()):
         self.parts = tuple(parts)
-        self.names = tuple(names) or tuple(getattr(p, "name", f"controllers[{i}]")
-                                           for i, p in enumerate(parts))
+        self.names = tuple(names) or tuple(
+            getattr(p, "name", f"controllers[{i}]") for i, p in enumerate(parts)
+        )
 
 
 def _matrix(value: Any, name: str, where: str) -> np.ndarray:
@@ -259,8 +290,9 @@ def _matrix(value: Any, name: str, where: str) -> np.ndarray:
     elif a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or not np.all(np.isfinite(a)):
-        raise ScenarioError(f"{where}: {name} must be a finite matrix (a list of rows); got shape "
-                         f"{np.shape(value)}")
+        raise ScenarioError(
+            f"{where}: {name} must be a finite matrix (a list of rows); got shape {np.shape(value)}"
+        )
     return a
 
 
@@ -284,18 +316,23 @@ def _numeric(v: Any, key: str, where: str) -> np.ndarray:
     while isinstance(v, np.ndarray) and v.dtype == object and v.size == 1:
         v = v.flat[0]
     if v is None:
-        raise ScenarioError(f"{where}: field {key} is null; give a number or a matrix of "
-                            "numbers (or leave the field out)")
+        raise ScenarioError(
+            f"{where}: field {key} is null; give a number or a matrix of "
+            "numbers (or leave the field out)"
+        )
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError, OverflowError):
-        raise ScenarioError(f"{where}: field {key} is not numeric ({type(v).__name__}); give "
-                         "A, B, C, D as matrices of numbers") from None
+        raise ScenarioError(
+            f"{where}: field {key} is not numeric ({type(v).__name__}); give "
+            "A, B, C, D as matrices of numbers"
+        ) from None
     return a
 
 
-def read_lti_file(path: str | Path, variable: str | None = None, *,
-                  where: str = "[controller] file") -> dict[str, Any]:
+def read_lti_file(
+    path: str | Path, variable: str | None = None, *, where: str = "[controller] file"
+) -> dict[str, Any]:
     """A, B, C, D (and dt, from ``dt`` or ``Ts``, when present) from a ``.mat`` (v5 or
     v7.3, through :func:`flexarm.io.matfile.load_mat`), ``.npz`` or JSON file.
 
@@ -307,8 +344,10 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
     path = Path(path)
     at = f"{where} = {str(path)!r}" + (f", variable = {variable!r}" if variable else "")
     if not path.is_file():
-        raise ScenarioError(f"{where} = {str(path)!r}: no such file (a relative file is read "
-                         "from the folder of the TOML that names it)")
+        raise ScenarioError(
+            f"{where} = {str(path)!r}: no such file (a relative file is read "
+            "from the folder of the TOML that names it)"
+        )
     suffix = path.suffix.lower()
     if suffix == ".mat":
         from flexarm.io.matfile import MatFileError, load_mat
@@ -325,12 +364,14 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
             for k, v in raw.items():
                 for sep in (".", "_", "/"):
                     if k.startswith(variable + sep):
-                        sub[k[len(variable) + 1:]] = v
+                        sub[k[len(variable) + 1 :]] = v
             if not sub:
-                raise ScenarioError(f"{at}: the file has no keys {variable}.A, {variable}.B, ... "
-                                 f"(it holds: {', '.join(raw) or 'nothing'}); give the "
-                                 "prefix of the block's keys, or no variable for top-level "
-                                 "A, B, C, D")
+                raise ScenarioError(
+                    f"{at}: the file has no keys {variable}.A, {variable}.B, ... "
+                    f"(it holds: {', '.join(raw) or 'nothing'}); give the "
+                    "prefix of the block's keys, or no variable for top-level "
+                    "A, B, C, D"
+                )
             raw, variable = sub, None
     elif suffix == ".json":
         try:
@@ -338,11 +379,15 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
         except (OSError, ValueError) as exc:
             raise ScenarioError(f"{where} = {str(path)!r}: not readable JSON ({exc})") from None
         if not isinstance(raw, dict):
-            raise ScenarioError(f"{at}: the JSON is a {type(raw).__name__}; give an object with "
-                             "A, B, C, D (and dt or Ts)")
+            raise ScenarioError(
+                f"{at}: the JSON is a {type(raw).__name__}; give an object with "
+                "A, B, C, D (and dt or Ts)"
+            )
     else:
-        raise ScenarioError(f"{where} = {str(path)!r}: give a .mat, .npz or .json file holding "
-                         "A, B, C, D and dt (or Ts)")
+        raise ScenarioError(
+            f"{where} = {str(path)!r}: give a .mat, .npz or .json file holding "
+            "A, B, C, D and dt (or Ts)"
+        )
     if variable is not None:
         node: Any = raw
         for depth, part in enumerate(variable.split(".")):
@@ -350,14 +395,18 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
             if fields is None or part not in fields:
                 have = ", ".join(map(str, fields or {})) or "nothing"
                 what = "the file" if depth == 0 else ".".join(variable.split(".")[:depth])
-                raise ScenarioError(f"{at}: {what} has no {part!r} (it holds: {have}); give "
-                                 "variable = the name of the struct with fields A, B, C, D")
+                raise ScenarioError(
+                    f"{at}: {what} has no {part!r} (it holds: {have}); give "
+                    "variable = the name of the struct with fields A, B, C, D"
+                )
             node = fields[part]
         fields = _struct(node)
         if fields is None:
-            raise ScenarioError(f"{at}: {variable} is not a struct (a "
-                             f"{type(node).__name__}); give the struct with fields A, B, C, "
-                             "D (and Ts)")
+            raise ScenarioError(
+                f"{at}: {variable} is not a struct (a "
+                f"{type(node).__name__}); give the struct with fields A, B, C, "
+                "D (and Ts)"
+            )
         raw = fields
     out: dict[str, Any] = {}
     for k in ("A", "B", "C", "D"):
@@ -369,50 +418,65 @@ def read_lti_file(path: str | Path, variable: str | None = None, *,
             try:
                 out[k] = _matrix(a, k, at)
             except (TypeError, ValueError, IndexError, OverflowError) as exc:
-                raise ScenarioError(f"{at}: field {k}: {exc}", fix=(
-                    "give A, B, C, D as finite matrices of numbers (a list of rows)")) from None
+                raise ScenarioError(
+                    f"{at}: field {k}: {exc}",
+                    fix=("give A, B, C, D as finite matrices of numbers (a list of rows)"),
+                ) from None
     for k in ("dt", "Ts"):
         if k in raw and "dt" not in out:
             ts = _numeric(raw[k], k, at).ravel()
             if ts.size != 1 or not math.isfinite(float(ts[0])):
-                shown = "empty" if ts.size == 0 else (
-                    f"{ts.size} numbers" if ts.size > 1 else f"{float(ts[0])!r}")
-                raise ScenarioError(f"{at}: field {k} is {shown}; give the controller's "
-                                    "sampling period as one number in s (e.g. 0.002), or "
-                                    "leave it out to run at the loop's period")
+                shown = (
+                    "empty"
+                    if ts.size == 0
+                    else (f"{ts.size} numbers" if ts.size > 1 else f"{float(ts[0])!r}")
+                )
+                raise ScenarioError(
+                    f"{at}: field {k} is {shown}; give the controller's "
+                    "sampling period as one number in s (e.g. 0.002), or "
+                    "leave it out to run at the loop's period"
+                )
             # MATLAB writes Ts = 0 for a continuous system, -1 for an unspecified period
             if ts[0] == 0:
-                raise ScenarioError(f"{at}: {k} = 0: a continuous-time system; discretise it "
-                                 "(c2d) before exporting the block")
+                raise ScenarioError(
+                    f"{at}: {k} = 0: a continuous-time system; discretise it "
+                    "(c2d) before exporting the block"
+                )
             if ts[0] > 0:
                 out["dt"] = float(ts[0])
     if "D" not in out:
-        raise ScenarioError(f"{at}: no D (the {'struct' if variable else 'file'} holds: "
-                         f"{', '.join(map(str, raw)) or 'nothing'}); a controller block needs "
-                         "D (outputs × inputs) and A, B, C when it has states: add the "
-                         "field D (zeros for a strictly proper block)")
+        raise ScenarioError(
+            f"{at}: no D (the {'struct' if variable else 'file'} holds: "
+            f"{', '.join(map(str, raw)) or 'nothing'}); a controller block needs "
+            "D (outputs × inputs) and A, B, C when it has states: add the "
+            "field D (zeros for a strictly proper block)"
+        )
     if all(out.get(k) is None for k in "ABC"):
         for k in "ABC":
             out.pop(k, None)
     return out
 
 
-def lti_matrices(A=None, B=None, C=None, D=None, *, n_in: int, n_out: int,
-                 where: str = "[controller]") -> tuple[np.ndarray, ...]:
+def lti_matrices(
+    A=None, B=None, C=None, D=None, *, n_in: int, n_out: int, where: str = "[controller]"
+) -> tuple[np.ndarray, ...]:
     """Check and complete (A, B, C, D) for ``n_in`` inputs and ``n_out`` outputs; missing
     A, B, C mean a static gain. Errors name the matrix, its shape and the expected one."""
     if D is None:
         raise ScenarioError(f"{where}: D is missing; give D ({n_out} × {n_in}: outputs × inputs)")
     D = _matrix(D, "D", where)
     if D.shape != (n_out, n_in):
-        raise ScenarioError(f"{where}: D is {D.shape[0]} × {D.shape[1]}, but the controller has "
-                         f"{n_out} output(s) (outputs) and {n_in} input(s) (inputs): D must be "
-                         f"{n_out} × {n_in}")
+        raise ScenarioError(
+            f"{where}: D is {D.shape[0]} × {D.shape[1]}, but the controller has "
+            f"{n_out} output(s) (outputs) and {n_in} input(s) (inputs): D must be "
+            f"{n_out} × {n_in}"
+        )
     if A is None and B is None and C is None:
         return np.zeros((0, 0)), np.zeros((0, n_in)), np.zeros((n_out, 0)), D
     if A is None or B is None or C is None:
-        raise ScenarioError(f"{where}: give A, B and C together (or none of them for a static "
-                         "gain D)")
+        raise ScenarioError(
+            f"{where}: give A, B and C together (or none of them for a static gain D)"
+        )
     A = np.asarray(A, float)
     A = A.reshape(1, 1) if A.ndim == 0 else A
     n = A.shape[0]
@@ -422,23 +486,28 @@ def lti_matrices(A=None, B=None, C=None, D=None, *, n_in: int, n_out: int,
     C = np.asarray(C, float).reshape(-1, n) if np.size(C) == n * n_out else _matrix(C, "C", where)
     for name, M, shape in (("B", B, (n, n_in)), ("C", C, (n_out, n))):
         if M.shape != shape:
-            raise ScenarioError(f"{where}: {name} is {M.shape[0]} × {M.shape[1]}; with {n} "
-                             f"state(s), {n_in} input(s) and {n_out} output(s) it must be "
-                             f"{shape[0]} × {shape[1]}")
+            raise ScenarioError(
+                f"{where}: {name} is {M.shape[0]} × {M.shape[1]}; with {n} "
+                f"state(s), {n_in} input(s) and {n_out} output(s) it must be "
+                f"{shape[0]} × {shape[1]}"
+            )
     return A, B, C, D
 
 
-def check_stable(A: np.ndarray, *, allow_unstable: bool = False,
-                 where: str = "[controller]") -> None:
+def check_stable(
+    A: np.ndarray, *, allow_unstable: bool = False, where: str = "[controller]"
+) -> None:
     """Refuse a controller whose A has an eigenvalue outside the unit circle (|z| > 1 + 1e-9)."""
     if A.size == 0 or allow_unstable:
         return
     eig = np.linalg.eigvals(A)
     j = int(np.argmax(np.abs(eig)))
     if abs(eig[j]) > 1.0 + STABILITY_MARGIN:
-        raise ScenarioError(f"{where}: the controller is unstable: eigenvalue {eig[j]:.6g} of A has "
-                         f"|z| = {abs(eig[j]):.6g} > 1; check A (a continuous-time A? "
-                         "discretise it), or set allow_unstable = true if it is meant")
+        raise ScenarioError(
+            f"{where}: the controller is unstable: eigenvalue {eig[j]:.6g} of A has "
+            f"|z| = {abs(eig[j]):.6g} > 1; check A (a continuous-time A? "
+            "discretise it), or set allow_unstable = true if it is meant"
+        )
 
 
 def controller_period(dt: float | None, base: float, *, where: str = "[controller]") -> int:
@@ -448,9 +517,11 @@ def controller_period(dt: float | None, base: float, *, where: str = "[controlle
     r = dt / base
     k = round(r)
     if k < 1 or abs(r - k) > 1e-9 * max(1.0, k):
-        raise ScenarioError(f"{where}: dt = {dt:g} s is not a whole multiple of the loop's "
-                         f"sampling period {base:g} s (ratio {r:.9g}); give dt = k·{base:g} s "
-                         "(the controller runs every k samples, its output held in between)")
+        raise ScenarioError(
+            f"{where}: dt = {dt:g} s is not a whole multiple of the loop's "
+            f"sampling period {base:g} s (ratio {r:.9g}); give dt = k·{base:g} s "
+            "(the controller runs every k samples, its output held in between)"
+        )
     return int(k)
 
 
@@ -469,21 +540,43 @@ def _signal_entries(signals, *, references, measured, where: str):
                 raise ScenarioError(
                     f"{where}: signals[{j}] = {s!r} is neither a channel nor a number: give "
                     f"a measured channel ({', '.join(sorted(measured))}), a reference "
-                    f"channel ({', '.join(sorted(references or ()))}) or a number")
-        elif isinstance(s, (int, float, np.integer, np.floating)) and not isinstance(s, bool) \
-                and math.isfinite(float(s)):
+                    f"channel ({', '.join(sorted(references or ()))}) or a number"
+                )
+        elif (
+            isinstance(s, (int, float, np.integer, np.floating))
+            and not isinstance(s, bool)
+            and math.isfinite(float(s))
+        ):
             out.append(("constant", float(s)))
         else:
-            raise ScenarioError(f"{where}: signals[{j}] = {s!r} is neither a channel nor a "
-                             "number: give a channel name or a finite number")
+            raise ScenarioError(
+                f"{where}: signals[{j}] = {s!r} is neither a channel nor a "
+                "number: give a channel name or a finite number"
+            )
     return tuple(out)
 
 
-def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=None, outputs,
-                   input_names, dt: float | None = None, base_dt: float,
-                   x0=None, allow_unstable: bool = False, tf=None, signals=None,
-                   references=None, measured=None, name: str = "controller",
-                   where: str = "[controller]") -> LTIController:
+def lti_controller(
+    A=None,
+    B=None,
+    C=None,
+    D=None,
+    *,
+    inputs=None,
+    setpoints=None,
+    outputs,
+    input_names,
+    dt: float | None = None,
+    base_dt: float,
+    x0=None,
+    allow_unstable: bool = False,
+    tf=None,
+    signals=None,
+    references=None,
+    measured=None,
+    name: str = "controller",
+    where: str = "[controller]",
+) -> LTIController:
     """Build an :class:`LTIController`.
 
     ``tf``: a python-control ``StateSpace`` / ``TransferFunction`` with ``dt`` instead of
@@ -505,9 +598,11 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
         inputs = list(inputs)
         setpoints = [None] * len(inputs) if setpoints is None else list(setpoints)
         if len(setpoints) != len(inputs):
-            raise ScenarioError(f"{where}: setpoints has {len(setpoints)} entries, inputs "
-                             f"{len(inputs)}: give one setpoint (a reference channel or 0) per "
-                             "input")
+            raise ScenarioError(
+                f"{where}: setpoints has {len(setpoints)} entries, inputs "
+                f"{len(inputs)}: give one setpoint (a reference channel or 0) per "
+                "input"
+            )
         sp = []
         for s in setpoints:
             if s is None or (not isinstance(s, str) and float(s) == 0.0):
@@ -521,11 +616,17 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
     for o in outputs:
         if isinstance(o, str) and o in input_names:
             outs.append(input_names.index(o))
-        elif isinstance(o, (int, np.integer)) and not isinstance(o, bool) and 1 <= o <= len(input_names):
+        elif (
+            isinstance(o, (int, np.integer))
+            and not isinstance(o, bool)
+            and 1 <= o <= len(input_names)
+        ):
             outs.append(int(o) - 1)
         else:
-            raise ScenarioError(f"{where}: output {o!r} is not an input of the plant; give one of "
-                             f"{', '.join(input_names)} (or the joint number 1..{len(input_names)})")
+            raise ScenarioError(
+                f"{where}: output {o!r} is not an input of the plant; give one of "
+                f"{', '.join(input_names)} (or the joint number 1..{len(input_names)})"
+            )
     if len(set(outs)) != len(outs):
         raise ScenarioError(f"{where}: outputs {list(outputs)} name a plant input twice")
     if tf is not None:
@@ -534,8 +635,10 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
         if isinstance(tf, tuple):
             tf = control.tf(tf[0], tf[1], dt if dt is not None else True)
         if tf.isctime():
-            raise ScenarioError(f"{where}: the system is continuous-time; discretise it first "
-                             "(e.g. sys.sample(T, method='tustin'))")
+            raise ScenarioError(
+                f"{where}: the system is continuous-time; discretise it first "
+                "(e.g. sys.sample(T, method='tustin'))"
+            )
         if dt is None and tf.dt is not True and tf.dt:
             dt = float(tf.dt)
         ss = control.ss(tf)
@@ -548,15 +651,35 @@ def lti_controller(A=None, B=None, C=None, D=None, *, inputs=None, setpoints=Non
     n = A.shape[0]
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, float).ravel()
     if x0.shape != (n,):
-        raise ScenarioError(f"{where}: initial_state has {x0.size} value(s); the controller has "
-                         f"{n} state(s)")
+        raise ScenarioError(
+            f"{where}: initial_state has {x0.size} value(s); the controller has {n} state(s)"
+        )
     f = lambda a: jnp.asarray(np.asarray(a, float))  # noqa: E731
-    return LTIController(f(A), f(B), f(C), f(D), f(x0), tuple(inputs), tuple(sp), tuple(outs),
-                         len(input_names), every, sig, name=name)
+    return LTIController(
+        f(A),
+        f(B),
+        f(C),
+        f(D),
+        f(x0),
+        tuple(inputs),
+        tuple(sp),
+        tuple(outs),
+        len(input_names),
+        every,
+        sig,
+        name=name,
+    )
 
 
-def lti_from_spec(spec, *, base_dt: float, input_names, references=None, measured=None,
-                  where: str = "[controller]") -> LTIController:
+def lti_from_spec(
+    spec,
+    *,
+    base_dt: float,
+    input_names,
+    references=None,
+    measured=None,
+    where: str = "[controller]",
+) -> LTIController:
     """The controller block a scenario's ``[controller] type = "lti"`` (or one of its
     ``[[controllers]]``) describes (:class:`flexarm.specs.experiment.LTIControllerSpec`);
     ``references``: the reference channels the run provides (a setpoint naming another is
@@ -571,8 +694,10 @@ def lti_from_spec(spec, *, base_dt: float, input_names, references=None, measure
         if dt is None:
             dt = got.get("dt")
         elif got.get("dt") is not None and abs(got["dt"] - dt) > 1e-9 * dt:
-            raise ValueError(f"{where}: dt = {dt:g} s, but the file {spec.file!r} says "
-                             f"{got['dt']:g} s (Ts); drop dt, or fix the one that is wrong")
+            raise ValueError(
+                f"{where}: dt = {dt:g} s, but the file {spec.file!r} says "
+                f"{got['dt']:g} s (Ts); drop dt, or fix the one that is wrong"
+            )
         where = f"{where} file {spec.file!r}"
     elif spec.num is not None:
         tf = (list(spec.num), list(spec.den))
@@ -581,15 +706,31 @@ def lti_from_spec(spec, *, base_dt: float, input_names, references=None, measure
     if references is not None:
         for s in spec.setpoints or []:
             if isinstance(s, str) and s not in references:
-                raise ValueError(f"{where} setpoint {s!r} is not a reference channel of "
-                                 f"the run; it has {', '.join(sorted(references))} (add "
-                                 f"[references.{s}] or pass it)")
-    return lti_controller(A, B, C, D, inputs=spec.inputs, setpoints=spec.setpoints,
-                          signals=getattr(spec, "signals", None), references=references,
-                          measured=measured, outputs=spec.outputs,
-                          input_names=list(input_names), dt=dt, base_dt=base_dt,
-                          x0=spec.initial_state, allow_unstable=spec.allow_unstable, tf=tf,
-                          name=name, where=where)
+                raise ValueError(
+                    f"{where} setpoint {s!r} is not a reference channel of "
+                    f"the run; it has {', '.join(sorted(references))} (add "
+                    f"[references.{s}] or pass it)"
+                )
+    return lti_controller(
+        A,
+        B,
+        C,
+        D,
+        inputs=spec.inputs,
+        setpoints=spec.setpoints,
+        signals=getattr(spec, "signals", None),
+        references=references,
+        measured=measured,
+        outputs=spec.outputs,
+        input_names=list(input_names),
+        dt=dt,
+        base_dt=base_dt,
+        x0=spec.initial_state,
+        allow_unstable=spec.allow_unstable,
+        tf=tf,
+        name=name,
+        where=where,
+    )
 
 
 def input_history(ctrl: LTIController, log) -> np.ndarray:
@@ -599,20 +740,25 @@ def input_history(ctrl: LTIController, log) -> np.ndarray:
     need = (*ctrl.measured_signals, *ctrl.reference_signals)
     missing = [c for c in need if c not in log.signals]
     if missing:
-        raise ValueError(f"{log.name}: the state of {ctrl.name} is run over the log, which "
-                         f"has no {', '.join(missing)}")
+        raise ValueError(
+            f"{log.name}: the state of {ctrl.name} is run over the log, which "
+            f"has no {', '.join(missing)}"
+        )
     n = len(log)
     if ctrl.signals is not None:
-        cols = [np.asarray(log[v], float) if kind != "constant" else np.full(n, float(v))
-                for kind, v in ctrl.signals]
+        cols = [
+            np.asarray(log[v], float) if kind != "constant" else np.full(n, float(v))
+            for kind, v in ctrl.signals
+        ]
         return np.stack(cols, 1) if cols else np.zeros((n, 0))
     y = np.stack([log[c] for c in ctrl.inputs], 1)
     s = np.stack([log[c] if c is not None else np.zeros(n) for c in ctrl.setpoints], 1)
     return s - y
 
 
-def run_state(ctrl: LTIController, w: np.ndarray, k: int, *, x0=None, k0: int = 0
-              ) -> tuple[np.ndarray, np.ndarray, int]:
+def run_state(
+    ctrl: LTIController, w: np.ndarray, k: int, *, x0=None, k0: int = 0
+) -> tuple[np.ndarray, np.ndarray, int]:
     """The block run over the inputs w_0..w_{k−1} (rows of ``w``) from state ``x0``
     (default its own) at phase ``k0`` (samples since the run's start): its state x_k, the
     output it holds at k (the last update's, in the plant's inputs) and the phase k0 + k.

@@ -46,22 +46,38 @@ class MeasuredTip(Controller):
         return self.law.step(state, m, reference)
 
 
-def nested_loops(gcm1: control.TransferFunction, gcm2: control.TransferFunction,
-                 gcb: control.TransferFunction, *, dt: float, coupling_gain: float = 0.0,
-                 friction_level: float = 0.0, angle_resolution: float = 0.0,
-                 velocity_deadband: float | None = None, rest_deadband: float | None = None,
-                 deflection_to_angle: float | None = None) -> Controller:
+def nested_loops(
+    gcm1: control.TransferFunction,
+    gcm2: control.TransferFunction,
+    gcb: control.TransferFunction,
+    *,
+    dt: float,
+    coupling_gain: float = 0.0,
+    friction_level: float = 0.0,
+    angle_resolution: float = 0.0,
+    velocity_deadband: float | None = None,
+    rest_deadband: float | None = None,
+    deflection_to_angle: float | None = None,
+) -> Controller:
     """The nested loops in command units (the inner loop's torque constant is 1: ĉ =
     ``coupling_gain`` per rad of bending, c_f = ``friction_level``). ``gcm1``, ``gcm2``,
     ``gcb``: discrete SISO transfer functions at ``dt`` (s). ``deflection_to_angle``: None
     reads the ``tip_angle`` channel, else the tip angle comes from the gauge
     (:class:`MeasuredTip`). Deadbands: see :func:`~flexarm.control.inner_loop.inner_loop`
     (``angle_resolution`` the hub encoder count, rad)."""
-    inner = inner_loop(gcm1, gcm2, dt=dt, torque_constant=1.0, coulomb=friction_level,
-                       coupling=coupling_gain, friction_compensation=friction_level != 0.0,
-                       angle_resolution=angle_resolution,
-                       velocity_deadband=velocity_deadband, rest_deadband=rest_deadband,
-                       reference="motor_reference")
+    inner = inner_loop(
+        gcm1,
+        gcm2,
+        dt=dt,
+        torque_constant=1.0,
+        coulomb=friction_level,
+        coupling=coupling_gain,
+        friction_compensation=friction_level != 0.0,
+        angle_resolution=angle_resolution,
+        velocity_deadband=velocity_deadband,
+        rest_deadband=rest_deadband,
+        reference="motor_reference",
+    )
     law = tip_loop(inner, gcb, dt)
     if deflection_to_angle is None:
         return law

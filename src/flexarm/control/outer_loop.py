@@ -74,8 +74,9 @@ class ReferenceChannel(Controller):
         return state, jnp.reshape(reference[self.channel], (1,))
 
 
-def pid_zpk(gain: float, zeros: tuple[float, float], pole: float,
-            dt: float) -> control.TransferFunction:
+def pid_zpk(
+    gain: float, zeros: tuple[float, float], pole: float, dt: float
+) -> control.TransferFunction:
     """G(z) = gain (1 − c1 z⁻¹)(1 − c2 z⁻¹) / ((1 − z⁻¹)(1 − p z⁻¹)), sampling period dt (s):
     a discrete PID with an integrator, two zeros c1, c2 and a filter pole p (rad/rad)."""
     c1, c2 = zeros
@@ -90,8 +91,7 @@ def tip_feedback(gcb, dt: float) -> LinearController:
     if isinstance(gcb, tuple):
         kp, kd = gcb
         return discrete.pd(kp, kd, dt, measured="tip_angle", reference="reference")
-    return discrete.from_transfer_function(gcb, dt, measured="tip_angle",
-                                           reference="reference")
+    return discrete.from_transfer_function(gcb, dt, measured="tip_angle", reference="reference")
 
 
 def tip_loop(inner: InnerLoop, gcb, dt: float, *, feedforward: str = "feedforward") -> Cascade:
@@ -107,9 +107,15 @@ def tip_loop(inner: InnerLoop, gcb, dt: float, *, feedforward: str = "feedforwar
     return Cascade(outer, inner, via=inner.reference)
 
 
-def trajectory_references(n: control.TransferFunction, trajectory: PointToPointTrajectory,
-                          t: np.ndarray, *, start: float = 0.0, advance: float = 0.0,
-                          oversample: int = 30) -> dict[str, np.ndarray]:
+def trajectory_references(
+    n: control.TransferFunction,
+    trajectory: PointToPointTrajectory,
+    t: np.ndarray,
+    *,
+    start: float = 0.0,
+    advance: float = 0.0,
+    oversample: int = 30,
+) -> dict[str, np.ndarray]:
     """Reference channels for :func:`tip_loop` on the sample times ``t`` (s, uniform): the
     tip trajectory θ_tr(t) = u(t − start) (``"reference"``) and the feedforward
     θ̂_mr(t) = (N u)(t − start + advance) (``"feedforward"``), both rad.
@@ -135,8 +141,10 @@ def trajectory_references(n: control.TransferFunction, trajectory: PointToPointT
     k = max(1, int(oversample))
     fine = t[0] + np.arange((t.size - 1) * k + 1) * ((t[-1] - t[0]) / max(t.size - 1, 1) / k)
     shifted: Callable = lambda tt, o: trajectory.derivative(np.asarray(tt) - start + advance, o)  # noqa: E731
-    return {"reference": trajectory.position(t - start),
-            "feedforward": feedforward_signal(n, shifted, fine)[::k]}
+    return {
+        "reference": trajectory.position(t - start),
+        "feedforward": feedforward_signal(n, shifted, fine)[::k],
+    }
 
 
 @dataclass(frozen=True)
@@ -149,8 +157,9 @@ class DeflectionReport:
     steady_acceleration: float  # rad, (1 − G_b) θm at constant acceleration A
 
 
-def deflection_report(gb: control.TransferFunction, n: control.TransferFunction,
-                      trajectory: PointToPointTrajectory) -> DeflectionReport:
+def deflection_report(
+    gb: control.TransferFunction, n: control.TransferFunction, trajectory: PointToPointTrajectory
+) -> DeflectionReport:
     """Peak of θm − θt with θm = N u, θt = G_b θm (linear models, inner loop = 1), when it
     occurs, and the deflection in steady acceleration: (1 − G_b(s))/s² at s → 0 times A,
     the part a parabolic move holds while accelerating (the rest comes from the corners)."""
@@ -163,12 +172,17 @@ def deflection_report(gb: control.TransferFunction, n: control.TransferFunction,
     # when G_b(0) = 1 and G_b'(0) = 0)
     diff = np.polysub(den, num)
     c2 = diff[-3] / den[-1] if diff.size >= 3 else 0.0
-    return DeflectionReport(float(abs(d[i])), float(t[i]), trajectory.duration,
-                            float(abs(c2) * trajectory.max_acceleration))
+    return DeflectionReport(
+        float(abs(d[i])),
+        float(t[i]),
+        trajectory.duration,
+        float(abs(c2) * trajectory.max_acceleration),
+    )
 
 
-def size_parabolic(gb: control.TransferFunction, distance: float, design_deflection: float,
-                   max_deflection: float) -> tuple[PointToPointTrajectory, control.TransferFunction, float]:
+def size_parabolic(
+    gb: control.TransferFunction, distance: float, design_deflection: float, max_deflection: float
+) -> tuple[PointToPointTrajectory, control.TransferFunction, float]:
     """Parabolic move for a minimum-phase second-order G_b (FRB Sec. VI-B.3).
 
     A = ``design_deflection`` · ω² with ω² = G_b's denominator constant over its s²
@@ -189,4 +203,3 @@ def size_parabolic(gb: control.TransferFunction, distance: float, design_deflect
     n = wiener_feedforward(gb, traj.laplace_model())
     peak = check_deflection(gb, n, traj, max_deflection)
     return traj, n, peak
-

@@ -67,8 +67,9 @@ def _static_residual(plant: MultiLinkPlant, theta: Array, delta: Array) -> Array
     return plant.K @ delta + plant.gravity(jnp.concatenate([theta, delta]))[n:]
 
 
-def quasi_static_deflection(plant: MultiLinkPlant, theta: Array, iterations: int = 4,
-                            delta0: Array | None = None) -> Array:
+def quasi_static_deflection(
+    plant: MultiLinkPlant, theta: Array, iterations: int = 4, delta0: Array | None = None
+) -> Array:
     """δ̄(θ): K δ̄ + g_δ(θ, δ̄) = 0 by ``iterations`` Newton steps from ``delta0`` (default 0);
     pure JAX (a fori_loop, so the step is compiled once), usable inside a closed loop."""
     d0 = jnp.zeros(plant.n_delta) if delta0 is None else delta0
@@ -90,8 +91,9 @@ def _newton_parts(plant: MultiLinkPlant, theta: Array, delta: Array):
     return F, Jm
 
 
-def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: float = 1e-12,
-                        max_iter: int = 50) -> np.ndarray:
+def residual_deflection(
+    model: MultiLinkModel, theta_d, *, delta0=None, tol: float = 1e-12, max_iter: int = 50
+) -> np.ndarray:
     """δ_d solving DLS eq. (9), K δ_d + g_δ(θ_d, δ_d) = 0 (m), by Newton's method.
 
     Converged when ‖F‖ ≤ tol·(1 + ‖g_δ(θ_d, 0)‖) (N). Raises :class:`RegulationError` if the
@@ -113,7 +115,8 @@ def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: flo
         except np.linalg.LinAlgError:
             raise RegulationError(
                 f"K + ∂g_δ/∂δ is singular at δ = {d}; no residual deflection at θ_d = "
-                f"{np.asarray(theta)} rad") from None
+                f"{np.asarray(theta)} rad"
+            ) from None
         d = d - step
         if not np.all(np.isfinite(d)):
             break
@@ -127,7 +130,7 @@ def residual_deflection(model: MultiLinkModel, theta_d, *, delta0=None, tol: flo
 def gravity_torque(model: MultiLinkModel, theta, delta) -> np.ndarray:
     """g_θ(θ, δ) (N·m): the joint torques that hold the arm at rest at (θ, δ)."""
     q = np.concatenate([np.asarray(theta, float).ravel(), np.asarray(delta, float).ravel()])
-    return model.gravity(q)[:model.n_links]
+    return model.gravity(q)[: model.n_links]
 
 
 # --------------------------------------------------------------------------- laws
@@ -163,8 +166,16 @@ def _gain(k, n: int, name: str) -> np.ndarray:
     return k
 
 
-def regulation_params(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
-                      duration: float = 0.0, newton_iterations: int = 4) -> RegulationParams:
+def regulation_params(
+    model: MultiLinkModel,
+    KP,
+    KD,
+    theta_d,
+    *,
+    theta_0=None,
+    duration: float = 0.0,
+    newton_iterations: int = 4,
+) -> RegulationParams:
     """Parameters for the laws: KP, KD as scalars, diagonals or matrices; δ_d from eq. (9)."""
     n = model.n_links
     theta_d = np.asarray(theta_d, float).reshape(n)
@@ -176,9 +187,17 @@ def regulation_params(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
         raise ValueError("an interpolating trajectory (duration > 0) needs theta_0")
     th0 = theta_d if theta_0 is None else np.asarray(theta_0, float).reshape(n)
     f = jnp.asarray
-    return RegulationParams(plant=model.plant, KP=f(_gain(KP, n, "KP")), KD=f(_gain(KD, n, "KD")),
-                            theta_d=f(theta_d), delta_d=f(delta_d), g_d=f(g_d), theta_0=f(th0),
-                            duration=f(float(duration)), newton_iterations=newton_iterations)
+    return RegulationParams(
+        plant=model.plant,
+        KP=f(_gain(KP, n, "KP")),
+        KD=f(_gain(KD, n, "KD")),
+        theta_d=f(theta_d),
+        delta_d=f(delta_d),
+        g_d=f(g_d),
+        theta_0=f(th0),
+        duration=f(float(duration)),
+        newton_iterations=newton_iterations,
+    )
 
 
 def reference(p: RegulationParams, t) -> tuple[Array, Array]:
@@ -205,7 +224,7 @@ def _matvec(M: Array, v: Array) -> Array:
 def _pd(p: RegulationParams, x: Array, t) -> Array:
     n, nq = p.plant.n_links, p.plant.n_q
     th_r, thd_r = reference(p, t)
-    return _matvec(p.KP, th_r - x[:n]) - _matvec(p.KD, x[nq:nq + n] - thd_r)
+    return _matvec(p.KP, th_r - x[:n]) - _matvec(p.KD, x[nq : nq + n] - thd_r)
 
 
 def law_pd_constant(p: RegulationParams, x: Array, t) -> Array:
@@ -216,7 +235,7 @@ def law_pd_constant(p: RegulationParams, x: Array, t) -> Array:
 def law_pd_online(p: RegulationParams, x: Array, t) -> Array:
     """Law (30), variant a: u = K_P(θ_d − θ) − K_D θ̇ + g_θ(θ, δ), measured (θ, δ)."""
     nq = p.plant.n_q
-    return _pd(p, x, t) + p.plant.gravity(x[:nq])[:p.plant.n_links]
+    return _pd(p, x, t) + p.plant.gravity(x[:nq])[: p.plant.n_links]
 
 
 def law_pd_quasistatic(p: RegulationParams, x: Array, t) -> Array:
@@ -244,6 +263,7 @@ LAWS: dict[str, Callable] = {
 def _gjac_norms(plant: MultiLinkPlant, qs: Array) -> Array:
     def one(q):
         return jnp.max(jnp.abs(jnp.linalg.eigvalsh(plant.gravity_jacobian(q))))
+
     return jax.vmap(one)(qs)
 
 
@@ -256,18 +276,34 @@ class AlphaBound:
     n_evaluations: int
 
 
-def alpha_bound(model: MultiLinkModel, theta_low, theta_high, delta_max, *,
-                n_samples: int = 4000, seed: int = 0, refine: int = 5) -> AlphaBound:
+def alpha_bound(
+    model: MultiLinkModel,
+    theta_low,
+    theta_high,
+    delta_max,
+    *,
+    n_samples: int = 4000,
+    seed: int = 0,
+    refine: int = 5,
+) -> AlphaBound:
     """α of DLS eq. (6) over the box θ ∈ [θ_low, θ_high] (rad), |δ| ≤ δ_max (m, per mode):
     the largest ‖∂g/∂q‖₂ over random samples, then a bounded local maximisation
     (L-BFGS-B) from the ``refine`` best samples. A lower estimate of the true supremum."""
     from scipy.optimize import minimize
 
     n, nd = model.n_links, model.n_delta
-    lo = np.concatenate([np.broadcast_to(np.asarray(theta_low, float), (n,)),
-                         -np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,))])
-    hi = np.concatenate([np.broadcast_to(np.asarray(theta_high, float), (n,)),
-                         np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,))])
+    lo = np.concatenate(
+        [
+            np.broadcast_to(np.asarray(theta_low, float), (n,)),
+            -np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,)),
+        ]
+    )
+    hi = np.concatenate(
+        [
+            np.broadcast_to(np.asarray(theta_high, float), (n,)),
+            np.broadcast_to(np.abs(np.asarray(delta_max, float)), (nd,)),
+        ]
+    )
     rng = np.random.default_rng(seed)
     qs = lo + (hi - lo) * rng.random((n_samples, n + nd))
     vals = np.asarray(_gjac_norms(model.plant, jnp.asarray(qs)))
@@ -278,8 +314,13 @@ def alpha_bound(model: MultiLinkModel, theta_low, theta_high, delta_max, *,
         return -float(_gjac_norms(model.plant, jnp.asarray(q[None, :]))[0])
 
     for k in np.argsort(vals)[::-1][:refine]:
-        res = minimize(neg, qs[k], method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
-                       options={"maxiter": 50})
+        res = minimize(
+            neg,
+            qs[k],
+            method="L-BFGS-B",
+            bounds=list(zip(lo, hi, strict=True)),
+            options={"maxiter": 50},
+        )
         nev += res.nfev
         if -res.fun > alpha:
             alpha, qbest = float(-res.fun), res.x
@@ -290,7 +331,7 @@ def alpha_along(model: MultiLinkModel, states) -> tuple[float, int]:
     """α a posteriori: max over the samples of a trajectory x(t) of ‖∂g/∂q(q(t))‖₂; returns
     (α, index of the sample where it is reached)."""
     x = np.atleast_2d(np.asarray(states, float))
-    vals = np.asarray(_gjac_norms(model.plant, jnp.asarray(x[:, :model.n_q])))
+    vals = np.asarray(_gjac_norms(model.plant, jnp.asarray(x[:, : model.n_q])))
     k = int(np.argmax(vals))
     return float(vals[k]), k
 
@@ -325,12 +366,17 @@ class StabilityConditions:
 
     def summary(self) -> str:
         def line(tag, name, lam, margin, ok):
-            return (f"({tag}) {name} = {lam:.4g} {'>' if ok else '<='} α = {self.alpha:.4g}: "
-                    f"{'holds' if ok else 'FAILS'} (margin {margin:+.4g})")
-        return "\n".join([
-            line("14", "λ_min(K)", self.lambda_min_K, self.margin_14, self.holds_14),
-            line("15", "λ_min(K_P)", self.lambda_min_KP, self.margin_15, self.holds_15),
-        ])
+            return (
+                f"({tag}) {name} = {lam:.4g} {'>' if ok else '<='} α = {self.alpha:.4g}: "
+                f"{'holds' if ok else 'FAILS'} (margin {margin:+.4g})"
+            )
+
+        return "\n".join(
+            [
+                line("14", "λ_min(K)", self.lambda_min_K, self.margin_14, self.holds_14),
+                line("15", "λ_min(K_P)", self.lambda_min_KP, self.margin_15, self.holds_15),
+            ]
+        )
 
 
 def stability_conditions(model: MultiLinkModel, KP, alpha: float) -> StabilityConditions:
@@ -338,13 +384,22 @@ def stability_conditions(model: MultiLinkModel, KP, alpha: float) -> StabilityCo
     n = model.n_links
     KPm = _gain(KP, n, "KP")
     lk = float(np.linalg.eigvalsh(model.K).min()) if model.n_delta else float("inf")
-    return StabilityConditions(float(alpha), lk, float(np.linalg.eigvalsh(0.5 * (KPm + KPm.T)).min()))
+    return StabilityConditions(
+        float(alpha), lk, float(np.linalg.eigvalsh(0.5 * (KPm + KPm.T)).min())
+    )
 
 
 # --------------------------------------------------------------------------- batches of parameters
-def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=None,
-                            duration: float = 0.0,
-                            newton_iterations: int = 4) -> tuple[RegulationParams, RegulationParams]:
+def regulation_params_batch(
+    model: MultiLinkModel,
+    KP,
+    KD,
+    theta_d,
+    *,
+    theta_0=None,
+    duration: float = 0.0,
+    newton_iterations: int = 4,
+) -> tuple[RegulationParams, RegulationParams]:
     """Parameters for N gain variations around one target, and their vmap-style batch axes.
 
     KP, KD: (N, n) diagonals or (N, n, n) matrices (N·m/rad, N·m·s/rad); one of the two may
@@ -353,8 +408,15 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     (N, n, n), axes with 0 on KP and KD and None elsewhere (the target, δ_d and g_θ(θ_d, δ_d)
     are shared)."""
     n = model.n_links
-    base = regulation_params(model, np.eye(n), np.eye(n), theta_d, theta_0=theta_0,
-                             duration=duration, newton_iterations=newton_iterations)
+    base = regulation_params(
+        model,
+        np.eye(n),
+        np.eye(n),
+        theta_d,
+        theta_0=theta_0,
+        duration=duration,
+        newton_iterations=newton_iterations,
+    )
 
     def stack(k, name):
         k = np.asarray(k, float)
@@ -364,8 +426,9 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
             return np.stack([np.diag(r) for r in k])
         if k.ndim == 3 and k.shape[1:] == (n, n):
             return k
-        raise ValueError(f"{name}: expected (N, {n}) diagonals or (N, {n}, {n}) matrices, "
-                         f"got shape {k.shape}")
+        raise ValueError(
+            f"{name}: expected (N, {n}) diagonals or (N, {n}, {n}) matrices, got shape {k.shape}"
+        )
 
     kp, kd = stack(KP, "KP"), stack(KD, "KD")
     if kp is None and kd is None:
@@ -381,7 +444,15 @@ def regulation_params_batch(model: MultiLinkModel, KP, KD, theta_d, *, theta_0=N
     kd = np.broadcast_to(_gain(KD, n, "KD"), (N, n, n)) if kd is None else kd
     params = eqx.tree_at(lambda p: (p.KP, p.KD), base, (jnp.asarray(kp), jnp.asarray(kd)))
     # the vmap axes of each field (0: batched, None: shared), in a RegulationParams of axes
-    axes = cast(Any, RegulationParams)(plant=None, KP=0, KD=0, theta_d=None, delta_d=None,
-                                       g_d=None, theta_0=None, duration=None,
-                                       newton_iterations=newton_iterations)
+    axes = cast(Any, RegulationParams)(
+        plant=None,
+        KP=0,
+        KD=0,
+        theta_d=None,
+        delta_d=None,
+        g_d=None,
+        theta_0=None,
+        duration=None,
+        newton_iterations=newton_iterations,
+    )
     return params, axes

@@ -70,34 +70,69 @@ class StateFeedback(Controller):
         return new, jnp.reshape(u, (1,))
 
 
-def state_feedback(k1: float, k2: float, k3: float, k4: float, dt: float, *,
-                   rate: str = "backward", rate_time_constant: float = 0.0,
-                   angle: str = "motor_angle", deflection: str = "tip_deflection",
-                   reference: str = "reference") -> StateFeedback:
+def state_feedback(
+    k1: float,
+    k2: float,
+    k3: float,
+    k4: float,
+    dt: float,
+    *,
+    rate: str = "backward",
+    rate_time_constant: float = 0.0,
+    angle: str = "motor_angle",
+    deflection: str = "tip_deflection",
+    reference: str = "reference",
+) -> StateFeedback:
     """u = K1 (r − θ) − K2 d − K3 θ̇ − K4 ḋ (see module docstring). ``rate`` is
     ``"backward"`` or ``"filtered"`` (then ``rate_time_constant`` τ > 0 in s)."""
     if rate not in RATE_SCHEMES:
         raise ValueError(f"rate = {rate!r} is not known; choose one of {', '.join(RATE_SCHEMES)}")
     if rate == "filtered" and not rate_time_constant > 0:
-        raise ValueError("rate = 'filtered' needs rate_time_constant > 0 (s), e.g. 0.02 "
-                         "for a 50 rad/s derivative filter")
+        raise ValueError(
+            "rate = 'filtered' needs rate_time_constant > 0 (s), e.g. 0.02 "
+            "for a 50 rad/s derivative filter"
+        )
     if not dt > 0:
         raise ValueError(f"sampling period dt = {dt!r} must be > 0 s")
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    return StateFeedback(f([k1, k2, k3, k4]), f(dt), f(rate_time_constant), rate, angle,
-                         deflection, reference)
+    return StateFeedback(
+        f([k1, k2, k3, k4]), f(dt), f(rate_time_constant), rate, angle, deflection, reference
+    )
 
 
-def hub_pd(kp: float, kd: float, dt: float, *, rate: str = "backward",
-           rate_time_constant: float = 0.0, angle: str = "motor_angle",
-           reference: str = "reference") -> StateFeedback:
+def hub_pd(
+    kp: float,
+    kd: float,
+    dt: float,
+    *,
+    rate: str = "backward",
+    rate_time_constant: float = 0.0,
+    angle: str = "motor_angle",
+    reference: str = "reference",
+) -> StateFeedback:
     """u = KP (r − θ) − KD θ̇ on the measured hub angle, θ̇ by ``rate`` (no tip sensor)."""
-    c = state_feedback(kp, 0.0, kd, 0.0, dt, rate=rate, rate_time_constant=rate_time_constant,
-                       angle=angle, reference=reference)
+    c = state_feedback(
+        kp,
+        0.0,
+        kd,
+        0.0,
+        dt,
+        rate=rate,
+        rate_time_constant=rate_time_constant,
+        angle=angle,
+        reference=reference,
+    )
     return StateFeedback(c.gains, c.dt, c.tau, c.rate, angle, None, reference)
 
 
 def from_spec(spec, dt: float) -> StateFeedback:
     """The controller of a :class:`~flexarm.specs.controllers_bench.StateFeedbackController`."""
-    return state_feedback(spec.k1, spec.k2, spec.k3, spec.k4, dt, rate=spec.rate,
-                          rate_time_constant=spec.rate_time_constant)
+    return state_feedback(
+        spec.k1,
+        spec.k2,
+        spec.k3,
+        spec.k4,
+        dt,
+        rate=spec.rate,
+        rate_time_constant=spec.rate_time_constant,
+    )

@@ -234,9 +234,7 @@ def quasi_parabolic(
     h = max(0.0, (-b + math.sqrt(b * b + a * (d - d0))) / a)
     breaks, states, durs = build(h)
     duration = float(sum(durs))
-    return PointToPointTrajectory(
-        "quasi-parabolic", d, duration, a, 4, breaks, states, max_snap=s
-    )
+    return PointToPointTrajectory("quasi-parabolic", d, duration, a, 4, breaks, states, max_snap=s)
 
 
 # ------------------------------------------------------------------------ deflection

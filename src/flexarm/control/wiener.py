@@ -152,8 +152,10 @@ def _merge_multiple(r: np.ndarray) -> np.ndarray:
         arr = np.asarray(c)
         mid = arr.mean()
         scale = max(abs(mid), np.max(np.abs(arr)))
-        return (bool(np.max(np.abs(arr - mid)) <= _CLUSTER_SPREAD * _EPS ** (1 / arr.size) * scale),
-                mid)
+        return (
+            bool(np.max(np.abs(arr - mid)) <= _CLUSTER_SPREAD * _EPS ** (1 / arr.size) * scale),
+            mid,
+        )
 
     while True:
         best = None
@@ -378,7 +380,9 @@ def wiener_feedforward(
     # A factor that lost no root keeps its coefficients as given (exact zeros stay zero).
     a_roots, den_roots, n_a = _cancel(gpoles, np.concatenate([zl, bnr_roots, u_roots]))
     q_roots, den_roots, n_q = _cancel(_roots(q), den_roots)
-    a_poly = gden / gden[0] if n_a == 0 and a_roots.size == gden.size - 1 else _poly_from_roots(a_roots)
+    a_poly = (
+        gden / gden[0] if n_a == 0 and a_roots.size == gden.size - 1 else _poly_from_roots(a_roots)
+    )
     q_poly = q if n_q == 0 else q[0] * _poly_from_roots(q_roots)
     num = np.polymul(q_poly, a_poly)
     den = k_g * _poly_from_roots(den_roots)
@@ -422,9 +426,7 @@ def _derivative_getter(reference: object, t: np.ndarray) -> Callable[[int], np.n
     return get
 
 
-def feedforward_signal(
-    n: control.TransferFunction, reference: object, t: np.ndarray
-) -> np.ndarray:
+def feedforward_signal(n: control.TransferFunction, reference: object, t: np.ndarray) -> np.ndarray:
     r"""θ̂_mr(t) = N applied to the reference trajectory, N possibly improper (rad).
 
     N(s) = Σ_k π_k s^k + N_p(s) (:func:`split_improper`); the result is

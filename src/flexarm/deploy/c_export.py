@@ -68,18 +68,60 @@ import numpy as np
 
 from flexarm.errors import FlexarmError  # the one error base (issue #25)
 
-__all__ = ["CCode", "ExportError", "Part", "EXPORTERS", "exporter", "generate_c", "export_c",
-           "load_design"]
+__all__ = [
+    "CCode",
+    "ExportError",
+    "Part",
+    "EXPORTERS",
+    "exporter",
+    "generate_c",
+    "export_c",
+    "load_design",
+]
 
 PRECISIONS = ("double", "float")
 
 #: C99 keywords and names the generated code uses for itself: not accepted as NAME.
 _C_RESERVED = {
-    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
-    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
-    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch",
-    "typedef", "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex",
-    "_Imaginary", "main"}
+    "auto",
+    "break",
+    "case",
+    "char",
+    "const",
+    "continue",
+    "default",
+    "do",
+    "double",
+    "else",
+    "enum",
+    "extern",
+    "float",
+    "for",
+    "goto",
+    "if",
+    "inline",
+    "int",
+    "long",
+    "register",
+    "restrict",
+    "return",
+    "short",
+    "signed",
+    "sizeof",
+    "static",
+    "struct",
+    "switch",
+    "typedef",
+    "union",
+    "unsigned",
+    "void",
+    "volatile",
+    "while",
+    "_Bool",
+    "_Complex",
+    "_Imaginary",
+    "main",
+}
 
 
 class ExportError(FlexarmError, ValueError):
@@ -128,14 +170,15 @@ class _Ctx:
         trip; float: the float32 value, 9 digits, suffix f)."""
         v = float(v)
         if not np.isfinite(v):
-            raise ExportError(f"a constant of the controller is {v}; C constants must be "
-                              "finite")
+            raise ExportError(f"a constant of the controller is {v}; C constants must be finite")
         if self.precision == "float":
             with np.errstate(over="ignore"):
                 f32 = np.float32(v)
             if not np.isfinite(f32):
-                raise ExportError(f"a constant of the controller, {v:.6g}, is beyond the "
-                                  "float range (3.4e38); export with --precision double")
+                raise ExportError(
+                    f"a constant of the controller, {v:.6g}, is beyond the "
+                    "float range (3.4e38); export with --precision double"
+                )
             s = format(float(f32), ".9g")  # 9 digits: float32 round trip
             return (s if any(ch in s for ch in ".e") else s + ".0") + "f"
         s = format(v, ".17g")
@@ -190,9 +233,11 @@ def _emit(ctrl, ctx: _Ctx, prefix: str, out: str) -> Part:
         if cls in EXPORTERS:
             return EXPORTERS[cls](ctrl, ctx, prefix, out)
     known = ", ".join(sorted(c.__name__ for c in EXPORTERS))
-    raise ExportError(f"controller {type(ctrl).__name__} cannot be exported to C (the "
-                      f"exportable kinds are {known}); simulate it in flexarm, or write "
-                      "its exporter in flexarm/deploy/c_export.py (one function per kind)")
+    raise ExportError(
+        f"controller {type(ctrl).__name__} cannot be exported to C (the "
+        f"exportable kinds are {known}); simulate it in flexarm, or write "
+        "its exporter in flexarm/deploy/c_export.py (one function per kind)"
+    )
 
 
 def _np(a) -> np.ndarray:
@@ -245,8 +290,12 @@ def _linear(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     N = ctx.name.upper()
     P = f"{N}_{p.upper()}"
     e = f"{p}e"
-    part = Part(law=[f"{type(ctrl).__name__}: x+ = A x + B e, y = C x + D e, e = "
-                     f"{ctrl.reference} - {ctrl.measured} ({n} state(s))"])
+    part = Part(
+        law=[
+            f"{type(ctrl).__name__}: x+ = A x + B e, y = C x + D e, e = "
+            f"{ctrl.reference} - {ctrl.measured} ({n} state(s))"
+        ]
+    )
     part.constants += ctx.array(f"{P}A", A.reshape(n, n), "A: state matrix")
     part.constants += ctx.array(f"{P}B", B, "B: input vector (per unit error)")
     part.constants += ctx.array(f"{P}C", C, "C: output row")
@@ -266,7 +315,8 @@ def _linear(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         f"        xn[i] = acc + {P}B[i] * {e};",
         "    }",
         f"    for (i = 0; i < {n}; ++i) {x}[i] = xn[i];",
-        "}"]
+        "}",
+    ]
     part.step += [f"{out}[{i}] = 0;" for i in range(1, ctx.n_u)]
     return part
 
@@ -287,11 +337,14 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         ins = [f"{(s or '0')} - {i}" for i, s in zip(ctrl.inputs, ctrl.setpoints, strict=True)]
         form = f"e = setpoint - measured ({', '.join(ins)})"
     label = "" if ctrl.name in ("controller", "[controller]") else f" {ctrl.name}"
-    part = Part(law=[f"LTIController{label}: {form}; "
-                     f"v = C x + D e, x+ = A x + B e; {n} state(s), {q} input(s), "
-                     f"{m} output(s) -> u[{', '.join(map(str, ctrl.outputs))}]"
-                     + (f"; runs every {every} samples, output held between" if every > 1
-                        else "")])
+    part = Part(
+        law=[
+            f"LTIController{label}: {form}; "
+            f"v = C x + D e, x+ = A x + B e; {n} state(s), {q} input(s), "
+            f"{m} output(s) -> u[{', '.join(map(str, ctrl.outputs))}]"
+            + (f"; runs every {every} samples, output held between" if every > 1 else "")
+        ]
+    )
     if n:
         part.constants += ctx.array(f"{P}A", A, f"A ({n} x {n})")
         part.constants += ctx.array(f"{P}B", B, f"B ({n} x {q}): columns e_0..e_{q - 1}")
@@ -301,18 +354,24 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         part.init.append(f"for (i = 0; i < {n}; ++i) s->{p}x[i] = {P}X0[i];")
     part.constants += ctx.array(f"{P}D", D, f"D ({m} x {q})")
     if every > 1:
-        part.members += [f"{ctx.real} {p}held[{ctx.n_u}];  /* output held between runs */",
-                         f"int {p}phase;  /* samples since the last run, 0..{every - 1} */"]
-        part.init += [f"for (i = 0; i < {ctx.n_u}; ++i) s->{p}held[i] = 0;",
-                      f"s->{p}phase = 0;"]
+        part.members += [
+            f"{ctx.real} {p}held[{ctx.n_u}];  /* output held between runs */",
+            f"int {p}phase;  /* samples since the last run, 0..{every - 1} */",
+        ]
+        part.init += [f"for (i = 0; i < {ctx.n_u}; ++i) s->{p}held[i] = 0;", f"s->{p}phase = 0;"]
     x = f"s->{p}x"
     body = [f"{ctx.real} e[{q}], v[{m}], {'acc, ' if n else ''}acc2;"]
     if n:
         body.append(f"{ctx.real} xn[{n}];")
     if ctrl.signals is not None:
         for j, (kind, v) in enumerate(ctrl.signals):
-            src = (ctx.meas(v) if kind == "measured" else ctx.ref(v) if kind == "reference"
-                   else ctx.lit(v))
+            src = (
+                ctx.meas(v)
+                if kind == "measured"
+                else ctx.ref(v)
+                if kind == "reference"
+                else ctx.lit(v)
+            )
             note = f"{kind} {v}" if kind != "constant" else "constant"
             body.append(f"e[{j}] = {src};  /* {note} */")
     for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints, strict=True)):
@@ -320,29 +379,40 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {sp or '0'} - {inp} */")
     body.append(f"for (i = 0; i < {m}; ++i) {{")
     if n:
-        body += [f"    acc = {P}C[i][0] * {x}[0];",
-                 *([f"    for (j = 1; j < {n}; ++j) acc += {P}C[i][j] * {x}[j];"]
-                   if n > 1 else [])]
-    body += [f"    acc2 = {P}D[i][0] * e[0];",
-             *([f"    for (j = 1; j < {q}; ++j) acc2 += {P}D[i][j] * e[j];"] if q > 1 else []),
-             f"    v[i] = {'acc + acc2' if n else 'acc2'};", "}"]
+        body += [
+            f"    acc = {P}C[i][0] * {x}[0];",
+            *([f"    for (j = 1; j < {n}; ++j) acc += {P}C[i][j] * {x}[j];"] if n > 1 else []),
+        ]
+    body += [
+        f"    acc2 = {P}D[i][0] * e[0];",
+        *([f"    for (j = 1; j < {q}; ++j) acc2 += {P}D[i][j] * e[j];"] if q > 1 else []),
+        f"    v[i] = {'acc + acc2' if n else 'acc2'};",
+        "}",
+    ]
     if n:
-        body += [f"for (i = 0; i < {n}; ++i) {{",
-                 f"    acc = {P}A[i][0] * {x}[0];",
-                 *([f"    for (j = 1; j < {n}; ++j) acc += {P}A[i][j] * {x}[j];"]
-                   if n > 1 else []),
-                 f"    acc2 = {P}B[i][0] * e[0];",
-                 *([f"    for (j = 1; j < {q}; ++j) acc2 += {P}B[i][j] * e[j];"]
-                   if q > 1 else []),
-                 "    xn[i] = acc + acc2;", "}",
-                 f"for (i = 0; i < {n}; ++i) {x}[i] = xn[i];"]
+        body += [
+            f"for (i = 0; i < {n}; ++i) {{",
+            f"    acc = {P}A[i][0] * {x}[0];",
+            *([f"    for (j = 1; j < {n}; ++j) acc += {P}A[i][j] * {x}[j];"] if n > 1 else []),
+            f"    acc2 = {P}B[i][0] * e[0];",
+            *([f"    for (j = 1; j < {q}; ++j) acc2 += {P}B[i][j] * e[j];"] if q > 1 else []),
+            "    xn[i] = acc + acc2;",
+            "}",
+            f"for (i = 0; i < {n}; ++i) {x}[i] = xn[i];",
+        ]
     dest = f"s->{p}held" if every > 1 else out
     body.append(f"for (i = 0; i < {ctx.n_u}; ++i) {dest}[i] = 0;")
     body += [f"{dest}[{o}] = v[{k}];" for k, o in enumerate(ctrl.outputs)]
     if every > 1:
-        step = ["{", f"    if (s->{p}phase == 0) {{", *("        " + b for b in body), "    }",
-                f"    for (i = 0; i < {ctx.n_u}; ++i) {out}[i] = s->{p}held[i];",
-                f"    s->{p}phase = (s->{p}phase + 1 == {every}) ? 0 : s->{p}phase + 1;", "}"]
+        step = [
+            "{",
+            f"    if (s->{p}phase == 0) {{",
+            *("        " + b for b in body),
+            "    }",
+            f"    for (i = 0; i < {ctx.n_u}; ++i) {out}[i] = s->{p}held[i];",
+            f"    s->{p}phase = (s->{p}phase + 1 == {every}) ? 0 : s->{p}phase + 1;",
+            "}",
+        ]
     else:
         step = ["{", *("    " + b for b in body), "}"]
     part.step += step
@@ -358,32 +428,45 @@ def _state_feedback(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     P = f"{N}_{p.upper()}"
     R = ctx.real
     rate = ctrl.rate
-    part = Part(law=[f"StateFeedback: y = K1 ({ctrl.reference} - {ctrl.angle}) - K2 "
-                     f"{ctrl.deflection or '0'} - K3 d/dt {ctrl.angle} - K4 d/dt "
-                     f"{ctrl.deflection or '0'}; rates: {rate}"])
-    part.constants += ctx.array(f"{P}K", K, "K1..K4 (command per rad, per m, per rad/s, "
-                                "per m/s)")
+    part = Part(
+        law=[
+            f"StateFeedback: y = K1 ({ctrl.reference} - {ctrl.angle}) - K2 "
+            f"{ctrl.deflection or '0'} - K3 d/dt {ctrl.angle} - K4 d/dt "
+            f"{ctrl.deflection or '0'}; rates: {rate}"
+        ]
+    )
+    part.constants += ctx.array(f"{P}K", K, "K1..K4 (command per rad, per m, per rad/s, per m/s)")
     part.constants += ctx.scalar(f"{P}DT", float(_np(ctrl.dt)), "T: sample period, s")
     if rate == "filtered":
-        part.constants += ctx.scalar(f"{P}TAU", float(_np(ctrl.tau)),
-                                     "tau: rate filter time constant, s")
+        part.constants += ctx.scalar(
+            f"{P}TAU", float(_np(ctrl.tau)), "tau: rate filter time constant, s"
+        )
     elif rate != "backward":
-        raise ExportError(f"StateFeedback rate = {rate!r} cannot be exported (backward or "
-                          "filtered)")
-    part.members += [f"{R} {p}th_prev, {p}d_prev;  /* angle and deflection at k-1 */",
-                     f"{R} {p}th_dot, {p}d_dot;  /* their rates at k-1 */",
-                     f"int {p}started;  /* 0 before the first sample */"]
-    part.init += [f"s->{p}th_prev = 0; s->{p}d_prev = 0; s->{p}th_dot = 0; s->{p}d_dot = 0;",
-                  f"s->{p}started = 0;"]
+        raise ExportError(
+            f"StateFeedback rate = {rate!r} cannot be exported (backward or filtered)"
+        )
+    part.members += [
+        f"{R} {p}th_prev, {p}d_prev;  /* angle and deflection at k-1 */",
+        f"{R} {p}th_dot, {p}d_dot;  /* their rates at k-1 */",
+        f"int {p}started;  /* 0 before the first sample */",
+    ]
+    part.init += [
+        f"s->{p}th_prev = 0; s->{p}d_prev = 0; s->{p}th_dot = 0; s->{p}d_dot = 0;",
+        f"s->{p}started = 0;",
+    ]
     th = ctx.meas(ctrl.angle)
     d = ctx.meas(ctrl.deflection) if ctrl.deflection else "0"
     sv = f"s->{p}"
     if rate == "backward":
-        rates = [f"    const {R} th_dot = (th - th_prev) / {P}DT;",
-                 f"    const {R} d_dot = (d - d_prev) / {P}DT;"]
+        rates = [
+            f"    const {R} th_dot = (th - th_prev) / {P}DT;",
+            f"    const {R} d_dot = (d - d_prev) / {P}DT;",
+        ]
     else:
-        rates = [f"    const {R} th_dot = ({P}TAU * {sv}th_dot + th - th_prev) / ({P}TAU + {P}DT);",
-                 f"    const {R} d_dot = ({P}TAU * {sv}d_dot + d - d_prev) / ({P}TAU + {P}DT);"]
+        rates = [
+            f"    const {R} th_dot = ({P}TAU * {sv}th_dot + th - th_prev) / ({P}TAU + {P}DT);",
+            f"    const {R} d_dot = ({P}TAU * {sv}d_dot + d - d_prev) / ({P}TAU + {P}DT);",
+        ]
     part.step += [
         "{",
         f"    const {R} th = {th};",
@@ -395,7 +478,8 @@ def _state_feedback(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         f" - {P}K[2] * th_dot - {P}K[3] * d_dot;",
         f"    {sv}th_prev = th; {sv}d_prev = d; {sv}th_dot = th_dot; {sv}d_dot = d_dot;",
         f"    {sv}started = 1;",
-        "}"]
+        "}",
+    ]
     for i in range(1, ctx.n_u):
         part.step.append(f"{out}[{i}] = 0;")
     return part
@@ -408,41 +492,58 @@ def _friction(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     meas = tuple(ctrl.measured)
     m = len(meas)
     if m != ctx.n_u:
-        raise ExportError(f"FrictionCompensated on {m} angle channel(s) ({', '.join(meas)}) "
-                          f"for {ctx.n_u} command(s) cannot be exported: give one channel "
-                          "per command")
+        raise ExportError(
+            f"FrictionCompensated on {m} angle channel(s) ({', '.join(meas)}) "
+            f"for {ctx.n_u} command(s) cannot be exported: give one channel "
+            "per command"
+        )
     inner = _emit(ctrl.feedback, ctx, p + "fb_", "u_fb")
     N = ctx.name.upper()
     P = f"{N}_{p.upper()}"
     R = ctx.real
     ctx.helpers.add("sign")
-    part = Part(members=list(inner.members), constants=list(inner.constants),
-                init=list(inner.init),
-                law=inner.law + [f"FrictionCompensated: u = u_fb + c sigma on "
-                                 f"{', '.join(meas)} (Feliu's sign rule with deadbands)"])
-    part.constants += ctx.array(f"{P}LEVEL", _np(ctrl.level).ravel(),
-                                "c: Coulomb level per command, command units (V or A)")
-    part.constants += ctx.array(f"{P}VDB", _np(ctrl.velocity_deadband).ravel(),
-                                "velocity deadband, rad/s: at rest below it")
-    part.constants += ctx.array(f"{P}UDB", _np(ctrl.rest_deadband).ravel(),
-                                "rest deadband, command units: no push at rest below it")
+    part = Part(
+        members=list(inner.members),
+        constants=list(inner.constants),
+        init=list(inner.init),
+        law=inner.law
+        + [
+            f"FrictionCompensated: u = u_fb + c sigma on "
+            f"{', '.join(meas)} (Feliu's sign rule with deadbands)"
+        ],
+    )
+    part.constants += ctx.array(
+        f"{P}LEVEL", _np(ctrl.level).ravel(), "c: Coulomb level per command, command units (V or A)"
+    )
+    part.constants += ctx.array(
+        f"{P}VDB", _np(ctrl.velocity_deadband).ravel(), "velocity deadband, rad/s: at rest below it"
+    )
+    part.constants += ctx.array(
+        f"{P}UDB",
+        _np(ctrl.rest_deadband).ravel(),
+        "rest deadband, command units: no push at rest below it",
+    )
     part.constants += ctx.scalar(f"{P}DT", float(_np(ctrl.dt)), "T: sample period, s")
-    part.members += [f"{R} {p}prev[{m}];  /* angles at k-1, rad */",
-                     f"int {p}started;  /* 0 before the first sample */"]
+    part.members += [
+        f"{R} {p}prev[{m}];  /* angles at k-1, rad */",
+        f"int {p}started;  /* 0 before the first sample */",
+    ]
     part.init += [f"for (i = 0; i < {m}; ++i) s->{p}prev[i] = 0;", f"s->{p}started = 0;"]
     sv = f"s->{p}"
     step = ["{", f"    {R} u_fb[{ctx.n_u}], th[{m}];"]
     step += ["    " + line for line in inner.step]
     step += [f"    th[{j}] = {ctx.meas(c)};" for j, c in enumerate(meas)]
-    step += [f"    for (i = 0; i < {m}; ++i) {{",
-             f"        const {R} prev = {sv}started ? {sv}prev[i] : th[i];",
-             f"        const {R} v = (th[i] - prev) / {P}DT;",
-             f"        {out}[i] = u_fb[i] + {P}LEVEL[i] * "
-             f"{N}_friction_sign(v, u_fb[i], {P}VDB[i], {P}UDB[i]);",
-             f"        {sv}prev[i] = th[i];",
-             "    }",
-             f"    {sv}started = 1;",
-             "}"]
+    step += [
+        f"    for (i = 0; i < {m}; ++i) {{",
+        f"        const {R} prev = {sv}started ? {sv}prev[i] : th[i];",
+        f"        const {R} v = (th[i] - prev) / {P}DT;",
+        f"        {out}[i] = u_fb[i] + {P}LEVEL[i] * "
+        f"{N}_friction_sign(v, u_fb[i], {P}VDB[i], {P}UDB[i]);",
+        f"        {sv}prev[i] = th[i];",
+        "    }",
+        f"    {sv}started = 1;",
+        "}",
+    ]
     part.step = step
     return part
 
@@ -468,8 +569,13 @@ def _sum(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         step += [f"    {ctx.real} {arr}[{ctx.n_u}];"]
         step += [f"    for (i = 1; i < {ctx.n_u}; ++i) {arr}[i] = 0;"] if ctx.n_u > 1 else []
         step += ["    " + ln for ln in inner.step]
-    step += [f"    for (i = 0; i < {ctx.n_u}; ++i) {{", f"        {out}[i] = {names[0]}[i];",
-             *(f"        {out}[i] += {a}[i];" for a in names[1:]), "    }", "}"]
+    step += [
+        f"    for (i = 0; i < {ctx.n_u}; ++i) {{",
+        f"        {out}[i] = {names[0]}[i];",
+        *(f"        {out}[i] += {a}[i];" for a in names[1:]),
+        "    }",
+        "}",
+    ]
     part.step = step
     return part
 
@@ -482,11 +588,13 @@ def _blocks(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     outputs (each drives its own u entries, zeros on the others)."""
     part = _sum(ctrl, ctx, p, out)
     every = [int(getattr(b, "every", 1)) for b in ctrl.parts]
-    part.law[0] = (f"{len(ctrl.parts)} controller blocks ([[controllers]]), scheduled by this "
-                   f"one step function: block i runs every k_i calls (k = "
-                   f"{', '.join(map(str, every))}; its first run at the first call after "
-                   "init) and holds its output between; u = the blocks' outputs, each on its "
-                   "own commands:")
+    part.law[0] = (
+        f"{len(ctrl.parts)} controller blocks ([[controllers]]), scheduled by this "
+        f"one step function: block i runs every k_i calls (k = "
+        f"{', '.join(map(str, every))}; its first run at the first call after "
+        "init) and holds its output between; u = the blocks' outputs, each on its "
+        "own commands:"
+    )
     return part
 
 
@@ -507,18 +615,26 @@ def _cascade(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     part = Part(law=[f"Cascade: the outer loop's output is the inner loop's {ctrl.via}:"])
     _nest(outer, part)
     _nest(inner, part)
-    part.step = ["{", f"    {ctx.real} {arr}[{ctx.n_u}];",
-                 *(["    " + f"for (i = 1; i < {ctx.n_u}; ++i) {arr}[i] = 0;"]
-                   if ctx.n_u > 1 else []),
-                 *("    " + ln for ln in outer.step), *("    " + ln for ln in inner.step), "}"]
+    part.step = [
+        "{",
+        f"    {ctx.real} {arr}[{ctx.n_u}];",
+        *(["    " + f"for (i = 1; i < {ctx.n_u}; ++i) {arr}[i] = 0;"] if ctx.n_u > 1 else []),
+        *("    " + ln for ln in outer.step),
+        *("    " + ln for ln in inner.step),
+        "}",
+    ]
     return part
 
 
 def _reference_channel(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     """y = reference[channel] (a precomputed signal passed through: FRB's θ̂_mr)."""
-    return Part(law=[f"ReferenceChannel: y = {ctrl.channel}"],
-                step=[f"{out}[0] = {ctx.ref(ctrl.channel)};",
-                      *(f"{out}[{i}] = 0;" for i in range(1, ctx.n_u))])
+    return Part(
+        law=[f"ReferenceChannel: y = {ctrl.channel}"],
+        step=[
+            f"{out}[0] = {ctx.ref(ctrl.channel)};",
+            *(f"{out}[{i}] = 0;" for i in range(1, ctx.n_u)),
+        ],
+    )
 
 
 def measured_tip(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
@@ -529,10 +645,12 @@ def measured_tip(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     P = f"{N}_{p.upper()}"
     tip = f"{p}tip_angle"
     part = Part(law=["tip_angle = motor_angle + S tip_deflection (from the gauge), then:"])
-    part.constants += ctx.scalar(f"{P}S", float(_np(ctrl.scale)),
-                                 "s: rad of tip angle per unit of tip_deflection")
-    line = (f"const {ctx.real} {tip} = {ctx.meas('motor_angle')} + {P}S * "
-            f"{ctx.meas('tip_deflection')};")
+    part.constants += ctx.scalar(
+        f"{P}S", float(_np(ctrl.scale)), "s: rad of tip angle per unit of tip_deflection"
+    )
+    line = (
+        f"const {ctx.real} {tip} = {ctx.meas('motor_angle')} + {P}S * {ctx.meas('tip_deflection')};"
+    )
     saved = ctx.computed_measured.get("tip_angle")
     ctx.computed_measured["tip_angle"] = tip
     try:
@@ -561,13 +679,16 @@ def _siso_ss(ctx: _Ctx, P: str, r, what: str) -> tuple[list[str], int]:
 def _siso_step(P: str, n: int, x: str, e: str, y: str, xn: str) -> list[str]:
     """xn = Σ_j A[i][j] x[j] + B[i] e (each row summed from j = 0), y = Σ_j C[j] x[j] + D e,
     the order of ``InnerLoop._lin``."""
-    return [f"for (i = 0; i < {n}; ++i) {{",
-            f"    acc = {P}A[i][0] * {x}[0];",
-            *([f"    for (j = 1; j < {n}; ++j) acc += {P}A[i][j] * {x}[j];"] if n > 1 else []),
-            f"    {xn}[i] = acc + {P}B[i] * {e};", "}",
-            f"acc = {P}C[0] * {x}[0];",
-            *([f"for (j = 1; j < {n}; ++j) acc += {P}C[j] * {x}[j];"] if n > 1 else []),
-            f"{y} = acc + {P}D * {e};"]
+    return [
+        f"for (i = 0; i < {n}; ++i) {{",
+        f"    acc = {P}A[i][0] * {x}[0];",
+        *([f"    for (j = 1; j < {n}; ++j) acc += {P}A[i][j] * {x}[j];"] if n > 1 else []),
+        f"    {xn}[i] = acc + {P}B[i] * {e};",
+        "}",
+        f"acc = {P}C[0] * {x}[0];",
+        *([f"for (j = 1; j < {n}; ++j) acc += {P}C[j] * {x}[j];"] if n > 1 else []),
+        f"{y} = acc + {P}D * {e};",
+    ]
 
 
 def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
@@ -578,44 +699,59 @@ def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     P = f"{N}_{p.upper()}"
     R = ctx.real
     ctx.helpers.add("sign")
-    part = Part(law=[f"InnerLoop (FRB Fig. 4): u = G_cm1 ({ctrl.reference} - G_cm2 "
-                     "motor_angle) + (coupling H (motor_angle - tip_angle) + C_f sigma) / K"])
+    part = Part(
+        law=[
+            f"InnerLoop (FRB Fig. 4): u = G_cm1 ({ctrl.reference} - G_cm2 "
+            "motor_angle) + (coupling H (motor_angle - tip_angle) + C_f sigma) / K"
+        ]
+    )
     ns = {}
-    for key, r, what in (("G1", ctrl.g1, "G_cm1"), ("G2", ctrl.g2, "G_cm2"),
-                         ("H", ctrl.coupling, "coupling filter H")):
+    for key, r, what in (
+        ("G1", ctrl.g1, "G_cm1"),
+        ("G2", ctrl.g2, "G_cm2"),
+        ("H", ctrl.coupling, "coupling filter H"),
+    ):
         consts, ns[key] = _siso_ss(ctx, f"{P}{key}_", r, what)
         part.constants += consts
         part.members.append(f"{R} {p}{key.lower()}[{ns[key]}];  /* {what} state */")
         part.init.append(f"for (i = 0; i < {ns[key]}; ++i) s->{p}{key.lower()}[i] = 0;")
-    for cname, val, what in (("K", ctrl.torque_constant, "K: torque per unit command"),
-                             ("CF", ctrl.coulomb, "C_f: Coulomb level (torque units)"),
-                             ("ON_F", ctrl.friction_on, "friction compensation on (1) / off"),
-                             ("ON_C", ctrl.coupling_on, "coupling compensation on (1) / off"),
-                             ("VDB", ctrl.velocity_deadband, "velocity deadband, rad/s"),
-                             ("UDB", ctrl.rest_deadband, "rest deadband, command units"),
-                             ("DT", ctrl.dt, "T: sample period, s"),
-                             ("TH0", ctrl.initial_motor_angle, "motor angle before t = 0, rad")):
+    for cname, val, what in (
+        ("K", ctrl.torque_constant, "K: torque per unit command"),
+        ("CF", ctrl.coulomb, "C_f: Coulomb level (torque units)"),
+        ("ON_F", ctrl.friction_on, "friction compensation on (1) / off"),
+        ("ON_C", ctrl.coupling_on, "coupling compensation on (1) / off"),
+        ("VDB", ctrl.velocity_deadband, "velocity deadband, rad/s"),
+        ("UDB", ctrl.rest_deadband, "rest deadband, command units"),
+        ("DT", ctrl.dt, "T: sample period, s"),
+        ("TH0", ctrl.initial_motor_angle, "motor angle before t = 0, rad"),
+    ):
         part.constants += ctx.scalar(f"{P}{cname}", float(_np(val)), what)
     part.members.append(f"{R} {p}th_prev;  /* motor angle at k-1, rad */")
     part.init.append(f"s->{p}th_prev = {P}TH0;")
     th, tip, ref = ctx.meas("motor_angle"), ctx.meas("tip_angle"), ctx.ref(ctrl.reference)
     sv = f"s->{p}"
-    step = ["{", f"    {R} xn2[{ns['G2']}], xn1[{ns['G1']}], xnc[{ns['H']}], y2, u_fb, c_hat, "
-            "acc;", f"    const {R} th = {th};"]
+    step = [
+        "{",
+        f"    {R} xn2[{ns['G2']}], xn1[{ns['G1']}], xnc[{ns['H']}], y2, u_fb, c_hat, acc;",
+        f"    const {R} th = {th};",
+    ]
     step += ["    " + ln for ln in _siso_step(f"{P}G2_", ns["G2"], f"{sv}g2", "th", "y2", "xn2")]
     step += [f"    {{ const {R} e1 = {ref} - y2;"]
-    step += ["    " + ln for ln in _siso_step(f"{P}G1_", ns["G1"], f"{sv}g1", "e1", "u_fb",
-                                               "xn1")]
+    step += ["    " + ln for ln in _siso_step(f"{P}G1_", ns["G1"], f"{sv}g1", "e1", "u_fb", "xn1")]
     step += ["    }", f"    {{ const {R} ec = th - {tip};"]
-    step += ["    " + ln for ln in _siso_step(f"{P}H_", ns["H"], f"{sv}h", "ec", "c_hat",
-                                               "xnc")]
-    step += ["    }",
-             f"    {{ const {R} v = (th - {sv}th_prev) / {P}DT;",
-             f"      const {R} sigma = {N}_friction_sign(v, u_fb, {P}VDB, {P}UDB);",
-             f"      {out}[0] = u_fb + ({P}ON_C * c_hat + {P}ON_F * {P}CF * sigma) / {P}K; }}",
-             *(f"    for (i = 0; i < {ns[k]}; ++i) {sv}{k.lower()}[i] = xn{c}[i];"
-               for k, c in (("G1", "1"), ("G2", "2"), ("H", "c"))),
-             f"    {sv}th_prev = th;", "}"]
+    step += ["    " + ln for ln in _siso_step(f"{P}H_", ns["H"], f"{sv}h", "ec", "c_hat", "xnc")]
+    step += [
+        "    }",
+        f"    {{ const {R} v = (th - {sv}th_prev) / {P}DT;",
+        f"      const {R} sigma = {N}_friction_sign(v, u_fb, {P}VDB, {P}UDB);",
+        f"      {out}[0] = u_fb + ({P}ON_C * c_hat + {P}ON_F * {P}CF * sigma) / {P}K; }}",
+        *(
+            f"    for (i = 0; i < {ns[k]}; ++i) {sv}{k.lower()}[i] = xn{c}[i];"
+            for k, c in (("G1", "1"), ("G2", "2"), ("H", "c"))
+        ),
+        f"    {sv}th_prev = th;",
+        "}",
+    ]
     for i in range(1, ctx.n_u):
         step.insert(-1, f"    {out}[{i}] = 0;")
     part.step = step
@@ -645,17 +781,23 @@ class CCode:
 
         d = Path(directory)
         if d.exists() and not d.is_dir():
-            raise ExportError(f"--out {d}: is a file, not a folder; give a folder for "
-                              f"{self.name}.h and {self.name}.c")
+            raise ExportError(
+                f"--out {d}: is a file, not a folder; give a folder for "
+                f"{self.name}.h and {self.name}.c"
+            )
         targets = [d / f"{self.name}.h", d / f"{self.name}.c"]
         if not overwrite:
             there = [str(t) for t in targets if t.exists()]
             if there:
-                raise OutputExistsError(f"{', '.join(there)}: exist(s) already; not "
-                                        "overwritten (pass --overwrite / overwrite=True)")
+                raise OutputExistsError(
+                    f"{', '.join(there)}: exist(s) already; not "
+                    "overwritten (pass --overwrite / overwrite=True)"
+                )
         d.mkdir(parents=True, exist_ok=True)
-        return [write_text(targets[0], self.header, overwrite=overwrite),
-                write_text(targets[1], self.source, overwrite=overwrite)]
+        return [
+            write_text(targets[0], self.header, overwrite=overwrite),
+            write_text(targets[1], self.source, overwrite=overwrite),
+        ]
 
 
 def _unit(name: str, scenario) -> str:
@@ -671,23 +813,34 @@ def _unit(name: str, scenario) -> str:
     u = signal_unit(sig) or {"tip_deflection": "m", "coupling_torque": "N*m"}.get(sig)
     if u is None:
         return f"the unit of the plant signal {sig}"
-    if sens is not None and sens.filter is not None and sens.filter.kind in (
-            "lowpass2_rate", "derivative2"):
+    if (
+        sens is not None
+        and sens.filter is not None
+        and sens.filter.kind in ("lowpass2_rate", "derivative2")
+    ):
         return f"{u}/s"
     return u
 
 
 def _c_name(name: str) -> str:
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or "") or name in _C_RESERVED:
-        raise ExportError(f"--name {name!r} is not a usable C identifier: give letters, "
-                          "digits and _ not starting with a digit, and not a C keyword "
-                          "(e.g. --name rotary_ctrl)")
+        raise ExportError(
+            f"--name {name!r} is not a usable C identifier: give letters, "
+            "digits and _ not starting with a digit, and not a C keyword "
+            "(e.g. --name rotary_ctrl)"
+        )
     return name
 
 
-def generate_c(scenario, *, name: str = "controller", precision: str = "double",
-               method: str | None = None, source: str | None = None,
-               controller=None) -> CCode:
+def generate_c(
+    scenario,
+    *,
+    name: str = "controller",
+    precision: str = "double",
+    method: str | None = None,
+    source: str | None = None,
+    controller=None,
+) -> CCode:
     """The C99 code of ``scenario``'s controller, built as the simulator builds it (module
     docstring). ``method``: the design method (for the provenance comment); ``source``:
     where the scenario came from (a file name, no folder, so output does not depend on
@@ -702,11 +855,15 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     if precision not in PRECISIONS:
         raise ExportError(f"--precision {precision!r}: give double or float")
     if not scenario.controller_specs() and controller is None:
-        raise ExportError(f"scenario {scenario.name!r} has no [controller]: nothing to "
-                          "export (add one, or export a design directory)")
+        raise ExportError(
+            f"scenario {scenario.name!r} has no [controller]: nothing to "
+            "export (add one, or export a design directory)"
+        )
     if scenario.sampling is None:
-        raise ExportError(f"scenario {scenario.name!r} has no [sampling]: a discrete "
-                          "controller needs its sample period")
+        raise ExportError(
+            f"scenario {scenario.name!r} has no [sampling]: a discrete "
+            "controller needs its sample period"
+        )
     prep = prepare(scenario, controller)
     loop = prep.loop
     ctrl = loop.controller
@@ -718,10 +875,13 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     try:
         part = _emit(ctrl, ctx, "", "y")
     except ExportError as exc:
-        what = ("the controller given" if controller is not None else
-                f"[controller] type = {getattr(scenario.controller, 'type', '?')!r}"
-                if scenario.controllers is None else
-                f"[[controllers]] ({len(scenario.controllers)} blocks)")
+        what = (
+            "the controller given"
+            if controller is not None
+            else f"[controller] type = {getattr(scenario.controller, 'type', '?')!r}"
+            if scenario.controllers is None
+            else f"[[controllers]] ({len(scenario.controllers)} blocks)"
+        )
         raise ExportError(f"scenario {scenario.name!r}, {what}: {exc}") from None
 
     limit = np.broadcast_to(_np(loop.actuator.limit), (n_u,))
@@ -730,40 +890,67 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     act_step: list[str] = []
     if np.any(np.isfinite(limit)):
         if not np.all(np.isfinite(limit)):
-            raise ExportError(f"scenario {scenario.name!r}: the command limits "
-                              f"{limit.tolist()} are finite for some commands only; give "
-                              "[actuator] limit")
-        act_consts += ctx.array(f"{N}_LIMIT", limit, "actuator saturation L per command "
-                                "(V or A): u = min(max(y, -L), L)")
-        act_step.append(f"    for (i = 0; i < {N}_N_U; ++i) y[i] = y[i] < -{N}_LIMIT[i] ? "
-                        f"-{N}_LIMIT[i] : (y[i] > {N}_LIMIT[i] ? {N}_LIMIT[i] : y[i]);")
+            raise ExportError(
+                f"scenario {scenario.name!r}: the command limits "
+                f"{limit.tolist()} are finite for some commands only; give "
+                "[actuator] limit"
+            )
+        act_consts += ctx.array(
+            f"{N}_LIMIT",
+            limit,
+            "actuator saturation L per command (V or A): u = min(max(y, -L), L)",
+        )
+        act_step.append(
+            f"    for (i = 0; i < {N}_N_U; ++i) y[i] = y[i] < -{N}_LIMIT[i] ? "
+            f"-{N}_LIMIT[i] : (y[i] > {N}_LIMIT[i] ? {N}_LIMIT[i] : y[i]);"
+        )
     if np.any(quantum > 0):
         bits = getattr(scenario.actuator, "bits", 0)
         if bits > 31:
-            raise ExportError(f"[actuator] bits = {bits}: the D/A count round-off is "
-                              "exported for at most 31 bits")
+            raise ExportError(
+                f"[actuator] bits = {bits}: the D/A count round-off is exported for at most 31 bits"
+            )
         ctx.helpers.add("round")
-        act_consts += ctx.array(f"{N}_QUANTUM", quantum, f"D/A count q = 2 L / 2^{bits} "
-                                "per command: u = q round(u / q), ties to even")
-        act_step.append(f"    for (i = 0; i < {N}_N_U; ++i) if ({N}_QUANTUM[i] > 0) "
-                        f"y[i] = {N}_round_even(y[i] / {N}_QUANTUM[i]) * {N}_QUANTUM[i];")
+        act_consts += ctx.array(
+            f"{N}_QUANTUM",
+            quantum,
+            f"D/A count q = 2 L / 2^{bits} per command: u = q round(u / q), ties to even",
+        )
+        act_step.append(
+            f"    for (i = 0; i < {N}_N_U; ++i) if ({N}_QUANTUM[i] > 0) "
+            f"y[i] = {N}_round_even(y[i] / {N}_QUANTUM[i]) * {N}_QUANTUM[i];"
+        )
 
     sc_sens = scenario.sensors or {}
     meas = [(c, _unit(c, scenario)) for c in ctx.measured]
     # reference channels: a scenario's [reference] / [references.X] are angles (rad), as is
     # the nested loops' feedforward; a known signal name keeps its own unit
-    refs = [(r, _unit(r, scenario) if signal_unit(r) is not None else "rad")
-            for r in ctx.references]
-    outs = [(nm, "V" if nm.startswith("voltage") else "A" if nm.startswith("current")
-             else "N*m" if nm.startswith("torque") else "command units") for nm in input_names]
+    refs = [
+        (r, _unit(r, scenario) if signal_unit(r) is not None else "rad") for r in ctx.references
+    ]
+    outs = [
+        (
+            nm,
+            "V"
+            if nm.startswith("voltage")
+            else "A"
+            if nm.startswith("current")
+            else "N*m"
+            if nm.startswith("torque")
+            else "command units",
+        )
+        for nm in input_names
+    ]
     dt = float(scenario.sampling.period)
     delay = int(scenario.sampling.delay)
 
     def chan_lines(items, arr, extra=None):
         if not items:
             return [" *   (none: pass NULL)"]
-        return [f" *   {arr}[{i}]  {n}  ({u}){(extra or {}).get(n, '')}"
-                for i, (n, u) in enumerate(items)]
+        return [
+            f" *   {arr}[{i}]  {n}  ({u}){(extra or {}).get(n, '')}"
+            for i, (n, u) in enumerate(items)
+        ]
 
     from flexarm.sim.build import sensor_quanta
 
@@ -790,17 +977,26 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
 
     provenance = [
         f" * Generated by flexarm {__version__} (flexarm export-c); do not edit by hand.",
-        f" * Scenario: {scenario.name}" + (f" ({source})" if source and source != scenario.name
-                                           else ""),
+        f" * Scenario: {scenario.name}"
+        + (f" ({source})" if source and source != scenario.name else ""),
         f" * Design method: {method or 'none (the scenario file controller)'}",
         f" * Controllers: {len(scenario.controllers)} blocks ([[controllers]]: "
-        + ", ".join(f"{b.name} every {b.every * scenario.sampling.period:g} s"
-                    for b in getattr(ctrl, "parts", ())) + ")"
-        if controller is None and scenario.controllers is not None else
-        (f" * Controller type: {getattr(scenario.controller, 'type', '?')}"
-         + (" + friction_compensation" if getattr(scenario.controller,
-                                                     "friction_compensation", None) else ""))
-        if controller is None else f" * Controller: {type(ctrl).__name__} (given in Python)",
+        + ", ".join(
+            f"{b.name} every {b.every * scenario.sampling.period:g} s"
+            for b in getattr(ctrl, "parts", ())
+        )
+        + ")"
+        if controller is None and scenario.controllers is not None
+        else (
+            f" * Controller type: {getattr(scenario.controller, 'type', '?')}"
+            + (
+                " + friction_compensation"
+                if getattr(scenario.controller, "friction_compensation", None)
+                else ""
+            )
+        )
+        if controller is None
+        else f" * Controller: {type(ctrl).__name__} (given in Python)",
         f" * Precision: {precision} ({R})",
     ]
     law = [f" *   {line}" for line in part.law]
@@ -810,57 +1006,61 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
     else:
         act_text.append(" *   no saturation (no finite limit in the scenario)")
     if np.any(quantum > 0):
-        act_text.append(f" *   D/A count {', '.join(f'{v:.6g}' for v in quantum)} "
-                        "(round half to even)")
+        act_text.append(
+            f" *   D/A count {', '.join(f'{v:.6g}' for v in quantum)} (round half to even)"
+        )
     guard = f"{N}_H"
-    header = "\n".join([
-        f"/* {name}.h: the {scenario.name} controller as C99, one call per sample.",
-        " *",
-        *provenance,
-        " *",
-        f" * Call {name}_init(&s) once, then {name}_step(&s, measured, reference, u) once",
-        f" * per sample period T = {dt:.17g} s, with the readings of that sample.",
-        f" * The scenario's computation delay: {delay} sample(s) (the target's own timing).",
-        " *",
-        " * Law:",
-        *law,
-        " *   then the actuator:",
-        *act_text,
-        " *",
-        " * measured[] (the sensors' readings in SI units, as the simulator's sensors",
-        " * deliver them):",
-        *chan_lines(meas, "measured", notes),
-        " * reference[]:",
-        *chan_lines(refs, "reference"),
-        " * u[] (the command to the D/A):",
-        *chan_lines(outs, "u"),
-        " */",
-        f"#ifndef {guard}",
-        f"#define {guard}",
-        "",
-        f"typedef {precision} {R};",
-        "",
-        f"#define {N}_N_MEASURED {len(meas)}",
-        f"#define {N}_N_REFERENCE {len(refs)}",
-        f"#define {N}_N_U {n_u}",
-        f"#define {N}_PERIOD {dt:.17g}  /* s */",
-        "",
-        "/* The controller's state (memory between samples); set by init, updated by step. */",
-        "typedef struct {",
-        *(f"    {mem}" for mem in part.members),
-        f"    int initialised;  /* 1 after {name}_init (keeps the struct non-empty) */",
-        f"}} {name}_state;",
-        "",
-        f"/* Reset the state (call once before the first {name}_step). */",
-        f"void {name}_init({name}_state *s);",
-        "",
-        "/* One sample: read measured[0..N_MEASURED-1] and reference[0..N_REFERENCE-1]",
-        " * (orders above), write u[0..N_U-1], update *s. */",
-        f"void {name}_step({name}_state *s, const double measured[], const double "
-        "reference[], double u[]);",
-        "",
-        f"#endif /* {guard} */",
-        ""])
+    header = "\n".join(
+        [
+            f"/* {name}.h: the {scenario.name} controller as C99, one call per sample.",
+            " *",
+            *provenance,
+            " *",
+            f" * Call {name}_init(&s) once, then {name}_step(&s, measured, reference, u) once",
+            f" * per sample period T = {dt:.17g} s, with the readings of that sample.",
+            f" * The scenario's computation delay: {delay} sample(s) (the target's own timing).",
+            " *",
+            " * Law:",
+            *law,
+            " *   then the actuator:",
+            *act_text,
+            " *",
+            " * measured[] (the sensors' readings in SI units, as the simulator's sensors",
+            " * deliver them):",
+            *chan_lines(meas, "measured", notes),
+            " * reference[]:",
+            *chan_lines(refs, "reference"),
+            " * u[] (the command to the D/A):",
+            *chan_lines(outs, "u"),
+            " */",
+            f"#ifndef {guard}",
+            f"#define {guard}",
+            "",
+            f"typedef {precision} {R};",
+            "",
+            f"#define {N}_N_MEASURED {len(meas)}",
+            f"#define {N}_N_REFERENCE {len(refs)}",
+            f"#define {N}_N_U {n_u}",
+            f"#define {N}_PERIOD {dt:.17g}  /* s */",
+            "",
+            "/* The controller's state (memory between samples); set by init, updated by step. */",
+            "typedef struct {",
+            *(f"    {mem}" for mem in part.members),
+            f"    int initialised;  /* 1 after {name}_init (keeps the struct non-empty) */",
+            f"}} {name}_state;",
+            "",
+            f"/* Reset the state (call once before the first {name}_step). */",
+            f"void {name}_init({name}_state *s);",
+            "",
+            "/* One sample: read measured[0..N_MEASURED-1] and reference[0..N_REFERENCE-1]",
+            " * (orders above), write u[0..N_U-1], update *s. */",
+            f"void {name}_step({name}_state *s, const double measured[], const double "
+            "reference[], double u[]);",
+            "",
+            f"#endif /* {guard} */",
+            "",
+        ]
+    )
 
     helpers = []
     if "sign" in ctx.helpers:
@@ -874,7 +1074,9 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
             f"    if ({N}_abs(v) > vdb) return {N}_sgn(v);",
             f"    if ({N}_abs(u_fb) > udb) return {N}_sgn(u_fb);",
             f"    return ({R})0;",
-            "}", ""]
+            "}",
+            "",
+        ]
     if "round" in ctx.helpers:
         helpers += [
             "/* x rounded to the nearest whole number, ties to even (as numpy and JAX round),",
@@ -886,49 +1088,62 @@ def generate_c(scenario, *, name: str = "controller", precision: str = "double",
             f"    if (f > ({R})0.5 || (f == ({R})0.5 && (n % 2) != 0)) n += 1;",
             f"    else if (f < ({R})-0.5 || (f == ({R})-0.5 && (n % 2) != 0)) n -= 1;",
             f"    return ({R})n;",
-            "}", ""]
+            "}",
+            "",
+        ]
 
     uses_ij = any(("[i]" in ln or "(i =" in ln) for ln in part.step + part.init + act_step)
     uses_j = any("(j =" in ln for ln in part.step)
     decl_ij = "    int i" + (", j" if uses_j else "") + ";" if (uses_ij or uses_j) else None
     init_ij = any("(i =" in ln for ln in part.init)
-    conv = [f"    const {R} m_{i} = ({R})measured[{i}];  /* {n} */"
-            for i, (n, _) in enumerate(meas)]
-    conv += [f"    const {R} r_{i} = ({R})reference[{i}];  /* {n} */"
-             for i, (n, _) in enumerate(refs)]
-    source = "\n".join([
-        f"/* {name}.c: see {name}.h (generated by flexarm export-c; do not edit by hand).",
-        *provenance,
-        " */",
-        f'#include "{name}.h"',
-        "",
-        *part.constants,
-        *act_consts,
-        "",
-        *helpers,
-        f"void {name}_init({name}_state *s)",
-        "{",
-        *(["    int i;"] if init_ij else []),
-        *("    " + ln for ln in part.init),
-        "    s->initialised = 1;",
-        "}",
-        "",
-        f"void {name}_step({name}_state *s, const double measured[], const double "
-        "reference[], double u[])",
-        "{",
-        *conv,
-        *([decl_ij] if decl_ij else []),
-        f"    {R} y[{N}_N_U];",
-        *(["    (void)measured;"] if not meas else []),
-        *(["    (void)reference;"] if not refs else []),
-        *(["    (void)s;  /* a static law: no state */"]
-          if not any("s->" in ln for ln in part.step) else []),
-        *("    " + ln for ln in part.step),
-        *act_step,
-        *([f"    for (i = 0; i < {N}_N_U; ++i) u[i] = (double)y[i];"] if uses_ij or uses_j
-          else [f"    u[{i}] = (double)y[{i}];" for i in range(n_u)]),
-        "}",
-        ""])
+    conv = [
+        f"    const {R} m_{i} = ({R})measured[{i}];  /* {n} */" for i, (n, _) in enumerate(meas)
+    ]
+    conv += [
+        f"    const {R} r_{i} = ({R})reference[{i}];  /* {n} */" for i, (n, _) in enumerate(refs)
+    ]
+    source = "\n".join(
+        [
+            f"/* {name}.c: see {name}.h (generated by flexarm export-c; do not edit by hand).",
+            *provenance,
+            " */",
+            f'#include "{name}.h"',
+            "",
+            *part.constants,
+            *act_consts,
+            "",
+            *helpers,
+            f"void {name}_init({name}_state *s)",
+            "{",
+            *(["    int i;"] if init_ij else []),
+            *("    " + ln for ln in part.init),
+            "    s->initialised = 1;",
+            "}",
+            "",
+            f"void {name}_step({name}_state *s, const double measured[], const double "
+            "reference[], double u[])",
+            "{",
+            *conv,
+            *([decl_ij] if decl_ij else []),
+            f"    {R} y[{N}_N_U];",
+            *(["    (void)measured;"] if not meas else []),
+            *(["    (void)reference;"] if not refs else []),
+            *(
+                ["    (void)s;  /* a static law: no state */"]
+                if not any("s->" in ln for ln in part.step)
+                else []
+            ),
+            *("    " + ln for ln in part.step),
+            *act_step,
+            *(
+                [f"    for (i = 0; i < {N}_N_U; ++i) u[i] = (double)y[i];"]
+                if uses_ij or uses_j
+                else [f"    u[{i}] = (double)y[{i}];" for i in range(n_u)]
+            ),
+            "}",
+            "",
+        ]
+    )
     return CCode(name, precision, header, source, meas, refs, outs)
 
 
@@ -944,8 +1159,10 @@ def load_design(design: str | Path) -> tuple[Any, str | None, str]:
     if p.is_dir():
         toml = p / "design.toml"
         if not toml.is_file():
-            raise ExportError(f"{p}: a folder without design.toml; give a design directory "
-                              "(written by flexarm design ... --out DIR) or a scenario file")
+            raise ExportError(
+                f"{p}: a folder without design.toml; give a design directory "
+                "(written by flexarm design ... --out DIR) or a scenario file"
+            )
         js = p / "design.json"
         if js.is_file():
             try:
@@ -958,14 +1175,20 @@ def load_design(design: str | Path) -> tuple[Any, str | None, str]:
     try:
         sc = load_scenario(path)
     except ScenarioError as exc:
-        hint = ("" if Path(path).exists() else
-                "; or give a design directory holding design.toml")
+        hint = "" if Path(path).exists() else "; or give a design directory holding design.toml"
         raise ExportError(f"{exc}{hint}") from None
     return sc, method, label
 
 
-def export_c(design, out: str | Path, *, name: str = "controller", precision: str = "double",
-             overwrite: bool = False, force: bool = False) -> tuple[CCode, list[Path]]:
+def export_c(
+    design,
+    out: str | Path,
+    *,
+    name: str = "controller",
+    precision: str = "double",
+    overwrite: bool = False,
+    force: bool = False,
+) -> tuple[CCode, list[Path]]:
     """``flexarm export-c``: the controller of ``design`` (a design directory, a scenario
     file or name, a :class:`~flexarm.design.result.Design`) as ``out/NAME.h`` and
     ``out/NAME.c``, or a scenario object. Returns the code and the paths written.
@@ -992,9 +1215,12 @@ def export_c(design, out: str | Path, *, name: str = "controller", precision: st
 
             raise UnstableDesignError(
                 f"{label or method or 'design'}: the design gate's verdict is not stable: "
-                f"{verdict}; not exported", field="verdict", value=verdict,
+                f"{verdict}; not exported",
+                field="verdict",
+                value=verdict,
                 fix="redesign (design.json and compare.md say why), or pass force=True "
-                    "(--force) to export it with the verdict as a #warning in the header")
+                "(--force) to export it with the verdict as a #warning in the header",
+            )
     code = generate_c(sc, name=name, precision=precision, method=method, source=label)
     if verdict is not None and verdict != "stable":
         code = _with_warning(code, f"{label or method}: design verdict: {verdict}")
@@ -1022,5 +1248,5 @@ def _with_warning(code: CCode, text: str) -> CCode:
     head = code.header
     i = head.find(guard)
     line = f'#warning "flexarm: {text}; exported with force"\n'
-    head = head[:i + len(guard)] + line + head[i + len(guard):] if i >= 0 else line + head
+    head = head[: i + len(guard)] + line + head[i + len(guard) :] if i >= 0 else line + head
     return replace(code, header=head)

@@ -26,8 +26,15 @@ from flexarm.design.result import Design
 __all__ = ["Design", "METHODS", "design", "design_checked", "GateOptions"]
 
 
-def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int = 4,
-         check_duration: float = 6.0, **options) -> Design:
+def _lqr(
+    scenario,
+    *,
+    plants=None,
+    count: float | None = None,
+    max_rounds: int = 4,
+    check_duration: float = 6.0,
+    **options,
+) -> Design:
     """``lqr``; with ``plants`` (a :class:`~flexarm.design.plants.PlantBatch`) made robust
     over them: while a drawn plant is unstable or reaches the command limit in the
     comparison's step (:func:`flexarm.design.compare.compare`, ``check_duration`` s; ``count``
@@ -51,14 +58,19 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
     best = None
     n = len(plants)
     for k in range(max_rounds + 1):
-        row = compare(plants, {"lqr": des}, logged=None, count=count,
-                      duration=check_duration).rows["lqr"]
+        row = compare(plants, {"lqr": des}, logged=None, count=count, duration=check_duration).rows[
+            "lqr"
+        ]
         r = list(des.info["weights"]["r"])
-        history.append({"r": r, "unstable": row["unstable"],
-                        "nominal_stable": row["nominal_stable"],
-                        "limit_respected": row["limit_respected"]})
-        fails = (not row["nominal_stable"],
-                 row["unstable"] + (0 if row["limit_respected"] else n))
+        history.append(
+            {
+                "r": r,
+                "unstable": row["unstable"],
+                "nominal_stable": row["nominal_stable"],
+                "limit_respected": row["limit_respected"],
+            }
+        )
+        fails = (not row["nominal_stable"], row["unstable"] + (0 if row["limit_respected"] else n))
         if best is None or fails <= best[0]:
             best = (fails, des, k)
         if fails == (False, 0):
@@ -71,12 +83,13 @@ def _lqr(scenario, *, plants=None, count: float | None = None, max_rounds: int =
     if fails != (False, 0):
         h = history[kept]
         des.warnings.append(
-            f"over the {n} plants the best of {len(history)} rounds (R x{4 ** kept}) leaves "
+            f"over the {n} plants the best of {len(history)} rounds (R x{4**kept}) leaves "
             f"{'the nominal plant unstable, ' if not h['nominal_stable'] else ''}"
             f"{h['unstable']} unstable"
             f"{'' if h['limit_respected'] else ' and reaches the limit'} (R raised up to "
             f"{4 ** (len(history) - 1)}-fold): the spread of the fit is too wide for one "
-            "linear design; tune over the plants (method 'tune') or fit longer logs")
+            "linear design; tune over the plants (method 'tune') or fit longer logs"
+        )
     des.info["robust_over_plants"] = {"n_plants": n, "rounds": history, "kept_round": kept}
     return des
 
@@ -93,8 +106,9 @@ def _nested(scenario, **options) -> Design:
     return design_nested(scenario, **options)
 
 
-def _tune(scenario, *, plants=None, spread=None, n_plants: int = 200, plant_seed: int = 0,
-          **options) -> Design:
+def _tune(
+    scenario, *, plants=None, spread=None, n_plants: int = 200, plant_seed: int = 0, **options
+) -> Design:
     """``tune`` over ``plants`` (a :class:`~flexarm.design.plants.PlantBatch`, e.g.
     :func:`~flexarm.design.plants.from_fit` of a fit result), or over ``n_plants`` drawn from
     ``spread`` (scenario path → (mean, std), :func:`~flexarm.design.plants.from_paths`)."""
@@ -103,9 +117,11 @@ def _tune(scenario, *, plants=None, spread=None, n_plants: int = 200, plant_seed
 
     if plants is None:
         if not spread:
-            raise ValueError("method 'tune' needs the plants to tune over: plants= (e.g. "
-                             "flexarm.design.plants.from_fit(fit_result, 200)) or spread= "
-                             "{path: (mean, std)}")
+            raise ValueError(
+                "method 'tune' needs the plants to tune over: plants= (e.g. "
+                "flexarm.design.plants.from_fit(fit_result, 200)) or spread= "
+                "{path: (mean, std)}"
+            )
         plants = from_paths(scenario, spread, n_plants, seed=plant_seed)
     return design_tune(scenario, plants, **options)
 
@@ -125,8 +141,7 @@ def design(scenario: Any, method: str = "lqr", **options) -> Design:
     are the method's (``lqr``/``place``: :func:`flexarm.design.linear.design_linear`;
     ``nested``: :func:`flexarm.design.nested.design_nested`; ``tune``: :func:`_tune`)."""
     if method not in METHODS:
-        raise ValueError(f"method = {method!r} is not known; choose one of "
-                         f"{', '.join(METHODS)}")
+        raise ValueError(f"method = {method!r} is not known; choose one of {', '.join(METHODS)}")
     if isinstance(scenario, str) or hasattr(scenario, "__fspath__"):
         from flexarm.specs import load_scenario
 

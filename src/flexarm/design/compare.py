@@ -61,9 +61,18 @@ METRICS = {
 }
 
 
-def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarray, *,
-                  count: float, limit: float, length: float, band: float = 0.02,
-                  tail: float = 0.25) -> dict[str, np.ndarray]:
+def batch_metrics(
+    out: dict,
+    signal_names,
+    time: np.ndarray,
+    reference: np.ndarray,
+    *,
+    count: float,
+    limit: float,
+    length: float,
+    band: float = 0.02,
+    tail: float = 0.25,
+) -> dict[str, np.ndarray]:
     """The per-plant metrics of the module doc from :func:`simulate_batch` arrays
     (signals (B, N, S), command (B, N, m)); ``reference`` (N,) at the sample instants,
     one step; ``length`` L (m) of the link; returns metric → (B,) arrays."""
@@ -76,8 +85,9 @@ def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarr
     k0 = int(jumps[0] + 1) if jumps.size else 0
     delta = float(r[-1] - r[k0 - 1]) if k0 > 0 else float(r[-1] - r[0])
     if delta == 0.0:
-        raise ValueError("the reference has no step: the comparison needs a step of the hub "
-                         "angle (step= rad)")
+        raise ValueError(
+            "the reference has no step: the comparison needs a step of the hub angle (step= rad)"
+        )
     n = r.size
     dt = float(time[1] - time[0])
     last = max(1, n // 20)
@@ -96,15 +106,20 @@ def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarr
         k_tail = n - max(1, int(round(tail * n)))
         hub_still = np.max(np.abs(th[:, k_tail:] - th_f[:, None]), axis=1) <= band * abs(delta)
         dt_tail = d[:, k_tail:]
-        osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2,
-                                    axis=1))
+        osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2, axis=1))
         peak = np.max(u, axis=1)
         ua = np.asarray(out["command"])[..., 0]
         chatter = np.sqrt(np.mean(np.diff(ua, axis=1) ** 2, axis=1))
         at_lim = dt * np.sum(u >= limit * (1 - 1e-9), axis=1)
-    m = {"hub_error_counts": hub_err, "tip_settling_s": ts,
-         "tip_overshoot_pct": np.maximum(over, 0.0), "tip_oscillation_mm": osc,
-         "peak_command_V": peak, "time_at_limit_s": at_lim, "command_chatter_V": chatter}
+    m = {
+        "hub_error_counts": hub_err,
+        "tip_settling_s": ts,
+        "tip_overshoot_pct": np.maximum(over, 0.0),
+        "tip_oscillation_mm": osc,
+        "peak_command_V": peak,
+        "time_at_limit_s": at_lim,
+        "command_chatter_V": chatter,
+    }
     stable = ~bad & np.isfinite(ts) & hub_still
     for k in m:
         m[k] = np.where(bad, np.nan, m[k])
@@ -112,8 +127,14 @@ def batch_metrics(out: dict, signal_names, time: np.ndarray, reference: np.ndarr
     return m
 
 
-def experiment(scenario, *, step: float | None = None, start: float = 0.1,
-               duration: float = 3.0, quantum: float | None = None) -> dict:
+def experiment(
+    scenario,
+    *,
+    step: float | None = None,
+    start: float = 0.1,
+    duration: float = 3.0,
+    quantum: float | None = None,
+) -> dict:
     """The overrides (:func:`flexarm.design.plants.with_overrides`) of the comparison's
     experiment: at rest, a step of ``step`` rad (default the scenario's reference
     amplitude) at ``start`` s, ``duration`` s; ``quantum`` sets the hub encoder's count
@@ -121,18 +142,24 @@ def experiment(scenario, *, step: float | None = None, start: float = 0.1,
     if step is None:
         step = float(scenario.reference.amplitude)
         if step == 0.0:
-            raise ValueError(f"scenario {scenario.name!r}: reference.amplitude = 0; give the "
-                             "step size (rad) with step=")
+            raise ValueError(
+                f"scenario {scenario.name!r}: reference.amplitude = 0; give the "
+                "step size (rad) with step="
+            )
     if not duration > start:
         raise ValueError(f"duration = {duration} s must exceed the step time start = {start} s")
     over: dict[str, Any] = {
-        "reference": {"type": "step", "offset": 0.0, "amplitude": float(step),
-                      "start": float(start)},
+        "reference": {
+            "type": "step",
+            "offset": 0.0,
+            "amplitude": float(step),
+            "start": float(start),
+        },
         "simulation": {"duration": float(duration)},
-        "initial": {"motor_angle": 0.0, "motor_velocity": 0.0, "tip_deflection": 0.0}}
+        "initial": {"motor_angle": 0.0, "motor_velocity": 0.0, "tip_deflection": 0.0},
+    }
     if quantum is not None:
-        over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None,
-                                           "range": None}}
+        over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None, "range": None}}
     return over
 
 
@@ -146,8 +173,11 @@ def _own_move(design_scenario, exp: dict) -> dict:
     d = design_scenario.model_dump(mode="json", exclude_none=True)
     ref = {**d["reference"], "offset": 0.0}
     dur = max(float(exp["simulation"]["duration"]), float(design_scenario.simulation.duration))
-    return {"controller": Replace(d["controller"]), "reference": Replace(ref),
-            "simulation": {"duration": dur}}
+    return {
+        "controller": Replace(d["controller"]),
+        "reference": Replace(ref),
+        "simulation": {"duration": dur},
+    }
 
 
 def encoder_count(scenario, count: float | None = None) -> float:
@@ -161,13 +191,16 @@ def encoder_count(scenario, count: float | None = None) -> float:
         return float(count)
     q = sensor_quanta(scenario.sensors).get("motor_angle", 0.0)
     if not q > 0:  # a fitted rig whose controller read finer than the log: its resolution
-        q = float((getattr(scenario, "notes", None) or {}).get("rig", {}).get(
-            "encoder_count", 0.0) or 0.0)
+        q = float(
+            (getattr(scenario, "notes", None) or {}).get("rig", {}).get("encoder_count", 0.0) or 0.0
+        )
     if not q > 0:
-        raise ValueError(f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
-                         "(or bits and range), so the hub error cannot be given in encoder "
-                         "counts; give count= (rad per count, e.g. 2*pi/4096) or "
-                         "sensors.motor_angle.quantum")
+        raise ValueError(
+            f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
+            "(or bits and range), so the hub error cannot be given in encoder "
+            "counts; give count= (rad per count, e.g. 2*pi/4096) or "
+            "sensors.motor_angle.quantum"
+        )
     return float(q)
 
 
@@ -181,8 +214,9 @@ def controller_spec(design) -> Any:
         return design.controller
     if hasattr(design, "type"):
         return design
-    raise TypeError(f"{type(design).__name__}: give a Design, a scenario or a controller "
-                    "spec to compare")
+    raise TypeError(
+        f"{type(design).__name__}: give a Design, a scenario or a controller spec to compare"
+    )
 
 
 def build_controller(batch: BatchLoop, spec, scenario) -> Any:
@@ -191,10 +225,13 @@ def build_controller(batch: BatchLoop, spec, scenario) -> Any:
     from flexarm.sim.build import controller_from_spec, sensor_quanta
 
     lp = batch.prepared.loop
-    return controller_from_spec(spec, float(scenario.sampling.period),
-                                input_names=lp.plant.input_names,
-                                references=batch.references,
-                                quanta=sensor_quanta(scenario.sensors))
+    return controller_from_spec(
+        spec,
+        float(scenario.sampling.period),
+        input_names=lp.plant.input_names,
+        references=batch.references,
+        quanta=sensor_quanta(scenario.sensors),
+    )
 
 
 @dataclass
@@ -222,8 +259,12 @@ class Comparison:
             if isinstance(x, (np.integer,)):
                 return int(x)
             return x
-        return {"settings": clean(self.settings), "rows": clean(self.rows),
-                "warnings": list(self.warnings)}
+
+        return {
+            "settings": clean(self.settings),
+            "rows": clean(self.rows),
+            "warnings": list(self.warnings),
+        }
 
     def table(self, fmt: str = "markdown") -> str:
         """One row per controller: each metric as nominal / median / worst, the unstable
@@ -234,9 +275,13 @@ class Comparison:
         for name, row in self.rows.items():
             cells = [name]
             for k in METRICS:
-                cells.append(" / ".join(format_metric(row[s][k]) for s in ("nominal", "median", "worst")))
-            cells += [f"{row['unstable']}/{row['n_plants']}",
-                      "yes" if row["limit_respected"] else "NO"]
+                cells.append(
+                    " / ".join(format_metric(row[s][k]) for s in ("nominal", "median", "worst"))
+                )
+            cells += [
+                f"{row['unstable']}/{row['n_plants']}",
+                "yes" if row["limit_respected"] else "NO",
+            ]
             body.append(cells)
         if fmt == "markdown":
             lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -265,9 +310,15 @@ class Comparison:
         for i, (name, tr) in enumerate(self.traces.items()):
             c = f"C{i}"
             if self.settings["n_plants"] > 0:
-                ax.fill_between(tr["time"], tr["tip_p05"], tr["tip_p95"], color=c, alpha=0.2,
-                                lw=0, label=f"{name}: 5-95 % of {self.settings['n_plants']} "
-                                            "plants")
+                ax.fill_between(
+                    tr["time"],
+                    tr["tip_p05"],
+                    tr["tip_p95"],
+                    color=c,
+                    alpha=0.2,
+                    lw=0,
+                    label=f"{name}: 5-95 % of {self.settings['n_plants']} plants",
+                )
             ax.plot(tr["time"], tr["tip_nominal"], color=c, lw=1.2, label=f"{name}: nominal")
         tr0 = next(iter(self.traces.values()))
         ax.plot(tr0["time"], tr0["reference"], "k:", lw=0.8, label="reference")
@@ -294,8 +345,9 @@ class Comparison:
             a.legend(fontsize=7, loc="best")
         fig.suptitle("nominal plant")
         fig.tight_layout()
-        paths.append(save_figure(fig, out / "compare_hub_command.png", overwrite=overwrite,
-                                 dpi=100))
+        paths.append(
+            save_figure(fig, out / "compare_hub_command.png", overwrite=overwrite, dpi=100)
+        )
         return paths
 
 
@@ -322,16 +374,32 @@ def summarise(m: dict[str, np.ndarray], limit: float) -> dict[str, Any]:
         med[k] = float(np.median(v)) if n else float("nan")
         worst[k] = float(np.max(v)) if n else float("nan")
     at_lim = np.asarray(m["time_at_limit_s"], float)
-    return {"nominal": nom, "median": med, "worst": worst, "unstable": int(n - st.sum()),
-            "nominal_stable": bool(m["stable"][0]), "n_plants": int(n),
-            "limit_respected": bool(np.all(at_lim == 0.0))}
+    return {
+        "nominal": nom,
+        "median": med,
+        "worst": worst,
+        "unstable": int(n - st.sum()),
+        "nominal_stable": bool(m["stable"][0]),
+        "n_plants": int(n),
+        "limit_respected": bool(np.all(at_lim == 0.0)),
+    }
 
 
-def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
-            logged: str | None = "logged controller", step: float | None = None,
-            start: float = 0.1, duration: float = 3.0, band: float = 0.02,
-            tail: float = 0.25, count: float | None = None,
-            seed: int | None = None, client: Any = None, chunks: Any = None) -> Comparison:
+def compare(
+    plants: PlantBatch,
+    designs: Mapping[str, Any] | None = None,
+    *,
+    logged: str | None = "logged controller",
+    step: float | None = None,
+    start: float = 0.1,
+    duration: float = 3.0,
+    band: float = 0.02,
+    tail: float = 0.25,
+    count: float | None = None,
+    seed: int | None = None,
+    client: Any = None,
+    chunks: Any = None,
+) -> Comparison:
     """Compare the nominal scenario's own controller (named ``logged``; None leaves it
     out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
@@ -344,14 +412,26 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
     if client is not None or chunks is not None or not isinstance(plants, PlantBatch):
         from flexarm.distributed import compare_chunked  # orchestration, entered on request
 
-        return compare_chunked(plants, designs, client=client, options=chunks, logged=logged,
-                               step=step, start=start, duration=duration, band=band,
-                               tail=tail, count=count, seed=seed)
+        return compare_chunked(
+            plants,
+            designs,
+            client=client,
+            options=chunks,
+            logged=logged,
+            step=step,
+            start=start,
+            duration=duration,
+            band=band,
+            tail=tail,
+            count=count,
+            seed=seed,
+        )
     nominal = plants.nominal
     q = encoder_count(nominal, count)
     has_q = count is None
-    exp = experiment(nominal, step=step, start=start, duration=duration,
-                     quantum=None if has_q else q)
+    exp = experiment(
+        nominal, step=step, start=start, duration=duration, quantum=None if has_q else q
+    )
     pb = plants.with_overrides(exp)
     base = pb.loop()
     scn = pb.nominal
@@ -365,9 +445,11 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
     limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[0])
     length = float(scn.arm.beam.length)
     rows, per, traces = {}, {}, {}
-    moves = {name: d.scenario for name, d in (designs or {}).items()
-             if getattr(getattr(getattr(d, "scenario", None), "reference", None), "type", None)
-             in SHAPED}
+    moves = {
+        name: d.scenario
+        for name, d in (designs or {}).items()
+        if getattr(getattr(getattr(d, "scenario", None), "reference", None), "type", None) in SHAPED
+    }
     for name, spec in specs.items():
         if name in moves:
             # a design that shapes its own move (Feliu's nested loops: the quasi-parabolic
@@ -378,22 +460,48 @@ def compare(plants: PlantBatch, designs: Mapping[str, Any] | None = None, *,
             bl = base.with_controller(build_controller(base, spec, scn))
         out = bl.run(seed=seed)
         ref = bl.references["reference"]
-        m = batch_metrics(out, bl.prepared.loop.plant.signal_names, bl.time, ref, count=q,
-                          limit=limit, length=length, band=band, tail=tail)
+        m = batch_metrics(
+            out,
+            bl.prepared.loop.plant.signal_names,
+            bl.time,
+            ref,
+            count=q,
+            limit=limit,
+            length=length,
+            band=band,
+            tail=tail,
+        )
         per[name] = m
         rows[name] = summarise(m, limit)
         sn = list(bl.prepared.loop.plant.signal_names)
         tip = out["signals"][:, :, sn.index("tip_angle")]
-        pct = (np.nanpercentile(tip[1:], [5, 50, 95], axis=0) if tip.shape[0] > 1
-               else np.repeat(tip[:1], 3, axis=0))  # nominal only: no band
-        traces[name] = {"time": bl.time, "reference": ref, "tip_nominal": tip[0],
-                        "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
-                        "command_nominal": out["command"][0, :, 0], "tip_p05": pct[0],
-                        "tip_p50": pct[1], "tip_p95": pct[2]}
-    settings = {"step_rad": float(scn.reference.amplitude), "start_s": start,
-                "duration_s": duration, "band_fraction": band, "tail_fraction": tail,
-                "count_rad": q, "limit_V": limit, "n_plants": len(plants), "seed": plants.seed,
-                "noise_seed": seed,
-                "plants": plants.info,
-                "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()}}
+        pct = (
+            np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
+            if tip.shape[0] > 1
+            else np.repeat(tip[:1], 3, axis=0)
+        )  # nominal only: no band
+        traces[name] = {
+            "time": bl.time,
+            "reference": ref,
+            "tip_nominal": tip[0],
+            "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
+            "command_nominal": out["command"][0, :, 0],
+            "tip_p05": pct[0],
+            "tip_p50": pct[1],
+            "tip_p95": pct[2],
+        }
+    settings = {
+        "step_rad": float(scn.reference.amplitude),
+        "start_s": start,
+        "duration_s": duration,
+        "band_fraction": band,
+        "tail_fraction": tail,
+        "count_rad": q,
+        "limit_V": limit,
+        "n_plants": len(plants),
+        "seed": plants.seed,
+        "noise_seed": seed,
+        "plants": plants.info,
+        "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()},
+    }
     return Comparison(rows, per, traces, settings, list(plants.warnings))

@@ -58,9 +58,12 @@ class GateOptions:
     def __post_init__(self):
         s = self.max_unstable_share
         if not (isinstance(s, (int, float)) and 0.0 <= s <= 1.0):
-            raise FlexarmError("the share of drawn plants allowed to fail must lie in [0, 1]",
-                               field="max_unstable_share", value=s,
-                               fix="give e.g. 0.01 for 1 %")
+            raise FlexarmError(
+                "the share of drawn plants allowed to fail must lie in [0, 1]",
+                field="max_unstable_share",
+                value=s,
+                fix="give e.g. 0.01 for 1 %",
+            )
 
 
 def assess(comparison, name: str, options: GateOptions = GateOptions()) -> dict[str, Any]:
@@ -83,23 +86,42 @@ def assess(comparison, name: str, options: GateOptions = GateOptions()) -> dict[
     if not row["nominal_stable"]:
         reasons.append("unstable on the nominal plant")
     if n and unstable / n > s:
-        reasons.append(f"unstable on {unstable} of {n} drawn plants "
-                       f"({100 * unstable / n:.3g} % > {100 * s:g} %)")
+        reasons.append(
+            f"unstable on {unstable} of {n} drawn plants "
+            f"({100 * unstable / n:.3g} % > {100 * s:g} %)"
+        )
     if options.check_limit:
         if nom_lim:
             reasons.append(f"the command reaches the ±{limit:g} limit on the nominal plant")
         if n and k_lim / n > s:
-            reasons.append(f"the command reaches the ±{limit:g} limit on {k_lim} of {n} drawn "
-                           f"plants ({100 * k_lim / n:.3g} % > {100 * s:g} %)")
-    return {"verdict": "; ".join(reasons) if reasons else STABLE, "reasons": reasons,
-            "nominal_stable": bool(row["nominal_stable"]), "unstable": unstable,
-            "n_plants": n, "nominal_limit_reached": nom_lim, "limit_reached": k_lim,
-            "limit": None if limit is None else float(limit), "max_unstable_share": s}
+            reasons.append(
+                f"the command reaches the ±{limit:g} limit on {k_lim} of {n} drawn "
+                f"plants ({100 * k_lim / n:.3g} % > {100 * s:g} %)"
+            )
+    return {
+        "verdict": "; ".join(reasons) if reasons else STABLE,
+        "reasons": reasons,
+        "nominal_stable": bool(row["nominal_stable"]),
+        "unstable": unstable,
+        "n_plants": n,
+        "nominal_limit_reached": nom_lim,
+        "limit_reached": k_lim,
+        "limit": None if limit is None else float(limit),
+        "max_unstable_share": s,
+    }
 
 
-def design_checked(scenario, method: str = "lqr", *, plants=None, count: float | None = None,
-                   gate: GateOptions = GateOptions(), logged: str | None = "scenario",
-                   client: Any = None, **options):
+def design_checked(
+    scenario,
+    method: str = "lqr",
+    *,
+    plants=None,
+    count: float | None = None,
+    gate: GateOptions = GateOptions(),
+    logged: str | None = "scenario",
+    client: Any = None,
+    **options,
+):
     """Design ``scenario``'s controller by ``method`` (:func:`flexarm.design.design`, with
     ``options``), compare it with the scenario's own controller (named ``logged``; None
     leaves it out) on the nominal plant and ``plants`` (a
@@ -124,10 +146,12 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
     except ValueError:
         raise FlexarmError(
             "the hub encoder's count is not known, so the design cannot be checked against "
-            "the rig's quantisation", field="sensors.motor_angle.quantum",
+            "the rig's quantisation",
+            field="sensors.motor_angle.quantum",
             fix="add quantum = <rad per count> under [sensors.motor_angle] of the scenario "
-                "(a fit writes it when it finds the encoder step; 1 mrad for the rotary rig's "
-                "logs), or give the encoder's counts per turn (--encoder-counts)") from None
+            "(a fit writes it when it finds the encoder step; 1 mrad for the rotary rig's "
+            "logs), or give the encoder's counts per turn (--encoder-counts)",
+        ) from None
     given = None if count is None else q
     if plants is not None and method in ("lqr", "tune"):
         options = {**options, "plants": plants, "count": given}
@@ -136,18 +160,24 @@ def design_checked(scenario, method: str = "lqr", *, plants=None, count: float |
     des = design(scenario, method, **options)
     batch = plants if plants is not None else PlantBatch.nominal_only(scenario)
     assert scenario.simulation is not None  # design needs a sampled-data scenario
-    duration = gate.duration if gate.duration is not None else max(
-        3.0, float(scenario.simulation.duration))
-    c = compare(batch, {method: des}, logged=logged, count=given, duration=duration,
-                client=client)
+    duration = (
+        gate.duration
+        if gate.duration is not None
+        else max(3.0, float(scenario.simulation.duration))
+    )
+    c = compare(batch, {method: des}, logged=logged, count=given, duration=duration, client=client)
     des.comparison = c
     des.info["comparison"] = c.to_dict()["rows"]
     des.warnings.extend(w for w in c.warnings if w not in des.warnings)
     des.gate = assess(c, method, gate)
     des.verdict = des.gate["verdict"]
     if des.verdict != STABLE and not gate.accept_unstable:
-        raise UnstableDesignError(f"the {method} design is not safe to run: {des.verdict}",
-                                  design=des, fix=(
-                                      "look at compare.md and design.json; pass "
-                                      "accept_unstable (--accept-unstable) to keep it anyway"))
+        raise UnstableDesignError(
+            f"the {method} design is not safe to run: {des.verdict}",
+            design=des,
+            fix=(
+                "look at compare.md and design.json; pass "
+                "accept_unstable (--accept-unstable) to keep it anyway"
+            ),
+        )
     return des

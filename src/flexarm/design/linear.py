@@ -145,8 +145,10 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     from flexarm.sim.build import sensor_quanta
 
     if scenario.sampling is None:
-        raise ValueError(f"scenario {scenario.name!r}: no [sampling]; the design needs the "
-                         "controller's period (add [sampling] period = ...)")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no [sampling]; the design needs the "
+            "controller's period (add [sampling] period = ...)"
+        )
     dt = float(scenario.sampling.period)
     if scenario.arm.kind == "multi_link":
         from flexarm.models.assembly import multi_link_arm
@@ -163,48 +165,58 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     if scenario.actuator.limit is not None:
         limit = np.minimum(limit, float(scenario.actuator.limit))
     if not np.all(np.isfinite(limit)):
-        raise ValueError(f"scenario {scenario.name!r}: the command limit is not finite; give "
-                         "[actuator] limit (V or A): the design's R and its check need it")
+        raise ValueError(
+            f"scenario {scenario.name!r}: the command limit is not finite; give "
+            "[actuator] limit (V or A): the design's R and its check need it"
+        )
     sensors = {k: v.model_dump() for k, v in scenario.sensors.items()}
     added: dict[str, dict] = {}
     if measured is None:
         chans = [k for k, s in sensors.items() if not s.get("filter")]
         if not chans:
-            chans = [n for n in arm.signal_names[:arm.n_joints]]
+            chans = [n for n in arm.signal_names[: arm.n_joints]]
             added = {c: {} for c in chans}
     elif isinstance(measured, dict):
         chans = list(measured)
         for c, sig in measured.items():
             if c in sensors:
                 if (sensors[c].get("signal") or c) != sig:
-                    raise ValueError(f"measured: channel {c!r} reads "
-                                     f"{sensors[c].get('signal') or c!r} in the scenario, not "
-                                     f"{sig!r}; give another channel name")
+                    raise ValueError(
+                        f"measured: channel {c!r} reads "
+                        f"{sensors[c].get('signal') or c!r} in the scenario, not "
+                        f"{sig!r}; give another channel name"
+                    )
             else:
                 added[c] = {"signal": sig}
     else:
         chans = list(measured)
         for c in chans:
             if c not in sensors:
-                raise ValueError(f"measured: {c!r} is not a sensor channel of scenario "
-                                 f"{scenario.name!r}; its channels: {', '.join(sensors) or 'none'} "
-                                 "(give a dict channel → signal to add one)")
+                raise ValueError(
+                    f"measured: {c!r} is not a sensor channel of scenario "
+                    f"{scenario.name!r}; its channels: {', '.join(sensors) or 'none'} "
+                    "(give a dict channel → signal to add one)"
+                )
     if not chans:
         raise ValueError("measured: no channel to read; name at least the joint angle(s)")
     spec_of = {c: {**sensors.get(c, {}), **added.get(c, {})} for c in chans}
     for c in chans:
         if spec_of[c].get("filter"):
-            raise ValueError(f"sensor {c!r} has a digital filter, which the design model does "
-                             "not include; leave it out of measured (e.g. --measured with the "
-                             "unfiltered channels)")
+            raise ValueError(
+                f"sensor {c!r} has a digital filter, which the design model does "
+                "not include; leave it out of measured (e.g. --measured with the "
+                "unfiltered channels)"
+            )
     from flexarm.specs.experiment import Sensor
 
     quanta_all = sensor_quanta({c: Sensor.model_validate(spec_of[c]) for c in chans})
     signals = [spec_of[c].get("signal") or c for c in chans]
     for c, s in zip(chans, signals, strict=True):
         if s not in arm.signal_names:
-            raise ValueError(f"sensor {c!r}: the arm has no signal {s!r}; its signals: "
-                             f"{', '.join(arm.signal_names)}")
+            raise ValueError(
+                f"sensor {c!r}: the arm has no signal {s!r}; its signals: "
+                f"{', '.join(arm.signal_names)}"
+            )
     uniq = list(dict.fromkeys(signals))
     lin = linearize(arm, outputs=uniq)
     A, B = np.asarray(lin.A), np.asarray(lin.B)
@@ -226,11 +238,27 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     for i in range(p):
         if i not in filt:
             Cc[i, :n] = gains[i] * Cs[uniq.index(signals[i])]
-    cont = control.ss(Ac, Bc, Cc, np.zeros((p, m)), states=names,
-                      inputs=list(lin.input_labels), outputs=chans, name="design model")
+    cont = control.ss(
+        Ac,
+        Bc,
+        Cc,
+        np.zeros((p, m)),
+        states=names,
+        inputs=list(lin.input_labels),
+        outputs=chans,
+        name="design model",
+    )
     sysd = control.c2d(cont, dt, "zoh")
-    sysd = control.ss(sysd.A, sysd.B, sysd.C, sysd.D, dt, states=names,
-                      inputs=list(lin.input_labels), outputs=chans)
+    sysd = control.ss(
+        sysd.A,
+        sysd.B,
+        sysd.C,
+        sysd.D,
+        dt,
+        states=names,
+        inputs=list(lin.input_labels),
+        outputs=chans,
+    )
     delays = [int(spec_of[c].get("delay", 0) or 0) for c in chans]
     aug = augment_delays(sysd, int(scenario.sampling.delay), delays)
 
@@ -247,18 +275,24 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     else:
         for j in range(arm.n_joints):
             ref = f"theta_ref_{j + 1}"
-            c = next((c for c, s in zip(chans, signals, strict=True) if s == f"theta_{j + 1}"), None)
+            c = next(
+                (c for c, s in zip(chans, signals, strict=True) if s == f"theta_{j + 1}"), None
+            )
             if c is not None and ref in scenario.references:
                 sp[c] = ref
     sp = {c: r for c, r in sp.items() if c is not None and c in chans}
     if not sp:
-        raise ValueError(f"scenario {scenario.name!r}: no measured channel has a setpoint; give "
-                         "setpoints (channel = reference channel), e.g. motor_angle=reference")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no measured channel has a setpoint; give "
+            "setpoints (channel = reference channel), e.g. motor_angle=reference"
+        )
     refs = {"reference", *scenario.references}
     for c, r in sp.items():
         if r not in refs:
-            raise ValueError(f"setpoints: {c} = {r!r} is not a reference channel of the "
-                             f"scenario; it has {', '.join(sorted(refs))}")
+            raise ValueError(
+                f"setpoints: {c} = {r!r} is not a reference channel of the "
+                f"scenario; it has {', '.join(sorted(refs))}"
+            )
     spl = [sp.get(c) for c in chans]
     tracked = [i for i, s in enumerate(spl) if s]
     amp = {chans[i]: _amplitude(scenario, spl[i]) for i in tracked}
@@ -268,7 +302,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     rigid[:N] = v
     k = N + m * int(scenario.sampling.delay)
     for i, d in enumerate(delays):
-        rigid[k:k + d] = Cc[i] @ v
+        rigid[k : k + d] = Cc[i] @ v
         k += d
     for i, j in follow.items():
         spl[i] = spl[j]
@@ -282,13 +316,30 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
             travel = a * (length if signals[i] == "tip_deflection" and length else 1.0)
             scales.append(DEFLECTION_FRACTION * travel * abs(gains[i]))
     k_u = np.asarray(arm.k_u, float).reshape(-1)
-    coulomb = np.asarray([float(np.asarray(f.coulomb)) if f.model != "none" else 0.0
-                          for f in arm.frictions])
-    return DesignModel(chans, signals, spl, tracked, cont, sysd, aug, dt,
-                       int(scenario.sampling.delay), delays,
-                       [float(quanta_all[c]) for c in chans],
-                       [float(spec_of[c].get("noise", 0.0) or 0.0) for c in chans], limit, k_u,
-                       coulomb, amp, scales, rigid, added)
+    coulomb = np.asarray(
+        [float(np.asarray(f.coulomb)) if f.model != "none" else 0.0 for f in arm.frictions]
+    )
+    return DesignModel(
+        chans,
+        signals,
+        spl,
+        tracked,
+        cont,
+        sysd,
+        aug,
+        dt,
+        int(scenario.sampling.delay),
+        delays,
+        [float(quanta_all[c]) for c in chans],
+        [float(spec_of[c].get("noise", 0.0) or 0.0) for c in chans],
+        limit,
+        k_u,
+        coulomb,
+        amp,
+        scales,
+        rigid,
+        added,
+    )
 
 
 def _rigid_rotation(A, C, chans, tracked, name) -> tuple[dict[int, int], np.ndarray]:
@@ -313,7 +364,8 @@ def _rigid_rotation(A, C, chans, tracked, name) -> tuple[dict[int, int], np.ndar
             raise ValueError(
                 f"scenario {name!r}: channel {chans[j]!r} cannot rest at an arbitrary setpoint "
                 "(the arm has a stiffness to ground, e.g. gravity, or the tracked channels read "
-                "one angle); the error-form design needs a horizontal arm (gravity = 0)")
+                "one angle); the error-form design needs a horizontal arm (gravity = 0)"
+            )
         for i in range(len(chans)):
             if i in tracked:
                 continue
@@ -326,25 +378,33 @@ def _rigid_rotation(A, C, chans, tracked, name) -> tuple[dict[int, int], np.ndar
             raise ValueError(
                 f"scenario {name!r}: channel {chans[i]!r} reads {c:.6g} per unit of "
                 f"{chans[j]!r} at rest, so its setpoint is neither 0 nor {chans[j]!r}'s; leave "
-                "it out of measured or give its gain")
+                "it out of measured or give its gain"
+            )
     return follow, np.stack(vs, axis=1)
 
 
 # ----------------------------------------------------------------------------- gains
 def _poles_z(poles, domain: str, dt: float, what: str) -> np.ndarray:
     if domain not in ("s", "z"):
-        raise ValueError(f"pole_domain = {domain!r}; give 's' (continuous-time poles, rad/s, "
-                         "mapped by z = exp(s T)) or 'z' (discrete)")
+        raise ValueError(
+            f"pole_domain = {domain!r}; give 's' (continuous-time poles, rad/s, "
+            "mapped by z = exp(s T)) or 'z' (discrete)"
+        )
     p = np.asarray([complex(x) for x in poles])
     if p.size == 0:
         raise ValueError(f"{what}: no poles given")
     z = np.exp(p * dt) if domain == "s" else p
     if np.any(np.abs(z) >= 1.0):
         bad = p[np.abs(z) >= 1.0][0]
-        raise ValueError(f"{what}: pole {bad:.6g} ({domain}) is not stable (|z| = "
-                         f"{abs(np.exp(bad * dt) if domain == 's' else bad):.6g} >= 1); give "
-                         + ("poles with a negative real part" if domain == "s" else
-                            "poles inside the unit circle"))
+        raise ValueError(
+            f"{what}: pole {bad:.6g} ({domain}) is not stable (|z| = "
+            f"{abs(np.exp(bad * dt) if domain == 's' else bad):.6g} >= 1); give "
+            + (
+                "poles with a negative real part"
+                if domain == "s"
+                else "poles inside the unit circle"
+            )
+        )
     for x in z[np.abs(np.imag(z)) > 1e-12]:
         if not np.any(np.abs(z - np.conj(x)) < 1e-9 * max(1.0, abs(x))):
             raise ValueError(f"{what}: the complex pole {x:.6g} has no conjugate; give both")
@@ -364,8 +424,11 @@ def _weights_matrix(w, n: int, what: str) -> np.ndarray:
     a = np.asarray(w, dtype=float)
     a = np.full(n, float(a)) if a.ndim == 0 else a
     a = np.diag(a) if a.ndim == 1 else a
-    if a.shape != (n, n) or not np.all(np.isfinite(a)) or np.any(
-            np.linalg.eigvalsh((a + a.T) / 2) < -1e-12):
+    if (
+        a.shape != (n, n)
+        or not np.all(np.isfinite(a))
+        or np.any(np.linalg.eigvalsh((a + a.T) / 2) < -1e-12)
+    ):
         raise ValueError(f"{what}: give {n} non-negative numbers (or one); got {w!r}")
     return a
 
@@ -374,8 +437,11 @@ def _channel_weights(dm: DesignModel, q, integral: bool) -> tuple[dict, dict]:
     """Per channel (and per integrator ``int_<channel>``) the weight q_i = 1/s_i² (Bryson),
     overridden by ``q`` (dict name → weight, or one number per channel [+ integrators])."""
     w = {c: 1.0 / s**2 if s > 0 else 0.0 for c, s in zip(dm.channels, dm.scales, strict=True)}
-    wi = {f"int_{dm.channels[i]}": 1.0 / (INTEGRAL_TIME * dm.scales[i])**2
-          for i in dm.tracked} if integral else {}
+    wi = (
+        {f"int_{dm.channels[i]}": 1.0 / (INTEGRAL_TIME * dm.scales[i]) ** 2 for i in dm.tracked}
+        if integral
+        else {}
+    )
     if q is None:
         return w, wi
     if isinstance(q, dict):
@@ -385,15 +451,20 @@ def _channel_weights(dm: DesignModel, q, integral: bool) -> tuple[dict, dict]:
             elif k in wi:
                 wi[k] = float(v)
             else:
-                raise ValueError(f"q: {k!r} is not a measured channel"
-                                 + (" or integrator" if integral else "") + "; give one of "
-                                 + ", ".join([*w, *wi]))
+                raise ValueError(
+                    f"q: {k!r} is not a measured channel"
+                    + (" or integrator" if integral else "")
+                    + "; give one of "
+                    + ", ".join([*w, *wi])
+                )
     else:
         vals = np.atleast_1d(np.asarray(q, float))
         keys = [*w, *wi]
         if vals.size != len(keys):
-            raise ValueError(f"q: {vals.size} numbers; give {len(keys)} ({', '.join(keys)}) or "
-                             "name them, e.g. motor_angle=1e3")
+            raise ValueError(
+                f"q: {vals.size} numbers; give {len(keys)} ({', '.join(keys)}) or "
+                "name them, e.g. motor_angle=1e3"
+            )
         for k, v in zip(keys, vals, strict=True):
             (w if k in w else wi)[k] = float(v)
     for k, v in {**w, **wi}.items():
@@ -410,12 +481,18 @@ def _input_setpoints(dm: DesignModel, controller) -> list[str | None]:
     labels = list(controller.input_labels)
     if not any(lab.endswith("_ref") for lab in labels):
         return list(dm.setpoints)
-    return [dm.setpoints[dm.channels.index(lab[2:-4])] if lab.endswith("_ref") else None
-            for lab in labels]
+    return [
+        dm.setpoints[dm.channels.index(lab[2:-4])] if lab.endswith("_ref") else None
+        for lab in labels
+    ]
 
 
-def step_response(dm: DesignModel, controller: control.StateSpace, n: int,
-                  amplitude: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+def step_response(
+    dm: DesignModel,
+    controller: control.StateSpace,
+    n: int,
+    amplitude: dict[str, float] | None = None,
+) -> dict[str, np.ndarray]:
     """The linear loop (augmented model and ``controller`` on its inputs e = r − M y,
     :func:`flexarm.control.lqg.input_rows`) for a step of the tracked channels' references
     at k = 0 (``amplitude`` per channel; default the scenario's): t (s), the undelayed
@@ -423,8 +500,9 @@ def step_response(dm: DesignModel, controller: control.StateSpace, n: int,
     and the channels' references ``r``; no saturation and no friction."""
     P = dm.augmented
     A, B, C = (np.asarray(a) for a in (P.A, P.B, P.C))
-    Ak, Bk, Ck, Dk = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
-                                               controller.D))
+    Ak, Bk, Ck, Dk = (
+        np.asarray(a) for a in (controller.A, controller.B, controller.C, controller.D)
+    )
     M = input_rows(P, controller)
     nx = dm.sampled.nstates
     Cu = np.asarray(dm.sampled.C)
@@ -450,8 +528,15 @@ def _pole_table(z: np.ndarray, dt: float) -> list[dict[str, float]]:
         s = cmath.log(p) / dt if abs(p) > 1e-300 else complex(-np.inf)
         wn = abs(s) if np.isfinite(s.real) else float("inf")
         zeta = -s.real / wn if wn and np.isfinite(wn) else 1.0
-        out.append({"re": float(p.real), "im": float(p.imag), "abs": float(abs(p)),
-                    "natural_frequency": float(wn), "damping": float(zeta)})
+        out.append(
+            {
+                "re": float(p.real),
+                "im": float(p.imag),
+                "abs": float(abs(p)),
+                "natural_frequency": float(wn),
+                "damping": float(zeta),
+            }
+        )
     return out
 
 
@@ -479,15 +564,24 @@ def _regulator(dm: DesignModel, Ar, Br, idx, method, q, r, poles, pole_domain, r
             Q[na + j, na + j] = wi[f"int_{dm.channels[i]}"]
         R = rho * _weights_matrix(1.0 / dm.limit**2 if r is None else r, m, "r")
         K, _, _ = control.dlqr(Ar, Br, Q, R)
-        return np.asarray(K), {"q": w, "q_integral": wi, "r": np.diag(R).tolist(),
-                               "rule": ("Bryson (1/scale²)" if q is None and r is None
-                                        else "given"),
-                               "scales": dict(zip(dm.channels, dm.scales, strict=True))}, None
+        return (
+            np.asarray(K),
+            {
+                "q": w,
+                "q_integral": wi,
+                "r": np.diag(R).tolist(),
+                "rule": ("Bryson (1/scale²)" if q is None and r is None else "given"),
+                "scales": dict(zip(dm.channels, dm.scales, strict=True)),
+            },
+            None,
+        )
     zp = _poles_z(poles, pole_domain, dm.dt, "poles")
     if zp.size != nx + ni:
-        raise ValueError(f"poles: {zp.size} given; give {nx + ni}: one per state of the "
-                         f"arm's model ({', '.join(dm.continuous.state_labels)})"
-                         + (f" and one per integrator ({ni})" if ni else ""))
+        raise ValueError(
+            f"poles: {zp.size} given; give {nx + ni}: one per state of the "
+            f"arm's model ({', '.join(dm.continuous.state_labels)})"
+            + (f" and one per integrator ({ni})" if ni else "")
+        )
     # states the feedback acts through: arm, input registers, the integrated channels'
     # registers, integrators; the other output registers get no gain (poles stay at 0)
     keep = list(range(nx + m * dm.computation_delay))
@@ -502,8 +596,11 @@ def _regulator(dm: DesignModel, Ar, Br, idx, method, q, r, poles, pole_domain, r
     K = np.zeros((m, na + ni))
     K[:, keep] = Kred
     given = [complex(v) for v in poles]
-    return K, {"poles": [[v.real, v.imag] for v in given], "pole_domain": pole_domain}, \
-        np.concatenate([allp, np.zeros(na + ni - len(keep))])
+    return (
+        K,
+        {"poles": [[v.real, v.imag] for v in given], "pole_domain": pole_domain},
+        np.concatenate([allp, np.zeros(na + ni - len(keep))]),
+    )
 
 
 def disturbance_model(dm: DesignModel) -> control.StateSpace:
@@ -515,12 +612,18 @@ def disturbance_model(dm: DesignModel) -> control.StateSpace:
     na, m = B.shape
     p = C.shape[0]
     G = np.zeros((na, m))
-    G[:dm.sampled.nstates] = np.asarray(dm.sampled.B)
+    G[: dm.sampled.nstates] = np.asarray(dm.sampled.B)
     Ae = np.block([[A, G], [np.zeros((m, na)), np.eye(m)]])
-    return control.ss(Ae, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((p, m))]),
-                      np.zeros((p, m)), P.dt,
-                      states=list(P.state_labels) + [f"disturbance_{k}" for k in P.input_labels],
-                      inputs=list(P.input_labels), outputs=list(P.output_labels))
+    return control.ss(
+        Ae,
+        np.vstack([B, np.zeros((m, m))]),
+        np.hstack([C, np.zeros((p, m))]),
+        np.zeros((p, m)),
+        P.dt,
+        states=list(P.state_labels) + [f"disturbance_{k}" for k in P.input_labels],
+        inputs=list(P.input_labels),
+        outputs=list(P.output_labels),
+    )
 
 
 def _observer(dm: DesignModel, plant, level, observer_poles, pole_domain, warnings):
@@ -534,33 +637,39 @@ def _observer(dm: DesignModel, plant, level, observer_poles, pole_domain, warnin
     if observer_poles is not None:
         zo = _poles_z(observer_poles, pole_domain, dm.dt, "observer_poles")
         if zo.size != nx + nd:
-            raise ValueError(f"observer_poles: {zo.size} given; give {nx + nd}, one per state "
-                             f"of the arm's model ({', '.join(dm.continuous.state_labels)})"
-                             + (f" and one per disturbance ({nd})" if nd else "")
-                             + "; the delay registers get z = 0")
+            raise ValueError(
+                f"observer_poles: {zo.size} given; give {nx + nd}, one per state "
+                f"of the arm's model ({', '.join(dm.continuous.state_labels)})"
+                + (f" and one per disturbance ({nd})" if nd else "")
+                + "; the delay registers get z = 0"
+            )
         L = _place(A.T, C.T, np.concatenate([zo, np.zeros(ne - zo.size)]), "observer_poles").T
         return L, {"kind": "placed", "poles": [[float(x.real), float(x.imag)] for x in zo]}
     V = np.array([s**2 + qq**2 / 12 for s, qq in zip(dm.noise, dm.quanta, strict=True)])
     for i, v in enumerate(V):
         if v <= 0:
-            V[i] = (1e-3 * dm.scales[i])**2
-            warnings.append(f"sensor {dm.channels[i]!r} has neither noise nor quantum: the "
-                            f"observer assumes σ = {math.sqrt(V[i]):.3g} (0.1 % of its scale); "
-                            "give [sensors] noise or quantum for a Kalman gain that fits the rig")
+            V[i] = (1e-3 * dm.scales[i]) ** 2
+            warnings.append(
+                f"sensor {dm.channels[i]!r} has neither noise nor quantum: the "
+                f"observer assumes σ = {math.sqrt(V[i]):.3g} (0.1 % of its scale); "
+                "give [sensors] noise or quantum for a Kalman gain that fits the rig"
+            )
     sd = np.maximum(level, DISTURBANCE_FRACTION * dm.limit)
     G = np.zeros((ne, m))
     G[:nx] = np.asarray(dm.sampled.B)
     W = G @ np.diag(sd**2) @ G.T
     for j in range(nd):  # a disturbance state walks by σ_d per DISTURBANCE_TIME
-        W[na + j, na + j] = sd[j]**2 * dm.dt / DISTURBANCE_TIME
+        W[na + j, na + j] = sd[j] ** 2 * dm.dt / DISTURBANCE_TIME
     W += 1e-9 * float(np.max(np.diag(W))) * np.eye(ne)
     L, _, _ = control.dlqe(A, np.eye(ne), C, W, np.diag(V))
-    return np.asarray(L), {"kind": "Kalman predictor", "V": V.tolist(),
-                           "disturbance_sigma": sd.tolist()}
+    return np.asarray(L), {
+        "kind": "Kalman predictor",
+        "V": V.tolist(),
+        "disturbance_sigma": sd.tolist(),
+    }
 
 
-def separation_check(dm: DesignModel, K, L, controller, integral,
-                     observer_plant=None) -> float:
+def separation_check(dm: DesignModel, K, L, controller, integral, observer_plant=None) -> float:
     """The separation principle, checked on the matrices: the loop of the augmented model
     and ``controller`` (states ẑ of ``observer_plant``, default the augmented model, then
     the integrators q) in the coordinates (z, q, ε = E z − ẑ) (E: z into the observer's
@@ -571,8 +680,9 @@ def separation_check(dm: DesignModel, K, L, controller, integral,
     Po = P if observer_plant is None else observer_plant
     A, B, C = (np.asarray(a) for a in (P.A, P.B, P.C))
     Ao, Co = np.asarray(Po.A), np.asarray(Po.C)
-    Ak, Bk, Ck, Dk = (np.asarray(a) for a in (controller.A, controller.B, controller.C,
-                                               controller.D))
+    Ak, Bk, Ck, Dk = (
+        np.asarray(a) for a in (controller.A, controller.B, controller.C, controller.D)
+    )
     MC = input_rows(P, controller) @ C
     na, ne, nk = A.shape[0], Ao.shape[0], Ak.shape[0]
     ni = nk - ne
@@ -580,23 +690,37 @@ def separation_check(dm: DesignModel, K, L, controller, integral,
     # (z, q, ε) → (z, ẑ, q): ẑ = E z − ε
     T = np.zeros((na + nk, na + nk))
     T[:na, :na] = np.eye(na)
-    T[na:na + ne, :na], T[na:na + ne, na + ni:] = np.eye(ne, na), -np.eye(ne)
-    T[na + ne:, na:na + ni] = np.eye(ni)
+    T[na : na + ne, :na], T[na : na + ne, na + ni :] = np.eye(ne, na), -np.eye(ne)
+    T[na + ne :, na : na + ni] = np.eye(ni)
     Mt = np.linalg.solve(T, M @ T)
     Ar, Br = integral_model(P, integral)
-    dev = max(np.abs(Mt[na + ni:, :na + ni]).max(initial=0.0),
-              np.abs(Mt[:na + ni, :na + ni] - (Ar - Br @ K)).max(),
-              np.abs(Mt[na + ni:, na + ni:] - (Ao - L @ Co)).max())
+    dev = max(
+        np.abs(Mt[na + ni :, : na + ni]).max(initial=0.0),
+        np.abs(Mt[: na + ni, : na + ni] - (Ar - Br @ K)).max(),
+        np.abs(Mt[na + ni :, na + ni :] - (Ao - L @ Co)).max(),
+    )
     return float(dev / max(np.abs(M).max(), 1.0))
 
 
 # ----------------------------------------------------------------------------- design
-def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
-                  observer_poles=None, pole_domain: str = "s", integral: bool = False,
-                  friction_compensation: bool = True, measured=None, setpoints=None,
-                  disturbance: bool | None = None, fit_limit: bool = True,
-                  two_dof: bool = True,
-                  check_seconds: float = 3.0) -> Design:
+def design_linear(
+    scenario,
+    method: str = "lqr",
+    *,
+    q=None,
+    r=None,
+    poles=None,
+    observer_poles=None,
+    pole_domain: str = "s",
+    integral: bool = False,
+    friction_compensation: bool = True,
+    measured=None,
+    setpoints=None,
+    disturbance: bool | None = None,
+    fit_limit: bool = True,
+    two_dof: bool = True,
+    check_seconds: float = 3.0,
+) -> Design:
     """``lqr`` or ``place`` state feedback with an observer for ``scenario``'s arm (module
     docstring); a :class:`~flexarm.design.result.Design`.
 
@@ -626,8 +750,10 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     if method == "place" and (q is not None or r is not None):
         raise ValueError("q, r: only for method = 'lqr'; place takes poles")
     if method == "place" and poles is None:
-        raise ValueError("poles: method = 'place' needs the closed-loop poles of the arm's "
-                         "states (e.g. poles = [-20, -25, -8+15j, -8-15j]; see info)")
+        raise ValueError(
+            "poles: method = 'place' needs the closed-loop poles of the arm's "
+            "states (e.g. poles = [-20, -25, -8+15j, -8-15j]; see info)"
+        )
     dm = design_model(scenario, measured, setpoints)
     P = dm.augmented
     m = P.ninputs
@@ -640,13 +766,17 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     fc = None
     if friction_compensation:
         if m != 1 or len(dm.coulomb) != 1:
-            warnings.append("friction compensation: one joint only ([controller."
-                            "friction_compensation]); left out for this multi-joint arm")
+            warnings.append(
+                "friction compensation: one joint only ([controller."
+                "friction_compensation]); left out for this multi-joint arm"
+            )
         elif dm.coulomb[0] <= 0:
             warnings.append("friction compensation: the arm has no Coulomb friction; none added")
         else:
-            hub = next((dm.channels[i] for i in dm.tracked
-                        if dm.signals[i] in ("motor_angle", "theta_1")), None)
+            hub = next(
+                (dm.channels[i] for i in dm.tracked if dm.signals[i] in ("motor_angle", "theta_1")),
+                None,
+            )
             if hub is None:
                 warnings.append("friction compensation: no measured hub angle channel; none added")
             else:
@@ -655,9 +785,11 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     if disturbance is None:
         disturbance = not integral
     if disturbance and integral:
-        raise ValueError("integral and disturbance: both give integral action; choose one "
-                         "(integral: integrators of the errors, LQI; disturbance: an estimated "
-                         "constant input disturbance, cancelled)")
+        raise ValueError(
+            "integral and disturbance: both give integral action; choose one "
+            "(integral: integrators of the errors, LQI; disturbance: an estimated "
+            "constant input disturbance, cancelled)"
+        )
     Po = disturbance_model(dm) if disturbance else P
     nd = Po.nstates - P.nstates
     L, obs = _observer(dm, Po, level, observer_poles, pole_domain, warnings)
@@ -667,9 +799,10 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     def attempt(rho):
         K, weights, wanted = _regulator(dm, Ar, Br, idx, method, q, r, poles, pole_domain, rho)
         # with a disturbance estimate d̂: u = −K x̂ − d̂ (cancelled where it enters)
-        Ko = np.hstack([K[:, :P.nstates], np.eye(m)[:, :nd], K[:, P.nstates:]])
-        ctrl = observer_controller(Po, Ko, L, integral=idx, name=method, reference=(
-            (dm.tracked, Zo) if two_dof else None))
+        Ko = np.hstack([K[:, : P.nstates], np.eye(m)[:, :nd], K[:, P.nstates :]])
+        ctrl = observer_controller(
+            Po, Ko, L, integral=idx, name=method, reference=((dm.tracked, Zo) if two_dof else None)
+        )
         sr = step_response(dm, ctrl, n)
         return K, weights, wanted, ctrl, sr, np.abs(sr["u"]).max(axis=0) + ff
 
@@ -698,29 +831,36 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
         # of hub error gives: no chatter on the last count (control/friction_compensation.py)
         # (the regulator's command for a rigid shift of half a count: |K_x Z| q / 2)
         h = dm.channels.index(fc["measured"])
-        kp = float(np.abs(K[:, :P.nstates] @ dm.rigid[:, dm.tracked.index(h)])[0])
+        kp = float(np.abs(K[:, : P.nstates] @ dm.rigid[:, dm.tracked.index(h)])[0])
         fc["rest_deadband"] = 0.5 * dm.quanta[h] * kp
     reg = np.linalg.eigvals(Ar - Br @ K)
     est = np.linalg.eigvals(np.asarray(Po.A) - L @ np.asarray(Po.C))
     cl = loop_poles(P, ctrl)
     sep = separation_check(dm, K, L, ctrl, idx, Po)
     if sep > 1e-9:
-        warnings.append(f"separation check: the loop deviates from the block-triangular form "
-                        f"by {sep:.3g} (relative); the closed-loop poles may differ from the "
-                        "regulator's and observer's")
+        warnings.append(
+            f"separation check: the loop deviates from the block-triangular form "
+            f"by {sep:.3g} (relative); the closed-loop poles may differ from the "
+            "regulator's and observer's"
+        )
     if np.abs(reg).max() >= 1 or np.abs(est).max() >= 1:
-        warnings.append(f"the design is not stable: largest |z| regulator "
-                        f"{np.abs(reg).max():.6g}, observer {np.abs(est).max():.6g}")
+        warnings.append(
+            f"the design is not stable: largest |z| regulator "
+            f"{np.abs(reg).max():.6g}, observer {np.abs(est).max():.6g}"
+        )
     if np.any(peak > dm.limit * (1 + 1e-9)):
         warnings.append(
             "peak command of the linear loop for a reference step of "
             + ", ".join(f"{a:g}" for a in dm.amplitude.values())
             + f" (+ the friction feedforward): {', '.join(f'{v:.3g}' for v in peak)} exceeds the "
             f"limit {', '.join(f'{v:g}' for v in dm.limit)}; the command saturates"
-            + (" (lower the tracked channel's weight q or raise r)" if method == "lqr" else
-               " (give slower poles)"))
-    settle = {dm.channels[i]: _settling(sr["t"], sr["y"][:, i], sr["r"][i])
-              for i in dm.tracked}
+            + (
+                " (lower the tracked channel's weight q or raise r)"
+                if method == "lqr"
+                else " (give slower poles)"
+            )
+        )
+    settle = {dm.channels[i]: _settling(sr["t"], sr["y"][:, i], sr["r"][i]) for i in dm.tracked}
 
     data = scenario.model_dump(mode="json", exclude_none=True)
     sens = data.setdefault("sensors", {})
@@ -731,30 +871,44 @@ def design_linear(scenario, method: str = "lqr", *, q=None, r=None, poles=None,
     if fc:
         spec["friction_compensation"] = fc
     data["controller"] = spec
-    data["description"] = (f"{scenario.name} with a {method} state feedback and "
-                           f"{obs['kind'].lower()} observer designed by flexarm")
+    data["description"] = (
+        f"{scenario.name} with a {method} state feedback and "
+        f"{obs['kind'].lower()} observer designed by flexarm"
+    )
     sc = scenario_from_dict(data, f"{scenario.name}: the {method} design")
 
     cpx = lambda a: [[float(v.real), float(v.imag)] for v in a]  # noqa: E731
     info = {
-        "model": {"arm_states": list(dm.continuous.state_labels), "n_arm": dm.n_arm,
-                  "n_augmented": P.nstates, "n_integrators": len(idx),
-                  "n_disturbances": nd, "two_dof": two_dof,
-                  "n_controller": ctrl.nstates, "period": dm.dt,
-                  "computation_delay": dm.computation_delay,
-                  "sensor_delays": dict(zip(dm.channels, dm.sensor_delays, strict=True)),
-                  "measured": dm.channels, "setpoints": dict(zip(dm.channels, dm.setpoints, strict=True))},
+        "model": {
+            "arm_states": list(dm.continuous.state_labels),
+            "n_arm": dm.n_arm,
+            "n_augmented": P.nstates,
+            "n_integrators": len(idx),
+            "n_disturbances": nd,
+            "two_dof": two_dof,
+            "n_controller": ctrl.nstates,
+            "period": dm.dt,
+            "computation_delay": dm.computation_delay,
+            "sensor_delays": dict(zip(dm.channels, dm.sensor_delays, strict=True)),
+            "measured": dm.channels,
+            "setpoints": dict(zip(dm.channels, dm.setpoints, strict=True)),
+        },
         "weights": weights,
-        "K": K.tolist(), "L": L.tolist(),
+        "K": K.tolist(),
+        "L": L.tolist(),
         "regulator_poles": _pole_table(reg, dm.dt),
         "observer_poles": _pole_table(est, dm.dt),
         "closed_loop_poles": cpx(cl),
         "separation_error": sep,
         "placement_error": None if wanted is None else _match(reg, wanted),
         "friction_compensation": fc,
-        "step": {"amplitude": dm.amplitude, "peak_command": peak.tolist(),
-                 "limit": dm.limit.tolist(), "settling_time_2pc": settle,
-                 "model": "linear loop, no friction or saturation"},
+        "step": {
+            "amplitude": dm.amplitude,
+            "peak_command": peak.tolist(),
+            "limit": dm.limit.tolist(),
+            "settling_time_2pc": settle,
+            "model": "linear loop, no friction or saturation",
+        },
     }
     return Design(method, sc, ctrl, info, warnings)
 

@@ -88,8 +88,9 @@ def _tf_lists(g: control.TransferFunction) -> tuple[list[float], list[float]]:
     return _coeffs(num if num.size else [0.0]), _coeffs(den)
 
 
-def _move_profile(model, n, traj, gb, t_inner, hub_delay: int, coupling: float,
-                  coulomb_cmd: float) -> tuple[float, float]:
+def _move_profile(
+    model, n, traj, gb, t_inner, hub_delay: int, coupling: float, coulomb_cmd: float
+) -> tuple[float, float]:
     """(peak |θm − θt| in rad, peak |u| in command units) of the move through the designed
     loops, linear: θ̂_mr = N u (:func:`~flexarm.control.outer_loop.trajectory_references`),
     the hub follows the inner closed loop T_in (its measured angle lags ``hub_delay``
@@ -112,12 +113,23 @@ def _move_profile(model, n, traj, gb, t_inner, hub_delay: int, coupling: float,
     return float(np.max(np.abs(th_m - th_t))), float(np.max(np.abs(u)) + abs(coulomb_cmd))
 
 
-def _size_quasi_parabolic(model, gb, distance, design_deflection, max_command, coupling,
-                          coulomb_cmd, rounding_time, t_inner, hub_delay):
+def _size_quasi_parabolic(
+    model,
+    gb,
+    distance,
+    design_deflection,
+    max_command,
+    coupling,
+    coulomb_cmd,
+    rounding_time,
+    t_inner,
+    hub_delay,
+):
     """Largest A (rad/s², within 1 %) of a quasi-parabolic move with corner time
     ``rounding_time`` whose peak deflection through the designed loops
     (:func:`_move_profile`) is <= ``design_deflection`` and whose command is
     <= ``max_command``; bisection in log A (both grow with A)."""
+
     def trial(a):
         try:
             tr = quasi_parabolic(distance, a, rounding_time=rounding_time)
@@ -134,8 +146,10 @@ def _size_quasi_parabolic(model, gb, distance, design_deflection, max_command, c
         a /= 2.0
         ok = trial(a)
         if a < 1e-9:
-            raise ValueError("no quasi-parabolic move meets the deflection and command "
-                             "limits; raise design_deflection or command_fraction")
+            raise ValueError(
+                "no quasi-parabolic move meets the deflection and command "
+                "limits; raise design_deflection or command_fraction"
+            )
     lo, best = a, ok
     hi = a * 2.0
     while True:
@@ -153,8 +167,18 @@ def _size_quasi_parabolic(model, gb, distance, design_deflection, max_command, c
     return best[1:]
 
 
-def _auto_pd(t_inner, gb, dt, tip_delay, gauge: bool, w1: float, kick: float,
-             quantum: float, g1_inf: float, tip_bandwidth: float = 0.0):
+def _auto_pd(
+    t_inner,
+    gb,
+    dt,
+    tip_delay,
+    gauge: bool,
+    w1: float,
+    kick: float,
+    quantum: float,
+    g1_inf: float,
+    tip_bandwidth: float = 0.0,
+):
     """(spectral radius, kp, kd, p) of the filtered PD G_cb (:func:`pd_tf`, p from
     :func:`derivative_pole`) minimising the spectral radius of the linear tip loop
     θ_mr = G_cb (θ_tr − θt_meas), θm_meas = T_in θ_mr (T_in with the hub sensor's delay),
@@ -181,9 +205,19 @@ def _auto_pd(t_inner, gb, dt, tip_delay, gauge: bool, w1: float, kick: float,
     return best
 
 
-def nested_metrics(res, *, start: float, distance: float, move_end: float, count: float,
-                   limit: float, band: float, settle_after: float = 0.3,
-                   steady_window: float = 0.5, offset: float = 0.0) -> dict:
+def nested_metrics(
+    res,
+    *,
+    start: float,
+    distance: float,
+    move_end: float,
+    count: float,
+    limit: float,
+    band: float,
+    settle_after: float = 0.3,
+    steady_window: float = 0.5,
+    offset: float = 0.0,
+) -> dict:
     """Figures of a simulated move of ``distance`` rad starting at ``start`` s: tip settling
     (s from the start, ``band`` of the move), hub error at rest (mean of θ_goal − measured θm
     over the last ``steady_window`` s, encoder counts of ``count`` rad), residual tip
@@ -193,8 +227,7 @@ def nested_metrics(res, *, start: float, distance: float, move_end: float, count
 
     t = res.time
     goal = offset + distance
-    m = step_metrics(t, res["tip_angle"], res["reference"], band=band, t_step=start,
-                     target=goal)
+    m = step_metrics(t, res["tip_angle"], res["reference"], band=band, t_step=start, target=goal)
     last = t >= t[-1] - steady_window
     hub_err = float(np.mean(goal - res.measured["motor_angle"][last]))
     win = t >= move_end + settle_after
@@ -205,24 +238,40 @@ def nested_metrics(res, *, start: float, distance: float, move_end: float, count
         "tip_overshoot": m.overshoot,
         "hub_error_counts": hub_err / count if count else math.nan,
         "hub_error_rad": hub_err,
-        "residual_tip_oscillation_rad": float(np.max(np.abs(tip - np.mean(tip)))) if tip.size else math.nan,
+        "residual_tip_oscillation_rad": float(np.max(np.abs(tip - np.mean(tip))))
+        if tip.size
+        else math.nan,
         "peak_command": float(np.max(u)),
         "time_at_limit_s": float(np.sum(u >= limit * (1 - 1e-9)) * (t[1] - t[0])),
         "peak_deflection_rad": float(np.max(np.abs(res["motor_angle"] - res["tip_angle"]))),
     }
 
 
-def design_nested(scenario, *, distance: float | None = None,
-                  trajectory: str = "quasi_parabolic", acceleration: float | None = None,
-                  snap: float | None = None, rounding_time: float | None = None,
-                  max_deflection: float = 0.1, design_deflection: float | None = None,
-                  command_fraction: float = 0.5, dc_gain: float | None = None,
-                  design_step: float | None = None, gcb=None,
-                  advance_by_inner_lag: bool = True, move_start: float = 0.05,
-                  duration: float | None = None, band: float = 0.02,
-                  inner_band: float = 0.02, inner_step: float | None = None,
-                  derivative_kick: float = 0.05, rest_deadband_counts: float = 1.5,
-                  min_root: float = -0.5, seed: int = 0) -> Design:
+def design_nested(
+    scenario,
+    *,
+    distance: float | None = None,
+    trajectory: str = "quasi_parabolic",
+    acceleration: float | None = None,
+    snap: float | None = None,
+    rounding_time: float | None = None,
+    max_deflection: float = 0.1,
+    design_deflection: float | None = None,
+    command_fraction: float = 0.5,
+    dc_gain: float | None = None,
+    design_step: float | None = None,
+    gcb=None,
+    advance_by_inner_lag: bool = True,
+    move_start: float = 0.05,
+    duration: float | None = None,
+    band: float = 0.02,
+    inner_band: float = 0.02,
+    inner_step: float | None = None,
+    derivative_kick: float = 0.05,
+    rest_deadband_counts: float = 1.5,
+    min_root: float = -0.5,
+    seed: int = 0,
+) -> Design:
     """Feliu's nested loops for the single-link rig of ``scenario`` (module docstring).
 
     Parameters (SI; angles in rad, commands in the drive's units)
@@ -270,8 +319,10 @@ def design_nested(scenario, *, distance: float | None = None,
     """
     sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
     if sc.arm.kind != "single_link":
-        raise ValueError(f"scenario {sc.name!r}: design_nested is Feliu's single-link scheme; "
-                         f"this arm has {len(sc.arm.links)} links")
+        raise ValueError(
+            f"scenario {sc.name!r}: design_nested is Feliu's single-link scheme; "
+            f"this arm has {len(sc.arm.links)} links"
+        )
     # a single-link scenario has [sampling] and [simulation] (validated)
     assert sc.sampling is not None and sc.simulation is not None
     dt, delay = float(sc.sampling.period), int(sc.sampling.delay)
@@ -281,8 +332,10 @@ def design_nested(scenario, *, distance: float | None = None,
     J, V, k_u = motor_design_model(model)
     limit = float(sc.actuator.limit or model.drive.limit)
     if not math.isfinite(limit):
-        raise ValueError(f"scenario {sc.name!r}: the drive has no finite limit; give "
-                         "[actuator] limit (V or A): the peak-command rule sizes to it")
+        raise ValueError(
+            f"scenario {sc.name!r}: the drive has no finite limit; give "
+            "[actuator] limit (V or A): the peak-command rule sizes to it"
+        )
     quanta = sensor_quanta(sc.sensors)
     count = quanta.get("motor_angle", 0.0)
     warnings: list[str] = []
@@ -293,35 +346,47 @@ def design_nested(scenario, *, distance: float | None = None,
     if "tip_angle" in sc.sensors:
         tip_sensor = sc.sensors["tip_angle"]
         if float(tip_sensor.gain) != 1.0:
-            raise ValueError(f"scenario {sc.name!r}: [sensors.tip_angle] gain = "
-                             f"{float(tip_sensor.gain):g}; the tip loop reads the channel as "
-                             "the tip angle in rad: calibrate it to gain = 1")
+            raise ValueError(
+                f"scenario {sc.name!r}: [sensors.tip_angle] gain = "
+                f"{float(tip_sensor.gain):g}; the tip loop reads the channel as "
+                "the tip angle in rad: calibrate it to gain = 1"
+            )
         tip, to_angle = "tip_angle", 0.0
     elif "tip_deflection" in sc.sensors:
         s = sc.sensors["tip_deflection"]
         length = getattr(sc.arm.beam, "length", None)
         if not length or not float(s.gain):
-            raise ValueError(f"scenario {sc.name!r}: the tip comes from [sensors.tip_deflection] "
-                             f"(gain {float(s.gain):g}) and the link length "
-                             f"({length!r} m); both must be non-zero")
+            raise ValueError(
+                f"scenario {sc.name!r}: the tip comes from [sensors.tip_deflection] "
+                f"(gain {float(s.gain):g}) and the link length "
+                f"({length!r} m); both must be non-zero"
+            )
         tip_sensor = s
         tip, to_angle = "tip_deflection", 1.0 / (float(s.gain) * float(length))
     else:
-        raise ValueError(f"scenario {sc.name!r}: the tip loop needs a tip measurement: add "
-                         "[sensors.tip_angle] or [sensors.tip_deflection] (strain gauge)")
+        raise ValueError(
+            f"scenario {sc.name!r}: the tip loop needs a tip measurement: add "
+            "[sensors.tip_angle] or [sensors.tip_deflection] (strain gauge)"
+        )
 
     tip_delay = int(tip_sensor.delay) - hub_delay
     if tip_delay < 0:
-        warnings.append(f"the tip channel lags less than the hub's ({tip_sensor.delay} < "
-                        f"{hub_delay} samples); the G_cb design takes it as equal")
+        warnings.append(
+            f"the tip channel lags less than the hub's ({tip_sensor.delay} < "
+            f"{hub_delay} samples); the G_cb design takes it as equal"
+        )
         tip_delay = 0
     if hub is not None and float(hub.bandwidth) > 0:
-        warnings.append(f"the hub sensor's {float(hub.bandwidth):g} Hz low-pass is not in "
-                        "the inner loop's design model (its delay is)")
+        warnings.append(
+            f"the hub sensor's {float(hub.bandwidth):g} Hz low-pass is not in "
+            "the inner loop's design model (its delay is)"
+        )
     d = float(sc.reference.amplitude) if distance is None else float(distance)
     if d == 0.0 or not math.isfinite(d):
-        raise ValueError(f"scenario {sc.name!r}: the move is {d!r} rad; give distance= or a "
-                         "non-zero [reference] amplitude")
+        raise ValueError(
+            f"scenario {sc.name!r}: the move is {d!r} rad; give distance= or a "
+            "non-zero [reference] amplitude"
+        )
     if trajectory not in ("parabolic", "quasi_parabolic"):
         raise ValueError(f"trajectory = {trajectory!r}; use 'parabolic' or 'quasi_parabolic'")
     dist = abs(d)
@@ -341,14 +406,28 @@ def design_nested(scenario, *, distance: float | None = None,
     # it (× 0.7) until the design meets its constraints (a given dc_gain is kept)
     horizon = max(0.3, 30 * (delay + hub_delay) * dt)
     if avail <= 0:
-        raise ValueError(f"scenario {sc.name!r}: the compensation alone needs the whole "
-                         f"limit {limit:g}: coupling {abs(coupling_cmd) * max_deflection:.4g} "
-                         f"at max_deflection {max_deflection:g} rad + friction "
-                         f"{abs(coulomb_cmd):.4g}; lower max_deflection")
+        raise ValueError(
+            f"scenario {sc.name!r}: the compensation alone needs the whole "
+            f"limit {limit:g}: coupling {abs(coupling_cmd) * max_deflection:.4g} "
+            f"at max_deflection {max_deflection:g} rad + friction "
+            f"{abs(coulomb_cmd):.4g}; lower max_deflection"
+        )
     design = lambda g, **kw: design_inner_loop(  # noqa: E731
-        model, dt, delay + hub_delay, dc_gain=g, current_limit=limit, step=step,
-        bending=max_deflection, coupling_gain=c_hat, coulomb=float(model.friction.coulomb),
-        band=inner_band, horizon=horizon, seed=seed, min_root=min_root, **kw)
+        model,
+        dt,
+        delay + hub_delay,
+        dc_gain=g,
+        current_limit=limit,
+        step=step,
+        bending=max_deflection,
+        coupling_gain=c_hat,
+        coulomb=float(model.friction.coulomb),
+        band=inner_band,
+        horizon=horizon,
+        seed=seed,
+        min_root=min_root,
+        **kw,
+    )
     if dc_gain is not None:
         g, inner = gain, design(gain)
     else:
@@ -363,13 +442,17 @@ def design_nested(scenario, *, distance: float | None = None,
                 if "no inner-loop design" not in str(exc):
                     raise
         if inner is None:
-            raise ValueError(f"scenario {sc.name!r}: no inner loop settles without overshoot "
-                             f"for G_cm1(1) from {gain:.4g} down to {g:.4g} (command/rad) "
-                             f"with {delay + hub_delay} samples of loop delay; give dc_gain")
+            raise ValueError(
+                f"scenario {sc.name!r}: no inner loop settles without overshoot "
+                f"for G_cm1(1) from {gain:.4g} down to {g:.4g} (command/rad) "
+                f"with {delay + hub_delay} samples of loop delay; give dc_gain"
+            )
     if g != gain:
-        warnings.append(f"G_cm1(1) lowered from {gain:.4g} to {g:.4g} (command/rad): the "
-                        f"{delay + hub_delay}-sample loop delay admits no faster design "
-                        "without overshoot")
+        warnings.append(
+            f"G_cm1(1) lowered from {gain:.4g} to {g:.4g} (command/rad): the "
+            f"{delay + hub_delay}-sample loop delay admits no faster design "
+            "without overshoot"
+        )
     gain = g
     t_inner = inner.closed_loop(model)
 
@@ -390,8 +473,17 @@ def design_nested(scenario, *, distance: float | None = None,
         tau = 2.0 * inner.settling_time if rounding_time is None else float(rounding_time)
         if acceleration is None:
             traj, n, _, _ = _size_quasi_parabolic(
-                model, gb, dist, defl_design, command_fraction * limit, c_hat, coulomb_cmd,
-                tau, t_inner, hub_delay)
+                model,
+                gb,
+                dist,
+                defl_design,
+                command_fraction * limit,
+                c_hat,
+                coulomb_cmd,
+                tau,
+                t_inner,
+                hub_delay,
+            )
         else:
             kw = {"max_snap": float(snap)} if snap is not None else {"rounding_time": tau}
             traj = quasi_parabolic(dist, float(acceleration), **kw)
@@ -400,22 +492,29 @@ def design_nested(scenario, *, distance: float | None = None,
         assert traj.max_snap is not None  # a quasi-parabolic move has one
         s_val = float(traj.max_snap)
     # the move through the designed loops (linear): what the sizing limits
-    defl_loop, u_move = _move_profile(model, n, traj, gb, t_inner, hub_delay, c_hat,
-                                      coulomb_cmd)
+    defl_loop, u_move = _move_profile(model, n, traj, gb, t_inner, hub_delay, c_hat, coulomb_cmd)
     if defl_loop > max_deflection * (1 + 1e-9):
-        warnings.append(f"the move bends the link to {defl_loop:.4g} rad through the "
-                        f"designed loops (linear), beyond max_deflection {max_deflection:g} rad")
+        warnings.append(
+            f"the move bends the link to {defl_loop:.4g} rad through the "
+            f"designed loops (linear), beyond max_deflection {max_deflection:g} rad"
+        )
     if defl_lin > max_deflection * (1 + 1e-9):
-        warnings.append(f"the ideal θm = N u bends the link to {defl_lin:.4g} rad, beyond "
-                        f"max_deflection {max_deflection:g} rad (the inner loop filters it)")
+        warnings.append(
+            f"the ideal θm = N u bends the link to {defl_lin:.4g} rad, beyond "
+            f"max_deflection {max_deflection:g} rad (the inner loop filters it)"
+        )
     if trajectory == "parabolic":
         # N has a polynomial part of degree 2 (FRB eq. (13)): θ̂_mr steps where ü jumps
-        warnings.append("a parabolic move's feedforward steps at its acceleration corners "
-                        "(FRB Sec. V-B): the command saturates there briefly; the "
-                        "quasi-parabolic move avoids it")
+        warnings.append(
+            "a parabolic move's feedforward steps at its acceleration corners "
+            "(FRB Sec. V-B): the command saturates there briefly; the "
+            "quasi-parabolic move avoids it"
+        )
     if u_move > limit:
-        warnings.append(f"the move needs {u_move:.4g} (command units) through the designed "
-                        f"loops (linear), beyond the limit {limit:g}: it will saturate")
+        warnings.append(
+            f"the move needs {u_move:.4g} (command units) through the designed "
+            f"loops (linear), beyond the limit {limit:g}: it will saturate"
+        )
     # the inner loop's lag seen at the hub itself (its measurement lags hub_delay more)
     advance = max(0.0, inner.lag - hub_delay * dt) if advance_by_inner_lag else 0.0
     start = max(float(move_start), advance)
@@ -426,12 +525,26 @@ def design_nested(scenario, *, distance: float | None = None,
         q_tip = count if tip == "tip_deflection" else quanta.get("tip_angle", 0.0)
         g1n0, g1d0 = _tf_lists(inner.gcm1)
         g1_inf = g1n0[0] / g1d0[0] if len(g1n0) == len(g1d0) else 0.0
-        rho, kp, kd, pole = _auto_pd(t_inner, gb, dt, tip_delay, tip == "tip_deflection", w1,
-                                     derivative_kick * limit, q_tip, g1_inf,
-                                     float(tip_sensor.bandwidth))
+        rho, kp, kd, pole = _auto_pd(
+            t_inner,
+            gb,
+            dt,
+            tip_delay,
+            tip == "tip_deflection",
+            w1,
+            derivative_kick * limit,
+            q_tip,
+            g1_inf,
+            float(tip_sensor.bandwidth),
+        )
         gcb_tf = pd_tf(kp, kd, dt, pole)
-        gcb_info = {"kind": "filtered pd (smallest spectral radius)", "kp": kp, "kd_s": kd,
-                    "derivative_pole": pole, "spectral_radius": rho}
+        gcb_info = {
+            "kind": "filtered pd (smallest spectral radius)",
+            "kp": kp,
+            "kd_s": kd,
+            "derivative_pole": pole,
+            "spectral_radius": rho,
+        }
     elif isinstance(gcb, tuple):
         gcb_tf = pd_tf(float(gcb[0]), float(gcb[1]), dt)
         gcb_info = {"kind": "pd (given)", "kp": float(gcb[0]), "kd_s": float(gcb[1])}
@@ -445,84 +558,157 @@ def design_nested(scenario, *, distance: float | None = None,
     gbn, gbd = _tf_lists(gcb_tf)
     nn = _coeffs(np.asarray(n.num[0][0], float))
     nd = _coeffs(np.asarray(n.den[0][0], float))
-    fc = (FrictionCompensationSpec(level=coulomb_cmd,
-                                   rest_deadband=rest_deadband_counts * count * gain)
-          if coulomb_cmd > 0 else None)
+    fc = (
+        FrictionCompensationSpec(
+            level=coulomb_cmd, rest_deadband=rest_deadband_counts * count * gain
+        )
+        if coulomb_cmd > 0
+        else None
+    )
     spec = NestedController(
-        type="nested", friction_compensation=fc, gcm1_num=g1n, gcm1_den=g1d,
-        gcm2_num=g2n, gcm2_den=g2d, coupling_gain=coupling_cmd, tip=tip,
-        deflection_to_angle=to_angle, gcb_num=gbn, gcb_den=gbd, feedforward_num=nn,
-        feedforward_den=nd, feedforward_advance=advance)
-    ref = Reference(type=trajectory, amplitude=d, offset=float(sc.initial.motor_angle),
-                    start=start, acceleration=float(traj.max_acceleration),
-                    snap=s_val)
+        type="nested",
+        friction_compensation=fc,
+        gcm1_num=g1n,
+        gcm1_den=g1d,
+        gcm2_num=g2n,
+        gcm2_den=g2d,
+        coupling_gain=coupling_cmd,
+        tip=tip,
+        deflection_to_angle=to_angle,
+        gcb_num=gbn,
+        gcb_den=gbd,
+        feedforward_num=nn,
+        feedforward_den=nd,
+        feedforward_advance=advance,
+    )
+    ref = Reference(
+        type=trajectory,
+        amplitude=d,
+        offset=float(sc.initial.motor_angle),
+        start=start,
+        acceleration=float(traj.max_acceleration),
+        snap=s_val,
+    )
     # the run holds the move and 1 s after it (unless a duration is given)
     needed = start + float(traj.duration) + 1.0
     run_time = max(float(sc.simulation.duration), needed) if duration is None else float(duration)
     if run_time < needed:
-        warnings.append(f"duration {run_time:g} s ends less than 1 s after the move "
-                        f"({start + float(traj.duration):.4g} s): the settling figures are cut")
-    designed = sc.model_copy(update={
-        "name": f"{sc.name}-nested",
-        "description": f"{sc.name} under Feliu's nested loops (flexarm design --method nested)",
-        "controller": spec, "reference": ref,
-        "simulation": sc.simulation.model_copy(update={"duration": run_time})})
+        warnings.append(
+            f"duration {run_time:g} s ends less than 1 s after the move "
+            f"({start + float(traj.duration):.4g} s): the settling figures are cut"
+        )
+    designed = sc.model_copy(
+        update={
+            "name": f"{sc.name}-nested",
+            "description": f"{sc.name} under Feliu's nested loops (flexarm design --method nested)",
+            "controller": spec,
+            "reference": ref,
+            "simulation": sc.simulation.model_copy(update={"duration": run_time}),
+        }
+    )
 
     # ---- run it: the inner loop alone with the tip held (FRB Fig. 11), and the move
     h_step = step if inner_step is None else float(inner_step)
     assert designed.simulation is not None  # sc's, with the run's duration
-    held = designed.model_copy(update={
-        "controller": spec.model_copy(update={"gcb_num": [0.0], "gcb_den": [1.0],
-                                              "feedforward_num": [1.0],
-                                              "feedforward_den": [1.0],
-                                              "feedforward_advance": 0.0}),
-        "reference": Reference(type="step", amplitude=h_step, offset=ref.offset,
-                               start=float(move_start)),
-        "simulation": designed.simulation.model_copy(update={"hold_tip": True})})
+    held = designed.model_copy(
+        update={
+            "controller": spec.model_copy(
+                update={
+                    "gcb_num": [0.0],
+                    "gcb_den": [1.0],
+                    "feedforward_num": [1.0],
+                    "feedforward_den": [1.0],
+                    "feedforward_advance": 0.0,
+                }
+            ),
+            "reference": Reference(
+                type="step", amplitude=h_step, offset=ref.offset, start=float(move_start)
+            ),
+            "simulation": designed.simulation.model_copy(update={"hold_tip": True}),
+        }
+    )
     try:  # FRB Fig. 11 holds the tip: a lumped beam with a tip mass only
         SingleLinkModel.from_spec(sc.arm, hold_tip=True)
         can_hold = True
     except ValueError as exc:
         can_hold = False
-        warnings.append(f"no held-tip inner-loop run ({exc}); the inner settling is the "
-                        "linear design's")
+        warnings.append(
+            f"no held-tip inner-loop run ({exc}); the inner settling is the linear design's"
+        )
     held_ts, held_err = None, math.nan
     if can_hold:
         from flexarm.metrics import step_metrics
 
         r_held = simulate(held)
-        mh = step_metrics(r_held.time, r_held["motor_angle"], r_held["reference"],
-                          band=inner_band, t_step=float(move_start), target=ref.offset + h_step)
+        mh = step_metrics(
+            r_held.time,
+            r_held["motor_angle"],
+            r_held["reference"],
+            band=inner_band,
+            t_step=float(move_start),
+            target=ref.offset + h_step,
+        )
         held_ts = mh.settling_time if mh.settling_time is not None else math.inf
         last = r_held.time >= r_held.time[-1] - 0.5
         held_err = float(np.mean(ref.offset + h_step - r_held.measured["motor_angle"][last]))
     res = simulate(designed)
-    figs = nested_metrics(res, start=start, distance=d, move_end=start + traj.duration,
-                          count=count, limit=limit, band=band, offset=ref.offset)
+    figs = nested_metrics(
+        res,
+        start=start,
+        distance=d,
+        move_end=start + traj.duration,
+        count=count,
+        limit=limit,
+        band=band,
+        offset=ref.offset,
+    )
 
     info = {
-        "drive": sc.arm.motor.drive, "command_unit": "A" if model.drive.input_name.startswith("current") else "V",
-        "sampling_period_s": dt, "delay_samples": delay,
-        "hub_sensor_delay_samples": hub_delay, "tip_sensor_extra_delay_samples": tip_delay, "command_limit": limit,
+        "drive": sc.arm.motor.drive,
+        "command_unit": "A" if model.drive.input_name.startswith("current") else "V",
+        "sampling_period_s": dt,
+        "delay_samples": delay,
+        "hub_sensor_delay_samples": hub_delay,
+        "tip_sensor_extra_delay_samples": tip_delay,
+        "command_limit": limit,
         "design_model": {"J_kg_m2": J, "V_N_m_s_per_rad": V, "k_u_N_m_per_unit": k_u},
-        "inner": {"dc_gain": gain, "design_step_rad": step,
-                  "settling_linear_s": float(inner.settling_time),
-                  "settling_held_tip_s": held_ts,
-                  "held_tip_step_rad": h_step,
-                  "held_tip_error_counts": held_err / count if count else math.nan,
-                  "lag_s": float(inner.lag), "peak_feedback_linear": float(inner.peak_current),
-                  "zeros_poles": [float(v) for v in inner.params]},
-        "compensation": {"coulomb_command": coulomb_cmd, "coupling_gain_per_rad": coupling_cmd,
-                         "coupling_stiffness_N_m_per_rad": c_hat, "tip": tip,
-                         "deflection_to_angle": to_angle},
-        "trajectory": {"kind": trajectory, "distance_rad": d, "acceleration": float(traj.max_acceleration),
-                       "snap": s_val, "duration_s": float(traj.duration), "start_s": start,
-                       "advance_s": advance, "linear_peak_deflection_rad": float(defl_lin),
-                       "loop_peak_deflection_rad": defl_loop,
-                       "loop_peak_command": u_move},
+        "inner": {
+            "dc_gain": gain,
+            "design_step_rad": step,
+            "settling_linear_s": float(inner.settling_time),
+            "settling_held_tip_s": held_ts,
+            "held_tip_step_rad": h_step,
+            "held_tip_error_counts": held_err / count if count else math.nan,
+            "lag_s": float(inner.lag),
+            "peak_feedback_linear": float(inner.peak_current),
+            "zeros_poles": [float(v) for v in inner.params],
+        },
+        "compensation": {
+            "coulomb_command": coulomb_cmd,
+            "coupling_gain_per_rad": coupling_cmd,
+            "coupling_stiffness_N_m_per_rad": c_hat,
+            "tip": tip,
+            "deflection_to_angle": to_angle,
+        },
+        "trajectory": {
+            "kind": trajectory,
+            "distance_rad": d,
+            "acceleration": float(traj.max_acceleration),
+            "snap": s_val,
+            "duration_s": float(traj.duration),
+            "start_s": start,
+            "advance_s": advance,
+            "linear_peak_deflection_rad": float(defl_lin),
+            "loop_peak_deflection_rad": defl_loop,
+            "loop_peak_command": u_move,
+        },
         "gcb": gcb_info,
         "simulated": figs,
     }
-    return Design(method="nested", scenario=designed,
-                  controller={"gcm1": inner.gcm1, "gcm2": inner.gcm2, "gcb": gcb_tf, "N": n},
-                  info=info, warnings=warnings)
+    return Design(
+        method="nested",
+        scenario=designed,
+        controller={"gcm1": inner.gcm1, "gcm2": inner.gcm2, "gcb": gcb_tf, "N": n},
+        info=info,
+        warnings=warnings,
+    )

@@ -54,8 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["PlantBatch", "BatchLoop", "from_fit", "from_paths", "with_overrides",
-           "UNDETERMINED"]
+__all__ = ["PlantBatch", "BatchLoop", "from_fit", "from_paths", "with_overrides", "UNDETERMINED"]
 
 #: std of a unit coordinate above which the data do not determine it (see module doc)
 UNDETERMINED = 0.5
@@ -88,8 +87,9 @@ def with_overrides(scenario, overrides: Mapping | None, source: str = "scenario"
     from flexarm.specs.scenario import scenario_from_dict
 
     d = _merge(scenario.model_dump(mode="json", exclude_none=True), overrides)
-    return scenario_from_dict(d, source=f"{source} ({scenario.name!r} with "
-                                        f"{', '.join(overrides)} changed)")
+    return scenario_from_dict(
+        d, source=f"{source} ({scenario.name!r} with {', '.join(overrides)} changed)"
+    )
 
 
 @dataclass
@@ -112,15 +112,19 @@ class BatchLoop:
 
         missing = sorted(_measured_names(controller) - set(self.loop.sensors.names))
         if missing:
-            raise ValueError(f"the controller reads {', '.join(missing)}, which the plants' "
-                             f"sensors ({', '.join(self.loop.sensors.names)}) do not measure; "
-                             "add [sensors.NAME] to the rig scenario")
+            raise ValueError(
+                f"the controller reads {', '.join(missing)}, which the plants' "
+                f"sensors ({', '.join(self.loop.sensors.names)}) do not measure; "
+                "add [sensors.NAME] to the rig scenario"
+            )
         n = self.size
-        tiled = jax.tree.map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)),
-                             eqx.filter(controller, eqx.is_array))
+        tiled = jax.tree.map(
+            lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)), eqx.filter(controller, eqx.is_array)
+        )
         ctrl = eqx.combine(tiled, eqx.filter(controller, eqx.is_array, inverse=True))
-        return dataclasses.replace(self, loop=eqx.tree_at(lambda lp: lp.controller,
-                                                          self.loop, ctrl))
+        return dataclasses.replace(
+            self, loop=eqx.tree_at(lambda lp: lp.controller, self.loop, ctrl)
+        )
 
     def run(self, *, seed: int = 0) -> dict[str, np.ndarray]:
         """One :func:`~flexarm.sim.sampled.simulate_batch` call; diverged rollouts are
@@ -128,9 +132,12 @@ class BatchLoop:
         from flexarm.sim.sampled import simulate_batch
 
         # no client or chunks: the arrays themselves
-        return cast("dict[str, np.ndarray]",
-                    simulate_batch(self.loop, self.x0, self.references, len(self.time),
-                                   seed=seed, check=False))
+        return cast(
+            "dict[str, np.ndarray]",
+            simulate_batch(
+                self.loop, self.x0, self.references, len(self.time), seed=seed, check=False
+            ),
+        )
 
 
 def diverged(out: dict) -> np.ndarray:
@@ -166,8 +173,18 @@ class PlantBatch:
     @classmethod
     def nominal_only(cls, scenario) -> PlantBatch:
         """The scenario alone, no drawn plants (a comparison on the nominal plant)."""
-        return cls(scenario, [], {}, [], np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0, [],
-                   {"source": "the nominal plant only", "n": 0})
+        return cls(
+            scenario,
+            [],
+            {},
+            [],
+            np.zeros((0, 0)),
+            np.zeros(0),
+            np.zeros(0),
+            0,
+            [],
+            {"source": "the nominal plant only", "n": 0},
+        )
 
     def with_overrides(self, overrides: Mapping | None) -> PlantBatch:
         """Every plant (and the nominal) with the same experiment changes (reference,
@@ -175,9 +192,12 @@ class PlantBatch:
         if not overrides:
             return self
         return dataclasses.replace(
-            self, nominal=with_overrides(self.nominal, overrides, "nominal plant"),
-            scenarios=[with_overrides(s, overrides, f"plant {i}")
-                       for i, s in enumerate(self.scenarios)])
+            self,
+            nominal=with_overrides(self.nominal, overrides, "nominal plant"),
+            scenarios=[
+                with_overrides(s, overrides, f"plant {i}") for i, s in enumerate(self.scenarios)
+            ],
+        )
 
     def loop(self, controller=None, *, include_nominal: bool = True) -> BatchLoop:
         """Prepare every plant (the nominal first) with ``controller`` (a
@@ -192,16 +212,20 @@ class PlantBatch:
         preps = [p0] + [prepare(s, ctrl) for s in scns[1:]]
         x0s = np.stack([p.x0 for p in preps])
         if not np.allclose(x0s, x0s[:1], rtol=0, atol=1e-12):
-            raise ValueError("the plants' initial states differ (an initial tip deflection "
-                             "maps onto each plant's own beam); start them at rest "
-                             "(initial.tip_deflection = 0) to run them as one batch")
-        return BatchLoop(stack_loops([p.loop for p in preps]), x0s[0], p0.references, p0.time,
-                         p0, len(preps))
+            raise ValueError(
+                "the plants' initial states differ (an initial tip deflection "
+                "maps onto each plant's own beam); start them at rest "
+                "(initial.tip_deflection = 0) to run them as one batch"
+            )
+        return BatchLoop(
+            stack_loops([p.loop for p in preps]), x0s[0], p0.references, p0.time, p0, len(preps)
+        )
 
 
 # ----------------------------------------------------------------------------- from a fit
-def from_fit(result, n: int = 200, *, seed: int = 0,
-             undetermined: float = UNDETERMINED, max_rounds: int = 50) -> PlantBatch:
+def from_fit(
+    result, n: int = 200, *, seed: int = 0, undetermined: float = UNDETERMINED, max_rounds: int = 50
+) -> PlantBatch:
     """N plants drawn from a servo-rig fit's uncertainty, eq. (1) of the module doc."""
     from flexarm.identification.time_domain.params import derived
     from flexarm.identification.time_domain.report import scenario_from_fit
@@ -211,13 +235,20 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
     space, U = result.space, np.asarray(result.unit, float)
     if space is None or U is None:
-        raise ValueError("the fit result has no search space (space/unit): it was not made "
-                         "by flexarm.identification.time_domain.fit; draw from_paths instead")
+        raise ValueError(
+            "the fit result has no search space (space/unit): it was not made "
+            "by flexarm.identification.time_domain.fit; draw from_paths instead"
+        )
     names, defs = list(space.names), list(space.defs)
     k = len(names)
-    std_u = np.asarray([result.std[nm] / abs(float(d.dphys_du(U[i]))) if
-                        abs(float(d.dphys_du(U[i]))) > 0 else np.nan
-                        for i, (nm, d) in enumerate(zip(names, defs, strict=True))])
+    std_u = np.asarray(
+        [
+            result.std[nm] / abs(float(d.dphys_du(U[i])))
+            if abs(float(d.dphys_du(U[i]))) > 0
+            else np.nan
+            for i, (nm, d) in enumerate(zip(names, defs, strict=True))
+        ]
+    )
     cov = result.stages.get("local", {}).get("covariance_unit")
     warnings: list[str] = []
     if cov is not None:
@@ -227,20 +258,26 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
     else:
         cov = np.diag(np.nan_to_num(std_u) ** 2)
         source = "independent normals with the fit's HAC std (no covariance in the result)"
-        warnings.append("the fit result holds no parameter covariance: parameters drawn "
-                        "independently (correlations ignored); refit with this flexarm to "
-                        "keep stages['local']['covariance_unit']")
+        warnings.append(
+            "the fit result holds no parameter covariance: parameters drawn "
+            "independently (correlations ignored); refit with this flexarm to "
+            "keep stages['local']['covariance_unit']"
+        )
     bad = ~np.isfinite(std_u) | ~np.all(np.isfinite(cov), axis=1)
     held = [i for i in range(k) if bad[i] or std_u[i] > undetermined]
     for i in held:
         warnings.append(
             f"{names[i]} = {result.params[names[i]]:.4g} {defs[i].unit} is not determined by "
             f"the data (std {std_u[i]:.3g} in its search coordinate, more than "
-            f"{undetermined} of the [0, 1] search box): held at its fitted value in every plant")
+            f"{undetermined} of the [0, 1] search box): held at its fitted value in every plant"
+        )
     free = [i for i in range(k) if i not in held]
     rng = np.random.default_rng(seed)
-    sign = {nm: (-1.0 if result.params.get(nm, 1.0) < 0 else 1.0)
-            for nm in names if nm.split("[")[0] == "tip_gain"}
+    sign = {
+        nm: (-1.0 if result.params.get(nm, 1.0) < 0 else 1.0)
+        for nm in names
+        if nm.split("[")[0] == "tip_gain"
+    }
     lower_ok = np.array([d.scale != "loglin" for d in defs])  # loglin: p >= lo needs u >= 0
     sub = cov[np.ix_(free, free)]
     length = result.rig.length
@@ -250,11 +287,19 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
         below 0, or a value the scenario schema refuses (e.g. a damping ratio > 1)."""
         if not np.all(lower_ok | (z >= 0.0)):
             return None
-        p = {nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
-             for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
+        p = {
+            nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
+            for i, (nm, d) in enumerate(zip(names, defs, strict=True))
+        }
         first = lambda m: p.get(m, p.get(f"{m}[0]", 0.0))  # noqa: E731
-        der = derived({m: first(m) for m in ("hub_inertia", "link_frequency", "link_inertia")
-                       if m in p or f"{m}[0]" in p}, length)
+        der = derived(
+            {
+                m: first(m)
+                for m in ("hub_inertia", "link_frequency", "link_inertia")
+                if m in p or f"{m}[0]" in p
+            },
+            length,
+        )
         d, _ = scenario_from_fit(dataclasses.replace(result, params=p, derived=der))
         d["name"] = f"{d['name']}-draw-{j}"
         try:
@@ -278,23 +323,34 @@ def from_fit(result, n: int = 200, *, seed: int = 0,
         if len(scen) == n:
             break
     if len(scen) < n:
-        raise ValueError(f"only {len(scen)} of {tried} draws from the fit are physical "
-                         "(friction levels >= 0, values the scenario schema accepts): its "
-                         "uncertainty is too wide to sample; refit with more data or give "
-                         "the spreads with from_paths")
+        raise ValueError(
+            f"only {len(scen)} of {tried} draws from the fit are physical "
+            "(friction levels >= 0, values the scenario schema accepts): its "
+            "uncertainty is too wide to sample; refit with more data or give "
+            "the spreads with from_paths"
+        )
     Z = np.asarray(draws)
-    values = {nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
-              for i, (nm, d) in enumerate(zip(names, defs, strict=True))}
+    values = {
+        nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
+        for i, (nm, d) in enumerate(zip(names, defs, strict=True))
+    }
     nominal = result.scenario()
-    info = {"source": source, "n": n, "seed": seed, "drawn": tried,
-            "rejected_fraction": 1.0 - n / tried if tried else 0.0,
-            "held": [names[i] for i in held], "undetermined_threshold": undetermined}
+    info = {
+        "source": source,
+        "n": n,
+        "seed": seed,
+        "drawn": tried,
+        "rejected_fraction": 1.0 - n / tried if tried else 0.0,
+        "held": [names[i] for i in held],
+        "undetermined_threshold": undetermined,
+    }
     return PlantBatch(nominal, scen, values, names, Z, U.copy(), std_u, seed, warnings, info)
 
 
 # ----------------------------------------------------------------------------- from paths
-def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200, *,
-               seed: int = 0) -> PlantBatch:
+def from_paths(
+    scenario, spread: Mapping[str, tuple[float, float]], n: int = 200, *, seed: int = 0
+) -> PlantBatch:
     """N plants from ``scenario`` with the parameters at ``spread`` (path → (mean, std) in
     SI) drawn independently, eq. (2) of the module doc."""
     from flexarm.specs.paths import scenario_with
@@ -308,11 +364,14 @@ def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200
         try:
             m, s = (float(v) for v in spread[p])
         except (TypeError, ValueError):
-            raise ValueError(f"spread[{p!r}] = {spread[p]!r}: give (mean, std) in SI, e.g. "
-                             "{'arm.friction.coulomb': (0.03, 0.005)}") from None
+            raise ValueError(
+                f"spread[{p!r}] = {spread[p]!r}: give (mean, std) in SI, e.g. "
+                "{'arm.friction.coulomb': (0.03, 0.005)}"
+            ) from None
         if not (math.isfinite(m) and math.isfinite(s) and s >= 0):
-            raise ValueError(f"spread[{p!r}] = ({m}, {s}): mean must be finite and std a "
-                             "finite number >= 0")
+            raise ValueError(
+                f"spread[{p!r}] = ({m}, {s}): mean must be finite and std a finite number >= 0"
+            )
         mean[i], std[i] = m, s
     # one standard normal per plant and parameter, row by row: plant j's draw does not
     # depend on how many plants are drawn
@@ -325,9 +384,19 @@ def from_paths(scenario, spread: Mapping[str, tuple[float, float]], n: int = 200
         else:
             s2 = math.log1p((s / m) ** 2)
             Z[:, i] = math.copysign(1.0, m) * np.exp(
-                math.log(abs(m)) - s2 / 2 + math.sqrt(s2) * E[:, i])
+                math.log(abs(m)) - s2 / 2 + math.sqrt(s2) * E[:, i]
+            )
     scen = [scenario_with(scenario, dict(zip(names, Z[j], strict=True))) for j in range(n)]
     nominal = scenario_with(scenario, dict(zip(names, mean, strict=True)))
-    return PlantBatch(nominal, scen, {p: Z[:, i] for i, p in enumerate(names)}, names, Z,
-                      mean, std, seed, [], {"source": "independent draws, eq. (2)", "n": n,
-                                            "seed": seed})
+    return PlantBatch(
+        nominal,
+        scen,
+        {p: Z[:, i] for i, p in enumerate(names)},
+        names,
+        Z,
+        mean,
+        std,
+        seed,
+        [],
+        {"source": "independent draws, eq. (2)", "n": n, "seed": seed},
+    )

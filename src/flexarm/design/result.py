@@ -50,9 +50,14 @@ class Design:
         return self.verdict == "stable"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"method": self.method, "scenario": self.scenario.name,
-                "verdict": self.verdict, "gate": self.gate, "info": self.info,
-                "warnings": list(self.warnings)}
+        return {
+            "method": self.method,
+            "scenario": self.scenario.name,
+            "verdict": self.verdict,
+            "gate": self.gate,
+            "info": self.info,
+            "warnings": list(self.warnings),
+        }
 
     def summary(self) -> str:
         """A few lines for the terminal: the method, the verdict (with the unstable count
@@ -65,9 +70,14 @@ class Design:
             lines.append(
                 f"  nominal plant {'stable' if g['nominal_stable'] else 'UNSTABLE'}"
                 + (f"{', reaches the' + lim + ' limit' if g['nominal_limit_reached'] else ''}")
-                + (f"; drawn plants: {g['unstable']}/{g['n_plants']} unstable, "
-                   f"{g['limit_reached']}/{g['n_plants']} reach the{lim} limit (at most "
-                   f"{100 * g['max_unstable_share']:g} % allowed)" if g["n_plants"] else ""))
+                + (
+                    f"; drawn plants: {g['unstable']}/{g['n_plants']} unstable, "
+                    f"{g['limit_reached']}/{g['n_plants']} reach the{lim} limit (at most "
+                    f"{100 * g['max_unstable_share']:g} % allowed)"
+                    if g["n_plants"]
+                    else ""
+                )
+            )
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
@@ -75,23 +85,29 @@ class Design:
         from flexarm.display import Table
 
         v = self.verdict if self.verdict is not None else "not checked"
-        rows: list[tuple] = [("method", self.method), ("rig", self.scenario.name),
-                             ("verdict", v)]
+        rows: list[tuple] = [("method", self.method), ("rig", self.scenario.name), ("verdict", v)]
         c = self.controller
         if c is not None:
-            rows.append(("controller", f"{type(c).__name__}: {c.ninputs} in, {c.noutputs} "
-                                       f"out, {getattr(c, 'nstates', 0)} states, dt {c.dt}"))
+            rows.append(
+                (
+                    "controller",
+                    f"{type(c).__name__}: {c.ninputs} in, {c.noutputs} "
+                    f"out, {getattr(c, 'nstates', 0)} states, dt {c.dt}",
+                )
+            )
         g = self.gate
         if g is not None and g.get("n_plants"):
             rows.append(("unstable plants", f"{g['unstable']}/{g['n_plants']}"))
             rows.append(("plants at the limit", f"{g['limit_reached']}/{g['n_plants']}"))
         for k in ("model", "step"):
             for kk, vv in (self.info.get(k) or {}).items():
-                if isinstance(vv, (int, float, str)) or (
-                        isinstance(vv, list) and len(vv) <= 4):
+                if isinstance(vv, (int, float, str)) or (isinstance(vv, list) and len(vv) <= 4):
                     rows.append((f"{k} {kk}", vv))
-        return Table(f"Design ({self.method}) of {self.scenario.name}", rows,
-                     notes=[f"warning: {w}" for w in self.warnings])
+        return Table(
+            f"Design ({self.method}) of {self.scenario.name}",
+            rows,
+            notes=[f"warning: {w}" for w in self.warnings],
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -107,14 +123,18 @@ class Design:
         from flexarm.errors import UnstableDesignError
 
         why = self.verdict if self.verdict is not None else "not checked by the design gate"
-        raise UnstableDesignError(f"the {self.method} design is not safe to run: {why}",
-                                  design=self,
-                                  fix="pass accept_unstable (--accept-unstable) to keep it")
+        raise UnstableDesignError(
+            f"the {self.method} design is not safe to run: {why}",
+            design=self,
+            fix="pass accept_unstable (--accept-unstable) to keep it",
+        )
 
     def write(self, directory: str | Path, *, overwrite: bool = False) -> list[Path]:
         """Write ``design.toml`` and ``design.json`` into ``directory`` (created)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
         data = self.scenario.model_dump(mode="json", exclude_none=True)
-        return [write_toml(d / "design.toml", data, overwrite=overwrite),
-                write_json(d / "design.json", self.to_dict(), overwrite=overwrite)]
+        return [
+            write_toml(d / "design.toml", data, overwrite=overwrite),
+            write_json(d / "design.json", self.to_dict(), overwrite=overwrite),
+        ]

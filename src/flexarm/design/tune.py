@@ -61,8 +61,13 @@ from flexarm.specs import paths as scenario_paths
 
 __all__ = ["design_tune", "TuneCost", "DEFAULT_WEIGHTS"]
 
-DEFAULT_WEIGHTS = {"overshoot": 1.0, "hub_error": 0.5, "at_limit": 1.0, "oscillation": 0.5,
-                   "chatter": 0.3}
+DEFAULT_WEIGHTS = {
+    "overshoot": 1.0,
+    "hub_error": 0.5,
+    "at_limit": 1.0,
+    "oscillation": 0.5,
+    "chatter": 0.3,
+}
 #: the command chatter's scale in the cost (V per sample, rms)
 CHATTER_SCALE = 0.1
 DIVERGED_COST = 1000.0
@@ -80,26 +85,50 @@ def _default_params(ctrl: dict) -> list[str]:
     if ctrl.get("type") == "state_feedback":
         names = ["k1", "k2", "k3", "k4"]
     else:
-        names = [k for k, v in ctrl.items() if isinstance(v, (int, float))
-                 and not isinstance(v, bool) and k not in ("rate_time_constant", "dt")]
-    return [f"controller.{k}" for k in names] + ["controller.friction_compensation.level",
-                                                 "controller.friction_compensation.rest_deadband"]
+        names = [
+            k
+            for k, v in ctrl.items()
+            if isinstance(v, (int, float))
+            and not isinstance(v, bool)
+            and k not in ("rate_time_constant", "dt")
+        ]
+    return [f"controller.{k}" for k in names] + [
+        "controller.friction_compensation.level",
+        "controller.friction_compensation.rest_deadband",
+    ]
 
 
 class TuneCost:
     """The cost of the module doc as a function of the tuned parameters (SI values in the
     order of ``paths``); ``evaluate(P)`` returns (cost, per-plant costs, metrics)."""
 
-    def __init__(self, scenario, plants: PlantBatch, paths: Sequence[str], *,
-                 step: float | None, start: float, duration: float, band: float,
-                 quantile: float, weights: Mapping[str, float], hub_error_max: float,
-                 count: float | None, seed: int):
+    def __init__(
+        self,
+        scenario,
+        plants: PlantBatch,
+        paths: Sequence[str],
+        *,
+        step: float | None,
+        start: float,
+        duration: float,
+        band: float,
+        quantile: float,
+        weights: Mapping[str, float],
+        hub_error_max: float,
+        count: float | None,
+        seed: int,
+    ):
         from flexarm.specs.scenario import scenario_from_dict
 
         self.paths = list(paths)
         self.q = encoder_count(plants.nominal, count)
-        exp = experiment(plants.nominal, step=step, start=start, duration=duration,
-                         quantum=None if count is None else self.q)
+        exp = experiment(
+            plants.nominal,
+            step=step,
+            start=start,
+            duration=duration,
+            quantum=None if count is None else self.q,
+        )
         pb = plants.with_overrides(exp)
         self.base = pb.loop()
         self.scn = pb.nominal
@@ -128,8 +157,16 @@ class TuneCost:
         spec = self.scenario(p).controller
         bl = self.base.with_controller(build_controller(self.base, spec, self.scn))
         out = bl.run(seed=self.seed)
-        m = batch_metrics(out, self.names, bl.time, bl.references["reference"], count=self.q,
-                          limit=self.limit, length=self.length, band=self.band)
+        m = batch_metrics(
+            out,
+            self.names,
+            bl.time,
+            bl.references["reference"],
+            count=self.q,
+            limit=self.limit,
+            length=self.length,
+            band=self.band,
+        )
         c = self.plant_costs(out, m, bl.time)
         self.nfev += 1
         self.seconds += _time.perf_counter() - t0
@@ -143,13 +180,17 @@ class TuneCost:
         with np.errstate(invalid="ignore", over="ignore"):
             fin = np.mean(tip[:, -last:], axis=1)
             eps = np.max(np.abs(tip[:, k_tail:] - fin[:, None]), axis=1)
-            ts = np.where(np.isfinite(m["tip_settling_s"]), m["tip_settling_s"],
-                          T * (1 + eps / tol))
-            c = (ts / T + w["overshoot"] * m["tip_overshoot_pct"] / 100
-                 + w["hub_error"] * np.maximum(0.0, m["hub_error_counts"] - self.hub_error_max)
-                 + w["at_limit"] * m["time_at_limit_s"] / T
-                 + w["oscillation"] * 1e-3 * m["tip_oscillation_mm"] / (tol * self.length)
-                 + w["chatter"] * m["command_chatter_V"] / CHATTER_SCALE)
+            ts = np.where(
+                np.isfinite(m["tip_settling_s"]), m["tip_settling_s"], T * (1 + eps / tol)
+            )
+            c = (
+                ts / T
+                + w["overshoot"] * m["tip_overshoot_pct"] / 100
+                + w["hub_error"] * np.maximum(0.0, m["hub_error_counts"] - self.hub_error_max)
+                + w["at_limit"] * m["time_at_limit_s"] / T
+                + w["oscillation"] * 1e-3 * m["tip_oscillation_mm"] / (tol * self.length)
+                + w["chatter"] * m["command_chatter_V"] / CHATTER_SCALE
+            )
         return np.where(np.isfinite(c), c, DIVERGED_COST)
 
 
@@ -162,23 +203,40 @@ def _linear_part(spec, dt: float):
     import control
 
     k1, k2, k3, k4 = spec.k1, spec.k2, spec.k3, spec.k4
-    return control.ss(np.zeros((2, 2)), [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-                      [[k3 / dt, k4 / dt]],
-                      [[k1, -(k1 + k3 / dt), -(k2 + k4 / dt)]], dt,
-                      inputs=["reference", "motor_angle", "tip_deflection"], outputs=["u"],
-                      states=["motor_angle_prev", "tip_deflection_prev"])
+    return control.ss(
+        np.zeros((2, 2)),
+        [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        [[k3 / dt, k4 / dt]],
+        [[k1, -(k1 + k3 / dt), -(k2 + k4 / dt)]],
+        dt,
+        inputs=["reference", "motor_angle", "tip_deflection"],
+        outputs=["u"],
+        states=["motor_angle_prev", "tip_deflection_prev"],
+    )
 
 
-def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = None,
-                bounds: Mapping[str, tuple[float, float]] | None = None,
-                step: float | None = None, start: float = 0.1, duration: float = 2.0,
-                band: float = 0.02, quantile: float = 0.9,
-                weights: Mapping[str, float] | None = None, hub_error_max: float = 1.0,
-                maxfev: int = 150, simplex_step: float = 0.3, restarts: int = 1,
-                count: float | None = None,
-                seed: int = 0,
-                callback: Callable[[dict], Any] | None = None,
-                client: Any = None, chunks: Any = None) -> Design:
+def design_tune(
+    scenario,
+    plants: PlantBatch,
+    *,
+    params: Sequence[str] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    step: float | None = None,
+    start: float = 0.1,
+    duration: float = 2.0,
+    band: float = 0.02,
+    quantile: float = 0.9,
+    weights: Mapping[str, float] | None = None,
+    hub_error_max: float = 1.0,
+    maxfev: int = 150,
+    simplex_step: float = 0.3,
+    restarts: int = 1,
+    count: float | None = None,
+    seed: int = 0,
+    callback: Callable[[dict], Any] | None = None,
+    client: Any = None,
+    chunks: Any = None,
+) -> Design:
     """Tune ``params`` (paths into ``scenario``, default K1..K4 and the friction
     compensation level) over ``plants`` (module doc); ``bounds``: path → (lo, hi) SI
     (default p0 ± 4|p0|, K1 in [p0/5, 5 p0], levels in [0, 5 c0]); ``callback`` receives
@@ -193,8 +251,10 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     from flexarm.specs.scenario import scenario_from_dict
 
     if scenario.controller is None:
-        raise ValueError(f"scenario {scenario.name!r}: no [controller] to tune; give the "
-                         "rig's controller (its structure and starting gains)")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no [controller] to tune; give the "
+            "rig's controller (its structure and starting gains)"
+        )
     if not 0.0 < quantile <= 1.0:
         raise ValueError(f"quantile = {quantile}: give a number in (0, 1] (1 = worst case)")
     d = scenario.model_dump(mode="json", exclude_none=True)
@@ -203,17 +263,21 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     if params is None:
         params = _default_params(ctrl)
     params = list(params)
-    if any(p.startswith("controller.friction_compensation") for p in params) and \
-            "friction_compensation" not in ctrl:
+    if (
+        any(p.startswith("controller.friction_compensation") for p in params)
+        and "friction_compensation" not in ctrl
+    ):
         model = SingleLinkModel.from_spec(plants.nominal.arm)
         fr = plants.nominal.arm.friction
         c0 = float(getattr(fr, "coulomb", 0.0) or 0.0) / float(model.drive.k_u)
         k1 = abs(float(ctrl.get("k1", ctrl.get("kp", 0.0)) or 0.0))
         q = encoder_count(plants.nominal, count)
         ctrl["friction_compensation"] = {"level": c0, "rest_deadband": k1 * q}
-        warn.append(f"friction compensation added: level starts at the fitted Coulomb "
-                    f"torque / k_u = {c0:.4g} V, rest deadband at one encoder count's "
-                    f"feedback K1 q = {k1 * q:.4g} V")
+        warn.append(
+            f"friction compensation added: level starts at the fitted Coulomb "
+            f"torque / k_u = {c0:.4g} V, rest deadband at one encoder count's "
+            f"feedback K1 q = {k1 * q:.4g} V"
+        )
     scenario = scenario_from_dict(d, source=f"scenario {scenario.name!r} to tune")
     d = scenario.model_dump(mode="json", exclude_none=True)
     p0 = np.array([float(_get(d, p)) for p in params])
@@ -234,13 +298,21 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         lo[i], hi[i] = a, b
     if len(plants) == 0:
         warn.append("no drawn plants: tuned on the nominal plant only")
-    cost_kw: dict[str, Any] = dict(step=step, start=start, duration=duration, band=band, quantile=quantile,
-                   weights=weights or {}, hub_error_max=hub_error_max, count=count, seed=seed)
+    cost_kw: dict[str, Any] = dict(
+        step=step,
+        start=start,
+        duration=duration,
+        band=band,
+        quantile=quantile,
+        weights=weights or {},
+        hub_error_max=hub_error_max,
+        count=count,
+        seed=seed,
+    )
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import ChunkedTuneCost
 
-        cost = ChunkedTuneCost(scenario, plants, params, client=client, options=chunks,
-                               **cost_kw)
+        cost = ChunkedTuneCost(scenario, plants, params, client=client, options=chunks, **cost_kw)
     else:
         cost = TuneCost(scenario, plants, params, **cost_kw)
     hist: list[float] = []
@@ -257,8 +329,14 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
         if J < best["cost"]:
             best.update(cost=J, x=np.array(x))
         if callback is not None:
-            callback({"nfev": len(hist), "cost": J, "best": best["cost"],
-                      "params": dict(zip(params, map(float, p), strict=True))})
+            callback(
+                {
+                    "nfev": len(hist),
+                    "cost": J,
+                    "best": best["cost"],
+                    "params": dict(zip(params, map(float, p), strict=True)),
+                }
+            )
         return J
 
     J0 = f(np.zeros(len(params)))
@@ -271,10 +349,20 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
             break
         simplex = np.vstack([x_start, x_start + simplex_step * np.eye(len(params))])
         simplex = np.clip(simplex, xb[0], xb[1])
-        res = minimize(f, x_start, method="Nelder-Mead", bounds=list(zip(xb[0], xb[1], strict=True)),
-                       options={"maxfev": left if r == restarts else
-                                max(left // (restarts + 1 - r), len(params) + 2),
-                                "initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-4})
+        res = minimize(
+            f,
+            x_start,
+            method="Nelder-Mead",
+            bounds=list(zip(xb[0], xb[1], strict=True)),
+            options={
+                "maxfev": left
+                if r == restarts
+                else max(left // (restarts + 1 - r), len(params) + 2),
+                "initial_simplex": simplex,
+                "xatol": 1e-3,
+                "fatol": 1e-4,
+            },
+        )
         messages.append(str(res.message))
         x_start = best["x"] if best["x"] is not None else res.x
     xbest = best["x"] if best["x"] is not None else np.zeros(len(params))
@@ -284,29 +372,54 @@ def design_tune(scenario, plants: PlantBatch, *, params: Sequence[str] | None = 
     seconds = _time.perf_counter() - t0
     stable = np.asarray(m["stable"], bool)
     if not stable.all():
-        warn.append(f"{int((~stable).sum())} of {stable.size} plants (nominal included) do "
-                    "not settle within the tuning run with the tuned gains")
+        warn.append(
+            f"{int((~stable).sum())} of {stable.size} plants (nominal included) do "
+            "not settle within the tuning run with the tuned gains"
+        )
     for p, v, a, b in zip(params, pbest, lo, hi, strict=True):
         if np.isclose(v, a, rtol=1e-9, atol=1e-12) or np.isclose(v, b, rtol=1e-9, atol=1e-12):
-            warn.append(f"{p} = {v:.4g} lies at a bound of [{a:.4g}, {b:.4g}]; widen it with "
-                        f"bounds={{'{p}': (lo, hi)}}")
+            warn.append(
+                f"{p} = {v:.4g} lies at a bound of [{a:.4g}, {b:.4g}]; widen it with "
+                f"bounds={{'{p}': (lo, hi)}}"
+            )
     if Jb >= J0:
         warn.append("tuning did not lower the cost: the starting gains are returned")
         tuned, pbest, Jb = cost.scenario(p0), p0, J0
     info = {
         "optimiser": "scipy.optimize.minimize(method='Nelder-Mead'), scaled coordinates "
-                     "(x = (p - p0)/|p0|), bounds clipped",
-        "parameters": {p: {"start": float(a), "tuned": float(b), "bounds": [float(low), float(high)]}
-                       for p, a, b, low, high in zip(params, p0, pbest, lo, hi, strict=True)},
-        "cost": {"start": float(J0), "tuned": float(Jb), "quantile": quantile,
-                 "weights": cost.w, "hub_error_max_counts": hub_error_max,
-                 "band_fraction": band, "definition": "see flexarm.design.tune"},
-        "experiment": {"step_rad": cost.delta, "start_s": start, "duration_s": duration,
-                       "count_rad": cost.q},
+        "(x = (p - p0)/|p0|), bounds clipped",
+        "parameters": {
+            p: {"start": float(a), "tuned": float(b), "bounds": [float(low), float(high)]}
+            for p, a, b, low, high in zip(params, p0, pbest, lo, hi, strict=True)
+        },
+        "cost": {
+            "start": float(J0),
+            "tuned": float(Jb),
+            "quantile": quantile,
+            "weights": cost.w,
+            "hub_error_max_counts": hub_error_max,
+            "band_fraction": band,
+            "definition": "see flexarm.design.tune",
+        },
+        "experiment": {
+            "step_rad": cost.delta,
+            "start_s": start,
+            "duration_s": duration,
+            "count_rad": cost.q,
+        },
         "plants": {**plants.info, "batch_size": cost.base.size},
-        "evaluations": len(hist), "seconds": seconds,
+        "evaluations": len(hist),
+        "seconds": seconds,
         "seconds_per_evaluation": cost.seconds / max(cost.nfev, 1),
-        "history": [float(h) for h in hist], "restarts": restarts, "message": messages}
+        "history": [float(h) for h in hist],
+        "restarts": restarts,
+        "message": messages,
+    }
     assert tuned.sampling is not None  # the rig scenario is a sampled-data one
-    return Design("tune", tuned, _linear_part(tuned.controller, float(tuned.sampling.period)),
-                  info, warn + list(plants.warnings))
+    return Design(
+        "tune",
+        tuned,
+        _linear_part(tuned.controller, float(tuned.sampling.period)),
+        info,
+        warn + list(plants.warnings),
+    )

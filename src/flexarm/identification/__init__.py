@@ -17,8 +17,14 @@ from flexarm.specs.scenario import names_a_scenario
 __all__ = ["fit", "validate", "predict"]
 
 
-def fit(scenario: Any, logs: Sequence[Any] | None = None, free: Sequence[str] | None = None,
-        options: Any = None, *, progress: Callable[[str], None] | None = None):
+def fit(
+    scenario: Any,
+    logs: Sequence[Any] | None = None,
+    free: Sequence[str] | None = None,
+    options: Any = None,
+    *,
+    progress: Callable[[str], None] | None = None,
+):
     """The one time-domain fit: ``fit(scenario, logs, free=None, options=None)`` →
     :class:`~flexarm.identification.time_domain.result.FitResult`
     (:func:`flexarm.identification.time_domain.engine.fit`). ``scenario``: a scenario (a
@@ -30,10 +36,12 @@ def fit(scenario: Any, logs: Sequence[Any] | None = None, free: Sequence[str] | 
     from flexarm.identification.time_domain.presets import Preset
 
     if not (isinstance(scenario, Preset) or names_a_scenario(scenario)):
-        raise TypeError("fit(scenario, logs, free=None, options=None): the first argument is "
-                        "a scenario (flexarm.Scenario, TOML path or built-in name) or a preset "
-                        "(for servo-rig logs: presets.servo_rig(DataSheet(gear_ratio=..., "
-                        "motor_constant=..., ...))), then the logs")
+        raise TypeError(
+            "fit(scenario, logs, free=None, options=None): the first argument is "
+            "a scenario (flexarm.Scenario, TOML path or built-in name) or a preset "
+            "(for servo-rig logs: presets.servo_rig(DataSheet(gear_ratio=..., "
+            "motor_constant=..., ...))), then the logs"
+        )
     if logs is None:
         raise TypeError("fit(scenario, logs, free=None, options=None): give the logs")
     return engine.fit(scenario, logs, free, options, progress=progress)

@@ -26,14 +26,30 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RANGES", "DEFAULT_RANGE", "MAT_MAX_JITTER", "COUNTER", "readable", "check_signals", "check_time",
-           "check_ranges", "unwrap_counter", "signal_range"]
+__all__ = [
+    "RANGES",
+    "DEFAULT_RANGE",
+    "MAT_MAX_JITTER",
+    "COUNTER",
+    "readable",
+    "check_signals",
+    "check_time",
+    "check_ranges",
+    "unwrap_counter",
+    "signal_range",
+]
 
 #: the sample counter's flexarm name
 COUNTER = "sample_counter"
 #: largest |value| accepted per SI unit of a signal (beyond it the value is not physical)
 RANGES: dict[str, float] = {
-    "rad": 1e3, "rad/s": 1e6, "m": 1e3, "m/s": 1e6, "V": 1e5, "A": 1e5, "N*m": 1e6,
+    "rad": 1e3,
+    "rad/s": 1e6,
+    "m": 1e3,
+    "m/s": 1e6,
+    "V": 1e5,
+    "A": 1e5,
+    "N*m": 1e6,
     "s": 1e11,  # a clock: Unix time in s is 1.8e9
     "": 2.0**53,  # counters: exact integers in a double
 }
@@ -85,14 +101,23 @@ def unwrap_counter(c: np.ndarray, bits: Sequence[int] = (16, 32)) -> np.ndarray:
     good = float(np.median(pos))
     for b in bits:
         m = 2.0**b
-        if np.all(np.abs(np.mod(d[neg], m) - good) < 1e-9 * m) and np.max(c) < m \
-                and np.min(c) >= -m / 2:
+        if (
+            np.all(np.abs(np.mod(d[neg], m) - good) < 1e-9 * m)
+            and np.max(c) < m
+            and np.min(c) >= -m / 2
+        ):
             return c[0] + np.concatenate([[0.0], np.cumsum(np.where(neg, d + m, d))])
     return c
 
 
-def check_time(t: np.ndarray, *, file: str | Path, column: str = "time",
-               lines: Sequence[int] | None = None, max_jitter: float | None = None) -> None:
+def check_time(
+    t: np.ndarray,
+    *,
+    file: str | Path,
+    column: str = "time",
+    lines: Sequence[int] | None = None,
+    max_jitter: float | None = None,
+) -> None:
     """The time stamps ``t`` (s) of ``file``: finite, not all equal, strictly increasing,
     and (with ``max_jitter``) uniform: max_k |Δt_k − median Δt| / median Δt ≤ max_jitter.
     ``column``: the time column as the message names it; ``lines``: the file line of each
@@ -102,50 +127,75 @@ def check_time(t: np.ndarray, *, file: str | Path, column: str = "time",
     bad = ~np.isfinite(t)
     if bad.any():
         k = int(np.argmax(bad))
-        raise _log_error(f"{path}: time, column {column}, {_where(k, lines)}: {t[k]!r} is "
-                         "not a finite time stamp", file=path, field=column)
+        raise _log_error(
+            f"{path}: time, column {column}, {_where(k, lines)}: {t[k]!r} is "
+            "not a finite time stamp",
+            file=path,
+            field=column,
+        )
     if t.size >= 2 and np.all(t == t[0]):
         raise _log_error(
             f"{path}: time, column {column}: all {t.size} time stamps are {t[0]:.9g} s: that "
             "is no clock; map the column or variable that holds the time (a log format's "
-            "[columns] time = ...)", file=path, field=column, value=float(t[0]))
+            "[columns] time = ...)",
+            file=path,
+            field=column,
+            value=float(t[0]),
+        )
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0))
         kind = "repeats" if d[k] == 0 else "decreases"
         swapped = ""
-        if d[k] < 0 and 0 < k + 1 < len(d) and t[k + 1] > (t[k - 1] if k else -np.inf) \
-                and t[k] < t[k + 2]:
-            swapped = (f"; the samples {_where(k, lines)} and {_where(k + 1, lines)} are "
-                       "swapped")
-        at = (f"data row {k + 2} (line {lines[k + 1]}, column {column})" if lines is not None
-              else f"sample {k + 1} (column {column})")
+        if (
+            d[k] < 0
+            and 0 < k + 1 < len(d)
+            and t[k + 1] > (t[k - 1] if k else -np.inf)
+            and t[k] < t[k + 2]
+        ):
+            swapped = f"; the samples {_where(k, lines)} and {_where(k + 1, lines)} are swapped"
+        at = (
+            f"data row {k + 2} (line {lines[k + 1]}, column {column})"
+            if lines is not None
+            else f"sample {k + 1} (column {column})"
+        )
         before = f" (line {lines[k]})" if lines is not None else ""
         raise _log_error(
             f"{path}: time {kind} at {at}: t = {t[k + 1]:.9g} s after t = {t[k]:.9g} s"
             f"{before}{swapped}; time must increase strictly (duplicated or unsorted rows?)",
-            file=path, field=column)
+            file=path,
+            field=column,
+        )
     if max_jitter is None or len(d) == 0:
         return
     med = float(np.median(d))
     rel = np.abs(d - med) / med
     k = int(np.argmax(rel))
     if rel[k] > max_jitter:
-        rows = (f"data row {k + 1} to {k + 2} (lines {lines[k]}-{lines[k + 1]}, column "
-                f"{column}; " if lines is not None else
-                f"sample {k} to {k + 1} (column {column}; ")
+        rows = (
+            f"data row {k + 1} to {k + 2} (lines {lines[k]}-{lines[k + 1]}, column {column}; "
+            if lines is not None
+            else f"sample {k} to {k + 1} (column {column}; "
+        )
         raise _log_error(
             f"{path}: non-uniform sampling: the step from {rows}t = {t[k]:.9g} s) is "
             f"{d[k]:.6g} s against a median step of {med:.6g} s (relative deviation "
             f"{rel[k]:.3g} > {max_jitter:g}); resample the log to a uniform time grid, or, if "
             "the controller ran at a fixed period and only the time stamps jitter, accept it "
             "with max_jitter= (flexarm fit / validate --max-jitter): the samples are then "
-            "taken as uniform at the median step", file=path, field=column)
+            "taken as uniform at the median step",
+            file=path,
+            field=column,
+        )
 
 
-def check_ranges(signals: Mapping[str, np.ndarray], *, file: str | Path,
-                 lines: Sequence[int] | None = None,
-                 columns: Mapping[str, str] | None = None) -> None:
+def check_ranges(
+    signals: Mapping[str, np.ndarray],
+    *,
+    file: str | Path,
+    lines: Sequence[int] | None = None,
+    columns: Mapping[str, str] | None = None,
+) -> None:
     """Every signal (SI units) within its physical range (:func:`signal_range`); the first
     value beyond it is named by column, row and value.  ``columns``: how the file names
     each signal (the format's spec), for the message."""
@@ -166,13 +216,22 @@ def check_ranges(signals: Mapping[str, np.ndarray], *, file: str | Path,
                 f"range of this signal (|x| <= {lim:g} in SI units); "
                 f"{int(over.reshape(over.shape[0], -1).any(axis=1).sum())} such row(s); a "
                 "corrupted value, or the wrong unit in the log format ([units])",
-                file=path, field=name, value=v)
+                file=path,
+                field=name,
+                value=v,
+            )
 
 
-def check_signals(file: str | Path, signals: dict[str, np.ndarray], *,
-                  time: np.ndarray | None = None, time_column: str | None = None,
-                  lines: Sequence[int] | None = None, max_jitter: float | None = None,
-                  columns: Mapping[str, str] | None = None) -> dict[str, np.ndarray]:
+def check_signals(
+    file: str | Path,
+    signals: dict[str, np.ndarray],
+    *,
+    time: np.ndarray | None = None,
+    time_column: str | None = None,
+    lines: Sequence[int] | None = None,
+    max_jitter: float | None = None,
+    columns: Mapping[str, str] | None = None,
+) -> dict[str, np.ndarray]:
     """The readers' hook (module doc): unwrap ``signals[COUNTER]`` in place, then
     :func:`check_time` on ``time`` (default ``signals["time"]``, if any; ``time_column`` its
     name in messages) and :func:`check_ranges` on all.  Returns ``signals``."""
@@ -180,8 +239,9 @@ def check_signals(file: str | Path, signals: dict[str, np.ndarray], *,
         signals[COUNTER] = unwrap_counter(signals[COUNTER])
     t = signals.get("time") if time is None else time
     if t is not None:
-        col = time_column or (f"time ({columns['time']!r})" if columns and "time" in columns
-                              else "time")
+        col = time_column or (
+            f"time ({columns['time']!r})" if columns and "time" in columns else "time"
+        )
         check_time(t, file=file, column=col, lines=lines, max_jitter=max_jitter)
         check_ranges({"time": t}, file=file, lines=lines, columns=columns)
     check_ranges(signals, file=file, lines=lines, columns=columns)
@@ -202,6 +262,9 @@ def readable(path: str | Path, load, what: str = "MATLAB v7.3 (HDF5) .mat file")
         raise
     except (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError) as exc:
         msg = " ".join(str(exc).split()) or type(exc).__name__
-        raise MatFileError(f"{path}: not a readable {what} ({type(exc).__name__}: {msg}); "
-                           "the file is damaged or cut short: copy it again from the "
-                           "logger, or save it from MATLAB again", file=path) from None
+        raise MatFileError(
+            f"{path}: not a readable {what} ({type(exc).__name__}: {msg}); "
+            "the file is damaged or cut short: copy it again from the "
+            "logger, or save it from MATLAB again",
+            file=path,
+        ) from None

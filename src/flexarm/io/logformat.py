@@ -104,8 +104,14 @@ GAIN_UNITS: dict[str, dict[str, str]] = {
     "pd": {"KP": "V/rad", "KD": "V*s/rad"},
 }
 #: Names the ``delimiter`` field accepts for characters.
-DELIMITER_NAMES = {"auto": None, "tab": "\t", "comma": ",", "semicolon": ";",
-                   "whitespace": " ", "space": " "}
+DELIMITER_NAMES = {
+    "auto": None,
+    "tab": "\t",
+    "comma": ",",
+    "semicolon": ";",
+    "whitespace": " ",
+    "space": " ",
+}
 
 
 class LogFormatError(LogError):
@@ -114,11 +120,12 @@ class LogFormatError(LogError):
 
 def _column_ref(k: str, v: object) -> int | str:
     if isinstance(v, bool) or not isinstance(v, (int, str)):
-        raise ValueError(f"{k} = {v!r}: give the header text (a string) or the 1-based column "
-                         "number (an integer; negative flips the sign)")
+        raise ValueError(
+            f"{k} = {v!r}: give the header text (a string) or the 1-based column "
+            "number (an integer; negative flips the sign)"
+        )
     if isinstance(v, int) and v == 0:
-        raise ValueError(f"{k} = 0: column numbers start at 1 (a negative number flips the "
-                         "sign)")
+        raise ValueError(f"{k} = 0: column numbers start at 1 (a negative number flips the sign)")
     if isinstance(v, str) and not v.strip(" -"):
         raise ValueError(f"{k} = {v!r}: give the column's header text or its number")
     return v
@@ -178,18 +185,21 @@ class ControllerFormat(Spec):
         for where in ("gains", "gain_columns"):
             bad = [k for k in getattr(self, where) if k not in units]
             if bad:
-                raise ValueError(f"{where}: {', '.join(map(repr, bad))} is not a gain of "
-                                 f"{self.kind!r}; its gains are {', '.join(units)}")
+                raise ValueError(
+                    f"{where}: {', '.join(map(repr, bad))} is not a gain of "
+                    f"{self.kind!r}; its gains are {', '.join(units)}"
+                )
         both = sorted(set(self.gains) & set(self.gain_columns))
         if both:
-            raise ValueError(f"{', '.join(both)} given both in gains and in gain_columns; "
-                             "keep one")
+            raise ValueError(f"{', '.join(both)} given both in gains and in gain_columns; keep one")
         if self.gains or self.gain_columns:
             missing = [k for k in units if k not in self.gains and k not in self.gain_columns]
             if missing:
-                raise ValueError(f"gain(s) {', '.join(missing)} of {self.kind!r} not found in "
-                                 "gains or gain_columns; give each (e.g. "
-                                 f"{missing[0]} = 0 in gains if the law has no such term)")
+                raise ValueError(
+                    f"gain(s) {', '.join(missing)} of {self.kind!r} not found in "
+                    "gains or gain_columns; give each (e.g. "
+                    f"{missing[0]} = 0 in gains if the law has no such term)"
+                )
         for k, v in self.gains.items():
             try:
                 to_si(v, units[k], field=f"gains.{k}")
@@ -227,8 +237,10 @@ class Checks(Spec):
     def _positive(cls, v: dict) -> dict:
         for k, q in v.items():
             if isinstance(q, (int, float)) and not q > 0:
-                raise ValueError(f"{k} = {q!r}: an encoder quantum is > 0 (in the channel's "
-                                 "SI unit), or the name of a .mat variable holding it")
+                raise ValueError(
+                    f"{k} = {q!r}: an encoder quantum is > 0 (in the channel's "
+                    "SI unit), or the name of a .mat variable holding it"
+                )
         return v
 
 
@@ -255,8 +267,7 @@ class LogFormat(Spec):
     def _delimiter(cls, v: str) -> str:
         if v.lower() in DELIMITER_NAMES or len(v) == 1 and v not in "\"'\n\r":
             return v
-        raise ValueError(f"got {v!r}; give one character or one of "
-                         f"{', '.join(DELIMITER_NAMES)}")
+        raise ValueError(f"got {v!r}; give one character or one of {', '.join(DELIMITER_NAMES)}")
 
     @field_validator("comment", mode="before")
     @classmethod
@@ -271,11 +282,12 @@ class LogFormat(Spec):
     def _columns(cls, v: dict) -> dict:
         bad = [k for k in v if signal_unit(k) is None]
         if bad:
-            raise ValueError(f"{', '.join(map(repr, bad))} is not one of flexarm's column "
-                             f"names; known: {known_names()} (gain columns go in "
-                             "[controller] gain_columns)")
-        return {k: x if isinstance(x, ColumnInFile) else _column_ref(k, x)
-                for k, x in v.items()}
+            raise ValueError(
+                f"{', '.join(map(repr, bad))} is not one of flexarm's column "
+                f"names; known: {known_names()} (gain columns go in "
+                "[controller] gain_columns)"
+            )
+        return {k: x if isinstance(x, ColumnInFile) else _column_ref(k, x) for k, x in v.items()}
 
     @field_validator("units")
     @classmethod
@@ -283,28 +295,39 @@ class LogFormat(Spec):
         for k, u in v.items():
             si = signal_unit(k)
             if si is None:
-                raise ValueError(f"{k!r} is not one of flexarm's column names; known: "
-                                 f"{known_names()}")
+                raise ValueError(
+                    f"{k!r} is not one of flexarm's column names; known: {known_names()}"
+                )
             try:
                 ureg.parse_expression(u).to(si)
             except Exception as exc:  # pint raises several exception types
-                raise ValueError(f"{k} = {u!r} does not convert to {si} ({exc}); give a unit "
-                                 f"of the same kind as {si}, e.g. {k} = "
-                                 f"\"{ {'s': 'ms', 'rad': 'deg', 'm': 'mm', 'V': 'mV'}.get(si, si)}\""
-                                 ) from None
+                raise ValueError(
+                    f"{k} = {u!r} does not convert to {si} ({exc}); give a unit "
+                    f"of the same kind as {si}, e.g. {k} = "
+                    f'"{ {"s": "ms", "rad": "deg", "m": "mm", "V": "mV"}.get(si, si) }"'
+                ) from None
         return v
 
     @model_validator(mode="after")
     def _checked_are_mapped(self) -> LogFormat:
         for k in [*self.checks.quantum, *self.checks.zero]:
             if k not in self.columns:
-                raise ValueError(f"[checks] names {k!r}, which [columns] does not map; "
-                                 f"mapped: {', '.join(self.columns) or 'none'}")
+                raise ValueError(
+                    f"[checks] names {k!r}, which [columns] does not map; "
+                    f"mapped: {', '.join(self.columns) or 'none'}"
+                )
         return self
 
-    def read(self, path: str | Path, *, required: tuple[str, ...] = ("time",),
-             controller: Any = None, columns: Mapping[str, str | int] | None = None,
-             units: Mapping[str, str] | None = None, **kw) -> Log:
+    def read(
+        self,
+        path: str | Path,
+        *,
+        required: tuple[str, ...] = ("time",),
+        controller: Any = None,
+        columns: Mapping[str, str | int] | None = None,
+        units: Mapping[str, str] | None = None,
+        **kw,
+    ) -> Log:
         """Read one log with this format: a ``.mat`` file through
         :func:`flexarm.io.matfile.read_mat`, any other through
         :func:`flexarm.io.logs.read_log` (``kw`` passes on to it, e.g. ``max_jitter``,
@@ -321,33 +344,52 @@ class LogFormat(Spec):
         gain_cols = fc.columns() if fc is not None else {}
         if path.suffix.lower() == ".mat":
             if not cols:
-                raise LogFormatError(f"{path}: a .mat recording needs a log format with a "
-                                     "[columns] table (flexarm name = variable spec)")
+                raise LogFormatError(
+                    f"{path}: a .mat recording needs a log format with a "
+                    "[columns] table (flexarm name = variable spec)"
+                )
             missing = [c for c in required if c not in cols]
             if missing:
-                raise LogFormatError(f"{path}: {where}: [columns] maps no "
-                                     f"{', '.join(missing)}; map it to a variable (e.g. "
-                                     f"time = \"logsout.time\")")
+                raise LogFormatError(
+                    f"{path}: {where}: [columns] maps no "
+                    f"{', '.join(missing)}; map it to a variable (e.g. "
+                    f'time = "logsout.time")'
+                )
             variables = matfile.load_mat(path)
             # a .mat log's gain columns are variable specs (strings), as its [columns]
             mat_cols = cast("dict[str, str]", {**cols, **gain_cols})
             log = matfile.read_mat(path, mat_cols, uts, variables=variables, source=self.source)
-            quanta = {k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
-                      if isinstance(q, str) else float(q)
-                      for k, q in self.checks.quantum.items()}
+            quanta = {
+                k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
+                if isinstance(q, str)
+                else float(q)
+                for k, q in self.checks.quantum.items()
+            }
         else:
             extra = {k: u for k in [*cols, *uts] if (u := signal_unit(k)) is not None}
             extra.update(STATE_FEEDBACK_GAINS)
-            text: dict[str, Any] = dict(delimiter=self.delimiter_char, comment=self.comment,
-                        skip_rows=self.skip_rows, source=where)
+            text: dict[str, Any] = dict(
+                delimiter=self.delimiter_char,
+                comment=self.comment,
+                skip_rows=self.skip_rows,
+                source=where,
+            )
             text.update(kw)
-            log = read_log(path, {**cols, **gain_cols} or None, uts or None,
-                           required=required, extra=extra, **text)
+            log = read_log(
+                path,
+                {**cols, **gain_cols} or None,
+                uts or None,
+                required=required,
+                extra=extra,
+                **text,
+            )
             quanta = {}
             for k, q in self.checks.quantum.items():
                 if isinstance(q, str):
-                    raise LogFormatError(f"{self.source}: [checks] quantum.{k} = {q!r}: a "
-                                         "text log has no variables; give the number")
+                    raise LogFormatError(
+                        f"{self.source}: [checks] quantum.{k} = {q!r}: a "
+                        "text log has no variables; give the number"
+                    )
                 quanta[k] = float(q)
         self._check(log, quanta)
         return self.declared_controller(log, controller)
@@ -367,13 +409,19 @@ class LogFormat(Spec):
         elif fc is not None and (fc.gains or fc.gain_columns):
             fixed = fc.fixed_gains()
             gcols = fc.columns()
-            gains = np.column_stack([sig.pop(k) if k in gcols else np.full(n, fixed.get(k, 0.0))
-                                     for k in STATE_FEEDBACK_GAINS])
+            gains = np.column_stack(
+                [
+                    sig.pop(k) if k in gcols else np.full(n, fixed.get(k, 0.0))
+                    for k in STATE_FEEDBACK_GAINS
+                ]
+            )
             try:
                 ctrl = StateFeedbackController(
-                    type="state_feedback", rate="filtered" if fc.tau > 0 else "backward",
+                    type="state_feedback",
+                    rate="filtered" if fc.tau > 0 else "backward",
                     rate_time_constant=fc.tau,
-                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]), strict=True)))
+                    **dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]), strict=True)),
+                )
             except Exception as exc:
                 raise LogFormatError(f"{log.where}: gains at the first sample: {exc}") from None
         elif "controller" in log.meta:
@@ -384,7 +432,8 @@ class LogFormat(Spec):
                 f"{self.source} [controller] gives neither gains nor gain_columns, and the log "
                 "has no '# controller:' line; add gain_columns = {K1 = .., ...} (the columns "
                 "holding the gains) or gains = {K1 = .., ...} to the format's [controller], "
-                "or pass controller= (--controller)")
+                "or pass controller= (--controller)"
+            )
         log.controller, log.gains, log.rate = ctrl, None, None
         log.voltage_limit = fc.limit if fc is not None else None
         log.log_format = self
@@ -413,8 +462,10 @@ class LogFormat(Spec):
                 own_time.setdefault(f, (name, ref.time))
         missing = [c for c in required if c not in self.columns]
         if missing:
-            raise LogFormatError(f"{path}: log format {self.source}: [columns] maps no "
-                                 f"{', '.join(missing)}; map it (from any of the run's files)")
+            raise LogFormatError(
+                f"{path}: log format {self.source}: [columns] maps no "
+                f"{', '.join(missing)}; map it (from any of the run's files)"
+            )
         parts: dict[Path, Log] = {}
         for f, cols in files.items():
             cols = dict(cols)
@@ -425,11 +476,17 @@ class LogFormat(Spec):
                 raise LogFormatError(
                     f"{f}: no such file ([columns] {who} in {self.source}, read for the log "
                     f"{path}); {{stem}} = {stem!r}: give the run's stem (the path the files' "
-                    "names start with) or fix the 'file' entries")
+                    "names start with) or fix the 'file' entries"
+                )
             sub = LogFormat.model_construct(
-                **{**{k: getattr(self, k) for k in type(self).model_fields},
-                   "columns": cols, "checks": Checks(), "controller": None,
-                   "units": {k: u for k, u in self.units.items() if k in cols}})
+                **{
+                    **{k: getattr(self, k) for k in type(self).model_fields},
+                    "columns": cols,
+                    "checks": Checks(),
+                    "controller": None,
+                    "units": {k: u for k, u in self.units.items() if k in cols},
+                }
+            )
             sub._source = self.source
             parts[f] = sub.read(f, required=("time",) if "time" in cols else (), **kw)
         t_file = next(f for f, c in files.items() if "time" in c)
@@ -441,7 +498,8 @@ class LogFormat(Spec):
                 raise LogFormatError(
                     f"{f}: {len(g)} samples, but {t_file} (the log's time, [columns] time in "
                     f"{self.source}) has {n}: the files of one log must share one time base; "
-                    "give files captured together (same trigger, same length)")
+                    "give files captured together (same trigger, same length)"
+                )
             if g.time is not None and f != t_file:
                 step = float(np.median(np.diff(time))) if n > 1 else 1.0
                 off = np.abs(g.time - time)
@@ -451,17 +509,25 @@ class LogFormat(Spec):
                         f"{f}: its time ({own_time[f][0]} time = {own_time[f][1]!r}) differs "
                         f"from the log's time in {t_file} at sample {j}: {g.time[j]:.9g} s vs "
                         f"{time[j]:.9g} s (step {step:g} s): the files of one log must share "
-                        "one time base; give captures of the same run and window")
+                        "one time base; give captures of the same run and window"
+                    )
         signals = {k: v for g in parts.values() for k, v in g.signals.items()}
-        log = Log(path, time, signals, skipped=[x for g in parts.values() for x in g.skipped],
-                  notes=[x for g in parts.values() for x in g.notes])
+        log = Log(
+            path,
+            time,
+            signals,
+            skipped=[x for g in parts.values() for x in g.skipped],
+            notes=[x for g in parts.values() for x in g.notes],
+        )
         quanta = {}
         for k, q in self.checks.quantum.items():
             if isinstance(q, str):
                 f = next(f for f, c in files.items() if k in c)
                 if f.suffix.lower() != ".mat":
-                    raise LogFormatError(f"{self.source}: [checks] quantum.{k} = {q!r}: a "
-                                         "text log has no variables; give the number")
+                    raise LogFormatError(
+                        f"{self.source}: [checks] quantum.{k} = {q!r}: a "
+                        "text log has no variables; give the number"
+                    )
                 q = matfile.scalar(f, matfile.load_mat(f), q, f"[checks] quantum.{k}")
             quanta[k] = float(q)
         self._check(log, quanta)
@@ -471,8 +537,9 @@ class LogFormat(Spec):
         for k, q in quanta.items():
             x = log[k]
             if not q > 0 or not np.isfinite(q):
-                raise LogFormatError(f"{log.where}: [checks] quantum.{k} = {q!r}: not a "
-                                     "positive number")
+                raise LogFormatError(
+                    f"{log.where}: [checks] quantum.{k} = {q!r}: not a positive number"
+                )
             off = np.abs(x / q - np.round(x / q))
             j = int(np.argmax(off))
             if off[j] > GRID_TOLERANCE:
@@ -484,7 +551,8 @@ class LogFormat(Spec):
                     f"of {len(x)} samples are off it. A measured angle lies on its encoder's "
                     "grid: is this variable a setpoint or a simulated signal? Map the "
                     "variable that holds the measurement (check the file's variables "
-                    "against each other)")
+                    "against each other)"
+                )
         for k in self.checks.zero:
             x = log[k]
             if np.any(x != 0):
@@ -492,7 +560,8 @@ class LogFormat(Spec):
                 raise LogFormatError(
                     f"{log.where}: {k} = {self.columns[k]!r} must be all zeros ([checks] zero "
                     f"in {self.source}); sample {j} is {x[j]:.6g} ({int((x != 0).sum())} "
-                    "non-zero): the format maps another variable than the one meant")
+                    "non-zero): the format maps another variable than the one meant"
+                )
 
     @property
     def source(self) -> str:
@@ -536,9 +605,15 @@ def load_log_format(path: str | Path | LogFormat) -> LogFormat:
     return log_format_from_dict(data, source=str(path))
 
 
-def load_log(path: str | Path, log_format: str | Path | LogFormat | None = None, *,
-             controller: Any = None, columns: Mapping[str, str | int] | None = None,
-             units: Mapping[str, str] | None = None, **kw) -> Log:
+def load_log(
+    path: str | Path,
+    log_format: str | Path | LogFormat | None = None,
+    *,
+    controller: Any = None,
+    columns: Mapping[str, str | int] | None = None,
+    units: Mapping[str, str] | None = None,
+    **kw,
+) -> Log:
     """One log as its logger wrote it (text or ``.mat``), read through a log-format file
     (``None``: a text log in flexarm's exchange format, SI units, named columns); returns
     the one :class:`flexarm.io.logs.Log` in SI units with the controller the lab ran
@@ -574,8 +649,10 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
     0: u = KP (r − θ) − KD θ̇)."""
     words = text.replace(",", " ").split()
     if not words:
-        raise LogError(f"{source}: empty controller declaration; write e.g. "
-                       "'state_feedback K1=6 K2=-3 K3=0.2 K4=0' or 'pd KP=10 KD=0.3'")
+        raise LogError(
+            f"{source}: empty controller declaration; write e.g. "
+            "'state_feedback K1=6 K2=-3 K3=0.2 K4=0' or 'pd KP=10 KD=0.3'"
+        )
     kind = words[0].lower()
     vals: dict[str, Any] = {}
     for w in words[1:]:
@@ -583,15 +660,21 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
             raise LogError(f"{source}: {w!r} in the controller declaration is not NAME=VALUE")
         k, _, v = w.partition("=")
         vals[k.strip().lower()] = v.strip()
-    allowed = {"state_feedback": {"k1", "k2", "k3", "k4", "rate", "tau"},
-               "pd": {"kp", "kd", "rate", "tau"}}
+    allowed = {
+        "state_feedback": {"k1", "k2", "k3", "k4", "rate", "tau"},
+        "pd": {"kp", "kd", "rate", "tau"},
+    }
     if kind not in allowed:
-        raise LogError(f"{source}: controller type {kind!r} is not known; a log declares "
-                       "'state_feedback K1=.. K2=.. K3=.. K4=..' or 'pd KP=.. KD=..'")
+        raise LogError(
+            f"{source}: controller type {kind!r} is not known; a log declares "
+            "'state_feedback K1=.. K2=.. K3=.. K4=..' or 'pd KP=.. KD=..'"
+        )
     unknown = set(vals) - allowed[kind]
     if unknown:
-        raise LogError(f"{source}: unknown controller field(s) {sorted(unknown)} for "
-                       f"{kind}; allowed: {sorted(allowed[kind])}")
+        raise LogError(
+            f"{source}: unknown controller field(s) {sorted(unknown)} for "
+            f"{kind}; allowed: {sorted(allowed[kind])}"
+        )
     num = {}
     for k, v in vals.items():
         if k == "rate":
@@ -599,8 +682,9 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
         try:
             num[k] = float(v)
         except ValueError:
-            raise LogError(f"{source}: controller field {k.upper()} = {v!r} is not a "
-                           "number") from None
+            raise LogError(
+                f"{source}: controller field {k.upper()} = {v!r} is not a number"
+            ) from None
     rate = vals.get("rate", "filtered" if "tau" in num else "backward")
     if kind == "pd":
         if "kp" not in num:
@@ -611,8 +695,9 @@ def parse_controller(text: str, source: str = "controller") -> StateFeedbackCont
             raise LogError(f"{source}: state_feedback controller without K1")
         g: dict[str, Any] = {k: num.get(k, 0.0) for k in ("k1", "k2", "k3", "k4")}
     try:
-        return StateFeedbackController(type="state_feedback", rate=rate,
-                                       rate_time_constant=num.get("tau", 0.0), **g)
+        return StateFeedbackController(
+            type="state_feedback", rate=rate, rate_time_constant=num.get("tau", 0.0), **g
+        )
     except Exception as exc:
         raise LogError(f"{source}: controller declaration: {exc}") from None
 
@@ -626,11 +711,17 @@ def controller_from_any(c: Any, source: str) -> StateFeedbackController:
     if isinstance(c, Mapping):
         d = {"type": "state_feedback", **c}
         if d.get("type") == "pd":
-            d = {"type": "state_feedback", "k1": d.get("kp"), "k3": d.get("kd", 0.0),
-                 **{k: v for k, v in d.items() if k in ("rate", "rate_time_constant")}}
+            d = {
+                "type": "state_feedback",
+                "k1": d.get("kp"),
+                "k3": d.get("kd", 0.0),
+                **{k: v for k, v in d.items() if k in ("rate", "rate_time_constant")},
+            }
         try:
             return StateFeedbackController(**d)
         except Exception as exc:
             raise LogError(f"{source}: controller: {exc}") from None
-    raise LogError(f"{source}: controller {c!r}: give a declaration string, a dict or a "
-                   "StateFeedbackController")
+    raise LogError(
+        f"{source}: controller {c!r}: give a declaration string, a dict or a "
+        "StateFeedbackController"
+    )

@@ -72,7 +72,7 @@ OPTIONAL: dict[str, str] = {
 KNOWN: dict[str, str] = {**REQUIRED, **OPTIONAL}
 #: Further named signals a log-format file may map, with their SI units.
 OTHER: dict[str, str] = {
-    "sample_counter": "",       # a logger's sample counter (dropped after the check)
+    "sample_counter": "",  # a logger's sample counter (dropped after the check)
     "load_angle": "rad",
     "load_velocity": "rad/s",
     "tip_x": "m",
@@ -83,10 +83,20 @@ OTHER: dict[str, str] = {
 #: deflection angle α (raw, or ``_f`` filtered as a controller logs it) and its rate, the
 #: drive's command (current, voltage, torque) and the measured current.
 PER_JOINT: dict[str, str] = {
-    "theta": "rad", "theta_ref": "rad", "theta_dot": "rad/s", "theta_dot_f": "rad/s",
-    "alpha": "rad", "alpha_f": "rad", "alpha_dot": "rad/s", "alpha_dot_f": "rad/s",
-    "deflection": "m", "deflection_angle": "rad",
-    "current": "A", "current_measured": "A", "voltage": "V", "torque": "N*m",
+    "theta": "rad",
+    "theta_ref": "rad",
+    "theta_dot": "rad/s",
+    "theta_dot_f": "rad/s",
+    "alpha": "rad",
+    "alpha_f": "rad",
+    "alpha_dot": "rad/s",
+    "alpha_dot_f": "rad/s",
+    "deflection": "m",
+    "deflection_angle": "rad",
+    "current": "A",
+    "current_measured": "A",
+    "voltage": "V",
+    "torque": "N*m",
 }
 
 #: Largest accepted relative deviation of a time step from the median step.
@@ -110,8 +120,7 @@ def signal_unit(name: str) -> str | None:
 
 def known_names() -> str:
     """The signal names a log may map, for messages."""
-    return (", ".join([*KNOWN, *OTHER]) + "; per joint j: "
-            + ", ".join(f"{b}_j" for b in PER_JOINT))
+    return ", ".join([*KNOWN, *OTHER]) + "; per joint j: " + ", ".join(f"{b}_j" for b in PER_JOINT)
 
 
 class LogError(FlexarmError, ValueError):
@@ -125,8 +134,7 @@ class LogExistsError(LogError, OutputExistsError):
 #: The rig's outputs a servo-rig fit reads (hub encoder and strain gauge).
 RIG_OUTPUTS = ("motor_angle", "tip_deflection")
 #: The state-feedback gains in the order of :attr:`Log.gains`, with their SI units.
-STATE_FEEDBACK_GAINS: dict[str, str] = {"K1": "V/rad", "K2": "V/m", "K3": "V*s/rad",
-                                        "K4": "V*s/m"}
+STATE_FEEDBACK_GAINS: dict[str, str] = {"K1": "V/rad", "K2": "V/m", "K3": "V*s/rad", "K4": "V*s/m"}
 
 
 @dataclass
@@ -172,8 +180,10 @@ class Log:
         if self.gains is not None:
             self.gains = np.asarray(self.gains, dtype=float)
             if self.gains.shape != (n, 4):
-                raise LogError(f"{self.where}: gains have shape {self.gains.shape}; expected "
-                               f"({n}, 4): K1..K4 per sample")
+                raise LogError(
+                    f"{self.where}: gains have shape {self.gains.shape}; expected "
+                    f"({n}, 4): K1..K4 per sample"
+                )
         if self.rate is None and c is not None:
             self.rate = getattr(c, "rate", None)
 
@@ -220,8 +230,9 @@ class Log:
         try:
             return self.signals[column]
         except KeyError:
-            raise KeyError(f"{self.where}: no column {column!r}; columns: "
-                           f"time, {', '.join(self.signals)}") from None
+            raise KeyError(
+                f"{self.where}: no column {column!r}; columns: time, {', '.join(self.signals)}"
+            ) from None
 
     def __len__(self) -> int:
         if self.time is not None:
@@ -244,21 +255,33 @@ class Log:
         keep = (rel >= t0 - eps) & (rel < t1 - eps)
         k = int(keep.sum())
         if k < min_samples:
-            what = ("lies outside the log" if k == 0 else f"holds only {k} sample(s), fewer "
-                    f"than {min_samples}")
-            raise LogError(f"{where} {what}; the log spans [0, {float(rel[-1]) + dt:g}) s "
-                           f"from its first sample ({len(self.time)} samples of {dt:g} s); "
-                           "choose a window inside it")
+            what = (
+                "lies outside the log"
+                if k == 0
+                else f"holds only {k} sample(s), fewer than {min_samples}"
+            )
+            raise LogError(
+                f"{where} {what}; the log spans [0, {float(rel[-1]) + dt:g}) s "
+                f"from its first sample ({len(self.time)} samples of {dt:g} s); "
+                "choose a window inside it"
+            )
         gains = self.gains[keep].copy() if self.gains is not None else None
         ctrl = self.controller
         if ctrl is not None and gains is not None and hasattr(ctrl, "model_copy"):
-            ctrl = ctrl.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                   map(float, gains[0]), strict=True)))
-        return replace(self, time=self.time[keep].copy(),
-                       signals={c: x[keep].copy() for c, x in self.signals.items()},
-                       comments=list(self.comments), meta=dict(self.meta),
-                       skipped=list(self.skipped), notes=list(self.notes), controller=ctrl,
-                       gains=gains)
+            ctrl = ctrl.model_copy(
+                update=dict(zip(("k1", "k2", "k3", "k4"), map(float, gains[0]), strict=True))
+            )
+        return replace(
+            self,
+            time=self.time[keep].copy(),
+            signals={c: x[keep].copy() for c, x in self.signals.items()},
+            comments=list(self.comments),
+            meta=dict(self.meta),
+            skipped=list(self.skipped),
+            notes=list(self.notes),
+            controller=ctrl,
+            gains=gains,
+        )
 
 
 def log_keys(logs: Sequence[Log]) -> list[str]:
@@ -269,17 +292,26 @@ def log_keys(logs: Sequence[Log]) -> list[str]:
     log without a file is keyed by its ``name``."""
     from flexarm.io.write import unique_keys
 
-    return unique_keys([p if (p := getattr(g, "path", None)) is not None
-                        else (getattr(g, "name", "<log>") or "<log>") for g in logs])
+    return unique_keys(
+        [
+            p
+            if (p := getattr(g, "path", None)) is not None
+            else (getattr(g, "name", "<log>") or "<log>")
+            for g in logs
+        ]
+    )
 
 
-def unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN,
-                 source: str = "") -> float:
+def unit_factor(
+    path: Path, column: str, unit: str, known: Mapping[str, str] = KNOWN, source: str = ""
+) -> float:
     """Factor from the file's ``unit`` to the SI unit of ``column``."""
     si = known.get(column)
     if si is None:
-        raise LogError(f"{path}: a unit was given for column {column!r}, which flexarm "
-                       f"does not know; known: {', '.join(known)}")
+        raise LogError(
+            f"{path}: a unit was given for column {column!r}, which flexarm "
+            f"does not know; known: {', '.join(known)}"
+        )
     try:
         try:
             q = ureg.Quantity(1.0, unit)
@@ -288,8 +320,10 @@ def unit_factor(path: Path, column: str, unit: str, known: Mapping[str, str] = K
         return float(q.to(si).magnitude)
     except Exception as exc:  # pint raises several exception types
         where = f" in {source}" if source else ""
-        raise LogError(f"{path}: cannot convert column {column!r} from {unit!r} to {si} "
-                       f"({exc}); give{where} a unit of the same kind as {si}") from None
+        raise LogError(
+            f"{path}: cannot convert column {column!r} from {unit!r} to {si} "
+            f"({exc}); give{where} a unit of the same kind as {si}"
+        ) from None
 
 
 #: Characters that start a comment line (the exchange format writes ``#``; many loggers ``%``).
@@ -311,8 +345,10 @@ def _decode(path: Path) -> str:
     if b"\x00" in raw:
         k = raw.index(b"\x00")
         line = raw[:k].count(b"\n") + 1
-        raise LogError(f"{path}: line {line}: a NUL byte at byte {k}; this is a binary file, "
-                       "not a text log (export the log as text: CSV, tab- or space-separated)")
+        raise LogError(
+            f"{path}: line {line}: a NUL byte at byte {k}; this is a binary file, "
+            "not a text log (export the log as text: CSV, tab- or space-separated)"
+        )
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -358,15 +394,16 @@ class _Layout:
     """Where things are in a log's text (line numbers 1-based)."""
 
     comments: list[str]
-    header: list[str] | None       # the header's fields (None: no header)
+    header: list[str] | None  # the header's fields (None: no header)
     header_line: int | None
     header_is_comment: bool
     delimiter: str | None
     rows: list[tuple[int, list[str]]]  # (file line, fields) of each data row
 
 
-def _layout(path: Path, text: str, delimiter: str | None, comment: Sequence[str],
-            skip_rows: int) -> _Layout:
+def _layout(
+    path: Path, text: str, delimiter: str | None, comment: Sequence[str], skip_rows: int
+) -> _Layout:
     """Comment lines, header, delimiter and data rows of a log.
 
     The header is the first line that is neither blank nor a comment, unless that line is
@@ -387,8 +424,10 @@ def _layout(path: Path, text: str, delimiter: str | None, comment: Sequence[str]
             break
         k += 1
     else:
-        raise LogError(f"{path}: no header row and no data; expected a line "
-                       f"'{','.join(REQUIRED)}' after any '#' comment lines")
+        raise LogError(
+            f"{path}: no header row and no data; expected a line "
+            f"'{','.join(REQUIRED)}' after any '#' comment lines"
+        )
     first = lines[k]
     header_is_comment = False
     if sniff:
@@ -433,25 +472,32 @@ def _norm(text: str) -> str:
     return " ".join(text.split())
 
 
-def _resolve_column(path: Path, ours: str, spec: object, lay: _Layout, ncol: int,
-                    source: str) -> tuple[int, float]:
+def _resolve_column(
+    path: Path, ours: str, spec: object, lay: _Layout, ncol: int, source: str
+) -> tuple[int, float]:
     """(0-based index, sign) of the file column that ``spec`` (header text or 1-based
     number; a leading ``-`` flips the sign) names for our column ``ours``."""
     where = f"{source or 'columns'}: column {ours!r} = {spec!r}"
-    have = (f"the file has {ncol} field(s) per data row; header"
-            + (f" (line {lay.header_line}): " + " | ".join(lay.header) if lay.header
-               else ": none (give columns by number, 1 to " f"{ncol})"))
+    have = f"the file has {ncol} field(s) per data row; header" + (
+        f" (line {lay.header_line}): " + " | ".join(lay.header)
+        if lay.header
+        else f": none (give columns by number, 1 to {ncol})"
+    )
     if isinstance(spec, bool) or not isinstance(spec, (int, str)):
         raise LogError(f"{path}: {where}: give the header text or the 1-based column number")
     if isinstance(spec, str):
         text = _norm(spec)
         names = [_norm(h) for h in lay.header or []][:ncol]
-        for cand, sign in ((text, 1.0), (text[1:].strip(), -1.0) if text.startswith("-")
-                           else (None, 1.0)):
+        for cand, sign in (
+            (text, 1.0),
+            (text[1:].strip(), -1.0) if text.startswith("-") else (None, 1.0),
+        ):
             if cand is not None and cand in names:
                 if names.count(cand) > 1:
-                    raise LogError(f"{path}: {where}: the header names {cand!r} "
-                                   f"{names.count(cand)} times; give the column's number")
+                    raise LogError(
+                        f"{path}: {where}: the header names {cand!r} "
+                        f"{names.count(cand)} times; give the column's number"
+                    )
                 return names.index(cand), sign
         try:
             spec = int(text)
@@ -469,13 +515,21 @@ def _describe(names: list[str], lay: _Layout, j: int) -> str:
     return f"{names[j]!r} (file column {j + 1}" + (f", {h!r})" if h and h != names[j] else ")")
 
 
-def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
-             units: Mapping[str, str] | None = None, *,
-             min_samples: int = MIN_SAMPLES, max_jitter: float = MAX_JITTER,
-             required: Sequence[str] = tuple(REQUIRED), hint: str = "",
-             delimiter: str | None = None, comment: Sequence[str] = COMMENT_CHARS,
-             skip_rows: int = 0, extra: Mapping[str, str] | None = None,
-             source: str = "") -> Log:
+def read_log(
+    path: str | Path,
+    columns: Mapping[str, str | int] | None = None,
+    units: Mapping[str, str] | None = None,
+    *,
+    min_samples: int = MIN_SAMPLES,
+    max_jitter: float = MAX_JITTER,
+    required: Sequence[str] = tuple(REQUIRED),
+    hint: str = "",
+    delimiter: str | None = None,
+    comment: Sequence[str] = COMMENT_CHARS,
+    skip_rows: int = 0,
+    extra: Mapping[str, str] | None = None,
+    source: str = "",
+) -> Log:
     """Read and validate one experiment log (see the module docstring for the format).
 
     Parameters
@@ -511,8 +565,10 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     known = {**KNOWN, **(extra or {})}
     for ours in list(columns) + list(units):
         if ours not in known:
-            raise LogError(f"{path}: {source or 'columns'}: {ours!r} is not a column name of the log "
-                           f"format; known: {', '.join(known)}")
+            raise LogError(
+                f"{path}: {source or 'columns'}: {ours!r} is not a column name of the log "
+                f"format; known: {', '.join(known)}"
+            )
     text = _decode(path)
     lay = _layout(path, text, delimiter, comment, skip_rows)
     comments = lay.comments
@@ -538,28 +594,38 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     taken: dict[int, str] = {}
     for ours, (j, _) in index.items():
         if j in taken:
-            raise LogError(f"{path}: {source or 'columns'}: {taken[j]!r} and {ours!r} both name file "
-                           f"column {j + 1}; each column can be read once")
+            raise LogError(
+                f"{path}: {source or 'columns'}: {taken[j]!r} and {ours!r} both name file "
+                f"column {j + 1}; each column can be read once"
+            )
         taken[j] = ours
     header = lay.header if lay.header is not None and len(lay.header) == ncol else None
-    names = [taken.get(j, _norm(header[j]) if header is not None else f"col{j + 1}")
-             for j in range(ncol)]
+    names = [
+        taken.get(j, _norm(header[j]) if header is not None else f"col{j + 1}") for j in range(ncol)
+    ]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise LogError(f"{path}: column(s) {', '.join(map(repr, dup))} appear more than once "
-                       f"in the header {lay.header}")
+        raise LogError(
+            f"{path}: column(s) {', '.join(map(repr, dup))} appear more than once "
+            f"in the header {lay.header}"
+        )
     missing = [c for c in required if c not in names]
     if missing:
-        found = (", ".join(lay.header) if lay.header else
-                 f"(no header; {ncol} field(s) per data row)")
+        found = (
+            ", ".join(lay.header) if lay.header else f"(no header; {ncol} field(s) per data row)"
+        )
         lines_msg = [
-            f"{path}: missing column(s) {', '.join(map(repr, missing))}." + (f" {hint}" if hint else ""),
+            f"{path}: missing column(s) {', '.join(map(repr, missing))}."
+            + (f" {hint}" if hint else ""),
             f"  found:    {found}",
             f"  expected: {', '.join(required)} (optional: "
             f"{', '.join(c for c in KNOWN if c not in required)})",
             "  if the file names them differently, map them by header text or 1-based "
-            "column number, e.g. " + " ".join(f"--column {c}=NAME" for c in missing)
-            + " (read_log(..., columns={'" + missing[0] + "': 'NAME'}), or a log-format "
+            "column number, e.g. "
+            + " ".join(f"--column {c}=NAME" for c in missing)
+            + " (read_log(..., columns={'"
+            + missing[0]
+            + "': 'NAME'}), or a log-format "
             "file's [columns])",
         ]
         raise LogError("\n".join(lines_msg))
@@ -567,13 +633,13 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
     data = _parse_numbers(path, lay, ncol, names, plain_header)
     n = data.shape[0]
     if n < min_samples:
-        raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} "
-                       "needed")
+        raise LogError(f"{path}: too few samples: {n} data row(s), at least {min_samples} needed")
     for _ours, (j, sign) in index.items():
         if sign < 0:
             data[:, j] = -data[:, j]
-    factors = {name: unit_factor(path, name, units[name], known, source)
-               for name in units if name in names}
+    factors = {
+        name: unit_factor(path, name, units[name], known, source) for name in units if name in names
+    }
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)
     signals: dict[str, np.ndarray] = {}
@@ -584,26 +650,41 @@ def read_log(path: str | Path, columns: Mapping[str, str | int] | None = None,
         if name in factors:
             x *= factors[name]
         signals[name] = x
-    _checks.check_signals(path, signals, time=time, time_column=_describe(names, lay, tj), lines=[ln for ln, _ in lay.rows], max_jitter=max_jitter)
+    _checks.check_signals(
+        path,
+        signals,
+        time=time,
+        time_column=_describe(names, lay, tj),
+        lines=[ln for ln, _ in lay.rows],
+        max_jitter=max_jitter,
+    )
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 
 
-def _parse_numbers(path: Path, lay: _Layout, ncol: int, names: list[str],
-                   plain_header: bool) -> np.ndarray:
+def _parse_numbers(
+    path: Path, lay: _Layout, ncol: int, names: list[str], plain_header: bool
+) -> np.ndarray:
     """The data rows as an (N, ncol) float array; a row with another number of fields, a
     field that is not a number, a NaN or an infinity is an error naming line and column."""
     out = np.empty((len(lay.rows), ncol))
     for r, (line, fields) in enumerate(lay.rows):
         if len(fields) != ncol:
-            other = (f"the header (line {lay.header_line}) has {ncol}" if plain_header
-                     else f"most rows have {ncol}")
+            other = (
+                f"the header (line {lay.header_line}) has {ncol}"
+                if plain_header
+                else f"most rows have {ncol}"
+            )
             cut = ""
             if len(fields) < ncol:
-                cut = (f"; column {_describe(names, lay, len(fields))} onwards is missing "
-                       "(is the file cut mid-line?)")
+                cut = (
+                    f"; column {_describe(names, lay, len(fields))} onwards is missing "
+                    "(is the file cut mid-line?)"
+                )
             shown = f" ({', '.join(lay.header)})" if lay.header else ""
-            raise LogError(f"{path}: data row {r + 1} (line {line}) has {len(fields)} "
-                           f"field(s); {other}{shown}{cut}")
+            raise LogError(
+                f"{path}: data row {r + 1} (line {line}) has {len(fields)} "
+                f"field(s); {other}{shown}{cut}"
+            )
         try:
             out[r] = list(map(_number, fields))
         except ValueError:
@@ -612,15 +693,19 @@ def _parse_numbers(path: Path, lay: _Layout, ncol: int, names: list[str],
                     _number(f)
                 except ValueError:
                     shown = repr(f) if f else "an empty field"
-                    raise LogError(f"{path}: column {_describe(names, lay, j)}, data row "
-                                   f"{r + 1} (line {line}): {shown} is not a number") from None
+                    raise LogError(
+                        f"{path}: column {_describe(names, lay, j)}, data row "
+                        f"{r + 1} (line {line}): {shown} is not a number"
+                    ) from None
     bad = ~np.isfinite(out)
     if bad.any():
         r, c = np.argwhere(bad)[0]
         what = "NaN" if math.isnan(out[r, c]) else "infinite"
-        raise LogError(f"{path}: column {_describe(names, lay, c)}, data row {r + 1} (line "
-                       f"{lay.rows[r][0]}): value is {what}; {int(bad.sum())} non-finite "
-                       "value(s) in all")
+        raise LogError(
+            f"{path}: column {_describe(names, lay, c)}, data row {r + 1} (line "
+            f"{lay.rows[r][0]}): value is {what}; {int(bad.sum())} non-finite "
+            "value(s) in all"
+        )
     return out
 
 
@@ -629,31 +714,40 @@ def _check_time(path: Path, t: np.ndarray, lay: _Layout, col: str, max_jitter: f
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0))
         kind = "repeats" if d[k] == 0 else "decreases"
-        raise LogError(f"{path}: time {kind} at data row {k + 2} (line {lay.rows[k + 1][0]}, "
-                       f"column {col}): t = {t[k + 1]:.9g} s after t = {t[k]:.9g} s (line "
-                       f"{lay.rows[k][0]}); time must increase strictly (duplicated or "
-                       "unsorted rows?)")
+        raise LogError(
+            f"{path}: time {kind} at data row {k + 2} (line {lay.rows[k + 1][0]}, "
+            f"column {col}): t = {t[k + 1]:.9g} s after t = {t[k]:.9g} s (line "
+            f"{lay.rows[k][0]}); time must increase strictly (duplicated or "
+            "unsorted rows?)"
+        )
     if len(d) == 0:
         return
     med = float(np.median(d))
     rel = np.abs(d - med) / med
     k = int(np.argmax(rel))
     if rel[k] > max_jitter:
-        raise LogError(f"{path}: non-uniform sampling: the step from data row {k + 1} to "
-                       f"{k + 2} (lines {lay.rows[k][0]}-{lay.rows[k + 1][0]}, column {col}; "
-                       f"t = {t[k]:.9g} s) is {d[k]:.6g} s against a median step of "
-                       f"{med:.6g} s (relative deviation {rel[k]:.3g} > {max_jitter:g}); "
-                       "resample the log to a uniform time grid, or, if the controller ran "
-                       "at a fixed period and only the time stamps jitter, accept it with "
-                       "max_jitter= (flexarm fit / validate --max-jitter): the samples are "
-                       "then taken as uniform at the median step")
+        raise LogError(
+            f"{path}: non-uniform sampling: the step from data row {k + 1} to "
+            f"{k + 2} (lines {lay.rows[k][0]}-{lay.rows[k + 1][0]}, column {col}; "
+            f"t = {t[k]:.9g} s) is {d[k]:.6g} s against a median step of "
+            f"{med:.6g} s (relative deviation {rel[k]:.3g} > {max_jitter:g}); "
+            "resample the log to a uniform time grid, or, if the controller ran "
+            "at a fixed period and only the time stamps jitter, accept it with "
+            "max_jitter= (flexarm fit / validate --max-jitter): the samples are "
+            "then taken as uniform at the median step"
+        )
 
 
-def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
-              signals: Mapping[str, Sequence[float] | np.ndarray], *,
-              comments: Sequence[str] | Mapping[str, object] = (),
-              overwrite: bool = False, fmt: str = "%.12g",
-              required: Sequence[str] = tuple(REQUIRED)) -> Path:
+def write_log(
+    path: str | Path,
+    time: Sequence[float] | np.ndarray,
+    signals: Mapping[str, Sequence[float] | np.ndarray],
+    *,
+    comments: Sequence[str] | Mapping[str, object] = (),
+    overwrite: bool = False,
+    fmt: str = "%.12g",
+    required: Sequence[str] = tuple(REQUIRED),
+) -> Path:
     """Write a log in the exchange format (SI values).
 
     ``signals`` must hold the required columns other than ``time``; extra columns follow
@@ -672,8 +766,9 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
     for c in order:
         x = np.asarray(signals[c], dtype=float)
         if x.shape != t.shape:
-            raise LogError(f"{path}: cannot write: signal {c!r} has shape {x.shape}, "
-                           f"time has {t.shape}")
+            raise LogError(
+                f"{path}: cannot write: signal {c!r} has shape {x.shape}, time has {t.shape}"
+            )
         cols.append(x)
     if isinstance(comments, Mapping):
         comment_lines = [f"{k}: {v}" for k, v in comments.items()]
@@ -687,6 +782,7 @@ def write_log(path: str | Path, time: Sequence[float] | np.ndarray,
             f.write(",".join(["time", *order]) + "\n")
             np.savetxt(f, np.column_stack(cols), delimiter=",", fmt=fmt)
     except OutputExistsError:
-        raise LogExistsError(f"{path}: exists already; not overwritten (pass overwrite=True)"
-                             ) from None
+        raise LogExistsError(
+            f"{path}: exists already; not overwritten (pass overwrite=True)"
+        ) from None
     return path

@@ -42,7 +42,9 @@ from flexarm.io import checks as _checks  # the readers' checks (issue #25)
 from flexarm.io.logs import Log, LogError, known_names, signal_unit, unit_factor
 from flexarm.units import ureg
 
-_SPEC = re.compile(r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$")
+_SPEC = re.compile(
+    r"^\s*(?P<sign>[-+]?)\s*(?P<path>[A-Za-z_][\w.]*?)\s*(\[\s*(?P<col>\d+)\s*\])?\s*$"
+)
 
 
 #: The flexarm name of a logger's sample counter: used to drop irregular trailing rows, not
@@ -71,10 +73,16 @@ class VarSpec:
     def parse(cls, text: str, *, where: str = "") -> VarSpec:
         m = _SPEC.match(text) if isinstance(text, str) else None
         if m is None:
-            raise MatFileError(f"{where}: cannot read the variable spec {text!r}; write "
-                               "'name', '-name', 'struct.field' or 'name[column]'")
-        return cls(tuple(m["path"].split(".")), None if m["col"] is None else int(m["col"]),
-                   -1.0 if m["sign"] == "-" else 1.0, text)
+            raise MatFileError(
+                f"{where}: cannot read the variable spec {text!r}; write "
+                "'name', '-name', 'struct.field' or 'name[column]'"
+            )
+        return cls(
+            tuple(m["path"].split(".")),
+            None if m["col"] is None else int(m["col"]),
+            -1.0 if m["sign"] == "-" else 1.0,
+            text,
+        )
 
 
 #: Signals read from one ``.mat`` file are a :class:`flexarm.io.logs.Log` (one log type).
@@ -82,6 +90,7 @@ MatRecording = Log
 
 
 # --- file access ----------------------------------------------------------------------
+
 
 class _Opaque:
     """Stand-in for an object the reader cannot decode (kept only to be named)."""
@@ -108,7 +117,9 @@ def _load_v73(path: Path) -> dict:
     try:
         import h5py
     except ImportError:  # pragma: no cover - h5py is a dependency
-        raise MatFileError(f"{path}: a MATLAB v7.3 (HDF5) file needs h5py; pip install h5py") from None
+        raise MatFileError(
+            f"{path}: a MATLAB v7.3 (HDF5) file needs h5py; pip install h5py"
+        ) from None
 
     def conv(node):
         if isinstance(node, h5py.Group):
@@ -117,8 +128,11 @@ def _load_v73(path: Path) -> dict:
             return {k: conv(node[k]) for k in node.keys() if not k.startswith("#")}
         cls = node.attrs.get("MATLAB_class", b"double")
         cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-        if "MATLAB_object_decode" in node.attrs or cls in ("cell", "function_handle") \
-                or node.dtype.kind not in "iufb":
+        if (
+            "MATLAB_object_decode" in node.attrs
+            or cls in ("cell", "function_handle")
+            or node.dtype.kind not in "iufb"
+        ):
             return _Opaque(cls)
         return np.asarray(node[()]).T  # HDF5 holds MATLAB arrays transposed
 
@@ -180,29 +194,39 @@ def _describe(variables: dict) -> str:
 
 
 def resolve_variable(path: Path, variables: dict, name: str, spec: VarSpec) -> np.ndarray:
-    where = (f"{path}: {name} = {spec.text!r}" if name.startswith("[") else
-             f"{path}: [columns] {name} = {spec.text!r}")
+    where = (
+        f"{path}: {name} = {spec.text!r}"
+        if name.startswith("[")
+        else f"{path}: [columns] {name} = {spec.text!r}"
+    )
     node: object = variables
     for depth, part in enumerate(spec.path):
         nxt = _child(_unwrap(node) if depth else node, part)
         if nxt is None:
             if depth == 0:
-                raise MatFileError(f"{where}: the file has no variable {part!r}; it holds: "
-                                   f"{_describe(variables)}")
-            raise MatFileError(f"{where}: {'.'.join(spec.path[:depth])} has no field "
-                               f"{part!r}; fields: {', '.join(_fields(_unwrap(node))) or 'none'}")
+                raise MatFileError(
+                    f"{where}: the file has no variable {part!r}; it holds: {_describe(variables)}"
+                )
+            raise MatFileError(
+                f"{where}: {'.'.join(spec.path[:depth])} has no field "
+                f"{part!r}; fields: {', '.join(_fields(_unwrap(node))) or 'none'}"
+            )
         node = nxt
     node = _unwrap(node)
     if isinstance(node, _Opaque):
-        raise MatFileError(f"{where}: {'.'.join(spec.path)} is an opaque MATLAB object "
-                           f"({node.kind}) that cannot be read; name a numeric variable")
+        raise MatFileError(
+            f"{where}: {'.'.join(spec.path)} is an opaque MATLAB object "
+            f"({node.kind}) that cannot be read; name a numeric variable"
+        )
     if _fields(node):  # a struct: a Simulink log gives its signals.values
         sig = _child(node, "signals")
         vals = _child(_unwrap(sig), "values") if sig is not None else None
         if vals is None:
-            raise MatFileError(f"{where}: {'.'.join(spec.path)} is a struct without "
-                               f"signals.values (fields: {', '.join(_fields(node))}); name a "
-                               f"field, e.g. '{'.'.join(spec.path)}.{_fields(node)[0]}'")
+            raise MatFileError(
+                f"{where}: {'.'.join(spec.path)} is a struct without "
+                f"signals.values (fields: {', '.join(_fields(node))}); name a "
+                f"field, e.g. '{'.'.join(spec.path)}.{_fields(node)[0]}'"
+            )
         node = _unwrap(vals)
     a = np.asarray(node)
     if a.dtype.kind not in "iufb":
@@ -216,18 +240,24 @@ def resolve_variable(path: Path, variables: dict, name: str, spec: VarSpec) -> n
         a2 = a.reshape(a.shape[0], -1)
     if spec.column is not None:
         if spec.column >= a2.shape[1]:
-            raise MatFileError(f"{where}: column {spec.column} does not exist; "
-                               f"{'.'.join(spec.path)} has {a2.shape[1]} column(s) (0-based)")
+            raise MatFileError(
+                f"{where}: column {spec.column} does not exist; "
+                f"{'.'.join(spec.path)} has {a2.shape[1]} column(s) (0-based)"
+            )
         x = a2[:, spec.column]
     elif a2.shape[1] != 1:
-        raise MatFileError(f"{where}: {'.'.join(spec.path)} has {a2.shape[1]} columns; pick "
-                           f"one, e.g. '{spec.text}[0]'")
+        raise MatFileError(
+            f"{where}: {'.'.join(spec.path)} has {a2.shape[1]} columns; pick "
+            f"one, e.g. '{spec.text}[0]'"
+        )
     else:
         x = a2[:, 0]
     bad = ~np.isfinite(x)
     if bad.any():
-        raise MatFileError(f"{where}: {int(bad.sum())} NaN/infinite value(s), first at sample "
-                           f"{int(np.argmax(bad))}; clean or trim the recording")
+        raise MatFileError(
+            f"{where}: {int(bad.sum())} NaN/infinite value(s), first at sample "
+            f"{int(np.argmax(bad))}; clean or trim the recording"
+        )
     return spec.sign * x
 
 
@@ -238,8 +268,9 @@ def scalar(path: str | Path, variables: dict, text: str, where: str) -> float:
     spec = VarSpec.parse(text, where=f"{path}: {where}")
     x = resolve_variable(path, variables, where, spec)
     if x.size != 1:
-        raise MatFileError(f"{path}: {where} = {text!r}: expected one number, "
-                           f"{'.'.join(spec.path)} holds {x.size}")
+        raise MatFileError(
+            f"{path}: {where} = {text!r}: expected one number, {'.'.join(spec.path)} holds {x.size}"
+        )
     return float(x[0])
 
 
@@ -253,13 +284,20 @@ def _factor(path: Path, name: str, unit: str) -> float:
         q = ureg.Quantity(1.0, unit)
         return float(q.to_base_units().magnitude)
     except Exception as exc:  # pint raises several exception types
-        raise MatFileError(f"{path}: [units] {name} = {unit!r}: not a unit pint knows ({exc}); "
-                           f"signal names flexarm knows: {known_names()}") from None
+        raise MatFileError(
+            f"{path}: [units] {name} = {unit!r}: not a unit pint knows ({exc}); "
+            f"signal names flexarm knows: {known_names()}"
+        ) from None
 
 
-def read_mat(path: str | Path, columns: Mapping[str, str],
-             units: Mapping[str, str] | None = None, *, variables: dict | None = None,
-             source: str = "") -> Log:
+def read_mat(
+    path: str | Path,
+    columns: Mapping[str, str],
+    units: Mapping[str, str] | None = None,
+    *,
+    variables: dict | None = None,
+    source: str = "",
+) -> Log:
     """Read the signals ``columns`` (flexarm name → variable spec) from a ``.mat`` file.
 
     ``units`` (flexarm name → the file's unit) converts to SI; the name ``time`` becomes
@@ -271,16 +309,20 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
     units = dict(units or {})
     for name in units:
         if name not in columns:
-            raise MatFileError(f"{path}: [units] names {name!r}, which [columns] does not "
-                               f"map; mapped: {', '.join(columns)}")
+            raise MatFileError(
+                f"{path}: [units] names {name!r}, which [columns] does not "
+                f"map; mapped: {', '.join(columns)}"
+            )
     if variables is None:
         variables = load_mat(path)
     sig: dict[str, np.ndarray] = {}
     for name, text in columns.items():
         if not isinstance(text, str):
-            raise MatFileError(f"{path}: {source + ': ' if source else ''}[columns] {name} = "
-                               f"{text!r}: a .mat file's signal is a variable spec (a string "
-                               "such as 'name', '-name', 'struct.field' or 'name[0]')")
+            raise MatFileError(
+                f"{path}: {source + ': ' if source else ''}[columns] {name} = "
+                f"{text!r}: a .mat file's signal is a variable spec (a string "
+                "such as 'name', '-name', 'struct.field' or 'name[0]')"
+            )
         spec = VarSpec.parse(text, where=f"{path}: [columns] {name}")
         x = resolve_variable(path, variables, name, spec)
         if name in units:
@@ -288,12 +330,16 @@ def read_mat(path: str | Path, columns: Mapping[str, str],
         sig[name] = x
     lengths = {k: len(v) for k, v in sig.items()}
     if len(set(lengths.values())) > 1:
-        raise MatFileError(f"{path}: channels of different lengths: "
-                           + ", ".join(f"{k} {n}" for k, n in lengths.items())
-                           + "; map channels recorded together")
+        raise MatFileError(
+            f"{path}: channels of different lengths: "
+            + ", ".join(f"{k} {n}" for k, n in lengths.items())
+            + "; map channels recorded together"
+        )
     notes: list[str] = []
     if COUNTER in sig:
-        sig[COUNTER] = _checks.unwrap_counter(sig[COUNTER])  # a 16-bit counter's wrap is no lost sample
+        sig[COUNTER] = _checks.unwrap_counter(
+            sig[COUNTER]
+        )  # a 16-bit counter's wrap is no lost sample
         _check_counter(path, sig, notes)
     _checks.check_signals(path, sig, columns=columns, max_jitter=_checks.MAT_MAX_JITTER)
     t = sig.pop("time", None)
@@ -311,18 +357,22 @@ def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> 
     if not len(bad):
         return
     first = int(bad[0]) + 1  # first irregular row
-    if np.all(step[first - 1:] != good) or first >= len(c) - 1:
+    if np.all(step[first - 1 :] != good) or first >= len(c) - 1:
         n = len(c) - first
-        msg = (f"{path}: the sample counter stops advancing at row {first} (of {len(c)}): "
-               f"{n} irregular trailing row(s) dropped")
+        msg = (
+            f"{path}: the sample counter stops advancing at row {first} (of {len(c)}): "
+            f"{n} irregular trailing row(s) dropped"
+        )
         warnings.warn(msg, MatFileWarning, stacklevel=3)
         notes.append(msg)
         for k in sig:
             sig[k] = sig[k][:first]
         return
-    raise MatFileError(f"{path}: [columns] {COUNTER}: the sample counter jumps at row {first} "
-                       f"(step {step[first - 1]:g}, expected {good:g}): samples were lost; "
-                       "cut the recording there")
+    raise MatFileError(
+        f"{path}: [columns] {COUNTER}: the sample counter jumps at row {first} "
+        f"(step {step[first - 1]:g}, expected {good:g}): samples were lost; "
+        "cut the recording there"
+    )
 
 
 def __getattr__(name: str):

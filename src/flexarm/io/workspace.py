@@ -23,15 +23,39 @@ import numpy as np
 from flexarm.io.matfile import MatFileError, load_mat, scalar
 
 #: The workspace variables read (one number each, K1 and K2 four).
-SCALARS = ("J11", "J12", "J21", "J22", "Ks1", "Ks2", "Ktg1", "Ktg2", "B11", "B21", "B12",
-           "B22", "L1", "L2", "KE_D1", "KE_D2", "wcf", "wcfa", "zetaf")
+SCALARS = (
+    "J11",
+    "J12",
+    "J21",
+    "J22",
+    "Ks1",
+    "Ks2",
+    "Ktg1",
+    "Ktg2",
+    "B11",
+    "B21",
+    "B12",
+    "B22",
+    "L1",
+    "L2",
+    "KE_D1",
+    "KE_D2",
+    "wcf",
+    "wcfa",
+    "zetaf",
+)
 
 
-def scenario_from_workspace(path: str | Path, *, current_limits: tuple[float, float] = (0.94, 1.2),
-                            coulomb: tuple[float, float] = (0.5, 0.025),
-                            static: tuple[float, float] = (1.0, 0.05),
-                            period: float | None = None, duration: float = 20.0,
-                            name: str | None = None) -> dict[str, Any]:
+def scenario_from_workspace(
+    path: str | Path,
+    *,
+    current_limits: tuple[float, float] = (0.94, 1.2),
+    coulomb: tuple[float, float] = (0.5, 0.025),
+    static: tuple[float, float] = (1.0, 0.05),
+    period: float | None = None,
+    duration: float = 20.0,
+    name: str | None = None,
+) -> dict[str, Any]:
     """The scenario (a dict in SI numbers) of the rig a workspace file describes.
 
     ``current_limits`` (A) and the joint friction levels ``coulomb`` / ``static`` (N·m) per
@@ -44,12 +68,15 @@ def scenario_from_workspace(path: str | Path, *, current_limits: tuple[float, fl
     K = {}
     for k in ("K1", "K2"):
         if k not in v:
-            raise MatFileError(f"{path}: the file has no variable {k!r} (the LQR gains of one "
-                               "stage, 4 numbers)")
+            raise MatFileError(
+                f"{path}: the file has no variable {k!r} (the LQR gains of one stage, 4 numbers)"
+            )
         K[k] = np.asarray(v[k], float).ravel()
         if K[k].size != 4:
-            raise MatFileError(f"{path}: {k} holds {K[k].size} numbers; the stage law "
-                               "i = K (x_ref − x), x = [θ, α_f, θ̇_f, α̇_f], needs 4")
+            raise MatFileError(
+                f"{path}: {k} holds {K[k].size} numbers; the stage law "
+                "i = K (x_ref − x), x = [θ, α_f, θ̇_f, α̇_f], needs 4"
+            )
     if period is None:  # the logger's step, rounded off its float noise; else 2 ms
         period = 2e-3
         if "stage1_X1_meas" in v:
@@ -58,58 +85,100 @@ def scenario_from_workspace(path: str | Path, *, current_limits: tuple[float, fl
     m2 = 3 * p["J22"] / p["L2"] ** 2
     J01 = p["J12"] - (p["J21"] + p["J22"] + 2 * p["L1"] * m2 * p["L2"] / 2 + m2 * p["L1"] ** 2)
     if not J01 > 0:
-        raise MatFileError(f"{path}: J12 = {p['J12']:g} kg·m² is smaller than the elbow stage's "
-                           f"inertia about joint 1 ({p['J12'] - J01:g} kg·m² with link 2 a "
-                           "uniform rod): the split of docs/choices.md does not apply")
+        raise MatFileError(
+            f"{path}: J12 = {p['J12']:g} kg·m² is smaller than the elbow stage's "
+            f"inertia about joint 1 ({p['J12'] - J01:g} kg·m² with link 2 a "
+            "uniform rod): the split of docs/choices.md does not apply"
+        )
 
     def link(L, m, J, K_, B):
-        return {"model": "torsional", "length": L, "mass": m, "inertia": J,
-                "torsional_stiffness": K_, "torsional_damping": B}
+        return {
+            "model": "torsional",
+            "length": L,
+            "mass": m,
+            "inertia": J,
+            "torsional_stiffness": K_,
+            "torsional_damping": B,
+        }
 
     def joint(B, Kt, lim, fc, fs):
-        return {"viscous": B, "drive": {"drive": "current", "torque_constant": Kt,
-                                        "current_limit": lim},
-                "friction": {"model": "coulomb", "coulomb": fc, "static": fs}}
+        return {
+            "viscous": B,
+            "drive": {"drive": "current", "torque_constant": Kt, "current_limit": lim},
+            "friction": {"model": "coulomb", "coulomb": fc, "static": fs},
+        }
 
     def filt(kind, w):
-        return {"kind": kind, "cutoff": w / (2 * math.pi), "damping": p["zetaf"],
-                "discretisation": "forward_euler"}
+        return {
+            "kind": kind,
+            "cutoff": w / (2 * math.pi),
+            "damping": p["zetaf"],
+            "discretisation": "forward_euler",
+        }
 
     sensors: dict[str, Any] = {}
     for j, q in ((1, p["KE_D1"]), (2, p["KE_D2"])):
         sensors[f"theta_{j}"] = {"quantum": q}
-        sensors[f"alpha_f_{j}"] = {"signal": f"deflection_angle_{j}",
-                                   "filter": filt("lowpass2", p["wcfa"])}
-        sensors[f"theta_dot_f_{j}"] = {"signal": f"theta_{j}", "quantum": q,
-                                       "filter": filt("derivative2", p["wcf"])}
-        sensors[f"alpha_dot_f_{j}"] = {"signal": f"deflection_angle_{j}",
-                                       "filter": filt("lowpass2_rate", p["wcfa"])}
+        sensors[f"alpha_f_{j}"] = {
+            "signal": f"deflection_angle_{j}",
+            "filter": filt("lowpass2", p["wcfa"]),
+        }
+        sensors[f"theta_dot_f_{j}"] = {
+            "signal": f"theta_{j}",
+            "quantum": q,
+            "filter": filt("derivative2", p["wcf"]),
+        }
+        sensors[f"alpha_dot_f_{j}"] = {
+            "signal": f"deflection_angle_{j}",
+            "filter": filt("lowpass2_rate", p["wcfa"]),
+        }
     D = np.zeros((2, 8))
     D[0, :4], D[1, 4:] = K["K1"], K["K2"]
-    inputs = [f"{s}_{j}" for j in (1, 2) for s in ("theta", "alpha_f", "theta_dot_f", "alpha_dot_f")]
+    inputs = [
+        f"{s}_{j}" for j in (1, 2) for s in ("theta", "alpha_f", "theta_dot_f", "alpha_dot_f")
+    ]
     return {
         "name": name or path.stem,
         "description": f"two-link flexible arm from the lab workspace {path.name}",
         "arm": {
-            "kind": "multi_link", "gravity": 0.0,
-            "links": [link(p["L1"], 1.0, J01, p["Ks1"], p["B12"]),
-                      link(p["L2"], m2, p["J22"], p["Ks2"], p["B22"])],
+            "kind": "multi_link",
+            "gravity": 0.0,
+            "links": [
+                link(p["L1"], 1.0, J01, p["Ks1"], p["B12"]),
+                link(p["L2"], m2, p["J22"], p["Ks2"], p["B22"]),
+            ],
             "hubs": [{"mass": 0.0, "inertia": p["J11"]}, {"mass": 0.0, "inertia": p["J21"]}],
-            "joints": [joint(p["B11"], p["Ktg1"], current_limits[0], coulomb[0], static[0]),
-                       joint(p["B21"], p["Ktg2"], current_limits[1], coulomb[1], static[1])],
+            "joints": [
+                joint(p["B11"], p["Ktg1"], current_limits[0], coulomb[0], static[0]),
+                joint(p["B21"], p["Ktg2"], current_limits[1], coulomb[1], static[1]),
+            ],
         },
         "sampling": {"period": period},
         "simulation": {"duration": duration, "substeps": 4},
         "sensors": sensors,
         "references": {
-            "theta_ref_1": {"type": "square", "offset": -math.radians(25),
-                            "amplitude": math.radians(50), "period": 10.0},
-            "theta_ref_2": {"type": "square", "offset": -math.radians(10),
-                            "amplitude": math.radians(20), "period": 10.0, "start": 2.5},
+            "theta_ref_1": {
+                "type": "square",
+                "offset": -math.radians(25),
+                "amplitude": math.radians(50),
+                "period": 10.0,
+            },
+            "theta_ref_2": {
+                "type": "square",
+                "offset": -math.radians(10),
+                "amplitude": math.radians(20),
+                "period": 10.0,
+                "start": 2.5,
+            },
         },
-        "controller": {"type": "lti", "dt": period, "inputs": inputs,
-                       "setpoints": ["theta_ref_1", 0, 0, 0, "theta_ref_2", 0, 0, 0],
-                       "outputs": ["current_1", "current_2"], "D": D.tolist()},
+        "controller": {
+            "type": "lti",
+            "dt": period,
+            "inputs": inputs,
+            "setpoints": ["theta_ref_1", 0, 0, 0, "theta_ref_2", 0, 0, 0],
+            "outputs": ["current_1", "current_2"],
+            "D": D.tolist(),
+        },
     }
 
 

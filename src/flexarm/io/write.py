@@ -50,10 +50,25 @@ from typing import IO, Any
 
 from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
 
-__all__ = ["atomic_open", "atomic_path", "write_text", "write_bytes", "write_json",
-           "write_toml", "save_figure", "output_folder", "inputs", "is_input",
-           "unique_keys", "save_or_rescue", "Saved", "interruptible", "Interruptible",
-           "OutputExistsError", "InputOverwriteError"]
+__all__ = [
+    "atomic_open",
+    "atomic_path",
+    "write_text",
+    "write_bytes",
+    "write_json",
+    "write_toml",
+    "save_figure",
+    "output_folder",
+    "inputs",
+    "is_input",
+    "unique_keys",
+    "save_or_rescue",
+    "Saved",
+    "interruptible",
+    "Interruptible",
+    "OutputExistsError",
+    "InputOverwriteError",
+]
 
 
 def _file_mode() -> int:
@@ -65,8 +80,9 @@ def _file_mode() -> int:
 
 # ------------------------------------------------------------------ the run's inputs
 #: the input files of the current run: (resolved path, (st_dev, st_ino) or None)
-_INPUTS: contextvars.ContextVar[tuple[tuple[Path, tuple[int, int] | None], ...]] = \
+_INPUTS: contextvars.ContextVar[tuple[tuple[Path, tuple[int, int] | None], ...]] = (
     contextvars.ContextVar("flexarm_inputs", default=())
+)
 
 
 def _identity(path: Path) -> tuple[int, int] | None:
@@ -116,7 +132,10 @@ def _check_target(path: Path, overwrite: bool) -> None:
     if src is not None:
         raise InputOverwriteError(
             f"{path}: is an input of this run ({src}); flexarm never writes over an input, "
-            "even with overwrite", file=path, fix="give another output path")
+            "even with overwrite",
+            file=path,
+            fix="give another output path",
+        )
     if path.is_dir():
         raise IsADirectoryError(f"{path}: is a folder; give a file name to write")
     if path.exists() and not overwrite:
@@ -124,8 +143,9 @@ def _check_target(path: Path, overwrite: bool) -> None:
     parent = path.parent
     if not parent.is_dir():
         what = "is a file, not a folder" if parent.exists() else "does not exist"
-        raise FileNotFoundError(f"{path}: cannot write: the folder {parent} {what}; "
-                                "create the folder first")
+        raise FileNotFoundError(
+            f"{path}: cannot write: the folder {parent} {what}; create the folder first"
+        )
 
 
 def _commit(tmp: Path, path: Path, overwrite: bool) -> None:
@@ -136,12 +156,14 @@ def _commit(tmp: Path, path: Path, overwrite: bool) -> None:
         try:
             os.link(tmp, path)  # fails if path exists: no race with another writer
         except FileExistsError:
-            raise OutputExistsError(f"{path}: exists already; not overwritten "
-                                    "(pass overwrite=True)") from None
+            raise OutputExistsError(
+                f"{path}: exists already; not overwritten (pass overwrite=True)"
+            ) from None
         except OSError:  # a file system without hard links
             if path.exists():
-                raise OutputExistsError(f"{path}: exists already; not overwritten "
-                                        "(pass overwrite=True)") from None
+                raise OutputExistsError(
+                    f"{path}: exists already; not overwritten (pass overwrite=True)"
+                ) from None
             os.replace(tmp, path)
         else:
             os.unlink(tmp)
@@ -175,8 +197,14 @@ def atomic_path(path: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def atomic_open(path: str | Path, mode: str = "w", *, overwrite: bool = False,
-                encoding: str | None = None, newline: str | None = None) -> Iterator[IO]:
+def atomic_open(
+    path: str | Path,
+    mode: str = "w",
+    *,
+    overwrite: bool = False,
+    encoding: str | None = None,
+    newline: str | None = None,
+) -> Iterator[IO]:
     """``open(path, mode)`` for writing (``"w"`` or ``"wb"``), atomically: the file
     appears complete when the block ends, or not at all."""
     if mode not in ("w", "wb"):
@@ -189,8 +217,9 @@ def atomic_open(path: str | Path, mode: str = "w", *, overwrite: bool = False,
             f.flush()
 
 
-def write_text(path: str | Path, text: str, *, overwrite: bool = False,
-               encoding: str = "utf-8") -> Path:
+def write_text(
+    path: str | Path, text: str, *, overwrite: bool = False, encoding: str = "utf-8"
+) -> Path:
     """Write ``text`` to ``path`` atomically."""
     with atomic_open(path, "w", overwrite=overwrite, encoding=encoding) as f:
         f.write(text)
@@ -204,15 +233,22 @@ def write_bytes(path: str | Path, data: bytes, *, overwrite: bool = False) -> Pa
     return Path(path)
 
 
-def write_json(path: str | Path, data: Any, *, overwrite: bool = False, indent: int = 2,
-               default: Callable[[Any], Any] | None = None) -> Path:
+def write_json(
+    path: str | Path,
+    data: Any,
+    *,
+    overwrite: bool = False,
+    indent: int = 2,
+    default: Callable[[Any], Any] | None = None,
+) -> Path:
     """``json.dumps(data, indent=indent, default=default)`` plus a newline, atomically.
     Non-finite floats are written as ``json`` does (``NaN``, ``Infinity``); callers that
     want ``null`` convert them first (as :mod:`flexarm.identification.time_domain.report` does).
     The text is
     built before the file is opened, so a value that cannot be serialised leaves no file."""
-    return write_text(path, json.dumps(data, indent=indent, default=default) + "\n",
-                      overwrite=overwrite)
+    return write_text(
+        path, json.dumps(data, indent=indent, default=default) + "\n", overwrite=overwrite
+    )
 
 
 def write_toml(path: str | Path, data: dict, *, overwrite: bool = False) -> Path:
@@ -241,15 +277,19 @@ def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     d = Path(path)
     src = is_input(d)
     if src is not None:
-        raise InputOverwriteError(f"{d}: is (inside) an input of this run ({src}); give "
-                                  "another output folder", file=d)
+        raise InputOverwriteError(
+            f"{d}: is (inside) an input of this run ({src}); give another output folder", file=d
+        )
     if d.exists() and not d.is_dir():
-        raise OutputExistsError(f"{d}: is a file, not a folder; give a folder name",
-                                file=d, fix="give a folder name")
+        raise OutputExistsError(
+            f"{d}: is a file, not a folder; give a folder name", file=d, fix="give a folder name"
+        )
     if d.is_dir() and any(d.iterdir()) and not overwrite:
-        raise OutputExistsError(f"{d}: the folder holds files already; not written into "
-                                "(pass overwrite=True, on the command line --overwrite)",
-                                file=d)
+        raise OutputExistsError(
+            f"{d}: the folder holds files already; not written into "
+            "(pass overwrite=True, on the command line --overwrite)",
+            file=d,
+        )
     d.mkdir(parents=True, exist_ok=True)
     return d
 
@@ -313,8 +353,13 @@ def _write_any(path: Path, data: Any, overwrite: bool) -> Path:
     return write_json(path, data, overwrite=overwrite)
 
 
-def save_or_rescue(path: str | os.PathLike, data: Any, *, overwrite: bool = False,
-                   writer: Callable[[Path, bool], Any] | None = None) -> Saved:
+def save_or_rescue(
+    path: str | os.PathLike,
+    data: Any,
+    *,
+    overwrite: bool = False,
+    writer: Callable[[Path, bool], Any] | None = None,
+) -> Saved:
     """Write ``data`` (text, bytes, or a dict: JSON, or TOML for a ``.toml`` path) to
     ``path``, or with ``writer(path, overwrite)``; when that fails (any ``OSError``: a full
     disk, a missing or read-only folder, a file that appeared meanwhile, an input of the
@@ -361,8 +406,7 @@ class Interruptible:
 
 
 @contextlib.contextmanager
-def interruptible(*, on_repeat: Callable[[str], None] | None = None
-                  ) -> Iterator[Interruptible]:
+def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator[Interruptible]:
     """The one place where flexarm handles SIGINT and SIGTERM (the CLI and the fit use it).
 
     Inside the block the first SIGINT (Ctrl-C) raises ``KeyboardInterrupt`` and the first

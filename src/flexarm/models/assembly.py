@@ -90,8 +90,13 @@ class SingleLinkBody(eqx.Module):
     state_names: tuple[str, ...] = eqx.field(static=True)
 
     n_joints = 1
-    signal_names = ("motor_angle", "motor_velocity", "tip_angle", "tip_deflection",
-                    "coupling_torque")
+    signal_names = (
+        "motor_angle",
+        "motor_velocity",
+        "tip_angle",
+        "tip_deflection",
+        "coupling_torque",
+    )
     friction_names = ("friction_torque",)
 
     def joint_velocity(self, x: Array) -> Array:
@@ -100,7 +105,7 @@ class SingleLinkBody(eqx.Module):
     def _beam(self, x: Array):
         nb = self.Ab.shape[0]
         hub = jnp.stack([x[0], x[1]])
-        zb = x[2:2 + nb]
+        zb = x[2 : 2 + nb]
         return hub, zb, _mv(self.Cb, zb) + _mv(self.Db, hub)
 
     def balance(self, x: Array, tau: Array, bias: Array):
@@ -150,7 +155,7 @@ class _MultiBody:
         qdd, G = aux
         for j in range(p.n_links):
             qdd = qdd - G[j] * f[j]
-        return jnp.concatenate([x[p.n_q:], qdd])
+        return jnp.concatenate([x[p.n_q :], qdd])
 
     @staticmethod
     def stop(p, x: Array, stuck: Array, aux) -> Array:
@@ -159,11 +164,11 @@ class _MultiBody:
         n, nq = p.n_links, p.n_q
         s = stuck.astype(x.dtype)
         M = G[:, :n] * s[:, None] * s[None, :] + jnp.diag(1.0 - s)
-        lam = jnp.linalg.solve(M, s * x[nq:nq + n])
+        lam = jnp.linalg.solve(M, s * x[nq : nq + n])
         dqd = sum(G[j] * lam[j] for j in range(n))
         x = x.at[nq:].add(-dqd)
         # exactly zero (not a round-off residue) for the stuck joints
-        return x.at[nq:nq + n].set(jnp.where(stuck, 0.0, x[nq:nq + n]))
+        return x.at[nq : nq + n].set(jnp.where(stuck, 0.0, x[nq : nq + n]))
 
 
 class Arm(Plant):
@@ -196,14 +201,14 @@ class Arm(Plant):
         nb = self._n_body
         zs, k = [], nb
         for f in self.frictions:
-            zs.append(x[k:k + f.n_states])
+            zs.append(x[k : k + f.n_states])
             k += f.n_states
         return x[:nb], zs
 
     def _omega(self, xb: Array) -> Array:
         if self.kind == "single":
             return self.body.joint_velocity(xb)
-        return xb[self.body.n_q:self.body.n_q + self.body.n_links]
+        return xb[self.body.n_q : self.body.n_q + self.body.n_links]
 
     def _drive(self, xb: Array, u: Array) -> Array:
         om = self._omega(xb)
@@ -220,9 +225,12 @@ class Arm(Plant):
 
     def _slow(self, om: Array) -> Array:
         """Joints inside their stick band |θ̇| < Δv (Karnopp models only)."""
-        return jnp.stack([(jnp.abs(om[j]) < fr.velocity_tolerance) if k
-                          else jnp.zeros_like(om[j], dtype=bool)
-                          for j, (fr, k) in enumerate(zip(self.frictions, self._karnopp(), strict=True))])
+        return jnp.stack(
+            [
+                (jnp.abs(om[j]) < fr.velocity_tolerance) if k else jnp.zeros_like(om[j], dtype=bool)
+                for j, (fr, k) in enumerate(zip(self.frictions, self._karnopp(), strict=True))
+            ]
+        )
 
     def _derivative(self, xb, f, aux):
         if self.kind == "single":
@@ -272,18 +280,28 @@ class Arm(Plant):
         om_prev = self._omega(self._split(x_prev)[0])
         om = self._omega(self._split(x_next)[0])
         # candidates: joints that crossed zero velocity or are inside the band
-        cand = jnp.stack([((om_prev[j] * om[j] <= 0.0) | (jnp.abs(om[j]) < fr.velocity_tolerance))
-                          if karnopp[j] else jnp.zeros_like(om[j], dtype=bool)
-                          for j, fr in enumerate(self.frictions)])
+        cand = jnp.stack(
+            [
+                ((om_prev[j] * om[j] <= 0.0) | (jnp.abs(om[j]) < fr.velocity_tolerance))
+                if karnopp[j]
+                else jnp.zeros_like(om[j], dtype=bool)
+                for j, fr in enumerate(self.frictions)
+            ]
+        )
         xb, tau, tau_a, aux, _, _ = self._forces(x_next, u, held=cand)
-        stuck = jnp.stack([fr.sticks(om_prev[j], om[j], tau_a[j]) if karnopp[j]
-                           else jnp.zeros_like(om[j], dtype=bool)
-                           for j, fr in enumerate(self.frictions)])
+        stuck = jnp.stack(
+            [
+                fr.sticks(om_prev[j], om[j], tau_a[j])
+                if karnopp[j]
+                else jnp.zeros_like(om[j], dtype=bool)
+                for j, fr in enumerate(self.frictions)
+            ]
+        )
         if self.kind == "single":
             xb = self.body.stop(xb, stuck)
         else:
             xb = _MultiBody.stop(self.body, xb, stuck, aux)
-        return jnp.concatenate([xb, x_next[self._n_body:]])
+        return jnp.concatenate([xb, x_next[self._n_body :]])
 
     @property
     def command_limit(self) -> Array:
@@ -316,8 +334,9 @@ def joint_numbers(joint) -> JointNumbers:
         return JointNumbers("current", d.torque_constant, 0.0, d.current_limit or inf)
     ke = d.gear_ratio * d.motor_constant
     ku = d.gear_efficiency * d.motor_efficiency * ke / d.armature_resistance
-    return JointNumbers("voltage", ku, ku * ke, d.voltage_limit or inf,
-                        d.rotor_inertia * d.gear_ratio**2)
+    return JointNumbers(
+        "voltage", ku, ku * ke, d.voltage_limit or inf, d.rotor_inertia * d.gear_ratio**2
+    )
 
 
 def multi_link_arm(spec) -> tuple[Arm, Any]:
@@ -329,21 +348,30 @@ def multi_link_arm(spec) -> tuple[Arm, Any]:
     joints = spec.joint_specs
     nums = [joint_numbers(j) for j in joints]
     if any(n.added_inertia for n in nums):
-        hubs = [h.model_copy(update={"inertia": h.inertia + n.added_inertia})
-                for h, n in zip(spec.hubs, nums, strict=False)]
+        hubs = [
+            h.model_copy(update={"inertia": h.inertia + n.added_inertia})
+            for h, n in zip(spec.hubs, nums, strict=False)
+        ]
         spec = spec.model_copy(update={"hubs": hubs})
     model = build_multilink(spec)
     body = model.plant
     frictions = tuple(Friction.from_spec(j.friction) for j in joints)
     n = len(joints)
-    names = body.state_names + tuple(f"friction_z_{i + 1}" for i, fr in enumerate(frictions)
-                                     for _ in range(fr.n_states))
+    names = body.state_names + tuple(
+        f"friction_z_{i + 1}" for i, fr in enumerate(frictions) for _ in range(fr.n_states)
+    )
     f = lambda v: jnp.asarray(np.asarray(v, dtype=float))  # noqa: E731
     arm = Arm(
         state_names=names,
         signal_names=body.signal_names + tuple(f"friction_torque_{i + 1}" for i in range(n)),
         input_names=tuple(f"{m.input_prefix}_{i + 1}" for i, m in enumerate(nums)),
-        body=body, k_u=f([m.k_u for m in nums]), k_omega=f([m.k_omega for m in nums]),
-        viscous=f([j.viscous for j in joints]), bias=f([j.friction.bias for j in joints]),
-        limit=f([m.limit for m in nums]), frictions=frictions, kind="multi")
+        body=body,
+        k_u=f([m.k_u for m in nums]),
+        k_omega=f([m.k_omega for m in nums]),
+        viscous=f([j.viscous for j in joints]),
+        bias=f([j.friction.bias for j in joints]),
+        limit=f([m.limit for m in nums]),
+        frictions=frictions,
+        kind="multi",
+    )
     return arm, model

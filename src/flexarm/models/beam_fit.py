@@ -54,11 +54,17 @@ class LumpedBeamFit:
         return float((64 * self.flexural_rigidity / (np.pi * youngs_modulus)) ** 0.25)
 
     def spec(self, damping_ratio: float = 0.0) -> LumpedBeam:
-        return LumpedBeam.model_validate(dict(
-            length=self.length, flexural_rigidity=self.flexural_rigidity,
-            damping_ratio=damping_ratio,
-            masses=[{"mass": m, "position": p}
-                    for m, p in zip(self.masses, self.positions, strict=False)]))
+        return LumpedBeam.model_validate(
+            dict(
+                length=self.length,
+                flexural_rigidity=self.flexural_rigidity,
+                damping_ratio=damping_ratio,
+                masses=[
+                    {"mass": m, "position": p}
+                    for m, p in zip(self.masses, self.positions, strict=False)
+                ],
+            )
+        )
 
 
 def _coefs(tf: control.TransferFunction) -> tuple[np.ndarray, np.ndarray]:
@@ -67,9 +73,13 @@ def _coefs(tf: control.TransferFunction) -> tuple[np.ndarray, np.ndarray]:
     return num / num[0], den / den[0]
 
 
-def fit_lumped_beam(tip_tf: control.TransferFunction, static_coupling: float,
-                    fractions: tuple[float, ...], length: float,
-                    guess: tuple[float, float] = (0.02, 0.05)) -> LumpedBeamFit:
+def fit_lumped_beam(
+    tip_tf: control.TransferFunction,
+    static_coupling: float,
+    fractions: tuple[float, ...],
+    length: float,
+    guess: tuple[float, float] = (0.02, 0.05),
+) -> LumpedBeamFit:
     """Masses at ``fractions`` of ``length`` (m); ``static_coupling`` in N*m/rad.
 
     ``guess`` = (EI N*m², each mass kg) starts the search."""
@@ -81,8 +91,15 @@ def fit_lumped_beam(tip_tf: control.TransferFunction, static_coupling: float,
 
     def build(p):
         EI, *ms = np.exp(p)
-        return LumpedBeam.model_validate(dict(length=L, flexural_rigidity=EI, masses=[
-            {"mass": m, "position": f * L} for m, f in zip(ms, fractions, strict=False)]))
+        return LumpedBeam.model_validate(
+            dict(
+                length=L,
+                flexural_rigidity=EI,
+                masses=[
+                    {"mass": m, "position": f * L} for m, f in zip(ms, fractions, strict=False)
+                ],
+            )
+        )
 
     n_res = len(tnum) + len(tden) - 1 - sum(1 for c in (*tnum[1:], *tden[1:]) if c == 0)
 
@@ -119,6 +136,12 @@ def fit_lumped_beam(tip_tf: control.TransferFunction, static_coupling: float,
             stacklevel=2,
         )
     EI, *ms = np.exp(sol.x)
-    return LumpedBeamFit(float(EI), float(L), tuple(float(m) for m in ms),
-                         tuple(float(f * L) for f in fractions), sol.fun,
-                         converged, str(sol.message))
+    return LumpedBeamFit(
+        float(EI),
+        float(L),
+        tuple(float(m) for m in ms),
+        tuple(float(f * L) for f in fractions),
+        sol.fun,
+        converged,
+        str(sol.message),
+    )

@@ -43,10 +43,14 @@ class Friction(eqx.Module):
     @classmethod
     def from_spec(cls, spec: FrictionSpec) -> Friction:
         return cls(
-            model=spec.model, coulomb=spec.coulomb, static=spec.breakaway,
+            model=spec.model,
+            coulomb=spec.coulomb,
+            static=spec.breakaway,
             stribeck_velocity=spec.stribeck_velocity,
             velocity_tolerance=spec.velocity_tolerance,
-            stiffness=spec.stiffness, damping=spec.damping, bias=spec.bias,
+            stiffness=spec.stiffness,
+            damping=spec.damping,
+            bias=spec.bias,
         )
 
     @property

@@ -34,14 +34,17 @@ def frictionless(arm: Arm) -> Arm:
     """The same arm with every joint's friction model set to ``none`` (a LuGre joint's
     bristle state is dropped); viscous friction and the drives are kept."""
     n_fric = sum(f.n_states for f in arm.frictions)
-    names = arm.state_names[:len(arm.state_names) - n_fric]
+    names = arm.state_names[: len(arm.state_names) - n_fric]
     none = tuple(Friction(model="none", bias=f.bias) for f in arm.frictions)
     return dataclasses.replace(arm, frictions=none, state_names=names)
 
 
-def linearize(arm: Arm, x0: Sequence[float] | np.ndarray | None = None,
-              u0: Sequence[float] | np.ndarray | None = None,
-              outputs: Sequence[str] | None = None) -> control.StateSpace:
+def linearize(
+    arm: Arm,
+    x0: Sequence[float] | np.ndarray | None = None,
+    u0: Sequence[float] | np.ndarray | None = None,
+    outputs: Sequence[str] | None = None,
+) -> control.StateSpace:
     """The continuous-time linear model of ``arm`` (friction left out) about the state
     ``x0`` (default: rest at zero) and command ``u0`` (default zero), with the signals
     ``outputs`` (names of :attr:`Arm.signal_names`; default: the joint angles, i.e. the
@@ -53,20 +56,33 @@ def linearize(arm: Arm, x0: Sequence[float] | np.ndarray | None = None,
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)[:n]
     u0 = np.zeros(m) if u0 is None else np.asarray(u0, dtype=float)
     if x0.shape != (n,):
-        raise ValueError(f"linearize: x0 has {x0.size} entries; the arm has {n} states "
-                         f"({', '.join(lin.state_names)})")
+        raise ValueError(
+            f"linearize: x0 has {x0.size} entries; the arm has {n} states "
+            f"({', '.join(lin.state_names)})"
+        )
     if u0.shape != (m,):
-        raise ValueError(f"linearize: u0 has {u0.size} entries; the arm has {m} inputs "
-                         f"({', '.join(lin.input_names)})")
-    names = list(outputs) if outputs is not None else list(lin.signal_names[:arm.n_joints])
+        raise ValueError(
+            f"linearize: u0 has {u0.size} entries; the arm has {m} inputs "
+            f"({', '.join(lin.input_names)})"
+        )
+    names = list(outputs) if outputs is not None else list(lin.signal_names[: arm.n_joints])
     for name in names:
         if name not in lin.signal_names:
-            raise ValueError(f"linearize: output {name!r} is not a signal of the arm; its "
-                             f"signals: {', '.join(lin.signal_names)}")
+            raise ValueError(
+                f"linearize: output {name!r} is not a signal of the arm; its "
+                f"signals: {', '.join(lin.signal_names)}"
+            )
     idx = [lin.signal_names.index(k) for k in names]
     x, u = jnp.asarray(x0), jnp.asarray(u0)
     A, B = jax.jacfwd(lin.rhs, argnums=(0, 1))(x, u)
     C, D = jax.jacfwd(lambda x, u: lin.signals(x, u)[jnp.asarray(idx)], argnums=(0, 1))(x, u)
-    return control.ss(np.asarray(A), np.asarray(B), np.asarray(C), np.asarray(D),
-                      states=list(lin.state_names), inputs=list(lin.input_names),
-                      outputs=names, name="linearised arm")
+    return control.ss(
+        np.asarray(A),
+        np.asarray(B),
+        np.asarray(C),
+        np.asarray(D),
+        states=list(lin.state_names),
+        inputs=list(lin.input_names),
+        outputs=names,
+        name="linearised arm",
+    )

@@ -79,13 +79,22 @@ class BeamBlock:
         A, B = self.A.copy(), self.B.copy()
         A[n + self.tip_dof, :] = 0.0
         B[n + self.tip_dof, :] = 0.0
-        return BeamBlock(A, B, self.C, self.D, self.length, self.mass_dofs, self.tip_dof,
-                         xbar=self.xbar, tip_shape=self.tip_shape)
+        return BeamBlock(
+            A,
+            B,
+            self.C,
+            self.D,
+            self.length,
+            self.mass_dofs,
+            self.tip_dof,
+            xbar=self.xbar,
+            tip_shape=self.tip_shape,
+        )
 
 
 def _siso(block: BeamBlock, row: int) -> control.TransferFunction:
     """Transfer function from θm to output ``row``, with θ̇m = s θm."""
-    A, B, C, D = block.A, block.B, block.C[row:row + 1], block.D[row:row + 1]
+    A, B, C, D = block.A, block.B, block.C[row : row + 1], block.D[row : row + 1]
     s = control.tf("s")
     if block.n_states == 0:
         return control.tf([D[0, 1], D[0, 0]], [1.0])
@@ -103,7 +112,7 @@ def _trim(p: np.ndarray, tol: float = 1e-12) -> np.ndarray:
     p = np.atleast_1d(np.asarray(p, float))
     scale = max(np.max(np.abs(p)), 1e-300)
     nz = np.nonzero(np.abs(p) > tol * scale)[0]
-    return p[nz[0]:] if nz.size else np.zeros(1)
+    return p[nz[0] :] if nz.size else np.zeros(1)
 
 
 def _clean(g: control.TransferFunction) -> control.TransferFunction:
@@ -168,9 +177,11 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
     if not np.all(np.isfinite(F)) or np.linalg.cond(F) > 1e12:
         # e.g. a length or EI off by many orders of magnitude (a unit slip), F then
         # under- or overflows; the stiffness K = F⁻¹ would be meaningless
-        raise ValueError(f"arm.beam: length {L:g} m and flexural rigidity {beam.EI:g} N*m**2 "
-                         f"give a singular flexibility matrix (condition number "
-                         f"{np.linalg.cond(F):.3g}); check the values and their units")
+        raise ValueError(
+            f"arm.beam: length {L:g} m and flexural rigidity {beam.EI:g} N*m**2 "
+            f"give a singular flexibility matrix (condition number "
+            f"{np.linalg.cond(F):.3g}); check the values and their units"
+        )
     K = np.linalg.inv(F)
     K = 0.5 * (K + K.T)
     M = np.diag(dof_mass)
@@ -180,28 +191,34 @@ def lumped_beam_block(beam: LumpedBeam) -> BeamBlock:
     D = M @ Phi @ np.diag(2 * beam.damping_ratio * np.sqrt(w2)) @ Phi.T @ M
     Minv = np.diag(1.0 / dof_mass)
     # tip deflection from the generalised forces K w
-    c_tip = cantilever_flexibility(np.append(dof_pos, L), np.append(dof_slope, False), beam.EI)[-1, :n]
+    c_tip = cantilever_flexibility(np.append(dof_pos, L), np.append(dof_slope, False), beam.EI)[
+        -1, :n
+    ]
     r_tip = c_tip @ K  # w(ℓ) = r_tip · w
     Z = np.zeros((n, n))
     A = np.block([[Z, np.eye(n)], [-Minv @ K, -Minv @ D]])
-    B = np.block([[np.zeros((n, 2))],
-                  [np.column_stack([Minv @ K @ xbar, Minv @ D @ xbar])]])
-    Cm = np.vstack([
-        np.concatenate([r_tip / L, np.zeros(n)]),
-        np.concatenate([-xbar @ K, -xbar @ D]),
-        np.concatenate([r_tip, np.zeros(n)]),
-    ])
-    Dm = np.array([
-        [1.0 - r_tip @ xbar / L, 0.0],
-        [xbar @ K @ xbar, xbar @ D @ xbar],
-        [-r_tip @ xbar, 0.0],
-    ])
+    B = np.block([[np.zeros((n, 2))], [np.column_stack([Minv @ K @ xbar, Minv @ D @ xbar])]])
+    Cm = np.vstack(
+        [
+            np.concatenate([r_tip / L, np.zeros(n)]),
+            np.concatenate([-xbar @ K, -xbar @ D]),
+            np.concatenate([r_tip, np.zeros(n)]),
+        ]
+    )
+    Dm = np.array(
+        [
+            [1.0 - r_tip @ xbar / L, 0.0],
+            [xbar @ K @ xbar, xbar @ D @ xbar],
+            [-r_tip @ xbar, 0.0],
+        ]
+    )
     tip = np.nonzero((np.abs(dof_pos - L) < 1e-12) & ~dof_slope)[0]
     # static shape under a tip force: by reciprocity, c_tip (deflections due to a unit tip
     # force), scaled to a unit tip deflection
     shape = c_tip / float(r_tip @ c_tip)
-    return BeamBlock(A, B, Cm, Dm, L, n, int(tip[0]) if tip.size else None,
-                     xbar=xbar, tip_shape=shape)
+    return BeamBlock(
+        A, B, Cm, Dm, L, n, int(tip[0]) if tip.size else None, xbar=xbar, tip_shape=shape
+    )
 
 
 def static_coupling(beam: LumpedBeam) -> float:
@@ -263,8 +280,7 @@ def transfer_function_block(beam: TransferFunctionBeam) -> BeamBlock:
     if L is not None:  # w_tip = ℓ (θt − θm)
         C[2] = L * C[0]
         D[2, 0] = L * (D[0, 0] - 1.0)
-    exact = (_clean(control.tf(nb, db)), _clean(control.tf(n_ct, d_ct)),
-             _clean(control.tf(nh, dh)))
+    exact = (_clean(control.tf(nb, db)), _clean(control.tf(n_ct, d_ct)), _clean(control.tf(nh, dh)))
     return BeamBlock(A, B, C, D, L, exact=exact)
 
 
@@ -279,8 +295,13 @@ def rigid_beam_inertia(beam: RigidBeam) -> float:
 
 def rigid_beam_block(beam: RigidBeam) -> BeamBlock:
     """No states: θt = θm, C_t = 0 (the masses go into the hub inertia), w_tip = 0."""
-    return BeamBlock(np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((3, 0)),
-                     np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]), beam.length)
+    return BeamBlock(
+        np.zeros((0, 0)),
+        np.zeros((0, 2)),
+        np.zeros((3, 0)),
+        np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]),
+        beam.length,
+    )
 
 
 def beam_block(beam) -> BeamBlock:
@@ -301,5 +322,3 @@ def natural_frequencies(block: BeamBlock) -> np.ndarray:
     ev = np.linalg.eigvals(block.A)
     w = np.abs(ev[ev.imag > 0])
     return np.sort(w) if w.size else np.sort(np.abs(ev))[::2]
-
-

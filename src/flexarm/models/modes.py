@@ -130,10 +130,16 @@ class LinkModes:
         """φ_j^(derivative)(x) for x in [0, ℓ] (m); shape (n_modes, len(x))."""
         x = np.atleast_1d(np.asarray(x, dtype=float))
         beta = self.beta_l / self.length
-        return np.stack([
-            _shape(c, b, bl, x, derivative)
-            for c, b, bl in zip(self.coeffs, beta, self.beta_l, strict=False)
-        ]) if self.n_modes else np.zeros((0, len(x)))
+        return (
+            np.stack(
+                [
+                    _shape(c, b, bl, x, derivative)
+                    for c, b, bl in zip(self.coeffs, beta, self.beta_l, strict=False)
+                ]
+            )
+            if self.n_modes
+            else np.zeros((0, len(x)))
+        )
 
 
 def _shape(c: np.ndarray, beta: float, bl: float, x: np.ndarray, k: int) -> np.ndarray:
@@ -142,8 +148,9 @@ def _shape(c: np.ndarray, beta: float, bl: float, x: np.ndarray, k: int) -> np.n
     cs, sn = np.cos(s), np.sin(s)
     cos_k = (cs, -sn, -cs, sn)[k % 4]
     sin_k = (sn, cs, -sn, -cs)[k % 4]
-    return beta**k * (c[0] * cos_k + c[1] * sin_k + c[2] * (-1.0) ** k * np.exp(-s)
-                      + c[3] * np.exp(s - bl))
+    return beta**k * (
+        c[0] * cos_k + c[1] * sin_k + c[2] * (-1.0) ** k * np.exp(-s) + c[3] * np.exp(s - bl)
+    )
 
 
 def boundary_matrix(b: np.ndarray | float, mu: float, eta: float) -> np.ndarray:
@@ -156,10 +163,18 @@ def boundary_matrix(b: np.ndarray | float, mu: float, eta: float) -> np.ndarray:
     rows = [
         [one, zero, one, e],
         [zero, one, -one, e],
-        [(-c + b**3 * eta * s) / r3, (-s - b**3 * eta * c) / r3, e * (1.0 + b**3 * eta) / r3,
-         (1.0 - b**3 * eta) / r3],
-        [(s + b * mu * c) / r4, (-c + b * mu * s) / r4, e * (b * mu - 1.0) / r4,
-         (1.0 + b * mu) / r4],
+        [
+            (-c + b**3 * eta * s) / r3,
+            (-s - b**3 * eta * c) / r3,
+            e * (1.0 + b**3 * eta) / r3,
+            (1.0 - b**3 * eta) / r3,
+        ],
+        [
+            (s + b * mu * c) / r4,
+            (-c + b * mu * s) / r4,
+            e * (b * mu - 1.0) / r4,
+            (1.0 + b * mu) / r4,
+        ],
     ]
     return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
 
@@ -175,20 +190,28 @@ def _roots(n: int, mu: float, eta: float) -> np.ndarray:
         return np.zeros(0)
     # Each interval (kπ − π/2, kπ + π/2] holds at most a few roots; scan to (n + 1)π.
     hi = (n + 1.5) * math.pi
-    grid = np.unique(np.concatenate([
-        np.geomspace(1e-4, 1.0, 2000),
-        np.arange(1.0, hi, 0.005),
-    ]))
+    grid = np.unique(
+        np.concatenate(
+            [
+                np.geomspace(1e-4, 1.0, 2000),
+                np.arange(1.0, hi, 0.005),
+            ]
+        )
+    )
     d = frequency_determinant(grid, mu, eta)
     roots: list[float] = []
     for k in range(len(grid) - 1):
         if d[k] == 0.0:
             roots.append(float(grid[k]))
         elif d[k] * d[k + 1] < 0.0:
-            root: Any = brentq(lambda b: float(frequency_determinant(b, mu, eta)),
-                               grid[k], grid[k + 1], xtol=1e-15,
-                               rtol=1e-15,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
-                               maxiter=200)
+            root: Any = brentq(
+                lambda b: float(frequency_determinant(b, mu, eta)),
+                grid[k],
+                grid[k + 1],
+                xtol=1e-15,
+                rtol=1e-15,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                maxiter=200,
+            )
             roots.append(root)
         if len(roots) == n:
             break
@@ -211,9 +234,16 @@ def _quadrature(length: float, bl_max: float) -> tuple[np.ndarray, np.ndarray]:
     return x, w
 
 
-def link_modes(length: float, linear_density: float, flexural_rigidity: float,
-               n_modes: int, *, tip_mass: float = 0.0, tip_inertia: float = 0.0,
-               mode_type: ModeType = "clamped_mass") -> LinkModes:
+def link_modes(
+    length: float,
+    linear_density: float,
+    flexural_rigidity: float,
+    n_modes: int,
+    *,
+    tip_mass: float = 0.0,
+    tip_inertia: float = 0.0,
+    mode_type: ModeType = "clamped_mass",
+) -> LinkModes:
     """The first ``n_modes`` modes of a uniform link (see module docstring).
 
     Parameters
@@ -225,8 +255,11 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
     tip_mass, tip_inertia: M_L (kg) and J_L (kg·m², about the tip), ≥ 0; used by the
         boundary conditions of ``clamped_mass`` modes (ignored by ``clamped_free``).
     """
-    for name, val, unit in (("length", length, "m"), ("linear_density", linear_density, "kg/m"),
-                            ("flexural_rigidity", flexural_rigidity, "N*m**2")):
+    for name, val, unit in (
+        ("length", length, "m"),
+        ("linear_density", linear_density, "kg/m"),
+        ("flexural_rigidity", flexural_rigidity, "N*m**2"),
+    ):
         if not (isinstance(val, (int, float, np.floating)) and math.isfinite(val) and val > 0):
             raise ModeError(f"{name} must be a finite number > 0 {unit}; got {val!r}")
     for name, val in (("tip_mass", tip_mass), ("tip_inertia", tip_inertia)):
@@ -266,31 +299,73 @@ def link_modes(length: float, linear_density: float, flexural_rigidity: float,
         _, sv, vt = np.linalg.svd(boundary_matrix(b, mu, eta))
         coeffs[j] = vt[-1]
         if sv[-1] > 1e-8 * sv[0]:
-            raise ModeError(f"mode {j + 1}: boundary matrix not singular at the root "
-                            f"βℓ = {b:.6f} (σ_min/σ_max = {sv[-1] / sv[0]:.1e})")
+            raise ModeError(
+                f"mode {j + 1}: boundary matrix not singular at the root "
+                f"βℓ = {b:.6f} (σ_min/σ_max = {sv[-1] / sv[0]:.1e})"
+            )
 
     xq, wq = _quadrature(ell, bl[-1] if n_modes else 1.0)
-    raw = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
-                    coeffs, np.zeros(n_modes), np.zeros(n_modes), np.zeros(n_modes),
-                    np.zeros(n_modes),
-                    np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
+    raw = LinkModes(
+        ell,
+        rho,
+        EI,
+        float(tip_mass),
+        float(tip_inertia),
+        mode_type,
+        bl,
+        omega,
+        coeffs,
+        np.zeros(n_modes),
+        np.zeros(n_modes),
+        np.zeros(n_modes),
+        np.zeros(n_modes),
+        np.zeros((n_modes, n_modes)),
+        np.zeros((n_modes, n_modes)),
+    )
     phi = raw.shape(xq)
     phi_l = raw.shape(ell)[:, 0]
     dphi_l = raw.shape(ell, 1)[:, 0]
     gen = (phi**2 * rho) @ wq + ml * phi_l**2 + jl * dphi_l**2
     scale = np.sqrt(m / gen) * np.where(phi_l < 0, -1.0, 1.0)
     coeffs = coeffs * scale[:, None]
-    modes = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
-                      coeffs, phi_l * scale, dphi_l * scale,
-                      np.zeros(n_modes), np.zeros(n_modes),
-                      np.zeros((n_modes, n_modes)), np.zeros((n_modes, n_modes)))
+    modes = LinkModes(
+        ell,
+        rho,
+        EI,
+        float(tip_mass),
+        float(tip_inertia),
+        mode_type,
+        bl,
+        omega,
+        coeffs,
+        phi_l * scale,
+        dphi_l * scale,
+        np.zeros(n_modes),
+        np.zeros(n_modes),
+        np.zeros((n_modes, n_modes)),
+        np.zeros((n_modes, n_modes)),
+    )
     phi = modes.shape(xq)
     d2 = modes.shape(xq, 2)
     Z = (rho * phi * wq) @ phi.T
     K = (EI * d2 * wq) @ d2.T
-    modes = LinkModes(ell, rho, EI, float(tip_mass), float(tip_inertia), mode_type, bl, omega,
-                      coeffs, modes.tip_value, modes.tip_slope,
-                      (rho * phi) @ wq, (rho * phi * xq) @ wq, 0.5 * (Z + Z.T), 0.5 * (K + K.T))
+    modes = LinkModes(
+        ell,
+        rho,
+        EI,
+        float(tip_mass),
+        float(tip_inertia),
+        mode_type,
+        bl,
+        omega,
+        coeffs,
+        modes.tip_value,
+        modes.tip_slope,
+        (rho * phi) @ wq,
+        (rho * phi * xq) @ wq,
+        0.5 * (Z + Z.T),
+        0.5 * (K + K.T),
+    )
     _check(modes)
     return modes
 
@@ -302,8 +377,11 @@ def _check(modes: LinkModes) -> None:
         return
     m = modes.mass
     ml, jl = modes._bc_loads()
-    G = modes.Z + ml * np.outer(modes.tip_value, modes.tip_value) \
+    G = (
+        modes.Z
+        + ml * np.outer(modes.tip_value, modes.tip_value)
         + jl * np.outer(modes.tip_slope, modes.tip_slope)
+    )
     err_g = np.abs(G / m - np.eye(n))
     kdiag = modes.omega**2 * m
     err_k = np.abs(modes.K - np.diag(kdiag)) / np.sqrt(np.outer(kdiag, kdiag))

@@ -261,13 +261,22 @@ class MultiLinkPlant(Plant):
             c, s = jnp.cos(al), jnp.sin(al)
             a = c * pd[0] + s * pd[1]
             b = -s * pd[0] + c * pd[1]
-            two_t = (self.link_mass[i] * (a * a + b * b) + self.link_J0[i] * ald * ald
-                     + 2.0 * self.link_d[i] * b * ald + self.hub_inertia[i] * ald * ald)
+            two_t = (
+                self.link_mass[i] * (a * a + b * b)
+                + self.link_J0[i] * ald * ald
+                + 2.0 * self.link_d[i] * b * ald
+                + self.hub_inertia[i] * ald * ald
+            )
             if sl.stop > sl.start:
                 Z = self.Z[sl, sl]
-                two_t = (two_t - 2.0 * a * ald * (self.v[sl] @ di)
-                         + ald * ald * (di @ Z @ di) + 2.0 * b * (self.v[sl] @ ddi)
-                         + 2.0 * ald * (self.w[sl] @ ddi) + ddi @ Z @ ddi)
+                two_t = (
+                    two_t
+                    - 2.0 * a * ald * (self.v[sl] @ di)
+                    + ald * ald * (di @ Z @ di)
+                    + 2.0 * b * (self.v[sl] @ ddi)
+                    + 2.0 * ald * (self.w[sl] @ ddi)
+                    + ddi @ Z @ ddi
+                )
             if i > 0:
                 two_t = two_t + self.hub_mass[i] * (pd @ pd)
             T = T + 0.5 * two_t
@@ -279,18 +288,21 @@ class MultiLinkPlant(Plant):
         moment = self.payload_mass * pe
         for i, (al, _, p, _, di, _, sl) in enumerate(links):
             vd = self.v[sl] @ di if sl.stop > sl.start else jnp.zeros(())
-            moment = moment + (self.link_mass[i] + self.hub_mass[i] * (i > 0)) * p \
+            moment = (
+                moment
+                + (self.link_mass[i] + self.hub_mass[i] * (i > 0)) * p
                 + _rot(al, self.link_d[i], vd)
+            )
         return -(self.gamma @ moment)
 
     def elastic_potential(self, q: Array) -> Array:
         """U_e = ½ δᵀKδ (J)."""
-        dl = q[self.n_links:]
+        dl = q[self.n_links :]
         return 0.5 * dl @ self.K @ dl
 
     def energy(self, x: Array) -> Array:
         """Total energy T + U_g + U_e (J) of the state x."""
-        q, qd = x[:self.n_q], x[self.n_q:]
+        q, qd = x[: self.n_q], x[self.n_q :]
         return self.kinetic_energy(q, qd) + self.gravity_potential(q) + self.elastic_potential(q)
 
     def tip_position(self, q: Array) -> Array:
@@ -370,8 +382,14 @@ class MultiLinkPlant(Plant):
             cc = _add(_mul(d, Py), _mul(-1.0, vd, Px), _mul(2.0, ad, dZdd))
             fx, fy = _mul(mt, gx), _mul(mt, gy)
             for k in range(nq):
-                h[k] = _add(h[k], _mul(fx, Jx[k]), _mul(fy, Jy[k]), _mul(-1.0, ca, Ax[k]),
-                            _mul(-1.0, cb, Ay[k]), _mul(cc, a[k]))
+                h[k] = _add(
+                    h[k],
+                    _mul(fx, Jx[k]),
+                    _mul(fy, Jy[k]),
+                    _mul(-1.0, ca, Ax[k]),
+                    _mul(-1.0, cb, Ay[k]),
+                    _mul(cc, a[k]),
+                )
             for j, k in enumerate(idx):
                 h[k] = _add(h[k], _mul(vi[j], Py), _mul(-1.0, ad2, Zd[j]))
             # next joint: position Jacobian and velocity-product acceleration
@@ -381,8 +399,10 @@ class MultiLinkPlant(Plant):
                 tip[k] = fi[j]
             tx = [_mul(-1.0, W, t) for t in a]
             ty = [_add(_mul(ell, t), f) for t, f in zip(a, tip, strict=True)]
-            Jx, Jy = ([_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty, strict=True)],
-                      [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty, strict=True)])
+            Jx, Jy = (
+                [_add(x, _mul(c, u), _mul(-1.0, s, v)) for x, u, v in zip(Jx, tx, ty, strict=True)],
+                [_add(w, _mul(s, u), _mul(c, v)) for w, u, v in zip(Jy, tx, ty, strict=True)],
+            )
             lx, ly = _add(_mul(-1.0, ad2, ell), _mul(-2.0, ad, Wd)), _mul(-1.0, ad2, W)
             accx = _add(accx, _mul(c, lx), _mul(-1.0, s, ly))
             accy = _add(accy, _mul(s, lx), _mul(c, ly))
@@ -435,6 +455,7 @@ class MultiLinkPlant(Plant):
 
     def coriolis_autodiff(self, q: Array, qd: Array) -> Array:
         """c = d/dt(∂T/∂q̇) − ∂T/∂q − B q̈ = (∂²T/∂q̇∂q) q̇ − ∂T/∂q by jax.jvp / jax.grad."""
+
         def p_of(qq):
             return jax.grad(self.kinetic_energy, argnums=1)(qq, qd)
 
@@ -449,8 +470,11 @@ class MultiLinkPlant(Plant):
         """C(q, q̇) from the Christoffel symbols of jax.jacfwd(B):
         C_ij = Σ_k ½(∂_k B_ij + ∂_j B_ik − ∂_i B_jk) q̇_k  (C q̇ = c, Ḃ − 2C skew-symmetric)."""
         dB = jax.jacfwd(self.mass_matrix)(q)  # dB[i, j, k] = ∂B_ij/∂q_k
-        return 0.5 * (jnp.einsum("ijk,k->ij", dB, qd) + jnp.einsum("ikj,k->ij", dB, qd)
-                      - jnp.einsum("jki,k->ij", dB, qd))
+        return 0.5 * (
+            jnp.einsum("ijk,k->ij", dB, qd)
+            + jnp.einsum("ikj,k->ij", dB, qd)
+            - jnp.einsum("jki,k->ij", dB, qd)
+        )
 
     def mass_matrix_dot(self, q: Array, qd: Array) -> Array:
         """Ḃ = Σ_k ∂B/∂q_k q̇_k (jax.jvp)."""
@@ -474,7 +498,7 @@ class MultiLinkPlant(Plant):
 
     def rhs(self, x: Array, u: Array) -> Array:
         """ẋ = (q̇, q̈), q̈ from :meth:`acceleration`; x may carry trailing batch dimensions."""
-        return jnp.concatenate([x[self.n_q:], self.acceleration(x, u)])
+        return jnp.concatenate([x[self.n_q :], self.acceleration(x, u)])
 
     def acceleration(self, x: Array, u: Array) -> Array:
         """q̈ solving B q̈ = [u; −Kδ − Dδ̇] − c − g. B, c + g and the forces are recorded once
@@ -489,6 +513,7 @@ class MultiLinkPlant(Plant):
 
     def _emit(self, prog: layered.Program, outputs: list, x: Array, u: Array) -> Array:
         """Evaluate a recorded program on the state x, input u and this plant's numbers."""
+
         def value(key):
             name, idx = key
             if name == "x":
@@ -517,7 +542,7 @@ class MultiLinkPlant(Plant):
         nq, n = self.n_q, self.n_links
         q = x[:nq]
         w = self.tip_rows @ q
-        return jnp.concatenate([q, self.tip_position(q), x[nq:nq + n], w, w / self.lengths])
+        return jnp.concatenate([q, self.tip_position(q), x[nq : nq + n], w, w / self.lengths])
 
     @property
     def command_limit(self) -> Array:
@@ -527,8 +552,21 @@ class MultiLinkPlant(Plant):
 # Numbers of the plant read by the recorded right-hand side, and the scheduling threshold of
 # the layered emission (measured on the benchmark arm: share = 8 and 3×3 pivot blocks give 7
 # layers and the fastest rollout of the values tried, 4 to 128 and blocks of 2 or 3).
-_PARAM_FIELDS = ("lengths", "link_mass", "link_d", "hub_mass", "payload_mass", "phi_tip",
-                 "dphi_tip", "v", "Z", "K", "D", "B0", "gamma")
+_PARAM_FIELDS = (
+    "lengths",
+    "link_mass",
+    "link_d",
+    "hub_mass",
+    "payload_mass",
+    "phi_tip",
+    "dphi_tip",
+    "v",
+    "Z",
+    "K",
+    "D",
+    "B0",
+    "gamma",
+)
 _SHARE = 8
 _SOLVE_BLOCK = 3
 
@@ -558,9 +596,21 @@ class _SymbolicPlant:
         self.n_modes = n_modes
         n, nd = len(n_modes), sum(n_modes)
         nq = n + nd
-        shapes = {"lengths": (n,), "link_mass": (n,), "link_d": (n,), "hub_mass": (n,),
-                  "payload_mass": (), "phi_tip": (nd,), "dphi_tip": (nd,), "v": (nd,),
-                  "Z": (nd, nd), "K": (nd, nd), "D": (nd, nd), "B0": (nq, nq), "gamma": (2,)}
+        shapes = {
+            "lengths": (n,),
+            "link_mass": (n,),
+            "link_d": (n,),
+            "hub_mass": (n,),
+            "payload_mass": (),
+            "phi_tip": (nd,),
+            "dphi_tip": (nd,),
+            "v": (nd,),
+            "Z": (nd, nd),
+            "K": (nd, nd),
+            "D": (nd, nd),
+            "B0": (nq, nq),
+            "gamma": (2,),
+        }
         for name in _PARAM_FIELDS:
             shape: tuple[int, ...] = shapes[name]
             if shape == ():
@@ -611,17 +661,23 @@ def _record(n_modes: tuple[int, ...], columns: bool) -> tuple[layered.Program, l
     out = layered.solve_spd(B, f, block=_SOLVE_BLOCK)
     if columns:
         for j in range(n):
-            out = out + layered.solve_spd(B, [1.0 if k == j else 0.0 for k in range(nq)],
-                                          block=_SOLVE_BLOCK)
+            out = out + layered.solve_spd(
+                B, [1.0 if k == j else 0.0 for k in range(nq)], block=_SOLVE_BLOCK
+            )
     return prog, out
 
 
 def signal_names(n_links: int, delta_names: list[str]) -> tuple[str, ...]:
     """Names of :meth:`MultiLinkPlant.signals`."""
     r = range(1, n_links + 1)
-    return tuple([f"theta_{i}" for i in r] + delta_names + ["tip_x", "tip_y"]
-                 + [f"theta_dot_{i}" for i in r] + [f"deflection_{i}" for i in r]
-                 + [f"deflection_angle_{i}" for i in r])
+    return tuple(
+        [f"theta_{i}" for i in r]
+        + delta_names
+        + ["tip_x", "tip_y"]
+        + [f"theta_dot_{i}" for i in r]
+        + [f"deflection_{i}" for i in r]
+        + [f"deflection_angle_{i}" for i in r]
+    )
 
 
 @dataclass(frozen=True)
@@ -675,16 +731,19 @@ class MultiLinkModel:
         return np.asarray(_jit_call(self.plant, "mass_matrix", jnp.asarray(q, float)))
 
     def coriolis(self, q, qd) -> np.ndarray:
-        return np.asarray(_jit_call(self.plant, "coriolis", jnp.asarray(q, float),
-                                    jnp.asarray(qd, float)))
+        return np.asarray(
+            _jit_call(self.plant, "coriolis", jnp.asarray(q, float), jnp.asarray(qd, float))
+        )
 
     def coriolis_matrix(self, q, qd) -> np.ndarray:
-        return np.asarray(_jit_call(self.plant, "coriolis_matrix", jnp.asarray(q, float),
-                                    jnp.asarray(qd, float)))
+        return np.asarray(
+            _jit_call(self.plant, "coriolis_matrix", jnp.asarray(q, float), jnp.asarray(qd, float))
+        )
 
     def mass_matrix_dot(self, q, qd) -> np.ndarray:
-        return np.asarray(_jit_call(self.plant, "mass_matrix_dot", jnp.asarray(q, float),
-                                    jnp.asarray(qd, float)))
+        return np.asarray(
+            _jit_call(self.plant, "mass_matrix_dot", jnp.asarray(q, float), jnp.asarray(qd, float))
+        )
 
     def gravity(self, q) -> np.ndarray:
         return np.asarray(_jit_call(self.plant, "gravity", jnp.asarray(q, float)))
@@ -707,8 +766,9 @@ class MultiLinkModel:
         return np.asarray(_jit_call(self.plant, "tip_position", jnp.asarray(q, float)))
 
     def rhs(self, x, u) -> np.ndarray:
-        return np.asarray(_jit_call(self.plant, "rhs", jnp.asarray(x, float),
-                                    jnp.asarray(u, float)))
+        return np.asarray(
+            _jit_call(self.plant, "rhs", jnp.asarray(x, float), jnp.asarray(u, float))
+        )
 
 
 @eqx.filter_jit
@@ -748,12 +808,22 @@ def torsional_modes(lk) -> LinkModes:
     φ(ℓ) = ℓ, φ'(ℓ) = 1 (:class:`flexarm.specs.multilink.Link`)."""
     J0, K = lk.joint_inertia, lk.torsional_stiffness
     return LinkModes(
-        length=lk.length, linear_density=lk.rho, flexural_rigidity=float("nan"),
-        tip_mass=0.0, tip_inertia=0.0, mode_type="torsional",
-        beta_l=np.array([np.nan]), omega=np.array([math.sqrt(K / J0)]),
-        coeffs=np.full((1, 4), np.nan), tip_value=np.array([lk.length]),
-        tip_slope=np.array([1.0]), v=np.array([lk.first_moment]), w=np.array([J0]),
-        Z=np.array([[J0]]), K=np.array([[K]]))
+        length=lk.length,
+        linear_density=lk.rho,
+        flexural_rigidity=float("nan"),
+        tip_mass=0.0,
+        tip_inertia=0.0,
+        mode_type="torsional",
+        beta_l=np.array([np.nan]),
+        omega=np.array([math.sqrt(K / J0)]),
+        coeffs=np.full((1, 4), np.nan),
+        tip_value=np.array([lk.length]),
+        tip_slope=np.array([1.0]),
+        v=np.array([lk.first_moment]),
+        w=np.array([J0]),
+        Z=np.array([[J0]]),
+        K=np.array([[K]]),
+    )
 
 
 def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
@@ -768,8 +838,17 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
         try:
             # a rigid link (modes = 0) may omit EI; any positive value gives no modes then
             EI = lk.flexural_rigidity if lk.flexural_rigidity is not None else 1.0
-            modes.append(link_modes(lk.length, lk.rho, EI, lk.n_modes,
-                                    tip_mass=M, tip_inertia=J, mode_type=lk.mode_type))
+            modes.append(
+                link_modes(
+                    lk.length,
+                    lk.rho,
+                    EI,
+                    lk.n_modes,
+                    tip_mass=M,
+                    tip_inertia=J,
+                    mode_type=lk.mode_type,
+                )
+            )
         except ValueError as exc:
             raise type(exc)(f"link {i + 1}: {exc}") from None
     n_modes = tuple(m.n_modes for m in modes)
@@ -782,7 +861,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
         out = np.zeros((nd, nd))
         k = 0
         for m in modes:
-            out[k:k + m.n_modes, k:k + m.n_modes] = f(m)
+            out[k : k + m.n_modes, k : k + m.n_modes] = f(m)
             k += m.n_modes
         return out
 
@@ -798,7 +877,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
     Dm = np.zeros((nd, nd))
     k = 0
     for lk, m in zip(arm.links, modes, strict=True):
-        Dm[k:k + m.n_modes, k:k + m.n_modes] = damping(lk, m)
+        Dm[k : k + m.n_modes, k : k + m.n_modes] = damping(lk, m)
         k += m.n_modes
 
     n = len(arm.links)
@@ -833,11 +912,14 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
 
     names_d = [f"delta_{i + 1}_{j + 1}" for i, m in enumerate(modes) for j in range(m.n_modes)]
     names_t = [f"theta_{i + 1}" for i in range(n)]
-    state_names = tuple(names_t + names_d + [f"theta_dot_{i + 1}" for i in range(n)]
-                        + [f"{s.replace('delta', 'delta_dot')}" for s in names_d])
+    state_names = tuple(
+        names_t
+        + names_d
+        + [f"theta_dot_{i + 1}" for i in range(n)]
+        + [f"{s.replace('delta', 'delta_dot')}" for s in names_d]
+    )
     gx, gy = arm.gravity_unit
-    lim = (np.full(n, np.inf) if arm.torque_limit is None
-           else np.asarray(arm.torque_limit, float))
+    lim = np.full(n, np.inf) if arm.torque_limit is None else np.asarray(arm.torque_limit, float)
     f = jnp.asarray
     plant = MultiLinkPlant(
         state_names=state_names,

@@ -32,11 +32,11 @@ from flexarm.specs.arm import RigidBeam, SingleLinkArm
 SIGNALS = SingleLinkBody.signal_names + SingleLinkBody.friction_names
 
 
-def _named(g: control.TransferFunction, name: str, input: str,
-           output: str) -> control.TransferFunction:
+def _named(
+    g: control.TransferFunction, name: str, input: str, output: str
+) -> control.TransferFunction:
     """``g`` with a name and signal names (python-control prints and connects by them)."""
-    return control.TransferFunction(g.num, g.den, g.dt, name=name, inputs=[input],
-                                    outputs=[output])
+    return control.TransferFunction(g.num, g.den, g.dt, name=name, inputs=[input], outputs=[output])
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,14 @@ class SingleLinkModel:
         block = beam_block(arm.beam)
         if hold_tip:
             block = block.held()
-        return cls(arm, J, arm.motor.viscous, Drive.from_spec(arm.motor),
-                   Friction.from_spec(arm.friction), block)
+        return cls(
+            arm,
+            J,
+            arm.motor.viscous,
+            Drive.from_spec(arm.motor),
+            Friction.from_spec(arm.friction),
+            block,
+        )
 
     # ----------------------------------------------------------------- linear part
     def beam_tf(self) -> control.TransferFunction:
@@ -77,8 +83,9 @@ class SingleLinkModel:
         s = control.tf("s")
         d = self.drive
         g = float(d.k_u) / (self.J * s**2 + (self.V + float(d.k_omega)) * s + ct)
-        return _named(_clean(control.minreal(g, tol=1e-7, verbose=False)), "G_m",
-                      d.input_name, "motor_angle")
+        return _named(
+            _clean(control.minreal(g, tol=1e-7, verbose=False)), "G_m", d.input_name, "motor_angle"
+        )
 
     def tip_tf(self) -> control.TransferFunction:
         """θt/u = G_m G_b (rad/A or rad/V); named ``G_t`` (input the drive's, output
@@ -92,22 +99,40 @@ class SingleLinkModel:
         as its body, the drive and friction at its one joint."""
         b = self.beam
         body_names = ("motor_angle", "motor_velocity") + tuple(
-            f"beam_{k}" for k in range(b.n_states))
+            f"beam_{k}" for k in range(b.n_states)
+        )
         names = body_names + (("friction_z",) if self.friction.n_states else ())
-        body = SingleLinkBody(J=self.J, Ab=jnp.asarray(b.A), Bb=jnp.asarray(b.B),
-                              Cb=jnp.asarray(b.C), Db=jnp.asarray(b.D), state_names=body_names)
+        body = SingleLinkBody(
+            J=self.J,
+            Ab=jnp.asarray(b.A),
+            Bb=jnp.asarray(b.B),
+            Cb=jnp.asarray(b.C),
+            Db=jnp.asarray(b.D),
+            state_names=body_names,
+        )
+
         def vec(v) -> Any:  # plain numbers stay Python floats: constants in the compiled loop
             if isinstance(v, (int, float, np.floating, np.integer)):
                 return (float(v),)
             return jnp.reshape(jnp.asarray(v, dtype=float), (1,))
-        return Arm(
-            state_names=names, signal_names=SIGNALS, input_names=(self.drive.input_name,),
-            body=body, k_u=vec(self.drive.k_u), k_omega=vec(self.drive.k_omega),
-            viscous=vec(self.V), bias=vec(self.friction.bias), limit=vec(self.drive.limit),
-            frictions=(self.friction,), kind="single")
 
-    def initial_state(self, motor_angle: float = 0.0, motor_velocity: float = 0.0,
-                      tip_deflection: float = 0.0) -> np.ndarray:
+        return Arm(
+            state_names=names,
+            signal_names=SIGNALS,
+            input_names=(self.drive.input_name,),
+            body=body,
+            k_u=vec(self.drive.k_u),
+            k_omega=vec(self.drive.k_omega),
+            viscous=vec(self.V),
+            bias=vec(self.friction.bias),
+            limit=vec(self.drive.limit),
+            frictions=(self.friction,),
+            kind="single",
+        )
+
+    def initial_state(
+        self, motor_angle: float = 0.0, motor_velocity: float = 0.0, tip_deflection: float = 0.0
+    ) -> np.ndarray:
         """State with the hub at ``motor_angle`` and the link statically bent so that its
         tip deflection is ``tip_deflection`` (m), at rest relative to the hub."""
         b = self.beam

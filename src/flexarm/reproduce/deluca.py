@@ -56,7 +56,7 @@ DEG = math.pi / 180.0
 # The paper's reported values: the "paper" column of the table and nothing else.
 PAPER = {
     "delta_d": (-0.15, -0.0045, -0.0056, -0.000076),  # m, from eq. (9)
-    "alpha": 17.67,                                    # eq. (6), a posteriori along the run
+    "alpha": 17.67,  # eq. (6), a posteriori along the run
 }
 
 
@@ -126,8 +126,11 @@ class DeLucaConfig:
         return np.asarray(self.theta_d_deg, float) * DEG
 
     def model(self, **overrides) -> MultiLinkModel:
-        kw: dict[str, Any] = dict(flexural_rigidity=self.flexural_rigidity,
-                                  mode_type=self.mode_type, damping_ratio=self.damping_ratio)
+        kw: dict[str, Any] = dict(
+            flexural_rigidity=self.flexural_rigidity,
+            mode_type=self.mode_type,
+            damping_ratio=self.damping_ratio,
+        )
         kw.update(overrides)
         EI = kw.pop("flexural_rigidity")
         return build_multilink(benchmark_arm(EI, **kw))
@@ -148,8 +151,9 @@ def _simulate(model, law, cfg: DeLucaConfig, params, t_final: float) -> Simulati
     """A run with the config's step and n_out samples (dt = t_final/n_out)."""
     dt = t_final / cfg.n_out
     n_sub = max(1, int(round(dt / cfg.step)))
-    return simulate_continuous(model, law, model.state(theta=cfg.theta_0), t_final, dt,
-                               params=params, step=dt / n_sub)
+    return simulate_continuous(
+        model, law, model.state(theta=cfg.theta_0), t_final, dt, params=params, step=dt / n_sub
+    )
 
 
 def _errors(run: SimulationResult, theta_d, delta_d):
@@ -159,11 +163,22 @@ def _errors(run: SimulationResult, theta_d, delta_d):
 
 
 def _row(quantity, paper, ours, unit="", note="", ratio=None):
-    if ratio is None and isinstance(paper, (int, float)) and isinstance(ours, (int, float)) \
-            and paper != 0 and math.isfinite(ours):
+    if (
+        ratio is None
+        and isinstance(paper, (int, float))
+        and isinstance(ours, (int, float))
+        and paper != 0
+        and math.isfinite(ours)
+    ):
         ratio = ours / paper
-    return {"quantity": quantity, "paper": paper, "ours": ours, "ratio": ratio, "unit": unit,
-            "note": note}
+    return {
+        "quantity": quantity,
+        "paper": paper,
+        "ours": ours,
+        "ratio": ratio,
+        "unit": unit,
+        "note": note,
+    }
 
 
 def _fmt(v) -> str:
@@ -185,8 +200,7 @@ def _write_table(rows: list[dict], path_csv: Path, path_md: Path, title: str) ->
         w.writeheader()
         for r in rows:
             w.writerow({k: _fmt(r[k]) for k in keys})
-    lines = [f"# {title}", "", "| " + " | ".join(keys) + " |",
-             "|" + "---|" * len(keys)]
+    lines = [f"# {title}", "", "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     for r in rows:
         lines.append("| " + " | ".join(_fmt(r[k]).replace("|", "\\|") for k in keys) + " |")
     write_text(path_md, "\n".join(lines) + "\n", overwrite=True)
@@ -197,12 +211,15 @@ def check_conditions(cond: R.StabilityConditions, where: str = "") -> list[str]:
     it and by how much; returns the messages."""
     msgs = []
     for tag, name, lam, margin, ok, unit in (
-            ("14", "λ_min(K)", cond.lambda_min_K, cond.margin_14, cond.holds_14, "N/m"),
-            ("15", "λ_min(K_P)", cond.lambda_min_KP, cond.margin_15, cond.holds_15, "N·m/rad")):
+        ("14", "λ_min(K)", cond.lambda_min_K, cond.margin_14, cond.holds_14, "N/m"),
+        ("15", "λ_min(K_P)", cond.lambda_min_KP, cond.margin_15, cond.holds_15, "N·m/rad"),
+    ):
         if not ok:
-            msg = (f"condition ({tag}) {name} > α fails{where}: {name} = {lam:.4g} {unit} ≤ "
-                   f"α = {cond.alpha:.4g}, short by {-margin:.4g}; (14)–(15) are only "
-                   "sufficient, the simulation still runs")
+            msg = (
+                f"condition ({tag}) {name} > α fails{where}: {name} = {lam:.4g} {unit} ≤ "
+                f"α = {cond.alpha:.4g}, short by {-margin:.4g}; (14)–(15) are only "
+                "sufficient, the simulation still runs"
+            )
             warnings.warn(msg, StabilityConditionWarning, stacklevel=3)
             msgs.append(msg)
     return msgs
@@ -219,9 +236,9 @@ def _mode_scale(model: MultiLinkModel, norm: str) -> np.ndarray:
     mass = np.concatenate([np.full(m.n_modes, m.mass) for m in model.modes])
     if norm == "link_mass":
         return np.ones_like(tip)
-    if norm == "unit_tip":      # φ(ℓ) = 1: δ is the tip deflection of the mode (m)
+    if norm == "unit_tip":  # φ(ℓ) = 1: δ is the tip deflection of the mode (m)
         return 1.0 / tip
-    if norm == "unit_mass":     # generalised mass 1 kg: δ in √kg·m
+    if norm == "unit_mass":  # generalised mass 1 kg: δ in √kg·m
         return 1.0 / np.sqrt(mass)
     raise ValueError(norm)
 
@@ -247,7 +264,7 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
         model = cfg.model(mode_type=mt)
         p = R.regulation_params(model, np.diag(cfg.KP), np.diag(cfg.KD), cfg.theta_d)
         run = _simulate(model, R.law_pd_constant, cfg, p, cfg.t_final)
-        G = np.stack([model.gravity_jacobian(x[:model.n_q]) for x in run.state_array[::10]])
+        G = np.stack([model.gravity_jacobian(x[: model.n_q]) for x in run.state_array[::10]])
         for norm in _NORMS:
             s = _mode_scale(model, norm)
             S = np.concatenate([np.ones(model.n_links), s])
@@ -260,26 +277,46 @@ def convention_study(cfg: DeLucaConfig, say: Callable[[str], None] | None = None
 
             lo, hi = cfg.convention_EI_bracket
             try:
-                EI = brentq(d11, lo, hi,
-                            rtol=1e-8,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
-                            xtol=1e-6)
+                EI = brentq(
+                    d11,
+                    lo,
+                    hi,
+                    rtol=1e-8,  # pyright: ignore[reportArgumentType]  (scipy: rtol is typed from its float64 default)
+                    xtol=1e-6,
+                )
                 m = cfg.model(mode_type=mt, flexural_rigidity=EI)
                 dd_match = R.residual_deflection(m, cfg.theta_d) / _mode_scale(m, norm)
             except (ValueError, R.RegulationError):
                 EI, dd_match = math.nan, np.full_like(dd, math.nan)
-            rows.append({
-                "modes": mt, "normalisation": norm,
-                **{f"delta_d{k + 1}_EI{cfg.flexural_rigidity:g}": float(v) for k, v in enumerate(dd)},
-                "alpha_along_run": alpha,
-                "EI_matching_delta_d1": EI,
-                **{f"delta_d{k + 1}_at_match": float(v) for k, v in enumerate(dd_match)},
-                **{f"ratio{k + 1}_at_match": float(v / pp) for k, (v, pp)
-                   in enumerate(zip(dd_match, paper, strict=False))},
-            })
-    rows.append({k: ("paper" if k == "modes" else "" if k == "normalisation" else math.nan)
-                 for k in rows[0]})
-    rows[-1].update({"alpha_along_run": PAPER["alpha"],
-                     **{f"delta_d{k + 1}_at_match": v for k, v in enumerate(paper)}})
+            rows.append(
+                {
+                    "modes": mt,
+                    "normalisation": norm,
+                    **{
+                        f"delta_d{k + 1}_EI{cfg.flexural_rigidity:g}": float(v)
+                        for k, v in enumerate(dd)
+                    },
+                    "alpha_along_run": alpha,
+                    "EI_matching_delta_d1": EI,
+                    **{f"delta_d{k + 1}_at_match": float(v) for k, v in enumerate(dd_match)},
+                    **{
+                        f"ratio{k + 1}_at_match": float(v / pp)
+                        for k, (v, pp) in enumerate(zip(dd_match, paper, strict=False))
+                    },
+                }
+            )
+    rows.append(
+        {
+            k: ("paper" if k == "modes" else "" if k == "normalisation" else math.nan)
+            for k in rows[0]
+        }
+    )
+    rows[-1].update(
+        {
+            "alpha_along_run": PAPER["alpha"],
+            **{f"delta_d{k + 1}_at_match": v for k, v in enumerate(paper)},
+        }
+    )
     return rows
 
 
@@ -296,7 +333,7 @@ def _fig2(run: SimulationResult, theta_d, delta_d, g_d, path: Path) -> None:
         ax[0, i].set_ylabel(f"θ{i + 1} (deg)")
         for j in range(2):
             k = 2 * i + j
-            line, = ax[1, i].plot(t, run.delta[:, k] * 1e3, label=f"δ{i + 1}{j + 1}")
+            (line,) = ax[1, i].plot(t, run.delta[:, k] * 1e3, label=f"δ{i + 1}{j + 1}")
             ax[1, i].axhline(delta_d[k] * 1e3, ls="--", c=line.get_color(), lw=0.8)
         ax[1, i].set_ylabel(f"δ link {i + 1} (mm)")
         ax[2, i].plot(t, run.torque[:, i], label=f"u{i + 1}")
@@ -306,8 +343,10 @@ def _fig2(run: SimulationResult, theta_d, delta_d, g_d, path: Path) -> None:
         for a in ax[:, i]:
             a.legend(fontsize=8)
             a.grid(alpha=0.3)
-    fig.suptitle("De Luca & Siciliano Fig. 2 on the benchmark arm: PD law (8), "
-                 "K_P = diag(18, 18), K_D = diag(10, 2)")
+    fig.suptitle(
+        "De Luca & Siciliano Fig. 2 on the benchmark arm: PD law (8), "
+        "K_P = diag(18, 18), K_D = diag(10, 2)"
+    )
     save_figure(fig, path, overwrite=True, dpi=110)
 
 
@@ -328,8 +367,10 @@ def _fig_laws(runs: dict, theta_d, path: Path) -> None:
         for a in ax[:, i]:
             a.legend(fontsize=8)
             a.grid(alpha=0.3)
-    fig.suptitle("Law (8) (constant gravity compensation) against law (30): "
-                 "(30a) g_θ(θ, δ), (30b) g_θ(θ, δ̄(θ))")
+    fig.suptitle(
+        "Law (8) (constant gravity compensation) against law (30): "
+        "(30a) g_θ(θ, δ), (30b) g_θ(θ, δ̄(θ))"
+    )
     save_figure(fig, path, overwrite=True, dpi=110)
 
 
@@ -360,12 +401,23 @@ def _fig_sweep(sweep_runs: dict, remedy_runs: dict, theta_d, path: Path) -> None
 
 
 # --------------------------------------------------------------------------- the run
-_STAGES = ("residual deflection δ_d, eq. (9)", "law (8)", "α and conditions (14)–(15)",
-           "laws (30a), (30b)", "gain sweep", "large gains", "conventions", "table and figures")
+_STAGES = (
+    "residual deflection δ_d, eq. (9)",
+    "law (8)",
+    "α and conditions (14)–(15)",
+    "laws (30a), (30b)",
+    "gain sweep",
+    "large gains",
+    "conventions",
+    "table and figures",
+)
 
 
-def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
-        config: DeLucaConfig | None = None) -> dict:
+def run(
+    out_dir,
+    progress: Callable[[int, int, str], None] | None = None,
+    config: DeLucaConfig | None = None,
+) -> dict:
     """Reproduce the paper's simulation section (module docstring) into ``out_dir``.
 
     ``progress(done, total, what)`` is called before each stage. Returns a dict: ``table``
@@ -382,6 +434,7 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         if progress is not None:
             k = next(stage, len(_STAGES) - 1)
             progress(k, len(_STAGES), what)
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = cfg.model()
@@ -405,20 +458,33 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         "theta_s": settling_time(t_all, eth_all, cfg.settle_angle_deg),
         "delta_s": settling_time(t_all, ed_all, cfg.settle_delta_frac),
     }
-    at_final = {"theta_err_deg": float(eth_f[-1]), "delta_err_frac": float(ed_f[-1]),
-                "theta_err_deg_per_joint": (np.abs(run8.theta[-1] - th_d) / DEG).tolist()}
+    at_final = {
+        "theta_err_deg": float(eth_f[-1]),
+        "delta_err_frac": float(ed_f[-1]),
+        "theta_err_deg_per_joint": (np.abs(run8.theta[-1] - th_d) / DEG).tolist(),
+    }
     du = np.abs(long8.torque - g_d).max(axis=1)
-    steady = {"u_end": long8.torque[-1].tolist(), "g_d": g_d.tolist(),
-              "max_abs_diff_end": float(du[-1]),
-              "within_tol_after_s": settling_time(long8.time, du, cfg.torque_tol),
-              "t_long": cfg.t_long}
+    steady = {
+        "u_end": long8.torque[-1].tolist(),
+        "g_d": g_d.tolist(),
+        "max_abs_diff_end": float(du[-1]),
+        "within_tol_after_s": settling_time(long8.time, du, cfg.torque_tol),
+        "t_long": cfg.t_long,
+    }
 
     say("α along the run and over its region, conditions (14)–(15)")
-    alpha_along, k_alpha = R.alpha_along(model, np.concatenate([run8.state_array, long8.state_array]))
-    q = np.concatenate([run8.state_array, long8.state_array])[:, :model.n_q]
-    region = R.alpha_bound(model, q[:, :model.n_links].min(0), q[:, :model.n_links].max(0),
-                           np.abs(q[:, model.n_links:]).max(0), n_samples=cfg.alpha_samples,
-                           refine=cfg.alpha_refine)
+    alpha_along, k_alpha = R.alpha_along(
+        model, np.concatenate([run8.state_array, long8.state_array])
+    )
+    q = np.concatenate([run8.state_array, long8.state_array])[:, : model.n_q]
+    region = R.alpha_bound(
+        model,
+        q[:, : model.n_links].min(0),
+        q[:, : model.n_links].max(0),
+        np.abs(q[:, model.n_links :]).max(0),
+        n_samples=cfg.alpha_samples,
+        refine=cfg.alpha_refine,
+    )
     cond = R.stability_conditions(model, KP, alpha_along)
     cond_region = R.stability_conditions(model, KP, region.alpha)
     msgs = check_conditions(cond, " (α along the run)")
@@ -431,35 +497,47 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     laws = {}
     for name, r in runs_laws.items():
         e_th, e_d = _errors(r, th_d, dd)
-        laws[name] = {"u0": r.torque[0].tolist(), "u0_norm": float(np.linalg.norm(r.torque[0])),
-                      "peak_abs_u": float(np.abs(r.torque).max()),
-                      "theta_err_deg_t_final": float(e_th[-1]),
-                      "delta_err_frac_t_final": float(e_d[-1])}
+        laws[name] = {
+            "u0": r.torque[0].tolist(),
+            "u0_norm": float(np.linalg.norm(r.torque[0])),
+            "peak_abs_u": float(np.abs(r.torque).max()),
+            "theta_err_deg_t_final": float(e_th[-1]),
+            "delta_err_frac_t_final": float(e_d[-1]),
+        }
 
     say("gain sweep")
     sweep, sweep_runs = [], {}
     for f in cfg.sweep_factors:
-        fk = f ** cfg.sweep_kd_exponent
+        fk = f**cfg.sweep_kd_exponent
         pf = R.regulation_params(model, KP * f, KD * fk, th_d)
-        entry = {"factor": f, "KP": (np.diag(KP) * f).tolist(), "KD": (np.diag(KD) * fk).tolist(),
-                 "conditions_hold": R.stability_conditions(model, KP * f, alpha_along).holds}
+        entry = {
+            "factor": f,
+            "KP": (np.diag(KP) * f).tolist(),
+            "KD": (np.diag(KD) * fk).tolist(),
+            "conditions_hold": R.stability_conditions(model, KP * f, alpha_along).holds,
+        }
         try:
             r = _simulate(model, R.law_pd_constant, cfg, pf, cfg.sweep_t_final)
             e_th, e_d = _errors(r, th_d, dd)
             k2 = int(np.argmin(np.abs(r.time - cfg.t_final)))
-            entry.update({"diverged": False, "u0_norm": float(np.linalg.norm(r.torque[0])),
-                          "peak_abs_u": float(np.abs(r.torque).max()),
-                          "theta_err_deg_t_final": float(e_th[k2]),
-                          "theta_err_deg_end": float(e_th[-1]),
-                          "delta_err_frac_end": float(e_d[-1]),
-                          "theta_settle_s": settling_time(r.time, e_th, cfg.settle_angle_deg)})
+            entry.update(
+                {
+                    "diverged": False,
+                    "u0_norm": float(np.linalg.norm(r.torque[0])),
+                    "peak_abs_u": float(np.abs(r.torque).max()),
+                    "theta_err_deg_t_final": float(e_th[k2]),
+                    "theta_err_deg_end": float(e_th[-1]),
+                    "delta_err_frac_end": float(e_d[-1]),
+                    "theta_settle_s": settling_time(r.time, e_th, cfg.settle_angle_deg),
+                }
+            )
             sweep_runs[f"K_P×{f:g}"] = r
         except SimulationDiverged as exc:
             entry.update({"diverged": True, "error": str(exc)})
         sweep.append(entry)
 
     say("large gains: interpolating trajectory, numerical limit")
-    f, fk = cfg.remedy_factor, cfg.remedy_factor ** cfg.sweep_kd_exponent
+    f, fk = cfg.remedy_factor, cfg.remedy_factor**cfg.sweep_kd_exponent
     remedy: dict[str, Any] = {"factor": f}
     remedy_runs = {}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
@@ -467,16 +545,20 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
         r = _simulate(model, R.law_pd_constant, cfg, pr, cfg.sweep_t_final)
         e_th, e_d = _errors(r, th_d, dd)
         k2 = int(np.argmin(np.abs(r.time - cfg.t_final)))
-        remedy[name] = {"duration_s": dur, "peak_abs_u": float(np.abs(r.torque).max()),
-                        "peak_abs_delta_m": float(np.abs(r.delta).max()),
-                        "theta_err_deg_t_final": float(e_th[k2]),
-                        "delta_err_frac_t_final": float(e_d[k2])}
+        remedy[name] = {
+            "duration_s": dur,
+            "peak_abs_u": float(np.abs(r.torque).max()),
+            "peak_abs_delta_m": float(np.abs(r.delta).max()),
+            "theta_err_deg_t_final": float(e_th[k2]),
+            "delta_err_frac_t_final": float(e_d[k2]),
+        }
         remedy_runs[f"K_P×{f:g}, {name}"] = r
     fu = cfg.unstable_factor
     unstable: dict[str, Any] = {"factor": fu}
     for name, dur in (("step", 0.0), ("quintic", cfg.remedy_duration)):
-        pu = R.regulation_params(model, KP * fu, KD * fu ** cfg.sweep_kd_exponent, th_d,
-                                 theta_0=cfg.theta_0, duration=dur)
+        pu = R.regulation_params(
+            model, KP * fu, KD * fu**cfg.sweep_kd_exponent, th_d, theta_0=cfg.theta_0, duration=dur
+        )
         try:
             _simulate(model, R.law_pd_constant, cfg, pu, cfg.t_final)
             unstable[f"rk4_{name}"] = "converged"
@@ -485,23 +567,33 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     if cfg.probe_tsit5:
         # the same loop with its adaptive solver (Tsit5, PID step control within each of
         # 200 output periods)
-        pu = R.regulation_params(model, KP * fu, KD * fu ** cfg.sweep_kd_exponent, th_d)
+        pu = R.regulation_params(model, KP * fu, KD * fu**cfg.sweep_kd_exponent, th_d)
         try:
-            ru = simulate_continuous(model, R.law_pd_constant, model.state(theta=cfg.theta_0),
-                                     cfg.t_final, cfg.t_final / 200, params=pu, method="tsit5",
-                                     step=cfg.step, rtol=cfg.tsit5_rtol,
-                                     atol=1e-3 * cfg.tsit5_rtol)
+            ru = simulate_continuous(
+                model,
+                R.law_pd_constant,
+                model.state(theta=cfg.theta_0),
+                cfg.t_final,
+                cfg.t_final / 200,
+                params=pu,
+                method="tsit5",
+                step=cfg.step,
+                rtol=cfg.tsit5_rtol,
+                atol=1e-3 * cfg.tsit5_rtol,
+            )
             unstable["tsit5_ok"] = True
-            unstable["tsit5_theta_err_deg_t_final"] = float(
-                np.abs(ru.theta[-1] - th_d).max() / DEG)
+            unstable["tsit5_theta_err_deg_t_final"] = float(np.abs(ru.theta[-1] - th_d).max() / DEG)
         except SimulationDiverged as exc:
             unstable["tsit5_ok"] = False
             unstable["tsit5_error"] = str(exc)
     remedy["unstable"] = unstable
 
     conventions = []
-    say("conventions: δ_d and α under other mode conventions" if cfg.conventions
-        else "conventions: skipped")
+    say(
+        "conventions: δ_d and α under other mode conventions"
+        if cfg.conventions
+        else "conventions: skipped"
+    )
     if cfg.conventions:
         conventions = convention_study(cfg)
 
@@ -509,70 +601,177 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     rows = []
     names = ["δ_d,11", "δ_d,12", "δ_d,21", "δ_d,22"]
     for k, nm in enumerate(names):
-        rows.append(_row(f"{nm} (eq. 9)", PAPER["delta_d"][k], float(dd[k]), "m",
-                         "arm data not in the paper: benchmark arm, see docs/choices.md"))
-    rows.append(_row("α a posteriori along the run (eq. 6, 2-norm)", PAPER["alpha"],
-                     alpha_along, "SI", f"max at t = {np.concatenate([run8.time, long8.time])[k_alpha]:.3g} s"))
-    rows.append(_row("α over the region spanned by the run", "", region.alpha, "SI",
-                     f"{region.n_evaluations} evaluations"))
-    rows.append(_row("condition (14) λ_min(K) > α", "satisfied", cond.holds_14, "",
-                     f"λ_min(K) = {cond.lambda_min_K:.4g} N/m, margin {cond.margin_14:+.4g} "
-                     f"(region α: {cond_region.margin_14:+.4g})"))
-    rows.append(_row("condition (15) λ_min(K_P) > α", "satisfied", cond.holds_15, "",
-                     f"λ_min(K_P) = {cond.lambda_min_KP:.4g} N·m/rad, margin {cond.margin_15:+.4g} "
-                     f"(region α: {cond_region.margin_15:+.4g})"))
-    rows.append(_row(f"settling time, every |θ_i − θ_d,i| ≤ {cfg.settle_angle_deg:g}°",
-                     f"well within {cfg.t_final:g} s", settle["theta_s"], "s"))
-    rows.append(_row(f"settling time, ‖δ − δ_d‖ ≤ {cfg.settle_delta_frac:g}·‖δ_d‖",
-                     f"well within {cfg.t_final:g} s", settle["delta_s"], "s",
-                     "undamped link modes, damped through the joints only"))
-    rows.append(_row(f"max |θ_i − θ_d,i| at t = {cfg.t_final:g} s", "≈ 0 (Fig. 2)",
-                     at_final["theta_err_deg"], "deg"))
-    rows.append(_row(f"‖δ − δ_d‖/‖δ_d‖ at t = {cfg.t_final:g} s", "≈ 0 (Fig. 2)",
-                     at_final["delta_err_frac"], ""))
-    rows.append(_row("steady torque u(∞) = g_θ(θ_d, δ_d)", "constant at steady state",
-                     steady["max_abs_diff_end"], "N·m",
-                     f"max |u − g_θ(θ_d, δ_d)| at t = {cfg.t_long:g} s; within "
-                     f"{cfg.torque_tol:g} N·m after {steady['within_tol_after_s']:.3g} s; "
-                     f"g_θ = ({g_d[0]:.4g}, {g_d[1]:.4g}) N·m"))
+        rows.append(
+            _row(
+                f"{nm} (eq. 9)",
+                PAPER["delta_d"][k],
+                float(dd[k]),
+                "m",
+                "arm data not in the paper: benchmark arm, see docs/choices.md",
+            )
+        )
+    rows.append(
+        _row(
+            "α a posteriori along the run (eq. 6, 2-norm)",
+            PAPER["alpha"],
+            alpha_along,
+            "SI",
+            f"max at t = {np.concatenate([run8.time, long8.time])[k_alpha]:.3g} s",
+        )
+    )
+    rows.append(
+        _row(
+            "α over the region spanned by the run",
+            "",
+            region.alpha,
+            "SI",
+            f"{region.n_evaluations} evaluations",
+        )
+    )
+    rows.append(
+        _row(
+            "condition (14) λ_min(K) > α",
+            "satisfied",
+            cond.holds_14,
+            "",
+            f"λ_min(K) = {cond.lambda_min_K:.4g} N/m, margin {cond.margin_14:+.4g} "
+            f"(region α: {cond_region.margin_14:+.4g})",
+        )
+    )
+    rows.append(
+        _row(
+            "condition (15) λ_min(K_P) > α",
+            "satisfied",
+            cond.holds_15,
+            "",
+            f"λ_min(K_P) = {cond.lambda_min_KP:.4g} N·m/rad, margin {cond.margin_15:+.4g} "
+            f"(region α: {cond_region.margin_15:+.4g})",
+        )
+    )
+    rows.append(
+        _row(
+            f"settling time, every |θ_i − θ_d,i| ≤ {cfg.settle_angle_deg:g}°",
+            f"well within {cfg.t_final:g} s",
+            settle["theta_s"],
+            "s",
+        )
+    )
+    rows.append(
+        _row(
+            f"settling time, ‖δ − δ_d‖ ≤ {cfg.settle_delta_frac:g}·‖δ_d‖",
+            f"well within {cfg.t_final:g} s",
+            settle["delta_s"],
+            "s",
+            "undamped link modes, damped through the joints only",
+        )
+    )
+    rows.append(
+        _row(
+            f"max |θ_i − θ_d,i| at t = {cfg.t_final:g} s",
+            "≈ 0 (Fig. 2)",
+            at_final["theta_err_deg"],
+            "deg",
+        )
+    )
+    rows.append(
+        _row(
+            f"‖δ − δ_d‖/‖δ_d‖ at t = {cfg.t_final:g} s",
+            "≈ 0 (Fig. 2)",
+            at_final["delta_err_frac"],
+            "",
+        )
+    )
+    rows.append(
+        _row(
+            "steady torque u(∞) = g_θ(θ_d, δ_d)",
+            "constant at steady state",
+            steady["max_abs_diff_end"],
+            "N·m",
+            f"max |u − g_θ(θ_d, δ_d)| at t = {cfg.t_long:g} s; within "
+            f"{cfg.torque_tol:g} N·m after {steady['within_tol_after_s']:.3g} s; "
+            f"g_θ = ({g_d[0]:.4g}, {g_d[1]:.4g}) N·m",
+        )
+    )
     rows.append(_row("initial effort ‖u(0)‖, law (8)", "large", laws["(8)"]["u0_norm"], "N·m"))
     for name in ("(30a)", "(30b)"):
-        rows.append(_row(f"initial effort ‖u(0)‖, law {name}", "lower than (8)",
-                         laws[name]["u0_norm"], "N·m",
-                         f"ratio to (8): {laws[name]['u0_norm'] / laws['(8)']['u0_norm']:.3f}; "
-                         f"|θ − θ_d| at {cfg.t_final:g} s {laws[name]['theta_err_deg_t_final']:.3g}°"))
+        rows.append(
+            _row(
+                f"initial effort ‖u(0)‖, law {name}",
+                "lower than (8)",
+                laws[name]["u0_norm"],
+                "N·m",
+                f"ratio to (8): {laws[name]['u0_norm'] / laws['(8)']['u0_norm']:.3f}; "
+                f"|θ − θ_d| at {cfg.t_final:g} s {laws[name]['theta_err_deg_t_final']:.3g}°",
+            )
+        )
     for e in sweep:
         if e["diverged"]:
-            rows.append(_row(f"gain sweep K_P×{e['factor']:g}", "stable, larger initial torque",
-                             "diverged", "", e["error"][:120]))
+            rows.append(
+                _row(
+                    f"gain sweep K_P×{e['factor']:g}",
+                    "stable, larger initial torque",
+                    "diverged",
+                    "",
+                    e["error"][:120],
+                )
+            )
         else:
-            rows.append(_row(f"gain sweep K_P×{e['factor']:g}, "
-                             f"K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
-                             "stable, larger initial torque", e["u0_norm"], "N·m (‖u(0)‖)",
-                             f"|θ − θ_d| {e['theta_err_deg_t_final']:.3g}° at {cfg.t_final:g} s, "
-                             f"{e['theta_err_deg_end']:.3g}° at {cfg.sweep_t_final:g} s; conditions "
-                             f"{'hold' if e['conditions_hold'] else 'fail'}"))
-    rows.append(_row(f"too large gains (K_P×{fu:g}): numerical trouble", "numerical instabilities",
-                     unstable["rk4_step"].split(":")[0], "",
-                     f"RK4 {cfg.step:g} s; with the quintic: {unstable['rk4_quintic'].split(':')[0]}"
-                     + (f"; Tsit5 rtol {cfg.tsit5_rtol:g}: {'ok' if unstable['tsit5_ok'] else 'failed'}"
-                        if cfg.probe_tsit5 else "")))
-    rows.append(_row(f"remedy at K_P×{f:g}: peak |u|, step → quintic over {cfg.remedy_duration:g} s",
-                     "interpolating trajectory", remedy["quintic"]["peak_abs_u"], "N·m",
-                     f"step {remedy['step']['peak_abs_u']:.4g} N·m; |θ − θ_d| at {cfg.t_final:g} s "
-                     f"{remedy['step']['theta_err_deg_t_final']:.3g}° → "
-                     f"{remedy['quintic']['theta_err_deg_t_final']:.3g}°",
-                     ratio=remedy["quintic"]["peak_abs_u"] / remedy["step"]["peak_abs_u"]))
+            rows.append(
+                _row(
+                    f"gain sweep K_P×{e['factor']:g}, "
+                    f"K_D×{e['factor'] ** cfg.sweep_kd_exponent:.3g}",
+                    "stable, larger initial torque",
+                    e["u0_norm"],
+                    "N·m (‖u(0)‖)",
+                    f"|θ − θ_d| {e['theta_err_deg_t_final']:.3g}° at {cfg.t_final:g} s, "
+                    f"{e['theta_err_deg_end']:.3g}° at {cfg.sweep_t_final:g} s; conditions "
+                    f"{'hold' if e['conditions_hold'] else 'fail'}",
+                )
+            )
+    rows.append(
+        _row(
+            f"too large gains (K_P×{fu:g}): numerical trouble",
+            "numerical instabilities",
+            unstable["rk4_step"].split(":")[0],
+            "",
+            f"RK4 {cfg.step:g} s; with the quintic: {unstable['rk4_quintic'].split(':')[0]}"
+            + (
+                f"; Tsit5 rtol {cfg.tsit5_rtol:g}: {'ok' if unstable['tsit5_ok'] else 'failed'}"
+                if cfg.probe_tsit5
+                else ""
+            ),
+        )
+    )
+    rows.append(
+        _row(
+            f"remedy at K_P×{f:g}: peak |u|, step → quintic over {cfg.remedy_duration:g} s",
+            "interpolating trajectory",
+            remedy["quintic"]["peak_abs_u"],
+            "N·m",
+            f"step {remedy['step']['peak_abs_u']:.4g} N·m; |θ − θ_d| at {cfg.t_final:g} s "
+            f"{remedy['step']['theta_err_deg_t_final']:.3g}° → "
+            f"{remedy['quintic']['theta_err_deg_t_final']:.3g}°",
+            ratio=remedy["quintic"]["peak_abs_u"] / remedy["step"]["peak_abs_u"],
+        )
+    )
 
     files = {}
     files["table_csv"], files["table_md"] = out / "deluca_table.csv", out / "deluca_table.md"
-    _write_table(rows, files["table_csv"], files["table_md"],
-                 "De Luca & Siciliano (1993), simulation section: paper vs flexarm")
+    _write_table(
+        rows,
+        files["table_csv"],
+        files["table_md"],
+        "De Luca & Siciliano (1993), simulation section: paper vs flexarm",
+    )
     if conventions:
         files["conventions_csv"] = out / "deluca_conventions.csv"
         files["conventions_md"] = out / "deluca_conventions.md"
-        _write_table(conventions, files["conventions_csv"], files["conventions_md"],
-                     "δ_d and α under other mode conventions")
+        _write_table(
+            conventions,
+            files["conventions_csv"],
+            files["conventions_md"],
+            "δ_d and α under other mode conventions",
+        )
     files["fig2"] = out / "deluca_fig2.png"
     _fig2(run8, th_d, dd, g_d, files["fig2"])
     files["laws"] = out / "deluca_laws.png"
@@ -581,25 +780,52 @@ def run(out_dir, progress: Callable[[int, int, str], None] | None = None,
     _fig_sweep(sweep_runs, remedy_runs, th_d, files["sweep"])
 
     return {
-        "table": rows, "delta_d": dd.tolist(), "g_d": g_d.tolist(),
-        "alpha_along": alpha_along, "alpha_region": region.alpha,
-        "conditions": {"along": asdict(cond) | {"holds_14": cond.holds_14, "holds_15": cond.holds_15,
-                                                "margin_14": cond.margin_14, "margin_15": cond.margin_15},
-                       "region": asdict(cond_region) | {"holds_14": cond_region.holds_14,
-                                                        "holds_15": cond_region.holds_15,
-                                                        "margin_14": cond_region.margin_14,
-                                                        "margin_15": cond_region.margin_15}},
-        "settling": settle, "at_t_final": at_final, "steady": steady, "laws": laws,
-        "sweep": sweep, "remedy": remedy, "conventions": conventions, "warnings": msgs,
+        "table": rows,
+        "delta_d": dd.tolist(),
+        "g_d": g_d.tolist(),
+        "alpha_along": alpha_along,
+        "alpha_region": region.alpha,
+        "conditions": {
+            "along": asdict(cond)
+            | {
+                "holds_14": cond.holds_14,
+                "holds_15": cond.holds_15,
+                "margin_14": cond.margin_14,
+                "margin_15": cond.margin_15,
+            },
+            "region": asdict(cond_region)
+            | {
+                "holds_14": cond_region.holds_14,
+                "holds_15": cond_region.holds_15,
+                "margin_14": cond_region.margin_14,
+                "margin_15": cond_region.margin_15,
+            },
+        },
+        "settling": settle,
+        "at_t_final": at_final,
+        "steady": steady,
+        "laws": laws,
+        "sweep": sweep,
+        "remedy": remedy,
+        "conventions": conventions,
+        "warnings": msgs,
         "figures": [str(files[k]) for k in ("fig2", "laws", "sweep")],
-        "table_csv": str(files["table_csv"]), "table_md": str(files["table_md"]),
-        "files": {k: str(v) for k, v in files.items()}, "config": asdict(cfg),
+        "table_csv": str(files["table_csv"]),
+        "table_md": str(files["table_md"]),
+        "files": {k: str(v) for k, v in files.items()},
+        "config": asdict(cfg),
     }
 
 
 def quick_config(**overrides) -> DeLucaConfig:
     """A shorter configuration (two sweep factors, no Tsit5 probe, no convention study), for
     tests; everything else as :class:`DeLucaConfig`."""
-    base = DeLucaConfig(sweep_factors=(1.0, 2.0), probe_tsit5=False, conventions=False,
-                        alpha_samples=500, alpha_refine=1, sweep_t_final=3.0)
+    base = DeLucaConfig(
+        sweep_factors=(1.0, 2.0),
+        probe_tsit5=False,
+        conventions=False,
+        alpha_samples=500,
+        alpha_refine=1,
+        sweep_t_final=3.0,
+    )
     return replace(base, **overrides)

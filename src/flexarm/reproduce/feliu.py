@@ -124,12 +124,25 @@ CHOICES = FeliuChoices()
 
 # The paper's reported values (Sec. VI): the "paper" column of the table only.
 _PAPER = {
-    "gcm1_dc": 15.0, "gcm2_dc": 1.0, "peak_400": 6.0, "inner_settle_ms": 33.0,
-    "two_mass_inner_settle_ms": 60.0, "accel_single": 8.750, "tip_settle_single": 0.22,
-    "max_deflection": 0.4, "tip_settle_two_mass": 0.3, "ripple_pct": 3.0,
-    "n_w2": 43.75, "n_2zw": 0.06,
-    "n2_a2": 1637.1, "n2_a0": 57903.7175, "n2_b1": 0.05605, "n2_b2": 0.00157075,
-    "n2_pole": 35.68333, "n2_gain": 45.475, "accel_two_mass": 7.875,
+    "gcm1_dc": 15.0,
+    "gcm2_dc": 1.0,
+    "peak_400": 6.0,
+    "inner_settle_ms": 33.0,
+    "two_mass_inner_settle_ms": 60.0,
+    "accel_single": 8.750,
+    "tip_settle_single": 0.22,
+    "max_deflection": 0.4,
+    "tip_settle_two_mass": 0.3,
+    "ripple_pct": 3.0,
+    "n_w2": 43.75,
+    "n_2zw": 0.06,
+    "n2_a2": 1637.1,
+    "n2_a0": 57903.7175,
+    "n2_b1": 0.05605,
+    "n2_b2": 0.00157075,
+    "n2_pole": 35.68333,
+    "n2_gain": 45.475,
+    "accel_two_mass": 7.875,
 }
 
 
@@ -141,7 +154,8 @@ def _count(scenario) -> float:
 
 def _with_duration(scenario, duration: float):
     return scenario.model_copy(
-        update={"simulation": scenario.simulation.model_copy(update={"duration": duration})})
+        update={"simulation": scenario.simulation.model_copy(update={"duration": duration})}
+    )
 
 
 def _simulate(p: Prepared, plant, controller, refs: dict[str, np.ndarray]) -> SimulationResult:
@@ -154,19 +168,24 @@ def _simulate(p: Prepared, plant, controller, refs: dict[str, np.ndarray]) -> Si
 def _zero_feedback(ctrl):
     """The cascade with G_cb = 0 (inner-loop experiments): same structure, traced zeros."""
     fb = ctrl.outer.parts[0]
-    return eqx.tree_at(lambda c: (c.outer.parts[0].C, c.outer.parts[0].D), ctrl,
-                       (jnp.zeros_like(fb.C), jnp.zeros_like(fb.D)))
+    return eqx.tree_at(
+        lambda c: (c.outer.parts[0].C, c.outer.parts[0].D),
+        ctrl,
+        (jnp.zeros_like(fb.C), jnp.zeros_like(fb.D)),
+    )
 
 
-def _rise_time(t: np.ndarray, y: np.ndarray, t0: float, target: float,
-               fraction: float = 0.9) -> float:
+def _rise_time(
+    t: np.ndarray, y: np.ndarray, t0: float, target: float, fraction: float = 0.9
+) -> float:
     """First time after t0 (s, relative to t0) at which y reaches ``fraction`` of target."""
     k = np.nonzero((t >= t0) & (np.abs(y) >= fraction * abs(target)))[0]
     return float(t[k[0]] - t0) if k.size else math.nan
 
 
-def _mode_amplitudes(t: np.ndarray, y: np.ndarray, goal: float, t0: float,
-                     omegas: np.ndarray) -> np.ndarray:
+def _mode_amplitudes(
+    t: np.ndarray, y: np.ndarray, goal: float, t0: float, omegas: np.ndarray
+) -> np.ndarray:
     """Least-squares amplitudes (rad) of sinusoids at ``omegas`` (rad/s) in y − goal
     after t0 (the beam's undamped modes ring on: fixed frequencies, constant amplitude)."""
     k = t > t0
@@ -179,21 +198,20 @@ def _mode_amplitudes(t: np.ndarray, y: np.ndarray, goal: float, t0: float,
 
 
 def _settle(res: SimulationResult, signal: str, band: float, t0: float, target: float):
-    m = step_metrics(res.time, res[signal], res["reference"], band=band, t_step=t0,
-                     target=target)
+    m = step_metrics(res.time, res[signal], res["reference"], band=band, t_step=t0, target=target)
     return m.settling_time if m.settling_time is not None else math.nan
 
 
-def _steady_error_counts(res: SimulationResult, step: float, count: float,
-                         last: float) -> float:
+def _steady_error_counts(res: SimulationResult, step: float, count: float, last: float) -> float:
     """Mean of step − measured θm over the last ``last`` s, in A/D counts."""
     k = res.time >= res.time[-1] - last
     return float(np.mean(step - res.measured["motor_angle"][k]) / count)
 
 
 # ---------------------------------------------------------------------------- figures
-def _figure(res: SimulationResult, title: str, path: Path, signals, *, xmax=None,
-            extra=None) -> Path:
+def _figure(
+    res: SimulationResult, title: str, path: Path, signals, *, xmax=None, extra=None
+) -> Path:
     fig = res.plot_arm(signals=signals)
     if extra is not None:
         extra(fig.axes[0])
@@ -208,10 +226,25 @@ def _figure(res: SimulationResult, title: str, path: Path, signals, *, xmax=None
 
 # ---------------------------------------------------------------------------- table
 def _row(rows: list, key: str, quantity: str, unit: str, paper, ours, note: str = "") -> None:
-    ratio = (ours / paper if isinstance(paper, (int, float)) and paper not in (0, None)
-             and isinstance(ours, (int, float)) and math.isfinite(ours) else math.nan)
-    rows.append({"key": key, "quantity": quantity, "unit": unit,
-                 "paper": paper, "ours": ours, "ratio": ratio, "note": note})
+    ratio = (
+        ours / paper
+        if isinstance(paper, (int, float))
+        and paper not in (0, None)
+        and isinstance(ours, (int, float))
+        and math.isfinite(ours)
+        else math.nan
+    )
+    rows.append(
+        {
+            "key": key,
+            "quantity": quantity,
+            "unit": unit,
+            "paper": paper,
+            "ours": ours,
+            "ratio": ratio,
+            "note": note,
+        }
+    )
 
 
 def _fmt(v) -> str:
@@ -229,23 +262,30 @@ def _write_table(rows: list, out: Path) -> tuple[Path, Path]:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
         for r in rows:
-            w.writerow({k: (_fmt(r[k]) if k in ("paper", "ours", "ratio") else r[k])
-                        for k in cols})
+            w.writerow({k: (_fmt(r[k]) if k in ("paper", "ours", "ratio") else r[k]) for k in cols})
     md_path = out / "feliu_table.md"
-    lines = ["# Feliu, Rattan & Brown (1993): paper vs flexarm", "",
-             "| quantity | unit | paper | ours | ours/paper | note |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        "# Feliu, Rattan & Brown (1993): paper vs flexarm",
+        "",
+        "| quantity | unit | paper | ours | ours/paper | note |",
+        "|---|---|---|---|---|---|",
+    ]
     cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
     for r in rows:
-        lines.append(f"| {cell(r['quantity'])} | {r['unit']} | {_fmt(r['paper'])} | "
-                     f"{_fmt(r['ours'])} | {_fmt(r['ratio'])} | {cell(r['note'])} |")
+        lines.append(
+            f"| {cell(r['quantity'])} | {r['unit']} | {_fmt(r['paper'])} | "
+            f"{_fmt(r['ours'])} | {_fmt(r['ratio'])} | {cell(r['note'])} |"
+        )
     write_text(md_path, "\n".join(lines) + "\n", overwrite=True)
     return csv_path, md_path
 
 
 # ---------------------------------------------------------------------------- the run
-def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = None,
-        choices: FeliuChoices = CHOICES) -> dict:
+def run(
+    out_dir: str | Path,
+    progress: Callable[[int, int, str], None] | None = None,
+    choices: FeliuChoices = CHOICES,
+) -> dict:
     """Run every experiment, write the figures and the table into ``out_dir``.
 
     ``progress(done, total, what)`` is called before each stage. Returns a dict with
@@ -272,24 +312,58 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     # ---- 1. inner-loop design (Sec. VI-B.2), on the motor model of eq. (9)
     say(0, "inner-loop design")
     design: InnerLoopDesign = design_inner_loop(
-        held1, c.dt, c.delay, dc_gain=c.dc_gain, step=c.design_step,
-        band=c.design_band, max_overshoot=c.max_overshoot, seed=c.design_seed)
+        held1,
+        c.dt,
+        c.delay,
+        dc_gain=c.dc_gain,
+        step=c.design_step,
+        band=c.design_band,
+        max_overshoot=c.max_overshoot,
+        seed=c.design_seed,
+    )
     lag = design.lag if c.advance_by_inner_lag else 0.0
-    _row(rows, "gcm1_dc", "G_cm1(1)", "A/rad", _PAPER["gcm1_dc"],
-         float(np.real(control.dcgain(design.gcm1))), "constraint of the design")
-    _row(rows, "gcm2_dc", "G_cm2(1)", "rad/rad", _PAPER["gcm2_dc"],
-         float(np.real(control.dcgain(design.gcm2))), "constraint of the design")
-    _row(rows, "peak_400", "peak feedback current, 400 mrad step (linear design loop)", "A",
-         _PAPER["peak_400"], design.peak_current_per_rad * 0.4,
-         "exceeds the 4.12 A amplifier: saturates in the simulations")
-    _row(rows, "inner_settle_design", f"inner-loop settling, linear design "
-         f"({100 * c.design_band:g} % band, between samples)", "ms",
-         _PAPER["inner_settle_ms"], 1e3 * design.settling_time, "Ĝ_m of eq. (9), 1 sample delay")
+    _row(
+        rows,
+        "gcm1_dc",
+        "G_cm1(1)",
+        "A/rad",
+        _PAPER["gcm1_dc"],
+        float(np.real(control.dcgain(design.gcm1))),
+        "constraint of the design",
+    )
+    _row(
+        rows,
+        "gcm2_dc",
+        "G_cm2(1)",
+        "rad/rad",
+        _PAPER["gcm2_dc"],
+        float(np.real(control.dcgain(design.gcm2))),
+        "constraint of the design",
+    )
+    _row(
+        rows,
+        "peak_400",
+        "peak feedback current, 400 mrad step (linear design loop)",
+        "A",
+        _PAPER["peak_400"],
+        design.peak_current_per_rad * 0.4,
+        "exceeds the 4.12 A amplifier: saturates in the simulations",
+    )
+    _row(
+        rows,
+        "inner_settle_design",
+        f"inner-loop settling, linear design ({100 * c.design_band:g} % band, between samples)",
+        "ms",
+        _PAPER["inner_settle_ms"],
+        1e3 * design.settling_time,
+        "Ĝ_m of eq. (9), 1 sample delay",
+    )
 
     # ---- 2. single-mass arm: inner loop with the tip held (Figs. 11-13)
     say(1, "single-mass inner loop (Figs. 11-13)")
-    traj1, n1, _ = size_parabolic(m1.beam_tf(), c.single_distance, c.design_deflection,
-                                  c.max_deflection)
+    traj1, n1, _ = size_parabolic(
+        m1.beam_tf(), c.single_distance, c.design_deflection, c.max_deflection
+    )
     gcb1 = pid_zpk(c.gcb_gain, c.gcb_zeros, c.gcb_pole, c.dt)
     inner1 = design.controller(m1, angle_resolution=count, reference="motor_reference")
     ctrl1 = tip_loop(inner1, gcb1, c.dt)
@@ -299,56 +373,132 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     step_refs["feedforward"] = step_refs["reference"]
     inner_only = _zero_feedback(ctrl1)
     runs = {}
-    for key, fr, co in (("all", True, True), ("no_friction", False, True),
-                        ("no_coupling", True, False)):
-        ctl = eqx.tree_at(lambda cc: cc.inner, inner_only,
-                          inner_only.inner.with_switches(friction=fr, coupling=co))
+    for key, fr, co in (
+        ("all", True, True),
+        ("no_friction", False, True),
+        ("no_coupling", True, False),
+    ):
+        ctl = eqx.tree_at(
+            lambda cc: cc.inner,
+            inner_only,
+            inner_only.inner.with_switches(friction=fr, coupling=co),
+        )
         runs[key] = _simulate(p1, held1.plant(), ctl, step_refs)
     r = runs["all"]
     ts11 = _settle(r, "motor_angle", c.inner_band_single, c.move_start, c.inner_step)
-    _row(rows, "inner_settle_sim", f"inner-loop settling, tip held "
-         f"({100 * c.inner_band_single:g} % band), Fig. 11", "ms", _PAPER["inner_settle_ms"],
-         1e3 * ts11, f"{1e3 * c.inner_step:g} mrad step, simulated arm")
-    ess = {k: _steady_error_counts(v, c.inner_step, count, c.steady_window)
-           for k, v in runs.items()}
-    _row(rows, "ess_all", "steady-state error with compensation, Fig. 11", "A/D counts",
-         0.0, ess["all"], f"mean measured error over the last {c.steady_window:g} s")
-    _row(rows, "ess_no_friction", "steady-state error without friction compensation, "
-         "Fig. 12", "A/D counts", "nonzero", ess["no_friction"], "")
-    _row(rows, "ess_no_coupling", "steady-state error without coupling compensation, "
-         "Fig. 13", "A/D counts", "nonzero", ess["no_coupling"], "")
-    rise = {k: _rise_time(v.time, v["motor_angle"], c.move_start, c.inner_step)
-            for k, v in runs.items()}
+    _row(
+        rows,
+        "inner_settle_sim",
+        f"inner-loop settling, tip held ({100 * c.inner_band_single:g} % band), Fig. 11",
+        "ms",
+        _PAPER["inner_settle_ms"],
+        1e3 * ts11,
+        f"{1e3 * c.inner_step:g} mrad step, simulated arm",
+    )
+    ess = {
+        k: _steady_error_counts(v, c.inner_step, count, c.steady_window) for k, v in runs.items()
+    }
+    _row(
+        rows,
+        "ess_all",
+        "steady-state error with compensation, Fig. 11",
+        "A/D counts",
+        0.0,
+        ess["all"],
+        f"mean measured error over the last {c.steady_window:g} s",
+    )
+    _row(
+        rows,
+        "ess_no_friction",
+        "steady-state error without friction compensation, Fig. 12",
+        "A/D counts",
+        "nonzero",
+        ess["no_friction"],
+        "",
+    )
+    _row(
+        rows,
+        "ess_no_coupling",
+        "steady-state error without coupling compensation, Fig. 13",
+        "A/D counts",
+        "nonzero",
+        ess["no_coupling"],
+        "",
+    )
+    rise = {
+        k: _rise_time(v.time, v["motor_angle"], c.move_start, c.inner_step) for k, v in runs.items()
+    }
     for k, fig in (("no_friction", 12), ("no_coupling", 13)):
-        _row(rows, f"rise90_{k}", f"time to 90 % without {k[3:]} compensation / with "
-             f"(Fig. {fig})", "ratio", 1.0, rise[k] / rise["all"],
-             "paper: the transient is the same")
+        _row(
+            rows,
+            f"rise90_{k}",
+            f"time to 90 % without {k[3:]} compensation / with (Fig. {fig})",
+            "ratio",
+            1.0,
+            rise[k] / rise["all"],
+            "paper: the transient is the same",
+        )
 
     def lin(ax):
-        return ax.plot(c.move_start + design.time, 1e3 * c.inner_step * design.response, "--",
-                       label="linear design (theoretical)")
+        return ax.plot(
+            c.move_start + design.time,
+            1e3 * c.inner_step * design.response,
+            "--",
+            label="linear design (theoretical)",
+        )
 
-    figs.append(_figure(runs["all"], "Fig. 11. Theoretical and experimental step responses "
-                        "of inner loop (single mass)", out / "fig11_inner_step_single_mass.png",
-                        ("reference", "motor_angle"), xmax=0.3, extra=lin))
-    figs.append(_figure(runs["no_friction"], "Fig. 12. Step response of inner loop "
-                        "(without Coulomb friction compensation)",
-                        out / "fig12_inner_no_friction_compensation.png",
-                        ("reference", "motor_angle"), xmax=0.3))
-    figs.append(_figure(runs["no_coupling"], "Fig. 13. Step response of inner loop "
-                        "(without coupling torque compensation)",
-                        out / "fig13_inner_no_coupling_compensation.png",
-                        ("reference", "motor_angle"), xmax=0.3))
+    figs.append(
+        _figure(
+            runs["all"],
+            "Fig. 11. Theoretical and experimental step responses of inner loop (single mass)",
+            out / "fig11_inner_step_single_mass.png",
+            ("reference", "motor_angle"),
+            xmax=0.3,
+            extra=lin,
+        )
+    )
+    figs.append(
+        _figure(
+            runs["no_friction"],
+            "Fig. 12. Step response of inner loop (without Coulomb friction compensation)",
+            out / "fig12_inner_no_friction_compensation.png",
+            ("reference", "motor_angle"),
+            xmax=0.3,
+        )
+    )
+    figs.append(
+        _figure(
+            runs["no_coupling"],
+            "Fig. 13. Step response of inner loop (without coupling torque compensation)",
+            out / "fig13_inner_no_coupling_compensation.png",
+            ("reference", "motor_angle"),
+            xmax=0.3,
+        )
+    )
 
     # ---- 3. single-mass tip loop (Figs. 14-15)
     say(2, "single-mass tip loop (Figs. 14-15)")
     w2 = float(np.real(m1.beam_tf().den[0][0][-1] / m1.beam_tf().den[0][0][0]))
     two_zw = float(np.real(m1.beam_tf().den[0][0][-2] / m1.beam_tf().den[0][0][0]))
-    _row(rows, "n_w2", "N(s) = 1/G_b: ω² (s⁰ coefficient of G_b's denominator)", "s⁻²",
-         _PAPER["n_w2"], w2, "our single-mass beam is the physical wire model")
+    _row(
+        rows,
+        "n_w2",
+        "N(s) = 1/G_b: ω² (s⁰ coefficient of G_b's denominator)",
+        "s⁻²",
+        _PAPER["n_w2"],
+        w2,
+        "our single-mass beam is the physical wire model",
+    )
     _row(rows, "n_2zw", "N(s) = 1/G_b: 2ζω (s¹ coefficient)", "s⁻¹", _PAPER["n_2zw"], two_zw, "")
-    _row(rows, "accel_single", "parabolic acceleration for 200 mrad design deflection",
-         "rad/s²", _PAPER["accel_single"], traj1.max_acceleration, "A = deflection · ω²")
+    _row(
+        rows,
+        "accel_single",
+        "parabolic acceleration for 200 mrad design deflection",
+        "rad/s²",
+        _PAPER["accel_single"],
+        traj1.max_acceleration,
+        "A = deflection · ω²",
+    )
     tip_runs = {}
     for key, adv in (("main", lag), ("no_advance", 0.0)):
         refs = trajectory_references(n1, traj1, t1, start=c.move_start, advance=adv)
@@ -356,29 +506,64 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     r = tip_runs["main"]
     ts14 = _settle(r, "tip_angle", c.single_tip_band, c.move_start, c.single_distance)
     defl1 = float(np.max(np.abs(r["motor_angle"] - r["tip_angle"])))
-    _row(rows, "tip_settle_single", f"single-mass tip settling ({100 * c.single_tip_band:g} "
-         "% band, from the start of the move), Fig. 14", "s", _PAPER["tip_settle_single"],
-         ts14, f"{c.single_distance:g} rad parabolic move of {traj1.duration:.3g} s")
-    _row(rows, "defl_single", "single-mass peak deflection |θm − θt|, Fig. 15", "rad",
-         _PAPER["max_deflection"], defl1, "paper: within the 400 mrad limit")
+    _row(
+        rows,
+        "tip_settle_single",
+        f"single-mass tip settling ({100 * c.single_tip_band:g} "
+        "% band, from the start of the move), Fig. 14",
+        "s",
+        _PAPER["tip_settle_single"],
+        ts14,
+        f"{c.single_distance:g} rad parabolic move of {traj1.duration:.3g} s",
+    )
+    _row(
+        rows,
+        "defl_single",
+        "single-mass peak deflection |θm − θt|, Fig. 15",
+        "rad",
+        _PAPER["max_deflection"],
+        defl1,
+        "paper: within the 400 mrad limit",
+    )
     rn = tip_runs["no_advance"]
-    _row(rows, "tip_settle_single_no_advance", "ablation: single-mass tip settling, "
-         "feedforward not advanced", "s", _PAPER["tip_settle_single"],
-         _settle(rn, "tip_angle", c.single_tip_band, c.move_start, c.single_distance),
-         "the paper's unity-inner-loop assumption")
-    _row(rows, "defl_single_no_advance", "ablation: single-mass peak deflection, "
-         "feedforward not advanced", "rad", _PAPER["max_deflection"],
-         float(np.max(np.abs(rn["motor_angle"] - rn["tip_angle"]))), "")
-    figs.append(_figure(r, "Fig. 14. Tip response of single-mass arm",
-                        out / "fig14_tip_single_mass.png", ("reference", "tip_angle")))
-    figs.append(_figure(r, "Fig. 15. Tip and motor responses of single-mass arm",
-                        out / "fig15_tip_motor_single_mass.png",
-                        ("reference", "motor_angle", "tip_angle")))
+    _row(
+        rows,
+        "tip_settle_single_no_advance",
+        "ablation: single-mass tip settling, feedforward not advanced",
+        "s",
+        _PAPER["tip_settle_single"],
+        _settle(rn, "tip_angle", c.single_tip_band, c.move_start, c.single_distance),
+        "the paper's unity-inner-loop assumption",
+    )
+    _row(
+        rows,
+        "defl_single_no_advance",
+        "ablation: single-mass peak deflection, feedforward not advanced",
+        "rad",
+        _PAPER["max_deflection"],
+        float(np.max(np.abs(rn["motor_angle"] - rn["tip_angle"]))),
+        "",
+    )
+    figs.append(
+        _figure(
+            r,
+            "Fig. 14. Tip response of single-mass arm",
+            out / "fig14_tip_single_mass.png",
+            ("reference", "tip_angle"),
+        )
+    )
+    figs.append(
+        _figure(
+            r,
+            "Fig. 15. Tip and motor responses of single-mass arm",
+            out / "fig15_tip_motor_single_mass.png",
+            ("reference", "motor_angle", "tip_angle"),
+        )
+    )
 
     # ---- 4. two-mass arm: inner loop with the tip held (Figs. 16-17)
     say(3, "two-mass inner loop (Figs. 16-17)")
-    traj2 = quasi_parabolic(c.two_mass_distance, c.two_mass_acceleration,
-                            max_snap=c.two_mass_snap)
+    traj2 = quasi_parabolic(c.two_mass_distance, c.two_mass_acceleration, max_snap=c.two_mass_snap)
     gb2 = m2.beam_tf()
     n2 = wiener_feedforward(gb2, traj2.laplace_model())
     inner2 = design.controller(m2, angle_resolution=count, reference="motor_reference")
@@ -390,27 +575,59 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     inner_only2 = _zero_feedback(ctrl2)
     runs2 = {}
     for key, co in (("all", True), ("no_coupling", False)):
-        ctl = eqx.tree_at(lambda cc: cc.inner, inner_only2,
-                          inner_only2.inner.with_switches(coupling=co))
+        ctl = eqx.tree_at(
+            lambda cc: cc.inner, inner_only2, inner_only2.inner.with_switches(coupling=co)
+        )
         runs2[key] = _simulate(p2, held2.plant(), ctl, step_refs2)
-    ts16 = _settle(runs2["all"], "motor_angle", c.inner_band_two_mass, c.move_start,
-                   c.inner_step)
-    _row(rows, "two_mass_inner_settle", "two-mass inner-loop settling (5 % band), Fig. 16",
-         "ms", _PAPER["two_mass_inner_settle_ms"], 1e3 * ts16,
-         "same G_cm1, G_cm2; static decoupling (eq. 16)")
-    ess2 = {k: _steady_error_counts(v, c.inner_step, count, c.steady_window)
-            for k, v in runs2.items()}
-    _row(rows, "ess_two_mass", "two-mass steady-state error with decoupling, Fig. 16",
-         "A/D counts", "small", ess2["all"], "the undamped mid-mass keeps a ripple")
-    _row(rows, "ess_two_mass_no_coupling", "two-mass steady-state error without "
-         "decoupling, Fig. 17", "A/D counts", "nonzero", ess2["no_coupling"], "")
-    figs.append(_figure(runs2["all"], "Fig. 16. Experimental step response of inner loop "
-                        "(two-mass arm)", out / "fig16_inner_step_two_mass.png",
-                        ("reference", "motor_angle"), xmax=0.4))
-    figs.append(_figure(runs2["no_coupling"], "Fig. 17. Step response of the inner loop "
-                        "without motor-beam decoupling (two-mass arm)",
-                        out / "fig17_inner_no_decoupling_two_mass.png",
-                        ("reference", "motor_angle"), xmax=0.4))
+    ts16 = _settle(runs2["all"], "motor_angle", c.inner_band_two_mass, c.move_start, c.inner_step)
+    _row(
+        rows,
+        "two_mass_inner_settle",
+        "two-mass inner-loop settling (5 % band), Fig. 16",
+        "ms",
+        _PAPER["two_mass_inner_settle_ms"],
+        1e3 * ts16,
+        "same G_cm1, G_cm2; static decoupling (eq. 16)",
+    )
+    ess2 = {
+        k: _steady_error_counts(v, c.inner_step, count, c.steady_window) for k, v in runs2.items()
+    }
+    _row(
+        rows,
+        "ess_two_mass",
+        "two-mass steady-state error with decoupling, Fig. 16",
+        "A/D counts",
+        "small",
+        ess2["all"],
+        "the undamped mid-mass keeps a ripple",
+    )
+    _row(
+        rows,
+        "ess_two_mass_no_coupling",
+        "two-mass steady-state error without decoupling, Fig. 17",
+        "A/D counts",
+        "nonzero",
+        ess2["no_coupling"],
+        "",
+    )
+    figs.append(
+        _figure(
+            runs2["all"],
+            "Fig. 16. Experimental step response of inner loop (two-mass arm)",
+            out / "fig16_inner_step_two_mass.png",
+            ("reference", "motor_angle"),
+            xmax=0.4,
+        )
+    )
+    figs.append(
+        _figure(
+            runs2["no_coupling"],
+            "Fig. 17. Step response of the inner loop without motor-beam decoupling (two-mass arm)",
+            out / "fig17_inner_no_decoupling_two_mass.png",
+            ("reference", "motor_angle"),
+            xmax=0.4,
+        )
+    )
 
     # ---- 5. two-mass tip loop (Figs. 18-19)
     say(4, "two-mass tip loop (Figs. 18-19)")
@@ -418,18 +635,33 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     den = np.asarray(n2.den[0][0], float)
     _n2_rows(rows, gb2, num, den)
     rep = deflection_report(gb2, n2, traj2)
-    _row(rows, "defl_two_mass_linear", "two-mass peak |θm − θt| of θm = N u, θt = G_b θm "
-         "(paper's A and snap)", "rad", _PAPER["max_deflection"], rep.peak,
-         f"at {rep.time:.3g} s of a {rep.duration:.3g} s move; steady-acceleration part "
-         f"{rep.steady_acceleration:.3g} rad, the rest from the snap corners")
+    _row(
+        rows,
+        "defl_two_mass_linear",
+        "two-mass peak |θm − θt| of θm = N u, θt = G_b θm (paper's A and snap)",
+        "rad",
+        _PAPER["max_deflection"],
+        rep.peak,
+        f"at {rep.time:.3g} s of a {rep.duration:.3g} s move; steady-acceleration part "
+        f"{rep.steady_acceleration:.3g} rad, the rest from the snap corners",
+    )
     s_max = _snap_for_deflection(gb2, c)
-    _row(rows, "snap_for_limit", "largest snap meeting 400 mrad in the linear model "
-         "(A = 7875 mrad/s²)", "rad/s⁴", c.two_mass_snap, s_max,
-         "the paper's snap gives the peak above")
+    _row(
+        rows,
+        "snap_for_limit",
+        "largest snap meeting 400 mrad in the linear model (A = 7875 mrad/s²)",
+        "rad/s⁴",
+        c.two_mass_snap,
+        s_max,
+        "the paper's snap gives the peak above",
+    )
     tip2 = {}
     ripple_t0 = c.move_start + traj2.duration
-    for key, n_ff, adv in (("main", n2, lag), ("no_advance", n2, 0.0),
-                           ("rigid", control.tf([1.0], [1.0]), lag)):
+    for key, n_ff, adv in (
+        ("main", n2, lag),
+        ("no_advance", n2, 0.0),
+        ("rigid", control.tf([1.0], [1.0]), lag),
+    ):
         refs = trajectory_references(n_ff, traj2, t2, start=c.move_start, advance=adv)
         tip2[key] = _simulate(p2, m2.plant(), ctrl2, refs)
     r = tip2["main"]
@@ -437,42 +669,103 @@ def run(out_dir: str | Path, progress: Callable[[int, int, str], None] | None = 
     after = r.time > ripple_t0
     ripple = float(np.max(np.abs(r["tip_angle"][after] - c.two_mass_distance)))
     modes = _modes(gb2)
-    amp = {k: _mode_amplitudes(v.time, v["tip_angle"], c.two_mass_distance,
-                               ripple_t0 + c.ripple_fit_delay, modes) for k, v in tip2.items()}
+    amp = {
+        k: _mode_amplitudes(
+            v.time, v["tip_angle"], c.two_mass_distance, ripple_t0 + c.ripple_fit_delay, modes
+        )
+        for k, v in tip2.items()
+    }
     d = c.two_mass_distance
-    _row(rows, "tip_settle_two_mass", f"two-mass tip settling ({100 * c.two_mass_tip_band:g} "
-         "% band, from the start of the move), Fig. 18", "s", _PAPER["tip_settle_two_mass"],
-         ts18, f"{d:g} rad quasi-parabolic move of {traj2.duration:.3g} s")
-    _row(rows, "ripple_two_mass", "two-mass residual ripple max |θt − D| after the move",
-         "% of step", _PAPER["ripple_pct"], 100 * ripple / d, "paper: below 3 %")
-    _row(rows, "mode1_two_mass", f"two-mass first-mode ({modes[0]:.3g} rad/s) amplitude "
-         "after the move", "% of step", "removed", 100 * amp["main"][0] / d,
-         f"with N = 1 (no Wiener feedforward): {100 * amp['rigid'][0] / d:.3g} %")
-    _row(rows, "mode2_two_mass", f"two-mass second-mode ({modes[1]:.3g} rad/s) amplitude "
-         "after the move", "% of step", _PAPER["ripple_pct"], 100 * amp["main"][1] / d,
-         "undamped in the model (eq. 14): it rings on")
-    _row(rows, "defl_two_mass", "two-mass peak deflection |θm − θt| (simulated), Fig. 19",
-         "rad", _PAPER["max_deflection"],
-         float(np.max(np.abs(r["motor_angle"] - r["tip_angle"]))),
-         "the inner loop (33 ms, 4.12 A) filters the snap spikes of N u")
+    _row(
+        rows,
+        "tip_settle_two_mass",
+        f"two-mass tip settling ({100 * c.two_mass_tip_band:g} "
+        "% band, from the start of the move), Fig. 18",
+        "s",
+        _PAPER["tip_settle_two_mass"],
+        ts18,
+        f"{d:g} rad quasi-parabolic move of {traj2.duration:.3g} s",
+    )
+    _row(
+        rows,
+        "ripple_two_mass",
+        "two-mass residual ripple max |θt − D| after the move",
+        "% of step",
+        _PAPER["ripple_pct"],
+        100 * ripple / d,
+        "paper: below 3 %",
+    )
+    _row(
+        rows,
+        "mode1_two_mass",
+        f"two-mass first-mode ({modes[0]:.3g} rad/s) amplitude after the move",
+        "% of step",
+        "removed",
+        100 * amp["main"][0] / d,
+        f"with N = 1 (no Wiener feedforward): {100 * amp['rigid'][0] / d:.3g} %",
+    )
+    _row(
+        rows,
+        "mode2_two_mass",
+        f"two-mass second-mode ({modes[1]:.3g} rad/s) amplitude after the move",
+        "% of step",
+        _PAPER["ripple_pct"],
+        100 * amp["main"][1] / d,
+        "undamped in the model (eq. 14): it rings on",
+    )
+    _row(
+        rows,
+        "defl_two_mass",
+        "two-mass peak deflection |θm − θt| (simulated), Fig. 19",
+        "rad",
+        _PAPER["max_deflection"],
+        float(np.max(np.abs(r["motor_angle"] - r["tip_angle"]))),
+        "the inner loop (33 ms, 4.12 A) filters the snap spikes of N u",
+    )
     rn = tip2["no_advance"]
-    _row(rows, "ripple_two_mass_no_advance", "ablation: two-mass ripple, feedforward not "
-         "advanced", "% of step", _PAPER["ripple_pct"],
-         100 * float(np.max(np.abs(rn["tip_angle"][after] - d))) / d, "")
-    figs.append(_figure(r, "Fig. 18. Tip response of two-mass arm",
-                        out / "fig18_tip_two_mass.png", ("reference", "tip_angle")))
-    figs.append(_figure(r, "Fig. 19. Motor and tip position responses of two-mass arm",
-                        out / "fig19_tip_motor_two_mass.png",
-                        ("reference", "motor_angle", "tip_angle")))
+    _row(
+        rows,
+        "ripple_two_mass_no_advance",
+        "ablation: two-mass ripple, feedforward not advanced",
+        "% of step",
+        _PAPER["ripple_pct"],
+        100 * float(np.max(np.abs(rn["tip_angle"][after] - d))) / d,
+        "",
+    )
+    figs.append(
+        _figure(
+            r,
+            "Fig. 18. Tip response of two-mass arm",
+            out / "fig18_tip_two_mass.png",
+            ("reference", "tip_angle"),
+        )
+    )
+    figs.append(
+        _figure(
+            r,
+            "Fig. 19. Motor and tip position responses of two-mass arm",
+            out / "fig19_tip_motor_two_mass.png",
+            ("reference", "motor_angle", "tip_angle"),
+        )
+    )
 
     # ---- 6. table
     say(5, "table")
     csv_path, md_path = _write_table(rows, out)
-    return {"table": rows, "figures": figs, "table_csv": csv_path, "table_md": md_path,
-            "choices": asdict(c),
-            "design": {"gcm1": design.gcm1, "gcm2": design.gcm2,
-                       "settling_time_s": design.settling_time, "lag_s": design.lag,
-                       "params": design.params.tolist()}}
+    return {
+        "table": rows,
+        "figures": figs,
+        "table_csv": csv_path,
+        "table_md": md_path,
+        "choices": asdict(c),
+        "design": {
+            "gcm1": design.gcm1,
+            "gcm2": design.gcm2,
+            "settling_time_s": design.settling_time,
+            "lag_s": design.lag,
+            "params": design.params.tolist(),
+        },
+    }
 
 
 def _modes(gb: control.TransferFunction) -> np.ndarray:
@@ -485,12 +778,15 @@ def _snap_for_deflection(gb: control.TransferFunction, c: FeliuChoices) -> float
     """Largest snap (rad/s⁴, within 0.5 %) whose two-mass move keeps the linear-model
     peak |θm − θt| within the limit (bisection in log S: the corner term of N u grows
     with S); NaN when even the slowest snap that fits the distance exceeds it."""
+
     def ok(s: float) -> bool | None:
         try:
             tr = quasi_parabolic(c.two_mass_distance, c.two_mass_acceleration, max_snap=s)
         except ValueError:  # the move is too short to reach A with this snap
             return None
-        return peak_deflection(gb, wiener_feedforward(gb, tr.laplace_model()), tr) <= c.max_deflection
+        return (
+            peak_deflection(gb, wiener_feedforward(gb, tr.laplace_model()), tr) <= c.max_deflection
+        )
 
     hi = c.two_mass_snap
     if ok(hi):
@@ -519,15 +815,57 @@ def _n2_rows(rows: list, gb2, num: np.ndarray, den: np.ndarray) -> None:
     quad = q / q[-1]  # (b2 s² + b1 s + 1)
     p = math.sqrt(den[-1] / den[0]) if den.size == 3 else math.nan
     g = float(den[0] / q[-1])  # N = A quad / (g (s + p)²) with quad(0) = 1
-    _row(rows, "n2_a2", "two-mass N(s): s² coefficient of the plant factor", "s⁻²",
-         _PAPER["n2_a2"], float(gden[2]), "")
-    _row(rows, "n2_a0", "two-mass N(s): s⁰ coefficient of the plant factor", "s⁻⁴",
-         _PAPER["n2_a0"], float(gden[4]), "")
-    _row(rows, "n2_b1", "two-mass N(s): b1 of (1 + b1 s + b2 s²)", "s", _PAPER["n2_b1"],
-         float(quad[-2]) if quad.size >= 2 else math.nan, "= 2/a, a² the RHP zero")
-    _row(rows, "n2_b2", "two-mass N(s): b2 of (1 + b1 s + b2 s²)", "s²", _PAPER["n2_b2"],
-         float(quad[-3]) if quad.size >= 3 else math.nan, "= 2/a²")
-    _row(rows, "n2_pole", "two-mass N(s): double pole p of (s + p)²", "s⁻¹",
-         _PAPER["n2_pole"], p, "the reflected RHP zero")
-    _row(rows, "n2_gain", "two-mass N(s): gain g of 1/(g (s + p)²)", "—", _PAPER["n2_gain"],
-         g, f"residual of the factorisation: {float(np.max(np.abs(rem))):.2g}")
+    _row(
+        rows,
+        "n2_a2",
+        "two-mass N(s): s² coefficient of the plant factor",
+        "s⁻²",
+        _PAPER["n2_a2"],
+        float(gden[2]),
+        "",
+    )
+    _row(
+        rows,
+        "n2_a0",
+        "two-mass N(s): s⁰ coefficient of the plant factor",
+        "s⁻⁴",
+        _PAPER["n2_a0"],
+        float(gden[4]),
+        "",
+    )
+    _row(
+        rows,
+        "n2_b1",
+        "two-mass N(s): b1 of (1 + b1 s + b2 s²)",
+        "s",
+        _PAPER["n2_b1"],
+        float(quad[-2]) if quad.size >= 2 else math.nan,
+        "= 2/a, a² the RHP zero",
+    )
+    _row(
+        rows,
+        "n2_b2",
+        "two-mass N(s): b2 of (1 + b1 s + b2 s²)",
+        "s²",
+        _PAPER["n2_b2"],
+        float(quad[-3]) if quad.size >= 3 else math.nan,
+        "= 2/a²",
+    )
+    _row(
+        rows,
+        "n2_pole",
+        "two-mass N(s): double pole p of (s + p)²",
+        "s⁻¹",
+        _PAPER["n2_pole"],
+        p,
+        "the reflected RHP zero",
+    )
+    _row(
+        rows,
+        "n2_gain",
+        "two-mass N(s): gain g of 1/(g (s + p)²)",
+        "—",
+        _PAPER["n2_gain"],
+        g,
+        f"residual of the factorisation: {float(np.max(np.abs(rem))):.2g}",
+    )

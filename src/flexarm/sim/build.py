@@ -57,9 +57,10 @@ def sample_times(scenario: Scenario, dt: float, values_per_sample: int = 16) -> 
             f"scenario {scenario.name!r}: {n:.3g} samples of {dt:g} s would need about "
             f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of this machine's "
             f"{have / MEMORY_SHARE / 2**30:.3g} GiB",
-            field="[simulation] duration (s)", value=duration,
-            fix=f"shorten it (at most about {longest:.3g} s here) or lengthen "
-                "[sampling] period")
+            field="[simulation] duration (s)",
+            value=duration,
+            fix=f"shorten it (at most about {longest:.3g} s here) or lengthen [sampling] period",
+        )
     return np.arange(n) * dt
 
 
@@ -101,38 +102,60 @@ def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     return ref.offset + ref.amplitude * ((phase >= 0.5) & (tau >= 0))
 
 
-def scenario_controller(scenario: Scenario, dt: float, *, input_names, references=None,
-                        measured=None) -> discrete.Controller:
+def scenario_controller(
+    scenario: Scenario, dt: float, *, input_names, references=None, measured=None
+) -> discrete.Controller:
     """The controller of a scenario: its ``[controller]`` (:func:`controller_from_spec`), or
     its ``[[controllers]]`` as :class:`~flexarm.control.lti.Blocks` (each block at its own
     period, driving its own inputs). ``measured``: the channels and plant signals a block's
     ``signals`` may name; ``references``: the run's reference channels."""
     if scenario.controllers is None:
-        return controller_from_spec(scenario.controller, dt, input_names=input_names,
-                                    references=references, measured=measured,
-                                    quanta=sensor_quanta(scenario.sensors))
+        return controller_from_spec(
+            scenario.controller,
+            dt,
+            input_names=input_names,
+            references=references,
+            measured=measured,
+            quanta=sensor_quanta(scenario.sensors),
+        )
     from flexarm.control.lti import Blocks, lti_from_spec
 
     blocks = []
     for i, spec in enumerate(scenario.controllers):
         assert isinstance(spec, LTIControllerSpec)  # [[controllers]]: lti blocks (validated)
         where = f"[[controllers]][{i}]" + (f" ({spec.name})" if spec.name else "")
-        blocks.append(lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names),
-                                    references=references, measured=measured, where=where))
+        blocks.append(
+            lti_from_spec(
+                spec,
+                base_dt=dt,
+                input_names=tuple(input_names),
+                references=references,
+                measured=measured,
+                where=where,
+            )
+        )
     driven: dict[int, str] = {}
     for b in blocks:
         for o in b.outputs:
             if o in driven:
-                raise ValueError(f"{b.name}: outputs: {input_names[o]!r} is driven by "
-                                 f"{driven[o]} already; two controllers cannot drive one "
-                                 "output (sum them in one block, or give each its own outputs)")
+                raise ValueError(
+                    f"{b.name}: outputs: {input_names[o]!r} is driven by "
+                    f"{driven[o]} already; two controllers cannot drive one "
+                    "output (sum them in one block, or give each its own outputs)"
+                )
             driven[o] = b.name
     return Blocks(*blocks)
 
 
-def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
-                         measured=None,
-                         quanta: dict[str, float] | None = None) -> discrete.Controller:
+def controller_from_spec(
+    spec,
+    dt: float,
+    *,
+    input_names=None,
+    references=None,
+    measured=None,
+    quanta: dict[str, float] | None = None,
+) -> discrete.Controller:
     """The discrete controller a scenario's ``[controller]`` section describes; an ``lti``
     controller needs the plant's ``input_names`` and checks its setpoints against the
     run's ``references`` (channel names). With ``[controller.friction_compensation]`` the
@@ -140,17 +163,23 @@ def controller_from_spec(spec, dt: float, *, input_names=None, references=None,
     ``quanta`` (channel → quantisation step) gives its default velocity deadband."""
     if getattr(spec, "type", None) == "nested":
         return _nested_from_spec(spec, dt, quanta or {})
-    ctrl = _feedback_from_spec(spec, dt, input_names=input_names, references=references,
-                               measured=measured)
+    ctrl = _feedback_from_spec(
+        spec, dt, input_names=input_names, references=references, measured=measured
+    )
     fc = getattr(spec, "friction_compensation", None)
     if fc is None:
         return ctrl
     from flexarm.control.friction_compensation import friction_compensated
 
-    return friction_compensated(ctrl, fc.level, dt=dt, measured=fc.measured,
-                                quantum=(quanta or {}).get(fc.measured, 0.0),
-                                velocity_deadband=fc.velocity_deadband,
-                                rest_deadband=fc.rest_deadband)
+    return friction_compensated(
+        ctrl,
+        fc.level,
+        dt=dt,
+        measured=fc.measured,
+        quantum=(quanta or {}).get(fc.measured, 0.0),
+        velocity_deadband=fc.velocity_deadband,
+        rest_deadband=fc.rest_deadband,
+    )
 
 
 def _nested_from_spec(spec, dt: float, quanta: dict[str, float]) -> discrete.Controller:
@@ -163,17 +192,22 @@ def _nested_from_spec(spec, dt: float, quanta: dict[str, float]) -> discrete.Con
     tf = lambda num, den: control.tf(num, den, dt)  # noqa: E731
     fc = spec.friction_compensation
     if fc is not None and fc.measured != "motor_angle":
-        raise ValueError(f"controller.friction_compensation.measured = {fc.measured!r}: the "
-                         "nested loops compensate the hub; use 'motor_angle'")
-    return nested_loops(tf(spec.gcm1_num, spec.gcm1_den), tf(spec.gcm2_num, spec.gcm2_den),
-                        tf(spec.gcb_num, spec.gcb_den), dt=dt,
-                        coupling_gain=spec.coupling_gain,
-                        friction_level=fc.level if fc is not None else 0.0,
-                        angle_resolution=quanta.get("motor_angle", 0.0),
-                        velocity_deadband=fc.velocity_deadband if fc is not None else None,
-                        rest_deadband=fc.rest_deadband if fc is not None else None,
-                        deflection_to_angle=(spec.deflection_to_angle
-                                             if spec.tip == "tip_deflection" else None))
+        raise ValueError(
+            f"controller.friction_compensation.measured = {fc.measured!r}: the "
+            "nested loops compensate the hub; use 'motor_angle'"
+        )
+    return nested_loops(
+        tf(spec.gcm1_num, spec.gcm1_den),
+        tf(spec.gcm2_num, spec.gcm2_den),
+        tf(spec.gcb_num, spec.gcb_den),
+        dt=dt,
+        coupling_gain=spec.coupling_gain,
+        friction_level=fc.level if fc is not None else 0.0,
+        angle_resolution=quanta.get("motor_angle", 0.0),
+        velocity_deadband=fc.velocity_deadband if fc is not None else None,
+        rest_deadband=fc.rest_deadband if fc is not None else None,
+        deflection_to_angle=(spec.deflection_to_angle if spec.tip == "tip_deflection" else None),
+    )
 
 
 def nested_feedforward(spec, ref: Reference, t: np.ndarray) -> np.ndarray:
@@ -191,30 +225,40 @@ def nested_feedforward(spec, ref: Reference, t: np.ndarray) -> np.ndarray:
     if len(spec.feedforward_num) == 1 and len(spec.feedforward_den) == 1:
         return n0 * reference_signal(ref, t)
     if ref.type not in ("parabolic", "quasi_parabolic"):
-        raise ValueError(f"controller.feedforward_num/den is a dynamic N(s); it needs the "
-                         f"derivatives of the reference, so [reference] type must be "
-                         f"'parabolic' or 'quasi_parabolic', not {ref.type!r}")
-    ff = trajectory_references(n, reference_trajectory(ref), t, start=ref.start,
-                               advance=spec.feedforward_advance)["feedforward"]
+        raise ValueError(
+            f"controller.feedforward_num/den is a dynamic N(s); it needs the "
+            f"derivatives of the reference, so [reference] type must be "
+            f"'parabolic' or 'quasi_parabolic', not {ref.type!r}"
+        )
+    ff = trajectory_references(
+        n, reference_trajectory(ref), t, start=ref.start, advance=spec.feedforward_advance
+    )["feedforward"]
     return n0 * ref.offset + ff
 
 
 def sensor_quanta(sensors: dict) -> dict[str, float]:
     """Channel → quantisation step (signal units) of a scenario's ``[sensors]``: ``quantum``,
     or ``range / 2**bits``, or 0 (unquantised)."""
-    return {k: float(s.quantum or (s.range / 2**s.bits if s.bits else 0.0))
-            for k, s in sensors.items()}
+    return {
+        k: float(s.quantum or (s.range / 2**s.bits if s.bits else 0.0)) for k, s in sensors.items()
+    }
 
 
-def _feedback_from_spec(spec, dt: float, *, input_names=None, references=None,
-                        measured=None) -> discrete.Controller:
+def _feedback_from_spec(
+    spec, dt: float, *, input_names=None, references=None, measured=None
+) -> discrete.Controller:
     if spec is None:
         return discrete.from_transfer_function(([0.0], [1.0]), dt)
     if spec.type == "lti":
         from flexarm.control.lti import lti_from_spec
 
-        return lti_from_spec(spec, base_dt=dt, input_names=tuple(input_names or ("u",)),
-                             references=references, measured=measured)
+        return lti_from_spec(
+            spec,
+            base_dt=dt,
+            input_names=tuple(input_names or ("u",)),
+            references=references,
+            measured=measured,
+        )
     m = spec.measured
     if spec.type == "pd":
         return discrete.pd(spec.kp, spec.kd, dt, measured=m)
@@ -263,9 +307,11 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     from flexarm.models.assembly import multi_link_arm
 
     if scenario.sampling is None:
-        raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation]; a "
-                         "multi-link arm without them runs its [regulation] law "
-                         "(flexarm.simulate runs it; prepare builds sampled loops only)")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no [sampling] and [simulation]; a "
+            "multi-link arm without them runs its [regulation] law "
+            "(flexarm.simulate runs it; prepare builds sampled loops only)"
+        )
     assert scenario.simulation is not None  # [sampling] and [simulation] come together
     arm, model = multi_link_arm(scenario.arm)
     dt = scenario.sampling.period
@@ -278,13 +324,19 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
         ctrl = joint_pd_from_spec(spec, arm, model, dt)
     else:
         if getattr(spec, "friction_compensation", None) is not None and arm.n_joints > 1:
-            raise ValueError(f"scenario {scenario.name!r}: [controller.friction_compensation] "
-                             f"compensates one joint; this arm has {arm.n_joints}. Use "
-                             "[controller] type = \"joint_pd\" with friction_compensation = "
-                             "[C_f per joint] for a multi-link arm")
-        ctrl = scenario_controller(scenario, dt, input_names=arm.input_names,
-                                   references=refs,
-                                   measured=set(scenario.sensors) | set(arm.signal_names))
+            raise ValueError(
+                f"scenario {scenario.name!r}: [controller.friction_compensation] "
+                f"compensates one joint; this arm has {arm.n_joints}. Use "
+                '[controller] type = "joint_pd" with friction_compensation = '
+                "[C_f per joint] for a multi-link arm"
+            )
+        ctrl = scenario_controller(
+            scenario,
+            dt,
+            input_names=arm.input_names,
+            references=refs,
+            measured=set(scenario.sensors) | set(arm.signal_names),
+        )
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
@@ -296,23 +348,36 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
         limit = np.minimum(limit, scenario.actuator.limit)
     bits = scenario.actuator.bits
     if bits and not np.all(np.isfinite(limit)):
-        raise ValueError(f"scenario {scenario.name!r}: actuator.bits = {bits} needs a finite "
-                         "command limit (the D/A span); give actuator.limit or the drives' limits")
+        raise ValueError(
+            f"scenario {scenario.name!r}: actuator.bits = {bits} needs a finite "
+            "command limit (the D/A span); give actuator.limit or the drives' limits"
+        )
     q = 2 * limit / 2**bits if bits else np.zeros_like(limit)
-    loop = SampledLoop(arm, ctrl, sensors, Actuator(jnp.asarray(limit), jnp.asarray(q)),
-                       jnp.asarray(dt), scenario.simulation.substeps, scenario.sampling.delay)
+    loop = SampledLoop(
+        arm,
+        ctrl,
+        sensors,
+        Actuator(jnp.asarray(limit), jnp.asarray(q)),
+        jnp.asarray(dt),
+        scenario.simulation.substeps,
+        scenario.sampling.delay,
+    )
     ini = scenario.initial
     nj = arm.n_joints
     th0 = np.zeros(nj) if ini.joint_angles is None else np.asarray(ini.joint_angles, float)
     om0 = np.zeros(nj) if ini.joint_velocities is None else np.asarray(ini.joint_velocities, float)
     d0 = residual_deflection(model, th0) if ini.equilibrium else None
-    x0 = np.concatenate([model.state(theta=th0, delta=d0, theta_dot=om0),
-                         np.zeros(arm.n_states - 2 * model.n_q)])
+    x0 = np.concatenate(
+        [model.state(theta=th0, delta=d0, theta_dot=om0), np.zeros(arm.n_states - 2 * model.n_q)]
+    )
     return Prepared(scenario, model, loop, x0, refs, t)
 
 
-def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
-            references: dict[str, np.ndarray] | None = None) -> Prepared:
+def prepare(
+    scenario: Scenario,
+    controller: discrete.Controller | None = None,
+    references: dict[str, np.ndarray] | None = None,
+) -> Prepared:
     """Build model, plant, loop, initial state and references of a scenario: any arm
     (:class:`flexarm.models.assembly.Arm`), one sampled-data loop.
 
@@ -328,9 +393,17 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     dt = scenario.sampling.period
     t = sample_times(scenario, dt, plant.n_states + len(scenario.sensors) + 8)
     refs = _references(scenario, t, references)
-    ctrl = controller if controller is not None else scenario_controller(
-        scenario, dt, input_names=plant.input_names, references=refs,
-        measured=set(scenario.sensors) | set(plant.signal_names))
+    ctrl = (
+        controller
+        if controller is not None
+        else scenario_controller(
+            scenario,
+            dt,
+            input_names=plant.input_names,
+            references=refs,
+            measured=set(scenario.sensors) | set(plant.signal_names),
+        )
+    )
     channels = {k: v.model_dump() for k, v in scenario.sensors.items()}
     for needed in _measured_names(ctrl):
         channels.setdefault(needed, {})
@@ -339,9 +412,15 @@ def prepare(scenario: Scenario, controller: discrete.Controller | None = None,
     sensors = Sensors.make(plant, channels, dt)
     limit = scenario.actuator.limit or float(model.drive.limit)
     q = 2 * limit / 2**scenario.actuator.bits if scenario.actuator.bits else 0.0
-    loop = SampledLoop(plant, ctrl, sensors,
-                       Actuator(jnp.asarray([limit]), jnp.asarray([q])),
-                       jnp.asarray(dt), scenario.simulation.substeps, scenario.sampling.delay)
+    loop = SampledLoop(
+        plant,
+        ctrl,
+        sensors,
+        Actuator(jnp.asarray([limit]), jnp.asarray([q])),
+        jnp.asarray(dt),
+        scenario.simulation.substeps,
+        scenario.sampling.delay,
+    )
     ini = scenario.initial
     x0 = model.initial_state(ini.motor_angle, ini.motor_velocity, ini.tip_deflection)
     return Prepared(scenario, model, loop, x0, refs, t)
@@ -364,7 +443,7 @@ def _walk(c):
         sub = getattr(c, attr, None)
         if sub is None:
             continue
-        for s in (sub if isinstance(sub, tuple) else (sub,)):
+        for s in sub if isinstance(sub, tuple) else (sub,):
             yield from _walk(s)
 
 
@@ -387,15 +466,22 @@ def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationRes
         p.time,
         {n: sig[..., i] for i, n in enumerate(plant.signal_names)},
         {n: meas[..., i] for i, n in enumerate(p.loop.sensors.names)},
-        out["references"], pick(out["command"]), plant.input_names, pick(out["states"]),
-        plant.state_names, title=p.scenario.name,
+        out["references"],
+        pick(out["command"]),
+        plant.input_names,
+        pick(out["states"]),
+        plant.state_names,
+        title=p.scenario.name,
         meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period},
     )
 
 
 #: a scenario's ``[regulation] law`` → the law of :mod:`flexarm.control.regulation`
-REGULATION_LAWS = {"constant": "law_pd_constant", "online": "law_pd_online",
-                   "quasistatic": "law_pd_quasistatic"}
+REGULATION_LAWS = {
+    "constant": "law_pd_constant",
+    "online": "law_pd_online",
+    "quasistatic": "law_pd_quasistatic",
+}
 
 
 def regulation_run(scenario: Scenario) -> tuple:
@@ -410,17 +496,32 @@ def regulation_run(scenario: Scenario) -> tuple:
 
     reg = scenario.regulation
     if reg is None:
-        raise ValueError(f"scenario {scenario.name!r}: no [sampling] and [simulation] and no "
-                         "[regulation]; give a sampled loop ([sampling], [simulation], "
-                         "[controller]) or a [regulation] law to simulate")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no [sampling] and [simulation] and no "
+            "[regulation]; give a sampled loop ([sampling], [simulation], "
+            "[controller]) or a [regulation] law to simulate"
+        )
     assert isinstance(scenario.arm, MultiLinkArm)  # [regulation] is multi-link only (validated)
     model = build_multilink(scenario.arm)
-    params = R.regulation_params(model, np.diag(reg.kp), np.diag(reg.kd), reg.target,
-                                 theta_0=reg.initial, duration=reg.interpolation_time)
+    params = R.regulation_params(
+        model,
+        np.diag(reg.kp),
+        np.diag(reg.kd),
+        reg.target,
+        theta_0=reg.initial,
+        duration=reg.interpolation_time,
+    )
     x0 = np.zeros(2 * model.n_q)
-    x0[:model.n_links] = reg.initial
-    run = simulate_continuous(model, getattr(R, REGULATION_LAWS[reg.law]), x0, reg.duration,
-                              reg.output_period, params=params, step=reg.step)
+    x0[: model.n_links] = reg.initial
+    run = simulate_continuous(
+        model,
+        getattr(R, REGULATION_LAWS[reg.law]),
+        x0,
+        reg.duration,
+        reg.output_period,
+        params=params,
+        step=reg.step,
+    )
     run.title = scenario.name
     return model, params, run
 
@@ -431,16 +532,24 @@ def simulate_regulation(scenario: Scenario) -> SimulationResult:
     return regulation_run(scenario)[2]
 
 
-def simulate(scenario: Scenario, controller: discrete.Controller | None = None,
-             references: dict[str, np.ndarray] | None = None) -> SimulationResult:
+def simulate(
+    scenario: Scenario,
+    controller: discrete.Controller | None = None,
+    references: dict[str, np.ndarray] | None = None,
+) -> SimulationResult:
     """Simulate a scenario and return the result: the sampled-data loop
     (:func:`prepare`), or, for a multi-link scenario with ``[regulation]`` and no
     ``[sampling]``, its continuous-time law (:func:`simulate_regulation`)."""
-    if (scenario.arm.kind == "multi_link" and scenario.sampling is None
-            and scenario.regulation is not None):
+    if (
+        scenario.arm.kind == "multi_link"
+        and scenario.sampling is None
+        and scenario.regulation is not None
+    ):
         if controller is not None or references:
-            raise ValueError(f"scenario {scenario.name!r} runs its [regulation] law "
-                             "(continuous time); a controller or references apply to a "
-                             "sampled loop: give the scenario [sampling] and [simulation]")
+            raise ValueError(
+                f"scenario {scenario.name!r} runs its [regulation] law "
+                "(continuous time); a controller or references apply to a "
+                "sampled loop: give the scenario [sampling] and [simulation]"
+            )
         return simulate_regulation(scenario)
     return run_prepared(prepare(scenario, controller, references))

@@ -38,28 +38,49 @@ from flexarm.sim import sampled
 from flexarm.sim.result import SimulationResult
 
 
-def law_loop(model: MultiLinkModel, law: Callable, params, dt: float, substeps: int, *,
-             solver: str = "rk4", tolerances: tuple[float, float] = (1e-8, 1e-10)
-             ) -> sampled.SampledLoop:
+def law_loop(
+    model: MultiLinkModel,
+    law: Callable,
+    params,
+    dt: float,
+    substeps: int,
+    *,
+    solver: str = "rk4",
+    tolerances: tuple[float, float] = (1e-8, 1e-10),
+) -> sampled.SampledLoop:
     """The sampled-data loop that runs ``law(params, x, t)`` continuously on the arm's plant:
     no sensors, saturation at the plant's torque limits, sample period ``dt`` (s) with
     ``substeps`` integration steps each."""
     plant = model.plant
     limit = jnp.asarray(plant.command_limit, float)
     return sampled.SampledLoop(
-        plant, ContinuousLaw(law, params, jnp.asarray(float(dt)), plant.n_inputs),
-        sampled.Sensors.make(plant, {}), sampled.Actuator(limit, jnp.zeros_like(limit)),
-        jnp.asarray(float(dt)), int(substeps), 0, solver,
-        cast("tuple[float, float]", tuple(tolerances)))  # (rtol, atol)
+        plant,
+        ContinuousLaw(law, params, jnp.asarray(float(dt)), plant.n_inputs),
+        sampled.Sensors.make(plant, {}),
+        sampled.Actuator(limit, jnp.zeros_like(limit)),
+        jnp.asarray(float(dt)),
+        int(substeps),
+        0,
+        solver,
+        cast("tuple[float, float]", tuple(tolerances)),
+    )  # (rtol, atol)
 
 
 def _result(loop, ts, xs, sig, us, title: str, diverged=None) -> SimulationResult:
     plant = loop.plant
     return SimulationResult(
-        ts, {n: sig[..., i] for i, n in enumerate(plant.signal_names)}, {},
-        {"reference": np.zeros_like(ts)}, us, plant.input_names, xs, plant.state_names,
-        title=title, meta={"output_period_s": float(ts[1] - ts[0]) if len(ts) > 1 else 0.0},
-        diverged=diverged)
+        ts,
+        {n: sig[..., i] for i, n in enumerate(plant.signal_names)},
+        {},
+        {"reference": np.zeros_like(ts)},
+        us,
+        plant.input_names,
+        xs,
+        plant.state_names,
+        title=title,
+        meta={"output_period_s": float(ts[1] - ts[0]) if len(ts) > 1 else 0.0},
+        diverged=diverged,
+    )
 
 
 def _times(t_final: float, dt: float) -> int:
@@ -75,10 +96,20 @@ def _bad(xs: np.ndarray, bound: float) -> np.ndarray:
     return ~np.isfinite(xs) | (np.abs(np.nan_to_num(xs, nan=np.inf)) > bound)
 
 
-def simulate_continuous(model: MultiLinkModel, law: Callable, x0, t_final: float,
-                        dt: float = 1e-3, *, params=None, method: str = "rk4",
-                        step: float = 1e-4, rtol: float = 1e-8, atol: float = 1e-10,
-                        bound: float = 1e4) -> SimulationResult:
+def simulate_continuous(
+    model: MultiLinkModel,
+    law: Callable,
+    x0,
+    t_final: float,
+    dt: float = 1e-3,
+    *,
+    params=None,
+    method: str = "rk4",
+    step: float = 1e-4,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    bound: float = 1e4,
+) -> SimulationResult:
     """Continuous-time closed loop ẋ = f(x, sat(law(params, x, t))) from x0 over [0, t_final].
 
     Outputs every ``dt`` (s), n = round(t_final/dt) + 1 of them. ``method``: ``rk4`` (fixed
@@ -90,8 +121,10 @@ def simulate_continuous(model: MultiLinkModel, law: Callable, x0, t_final: float
     plant = model.plant
     x0 = np.asarray(x0, float)
     if x0.size != 2 * model.n_q:
-        raise ValueError(f"x0 has {x0.size} values; this arm's state has {2 * model.n_q}: "
-                         f"{', '.join(plant.state_names)} (model.state(theta=...) builds one)")
+        raise ValueError(
+            f"x0 has {x0.size} values; this arm's state has {2 * model.n_q}: "
+            f"{', '.join(plant.state_names)} (model.state(theta=...) builds one)"
+        )
     if not np.all(np.isfinite(x0)):
         raise ValueError(f"x0 holds NaN or infinite values: {x0.ravel().tolist()}")
     n_out = _times(t_final, dt)
@@ -112,8 +145,13 @@ def simulate_continuous(model: MultiLinkModel, law: Callable, x0, t_final: float
             f"closed loop diverged at t = {ts[k]:.6g} s: {plant.state_names[j]} = {xs[k, j]:.4g} "
             f"(bound ±{bound:g}); reduce the gains or the step ({method}, step "
             f"{step if method == 'rk4' else 'adaptive'}), or use an interpolating trajectory"
-            + ("; the adaptive solver's step size may have collapsed (the closed loop is stiff "
-               "or diverging)" if method == "tsit5" else ""))
+            + (
+                "; the adaptive solver's step size may have collapsed (the closed loop is stiff "
+                "or diverging)"
+                if method == "tsit5"
+                else ""
+            )
+        )
     return _result(loop, ts, xs, sig, us, "flexarm continuous closed loop")
 
 
@@ -127,9 +165,19 @@ def run_law(loop: sampled.SampledLoop, x0: np.ndarray, n_samples: int):
     return np.asarray(xs), np.asarray(sig), np.asarray(us)
 
 
-def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final: float,
-                              dt: float = 1e-3, *, params, axes, step: float = 1e-4,
-                              chunk: int = 128, bound: float = 1e4) -> SimulationResult:
+def simulate_continuous_batch(
+    model: MultiLinkModel,
+    law: Callable,
+    x0,
+    t_final: float,
+    dt: float = 1e-3,
+    *,
+    params,
+    axes,
+    step: float = 1e-4,
+    chunk: int = 128,
+    bound: float = 1e4,
+) -> SimulationResult:
     """N closed loops ẋ = f(x, sat(law(params_i, x, t))) at once, fixed-step RK4 (``step``,
     default 0.1 ms), outputs every ``dt``: what :func:`simulate_continuous` does for one.
 
@@ -148,12 +196,19 @@ def simulate_continuous_batch(model: MultiLinkModel, law: Callable, x0, t_final:
     n_sub = max(1, int(round(dt / step)))
     x0 = np.asarray(x0, float)
     if x0.shape[-1:] != (nx,) or x0.ndim > 2 or not np.all(np.isfinite(x0)):
-        raise ValueError(f"x0 must be ({nx},) or (N, {nx}) finite values "
-                         f"({', '.join(plant.state_names)}); got shape {x0.shape}")
+        raise ValueError(
+            f"x0 must be ({nx},) or (N, {nx}) finite values "
+            f"({', '.join(plant.state_names)}); got shape {x0.shape}"
+        )
     loop = law_loop(model, law, params, dt, n_sub)
     xs, sig, us = sampled.simulate_law_batch(loop, x0, n_out + 1, axes, chunk=chunk)
     ts = np.arange(n_out + 1) * float(dt)
-    return _result(loop, ts, xs, sig, us, "flexarm continuous closed loops",
-                   diverged=_bad(xs, bound).any(axis=(1, 2)))
-
-
+    return _result(
+        loop,
+        ts,
+        xs,
+        sig,
+        us,
+        "flexarm continuous closed loops",
+        diverged=_bad(xs, bound).any(axis=(1, 2)),
+    )

@@ -68,15 +68,19 @@ def with_filter_state(loop: SampledLoop | Sensors, states: dict[str, Any]):
     for name, x in states.items():
         if name not in sens.names or sens.names.index(name) not in sens.digital:
             have = [sens.names[i] for i in sens.digital]
-            raise ValueError(f"with_filter_state: channel {name!r} has no digital filter; "
-                             f"filtered channels: {', '.join(have)}")
+            raise ValueError(
+                f"with_filter_state: channel {name!r} has no digital filter; "
+                f"filtered channels: {', '.join(have)}"
+            )
         j = sens.digital.index(sens.names.index(name))
         x = np.asarray(x, float).ravel()
         if x.size > k or not np.all(np.isfinite(x)):
-            raise ValueError(f"with_filter_state: {name!r}: state {x} (the filter has at most "
-                             f"{k} states; finite values)")
+            raise ValueError(
+                f"with_filter_state: {name!r}: state {x} (the filter has at most "
+                f"{k} states; finite values)"
+            )
         x0[j] = 0.0
-        x0[j, :x.size] = x
+        x0[j, : x.size] = x
     new = eqx.tree_at(lambda s: s.fx0, sens, jnp.asarray(x0))
     if isinstance(loop, SampledLoop):
         return eqx.tree_at(lambda lp: lp.sensors, loop, new)
@@ -106,15 +110,24 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
             continue
         kind = f["kind"]
         if kind not in FILTER_KINDS or f.get("discretisation", "forward_euler") == "tustin":
-            raise ValueError(f"sensor {name!r}: a {kind!r} filter"
-                             + (" discretised by tustin" if kind in FILTER_KINDS else "")
-                             + " has no state read off its outputs; set it with "
-                             "with_filter_state")
+            raise ValueError(
+                f"sensor {name!r}: a {kind!r} filter"
+                + (" discretised by tustin" if kind in FILTER_KINDS else "")
+                + " has no state read off its outputs; set it with "
+                "with_filter_state"
+            )
         y = log[name]
         sib_kinds = ("lowpass2",) if FILTER_KINDS[kind] == 1 else ("lowpass2_rate", "derivative2")
-        sibs = [n for n, o in chans.items() if n != name and sig[n] == sig[name]
-                and o.get("filter") and o["filter"]["kind"] in sib_kinds
-                and same_filter(o["filter"], f) and n in log.signals]
+        sibs = [
+            n
+            for n, o in chans.items()
+            if n != name
+            and sig[n] == sig[name]
+            and o.get("filter")
+            and o["filter"]["kind"] in sib_kinds
+            and same_filter(o["filter"], f)
+            and n in log.signals
+        ]
         if FILTER_KINDS[kind] == 0:  # lowpass2: x1 logged
             x1 = y[k]
             if sibs:
@@ -122,27 +135,37 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
             elif f.get("discretisation", "forward_euler") == "forward_euler" and k + 1 < len(y):
                 x2 = (y[k + 1] - y[k]) / dt
             else:
-                raise ValueError(f"sensor {name!r}: its rate is not logged (no rate channel on "
-                                 f"{sig[name]!r} with the same filter) and cannot be "
-                                 "differenced at the log's last sample")
+                raise ValueError(
+                    f"sensor {name!r}: its rate is not logged (no rate channel on "
+                    f"{sig[name]!r} with the same filter) and cannot be "
+                    "differenced at the log's last sample"
+                )
             out[name] = np.array([x1, x2])
             continue
         x2 = y[k]
         if sibs:
             out[name] = np.array([log[sibs[0]][k], x2])
             continue
-        raw = [n for n, o in chans.items() if sig[n] == sig[name] and not o.get("filter")
-               and n in log.signals and float(o.get("gain", 1.0)) == float(c.get("gain", 1.0))]
+        raw = [
+            n
+            for n, o in chans.items()
+            if sig[n] == sig[name]
+            and not o.get("filter")
+            and n in log.signals
+            and float(o.get("gain", 1.0)) == float(c.get("gain", 1.0))
+        ]
         if not raw:
-            raise ValueError(f"sensor {name!r}: the log holds neither its low-passed signal "
-                             f"nor the unfiltered reading of {sig[name]!r}; log one, or set "
-                             "the state with with_filter_state")
+            raise ValueError(
+                f"sensor {name!r}: the log holds neither its low-passed signal "
+                f"nor the unfiltered reading of {sig[name]!r}; log one, or set "
+                "the state with with_filter_state"
+            )
         filt = digital_filter(f, dt, where=f"sensor {name!r}: filter")
         rho = float(np.max(np.abs(np.linalg.eigvals(filt.A))))
         back = int(math.ceil(math.log(1e-12) / math.log(rho))) if 0 < rho < 1 else k + 1
         u = log[raw[0]]
         if k >= back:  # enough history: the filter's own state, its start forgotten
-            _, xs = filt.run(u[k - back:k + 1])
+            _, xs = filt.run(u[k - back : k + 1])
             out[name] = np.array([xs[-1][0], x2])
         else:  # the low-passed input lags it by 2ζ/ω times its rate (exact on a ramp)
             w = 2 * math.pi * float(f["cutoff"])
@@ -192,7 +215,8 @@ def dynamic_blocks(ctrl: Controller) -> list[tuple[str, LTIController | LinearCo
 
     def visit(b):
         if (isinstance(b, LTIController) and b.dynamic) or (
-                isinstance(b, LinearController) and np.asarray(b.A).size):
+            isinstance(b, LinearController) and np.asarray(b.A).size
+        ):
             found.append(b)
         return b
 
@@ -209,8 +233,10 @@ def dynamic_blocks(ctrl: Controller) -> list[tuple[str, LTIController | LinearCo
 def _linear_history(block: LinearController, log) -> np.ndarray:
     missing = [c for c in (block.measured, block.reference) if c not in log.signals]
     if missing:
-        raise ValueError(f"{log.name}: the state of the {block.measured} controller is run "
-                         f"over the logs, which have no {', '.join(missing)}")
+        raise ValueError(
+            f"{log.name}: the state of the {block.measured} controller is run "
+            f"over the logs, which have no {', '.join(missing)}"
+        )
     return np.asarray(log[block.reference], float) - np.asarray(log[block.measured], float)
 
 
@@ -222,8 +248,11 @@ def _join(logs) -> Any:
     common = [k for k in logs[0].signals if all(k in lg.signals for lg in logs)]
     n = sum(len(lg) for lg in logs)
     dt = logs[0].dt if logs[0].time is not None and len(logs[0]) > 1 else 1.0
-    return Log(None, np.arange(n) * dt,
-               {k: np.concatenate([np.asarray(lg[k], float) for lg in logs]) for k in common})
+    return Log(
+        None,
+        np.arange(n) * dt,
+        {k: np.concatenate([np.asarray(lg[k], float) for lg in logs]) for k in common},
+    )
 
 
 def continuous_starts(loop: SampledLoop, sensors: dict, logs, dt: float) -> list[PieceStart]:
@@ -236,14 +265,19 @@ def continuous_starts(loop: SampledLoop, sensors: dict, logs, dt: float) -> list
         return []
     blocks = dynamic_blocks(loop.controller)
     for name, b in blocks:
-        need = ((*b.measured_signals, *b.reference_signals) if isinstance(b, LTIController)
-                else (b.measured, b.reference))
+        need = (
+            (*b.measured_signals, *b.reference_signals)
+            if isinstance(b, LTIController)
+            else (b.measured, b.reference)
+        )
         for lg in logs:
             missing = [c for c in need if c not in lg.signals]
             if missing:
-                raise ValueError(f"{lg.name}: no {', '.join(missing)}, an input of {name}, "
-                                 "whose state is run over the logs (continuous): log the "
-                                 "block's inputs, or replay without continuous")
+                raise ValueError(
+                    f"{lg.name}: no {', '.join(missing)}, an input of {name}, "
+                    "whose state is run over the logs (continuous): log the "
+                    "block's inputs, or replay without continuous"
+                )
     joined = _join(logs)
     hist = {}
     for name, b in blocks:
@@ -252,17 +286,27 @@ def continuous_starts(loop: SampledLoop, sensors: dict, logs, dt: float) -> list
         else:
             hist[name] = _linear_history(b, joined)[:, None]
     starts, k = [], 0
-    state = {name: (np.asarray(b.x0 if isinstance(b, LTIController) else b.init(), float),
-                    np.zeros(getattr(b, "n_u", 1)), 0) for name, b in blocks}
+    state = {
+        name: (
+            np.asarray(b.x0 if isinstance(b, LTIController) else b.init(), float),
+            np.zeros(getattr(b, "n_u", 1)),
+            0,
+        )
+        for name, b in blocks
+    }
     for i, lg in enumerate(logs):
-        filt = filter_state_from_log(sensors, joined, k, dt) if i else \
-            filter_state_from_log(sensors, lg, 0, dt)
-        starts.append(PieceStart(i, k, {n: (x.copy(), u.copy(), ph)
-                                        for n, (x, u, ph) in state.items()}, filt))
+        filt = (
+            filter_state_from_log(sensors, joined, k, dt)
+            if i
+            else filter_state_from_log(sensors, lg, 0, dt)
+        )
+        starts.append(
+            PieceStart(i, k, {n: (x.copy(), u.copy(), ph) for n, (x, u, ph) in state.items()}, filt)
+        )
         n = len(lg)
         for name, b in blocks:
             x, u, ph = state[name]
-            w = hist[name][k:k + n]
+            w = hist[name][k : k + n]
             if isinstance(b, LTIController):
                 state[name] = run_state(b, w, n, x0=x, k0=ph)
             else:
@@ -286,8 +330,12 @@ def start_piece(loop: SampledLoop, start: PieceStart) -> SampledLoop:
             return b
         x, u, ph = start.controllers[n]
         if isinstance(b, LTIController):
-            return dataclasses.replace(b, x0=jnp.asarray(x), u0=jnp.asarray(u),
-                                       k0=jnp.asarray(ph % b.every, dtype=jnp.int32))
+            return dataclasses.replace(
+                b,
+                x0=jnp.asarray(x),
+                u0=jnp.asarray(u),
+                k0=jnp.asarray(ph % b.every, dtype=jnp.int32),
+            )
         return _LinearStarted.around(b, x)
 
     ctrl = _map_blocks(loop.controller, set_state)
@@ -316,16 +364,21 @@ def warn_assumed_start(loop: SampledLoop, log_name: str, *, stacklevel: int = 2)
     msgs = []
     for name, b in dynamic_blocks(loop.controller):
         n = int(np.asarray(b.A).shape[-1])
-        msgs.append(f"{log_name}: controller {name!r} is dynamic ({n} state(s)) and starts "
-                    "this log from its initial_state (an assumption, 0 by default); if the "
-                    "logs are consecutive pieces of one run, pass --continuous "
-                    "(continuous=True) to carry its state from the pieces before")
+        msgs.append(
+            f"{log_name}: controller {name!r} is dynamic ({n} state(s)) and starts "
+            "this log from its initial_state (an assumption, 0 by default); if the "
+            "logs are consecutive pieces of one run, pass --continuous "
+            "(continuous=True) to carry its state from the pieces before"
+        )
     for m in msgs:
         warnings.warn(m, ControllerStateWarning, stacklevel=stacklevel + 1)
     return msgs
+
+
 # ----------------------------------------------------------------------------- computed inputs
-def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
-                      ) -> tuple[dict[str, np.ndarray], list[str]]:
+def computed_channels(
+    sensors: dict, log, dt: float, *, name: str | None = None
+) -> tuple[dict[str, np.ndarray], list[str]]:
     """The digitally filtered channels of ``sensors`` (a scenario's ``[sensors]``) that the
     log does not hold but that its logged signals define, computed as the logger computed
     them (issue #24, item 5: a controller reading the lab's filtered rates from a log that
@@ -358,8 +411,11 @@ def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
     default = {"gain": 1.0, "delay": 0.0, "zeroing": 0.0, "cutoff": 0.0, "damping": 0.9}
 
     def same(a: dict, b: dict, keys) -> bool:
-        return all(float(va if (va := a.get(k)) is not None else default[k])
-                   == float(vb if (vb := b.get(k)) is not None else default[k]) for k in keys)
+        return all(
+            float(va if (va := a.get(k)) is not None else default[k])
+            == float(vb if (vb := b.get(k)) is not None else default[k])
+            for k in keys
+        )
 
     out: dict[str, np.ndarray] = {}
     notes: list[str] = []
@@ -369,11 +425,17 @@ def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
             continue
         fe = f.get("discretisation", "forward_euler") == "forward_euler"
         if f["kind"] in FILTER_KINDS and FILTER_KINDS[f["kind"]] == 1 and fe:
-            sib = [n for n, o in chans.items() if n in sig and src[n] == src[c]
-                   and o.get("filter") and o["filter"]["kind"] == "lowpass2"
-                   and same(o["filter"], f, ("cutoff", "damping"))
-                   and o["filter"].get("discretisation", "forward_euler") == "forward_euler"
-                   and same(o, spec, ("gain", "delay", "zeroing"))]
+            sib = [
+                n
+                for n, o in chans.items()
+                if n in sig
+                and src[n] == src[c]
+                and o.get("filter")
+                and o["filter"]["kind"] == "lowpass2"
+                and same(o["filter"], f, ("cutoff", "damping"))
+                and o["filter"].get("discretisation", "forward_euler") == "forward_euler"
+                and same(o, spec, ("gain", "delay", "zeroing"))
+            ]
             if sib:
                 x1 = np.asarray(sig[sib[0]], float)
                 if x1.size >= 3:
@@ -381,18 +443,27 @@ def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
                     v[:-1] = np.diff(x1) / dt
                     v[-1] = 2 * v[-2] - v[-3]
                     out[c] = v
-                    notes.append(f"{where}: {c!r} is not logged: computed from the logged "
-                                 f"{sib[0]!r} (the rate state of its {f['kind']} filter, "
-                                 "ξ₂ = Δξ₁/T; the last sample extrapolated)")
+                    notes.append(
+                        f"{where}: {c!r} is not logged: computed from the logged "
+                        f"{sib[0]!r} (the rate state of its {f['kind']} filter, "
+                        "ξ₂ = Δξ₁/T; the last sample extrapolated)"
+                    )
                     continue
-        raw = [n for n, o in chans.items() if n in sig and src[n] == src[c]
-               and not o.get("filter") and same(o, spec, ("zeroing",))
-               and float(o.get("gain", 1.0)) != 0.0]
+        raw = [
+            n
+            for n, o in chans.items()
+            if n in sig
+            and src[n] == src[c]
+            and not o.get("filter")
+            and same(o, spec, ("zeroing",))
+            and float(o.get("gain", 1.0)) != 0.0
+        ]
         if not raw:
             continue
         r = chans[raw[0]]
-        u = np.asarray(sig[raw[0]], float) * (float(spec.get("gain", 1.0))
-                                              / float(r.get("gain", 1.0)))
+        u = np.asarray(sig[raw[0]], float) * (
+            float(spec.get("gain", 1.0)) / float(r.get("gain", 1.0))
+        )
         q = float(spec.get("quantum", 0.0) or 0.0)
         if q <= 0 and int(spec.get("bits", 0) or 0) > 0:
             q = float(spec["range"]) / 2 ** int(spec["bits"])
@@ -402,10 +473,11 @@ def computed_channels(sensors: dict, log, dt: float, *, name: str | None = None
         u = _shift(u, -int(r.get("delay", 0) or 0))
         v, _ = digital_filter(f, dt, where=f"sensor {c!r}: filter").run(u)
         out[c] = _shift(v, int(spec.get("delay", 0) or 0))
-        notes.append(f"{where}: {c!r} is not logged: computed from the logged {raw[0]!r} "
-                     f"through its {f['kind']} filter (as the sensor stage runs it, from rest "
-                     "on the log's first sample" + (f"; delay {shift:+d} samples" if shift
-                                                    else "") + ")")
+        notes.append(
+            f"{where}: {c!r} is not logged: computed from the logged {raw[0]!r} "
+            f"through its {f['kind']} filter (as the sensor stage runs it, from rest "
+            "on the log's first sample" + (f"; delay {shift:+d} samples" if shift else "") + ")"
+        )
     return out, notes
 
 
@@ -414,6 +486,6 @@ def _shift(x: np.ndarray, d: int) -> np.ndarray:
     if d == 0 or x.size == 0:
         return x
     if d > 0:
-        return np.concatenate([np.full(min(d, x.size), x[0]), x[:-d]])[:x.size]
+        return np.concatenate([np.full(min(d, x.size), x[0]), x[:-d]])[: x.size]
     d = -d
-    return np.concatenate([x[d:], np.full(min(d, x.size), x[-1])])[:x.size]
+    return np.concatenate([x[d:], np.full(min(d, x.size), x[-1])])[: x.size]

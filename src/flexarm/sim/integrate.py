@@ -32,9 +32,7 @@ class RK4(diffrax.AbstractERK):
         b_error=np.zeros(4),
         c=np.array([0.5, 0.5, 1.0]),
     )
-    interpolation_cls: ClassVar[Callable] = (
-        diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
-    )
+    interpolation_cls: ClassVar[Callable] = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
 
     def order(self, terms):
         return 4
@@ -84,10 +82,12 @@ def rk4_step(plant: Plant, y: Array, u: Array, h: Array) -> Array:
     return y + (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-def integrate_hold(plant: Plant, x: Array, u: Array, h: Array, substeps: int,
-                   solver: diffrax.AbstractSolver) -> Array:
+def integrate_hold(
+    plant: Plant, x: Array, u: Array, h: Array, substeps: int, solver: diffrax.AbstractSolver
+) -> Array:
     """Integrate ẋ = f(x, u) with u held for ``substeps`` steps of length ``h``."""
     if type(solver) is RK4:
+
         def body(_, y):
             return plant.project(y, rk4_step(plant, y, u, h), u)
     else:
@@ -100,9 +100,16 @@ def integrate_hold(plant: Plant, x: Array, u: Array, h: Array, substeps: int,
     return jax.lax.fori_loop(0, substeps, body, x)
 
 
-def integrate_law(plant: Plant, x: Array, command: Callable[[Array, Array], Array], t0: Array,
-                  h: Array, substeps: int, solver: diffrax.AbstractSolver,
-                  tolerances: tuple[float, float] = (1e-8, 1e-10)) -> Array:
+def integrate_law(
+    plant: Plant,
+    x: Array,
+    command: Callable[[Array, Array], Array],
+    t0: Array,
+    h: Array,
+    substeps: int,
+    solver: diffrax.AbstractSolver,
+    tolerances: tuple[float, float] = (1e-8, 1e-10),
+) -> Array:
     """Integrate ẋ = f(x, command(x, t)) over [t0, t0 + substeps·h]: a continuous-time law
     evaluated at every stage (:class:`flexarm.control.continuous_law.ContinuousLaw`).
 
@@ -121,6 +128,7 @@ def integrate_law(plant: Plant, x: Array, command: Callable[[Array, Array], Arra
             return plant.project(y, y1, command(y1, t + h))
 
         return jax.lax.fori_loop(0, substeps, body, x)
+
     def vector_field(t, y, args):
         return plant.rhs(y, command(y, t))
 
@@ -128,9 +136,16 @@ def integrate_law(plant: Plant, x: Array, command: Callable[[Array, Array], Arra
     if type(solver) is Tsit5:
         rtol, atol = tolerances
         sol = diffrax.diffeqsolve(
-            term, diffrax.Tsit5(), t0, t0 + substeps * h, h, x,
+            term,
+            diffrax.Tsit5(),
+            t0,
+            t0 + substeps * h,
+            h,
+            x,
             stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-            max_steps=TSIT5_MAX_STEPS, throw=False)
+            max_steps=TSIT5_MAX_STEPS,
+            throw=False,
+        )
         assert sol.ys is not None  # saved at t1 (diffeqsolve's default)
         return jnp.where(sol.result == diffrax.RESULTS.successful, sol.ys[-1], jnp.nan)
 
@@ -166,19 +181,22 @@ def _rk4_stages(f: Callable[[Array, Array], Array], x: Array, t, h, *, unroll: b
         kk = f(x + ab[0] * h * kk, t + ab[0] * h)
         return (acc + ab[1] * kk, kk), None
 
-    (acc, _), _ = jax.lax.scan(stage, (jnp.zeros_like(x), jnp.zeros_like(x)),
-                               (jnp.array(_RK4_A), jnp.array(_RK4_W)))
+    (acc, _), _ = jax.lax.scan(
+        stage, (jnp.zeros_like(x), jnp.zeros_like(x)), (jnp.array(_RK4_A), jnp.array(_RK4_W))
+    )
     return x + h * acc
 
 
-def rk4_path(f: Callable[[Array, Array], Array], x0: Array, h, n_sub, n_out: int, *,
-             unroll: bool = False) -> Array:
+def rk4_path(
+    f: Callable[[Array, Array], Array], x0: Array, h, n_sub, n_out: int, *, unroll: bool = False
+) -> Array:
     """Classical RK4 for ẋ = f(x, t) with step h from x0 (shape (n_x, *batch)), n_sub steps
     per output, n_out outputs: the states at 0, n_sub·h, …, shape (n_out + 1, *x0.shape).
 
     Not a closed-loop simulator (that is :mod:`flexarm.sim.sampled`, which runs continuous
     laws too, :func:`integrate_law`): a plain integrator of a given ẋ = f(x, t), e.g. free
     motion (tests/test_properties_models.py). Stages as :func:`_rk4_stages`."""
+
     def step(k, carry):
         x, t = carry
         return _rk4_stages(f, x, t, h, unroll=unroll), t + h

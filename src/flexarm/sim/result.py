@@ -36,9 +36,16 @@ def _unit(name: str) -> str:
     """SI unit of an exchange column or a multi-link state/command name."""
     if name in EXCHANGE_UNITS:
         return EXCHANGE_UNITS[name]
-    for prefix, unit in (("theta_dot_", "rad/s"), ("delta_dot_", "m/s"), ("theta_", "rad"),
-                         ("delta_", "m"), ("torque_", "N*m"), ("current_", "A"),
-                         ("voltage_", "V"), ("friction_z_", "rad")):
+    for prefix, unit in (
+        ("theta_dot_", "rad/s"),
+        ("delta_dot_", "m/s"),
+        ("theta_", "rad"),
+        ("delta_", "m"),
+        ("torque_", "N*m"),
+        ("current_", "A"),
+        ("voltage_", "V"),
+        ("friction_z_", "rad"),
+    ):
         if name.startswith(prefix):
             return unit
     if name.endswith("_torque"):
@@ -52,10 +59,20 @@ class SimulationResult(control.TimeResponseData):
     ``signals``/``measured``: name → ([N,] T) arrays; ``references``: name → (T,);
     ``command`` ([N,] T, m); ``states`` ([N,] T, n_x); ``diverged`` (N,) for a batch."""
 
-    def __init__(self, time, signals: dict[str, np.ndarray], measured: dict[str, np.ndarray],
-                 references: dict[str, np.ndarray], command: np.ndarray, input_names,
-                 states: np.ndarray, state_names, title: str = "flexarm simulation",
-                 meta: dict | None = None, diverged: np.ndarray | None = None):
+    def __init__(
+        self,
+        time,
+        signals: dict[str, np.ndarray],
+        measured: dict[str, np.ndarray],
+        references: dict[str, np.ndarray],
+        command: np.ndarray,
+        input_names,
+        states: np.ndarray,
+        state_names,
+        title: str = "flexarm simulation",
+        meta: dict | None = None,
+        diverged: np.ndarray | None = None,
+    ):
         self.signals = signals
         self.measured = measured
         self.references = references
@@ -65,11 +82,15 @@ class SimulationResult(control.TimeResponseData):
         self.diverged = None if diverged is None else np.asarray(diverged, dtype=bool)
         names = list(signals)
         super().__init__(
-            np.asarray(time), np.array([signals[n] for n in names]),
+            np.asarray(time),
+            np.array([signals[n] for n in names]),
             states=np.moveaxis(np.asarray(states), -1, 0),
             inputs=np.moveaxis(self.command, -1, 0),
-            output_labels=names, state_labels=list(state_names),
-            input_labels=list(input_names), title=title, issiso=False,
+            output_labels=names,
+            state_labels=list(state_names),
+            input_labels=list(input_names),
+            title=title,
+            issiso=False,
         )
 
     # ------------------------------------------------------------ batches
@@ -82,10 +103,17 @@ class SimulationResult(control.TimeResponseData):
         if not self.is_batch:
             raise ValueError("run(i): this result is one rollout, not a batch")
         return SimulationResult(
-            self.time, {k: v[i] for k, v in self.signals.items()},
-            {k: v[i] for k, v in self.measured.items()}, self.references, self.command[i],
-            self.input_names, self.state_array[i], self.state_names, title=str(self.title),
-            meta=self.meta)
+            self.time,
+            {k: v[i] for k, v in self.signals.items()},
+            {k: v[i] for k, v in self.measured.items()},
+            self.references,
+            self.command[i],
+            self.input_names,
+            self.state_array[i],
+            self.state_names,
+            title=str(self.title),
+            meta=self.meta,
+        )
 
     # ------------------------------------------------------------ named views
     @property
@@ -167,13 +195,19 @@ class SimulationResult(control.TimeResponseData):
                 return (name, unit, final, float(np.nanmin(x)), float(np.nanmax(x)))
 
         rows = [row(n, v, _unit(n)) for n, v in self.signals.items()]
-        rows += [row(n, self.command[..., i], _unit(n)) for i, n in enumerate(self.input_names)
-                 if n not in self.signals]
+        rows += [
+            row(n, self.command[..., i], _unit(n))
+            for i, n in enumerate(self.input_names)
+            if n not in self.signals
+        ]
         rows += [row(n, v, _unit(n)) for n, v in self.references.items() if n not in self.signals]
         states = self.state_names
-        notes.append(f"{len(states)} states ({', '.join(states[:4])}"
-                     + (", ..." if len(states) > 4 else "") + "); "
-                     "res[name] gives any of them, res.measured[name] as the sensors read it")
+        notes.append(
+            f"{len(states)} states ({', '.join(states[:4])}"
+            + (", ..." if len(states) > 4 else "")
+            + "); "
+            "res[name] gives any of them, res.measured[name] as the sensors read it"
+        )
         return Table(title, rows, header=("signal", "unit", "final", "min", "max"), notes=notes)
 
     def __repr__(self) -> str:
@@ -203,8 +237,9 @@ class SimulationResult(control.TimeResponseData):
                 cols[n] = self.signals[n]
         return cols
 
-    def to_csv(self, path: str | Path, *, overwrite: bool = False,
-               comments: dict[str, str] | None = None) -> Path:
+    def to_csv(
+        self, path: str | Path, *, overwrite: bool = False, comments: dict[str, str] | None = None
+    ) -> Path:
         """Write the exchange format (:mod:`flexarm.io.logs`: header ``time,reference,current,
         motor_angle,...``, SI units, ``# key: value`` comment lines first, then a ``# units:``
         line). Refuses to overwrite unless asked (:class:`flexarm.io.logs.LogExistsError`, a
@@ -215,11 +250,13 @@ class SimulationResult(control.TimeResponseData):
         lines.append("units: " + ", ".join(f"{k} [{_unit(k)}]" for k in cols))
         path.parent.mkdir(parents=True, exist_ok=True)
         t = cols.pop("time")
-        return write_log(path, t, cols, comments=lines, overwrite=overwrite, fmt="%.10g",
-                         required=("time",))
+        return write_log(
+            path, t, cols, comments=lines, overwrite=overwrite, fmt="%.10g", required=("time",)
+        )
 
-    def plot_arm(self, signals=("reference", "motor_angle", "tip_angle"), *, ax=None,
-                 command: bool = True):
+    def plot_arm(
+        self, signals=("reference", "motor_angle", "tip_angle"), *, ax=None, command: bool = True
+    ):
         """Angles against time (mrad) and, below, the command: the figure of FRB Figs. 11-19.
         Draws on ``ax`` when given, else on a new :class:`matplotlib.figure.Figure` (no pyplot
         state: a notebook shows the returned figure; :func:`flexarm.io.write.save_figure`
@@ -241,7 +278,9 @@ class SimulationResult(control.TimeResponseData):
         if command and len(axes) > 1:
             for i, n in enumerate(self.input_names):
                 axes[1].step(self.time, self.command[:, i], where="post", label=n)
-            axes[1].set_ylabel(" / ".join(f"{n} [{EXCHANGE_UNITS.get(n, '')}]" for n in self.input_names))
+            axes[1].set_ylabel(
+                " / ".join(f"{n} [{EXCHANGE_UNITS.get(n, '')}]" for n in self.input_names)
+            )
             axes[1].grid(True, alpha=0.3)
         axes[-1].set_xlabel("time [s]")
         fig.tight_layout()

@@ -92,8 +92,9 @@ class Sensors(eqx.Module):
     zero_n: tuple[int, ...] = eqx.field(static=True, default=())
 
     @classmethod
-    def make(cls, plant: Plant, channels: dict[str, dict[str, Any]],
-             dt: float | None = None) -> Sensors:
+    def make(
+        cls, plant: Plant, channels: dict[str, dict[str, Any]], dt: float | None = None
+    ) -> Sensors:
         """Channels (name → a :class:`flexarm.specs.experiment.Sensor` as a dict) of
         ``plant``; ``dt`` the sample period (needed by digital filters with a cutoff)."""
         names = tuple(channels)
@@ -103,20 +104,28 @@ class Sensors(eqx.Module):
                 raise ValueError(
                     f"sensor {n!r}: the plant has no signal {signal[n]!r}; it has "
                     f"{', '.join(plant.signal_names)}"
-                    + ("" if channels[n].get("signal") else
-                       " (name the signal a channel reads with signal = ...)")
+                    + (
+                        ""
+                        if channels[n].get("signal")
+                        else " (name the signal a channel reads with signal = ...)"
+                    )
                 )
         get = lambda key, d: jnp.asarray([float(channels[n].get(key, d)) for n in names])  # noqa: E731
         quantum = [
-            float(channels[n]["quantum"]) if float(channels[n].get("quantum", 0) or 0) > 0 else
-            float(channels[n]["range"]) / 2 ** int(channels[n]["bits"])
-            if int(channels[n].get("bits", 0)) > 0 else 0.0 for n in names
+            float(channels[n]["quantum"])
+            if float(channels[n].get("quantum", 0) or 0) > 0
+            else float(channels[n]["range"]) / 2 ** int(channels[n]["bits"])
+            if int(channels[n].get("bits", 0)) > 0
+            else 0.0
+            for n in names
         ]
         bw = [float(channels[n].get("bandwidth", 0.0) or 0.0) for n in names]
         for n, f in zip(names, bw, strict=True):
             if not (f >= 0 and np.isfinite(f)):
-                raise ValueError(f"sensor {n!r}: bandwidth = {f!r} Hz; give the low-pass "
-                                 "cutoff as a finite number >= 0 Hz (0 = no filter)")
+                raise ValueError(
+                    f"sensor {n!r}: bandwidth = {f!r} Hz; give the low-pass "
+                    "cutoff as a finite number >= 0 Hz (0 = no filter)"
+                )
         filtered = tuple(i for i, f in enumerate(bw) if f > 0)
         omega = jnp.asarray([2 * np.pi * bw[i] for i in filtered]) if filtered else None
         digital = tuple(i for i, n in enumerate(names) if channels[n].get("filter"))
@@ -124,25 +133,44 @@ class Sensors(eqx.Module):
         if digital:
             from flexarm.control.lti import digital_filter
 
-            filts = [digital_filter(channels[names[i]]["filter"], dt,
-                                    where=f"sensor {names[i]!r}: filter") for i in digital]
+            filts = [
+                digital_filter(
+                    channels[names[i]]["filter"], dt, where=f"sensor {names[i]!r}: filter"
+                )
+                for i in digital
+            ]
             k = max(1, *(f.order for f in filts))
             A = np.zeros((len(filts), k, k))
             B, C = np.zeros((len(filts), k)), np.zeros((len(filts), k))
             for j, f in enumerate(filts):
-                A[j, :f.order, :f.order], B[j, :f.order], C[j, :f.order] = f.A, f.B, f.C
-            mats = dict(fA=jnp.asarray(A), fB=jnp.asarray(B), fC=jnp.asarray(C),
-                        fD=jnp.asarray([f.D for f in filts]),
-                        fx0=jnp.full((len(filts), k), jnp.nan))
+                A[j, : f.order, : f.order], B[j, : f.order], C[j, : f.order] = f.A, f.B, f.C
+            mats = dict(
+                fA=jnp.asarray(A),
+                fB=jnp.asarray(B),
+                fC=jnp.asarray(C),
+                fD=jnp.asarray([f.D for f in filts]),
+                fx0=jnp.full((len(filts), k), jnp.nan),
+            )
         zeroed, zero_n = zeroing_windows(channels, dt)
-        return cls(names, tuple(plant.signal_names.index(signal[n]) for n in names),
-                   tuple(int(channels[n].get("delay", 0)) for n in names),
-                   get("gain", 1.0), get("noise", 0.0), jnp.asarray(quantum),
-                   filtered, omega, digital, **mats, zeroed=zeroed, zero_n=zero_n)
+        return cls(
+            names,
+            tuple(plant.signal_names.index(signal[n]) for n in names),
+            tuple(int(channels[n].get("delay", 0)) for n in names),
+            get("gain", 1.0),
+            get("noise", 0.0),
+            jnp.asarray(quantum),
+            filtered,
+            omega,
+            digital,
+            **mats,
+            zeroed=zeroed,
+            zero_n=zero_n,
+        )
 
 
-def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
-                    ) -> tuple[tuple[int, ...], tuple[int, ...]]:
+def zeroing_windows(
+    channels: dict[str, dict[str, Any]], dt: float | None
+) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """Positions (in ``channels``' order) of the channels with a ``zeroing`` window W > 0 s
     and its length n = round(W / dt) samples (:class:`flexarm.specs.experiment.Sensor`).
     A window shorter than half a sample is an error naming the channel."""
@@ -155,8 +183,10 @@ def zeroing_windows(channels: dict[str, dict[str, Any]], dt: float | None
             raise ValueError(f"sensor {n!r}: zeroing = {w:g} s needs the sample period")
         k = round(w / dt)
         if k < 1:
-            raise ValueError(f"sensors.{n}.zeroing = {w:g} s is shorter than one sample "
-                             f"({dt:g} s): give a window of at least one sample, or 0 for none")
+            raise ValueError(
+                f"sensors.{n}.zeroing = {w:g} s is shorter than one sample "
+                f"({dt:g} s): give a window of at least one sample, or 0 for none"
+            )
         pos.append(i)
         ns.append(k)
     return tuple(pos), tuple(ns)
@@ -172,7 +202,8 @@ def check_zeroing(sensors: Sensors, n_samples: int, dt: float, where: str = "the
                 f"not shorter than the {'run' if where == 'the run' else 'log'} ({n_samples} "
                 f"samples, {(n_samples - 1) * dt:g} s): "
                 "the channel would read 0 throughout; shorten the window, or set zeroing = 0 "
-                "for a log that starts after the logger's tare (a later piece of a run)")
+                "for a log that starts after the logger's tare (a later piece of a run)"
+            )
 
 
 #: Largest ω_f h (h the integration substep) :func:`check_filter_step` accepts: RK4's
@@ -203,7 +234,8 @@ def check_filter_step(sensors: Sensors, dt: float | Array, substeps: int) -> Non
                 f"for the integration step {dt / substeps:g} s (T / substeps = {dt:g} s / "
                 f"{substeps}): 2π·bandwidth·step = {w * dt / substeps:.3g} > "
                 f"{FILTER_STEP_LIMIT}; raise simulation.substeps to >= {need}, or lower "
-                "the bandwidth")
+                "the bandwidth"
+            )
 
 
 class FilteredPlant(Plant):
@@ -216,12 +248,18 @@ class FilteredPlant(Plant):
     omega: Array
 
     @classmethod
-    def around(cls, plant: Plant, index, gain: Array, omega: Array,
-               labels) -> FilteredPlant:
+    def around(cls, plant: Plant, index, gain: Array, omega: Array, labels) -> FilteredPlant:
         """``plant`` with one filter on each plant signal ``index[i]`` (gain ``gain[i]``,
         cutoff ``omega[i]`` rad/s), its state named ``filter_<labels[i]>``."""
-        return cls(plant.state_names + tuple(f"filter_{lb}" for lb in labels),
-                   plant.signal_names, plant.input_names, plant, tuple(index), gain, omega)
+        return cls(
+            plant.state_names + tuple(f"filter_{lb}" for lb in labels),
+            plant.signal_names,
+            plant.input_names,
+            plant,
+            tuple(index),
+            gain,
+            omega,
+        )
 
     def rhs(self, z: Array, u: Array) -> Array:
         n = self.plant.n_states
@@ -239,9 +277,13 @@ class FilteredPlant(Plant):
 
 def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
     assert sens.omega is not None  # set with the filtered channels (Sensors.make)
-    return FilteredPlant.around(plant, [sens.index[c] for c in sens.filtered],
-                                jnp.stack([sens.gain[c] for c in sens.filtered]), sens.omega,
-                                [sens.names[c] for c in sens.filtered])
+    return FilteredPlant.around(
+        plant,
+        [sens.index[c] for c in sens.filtered],
+        jnp.stack([sens.gain[c] for c in sens.filtered]),
+        sens.omega,
+        [sens.names[c] for c in sens.filtered],
+    )
 
 
 class Actuator(eqx.Module):
@@ -299,8 +341,13 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     xd0 = None
     if sens.digital:
         xd0, y0 = _digital_initial(sens, y0)
-    carry = (x0, loop.controller.init(), jnp.tile(y0, (dmax + 1, 1)),
-             jnp.zeros((loop.delay + 1, n_u)), u0)
+    carry = (
+        x0,
+        loop.controller.init(),
+        jnp.tile(y0, (dmax + 1, 1)),
+        jnp.zeros((loop.delay + 1, n_u)),
+        u0,
+    )
     if sens.filtered:
         carry += (_pick(raw, sens.filtered),)
     if sens.digital:
@@ -374,8 +421,7 @@ def _block_size(loop: SampledLoop) -> int:
     return max(1, _SMALL_BUFFER_BYTES // (8 * widest))
 
 
-def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
-          block: int = 1):
+def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array, block: int = 1):
     """The sample loop: final carry and the records (states, signals, measured, command)
     at the sample instants. The signals are evaluated after the loop, for all samples at
     once (one kernel instead of one per sample). With ``block`` > 1 the loop runs over
@@ -401,8 +447,10 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             lim = act.limit.reshape(act.limit.shape + trail)
             return jnp.clip(u.reshape(u.shape + trail) + uc, -lim, lim)
 
-        return (integrate_law(P, z, command, t_k, h, loop.substeps, solver, loop.tolerances),
-                command(z, t_k))
+        return (
+            integrate_law(P, z, command, t_k, h, loop.substeps, solver, loop.tolerances),
+            command(z, t_k),
+        )
 
     def sample(carry, inp):
         x, cstate, sbuf, ubuf, u_prev = carry[:5]
@@ -413,8 +461,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         if fplant is not None:
             yf = carry[5]
             slot = {c: j for j, c in enumerate(sens.filtered)}
-            raw = jnp.stack([yf[slot[c]] if c in slot else raw[c]
-                             for c in range(len(sens.names))])
+            raw = jnp.stack([yf[slot[c]] if c in slot else raw[c] for c in range(len(sens.names))])
         y = _quantise(raw + sens.noise * noise_k, sens.quantum)
         extra = ()
         pos = 6 if fplant is not None else 5  # the optional parts of the carry
@@ -430,8 +477,11 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         if sens.zeroed:
             extra += (z_next,)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
-        meas_vec = (jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)]) if sens.delays
-                    else jnp.zeros((0,)))
+        meas_vec = (
+            jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)])
+            if sens.delays
+            else jnp.zeros((0,))
+        )
         meas = {n: meas_vec[i] for i, n in enumerate(sens.names)}
         # 2. controller, 3. computation delay, saturation, D/A
         t_k = law.time(cstate) if law is not None else None
@@ -485,17 +535,25 @@ def _sensor_noise(seed: ArrayLike, n_samples: int, n_channels: int) -> Array:
 def _run_seeded(loop: SampledLoop, x0: Array, refs: dict[str, Array], seed: Array):
     """A whole run in one compiled call: sensor noise, initial carry, the sample loop."""
     n = next(iter(refs.values())).shape[0]
-    return _run_from_x0(loop, x0, refs, _sensor_noise(seed, n, len(loop.sensors.names)),
-                        _block_size(loop))
+    return _run_from_x0(
+        loop, x0, refs, _sensor_noise(seed, n, len(loop.sensors.names)), _block_size(loop)
+    )
 
 
 # compiled; its callers pass NumPy arrays, which the jit turns into the Arrays above
 _run_all: Callable[..., Any] = eqx.filter_jit(_run_seeded)
 
 
-def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
-                  *, seed: int = 0, progress: Callable[[int, int], None] | None = None,
-                  chunk: int = 5000) -> dict[str, np.ndarray]:
+def simulate_loop(
+    loop: SampledLoop,
+    x0: Any,
+    references: dict[str, Any],
+    n_samples: int,
+    *,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+    chunk: int = 5000,
+) -> dict[str, np.ndarray]:
     """Run the loop for ``n_samples`` samples; return numpy arrays.
 
     ``references`` maps channel names to arrays of length ``n_samples`` (values at the
@@ -514,8 +572,7 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
         if progress is not None:
             progress(n_samples, n_samples)
     else:
-        noise = _sensor_noise(np.asarray(seed, dtype=np.int64), n_samples,
-                              len(loop.sensors.names))
+        noise = _sensor_noise(np.asarray(seed, dtype=np.int64), n_samples, len(loop.sensors.names))
         carry = _init_jit(loop, jnp.asarray(x0))
         parts = []
         for k0 in range(0, n_samples, chunk):
@@ -533,13 +590,20 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
                 break
         recs = [np.concatenate([p[i] for p in parts]) for i in range(4)]
         if len(recs[0]) < n_samples:  # stopped early on divergence: pad with NaN
-            recs = [np.concatenate([r, np.full((n_samples - len(r),) + r.shape[1:], np.nan)])
-                    for r in recs]
+            recs = [
+                np.concatenate([r, np.full((n_samples - len(r),) + r.shape[1:], np.nan)])
+                for r in recs
+            ]
         xf = carry[0]
     xs, sig, meas, us = recs
-    out = {"states": xs, "signals": sig, "measured": meas, "command": us,
-           "final_state": np.asarray(xf),
-           "references": {k: np.asarray(v) for k, v in refs.items()}}
+    out = {
+        "states": xs,
+        "signals": sig,
+        "measured": meas,
+        "command": us,
+        "final_state": np.asarray(xf),
+        "references": {k: np.asarray(v) for k, v in refs.items()},
+    }
     check_divergence(out, loop, float(loop.dt))
     return out
 
@@ -547,11 +611,19 @@ def simulate_loop(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samp
 _init_jit = eqx.filter_jit(initial_carry)
 
 
-def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_samples: int,
-                   *, seed: int = 0, in_axes: Any = 0,
-                   batch_size: int | None = 512,
-                   check: bool = True, client: Any = None,
-                   chunks: Any = None) -> dict[str, np.ndarray] | BatchSummary:
+def simulate_batch(
+    loop: SampledLoop,
+    x0: Any,
+    references: dict[str, Any],
+    n_samples: int,
+    *,
+    seed: int = 0,
+    in_axes: Any = 0,
+    batch_size: int | None = 512,
+    check: bool = True,
+    client: Any = None,
+    chunks: Any = None,
+) -> dict[str, np.ndarray] | BatchSummary:
     """``vmap`` of :func:`simulate_loop` over the batched leaves of ``loop``.
 
     ``in_axes`` is a pytree prefix of ``loop`` telling which leaves carry a leading batch
@@ -571,15 +643,30 @@ def simulate_batch(loop: SampledLoop, x0: Any, references: dict[str, Any], n_sam
     if client is not None or chunks is not None:  # orchestration layer, entered on request
         from flexarm.distributed import simulate_chunked
 
-        return simulate_chunked(loop, x0, references, n_samples, seed=seed, in_axes=in_axes,
-                                batch_size=batch_size, client=client, options=chunks)
+        return simulate_chunked(
+            loop,
+            x0,
+            references,
+            n_samples,
+            seed=seed,
+            in_axes=in_axes,
+            batch_size=batch_size,
+            client=client,
+            options=chunks,
+        )
     refs = _prepare_refs(references, n_samples)
     fn = _batched(in_axes, batch_size)
-    xs, sig, meas, us, xf = fn(loop, np.asarray(x0, dtype=float), refs,
-                               np.asarray(seed, dtype=np.int64))
-    out = {"states": np.asarray(xs), "signals": np.asarray(sig), "measured": np.asarray(meas),
-           "command": np.asarray(us), "final_state": np.asarray(xf),
-           "references": {k: np.asarray(v) for k, v in refs.items()}}
+    xs, sig, meas, us, xf = fn(
+        loop, np.asarray(x0, dtype=float), refs, np.asarray(seed, dtype=np.int64)
+    )
+    out = {
+        "states": np.asarray(xs),
+        "signals": np.asarray(sig),
+        "measured": np.asarray(meas),
+        "command": np.asarray(us),
+        "final_state": np.asarray(xf),
+        "references": {k: np.asarray(v) for k, v in refs.items()},
+    }
     if check:
         check_divergence(out, loop, float(np.ravel(np.asarray(loop.dt))[0]), batched=True)
     return out
@@ -610,9 +697,13 @@ def _batched(in_axes, batch_size: int | None):
             return vmapped(loop, x0, refs, noise)
         # each leaf of the loop and its batch axis (None: shared by all rollouts)
         leaves, treedef = jax.tree.flatten(loop, is_leaf=_is_none)
-        axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=_is_none),
-                               is_leaf=_is_none)
-        axes = [a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)]
+        axes = jax.tree.leaves(
+            jax.tree.broadcast(in_axes, loop, is_leaf=_is_none), is_leaf=_is_none
+        )
+        axes = [
+            a if a is not None and eqx.is_array(x) else None
+            for x, a in zip(leaves, axes, strict=False)
+        ]
         sizes = {x.shape[a] for x, a in zip(leaves, axes, strict=False) if a is not None}
         if len(sizes) != 1 or max(sizes) <= batch_size:
             return vmapped(loop, x0, refs, noise)
@@ -634,17 +725,20 @@ def _batched(in_axes, batch_size: int | None):
             chunk = [x if a is None else next(it) for x, a in zip(leaves, axes, strict=False)]
             return vmapped0(jax.tree.unflatten(treedef, chunk), x0, refs, noise)
 
-        out = jax.lax.map(one_chunk, [chunked(x, a) for x, a in zip(leaves, axes, strict=False)
-                                      if a is not None])
-        return jax.tree.map(lambda o: o.reshape((o.shape[0] * o.shape[1],) + o.shape[2:])[:size],
-                            out)
+        out = jax.lax.map(
+            one_chunk, [chunked(x, a) for x, a in zip(leaves, axes, strict=False) if a is not None]
+        )
+        return jax.tree.map(
+            lambda o: o.reshape((o.shape[0] * o.shape[1],) + o.shape[2:])[:size], out
+        )
 
     _BATCHED[key] = eqx.filter_jit(run)
     return _BATCHED[key]
 
 
-def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
-                       chunk: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def simulate_law_batch(
+    loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *, chunk: int = 128
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A batch of a continuous law alone (a :class:`ContinuousLaw` without sampled part, no
     sensors) whose ``params`` hold the batch along axis 0 where the vmap-style prefix
     ``axes`` says 0: the loop of :func:`simulate_loop` with the plant's state carried
@@ -661,18 +755,27 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
     samples; no divergence check (the caller flags rollouts)."""
     law = loop.controller
     if not isinstance(law, ContinuousLaw) or law.sampled is not None or loop.sensors.names:
-        raise ValueError("simulate_law_batch runs a ContinuousLaw alone (no sampled part, no "
-                         "sensors); batch other loops with simulate_batch")
+        raise ValueError(
+            "simulate_law_batch runs a ContinuousLaw alone (no sampled part, no "
+            "sensors); batch other loops with simulate_batch"
+        )
     leaves, treedef = jax.tree.flatten(law.params)
-    full = jax.tree.map(lambda ax, sub: jax.tree.map(lambda _: _Axis(ax), sub), axes, law.params,
-                        is_leaf=lambda a: a is None)
+    full = jax.tree.map(
+        lambda ax, sub: jax.tree.map(lambda _: _Axis(ax), sub),
+        axes,
+        law.params,
+        is_leaf=lambda a: a is None,
+    )
     leaf_axes = tuple(a.v for a in jax.tree.leaves(full, is_leaf=lambda a: isinstance(a, _Axis)))
     if any(a not in (None, 0) for a in leaf_axes):
         raise ValueError("axes must be 0 (batched along the first axis) or None")
     sizes = {int(x.shape[0]) for x, a in zip(leaves, leaf_axes, strict=False) if a is not None}
     if len(sizes) != 1:
-        raise ValueError(f"the batched parameters disagree on the batch size: {sorted(sizes)}"
-                         if sizes else "axes batches no parameter (give 0 on the batched leaves)")
+        raise ValueError(
+            f"the batched parameters disagree on the batch size: {sorted(sizes)}"
+            if sizes
+            else "axes batches no parameter (give 0 on the batched leaves)"
+        )
     size = sizes.pop()
     x0 = jnp.asarray(x0, float)
     if x0.ndim == 2 and x0.shape[0] != size:
@@ -685,8 +788,9 @@ def simulate_law_batch(loop: SampledLoop, x0: Any, n_samples: int, axes: Any, *,
 
     leaves = [x if a is None else padded(x) for x, a in zip(leaves, leaf_axes, strict=False)]
     x0 = padded(x0) if x0.ndim == 2 else x0
-    batched = eqx.tree_at(lambda lp: lp.controller.params, loop,
-                          jax.tree.unflatten(treedef, leaves))
+    batched = eqx.tree_at(
+        lambda lp: lp.controller.params, loop, jax.tree.unflatten(treedef, leaves)
+    )
     refs = _prepare_refs({}, n_samples)
     xs, sig, us = _run_law_batch(batched, x0, refs, leaf_axes, chunk)
     return np.asarray(xs)[:size], np.asarray(sig)[:size], np.asarray(us)[:size]
@@ -709,14 +813,21 @@ def _run_law_batch(loop: SampledLoop, x0: Array, refs, leaf_axes: tuple, chunk: 
     noise = jnp.zeros((n, 0))
 
     def one_chunk(c):
-        lv = [x if a is None else jax.lax.dynamic_slice_in_dim(x, c * chunk, chunk, 0)
-              for x, a in zip(leaves, leaf_axes, strict=False)]
-        ctrl = ContinuousLaw(law.law, jax.tree.unflatten(treedef, lv), law.dt, law.n_inputs,
-                             None, leaf_axes)
-        xc = (jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T if x0.ndim == 2
-              else jnp.broadcast_to(x0[:, None], x0.shape + (chunk,)))
-        xs, sig, _, us, _ = _run_from_x0(eqx.tree_at(lambda lp: lp.controller, loop, ctrl),
-                                         xc, refs, noise)
+        lv = [
+            x if a is None else jax.lax.dynamic_slice_in_dim(x, c * chunk, chunk, 0)
+            for x, a in zip(leaves, leaf_axes, strict=False)
+        ]
+        ctrl = ContinuousLaw(
+            law.law, jax.tree.unflatten(treedef, lv), law.dt, law.n_inputs, None, leaf_axes
+        )
+        xc = (
+            jax.lax.dynamic_slice_in_dim(x0, c * chunk, chunk, 0).T
+            if x0.ndim == 2
+            else jnp.broadcast_to(x0[:, None], x0.shape + (chunk,))
+        )
+        xs, sig, _, us, _ = _run_from_x0(
+            eqx.tree_at(lambda lp: lp.controller, loop, ctrl), xc, refs, noise
+        )
         return tuple(jnp.moveaxis(a, -1, 0) for a in (xs, sig, us))  # (chunk, n, ·)
 
     out = jax.lax.map(one_chunk, jnp.arange(size // chunk))

@@ -20,8 +20,23 @@ from flexarm.specs.scenario import (
 )
 
 __all__ = [
-    "Actuator", "CurrentMotor", "Friction", "Initial", "LumpedBeam", "PointMass",
-    "Reference", "RigidBeam", "Sampling", "Scenario", "ScenarioError", "Sensor",
-    "Simulation", "SingleLinkArm", "TransferFunctionBeam", "VoltageMotor",
-    "builtin_scenarios", "load_scenario", "scenario_from_dict",
+    "Actuator",
+    "CurrentMotor",
+    "Friction",
+    "Initial",
+    "LumpedBeam",
+    "PointMass",
+    "Reference",
+    "RigidBeam",
+    "Sampling",
+    "Scenario",
+    "ScenarioError",
+    "Sensor",
+    "Simulation",
+    "SingleLinkArm",
+    "TransferFunctionBeam",
+    "VoltageMotor",
+    "builtin_scenarios",
+    "load_scenario",
+    "scenario_from_dict",
 ]

@@ -44,6 +44,8 @@ class StateFeedbackController(Spec):
     @model_validator(mode="after")
     def _filter_has_tau(self) -> StateFeedbackController:
         if self.rate == "filtered" and not self.rate_time_constant > 0:
-            raise ValueError("rate = 'filtered' needs rate_time_constant > 0 s "
-                             "(e.g. 0.02 s for a 50 rad/s derivative filter)")
+            raise ValueError(
+                "rate = 'filtered' needs rate_time_constant > 0 s "
+                "(e.g. 0.02 s for a 50 rad/s derivative filter)"
+            )
         return self

@@ -34,8 +34,10 @@ def _not_angular(v: object, name: str) -> object:
         from flexarm.units import to_si
 
         w = to_si(v, "Hz", field=name)
-        raise ValueError(f"got {v!r}: an angular frequency; the cutoff is in Hz, "
-                         f"f_c = ω_c / 2π: write \"{w / 6.283185307179586:.6g} Hz\"")
+        raise ValueError(
+            f"got {v!r}: an angular frequency; the cutoff is in Hz, "
+            f'f_c = ω_c / 2π: write "{w / 6.283185307179586:.6g} Hz"'
+        )
     return v
 
 
@@ -70,10 +72,11 @@ class DigitalFilterSpec(Spec):
                 raise ValueError(f"den = {self.den}: the denominator is zero")
         else:
             if self.cutoff is None:
-                raise ValueError(f"kind = {self.kind!r} needs cutoff (Hz), e.g. cutoff = \"2 Hz\"")
+                raise ValueError(f'kind = {self.kind!r} needs cutoff (Hz), e.g. cutoff = "2 Hz"')
             if self.num is not None or self.den is not None:
-                raise ValueError(f"kind = {self.kind!r} takes cutoff and damping; num/den "
-                                 "belong to kind = 'tf'")
+                raise ValueError(
+                    f"kind = {self.kind!r} takes cutoff and damping; num/den belong to kind = 'tf'"
+                )
         return self
 
 
@@ -119,8 +122,9 @@ class Sensor(Spec):
     @model_validator(mode="after")
     def _one_quantum(self) -> Sensor:
         if self.quantum > 0 and self.bits > 0:
-            raise ValueError(f"give quantum ({self.quantum:g}) or bits ({self.bits}) and range, "
-                             "not both")
+            raise ValueError(
+                f"give quantum ({self.quantum:g}) or bits ({self.bits}) and range, not both"
+            )
         return self
 
 
@@ -164,8 +168,7 @@ class Reference(Spec):
     quasi-parabolic, peak ``snap`` (rad/s⁴) (FRB Sec. V-B,
     :mod:`flexarm.control.trajectories`)."""
 
-    type: Literal["step", "square", "sine", "constant", "parabolic",
-                  "quasi_parabolic"] = "step"
+    type: Literal["step", "square", "sine", "constant", "parabolic", "quasi_parabolic"] = "step"
     amplitude: Q("rad") = 0.0
     offset: Q("rad") = 0.0
     start: Q("s", ge=0) = 0.0
@@ -177,14 +180,20 @@ class Reference(Spec):
     def _trajectory(self) -> Reference:
         moves = self.type in ("parabolic", "quasi_parabolic")
         if moves and (self.acceleration is None or self.amplitude == 0.0):
-            raise ValueError(f"type = {self.type!r} needs amplitude (the move, rad, non-zero) "
-                             "and acceleration (rad/s**2)")
+            raise ValueError(
+                f"type = {self.type!r} needs amplitude (the move, rad, non-zero) "
+                "and acceleration (rad/s**2)"
+            )
         if (self.type == "quasi_parabolic") != (self.snap is not None):
-            raise ValueError("snap (rad/s**4) is given with type = 'quasi_parabolic' and only "
-                             f"then; type = {self.type!r}, snap = {self.snap!r}")
+            raise ValueError(
+                "snap (rad/s**4) is given with type = 'quasi_parabolic' and only "
+                f"then; type = {self.type!r}, snap = {self.snap!r}"
+            )
         if not moves and self.acceleration is not None:
-            raise ValueError(f"acceleration is read only by parabolic / quasi_parabolic "
-                             f"references; type = {self.type!r}")
+            raise ValueError(
+                f"acceleration is read only by parabolic / quasi_parabolic "
+                f"references; type = {self.type!r}"
+            )
         return self
 
 
@@ -283,32 +292,44 @@ class LTIControllerSpec(Spec):
 
     @model_validator(mode="after")
     def _one_source(self) -> LTIControllerSpec:
-        given = [name for name, on in (("A..D", any(getattr(self, k) is not None
-                                                    for k in "ABCD")),
-                                       ("num/den", self.num is not None or self.den is not None),
-                                       ("file", self.file is not None)) if on]
+        given = [
+            name
+            for name, on in (
+                ("A..D", any(getattr(self, k) is not None for k in "ABCD")),
+                ("num/den", self.num is not None or self.den is not None),
+                ("file", self.file is not None),
+            )
+            if on
+        ]
         if len(given) != 1:
-            raise ValueError("give the controller one way: A, B, C, D (D alone for a static "
-                             "gain), or num and den, or file; got "
-                             + (" and ".join(given) if given else "none"))
+            raise ValueError(
+                "give the controller one way: A, B, C, D (D alone for a static "
+                "gain), or num and den, or file; got " + (" and ".join(given) if given else "none")
+            )
         if given == ["num/den"] and (self.num is None or self.den is None):
             raise ValueError("give num and den together")
         if given == ["A..D"] and self.D is None:
             raise ValueError("D is missing (outputs × inputs); A, B, C are optional together")
         if self.variable is not None and self.file is None:
-            raise ValueError(f"variable = {self.variable!r} selects a struct in a file: give "
-                             "file too (e.g. file = \"ctrl.mat\")")
+            raise ValueError(
+                f"variable = {self.variable!r} selects a struct in a file: give "
+                'file too (e.g. file = "ctrl.mat")'
+            )
         if (self.inputs is None) == (self.signals is None):
-            raise ValueError("give the block's inputs one way: inputs (+ setpoints: v = "
-                             "setpoint − measured) or signals (the input vector in the "
-                             "block's order: channels and numbers); got "
-                             + ("both" if self.inputs is not None else "neither"))
+            raise ValueError(
+                "give the block's inputs one way: inputs (+ setpoints: v = "
+                "setpoint − measured) or signals (the input vector in the "
+                "block's order: channels and numbers); got "
+                + ("both" if self.inputs is not None else "neither")
+            )
         if self.signals is not None:
             if not self.signals:
                 raise ValueError("signals is empty: list the block's inputs in its order")
             if self.setpoints is not None:
-                raise ValueError("setpoints go with inputs; with signals, write the setpoint "
-                                 "channels into the vector itself")
+                raise ValueError(
+                    "setpoints go with inputs; with signals, write the setpoint "
+                    "channels into the vector itself"
+                )
             for j, s in enumerate(self.signals):
                 if isinstance(s, str) and not s.strip():
                     raise ValueError(f"signals[{j}] = {s!r}: give a channel name or a number")
@@ -316,14 +337,23 @@ class LTIControllerSpec(Spec):
         if not self.inputs:
             raise ValueError("inputs is empty: list the measured channels (one per column of D)")
         if self.setpoints is not None and len(self.setpoints) != len(self.inputs):
-            raise ValueError(f"setpoints has {len(self.setpoints)} entries, inputs "
-                             f"{len(self.inputs)}: one setpoint (a reference channel or 0) "
-                             "per input")
+            raise ValueError(
+                f"setpoints has {len(self.setpoints)} entries, inputs "
+                f"{len(self.inputs)}: one setpoint (a reference channel or 0) "
+                "per input"
+            )
         for s in self.setpoints or []:
             if not isinstance(s, str) and s != 0:
                 raise ValueError(f"setpoint {s!r}: give a reference channel name or 0")
         return self
 
 
-ControllerSpec = (PDController | PIDController | LeadController | TFController
-                  | StateFeedbackController | LTIControllerSpec | NestedController)
+ControllerSpec = (
+    PDController
+    | PIDController
+    | LeadController
+    | TFController
+    | StateFeedbackController
+    | LTIControllerSpec
+    | NestedController
+)

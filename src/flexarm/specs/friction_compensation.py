@@ -24,7 +24,14 @@ class FrictionCompensationSpec(Spec):
 
     level: Q("", ge=0, what="Coulomb level in command units (A or V)")
     measured: str = "motor_angle"
-    velocity_deadband: Q("rad/s", ge=0, what="below it the joint is at rest; "
-                         "default half an encoder count per sample") | None = None
-    rest_deadband: Q("", ge=0, what="feedback command below which no compensation "
-                     "acts at rest (command units)") = 0.0
+    velocity_deadband: (
+        Q(
+            "rad/s",
+            ge=0,
+            what="below it the joint is at rest; default half an encoder count per sample",
+        )
+        | None
+    ) = None
+    rest_deadband: Q(
+        "", ge=0, what="feedback command below which no compensation acts at rest (command units)"
+    ) = 0.0

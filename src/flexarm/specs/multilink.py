@@ -65,16 +65,21 @@ class Link(Spec):
                 raise ValueError("a torsional link needs torsional_stiffness (N*m/rad)")
             for k in ("flexural_rigidity", "modal_damping"):
                 if getattr(self, k) is not None:
-                    raise ValueError(f"{k} belongs to model = 'modes' links; a torsional link "
-                                     "takes torsional_stiffness and torsional_damping")
+                    raise ValueError(
+                        f"{k} belongs to model = 'modes' links; a torsional link "
+                        "takes torsional_stiffness and torsional_damping"
+                    )
             if self.modes not in (None, 1):
-                raise ValueError(f"a torsional link has one coordinate (α); modes = "
-                                 f"{self.modes} is not allowed")
+                raise ValueError(
+                    f"a torsional link has one coordinate (α); modes = {self.modes} is not allowed"
+                )
             if self.torsional_damping is not None and self.damping_ratio != 0.0:
                 raise ValueError("give either damping_ratio or torsional_damping, not both")
             if self.center_of_mass is not None and self.center_of_mass > self.length:
-                raise ValueError(f"center_of_mass = {self.center_of_mass:g} m lies beyond the "
-                                 f"link length {self.length:g} m")
+                raise ValueError(
+                    f"center_of_mass = {self.center_of_mass:g} m lies beyond the "
+                    f"link length {self.length:g} m"
+                )
             return self
         for k in ("center_of_mass", "inertia", "torsional_stiffness", "torsional_damping"):
             if getattr(self, k) is not None:
@@ -89,8 +94,7 @@ class Link(Spec):
         if self.modal_damping is not None:
             if len(self.modal_damping) != self.n_modes:
                 raise ValueError(
-                    f"modal_damping has {len(self.modal_damping)} values for "
-                    f"{self.n_modes} modes"
+                    f"modal_damping has {len(self.modal_damping)} values for {self.n_modes} modes"
                 )
             if self.damping_ratio != 0.0:
                 raise ValueError("give either damping_ratio or modal_damping, not both")
@@ -217,12 +221,18 @@ class MultiLinkArm(Spec):
         if len(self.hubs) != n:
             raise ValueError(f"{n} links need {n} hubs (one per joint); got {len(self.hubs)}")
         if self.joints is not None and len(self.joints) != n:
-            raise ValueError(f"{n} links need {n} joints (drive and friction of each); got "
-                             f"{len(self.joints)}")
-        if self.joints is not None and self.torque_limit is not None and any(
-                j.drive.drive != "torque" for j in self.joints):
-            raise ValueError("torque_limit applies to torque drives; give each joint's "
-                             "current_limit / voltage_limit in [[arm.joints]] instead")
+            raise ValueError(
+                f"{n} links need {n} joints (drive and friction of each); got {len(self.joints)}"
+            )
+        if (
+            self.joints is not None
+            and self.torque_limit is not None
+            and any(j.drive.drive != "torque" for j in self.joints)
+        ):
+            raise ValueError(
+                "torque_limit applies to torque drives; give each joint's "
+                "current_limit / voltage_limit in [[arm.joints]] instead"
+            )
         gx, gy = self.gravity_direction
         if not (math.isfinite(gx) and math.isfinite(gy)) or math.hypot(gx, gy) == 0.0:
             raise ValueError(
@@ -249,15 +259,25 @@ class MultiLinkArm(Spec):
         return gx / r, gy / r
 
 
-def benchmark_arm(flexural_rigidity: float = 15.0, *, gravity: float = 9.81,
-                  modes: int = 2,
-                  mode_type: Literal["clamped_mass", "clamped_free"] = "clamped_mass",
-                  damping_ratio: float = 0.0) -> MultiLinkArm:
+def benchmark_arm(
+    flexural_rigidity: float = 15.0,
+    *,
+    gravity: float = 9.81,
+    modes: int = 2,
+    mode_type: Literal["clamped_mass", "clamped_free"] = "clamped_mass",
+    damping_ratio: float = 0.0,
+) -> MultiLinkArm:
     """De Luca & Siciliano's two-link arm (IEEE SMC 1991 data) in a vertical plane: ℓ = 0.5 m,
     ρ = 0.2 kg/m, hub 2 of 1 kg, hub inertias 0.1 kg·m², payload 0.1 kg / 0.0005 kg·m².
     The project's gravity benchmark uses EI = 15 N·m² (the 1991 paper had 1 N·m²)."""
-    link = Link(length=0.5, linear_density=0.2, flexural_rigidity=flexural_rigidity,
-                modes=modes, mode_type=mode_type, damping_ratio=damping_ratio)
+    link = Link(
+        length=0.5,
+        linear_density=0.2,
+        flexural_rigidity=flexural_rigidity,
+        modes=modes,
+        mode_type=mode_type,
+        damping_ratio=damping_ratio,
+    )
     return MultiLinkArm(
         links=[link, link],
         hubs=[Hub(mass=0.0, inertia=0.1), Hub(mass=1.0, inertia=0.1)],

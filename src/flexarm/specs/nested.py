@@ -54,8 +54,9 @@ class NestedController(Spec):
     gcm2_den: Coefficients(denominator=True)
     coupling_gain: Q("", what="command units per rad of bending θm − θt") = 0.0
     tip: Literal["tip_angle", "tip_deflection"] = "tip_angle"
-    deflection_to_angle: Q("", what="rad of θt − θm per unit of the tip_deflection "
-                           "channel, 1/(gain·L)") = 0.0
+    deflection_to_angle: Q(
+        "", what="rad of θt − θm per unit of the tip_deflection channel, 1/(gain·L)"
+    ) = 0.0
     gcb_num: Coefficients()
     gcb_den: Coefficients(denominator=True)
     feedforward_num: Coefficients() = [1.0]
@@ -70,10 +71,14 @@ class NestedController(Spec):
     @model_validator(mode="after")
     def _tip_source(self) -> NestedController:
         if self.tip == "tip_deflection" and self.deflection_to_angle == 0.0:
-            raise ValueError("tip = 'tip_deflection' needs deflection_to_angle = 1/(gain·L) "
-                             "(rad per unit of the channel), e.g. 1/0.42 for a gauge "
-                             "calibrated in m on a 0.42 m link")
+            raise ValueError(
+                "tip = 'tip_deflection' needs deflection_to_angle = 1/(gain·L) "
+                "(rad per unit of the channel), e.g. 1/0.42 for a gauge "
+                "calibrated in m on a 0.42 m link"
+            )
         if self.tip == "tip_angle" and self.deflection_to_angle != 0.0:
-            raise ValueError(f"deflection_to_angle = {self.deflection_to_angle:g} is read "
-                             "only with tip = 'tip_deflection'; drop it or set tip")
+            raise ValueError(
+                f"deflection_to_angle = {self.deflection_to_angle:g} is read "
+                "only with tip = 'tip_deflection'; drop it or set tip"
+            )
         return self

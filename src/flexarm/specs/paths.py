@@ -34,13 +34,16 @@ def parse_path(path: str, what: str = "free parameter") -> list[str | int]:
     for m in _TOKEN.finditer(path):
         if m.start() != pos:
             break
-        keys.append(m.group(1) if m.group(1) else (m.group(2) if m.group(2) == "*"
-                                                   else int(m.group(2))))
+        keys.append(
+            m.group(1) if m.group(1) else (m.group(2) if m.group(2) == "*" else int(m.group(2)))
+        )
         pos = m.end()
     if pos != len(path) or not keys:
-        raise ValueError(f"{what} {path!r}: not a path into the scenario; write it as "
-                         "dotted names with [index] for lists, e.g. "
-                         "'arm.joints[0].friction.coulomb' or 'sensors.theta_1.gain'")
+        raise ValueError(
+            f"{what} {path!r}: not a path into the scenario; write it as "
+            "dotted names with [index] for lists, e.g. "
+            "'arm.joints[0].friction.coulomb' or 'sensors.theta_1.gain'"
+        )
     return keys
 
 
@@ -60,8 +63,13 @@ def get(d: Any, path: str | Keys, what: str = "free parameter") -> Any:
             d = d[k]
         except (KeyError, IndexError, TypeError):
             here = format_path(keys[:i]) or "the scenario"
-            have = (", ".join(map(str, d)) if isinstance(d, dict)
-                    else f"{len(d)} entries" if isinstance(d, list) else type(d).__name__)
+            have = (
+                ", ".join(map(str, d))
+                if isinstance(d, dict)
+                else f"{len(d)} entries"
+                if isinstance(d, list)
+                else type(d).__name__
+            )
             raise ValueError(f"{what} {text!r}: {here} has no {k!r} (it has {have})") from None
     return d
 
@@ -74,8 +82,10 @@ def set(d: Any, path: str | Keys, value: Any, what: str = "free parameter") -> N
     try:
         parent[keys[-1]] = value
     except (IndexError, TypeError):
-        raise ValueError(f"{what} {text!r}: cannot set {keys[-1]!r} in "
-                         f"{format_path(keys[:-1]) or 'the scenario'}") from None
+        raise ValueError(
+            f"{what} {text!r}: cannot set {keys[-1]!r} in "
+            f"{format_path(keys[:-1]) or 'the scenario'}"
+        ) from None
 
 
 def format_path(keys: Keys) -> str:
@@ -98,8 +108,11 @@ def expand_paths(dump: dict, paths: Sequence[str], what: str = "free parameter")
         lst = get(dump, keys[:i], what)
         if not isinstance(lst, list):
             raise ValueError(f"{what} {p!r}: [*] needs a list; found {type(lst).__name__}")
-        out += expand_paths(dump, [format_path(list(keys[:i]) + [j] + list(keys[i + 1:]))
-                                   for j in range(len(lst))], what)
+        out += expand_paths(
+            dump,
+            [format_path(list(keys[:i]) + [j] + list(keys[i + 1 :])) for j in range(len(lst))],
+            what,
+        )
     return out
 
 

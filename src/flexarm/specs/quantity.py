@@ -39,8 +39,14 @@ class Spec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
 
-def Q(unit: str, *, gt: float | None = None, ge: float | None = None,
-      le: float | None = None, what: str = "") -> Any:
+def Q(
+    unit: str,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    le: float | None = None,
+    what: str = "",
+) -> Any:
     """A float field stored in SI ``unit``; optional bounds ``gt``, ``ge``, ``le`` (SI)."""
 
     def convert(v: object) -> float:
@@ -57,17 +63,24 @@ def Q(unit: str, *, gt: float | None = None, ge: float | None = None,
             raise ValueError(f"got {v!r} = {x:g} {unit}; must be <= {le:g} {unit}{why}")
         return x
 
-    bounds = ", ".join(f"{op} {v:g}" for op, v in ((">", gt), (">=", ge), ("<=", le)) if v is not None)
-    return Annotated[float, BeforeValidator(convert), PlainSerializer(float),
-                     Unit(unit or "1", bounds, what)]
+    bounds = ", ".join(
+        f"{op} {v:g}" for op, v in ((">", gt), (">=", ge), ("<=", le)) if v is not None
+    )
+    return Annotated[
+        float, BeforeValidator(convert), PlainSerializer(float), Unit(unit or "1", bounds, what)
+    ]
 
 
 def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
     """A non-negative integer field (bits, samples, substeps)."""
 
     def convert(v: object) -> int:
-        if (isinstance(v, bool) or not isinstance(v, (int, float))
-                or (isinstance(v, float) and not math.isfinite(v)) or int(v) != v):
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or (isinstance(v, float) and not math.isfinite(v))
+            or int(v) != v
+        ):
             raise ValueError(f"got {v!r}; expected a whole number")
         n = int(v)
         why = f" ({what})" if what else ""
@@ -76,14 +89,19 @@ def Count(*, ge: int = 0, le: int | None = None, what: str = "") -> Any:
             raise ValueError(f"got {n}; must be >= {ge}{hi}{why}")
         return n
 
-    return Annotated[int, BeforeValidator(convert),
-                     Unit("count", f">= {ge}" + (f", <= {le}" if le is not None else ""), what)]
+    return Annotated[
+        int,
+        BeforeValidator(convert),
+        Unit("count", f">= {ge}" + (f", <= {le}" if le is not None else ""), what),
+    ]
 
 
 def _leading_nonzero(c: list[float]) -> list[float]:
     if c and c[0] == 0.0:
-        raise ValueError(f"got {c!r}: the leading coefficient (highest power) is 0; drop "
-                         "leading zeros (coefficients in descending powers)")
+        raise ValueError(
+            f"got {c!r}: the leading coefficient (highest power) is 0; drop "
+            "leading zeros (coefficients in descending powers)"
+        )
     return c
 
 

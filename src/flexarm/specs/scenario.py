@@ -35,8 +35,10 @@ from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
 #: plant signals of a multi-link arm (:func:`flexarm.models.multilink.signal_names`)
-_MULTI_SIGNAL = re.compile(r"(theta|theta_dot|deflection|deflection_angle|delta|"
-                           r"friction_torque)_\d+(_\d+)?|tip_x|tip_y")
+_MULTI_SIGNAL = re.compile(
+    r"(theta|theta_dot|deflection|deflection_angle|delta|"
+    r"friction_torque)_\d+(_\d+)?|tip_x|tip_y"
+)
 
 
 class ScenarioError(FlexarmError, ValueError):
@@ -66,8 +68,9 @@ class RegulationSpec(Spec):
         n = len(self.target)
         for name in ("initial", "kp", "kd"):
             if len(getattr(self, name)) != n:
-                raise ValueError(f"{name} has {len(getattr(self, name))} entries; target has {n} "
-                                 "(one per joint)")
+                raise ValueError(
+                    f"{name} has {len(getattr(self, name))} entries; target has {n} (one per joint)"
+                )
         return self
 
 
@@ -100,9 +103,12 @@ class Scenario(Spec):
     initial: Initial = Initial()
     reference: Reference = Reference()
     references: dict[str, Reference] = Field(default_factory=dict)
-    controller: Annotated[ControllerSpec | JointPDController, Field(discriminator="type")] | None = None
-    controllers: list[Annotated[ControllerSpec | JointPDController,
-                                Field(discriminator="type")]] | None = None
+    controller: (
+        Annotated[ControllerSpec | JointPDController, Field(discriminator="type")] | None
+    ) = None
+    controllers: (
+        list[Annotated[ControllerSpec | JointPDController, Field(discriminator="type")]] | None
+    ) = None
     regulation: RegulationSpec | None = None
 
     @property
@@ -125,12 +131,14 @@ class Scenario(Spec):
         refs, out = self.reference_channels(), set()
         for spec in self.controller_specs():
             out.update(s for s in getattr(spec, "setpoints", None) or [] if isinstance(s, str))
-            out.update(s for s in getattr(spec, "signals", None) or []
-                       if isinstance(s, str) and s in refs)
+            out.update(
+                s for s in getattr(spec, "signals", None) or [] if isinstance(s, str) and s in refs
+            )
         return out
 
-    def with_controllers(self, tables: ControllerFile | dict[str, Any],
-                         source: str | None = None) -> Scenario:
+    def with_controllers(
+        self, tables: ControllerFile | dict[str, Any], source: str | None = None
+    ) -> Scenario:
         """This scenario with its controllers replaced by ``tables`` (a
         :class:`ControllerFile` from :func:`load_controllers`, or a dict with a
         ``controller`` table or a ``controllers`` list as in a scenario TOML); validated
@@ -138,25 +146,26 @@ class Scenario(Spec):
         :class:`ScenarioError` naming ``source`` (default the controller file)."""
         if isinstance(tables, ControllerFile):
             source = source or tables.source
-            tables = tables.model_dump(mode="json", exclude_none=True,
-                                       exclude={"source"})
+            tables = tables.model_dump(mode="json", exclude_none=True, exclude={"source"})
         given = {k: v for k, v in tables.items() if k in ("controller", "controllers")}
         if len(given) != 1 or set(tables) - {"controller", "controllers"}:
-            raise ScenarioError(f"{source or 'controllers'}: give [controller] (one block) or "
-                                "[[controllers]] (several), nothing else; got "
-                                f"{', '.join(sorted(tables)) or 'nothing'}")
+            raise ScenarioError(
+                f"{source or 'controllers'}: give [controller] (one block) or "
+                "[[controllers]] (several), nothing else; got "
+                f"{', '.join(sorted(tables)) or 'nothing'}"
+            )
         data = self.model_dump(mode="json", exclude_none=True)
         data.pop("controller", None)
         data.pop("controllers", None)
         data.update(given)
-        return scenario_from_dict(data, source=f"{source or 'controllers'} (with scenario "
-                                                f"{self.name!r})")
+        return scenario_from_dict(
+            data, source=f"{source or 'controllers'} (with scenario {self.name!r})"
+        )
 
     @model_validator(mode="after")
     def _check_controllers(self) -> Scenario:
         if self.controller is not None and self.controllers is not None:
-            raise ValueError("give [controller] (one block) or [[controllers]] (several), "
-                             "not both")
+            raise ValueError("give [controller] (one block) or [[controllers]] (several), not both")
         if self.controllers is None:
             blocks = [("controller", self.controller)] if self.controller is not None else []
         else:
@@ -169,12 +178,16 @@ class Scenario(Spec):
                         f"{where}: type = {c.type!r}"
                         + (" with friction_compensation" if c.type == "lti" else "")
                         + " cannot run as one of several [[controllers]]: each block "
-                        "needs its own outputs and period, which type = \"lti\" has (write "
-                        "the law as A, B, C, D, or use [controller] for a single one)")
+                        'needs its own outputs and period, which type = "lti" has (write '
+                        "the law as A, B, C, D, or use [controller] for a single one)"
+                    )
         base = self.sampling.period if self.sampling is not None else None
         driven: dict[object, str] = {}
-        known = (set(self.sensors) | self.reference_channels()
-                 | (set(KNOWN_SENSORS) if self.arm.kind == "single_link" else set()))
+        known = (
+            set(self.sensors)
+            | self.reference_channels()
+            | (set(KNOWN_SENSORS) if self.arm.kind == "single_link" else set())
+        )
         for where, c in blocks:
             dt = getattr(c, "dt", None)
             if dt is not None and base is not None:
@@ -183,22 +196,29 @@ class Scenario(Spec):
                     raise ValueError(
                         f"{where}.dt = {dt:g} s is not a whole multiple of the sampling "
                         f"period {base:g} s (ratio {r:.9g}); give dt = k·{base:g} s, e.g. "
-                        f"{max(1, round(r)) * base:g} s (the block runs every k samples)")
+                        f"{max(1, round(r)) * base:g} s (the block runs every k samples)"
+                    )
             for j, s in enumerate(getattr(c, "signals", None) or []):
-                if isinstance(s, str) and s not in known and not (
-                        self.arm.kind == "multi_link" and _MULTI_SIGNAL.fullmatch(s)):
+                if (
+                    isinstance(s, str)
+                    and s not in known
+                    and not (self.arm.kind == "multi_link" and _MULTI_SIGNAL.fullmatch(s))
+                ):
                     raise ValueError(
                         f"{where}.signals[{j}] = {s!r} is neither a channel nor a number: "
                         f"give a sensor channel ({', '.join(sorted(self.sensors)) or 'none'}), "
                         f"a reference channel ({', '.join(sorted(self.reference_channels()))}"
-                        "), a plant signal, or a number (a constant input)")
+                        "), a plant signal, or a number (a constant input)"
+                    )
             for o in getattr(c, "outputs", None) or []:
                 m = re.fullmatch(r".*_(\d+)", o) if isinstance(o, str) else None
                 key = int(o) if not isinstance(o, str) else int(m.group(1)) if m else o
                 if key in driven and driven[key] != where:
-                    raise ValueError(f"{where}.outputs: {o!r} is driven by {driven[key]} "
-                                     "already; two controllers cannot drive one output (sum "
-                                     "them in one block, or give each its own outputs)")
+                    raise ValueError(
+                        f"{where}.outputs: {o!r} is driven by {driven[key]} "
+                        "already; two controllers cannot drive one output (sum "
+                        "them in one block, or give each its own outputs)"
+                    )
                 driven[key] = where
         return self
 
@@ -207,11 +227,15 @@ class Scenario(Spec):
         if self.arm.kind == "single_link":
             for name in ("sampling", "simulation"):
                 if getattr(self, name) is None:
-                    raise ValueError(f"[{name}] is missing; a single-link scenario needs "
-                                     "[sampling] (period) and [simulation] (duration)")
+                    raise ValueError(
+                        f"[{name}] is missing; a single-link scenario needs "
+                        "[sampling] (period) and [simulation] (duration)"
+                    )
             if self.regulation is not None:
-                raise ValueError("[regulation] is the multi-link continuous-time law; a "
-                                 "single-link arm takes a [controller]")
+                raise ValueError(
+                    "[regulation] is the multi-link continuous-time law; a "
+                    "single-link arm takes a [controller]"
+                )
             for name, sensor in self.sensors.items():
                 if (sensor.signal or name) not in KNOWN_SENSORS:
                     raise ValueError(
@@ -228,13 +252,16 @@ class Scenario(Spec):
             return self
         n = len(self.arm.links)
         if self.regulation is not None and len(self.regulation.target) != n:
-            raise ValueError(f"regulation.target has {len(self.regulation.target)} joints; the arm "
-                             f"has {n} links")
+            raise ValueError(
+                f"regulation.target has {len(self.regulation.target)} joints; the arm has {n} links"
+            )
         if (self.sampling is None) != (self.simulation is None):
             raise ValueError("give [sampling] and [simulation] together (the sampled-data loop)")
         if self.sampling is None and (self.controller is not None or self.controllers):
-            raise ValueError("a [controller] runs in the sampled-data loop: give [sampling] "
-                             "(period) and [simulation] (duration)")
+            raise ValueError(
+                "a [controller] runs in the sampled-data loop: give [sampling] "
+                "(period) and [simulation] (duration)"
+            )
         for name in ("joint_angles", "joint_velocities"):
             v = getattr(self.initial, name)
             if v is not None and len(v) != n:
@@ -258,11 +285,17 @@ def _scenario_table(sc: Scenario):
     rows: list[tuple[str, object]] = [("description", sc.description or None)]
     if arm.kind == "single_link":
         motor = arm.motor
-        rows += [("arm", "single link"),
-                 ("drive", f"{motor.drive}, J = {motor.inertia:.4g} kg*m**2"),
-                 ("beam", getattr(arm.beam, "model", None)),
-                 ("friction", f"Coulomb {arm.friction.coulomb:.4g} N*m"
-                  if getattr(arm.friction, "coulomb", None) is not None else None)]
+        rows += [
+            ("arm", "single link"),
+            ("drive", f"{motor.drive}, J = {motor.inertia:.4g} kg*m**2"),
+            ("beam", getattr(arm.beam, "model", None)),
+            (
+                "friction",
+                f"Coulomb {arm.friction.coulomb:.4g} N*m"
+                if getattr(arm.friction, "coulomb", None) is not None
+                else None,
+            ),
+        ]
     else:
         rows.append(("arm", f"{len(arm.links)} links"))
     if sc.sampling is not None:
@@ -311,17 +344,20 @@ class ControllerFile(Spec):
     ``[[controllers]]`` tables exactly as in a scenario (:func:`load_controllers`)."""
 
     source: str = "controllers"
-    controller: Annotated[ControllerSpec | JointPDController,
-                          Field(discriminator="type")] | None = None
-    controllers: list[Annotated[ControllerSpec | JointPDController,
-                                Field(discriminator="type")]] | None = None
+    controller: (
+        Annotated[ControllerSpec | JointPDController, Field(discriminator="type")] | None
+    ) = None
+    controllers: (
+        list[Annotated[ControllerSpec | JointPDController, Field(discriminator="type")]] | None
+    ) = None
 
     @model_validator(mode="after")
     def _one(self) -> ControllerFile:
         if (self.controller is None) == (self.controllers is None):
-            raise ValueError("give [controller] (one block) or [[controllers]] (several): "
-                             + ("both given" if self.controller is not None else
-                                "the file has neither"))
+            raise ValueError(
+                "give [controller] (one block) or [[controllers]] (several): "
+                + ("both given" if self.controller is not None else "the file has neither")
+            )
         return self
 
 
@@ -353,9 +389,11 @@ def _read_toml(path: Path, what: str) -> dict[str, Any]:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:
-        raise ScenarioError(f"{path}: not a text file in UTF-8 (byte {exc.start}: "
-                            f"{exc.object[exc.start:exc.start + 1]!r}); a {what} is a TOML "
-                            "text file") from None
+        raise ScenarioError(
+            f"{path}: not a text file in UTF-8 (byte {exc.start}: "
+            f"{exc.object[exc.start : exc.start + 1]!r}); a {what} is a TOML "
+            "text file"
+        ) from None
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
 
@@ -367,8 +405,9 @@ def load_controllers(path: str | Path) -> ControllerFile:
     FILE.toml`` does). Problems are a :class:`ScenarioError` naming the file and field."""
     path = Path(path)
     if not path.exists():
-        raise ScenarioError(f"{path}: no such controller file (a TOML with [controller] or "
-                            "[[controllers]])")
+        raise ScenarioError(
+            f"{path}: no such controller file (a TOML with [controller] or [[controllers]])"
+        )
     data = _resolve_files(_read_toml(path, "controller file"), path.parent)
     try:
         return ControllerFile.model_validate({**data, "source": str(path)})
@@ -377,14 +416,29 @@ def load_controllers(path: str | Path) -> ControllerFile:
 
 
 def _is_union_tag(p: object) -> bool:
-    return isinstance(p, str) and p in {"current", "voltage", "torque", "lumped",
-                                        "transfer_function", "rigid", "pd", "pid", "lead", "tf",
-                                        "state_feedback", "joint_pd", "lti", "nested", "single_link",
-                                        "multi_link"}
+    return isinstance(p, str) and p in {
+        "current",
+        "voltage",
+        "torque",
+        "lumped",
+        "transfer_function",
+        "rigid",
+        "pd",
+        "pid",
+        "lead",
+        "tf",
+        "state_feedback",
+        "joint_pd",
+        "lti",
+        "nested",
+        "single_link",
+        "multi_link",
+    }
 
 
-def scenario_from_dict(data: dict[str, Any], source: str = "scenario"
-                       ) -> Scenario | MultiLinkScenario:
+def scenario_from_dict(
+    data: dict[str, Any], source: str = "scenario"
+) -> Scenario | MultiLinkScenario:
     """Validate a scenario given as a dict (as parsed from TOML); ``arm.kind`` picks a
     single-link :class:`Scenario` or a :class:`MultiLinkScenario`."""
     if isinstance(data, dict) and isinstance(data.get("arm"), dict) and "kind" not in data["arm"]:
@@ -400,8 +454,11 @@ def scenario_from_dict(data: dict[str, Any], source: str = "scenario"
 def builtin_scenarios() -> dict[str, Path]:
     """Names and paths of the scenarios shipped with flexarm."""
     folder = resources.files("flexarm") / "scenarios"
-    return {p.name.removesuffix(".toml"): Path(str(p)) for p in folder.iterdir()
-            if p.name.endswith(".toml")}
+    return {
+        p.name.removesuffix(".toml"): Path(str(p))
+        for p in folder.iterdir()
+        if p.name.endswith(".toml")
+    }
 
 
 def resolve_scenario_path(name_or_path: str | Path) -> Path:
@@ -423,8 +480,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario | MultiLinkScenario:
     controller ``file`` is read from the scenario's folder, not the working directory."""
     path = resolve_scenario_path(name_or_path)
     if path.is_dir():
-        raise ScenarioError(f"{path}: is a folder; give a scenario TOML file or a built-in "
-                            "name (flexarm scenarios lists them)")
+        raise ScenarioError(
+            f"{path}: is a folder; give a scenario TOML file or a built-in "
+            "name (flexarm scenarios lists them)"
+        )
     data = _resolve_files(_read_toml(path, "scenario"), path.parent)
     return scenario_from_dict(data, source=str(path))
 

@@ -77,14 +77,23 @@ class PairPhasors:
 
     @classmethod
     def from_analyses(cls, base: HarmonicAnalysis, partner: HarmonicAnalysis) -> PairPhasors:
-        return cls(base.phasor("motor_angle", 1), base.phasor("motor_angle", 3),
-                   base.phasor("current", 3), partner.phasor("motor_angle", 1),
-                   partner.phasor("current", 1), base.friction(3), partner.friction(1))
+        return cls(
+            base.phasor("motor_angle", 1),
+            base.phasor("motor_angle", 3),
+            base.phasor("current", 3),
+            partner.phasor("motor_angle", 1),
+            partner.phasor("current", 1),
+            base.friction(3),
+            partner.friction(1),
+        )
 
     def g_inv_3w0(self, cf: float) -> complex:
         """G'⁻¹(3ω0) (A/rad) from eq. (5) for a trial C_f (A)."""
-        s1 = (square_wave_phasor(self.theta1_partner, 1) if self.shape1_partner is None
-              else self.shape1_partner)
+        s1 = (
+            square_wave_phasor(self.theta1_partner, 1)
+            if self.shape1_partner is None
+            else self.shape1_partner
+        )
         return (self.current1_partner - cf * s1) / self.theta1_partner
 
     def cf_prime(self, cf: float) -> complex:
@@ -116,9 +125,15 @@ class PairEstimate:
     at_search_bound: bool = False
 
 
-def estimate_pair(ph: PairPhasors, *, scale: float | None = None, omega: float = math.nan,
-                  partner_omega: float = math.nan, name: str = "",
-                  partner_name: str = "") -> PairEstimate:
+def estimate_pair(
+    ph: PairPhasors,
+    *,
+    scale: float | None = None,
+    omega: float = math.nan,
+    partner_omega: float = math.nan,
+    name: str = "",
+    partner_name: str = "",
+) -> PairEstimate:
     """Minimise eq. (6) over C_f > 0 (direct search on ln C_f, see module docstring).
 
     ``scale`` (A) centres the search; by default the larger fundamental current amplitude
@@ -131,20 +146,33 @@ def estimate_pair(ph: PairPhasors, *, scale: float | None = None, omega: float =
     costs = np.array([ph.cost(math.exp(u)) for u in grid])
     k = int(np.argmin(costs))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
-    res: Any = minimize_scalar(lambda u: ph.cost(math.exp(u)), bounds=(a, b), method="bounded",
-                          options={"xatol": 1e-12, "maxiter": 500})
+    res: Any = minimize_scalar(
+        lambda u: ph.cost(math.exp(u)),
+        bounds=(a, b),
+        method="bounded",
+        options={"xatol": 1e-12, "maxiter": 500},
+    )
     if not res.success:
         warnings.warn(
             f"Coulomb estimate {name or omega!s}: bounded Brent search stopped without "
             f"converging ({res.message}); the best grid point is used. Check the pair's "
             "phasors (a current amplitude near zero, or no 3ω0 response)",
-            RuntimeWarning, stacklevel=2)
+            RuntimeWarning,
+            stacklevel=2,
+        )
     u = float(res.x) if res.success and res.fun <= costs[k] else float(grid[k])
     cf = math.exp(u)
-    return PairEstimate(omega=omega, partner_omega=partner_omega, coulomb_current=cf,
-                        cost=ph.cost(cf), cf_prime=ph.cf_prime(cf),
-                        g_3w0=1.0 / ph.g_inv_3w0(cf), name=name, partner_name=partner_name,
-                        at_search_bound=k in (0, len(grid) - 1))
+    return PairEstimate(
+        omega=omega,
+        partner_omega=partner_omega,
+        coulomb_current=cf,
+        cost=ph.cost(cf),
+        cf_prime=ph.cf_prime(cf),
+        g_3w0=1.0 / ph.g_inv_3w0(cf),
+        name=name,
+        partner_name=partner_name,
+        at_search_bound=k in (0, len(grid) - 1),
+    )
 
 
 @dataclass
@@ -167,8 +195,9 @@ class CoulombEstimate:
         return np.array([p.coulomb_current for p in self.pairs])
 
 
-def find_partners(analyses: Sequence[HarmonicAnalysis], tol: float = PARTNER_TOL
-                  ) -> list[tuple[int, int | None]]:
+def find_partners(
+    analyses: Sequence[HarmonicAnalysis], tol: float = PARTNER_TOL
+) -> list[tuple[int, int | None]]:
     """For each experiment k, the index of its 3ω0 partner (closest within ``tol``) or None."""
     w = np.array([a.omega0 for a in analyses])
     out = []
@@ -180,8 +209,9 @@ def find_partners(analyses: Sequence[HarmonicAnalysis], tol: float = PARTNER_TOL
     return out
 
 
-def estimate_coulomb(analyses: Sequence[HarmonicAnalysis], *, tol: float = PARTNER_TOL
-                     ) -> CoulombEstimate:
+def estimate_coulomb(
+    analyses: Sequence[HarmonicAnalysis], *, tol: float = PARTNER_TOL
+) -> CoulombEstimate:
     """C_f (A) from every ω0/3ω0 pair among ``analyses`` (eqs. (4)-(6), module docstring).
 
     An experiment that has no 3ω0 partner and is not itself the partner of another one
@@ -198,24 +228,39 @@ def estimate_coulomb(analyses: Sequence[HarmonicAnalysis], *, tol: float = PARTN
         if j is None:
             if k not in partners:
                 unpaired.append(a.name)
-                _warn(f"{a.name}: no 3ω0 partner for ω0 = {a.omega0:.6g} rad/s (no experiment "
-                      f"within {100 * tol:g} % of {3 * a.omega0:.6g} rad/s); this frequency "
-                      "is not used to estimate the Coulomb friction", msgs)
+                _warn(
+                    f"{a.name}: no 3ω0 partner for ω0 = {a.omega0:.6g} rad/s (no experiment "
+                    f"within {100 * tol:g} % of {3 * a.omega0:.6g} rad/s); this frequency "
+                    "is not used to estimate the Coulomb friction",
+                    msgs,
+                )
             continue
         b = analyses[j]
-        e = estimate_pair(PairPhasors.from_analyses(a, b), omega=a.omega0,
-                          partner_omega=b.omega0, name=a.name, partner_name=b.name)
+        e = estimate_pair(
+            PairPhasors.from_analyses(a, b),
+            omega=a.omega0,
+            partner_omega=b.omega0,
+            name=a.name,
+            partner_name=b.name,
+        )
         if e.at_search_bound:
-            _warn(f"{a.name}: the Coulomb estimate for ω0 = {a.omega0:.6g} rad/s lies at the "
-                  f"edge of the search range ({e.coulomb_current:.3g} A); the pair's data do "
-                  "not fit eqs. (4)-(5)", msgs)
+            _warn(
+                f"{a.name}: the Coulomb estimate for ω0 = {a.omega0:.6g} rad/s lies at the "
+                f"edge of the search range ({e.coulomb_current:.3g} A); the pair's data do "
+                "not fit eqs. (4)-(5)",
+                msgs,
+            )
         est.append(e)
     if not est:
         if analyses:
-            _warn("no ω0/3ω0 pair of experiments: the Coulomb friction cannot be estimated "
-                  f"(frequencies: {', '.join(f'{a.omega0:.4g}' for a in analyses)} rad/s)", msgs)
+            _warn(
+                "no ω0/3ω0 pair of experiments: the Coulomb friction cannot be estimated "
+                f"(frequencies: {', '.join(f'{a.omega0:.4g}' for a in analyses)} rad/s)",
+                msgs,
+            )
         return CoulombEstimate(None, [], None, None, unpaired, msgs)
     v = np.array([e.coulomb_current for e in est])
     mean = float(v.mean())
-    return CoulombEstimate(mean, est, float(v.std()), float(np.max(np.abs(v - mean)) / mean),
-                           unpaired, msgs)
+    return CoulombEstimate(
+        mean, est, float(v.std()), float(np.max(np.abs(v - mean)) / mean), unpaired, msgs
+    )

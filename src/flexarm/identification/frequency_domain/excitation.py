@@ -70,18 +70,29 @@ def crest_factor(u: np.ndarray) -> float:
     return float(np.max(np.abs(u).max(axis=1) / np.sqrt((u**2).mean(axis=1))))
 
 
-def multisine_lines(period: int, fs: float, f_min: float, f_max: float, *, kind: str = "odd",
-                    grid: str = "linear", n_lines: int | None = None, block: int = 3,
-                    rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+def multisine_lines(
+    period: int,
+    fs: float,
+    f_min: float,
+    f_max: float,
+    *,
+    kind: str = "odd",
+    grid: str = "linear",
+    n_lines: int | None = None,
+    block: int = 3,
+    rng: np.random.Generator | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Excited and detection lines (DFT indices) of a multisine design in [f_min, f_max]."""
     if kind not in KINDS:
         raise ExcitationError(f"kind={kind!r}: choose one of {', '.join(KINDS)}")
     df = fs / period
     k0, k1 = max(1, int(np.ceil(f_min / df - 1e-9))), int(np.floor(f_max / df + 1e-9))
     if k1 > period // 2 - 1 or k0 > k1:
-        raise ExcitationError(f"band {f_min:g}–{f_max:g} Hz holds no line of the grid "
-                              f"{df:g} Hz below Nyquist ({fs / 2:g} Hz); widen it or change "
-                              "the period")
+        raise ExcitationError(
+            f"band {f_min:g}–{f_max:g} Hz holds no line of the grid "
+            f"{df:g} Hz below Nyquist ({fs / 2:g} Hz); widen it or change "
+            "the period"
+        )
     k = np.arange(k0, k1 + 1)
     if grid == "log":
         n = n_lines or max(2, int(np.ceil(10 * np.log10(k1 / k0))))
@@ -94,8 +105,11 @@ def multisine_lines(period: int, fs: float, f_min: float, f_max: float, *, kind:
     detection = np.setdiff1d(np.arange(k.min(), k.max() + 1), k)
     if kind == "random-odd":
         rng = rng or np.random.default_rng(0)
-        drop = [g[rng.integers(len(g))] for g in np.array_split(k, max(1, len(k) // block))
-                if len(g) > 1]
+        drop = [
+            g[rng.integers(len(g))]
+            for g in np.array_split(k, max(1, len(k) // block))
+            if len(g) > 1
+        ]
         k = np.setdiff1d(k, drop)
         detection = np.setdiff1d(np.arange(k.min(), k.max() + 1), k)
     return k, detection
@@ -116,8 +130,9 @@ def _one_period(period: int, k: np.ndarray, amp: np.ndarray, phi: np.ndarray) ->
     return np.fft.irfft(X, period)
 
 
-def _min_crest(period: int, k: np.ndarray, amp: np.ndarray, phi: np.ndarray,
-               iterations: int = 200) -> np.ndarray:
+def _min_crest(
+    period: int, k: np.ndarray, amp: np.ndarray, phi: np.ndarray, iterations: int = 200
+) -> np.ndarray:
     """Iterative clipping: clip at a level below the peak, keep the phases, restore |A|."""
     best, best_cf = phi, crest_factor(_one_period(period, k, amp, phi))
     for i in range(iterations):
@@ -130,19 +145,35 @@ def _min_crest(period: int, k: np.ndarray, amp: np.ndarray, phi: np.ndarray,
     return best
 
 
-def multisine(period: int, fs: float, f_min: float, f_max: float, *, kind: str = "odd",
-              grid: str = "linear", phases: str = "random", rms: float | None = 1.0,
-              amplitude: float | None = None, periods: int = 1, realisations: int = 1,
-              n_lines: int | None = None, block: int = 3, seed: int = 0) -> Excitation:
+def multisine(
+    period: int,
+    fs: float,
+    f_min: float,
+    f_max: float,
+    *,
+    kind: str = "odd",
+    grid: str = "linear",
+    phases: str = "random",
+    rms: float | None = 1.0,
+    amplitude: float | None = None,
+    periods: int = 1,
+    realisations: int = 1,
+    n_lines: int | None = None,
+    block: int = 3,
+    seed: int = 0,
+) -> Excitation:
     """A periodic multisine (see the module docstring). Give ``rms`` (of the signal) or
     ``amplitude`` (per line); each realisation draws new random phases (and, for
     random-odd, keeps the same lines)."""
     if period < 4 or periods < 1 or realisations < 1:
-        raise ExcitationError(f"period={period}, periods={periods}, realisations={realisations}: "
-                              "need period >= 4 samples and at least one of each")
+        raise ExcitationError(
+            f"period={period}, periods={periods}, realisations={realisations}: "
+            "need period >= 4 samples and at least one of each"
+        )
     rng = np.random.default_rng(seed)
-    k, det = multisine_lines(period, fs, f_min, f_max, kind=kind, grid=grid, n_lines=n_lines,
-                             block=block, rng=rng)
+    k, det = multisine_lines(
+        period, fs, f_min, f_max, kind=kind, grid=grid, n_lines=n_lines, block=block, rng=rng
+    )
     rows = []
     for _ in range(realisations):
         a = np.ones(len(k))
@@ -168,12 +199,25 @@ def prbs(order: int, fs: float, *, amplitude: float = 1.0, periods: int = 1) -> 
         raise ExcitationError(f"order={order}: a PRBS needs 2 <= order <= 32")
     seq = max_len_seq(order)[0].astype(float) * 2 - 1
     P = len(seq)
-    return Excitation(np.tile(amplitude * seq, periods)[None], float(fs), P,
-                      np.arange(1, P // 2 + 1), np.array([], int))
+    return Excitation(
+        np.tile(amplitude * seq, periods)[None],
+        float(fs),
+        P,
+        np.arange(1, P // 2 + 1),
+        np.array([], int),
+    )
 
 
-def swept_sine(period: int, fs: float, f_min: float, f_max: float, *, method: str = "logarithmic",
-               amplitude: float = 1.0, periods: int = 1) -> Excitation:
+def swept_sine(
+    period: int,
+    fs: float,
+    f_min: float,
+    f_max: float,
+    *,
+    method: str = "logarithmic",
+    amplitude: float = 1.0,
+    periods: int = 1,
+) -> Excitation:
     """One sweep f_min → f_max per period (``scipy.signal.chirp``), repeated ``periods`` times."""
     from scipy.signal import chirp
 
@@ -188,22 +232,31 @@ def sine_pairs(omegas) -> list[tuple[float, float]]:
     return [(float(w), 3.0 * float(w)) for w in omegas]
 
 
-def write_excitation(path: str | Path, exc: Excitation, *, name: str = "reference",
-                     overwrite: bool = False) -> tuple[Path, Path]:
+def write_excitation(
+    path: str | Path, exc: Excitation, *, name: str = "reference", overwrite: bool = False
+) -> tuple[Path, Path]:
     """The signal as a log (``time`` + one column per realisation) and ``<stem>-lines.csv``
     with ``line,frequency_hz,role`` (excited / detection); returns both paths."""
     from flexarm.io.logs import write_log
 
     path = Path(path)
     cols = {name if i == 0 else f"{name}_{i}": row for i, row in enumerate(exc.signal)}
-    meta = {"period_samples": exc.period, "fs_hz": exc.fs, "crest_factor": f"{exc.crest_factor:.4f}",
-            "excited_lines": len(exc.excited), "detection_lines": len(exc.detection)}
+    meta = {
+        "period_samples": exc.period,
+        "fs_hz": exc.fs,
+        "crest_factor": f"{exc.crest_factor:.4f}",
+        "excited_lines": len(exc.excited),
+        "detection_lines": len(exc.detection),
+    }
     out = write_log(path, exc.time, cols, comments=meta, overwrite=overwrite, required=("time",))
     lines = path.with_name(path.stem + "-lines.csv")
     if lines.exists() and not overwrite:
         raise FileExistsError(f"{lines}: exists; pass overwrite to replace it")
-    rows = [(int(k), k * exc.fs / exc.period, "excited") for k in exc.excited] + \
-           [(int(k), k * exc.fs / exc.period, "detection") for k in exc.detection]
+    rows = [(int(k), k * exc.fs / exc.period, "excited") for k in exc.excited] + [
+        (int(k), k * exc.fs / exc.period, "detection") for k in exc.detection
+    ]
     rows.sort()
-    lines.write_text("line,frequency_hz,role\n" + "".join(f"{k},{f:.12g},{r}\n" for k, f, r in rows))
+    lines.write_text(
+        "line,frequency_hz,role\n" + "".join(f"{k},{f:.12g},{r}\n" for k, f, r in rows)
+    )
     return out, lines

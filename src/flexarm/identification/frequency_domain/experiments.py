@@ -61,13 +61,16 @@ def default_frequencies(model: SingleLinkModel, n_pairs: int = 7) -> list[float]
     a beam or motor resonance (a lightly damped free mode would leak into the harmonics).
     The low pairs carry the viscous coefficient V (the low real pole of G_m)."""
     wb = _beam_frequency(model)
-    res = [wb] + [abs(p) for p in np.roots(np.asarray(model.motor_tf().den[0][0])) if abs(p.imag) > 0]
+    res = [wb] + [
+        abs(p) for p in np.roots(np.asarray(model.motor_tf().den[0][0])) if abs(p.imag) > 0
+    ]
     base = np.geomspace(0.12 * wb, 2.0 * wb, 4 * n_pairs)
     chosen: list[float] = []
     for w in base:
         cand = (float(w), float(3 * w))
-        if all(min(abs(c - r) / r for r in res) > 0.10 for c in cand) and \
-                all(abs(w - c) / c > 0.3 for c in chosen):
+        if all(min(abs(c - r) / r for r in res) > 0.10 for c in cand) and all(
+            abs(w - c) / c > 0.3 for c in chosen
+        ):
             chosen.append(float(w))
         if len(chosen) == n_pairs:
             break
@@ -80,8 +83,9 @@ def _beam_frequency(model: SingleLinkModel) -> float:
     return float(np.min(w)) if w.size else 10.0
 
 
-def pd_gains(model: SingleLinkModel, dt: float, fraction: float = 0.25, zeta: float = 0.7
-             ) -> tuple[float, float]:
+def pd_gains(
+    model: SingleLinkModel, dt: float, fraction: float = 0.25, zeta: float = 0.7
+) -> tuple[float, float]:
     """kp, kd for crossover ω_c = fraction/T on the rigid motor (see module docstring)."""
     wc = fraction / dt
     ku = float(model.drive.k_u)
@@ -108,9 +112,14 @@ def amplitude(model: SingleLinkModel, w: float, design: SineDesign) -> float:
     return float(a)
 
 
-def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDesign = SineDesign(),
-                         *, overwrite: bool = False,
-                         progress: Callable[[str, int, int], None] | None = None) -> list[Path]:
+def run_sine_experiments(
+    scenario: Scenario,
+    out_dir: str | Path,
+    design: SineDesign = SineDesign(),
+    *,
+    overwrite: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> list[Path]:
     """Run one experiment per frequency; write ``sine_<ω>rad_s.csv`` files into ``out_dir``.
     Returns the paths. Refuses to replace existing files unless ``overwrite``."""
     out = Path(out_dir)
@@ -143,8 +152,9 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         t_rec0 = (design.ramp_periods + design.settle_periods) * period
         duration = t_rec0 + design.periods * period
         n = int(math.ceil(duration / dt)) + 1
-        sc = scenario.model_copy(update={
-            "simulation": scenario.simulation.model_copy(update={"duration": (n - 1) * dt})})
+        sc = scenario.model_copy(
+            update={"simulation": scenario.simulation.model_copy(update={"duration": (n - 1) * dt})}
+        )
         p = prepare(sc, controller=ctrl)
         assert sc.simulation is not None  # scenario's, with this run's duration
         t = p.time
@@ -152,9 +162,15 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         env = np.where(t < ramp_t, 0.5 * (1 - np.cos(np.pi * np.clip(t / ramp_t, 0, 1))), 1.0)
         p.references["reference"] = a * env * np.sin(w * t)
         cb = None if progress is None else (lambda d, tot, w=w: progress(f"{w:.4g} rad/s", d, tot))
-        out_arr = simulate_loop(p.loop, p.x0, p.references, p.n_samples,
-                                seed=sc.simulation.seed, progress=cb or (lambda d, tot: None),
-                                chunk=design.chunk)
+        out_arr = simulate_loop(
+            p.loop,
+            p.x0,
+            p.references,
+            p.n_samples,
+            seed=sc.simulation.seed,
+            progress=cb or (lambda d, tot: None),
+            chunk=design.chunk,
+        )
         res = to_result(p, out_arr)
         keep = t >= t_rec0 - 1e-12
         cols = res.exchange_columns()
@@ -163,11 +179,20 @@ def run_sine_experiments(scenario: Scenario, out_dir: str | Path, design: SineDe
         from flexarm.io.logs import write_log
 
         out.mkdir(parents=True, exist_ok=True)
-        write_log(path, rec.pop("time"), rec, overwrite=overwrite, comments=[
-            f"scenario: {scenario.name}", "experiment: sine",
-            f"omega0_rad_s: {w:.10g}", f"amplitude_rad: {a:.6g}",
-            f"controller: pd KP={kp:.6g} KD={kd:.6g}", f"sampling_period_s: {dt:g}",
-            f"discarded_periods: {design.ramp_periods + design.settle_periods}",
-        ])
+        write_log(
+            path,
+            rec.pop("time"),
+            rec,
+            overwrite=overwrite,
+            comments=[
+                f"scenario: {scenario.name}",
+                "experiment: sine",
+                f"omega0_rad_s: {w:.10g}",
+                f"amplitude_rad: {a:.6g}",
+                f"controller: pd KP={kp:.6g} KD={kd:.6g}",
+                f"sampling_period_s: {dt:g}",
+                f"discarded_periods: {design.ramp_periods + design.settle_periods}",
+            ],
+        )
         paths.append(path)
     return paths

@@ -58,8 +58,7 @@ class FrequencyResponse:
         """``which``: ``"motor"`` (corrected if available, else raw), ``"motor_raw"``,
         ``"motor_corrected"`` or ``"beam"``."""
         data = {
-            "motor": self.motor_corrected if self.motor_corrected is not None
-            else self.motor_raw,
+            "motor": self.motor_corrected if self.motor_corrected is not None else self.motor_raw,
             "motor_raw": self.motor_raw,
             "motor_corrected": self.motor_corrected,
             "beam": self.beam,
@@ -71,8 +70,9 @@ class FrequencyResponse:
         return control.FrequencyResponseData(data[which], self.omega, name=which)
 
 
-def frequency_response(analyses: Sequence[HarmonicAnalysis],
-                       coulomb_current: float | None = None) -> FrequencyResponse:
+def frequency_response(
+    analyses: Sequence[HarmonicAnalysis], coulomb_current: float | None = None
+) -> FrequencyResponse:
     """Raw and corrected (eq. (7)) motor responses and beam response of all experiments.
 
     The correction subtracts C_f times the friction shape's fundamental of each experiment
@@ -85,8 +85,19 @@ def frequency_response(analyses: Sequence[HarmonicAnalysis],
     tt = np.array([a.phasor("tip_angle", 1) for a in an])
     cur = np.array([a.phasor("current", 1) for a in an])
     shape = np.array([a.friction(1) for a in an])
-    corr = (None if coulomb_current is None
-            else corrected_motor_response(th, cur, coulomb_current, shape))
-    return FrequencyResponse(omega=w, names=[a.name for a in an], theta_m=th, theta_t=tt,
-                             current=cur, motor_raw=th / cur, motor_corrected=corr,
-                             beam=tt / th, coulomb_current=coulomb_current)
+    corr = (
+        None
+        if coulomb_current is None
+        else corrected_motor_response(th, cur, coulomb_current, shape)
+    )
+    return FrequencyResponse(
+        omega=w,
+        names=[a.name for a in an],
+        theta_m=th,
+        theta_t=tt,
+        current=cur,
+        motor_raw=th / cur,
+        motor_corrected=corr,
+        beam=tt / th,
+        coulomb_current=coulomb_current,
+    )

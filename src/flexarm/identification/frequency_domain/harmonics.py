@@ -63,13 +63,14 @@ def estimate_frequency(t: np.ndarray, x: np.ndarray, *, name: str = "signal") ->
     y = x - x.mean()
     scale = float(np.max(np.abs(y))) if n else 0.0
     if n < 4 or scale == 0.0 or not np.isfinite(scale):
-        raise IdentificationError(f"{name}: the reference is constant; no sinusoid to find "
-                                  "the excitation frequency from")
+        raise IdentificationError(
+            f"{name}: the reference is constant; no sinusoid to find the excitation frequency from"
+        )
     nfft = 1 << int(math.ceil(math.log2(4 * n)))
     spec = np.abs(np.fft.rfft(y * np.hanning(n), nfft))
     k = int(np.argmax(spec[1:])) + 1
     if 1 <= k < len(spec) - 1:
-        la, lb, lc = np.log(spec[k - 1:k + 2] + 1e-300)
+        la, lb, lc = np.log(spec[k - 1 : k + 2] + 1e-300)
         den = la - 2 * lb + lc
         delta = 0.5 * (la - lc) / den if den != 0 else 0.0
     else:
@@ -113,8 +114,9 @@ def estimate_frequency(t: np.ndarray, x: np.ndarray, *, name: str = "signal") ->
     return float(w)
 
 
-def whole_periods(t: np.ndarray, omega0: float, *, discard_periods: float = 1.0,
-                  name: str = "signal") -> tuple[int, int, int]:
+def whole_periods(
+    t: np.ndarray, omega0: float, *, discard_periods: float = 1.0, name: str = "signal"
+) -> tuple[int, int, int]:
     """(start, stop, N): the window of the last N whole periods of 2π/ω0 in ``t``.
 
     N is the largest whole number of periods that fits after ``discard_periods`` periods
@@ -132,13 +134,20 @@ def whole_periods(t: np.ndarray, omega0: float, *, discard_periods: float = 1.0,
             f"{name}: fewer than two whole periods of the excitation: the record is "
             f"{n * dt:.6g} s long, {total:.3g} periods of 2π/ω0 = {T:.6g} s "
             f"(ω0 = {omega0:.6g} rad/s); record at least two periods (more, to let transients "
-            "die out)")
+            "die out)"
+        )
     M = min(n, int(round(N * T / dt)))
     return n - M, n, N
 
 
-def fourier_phasors(t: np.ndarray, x: np.ndarray | Sequence[np.ndarray], omega0: float,
-                    n_max: int, *, window: tuple[int, int] | None = None) -> np.ndarray:
+def fourier_phasors(
+    t: np.ndarray,
+    x: np.ndarray | Sequence[np.ndarray],
+    omega0: float,
+    n_max: int,
+    *,
+    window: tuple[int, int] | None = None,
+) -> np.ndarray:
     """Phasors X_0 … X_nmax of one signal (shape (n_max+1,)) or of several signals
     (shape (k, n_max+1)), by least squares over ``window`` = (start, stop) indices.
 
@@ -164,8 +173,9 @@ def fourier_phasors(t: np.ndarray, x: np.ndarray | Sequence[np.ndarray], omega0:
     return out[0] if single else out
 
 
-def saturation_level(x: np.ndarray, *, min_fraction: float = 0.02,
-                     rel_tol: float = 1e-6) -> float | None:
+def saturation_level(
+    x: np.ndarray, *, min_fraction: float = 0.02, rel_tol: float = 1e-6
+) -> float | None:
     """The level |x| of a flat plateau at the extreme value of ``x``, or None.
 
     A plateau: at least ``min_fraction`` of the samples within ``rel_tol``·max|x| of
@@ -243,8 +253,9 @@ def ideal_friction_phasor(theta_m1: complex, n: int = 1) -> complex:
     return complex(4.0 / (n * np.pi) * np.exp(1j * (n * np.angle(theta_m1) + np.pi / 2)))
 
 
-def measured_friction_shape(t: np.ndarray, theta_phasors: np.ndarray, omega0: float,
-                            n_max: int) -> np.ndarray:
+def measured_friction_shape(
+    t: np.ndarray, theta_phasors: np.ndarray, omega0: float, n_max: int
+) -> np.ndarray:
     """Phasors 0…n_max of sign(θ̇m(t)) with θ̇m rebuilt from θm's harmonics 1…n_max.
 
     FRB Sec. II: the high-gain loop "allows us to determine the velocity of the motor and,
@@ -262,11 +273,17 @@ def measured_friction_shape(t: np.ndarray, theta_phasors: np.ndarray, omega0: fl
     return fourier_phasors(t, np.sign(v), omega0, n_max)
 
 
-def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = None,
-                omega0: float | None = None, discard_periods: float = 1.0,
-                saturation_fraction: float = 0.02,
-                held: Iterable[str] = HELD_COLUMNS,
-                friction_shape: str = "measured") -> HarmonicAnalysis:
+def analyse_log(
+    log: Log,
+    *,
+    n_max: int = 5,
+    columns: Iterable[str] | None = None,
+    omega0: float | None = None,
+    discard_periods: float = 1.0,
+    saturation_fraction: float = 0.02,
+    held: Iterable[str] = HELD_COLUMNS,
+    friction_shape: str = "measured",
+) -> HarmonicAnalysis:
     """Frequency, analysis window, phasors of harmonics 0…``n_max`` of ``columns``
     (default: all but time) and a saturation check of the current (warning).
 
@@ -285,23 +302,31 @@ def analyse_log(log: Log, *, n_max: int = 5, columns: Iterable[str] | None = Non
         omega0 = estimate_frequency(t, log["reference"], name=where)
     start, stop, N = whole_periods(t, omega0, discard_periods=discard_periods, name=where)
     cols = list(log.signals) if columns is None else list(columns)
-    ph = fourier_phasors(t, np.stack([log[c] for c in cols]), omega0, n_max,
-                         window=(start, stop))
+    ph = fourier_phasors(t, np.stack([log[c] for c in cols]), omega0, n_max, window=(start, stop))
     held = set(held)
     hold = zoh_factor(omega0 * np.arange(n_max + 1), log.dt)
-    res = HarmonicAnalysis(name=name, omega0=float(omega0), n_periods=N, start=start,
-                           stop=stop, phasors={c: ph[k] * (hold if c in held else 1.0)
-                                               for k, c in enumerate(cols)})
+    res = HarmonicAnalysis(
+        name=name,
+        omega0=float(omega0),
+        n_periods=N,
+        start=start,
+        stop=stop,
+        phasors={c: ph[k] * (hold if c in held else 1.0) for k, c in enumerate(cols)},
+    )
     if friction_shape == "measured" and "motor_angle" in res.phasors:
-        res.friction_shape = measured_friction_shape(t[start:stop],
-                                                     res.phasors["motor_angle"], omega0, n_max)
+        res.friction_shape = measured_friction_shape(
+            t[start:stop], res.phasors["motor_angle"], omega0, n_max
+        )
         res.friction_shape_kind = "measured"
     if "current" in log.signals:
         level = saturation_level(log["current"], min_fraction=saturation_fraction)
         if level is not None:
             res.saturation = level
             frac = np.mean(np.abs(log["current"]) >= level * (1 - 1e-6))
-            _warn(f"{where}: the current looks saturated: flat at ±{level:.6g} A for "
-                  f"{100 * frac:.1f} % of the samples; the model of FRB eqs. (1)-(5) does not "
-                  "hold there (lower the excitation amplitude)", res.warnings)
+            _warn(
+                f"{where}: the current looks saturated: flat at ±{level:.6g} A for "
+                f"{100 * frac:.1f} % of the samples; the model of FRB eqs. (1)-(5) does not "
+                "hold there (lower the excitation amplitude)",
+                res.warnings,
+            )
     return res

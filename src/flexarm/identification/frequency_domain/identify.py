@@ -81,8 +81,12 @@ def _roots(poly: Sequence[float]) -> list[dict[str, float]]:
     return [_cx(r) for r in np.roots(np.asarray(poly, dtype=float))] if len(poly) > 1 else []
 
 
-def arm_parameters(motor_tf: control.TransferFunction, beam_tf: control.TransferFunction,
-                   motor_constant: float, omega: np.ndarray) -> dict[str, float]:
+def arm_parameters(
+    motor_tf: control.TransferFunction,
+    beam_tf: control.TransferFunction,
+    motor_constant: float,
+    omega: np.ndarray,
+) -> dict[str, float]:
     """J (kg·m²), V (N·m·s/rad), C (N·m/rad) from G_m = K/(J s² + V s + C(1 − G_b)).
 
     Linear least squares over ``omega`` (rad/s) of the relative model error
@@ -91,16 +95,19 @@ def arm_parameters(motor_tf: control.TransferFunction, beam_tf: control.Transfer
     w = np.asarray(omega, dtype=float)
     gm = tf_response(motor_tf, w)
     gb = tf_response(beam_tf, w)
-    rows = (gm / motor_constant)[:, None] * np.column_stack(
-        [-w**2 + 0j, 1j * w, 1 - gb])
+    rows = (gm / motor_constant)[:, None] * np.column_stack([-(w**2) + 0j, 1j * w, 1 - gb])
     A = np.vstack([rows.real, rows.imag])
     b = np.concatenate([np.ones_like(w), np.zeros_like(w)])
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     x = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
     res = A @ x - b
-    return {"inertia": float(x[0]), "viscous": float(x[1]), "stiffness": float(x[2]),
-            "rms_relative_error": float(np.sqrt(np.mean(res[:len(w)]**2 + res[len(w):]**2)))}
+    return {
+        "inertia": float(x[0]),
+        "viscous": float(x[1]),
+        "stiffness": float(x[2]),
+        "rms_relative_error": float(np.sqrt(np.mean(res[: len(w)] ** 2 + res[len(w) :] ** 2))),
+    }
 
 
 @dataclass
@@ -165,16 +172,24 @@ class IdentificationResult:
         """The headline numbers: C_f, K, the fitted parameters, the poles; the warnings."""
         rows: list[tuple[str, object]] = [
             ("experiments", len(self.analyses)),
-            ("Coulomb current C_f", None if self.coulomb_current is None
-             else f"{self.coulomb_current:.4g} A"),
-            ("Coulomb torque K·C_f", None if self.coulomb_torque is None
-             else f"{self.coulomb_torque:.4g} N*m"),
-            ("motor constant K", f"{self.motor_constant:.4g} N*m/A")]
+            (
+                "Coulomb current C_f",
+                None if self.coulomb_current is None else f"{self.coulomb_current:.4g} A",
+            ),
+            (
+                "Coulomb torque K·C_f",
+                None if self.coulomb_torque is None else f"{self.coulomb_torque:.4g} N*m",
+            ),
+            ("motor constant K", f"{self.motor_constant:.4g} N*m/A"),
+        ]
         rows += [(k, v) for k, v in self.parameters.items()]
-        rows += [("G_m poles", [complex(p) for p in np.roots(self.motor_tf.den[0][0])]),
-                 ("G_b poles", [complex(p) for p in np.roots(self.beam_tf.den[0][0])])]
-        return Table(f"IdentificationResult ({len(self.files)} files)", rows,
-                     notes=list(self.warnings))
+        rows += [
+            ("G_m poles", [complex(p) for p in np.roots(self.motor_tf.den[0][0])]),
+            ("G_b poles", [complex(p) for p in np.roots(self.beam_tf.den[0][0])]),
+        ]
+        return Table(
+            f"IdentificationResult ({len(self.files)} files)", rows, notes=list(self.warnings)
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -212,39 +227,57 @@ class IdentificationResult:
         per = []
         for k, name in enumerate(fr.names):
             a = by_name[name]
-            per.append({
-                "file": name,
-                "omega": float(fr.omega[k]),
-                "periods_analysed": a.n_periods,
-                "role": roles.get(name, "unpaired"),
-                "motor_raw": _cx(fr.motor_raw[k]),
-                "motor_corrected": None if fr.motor_corrected is None
-                else _cx(fr.motor_corrected[k]),
-                "beam": _cx(fr.beam[k]),
-                "motor_fit_relative_error": float(self.motor_fit.relative_error[k]),
-                "beam_fit_relative_error": float(self.beam_fit.relative_error[k]),
-                "current_saturation": a.saturation,
-            })
+            per.append(
+                {
+                    "file": name,
+                    "omega": float(fr.omega[k]),
+                    "periods_analysed": a.n_periods,
+                    "role": roles.get(name, "unpaired"),
+                    "motor_raw": _cx(fr.motor_raw[k]),
+                    "motor_corrected": None
+                    if fr.motor_corrected is None
+                    else _cx(fr.motor_corrected[k]),
+                    "beam": _cx(fr.beam[k]),
+                    "motor_fit_relative_error": float(self.motor_fit.relative_error[k]),
+                    "beam_fit_relative_error": float(self.beam_fit.relative_error[k]),
+                    "current_saturation": a.saturation,
+                }
+            )
         c = self.coulomb
         return {
             "coulomb_current": self.coulomb_current,
             "coulomb_torque": self.coulomb_torque,
             "coulomb_current_per_frequency": [
-                {"omega": e.omega, "partner_omega": e.partner_omega,
-                 "coulomb_current": e.coulomb_current, "cost": e.cost,
-                 "file": e.name, "partner_file": e.partner_name} for e in c.pairs],
-            "coulomb_spread": {"mean": c.coulomb_current, "std": c.std,
-                               "max_relative_deviation": c.max_rel_dev,
-                               "pairs": len(c.pairs)},
+                {
+                    "omega": e.omega,
+                    "partner_omega": e.partner_omega,
+                    "coulomb_current": e.coulomb_current,
+                    "cost": e.cost,
+                    "file": e.name,
+                    "partner_file": e.partner_name,
+                }
+                for e in c.pairs
+            ],
+            "coulomb_spread": {
+                "mean": c.coulomb_current,
+                "std": c.std,
+                "max_relative_deviation": c.max_rel_dev,
+                "pairs": len(c.pairs),
+            },
             "motor_constant": self.motor_constant,
             "motor_tf": tf_coefficients(self.motor_tf),
-            "motor_tf_method": "structured physical fit (J, V, C, C_f)" if self.use_physical
-            else ("free fit to the corrected data" if fr.motor_corrected is not None
-                              else "free fit to the raw data"),
+            "motor_tf_method": "structured physical fit (J, V, C, C_f)"
+            if self.use_physical
+            else (
+                "free fit to the corrected data"
+                if fr.motor_corrected is not None
+                else "free fit to the raw data"
+            ),
             "motor_tf_corrected_fit": tf_coefficients(self.motor_fit.tf),
             "motor_tf_fitted_to": "corrected" if fr.motor_corrected is not None else "raw",
             "physical_fit": None if self.physical is None else self.physical.to_dict(),
-            "motor_tf_raw": None if self.motor_fit_raw is None
+            "motor_tf_raw": None
+            if self.motor_fit_raw is None
             else tf_coefficients(self.motor_fit_raw.tf),
             "motor_poles": _roots(tf_coefficients(self.motor_tf)["den"]),
             "motor_zeros": _roots(tf_coefficients(self.motor_tf)["num"]),
@@ -254,14 +287,22 @@ class IdentificationResult:
             "frequency_response": per,
             "warnings": list(self.warnings),
             "settings": dict(self.settings),
-            "units": {"omega": "rad/s", "coulomb_current": "A", "coulomb_torque": "N*m",
-                      "motor_constant": "N*m/A", "motor_tf": "rad/A (s in rad/s)",
-                      "beam_tf": "rad/rad", "inertia": "kg*m**2", "viscous": "N*m*s/rad",
-                      "stiffness": "N*m/rad"},
+            "units": {
+                "omega": "rad/s",
+                "coulomb_current": "A",
+                "coulomb_torque": "N*m",
+                "motor_constant": "N*m/A",
+                "motor_tf": "rad/A (s in rad/s)",
+                "beam_tf": "rad/rad",
+                "inertia": "kg*m**2",
+                "viscous": "N*m*s/rad",
+                "stiffness": "N*m/rad",
+            },
         }
 
-    def to_json(self, path: str | Path | None = None, *, indent: int = 2,
-                overwrite: bool = True) -> str:
+    def to_json(
+        self, path: str | Path | None = None, *, indent: int = 2, overwrite: bool = True
+    ) -> str:
         """The :meth:`to_dict` summary as JSON text; also written to ``path`` if given
         (atomically, :func:`flexarm.io.write.write_text`; an existing file is replaced unless
         ``overwrite=False``)."""
@@ -286,8 +327,9 @@ class IdentificationResult:
         def panel(fig, title, model, data):
             ax1, ax2 = fig.subplots(2, 1, sharex=True)
             ph_m = np.degrees(np.unwrap(np.angle(model)))
-            ax1.semilogx(wg, 20 * np.log10(np.abs(model)), "-", color="k", lw=1.2,
-                         label="fitted model")
+            ax1.semilogx(
+                wg, 20 * np.log10(np.abs(model)), "-", color="k", lw=1.2, label="fitted model"
+            )
             ax2.semilogx(wg, ph_m, "-", color="k", lw=1.2)
             for label, H, marker in data:
                 ph = np.degrees(np.angle(H))
@@ -309,15 +351,26 @@ class IdentificationResult:
         if fr.motor_corrected is not None:
             data.append(("corrected data, eq. (7)", fr.motor_corrected, "D"))
         cf = self.coulomb_current
-        panel(fig, "Motor G_m = θm/i (rad/A)" + (f", C_f = {cf:.4g} A" if cf else ""),
-              tf_response(self.motor_tf, wg), data)
+        panel(
+            fig,
+            "Motor G_m = θm/i (rad/A)" + (f", C_f = {cf:.4g} A" if cf else ""),
+            tf_response(self.motor_tf, wg),
+            data,
+        )
         if self.physical is not None:
             ax1, ax2 = fig.axes[:2]
             other = self.motor_fit.tf if self.use_physical else self.physical.motor_tf
             h = tf_response(other, wg)
-            ax1.semilogx(wg, 20 * np.log10(np.abs(h)), "--", color="0.5", lw=1,
-                         label="free fit to corrected data" if self.use_physical
-                         else "structured fit (J, V, C, C_f)")
+            ax1.semilogx(
+                wg,
+                20 * np.log10(np.abs(h)),
+                "--",
+                color="0.5",
+                lw=1,
+                label="free fit to corrected data"
+                if self.use_physical
+                else "structured fit (J, V, C, C_f)",
+            )
             ax2.semilogx(wg, np.degrees(np.unwrap(np.angle(h))), "--", color="0.5", lw=1)
             ax1.legend(loc="best", fontsize=8)
         p = out / "motor_bode.png"
@@ -325,15 +378,20 @@ class IdentificationResult:
         paths.append(p)
 
         fig = Figure(figsize=(7, 6), layout="constrained")
-        panel(fig, "Beam G_b = θt/θm", tf_response(self.beam_tf, wg),
-              [("experimental data", fr.beam, "x")])
+        panel(
+            fig,
+            "Beam G_b = θt/θm",
+            tf_response(self.beam_tf, wg),
+            [("experimental data", fr.beam, "x")],
+        )
         p = out / "beam_bode.png"
         save_figure(fig, p, overwrite=True, dpi=dpi)
         paths.append(p)
         return paths
 
-    def to_scenario_dict(self, *, current_limit: float | str | None = None,
-                         name: str = "identified_arm") -> dict[str, Any]:
+    def to_scenario_dict(
+        self, *, current_limit: float | str | None = None, name: str = "identified_arm"
+    ) -> dict[str, Any]:
         """Scenario fragment for a single-link arm with a transfer-function beam.
 
         ``arm.motor``: drive ``current``, J, V (from :func:`arm_parameters`), K, and the
@@ -351,11 +409,15 @@ class IdentificationResult:
         if bad:
             raise IdentificationError(
                 "cannot build a scenario: the identified parameters are not physical ("
-                + ", ".join(bad) + "); check the fitted orders and the data")
-        notes = {"source": "flexarm.identification.frequency_domain.identify (FRB Sec. II)",
-                 "files": ", ".join(str(f) for f in self.files),
-                 "parameters_from": "least squares on the fitted G_m, G_b: "
-                                    "G_m = K/(J s^2 + V s + C (1 - G_b))"}
+                + ", ".join(bad)
+                + "); check the fitted orders and the data"
+            )
+        notes = {
+            "source": "flexarm.identification.frequency_domain.identify (FRB Sec. II)",
+            "files": ", ".join(str(f) for f in self.files),
+            "parameters_from": "least squares on the fitted G_m, G_b: "
+            "G_m = K/(J s^2 + V s + C (1 - G_b))",
+        }
         if current_limit is None:
             sat = [a.saturation for a in self.analyses if a.saturation is not None]
             if sat:
@@ -363,25 +425,38 @@ class IdentificationResult:
                 notes["current_limit"] = "saturation level seen in the logs"
             else:
                 limit = float(max(np.max(np.abs(lg["current"])) for lg in self.logs))
-                notes["current_limit"] = ("largest |current| recorded (a lower bound; give "
-                                          "the amplifier's limit)")
+                notes["current_limit"] = (
+                    "largest |current| recorded (a lower bound; give the amplifier's limit)"
+                )
         else:
             limit = to_si(current_limit, "A", field="current_limit")
-        friction = ({"model": "coulomb", "coulomb": float(self.coulomb_torque)}
-                    if self.coulomb_torque is not None else {"model": "none"})
+        friction = (
+            {"model": "coulomb", "coulomb": float(self.coulomb_torque)}
+            if self.coulomb_torque is not None
+            else {"model": "none"}
+        )
         gb = tf_coefficients(self.beam_tf)
         return {
             "name": name,
             "description": "single-link arm identified from sinusoidal experiments "
-                           "(Feliu, Rattan & Brown 1993, Sec. II)",
+            "(Feliu, Rattan & Brown 1993, Sec. II)",
             "notes": notes,
             "arm": {
                 "kind": "single_link",
-                "motor": {"drive": "current", "inertia": J, "viscous": max(V, 0.0),
-                          "torque_constant": self.motor_constant, "current_limit": limit},
+                "motor": {
+                    "drive": "current",
+                    "inertia": J,
+                    "viscous": max(V, 0.0),
+                    "torque_constant": self.motor_constant,
+                    "current_limit": limit,
+                },
                 "friction": friction,
-                "beam": {"model": "transfer_function", "stiffness": C,
-                         "tip_num": gb["num"], "tip_den": gb["den"]},
+                "beam": {
+                    "model": "transfer_function",
+                    "stiffness": C,
+                    "tip_num": gb["num"],
+                    "tip_den": gb["den"],
+                },
             },
         }
 
@@ -398,10 +473,17 @@ def _unit_static_gain(fit: TFEstimate, omega: np.ndarray, H: np.ndarray) -> TFEs
     g = den[-1] / num[-1]
     tf = control.tf(num * g, den)
     err = np.abs(tf_response(tf, omega) - H) / np.abs(H)
-    params = {k: ({**v, "value": v["value"] * g, "std": v["std"] * abs(g)} if k.startswith("b")
-                  else v) for k, v in fit.parameters.items()}
-    return replace(fit, tf=tf, relative_error=err, parameters=params,
-                   message=fit.message + "; numerator scaled to G_b(0) = 1")
+    params = {
+        k: ({**v, "value": v["value"] * g, "std": v["std"] * abs(g)} if k.startswith("b") else v)
+        for k, v in fit.parameters.items()
+    }
+    return replace(
+        fit,
+        tf=tf,
+        relative_error=err,
+        parameters=params,
+        message=fit.message + "; numerator scaled to G_b(0) = 1",
+    )
 
 
 def _collect_files(files_or_dir, pattern: str) -> list[Path]:
@@ -413,7 +495,8 @@ def _collect_files(files_or_dir, pattern: str) -> list[Path]:
                 raise IdentificationError(
                     f"{p}: no experiment logs ({pattern}) in this directory; expected one CSV "
                     "file per sinusoidal experiment (columns time,reference,current,"
-                    "motor_angle,tip_angle)")
+                    "motor_angle,tip_angle)"
+                )
             return files
         if not p.exists():
             raise IdentificationError(f"{p}: no such file or directory")
@@ -427,14 +510,24 @@ def _collect_files(files_or_dir, pattern: str) -> list[Path]:
     return files
 
 
-def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: float | str,
-             motor_orders: tuple[int, int] = (2, 4), beam_orders: tuple[int, int] = (0, 2),
-             columns: Mapping[str, str] | None = None, units: Mapping[str, str] | None = None,
-             *, motor_integrators: int = 1, beam_integrators: int = 0,
-             coulomb_current: float | None = None, partner_tol: float = PARTNER_TOL,
-             discard_periods: float = 1.0, pattern: str = "*.csv",
-             n_grid: int = 400, structured: bool | None = None,
-             friction_shape: str = "measured") -> IdentificationResult:
+def identify(
+    files_or_dir: str | Path | Iterable[str | Path],
+    motor_constant: float | str,
+    motor_orders: tuple[int, int] = (2, 4),
+    beam_orders: tuple[int, int] = (0, 2),
+    columns: Mapping[str, str] | None = None,
+    units: Mapping[str, str] | None = None,
+    *,
+    motor_integrators: int = 1,
+    beam_integrators: int = 0,
+    coulomb_current: float | None = None,
+    partner_tol: float = PARTNER_TOL,
+    discard_periods: float = 1.0,
+    pattern: str = "*.csv",
+    n_grid: int = 400,
+    structured: bool | None = None,
+    friction_shape: str = "measured",
+) -> IdentificationResult:
     """Identify G_m, G_b, C_f, J, V, C from sinusoidal experiments (see module docstring).
 
     Parameters
@@ -481,9 +574,13 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     for f in files:
         try:
             log = read_log(f, columns=columns, units=units)
-            an = analyse_log(log, n_max=5, columns=["reference", "current", "motor_angle",
-                                                    "tip_angle"],
-                             discard_periods=discard_periods, friction_shape=friction_shape)
+            an = analyse_log(
+                log,
+                n_max=5,
+                columns=["reference", "current", "motor_angle", "tip_angle"],
+                discard_periods=discard_periods,
+                friction_shape=friction_shape,
+            )
         except (LogError, IdentificationError) as exc:
             problems.append(str(exc))
             continue
@@ -491,8 +588,9 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         analyses.append(an)
         warnings_.extend(an.warnings)
     if problems:
-        raise IdentificationError(f"{len(problems)} of {len(files)} log(s) cannot be used:\n"
-                                  + "\n".join(problems))
+        raise IdentificationError(
+            f"{len(problems)} of {len(files)} log(s) cannot be used:\n" + "\n".join(problems)
+        )
 
     if coulomb_current is None:
         coul = estimate_coulomb(analyses, tol=partner_tol)
@@ -503,22 +601,37 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         coul = CoulombEstimate(cf, [], None, None)
     fr = frequency_response(analyses, cf)
     if cf is None:
-        _warn("the Coulomb friction is unknown: the motor model is fitted to the raw "
-              "(uncorrected) frequency response, which Coulomb friction distorts", warnings_)
+        _warn(
+            "the Coulomb friction is unknown: the motor model is fitted to the raw "
+            "(uncorrected) frequency response, which Coulomb friction distorts",
+            warnings_,
+        )
 
     nz, npl = motor_orders
     bz, bp = beam_orders
+
     def fit_tf(omega, H, n_zeros, n_poles, integrators):
-        return tfest(control.frd(np.asarray(H, complex), omega), n_poles, n_zeros,
-                     integrators=integrators, cost="log")
+        return tfest(
+            control.frd(np.asarray(H, complex), omega),
+            n_poles,
+            n_zeros,
+            integrators=integrators,
+            cost="log",
+        )
 
     try:
-        mfit = fit_tf(fr.omega, fr.motor_corrected if cf is not None else fr.motor_raw,
-                      nz, npl, integrators=motor_integrators)
+        mfit = fit_tf(
+            fr.omega,
+            fr.motor_corrected if cf is not None else fr.motor_raw,
+            nz,
+            npl,
+            integrators=motor_integrators,
+        )
         bfit = fit_tf(fr.omega, fr.beam, bz, bp, integrators=beam_integrators)
     except (TFEstError, ValueError) as exc:
-        raise IdentificationError(f"cannot fit the transfer functions to the {len(fr.omega)} "
-                                  f"experiment(s): {exc}") from None
+        raise IdentificationError(
+            f"cannot fit the transfer functions to the {len(fr.omega)} experiment(s): {exc}"
+        ) from None
     if beam_integrators == 0:
         bfit = _unit_static_gain(bfit, fr.omega, fr.beam)
     mfit_raw = None
@@ -530,9 +643,11 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     assert mfit.relative_error is not None  # tfest sets it
     worst = int(np.argmax(mfit.relative_error))
     if mfit.relative_error[worst] > 0.2:
-        _warn(f"{fr.names[worst]}: the free fit of G_m is {100 * mfit.relative_error[worst]:.0f} % "
-              f"off the data at ω = {fr.omega[worst]:.4g} rad/s; check the model orders",
-              warnings_)
+        _warn(
+            f"{fr.names[worst]}: the free fit of G_m is {100 * mfit.relative_error[worst]:.0f} % "
+            f"off the data at ω = {fr.omega[worst]:.4g} rad/s; check the model orders",
+            warnings_,
+        )
 
     grid = np.logspace(np.log10(fr.omega.min()), np.log10(fr.omega.max()), n_grid)
     one_mode = beam_orders == (0, 2) and beam_integrators == 0
@@ -543,8 +658,11 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
         except ValueError as exc:
             _warn(f"no structured fit: {exc}", warnings_)
     if phys is not None and not (min(phys.inertia, phys.stiffness) > 0 and phys.viscous >= 0):
-        _warn("the structured fit gave non-physical values (J, V, C = "
-              f"{phys.inertia:.3g}, {phys.viscous:.3g}, {phys.stiffness:.3g})", warnings_)
+        _warn(
+            "the structured fit gave non-physical values (J, V, C = "
+            f"{phys.inertia:.3g}, {phys.viscous:.3g}, {phys.stiffness:.3g})",
+            warnings_,
+        )
         phys = None
     if structured is None:  # auto: the joint fit where its model holds (one-mode beam)
         structured = one_mode
@@ -554,21 +672,43 @@ def identify(files_or_dir: str | Path | Iterable[str | Path], motor_constant: fl
     params: dict[str, Any]
     if use_phys:
         assert phys is not None  # use_phys needs one
-        params = {"inertia": phys.inertia, "viscous": phys.viscous,
-                  "stiffness": phys.stiffness,
-                  "method": "structured physical fit (flexarm.identification.frequency_domain.physical)"}
+        params = {
+            "inertia": phys.inertia,
+            "viscous": phys.viscous,
+            "stiffness": phys.stiffness,
+            "method": "structured physical fit (flexarm.identification.frequency_domain.physical)",
+        }
     else:
         params = arm_parameters(mfit.tf, bfit.tf, K, grid)
-        params["method"] = ("least squares on the fitted models, G_m = K/(J s^2 + V s + "
-                            f"C (1 - G_b)), {n_grid} frequencies from {grid[0]:.4g} to "
-                            f"{grid[-1]:.4g} rad/s")
-    settings = {"motor_orders": list(motor_orders), "motor_integrators": motor_integrators,
-                "beam_orders": list(beam_orders), "beam_integrators": beam_integrators,
-                "partner_tol": partner_tol, "discard_periods": discard_periods,
-                "coulomb_current_given": coulomb_current is not None,
-                "structured": use_phys, "friction_shape": friction_shape}
-    return IdentificationResult(files=files, logs=logs, analyses=analyses, coulomb=coul,
-                                response=fr, motor_fit=mfit, motor_fit_raw=mfit_raw,
-                                beam_fit=bfit, motor_constant=K, parameters=params,
-                                settings=settings, warnings=warnings_, physical=phys,
-                                use_physical=use_phys)
+        params["method"] = (
+            "least squares on the fitted models, G_m = K/(J s^2 + V s + "
+            f"C (1 - G_b)), {n_grid} frequencies from {grid[0]:.4g} to "
+            f"{grid[-1]:.4g} rad/s"
+        )
+    settings = {
+        "motor_orders": list(motor_orders),
+        "motor_integrators": motor_integrators,
+        "beam_orders": list(beam_orders),
+        "beam_integrators": beam_integrators,
+        "partner_tol": partner_tol,
+        "discard_periods": discard_periods,
+        "coulomb_current_given": coulomb_current is not None,
+        "structured": use_phys,
+        "friction_shape": friction_shape,
+    }
+    return IdentificationResult(
+        files=files,
+        logs=logs,
+        analyses=analyses,
+        coulomb=coul,
+        response=fr,
+        motor_fit=mfit,
+        motor_fit_raw=mfit_raw,
+        beam_fit=bfit,
+        motor_constant=K,
+        parameters=params,
+        settings=settings,
+        warnings=warnings_,
+        physical=phys,
+        use_physical=use_phys,
+    )

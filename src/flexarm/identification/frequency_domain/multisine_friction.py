@@ -71,8 +71,9 @@ GRID = np.geomspace(1e-3, 0.5, 8)
 MAX_TRANSIENT_PERIODS = 12
 
 
-def two_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
-                      substeps: int = 4) -> dict:
+def two_mass_scenario(
+    p: dict, coulomb: float, fs: float, n_samples: int, *, substeps: int = 4
+) -> dict:
     """Scenario dict of the two-mass drive (per unit torque constant; ``p`` as
     :func:`~.tfest.two_mass_response`) as flexarm's single-link arm with a transfer-function
     beam: θl/θm = G_b = (c s + k)/(J_l s² + (c + d_l) s + k); the coupling torque
@@ -89,23 +90,37 @@ def two_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
     dl = max(float(p["load_viscous"]), 1e-9 * k / wr)  # H's pole off the origin
     return {
         "name": "two-mass-from-frf",
-        "arm": {"kind": "single_link",
-                "motor": {"drive": "current", "inertia": Jm, "viscous": dm + c,
-                          "torque_constant": 1.0, "current_limit": 1e9},
-                "friction": ({"model": "coulomb", "coulomb": float(coulomb),
-                              "static": float(coulomb)} if coulomb > 0 else {"model": "none"}),
-                "beam": {"model": "transfer_function", "tip_num": [c, k] if c else [k],
-                         "tip_den": [Jl, c + dl, k],
-                         "coupling_num": [k * Jl - c * c, k * dl - c * k],
-                         "coupling_den": [Jl, dl]}},
+        "arm": {
+            "kind": "single_link",
+            "motor": {
+                "drive": "current",
+                "inertia": Jm,
+                "viscous": dm + c,
+                "torque_constant": 1.0,
+                "current_limit": 1e9,
+            },
+            "friction": (
+                {"model": "coulomb", "coulomb": float(coulomb), "static": float(coulomb)}
+                if coulomb > 0
+                else {"model": "none"}
+            ),
+            "beam": {
+                "model": "transfer_function",
+                "tip_num": [c, k] if c else [k],
+                "tip_den": [Jl, c + dl, k],
+                "coupling_num": [k * Jl - c * c, k * dl - c * k],
+                "coupling_den": [Jl, dl],
+            },
+        },
         "sampling": {"period": 1.0 / fs, "delay": 0},
         "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
         "sensors": {"motor_angle": {}, "tip_angle": {}},
     }
 
 
-def voltage_servo_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
-                           substeps: int = 4) -> dict:
+def voltage_servo_scenario(
+    p: dict, coulomb: float, fs: float, n_samples: int, *, substeps: int = 4
+) -> dict:
     """Scenario dict of the geared voltage-driven servo with a flexible link (``p`` as
     :func:`~.structures.voltage_servo_response`, with the given K_m, R_m, K_g, η) as
     flexarm's single-link arm: voltage drive (η as the gear efficiency, motor efficiency 1:
@@ -118,30 +133,47 @@ def voltage_servo_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *
     C, Jl, c = p["link_stiffness"], p["link_inertia"], p["link_damping"]
     zeta = float(c / (2 * math.sqrt(C * Jl)))
     if zeta > 1:
-        raise IdentificationError(f"voltage-servo: the fitted link damping ratio {zeta:.3g} "
-                                  "exceeds 1; the lumped beam takes 0–1: refit the BLA")
+        raise IdentificationError(
+            f"voltage-servo: the fitted link damping ratio {zeta:.3g} "
+            "exceeds 1; the lumped beam takes 0–1: refit the BLA"
+        )
     return {
         "name": "voltage-servo-from-frf",
-        "arm": {"kind": "single_link",
-                "motor": {"drive": "voltage", "inertia": p["hub_inertia"],
-                          "viscous": max(float(p["hub_viscous"]), 0.0),
-                          "motor_constant": p["motor_constant"],
-                          "armature_resistance": p["armature_resistance"],
-                          "gear_ratio": p["gear_ratio"], "gear_efficiency": p["efficiency"],
-                          "motor_efficiency": 1.0, "voltage_limit": 1e9},
-                "friction": ({"model": "coulomb", "coulomb": float(coulomb),
-                              "static": float(coulomb)} if coulomb > 0 else {"model": "none"}),
-                "beam": {"model": "lumped", "length": L, "flexural_rigidity": C * L / 3,
-                         "damping_ratio": zeta,
-                         "masses": [{"mass": Jl / L**2, "joint": "pinned"}]}},
+        "arm": {
+            "kind": "single_link",
+            "motor": {
+                "drive": "voltage",
+                "inertia": p["hub_inertia"],
+                "viscous": max(float(p["hub_viscous"]), 0.0),
+                "motor_constant": p["motor_constant"],
+                "armature_resistance": p["armature_resistance"],
+                "gear_ratio": p["gear_ratio"],
+                "gear_efficiency": p["efficiency"],
+                "motor_efficiency": 1.0,
+                "voltage_limit": 1e9,
+            },
+            "friction": (
+                {"model": "coulomb", "coulomb": float(coulomb), "static": float(coulomb)}
+                if coulomb > 0
+                else {"model": "none"}
+            ),
+            "beam": {
+                "model": "lumped",
+                "length": L,
+                "flexural_rigidity": C * L / 3,
+                "damping_ratio": zeta,
+                "masses": [{"mass": Jl / L**2, "joint": "pinned"}],
+            },
+        },
         "sampling": {"period": 1.0 / fs, "delay": 0},
         "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
         "sensors": {"motor_angle": {}, "tip_angle": {}, "tip_deflection": {}},
     }
 
 
-def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int, *,
-                             substeps: int = 4) -> dict:
+def frb_single_mass_scenario(
+    p: dict, coulomb: float, fs: float, n_samples: int, *, substeps: int = 4
+) -> dict:
     """Scenario dict of FRB's single-mass arm (``p`` as
     :func:`~.structures.frb_single_mass_response`, with the given K) as flexarm's
     single-link arm: current drive K, hub J, V, and the transfer-function beam of FRB eqs.
@@ -150,14 +182,27 @@ def frb_single_mass_scenario(p: dict, coulomb: float, fs: float, n_samples: int,
     K, C, Jt = p["motor_constant"], p["link_stiffness"], p["tip_inertia"]
     return {
         "name": "frb-single-mass-from-frf",
-        "arm": {"kind": "single_link",
-                "motor": {"drive": "current", "inertia": p["hub_inertia"],
-                          "viscous": max(float(p["hub_viscous"]), 0.0), "torque_constant": K,
-                          "current_limit": 1e9},
-                "friction": ({"model": "coulomb", "coulomb": float(coulomb) * K,
-                              "static": float(coulomb) * K} if coulomb > 0 else {"model": "none"}),
-                "beam": {"model": "transfer_function", "stiffness": C, "tip_num": [C / Jt],
-                         "tip_den": [1.0, p["tip_damping"] / Jt, C / Jt]}},
+        "arm": {
+            "kind": "single_link",
+            "motor": {
+                "drive": "current",
+                "inertia": p["hub_inertia"],
+                "viscous": max(float(p["hub_viscous"]), 0.0),
+                "torque_constant": K,
+                "current_limit": 1e9,
+            },
+            "friction": (
+                {"model": "coulomb", "coulomb": float(coulomb) * K, "static": float(coulomb) * K}
+                if coulomb > 0
+                else {"model": "none"}
+            ),
+            "beam": {
+                "model": "transfer_function",
+                "stiffness": C,
+                "tip_num": [C / Jt],
+                "tip_den": [1.0, p["tip_damping"] / Jt, C / Jt],
+            },
+        },
         "sampling": {"period": 1.0 / fs, "delay": 0},
         "simulation": {"duration": (n_samples - 1) / fs, "substeps": substeps},
         "sensors": {"motor_angle": {}, "tip_angle": {}},
@@ -170,14 +215,18 @@ class _Simulator:
 
     scenario: Callable[..., dict]  # (params, C_f, fs, n) → scenario dict
     viscous: str  # the BLA's viscous parameter that holds the friction's Bussgang share
-    rigid: Callable[..., Any]  # params → (total inertia, damping besides ``viscous``): slowest decay
+    rigid: Callable[
+        ..., Any
+    ]  # params → (total inertia, damping besides ``viscous``): slowest decay
     derived: Callable[..., dict]  # params → dict with resonance_hz, resonance_damping
     torque: Callable[..., Any]  # params → torque per unit of input (scales the C_f grid)
     input: str  # the reference channel the open-loop 'controller' plays
     unit: str  # of C_f
     damping_unit: str  # of ``viscous``
     where: str
-    friction_torque: Callable[..., Any] = lambda p: 1.0  # params → torque (damping units × rad/s) per unit C_f
+    friction_torque: Callable[..., Any] = lambda p: (
+        1.0
+    )  # params → torque (damping units × rad/s) per unit C_f
 
 
 def _two_mass_rigid(p):
@@ -194,18 +243,48 @@ def _frb_rigid(p):
 
 SIMULATORS = {
     # the FRB arm's V in N·m·s/rad, C_f in A (as the paper): the friction torque is K C_f
-    "frb-single-mass": _Simulator(frb_single_mass_scenario, "hub_viscous", _frb_rigid,
-                                  frb_single_mass_derived, lambda p: 1.0, "current", "A",
-                                  "N·m·s/rad", "at the motor", lambda p: p["motor_constant"]),
-    "two-mass": _Simulator(two_mass_scenario, "motor_viscous", _two_mass_rigid, two_mass_derived,
-                           lambda p: 1.0, "current", "A", "A·s/rad", "at the motor"),
-    "voltage-servo": _Simulator(voltage_servo_scenario, "hub_viscous", _servo_rigid,
-                                voltage_servo_derived, lambda p: servo_gains(p)[0], "voltage",
-                                "N·m", "N·m·s/rad", "at the output shaft"),
+    "frb-single-mass": _Simulator(
+        frb_single_mass_scenario,
+        "hub_viscous",
+        _frb_rigid,
+        frb_single_mass_derived,
+        lambda p: 1.0,
+        "current",
+        "A",
+        "N·m·s/rad",
+        "at the motor",
+        lambda p: p["motor_constant"],
+    ),
+    "two-mass": _Simulator(
+        two_mass_scenario,
+        "motor_viscous",
+        _two_mass_rigid,
+        two_mass_derived,
+        lambda p: 1.0,
+        "current",
+        "A",
+        "A·s/rad",
+        "at the motor",
+    ),
+    "voltage-servo": _Simulator(
+        voltage_servo_scenario,
+        "hub_viscous",
+        _servo_rigid,
+        voltage_servo_derived,
+        lambda p: servo_gains(p)[0],
+        "voltage",
+        "N·m",
+        "N·m·s/rad",
+        "at the output shaft",
+    ),
 }
 #: The arm's signal that each structure output is read from.
-_SIGNAL = {"motor_angle": "motor_angle", "load_angle": "tip_angle", "tip_angle": "tip_angle",
-           "tip_deflection": "tip_deflection"}
+_SIGNAL = {
+    "motor_angle": "motor_angle",
+    "load_angle": "tip_angle",
+    "tip_angle": "tip_angle",
+    "tip_deflection": "tip_deflection",
+}
 
 
 @dataclass
@@ -230,15 +309,23 @@ class MultisineCoulomb:
 
     def to_json(self) -> dict:
         where = SIMULATORS[self.structure].where
-        return {"value": self.coulomb_current, "std": self.std, "unit": self.unit,
-                "structure": self.structure,
-                "band_hz": [list(b) for b in self.band_hz], "band_values": self.band_values,
-                "detected": self.detected, "equivalent_damping": self.equivalent_damping,
-                "motor_viscous_bla": self.motor_viscous_bla, "velocity_rms": self.velocity_rms,
-                "linear_share_db": self.linear_share_db, "simulations": self.simulations,
-                "method": "odd distortion matched by flexarm's simulator of the fitted "
-                          f"{self.structure} model with Coulomb friction {where}",
-                "warnings": self.warnings}
+        return {
+            "value": self.coulomb_current,
+            "std": self.std,
+            "unit": self.unit,
+            "structure": self.structure,
+            "band_hz": [list(b) for b in self.band_hz],
+            "band_values": self.band_values,
+            "detected": self.detected,
+            "equivalent_damping": self.equivalent_damping,
+            "motor_viscous_bla": self.motor_viscous_bla,
+            "velocity_rms": self.velocity_rms,
+            "linear_share_db": self.linear_share_db,
+            "simulations": self.simulations,
+            "method": "odd distortion matched by flexarm's simulator of the fitted "
+            f"{self.structure} model with Coulomb friction {where}",
+            "warnings": self.warnings,
+        }
 
 
 def _odd_lines(frf: PeriodicFRF) -> np.ndarray:
@@ -247,12 +334,14 @@ def _odd_lines(frf: PeriodicFRF) -> np.ndarray:
     if not np.all(exc % 2 == 1):
         raise IdentificationError(
             f"{frf.input}: the excited lines are not all odd; the odd distortion (the Coulomb "
-            "friction's signature) needs an odd multisine (flexarm excite --kind random-odd)")
+            "friction's signature) needs an odd multisine (flexarm excite --kind random-odd)"
+        )
     odd = det[det % 2 == 1]
     if odd.size == 0:
         raise IdentificationError(
             f"{frf.input}: no odd detection lines between the excited ones: the Coulomb level "
-            "cannot be measured; use a random-odd multisine (flexarm excite --kind random-odd)")
+            "cannot be measured; use a random-odd multisine (flexarm excite --kind random-odd)"
+        )
     return odd
 
 
@@ -262,11 +351,19 @@ def _bands(frf: PeriodicFRF, lines: np.ndarray) -> list[tuple[int, int, np.ndarr
     while edges[-1] * 2 < kmax:
         edges.append(edges[-1] * 2)
     edges.append(kmax + 1)
-    return [(lo, hi, lines[(lines >= lo) & (lines < hi)]) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
+    return [
+        (lo, hi, lines[(lines >= lo) & (lines < hi)])
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True)
+    ]
 
 
-def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: str = "two-mass",
-                    outputs=("motor_angle",)) -> PeriodicFRF:
+def simulate_record(
+    frf: PeriodicFRF,
+    params: dict,
+    coulomb: float,
+    structure: str = "two-mass",
+    outputs=("motor_angle",),
+) -> PeriodicFRF:
     """The periodic FRF of ``structure`` at ``params`` with Coulomb level ``coulomb`` (in the
     structure's unit, :data:`SIMULATORS`) driven by the measured record's mean input period
     (DC removed: a constant torque would run the free rigid body away), played open loop
@@ -283,8 +380,10 @@ def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: s
     sim = SIMULATORS[structure]
     sp = frf.spectra
     if not sp:
-        raise IdentificationError(f"{frf.input}: the FRF carries no period spectra (LPM or "
-                                  "several realisations): the record cannot be replayed")
+        raise IdentificationError(
+            f"{frf.input}: the FRF carries no period spectra (LPM or "
+            "several realisations): the record cannot be replayed"
+        )
     P, fs = frf.period, frf.fs
     U = sp["mean"][0].copy()
     U[0] = 0.0
@@ -292,8 +391,10 @@ def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: s
     J, d_rest = sim.rigid(params)
     d = max(float(params[sim.viscous]), 0.0)
     der = {**params, **sim.derived(params)}  # resonance_hz: a parameter or derived
-    tau = max(J / max(d + d_rest, 1e-300),
-              1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300))
+    tau = max(
+        J / max(d + d_rest, 1e-300),
+        1 / max(der["resonance_damping"] * 2 * math.pi * der["resonance_hz"], 1e-300),
+    )
     ntr = int(min(MAX_TRANSIENT_PERIODS, max(1, math.ceil(10 * tau * fs / P))))
     n = (ntr + 2) * P
     sc = scenario_from_dict(sim.scenario(params, coulomb, fs, n))
@@ -305,13 +406,24 @@ def simulate_record(frf: PeriodicFRF, params: dict, coulomb: float, structure: s
     names = prep.loop.sensors.names
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return periodic_frf(out["command"][:, 0],
-                            {o: out["measured"][:, names.index(_SIGNAL[o])] for o in outputs},
-                            fs, period=P, lines=frf.lines, transient_periods=ntr)
+        return periodic_frf(
+            out["command"][:, 0],
+            {o: out["measured"][:, names.index(_SIGNAL[o])] for o in outputs},
+            fs,
+            period=P,
+            lines=frf.lines,
+            transient_periods=ntr,
+        )
 
 
-def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "motor_angle",
-                            structure: str = "two-mass", progress=None) -> MultisineCoulomb:
+def coulomb_from_distortion(
+    frf: PeriodicFRF,
+    params: dict,
+    *,
+    output: str = "motor_angle",
+    structure: str = "two-mass",
+    progress=None,
+) -> MultisineCoulomb:
     """C_f from the odd distortion of ``output`` in a periodic FRF (:func:`periodic_frf`
     of the measured record) and the parameters ``params`` of ``structure`` fitted to its BLA
     (``StructuredFit.values``; for ``voltage-servo`` with the given K_m, R_m, K_g, η merged
@@ -321,15 +433,19 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     (its Bussgang share is taken from B_eq, the back-EMF damping being known).
     ``progress(i, n)`` after each simulation."""
     if structure not in SIMULATORS:
-        raise IdentificationError(f"structure {structure!r}: the Coulomb level from the odd "
-                                  f"distortion simulates {', '.join(SIMULATORS)}")
+        raise IdentificationError(
+            f"structure {structure!r}: the Coulomb level from the odd "
+            f"distortion simulates {', '.join(SIMULATORS)}"
+        )
     sim = SIMULATORS[structure]
     if output not in _SIGNAL:
-        raise IdentificationError(f"output {output!r}: the odd distortion is matched on "
-                                  f"{', '.join(_SIGNAL)}")
+        raise IdentificationError(
+            f"output {output!r}: the odd distortion is matched on {', '.join(_SIGNAL)}"
+        )
     if output not in frf.outputs:
-        raise IdentificationError(f"output {output!r} is not in the FRF (outputs: "
-                                  f"{', '.join(frf.outputs)})")
+        raise IdentificationError(
+            f"output {output!r} is not in the FRF (outputs: {', '.join(frf.outputs)})"
+        )
     sp = frf.spectra
     P, M, fs = frf.period, sp["M"], frf.fs
     j = 1 + frf.outputs.index(output)
@@ -352,7 +468,10 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
     for _lo, _hi, ls in bands:
         if ls.size:
             idx = [pos[int(k)] for k in ls]
-            if 10 * math.log10(max(y2[idx].mean(), 1e-300) / max(noise[idx].mean(), 1e-300)) >= DETECT_DB:
+            if (
+                10 * math.log10(max(y2[idx].mean(), 1e-300) / max(noise[idx].mean(), 1e-300))
+                >= DETECT_DB
+            ):
                 detected.append(ls)
     use = np.concatenate(detected) if detected else odd
     sel = np.array([pos[int(k)] for k in use])
@@ -384,7 +503,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
             f"{frf.input}: the measured odd distortion ({10 * math.log10(target):.1f} dB re 1 "
             f"rad²) is outside what the simulated {structure} model gives for C_f from "
             f"{grid[0]:.3g} to {grid[-1]:.3g} {sim.unit}; the fitted model or the friction "
-            f"structure (Coulomb {sim.where}) does not describe this record")
+            f"structure (Coulomb {sim.where}) does not describe this record"
+        )
     # log-log interpolation on the monotone part, then secant steps with new simulations
     i = int(np.nonzero(tot >= target)[0][0])
     pts = [(lg[i - 1], lt[i - 1], sims[i - 1]), (lg[i], lt[i], sims[i])]
@@ -423,7 +543,8 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
             continue
         q = int(np.nonzero(ok)[0][0])
         xb = lg[q] + (math.log(want) - math.log(tb[q])) * (lg[q + 1] - lg[q]) / (
-            math.log(tb[q + 1]) - math.log(tb[q]))
+            math.log(tb[q + 1]) - math.log(tb[q])
+        )
         band_vals.append(float(math.exp(xb)))
     floor_db = 10 * math.log10(max(floor[sel].sum(), 1e-300) / target)
     if not detected:
@@ -431,24 +552,39 @@ def coulomb_from_distortion(frf: PeriodicFRF, params: dict, *, output: str = "mo
             f"{output}: no odd distortion {DETECT_DB:g} dB above the noise: at this amplitude "
             "Coulomb friction cannot be told from viscous damping (both only damp the BLA); "
             f"C_f = {cf:.3g} {sim.unit} is the upper bound whose distortion would reach the "
-            "noise level")
+            "noise level"
+        )
     deq = d_eq(cf)
     if deq > dm:
         notes.append(
             f"{output}: the friction's equivalent damping C_f·√(2/π)/σ_v = {deq:.3g} "
             f"{sim.damping_unit} exceeds the BLA's viscous damping {sim.viscous} = {dm:.3g}: "
             f"the model (Coulomb {sim.where} only) does not explain both the distortion and "
-            "the damping; friction elsewhere or a different friction law is likely")
+            "the damping; friction elsewhere or a different friction law is likely"
+        )
     if detected and floor_db > -1.0:
-        notes.append(f"{output}: the measured input's own odd-line content, through the linear "
-                     f"model, already gives {floor_db:+.1f} dB of the measured odd distortion: "
-                     "the friction's share cannot be separated from it")
+        notes.append(
+            f"{output}: the measured input's own odd-line content, through the linear "
+            f"model, already gives {floor_db:+.1f} dB of the measured odd distortion: "
+            "the friction's share cannot be separated from it"
+        )
     for m in notes:
         warnings.warn(m, IdentificationWarning, stacklevel=2)
-    return MultisineCoulomb(float(cf), float(std), band_vals,
-                            [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
-                            bool(detected), deq, dm, sv, floor_db, count[0], notes, sim.unit,
-                            structure)
+    return MultisineCoulomb(
+        float(cf),
+        float(std),
+        band_vals,
+        [(float(lo * fs / P), float((hi - 1) * fs / P)) for lo, hi, _ in bands],
+        bool(detected),
+        deq,
+        dm,
+        sv,
+        floor_db,
+        count[0],
+        notes,
+        sim.unit,
+        structure,
+    )
 
 
 def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
@@ -456,12 +592,14 @@ def velocity_rms(frf: PeriodicFRF, output: str = "motor_angle") -> float:
     2 |ω_k Θ_k|² (Θ_k the mean period's DFT with 1/P scaling)."""
     sp = frf.spectra
     if not sp:
-        raise IdentificationError(f"{output}: the FRF carries no period spectra (LPM or "
-                                  "several realisations): the velocity rms needs them")
+        raise IdentificationError(
+            f"{output}: the FRF carries no period spectra (LPM or "
+            "several realisations): the velocity rms needs them"
+        )
     P, fs = frf.period, frf.fs
     j = 1 + frf.outputs.index(output)
     wk = 2 * np.pi * np.arange(1, P // 2) * fs / P
-    return float(np.sqrt(2 * np.sum(np.abs(wk * sp["mean"][j, 1:P // 2]) ** 2)))
+    return float(np.sqrt(2 * np.sum(np.abs(wk * sp["mean"][j, 1 : P // 2]) ** 2)))
 
 
 def _play(params, state, measured, reference):
@@ -480,24 +618,36 @@ def coulomb_from_amplitudes(velocity_rms, damping, damping_std) -> dict:
     d = np.asarray(damping, float)
     sd = np.asarray(damping_std, float)
     if sv.size < 2 or np.ptp(1 / sv) <= 0:
-        raise IdentificationError("coulomb_from_amplitudes needs records at two or more "
-                                  "different amplitudes (velocity rms)")
+        raise IdentificationError(
+            "coulomb_from_amplitudes needs records at two or more "
+            "different amplitudes (velocity rms)"
+        )
     A = np.column_stack([np.ones_like(sv), math.sqrt(2 / math.pi) / sv]) / sd[:, None]
     x, *_ = np.linalg.lstsq(A, d / sd, rcond=None)
     cov = np.linalg.inv(A.T @ A)
     s = np.sqrt(np.diag(cov))
-    out = {"viscous": {"value": float(x[0]), "std": float(s[0])},
-           "coulomb_current": {"value": float(x[1]), "std": float(s[1])},
-           "correlation": float(cov[0, 1] / (s[0] * s[1])), "warnings": []}
+    out = {
+        "viscous": {"value": float(x[0]), "std": float(s[0])},
+        "coulomb_current": {"value": float(x[1]), "std": float(s[1])},
+        "correlation": float(cov[0, 1] / (s[0] * s[1])),
+        "warnings": [],
+    }
     if abs(x[1]) < 2 * s[1]:
         out["warnings"].append(
             f"C_f = {x[1]:.3g} ± {s[1]:.2g} A is within two standard deviations of zero: the "
-            "amplitudes recorded cannot tell Coulomb friction from viscous damping")
+            "amplitudes recorded cannot tell Coulomb friction from viscous damping"
+        )
     return out
 
 
-def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: str = "two-mass",
-                                *, iterations: int = 3, progress=None) -> dict:
+def coulomb_from_bla_amplitudes(
+    frfs: list[PeriodicFRF],
+    fits: list,
+    structure: str = "two-mass",
+    *,
+    iterations: int = 3,
+    progress=None,
+) -> dict:
     """C_f and the viscous damping d_v from the BLA's viscous damping at several amplitudes,
     matched with flexarm's simulator of the fitted model with friction.
 
@@ -518,23 +668,31 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
     (d − d_sim)/std at the end), ``warnings`` (C_f within two standard deviations of zero:
     the amplitudes cannot tell Coulomb friction from viscous damping; a negative d_v)."""
     if structure not in SIMULATORS:
-        raise IdentificationError(f"structure {structure!r}: the amplitude match simulates "
-                                  f"{', '.join(SIMULATORS)}")
+        raise IdentificationError(
+            f"structure {structure!r}: the amplitude match simulates {', '.join(SIMULATORS)}"
+        )
     if len(frfs) != len(fits) or len(frfs) < 2:
-        raise IdentificationError("coulomb_from_bla_amplitudes needs two or more records "
-                                  "(one FRF and one fit each) at different amplitudes")
+        raise IdentificationError(
+            "coulomb_from_bla_amplitudes needs two or more records "
+            "(one FRF and one fit each) at different amplitudes"
+        )
     from flexarm.identification.frequency_domain.structures import STRUCTURES, fit_structure
 
     sim = SIMULATORS[structure]
     names = STRUCTURES[structure].parameters
     sv = np.array([velocity_rms(f) for f in frfs])
     d = np.array([fit.parameters[sim.viscous]["value"] for fit in fits])
-    sd = np.array([fit.parameters[sim.viscous].get("std_inflated",
-                                                   fit.parameters[sim.viscous]["std"])
-                   for fit in fits])
+    sd = np.array(
+        [
+            fit.parameters[sim.viscous].get("std_inflated", fit.parameters[sim.viscous]["std"])
+            for fit in fits
+        ]
+    )
     if np.any(~(sd > 0)):
-        raise IdentificationError(f"the {sim.viscous} of a fit has no positive standard "
-                                  f"deviation (held fixed?): it must be fitted in every record")
+        raise IdentificationError(
+            f"the {sim.viscous} of a fit has no positive standard "
+            f"deviation (held fixed?): it must be fitted in every record"
+        )
     ft = float(sim.friction_torque({**fits[0].given, **fits[0].values}))  # torque per unit C_f
     start = coulomb_from_amplitudes(sv, d / ft, sd / ft)
     start["viscous"] = {k: v * ft for k, v in start["viscous"].items()}
@@ -557,35 +715,58 @@ def coulomb_from_bla_amplitudes(frfs: list[PeriodicFRF], fits: list, structure: 
             # ZOH (1 − e^{−sT})/sT, divided out to compare with the fitted continuous model
             sT = 1j * w / frf.fs
             zoh = (1 - np.exp(-sT)) / sT
-            f2 = fit_structure(structure, w,
-                               {o: rec.response[j] / zoh for j, o in enumerate(outs)},
-                               {o: (frf.total_std if frf.total_std is not None
-                                    else frf.noise_std)[kk] for o, kk in zip(outs, k, strict=True)},
-                               free=fit.free, initial={n: fit.values[n] for n in names},
-                               given=fit.given)
+            f2 = fit_structure(
+                structure,
+                w,
+                {o: rec.response[j] / zoh for j, o in enumerate(outs)},
+                {
+                    o: (frf.total_std if frf.total_std is not None else frf.noise_std)[kk]
+                    for o, kk in zip(outs, k, strict=True)
+                },
+                free=fit.free,
+                initial={n: fit.values[n] for n in names},
+                given=fit.given,
+            )
             d_sim[i] = f2.parameters[sim.viscous]["value"]
         x = x + cov @ A.T @ ((d - d_sim) / sd)
     s = np.sqrt(np.diag(cov))
     mismatch = float(np.sqrt(np.mean(((d - d_sim) / sd) ** 2))) if iterations else None
     notes = list(start["warnings"])
     if abs(x[1]) < 2 * s[1] and not notes:
-        notes.append(f"C_f = {x[1]:.3g} ± {s[1]:.2g} {sim.unit} is within two standard deviations "
-                     "of zero: the amplitudes recorded cannot tell Coulomb friction from "
-                     "viscous damping")
+        notes.append(
+            f"C_f = {x[1]:.3g} ± {s[1]:.2g} {sim.unit} is within two standard deviations "
+            "of zero: the amplitudes recorded cannot tell Coulomb friction from "
+            "viscous damping"
+        )
     if x[0] < 0:
-        notes.append(f"the viscous damping {x[0]:.3g} {sim.damping_unit} is negative: the BLA's "
-                     "damping falls faster with amplitude than Coulomb friction explains")
-    for m in notes[len(start["warnings"]):]:
+        notes.append(
+            f"the viscous damping {x[0]:.3g} {sim.damping_unit} is negative: the BLA's "
+            "damping falls faster with amplitude than Coulomb friction explains"
+        )
+    for m in notes[len(start["warnings"]) :]:
         warnings.warn(m, IdentificationWarning, stacklevel=2)
-    return {"structure": structure, "unit": sim.unit, "damping_unit": sim.damping_unit,
-            "coulomb": {"value": float(x[1]), "std": float(s[1])},
-            "viscous": {"value": float(x[0]), "std": float(s[0])},
-            "correlation": float(cov[0, 1] / (s[0] * s[1])),
-            "bussgang": {"coulomb": start["coulomb_current"], "viscous": start["viscous"]},
-            "records": [{"velocity_rms": float(a), "damping": float(b), "damping_std": float(c),
-                         "damping_simulated": float(e)} for a, b, c, e in zip(sv, d, sd, d_sim, strict=True)],
-            "mismatch": mismatch, "iterations": int(iterations), "simulations": count,
-            "method": "BLA viscous damping per amplitude; Bussgang start, then matched by "
-                      f"flexarm's simulator of the fitted {structure} model with Coulomb "
-                      f"friction {sim.where}",
-            "warnings": notes}
+    return {
+        "structure": structure,
+        "unit": sim.unit,
+        "damping_unit": sim.damping_unit,
+        "coulomb": {"value": float(x[1]), "std": float(s[1])},
+        "viscous": {"value": float(x[0]), "std": float(s[0])},
+        "correlation": float(cov[0, 1] / (s[0] * s[1])),
+        "bussgang": {"coulomb": start["coulomb_current"], "viscous": start["viscous"]},
+        "records": [
+            {
+                "velocity_rms": float(a),
+                "damping": float(b),
+                "damping_std": float(c),
+                "damping_simulated": float(e),
+            }
+            for a, b, c, e in zip(sv, d, sd, d_sim, strict=True)
+        ],
+        "mismatch": mismatch,
+        "iterations": int(iterations),
+        "simulations": count,
+        "method": "BLA viscous damping per amplitude; Bussgang start, then matched by "
+        f"flexarm's simulator of the fitted {structure} model with Coulomb "
+        f"friction {sim.where}",
+        "warnings": notes,
+    }

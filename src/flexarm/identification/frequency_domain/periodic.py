@@ -97,29 +97,49 @@ class PeriodicFRF:
         excited lines)."""
         out = {}
         for j, name in enumerate(self.outputs):
-            d = {"re": self.response[j].real.tolist(), "im": self.response[j].imag.tolist(),
-                 "noise_std": self.noise_std[j].tolist()}
+            d = {
+                "re": self.response[j].real.tolist(),
+                "im": self.response[j].imag.tolist(),
+                "noise_std": self.noise_std[j].tolist(),
+            }
             if self.total_std is not None:
                 d["total_std"] = self.total_std[j].tolist()
             if self.distortion is not None:
                 bands = self.distortion[name]
                 nan = lambda v: None if not math.isfinite(v) else float(v)  # noqa: E731
-                d["distortion"] = {"band_hz": [list(map(float, b.band_hz)) for b in bands],
-                                   "odd_db": [nan(b.odd_db) for b in bands],
-                                   "even_db": [nan(b.even_db) for b in bands],
-                                   "noise_db": [nan(b.noise_db) for b in bands]}
+                d["distortion"] = {
+                    "band_hz": [list(map(float, b.band_hz)) for b in bands],
+                    "odd_db": [nan(b.odd_db) for b in bands],
+                    "even_db": [nan(b.even_db) for b in bands],
+                    "noise_db": [nan(b.noise_db) for b in bands],
+                }
             out[name] = d
         sp = self.spectra
-        spectra = None if not sp else {
-            "note": "mean DFT over the steady periods (1/P scaling) of input then outputs at "
-                    "every line 0..P/2, their variances, and the number of periods M",
-            "re": sp["mean"].real.tolist(), "im": sp["mean"].imag.tolist(),
-            "var": sp["var"].tolist(), "M": int(sp["M"])}
-        return {"input": self.input, "frequency_hz": self.frequency_hz.tolist(),
-                "lines": self.lines.tolist(), "period_samples": self.period, "fs_hz": self.fs,
-                "periods_used": self.periods_used, "transient_periods": self.transient_periods,
-                "outputs": out, "verdict": self.verdict(), "warnings": self.warnings,
-                "spectra": spectra}
+        spectra = (
+            None
+            if not sp
+            else {
+                "note": "mean DFT over the steady periods (1/P scaling) of input then outputs at "
+                "every line 0..P/2, their variances, and the number of periods M",
+                "re": sp["mean"].real.tolist(),
+                "im": sp["mean"].imag.tolist(),
+                "var": sp["var"].tolist(),
+                "M": int(sp["M"]),
+            }
+        )
+        return {
+            "input": self.input,
+            "frequency_hz": self.frequency_hz.tolist(),
+            "lines": self.lines.tolist(),
+            "period_samples": self.period,
+            "fs_hz": self.fs,
+            "periods_used": self.periods_used,
+            "transient_periods": self.transient_periods,
+            "outputs": out,
+            "verdict": self.verdict(),
+            "warnings": self.warnings,
+            "spectra": spectra,
+        }
 
     @classmethod
     def from_json(cls, d: dict, source: str = "FRF JSON") -> PeriodicFRF:
@@ -127,64 +147,123 @@ class PeriodicFRF:
         analysis of :mod:`.multisine_friction`)."""
         try:
             names = list(d["outputs"])
-            G = np.array([np.asarray(d["outputs"][n]["re"]) + 1j * np.asarray(d["outputs"][n]["im"])
-                          for n in names])
+            G = np.array(
+                [
+                    np.asarray(d["outputs"][n]["re"]) + 1j * np.asarray(d["outputs"][n]["im"])
+                    for n in names
+                ]
+            )
             f = np.asarray(d["frequency_hz"], float)
             nstd = np.array([d["outputs"][n]["noise_std"] for n in names], float)
-            tstd = (np.array([d["outputs"][n]["total_std"] for n in names], float)
-                    if all("total_std" in d["outputs"][n] for n in names) else None)
+            tstd = (
+                np.array([d["outputs"][n]["total_std"] for n in names], float)
+                if all("total_std" in d["outputs"][n] for n in names)
+                else None
+            )
             dist = None
             if all("distortion" in d["outputs"][n] for n in names):
                 fl = lambda v: math.nan if v is None else float(v)  # noqa: E731
-                dist = {n: [Band(tuple(b), fl(o), fl(e), fl(z)) for b, o, e, z in zip(
-                    *(d["outputs"][n]["distortion"][k] for k in ("band_hz", "odd_db", "even_db",
-                                                                "noise_db")), strict=False)] for n in names}
+                dist = {
+                    n: [
+                        Band(tuple(b), fl(o), fl(e), fl(z))
+                        for b, o, e, z in zip(
+                            *(
+                                d["outputs"][n]["distortion"][k]
+                                for k in ("band_hz", "odd_db", "even_db", "noise_db")
+                            ),
+                            strict=False,
+                        )
+                    ]
+                    for n in names
+                }
             sp = d.get("spectra")
-            spectra = {} if not sp else {
-                "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
-                "var": np.asarray(sp["var"], float), "M": int(sp["M"]),
-                "lines": np.arange(len(sp["re"][0])), "excited": np.asarray(d["lines"], int)}
+            spectra = (
+                {}
+                if not sp
+                else {
+                    "mean": np.asarray(sp["re"]) + 1j * np.asarray(sp["im"]),
+                    "var": np.asarray(sp["var"], float),
+                    "M": int(sp["M"]),
+                    "lines": np.arange(len(sp["re"][0])),
+                    "excited": np.asarray(d["lines"], int),
+                }
+            )
             if not names:
                 raise ValueError("'outputs': no output")
             if f.ndim != 1 or f.size == 0 or not np.all(np.isfinite(f)):
-                raise ValueError(f"'frequency_hz': not a list of finite numbers ({f.ndim}-d, "
-                                 f"{f.size} values)")
+                raise ValueError(
+                    f"'frequency_hz': not a list of finite numbers ({f.ndim}-d, {f.size} values)"
+                )
             for what, arr in (("re/im", G), ("noise_std", nstd), ("total_std", tstd)):
                 if arr is not None and arr.shape != (len(names), f.size):
-                    raise ValueError(f"'outputs' {what}: shape {arr.shape}, expected "
-                                     f"{(len(names), f.size)} (one value per output and "
-                                     "frequency)")
+                    raise ValueError(
+                        f"'outputs' {what}: shape {arr.shape}, expected "
+                        f"{(len(names), f.size)} (one value per output and "
+                        "frequency)"
+                    )
             if len(np.asarray(d["lines"]).ravel()) != f.size:
-                raise ValueError(f"'lines': {len(np.asarray(d['lines']).ravel())} lines for "
-                                 f"{f.size} frequencies")
-            frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * f,
-                                                inputs=[d["input"]], outputs=names)
-            return cls(frd, G, f, np.asarray(d["lines"], int), names, d["input"], nstd, tstd,
-                       dist, int(d["period_samples"]), float(d["fs_hz"]), int(d["periods_used"]),
-                       int(d["transient_periods"]), spectra, list(d.get("warnings", [])))
-        except (KeyError, TypeError, ValueError, IndexError, OverflowError,
-                AttributeError) as exc:
-            raise IdentificationError(f"{source}: not an FRF written by flexarm frf "
-                                      f"(missing or bad {exc})", file=source,
-                                      fix="give the JSON flexarm frf --json wrote") from None
+                raise ValueError(
+                    f"'lines': {len(np.asarray(d['lines']).ravel())} lines for {f.size} frequencies"
+                )
+            frd = control.FrequencyResponseData(
+                G[:, None, :], 2 * np.pi * f, inputs=[d["input"]], outputs=names
+            )
+            return cls(
+                frd,
+                G,
+                f,
+                np.asarray(d["lines"], int),
+                names,
+                d["input"],
+                nstd,
+                tstd,
+                dist,
+                int(d["period_samples"]),
+                float(d["fs_hz"]),
+                int(d["periods_used"]),
+                int(d["transient_periods"]),
+                spectra,
+                list(d.get("warnings", [])),
+            )
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError) as exc:
+            raise IdentificationError(
+                f"{source}: not an FRF written by flexarm frf (missing or bad {exc})",
+                file=source,
+                fix="give the JSON flexarm frf --json wrote",
+            ) from None
 
     def _table(self) -> Table:
         """One row per output: |G| range (dB), median noise and total std relative to |G|."""
         f = self.frequency_hz
-        title = (f"PeriodicFRF {self.input} → {', '.join(self.outputs)}: {len(self.lines)} lines"
-                 + (f", {f[0]:.4g}–{f[-1]:.4g} Hz" if len(f) else ""))
+        title = f"PeriodicFRF {self.input} → {', '.join(self.outputs)}: {len(self.lines)} lines" + (
+            f", {f[0]:.4g}–{f[-1]:.4g} Hz" if len(f) else ""
+        )
         rows = []
         with np.errstate(all="ignore"):
             for j, name in enumerate(self.outputs):
                 mag = np.abs(self.response[j])
                 db = 20 * np.log10(np.maximum(mag, 1e-300))
                 rel = lambda sd, mag=mag: f"{100 * float(np.median(sd / mag)):.3g} %"  # noqa: E731
-                rows.append((name, f"{db.min():.1f} … {db.max():.1f}", rel(self.noise_std[j]),
-                             None if self.total_std is None else rel(self.total_std[j])))
-        notes = [f"period {self.period} samples at {self.fs:g} Hz, {self.periods_used} periods "
-                 f"used ({self.transient_periods} transient)", self.verdict(), *self.warnings]
-        return Table(title, rows, header=("output", "|G| (dB)", "noise std/|G|",
-                                          "total std/|G|"), notes=notes)
+                rows.append(
+                    (
+                        name,
+                        f"{db.min():.1f} … {db.max():.1f}",
+                        rel(self.noise_std[j]),
+                        None if self.total_std is None else rel(self.total_std[j]),
+                    )
+                )
+        notes = [
+            f"period {self.period} samples at {self.fs:g} Hz, {self.periods_used} periods "
+            f"used ({self.transient_periods} transient)",
+            self.verdict(),
+            *self.warnings,
+        ]
+        return Table(
+            title,
+            rows,
+            header=("output", "|G| (dB)", "noise std/|G|", "total std/|G|"),
+            notes=notes,
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -195,8 +274,10 @@ class PeriodicFRF:
     def verdict(self) -> str:
         """A plain sentence per output about the nonlinear distortion."""
         if self.distortion is None:
-            return ("no detection lines: the distortion cannot be told from the noise; "
-                    "excite a random-odd multisine to check linearity")
+            return (
+                "no detection lines: the distortion cannot be told from the noise; "
+                "excite a random-odd multisine to check linearity"
+            )
         return " ".join(distortion_verdict(name, bands) for name, bands in self.distortion.items())
 
 
@@ -207,14 +288,18 @@ def distortion_verdict(name: str, bands: Sequence[Band]) -> str:
     parts = []
     if odd:
         top = max(b.odd_db - b.noise_db for b in odd)
-        parts.append(f"odd distortion up to {top:.0f} dB above the noise in "
-                     f"{_span(odd)} (up to {max(b.odd_db for b in odd):.0f} dB re the excited "
-                     "output): a symmetric nonlinearity such as Coulomb friction; a linear "
-                     "model cannot fit to the noise level there")
+        parts.append(
+            f"odd distortion up to {top:.0f} dB above the noise in "
+            f"{_span(odd)} (up to {max(b.odd_db for b in odd):.0f} dB re the excited "
+            "output): a symmetric nonlinearity such as Coulomb friction; a linear "
+            "model cannot fit to the noise level there"
+        )
     if even:
         top = max(b.even_db - b.noise_db for b in even)
-        parts.append(f"even distortion up to {top:.0f} dB above the noise in {_span(even)}: "
-                     "an asymmetric nonlinearity (an offset, a position-dependent load)")
+        parts.append(
+            f"even distortion up to {top:.0f} dB above the noise in {_span(even)}: "
+            "an asymmetric nonlinearity (an offset, a position-dependent load)"
+        )
     if not parts:
         parts.append("no distortion above the noise: a linear model can fit to the noise level")
     return f"{name}: " + "; ".join(parts) + "."
@@ -238,22 +323,32 @@ def detect_period(x: np.ndarray, *, min_period: int = 8, name: str = "input") ->
     rr = r[lags]
     best = rr.max()
     if best < 0.5:
-        raise IdentificationError(f"{name}: no period found (autocorrelation at most "
-                                  f"{best:.2f} for periods of {min_period}–{n // 2} samples); "
-                                  "is the excitation periodic? give --period")
+        raise IdentificationError(
+            f"{name}: no period found (autocorrelation at most "
+            f"{best:.2f} for periods of {min_period}–{n // 2} samples); "
+            "is the excitation periodic? give --period"
+        )
     cand = lags[rr >= 0.9 * best]
-    return int(cand[0] + np.argmax(r[cand[0]:cand[0] + max(cand[0] // 2, 2)]))
+    return int(cand[0] + np.argmax(r[cand[0] : cand[0] + max(cand[0] // 2, 2)]))
 
 
 def _dft_periods(x: np.ndarray, P: int, M0: int) -> np.ndarray:
     return np.fft.rfft(x[..., : M0 * P].reshape(*x.shape[:-1], M0, P), axis=-1) / P
 
 
-def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
-                 period: int | None = None, lines: Sequence[int] | np.ndarray | None = None,
-                 transient_periods: int | None = None, input_name: str = "input",
-                 source: str = "<data>", detrend: bool = True,
-                 require_distortion: bool = False) -> PeriodicFRF:
+def periodic_frf(
+    u: np.ndarray,
+    y: Mapping[str, np.ndarray],
+    fs: float,
+    *,
+    period: int | None = None,
+    lines: Sequence[int] | np.ndarray | None = None,
+    transient_periods: int | None = None,
+    input_name: str = "input",
+    source: str = "<data>",
+    detrend: bool = True,
+    require_distortion: bool = False,
+) -> PeriodicFRF:
     """FRF, noise and distortion from one periodic record (see the module docstring).
 
     ``u``: input samples; ``y``: output name → samples (same length); ``fs``: sampling
@@ -271,55 +366,75 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
             raise IdentificationError(f"{source}: signal {k!r} has shape {v.shape}; expected 1-D")
         bad = ~np.isfinite(v)
         if bad.any():
-            raise IdentificationError(f"{source}: signal {k!r} has {int(bad.sum())} NaN/"
-                                      f"infinite value(s), first at sample {int(np.argmax(bad))}")
+            raise IdentificationError(
+                f"{source}: signal {k!r} has {int(bad.sum())} NaN/"
+                f"infinite value(s), first at sample {int(np.argmax(bad))}"
+            )
     lens = {k: len(v) for k, v in chans.items()}
     if len(set(lens.values())) > 1:
-        raise IdentificationError(f"{source}: channels of different lengths: "
-                                  + ", ".join(f"{k} {n}" for k, n in lens.items()))
+        raise IdentificationError(
+            f"{source}: channels of different lengths: "
+            + ", ".join(f"{k} {n}" for k, n in lens.items())
+        )
     N = lens[input_name]
     notes: list[str] = []
-    P = detect_period(chans[input_name], name=f"{source}: {input_name}") if period is None else int(period)
+    P = (
+        detect_period(chans[input_name], name=f"{source}: {input_name}")
+        if period is None
+        else int(period)
+    )
     M0 = N // P
     if P < 2 or M0 < 2:
-        raise IdentificationError(f"{source}: {N} samples hold {M0} whole period(s) of {P} "
-                                  "samples; the FRF and its noise level need at least two "
-                                  "whole periods: record longer or give the right --period")
+        raise IdentificationError(
+            f"{source}: {N} samples hold {M0} whole period(s) of {P} "
+            "samples; the FRF and its noise level need at least two "
+            "whole periods: record longer or give the right --period"
+        )
     X = np.stack([chans[k] for k in [input_name] + names])  # (C, N)
     if N - M0 * P:
-        msg = (f"{source}: {N - M0 * P} trailing sample(s) of a partial period discarded "
-               f"({M0} whole periods of {P} samples kept)")
+        msg = (
+            f"{source}: {N - M0 * P} trailing sample(s) of a partial period discarded "
+            f"({M0} whole periods of {P} samples kept)"
+        )
         warnings.warn(msg, IdentificationWarning, stacklevel=2)
         notes.append(msg)
     Xp = X[:, : M0 * P].reshape(len(X), M0, P)
     if detrend:  # remove a linear drift b·n from the mean period-to-period difference
-        half = Xp[:, M0 // 2:]
-        b = (half[:, -1] - half[:, 0]).mean(axis=1) / (P * max(half.shape[1] - 1, 1)) \
-            if half.shape[1] > 1 else (Xp[:, -1] - Xp[:, 0]).mean(axis=1) / (P * (M0 - 1))
+        half = Xp[:, M0 // 2 :]
+        b = (
+            (half[:, -1] - half[:, 0]).mean(axis=1) / (P * max(half.shape[1] - 1, 1))
+            if half.shape[1] > 1
+            else (Xp[:, -1] - Xp[:, 0]).mean(axis=1) / (P * (M0 - 1))
+        )
         Xp = Xp - b[:, None, None] * np.arange(M0 * P).reshape(M0, P)[None]
     F = np.fft.rfft(Xp, axis=-1) / P  # (C, M0, P/2+1)
 
     if lines is None:
-        Um = np.abs(F[0, M0 // 2:].mean(axis=0))
+        Um = np.abs(F[0, M0 // 2 :].mean(axis=0))
         Um[0] = 0.0
         exc = np.nonzero(Um >= Um.max() * 10 ** (-LINES_DB / 20))[0]
     else:
         exc = np.unique(np.asarray(lines, int))
         if exc.size == 0 or exc.min() < 1 or exc.max() > P // 2:
-            raise IdentificationError(f"{source}: excited lines must lie in 1..{P // 2} for a "
-                                      f"period of {P} samples; got {exc.min()}..{exc.max()}")
-    change = periodic_change(Xp[0, M0 // 2:] if M0 >= 4 else Xp[0])
+            raise IdentificationError(
+                f"{source}: excited lines must lie in 1..{P // 2} for a "
+                f"period of {P} samples; got {exc.min()}..{exc.max()}"
+            )
+    change = periodic_change(Xp[0, M0 // 2 :] if M0 >= 4 else Xp[0])
     if change > MAX_CHANGE:
         raise IdentificationError(
             f"{source}: the period of {P} samples does not fit the data: consecutive periods "
             f"of the input {input_name!r} differ by {change:.2f} of its power (a periodic "
             f"input with fair noise: well below {MAX_CHANGE}); give the excitation's true "
-            "period or --period auto")
+            "period or --period auto"
+        )
 
     # Transient periods: departure from the steady mean at the excited lines.
-    ref = F[:, M0 // 2:, :][:, :, exc].mean(axis=1)
-    dev = (np.abs(F[:, :, exc] - ref[:, None]) ** 2).sum(axis=-1) / (np.abs(ref) ** 2).sum(-1)[:, None]
-    typical = np.median(dev[:, M0 // 2:], axis=1)
+    ref = F[:, M0 // 2 :, :][:, :, exc].mean(axis=1)
+    dev = (np.abs(F[:, :, exc] - ref[:, None]) ** 2).sum(axis=-1) / (np.abs(ref) ** 2).sum(-1)[
+        :, None
+    ]
+    typical = np.median(dev[:, M0 // 2 :], axis=1)
     ratio = (dev / np.maximum(typical[:, None], 1e-300)).max(axis=0)
     if transient_periods is None:
         nt = 0
@@ -328,8 +443,9 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
     else:
         nt = int(transient_periods)
         if nt < 0 or M0 - nt < 2:
-            raise IdentificationError(f"{source}: {nt} transient period(s) of {M0} leave fewer "
-                                      "than two steady periods")
+            raise IdentificationError(
+                f"{source}: {nt} transient period(s) of {M0} leave fewer than two steady periods"
+            )
     F = F[:, nt:]
     M = M0 - nt
 
@@ -339,8 +455,15 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
     cov_yu = (d[1:] * np.conj(d[:1])).sum(axis=1) / (M - 1)
     U, Y = mean[0, exc], mean[1:, exc]
     G = Y / U
-    varG = np.abs(G) ** 2 / M * (var[1:, exc] / np.abs(Y) ** 2 + var[0, exc] / np.abs(U) ** 2
-                                 - 2 * np.real(cov_yu[:, exc] / (Y * np.conj(U))))
+    varG = (
+        np.abs(G) ** 2
+        / M
+        * (
+            var[1:, exc] / np.abs(Y) ** 2
+            + var[0, exc] / np.abs(U) ** 2
+            - 2 * np.real(cov_yu[:, exc] / (Y * np.conj(U)))
+        )
+    )
     noise_std = np.sqrt(np.maximum(varG, 0.0))
 
     kmin, kmax = int(exc.min()), int(exc.max())
@@ -368,36 +491,67 @@ def periodic_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *,
                     continue
                 refp = yy[e].mean()
                 db = lambda p, refp=refp: (  # noqa: E731
-                    10 * math.log10(p / refp) if p > 0 else -math.inf)
-                bands.append(Band((lo * df, (hi - 1) * df),
-                                  db(yy[o].mean()) if o.size else math.nan,
-                                  db(yy[ev].mean()) if ev.size else math.nan,
-                                  db(noise_mean[np.r_[e, o, ev]].mean())))
+                    10 * math.log10(p / refp) if p > 0 else -math.inf
+                )
+                bands.append(
+                    Band(
+                        (lo * df, (hi - 1) * df),
+                        db(yy[o].mean()) if o.size else math.nan,
+                        db(yy[ev].mean()) if ev.size else math.nan,
+                        db(noise_mean[np.r_[e, o, ev]].mean()),
+                    )
+                )
             distortion[name] = bands
         if odd_det.size:
             s = np.maximum(np.abs(mean[1:, odd_det]) ** 2 - var[1:, odd_det] / M, 0.0)
             near = np.argsort(np.abs(odd_det[None, :] - exc[:, None]), axis=1)[:, :NEIGHBOURS]
             s_exc = s[:, near].mean(axis=-1)  # (ny, K)
-            total_std = np.sqrt(noise_std ** 2 + s_exc / np.abs(U) ** 2)
+            total_std = np.sqrt(noise_std**2 + s_exc / np.abs(U) ** 2)
     elif require_distortion:
         raise IdentificationError(
             f"{source}: every line from {kmin} to {kmax} (× {fs / P:g} Hz) is excited: no "
             "detection lines, so nonlinear distortion cannot be told from the output; use a "
-            "random-odd multisine (flexarm excite --kind random-odd)")
+            "random-odd multisine (flexarm excite --kind random-odd)"
+        )
 
     freq = exc * fs / P
-    frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq,
-                                        inputs=[input_name], outputs=names)
-    spectra = {"lines": np.arange(F.shape[-1]), "mean": mean, "var": var, "M": M,
-               "excited": exc}
-    return PeriodicFRF(frd, G, freq, exc, names, input_name, noise_std, total_std, distortion,
-                       P, float(fs), M, nt, spectra, notes)
+    frd = control.FrequencyResponseData(
+        G[:, None, :], 2 * np.pi * freq, inputs=[input_name], outputs=names
+    )
+    spectra = {"lines": np.arange(F.shape[-1]), "mean": mean, "var": var, "M": M, "excited": exc}
+    return PeriodicFRF(
+        frd,
+        G,
+        freq,
+        exc,
+        names,
+        input_name,
+        noise_std,
+        total_std,
+        distortion,
+        P,
+        float(fs),
+        M,
+        nt,
+        spectra,
+        notes,
+    )
 
 
-def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int = 2,
-            half_width: int = 5, f_min: float | None = None, f_max: float | None = None,
-            max_lines: int = 2000, input_name: str = "input", reference: np.ndarray | None = None,
-            source: str = "<data>") -> PeriodicFRF:
+def lpm_frf(
+    u: np.ndarray,
+    y: Mapping[str, np.ndarray],
+    fs: float,
+    *,
+    order: int = 2,
+    half_width: int = 5,
+    f_min: float | None = None,
+    f_max: float | None = None,
+    max_lines: int = 2000,
+    input_name: str = "input",
+    reference: np.ndarray | None = None,
+    source: str = "<data>",
+) -> PeriodicFRF:
     """FRF of a record that is not periodic or not in steady state: the local polynomial
     method (LPM; Pintelon & Schoukens 2012). With the DFTs U(k), Y(k) of the whole record
     (N samples), around each line k and r = −n..n (n = ``half_width``),
@@ -428,21 +582,27 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
             raise IdentificationError(f"{source}: signal {k!r} must be 1-D and finite")
     lens = {k: len(v) for k, v in chans.items()}
     if len(set(lens.values())) > 1:
-        raise IdentificationError(f"{source}: channels of different lengths: "
-                                  + ", ".join(f"{k} {n}" for k, n in lens.items()))
+        raise IdentificationError(
+            f"{source}: channels of different lengths: "
+            + ", ".join(f"{k} {n}" for k, n in lens.items())
+        )
     R, n = int(order), int(half_width)
     q = 2 * n + 1 - 2 * (R + 1)
     if R < 0 or q < 1:
-        raise IdentificationError(f"{source}: LPM order {R} with half_width {n} leaves {q} "
-                                  "degrees of freedom; need 2·half_width + 1 > 2·(order + 1)")
+        raise IdentificationError(
+            f"{source}: LPM order {R} with half_width {n} leaves {q} "
+            "degrees of freedom; need 2·half_width + 1 > 2·(order + 1)"
+        )
     N = lens[input_name]
     X = np.fft.rfft(np.stack(list(chans.values())), axis=-1) / np.sqrt(N)
     df = fs / N
     k0 = max(n + 1, int(np.ceil((f_min or 0) / df)))
     k1 = min(X.shape[-1] - n - 2, int(np.floor(f_max / df)) if f_max else X.shape[-1])
     if k1 < k0:
-        raise IdentificationError(f"{source}: {N} samples give no line in the band with "
-                                  f"{n} lines on each side; record longer or widen the band")
+        raise IdentificationError(
+            f"{source}: {N} samples give no line in the band with "
+            f"{n} lines on each side; record longer or widen the band"
+        )
     reg = X[-1] if reference is not None else X[0]  # the local regressor's signal
     ks = np.arange(k0, k1 + 1)
     # lines whose window carries input: the local input energy above 1e-8 of the largest
@@ -450,8 +610,10 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
     e_loc = np.convolve(np.abs(reg) ** 2, np.ones(2 * n + 1), mode="same")[ks]
     ks = ks[e_loc > 1e-8 * e_loc.max()]
     if ks.size == 0:
-        raise IdentificationError(f"{source}: the input {input_name!r} carries no power in "
-                                  "the band: no FRF line can be estimated")
+        raise IdentificationError(
+            f"{source}: the input {input_name!r} carries no power in "
+            "the band: no FRF line can be estimated"
+        )
     if ks.size > max_lines:
         ks = ks[np.round(np.linspace(0, ks.size - 1, max_lines)).astype(int)]
     r = np.arange(-n, n + 1)
@@ -474,7 +636,8 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
         raise IdentificationError(
             f"{source}: no window of {2 * n + 1} lines holds enough excited lines for the "
             f"local polynomial of order {R}: the LPM needs a broadband input (noise, a sweep, "
-            "a full multisine); for a periodic multisine use the periodic method")
+            "a full multisine); for a periodic multisine use the periodic method"
+        )
     ks, K, KhK, idx = ks[ok], K[ok], KhK[ok], idx[ok]
     KhK_inv = np.linalg.inv(KhK)
     G = np.empty((len(names), ks.size), complex)
@@ -499,15 +662,36 @@ def lpm_frf(u: np.ndarray, y: Mapping[str, np.ndarray], fs: float, *, order: int
         vu = np.sum(np.abs(eu) ** 2, axis=1) / q * p00
         cyu = np.sum(ey * eu.conj(), axis=1) / q * p00
         G[j] = gy / gu
-        sd[j] = np.abs(G[j]) * np.sqrt(np.maximum(
-            vy / np.abs(gy) ** 2 + vu / np.abs(gu) ** 2 - 2 * np.real(cyu / (gy * gu.conj())), 0))
+        sd[j] = np.abs(G[j]) * np.sqrt(
+            np.maximum(
+                vy / np.abs(gy) ** 2 + vu / np.abs(gu) ** 2 - 2 * np.real(cyu / (gy * gu.conj())), 0
+            )
+        )
     freq = ks * df
-    frd = control.FrequencyResponseData(G[:, None, :], 2 * np.pi * freq, inputs=[input_name],
-                                        outputs=names)
-    return PeriodicFRF(frd, G, freq, ks, names, input_name, sd, None, None, N, float(fs), 1, 0,
-                       {}, [f"{source}: local polynomial method (order {R}, {2 * n + 1} lines, "
-                            f"{q} dof per line" + (", indirect through the reference)"
-                                                   if reference is not None else ")")])
+    frd = control.FrequencyResponseData(
+        G[:, None, :], 2 * np.pi * freq, inputs=[input_name], outputs=names
+    )
+    return PeriodicFRF(
+        frd,
+        G,
+        freq,
+        ks,
+        names,
+        input_name,
+        sd,
+        None,
+        None,
+        N,
+        float(fs),
+        1,
+        0,
+        {},
+        [
+            f"{source}: local polynomial method (order {R}, {2 * n + 1} lines, "
+            f"{q} dof per line"
+            + (", indirect through the reference)" if reference is not None else ")")
+        ],
+    )
 
 
 def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>") -> PeriodicFRF:
@@ -524,17 +708,23 @@ def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>")
     :class:`IdentificationError` when the records disagree on lines, outputs or rate."""
     rs = list(results)
     if len(rs) < 2:
-        raise IdentificationError(f"{source}: the robust BLA needs at least two realisations; "
-                                  f"got {len(rs)}")
+        raise IdentificationError(
+            f"{source}: the robust BLA needs at least two realisations; got {len(rs)}"
+        )
     first = rs[0]
     for k, r in enumerate(rs[1:], 2):
-        if (r.outputs != first.outputs or r.fs != first.fs or r.period != first.period
-                or not np.array_equal(r.lines, first.lines)):
+        if (
+            r.outputs != first.outputs
+            or r.fs != first.fs
+            or r.period != first.period
+            or not np.array_equal(r.lines, first.lines)
+        ):
             raise IdentificationError(
                 f"{source}: realisation {k} differs from the first in its excited lines, "
                 f"outputs, period or sampling rate ({r.outputs} at {r.fs:g} Hz, {r.period} "
                 f"samples, {len(r.lines)} lines vs {first.outputs} at {first.fs:g} Hz, "
-                f"{first.period} samples, {len(first.lines)} lines): one design per call")
+                f"{first.period} samples, {len(first.lines)} lines): one design per call"
+            )
     R = len(rs)
     G = np.stack([r.response for r in rs])  # (R, ny, K)
     Gm = G.mean(axis=0)
@@ -543,21 +733,47 @@ def combine_realisations(results: Sequence[PeriodicFRF], source: str = "<data>")
     dist = None
     dists = [r.distortion for r in rs]
     if all(d is not None for d in dists):
+
         def pmean(vals):
             v = [x for x in vals if math.isfinite(x)]
             return 10 * math.log10(np.mean([10 ** (x / 10) for x in v])) if v else math.nan
-        dist = {n: [Band(bs[0].band_hz, pmean([b.odd_db for b in bs]),
-                         pmean([b.even_db for b in bs]), pmean([b.noise_db for b in bs]))
-                    for bs in zip(*(d[n] for d in dists if d is not None), strict=False)]
-                for n in first.outputs}
-    frd = control.FrequencyResponseData(Gm[:, None, :], 2 * np.pi * first.frequency_hz,
-                                        inputs=[first.input], outputs=first.outputs)
+
+        dist = {
+            n: [
+                Band(
+                    bs[0].band_hz,
+                    pmean([b.odd_db for b in bs]),
+                    pmean([b.even_db for b in bs]),
+                    pmean([b.noise_db for b in bs]),
+                )
+                for bs in zip(*(d[n] for d in dists if d is not None), strict=False)
+            ]
+            for n in first.outputs
+        }
+    frd = control.FrequencyResponseData(
+        Gm[:, None, :], 2 * np.pi * first.frequency_hz, inputs=[first.input], outputs=first.outputs
+    )
     notes = [w for r in rs for w in r.warnings]
-    notes.append(f"{source}: BLA over {R} realisations (robust method): total_std from their "
-                 "spread")
-    return PeriodicFRF(frd, Gm, first.frequency_hz, first.lines, first.outputs, first.input,
-                       noise, total, dist, first.period, first.fs,
-                       sum(r.periods_used for r in rs), first.transient_periods, {}, notes)
+    notes.append(
+        f"{source}: BLA over {R} realisations (robust method): total_std from their spread"
+    )
+    return PeriodicFRF(
+        frd,
+        Gm,
+        first.frequency_hz,
+        first.lines,
+        first.outputs,
+        first.input,
+        noise,
+        total,
+        dist,
+        first.period,
+        first.fs,
+        sum(r.periods_used for r in rs),
+        first.transient_periods,
+        {},
+        notes,
+    )
 
 
 def periodic_change(xp: np.ndarray) -> float:
@@ -600,7 +816,9 @@ def plot_distortion(res: PeriodicFRF, path=None):
         db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
         ax.plot(exc * df, db(y[exc]), "k+", label="output, excited lines")
         o = other[other % 2 == 1] if odd else other
-        ax.plot(o * df, db(y[o]), "ro", ms=3, label="odd detection lines" if odd else "detection lines")
+        ax.plot(
+            o * df, db(y[o]), "ro", ms=3, label="odd detection lines" if odd else "detection lines"
+        )
         if odd:
             e = other[other % 2 == 0]
             ax.plot(e * df, db(y[e]), "bx", ms=3, label="even detection lines")
@@ -623,6 +841,7 @@ def _finish(fig, axes, path):
     fig.tight_layout()
     if path is not None:
         from flexarm.io.write import save_figure
+
         save_figure(fig, path, overwrite=True, dpi=120)
     return fig
 
@@ -636,6 +855,12 @@ def plot_bode(res: PeriodicFRF, path=None, model=None):
 
     sd = res.total_std if res.total_std is not None else res.noise_std
     data = {n: res.response[j] for j, n in enumerate(res.outputs)}
-    return bode_figure(res.frequency_hz, data, {n: sd[j] for j, n in enumerate(res.outputs)},
-                       model, title=f"FRF from {res.input} (±2σ: "
-                       f"{'total' if res.total_std is not None else 'noise'} std)", path=path)
+    return bode_figure(
+        res.frequency_hz,
+        data,
+        {n: sd[j] for j, n in enumerate(res.outputs)},
+        model,
+        title=f"FRF from {res.input} (±2σ: "
+        f"{'total' if res.total_std is not None else 'noise'} std)",
+        path=path,
+    )

@@ -42,15 +42,21 @@ class PhysicalFit:
     motor_tf: control.TransferFunction
 
     def to_dict(self) -> dict:
-        return {"inertia": self.inertia, "viscous": self.viscous, "stiffness": self.stiffness,
-                "coulomb_current": self.coulomb_current, "std": dict(self.std),
-                "relative_residual": self.relative_residual,
-                "method": "linear least squares on K i = (J s^2 + V s + C (1 - G_b)) theta_m "
-                          "+ (4 C_f / pi) j exp(j angle theta_m) at every fundamental"}
+        return {
+            "inertia": self.inertia,
+            "viscous": self.viscous,
+            "stiffness": self.stiffness,
+            "coulomb_current": self.coulomb_current,
+            "std": dict(self.std),
+            "relative_residual": self.relative_residual,
+            "method": "linear least squares on K i = (J s^2 + V s + C (1 - G_b)) theta_m "
+            "+ (4 C_f / pi) j exp(j angle theta_m) at every fundamental",
+        }
 
 
-def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunction,
-                 motor_constant: float) -> PhysicalFit:
+def fit_physical(
+    analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunction, motor_constant: float
+) -> PhysicalFit:
     """J, V, C, C_f from the fundamentals of all experiments (see module docstring)."""
     if len(analyses) < 2:
         raise ValueError("the structured fit needs at least two experiments")
@@ -66,7 +72,7 @@ def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunc
         i = an.phasor("current")
         gb = complex(beam_tf(1j * w))
         wt = 1.0 / max(abs(K * i), 1e-300)
-        rows.append(np.array([-w**2 * th, 1j * w * th, (1 - gb) * th, an.friction(1)]) * wt)
+        rows.append(np.array([-(w**2) * th, 1j * w * th, (1 - gb) * th, an.friction(1)]) * wt)
         rhs.append(K * i * wt)
     A = np.array(rows)
     b = np.array(rhs)
@@ -83,7 +89,17 @@ def fit_physical(analyses: list[HarmonicAnalysis], beam_tf: control.TransferFunc
     diff[-1] = 0.0
     den = np.polyadd(np.polymul([J, V, 0.0], db), C * diff)
     gm = control.tf(K * db / den[0], den / den[0])
-    return PhysicalFit(J, V, C, cf / K,
-                       {"inertia": float(sd[0]), "viscous": float(sd[1]),
-                        "stiffness": float(sd[2]), "coulomb_current": float(sd[3] / K)},
-                       float(np.linalg.norm(r) / np.linalg.norm(b2)), gm)
+    return PhysicalFit(
+        J,
+        V,
+        C,
+        cf / K,
+        {
+            "inertia": float(sd[0]),
+            "viscous": float(sd[1]),
+            "stiffness": float(sd[2]),
+            "coulomb_current": float(sd[3] / K),
+        },
+        float(np.linalg.norm(r) / np.linalg.norm(b2)),
+        gm,
+    )

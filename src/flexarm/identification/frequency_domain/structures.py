@@ -76,19 +76,30 @@ def _pair(cubic) -> tuple[float, float]:
     return float(abs(p) / (2 * np.pi)), float(-p.real / abs(p))
 
 
-def _hub_link_starts(structure: str, omega, data, gain: float, damping: float,
-                     link: tuple[str, str], unit: str) -> list[dict]:
+def _hub_link_starts(
+    structure: str, omega, data, gain: float, damping: float, link: tuple[str, str], unit: str
+) -> list[dict]:
     """Start candidates of a hub + link structure (one per inertia ratio r of
     :func:`_rigid_and_modes`): hub inertia J/(1+r), link inertia J r/(1+r) and stiffness
     ω_a² J r/(1+r), link damping at ζ = 0.02, no hub viscous friction, no delay; ``link``
     the structure's names of the link inertia and damping."""
     if data.get("motor_angle") is None:
-        raise TFEstError(f"{structure}: the start values need the motor_angle FRF ({unit}); "
-                         "give it, or give every parameter in 'initial'")
+        raise TFEstError(
+            f"{structure}: the start values need the motor_angle FRF ({unit}); "
+            "give it, or give every parameter in 'initial'"
+        )
     J, wa, ratios = _rigid_and_modes(omega, data["motor_angle"], gain=gain, damping=damping)
-    return [{"hub_inertia": J / (1 + r), "hub_viscous": 0.0, "link_stiffness": wa**2 * J * r / (1 + r),
-             link[0]: J * r / (1 + r), link[1]: 2 * 0.02 * wa * J * r / (1 + r),
-             "delay_s": 0.0} for r in ratios]
+    return [
+        {
+            "hub_inertia": J / (1 + r),
+            "hub_viscous": 0.0,
+            "link_stiffness": wa**2 * J * r / (1 + r),
+            link[0]: J * r / (1 + r),
+            link[1]: 2 * 0.02 * wa * J * r / (1 + r),
+            "delay_s": 0.0,
+        }
+        for r in ratios
+    ]
 
 
 def _rigid_and_modes(omega, G, gain=1.0, damping=0.0):
@@ -118,8 +129,15 @@ def _rigid_and_modes(omega, G, gain=1.0, damping=0.0):
 
 #: Parameters of the two-mass structure, in fit order (per unit of the input's torque
 #: constant: inertias in A·s²/rad when the input is a current in A and the outputs in rad).
-TWO_MASS = ("total_inertia", "inertia_ratio", "resonance_hz", "shaft_damping",
-            "motor_viscous", "load_viscous", "delay_s")
+TWO_MASS = (
+    "total_inertia",
+    "inertia_ratio",
+    "resonance_hz",
+    "shaft_damping",
+    "motor_viscous",
+    "load_viscous",
+    "delay_s",
+)
 
 
 def two_mass_response(p: dict, omega) -> tuple[np.ndarray, np.ndarray]:
@@ -157,15 +175,22 @@ def two_mass_derived(p: dict) -> dict:
     k = wr**2 * Jm * Jl / J
     c = 2 * p["shaft_damping"] * k / wr
     dm, dl = p["motor_viscous"], p["load_viscous"]
-    cubic = [Jm * Jl, Jm * (c + dl) + Jl * (c + dm), k * J + (c + dm) * (c + dl) - c**2, k * (dm + dl)]
+    cubic = [
+        Jm * Jl,
+        Jm * (c + dl) + Jl * (c + dm),
+        k * J + (c + dm) * (c + dl) - c**2,
+        k * (dm + dl),
+    ]
     roots = np.roots(cubic)
     pair = roots[np.argmax(np.abs(roots.imag))]
     zeta = float(-pair.real / abs(pair)) if abs(pair.imag) > 0 else 1.0
-    return {"resonance_damping": zeta,
-            "antiresonance_hz": p["resonance_hz"] / np.sqrt(1 + r),
-            "motor_inertia": p["total_inertia"] / (1 + r),
-            "load_inertia": p["total_inertia"] * r / (1 + r),
-            "stiffness": (2 * np.pi * p["resonance_hz"]) ** 2 * p["total_inertia"] * r / (1 + r) ** 2}
+    return {
+        "resonance_damping": zeta,
+        "antiresonance_hz": p["resonance_hz"] / np.sqrt(1 + r),
+        "motor_inertia": p["total_inertia"] / (1 + r),
+        "load_inertia": p["total_inertia"] * r / (1 + r),
+        "stiffness": (2 * np.pi * p["resonance_hz"]) ** 2 * p["total_inertia"] * r / (1 + r) ** 2,
+    }
 
 
 def two_mass_guess(omega, Gm) -> dict:
@@ -178,8 +203,15 @@ def two_mass_guess(omega, Gm) -> dict:
     fa, fr = omega[ia] / (2 * np.pi), omega[ir] / (2 * np.pi)
     if fr <= fa * 1.01:
         fr = fa * 1.5
-    return {"total_inertia": J, "inertia_ratio": (fr / fa) ** 2 - 1, "resonance_hz": fr,
-            "shaft_damping": 0.05, "motor_viscous": 0.0, "load_viscous": 0.0, "delay_s": 0.0}
+    return {
+        "total_inertia": J,
+        "inertia_ratio": (fr / fa) ** 2 - 1,
+        "resonance_hz": fr,
+        "shaft_damping": 0.05,
+        "motor_viscous": 0.0,
+        "load_viscous": 0.0,
+        "delay_s": 0.0,
+    }
 
 
 def _two_mass_guess(omega, data, given):
@@ -193,21 +225,34 @@ def _two_mass_outputs(p, omega):
 
 
 TWO_MASS_STRUCTURE = Structure(
-    name="two-mass", parameters=TWO_MASS,
+    name="two-mass",
+    parameters=TWO_MASS,
     log=frozenset({"total_inertia", "inertia_ratio", "resonance_hz"}),
-    outputs=("motor_angle", "load_angle"), response=_two_mass_outputs, guess=_two_mass_guess,
-    scale=lambda p0, w: {"motor_viscous": p0["total_inertia"] * w.min(),
-                         "load_viscous": p0["total_inertia"] * w.min(),
-                         "delay_s": 1 / w.max(), "shaft_damping": 0.01},
+    outputs=("motor_angle", "load_angle"),
+    response=_two_mass_outputs,
+    guess=_two_mass_guess,
+    scale=lambda p0, w: {
+        "motor_viscous": p0["total_inertia"] * w.min(),
+        "load_viscous": p0["total_inertia"] * w.min(),
+        "delay_s": 1 / w.max(),
+        "shaft_damping": 0.01,
+    },
     derived=two_mass_derived,
     units="per unit of the input's torque constant (A·s²/rad for a current input and angles "
-          "in rad)")
+    "in rad)",
+)
 
 
 # --- FRB single-mass arm: eqs. (1), (12), (13) ------------------------------------------
 
-FRB_SINGLE_MASS = ("hub_inertia", "hub_viscous", "link_stiffness", "tip_inertia",
-                   "tip_damping", "delay_s")
+FRB_SINGLE_MASS = (
+    "hub_inertia",
+    "hub_viscous",
+    "link_stiffness",
+    "tip_inertia",
+    "tip_damping",
+    "delay_s",
+)
 
 
 def frb_single_mass_response(p: dict, omega) -> dict[str, np.ndarray]:
@@ -229,8 +274,12 @@ def frb_single_mass_response(p: dict, omega) -> dict[str, np.ndarray]:
     Jt, dt = p["tip_inertia"], p["tip_damping"]
     Db = Jt * s**2 + dt * s + C
     Gb = C / Db
-    Gm = p["motor_constant"] * Db / (s * (J * s * Db + V * Db + C * (Jt * s + dt))) \
+    Gm = (
+        p["motor_constant"]
+        * Db
+        / (s * (J * s * Db + V * Db + C * (Jt * s + dt)))
         * np.exp(-s * p["delay_s"])
+    )
     return {"motor_angle": Gm, "tip_angle": Gb * Gm, "tip_angle/motor_angle": Gb}
 
 
@@ -244,35 +293,54 @@ def frb_single_mass_derived(p: dict) -> dict:
     cubic = np.array([J * Jt, J * dt + V * Jt, J * C + V * dt + C * Jt, C * (V + dt)])
     fr, zr = _pair(cubic)
     c = cubic / (J * Jt)
-    return {"resonance_hz": fr, "resonance_damping": zr,
-            "antiresonance_hz": float(np.sqrt(C / Jt) / (2 * np.pi)),
-            "tip_damping_ratio": float(dt / (2 * np.sqrt(C * Jt))),
-            "total_inertia": J + Jt, "gm_gain": p["motor_constant"] / J,
-            "gm_den_s2": float(c[1]), "gm_den_s1": float(c[2]), "gm_den_s0": float(c[3])}
+    return {
+        "resonance_hz": fr,
+        "resonance_damping": zr,
+        "antiresonance_hz": float(np.sqrt(C / Jt) / (2 * np.pi)),
+        "tip_damping_ratio": float(dt / (2 * np.sqrt(C * Jt))),
+        "total_inertia": J + Jt,
+        "gm_gain": p["motor_constant"] / J,
+        "gm_den_s2": float(c[1]),
+        "gm_den_s1": float(c[2]),
+        "gm_den_s0": float(c[3]),
+    }
 
 
 def _frb_guess(omega, data, given):
     K = given["motor_constant"]
-    return _hub_link_starts("frb-single-mass", omega, data, K, 0.0,
-                            ("tip_inertia", "tip_damping"), "θm/i")
+    return _hub_link_starts(
+        "frb-single-mass", omega, data, K, 0.0, ("tip_inertia", "tip_damping"), "θm/i"
+    )
 
 
 FRB_SINGLE_MASS_STRUCTURE = Structure(
-    name="frb-single-mass", parameters=FRB_SINGLE_MASS,
+    name="frb-single-mass",
+    parameters=FRB_SINGLE_MASS,
     log=frozenset({"hub_inertia", "link_stiffness", "tip_inertia"}),
     outputs=("motor_angle", "tip_angle", "tip_angle/motor_angle"),
-    response=frb_single_mass_response, guess=_frb_guess,
-    scale=lambda p0, w: {"hub_viscous": (p0["hub_inertia"] + p0["tip_inertia"]) * w.min(),
-                         "tip_damping": p0["tip_inertia"] * w.min(), "delay_s": 1 / w.max()},
+    response=frb_single_mass_response,
+    guess=_frb_guess,
+    scale=lambda p0, w: {
+        "hub_viscous": (p0["hub_inertia"] + p0["tip_inertia"]) * w.min(),
+        "tip_damping": p0["tip_inertia"] * w.min(),
+        "delay_s": 1 / w.max(),
+    },
     derived=frb_single_mass_derived,
     given={"motor_constant": "K, N·m/A (torque per ampere of the current drive)"},
-    units="SI: kg·m², N·m·s/rad, N·m/rad; input current in A, angles in rad")
+    units="SI: kg·m², N·m·s/rad, N·m/rad; input current in A, angles in rad",
+)
 
 
 # --- the geared voltage-driven servo with a flexible link (rotary rig) -----------------
 
-VOLTAGE_SERVO = ("hub_inertia", "hub_viscous", "link_stiffness", "link_inertia",
-                 "link_damping", "delay_s")
+VOLTAGE_SERVO = (
+    "hub_inertia",
+    "hub_viscous",
+    "link_stiffness",
+    "link_inertia",
+    "link_damping",
+    "delay_s",
+)
 
 
 def servo_gains(given: dict) -> tuple[float, float]:
@@ -316,34 +384,50 @@ def voltage_servo_derived(p: dict) -> dict:
     J, B = p["hub_inertia"], p["hub_viscous"] + kw
     C, Jl, c = p["link_stiffness"], p["link_inertia"], p["link_damping"]
     fr, zr = _pair([J * Jl, J * c + B * Jl + Jl * c, J * C + B * c + Jl * C, B * C])
-    return {"resonance_hz": fr, "resonance_damping": zr,
-            "link_frequency_hz": float(np.sqrt(C / Jl) / (2 * np.pi)),
-            "link_damping_ratio": float(c / (2 * np.sqrt(C * Jl))),
-            "input_gain": ku, "back_emf_damping": kw}
+    return {
+        "resonance_hz": fr,
+        "resonance_damping": zr,
+        "link_frequency_hz": float(np.sqrt(C / Jl) / (2 * np.pi)),
+        "link_damping_ratio": float(c / (2 * np.sqrt(C * Jl))),
+        "input_gain": ku,
+        "back_emf_damping": kw,
+    }
 
 
 def _servo_guess(omega, data, given):
     ku, kw = servo_gains(given)
-    return _hub_link_starts("voltage-servo", omega, data, ku, kw,
-                            ("link_inertia", "link_damping"), "hub angle per volt")
+    return _hub_link_starts(
+        "voltage-servo", omega, data, ku, kw, ("link_inertia", "link_damping"), "hub angle per volt"
+    )
 
 
 VOLTAGE_SERVO_STRUCTURE = Structure(
-    name="voltage-servo", parameters=VOLTAGE_SERVO,
+    name="voltage-servo",
+    parameters=VOLTAGE_SERVO,
     log=frozenset({"hub_inertia", "link_stiffness", "link_inertia"}),
     outputs=("motor_angle", "tip_angle", "tip_deflection", "tip_angle/motor_angle"),
-    response=voltage_servo_response, guess=_servo_guess,
-    scale=lambda p0, w: {"hub_viscous": (p0["hub_inertia"] + p0["link_inertia"]) * w.min(),
-                         "link_damping": p0["link_inertia"] * w.min(), "delay_s": 1 / w.max()},
+    response=voltage_servo_response,
+    guess=_servo_guess,
+    scale=lambda p0, w: {
+        "hub_viscous": (p0["hub_inertia"] + p0["link_inertia"]) * w.min(),
+        "link_damping": p0["link_inertia"] * w.min(),
+        "delay_s": 1 / w.max(),
+    },
     derived=voltage_servo_derived,
-    given={"motor_constant": "K_m, V·s/rad (= N·m/A)", "armature_resistance": "R_m, Ω",
-           "gear_ratio": "K_g", "efficiency": "η = η_g η_m (gear times motor efficiency)"},
+    given={
+        "motor_constant": "K_m, V·s/rad (= N·m/A)",
+        "armature_resistance": "R_m, Ω",
+        "gear_ratio": "K_g",
+        "efficiency": "η = η_g η_m (gear times motor efficiency)",
+    },
     optional_given={"length": "L, m (only for the tip_deflection output)"},
-    units="SI at the output shaft: kg·m², N·m·s/rad, N·m/rad; input voltage in V")
+    units="SI at the output shaft: kg·m², N·m·s/rad, N·m/rad; input voltage in V",
+)
 
 
-STRUCTURES = {s.name: s for s in (TWO_MASS_STRUCTURE, FRB_SINGLE_MASS_STRUCTURE,
-                                  VOLTAGE_SERVO_STRUCTURE)}
+STRUCTURES = {
+    s.name: s for s in (TWO_MASS_STRUCTURE, FRB_SINGLE_MASS_STRUCTURE, VOLTAGE_SERVO_STRUCTURE)
+}
 
 
 def get_structure(name: str) -> Structure:
@@ -354,6 +438,7 @@ def get_structure(name: str) -> Structure:
 
 
 # --- the one fitter ----------------------------------------------------------------------
+
 
 @dataclass
 class StructuredFit:
@@ -386,20 +471,34 @@ class StructuredFit:
         return STRUCTURES[self.structure].response({**self.given, **self.values}, omega)
 
     def to_json(self) -> dict:
-        return {"structure": self.structure, "units": STRUCTURES[self.structure].units,
-                "given": dict(self.given), "free": list(self.free),
-                "outputs": list(self.outputs), "cost": self.cost,
-                "expected_cost": self.expected_cost, "cost_std": self.cost_std,
-                "verdict": self.verdict, "parameters": self.parameters}
+        return {
+            "structure": self.structure,
+            "units": STRUCTURES[self.structure].units,
+            "given": dict(self.given),
+            "free": list(self.free),
+            "outputs": list(self.outputs),
+            "cost": self.cost,
+            "expected_cost": self.expected_cost,
+            "cost_std": self.cost_std,
+            "verdict": self.verdict,
+            "parameters": self.parameters,
+        }
 
 
 #: Starts of the delay (× 1/ω_max): the phase e^{−jωτ} makes the cost multimodal in τ.
 _DELAY_STARTS = (0.0, 0.25, 0.5, 1.0)
 
 
-def fit_structure(structure: Structure | str, omega, data: dict, std: dict | None = None, *,
-                  free=None, initial: dict | None = None, given: dict | None = None
-                  ) -> StructuredFit:
+def fit_structure(
+    structure: Structure | str,
+    omega,
+    data: dict,
+    std: dict | None = None,
+    *,
+    free=None,
+    initial: dict | None = None,
+    given: dict | None = None,
+) -> StructuredFit:
     """Fit ``structure`` to the FRFs ``data`` (output name → complex array at ``omega``,
     rad/s; any subset of ``structure.outputs``) weighted by ``std`` (output name → standard
     deviation per line; all or none), the ML cost of the module docstring.
@@ -414,12 +513,16 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     given = dict(given or {})
     missing = [g for g in st.given if given.get(g) is None]
     if missing:
-        raise TFEstError(f"{st.name}: give the known value(s) " + "; ".join(
-            f"{g} ({st.given[g]})" for g in missing))
+        raise TFEstError(
+            f"{st.name}: give the known value(s) "
+            + "; ".join(f"{g} ({st.given[g]})" for g in missing)
+        )
     bad_given = [g for g in given if g not in st.given and g not in st.optional_given]
     if bad_given:
-        raise TFEstError(f"{st.name}: unknown given value(s) {bad_given}; this structure takes "
-                         f"{', '.join(list(st.given) + list(st.optional_given)) or 'none'}")
+        raise TFEstError(
+            f"{st.name}: unknown given value(s) {bad_given}; this structure takes "
+            f"{', '.join(list(st.given) + list(st.optional_given)) or 'none'}"
+        )
     for g, v in given.items():
         if v is not None and not (np.isfinite(v) and v > 0):
             raise TFEstError(f"{st.name}: given {g} = {v!r}: must be finite and positive")
@@ -428,16 +531,21 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
         raise TFEstError(f"{st.name}: no FRF given; give one or more of {', '.join(st.outputs)}")
     unknown = [k for k in chans if k not in st.outputs]
     if unknown:
-        raise TFEstError(f"{st.name}: output(s) {unknown} are not outputs of the structure; "
-                         f"its outputs: {', '.join(st.outputs)}")
+        raise TFEstError(
+            f"{st.name}: output(s) {unknown} are not outputs of the structure; "
+            f"its outputs: {', '.join(st.outputs)}"
+        )
     if "tip_deflection" in chans and given.get("length") is None:
-        raise TFEstError(f"{st.name}: the tip_deflection output needs the link length: give "
-                         "length (m)")
+        raise TFEstError(
+            f"{st.name}: the tip_deflection output needs the link length: give length (m)"
+        )
     std = {k: v for k, v in (std or {}).items() if v is not None and k in chans}
     known = len(std) == len(chans)
     if std and not known:
-        raise TFEstError(f"{st.name}: std given for {sorted(std)} but not for "
-                         f"{sorted(set(chans) - set(std))}: give all or none")
+        raise TFEstError(
+            f"{st.name}: std given for {sorted(std)} but not for "
+            f"{sorted(set(chans) - set(std))}: give all or none"
+        )
     for k, g in chans.items():
         if g.shape != omega.shape:
             raise TFEstError(f"{st.name}: output {k} has {g.size} values; omega has {omega.size}")
@@ -448,12 +556,15 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     free = tuple(st.parameters) if free is None else tuple(free)
     bad = [f for f in free if f not in st.parameters]
     if bad:
-        raise TFEstError(f"free: unknown parameter(s) {bad}; choose from {', '.join(st.parameters)}")
+        raise TFEstError(
+            f"free: unknown parameter(s) {bad}; choose from {', '.join(st.parameters)}"
+        )
     init = dict(initial or {})
     bad = [f for f in init if f not in st.parameters]
     if bad:
-        raise TFEstError(f"initial: unknown parameter(s) {bad}; choose from "
-                         f"{', '.join(st.parameters)}")
+        raise TFEstError(
+            f"initial: unknown parameter(s) {bad}; choose from {', '.join(st.parameters)}"
+        )
     w = {k: (1 / np.asarray(std[k], float) if known else 1 / np.abs(g)) for k, g in chans.items()}
 
     def start_cost(q):
@@ -467,8 +578,11 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
         cands = [{**c, **init, **given} for c in (cands if isinstance(cands, list) else [cands])]
         with np.errstate(all="ignore"):
             costs = [start_cost(c) for c in cands]
-        p0 = cands[int(np.nanargmin(np.where(np.isfinite(costs), costs, np.nan)))] \
-            if np.isfinite(costs).any() else cands[0]
+        p0 = (
+            cands[int(np.nanargmin(np.where(np.isfinite(costs), costs, np.nan)))]
+            if np.isfinite(costs).any()
+            else cands[0]
+        )
     free = tuple(f for f in st.parameters if f in free)
     scale = st.scale(p0, omega)
 
@@ -489,12 +603,21 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     x0 = np.array([np.log(p0[f]) if f in st.log else p0[f] / scale[f] for f in free])
     lo = np.array([-np.inf if f in st.log else 0.0 for f in free])
     best = None
-    for tau0 in (_DELAY_STARTS if "delay_s" in free else [None]):
+    for tau0 in _DELAY_STARTS if "delay_s" in free else [None]:
         xs = x0.copy()
         if tau0 is not None:
             xs[free.index("delay_s")] = tau0
-        sol = least_squares(resid, xs, bounds=(lo, np.inf), method="trf", x_scale="jac",
-                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+        sol = least_squares(
+            resid,
+            xs,
+            bounds=(lo, np.inf),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=2000,
+        )
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None  # one start at least
@@ -503,8 +626,16 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
     # unbounded Levenberg–Marquardt polish from its solution is kept when it lowers the
     # cost and leaves every bounded parameter at or above 0 (to 1e-9 of its scale).
     if np.isfinite(lo).any():
-        pol = least_squares(resid, best.x, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15,
-                            gtol=1e-15, max_nfev=200 * (len(x0) + 1))
+        pol = least_squares(
+            resid,
+            best.x,
+            method="lm",
+            x_scale="jac",
+            xtol=1e-15,
+            ftol=1e-15,
+            gtol=1e-15,
+            max_nfev=200 * (len(x0) + 1),
+        )
         fin = np.isfinite(lo)
         if pol.cost <= best.cost and np.all(pol.x[fin] >= -1e-9):
             pol.x = np.maximum(pol.x, lo)
@@ -524,20 +655,47 @@ def fit_structure(structure: Structure | str, omega, data: dict, std: dict | Non
 
     names = list(st.parameters) + list(st.derived(p))
     h = 1e-6
-    D = np.column_stack([(all_values(x + h * e) - all_values(x - h * e)) / (2 * h)
-                         for e in np.eye(len(x))]) if len(x) else np.zeros((len(names), 0))
+    D = (
+        np.column_stack(
+            [(all_values(x + h * e) - all_values(x - h * e)) / (2 * h) for e in np.eye(len(x))]
+        )
+        if len(x)
+        else np.zeros((len(names), 0))
+    )
     cov_all = D @ cov_x @ D.T
     vals = all_values(x)
-    params = {n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
-              for i, (n, v) in enumerate(zip(names, vals, strict=False))}
+    params = {
+        n: {"value": float(v), "std": float(np.sqrt(max(cov_all[i, i], 0)))}
+        for i, (n, v) in enumerate(zip(names, vals, strict=False))
+    }
     exp = F - n_par / 2 if known else None
     params = inflate_std(params, cost, F, n_par, exp)
-    return StructuredFit(st.name, params, cost, exp, np.sqrt(exp) if exp is not None else None,
-                         F, n_par, cov_all, free, best.fun, given, tuple(chans))
+    return StructuredFit(
+        st.name,
+        params,
+        cost,
+        exp,
+        np.sqrt(exp) if exp is not None else None,
+        F,
+        n_par,
+        cov_all,
+        free,
+        best.fun,
+        given,
+        tuple(chans),
+    )
 
 
-def fit_two_mass(omega, motor=None, load=None, *, motor_std=None, load_std=None,
-                 free=TWO_MASS, initial: dict | None = None) -> StructuredFit:
+def fit_two_mass(
+    omega,
+    motor=None,
+    load=None,
+    *,
+    motor_std=None,
+    load_std=None,
+    free=TWO_MASS,
+    initial: dict | None = None,
+) -> StructuredFit:
     """The two-mass drive fitted to the motor and/or load angle FRF (rad per input unit):
     :func:`fit_structure` with ``TWO_MASS_STRUCTURE``; ``response`` of the result gives
     ``motor_angle`` and ``load_angle``."""
@@ -546,5 +704,11 @@ def fit_two_mass(omega, motor=None, load=None, *, motor_std=None, load_std=None,
     std = None
     if motor_std is not None or load_std is not None:
         std = {"motor_angle": motor_std, "load_angle": load_std}
-    return fit_structure(TWO_MASS_STRUCTURE, omega, {"motor_angle": motor, "load_angle": load},
-                         std, free=free, initial=initial)
+    return fit_structure(
+        TWO_MASS_STRUCTURE,
+        omega,
+        {"motor_angle": motor, "load_angle": load},
+        std,
+        free=free,
+        initial=initial,
+    )

@@ -90,21 +90,33 @@ class TFEstimate:
 
     @property
     def verdict(self) -> str:
-        return cost_verdict(self.cost, self.n_frequencies, self.n_parameters, self.expected_cost,
-                            self.unstable_poles)
+        return cost_verdict(
+            self.cost,
+            self.n_frequencies,
+            self.n_parameters,
+            self.expected_cost,
+            self.unstable_poles,
+        )
 
     def _table(self) -> Table:
         """One row per parameter: value, std (and the inflated std of a rejected fit)."""
         nz, npo = len(self.tf.num[0][0]) - 1, len(self.tf.den[0][0]) - 1
-        title = (f"TFEstimate: {npo} poles, {nz} zeros"
-                 + (f", delay {self.delay:.4g} s" if self.delay else "")
-                 + f", {self.n_frequencies} frequencies")
+        title = (
+            f"TFEstimate: {npo} poles, {nz} zeros"
+            + (f", delay {self.delay:.4g} s" if self.delay else "")
+            + f", {self.n_frequencies} frequencies"
+        )
         inflated = any("std_inflated" in v for v in self.parameters.values())
-        rows = [(n, v.get("value"), v.get("std"), *((v.get("std_inflated"),) if inflated else ()))
-                for n, v in self.parameters.items()]
+        rows = [
+            (n, v.get("value"), v.get("std"), *((v.get("std_inflated"),) if inflated else ()))
+            for n, v in self.parameters.items()
+        ]
         header = ("parameter", "value", "std") + (("std inflated",) if inflated else ())
-        cost = (f"cost {self.cost:.4g}" + (f", expected {self.expected_cost:.4g} ± "
-                                           f"{self.cost_std:.3g}" if self.expected_cost else ""))
+        cost = f"cost {self.cost:.4g}" + (
+            f", expected {self.expected_cost:.4g} ± {self.cost_std:.3g}"
+            if self.expected_cost
+            else ""
+        )
         return Table(title, rows, header=header, notes=[cost, self.verdict])
 
     def __repr__(self) -> str:
@@ -135,11 +147,11 @@ def plot_fit(fit, frequency_hz, data, std=None, *, path=None):
 
     def model(w):
         r = fit.response(w)
-        return {k: v for k, v in r.items() if k in names} if isinstance(r, dict) else {
-            names[0]: r}
+        return {k: v for k, v in r.items() if k in names} if isinstance(r, dict) else {names[0]: r}
 
-    title = f"fit: cost {fit.cost:.4g}" + (f", expected {fit.expected_cost:.4g}"
-                                           if fit.expected_cost else "")
+    title = f"fit: cost {fit.cost:.4g}" + (
+        f", expected {fit.expected_cost:.4g}" if fit.expected_cost else ""
+    )
     return bode_figure(frequency_hz, data, std, model, title=title, path=path)
 
 
@@ -169,17 +181,23 @@ def cost_verdict(cost, F, n_par, expected, unstable=()) -> str:
     dof = 2 * F - n_par
     lo, hi = chi2.ppf([0.005, 0.995], dof) / 2
     if cost > hi:
-        return (f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
-                f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
-                "to the noise level (model errors or nonlinear distortion); the standard "
-                "deviations 'std' hold for noise only, 'std_inflated' "
-                f"(× {np.sqrt(cost / expected):.3g}) "
-                "treat the misfit as extra noise" + extra)
+        return (
+            f"rejected: the cost {cost:.4g} is {cost / expected:.3g} times its expected "
+            f"value {expected:.4g} (99 % range {lo:.4g}–{hi:.4g}): the model does not fit "
+            "to the noise level (model errors or nonlinear distortion); the standard "
+            "deviations 'std' hold for noise only, 'std_inflated' "
+            f"(× {np.sqrt(cost / expected):.3g}) "
+            "treat the misfit as extra noise" + extra
+        )
     if cost < lo:
-        return (f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "
-                "the variances are overestimated or the model overfits" + extra)
-    return (f"accepted: the cost {cost:.4g} lies within the 99 % range {lo:.4g}–{hi:.4g} of "
-            f"its expected value {expected:.4g}: the model fits to the noise level" + extra)
+        return (
+            f"suspicious: the cost {cost:.4g} is below its 99 % range {lo:.4g}–{hi:.4g}: "
+            "the variances are overestimated or the model overfits" + extra
+        )
+    return (
+        f"accepted: the cost {cost:.4g} lies within the 99 % range {lo:.4g}–{hi:.4g} of "
+        f"its expected value {expected:.4g}: the model fits to the noise level" + extra
+    )
 
 
 def _frd_data(frd, output: int, input: int, std):
@@ -214,7 +232,7 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=30):
         sc = np.linalg.norm(Ar, axis=0)
         sc[sc == 0] = 1
         x = np.linalg.lstsq(Ar / sc, np.concatenate([rhs.real, rhs.imag]), rcond=None)[0] / sc
-        b_new, a_new = x[: nz + 1], np.r_[x[nz + 1:], 1.0]
+        b_new, a_new = x[: nz + 1], np.r_[x[nz + 1 :], 1.0]
         a_new = reflect_unstable_roots(a_new)
         done = a is not None and np.linalg.norm(a_new - a) < 1e-12 * np.linalg.norm(a_new)
         b, a = b_new, a_new
@@ -225,8 +243,9 @@ def _levy_sk(s, Hr, w, nz, nd, iterations=30):
     assert a is not None and b is not None  # one iteration at least
     dv = np.polynomial.polynomial.polyval(s, a)
     A = pw[:, : nz + 1] / dv[:, None] * w[:, None]
-    b = np.linalg.lstsq(np.vstack([A.real, A.imag]),
-                        np.concatenate([(Hr * w).real, (Hr * w).imag]), rcond=None)[0]
+    b = np.linalg.lstsq(
+        np.vstack([A.real, A.imag]), np.concatenate([(Hr * w).real, (Hr * w).imag]), rcond=None
+    )[0]
     return b, a
 
 
@@ -247,9 +266,20 @@ def reflect_unstable_roots(a):
 _LOG_PENALTY = 50.0
 
 
-def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool | float = False,
-          std=None, stable: bool = True, output: int = 0, input: int = 0,
-          max_nfev: int = 200, cost: str = "ml") -> TFEstimate:
+def tfest(
+    frd,
+    n_poles: int,
+    n_zeros: int,
+    *,
+    integrators: int = 0,
+    delay: bool | float = False,
+    std=None,
+    stable: bool = True,
+    output: int = 0,
+    input: int = 0,
+    max_nfev: int = 200,
+    cost: str = "ml",
+) -> TFEstimate:
     """Fit H(s) = N/(s^k D) e^{−sτ} to one channel of a python-control FRD (module docstring).
 
     ``std``: standard deviation of the FRF estimate per frequency (a PeriodicFRF's
@@ -262,13 +292,17 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     omega, H, std = _frd_data(frd, output, input, std)
     nd = n_poles - integrators
     if integrators < 0 or nd < 0 or n_zeros < 0:
-        raise TFEstError(f"orders: n_zeros={n_zeros}, n_poles={n_poles}, integrators="
-                         f"{integrators}: need 0 <= integrators <= n_poles and n_zeros >= 0")
+        raise TFEstError(
+            f"orders: n_zeros={n_zeros}, n_poles={n_poles}, integrators="
+            f"{integrators}: need 0 <= integrators <= n_poles and n_zeros >= 0"
+        )
     n_par = n_zeros + 1 + nd + (delay is True)
     F = len(omega)
     if 2 * F <= n_par:
-        raise TFEstError(f"{F} frequencies give {2 * F} real equations, not more than the "
-                         f"{n_par} parameters of {n_zeros} zeros and {n_poles} poles")
+        raise TFEstError(
+            f"{F} frequencies give {2 * F} real equations, not more than the "
+            f"{n_par} parameters of {n_zeros} zeros and {n_poles} poles"
+        )
     ws = float(np.exp(np.mean(np.log(omega))))
     s = 1j * omega / ws
     sig = std if std is not None else np.abs(H)
@@ -282,9 +316,11 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
         return _levy_sk(s, Hr, w / np.abs(s) ** integrators, n_zeros, nd)
 
     def model(b, a, tau):
-        return (np.polynomial.polynomial.polyval(s, b)
-                / (s**integrators * np.polynomial.polynomial.polyval(s, a))
-                * np.exp(-1j * omega * tau))
+        return (
+            np.polynomial.polynomial.polyval(s, b)
+            / (s**integrators * np.polynomial.polynomial.polyval(s, a))
+            * np.exp(-1j * omega * tau)
+        )
 
     def cresid(b, a, tau):
         """Weighted complex residual of the chosen cost."""
@@ -309,7 +345,7 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     fit_tau = delay is True
 
     def unpack(x):
-        return x[:nb], np.r_[x[nb:nb + nd], 1.0], (x[-1] / ws if fit_tau else tau0)
+        return x[:nb], np.r_[x[nb : nb + nd], 1.0], (x[-1] / ws if fit_tau else tau0)
 
     def resid(x):
         e = cresid(*unpack(x))
@@ -339,16 +375,24 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     x0 = np.r_[b, a[:-1], [tau0 * ws] if fit_tau else []]
     unstable: list[complex] = []
     for _attempt in range(3):
-        sol = least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=max_nfev * len(x0),
-                            jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-                            xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        sol = least_squares(
+            resid,
+            x0,
+            method="lm",
+            x_scale="jac",
+            max_nfev=max_nfev * len(x0),
+            jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+            xtol=1e-15,
+            ftol=1e-15,
+            gtol=1e-15,
+        )
         x = sol.x
-        a_fit = np.r_[x[nb:nb + nd], 1.0]
+        a_fit = np.r_[x[nb : nb + nd], 1.0]
         roots = np.roots(a_fit[::-1]) if nd else np.array([])
         unstable = [complex(r * ws) for r in roots if r.real > 0]
         if not unstable or not stable:
             break
-        x0 = np.r_[x[:nb], reflect_unstable_roots(a_fit)[:-1], x[nb + nd:]]
+        x0 = np.r_[x[:nb], reflect_unstable_roots(a_fit)[:-1], x[nb + nd :]]
     bb, aa, tau = unpack(x)
     cost_value = float(np.sum(sol.fun**2))
     Jm = jac(x)
@@ -357,8 +401,11 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     # real residuals have variance 1/2 with known σ; else their sample variance
     cov_x = 0.5 * JtJ_inv if std is not None else JtJ_inv * cost_value / max(dof, 1)
     # scaled → physical coefficients: num_i = b_i ω_s^{nd+k−i}, den_i = a_i ω_s^{nd−i}
-    scale = np.r_[ws ** (nd + integrators - np.arange(nb)), ws ** (nd - np.arange(nd)),
-                  [1 / ws] if fit_tau else []]
+    scale = np.r_[
+        ws ** (nd + integrators - np.arange(nb)),
+        ws ** (nd - np.arange(nd)),
+        [1 / ws] if fit_tau else [],
+    ]
     cov = cov_x * np.outer(scale, scale)
     num = bb * ws ** (nd + integrators - np.arange(nb))
     den = np.r_[aa[:-1] * ws ** (nd - np.arange(nd)), 1.0]
@@ -372,11 +419,25 @@ def tfest(frd, n_poles: int, n_zeros: int, *, integrators: int = 0, delay: bool 
     exp = F - n_par / 2 if std is not None else None
     params = inflate_std(params, cost_value, F, n_par, exp)
     Hm = model(bb, aa, tau)
-    message = str(sol.message) + ("" if not unstable else
-                                  f"; {len(unstable)} unstable pole(s) left")
-    return TFEstimate(tf, float(tau), cost_value, exp, np.sqrt(exp) if exp is not None else None,
-                      params, cov, F, n_par, unstable, cresid(bb, aa, tau),
-                      np.abs(Hm - H) / np.abs(H), message, cost)
+    message = str(sol.message) + (
+        "" if not unstable else f"; {len(unstable)} unstable pole(s) left"
+    )
+    return TFEstimate(
+        tf,
+        float(tau),
+        cost_value,
+        exp,
+        np.sqrt(exp) if exp is not None else None,
+        params,
+        cov,
+        F,
+        n_par,
+        unstable,
+        cresid(bb, aa, tau),
+        np.abs(Hm - H) / np.abs(H),
+        message,
+        cost,
+    )
 
 
 def tf_coefficients(tf: control.TransferFunction) -> dict[str, list[float]]:

@@ -14,17 +14,17 @@ pipeline's result."""
 # its name on the package; the servo-rig functions are what these names mean here
 from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
 from flexarm.identification.time_domain.general import (
-                                                        FitOptions,
-                                                        ScenarioFit,
-                                                        fit_scenario,
-                                                        predict_scenario,
+    FitOptions,
+    ScenarioFit,
+    fit_scenario,
+    predict_scenario,
 )
 from flexarm.identification.time_domain.logs import (
-                                                        BenchLog,
-                                                        FitInputError,
-                                                        load_rig_log,
-                                                        parse_controller,
-                                                        read_bench_log,
+    BenchLog,
+    FitInputError,
+    load_rig_log,
+    parse_controller,
+    read_bench_log,
 )
 from flexarm.identification.time_domain.options import PredictOptions
 from flexarm.identification.time_domain.predict import Prediction, overlay_figure
@@ -32,7 +32,22 @@ from flexarm.identification.time_domain.report import FitResult as RigFitResult
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.validate import validate
 
-__all__ = ["BenchLog", "FitInputError", "FitOptions", "FitResult", "PredictOptions",
-           "Prediction", "RigFitResult", "ScenarioFit", "fit", "fit_scenario", "load_rig_log",
-           "overlay_figure", "parse_controller", "predict", "predict_scenario",
-           "read_bench_log", "validate"]
+__all__ = [
+    "BenchLog",
+    "FitInputError",
+    "FitOptions",
+    "FitResult",
+    "PredictOptions",
+    "Prediction",
+    "RigFitResult",
+    "ScenarioFit",
+    "fit",
+    "fit_scenario",
+    "load_rig_log",
+    "overlay_figure",
+    "parse_controller",
+    "predict",
+    "predict_scenario",
+    "read_bench_log",
+    "validate",
+]

@@ -64,8 +64,23 @@ from flexarm.sim.integrate import integrate_hold, solver_for
 from flexarm.sim.sampled import FilteredPlant
 
 #: Names of the model numbers (each an array (L, P)) that :func:`closed_loop_cost` takes.
-MODEL_KEYS = ("J", "B", "wc2", "c2z", "JlL", "Fc", "Fs", "bias", "gain", "dth", "dd",
-              "th0", "om0", "w0", "wd0")
+MODEL_KEYS = (
+    "J",
+    "B",
+    "wc2",
+    "c2z",
+    "JlL",
+    "Fc",
+    "Fs",
+    "bias",
+    "gain",
+    "dth",
+    "dd",
+    "th0",
+    "om0",
+    "w0",
+    "wd0",
+)
 #: Names of the per-log data (arrays (L, ...)).
 DATA_KEYS = ("ref", "y_th", "y_d", "w_th", "w_d", "volt", "K", "tau")
 
@@ -90,27 +105,53 @@ def single_link_arm(m: dict, const: dict) -> Arm:
     z, o = jnp.zeros_like(wc2), jnp.ones_like(wc2)
     Ab = jnp.stack([jnp.stack([z, o]), jnp.stack([-wc2, -c2z])])
     Bb = jnp.stack([jnp.stack([z, z]), jnp.stack([wc2 * L, c2z * L])])
-    Cb = jnp.stack([jnp.stack([o / L, z]), jnp.stack([-JlL * wc2, -JlL * c2z]),
-                    jnp.stack([o, z])])
-    Db = jnp.stack([jnp.stack([z, z]), jnp.stack([JlL * wc2 * L, JlL * c2z * L]),
-                    jnp.stack([-L * o, z])])
-    body = SingleLinkBody(J=m["J"], Ab=Ab, Bb=Bb, Cb=Cb, Db=Db,
-                          state_names=("motor_angle", "motor_velocity", "beam_0", "beam_1"))
-    fr = Friction(model="coulomb", coulomb=m["Fc"], static=m["Fs"],
-                  velocity_tolerance=const["vel_tol"])
+    Cb = jnp.stack([jnp.stack([o / L, z]), jnp.stack([-JlL * wc2, -JlL * c2z]), jnp.stack([o, z])])
+    Db = jnp.stack(
+        [jnp.stack([z, z]), jnp.stack([JlL * wc2 * L, JlL * c2z * L]), jnp.stack([-L * o, z])]
+    )
+    body = SingleLinkBody(
+        J=m["J"],
+        Ab=Ab,
+        Bb=Bb,
+        Cb=Cb,
+        Db=Db,
+        state_names=("motor_angle", "motor_velocity", "beam_0", "beam_1"),
+    )
+    fr = Friction(
+        model="coulomb", coulomb=m["Fc"], static=m["Fs"], velocity_tolerance=const["vel_tol"]
+    )
     vec = lambda v: (v * o)[None]  # noqa: E731  (one joint; the batch, if any, last)
-    return Arm(state_names=body.state_names, signal_names=SIGNALS,
-               input_names=("voltage",), body=body, k_u=vec(const["k_u"]),
-               k_omega=vec(const["k_omega"]), viscous=vec(m["B"]), bias=vec(m["bias"]),
-               limit=vec(const["limit"]), frictions=(fr,), kind="single")
+    return Arm(
+        state_names=body.state_names,
+        signal_names=SIGNALS,
+        input_names=("voltage",),
+        body=body,
+        k_u=vec(const["k_u"]),
+        k_omega=vec(const["k_omega"]),
+        viscous=vec(m["B"]),
+        bias=vec(m["bias"]),
+        limit=vec(const["limit"]),
+        frictions=(fr,),
+        kind="single",
+    )
 
 
 #: the plant signals the rig's sensors read: hub angle and tip deflection w (m)
 _HUB, _TIP = SIGNALS.index("motor_angle"), SIGNALS.index("tip_deflection")
 
 
-def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_delay: int,
-          open_loop: bool, record: bool, filters: tuple[bool, bool] = (False, False)):
+def _scan(
+    m: dict,
+    data: dict,
+    const: dict,
+    *,
+    substeps: int,
+    n_buf: int,
+    comp_delay: int,
+    open_loop: bool,
+    record: bool,
+    filters: tuple[bool, bool] = (False, False),
+):
     """The sampled-data loop over all samples; m: model numbers (L, P); data: per-log
     arrays (L, N) / (L, 4) / (L,); const: scalars (dt, L, k_u, k_om, q_th, q_d, limit, tol,
     and omega_th / omega_d for the filtered channels). Every quantity carries the batch
@@ -131,8 +172,10 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     if index:
         one = jnp.ones(shape)
         gains = jnp.stack(([one] if filt_th else []) + ([gain] if filt_d else []))
-        omega = jnp.stack(([const["omega_th"] * one] if filt_th else [])
-                          + ([const["omega_d"] * one] if filt_d else []))
+        omega = jnp.stack(
+            ([const["omega_th"] * one] if filt_th else [])
+            + ([const["omega_d"] * one] if filt_d else [])
+        )
         plant = FilteredPlant.around(arm, index, gains, omega, [SIGNALS[i] for i in index])
     solver = solver_for("rk4")
 
@@ -201,7 +244,8 @@ def _scan(m: dict, data: dict, const: dict, *, substeps: int, n_buf: int, comp_d
     if K.ndim == 2:
         K = jnp.broadcast_to(K[:, None, :], data["ref"].shape + (4,))
     xs = tuple(data[k].T for k in ("ref", "y_th", "y_d", "w_th", "w_d", "volt")) + (
-        jnp.swapaxes(K, 0, 1),)  # (N, L, 4)
+        jnp.swapaxes(K, 0, 1),
+    )  # (N, L, 4)
     carry, out = jax.lax.scan(sample, carry0, xs)
     return carry[6], out  # the accumulators
 
@@ -210,25 +254,59 @@ _STATIC = ("substeps", "n_buf", "comp_delay", "open_loop", "filters")
 
 
 @partial(jax.jit, static_argnames=_STATIC)
-def closed_loop_cost(m: dict, data: dict, const: dict, *, substeps: int = 2, n_buf: int = 8,
-                     comp_delay: int = 0, open_loop: bool = False,
-                     filters: tuple[bool, bool] = (False, False)):
+def closed_loop_cost(
+    m: dict,
+    data: dict,
+    const: dict,
+    *,
+    substeps: int = 2,
+    n_buf: int = 8,
+    comp_delay: int = 0,
+    open_loop: bool = False,
+    filters: tuple[bool, bool] = (False, False),
+):
     """Weighted sums of squared errors (L, P) of the measured hub angle and tip deflection,
     and a flag (L, P) for rollouts that diverged (|θ| or |w| beyond 1e3). ``filters``:
     whether the hub / tip channel has a low-pass filter (cutoffs in ``const``)."""
-    acc, _ = _scan(m, data, const, substeps=substeps, n_buf=n_buf, comp_delay=comp_delay,
-                   open_loop=open_loop, record=False, filters=filters)
+    acc, _ = _scan(
+        m,
+        data,
+        const,
+        substeps=substeps,
+        n_buf=n_buf,
+        comp_delay=comp_delay,
+        open_loop=open_loop,
+        record=False,
+        filters=filters,
+    )
     return acc
 
 
 @partial(jax.jit, static_argnames=_STATIC)
-def closed_loop_run(m: dict, data: dict, const: dict, *, substeps: int = 2, n_buf: int = 8,
-                    comp_delay: int = 0, open_loop: bool = False,
-                    filters: tuple[bool, bool] = (False, False)):
+def closed_loop_run(
+    m: dict,
+    data: dict,
+    const: dict,
+    *,
+    substeps: int = 2,
+    n_buf: int = 8,
+    comp_delay: int = 0,
+    open_loop: bool = False,
+    filters: tuple[bool, bool] = (False, False),
+):
     """Trajectories, each (N, L, P): measured θ, measured d, command u, true θ, true w;
     and the accumulators of :func:`closed_loop_cost`."""
-    acc, out = _scan(m, data, const, substeps=substeps, n_buf=n_buf, comp_delay=comp_delay,
-                     open_loop=open_loop, record=True, filters=filters)
+    acc, out = _scan(
+        m,
+        data,
+        const,
+        substeps=substeps,
+        n_buf=n_buf,
+        comp_delay=comp_delay,
+        open_loop=open_loop,
+        record=True,
+        filters=filters,
+    )
     return out, acc
 
 

@@ -92,29 +92,44 @@ class ControllerCheck:
 
     def to_dict(self) -> dict:
         """JSON-ready (NaN as null)."""
+
         def clean(x):
             a = np.asarray(x, float)
             return [[None if not np.isfinite(v) else float(v) for v in row] for row in a]
-        return {"log": self.log, "segments": [list(s) for s in self.segments],
-                "gains": list(GAINS), "declared": clean(self.declared),
-                "regressed": clean(self.regressed), "stderr": clean(self.stderr),
-                "r2": self.r2, "delay_samples": self.delay,
-                "r2_by_delay": {str(k): v for k, v in self.r2_by_delay.items()},
-                "rates": self.rates, "saturation_limit": self.saturation_limit,
-                "saturation_fraction": self.saturation_fraction,
-                "declared_limit": self.declared_limit, "glitch_samples": self.glitch_samples,
-                "samples_used": self.samples_used, "rate_tau": self.rate_tau,
-                "rate_r2": self.rate_r2, "disagreements": self.disagreements}
+
+        return {
+            "log": self.log,
+            "segments": [list(s) for s in self.segments],
+            "gains": list(GAINS),
+            "declared": clean(self.declared),
+            "regressed": clean(self.regressed),
+            "stderr": clean(self.stderr),
+            "r2": self.r2,
+            "delay_samples": self.delay,
+            "r2_by_delay": {str(k): v for k, v in self.r2_by_delay.items()},
+            "rates": self.rates,
+            "saturation_limit": self.saturation_limit,
+            "saturation_fraction": self.saturation_fraction,
+            "declared_limit": self.declared_limit,
+            "glitch_samples": self.glitch_samples,
+            "samples_used": self.samples_used,
+            "rate_tau": self.rate_tau,
+            "rate_r2": self.rate_r2,
+            "disagreements": self.disagreements,
+        }
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2)
 
     def summary(self) -> str:
-        lines = [f"{self.log}: controller check: R² {self.r2:.5f} at a computation delay of "
-                 f"{self.delay} sample(s) (" + ", ".join(
-                     f"{k}: {v:.5f}" for k, v in self.r2_by_delay.items()) + f"); rates "
-                 f"{self.rates}; {self.samples_used} samples used, {self.glitch_samples} "
-                 "after reference steps left out"]
+        lines = [
+            f"{self.log}: controller check: R² {self.r2:.5f} at a computation delay of "
+            f"{self.delay} sample(s) ("
+            + ", ".join(f"{k}: {v:.5f}" for k, v in self.r2_by_delay.items())
+            + f"); rates "
+            f"{self.rates}; {self.samples_used} samples used, {self.glitch_samples} "
+            "after reference steps left out"
+        ]
         for s, (a, b) in enumerate(self.segments):
             terms = []
             for i, g in enumerate(GAINS):
@@ -123,15 +138,22 @@ class ControllerCheck:
                 terms.append(f"{g} {d:g} → {reg} {GAINS[g]}")
             lines.append(f"  samples {a}-{b}: " + "; ".join(terms))
         if self.saturation_limit is not None:
-            lines.append(f"  saturation at ±{self.saturation_limit:.3g} V on "
-                         f"{100 * self.saturation_fraction:.2f} % of the samples"
-                         + (f" (declared {self.declared_limit:g} V)"
-                            if self.declared_limit is not None else ""))
+            lines.append(
+                f"  saturation at ±{self.saturation_limit:.3g} V on "
+                f"{100 * self.saturation_fraction:.2f} % of the samples"
+                + (
+                    f" (declared {self.declared_limit:g} V)"
+                    if self.declared_limit is not None
+                    else ""
+                )
+            )
         else:
             lines.append("  no saturation seen")
         for c, tau in self.rate_tau.items():
-            lines.append(f"  {c}: the logged rate is the backward difference through "
-                         f"1/(τ s + 1) with τ = {1e3 * tau:.3g} ms (R² {self.rate_r2[c]:.3f})")
+            lines.append(
+                f"  {c}: the logged rate is the backward difference through "
+                f"1/(τ s + 1) with τ = {1e3 * tau:.3g} ms (R² {self.rate_r2[c]:.3f})"
+            )
         lines += [f"  disagrees: {d}" for d in self.disagreements]
         return "\n".join(lines)
 
@@ -141,8 +163,9 @@ class ControllerCheck:
         for s, (a, b) in enumerate(self.segments):
             reg = np.where(np.isfinite(self.regressed[s]), self.regressed[s], self.declared[s])
             g[a:b] = reg
-        c = log.controller.model_copy(update=dict(zip(("k1", "k2", "k3", "k4"),
-                                                      map(float, g[0]), strict=True)))
+        c = log.controller.model_copy(
+            update=dict(zip(("k1", "k2", "k3", "k4"), map(float, g[0]), strict=True))
+        )
         return replace(log, controller=c, gains=g)
 
 
@@ -158,8 +181,9 @@ def _terms(log: Log) -> tuple[np.ndarray, str]:
     else:
         thd = np.diff(th, prepend=th[0]) / T
         dd = np.diff(d, prepend=d[0]) / T
-    return np.column_stack([c["reference"] - th, -d, -thd, -dd]), ("logged" if logged
-                                                                    else "backward")
+    return np.column_stack([c["reference"] - th, -d, -thd, -dd]), (
+        "logged" if logged else "backward"
+    )
 
 
 def _robust_fit(A: np.ndarray, y: np.ndarray):
@@ -167,9 +191,14 @@ def _robust_fit(A: np.ndarray, y: np.ndarray):
     b0, *_ = np.linalg.lstsq(A, y, rcond=None)
     r0 = y - A @ b0
     scale = max(1.4826 * float(np.median(np.abs(r0 - np.median(r0)))), 1e-3)
-    sol = least_squares(lambda b: A @ b - y, b0, loss="huber", f_scale=scale,
-                        jac=lambda b: A,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-                        method="trf")
+    sol = least_squares(
+        lambda b: A @ b - y,
+        b0,
+        loss="huber",
+        f_scale=scale,
+        jac=lambda b: A,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+        method="trf",
+    )
     return sol.x, y - A @ sol.x
 
 
@@ -187,29 +216,37 @@ def _rate_filter(log: Log) -> tuple[dict[str, float], dict[str, float]]:
             f = lfilter([1 - a], [1, -a], b, zi=[a * v[0]])[0]
             return float(np.mean((v - f) ** 2))
 
-        res: Any = minimize_scalar(cost, bounds=(0.0, 200 * T), method="bounded",
-                              options={"xatol": 1e-2 * T})
+        res: Any = minimize_scalar(
+            cost, bounds=(0.0, 200 * T), method="bounded", options={"xatol": 1e-2 * T}
+        )
         taus[vel] = float(res.x)
         r2s[vel] = 1.0 - res.fun / float(np.var(v))
     return taus, r2s
 
 
-def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
-                     glitch: float = GLITCH_S) -> ControllerCheck:
+def check_controller(
+    log: Log, *, delays=(0, 1, 2), use_regressed: bool = False, glitch: float = GLITCH_S
+) -> ControllerCheck:
     """Regress the logged command on the declared law's terms (module docstring); raise
     :class:`FitInputError` naming the gain when it disagrees, unless ``use_regressed``."""
     where = log.path or log.name
     if "voltage" not in log.columns:
-        raise FitInputError(f"{where}: field 'voltage': the controller check regresses the "
-                            "logged command, but the log has no voltage column; map it "
-                            "(log format [columns] voltage = ..., or --column voltage=NAME)")
+        raise FitInputError(
+            f"{where}: field 'voltage': the controller check regresses the "
+            "logged command, but the log has no voltage column; map it "
+            "(log format [columns] voltage = ..., or --column voltage=NAME)"
+        )
     if log.gains is None:
-        raise FitInputError(f"{where}: field 'controller': no declared law to check; give the "
-                            "gains (log format [controller], a '# controller:' line, or "
-                            "--controller)")
+        raise FitInputError(
+            f"{where}: field 'controller': no declared law to check; give the "
+            "gains (log format [controller], a '# controller:' line, or "
+            "--controller)"
+        )
     if "motor_angle" not in log.columns:
-        raise FitInputError(f"{where}: field 'motor_angle': the law closes on the hub angle, "
-                            "but the log has no motor_angle column")
+        raise FitInputError(
+            f"{where}: field 'motor_angle': the law closes on the hub angle, "
+            "but the log has no motor_angle column"
+        )
     delays = sorted({int(m) for m in delays})
     if not delays or delays[0] < 0:
         raise FitInputError(f"{where}: delays {delays}: give whole numbers of samples >= 0")
@@ -228,10 +265,10 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
     for m in delays:
         glitch_mask = np.zeros(n, bool)
         for s in steps:
-            glitch_mask[s:s + m + G] = True
+            glitch_mask[s : s + m + G] = True
         base = glitch_mask.copy()
         base[:m] = True  # no past signals for the first m samples
-        Xm = np.vstack([np.zeros((m, 4)), X[:n - m]])
+        Xm = np.vstack([np.zeros((m, 4)), X[: n - m]])
         # pass 1: the law with the declared gains' structure, fitted on all but glitches
         pred = np.zeros(n)
         for a, b in segs:
@@ -240,8 +277,12 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
             if rows.size >= MIN_SEGMENT and cols.any():
                 coef, _ = _robust_fit(Xm[rows][:, cols], u[rows])
                 pred[a:b] = Xm[a:b][:, cols] @ coef
-        cand = (~base & (np.sign(pred) == np.sign(u)) & (np.abs(u) > 0.5 * umax)
-                & (np.abs(pred) > np.abs(u) + np.maximum(0.05 * np.abs(u), 0.05)))
+        cand = (
+            ~base
+            & (np.sign(pred) == np.sign(u))
+            & (np.abs(u) > 0.5 * umax)
+            & (np.abs(pred) > np.abs(u) + np.maximum(0.05 * np.abs(u), 0.05))
+        )
         limit = float(np.median(np.abs(u[cand]))) if cand.sum() >= 10 else None
         sat = np.abs(u) >= 0.99 * limit if limit is not None else np.zeros(n, bool)
         used = ~base & ~sat
@@ -263,10 +304,12 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
             res_all.append(res)
             y_all.append(u[rows])
         if not res_all:
-            raise FitInputError(f"{where}: too few samples to check the controller: no gain "
-                                f"segment keeps {MIN_SEGMENT} samples once the "
-                                f"{int(glitch_mask.sum())} after reference steps and the "
-                                f"{int(sat.sum())} saturated ones are left out")
+            raise FitInputError(
+                f"{where}: too few samples to check the controller: no gain "
+                f"segment keeps {MIN_SEGMENT} samples once the "
+                f"{int(glitch_mask.sum())} after reference steps and the "
+                f"{int(sat.sum())} saturated ones are left out"
+            )
         res_c, y_c = np.concatenate(res_all), np.concatenate(y_all)
         r2 = 1.0 - float(res_c @ res_c) / max(float(np.sum((y_c - y_c.mean()) ** 2)), 1e-300)
         r2_by[m] = r2
@@ -277,11 +320,23 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
     declared = np.array([log.gains[a] for a, _ in segs])
     taus, tr2 = _rate_filter(log)
     out = ControllerCheck(
-        log=log.name, segments=segs, declared=declared, regressed=reg, stderr=se, r2=r2,
-        delay=m, r2_by_delay=r2_by, rates=rates, saturation_limit=limit,
-        saturation_fraction=float(sat.mean()), declared_limit=log.voltage_limit,
-        glitch_samples=int(glitch_mask.sum()), samples_used=int(used.sum()),
-        rate_tau=taus, rate_r2=tr2)
+        log=log.name,
+        segments=segs,
+        declared=declared,
+        regressed=reg,
+        stderr=se,
+        r2=r2,
+        delay=m,
+        r2_by_delay=r2_by,
+        rates=rates,
+        saturation_limit=limit,
+        saturation_fraction=float(sat.mean()),
+        declared_limit=log.voltage_limit,
+        glitch_samples=int(glitch_mask.sum()),
+        samples_used=int(used.sum()),
+        rate_tau=taus,
+        rate_r2=tr2,
+    )
     u_rms = float(np.sqrt(np.mean(u[used] ** 2)))
     for s, (a, b) in enumerate(segs):
         rows = np.arange(a, b)[used[a:b]]
@@ -297,18 +352,25 @@ def check_controller(log: Log, *, delays=(0, 1, 2), use_regressed: bool = False,
             tol = max(REL_TOL * abs(d), N_SIGMA * e)
             if not (opposite or diff > tol):
                 continue
-            why = ("opposite sign" if opposite else
-                   f"declared 0, but the term moves the command by {diff * x_rms:.3g} V rms"
-                   if d == 0 else f"off by {100 * (rg - d) / abs(d):+.0f} %, more than "
-                   f"max(10 %, 4 σ = {N_SIGMA * e:.2g})")
+            why = (
+                "opposite sign"
+                if opposite
+                else f"declared 0, but the term moves the command by {diff * x_rms:.3g} V rms"
+                if d == 0
+                else f"off by {100 * (rg - d) / abs(d):+.0f} %, more than "
+                f"max(10 %, 4 σ = {N_SIGMA * e:.2g})"
+            )
             seg = f" (samples {a}-{b})" if len(segs) > 1 else ""
-            out.disagreements.append(f"{g}{seg}: declared {d:g} {GAINS[g]}, regressed "
-                                     f"{rg:.4g} ± {e:.2g} {GAINS[g]}: {why}")
+            out.disagreements.append(
+                f"{g}{seg}: declared {d:g} {GAINS[g]}, regressed "
+                f"{rg:.4g} ± {e:.2g} {GAINS[g]}: {why}"
+            )
     if out.disagreements and not use_regressed:
         raise FitInputError(
             f"{where}: the logged command disagrees with the declared law (R² {r2:.4f} at a "
             f"delay of {m} sample(s)):\n  " + "\n  ".join(out.disagreements) + "\n  fix the "
             "gains (their sign convention) in the log format's [controller] or the log's "
             "'# controller:' line, or pass use_regressed=True (--use-regressed-law) to use "
-            "the regressed law")
+            "the regressed law"
+        )
     return out

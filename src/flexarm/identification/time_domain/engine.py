@@ -30,8 +30,14 @@ from flexarm.identification.time_domain.presets import Preset, for_scenario
 __all__ = ["fit"]
 
 
-def fit(scenario: Any, logs: Sequence[Any], free: Sequence[str] | None = None,
-        options: Any = None, *, progress: Callable[[str], None] | None = None):
+def fit(
+    scenario: Any,
+    logs: Sequence[Any],
+    free: Sequence[str] | None = None,
+    options: Any = None,
+    *,
+    progress: Callable[[str], None] | None = None,
+):
     """Fit ``scenario``'s free parameters to ``logs`` (module docstring). Paths in ``logs``
     are read by :func:`flexarm.io.logformat.load_log` (exchange format)."""
     from flexarm.identification.time_domain import general
@@ -52,11 +58,22 @@ def fit(scenario: Any, logs: Sequence[Any], free: Sequence[str] | None = None,
     else:
         base = preset.options if free is None else None
         flat = (grouped or FitOptions()).engine_options(base)
-    source = "given" if free is not None else (
-        f"preset {preset.name}" if not isinstance(scenario, Preset) else f"preset {preset.name}")
+    source = (
+        "given"
+        if free is not None
+        else (
+            f"preset {preset.name}" if not isinstance(scenario, Preset) else f"preset {preset.name}"
+        )
+    )
     free_list = list(free) if free is not None else list(preset.free)
-    res = general.fit_scenario(preset.scenario, logs, free_list, flat, progress=progress,
-                               predict=grouped.predict if grouped is not None else True)
+    res = general.fit_scenario(
+        preset.scenario,
+        logs,
+        free_list,
+        flat,
+        progress=progress,
+        predict=grouped.predict if grouped is not None else True,
+    )
     res.free_source = source
     return res
 

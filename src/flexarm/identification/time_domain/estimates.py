@@ -111,17 +111,21 @@ def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
     # scipy's return types are inferred from its branches: (num, den, dt), and y alone here
     tfd: Any = scipy.signal.cont2discrete((num, den), dt, method="zoh")
     b, aa, _ = tfd
-    x = np.concatenate([np.full(lag, th[0]), th[:len(th) - lag]]) - th[0]
+    x = np.concatenate([np.full(lag, th[0]), th[: len(th) - lag]]) - th[0]
     y: Any = scipy.signal.lfilter(np.ravel(b), aa, x)
     return y
 
 
-def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
-              omega_guess: float | None = None) -> TipModel | None:
+def tip_model(
+    logs: list[Log], length: float, *, max_lag: int | None = None, omega_guess: float | None = None
+) -> TipModel | None:
     """The hub → tip model (1) fitted to every log with both channels (see the module
     docstring); None when no log has a moving tip channel."""
-    pairs = [(g.columns["motor_angle"], g.columns["tip_deflection"], g.dt) for g in logs
-             if "motor_angle" in g.columns and "tip_deflection" in g.outputs]
+    pairs = [
+        (g.columns["motor_angle"], g.columns["tip_deflection"], g.dt)
+        for g in logs
+        if "motor_angle" in g.columns and "tip_deflection" in g.outputs
+    ]
     if not pairs:
         return None
     dt = pairs[0][2]
@@ -132,21 +136,26 @@ def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
         return None
     # starting frequency: the spectral peak of the tip signals (2-60 rad/s band)
     if omega_guess is None:
-        f, P = scipy.signal.welch(np.concatenate([d - d.mean() for _, d in pairs]), 1 / dt,
-                                  nperseg=min(4096, min(len(d) for _, d in pairs)))
+        f, P = scipy.signal.welch(
+            np.concatenate([d - d.mean() for _, d in pairs]),
+            1 / dt,
+            nperseg=min(4096, min(len(d) for _, d in pairs)),
+        )
         band = (f > 0.3) & (f < 10)
         omega_guess = 2 * np.pi * float(f[band][np.argmax(P[band])]) if band.any() else 10.0
 
     def res(p, lag):
-        return np.concatenate([(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:])
-                               for th, d in pairs])
+        return np.concatenate(
+            [(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:]) for th, d in pairs]
+        )
 
     def solve(lag, p0):
-        lo, hi = [0.2 * omega_guess, 0.0, -50 * length, 0.3], [5 * omega_guess, 0.7,
-                                                                50 * length, 0.45 / dt]
+        lo, hi = (
+            [0.2 * omega_guess, 0.0, -50 * length, 0.3],
+            [5 * omega_guess, 0.7, 50 * length, 0.45 / dt],
+        )
         p0 = np.clip(p0, np.add(lo, 1e-9), np.subtract(hi, 1e-9))
-        r = least_squares(res, p0, args=(lag,), bounds=(lo, hi), x_scale="jac",
-                          max_nfev=60)
+        r = least_squares(res, p0, args=(lag,), bounds=(lo, hi), x_scale="jac", max_nfev=60)
         return r.x, float(np.sum(r.fun**2))
 
     # every lag from the previous lag's optimum; the first from both gauge signs
@@ -179,13 +188,26 @@ def tip_model(logs: list[Log], length: float, *, max_lag: int | None = None,
     fits = [_fitpct(d[skip:], _tip_response(p, th, lag, dt)[skip:]) for th, d in pairs]
     n = sum(len(d) - skip for _, d in pairs)
     prof_fit = {k: float(100 * (1 - np.sqrt(v / n))) for k, v in sorted(profile.items())}
-    return TipModel(float(p[0]), float(p[1]), float(p[2] / length), int(lag), float(p[3]),
-                    float(np.mean(fits)), prof_fit)
+    return TipModel(
+        float(p[0]),
+        float(p[1]),
+        float(p[2] / length),
+        int(lag),
+        float(p[3]),
+        float(np.mean(fits)),
+        prof_fit,
+    )
 
 
-def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
-              max_delay: int | None = None, tip: TipModel | None = None,
-              window: float = 0.04) -> HubDelay:
+def hub_delay(
+    logs: list[Log],
+    k_u: float,
+    k_omega: float,
+    *,
+    max_delay: int | None = None,
+    tip: TipModel | None = None,
+    window: float = 0.04,
+) -> HubDelay:
     """The hub channel's delay from the integral regression (module docstring)."""
     usable = [g for g in logs if "motor_angle" in g.columns and "voltage" in g.columns]
     if not usable:
@@ -205,8 +227,11 @@ def hub_delay(logs: list[Log], k_u: float, k_omega: float, *,
         Iu = np.concatenate([[0.0], np.cumsum(g.columns["voltage"]) * dt])[:N]
         wmax = np.percentile(np.abs(w), 99)
         sg = np.cumsum(np.sign(w) * (np.abs(w) > 0.05 * wmax)) * dt
-        Id = (np.cumsum(g.columns["tip_deflection"]) * dt
-              if use_tip and "tip_deflection" in g.outputs else None)
+        Id = (
+            np.cumsum(g.columns["tip_deflection"]) * dt
+            if use_tip and "tip_deflection" in g.outputs
+            else None
+        )
         series.append((th, w, Iu, sg, Id))
     profile, coef = {}, {}
     for D in range(0, max_delay + 1):
@@ -253,8 +278,11 @@ def link_frequency_estimates(logs: list[Log], tip: TipModel | None) -> dict:
 
     out: dict = {}
     if tip is not None:
-        out["hub_to_tip_model"] = {"value": tip.omega_c, "fit_percent": tip.fit_percent,
-                                   "trusted": tip.trusted}
+        out["hub_to_tip_model"] = {
+            "value": tip.omega_c,
+            "fit_percent": tip.fit_percent,
+            "trusted": tip.trusted,
+        }
     wc, how = guesses.link_frequency(logs)
     if wc:
         out["spectral_peak_" + how] = {"value": float(wc)}

@@ -71,8 +71,10 @@ def detect_quantum(x: np.ndarray) -> float:
         return 0.0
     q = float(np.min(d))
     k = x / q
-    if np.max(np.abs(k - np.round(k - 0.0))) < 1e-3 or np.max(
-            np.abs((x - x[0]) / q - np.round((x - x[0]) / q))) < 1e-3:
+    if (
+        np.max(np.abs(k - np.round(k - 0.0))) < 1e-3
+        or np.max(np.abs((x - x[0]) / q - np.round((x - x[0]) / q))) < 1e-3
+    ):
         return q
     return 0.0
 
@@ -95,8 +97,10 @@ def _computation_delay(logs, notes: list[str]) -> int:
     if not found:
         return 0
     d = max(set(found), key=found.count)
-    notes.append(f"computation delay {d} sample(s): where the declared law best explains the "
-                 f"logged command ({found.count(d)} of {len(found)} logs)")
+    notes.append(
+        f"computation delay {d} sample(s): where the declared law best explains the "
+        f"logged command ({found.count(d)} of {len(found)} logs)"
+    )
     return int(d)
 
 
@@ -110,28 +114,45 @@ def _finer_than_logged(log, q: float) -> bool:
     return bool(np.median(np.abs(k - np.round(k))) > 0.05)
 
 
-def make_rig(drive: str, gear_ratio: float, motor_constant: float | None,
-             armature_resistance: float | None, link_length: float | None,
-             gear_efficiency: float, motor_efficiency: float,
-             limit: float, encoder_quantum: float, tip_quantum: float = 0.0) -> Rig:
+def make_rig(
+    drive: str,
+    gear_ratio: float,
+    motor_constant: float | None,
+    armature_resistance: float | None,
+    link_length: float | None,
+    gear_efficiency: float,
+    motor_efficiency: float,
+    limit: float,
+    encoder_quantum: float,
+    tip_quantum: float = 0.0,
+) -> Rig:
     """Drive gains from the data sheet: voltage drive k_u = η_g η_m K_g K_m / R,
     k_ω = k_u K_g K_m; current drive k_u = η_g η_m K_g K_m, k_ω = 0."""
-    for name, v in (("gear_ratio", gear_ratio), ("motor_constant", motor_constant),
-                    ("link_length", link_length)):
+    for name, v in (
+        ("gear_ratio", gear_ratio),
+        ("motor_constant", motor_constant),
+        ("link_length", link_length),
+    ):
         if v is None or not v > 0:
             raise FitInputError(f"fit: field {name!r} = {v!r}: give the data-sheet value (> 0)")
     assert motor_constant is not None and link_length is not None  # checked just above
     eta = gear_efficiency * motor_efficiency
     if drive == "voltage":
         if armature_resistance is None or not armature_resistance > 0:
-            raise FitInputError("fit: field 'armature_resistance' is needed (> 0, ohm) for "
-                                "drive='voltage'")
+            raise FitInputError(
+                "fit: field 'armature_resistance' is needed (> 0, ohm) for drive='voltage'"
+            )
         ke = gear_ratio * motor_constant
         ku = eta * ke / armature_resistance
-        motor = dict(drive="voltage", motor_constant=motor_constant,
-                     armature_resistance=armature_resistance, gear_ratio=gear_ratio,
-                     gear_efficiency=gear_efficiency, motor_efficiency=motor_efficiency,
-                     voltage_limit=limit)
+        motor = dict(
+            drive="voltage",
+            motor_constant=motor_constant,
+            armature_resistance=armature_resistance,
+            gear_ratio=gear_ratio,
+            gear_efficiency=gear_efficiency,
+            motor_efficiency=motor_efficiency,
+            voltage_limit=limit,
+        )
         return Rig("voltage", ku, ku * ke, limit, link_length, motor, encoder_quantum, tip_quantum)
     if drive == "current":
         ku = eta * gear_ratio * motor_constant
@@ -140,9 +161,18 @@ def make_rig(drive: str, gear_ratio: float, motor_constant: float | None,
     raise FitInputError(f"fit: field 'drive' = {drive!r}: choose 'voltage' or 'current'")
 
 
-def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_sign,
-           delays, bounds: dict | None, info: dict,
-           est: dict | None = None) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
+def _space(
+    logs,
+    rig: Rig,
+    n_sessions: int,
+    friction: bool,
+    max_delay: int,
+    tip_sign,
+    delays,
+    bounds: dict | None,
+    info: dict,
+    est: dict | None = None,
+) -> tuple[ParamSpace, np.ndarray, np.ndarray]:
     """Bounds from the data (see :mod:`flexarm.identification.time_domain.guesses` and
     :mod:`flexarm.identification.time_domain.estimates`) and the seed point. ``est``: the cheap
     estimates (``tip``: the hub → tip model, ``hub``: the hub delay, ``frequency``: the link
@@ -183,8 +213,11 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     tau_f = guesses.stick_torque(logs, rig.k_u)
     info["stick_torque_guess"] = tau_f
     tau_f = max(tau_f or 0.0, 0.01 * rig.k_u * rig.limit)
-    speed = max(np.percentile(np.abs(np.gradient(g_.columns["motor_angle"], g_.dt)), 99)
-                for g_ in logs if "motor_angle" in g_.columns)
+    speed = max(
+        np.percentile(np.abs(np.gradient(g_.columns["motor_angle"], g_.dt)), 99)
+        for g_ in logs
+        if "motor_angle" in g_.columns
+    )
     B_hi = max(0.5 * rig.k_u * rig.limit / max(speed, 1e-3), 2 * rig.k_omega, 1e-6)
     defs = [ParamDef("hub_inertia", "kg*m**2", *J_b, "log")]
     if any("tip_deflection" in g.outputs for g in logs):
@@ -200,14 +233,18 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
     for s in range(n_sessions):
         defs.append(ParamDef("viscous", "N*m*s/rad", 0.0, B_hi, "loglin", s))
         if friction:
-            defs += [ParamDef("coulomb", "N*m", 0.0, 2 * tau_f, "loglin", s),
-                     ParamDef("static_excess", "N*m", 0.0, 2 * tau_f, "loglin", s),
-                     ParamDef("bias", "N*m", -tau_f, tau_f, "lin", s)]
+            defs += [
+                ParamDef("coulomb", "N*m", 0.0, 2 * tau_f, "loglin", s),
+                ParamDef("static_excess", "N*m", 0.0, 2 * tau_f, "loglin", s),
+                ParamDef("bias", "N*m", -tau_f, tau_f, "lin", s),
+            ]
     for name, (lo, hi) in (bounds or {}).items():
         hits = [i for i, d in enumerate(defs) if d.name == name]
         if not hits:
-            raise FitInputError(f"fit: bounds: {name!r} is not a fitted parameter; fitted: "
-                                f"{sorted({d.name for d in defs})}")
+            raise FitInputError(
+                f"fit: bounds: {name!r} is not a fitted parameter; fitted: "
+                f"{sorted({d.name for d in defs})}"
+            )
         if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
             raise FitInputError(f"fit: bounds[{name!r}] = ({lo}, {hi}): need finite lo < hi")
         for i in hits:
@@ -217,23 +254,46 @@ def _space(logs, rig: Rig, n_sessions: int, friction: bool, max_delay: int, tip_
             defs[i] = ParamDef(d.name, d.unit, float(lo), float(hi), d.scale, d.session)
     ranges = _delay_ranges(hub, tip, max_delay, delays)
     info["delay_ranges"] = {"motor_angle": ranges[0], "tip_deflection": ranges[1]}
-    space = ParamSpace(defs, n_sessions, max(r[1] for r in ranges), sign, friction,
-                       (delays[0], delays[1]), delay_ranges=ranges)
+    space = ParamSpace(
+        defs,
+        n_sessions,
+        max(r[1] for r in ranges),
+        sign,
+        friction,
+        (delays[0], delays[1]),
+        delay_ranges=ranges,
+    )
     zeta0 = float(np.clip(tip.zeta, 0.003, 0.25)) if tip is not None and tip.trusted else 0.03
-    B0 = (float(np.clip(hub.viscous, 0.0, B_hi)) if hub is not None and hub.trusted
-          and hub.viscous is not None else 0.05 * B_hi)
-    seed = {"hub_inertia": J_est or J_ref, "link_frequency": wc, "link_inertia": J_ref,
-            "link_damping": zeta0, "tip_gain": abs(g) if g else 1.0, "viscous": B0,
-            "coulomb": 0.6 * tau_f, "static_excess": 0.2 * tau_f, "bias": 0.0}
-    u0 = np.array([float(np.clip(d.to_unit(np.clip(seed[d.name], d.lo, d.hi)), 0, 1))
-                   for d in defs])
+    B0 = (
+        float(np.clip(hub.viscous, 0.0, B_hi))
+        if hub is not None and hub.trusted and hub.viscous is not None
+        else 0.05 * B_hi
+    )
+    seed = {
+        "hub_inertia": J_est or J_ref,
+        "link_frequency": wc,
+        "link_inertia": J_ref,
+        "link_damping": zeta0,
+        "tip_gain": abs(g) if g else 1.0,
+        "viscous": B0,
+        "coulomb": 0.6 * tau_f,
+        "static_excess": 0.2 * tau_f,
+        "bias": 0.0,
+    }
+    u0 = np.array(
+        [float(np.clip(d.to_unit(np.clip(seed[d.name], d.lo, d.hi)), 0, 1)) for d in defs]
+    )
     # the seed's delays: the middle of a range set by a trusted estimate, else the
     # smallest delay searched
     from_est = (hub is not None and hub.trusted, tip is not None and tip.trusted)
     mid = [sum(r) // 2 if e else r[0] for r, e in zip(ranges, from_est, strict=True)]
-    d0 = np.array([delays[0] if delays[0] is not None else mid[0],
-                   delays[1] if delays[1] is not None else mid[1],
-                   ((sign or 1) + 1) // 2])
+    d0 = np.array(
+        [
+            delays[0] if delays[0] is not None else mid[0],
+            delays[1] if delays[1] is not None else mid[1],
+            ((sign or 1) + 1) // 2,
+        ]
+    )
     return space, u0, d0
 
 
@@ -261,22 +321,43 @@ def _delay_ranges(hub, tip, max_delay: int, fixed) -> tuple[tuple[int, int], tup
     return h, t
 
 
-def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
-        motor_constant: float | None = None, armature_resistance: float | None = None,
-        link_length: float | None = None, gear_efficiency: float = 1.0,
-        motor_efficiency: float = 1.0, voltage_limit: float | None = None,
-        current_limit: float | None = None, mode: str = "closed_loop",
-        controller: Any = None, sessions: Sequence[int] | None = None,
-        friction: bool = True, encoder_counts: int | None = None,
-        tip_sign: int | None = None, angle_delay: int | None = None,
-        tip_delay: int | None = None, max_delay: int | None = None,
-        computation_delay: int | None = None,
-        bounds: dict[str, tuple[float, float]] | None = None, substeps: int = 2,
-        popsize: int = 8, maxiter: int = 40, global_seconds: float | None = 5.0,
-        local_nfev: int = 30, delay_nfev: int = 6, polish_iter: int = 8, seed: int = 0, chunk: int = 64,
-        progress: Callable[[str], None] | None = None,
-        filters: dict[str, float] | None = None, delay_search: str = "neighbours",
-        estimates: bool = True) -> FitResult:
+def fit(
+    logs: Sequence[Any],
+    *,
+    drive: str = "voltage",
+    gear_ratio: float = 1.0,
+    motor_constant: float | None = None,
+    armature_resistance: float | None = None,
+    link_length: float | None = None,
+    gear_efficiency: float = 1.0,
+    motor_efficiency: float = 1.0,
+    voltage_limit: float | None = None,
+    current_limit: float | None = None,
+    mode: str = "closed_loop",
+    controller: Any = None,
+    sessions: Sequence[int] | None = None,
+    friction: bool = True,
+    encoder_counts: int | None = None,
+    tip_sign: int | None = None,
+    angle_delay: int | None = None,
+    tip_delay: int | None = None,
+    max_delay: int | None = None,
+    computation_delay: int | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
+    substeps: int = 2,
+    popsize: int = 8,
+    maxiter: int = 40,
+    global_seconds: float | None = 5.0,
+    local_nfev: int = 30,
+    delay_nfev: int = 6,
+    polish_iter: int = 8,
+    seed: int = 0,
+    chunk: int = 64,
+    progress: Callable[[str], None] | None = None,
+    filters: dict[str, float] | None = None,
+    delay_search: str = "neighbours",
+    estimates: bool = True,
+) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
     ``voltage_limit`` (V; A for a current drive without ``current_limit``): None takes the
@@ -331,8 +412,10 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
     if delay_search not in ("neighbours", "profile", "both"):
-        raise FitInputError(f"fit: field 'delay_search' = {delay_search!r}: choose "
-                            "'neighbours', 'profile' or 'both'")
+        raise FitInputError(
+            f"fit: field 'delay_search' = {delay_search!r}: choose "
+            "'neighbours', 'profile' or 'both'"
+        )
     if mode not in ("closed_loop", "open_loop"):
         raise FitInputError(f"fit: field 'mode' = {mode!r}: choose 'closed_loop' or 'open_loop'")
     if not logs:
@@ -341,25 +424,33 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
     dts = [g.dt for g in blogs]
     for g in blogs:
         if abs(g.dt - dts[0]) > PERIOD_TOL * dts[0]:
-            raise FitInputError(f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
-                                f"from {blogs[0].path}'s {dts[0]:g} s; resample to one period")
+            raise FitInputError(
+                f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
+                f"from {blogs[0].path}'s {dts[0]:g} s; resample to one period"
+            )
         if mode == "closed_loop":
             check_closed_loop(g)
         elif "voltage" not in g.columns:
-            raise FitInputError(f"{g.path}: field 'voltage': open-loop replay needs the logged "
-                                "command column 'voltage' (V, or A for a current drive)")
+            raise FitInputError(
+                f"{g.path}: field 'voltage': open-loop replay needs the logged "
+                "command column 'voltage' (V, or A for a current drive)"
+            )
     if max_delay is None:
         max_delay = int(round(_est.MAX_DELAY_S / dts[0]))
     filt = check_filters(filters, dts[0], substeps)
     sess = list(sessions) if sessions is not None else [0] * len(blogs)
     if len(sess) != len(blogs) or sorted(set(sess)) != list(range(max(sess) + 1)):
-        raise FitInputError(f"fit: field 'sessions' = {sess}: give one index per log, "
-                            "numbered 0, 1, ... without gaps")
+        raise FitInputError(
+            f"fit: field 'sessions' = {sess}: give one index per log, "
+            "numbered 0, 1, ... without gaps"
+        )
     if encoder_counts:
         q = 2 * np.pi / encoder_counts
     else:
-        q = max((detect_quantum(g.columns["motor_angle"]) for g in blogs
-                 if "motor_angle" in g.columns), default=0.0)
+        q = max(
+            (detect_quantum(g.columns["motor_angle"]) for g in blogs if "motor_angle" in g.columns),
+            default=0.0,
+        )
         if q > 0 and any(_finer_than_logged(g, q) for g in blogs):
             # the logger rounds the angle it writes, but its own rate (from the angle it
             # read) is not a multiple of q / T: the controller read a finer angle
@@ -371,84 +462,182 @@ def fit(logs: Sequence[Any], *, drive: str = "voltage", gear_ratio: float = 1.0,
             voltage_limit = declared.pop()
         else:
             voltage_limit = 10.0
-            notes.append("no amplifier limit given and the logs' format declares "
-                         + ("several" if declared else "none") + ": 10 V assumed "
-                         "(give voltage_limit, --voltage-limit, or [controller] limit in the "
-                         "log format)")
+            notes.append(
+                "no amplifier limit given and the logs' format declares "
+                + ("several" if declared else "none")
+                + ": 10 V assumed "
+                "(give voltage_limit, --voltage-limit, or [controller] limit in the "
+                "log format)"
+            )
     if computation_delay is None:
         computation_delay = _computation_delay(blogs, notes) if mode == "closed_loop" else 0
-    q_logged = max((detect_quantum(g.columns["motor_angle"]) for g in blogs
-                    if "motor_angle" in g.columns), default=0.0)
+    q_logged = max(
+        (detect_quantum(g.columns["motor_angle"]) for g in blogs if "motor_angle" in g.columns),
+        default=0.0,
+    )
     limit = voltage_limit if drive == "voltage" else (current_limit or voltage_limit)
-    rig = make_rig(drive, gear_ratio, motor_constant, armature_resistance, link_length,
-                   gear_efficiency, motor_efficiency, limit, q)
-    info: dict[str, Any] = {"encoder_quantum": q, "logged_resolution": q_logged,
-                            "voltage_limit": voltage_limit,
-                            "computation_delay": computation_delay, "notes": notes}
+    rig = make_rig(
+        drive,
+        gear_ratio,
+        motor_constant,
+        armature_resistance,
+        link_length,
+        gear_efficiency,
+        motor_efficiency,
+        limit,
+        q,
+    )
+    info: dict[str, Any] = {
+        "encoder_quantum": q,
+        "logged_resolution": q_logged,
+        "voltage_limit": voltage_limit,
+        "computation_delay": computation_delay,
+        "notes": notes,
+    }
     if estimates:
         say("estimates: hub-to-tip model, hub delay, link frequency")
         est = _estimates(blogs, rig, max_delay, filters)
-        info["estimates"] = {"tip_model": est["tip"].to_dict() if est["tip"] else None,
-                             "hub_delay": est["hub"].to_dict(),
-                             "link_frequency": est["frequency"]}
+        info["estimates"] = {
+            "tip_model": est["tip"].to_dict() if est["tip"] else None,
+            "hub_delay": est["hub"].to_dict(),
+            "link_frequency": est["frequency"],
+        }
     else:  # bounds from the guesses alone, every delay 0 ... max_delay searched
         est = {}
         info["estimates"] = None
     if est.get("tip_cutoff"):
         # the hub → tip model's low-pass, as a known sensor filter (lag and cutoff are
         # estimated together; the closed-loop stages then search the delay around it)
-        filt = check_filters({**{k: v for k, v in filt.items() if v},
-                              "tip_deflection": est["tip_cutoff"]}, dts[0], substeps)
-    space, u0, d0 = _space(blogs, rig, max(sess) + 1, friction, max_delay, tip_sign,
-                           (angle_delay, tip_delay), bounds, info, est)
+        filt = check_filters(
+            {**{k: v for k, v in filt.items() if v}, "tip_deflection": est["tip_cutoff"]},
+            dts[0],
+            substeps,
+        )
+    space, u0, d0 = _space(
+        blogs,
+        rig,
+        max(sess) + 1,
+        friction,
+        max_delay,
+        tip_sign,
+        (angle_delay, tip_delay),
+        bounds,
+        info,
+        est,
+    )
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
-    common: dict[str, Any] = dict(mode=mode, substeps=substeps, comp_delay=computation_delay, chunk=chunk,
-                  wc_guess=wc_guess, filters=filt)
+    common: dict[str, Any] = dict(
+        mode=mode,
+        substeps=substeps,
+        comp_delay=computation_delay,
+        chunk=chunk,
+        wc_guess=wc_guess,
+        filters=filt,
+    )
     obj_g = Objective(blogs, rig, space, sess, n_samples=n_glob, **common)
-    say(f"global stage: {space.n_cont} continuous + discrete parameters, "
-        f"{len(blogs)} logs x {n_glob} samples")
+    say(
+        f"global stage: {space.n_cont} continuous + discrete parameters, "
+        f"{len(blogs)} logs x {n_glob} samples"
+    )
     best = {"U": u0, "D": d0, "off": None, "cost": float("inf")}
     try:
         glob, loc, D, warnings, obj = _stages(
-            obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best, say,
-            popsize=popsize, maxiter=maxiter, seed=seed, local_nfev=local_nfev,
-            delay_nfev=delay_nfev, polish_iter=polish_iter, friction=friction,
-            delay_search=delay_search, info=info)
+            obj_g,
+            blogs,
+            rig,
+            space,
+            sess,
+            common,
+            u0,
+            d0,
+            n_glob,
+            n_full,
+            best,
+            say,
+            popsize=popsize,
+            maxiter=maxiter,
+            seed=seed,
+            local_nfev=local_nfev,
+            delay_nfev=delay_nfev,
+            polish_iter=polish_iter,
+            friction=friction,
+            delay_search=delay_search,
+            info=info,
+        )
         interrupted = False
     except KeyboardInterrupt:
         # Ctrl-C: the best point so far, marked interrupted (flexarm.errors.FitInterrupted)
         interrupted = True
         D, warnings = np.asarray(best["D"]), []
         off = best["off"] if best["off"] is not None else np.zeros((len(blogs), 4))
-        loc = {"U": np.asarray(best["U"]), "off": off, "std_u": np.full(space.n_cont, np.nan),
-               "std_iid_u": np.full(space.n_cont, np.nan), "success": False,
-               "message": "interrupted", "nfev": 0, "cost": best["cost"], "seconds": 0.0,
-               "rho": float("nan"), "at_bounds": [], "bandwidth": []}
-        glob = best.get("glob") or GlobalResult(loc["U"], D, best["cost"], 0, 0, False,
-                                                "interrupted", 0.0, np.zeros(0))
+        loc = {
+            "U": np.asarray(best["U"]),
+            "off": off,
+            "std_u": np.full(space.n_cont, np.nan),
+            "std_iid_u": np.full(space.n_cont, np.nan),
+            "success": False,
+            "message": "interrupted",
+            "nfev": 0,
+            "cost": best["cost"],
+            "seconds": 0.0,
+            "rho": float("nan"),
+            "at_bounds": [],
+            "bandwidth": [],
+        }
+        glob = best.get("glob") or GlobalResult(
+            loc["U"], D, best["cost"], 0, 0, False, "interrupted", 0.0, np.zeros(0)
+        )
         obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
     if not interrupted:
         loc, space = _widen_and_retry(obj, loc, D, space, local_nfev, info, warnings, say)
     tr, e, bad = obj.run(loc["U"][None], D[None], loc["off"][None])
     fitp = obj.fit_percent(e[0])
     res = FitResult.build(
-        logs=blogs, rig=rig, space=space, U=loc["U"], D=D, offsets=loc["off"],
-        std_u=loc["std_u"], std_iid_u=loc["std_iid_u"], fit_percent=fitp, diverged=bad[0], traj=[a[0] for a in tr],
-        glob=glob, local=loc, info=info, settings=dict(
-            mode=mode, friction=friction, substeps=substeps, computation_delay=computation_delay,
-            sessions=sess, popsize=popsize, maxiter=maxiter, global_samples=n_glob, seed=seed,
-            filters=filt),
-        seconds=time.perf_counter() - t_start, objective=obj)
-    res.warnings.extend(warnings + _poorly_determined(res, rig, space) + _tip_offsets(blogs)
-                        + _delay_order(res, space)
-                        + [n for n in notes if n.startswith("no amplifier limit")])
+        logs=blogs,
+        rig=rig,
+        space=space,
+        U=loc["U"],
+        D=D,
+        offsets=loc["off"],
+        std_u=loc["std_u"],
+        std_iid_u=loc["std_iid_u"],
+        fit_percent=fitp,
+        diverged=bad[0],
+        traj=[a[0] for a in tr],
+        glob=glob,
+        local=loc,
+        info=info,
+        settings=dict(
+            mode=mode,
+            friction=friction,
+            substeps=substeps,
+            computation_delay=computation_delay,
+            sessions=sess,
+            popsize=popsize,
+            maxiter=maxiter,
+            global_samples=n_glob,
+            seed=seed,
+            filters=filt,
+        ),
+        seconds=time.perf_counter() - t_start,
+        objective=obj,
+    )
+    res.warnings.extend(
+        warnings
+        + _poorly_determined(res, rig, space)
+        + _tip_offsets(blogs)
+        + _delay_order(res, space)
+        + [n for n in notes if n.startswith("no amplifier limit")]
+    )
     if interrupted:
         from flexarm.errors import FitInterrupted
 
-        res.message = ("INTERRUPTED (Ctrl-C): the best parameters found so far, cost "
-                       f"{best['cost']:.4g}; not converged. " + res.message)
+        res.message = (
+            "INTERRUPTED (Ctrl-C): the best parameters found so far, cost "
+            f"{best['cost']:.4g}; not converged. " + res.message
+        )
         raise FitInterrupted(res)
     return res
 
@@ -459,8 +648,16 @@ WIDEN_RETRIES = 2
 WIDEN_FACTOR = 3.0
 
 
-def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace,
-                     local_nfev: int, info: dict, warnings: list, say) -> tuple:
+def _widen_and_retry(
+    obj: Objective,
+    loc: dict,
+    D: np.ndarray,
+    space: ParamSpace,
+    local_nfev: int,
+    info: dict,
+    warnings: list,
+    say,
+) -> tuple:
     """A parameter that ends at a bound of its data-derived range: move that bound out
     (×``WIDEN_FACTOR`` for log-scaled, one range width for linear ones), refit from the
     same physical point by least squares, keep the refit when it costs less; at most
@@ -483,17 +680,24 @@ def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace
             defs[i] = ParamDef(d.name, d.unit, lo, hi, d.scale, d.session, d.doc)
             moved[space.names[i]] = [[d.lo, d.hi], [lo, hi]]
         new = replace(space, defs=defs)
-        U1 = np.array([nd.to_unit(od.to_phys(u)) for od, nd, u in
-                       zip(space.defs, defs, loc["U"], strict=False)])
+        U1 = np.array(
+            [
+                nd.to_unit(od.to_phys(u))
+                for od, nd, u in zip(space.defs, defs, loc["U"], strict=False)
+            ]
+        )
         say(f"widening the bounds of {', '.join(moved)} and refitting")
         obj.space = new
         loc2 = _local_continued(obj, np.clip(U1, 0.0, 1.0), D, local_nfev, off0=loc["off"])
-        info.setdefault("widened", []).append({"bounds": moved, "cost_before": loc["cost"],
-                                               "cost_after": loc2["cost"]})
+        info.setdefault("widened", []).append(
+            {"bounds": moved, "cost_before": loc["cost"], "cost_after": loc2["cost"]}
+        )
         if loc2["cost"] < loc["cost"]:
-            warnings.append(f"{', '.join(moved)} ended at a bound of the data-derived range; "
-                            "the range was widened and the fit redone (cost "
-                            f"{loc['cost']:.4g} -> {loc2['cost']:.4g})")
+            warnings.append(
+                f"{', '.join(moved)} ended at a bound of the data-derived range; "
+                "the range was widened and the fit redone (cost "
+                f"{loc['cost']:.4g} -> {loc2['cost']:.4g})"
+            )
             loc, space = loc2, new
         else:
             obj.space = space
@@ -501,14 +705,42 @@ def _widen_and_retry(obj: Objective, loc: dict, D: np.ndarray, space: ParamSpace
     return loc, space
 
 
-def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best, say, *,
-            popsize, maxiter, seed, local_nfev, delay_nfev, polish_iter, friction,
-            delay_search, info):
+def _stages(
+    obj_g,
+    blogs,
+    rig,
+    space,
+    sess,
+    common,
+    u0,
+    d0,
+    n_glob,
+    n_full,
+    best,
+    say,
+    *,
+    popsize,
+    maxiter,
+    seed,
+    local_nfev,
+    delay_nfev,
+    polish_iter,
+    friction,
+    delay_search,
+    info,
+):
     """The global stage, the tip-delay starts, the local stage and the friction polish
     (see :func:`fit`); ``best`` is kept current with the best point so far."""
     glob = differential_evolution_stage(
-        obj_g, u0, d0, popsize=popsize, maxiter=maxiter, seed=seed,
-        progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"), best=best)
+        obj_g,
+        u0,
+        d0,
+        popsize=popsize,
+        maxiter=maxiter,
+        seed=seed,
+        progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"),
+        best=best,
+    )
     best["glob"] = glob
     if not np.isfinite(glob.cost) or glob.cost >= 1e3:
         bad = [g.name for i, g in enumerate(blogs)]
@@ -516,7 +748,8 @@ def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best
             f"fit: every simulated loop diverged ({', '.join(bad)}): the logs' controller "
             "gains make the simulated loop unstable for all parameters tried; check the "
             "'# controller:' lines (gains, signs, units: V/rad, V/m, V*s/rad, V*s/m), the "
-            "tip sensor's sign (tip_sign=) and the data-sheet values")
+            "tip sensor's sign (tip_sign=) and the data-sheet values"
+        )
     obj = Objective(blogs, rig, space, sess, **common) if n_glob != n_full else obj_g
     D, U0, off0 = glob.D, glob.U, None
     warnings: list[str] = []
@@ -533,28 +766,35 @@ def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best
             # briefly at the neighbouring delays too (on the global window), keep the best
             near = _neighbour_refinement(obj_r, glob.U, D, min(delay_nfev, local_nfev))
             info["tip_delay_trials"] = near.pop("trials")
-            say(f"tip delay {int(near['D'][1])} samples (short refinements: "
-                f"{info['tip_delay_trials']})")
+            say(
+                f"tip delay {int(near['D'][1])} samples (short refinements: "
+                f"{info['tip_delay_trials']})"
+            )
             starts.append(near)
         if delay_search in ("profile", "both"):
-            prof = _tip_delay_profile(obj_r, glob.U, D, min(2 * PROFILE_NFEV, local_nfev),
-                                      min(PROFILE_NFEV, local_nfev))
+            prof = _tip_delay_profile(
+                obj_r, glob.U, D, min(2 * PROFILE_NFEV, local_nfev), min(PROFILE_NFEV, local_nfev)
+            )
             info["tip_delay_profile"] = prof["profile"]
-            say(f"tip delay profile (short refinements): "
-                f"{ {k: round(v, 6) for k, v in prof['profile'].items()} }")
+            say(
+                f"tip delay profile (short refinements): "
+                f"{ {k: round(v, 6) for k, v in prof['profile'].items()} }"
+            )
             # "profile": its two best delays; "both": its best delay other than the
             # neighbours' choice (two starts that test two delays on the full logs)
             taken = {int(c["D"][1]) for c in starts}
             new = [c for c in prof["candidates"] if int(c["D"][1]) not in taken]
-            starts.extend(new[:2 if delay_search == "profile" else 1])
+            starts.extend(new[: 2 if delay_search == "profile" else 1])
     # every start gets the local stage and the friction polish on the full logs; the
     # lowest cost wins (on one open-loop log, two sessions or behind a slow sensor filter
     # the global stage's tip delay was 2 samples off, which the profile over every delay
     # finds)
     finals = []
     for k, c in enumerate(starts):
-        say(f"local stage{f' (start {k + 1} of {len(starts)})' if len(starts) > 1 else ''}: "
-            f"least squares on {len(blogs)} logs x {n_full} samples")
+        say(
+            f"local stage{f' (start {k + 1} of {len(starts)})' if len(starts) > 1 else ''}: "
+            f"least squares on {len(blogs)} logs x {n_full} samples"
+        )
         loc_k = _local_continued(obj, c["U"], c["D"], local_nfev, off0=c["off"])
         if friction and polish_iter > 0:
             say("friction polish: batched differential evolution on the friction parameters")
@@ -573,7 +813,8 @@ def _stages(obj_g, blogs, rig, space, sess, common, u0, d0, n_glob, n_full, best
                 f"tip_deflection delay = {int(D[1])} samples is poorly determined: delay "
                 f"{int(other[0][1][1])} costs only "
                 f"{100 * (other[0][0]['cost'] / loc['cost'] - 1):.1f} % more on the full "
-                "logs; give tip_delay= if it is known, or record longer logs")
+                "logs; give tip_delay= if it is known, or record longer logs"
+            )
     return glob, loc, D, warnings, obj
 
 
@@ -612,8 +853,9 @@ DELAY_FLAT = 0.10
 PROFILE_NFEV = 10
 
 
-def _tip_delay_profile(obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev: int,
-                       nfev: int) -> dict:
+def _tip_delay_profile(
+    obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev: int, nfev: int
+) -> dict:
     """Profile the cost over every tip delay 0 ... max_delay on ``obj``'s window: first a
     refinement (``start_nfev`` evaluations) at the global stage's delay ``D[1]`` (the
     global stage runs without the per-log initial-state offsets and stops far from the
@@ -633,8 +875,10 @@ def _tip_delay_profile(obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev:
         trials.append((r["cost"], dd, Dk, r))
     profile = {int(t[1]): float(t[0]) for t in trials}
     trials.sort(key=lambda t: t[0])
-    return {"profile": profile, "candidates": [
-        {"D": Dk, "U": r["U"], "off": r["off"]} for _, _, Dk, r in trials]}
+    return {
+        "profile": profile,
+        "candidates": [{"D": Dk, "U": r["U"], "off": r["off"]} for _, _, Dk, r in trials],
+    }
 
 
 def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: int) -> dict:
@@ -665,11 +909,13 @@ def _delay_order(res: FitResult, space: ParamSpace) -> list[str]:
         return []
     if dh is None or dt is None or dt >= dh:
         return []
-    return [f"tip_deflection delay = {dt} samples is below the motor_angle delay = {dh}: "
-            "the tip channel reading the motion before the hub channel is not what a strain "
-            "gauge and an encoder do; the hub delay likely stands for a lag of the hub's "
-            "start that the friction model lacks (a stuck gear train); treat both delays as "
-            "apparent, or give angle_delay= if it is known"]
+    return [
+        f"tip_deflection delay = {dt} samples is below the motor_angle delay = {dh}: "
+        "the tip channel reading the motion before the hub channel is not what a strain "
+        "gauge and an encoder do; the hub delay likely stands for a lag of the hub's "
+        "start that the friction model lacks (a stuck gear train); treat both delays as "
+        "apparent, or give angle_delay= if it is known"
+    ]
 
 
 #: a tip reading at rest beyond this fraction of the signal's range is called an offset
@@ -684,10 +930,12 @@ def _tip_offsets(blogs) -> list[str]:
     for g in blogs:
         r = guesses.tip_rest_reading(g)
         if r is not None and r[1] > 0 and abs(r[0]) > TIP_OFFSET_WARN * r[1]:
-            out.append(f"{g.name}: tip_deflection reads {r[0]:.3g} m at rest "
-                       f"({100 * abs(r[0]) / r[1]:.0f} % of its range), where a free link "
-                       "rests at 0: a sensor offset, which the model does not have; zero "
-                       "the gauge (subtract its rest reading) before fitting")
+            out.append(
+                f"{g.name}: tip_deflection reads {r[0]:.3g} m at rest "
+                f"({100 * abs(r[0]) / r[1]:.0f} % of its range), where a free link "
+                "rests at 0: a sensor offset, which the model does not have; zero "
+                "the gauge (subtract its rest reading) before fitting"
+            )
     return out
 
 
@@ -699,19 +947,30 @@ def _poorly_determined(res: FitResult, rig: Rig, space: ParamSpace) -> list[str]
         sfx = "" if space.n_sessions == 1 else f"[{s}]"
         B = res.params.get("viscous" + sfx, 0.0)
         if rig.k_omega > 0 and B < 0.2 * rig.k_omega:
-            out.append(f"viscous{sfx} = {B:.3g} N*m*s/rad is poorly determined: it is "
-                       f"{100 * B / rig.k_omega:.0f} % of the drive's back-EMF damping "
-                       f"k_omega = {rig.k_omega:.3g}, which acts in parallel")
+            out.append(
+                f"viscous{sfx} = {B:.3g} N*m*s/rad is poorly determined: it is "
+                f"{100 * B / rig.k_omega:.0f} % of the drive's back-EMF damping "
+                f"k_omega = {rig.k_omega:.3g}, which acts in parallel"
+            )
         if space.friction:
-            out.append(f"static_excess{sfx} (breakaway) and bias{sfx} rest on the restarts "
-                       "of a stuck hub and the up/down asymmetry of its stops: with few "
-                       "restarts (short logs, one move size) expect 10-20 % errors in the "
-                       "breakaway and a bias known to a few % of it only")
+            out.append(
+                f"static_excess{sfx} (breakaway) and bias{sfx} rest on the restarts "
+                "of a stuck hub and the up/down asymmetry of its stops: with few "
+                "restarts (short logs, one move size) expect 10-20 % errors in the "
+                "breakaway and a bias known to a few % of it only"
+            )
     return out
 
 
-def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, seed: int,
-                     local_nfev: int, width: float = 0.12) -> dict:
+def _friction_polish(
+    obj: Objective,
+    loc: dict,
+    D: np.ndarray,
+    maxiter: int,
+    seed: int,
+    local_nfev: int,
+    width: float = 0.12,
+) -> dict:
     """Stick-slip makes the cost jump where a stop lands on another encoder count, so the
     finite-difference Jacobian of the friction parameters is unreliable and least squares
     stalls there. Re-search the friction coordinates (unit box ± ``width`` around the
@@ -729,10 +988,20 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
         return obj.cost(Us, np.tile(D, (X.shape[0], 1)), np.tile(off, (X.shape[0], 1, 1)))
 
     c0 = float(f(U[idx][:, None])[0])
-    res = differential_evolution(f, bounds, popsize=8, maxiter=maxiter, tol=0.0,
-                                 seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-                                 updating="deferred", vectorized=True, polish=False,
-                                 x0=U[idx], mutation=(0.5, 1.0), recombination=0.7)
+    res = differential_evolution(
+        f,
+        bounds,
+        popsize=8,
+        maxiter=maxiter,
+        tol=0.0,
+        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
+        updating="deferred",
+        vectorized=True,
+        polish=False,
+        x0=U[idx],
+        mutation=(0.5, 1.0),
+        recombination=0.7,
+    )
     if res.fun >= c0:
         return loc
     U1 = U.copy()
@@ -745,8 +1014,9 @@ def _friction_polish(obj: Objective, loc: dict, D: np.ndarray, maxiter: int, see
     return out if out["cost"] <= float(res.fun) + 1e-15 else loc
 
 
-def _local_continued(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
-                     off0: np.ndarray | None = None) -> dict:
+def _local_continued(
+    obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int, off0: np.ndarray | None = None
+) -> dict:
     """:func:`_local` first on the loop without the converters' rounding
     (:meth:`Objective.unquantised`: a smooth cost), then from its optimum on the rounded
     loop, each with up to ``max_nfev`` evaluations; one stage when nothing is quantised.
@@ -767,9 +1037,15 @@ def _local_continued(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: in
     return out
 
 
-def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
-           step: float = 1e-3, off0: np.ndarray | None = None,
-           free_params: bool = True) -> dict:
+def _local(
+    obj: Objective,
+    U0: np.ndarray,
+    D: np.ndarray,
+    max_nfev: int,
+    step: float = 1e-3,
+    off0: np.ndarray | None = None,
+    free_params: bool = True,
+) -> dict:
     """least_squares over the unit coordinates and each log's initial-state offsets (tip
     deflection and rate, hub angle and rate); ``free_params=False`` holds the parameters
     at ``U0`` and estimates the initial states only (a held-out log's, from its own data)."""
@@ -813,10 +1089,18 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
         return cache[key]
 
     t0 = time.perf_counter()
-    res = least_squares(lambda z: batch(z)[0], z0[free],
-                        jac=lambda z: batch(z)[1],  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-                        bounds=(lo[free], hi[free]), method="trf", x_scale=1.0,
-                        max_nfev=max_nfev, ftol=1e-6, xtol=1e-6, gtol=1e-8)
+    res = least_squares(
+        lambda z: batch(z)[0],
+        z0[free],
+        jac=lambda z: batch(z)[1],  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+        bounds=(lo[free], hi[free]),
+        method="trf",
+        x_scale=1.0,
+        max_nfev=max_nfev,
+        ftol=1e-6,
+        xtol=1e-6,
+        gtol=1e-8,
+    )
     r, Jac = batch(res.x)
     x = full(res.x)
     keep = mask.ravel()
@@ -837,17 +1121,38 @@ def _local(obj: Objective, U0: np.ndarray, D: np.ndarray, max_nfev: int,
         except np.linalg.LinAlgError:
             bw = []
     U, off = split(x[None])
-    return {"U": U[0], "off": off[0], "std_u": std_u, "std_iid_u": std_iid_u,
-            "cov_u": cov_u, "bandwidth": [int(m) for m in bw], "status": int(res.status),
-            "success": bool(res.status > 0), "message": str(res.message),
-            "nfev": int(res.nfev), "cost": float(2 * res.cost), "rho": rho,
-            "seconds": time.perf_counter() - t0, "at_bounds": [
-                i for i in range(n) if free_params and (x[i] < 1e-3 or x[i] > 1 - 1e-3)
-                and obj.space.defs[i].scale != "loglin"]}
+    return {
+        "U": U[0],
+        "off": off[0],
+        "std_u": std_u,
+        "std_iid_u": std_iid_u,
+        "cov_u": cov_u,
+        "bandwidth": [int(m) for m in bw],
+        "status": int(res.status),
+        "success": bool(res.status > 0),
+        "message": str(res.message),
+        "nfev": int(res.nfev),
+        "cost": float(2 * res.cost),
+        "rho": rho,
+        "seconds": time.perf_counter() - t0,
+        "at_bounds": [
+            i
+            for i in range(n)
+            if free_params
+            and (x[i] < 1e-3 or x[i] > 1 - 1e-3)
+            and obj.space.defs[i].scale != "loglin"
+        ],
+    }
 
 
-def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = True,
-            nfev: int = 15, controller: Any = None) -> dict:
+def predict(
+    result: FitResult,
+    logs: Sequence[Any],
+    *,
+    estimate_initial: bool = True,
+    nfev: int = 15,
+    controller: Any = None,
+) -> dict:
     """The fitted model's prediction of other logs (held-out data, e.g. another time
     window of the same recording): the loop closed with each log's own reference and
     controller, the parameters as fitted, each log's initial state (hub angle and rate,
@@ -859,16 +1164,25 @@ def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = 
     T = result.logs[0].dt
     for g in blogs:
         if abs(g.dt - T) > PERIOD_TOL * T:
-            raise FitInputError(f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
-                                f"from the fitted logs' {T:g} s")
+            raise FitInputError(
+                f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
+                f"from the fitted logs' {T:g} s"
+            )
         if result.settings["mode"] == "closed_loop":
             check_closed_loop(g)
     st = result.settings
     space = result.space
-    obj = Objective(blogs, result.rig, space, [0] * len(blogs), mode=st["mode"],
-                    substeps=st["substeps"], comp_delay=st["computation_delay"],
-                    wc_guess=float(result.params.get("link_frequency", 10.0)),
-                    filters=st["filters"])
+    obj = Objective(
+        blogs,
+        result.rig,
+        space,
+        [0] * len(blogs),
+        mode=st["mode"],
+        substeps=st["substeps"],
+        comp_delay=st["computation_delay"],
+        wc_guess=float(result.params.get("link_frequency", 10.0)),
+        filters=st["filters"],
+    )
     U, D = result.unit, result.discrete
     off = np.zeros((len(blogs), 4))
     if estimate_initial:
@@ -876,11 +1190,15 @@ def predict(result: FitResult, logs: Sequence[Any], *, estimate_initial: bool = 
     tr, e, bad = obj.run(U[None], D[None], off[None])
     fp = obj.fit_percent(e[0])
     keys = log_keys(blogs)  # one key per log (same names in other folders apart)
-    out = {"fit_percent": {k: {"motor_angle": _pct(fp[i, 0]),
-                               "tip_deflection": _pct(fp[i, 1])}
-                           for i, k in enumerate(keys)},
-           "diverged": {k: bool(bad[0, i]) for i, k in enumerate(keys)},
-           "traj": [a[0] for a in tr], "logs": blogs}
+    out = {
+        "fit_percent": {
+            k: {"motor_angle": _pct(fp[i, 0]), "tip_deflection": _pct(fp[i, 1])}
+            for i, k in enumerate(keys)
+        },
+        "diverged": {k: bool(bad[0, i]) for i, k in enumerate(keys)},
+        "traj": [a[0] for a in tr],
+        "logs": blogs,
+    }
     return out
 
 

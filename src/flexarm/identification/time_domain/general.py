@@ -95,8 +95,14 @@ from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
-__all__ = ["FitOptions", "ScenarioFit", "fit_scenario", "predict_scenario", "expand_paths",
-           "scenario_with"]
+__all__ = [
+    "FitOptions",
+    "ScenarioFit",
+    "fit_scenario",
+    "predict_scenario",
+    "expand_paths",
+    "scenario_with",
+]
 
 
 # ----------------------------------------------------------------------------- paths
@@ -110,12 +116,16 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
     if v is None and keys[-1] == "static" and "friction" in keys:
         v = _path_get(dump, keys[:-1]).get("coulomb", 0.0)  # breakaway defaults to coulomb
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ValueError(f"free parameter {path!r}: the scenario's value there is {v!r}, not "
-                         "a number; give it a number in the scenario (the template value)")
+        raise ValueError(
+            f"free parameter {path!r}: the scenario's value there is {v!r}, not "
+            "a number; give it a number in the scenario (the template value)"
+        )
     if not math.isfinite(v) or v == 0.0:
-        raise ValueError(f"free parameter {path!r}: the template value is {v!r}; parameters "
-                         "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
-                         "starting value in the scenario (e.g. the data-sheet value)")
+        raise ValueError(
+            f"free parameter {path!r}: the template value is {v!r}; parameters "
+            "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
+            "starting value in the scenario (e.g. the data-sheet value)"
+        )
     return float(v)
 
 
@@ -186,27 +196,39 @@ class FitOptions:
 
     def check(self) -> None:
         if not self.bound_factor > 1:
-            raise ValueError(f"FitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
-                             "(bounds p0/f … p0·f)")
+            raise ValueError(
+                f"FitOptions.bound_factor = {self.bound_factor!r}: must be > 1 (bounds p0/f … p0·f)"
+            )
         for name in ("residual_level", "correlation_time", "fd_step"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ValueError(f"FitOptions.{name} = {v!r}: must be a finite number > 0")
         if self.initial not in ("log", "scenario"):
-            raise ValueError(f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
-                             "from the logged state) or 'scenario' (a log's first sample "
-                             "starts from the scenario's [initial] state)")
-        if self.continuous and self.windows is not None and any(
-                w is not None for w in self.windows):
-            raise ValueError("FitOptions: continuous (consecutive pieces of one run) runs "
-                             "whole logs; leave out windows (--window)")
+            raise ValueError(
+                f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
+                "from the logged state) or 'scenario' (a log's first sample "
+                "starts from the scenario's [initial] state)"
+            )
+        if (
+            self.continuous
+            and self.windows is not None
+            and any(w is not None for w in self.windows)
+        ):
+            raise ValueError(
+                "FitOptions: continuous (consecutive pieces of one run) runs "
+                "whole logs; leave out windows (--window)"
+            )
         if self.segment is not None and not self.segment > 0:
-            raise ValueError(f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
-                             "(e.g. 2–5 s) or None for whole logs")
+            raise ValueError(
+                f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
+                "(e.g. 2–5 s) or None for whole logs"
+            )
         for p, s in self.priors.items():
             if not (s > 0 and math.isfinite(s)):
-                raise ValueError(f"FitOptions.priors[{p!r}] = {s!r}: the relative standard "
-                                 "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)")
+                raise ValueError(
+                    f"FitOptions.priors[{p!r}] = {s!r}: the relative standard "
+                    "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)"
+                )
 
 
 # ----------------------------------------------------------------------------- data
@@ -230,8 +252,10 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
         d = dict(log)
         t = np.asarray(d.pop("time"), float)
         return str(d.pop("name", "<log>")), t, d
-    raise TypeError(f"logs: got {type(log).__name__}; give flexarm.io.logs.Log objects (read_log) "
-                    "or dicts with 'time' and channel arrays")
+    raise TypeError(
+        f"logs: got {type(log).__name__}; give flexarm.io.logs.Log objects (read_log) "
+        "or dicts with 'time' and channel arrays"
+    )
 
 
 # ----------------------------------------------------------------------------- result
@@ -248,9 +272,11 @@ def stack_loops(loops: list):
     try:
         return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *loops)
     except ValueError as exc:
-        raise ValueError("the free parameters change the structure of the loop (e.g. a "
-                         "friction model, a filter switched on or off), which cannot be "
-                         f"batched: {exc}") from None
+        raise ValueError(
+            "the free parameters change the structure of the loop (e.g. a "
+            "friction model, a filter switched on or off), which cannot be "
+            f"batched: {exc}"
+        ) from None
 
 
 def _savgol_derivative(y: np.ndarray, k: int, h: int, dt: float) -> np.ndarray:
@@ -274,12 +300,23 @@ def _savgol_derivative(y: np.ndarray, k: int, h: int, dt: float) -> np.ndarray:
 class _Engine:
     """Logs cut into segments, the batched run of candidate parameter vectors, residuals."""
 
-    def __init__(self, scenario, logs: Sequence, free: Sequence[str], options: FitOptions,
-                 segment: float | Literal["options"] | None = "options"):
+    def __init__(
+        self,
+        scenario,
+        logs: Sequence,
+        free: Sequence[str],
+        options: FitOptions,
+        segment: float | Literal["options"] | None = "options",
+    ):
         options.check()
         if options.substeps is not None and scenario.simulation is not None:
-            scenario = scenario.model_copy(update={"simulation": scenario.simulation.model_copy(
-                update={"substeps": int(options.substeps)})})
+            scenario = scenario.model_copy(
+                update={
+                    "simulation": scenario.simulation.model_copy(
+                        update={"substeps": int(options.substeps)}
+                    )
+                }
+            )
         self.template = scenario
         self.options = options
         self.dump = scenario.model_dump()
@@ -287,41 +324,52 @@ class _Engine:
         if len(set(self.free)) != len(self.free):
             raise ValueError(f"free parameters listed twice: {self.free}")
         self.keys = [parse_path(p) for p in self.free]
-        self.p0 = np.array([_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free, strict=True)])
+        self.p0 = np.array(
+            [_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free, strict=True)]
+        )
         # priors and bounds may name paths with [*] too: one entry per element
         if any("[*]" in p for p in list(options.priors) + list(options.bounds)):
             options = copy.copy(options)
-            options.priors = {q: v for p, v in options.priors.items()
-                              for q in expand_paths(self.dump, [p])}
-            options.bounds = {q: v for p, v in options.bounds.items()
-                              for q in expand_paths(self.dump, [p])}
+            options.priors = {
+                q: v for p, v in options.priors.items() for q in expand_paths(self.dump, [p])
+            }
+            options.bounds = {
+                q: v for p, v in options.bounds.items() for q in expand_paths(self.dump, [p])
+            }
             self.options = options
         for p in list(options.priors) + list(options.bounds):
             if p not in self.free:
-                raise ValueError(f"FitOptions: {p!r} has a prior or bounds but is not free; "
-                                 f"free: {', '.join(self.free)}")
+                raise ValueError(
+                    f"FitOptions: {p!r} has a prior or bounds but is not free; "
+                    f"free: {', '.join(self.free)}"
+                )
         lo = np.full(len(self.free), -math.log(options.bound_factor))
         hi = -lo
         for i, p in enumerate(self.free):
             if p in options.bounds:
                 a, b = (float(v) for v in options.bounds[p])
                 if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
-                    raise ValueError(f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
-                                     f"must have the sign of the template value {self.p0[i]:g}")
+                    raise ValueError(
+                        f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
+                        f"must have the sign of the template value {self.p0[i]:g}"
+                    )
                 za, zb = sorted((math.log(a / self.p0[i]), math.log(b / self.p0[i])))
                 if not za <= 0 <= zb:
-                    raise ValueError(f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
-                                     f"the template value {self.p0[i]:g}; move one of them")
+                    raise ValueError(
+                        f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
+                        f"the template value {self.p0[i]:g}; move one of them"
+                    )
                 lo[i], hi[i] = za, zb
         self.lo, self.hi = lo, hi
         self.sigma = np.array([options.priors.get(p, np.inf) for p in self.free])
         self.tied = {}
         for p, master in options.ties.items():
             if master not in self.free:
-                raise ValueError(f"FitOptions.ties: {p!r} follows {master!r}, which is not "
-                                 f"free; free: {', '.join(self.free)}")
-            self.tied[p] = (self.free.index(master),
-                            _template_value(self.dump, parse_path(p), p))
+                raise ValueError(
+                    f"FitOptions.ties: {p!r} follows {master!r}, which is not "
+                    f"free; free: {', '.join(self.free)}"
+                )
+            self.tied[p] = (self.free.index(master), _template_value(self.dump, parse_path(p), p))
         self.prep0 = prepare(scenario)
         loop = self.prep0.loop
         self.dt = float(loop.dt)
@@ -336,37 +384,54 @@ class _Engine:
         from flexarm.io.logs import log_keys
 
         keys = log_keys(logs)  # unique per log: same file names in other folders stay apart
-        self.logs = [self._read(log, w, k if getattr(log, "path", None) is not None else None)
-                     for log, w, k in zip(logs, wins, keys, strict=True)]
+        self.logs = [
+            self._read(log, w, k if getattr(log, "path", None) is not None else None)
+            for log, w, k in zip(logs, wins, keys, strict=True)
+        ]
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
         for L in self.logs:
-            missing = sorted(n for n in read if n in self.names
-                             and not L.present[self.names.index(n)])
+            missing = sorted(
+                n for n in read if n in self.names and not L.present[self.names.index(n)]
+            )
             if missing:
-                raise ValueError(f"{L.name}: no column {', '.join(map(repr, missing))}, which "
-                                 f"the controller of scenario {self.template.name!r} reads; the "
-                                 "fit runs the controller on the logged channels from the log's "
-                                 "start: log them (or map them with a log format)")
-        chans = options.channels or {n: 1.0 for n in self.names
-                                     if any(L.present[self.names.index(n)]
-                                            and n not in L.computed for L in self.logs)}
+                raise ValueError(
+                    f"{L.name}: no column {', '.join(map(repr, missing))}, which "
+                    f"the controller of scenario {self.template.name!r} reads; the "
+                    "fit runs the controller on the logged channels from the log's "
+                    "start: log them (or map them with a log format)"
+                )
+        chans = options.channels or {
+            n: 1.0
+            for n in self.names
+            if any(L.present[self.names.index(n)] and n not in L.computed for L in self.logs)
+        }
         for c in chans:
             if c not in self.names:
-                raise ValueError(f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
-                                 f"{scenario.name!r}; channels: {', '.join(self.names)}")
+                raise ValueError(
+                    f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
+                    f"{scenario.name!r}; channels: {', '.join(self.names)}"
+                )
             if not any(L.present[self.names.index(c)] for L in self.logs):
-                raise ValueError(f"FitOptions.channels: no log holds channel {c!r}; the logs hold "
-                                 f"{sorted({k for L in self.logs for k in _cols(L, self.names)})}")
+                raise ValueError(
+                    f"FitOptions.channels: no log holds channel {c!r}; the logs hold "
+                    f"{sorted({k for L in self.logs for k in _cols(L, self.names)})}"
+                )
         self.channels = dict(chans)
         self.cidx = [self.names.index(c) for c in self.channels]
-        allv = {c: np.concatenate([L.y[:, self.names.index(c)] for L in self.logs
-                                   if L.present[self.names.index(c)]]) for c in self.channels}
+        allv = {
+            c: np.concatenate(
+                [L.y[:, self.names.index(c)] for L in self.logs if L.present[self.names.index(c)]]
+            )
+            for c in self.channels
+        }
         self.spread = np.array([max(float(np.nanstd(allv[c])), 1e-300) for c in self.channels])
-        self.scale = (np.sqrt(np.array(list(self.channels.values()), float))
-                      / (options.residual_level * self.spread)
-                      * math.sqrt(self.dt / options.correlation_time))
+        self.scale = (
+            np.sqrt(np.array(list(self.channels.values()), float))
+            / (options.residual_level * self.spread)
+            * math.sqrt(self.dt / options.correlation_time)
+        )
         self.ctrl_inits = None  # per-log controller start states (continuous)
         self.starts = None
         if options.continuous:
@@ -383,11 +448,11 @@ class _Engine:
         from flexarm.sim.filters import continuous_starts, start_piece
 
         loop = self.prep0.loop
-        self.starts = continuous_starts(loop, self.template.sensors,
-                                        [L.log for L in self.logs], self.dt)
+        self.starts = continuous_starts(
+            loop, self.template.sensors, [L.log for L in self.logs], self.dt
+        )
         inits = [start_piece(loop, st).controller.init() for st in self.starts]
-        self.ctrl_inits = jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]),
-                                       *inits)
+        self.ctrl_inits = jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *inits)
 
     def _context(self, li: int):
         """The samples around log ``li``'s segment starts: (y (N, C), the log as a
@@ -401,12 +466,18 @@ class _Engine:
         if getattr(self, "_joined", None) is None:
             from flexarm.io.logs import Log
 
-            common = [k for k in self.logs[0].log.signals
-                      if all(k in M.log.signals for M in self.logs)]
+            common = [
+                k for k in self.logs[0].log.signals if all(k in M.log.signals for M in self.logs)
+            ]
             n = sum(M.t.size for M in self.logs)
-            whole = Log(None, np.arange(n) * self.dt,
-                        {k: np.concatenate([np.asarray(M.log[k], float) for M in self.logs])
-                         for k in common})
+            whole = Log(
+                None,
+                np.arange(n) * self.dt,
+                {
+                    k: np.concatenate([np.asarray(M.log[k], float) for M in self.logs])
+                    for k in common
+                },
+            )
             offs = np.concatenate([[0], np.cumsum([M.t.size for M in self.logs])])
             self._joined = (np.concatenate([M.y for M in self.logs]), whole, offs)
         Y, whole, offs = self._joined
@@ -431,9 +502,11 @@ class _Engine:
             raise ValueError(f"{name}: {t.size} samples; a log needs at least 3")
         dt = float(np.median(np.diff(t)))
         if abs(dt - self.dt) > 1e-6 * self.dt:
-            raise ValueError(f"{name}: sampled every {dt:g} s, but scenario "
-                             f"{self.template.name!r} samples every {self.dt:g} s "
-                             "([sampling] period); resample the log or change the scenario")
+            raise ValueError(
+                f"{name}: sampled every {dt:g} s, but scenario "
+                f"{self.template.name!r} samples every {self.dt:g} s "
+                "([sampling] period); resample the log or change the scenario"
+            )
         check_zeroing(self.prep0.loop.sensors, t.size, self.dt, name)
         from flexarm.sim.filters import computed_channels
 
@@ -448,8 +521,9 @@ class _Engine:
             k0 = max(0, int(math.ceil(a / dt - 1e-6)))
             k1 = min(t.size, int(math.ceil(b / dt - 1e-6)))
             if not 0 <= k0 < k1 - 2:
-                raise ValueError(f"{name}: window ({a:g}, {b:g}) s is outside the log "
-                                 f"(0 … {t[-1]:g} s)")
+                raise ValueError(
+                    f"{name}: window ({a:g}, {b:g}) s is outside the log (0 … {t[-1]:g} s)"
+                )
         N = t.size
         y = np.full((N, len(self.names)), np.nan)
         present = np.zeros(len(self.names), bool)
@@ -462,16 +536,25 @@ class _Engine:
             if k in sig:
                 refs[k] = np.asarray(sig[k], float)
             else:
-                spec = (self.template.reference if k == "reference"
-                        else self.template.references.get(k))
-                refs[k] = (reference_signal(spec, t) if spec is not None else np.zeros(N))
+                spec = (
+                    self.template.reference if k == "reference" else self.template.references.get(k)
+                )
+                refs[k] = reference_signal(spec, t) if spec is not None else np.zeros(N)
         label = name if window is None else f"{name}[{window[0]:g}:{window[1]:g} s]"
         from flexarm.io.logs import Log
 
         whole = Log(None, t, {k: np.asarray(v, float) for k, v in sig.items()})
-        return _LogData(label, t, y, refs, present,
-                        k0 == 0 and self.options.initial == "scenario", (k0, k1), whole,
-                        tuple(extra))
+        return _LogData(
+            label,
+            t,
+            y,
+            refs,
+            present,
+            k0 == 0 and self.options.initial == "scenario",
+            (k0, k1),
+            whole,
+            tuple(extra),
+        )
 
     def _segments(self, seg: float | None) -> None:
         """Segment table: (log, k0, length) and the padded per-segment arrays."""
@@ -539,12 +622,16 @@ class _Engine:
         Nmax = max(1, int(self.seg_k0.max()) + 1)
 
         def fit_n(a):
-            return (a[:Nmax] if a.shape[0] >= Nmax else
-                    np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1), mode="edge"))
+            return (
+                a[:Nmax]
+                if a.shape[0] >= Nmax
+                else np.pad(a, [(0, Nmax - a.shape[0])] + [(0, 0)] * (a.ndim - 1), mode="edge")
+            )
 
         self.log_y = np.stack([fit_n(np.nan_to_num(L.y)) for L in self.logs])
-        self.log_refs = {k: np.stack([fit_n(L.refs[k]) for L in self.logs])
-                         for k in self.prep0.references}
+        self.log_refs = {
+            k: np.stack([fit_n(L.refs[k]) for L in self.logs]) for k in self.prep0.references
+        }
 
     def _digital_init(self, y0: np.ndarray, dy0: np.ndarray) -> None:
         """Digitally filtered channels (``sensors.X.filter``): their states at each segment
@@ -569,15 +656,17 @@ class _Engine:
             for j, c in enumerate(sens.digital):
                 name = self.names[c]
                 if name not in st[k0]:
-                    raise ValueError(f"{L.name}: no column {name!r}: the state of its digital "
-                                     "filter at a segment start cannot be read off the log; "
-                                     "log it, or fit whole logs from rest (segment=None)")
-                xd[s_, j, :len(st[k0][name])] = st[k0][name]
+                    raise ValueError(
+                        f"{L.name}: no column {name!r}: the state of its digital "
+                        "filter at a segment start cannot be read off the log; "
+                        "log it, or fit whole logs from rest (segment=None)"
+                    )
+                xd[s_, j, : len(st[k0][name])] = st[k0][name]
                 us = []
                 for k in ks[:-1]:
                     a, b = np.zeros(kmax), np.zeros(kmax)
-                    a[:len(st[k][name])] = st[k][name]
-                    b[:len(st[k + 1][name])] = st[k + 1][name]
+                    a[: len(st[k][name])] = st[k][name]
+                    b[: len(st[k + 1][name])] = st[k + 1][name]
                     rhs = b - A[j] @ a
                     us.append(float(B[j] @ rhs / max(B[j] @ B[j], 1e-300)))
                 us = np.asarray(us)
@@ -600,9 +689,14 @@ class _Engine:
         preps = [self.prepared(z) for z in Z]
         loop = stack_loops([p.loop for p in preps])
         if not self.options.quantise:
-            loop = eqx.tree_at(lambda lp: (lp.sensors.quantum, lp.actuator.quantum), loop,
-                               replace=(jnp.zeros_like(loop.sensors.quantum),
-                                        jnp.zeros_like(loop.actuator.quantum)))
+            loop = eqx.tree_at(
+                lambda lp: (lp.sensors.quantum, lp.actuator.quantum),
+                loop,
+                replace=(
+                    jnp.zeros_like(loop.sensors.quantum),
+                    jnp.zeros_like(loop.actuator.quantum),
+                ),
+            )
         return loop, np.stack([p.x0 for p in preps])
 
     def run(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
@@ -615,14 +709,26 @@ class _Engine:
             offsets = np.zeros((Z.shape[0], len(self.seg), nx))
         offsets = offsets * self.state_scale
         for a in range(0, Z.shape[0], B):
-            loop, x0s = self.loops(Z[a:a + B])
+            loop, x0s = self.loops(Z[a : a + B])
             warm, shared = self._warm(loop)
-            out.append(np.asarray(_run_segments(
-                loop, jnp.asarray(x0s), jnp.asarray(offsets[a:a + B]), warm, shared,
-                {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
-                jnp.asarray(self.y0), jnp.asarray(self.dy0), jnp.asarray(self.sbuf0),
-                jnp.asarray(self.seg_xd), jnp.asarray(self.seg_scn),
-                jnp.asarray(self.seg_k0, jnp.int32))))
+            out.append(
+                np.asarray(
+                    _run_segments(
+                        loop,
+                        jnp.asarray(x0s),
+                        jnp.asarray(offsets[a : a + B]),
+                        warm,
+                        shared,
+                        {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
+                        jnp.asarray(self.y0),
+                        jnp.asarray(self.dy0),
+                        jnp.asarray(self.sbuf0),
+                        jnp.asarray(self.seg_xd),
+                        jnp.asarray(self.seg_scn),
+                        jnp.asarray(self.seg_k0, jnp.int32),
+                    )
+                )
+            )
         return np.concatenate(out)
 
     def _warm(self, loop):
@@ -630,18 +736,25 @@ class _Engine:
         computed once when every candidate has the same controller (its gains do not
         depend on the free parameters), else per candidate."""
         nd = self.delay + 1
-        args = (jnp.asarray(self.log_y), {k: jnp.asarray(v) for k, v in self.log_refs.items()},
-                jnp.asarray(self.seg_log), jnp.asarray(self.seg_k0), self.ctrl_inits)
-        leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller,
-                                                                     eqx.is_array))]
+        args = (
+            jnp.asarray(self.log_y),
+            {k: jnp.asarray(v) for k, v in self.log_refs.items()},
+            jnp.asarray(self.seg_log),
+            jnp.asarray(self.seg_k0),
+            self.ctrl_inits,
+        )
+        leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller, eqx.is_array))]
         same = all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in leaves)
         if same:
             ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
             key = "warm"
             if key not in self._cache or not all(
-                    np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves, strict=False)):
-                self._cache[key] = ([x.copy() for x in leaves],
-                                    _warm_jit(ctrl0, self.names, nd, *args))
+                np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves, strict=False)
+            ):
+                self._cache[key] = (
+                    [x.copy() for x in leaves],
+                    _warm_jit(ctrl0, self.names, nd, *args),
+                )
             return self._cache[key][1], True
         return eqx.filter_vmap(lambda c: _warm(c, self.names, nd, *args))(loop.controller), False
 
@@ -727,11 +840,13 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0, inits=N
     commands of the nd samples before it (S, nd, m), newest first (0 before the log).
     ``inits``: each log's controller state at its first sample, stacked over logs
     (``continuous``); None: ``ctrl.init()`` for every log."""
+
     def warm(ly, lr, c0):
         def step(cs, inp):
             m, r = inp
             cs2, u = ctrl.step(cs, {n: m[i] for i, n in enumerate(names)}, r)
             return cs2, (cs, u)
+
         _, (cs_all, u_all) = jax.lax.scan(step, ctrl.init() if c0 is None else c0, (ly, lr))
         return cs_all, u_all
 
@@ -743,8 +858,9 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0, inits=N
     def one(s_log, k0):
         cs = jax.tree.map(lambda a: a[s_log, k0], cs_all)
         uc = u_all[s_log]
-        ub = jnp.stack([jnp.where(k0 - 1 - i >= 0, uc[jnp.maximum(k0 - 1 - i, 0)], 0.0)
-                        for i in range(nd)])
+        ub = jnp.stack(
+            [jnp.where(k0 - 1 - i >= 0, uc[jnp.maximum(k0 - 1 - i, 0)], 0.0) for i in range(nd)]
+        )
         return cs, ub
 
     return jax.vmap(one)(seg_log, seg_k0)
@@ -753,8 +869,7 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0, inits=N
 _warm_jit = eqx.filter_jit(_warm)
 
 
-def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn,
-                   seg_k0):
+def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0):
     act, sens = loop.actuator, loop.sensors
     M = next(iter(seg_refs.values())).shape[1]
     C = len(sens.names)
@@ -772,14 +887,15 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
         if sens.zeroed:  # the logger's zeroing: a segment after its window reads the
             carry += (zeroing_start(sens, k0),)  # logged (zeroed) values, offset 0
         if len(carry) != len(scn_carry):
-            raise RuntimeError(f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
-                               f"builds {len(carry)} (flexarm.sim.sampled changed: update "
-                               "general._one_candidate)")
+            raise RuntimeError(
+                f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
+                f"builds {len(carry)} (flexarm.sim.sampled changed: update "
+                "general._one_candidate)"
+            )
         carry = jax.tree.map(lambda a, b: jnp.where(use_scn, a, b), scn_carry, carry)
         return (carry[0] + off,) + tuple(carry[1:])
 
-    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets,
-                                  seg_k0)
+    carries = jax.vmap(seg_carry)(cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets, seg_k0)
     noise = jnp.zeros((M, C))
 
     def one_seg(carry, refs):
@@ -790,13 +906,15 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
 
 
 @eqx.filter_jit
-def _run_segments(loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0,
-                  seg_xd, seg_scn, seg_k0):
+def _run_segments(
+    loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0
+):
     def f(lp, x0, off, w):
         return _one_candidate(lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0)
 
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
-        loop, x0s, offsets, warm)
+        loop, x0s, offsets, warm
+    )
 
 
 @eqx.filter_jit
@@ -805,9 +923,15 @@ def _states_jit(loop, y0, dy0):
 
 
 # ----------------------------------------------------------------------------- fit
-def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
-                 options: FitOptions | None = None, *, progress=None,
-                 predict: bool = True) -> ScenarioFit:
+def fit_scenario(
+    scenario,
+    logs: Sequence,
+    free: Sequence[str] | None = None,
+    options: FitOptions | None = None,
+    *,
+    progress=None,
+    predict: bool = True,
+) -> ScenarioFit:
     """Estimate the ``free`` parameters of ``scenario`` from closed-loop ``logs``
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
     columns, sampled at the scenario's period). See the module docstring. Without ``free``
@@ -823,8 +947,10 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
         options = copy.copy(options)
         options.priors = dict(fit_notes["priors"])
     if not free:
-        raise ValueError("fit_scenario: no free parameters; list them (free=[...]) as paths "
-                         "into the scenario, e.g. 'arm.joints[0].friction.coulomb'")
+        raise ValueError(
+            "fit_scenario: no free parameters; list them (free=[...]) as paths "
+            "into the scenario, e.g. 'arm.joints[0].friction.coulomb'"
+        )
     t_start = time.perf_counter()
     eng = _Engine(scenario, logs, free, options)
     n = len(eng.free)
@@ -842,30 +968,56 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
             return np.sum(R * R, axis=1)
 
         res = differential_evolution(
-            f, list(zip(eng.lo, eng.hi, strict=True)), popsize=options.popsize, maxiter=options.maxiter,
+            f,
+            list(zip(eng.lo, eng.hi, strict=True)),
+            popsize=options.popsize,
+            maxiter=options.maxiter,
             seed=options.seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-            tol=1e-3, updating="deferred", vectorized=True, polish=False,
-            init="latinhypercube", x0=z0, mutation=(0.5, 1.0), recombination=0.7)
+            tol=1e-3,
+            updating="deferred",
+            vectorized=True,
+            polish=False,
+            init="latinhypercube",
+            x0=z0,
+            mutation=(0.5, 1.0),
+            recombination=0.7,
+        )
         z0 = np.asarray(res.x)
-        stages["global"] = {"cost": float(res.fun), "nfev": int(res.nfev), "generations":
-                            int(res.nit), "seconds": round(time.perf_counter() - t0, 2)}
+        stages["global"] = {
+            "cost": float(res.fun),
+            "nfev": int(res.nfev),
+            "generations": int(res.nit),
+            "seconds": round(time.perf_counter() - t0, 2),
+        }
         say(f"global stage: cost {res.fun:.4g} after {res.nit} generations")
 
     z0 = np.clip(z0, eng.lo, eng.hi)
-    res, r, J, info = _local(eng, z0, options,
-                              states=options.estimate_states and options.segment is not None,
-                              progress=progress)
+    res, r, J, info = _local(
+        eng,
+        z0,
+        options,
+        states=options.estimate_states and options.segment is not None,
+        progress=progress,
+    )
     stages["local"] = info
-    say(f"local stage: cost {info['cost']:.4g} after {info['nfev']} evaluations "
-        f"({info['message']})")
+    say(
+        f"local stage: cost {info['cost']:.4g} after {info['nfev']} evaluations ({info['message']})"
+    )
     if options.polish and options.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
         # each log's start state stays a nuisance parameter (offsets to the logged state)
-        res, r, J, info = _local(eng, res.x, options, progress=progress,
-                                 states=options.estimate_states and not eng.seg_scn.all())
+        res, r, J, info = _local(
+            eng,
+            res.x,
+            options,
+            progress=progress,
+            states=options.estimate_states and not eng.seg_scn.all(),
+        )
         stages["polish"] = info
-        say(f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
-            f"({info['message']})")
+        say(
+            f"polish on whole logs: cost {info['cost']:.4g} after {info['nfev']} evaluations "
+            f"({info['message']})"
+        )
     z = res.x
     info_diag = np.einsum("ij,ij->j", J, J)
     det = info_diag > 1e-12 * max(float(info_diag.max()), 1e-300)
@@ -877,41 +1029,72 @@ def fit_scenario(scenario, logs: Sequence, free: Sequence[str] | None = None,
     # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
     values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    std = {p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
-           for i, p in enumerate(eng.free)}
+    std = {
+        p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
+        for i, p in enumerate(eng.free)
+    }
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(d, d)
     warnings = []
     for i, p in enumerate(eng.free):
         if not det[i]:
-            warnings.append(f"{p}: the fit does not depend on it at the optimum (e.g. a "
-                            "breakaway level below the Coulomb level, raised to it, or a "
-                            "joint that never sticks): its value is not determined by the data")
+            warnings.append(
+                f"{p}: the fit does not depend on it at the optimum (e.g. a "
+                "breakaway level below the Coulomb level, raised to it, or a "
+                "joint that never sticks): its value is not determined by the data"
+            )
     for i in range(n):
         for j in range(i + 1, n):
             if det[i] and det[j] and abs(corr[i, j]) > options.corr_warn:
-                warnings.append(f"the data cannot tell {eng.free[i]} from {eng.free[j]} "
-                                f"(correlation {corr[i, j]:+.3f}): fix one, give a prior, or "
-                                "add an experiment that separates them")
+                warnings.append(
+                    f"the data cannot tell {eng.free[i]} from {eng.free[j]} "
+                    f"(correlation {corr[i, j]:+.3f}): fix one, give a prior, or "
+                    "add an experiment that separates them"
+                )
     for i, p in enumerate(eng.free):
         if z[i] <= eng.lo[i] + 1e-3 or z[i] >= eng.hi[i] - 1e-3:
             lo, hi = sorted((eng.p0[i] * math.exp(eng.lo[i]), eng.p0[i] * math.exp(eng.hi[i])))
-            warnings.append(f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
-                            f"widen it with FitOptions.bounds={{{p!r}: (lo, hi)}}")
+            warnings.append(
+                f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
+                f"widen it with FitOptions.bounds={{{p!r}: (lo, hi)}}"
+            )
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
-    pred = (predict_scenario(fitted, logs, options, channels=list(eng.channels)) if predict
-            else {"fit_percent": {}})
+    pred = (
+        predict_scenario(fitted, logs, options, channels=list(eng.channels))
+        if predict
+        else {"fit_percent": {}}
+    )
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
-    return ScenarioFit(eng.free, values, dict(zip(eng.free, map(float, eng.p0), strict=True)), std, corr,
-                       warnings, pred["fit_percent"], seg_fp, fitted, converged, msg,
-                       int(res.nfev), float(2 * res.cost), time.perf_counter() - t_start,
-                       stages, pred)
+    return ScenarioFit(
+        eng.free,
+        values,
+        dict(zip(eng.free, map(float, eng.p0), strict=True)),
+        std,
+        corr,
+        warnings,
+        pred["fit_percent"],
+        seg_fp,
+        fitted,
+        converged,
+        msg,
+        int(res.nfev),
+        float(2 * res.cost),
+        time.perf_counter() - t_start,
+        stages,
+        pred,
+    )
 
 
-def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = False,
-           o0: np.ndarray | None = None, progress=None):
+def _local(
+    eng: _Engine,
+    z0: np.ndarray,
+    options: FitOptions,
+    states: bool = False,
+    o0: np.ndarray | None = None,
+    progress=None,
+):
     """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
     columns are simulated with the point itself as one batch. With ``states``, each
     segment's start state is estimated too (multiple shooting's node states): offsets
@@ -964,9 +1147,10 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
                     r_i.append(np.arange(a_, b_))
                     c_i.append(np.full(b_ - a_, s_ * nx + i))
                     vals.append(D[i, a_:b_])
-            Jo = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(r_i),
-                                                           np.concatenate(c_i))),
-                                   shape=(r0.size, S * nx))
+            Jo = sparse.csr_matrix(
+                (np.concatenate(vals), (np.concatenate(r_i), np.concatenate(c_i))),
+                shape=(r0.size, S * nx),
+            )
             c["J"] = sparse.hstack([sparse.csr_matrix(Jp), Jo]).tocsr()
         else:
             c["J"] = Jp
@@ -981,12 +1165,19 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
-    res = least_squares(lambda v: point(v)["r"], v0,
-                        jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-                        bounds=(lo, hi), method="trf", x_scale=1.0,
-                        tr_solver="lsmr" if nx else "exact",
-                        max_nfev=options.max_nfev, ftol=options.ftol, xtol=options.xtol,
-                        gtol=1e-10)
+    res = least_squares(
+        lambda v: point(v)["r"],
+        v0,
+        jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
+        bounds=(lo, hi),
+        method="trf",
+        x_scale=1.0,
+        tr_solver="lsmr" if nx else "exact",
+        max_nfev=options.max_nfev,
+        ftol=options.ftol,
+        xtol=options.xtol,
+        gtol=1e-10,
+    )
     r, J = batch(res.x)
     J = J.toarray() if nx else J
     z, off = split(res.x)
@@ -995,12 +1186,18 @@ def _local(eng: _Engine, z0: np.ndarray, options: FitOptions, states: bool = Fal
         Jz = Jz.copy()
         for s_ in range(S):
             a_, b_ = int(rows[s_]), int(rows[s_ + 1])
-            Jo = J[a_:b_, n + s_ * nx:n + (s_ + 1) * nx]
+            Jo = J[a_:b_, n + s_ * nx : n + (s_ + 1) * nx]
             coef, *_ = np.linalg.lstsq(Jo, Jz[a_:b_], rcond=1e-10)
             Jz[a_:b_] -= Jo @ coef
-    info = {"cost": float(2 * res.cost), "nfev": int(res.nfev), "status": int(res.status),
-            "message": str(res.message), "segments": S, "state_offsets": S * nx,
-            "seconds": round(time.perf_counter() - t0, 2)}
+    info = {
+        "cost": float(2 * res.cost),
+        "nfev": int(res.nfev),
+        "status": int(res.status),
+        "message": str(res.message),
+        "segments": S,
+        "state_offsets": S * nx,
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
     res.x = z
     res.offsets = off
     return res, r, Jz, info
@@ -1017,9 +1214,15 @@ def friction_paths(scenario) -> list[str]:
         base = "arm.friction"
         groups = [(base, fr, "arm.motor.viscous", arm["motor"].get("viscous", 0.0))]
     else:
-        groups = [(f"arm.joints[{j}].friction", jt.get("friction") or {},
-                   f"arm.joints[{j}].viscous", jt.get("viscous", 0.0))
-                  for j, jt in enumerate(arm.get("joints") or [])]
+        groups = [
+            (
+                f"arm.joints[{j}].friction",
+                jt.get("friction") or {},
+                f"arm.joints[{j}].viscous",
+                jt.get("viscous", 0.0),
+            )
+            for j, jt in enumerate(arm.get("joints") or [])
+        ]
     for base, fr, vpath, v in groups:
         if fr.get("model", "none") != "none":
             if fr.get("coulomb"):
@@ -1029,9 +1232,11 @@ def friction_paths(scenario) -> list[str]:
         if v:
             out.append(vpath)
     if not out:
-        raise ValueError(f"scenario {scenario.name!r}: no joint friction to re-estimate (every "
-                         "friction level is 0 or its model is 'none'); give starting values "
-                         "in the scenario")
+        raise ValueError(
+            f"scenario {scenario.name!r}: no joint friction to re-estimate (every "
+            "friction level is 0 or its model is 'none'); give starting values "
+            "in the scenario"
+        )
     return out
 
 
@@ -1042,10 +1247,15 @@ def scenario_fit_notes(scenario) -> dict:
     fit = notes.get("fit") if isinstance(notes, dict) else None
     if fit is None:
         return {}
-    if not isinstance(fit, dict) or not isinstance(fit.get("free", []), list) or not isinstance(
-            fit.get("priors", {}), dict):
-        raise ValueError(f"scenario {scenario.name!r}: [notes.fit] must hold free = [\"path\", "
-                         f"...] and priors = {{\"path\" = rel_std}}; got {fit!r}")
+    if (
+        not isinstance(fit, dict)
+        or not isinstance(fit.get("free", []), list)
+        or not isinstance(fit.get("priors", {}), dict)
+    ):
+        raise ValueError(
+            f'scenario {scenario.name!r}: [notes.fit] must hold free = ["path", '
+            f'...] and priors = {{"path" = rel_std}}; got {fit!r}'
+        )
     return fit
 
 
@@ -1080,9 +1290,15 @@ def _covariance(eng: _Engine, r: np.ndarray, J: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- predict
-def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None, *,
-                     channels: Sequence[str] | None = None, plots: str | Path | None = None,
-                     tag: str = "predict") -> dict:
+def predict_scenario(
+    scenario,
+    logs: Sequence,
+    options: FitOptions | None = None,
+    *,
+    channels: Sequence[str] | None = None,
+    plots: str | Path | None = None,
+    tag: str = "predict",
+) -> dict:
     """Whole-run prediction of each log (or window) with the scenario's parameters fixed:
     one simulation per log from the scenario's initial state (a window that does not start
     at the log's first sample: from the logged state there). Returns fit % per log and
@@ -1106,10 +1322,20 @@ def predict_scenario(scenario, logs: Sequence, options: FitOptions | None = None
             if m.any():
                 d[c] = round(_fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]), 2)
         fp[L.name] = d
-        traj[L.name] = {"time": L.t[k0:k0 + ln], "simulated": tr,
-                        "measured": {c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels, strict=True)}}
-    out = {"fit_percent": fp, "trajectories": traj, "plots": [], "notes": list(eng.notes),
-           "warnings": state_warnings}
+        traj[L.name] = {
+            "time": L.t[k0 : k0 + ln],
+            "simulated": tr,
+            "measured": {
+                c: eng.seg_y[s, :ln, j] for j, c in zip(eng.cidx, eng.channels, strict=True)
+            },
+        }
+    out = {
+        "fit_percent": fp,
+        "trajectories": traj,
+        "plots": [],
+        "notes": list(eng.notes),
+        "warnings": state_warnings,
+    }
     if plots is not None:
         out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
     return out
@@ -1127,8 +1353,7 @@ def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: s
     for i, (name, tr) in enumerate(traj.items()):
         chans = list(tr["simulated"])
         fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
-        ax = fig.subplots(len(chans), 1, sharex=True,
-                               squeeze=False)
+        ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)
         for a, c in zip(ax[:, 0], chans, strict=True):
             a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
             a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")

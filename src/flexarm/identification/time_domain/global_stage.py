@@ -33,11 +33,18 @@ class GlobalResult:
     population_cost: np.ndarray
 
 
-def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray, *,
-                                 popsize: int = 8, maxiter: int = 40, seed: int = 0,
-                                 tol: float = 1e-3,
-                                 progress: Callable[[int, float], None] | None = None,
-                                 best: dict | None = None) -> GlobalResult:
+def differential_evolution_stage(
+    obj: Objective,
+    u0: np.ndarray,
+    d0: np.ndarray,
+    *,
+    popsize: int = 8,
+    maxiter: int = 40,
+    seed: int = 0,
+    tol: float = 1e-3,
+    progress: Callable[[int, float], None] | None = None,
+    best: dict | None = None,
+) -> GlobalResult:
     """Minimise :meth:`Objective.cost` over the continuous unit coordinates and the free
     discrete coordinates; ``u0``, ``d0`` seed the initial population. ``best`` (a dict),
     when given, holds the best point after every generation (U, D, cost)."""
@@ -72,12 +79,32 @@ def differential_evolution_stage(obj: Objective, u0: np.ndarray, d0: np.ndarray,
     x0 = np.concatenate([np.clip(u0, 0, 1), np.asarray(d0, float)[free]])
     t0 = time.perf_counter()
     res = differential_evolution(
-        f, bounds, popsize=popsize, maxiter=maxiter, tol=tol, atol=0.0,
+        f,
+        bounds,
+        popsize=popsize,
+        maxiter=maxiter,
+        tol=tol,
+        atol=0.0,
         seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-        updating="deferred", vectorized=True, polish=False, init="latinhypercube",
-        integrality=integrality, x0=x0, mutation=(0.5, 1.0), recombination=0.7,
-        callback=cb)
+        updating="deferred",
+        vectorized=True,
+        polish=False,
+        init="latinhypercube",
+        integrality=integrality,
+        x0=x0,
+        mutation=(0.5, 1.0),
+        recombination=0.7,
+        callback=cb,
+    )
     U, D = split(res.x[:, None])
-    return GlobalResult(U[0], D[0], float(res.fun), int(res.nfev), int(res.nit),
-                        bool(res.success), str(res.message), time.perf_counter() - t0,
-                        np.asarray(res.population_energies))
+    return GlobalResult(
+        U[0],
+        D[0],
+        float(res.fun),
+        int(res.nfev),
+        int(res.nit),
+        bool(res.success),
+        str(res.message),
+        time.perf_counter() - t0,
+        np.asarray(res.population_energies),
+    )

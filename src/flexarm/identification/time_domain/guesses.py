@@ -73,7 +73,7 @@ def tip_rest_reading(log: Log, settle: float = 0.5) -> tuple[float, float] | Non
     d = log.columns.get("tip_deflection")
     if d is None:
         return None
-    rest = [d[(i0 + i1) // 2:i1] for i0, i1 in stuck_intervals(log, 2 * settle)]
+    rest = [d[(i0 + i1) // 2 : i1] for i0, i1 in stuck_intervals(log, 2 * settle)]
     if not rest:
         return None
     lo, hi = np.percentile(d, [1, 99])
@@ -91,8 +91,11 @@ def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0):
             segs.append((scipy.signal.detrend(d[i0:i1]), log.dt))
     if not segs:
         how = "whole"
-        segs = [(scipy.signal.detrend(log.columns["tip_deflection"]), log.dt) for log in logs
-                if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0]
+        segs = [
+            (scipy.signal.detrend(log.columns["tip_deflection"]), log.dt)
+            for log in logs
+            if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0
+        ]
     if not segs:
         return None, "none"
     T = segs[0][1]
@@ -118,8 +121,7 @@ def tip_gain(logs: list[Log], wc: float, length: float, zeta: float = 0.03):
         T = log.dt
         acc = np.gradient(np.gradient(th, T), T)
         # (num, den, dt) and y alone here: scipy's return types are inferred from its branches
-        sysd: Any = scipy.signal.cont2discrete(([1.0], [1.0, 2 * zeta * wc, wc**2]), T,
-                                               "bilinear")
+        sysd: Any = scipy.signal.cont2discrete(([1.0], [1.0, 2 * zeta * wc, wc**2]), T, "bilinear")
         x: Any = scipy.signal.lfilter(np.ravel(sysd[0]), sysd[1], -length * acc)
         x, dd = x - x.mean(), d - d.mean()
         num += x @ dd
@@ -144,7 +146,7 @@ def hub_inertia(logs: list[Log], k_u: float, window: float = 0.025):
         steps = np.nonzero(np.abs(np.diff(r)) > 1e-9)[0] + 1
         n = max(int(window / T), 5)
         for s in steps:
-            moved = np.nonzero(np.abs(th[s:s + 200] - th[s]) > 0)[0]
+            moved = np.nonzero(np.abs(th[s : s + 200] - th[s]) > 0)[0]
             if not moved.size:
                 continue
             k0 = s + max(int(moved[0]) - 1, 0)
@@ -152,8 +154,8 @@ def hub_inertia(logs: list[Log], k_u: float, window: float = 0.025):
                 continue
             t = np.arange(n) * T
             A = np.column_stack([np.ones(n), t, 0.5 * t * t])
-            c = np.linalg.lstsq(A, th[k0:k0 + n], rcond=None)[0]
-            ubar = np.mean(u[k0:k0 + n])
+            c = np.linalg.lstsq(A, th[k0 : k0 + n], rcond=None)[0]
+            ubar = np.mean(u[k0 : k0 + n])
             if c[2] * ubar > 0:
                 est.append(k_u * ubar / c[2])
     return float(np.median(est)) if est else None
@@ -201,7 +203,7 @@ def initial_hub(log: Log, n: int = 20, k: int = 0):
     th = log.columns.get("motor_angle")
     if th is None:
         return 0.0, 0.0
-    th = np.asarray(th[k:k + n], float)
+    th = np.asarray(th[k : k + n], float)
     t = np.arange(len(th)) * log.dt
     if len(th) < 3 or np.ptp(th) == 0:
         return float(th[0]) if len(th) else 0.0, 0.0
@@ -209,8 +211,7 @@ def initial_hub(log: Log, n: int = 20, k: int = 0):
     return float(c[2]), float(c[1])
 
 
-def initial_tip_at(log: Log, k: int, n: int = 21,
-                   cutoff: float = 0.0) -> tuple[float, float]:
+def initial_tip_at(log: Log, k: int, n: int = 21, cutoff: float = 0.0) -> tuple[float, float]:
     """Tip deflection and rate (measured units, g w and g ẇ) at t = 0 when the tip channel
     is delayed by ``k`` samples: a parabola g w(t) = a + b t + c t²/2 fitted to samples
     k ... k + n − 1. With a known first-order sensor low-pass of ``cutoff`` Hz (ω = 2π f_c)
@@ -222,8 +223,8 @@ def initial_tip_at(log: Log, k: int, n: int = 21,
     if d is None or np.ptp(d) == 0:
         return (0.0, 0.0)
     t = np.arange(n) * log.dt
-    y = np.asarray(d[k:k + n], float)
-    t = t[:len(y)]
+    y = np.asarray(d[k : k + n], float)
+    t = t[: len(y)]
     if cutoff > 0:
         w = 2 * np.pi * cutoff
         e = -np.expm1(-w * t) / w  # (1 − e^{−ωt})/ω, exact for small ωt

@@ -51,44 +51,81 @@ def check_rig_log(log: Log) -> Log:
     not constant. Returns the log; raises :class:`FitInputError` naming the file."""
     present = [c for c in OUTPUTS if c in log.signals]
     if not log.outputs:
-        why = (f"column(s) {', '.join(present)} are constant" if present
-               else f"no column {' or '.join(OUTPUTS)} (found: {', '.join(log.signals)})")
-        raise FitInputError(f"{log.where}: no usable output column: {why}; the fit needs the "
-                            "hub angle motor_angle (rad) and/or the tip deflection "
-                            "tip_deflection (m) as measured; map other names with columns=")
+        why = (
+            f"column(s) {', '.join(present)} are constant"
+            if present
+            else f"no column {' or '.join(OUTPUTS)} (found: {', '.join(log.signals)})"
+        )
+        raise FitInputError(
+            f"{log.where}: no usable output column: {why}; the fit needs the "
+            "hub angle motor_angle (rad) and/or the tip deflection "
+            "tip_deflection (m) as measured; map other names with columns="
+        )
     return log
 
 
-def load_rig_log(path: str | Path, log_format: str | Path | LogFormat | None = None, *,
-                 columns: Mapping[str, str | int] | None = None,
-                 units: Mapping[str, str] | None = None, controller: Any = None,
-                 max_jitter: float = MAX_JITTER, min_samples: int = MIN_BENCH_SAMPLES) -> Log:
+def load_rig_log(
+    path: str | Path,
+    log_format: str | Path | LogFormat | None = None,
+    *,
+    columns: Mapping[str, str | int] | None = None,
+    units: Mapping[str, str] | None = None,
+    controller: Any = None,
+    max_jitter: float = MAX_JITTER,
+    min_samples: int = MIN_BENCH_SAMPLES,
+) -> Log:
     """One servo-rig log: :func:`flexarm.io.logformat.load_log` (``time`` and ``reference``
     required) and :func:`check_rig_log`; a problem is one :class:`FitInputError` line."""
     try:
-        log = _lf.load_log(path, log_format, controller=controller, columns=columns,
-                           units=units, required=("time", "reference"),
-                           min_samples=min_samples, max_jitter=max_jitter,
-                           hint="A bench log needs time (s), reference (rad, the commanded "
-                                "hub angle) and motor_angle and/or tip_deflection.")
+        log = _lf.load_log(
+            path,
+            log_format,
+            controller=controller,
+            columns=columns,
+            units=units,
+            required=("time", "reference"),
+            min_samples=min_samples,
+            max_jitter=max_jitter,
+            hint="A bench log needs time (s), reference (rad, the commanded "
+            "hub angle) and motor_angle and/or tip_deflection.",
+        )
     except LogError as exc:
         raise FitInputError(str(exc)) from None
     return check_rig_log(log)
 
 
-def read_bench_log(path: str | Path, *, columns: Mapping[str, str | int] | None = None,
-                   units: Mapping[str, str] | None = None, controller: Any = None,
-                   max_jitter: float = MAX_JITTER, min_samples: int = MIN_BENCH_SAMPLES,
-                   log_format: str | Path | LogFormat | None = None) -> Log:
+def read_bench_log(
+    path: str | Path,
+    *,
+    columns: Mapping[str, str | int] | None = None,
+    units: Mapping[str, str] | None = None,
+    controller: Any = None,
+    max_jitter: float = MAX_JITTER,
+    min_samples: int = MIN_BENCH_SAMPLES,
+    log_format: str | Path | LogFormat | None = None,
+) -> Log:
     """Deprecated: :func:`load_rig_log` (the same log, the one :class:`Log` type)."""
-    return load_rig_log(path, log_format, columns=columns, units=units, controller=controller,
-                        max_jitter=max_jitter, min_samples=min_samples)
+    return load_rig_log(
+        path,
+        log_format,
+        columns=columns,
+        units=units,
+        controller=controller,
+        max_jitter=max_jitter,
+        min_samples=min_samples,
+    )
 
 
 def BenchLog(path, time, columns, meta=None, controller=None, **kw) -> Log:  # noqa: N802
     """Deprecated: a :class:`~flexarm.io.logs.Log` (``columns`` are its ``signals``)."""
-    return Log(None if path is None else Path(path), np.asarray(time, float), dict(columns),
-               meta=dict(meta or {}), controller=controller, **kw)
+    return Log(
+        None if path is None else Path(path),
+        np.asarray(time, float),
+        dict(columns),
+        meta=dict(meta or {}),
+        controller=controller,
+        **kw,
+    )
 
 
 def parse_controller(text: str, source: str = "controller"):
@@ -115,8 +152,12 @@ def as_bench_log(x: Any, controller: Any = None, **kw) -> Log:
         if controller is not None:
             from dataclasses import replace
 
-            return replace(x, controller=controller_from_any(
-                controller, f"{x.where}: controller option"), gains=None, rate=None)
+            return replace(
+                x,
+                controller=controller_from_any(controller, f"{x.where}: controller option"),
+                gains=None,
+                rate=None,
+            )
         return x
     fmt = kw.pop("log_format", None)
     return load_rig_log(x, fmt, controller=controller, **kw)
@@ -130,22 +171,40 @@ def check_closed_loop(log: Log) -> None:
             f"{log.where}: field 'controller': no controller declared; add a line "
             "'# controller: state_feedback K1=.. K2=.. K3=.. K4=..' (or 'pd KP=.. KD=..') "
             "before the header, pass controller=... (--controller), or fit in open-loop "
-            "replay (mode='open_loop', needs a voltage column)")
+            "replay (mode='open_loop', needs a voltage column)"
+        )
     if "motor_angle" not in log.signals:
-        raise FitInputError(f"{log.where}: field 'motor_angle': the controller "
-                            "closes on the hub angle, but the log has no motor_angle column")
+        raise FitInputError(
+            f"{log.where}: field 'motor_angle': the controller "
+            "closes on the hub angle, but the log has no motor_angle column"
+        )
     if (c.k2 != 0 or c.k4 != 0) and "tip_deflection" not in log.signals:
-        raise FitInputError(f"{log.where}: field 'tip_deflection': the controller "
-                            f"uses the tip deflection (K2 = {c.k2:g}, K4 = {c.k4:g}) but the "
-                            "log has no tip_deflection column")
+        raise FitInputError(
+            f"{log.where}: field 'tip_deflection': the controller "
+            f"uses the tip deflection (K2 = {c.k2:g}, K4 = {c.k4:g}) but the "
+            "log has no tip_deflection column"
+        )
 
 
-def write_bench_log(path: str | Path, time: np.ndarray, columns: Mapping[str, np.ndarray], *,
-                    comments: Sequence[str] = (), overwrite: bool = False,
-                    fmt: str = "%.12g") -> Path:
+def write_bench_log(
+    path: str | Path,
+    time: np.ndarray,
+    columns: Mapping[str, np.ndarray],
+    *,
+    comments: Sequence[str] = (),
+    overwrite: bool = False,
+    fmt: str = "%.12g",
+) -> Path:
     """Deprecated: :func:`flexarm.io.logs.write_log` (errors as :class:`FitInputError`)."""
     try:
-        return write_log(path, time, columns, comments=list(comments), overwrite=overwrite,
-                         fmt=fmt, required=("time",))
+        return write_log(
+            path,
+            time,
+            columns,
+            comments=list(comments),
+            overwrite=overwrite,
+            fmt=fmt,
+            required=("time",),
+        )
     except LogError as exc:
         raise FitInputError(str(exc)) from None

@@ -62,28 +62,35 @@ def check_filters(filters: Any, dt: float, substeps: int) -> dict[str, float]:
     if filters is None:
         return {c: 0.0 for c in FILTER_CHANNELS}
     if not isinstance(filters, dict):
-        raise FitInputError(f"fit: field 'filters' = {filters!r}: give a dict of cutoffs in "
-                            "Hz by channel, e.g. {'tip_deflection': 50.0}")
+        raise FitInputError(
+            f"fit: field 'filters' = {filters!r}: give a dict of cutoffs in "
+            "Hz by channel, e.g. {'tip_deflection': 50.0}"
+        )
     out = {c: 0.0 for c in FILTER_CHANNELS}
     for ch, hz in filters.items():
         if ch not in FILTER_CHANNELS:
-            raise FitInputError(f"fit: field 'filters' has channel {ch!r}, which is not "
-                                f"known; use {' or '.join(map(repr, FILTER_CHANNELS))}")
+            raise FitInputError(
+                f"fit: field 'filters' has channel {ch!r}, which is not "
+                f"known; use {' or '.join(map(repr, FILTER_CHANNELS))}"
+            )
         try:
             f = float(hz)
         except (TypeError, ValueError):
             f = float("nan")
         if not (np.isfinite(f) and f >= 0):
-            raise FitInputError(f"fit: field 'filters[{ch!r}]' = {hz!r}: a cutoff must be a "
-                                "finite number of Hz >= 0 (the sensor's -3 dB frequency; "
-                                "0 = no filter)")
+            raise FitInputError(
+                f"fit: field 'filters[{ch!r}]' = {hz!r}: a cutoff must be a "
+                "finite number of Hz >= 0 (the sensor's -3 dB frequency; "
+                "0 = no filter)"
+            )
         need = filter_substeps(f, dt)
         if substeps < need:
             raise FitInputError(
                 f"fit: field 'filters[{ch!r}]' = {f:g} Hz is too fast for the integration "
                 f"step T / substeps = {dt:g} s / {substeps} (2π f_c h = "
                 f"{2 * np.pi * f * dt / substeps:.3g} > {FILTER_STEP_LIMIT}): pass "
-                f"substeps >= {need}")
+                f"substeps >= {need}"
+            )
         out[ch] = f
     return out
 
@@ -91,10 +98,21 @@ def check_filters(filters: Any, dt: float, substeps: int) -> dict[str, float]:
 class Objective:
     """Cost of parameter populations on a set of logs (one compiled simulation per shape)."""
 
-    def __init__(self, logs: list[Log], rig: Rig, space: ParamSpace, sessions: list[int],
-                 *, mode: str = "closed_loop", substeps: int = 2, comp_delay: int = 0,
-                 n_samples: int | None = None, chunk: int = 64, wc_guess: float = 20.0,
-                 filters: dict[str, float] | None = None):
+    def __init__(
+        self,
+        logs: list[Log],
+        rig: Rig,
+        space: ParamSpace,
+        sessions: list[int],
+        *,
+        mode: str = "closed_loop",
+        substeps: int = 2,
+        comp_delay: int = 0,
+        n_samples: int | None = None,
+        chunk: int = 64,
+        wc_guess: float = 20.0,
+        filters: dict[str, float] | None = None,
+    ):
         self.logs, self.rig, self.space, self.sessions = logs, rig, space, np.asarray(sessions)
         #: known low-pass cutoffs (Hz) of the channels, 0 = none (checked by fit())
         self.filters = {"motor_angle": 0.0, "tip_deflection": 0.0, **(filters or {})}
@@ -117,7 +135,7 @@ class Objective:
             for j, (name, y, w) in enumerate((("motor_angle", yt, wt), ("tip_deflection", yd, wd))):
                 if name in g.outputs:
                     y[i] = pad(g.columns[name])
-                    seg = g.columns[name][self.skip:n]
+                    seg = g.columns[name][self.skip : n]
                     sst = float(np.sum((seg - seg.mean()) ** 2)) if seg.size else 0.0
                     if not sst > 0:
                         from flexarm.identification.time_domain.logs import FitInputError
@@ -126,35 +144,50 @@ class Objective:
                             f"{g.where}: {name} does not vary over the {n - self.skip} samples "
                             f"after the first {self.skip} ({n} in the log or window, one every "
                             f"{g.dt:g} s), so it cannot be fitted",
-                            file=g.where, field=name,
+                            file=g.where,
+                            field=name,
                             fix="give a longer window (the first samples are left out for the "
-                                "delay search), or check the time unit of the log format")
+                            "delay search), or check the time unit of the log format",
+                        )
                     self.sst[i, j] = sst
-                    w[i, self.skip:n] = 1.0 / sst
+                    w[i, self.skip : n] = 1.0 / sst
             if g.controller is not None:
                 c = g.controller
                 gains = getattr(g, "gains", None)  # per sample (N, 4) where logged
                 if gains is not None:
-                    K[i] = np.concatenate([gains[:n], np.repeat(gains[n - 1:n], N - n, 0)])
+                    K[i] = np.concatenate([gains[:n], np.repeat(gains[n - 1 : n], N - n, 0)])
                 else:
                     K[i] = (c.k1, c.k2, c.k3, c.k4)
                 tau[i] = c.rate_time_constant if c.rate == "filtered" else 0.0
         self.data = as_jax(dict(ref=ref, y_th=yt, y_d=yd, w_th=wt, w_d=wd, volt=volt, K=K, tau=tau))
-        self.const = as_jax(dict(dt=T, length=rig.length, k_u=rig.k_u, k_omega=rig.k_omega,
-                                 q_th=rig.encoder_quantum, q_d=rig.tip_quantum,
-                                 limit=rig.limit, vel_tol=rig.vel_tol,
-                                 omega_th=2 * np.pi * self.filters["motor_angle"],
-                                 omega_d=2 * np.pi * self.filters["tip_deflection"]))
-        self.hub0 = np.array([[guesses.initial_hub(g, k=k)
-                               for k in range(space.max_delay + 1)]
-                              for g in logs])  # (L, max_delay + 1, 2)
+        self.const = as_jax(
+            dict(
+                dt=T,
+                length=rig.length,
+                k_u=rig.k_u,
+                k_omega=rig.k_omega,
+                q_th=rig.encoder_quantum,
+                q_d=rig.tip_quantum,
+                limit=rig.limit,
+                vel_tol=rig.vel_tol,
+                omega_th=2 * np.pi * self.filters["motor_angle"],
+                omega_d=2 * np.pi * self.filters["tip_deflection"],
+            )
+        )
+        self.hub0 = np.array(
+            [[guesses.initial_hub(g, k=k) for k in range(space.max_delay + 1)] for g in logs]
+        )  # (L, max_delay + 1, 2)
         fd = self.filters["tip_deflection"]
-        self.tip0 = np.array([[guesses.initial_tip_at(g, k, cutoff=fd)
-                               for k in range(space.max_delay + 1)]
-                              for g in logs])  # (L, max_delay + 1, 2)
+        self.tip0 = np.array(
+            [
+                [guesses.initial_tip_at(g, k, cutoff=fd) for k in range(space.max_delay + 1)]
+                for g in logs
+            ]
+        )  # (L, max_delay + 1, 2)
         self.wc_guess = wc_guess
-        self.tip_scale = np.array([max(np.std(g.columns.get("tip_deflection", [0.0])), 1e-9)
-                                   for g in logs])
+        self.tip_scale = np.array(
+            [max(np.std(g.columns.get("tip_deflection", [0.0])), 1e-9) for g in logs]
+        )
         # scale of the hub-angle offsets: one encoder count (or 1 mrad unquantised)
         self.hub_scale = rig.encoder_quantum or 1e-3
 
@@ -170,8 +203,7 @@ class Objective:
             v0 = v0 + offsets[..., 1] * self.tip_scale[None] * w
         return d0, v0
 
-    def hub_initial(self, P: int, offsets: np.ndarray | None = None,
-                    dth: np.ndarray | None = None):
+    def hub_initial(self, P: int, offsets: np.ndarray | None = None, dth: np.ndarray | None = None):
         """Hub angle and rate at t = 0, (P, L) each: the log's reading at k = the hub
         delay ``dth`` (P,) (0 when not given); offsets[..., 2:4] (when given) shift them
         in units of ``hub_scale`` (rad) and ``hub_scale`` · ω_guess (rad/s)."""
@@ -211,13 +243,25 @@ class Objective:
         else:
             Fc = Fs = bias = np.zeros((self.L, P))
             B = per("viscous")
-        return as_jax(dict(
-            J=glob("hub_inertia"), B=B, wc2=wc**2, c2z=2 * zeta * wc,
-            JlL=JlL, Fc=Fc, Fs=Fs, bias=bias, gain=gain,
-            dth=np.broadcast_to(D[:, 0][None], (self.L, P)),
-            dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
-            th0=th0.T, om0=om0.T,
-            w0=d0.T / gain, wd0=v0.T / gain))
+        return as_jax(
+            dict(
+                J=glob("hub_inertia"),
+                B=B,
+                wc2=wc**2,
+                c2z=2 * zeta * wc,
+                JlL=JlL,
+                Fc=Fc,
+                Fs=Fs,
+                bias=bias,
+                gain=gain,
+                dth=np.broadcast_to(D[:, 0][None], (self.L, P)),
+                dd=np.broadcast_to(D[:, 1][None], (self.L, P)),
+                th0=th0.T,
+                om0=om0.T,
+                w0=d0.T / gain,
+                wd0=v0.T / gain,
+            )
+        )
 
     @property
     def quantised(self) -> bool:
@@ -232,15 +276,17 @@ class Objective:
         step tolerance. Without it the cost is smooth and its minimum lies within those
         jags of the rounded cost's (the local stage's continuation, :mod:`.fit`)."""
         out = copy.copy(self)
-        out.const = {**self.const, "q_th": self.const["q_th"] * 0.0,
-                     "q_d": self.const["q_d"] * 0.0}
+        out.const = {**self.const, "q_th": self.const["q_th"] * 0.0, "q_d": self.const["q_d"] * 0.0}
         return out
 
     def _kw(self):
-        return dict(substeps=self.substeps, n_buf=self.space.max_delay + 1,
-                    comp_delay=self.comp_delay, open_loop=self.mode == "open_loop",
-                    filters=(self.filters["motor_angle"] > 0,
-                             self.filters["tip_deflection"] > 0))
+        return dict(
+            substeps=self.substeps,
+            n_buf=self.space.max_delay + 1,
+            comp_delay=self.comp_delay,
+            open_loop=self.mode == "open_loop",
+            filters=(self.filters["motor_angle"] > 0, self.filters["tip_deflection"] > 0),
+        )
 
     # ------------------------------------------------------------------ evaluation
     def sse(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None):
@@ -254,7 +300,9 @@ class Objective:
         offsets = None if offsets is None else pad(offsets)
         out_e, out_b = [], []
         for k in range(0, Pp, c):
-            m = self.model(U[k:k + c], D[k:k + c], None if offsets is None else offsets[k:k + c])
+            m = self.model(
+                U[k : k + c], D[k : k + c], None if offsets is None else offsets[k : k + c]
+            )
             et, ed, bad = closed_loop_cost(m, self.data, self.const, **self._kw())
             out_e.append(np.stack([np.asarray(et), np.asarray(ed)], -1))
             out_b.append(np.asarray(bad))

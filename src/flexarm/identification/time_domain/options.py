@@ -27,8 +27,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Cost", "Shooting", "Local", "GlobalDE", "Priors", "ServoRig", "FitOptions",
-           "PredictOptions"]
+__all__ = [
+    "Cost",
+    "Shooting",
+    "Local",
+    "GlobalDE",
+    "Priors",
+    "ServoRig",
+    "FitOptions",
+    "PredictOptions",
+]
 
 
 @dataclass
@@ -108,12 +116,19 @@ class ServoRig:
     seed: int = 0
 
     def keywords(self) -> dict:
-        return dict(mode=self.mode, friction=self.friction, global_seconds=self.global_seconds,
-                    delay_search=self.delay_search, polish_iter=self.polish_iter,
-                    sessions=self.sessions, tip_sign=self.tip_sign,
-                    encoder_counts=self.encoder_counts,
-                    filters=dict(self.filters) if self.filters else None,
-                    controller=self.controller, seed=self.seed)
+        return dict(
+            mode=self.mode,
+            friction=self.friction,
+            global_seconds=self.global_seconds,
+            delay_search=self.delay_search,
+            polish_iter=self.polish_iter,
+            sessions=self.sessions,
+            tip_sign=self.tip_sign,
+            encoder_counts=self.encoder_counts,
+            filters=dict(self.filters) if self.filters else None,
+            controller=self.controller,
+            seed=self.seed,
+        )
 
 
 def _changed(group, over_base: bool):
@@ -125,9 +140,13 @@ def _changed(group, over_base: bool):
         if not over_base:
             yield f.name, v
             continue
-        default = (f.default if f.default is not dataclasses.MISSING
-                   else f.default_factory() if f.default_factory is not dataclasses.MISSING
-                   else dataclasses.MISSING)
+        default = (
+            f.default
+            if f.default is not dataclasses.MISSING
+            else f.default_factory()
+            if f.default_factory is not dataclasses.MISSING
+            else dataclasses.MISSING
+        )
         if default is dataclasses.MISSING or v != default:
             yield f.name, v
 

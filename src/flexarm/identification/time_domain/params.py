@@ -68,17 +68,28 @@ class ParamDef:
 
 MECHANICS = ("hub_inertia", "link_frequency", "link_inertia", "link_damping", "tip_gain")
 FRICTION = ("viscous", "coulomb", "static_excess", "bias")
-UNITS = {"hub_inertia": "kg*m**2", "link_frequency": "rad/s", "link_inertia": "kg*m**2",
-         "link_damping": "", "tip_gain": "m/m", "viscous": "N*m*s/rad", "coulomb": "N*m",
-         "static_excess": "N*m", "bias": "N*m"}
-DOCS = {"hub_inertia": "J: hub inertia at the output shaft",
-        "link_frequency": "omega_c: link frequency with the hub held (clamped)",
-        "link_inertia": "J_l = m L^2: link inertia about the hub",
-        "link_damping": "zeta: damping ratio of the link mode",
-        "tip_gain": "|g|: strain-gauge calibration, measured m per m of tip deflection",
-        "viscous": "B: viscous friction at the hub", "coulomb": "F_c: Coulomb friction",
-        "static_excess": "F_s - F_c: breakaway above the Coulomb level",
-        "bias": "constant bias torque at the hub"}
+UNITS = {
+    "hub_inertia": "kg*m**2",
+    "link_frequency": "rad/s",
+    "link_inertia": "kg*m**2",
+    "link_damping": "",
+    "tip_gain": "m/m",
+    "viscous": "N*m*s/rad",
+    "coulomb": "N*m",
+    "static_excess": "N*m",
+    "bias": "N*m",
+}
+DOCS = {
+    "hub_inertia": "J: hub inertia at the output shaft",
+    "link_frequency": "omega_c: link frequency with the hub held (clamped)",
+    "link_inertia": "J_l = m L^2: link inertia about the hub",
+    "link_damping": "zeta: damping ratio of the link mode",
+    "tip_gain": "|g|: strain-gauge calibration, measured m per m of tip deflection",
+    "viscous": "B: viscous friction at the hub",
+    "coulomb": "F_c: Coulomb friction",
+    "static_excess": "F_s - F_c: breakaway above the Coulomb level",
+    "bias": "constant bias torque at the hub",
+}
 
 
 @dataclass
@@ -104,8 +115,10 @@ class ParamSpace:
 
     @property
     def names(self) -> list[str]:
-        return [d.name if d.session is None or self.n_sessions == 1 else f"{d.name}[{d.session}]"
-                for d in self.defs]
+        return [
+            d.name if d.session is None or self.n_sessions == 1 else f"{d.name}[{d.session}]"
+            for d in self.defs
+        ]
 
     def index(self, name: str, session: int | None = None) -> int:
         for i, d in enumerate(self.defs):
@@ -131,12 +144,20 @@ class ParamSpace:
 
     def physical(self, u: np.ndarray) -> dict[str, np.ndarray]:
         """Unit coordinates (..., n_cont) → dict of physical values keyed by :attr:`names`."""
-        return {n: d.to_phys(u[..., i]) for i, (n, d) in enumerate(zip(self.names, self.defs, strict=True))}
+        return {
+            n: d.to_phys(u[..., i])
+            for i, (n, d) in enumerate(zip(self.names, self.defs, strict=True))
+        }
 
     def session_values(self, u: np.ndarray, name: str) -> np.ndarray:
         """(..., n_sessions) physical values of a per-session parameter."""
-        return np.stack([self.defs[self.index(name, s)].to_phys(u[..., self.index(name, s)])
-                         for s in range(self.n_sessions)], axis=-1)
+        return np.stack(
+            [
+                self.defs[self.index(name, s)].to_phys(u[..., self.index(name, s)])
+                for s in range(self.n_sessions)
+            ],
+            axis=-1,
+        )
 
     def value(self, u: np.ndarray, name: str) -> np.ndarray:
         i = self.index(name)

@@ -65,9 +65,16 @@ class Prediction:
         """JSON-ready: scenario, fit %, divergence, warnings, notes, figures (no traces)."""
         from flexarm.identification.time_domain.result import finite
 
-        return finite({"scenario": self.scenario, "fit_percent": self.fit_percent,
-                       "diverged": self.diverged, "warnings": self.warnings,
-                       "notes": self.notes, "plots": [str(p) for p in self.plots]})
+        return finite(
+            {
+                "scenario": self.scenario,
+                "fit_percent": self.fit_percent,
+                "diverged": self.diverged,
+                "warnings": self.warnings,
+                "notes": self.notes,
+                "plots": [str(p) for p in self.plots],
+            }
+        )
 
     def _table(self):
         from flexarm.display import Table
@@ -76,8 +83,12 @@ class Prediction:
         rows = [(key, *(per.get(s) for s in sigs)) for key, per in self.fit_percent.items()]
         notes = [f"{k} diverged" for k, bad in self.diverged.items() if bad]
         notes += [f"warning: {w}" for w in self.warnings] + list(self.notes)
-        return Table(f"Prediction by {self.scenario}: fit % per log and signal", rows,
-                     header=("log", *sigs), notes=notes)
+        return Table(
+            f"Prediction by {self.scenario}: fit % per log and signal",
+            rows,
+            header=("log", *sigs),
+            notes=notes,
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -88,8 +99,7 @@ class Prediction:
     def __getitem__(self, key: str):
         """Deprecated dict access (``validate(...)["fit_percent"]``), as the old
         validators returned dicts."""
-        if key in ("fit_percent", "diverged", "warnings", "notes", "plots", "scenario",
-                   "traces"):
+        if key in ("fit_percent", "diverged", "warnings", "notes", "plots", "scenario", "traces"):
             return getattr(self, key)
         raise KeyError(key)
 
@@ -99,8 +109,9 @@ def _is_rig_fit(x) -> bool:
 
 
 def _rig_logs(logs, controller) -> bool:
-    return all(getattr(g, "controller", None) is not None or controller is not None
-               for g in logs) and all("reference" in getattr(g, "signals", {}) for g in logs)
+    return all(
+        getattr(g, "controller", None) is not None or controller is not None for g in logs
+    ) and all("reference" in getattr(g, "signals", {}) for g in logs)
 
 
 def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = None) -> Prediction:
@@ -116,17 +127,22 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
     logs = load_logs(logs)
     if opts.windows is not None:
         if len(opts.windows) != len(logs):
-            raise ValueError(f"PredictOptions.windows has {len(opts.windows)} entries for "
-                             f"{len(logs)} logs")
+            raise ValueError(
+                f"PredictOptions.windows has {len(opts.windows)} entries for {len(logs)} logs"
+            )
         if opts.continuous and any(w is not None for w in opts.windows):
-            raise ValueError("PredictOptions: continuous (consecutive pieces of one run) "
-                             "predicts whole logs; leave out windows (--window)")
+            raise ValueError(
+                "PredictOptions: continuous (consecutive pieces of one run) "
+                "predicts whole logs; leave out windows (--window)"
+            )
     keys = log_keys(logs)
     cfile = controller_file(opts.controller)
     if _is_rig_fit(model):
         if cfile is not None or opts.continuous:
-            raise ValueError("a servo-rig fit predicts with its own loop: a controller file "
-                             "and continuous need a scenario (flexarm validate SCENARIO ...)")
+            raise ValueError(
+                "a servo-rig fit predicts with its own loop: a controller file "
+                "and continuous need a scenario (flexarm validate SCENARIO ...)"
+            )
         return _predict_rig_fit(model, logs, keys, opts)
     sc = getattr(model, "scenario", model)
     sc = sc if isinstance(sc, Scenario) else load_scenario(sc)
@@ -134,9 +150,11 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
         sc = sc.with_controllers(cfile)
         opts = replace(opts, controller=None)
     elif opts.continuous and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
-        raise ValueError("continuous: the servo rig's replay runs each log alone; a "
-                         "scenario's own controller (or --controller FILE.toml) runs them "
-                         "as one run")
+        raise ValueError(
+            "continuous: the servo rig's replay runs each log alone; a "
+            "scenario's own controller (or --controller FILE.toml) runs them "
+            "as one run"
+        )
     if cfile is None and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
         return _predict_rig_scenario(sc, logs, keys, opts)
     return _predict_scenario(sc, logs, keys, opts)
@@ -155,8 +173,10 @@ def controller_file(value: Any):
         p = Path(value)
         if p.is_file():
             return load_controllers(p)
-        raise ValueError(f"controller {str(value)!r}: no such controller file (a TOML with "
-                         "[controller] or [[controllers]] tables); give an existing file")
+        raise ValueError(
+            f"controller {str(value)!r}: no such controller file (a TOML with "
+            "[controller] or [[controllers]] tables); give an existing file"
+        )
     return None
 
 
@@ -169,22 +189,34 @@ def _windowed(logs, opts):
 def _predict_scenario(sc, logs, keys, opts) -> Prediction:
     from flexarm.identification.time_domain.general import FitOptions, predict_scenario
 
-    fo = FitOptions(windows=list(opts.windows) if opts.windows is not None else None,
-                    continuous=bool(opts.continuous))
+    fo = FitOptions(
+        windows=list(opts.windows) if opts.windows is not None else None,
+        continuous=bool(opts.continuous),
+    )
     out = predict_scenario(sc, logs, fo, channels=list(opts.channels) if opts.channels else None)
     # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
     fp = dict(zip(keys, out["fit_percent"].values(), strict=False))
     traces = {}
     for k, tr in zip(keys, out["trajectories"].values(), strict=False):
         t = np.asarray(tr["time"], float)
-        traces[k] = {"time": t - t[0] if t.size else t, "measured": tr["measured"],
-                     "simulated": tr["simulated"]}
-    pred = Prediction(sc.name, fp, traces, warnings=list(out.get("warnings", [])),
-                      notes=list(dict.fromkeys(out.get("notes", []))),
-                      diverged={k: False for k in keys})
+        traces[k] = {
+            "time": t - t[0] if t.size else t,
+            "measured": tr["measured"],
+            "simulated": tr["simulated"],
+        }
+    pred = Prediction(
+        sc.name,
+        fp,
+        traces,
+        warnings=list(out.get("warnings", [])),
+        notes=list(dict.fromkeys(out.get("notes", []))),
+        diverged={k: False for k in keys},
+    )
     if opts.continuous:
-        pred.notes.append(f"continuous: the {len(keys)} logs replayed as consecutive pieces "
-                          "of one run (controller and filter states carried)")
+        pred.notes.append(
+            f"continuous: the {len(keys)} logs replayed as consecutive pieces "
+            "of one run (controller and filter states carried)"
+        )
     if opts.plots is not None:
         pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
     return pred
@@ -213,26 +245,33 @@ def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
     fp, div, traces = {}, {}, {}
     i = 0
     for grp in groups:
-        out = rig_predict(res, grp, estimate_initial=opts.estimate_initial,
-                          controller=opts.controller)
+        out = rig_predict(
+            res, grp, estimate_initial=opts.estimate_initial, controller=opts.controller
+        )
         got_fp, got_div = list(out["fit_percent"].values()), list(out["diverged"].values())
         for j, g in enumerate(out["logs"]):
             k = keys[i]
             fp[k], div[k] = got_fp[j], got_div[j]
             n = len(g)
             tr = out["traj"]
-            sim = {"motor_angle": np.asarray(tr[0][j, :n]),
-                   "tip_deflection": np.asarray(tr[1][j, :n]),
-                   "command": np.asarray(tr[2][j, :n])}
+            sim = {
+                "motor_angle": np.asarray(tr[0][j, :n]),
+                "tip_deflection": np.asarray(tr[1][j, :n]),
+                "command": np.asarray(tr[2][j, :n]),
+            }
             meas = {c: g.signals[c] for c in ("motor_angle", "tip_deflection") if c in g.signals}
             if "voltage" in g.signals:
                 meas["command"] = g.signals["voltage"]
             traces[k] = {"time": g.time - g.time[0], "measured": meas, "simulated": sim}
             i += 1
-    pred = Prediction("fitted rig", fp, traces, diverged=div,
-                      warnings=[f"{k}: the simulated loop diverged" for k, d in div.items() if d],
-                      notes=["initial state estimated from each log's own data"]
-                      if opts.estimate_initial else [])
+    pred = Prediction(
+        "fitted rig",
+        fp,
+        traces,
+        diverged=div,
+        warnings=[f"{k}: the simulated loop diverged" for k, d in div.items() if d],
+        notes=["initial state estimated from each log's own data"] if opts.estimate_initial else [],
+    )
     if opts.plots is not None:
         pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
     return pred
@@ -262,8 +301,9 @@ def overlay_figure(prediction: Prediction, key: str, fig=None):
     return fig
 
 
-def write_overlays(prediction: Prediction, directory: str | Path, tag: str = "predict"
-                   ) -> list[Path]:
+def write_overlays(
+    prediction: Prediction, directory: str | Path, tag: str = "predict"
+) -> list[Path]:
     """:func:`overlay_figure` for every log, as PNGs in ``directory`` (written by
     :func:`flexarm.io.write.save_figure`)."""
     import re

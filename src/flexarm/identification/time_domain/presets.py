@@ -85,8 +85,9 @@ def servo_rig(sheet: DataSheet) -> Preset:
     free = ["hub_inertia", "viscous", *FRICTION]
     if sheet.link_length is not None:
         free += ["link_frequency", "link_damping", "link_inertia", "tip_gain"]
-    return Preset("rotary-servo", None, list(dict.fromkeys(free)), None, "servo_rig",
-                  sheet.keywords())
+    return Preset(
+        "rotary-servo", None, list(dict.fromkeys(free)), None, "servo_rig", sheet.keywords()
+    )
 
 
 #: Built-in scenario name → its preset.
@@ -104,8 +105,12 @@ def for_scenario(scenario) -> Preset:
 
     notes = scenario_fit_notes(scenario)
     if notes.get("free"):
-        return Preset(scenario.name, scenario, list(notes["free"]),
-                      FitOptions(priors=dict(notes.get("priors", {}))))
+        return Preset(
+            scenario.name,
+            scenario,
+            list(notes["free"]),
+            FitOptions(priors=dict(notes.get("priors", {}))),
+        )
     if scenario.name in BUILTIN:
         p = BUILTIN[scenario.name]()
         # the registered preset's template is the built-in; a changed copy keeps its numbers,
@@ -124,7 +129,9 @@ def for_scenario(scenario) -> Preset:
         sc = scenario_with(scenario, starts) if starts else scenario
         return Preset(p.name, sc, p.free, p.options, p.engine, p.sheet)
     if scenario.sampling is None:
-        raise ValueError(f"scenario {scenario.name!r} has no [sampling]: a continuous-time "
-                         "[regulation] law is simulated (flexarm.simulate), not fitted to "
-                         "logs; give a scenario with a sampled loop")
+        raise ValueError(
+            f"scenario {scenario.name!r} has no [sampling]: a continuous-time "
+            "[regulation] law is simulated (flexarm.simulate), not fitted to "
+            "logs; give a scenario with a sampled loop"
+        )
     return Preset(scenario.name, scenario, friction_paths(scenario), FitOptions())

@@ -19,9 +19,14 @@ from flexarm.io.write import save_figure, write_json, write_text
 
 def check_physical(params: dict[str, float], source: str = "fit") -> None:
     """Raise a clear error for non-physical values (inertia, stiffness, gain <= 0)."""
-    for name, what in (("hub_inertia", "hub inertia J"), ("link_inertia", "link inertia J_l"),
-                       ("link_stiffness", "link stiffness C"), ("link_frequency", "link frequency"),
-                       ("coulomb", "Coulomb friction"), ("viscous", "viscous friction")):
+    for name, what in (
+        ("hub_inertia", "hub inertia J"),
+        ("link_inertia", "link inertia J_l"),
+        ("link_stiffness", "link stiffness C"),
+        ("link_frequency", "link frequency"),
+        ("coulomb", "Coulomb friction"),
+        ("viscous", "viscous friction"),
+    ):
         v = params.get(name)
         if v is None:
             continue
@@ -32,7 +37,8 @@ def check_physical(params: dict[str, float], source: str = "fit") -> None:
                 f"{UNITS.get(name, 'N*m/rad')}; it must be {'> 0' if strict else '>= 0'}. "
                 "The model cannot explain the logs with physical values: check the data-sheet "
                 "values (gear ratio, motor constant, resistance, link length), the units of "
-                "the log columns and the controller declaration, or give bounds=")
+                "the log columns and the controller declaration, or give bounds="
+            )
 
 
 @dataclass
@@ -77,9 +83,27 @@ class FitResult:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def build(cls, *, logs, rig, space, U, D, offsets, std_u, fit_percent, diverged, traj,
-              glob, local, info, settings, seconds, objective,
-              std_iid_u=None) -> FitResult:
+    def build(
+        cls,
+        *,
+        logs,
+        rig,
+        space,
+        U,
+        D,
+        offsets,
+        std_u,
+        fit_percent,
+        diverged,
+        traj,
+        glob,
+        local,
+        info,
+        settings,
+        seconds,
+        objective,
+        std_iid_u=None,
+    ) -> FitResult:
         params, std, std_iid = {}, {}, {}
         if std_iid_u is None:
             std_iid_u = np.full(len(space.defs), np.nan)
@@ -91,41 +115,61 @@ class FitResult:
         if "tip_gain" in params:
             params["tip_gain"] *= sign
         first = lambda n: params.get(n, params.get(f"{n}[0]", 0.0))  # noqa: E731
-        der = derived({k: first(k) for k in ("hub_inertia", "link_frequency", "link_inertia")
-                       if k in params or f"{k}[0]" in params}, rig.length)
+        der = derived(
+            {
+                k: first(k)
+                for k in ("hub_inertia", "link_frequency", "link_inertia")
+                if k in params or f"{k}[0]" in params
+            },
+            rig.length,
+        )
         if settings["friction"]:
             for s in range(space.n_sessions):
                 sfx = "" if space.n_sessions == 1 else f"[{s}]"
                 der["static" + sfx] = params["coulomb" + sfx] + params["static_excess" + sfx]
         check_physical({**params, **der})
         names = log_keys(logs)  # one key per log (same names in other folders apart)
-        fp = {n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
-              for i, n in enumerate(names)}
+        fp = {
+            n: {"motor_angle": _r(fit_percent[i, 0]), "tip_deflection": _r(fit_percent[i, 1])}
+            for i, n in enumerate(names)
+        }
         d0, v0 = objective.tip_initial(np.asarray([D[1]]), offsets[None])
         th0, om0 = objective.hub_initial(1, offsets[None], np.asarray([D[0]]))
-        ini = {n: {"motor_angle": float(th0[0, i]),
-                   "motor_velocity": float(om0[0, i]),
-                   "tip_deflection": float(d0[0, i] / params.get("tip_gain", 1.0)),
-                   "tip_velocity": float(v0[0, i] / params.get("tip_gain", 1.0))}
-               for i, n in enumerate(names)}
+        ini = {
+            n: {
+                "motor_angle": float(th0[0, i]),
+                "motor_velocity": float(om0[0, i]),
+                "tip_deflection": float(d0[0, i] / params.get("tip_gain", 1.0)),
+                "tip_velocity": float(v0[0, i] / params.get("tip_gain", 1.0)),
+            }
+            for i, n in enumerate(names)
+        }
         warn = []
         converged = bool(local["success"])
         msg = []
         if not glob.success:
-            msg.append(f"global stage stopped after {glob.nit} generations without meeting "
-                       f"its tolerance ({glob.message})")
+            msg.append(
+                f"global stage stopped after {glob.nit} generations without meeting "
+                f"its tolerance ({glob.message})"
+            )
         if not local["success"]:
-            msg.append(f"local stage did not converge in {local['nfev']} evaluations "
-                       f"({local['message']})")
+            msg.append(
+                f"local stage did not converge in {local['nfev']} evaluations ({local['message']})"
+            )
         if converged:
             msg.insert(0, "converged (local stage met its tolerance)")
         else:
-            msg.insert(0, "NOT CONVERGED: the best parameters found are returned with their "
-                          "fit %; raise maxiter / local_nfev, or narrow the bounds")
+            msg.insert(
+                0,
+                "NOT CONVERGED: the best parameters found are returned with their "
+                "fit %; raise maxiter / local_nfev, or narrow the bounds",
+            )
         for i in local["at_bounds"]:
-            warn.append(f"{space.names[i]} = {params[space.names[i]]:.4g} lies at a bound of "
-                        f"[{space.defs[i].lo:.4g}, {space.defs[i].hi:.4g}]; widen it with "
-                        f"bounds={{'{space.defs[i].name}': (lo, hi)}}")
+            warn.append(
+                f"{space.names[i]} = {params[space.names[i]]:.4g} lies at a bound of "
+                f"[{space.defs[i].lo:.4g}, {space.defs[i].hi:.4g}]; widen it with "
+                f"bounds={{'{space.defs[i].name}': (lo, hi)}}"
+            )
         for i, n in enumerate(names):
             if diverged[i]:
                 warn.append(f"{n}: the fitted loop diverges in simulation")
@@ -133,46 +177,92 @@ class FitResult:
                 if v is not None and v < 80:
                     warn.append(f"{n}: fit {v:.1f} % on {sig} is low")
         dl = {"motor_angle": int(D[0]), "tip_deflection": int(D[1])}
-        stages = {"global": {"cost": glob.cost, "nfev": glob.nfev, "generations": glob.nit,
-                             "success": glob.success, "message": glob.message,
-                             "seconds": glob.seconds},
-                  "local": {k: local[k] for k in ("cost", "nfev", "success", "message",
-                                                  "seconds", "rho")},
-                  "guesses": info}
+        stages = {
+            "global": {
+                "cost": glob.cost,
+                "nfev": glob.nfev,
+                "generations": glob.nit,
+                "success": glob.success,
+                "message": glob.message,
+                "seconds": glob.seconds,
+            },
+            "local": {
+                k: local[k] for k in ("cost", "nfev", "success", "message", "seconds", "rho")
+            },
+            "guesses": info,
+        }
         if "smooth_stage" in local:  # the continuation's first stage (unrounded loop)
             stages["local"]["smooth_stage"] = local["smooth_stage"]
         if local.get("cov_u") is not None:  # the HAC covariance of the unit coordinates
             # (space.names order): plants drawn from the fit (flexarm.design.plants)
             stages["local"]["covariance_unit"] = np.asarray(local["cov_u"]).tolist()
         stages["local"]["hac_bandwidth_samples"] = {
-            n: m for n, m in zip(names, local.get("bandwidth", []), strict=False)}
-        return cls(params, std, der, dl, fp, converged, "; ".join(msg), warn, settings, stages,
-                   ini, rig, list(logs), traj, seconds, std_iid, space, np.asarray(U),
-                   np.asarray(D))
+            n: m for n, m in zip(names, local.get("bandwidth", []), strict=False)
+        }
+        return cls(
+            params,
+            std,
+            der,
+            dl,
+            fp,
+            converged,
+            "; ".join(msg),
+            warn,
+            settings,
+            stages,
+            ini,
+            rig,
+            list(logs),
+            traj,
+            seconds,
+            std_iid,
+            space,
+            np.asarray(U),
+            np.asarray(D),
+        )
 
     # ------------------------------------------------------------------ outputs
     def to_dict(self) -> dict:
-        return _jsonable({
-            "converged": self.converged, "message": self.message, "warnings": self.warnings,
-            "parameters": {k: {"value": v, "std": self.std.get(k),
-                               "std_iid": self.std_iid.get(k), "unit": UNITS.get(
-                k.split("[")[0], ""), "doc": DOCS.get(k.split("[")[0], "")}
-                for k, v in self.params.items()},
-            "derived": self.derived, "delays_samples": self.delays,
-            "fit_percent": self.fit_percent, "initial_states": self.initial_states,
-            "settings": self.settings, "stages": self.stages, "seconds": self.seconds,
-            "uncertainty_note": "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from "
-                                "the final Jacobian, S the Bartlett-weighted autocovariance "
-                                "of the residual x Jacobian-row products per log, bandwidth "
-                                "10 residual correlation times (stages.local."
-                                "hac_bandwidth_samples); std_iid: s^2 (J^T J)^-1 assuming "
-                                "independent residuals, too small when they are correlated. "
-                                "Both ignore the jumps of stick-slip and structural bias",
-        })
+        return _jsonable(
+            {
+                "converged": self.converged,
+                "message": self.message,
+                "warnings": self.warnings,
+                "parameters": {
+                    k: {
+                        "value": v,
+                        "std": self.std.get(k),
+                        "std_iid": self.std_iid.get(k),
+                        "unit": UNITS.get(k.split("[")[0], ""),
+                        "doc": DOCS.get(k.split("[")[0], ""),
+                    }
+                    for k, v in self.params.items()
+                },
+                "derived": self.derived,
+                "delays_samples": self.delays,
+                "fit_percent": self.fit_percent,
+                "initial_states": self.initial_states,
+                "settings": self.settings,
+                "stages": self.stages,
+                "seconds": self.seconds,
+                "uncertainty_note": "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from "
+                "the final Jacobian, S the Bartlett-weighted autocovariance "
+                "of the residual x Jacobian-row products per log, bandwidth "
+                "10 residual correlation times (stages.local."
+                "hac_bandwidth_samples); std_iid: s^2 (J^T J)^-1 assuming "
+                "independent residuals, too small when they are correlated. "
+                "Both ignore the jumps of stick-slip and structural bias",
+            }
+        )
 
-    def document(self, *, without_friction: FitResult | None = None,
-                 window: tuple[float, float] | None = None, held_out: Any = None,
-                 held_window: tuple[float, float] | None = None) -> dict:
+    def document(
+        self,
+        *,
+        without_friction: FitResult | None = None,
+        window: tuple[float, float] | None = None,
+        held_out: Any = None,
+        held_window: tuple[float, float] | None = None,
+    ) -> dict:
         """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`
         plus, when given, the fit without joint friction (``without_friction``: its fit %,
         parameters, message), the fitted window (``window_s``, s from each log's first
@@ -181,16 +271,24 @@ class FitResult:
         ``predict`` dict, over ``held_window``)."""
         d = self.to_dict()
         if without_friction is not None:
-            d["without_friction"] = _jsonable({"fit_percent": without_friction.fit_percent,
-                                               "params": without_friction.params,
-                                               "message": without_friction.message})
+            d["without_friction"] = _jsonable(
+                {
+                    "fit_percent": without_friction.fit_percent,
+                    "params": without_friction.params,
+                    "message": without_friction.message,
+                }
+            )
         if window is not None:
             d["window_s"] = list(window)
         if held_out is not None:
-            d["held_out"] = _jsonable({
-                "window_s": list(held_window) if held_window is not None else None,
-                "fit_percent": held_out["fit_percent"], "diverged": held_out["diverged"],
-                "initial_state": "estimated from each window's own data"})
+            d["held_out"] = _jsonable(
+                {
+                    "window_s": list(held_window) if held_window is not None else None,
+                    "fit_percent": held_out["fit_percent"],
+                    "diverged": held_out["diverged"],
+                    "initial_state": "estimated from each window's own data",
+                }
+            )
         return d
 
     def to_json(self, path: str | Path) -> Path:
@@ -199,44 +297,59 @@ class FitResult:
         return path
 
     def summary(self) -> str:
-        lines = [f"flexarm fit ({self.settings['mode']}, friction "
-                 f"{'on' if self.settings['friction'] else 'off'}): {self.message}"]
-        lines.append("  parameter              value ± std (HAC) [std if residuals were "
-                     "independent]")
+        lines = [
+            f"flexarm fit ({self.settings['mode']}, friction "
+            f"{'on' if self.settings['friction'] else 'off'}): {self.message}"
+        ]
+        lines.append(
+            "  parameter              value ± std (HAC) [std if residuals were independent]"
+        )
         for k, v in self.params.items():
             s = self.std.get(k, float("nan"))
             si = self.std_iid.get(k, float("nan"))
             rel = f" ({100 * s / abs(v):.1f} %)" if v else ""
-            lines.append(f"  {k:22s} {v: .5g} ± {s:.2g}{rel} [{si:.2g}] "
-                         f"{UNITS.get(k.split('[')[0], '')}")
+            lines.append(
+                f"  {k:22s} {v: .5g} ± {s:.2g}{rel} [{si:.2g}] {UNITS.get(k.split('[')[0], '')}"
+            )
         for k, v in self.derived.items():
             lines.append(f"  {k:22s} {v: .5g}")
-        lines.append(f"  delays (samples): hub angle {self.delays['motor_angle']}, "
-                     f"tip deflection {self.delays['tip_deflection']}")
+        lines.append(
+            f"  delays (samples): hub angle {self.delays['motor_angle']}, "
+            f"tip deflection {self.delays['tip_deflection']}"
+        )
         lines.append("  fit %:")
         for n, d in self.fit_percent.items():
-            lines.append(f"    {n}: " + ", ".join(
-                f"{k} {v:.1f}" if v is not None else f"{k} -" for k, v in d.items()))
+            lines.append(
+                f"    {n}: "
+                + ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} -" for k, v in d.items())
+            )
         for w in self.warnings:
             lines.append(f"  warning: {w}")
-        lines.append(f"  time {self.seconds:.1f} s (global {self.stages['global']['seconds']:.1f}"
-                     f" s, {self.stages['global']['generations']} generations; local "
-                     f"{self.stages['local']['seconds']:.1f} s)")
+        lines.append(
+            f"  time {self.seconds:.1f} s (global {self.stages['global']['seconds']:.1f}"
+            f" s, {self.stages['global']['generations']} generations; local "
+            f"{self.stages['local']['seconds']:.1f} s)"
+        )
         return "\n".join(lines)
 
     def _table(self):
         from flexarm.display import Table, fit_percent_lines, parameter_rows
 
         state = "converged" if self.converged else "NOT converged"
-        notes = [f"{state}: {self.message}",
-                 "delays (samples): " + ", ".join(f"{k} {v}" for k, v in self.delays.items()),
-                 *fit_percent_lines(self.fit_percent)]
+        notes = [
+            f"{state}: {self.message}",
+            "delays (samples): " + ", ".join(f"{k} {v}" for k, v in self.delays.items()),
+            *fit_percent_lines(self.fit_percent),
+        ]
         notes += [f"warning: {w}" for w in self.warnings]
         units = {k: UNITS.get(k.split("[")[0], "") for k in self.params}
-        return Table(f"FitResult of the servo rig ({self.settings.get('mode', 'fit')}): "
-                     f"{len(self.params)} parameters (SI)",
-                     parameter_rows(self.params, self.std, units),
-                     header=("parameter", "value", "std (HAC)", "std %", "unit"), notes=notes)
+        return Table(
+            f"FitResult of the servo rig ({self.settings.get('mode', 'fit')}): "
+            f"{len(self.params)} parameters (SI)",
+            parameter_rows(self.params, self.std, units),
+            header=("parameter", "value", "std (HAC)", "std %", "unit"),
+            notes=notes,
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -257,16 +370,29 @@ class FitResult:
         """Write the fitted scenario as commented TOML (SI units); refuses to overwrite."""
         path = Path(path)
         if path.exists() and not overwrite:  # before the work; the writer checks again
-            raise OutputExistsError(f"{path}: exists already; not overwritten "
-                                    "(pass overwrite=True)")
+            raise OutputExistsError(
+                f"{path}: exists already; not overwritten (pass overwrite=True)"
+            )
         d, comments = scenario_from_fit(self)
         self.scenario()  # validates
-        write_text(path, overwrite=overwrite, text=toml_with_comments(d, comments, header=[
-            "Fitted by flexarm.identification.time_domain from " + ", ".join(g.name for g in self.logs),
-            self.message,
-            "fit %: " + "; ".join(f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items()
-                                                       if v is not None)
-                                  for n, d_ in self.fit_percent.items())]))
+        write_text(
+            path,
+            overwrite=overwrite,
+            text=toml_with_comments(
+                d,
+                comments,
+                header=[
+                    "Fitted by flexarm.identification.time_domain from "
+                    + ", ".join(g.name for g in self.logs),
+                    self.message,
+                    "fit %: "
+                    + "; ".join(
+                        f"{n}: " + ", ".join(f"{k} {v:.1f}" for k, v in d_.items() if v is not None)
+                        for n, d_ in self.fit_percent.items()
+                    ),
+                ],
+            ),
+        )
         return path
 
     def plots(self, directory: str | Path) -> list[Path]:
@@ -300,8 +426,12 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     der = res.derived
     motor = {**rig.motor, "inertia": p["hub_inertia"], "viscous": p["viscous"]}
     if res.settings["friction"]:
-        fr = {"model": "coulomb", "coulomb": p["coulomb"],
-              "static": p["coulomb"] + p["static_excess"], "bias": p["bias"]}
+        fr = {
+            "model": "coulomb",
+            "coulomb": p["coulomb"],
+            "static": p["coulomb"] + p["static_excess"],
+            "bias": p["bias"],
+        }
     else:
         fr = {"model": "none"}
     log0 = res.logs[0]
@@ -310,8 +440,7 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     rigid = "link_frequency" not in p
     sensors: dict[str, dict[str, Any]] = {"motor_angle": {"delay": res.delays["motor_angle"]}}
     if not rigid:
-        sensors["tip_deflection"] = {"gain": p["tip_gain"],
-                                     "delay": res.delays["tip_deflection"]}
+        sensors["tip_deflection"] = {"gain": p["tip_gain"], "delay": res.delays["tip_deflection"]}
     for ch, hz in res.settings.get("filters", {}).items():
         if hz > 0 and ch in sensors:  # the sensor low-pass, given or estimated
             sensors[ch]["bandwidth"] = hz
@@ -322,20 +451,36 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
     ctrl = log0.controller.model_dump() if log0.controller is not None else None
     r = log0.columns["reference"]
     steps = np.nonzero(np.abs(np.diff(r)) > 1e-9)[0]
-    ref = {"type": "step", "offset": float(r[0]),
-           "amplitude": float(r[steps[0] + 1] - r[0]) if steps.size else 0.0,
-           "start": float((steps[0] + 1) * T) if steps.size else 0.0}
-    beam = ({"model": "rigid", "length": L} if rigid else {
-        "model": "lumped", "length": L, "flexural_rigidity": der["flexural_rigidity"],
-        "damping_ratio": p["link_damping"],
-        "masses": [{"mass": der["tip_mass"], "joint": "pinned"}]})
-    d = {"name": "fitted-arm", "description": "Arm fitted by flexarm.identification.time_domain from bench logs",
-         "arm": {"motor": motor, "friction": fr, "beam": beam},
-         "sampling": {"period": float(f"{T:.10g}"), "delay": res.settings["computation_delay"]},
-         "sensors": sensors, "actuator": {"limit": rig.limit},
-         "simulation": {"duration": float(log0.time[-1] - log0.time[0]),
-                        "substeps": res.settings["substeps"]},
-         "reference": ref}
+    ref = {
+        "type": "step",
+        "offset": float(r[0]),
+        "amplitude": float(r[steps[0] + 1] - r[0]) if steps.size else 0.0,
+        "start": float((steps[0] + 1) * T) if steps.size else 0.0,
+    }
+    beam = (
+        {"model": "rigid", "length": L}
+        if rigid
+        else {
+            "model": "lumped",
+            "length": L,
+            "flexural_rigidity": der["flexural_rigidity"],
+            "damping_ratio": p["link_damping"],
+            "masses": [{"mass": der["tip_mass"], "joint": "pinned"}],
+        }
+    )
+    d = {
+        "name": "fitted-arm",
+        "description": "Arm fitted by flexarm.identification.time_domain from bench logs",
+        "arm": {"motor": motor, "friction": fr, "beam": beam},
+        "sampling": {"period": float(f"{T:.10g}"), "delay": res.settings["computation_delay"]},
+        "sensors": sensors,
+        "actuator": {"limit": rig.limit},
+        "simulation": {
+            "duration": float(log0.time[-1] - log0.time[0]),
+            "substeps": res.settings["substeps"],
+        },
+        "reference": ref,
+    }
     if ctrl is not None:
         d["controller"] = ctrl
     q_log = float((res.stages.get("guesses") or {}).get("logged_resolution") or 0.0)
@@ -343,32 +488,35 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
         # the controller read a finer angle than the log holds (the fit left the encoder
         # out); the logged resolution bounds its count for a design's quantisation check
         d["notes"] = {"rig": {"encoder_count": q_log}}
-    c = {"arm.motor.inertia": "kg*m^2, J: fitted hub inertia at the output shaft",
-         "arm.motor.viscous": "N*m*s/rad, B: fitted viscous friction",
-         "arm.motor.motor_constant": "V*s/rad, K_m (data sheet)",
-         "arm.motor.armature_resistance": "ohm (data sheet)",
-         "arm.motor.gear_ratio": "K_g (data sheet)",
-         "arm.friction.coulomb": "N*m, fitted Coulomb friction",
-         "arm.friction.static": "N*m, fitted breakaway (static) friction",
-         "arm.friction.bias": "N*m, fitted constant bias torque",
-         "arm.beam.damping_ratio": "fitted link damping ratio",
-         "arm.beam.length": "m, link length (data sheet)",
-         "sampling.period": "s",
-         "sampling.delay": "samples of computation delay (given, or where the declared law "
-                           "best explains the logged command)",
-         "actuator.limit": "V, the amplifier limit (given, or the log format's [controller] "
-                           "limit)",
-         "notes.rig.encoder_count": "rad, the logged hub angle's resolution (the controller "
-                                    "read a finer one): the design's quantisation check",
-         "sensors.motor_angle.delay": "samples, fitted",
-         "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
-         "sensors.tip_deflection.delay": "samples, fitted",
-         "simulation.duration": "s, length of the first log"}
+    c = {
+        "arm.motor.inertia": "kg*m^2, J: fitted hub inertia at the output shaft",
+        "arm.motor.viscous": "N*m*s/rad, B: fitted viscous friction",
+        "arm.motor.motor_constant": "V*s/rad, K_m (data sheet)",
+        "arm.motor.armature_resistance": "ohm (data sheet)",
+        "arm.motor.gear_ratio": "K_g (data sheet)",
+        "arm.friction.coulomb": "N*m, fitted Coulomb friction",
+        "arm.friction.static": "N*m, fitted breakaway (static) friction",
+        "arm.friction.bias": "N*m, fitted constant bias torque",
+        "arm.beam.damping_ratio": "fitted link damping ratio",
+        "arm.beam.length": "m, link length (data sheet)",
+        "sampling.period": "s",
+        "sampling.delay": "samples of computation delay (given, or where the declared law "
+        "best explains the logged command)",
+        "actuator.limit": "V, the amplifier limit (given, or the log format's [controller] limit)",
+        "notes.rig.encoder_count": "rad, the logged hub angle's resolution (the controller "
+        "read a finer one): the design's quantisation check",
+        "sensors.motor_angle.delay": "samples, fitted",
+        "sensors.tip_deflection.gain": "fitted strain-gauge calibration (m per m, with sign)",
+        "sensors.tip_deflection.delay": "samples, fitted",
+        "simulation.duration": "s, length of the first log",
+    }
     if not rigid:  # a rigid arm has no link stiffness (its --scenario-out raised KeyError)
-        c["arm.beam.flexural_rigidity"] = (f"N*m^2, EI = C L / 3 with fitted stiffness "
-                                           f"C = {der['link_stiffness']:.5g} N*m/rad")
-        c["arm.beam.masses.mass"] = (f"kg, J_l / L^2 with fitted link inertia "
-                                     f"J_l = {p['link_inertia']:.5g} kg*m^2")
+        c["arm.beam.flexural_rigidity"] = (
+            f"N*m^2, EI = C L / 3 with fitted stiffness C = {der['link_stiffness']:.5g} N*m/rad"
+        )
+        c["arm.beam.masses.mass"] = (
+            f"kg, J_l / L^2 with fitted link inertia J_l = {p['link_inertia']:.5g} kg*m^2"
+        )
     return d, c
 
 
@@ -377,8 +525,12 @@ def toml_with_comments(d: dict, comments: dict, header: list[str]) -> str:
     lines = [f"# {h}" for h in header] + [""]
 
     def emit(prefix: str, table: dict, array_item: bool = False):
-        scalars = {k: v for k, v in table.items() if not isinstance(v, (dict, list))
-                   or (isinstance(v, list) and not (v and isinstance(v[0], dict)))}
+        scalars = {
+            k: v
+            for k, v in table.items()
+            if not isinstance(v, (dict, list))
+            or (isinstance(v, list) and not (v and isinstance(v[0], dict)))
+        }
         if prefix:
             lines.append(f"[[{prefix}]]" if array_item else f"[{prefix}]")
         for k, v in scalars.items():
@@ -413,8 +565,10 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
         fig = Figure(figsize=(8, 7))
         ax = fig.subplots(3, 1, sharex=True)
         ax[0].plot(t, g.columns["reference"], "k:", lw=0.8, label="reference")
-        for a, col, k, unit, sc in ((ax[0], "motor_angle", 0, "rad", 1.0),
-                                    (ax[1], "tip_deflection", 1, "mm", 1e3)):
+        for a, col, k, unit, sc in (
+            (ax[0], "motor_angle", 0, "rad", 1.0),
+            (ax[1], "tip_deflection", 1, "mm", 1e3),
+        ):
             if col in g.columns:
                 a.plot(t, sc * g.columns[col], lw=0.9, label="measured")
             a.plot(t, sc * traj[k][i, :n], lw=0.9, label="simulated")
@@ -452,8 +606,10 @@ def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
     trade off; the Python path :func:`flexarm.design.plants.from_fit` keeps them)."""
     par = fit.get("parameters")
     if not isinstance(par, dict):
-        raise FitInputError("the fit JSON has no 'parameters' table: give the file "
-                            "`flexarm fit ... --json FIT.json` wrote")
+        raise FitInputError(
+            "the fit JSON has no 'parameters' table: give the file "
+            "`flexarm fit ... --json FIT.json` wrote"
+        )
     d = scenario.model_dump(mode="json", exclude_none=True)
     arm = d["arm"]
 
@@ -488,12 +644,17 @@ def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
             put("arm.beam.masses[0].mass", beam["masses"][0]["mass"], sj / L**2)
             if sw is not None and w:
                 rel = math.hypot(2 * sw / w, sj / J)
-                put("arm.beam.flexural_rigidity", beam["flexural_rigidity"],
-                    rel * beam["flexural_rigidity"])
+                put(
+                    "arm.beam.flexural_rigidity",
+                    beam["flexural_rigidity"],
+                    rel * beam["flexural_rigidity"],
+                )
         tip = d.get("sensors", {}).get("tip_deflection", {})
         put("sensors.tip_deflection.gain", tip.get("gain"), std("tip_gain"))
     if not out:
-        raise FitInputError("the fit JSON gives no standard deviation the scenario can use "
-                            "(every std is missing or NaN): the fit could not estimate its "
-                            "uncertainty; give --spread PATH=STD instead")
+        raise FitInputError(
+            "the fit JSON gives no standard deviation the scenario can use "
+            "(every std is missing or NaN): the fit could not estimate its "
+            "uncertainty; give --spread PATH=STD instead"
+        )
     return out

@@ -62,11 +62,15 @@ class FitResult:
         name = getattr(self.scenario, "name", "scenario")
         notes = [f"{state}: {self.message}", *fit_percent_lines(self.fit_percent)]
         notes += [f"warning: {w}" for w in self.warnings]
-        notes.append(f"free list: {self.free_source}; {self.nfev} evaluations, "
-                     f"{self.seconds:.1f} s")
-        return Table(f"FitResult of {name}: {len(self.free)} free parameters (SI)",
-                     parameter_rows(self.params, self.std),
-                     header=("parameter", "value", "std (HAC)", "std %", "unit"), notes=notes)
+        notes.append(
+            f"free list: {self.free_source}; {self.nfev} evaluations, {self.seconds:.1f} s"
+        )
+        return Table(
+            f"FitResult of {name}: {len(self.free)} free parameters (SI)",
+            parameter_rows(self.params, self.std),
+            header=("parameter", "value", "std (HAC)", "std %", "unit"),
+            notes=notes,
+        )
 
     def __repr__(self) -> str:
         return self._table().text()
@@ -83,15 +87,24 @@ class FitResult:
     def to_dict(self) -> dict:
         """The ``--json`` document (non-finite numbers, e.g. the std of an undetermined
         parameter, as null)."""
-        d = {"free": self.free, "params": self.params, "template": self.template,
-             "std": self.std, "correlation": np.round(np.asarray(self.correlation, float),
-                                                      4).tolist(),
-             "warnings": self.warnings, "fit_percent": self.fit_percent,
-             "segment_fit_percent": self.segment_fit_percent,
-             "converged": self.converged, "message": self.message,
-             "nfev": self.nfev, "cost": self.cost,
-             "seconds": round(self.seconds, 2), "stages": self.stages,
-             "free_source": self.free_source, "plots": [str(p) for p in self.plots]}
+        d = {
+            "free": self.free,
+            "params": self.params,
+            "template": self.template,
+            "std": self.std,
+            "correlation": np.round(np.asarray(self.correlation, float), 4).tolist(),
+            "warnings": self.warnings,
+            "fit_percent": self.fit_percent,
+            "segment_fit_percent": self.segment_fit_percent,
+            "converged": self.converged,
+            "message": self.message,
+            "nfev": self.nfev,
+            "cost": self.cost,
+            "seconds": round(self.seconds, 2),
+            "stages": self.stages,
+            "free_source": self.free_source,
+            "plots": [str(p) for p in self.plots],
+        }
         d.update(self.extras)
         return finite(d)
 
@@ -100,25 +113,55 @@ class FitResult:
         """A result read back from :meth:`to_dict`'s document (``scenario``: the fitted
         scenario, e.g. ``load_scenario`` of the ``--scenario-out`` file; the document does
         not hold it). Nulls read back as NaN (std) and the correlation as an array."""
-        known = {"free", "params", "template", "std", "correlation", "warnings",
-                 "fit_percent", "segment_fit_percent", "converged", "message", "nfev",
-                 "cost", "seconds", "stages", "free_source", "plots"}
+        known = {
+            "free",
+            "params",
+            "template",
+            "std",
+            "correlation",
+            "warnings",
+            "fit_percent",
+            "segment_fit_percent",
+            "converged",
+            "message",
+            "nfev",
+            "cost",
+            "seconds",
+            "stages",
+            "free_source",
+            "plots",
+        }
         missing = [k for k in ("free", "params", "std") if k not in d]
         if missing:
-            raise ValueError(f"fit document: no {', '.join(missing)}: not a document written "
-                             "by FitResult.to_dict (flexarm fit SCENARIO LOG... --json)")
+            raise ValueError(
+                f"fit document: no {', '.join(missing)}: not a document written "
+                "by FitResult.to_dict (flexarm fit SCENARIO LOG... --json)"
+            )
         nan = float("nan")
-        corr = np.array([[nan if v is None else v for v in row]
-                         for row in d.get("correlation", [])], float)
-        return cls(list(d["free"]), dict(d["params"]), dict(d.get("template", {})),
-                   {k: nan if v is None else float(v) for k, v in d["std"].items()},
-                   corr, list(d.get("warnings", [])), dict(d.get("fit_percent", {})),
-                   dict(d.get("segment_fit_percent", {})), scenario,
-                   bool(d.get("converged", False)), str(d.get("message", "")),
-                   int(d.get("nfev", 0)), float(d.get("cost") or nan),
-                   float(d.get("seconds", 0.0)), dict(d.get("stages", {})), {},
-                   str(d.get("free_source", "given")), list(d.get("plots", [])),
-                   {k: v for k, v in d.items() if k not in known})
+        corr = np.array(
+            [[nan if v is None else v for v in row] for row in d.get("correlation", [])], float
+        )
+        return cls(
+            list(d["free"]),
+            dict(d["params"]),
+            dict(d.get("template", {})),
+            {k: nan if v is None else float(v) for k, v in d["std"].items()},
+            corr,
+            list(d.get("warnings", [])),
+            dict(d.get("fit_percent", {})),
+            dict(d.get("segment_fit_percent", {})),
+            scenario,
+            bool(d.get("converged", False)),
+            str(d.get("message", "")),
+            int(d.get("nfev", 0)),
+            float(d.get("cost") or nan),
+            float(d.get("seconds", 0.0)),
+            dict(d.get("stages", {})),
+            {},
+            str(d.get("free_source", "given")),
+            list(d.get("plots", [])),
+            {k: v for k, v in d.items() if k not in known},
+        )
 
 
 def finite(x: Any) -> Any:

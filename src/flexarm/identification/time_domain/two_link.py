@@ -49,16 +49,32 @@ CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
 FIT_WINDOW = (0.0, 50.002)
 FIT_STEPS = ("5deg", "neg_10deg", "20deg", "neg_30deg")
 HELD_STEPS = ("neg_5deg", "10deg", "neg_20deg", "30deg", "0deg_run02")
-FREE = ["arm.joints[*].friction.coulomb", "arm.joints[*].friction.static",
-        "arm.joints[*].viscous", "arm.links[*].torsional_stiffness",
-        "arm.links[*].torsional_damping", "sensors.alpha_f_1.gain", "sensors.alpha_f_2.gain",
-        "arm.joints[*].drive.torque_constant", "arm.hubs[1].inertia"]
-PRIORS = {"arm.joints[0].drive.torque_constant": 0.3, "arm.joints[1].drive.torque_constant": 0.3,
-          "arm.links[0].torsional_stiffness": 0.3, "arm.links[1].torsional_stiffness": 0.3,
-          "sensors.alpha_f_1.gain": 0.2, "sensors.alpha_f_2.gain": 0.2,
-          "arm.hubs[1].inertia": 0.3, "arm.joints[0].viscous": 0.5, "arm.joints[1].viscous": 0.5}
-TIES = {"sensors.alpha_dot_f_1.gain": "sensors.alpha_f_1.gain",
-        "sensors.alpha_dot_f_2.gain": "sensors.alpha_f_2.gain"}
+FREE = [
+    "arm.joints[*].friction.coulomb",
+    "arm.joints[*].friction.static",
+    "arm.joints[*].viscous",
+    "arm.links[*].torsional_stiffness",
+    "arm.links[*].torsional_damping",
+    "sensors.alpha_f_1.gain",
+    "sensors.alpha_f_2.gain",
+    "arm.joints[*].drive.torque_constant",
+    "arm.hubs[1].inertia",
+]
+PRIORS = {
+    "arm.joints[0].drive.torque_constant": 0.3,
+    "arm.joints[1].drive.torque_constant": 0.3,
+    "arm.links[0].torsional_stiffness": 0.3,
+    "arm.links[1].torsional_stiffness": 0.3,
+    "sensors.alpha_f_1.gain": 0.2,
+    "sensors.alpha_f_2.gain": 0.2,
+    "arm.hubs[1].inertia": 0.3,
+    "arm.joints[0].viscous": 0.5,
+    "arm.joints[1].viscous": 0.5,
+}
+TIES = {
+    "sensors.alpha_dot_f_1.gain": "sensors.alpha_f_1.gain",
+    "sensors.alpha_dot_f_2.gain": "sensors.alpha_f_2.gain",
+}
 
 
 def _step_file(data: Path, step: str) -> Path:
@@ -73,8 +89,11 @@ def load_split(data: str | Path, examples: str | Path) -> dict:
     data, examples = Path(data), Path(examples)
     run = load_log_format(examples / "two-link-workspace.toml").read(data / "lqr_full_10deg.mat")
     st = load_log_format(examples / "two-link-staircase.toml")
-    return {"run": run, "fit_steps": [st.read(_step_file(data, s)) for s in FIT_STEPS],
-            "held_steps": {s: st.read(_step_file(data, s)) for s in HELD_STEPS}}
+    return {
+        "run": run,
+        "fit_steps": [st.read(_step_file(data, s)) for s in FIT_STEPS],
+        "held_steps": {s: st.read(_step_file(data, s)) for s in HELD_STEPS},
+    }
 
 
 def template(friction: bool = True):
@@ -94,22 +113,37 @@ def template(friction: bool = True):
 
 
 def default_options(**kw) -> FitOptions:
-    base: dict[str, Any] = dict(channels={c: 1.0 for c in CHANNELS}, priors=dict(PRIORS), ties=dict(TIES),
-                segment=3.0, substeps=2, max_nfev=25, bound_factor=4.0,
-                residual_level=0.2, correlation_time=0.5,
-                bounds={"arm.links[0].torsional_damping": (1e-3, 10.0),
-                        "arm.links[1].torsional_damping": (1e-3, 10.0),
-                        "arm.joints[0].friction.coulomb": (0.01, 5.0),
-                        "arm.joints[0].friction.static": (0.01, 5.0),
-                        "arm.joints[1].friction.coulomb": (1e-3, 0.5),
-                        "arm.joints[1].friction.static": (1e-3, 0.5)})
+    base: dict[str, Any] = dict(
+        channels={c: 1.0 for c in CHANNELS},
+        priors=dict(PRIORS),
+        ties=dict(TIES),
+        segment=3.0,
+        substeps=2,
+        max_nfev=25,
+        bound_factor=4.0,
+        residual_level=0.2,
+        correlation_time=0.5,
+        bounds={
+            "arm.links[0].torsional_damping": (1e-3, 10.0),
+            "arm.links[1].torsional_damping": (1e-3, 10.0),
+            "arm.joints[0].friction.coulomb": (0.01, 5.0),
+            "arm.joints[0].friction.static": (0.01, 5.0),
+            "arm.joints[1].friction.coulomb": (1e-3, 0.5),
+            "arm.joints[1].friction.static": (1e-3, 0.5),
+        },
+    )
     base.update(kw)
     return FitOptions(**base)
 
 
-def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = True,
-                 options: FitOptions | None = None,
-                 progress: Callable[[str], None] | None = None) -> ScenarioFit:
+def fit_two_link(
+    data: str | Path,
+    examples: str | Path,
+    *,
+    friction: bool = True,
+    options: FitOptions | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ScenarioFit:
     """The fit of the split (module docstring) through the one engine
     (:func:`flexarm.identification.time_domain.engine.fit` on
     :func:`~flexarm.identification.time_domain.presets.two_link`); ``friction=False`` fits
@@ -127,23 +161,47 @@ def fit_two_link(data: str | Path, examples: str | Path, *, friction: bool = Tru
         preset.options = options
     wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
     # the two-link preset runs the general engine: a ScenarioFit (not the servo rig's result)
-    return cast(ScenarioFit, engine.fit(preset, [logs["run"]] + logs["fit_steps"], None,
-                                        Grouped(windows=wins, predict=False), progress=progress))
+    return cast(
+        ScenarioFit,
+        engine.fit(
+            preset,
+            [logs["run"]] + logs["fit_steps"],
+            None,
+            Grouped(windows=wins, predict=False),
+            progress=progress,
+        ),
+    )
 
 
-def held_out_report(scenario, data: str | Path, examples: str | Path, *,
-                    plots: str | Path | None = None) -> dict:
+def held_out_report(
+    scenario, data: str | Path, examples: str | Path, *, plots: str | Path | None = None
+) -> dict:
     """fit % per signal of the fitted scenario on the held-out data: the last 52 s of the
     run (one simulation from the logged state at 50 s) and each other step (from its
     file's first sample), with the steps' medians."""
     logs = load_split(data, examples)
     ch = list(CHANNELS)
-    last = predict_scenario(scenario, [logs["run"]], FitOptions(windows=[(50.0, 102.0)]),
-                            channels=ch, plots=plots, tag="last52s")
-    steps = predict_scenario(scenario, list(logs["held_steps"].values()), FitOptions(),
-                             channels=ch, plots=plots, tag="steps")
+    last = predict_scenario(
+        scenario,
+        [logs["run"]],
+        FitOptions(windows=[(50.0, 102.0)]),
+        channels=ch,
+        plots=plots,
+        tag="last52s",
+    )
+    steps = predict_scenario(
+        scenario,
+        list(logs["held_steps"].values()),
+        FitOptions(),
+        channels=ch,
+        plots=plots,
+        tag="steps",
+    )
     per_step = dict(zip(logs["held_steps"], steps["fit_percent"].values(), strict=False))
     med = {c: float(np.median([d[c] for d in per_step.values() if c in d])) for c in ch}
-    return {"last_52s": next(iter(last["fit_percent"].values())), "steps": per_step,
-            "steps_median": {c: round(v, 2) for c, v in med.items()},
-            "plots": last["plots"] + steps["plots"]}
+    return {
+        "last_52s": next(iter(last["fit_percent"].values())),
+        "steps": per_step,
+        "steps_median": {c: round(v, 2) for c, v in med.items()},
+        "plots": last["plots"] + steps["plots"],
+    }

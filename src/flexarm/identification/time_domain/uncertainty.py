@@ -59,8 +59,9 @@ def correlation_time(x: np.ndarray) -> int:
     return int(below[0]) if below.size else n
 
 
-def bandwidth(r: np.ndarray, factor: float = BANDWIDTH_FACTOR,
-              max_fraction: float = MAX_FRACTION) -> int:
+def bandwidth(
+    r: np.ndarray, factor: float = BANDWIDTH_FACTOR, max_fraction: float = MAX_FRACTION
+) -> int:
     """Bartlett bandwidth M (samples) of one log from its residuals ``r`` (C, N) (channels
     × samples): ``factor`` × the longest channel correlation time, in [1, max_fraction N]."""
     r = np.atleast_2d(r)
@@ -90,8 +91,13 @@ def iid_covariance(r: np.ndarray, J: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(J.T @ J) * s2
 
 
-def hac_covariance(r: np.ndarray, J: np.ndarray, *, factor: float = BANDWIDTH_FACTOR,
-                   max_fraction: float = MAX_FRACTION) -> tuple[np.ndarray, list[int]]:
+def hac_covariance(
+    r: np.ndarray,
+    J: np.ndarray,
+    *,
+    factor: float = BANDWIDTH_FACTOR,
+    max_fraction: float = MAX_FRACTION,
+) -> tuple[np.ndarray, list[int]]:
     """Newey–West sandwich covariance (JᵀJ)⁺ Ŝ (JᵀJ)⁺ · m/(m − p) (see the module doc).
 
     ``r``: residuals (C, L, N) (channels, logs, samples), 0 where a sample is not used;

@@ -32,8 +32,14 @@ from flexarm.sim.sampled import SimulationDiverged, simulate_loop
 from flexarm.specs import Scenario, load_scenario
 
 
-def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller: Any = None,
-             plots: str | Path | None = None, traces: bool = False) -> dict:
+def validate(
+    scenario: Scenario | str | Path,
+    logs: Sequence[Any],
+    *,
+    controller: Any = None,
+    plots: str | Path | None = None,
+    traces: bool = False,
+) -> dict:
     """fit % per log and signal: ``{"fit_percent": {"<file name>": {"motor_angle": x,
     "tip_deflection": y}}, "scenario": ..., "plots": [...]}`` (with ``traces``, also
     ``"traces"``: per log ``time``, ``measured``, ``simulated``). The servo-rig replay
@@ -48,14 +54,23 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
         check_closed_loop(log)
         T = sc.sampling.period
         if abs(log.dt - T) > PERIOD_TOL * T:
-            raise FitInputError(f"{log.path}: field 'time': sampling period {log.dt:g} s, but "
-                                f"the scenario's sampling.period is {T:g} s")
+            raise FitInputError(
+                f"{log.path}: field 'time': sampling period {log.dt:g} s, but "
+                f"the scenario's sampling.period is {T:g} s"
+            )
         sensors = {k: v.model_copy(update={"noise": 0.0}) for k, v in sc.sensors.items()}
         n = len(log)
-        s2 = sc.model_copy(update={"sensors": sensors, "simulation": sc.simulation.model_copy(
-            update={"duration": (n - 1) * T})})
-        p = prepare(s2, controller=from_spec(log.controller, T),
-                    references={"reference": log.columns["reference"][:len(range(n))]})
+        s2 = sc.model_copy(
+            update={
+                "sensors": sensors,
+                "simulation": sc.simulation.model_copy(update={"duration": (n - 1) * T}),
+            }
+        )
+        p = prepare(
+            s2,
+            controller=from_spec(log.controller, T),
+            references={"reference": log.columns["reference"][: len(range(n))]},
+        )
         th0, om0 = guesses.initial_hub(log)
         tip = sc.sensors.get("tip_deflection")
         gain = tip.gain if tip is not None else 1.0
@@ -65,7 +80,7 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
         nb = p.model.beam.mass_dofs
         if nb:
             shape = p.model.initial_state(0.0, 0.0, 1.0) - p.model.initial_state()
-            x0[2 + nb:2 + 2 * nb] += shape[2:2 + nb] * v0 / gain
+            x0[2 + nb : 2 + 2 * nb] += shape[2 : 2 + nb] * v0 / gain
         try:
             out = simulate_loop(p.loop, x0, p.references, p.n_samples)
         except SimulationDiverged as exc:
@@ -73,7 +88,8 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
             raise FitInputError(
                 f"{log.path}: field 'controller': with K1={c.k1:g} K2={c.k2:g} K3={c.k3:g} "
                 f"K4={c.k4:g} the simulated loop on {sc.name} is unstable ({exc}); check the "
-                "gains and their signs/units, and the tip sensor's gain sign") from None
+                "gains and their signs/units, and the tip sensor's gain sign"
+            ) from None
         names = p.loop.sensors.names
         skip = max((s.delay for s in sc.sensors.values()), default=0) + sc.sampling.delay + 1
         fp = {}
@@ -83,8 +99,9 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
                 traj[j][0] = out["measured"][:, names.index(sig)]
             if sig in log.outputs and sig in names:
                 y, yh = log.columns[sig][skip:], traj[j][0, skip:]
-                fp[sig] = round(float(100 * (1 - np.linalg.norm(y - yh)
-                                             / np.linalg.norm(y - y.mean()))), 3)
+                fp[sig] = round(
+                    float(100 * (1 - np.linalg.norm(y - yh) / np.linalg.norm(y - y.mean()))), 3
+                )
             else:
                 fp[sig] = None
         traj[2][0] = out["command"][:, 0]
@@ -97,23 +114,28 @@ def validate(scenario: Scenario | str | Path, logs: Sequence[Any], *, controller
                 f"K4={c.k4:g} the simulated loop on {sc.name} runs away (command saturated "
                 f"{100 * sat:.0f} % of the time, hub-angle fit {fp['motor_angle']:.0f} %): "
                 "the gains make the simulated loop unstable; check their signs and units "
-                "(V/rad, V/m, V*s/rad, V*s/m) and the tip sensor's gain sign")
+                "(V/rad, V/m, V*s/rad, V*s/m) and the tip sensor's gain sign"
+            )
         result["fit_percent"][log.name] = fp
         if traces:
-            meas = {c: log.signals[c] for c in ("motor_angle", "tip_deflection")
-                    if c in log.signals}
+            meas = {
+                c: log.signals[c] for c in ("motor_angle", "tip_deflection") if c in log.signals
+            }
             if "voltage" in log.signals:
                 meas["command"] = log.signals["voltage"]
-            sim = {c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection"))
-                   if c in names}
+            sim = {
+                c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection")) if c in names
+            }
             sim["command"] = traj[2][0]
             assert log.time is not None  # a bench log has its time (as_bench_log)
             result.setdefault("traces", []).append(
-                {"time": log.time - log.time[0], "measured": meas, "simulated": sim})
+                {"time": log.time - log.time[0], "measured": meas, "simulated": sim}
+            )
         blogs.append(log)
         trajs.append(traj)
     if plots is not None:
         for log, tr in zip(blogs, trajs, strict=True):
-            result["plots"] += [str(q) for q in overlay_plots(
-                plots, [log], tr, result["fit_percent"], "validate")]
+            result["plots"] += [
+                str(q) for q in overlay_plots(plots, [log], tr, result["fit_percent"], "validate")
+            ]
     return result
