@@ -309,3 +309,43 @@ def test_the_cli_gates_the_design_and_the_export(tmp_path):
     )
     assert r.exit_code == 2 and "--max-unstable-share" in r.stderr
     assert not (tmp_path / "d3").exists()
+
+
+def test_the_cli_comparison_fits_80_columns_and_cuts_no_number(tmp_path):
+    """Issue #26: the design comparison printed by `flexarm design` stays within 80 columns
+    (the terminal's width here) and shows every figure whole: each controller's unstable
+    count as 'k/N' and each metric's nominal / median / worst as compare.json has them."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from flexarm.cli import app
+    from flexarm.design.compare import format_metric
+
+    out = tmp_path / "d"
+    r = CliRunner().invoke(
+        app,
+        [
+            "design",
+            "rotary-flexible-link",
+            "--method",
+            "lqr",
+            "--spread",
+            "arm.motor.inertia=10%",
+            "--plants",
+            "3",
+            "--out",
+            str(out),
+            "--accept-unstable",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert all(len(line) <= 80 for line in r.stdout.splitlines()), r.stdout
+    rows = json.loads((out / "compare.json").read_text())["rows"]
+    flat = " ".join(r.stdout.split())
+    for name, row in rows.items():
+        assert f"{row['unstable']}/{row['n_plants']}" in flat, (name, r.stdout)
+        cell = " / ".join(
+            format_metric(row[k]["tip_settling_s"]) for k in ("nominal", "median", "worst")
+        )
+        assert cell in flat, (name, cell, r.stdout)

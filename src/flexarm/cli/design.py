@@ -9,7 +9,6 @@ from typing import Any
 
 import typer
 from rich.markup import escape
-from rich.table import Table
 
 from flexarm.cli import parsing
 from flexarm.cli.common import (
@@ -458,30 +457,32 @@ def _check_options(
 
 
 def _print_comparison(side, plants: int) -> None:
-    """The step comparison as a table: nominal / median / worst per metric and controller."""
+    """The step comparison as a table within the terminal's width (one row per metric, one
+    column per controller: nominal / median / worst; stacked, never cut, where the columns
+    do not fit: :class:`flexarm.display.Table`)."""
     from flexarm.design.compare import METRICS, format_metric
+    from flexarm.display import Table as TextTable
 
     drawn = side.settings["n_plants"] > 0
     cols = ("nominal", "median", "worst") if drawn else ("nominal",)
-    tab = Table(
-        title=(
-            f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
-            f"over {plants} drawn plants"
-            if drawn
-            else f"a {side.settings['step_rad']:g} rad step on the nominal plant"
-        )
+    title = (
+        f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
+        f"over {plants} drawn plants"
+        if drawn
+        else f"a {side.settings['step_rad']:g} rad step on the nominal plant"
     )
-    tab.add_column("controller")
-    for title, unit, _ in METRICS.values():
-        tab.add_column(escape(f"{title} [{unit}]"))  # rich markup ate "[s]"
-    if drawn:
-        tab.add_column("unstable")
-    tab.add_column("limit ok")
-    for name, row in side.rows.items():
-        tab.add_row(
-            name,
-            *[" / ".join(format_metric(row[k][m]) for k in cols) for m in METRICS],
-            *([f"{row['unstable']}/{row['n_plants']}"] if drawn else []),
-            "yes" if row["limit_respected"] else "NO",
+    names = list(side.rows)
+    rows: list[tuple] = [
+        (
+            f"{t} [{u}]",
+            *(" / ".join(format_metric(side.rows[n][k][m]) for k in cols) for n in names),
         )
-    console.print(tab)
+        for m, (t, u, _) in METRICS.items()
+    ]
+    if drawn:
+        rows.append(
+            ("unstable", *(f"{side.rows[n]['unstable']}/{side.rows[n]['n_plants']}" for n in names))
+        )
+    rows.append(("limit ok", *("yes" if side.rows[n]["limit_respected"] else "NO" for n in names)))
+    text = TextTable(title, rows, header=("metric", *names)).text(console.width or 80)
+    console.print(text, markup=False, highlight=False, soft_wrap=True)
