@@ -230,7 +230,7 @@ def test_cli_fit_and_validate_refit_friction(tmp_path):
     from typer.testing import CliRunner
 
     from flexarm.cli import app
-    from flexarm.identification.time_domain.general import _drop_none
+    from flexarm.identification.time_domain.result import drop_none as _drop_none
     from flexarm.io.logs import write_log
     from flexarm.io.write import write_toml
 

@@ -380,7 +380,7 @@ def test_general_fit_and_refit_validate_reports(tmp_path):
     """The general path (flexarm fit SCENARIO LOG --free ..., validate --refit friction)
     with --report, on test_fit_scenario's synthetic two-mode link: the report's fitted
     values, std and fit % are the JSON's, and the refitted friction table is there."""
-    from flexarm.identification.time_domain.general import _drop_none
+    from flexarm.identification.time_domain.result import drop_none as _drop_none
     from flexarm.identification.time_domain.synthetic import scenario_log
     from flexarm.io.logs import write_log
     from flexarm.io.write import write_toml
