@@ -362,8 +362,12 @@ def map_chunks(
         return [fn(*a, **shared) for a in args]
     where = list(workers) if workers else None
     if shared:
-        fut = client.scatter(shared, broadcast=True, hash=False, workers=where)
-        shared = dict(fut)
+        # scattered as a list: each value gets a key of its own (a dict would be keyed by
+        # its names, 'seed', 'references', ..., shared with the next call's, whose release
+        # then cancels this call's tasks: "lost dependencies")
+        names = list(shared)
+        futs = client.scatter([shared[k] for k in names], broadcast=True, hash=False, workers=where)
+        shared = dict(zip(names, futs, strict=True))
     futures = [
         client.submit(
             fn, *a, **shared, pure=False, retries=retries, workers=where, allow_other_workers=False
