@@ -10,9 +10,6 @@ servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` 
 ``BenchLog`` / ``read_bench_log`` the old log type and reader, ``RigFitResult`` the servo
 pipeline's result."""
 
-# last: the submodules `fit` and `predict` share these names, and importing a submodule binds
-# its name on the package; the servo-rig functions are what these names mean here
-from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
 from flexarm.identification.time_domain.general import (
     FitOptions,
     ScenarioFit,
@@ -51,3 +48,8 @@ __all__ = [
     "read_bench_log",
     "validate",
 ]
+
+# last, after __all__ (so that import sorting keeps it last): the submodules `fit` and
+# `predict` share these names, and importing a submodule binds its name on the package;
+# the servo-rig functions are what these names mean here
+from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
