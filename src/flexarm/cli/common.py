@@ -43,6 +43,16 @@ def fail(msg: str) -> NoReturn:
     raise typer.Exit(2)
 
 
+def check_cluster(scheduler: str | None, workers: int | None) -> None:
+    """``--scheduler`` / ``--workers`` checked before any work (the commands that run on
+    Dask: ``fit-many``, ``design``); :func:`flexarm.distributed.client_for` checks the same
+    values again when it starts the client."""
+    if scheduler is not None and workers is not None:
+        fail("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        fail(f"--workers {workers}: give 1 or more")
+
+
 def load(scenario: str):
     """A scenario (file or built-in name) with the model's own checks; a bad one is one
     line naming the field."""

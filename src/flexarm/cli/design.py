@@ -12,6 +12,7 @@ from rich.markup import escape
 
 from flexarm.cli import parsing
 from flexarm.cli.common import (
+    check_cluster,
     check_file_option,
     command_line,
     console,
@@ -157,10 +158,7 @@ def design_cmd(
     The design gate: a design unstable on the nominal plant or on more than
     --max-unstable-share of the drawn plants, or whose command reaches the limit, is written
     with its verdict, printed in red, and the command exits 2 unless --accept-unstable."""
-    if scheduler is not None and workers is not None:
-        fail("give --scheduler or --workers, not both")
-    if workers is not None and workers < 1:
-        fail(f"--workers {workers}: give 1 or more")
+    check_cluster(scheduler, workers)
     with guarded(scenario, fit_json):
         _design(
             ctx,

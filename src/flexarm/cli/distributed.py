@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from flexarm.cli.common import console, enable_cache, err, fail
+from flexarm.cli.common import check_cluster, console, enable_cache, err
 
 
 def fit_many(
@@ -44,10 +44,7 @@ def fit_many(
     failed (the others still run)."""
     import flexarm.distributed as fd
 
-    if scheduler is not None and workers is not None:
-        fail("give --scheduler or --workers, not both")
-    if workers is not None and workers < 1:
-        fail(f"--workers {workers}: give 1 or more")
+    check_cluster(scheduler, workers)
     enable_cache()
     rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
 
