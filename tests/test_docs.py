@@ -11,7 +11,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 
-import scenario_reference  # noqa: E402
+import scenario_reference  # noqa: E402 - from tools/, put on sys.path above
 
 SCENARIOS = sorted((ROOT / "src" / "flexarm" / "scenarios").glob("*.toml"))
 

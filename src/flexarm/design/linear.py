@@ -877,7 +877,9 @@ def design_linear(
     )
     sc = scenario_from_dict(data, f"{scenario.name}: the {method} design")
 
-    cpx = lambda a: [[float(v.real), float(v.imag)] for v in a]  # noqa: E731
+    def cpx(a):
+        return [[float(v.real), float(v.imag)] for v in a]
+
     info = {
         "model": {
             "arm_states": list(dm.continuous.state_labels),

@@ -412,22 +412,25 @@ def design_nested(
             f"at max_deflection {max_deflection:g} rad + friction "
             f"{abs(coulomb_cmd):.4g}; lower max_deflection"
         )
-    design = lambda g, **kw: design_inner_loop(  # noqa: E731
-        model,
-        dt,
-        delay + hub_delay,
-        dc_gain=g,
-        current_limit=limit,
-        step=step,
-        bending=max_deflection,
-        coupling_gain=c_hat,
-        coulomb=float(model.friction.coulomb),
-        band=inner_band,
-        horizon=horizon,
-        seed=seed,
-        min_root=min_root,
-        **kw,
-    )
+
+    def design(g, **kw):
+        return design_inner_loop(
+            model,
+            dt,
+            delay + hub_delay,
+            dc_gain=g,
+            current_limit=limit,
+            step=step,
+            bending=max_deflection,
+            coupling_gain=c_hat,
+            coulomb=float(model.friction.coulomb),
+            band=inner_band,
+            horizon=horizon,
+            seed=seed,
+            min_root=min_root,
+            **kw,
+        )
+
     if dc_gain is not None:
         g, inner = gain, design(gain)
     else:

@@ -120,7 +120,9 @@ def integrate_law(
     first step h; it returns NaN (so the loop reports divergence) when it fails, e.g. when
     its step size collapses or it needs more than :data:`TSIT5_MAX_STEPS` steps."""
     if type(solver) is RK4:
-        f = lambda y, t: plant.rhs(y, command(y, t))  # noqa: E731
+
+        def f(y, t):
+            return plant.rhs(y, command(y, t))
 
         def body(i, y):
             t = t0 + i * h

@@ -120,7 +120,10 @@ def single_link_arm(m: dict, const: dict) -> Arm:
     fr = Friction(
         model="coulomb", coulomb=m["Fc"], static=m["Fs"], velocity_tolerance=const["vel_tol"]
     )
-    vec = lambda v: (v * o)[None]  # noqa: E731  (one joint; the batch, if any, last)
+
+    def vec(v):  # one joint; the batch, if any, last
+        return (v * o)[None]
+
     return Arm(
         state_names=body.state_names,
         signal_names=SIGNALS,
