@@ -1,10 +1,12 @@
 """The code habits of issue #26, run by ``make test``: ruff (lint and format) and pyright
-(basic, on src/) are clean. Each tool is the one installed beside the running Python (the
-versions pinned in requirements/lock.txt), else the one on PATH; without it the test skips
-and says so. Configuration: pyproject.toml ([tool.ruff], [tool.pyright]) and typings/."""
+(basic, on src/) are clean, and every noqa comment names its codes and says why. Each tool
+is the one installed beside the running Python (the versions pinned in
+requirements/lock.txt), else the one on PATH; without it the test skips and says so.
+Configuration: pyproject.toml ([tool.ruff], [tool.pyright]) and typings/."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -51,3 +53,30 @@ def test_ruff_format_is_clean():
 def test_pyright_is_clean():
     """pyright in basic mode on src/ ([tool.pyright]) with this Python's packages."""
     _run([_tool("pyright"), "--pythonpath", sys.executable], timeout=900)
+
+
+#: the trees whose noqa comments must say why
+NOQA_TREES = ["src", "tests", "benchmarks", "tools"]
+#: a noqa comment as ruff finds one (a hash, maybe spaces, the word)
+_NOQA = re.compile("#" + r"\s*noqa\b(?P<rest>.*)$", re.IGNORECASE)
+#: what must follow the word: the codes, then a dash and the reason (ruff reads the codes and
+#: stops at the dash; RUF100 in [tool.ruff.lint] flags a directive that suppresses nothing)
+_REASONED = re.compile(r"^:\s*[A-Z]+[0-9]+(?:\s*,\s*[A-Z]+[0-9]+)*\s+-\s+\S")
+
+
+def test_every_noqa_names_its_codes_and_says_why():
+    """Each noqa comment in src/, tests/, benchmarks/ and tools/ names its codes and says
+    why after a dash (``noqa: F401 - only whether it imports``, after the hash): a
+    suppression is a decision, and its line says what it suppresses and why. Most are
+    better fixed than excused (a ``def`` for a named lambda, E731; the import moved to the
+    top, E402)."""
+    bad = []
+    for tree in NOQA_TREES:
+        for path in sorted((ROOT / tree).rglob("*.py")):
+            for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                m = _NOQA.search(line)
+                if m and not _REASONED.match(m.group("rest")):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert not bad, "noqa comments without their codes and a reason (noqa: E402 - why):\n" + (
+        "\n".join(bad)
+    )
