@@ -153,6 +153,11 @@ def test_place_gives_the_designed_poles():
         "e_tip_deflection",
         "e_motor_angle_ref",
     ]
+    # named python-control systems (issue #26): the controller after its method, its
+    # output the drive's command; the design model's sampled forms
+    assert des.controller.name == "place"
+    assert list(des.controller.output_labels) == list(dm.augmented.input_labels)
+    assert (dm.sampled.name, dm.augmented.name) == ("design model, sampled", "augmented model")
     assert des.scenario.controller.inputs == ["motor_angle", "tip_deflection", "motor_angle"]
     assert des.scenario.controller.setpoints == [0, 0, "reference"]
     # the observer (Kalman predictor) is stable and so is the loop

@@ -78,6 +78,11 @@ def derivative_pole(kd: float, dt: float, kick: float, quantum: float, g1_inf: f
     return float(min(0.999, max(0.0, 1.0 - kick * dt / (kd * quantum * abs(g1_inf)))))
 
 
+def _named(g: control.TransferFunction, name: str) -> control.TransferFunction:
+    """``g`` (the same coefficients and period) named ``name``."""
+    return control.TransferFunction(g.num, g.den, g.dt, name=name)
+
+
 def _coeffs(p) -> list[float]:
     return [float(v) for v in np.real(np.atleast_1d(np.asarray(p, dtype=complex)))]
 
@@ -711,7 +716,12 @@ def design_nested(
     return Design(
         method="nested",
         scenario=designed,
-        controller={"gcm1": inner.gcm1, "gcm2": inner.gcm2, "gcb": gcb_tf, "N": n},
+        controller={  # named as in FRB Figs. 4 and 5
+            "gcm1": _named(inner.gcm1, "G_cm1"),
+            "gcm2": _named(inner.gcm2, "G_cm2"),
+            "gcb": _named(gcb_tf, "G_cb"),
+            "N": _named(n, "N"),
+        },
         info=info,
         warnings=warnings,
     )
