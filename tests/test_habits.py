@@ -80,3 +80,60 @@ def test_every_noqa_names_its_codes_and_says_why():
     assert not bad, "noqa comments without their codes and a reason (noqa: E402 - why):\n" + (
         "\n".join(bad)
     )
+
+
+# ------------------------------------------------------------------ test files' names
+#: what a test file may be named after besides a module of flexarm: the documentation
+#: (docs/, README.md, the notebooks) and the code habits of every tree (this file)
+OUTSIDE_THE_PACKAGE = {"docs", "habits"}
+
+
+def _module_names() -> tuple[set[str], dict[str, set[str]]]:
+    """(full, tails): every module and subpackage of flexarm as its dotted path below
+    flexarm with ``_`` for ``.`` (``identification_frequency_domain_harmonics``; the package
+    itself ``flexarm``), and each tail of those paths (``frequency_domain_harmonics``,
+    ``harmonics``) → the full names that end with it."""
+    pkg = ROOT / "src" / "flexarm"
+    full, tails = {"flexarm"}, {}
+    for path in pkg.rglob("*.py"):
+        parts = path.relative_to(pkg).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        if not parts or parts[-1] == "__main__":
+            continue
+        name = "_".join(parts)
+        full.add(name)
+        for i in range(len(parts)):
+            tails.setdefault("_".join(parts[i:]), set()).add(name)
+    return full, tails
+
+
+def test_every_test_file_is_named_after_what_it_tests():
+    """The rule: ``tests/test_<name>.py`` or ``tests/test_<name>__<topic>.py``, where
+    <name> is a module or subpackage of flexarm, its dotted path below flexarm with ``_``
+    for ``.`` (``design_gate`` for flexarm.design.gate; ``flexarm`` for the package's
+    public face), or a tail of that path that no other module shares (``harmonics`` for
+    identification.frequency_domain.harmonics; ``io_logs``, not ``logs``, which
+    identification.time_domain.logs shares), or ``docs`` / ``habits``
+    (:data:`OUTSIDE_THE_PACKAGE`). ``__<topic>``, after a double underscore, names a
+    further file about the same module (``test_io_logs__properties.py``). A test that
+    runs through several modules (an acceptance run, the CLI on a real rig) is named after
+    the module it mainly exercises. Helpers without tests keep a leading underscore
+    (``_helpers.py``)."""
+    full, tails = _module_names()
+    bad = []
+    for path in sorted((ROOT / "tests").glob("test_*.py")):
+        name, sep, topic = path.stem.removeprefix("test_").partition("__")
+        if sep and (not topic or "__" in topic):
+            bad.append(f"{path.name}: one __<topic> after the name")
+        elif name in full or name in OUTSIDE_THE_PACKAGE:
+            continue
+        elif len(tails.get(name, ())) == 1:
+            continue
+        elif name in tails:
+            bad.append(f"{path.name}: {name!r} is shared by {', '.join(sorted(tails[name]))}")
+        else:
+            bad.append(f"{path.name}: no module of flexarm is named {name!r}")
+    assert not bad, "test files not named after a module (tests/test_habits.py):\n" + (
+        "\n".join(bad)
+    )
