@@ -10,7 +10,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-try:  # property tests (tests/test_properties_*.py): repeatable, bounded, no example database
+try:  # property tests (tests/test_*__properties.py): repeatable, bounded, no example database
     from hypothesis import settings
 
     settings.register_profile(

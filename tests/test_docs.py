@@ -70,7 +70,7 @@ def test_readme_links_exist():
 
 
 def test_readme_c_loop_is_the_design_pages():
-    """The README's C target loop (compiled by tests/test_export_c.py) is the one
+    """The README's C target loop (compiled by tests/test_c_export.py) is the one
     docs/tasks/design-export.md shows."""
 
     def block(path):

@@ -197,7 +197,7 @@ def rk4_path(
 
     Not a closed-loop simulator (that is :mod:`flexarm.sim.sampled`, which runs continuous
     laws too, :func:`integrate_law`): a plain integrator of a given ẋ = f(x, t), e.g. free
-    motion (tests/test_properties_models.py). Stages as :func:`_rk4_stages`."""
+    motion (tests/test_models__properties.py). Stages as :func:`_rk4_stages`."""
 
     def step(k, carry):
         x, t = carry

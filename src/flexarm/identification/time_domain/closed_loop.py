@@ -18,7 +18,7 @@ every substep a hub that crossed zero velocity, or entered the band |ω| < Δv, 
 the sample loop around it, for fitting: every log and parameter point at once (the batch
 (L, P) carried last in every array), sensor delays that are traced parameters, the
 logged per-sample gains, and the cost summed inside the scan; it equals
-:func:`flexarm.sim.sampled.simulate_loop` on the same rig to 1e-9 (tests/test_bench_fit.py).
+:func:`flexarm.sim.sampled.simulate_loop` on the same rig to 1e-9 (tests/test_time_domain_fit.py).
 
 Sensor low-pass filters (known cutoffs, not fitted; ``filters=(hub, tip)`` static flags,
 ω_θ = ``const["omega_th"]``, ω_d = ``const["omega_d"]`` in rad/s) are analog first-order
