@@ -50,7 +50,7 @@ test: $(STAMP)
 
 # The documentation site (mkdocs.yml: mkdocs-material, mkdocstrings, mkdocs-jupyter) into
 # site/, warnings as errors, the notebooks executed; docs/hooks.py generates the scenario
-# reference and the API pages at build time. tests/test_docs_site.py builds it too.
+# reference and the API pages at build time. tests/test_docs__site.py builds it too.
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 FLEXARM_DOCS_EXECUTE=true $(BIN)/python -m mkdocs build --strict --site-dir site
 

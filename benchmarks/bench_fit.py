@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-import flexarm  # noqa: F401  (float64)
 from flexarm.identification.time_domain import fit, validate
 from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.specs import load_scenario

@@ -20,8 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "src"))
 
-import _frb_sim as sim  # noqa: E402
-from flexarm.identification.frequency_domain.identify import identify  # noqa: E402
+import _frb_sim as sim  # noqa: E402 - after the sys.path entries above
+from flexarm.identification.frequency_domain.identify import identify  # noqa: E402 - after the sys.path entries above
 
 TARGET_S = 1.0
 REPEATS = 5

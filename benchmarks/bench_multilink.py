@@ -28,7 +28,6 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import solve_ivp
 
-import flexarm  # noqa: F401  (float64)
 from flexarm.control import regulation as R
 from flexarm.models.multilink import build_multilink
 from flexarm.sim import continuous as C

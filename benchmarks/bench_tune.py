@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-import flexarm  # noqa: F401  (float64)
+import flexarm
 from flexarm.design import plants as pl
 from flexarm.design.tune import TuneCost, design_tune
 

@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from flexarm.identification.time_domain.two_link import fit_two_link, held_out_report  # noqa: E402
+from flexarm.identification.time_domain.two_link import fit_two_link, held_out_report  # noqa: E402 - after the sys.path entries above
 
 DATA = ROOT.parents[0] / "shared" / "data" / "two-link-rig"
 EXAMPLES = ROOT / "examples"

@@ -1,5 +1,5 @@
 """Write the notebooks of docs/notebooks/ (plain nbformat 4 JSON, no outputs) from the cells
-below: ``python docs/make_notebooks.py``. tests/test_notebooks.py executes every notebook
+below: ``python docs/make_notebooks.py``. tests/test_docs__notebooks.py executes every notebook
 and fails when a notebook differs from what this script writes.
 
 Every notebook runs on the built-in scenarios with short durations; cells that need the

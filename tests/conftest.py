@@ -1,12 +1,16 @@
+import functools
 import os
+from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import jax  # noqa: E402
+import jax
 
 jax.config.update("jax_enable_x64", True)
 
-try:  # property tests (tests/test_properties_*.py): repeatable, bounded, no example database
+try:  # property tests (tests/test_*__properties.py): repeatable, bounded, no example database
     from hypothesis import settings
 
     settings.register_profile(
@@ -18,11 +22,6 @@ except ImportError:  # the property test files skip themselves
 
 
 # ------------------------------------------------------------------ the real lab logs
-import functools  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import pytest  # noqa: E402
-
 #: the repository root
 ROOT = Path(__file__).resolve().parents[1]
 #: the real lab logs: $FLEXARM_DATA, else ../shared/data beside the repository (absent in a

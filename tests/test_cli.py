@@ -435,7 +435,7 @@ def test_plain_ctrl_c_in_fit_exits_130_writing_a_marked_stub(tmp_path, monkeypat
 
 
 def test_scenario_valid_as_data_but_not_as_a_model_exits_2(tmp_path):
-    """Found by tests/test_properties_scenarios.py: an improper G_b passed the schema and
+    """Found by tests/test_scenario__properties.py: an improper G_b passed the schema and
     `info` ended in a ValueError traceback from the model layer."""
     from flexarm.specs import builtin_scenarios
 

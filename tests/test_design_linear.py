@@ -153,6 +153,11 @@ def test_place_gives_the_designed_poles():
         "e_tip_deflection",
         "e_motor_angle_ref",
     ]
+    # named python-control systems (issue #26): the controller after its method, its
+    # output the drive's command; the design model's sampled forms
+    assert des.controller.name == "place"
+    assert list(des.controller.output_labels) == list(dm.augmented.input_labels)
+    assert (dm.sampled.name, dm.augmented.name) == ("design model, sampled", "augmented model")
     assert des.scenario.controller.inputs == ["motor_angle", "tip_deflection", "motor_angle"]
     assert des.scenario.controller.setpoints == [0, 0, "reference"]
     # the observer (Kalman predictor) is stable and so is the loop
@@ -163,7 +168,7 @@ def test_place_gives_the_designed_poles():
 def test_lqr_friction_compensation_stops_within_one_count(integral):
     """The built-in rotary rig (Coulomb 0.03 N·m, stiction 0.04 N·m, 12-bit encoder, noisy
     gauge 2 samples late), a 0.3 rad step: the scenario's own state feedback sticks 7.3
-    counts short (test_friction_compensation: the band F_s / (k1 k_u)); the LQR design with
+    counts short (test_control_friction_compensation: the band F_s / (k1 k_u)); the LQR design with
     the Coulomb feedforward C_f / k_u and integral action (the default estimated input
     disturbance, or LQI) stops within one count, and its command stays inside the 10 V
     limit (the design scales R until the linear loop's peak is within 90 % of it).
@@ -288,7 +293,8 @@ def test_front_door_is_the_callable_package():
 # ----------------------------------------------------------------------------- real rig
 @pytest.fixture(scope="module")
 def unit6_rig(rotary_whole_fit):
-    """The unit 6 rig fitted on its whole log (tests/test_real_rotary_rig.py's SHEET), as
+    """The unit 6 rig fitted on its whole log (SHEET of
+    tests/test_time_domain_fit__rotary_rig.py), as
     the rig runs: its hub encoder's count (4096 per turn, the rig class's) and the gauge's
     1 mm resolution of the logs (σ = 1 mm / √12) as the sensors' quantum and noise, and an
     0.8 rad step (the logged square wave's)."""

@@ -119,6 +119,9 @@ def test_feliu_single_mass(single):
     # the reproduction's 1 s run ends 0.65 s after the 0.305 s move: the design says so
     assert any("settling figures are cut" in w for w in single.warnings)
     assert single.scenario.simulation.duration == C.duration_single  # a given one is kept
+    # the controller's parts, named as in FRB Figs. 4 and 5
+    names = {k: g.name for k, g in single.controller.items()}
+    assert names == {"gcm1": "G_cm1", "gcm2": "G_cm2", "gcb": "G_cb", "N": "N"}
 
 
 def test_feliu_two_mass(two_mass):

@@ -203,6 +203,7 @@ def test_tune_lowers_the_batch_cost_and_is_reproducible(tmp_path):
     rng = np.random.default_rng(0)
     r, th, dd = rng.normal(size=(3, 50))
     sys = des.controller
+    assert (sys.name, sys.input_labels) == ("tune", ["reference", "motor_angle", "tip_deflection"])
     _, y = control.forced_response(
         sys, np.arange(50) * T, np.vstack([r, th, dd]), X0=[th[0], dd[0]]
     )

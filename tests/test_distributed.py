@@ -40,7 +40,7 @@ SPREAD = {
     "arm.beam.damping_ratio": (0.03, 0.01),
     "sensors.tip_deflection.gain": (1.0, 0.05),
 }
-#: the synthetic rig of tests/test_bench_fit.py (its data sheet, delays known)
+#: the synthetic rig of tests/test_time_domain_fit.py (its data sheet, delays known)
 RIG = dict(
     drive="voltage",
     gear_ratio=70,

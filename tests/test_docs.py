@@ -11,7 +11,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 
-import scenario_reference  # noqa: E402
+import scenario_reference  # noqa: E402 - from tools/, put on sys.path above
 
 SCENARIOS = sorted((ROOT / "src" / "flexarm" / "scenarios").glob("*.toml"))
 
@@ -70,7 +70,7 @@ def test_readme_links_exist():
 
 
 def test_readme_c_loop_is_the_design_pages():
-    """The README's C target loop (compiled by tests/test_export_c.py) is the one
+    """The README's C target loop (compiled by tests/test_c_export.py) is the one
     docs/tasks/design-export.md shows."""
 
     def block(path):

@@ -329,7 +329,7 @@ def test_fit_report_holds_the_fit_and_the_command(synthetic):
         assert float(
             _cells(text, "b.csv")[1 + list(res["fit_percent"]["b.csv"]).index(sig)]
         ) == pytest.approx(v, abs=0.051)
-    # the true model fits its own noisy, quantised log (test_bench_fit: > 95 % both)
+    # the true model fits its own noisy, quantised log (test_time_domain_fit: > 95 % both)
     assert min(res["fit_percent"]["b.csv"].values()) > 95
     cmd = re.search(r"<code>(flexarm fit .*?)</code>", text).group(1)
     assert html.unescape(cmd).split()[:3] == ["flexarm", "fit", str(log)]
@@ -378,13 +378,13 @@ def test_synthetic_fit_and_validate_reports_render_in_chromium(synthetic, tmp_pa
 @pytest.mark.slow  # two general fits (least squares on the one simulator): ~40-80 s
 def test_general_fit_and_refit_validate_reports(tmp_path):
     """The general path (flexarm fit SCENARIO LOG --free ..., validate --refit friction)
-    with --report, on test_fit_scenario's synthetic two-mode link: the report's fitted
+    with --report, on test_time_domain_general's synthetic two-mode link: the report's fitted
     values, std and fit % are the JSON's, and the refitted friction table is there."""
     from flexarm.identification.time_domain.result import drop_none as _drop_none
     from flexarm.identification.time_domain.synthetic import scenario_log
     from flexarm.io.logs import write_log
     from flexarm.io.write import write_toml
-    from test_fit_scenario import scenario_with, staircase, two_mode_link
+    from test_time_domain_general import scenario_with, staircase, two_mode_link
 
     truth = two_mode_link()
     t = np.arange(1501) * 0.002
@@ -495,7 +495,7 @@ def test_unit6_fit_report_shows_its_figures_in_chromium(unit6, tmp_path):
     text = page.read_text()
     fp = res.fit_percent["4PM_Group37_FlexArm_Unit6"]
     print("unit 6 whole-log fit %:", fp)
-    # the whole-log fit reaches the held-out levels of test_real_rotary_rig (>= 95 / 80)
+    # the whole-log fit reaches the held-out levels of test_time_domain_fit__rotary_rig (>= 95 / 80)
     assert fp["motor_angle"] >= 95 and fp["tip_deflection"] >= 80
     c = _cells(text, "4PM_Group37_FlexArm_Unit6")
     assert float(c[1]) == pytest.approx(fp["motor_angle"], abs=0.051)

@@ -99,7 +99,10 @@ def test_friction_sign_rule():
         15.0, 1.0, dt=DT, torque_constant=1.0, coulomb=0.1, coupling=0.0, angle_resolution=COUNT
     )
     step = ctrl.step
-    meas = lambda th: {"motor_angle": jnp.asarray(th), "tip_angle": jnp.asarray(0.0)}  # noqa: E731
+
+    def meas(th):
+        return {"motor_angle": jnp.asarray(th), "tip_angle": jnp.asarray(0.0)}
+
     s0 = ctrl.init()
     # at rest, error of 3 counts: feedback 15·3q, plus the friction current in its direction
     _, u = step(s0, meas(0.0), {"reference": jnp.asarray(3 * COUNT)})

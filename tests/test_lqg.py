@@ -62,7 +62,10 @@ def test_linearize_is_the_jacobian_of_the_arm():
     sys = linearize(arm, outputs=["theta_1", "deflection_angle_1", "theta_2", "deflection_angle_2"])
     lin = frictionless(arm)
     x0, u0, h = np.zeros(lin.n_states), np.zeros(2), 1e-6
-    f = lambda x, u: np.asarray(lin.rhs(jnp.asarray(x), jnp.asarray(u)))  # noqa: E731
+
+    def f(x, u):
+        return np.asarray(lin.rhs(jnp.asarray(x), jnp.asarray(u)))
+
     A = np.stack(
         [(f(x0 + h * e, u0) - f(x0 - h * e, u0)) / (2 * h) for e in np.eye(lin.n_states)], 1
     )

@@ -124,7 +124,7 @@ __all__ = [
 def have_dask() -> bool:
     """True when ``dask.distributed`` can be imported."""
     try:
-        import distributed  # noqa: F401
+        import distributed  # noqa: F401 - only whether it imports
     except ImportError:
         return False
     return True
@@ -430,7 +430,9 @@ def _batched_leaves(loop, in_axes):
     import equinox as eqx
     import jax
 
-    is_none = lambda x: x is None  # noqa: E731
+    def is_none(x):
+        return x is None
+
     leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
     axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
     axes = [
@@ -1087,7 +1089,7 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
     try:
         res, extra = (fit or fit_row)(row)
         d = {**res.to_dict(), **extra}
-    except Exception as exc:  # noqa: BLE001 - a failing row is reported, others go on
+    except Exception as exc:  # a failing row is reported, others go on
         msg = _first_line(exc)
         (folder / "error.txt").write_text(msg + "\n", encoding="utf-8")
         return {
@@ -1101,12 +1103,12 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
     notes = []
     try:
         res.write_scenario(folder / "fitted.toml", overwrite=True)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         notes.append(f"fitted scenario not written: {_first_line(exc)}")
     if figures and hasattr(res, "plots"):
         try:
             res.plots(folder / "plots")
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             notes.append(f"figures not written: {_first_line(exc)}")
     d["warnings"] = list(d.get("warnings") or []) + notes
     seconds = _time.perf_counter() - t0
@@ -1236,7 +1238,7 @@ def fit_many(
             for fut in as_completed(futs):
                 try:
                     rec = fut.result()
-                except Exception as exc:  # noqa: BLE001 - the task failed (e.g. killed 3 times)
+                except Exception as exc:  # the task failed (e.g. killed 3 times)
                     rec = {
                         "id": futs[fut].id,
                         "status": "failed",

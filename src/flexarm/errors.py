@@ -164,7 +164,7 @@ def internal_error_report(exc: BaseException, folder: str | os.PathLike) -> Path
         from importlib.metadata import version
 
         ver = version("flexarm")
-    except Exception:  # noqa: BLE001 - a report must not fail on a missing distribution
+    except Exception:  # a report must not fail on a missing distribution
         ver = "unknown"
     text = "".join(
         [

@@ -4,8 +4,9 @@ scenario's own controller on a reference step over drawn plants."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.markup import escape
@@ -26,6 +27,9 @@ from flexarm.cli.common import (
     warn,
     write_report,
 )
+
+if TYPE_CHECKING:
+    from flexarm.design.gate import GateOptions
 
 
 def design_cmd(
@@ -159,125 +163,133 @@ def design_cmd(
     --max-unstable-share of the drawn plants, or whose command reaches the limit, is written
     with its verdict, printed in red, and the command exits 2 unless --accept-unstable."""
     check_cluster(scheduler, workers)
+    request = DesignRequest(
+        scenario=scenario,
+        method=method,
+        out=out,
+        q=q,
+        r=r,
+        poles=poles,
+        observer_poles=observer_poles,
+        pole_domain=pole_domain,
+        integral=integral,
+        disturbance=disturbance,
+        friction_compensation=friction_compensation,
+        max_deflection=max_deflection,
+        distance=distance,
+        fit_json=fit_json,
+        spread=spread,
+        plants=plants,
+        seed=seed,
+        encoder_counts=encoder_counts,
+        report=report,
+        accept_unstable=accept_unstable,
+        max_unstable_share=max_unstable_share,
+        overwrite=overwrite,
+        scheduler=scheduler,
+        workers=workers,
+    )
     with guarded(scenario, fit_json):
-        _design(
-            ctx,
-            scenario,
-            method,
-            out,
-            q,
-            r,
-            poles,
-            observer_poles,
-            pole_domain,
-            integral,
-            disturbance,
-            friction_compensation,
-            max_deflection,
-            distance,
-            fit_json,
-            spread,
-            plants,
-            seed,
-            encoder_counts,
-            report,
-            accept_unstable,
-            max_unstable_share,
-            overwrite,
-            scheduler,
-            workers,
-        )
+        _design(ctx, request)
 
 
-def _design(
-    ctx,
-    scenario,
-    method,
-    out,
-    q,
-    r,
-    poles,
-    observer_poles,
-    pole_domain,
-    integral,
-    disturbance,
-    friction_compensation,
-    max_deflection,
-    distance,
-    fit_json,
-    spread,
-    plants,
-    seed,
-    encoder_counts,
-    report,
-    accept_unstable,
-    max_unstable_share,
-    overwrite,
-    scheduler=None,
-    workers=None,
-) -> None:
+@dataclass(frozen=True, kw_only=True)
+class DesignRequest:
+    """The options of ``flexarm design`` as given on the command line, one field per option
+    (the command's help says what each means).
+
+    DECISION: a command-line record, not a library one: the library's
+    :func:`flexarm.design.gate.design_checked` takes the method's own keyword arguments
+    (:meth:`method_options`), the drawn plants, the encoder count, a Dask client and its
+    own record :class:`flexarm.design.gate.GateOptions` (:meth:`gate_options`); the rest
+    (file paths, the spread as text, the scheduler) is the command's."""
+
+    scenario: str
+    method: str = "lqr"
+    out: Path
+    q: str | None = None
+    r: str | None = None
+    poles: str | None = None
+    observer_poles: str | None = None
+    pole_domain: str = "s"
+    integral: bool = False
+    disturbance: bool | None = None
+    friction_compensation: bool = True
+    max_deflection: float | None = None
+    distance: float | None = None
+    fit_json: Path | None = None
+    spread: str | None = None
+    plants: int = 200
+    seed: int = 0
+    encoder_counts: int | None = None
+    report: Path | None = None
+    accept_unstable: bool = False
+    max_unstable_share: float = 0.01
+    overwrite: bool = False
+    scheduler: str | None = None
+    workers: int | None = None
+
+    def method_options(self) -> dict[str, Any]:
+        """The method's own keyword arguments of :func:`flexarm.design.design` (the pole
+        lists and weights parsed; a malformed one is refused here)."""
+        poles_v = parsing.complex_list(self.poles, "--poles")
+        observer_v = parsing.complex_list(self.observer_poles, "--observer-poles")
+        q_v, r_v = parsing.weights(self.q, "--q"), parsing.weights(self.r, "--r")
+        opts: dict[str, Any]
+        if self.method == "nested":
+            opts = {
+                k: v
+                for k, v in (("max_deflection", self.max_deflection), ("distance", self.distance))
+                if v is not None
+            }
+        elif self.method == "tune":
+            opts = {}  # the plants (tune needs --fit-json or --spread: checked before)
+        else:
+            opts = dict(
+                integral=self.integral,
+                disturbance=self.disturbance,
+                friction_compensation=self.friction_compensation,
+                pole_domain=self.pole_domain,
+                observer_poles=observer_v,
+            )
+        if self.method == "place":
+            opts["poles"] = poles_v
+        elif self.method == "lqr":
+            opts.update(q=q_v, r=r_v)
+        return opts
+
+    def gate_options(self) -> GateOptions:
+        """The library's gate: the command keeps (accepts) every design, writes it with its
+        verdict, and exits 2 itself unless ``--accept-unstable``."""
+        from flexarm.design.gate import GateOptions
+
+        return GateOptions(max_unstable_share=self.max_unstable_share, accept_unstable=True)
+
+    @property
+    def count(self) -> float | None:
+        """The encoder count, rad, from ``--encoder-counts`` (None: the scenario's)."""
+        return 2 * math.pi / self.encoder_counts if self.encoder_counts else None
+
+
+def _design(ctx, o: DesignRequest) -> None:
     enable_cache()
     from flexarm.design import METHODS
-    from flexarm.design.gate import GateOptions, design_checked
+    from flexarm.design.gate import design_checked
     from flexarm.errors import FlexarmError
 
-    _check_options(
-        method,
-        METHODS,
-        pole_domain,
-        poles,
-        q,
-        r,
-        observer_poles,
-        integral,
-        disturbance,
-        max_deflection,
-        distance,
-        fit_json,
-        spread,
-        plants,
-        encoder_counts,
-    )
-    if not (0.0 <= max_unstable_share <= 1.0):
-        fail(
-            f"--max-unstable-share {max_unstable_share}: give a share in [0, 1], e.g. 0.01 for 1 %"
-        )
+    _check_options(o, METHODS)
     # the option values parsed before any work: a malformed one is refused first
-    poles_v = parsing.complex_list(poles, "--poles")
-    observer_v = parsing.complex_list(observer_poles, "--observer-poles")
-    q_v, r_v = parsing.weights(q, "--q"), parsing.weights(r, "--r")
-    check_file_option("--report", report, overwrite, "design.html")
-    sc = load(scenario)
-    spread_d = plant_spread(sc, fit_json, spread)
-    out = outdir(out, overwrite)
-    count = 2 * math.pi / encoder_counts if encoder_counts else None
-    opts: dict[str, Any]  # each method's own keyword arguments
-    if method == "nested":
-        opts = {
-            k: v
-            for k, v in (("max_deflection", max_deflection), ("distance", distance))
-            if v is not None
-        }
-    elif method == "tune":
-        opts = {}  # the plants below (tune needs --fit-json or --spread: checked above)
-    else:
-        opts = dict(
-            integral=integral,
-            disturbance=disturbance,
-            friction_compensation=friction_compensation,
-            pole_domain=pole_domain,
-            observer_poles=observer_v,
-        )
-    if method == "place":
-        opts["poles"] = poles_v
-    elif method == "lqr":
-        opts.update(q=q_v, r=r_v)
+    opts = o.method_options()  # each method's own keyword arguments
+    check_file_option("--report", o.report, o.overwrite, "design.html")
+    sc = load(o.scenario)
+    spread_d = plant_spread(sc, o.fit_json, o.spread)
+    out = outdir(o.out, o.overwrite)
+    method, plants, overwrite = o.method, o.plants, o.overwrite
     from flexarm.design.plants import from_paths
 
-    gate = GateOptions(max_unstable_share=max_unstable_share, accept_unstable=True)
     with console.status(f"designing ({method})...") as status:
         try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
-            drawn = from_paths(sc, spread_d, plants, seed=seed) if spread_d else None
+            drawn = from_paths(sc, spread_d, plants, seed=o.seed) if spread_d else None
         except ValueError as exc:
             fail(f"--fit-json/--spread: {exc}")
         if method == "tune":
@@ -293,14 +305,20 @@ def _design(
         from flexarm.distributed import session
 
         try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
-            with session(scheduler, workers) as client:  # None: in-process
+            with session(o.scheduler, o.workers) as client:  # None: in-process
                 des = design_checked(
-                    sc, method, plants=drawn, count=count, gate=gate, client=client, **opts
+                    sc,
+                    method,
+                    plants=drawn,
+                    count=o.count,
+                    gate=o.gate_options(),
+                    client=client,
+                    **opts,
                 )
         except FlexarmError:
             raise
         except ValueError as exc:
-            fail(f"{scenario}: {exc}")
+            fail(f"{o.scenario}: {exc}")
     side = getattr(des, "comparison", None)
     files = des.write(out, overwrite=overwrite)
     if side is not None:
@@ -322,7 +340,7 @@ def _design(
     for w in des.warnings:
         warn(w)
     console.print("wrote " + ", ".join(str(p) for p in files))
-    if report is not None:
+    if o.report is not None:
         from flexarm.analysis.html_report import design_report
 
         write_report(
@@ -331,15 +349,15 @@ def _design(
                 figures=[p for p in files if str(p).endswith(".png")],
                 comparison=side,
                 command=command_line(ctx),
-                inputs=[scenario],
+                inputs=[o.scenario],
             ),
-            report,
+            o.report,
             overwrite,
         )
     if not des.stable:
-        colour = "yellow" if accept_unstable else "bold red"
+        colour = "yellow" if o.accept_unstable else "bold red"
         err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False, soft_wrap=True)
-        if not accept_unstable:
+        if not o.accept_unstable:
             fail(
                 f"the {method} design is not safe to run: {des.verdict}; written to {out} "
                 "with its verdict (design.json, compare.md say why); redesign, or pass "
@@ -385,31 +403,16 @@ def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
     return out
 
 
-def _check_options(
-    method,
-    methods,
-    pole_domain,
-    poles,
-    q,
-    r,
-    observer_poles,
-    integral,
-    disturbance,
-    max_deflection,
-    distance,
-    fit_json,
-    spread,
-    plants,
-    encoder_counts,
-) -> None:
+def _check_options(o: DesignRequest, methods) -> None:
     """The option combinations ``design`` accepts (refused before any work).
 
     DECISION: the library's ``design()`` checks its own arguments too; these checks name
     the command-line options."""
+    method, poles, q, r = o.method, o.poles, o.q, o.r
     if method not in methods:
         fail(f"--method {method!r}: not known; choose one of {', '.join(methods)}")
-    if pole_domain not in ("s", "z"):
-        fail(f"--pole-domain {pole_domain!r}: give s (continuous-time poles, rad/s) or z")
+    if o.pole_domain not in ("s", "z"):
+        fail(f"--pole-domain {o.pole_domain!r}: give s (continuous-time poles, rad/s) or z")
     if method == "place" and poles is None:
         fail(
             "--method place needs --poles (the closed-loop poles of the arm's states, "
@@ -422,13 +425,13 @@ def _check_options(
         fail("--q/--r: only with --method lqr (place takes --poles)")
     if method == "nested":
         given = [
-            o
-            for o, v in (
+            flag
+            for flag, v in (
                 ("--q", q),
                 ("--r", r),
-                ("--observer-poles", observer_poles),
-                ("--integral", integral or None),
-                ("--disturbance", disturbance),
+                ("--observer-poles", o.observer_poles),
+                ("--integral", o.integral or None),
+                ("--disturbance", o.disturbance),
             )
             if v is not None
         ]
@@ -437,21 +440,26 @@ def _check_options(
                 f"{', '.join(given)}: only with --method lqr or place (the nested loops take "
                 "--max-deflection and --distance)"
             )
-    elif max_deflection is not None or distance is not None:
+    elif o.max_deflection is not None or o.distance is not None:
         fail("--max-deflection/--distance: only with --method nested")
-    if method == "tune" and fit_json is None and spread is None:
+    if method == "tune" and o.fit_json is None and o.spread is None:
         fail(
             "--method tune needs the plants' spread: --fit-json FIT.json (the rig's fit) or "
             "--spread PATH=STD,..."
         )
-    if fit_json is not None and spread is not None:
+    if o.fit_json is not None and o.spread is not None:
         fail("--fit-json and --spread both give the plants' spread; choose one")
-    if plants < 1:
-        fail(f"--plants {plants}: give at least 1 plant (200 for the issue's comparison)")
-    if encoder_counts is not None and encoder_counts < 2:
-        fail(f"--encoder-counts {encoder_counts}: give the counts per turn (e.g. 4096)")
-    if integral and disturbance:
+    if o.plants < 1:
+        fail(f"--plants {o.plants}: give at least 1 plant (200 for the issue's comparison)")
+    if o.encoder_counts is not None and o.encoder_counts < 2:
+        fail(f"--encoder-counts {o.encoder_counts}: give the counts per turn (e.g. 4096)")
+    if o.integral and o.disturbance:
         fail("--integral and --disturbance both give integral action; choose one")
+    if not (0.0 <= o.max_unstable_share <= 1.0):
+        fail(
+            f"--max-unstable-share {o.max_unstable_share}: give a share in [0, 1], "
+            "e.g. 0.01 for 1 %"
+        )
 
 
 def _print_comparison(side, plants: int) -> None:

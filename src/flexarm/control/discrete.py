@@ -73,7 +73,9 @@ class LinearController(Controller):
 
 
 def _lin(A, B, C, D, measured: str, reference: str) -> LinearController:
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    def f(v):
+        return jnp.asarray(v, dtype=float)
+
     return LinearController(f(A), f(B), f(C), f(D), measured, reference)
 
 

@@ -92,7 +92,10 @@ def friction_compensated(
     is taken to be at rest); ``rest_deadband`` in command units (default 0)."""
     measured = (measured,) if isinstance(measured, str) else tuple(measured)
     m = len(measured)
-    f = lambda v: jnp.broadcast_to(jnp.asarray(v, dtype=float), (m,))  # noqa: E731
+
+    def f(v):
+        return jnp.broadcast_to(jnp.asarray(v, dtype=float), (m,))
+
     if velocity_deadband is None:
         velocity_deadband = 0.5 * jnp.asarray(quantum, dtype=float) / dt
     return FrictionCompensated(

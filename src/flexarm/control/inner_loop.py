@@ -155,7 +155,9 @@ class InnerLoop(Controller):
     measured_signals = ("motor_angle", "tip_angle")
 
     def init(self):
-        z = lambda r: jnp.zeros(r[1].shape)  # noqa: E731
+        def z(r):
+            return jnp.zeros(r[1].shape)
+
         return z(self.g1), z(self.g2), z(self.coupling), self.initial_motor_angle
 
     @staticmethod
@@ -236,7 +238,10 @@ def inner_loop(
         velocity_deadband = 0.5 * q / dt
     if rest_deadband is None:
         rest_deadband = 0.5 * q * abs(float(np.real(control.dcgain(g1))))
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+
+    def f(v):
+        return jnp.asarray(v, dtype=float)
+
     return InnerLoop(
         _realise(g1),
         _realise(g2),

@@ -81,7 +81,10 @@ def joint_pd_from_spec(spec, arm, model, dt: float) -> JointPD:
         if spec.friction_compensation is None
         else np.asarray(spec.friction_compensation, float)
     )
-    f = lambda v: jnp.asarray(np.asarray(v, float))  # noqa: E731
+
+    def f(v):
+        return jnp.asarray(np.asarray(v, float))
+
     return JointPD(
         kp=f(spec.kp),
         kd=f(spec.kd),

@@ -85,7 +85,16 @@ def lqg(plant: control.StateSpace, dt: float, Q, R, W, V) -> LQGDesign:
     n, m, p = plant.nstates, plant.ninputs, plant.noutputs
     Q, R = _weight(Q, n, "Q"), _weight(R, m, "R")
     W, V = _weight(W, n, "W"), _weight(V, p, "V")
-    sysd = control.c2d(control.ss(plant.A, plant.B, plant.C, np.zeros((p, m))), dt, "zoh")
+    cont = control.ss(
+        plant.A,
+        plant.B,
+        plant.C,
+        np.zeros((p, m)),
+        states=list(plant.state_labels),
+        inputs=list(plant.input_labels),
+        outputs=list(plant.output_labels),
+    )
+    sysd = control.c2d(cont, dt, "zoh", name=f"{plant.name}, sampled")
     Ad, Bd, C = np.asarray(sysd.A), np.asarray(sysd.B), np.asarray(sysd.C)
     K, _, _ = control.dlqr(Ad, Bd, Q, R)
     L, _, _ = control.dlqe(Ad, np.eye(n), C, W, V)

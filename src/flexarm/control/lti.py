@@ -654,7 +654,10 @@ def lti_controller(
         raise ScenarioError(
             f"{where}: initial_state has {x0.size} value(s); the controller has {n} state(s)"
         )
-    f = lambda a: jnp.asarray(np.asarray(a, float))  # noqa: E731
+
+    def f(a):
+        return jnp.asarray(np.asarray(a, float))
+
     return LTIController(
         f(A),
         f(B),

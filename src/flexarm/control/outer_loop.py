@@ -30,7 +30,6 @@ raises when the peak exceeds the limit.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import control
@@ -140,7 +139,10 @@ def trajectory_references(
     t = np.asarray(t, float)
     k = max(1, int(oversample))
     fine = t[0] + np.arange((t.size - 1) * k + 1) * ((t[-1] - t[0]) / max(t.size - 1, 1) / k)
-    shifted: Callable = lambda tt, o: trajectory.derivative(np.asarray(tt) - start + advance, o)  # noqa: E731
+
+    def shifted(tt, o):
+        return trajectory.derivative(np.asarray(tt) - start + advance, o)
+
     return {
         "reference": trajectory.position(t - start),
         "feedforward": feedforward_signal(n, shifted, fine)[::k],

@@ -94,7 +94,10 @@ def state_feedback(
         )
     if not dt > 0:
         raise ValueError(f"sampling period dt = {dt!r} must be > 0 s")
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+
+    def f(v):
+        return jnp.asarray(v, dtype=float)
+
     return StateFeedback(
         f([k1, k2, k3, k4]), f(dt), f(rate_time_constant), rate, angle, deflection, reference
     )

@@ -258,6 +258,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
         states=names,
         inputs=list(lin.input_labels),
         outputs=chans,
+        name="design model, sampled",
     )
     delays = [int(spec_of[c].get("delay", 0) or 0) for c in chans]
     aug = augment_delays(sysd, int(scenario.sampling.delay), delays)
@@ -623,6 +624,7 @@ def disturbance_model(dm: DesignModel) -> control.StateSpace:
         states=list(P.state_labels) + [f"disturbance_{k}" for k in P.input_labels],
         inputs=list(P.input_labels),
         outputs=list(P.output_labels),
+        name="augmented model with input disturbance",
     )
 
 
@@ -877,7 +879,9 @@ def design_linear(
     )
     sc = scenario_from_dict(data, f"{scenario.name}: the {method} design")
 
-    cpx = lambda a: [[float(v.real), float(v.imag)] for v in a]  # noqa: E731
+    def cpx(a):
+        return [[float(v.real), float(v.imag)] for v in a]
+
     info = {
         "model": {
             "arm_states": list(dm.continuous.state_labels),

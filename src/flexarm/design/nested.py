@@ -78,6 +78,11 @@ def derivative_pole(kd: float, dt: float, kick: float, quantum: float, g1_inf: f
     return float(min(0.999, max(0.0, 1.0 - kick * dt / (kd * quantum * abs(g1_inf)))))
 
 
+def _named(g: control.TransferFunction, name: str) -> control.TransferFunction:
+    """``g`` (the same coefficients and period) named ``name``."""
+    return control.TransferFunction(g.num, g.den, g.dt, name=name)
+
+
 def _coeffs(p) -> list[float]:
     return [float(v) for v in np.real(np.atleast_1d(np.asarray(p, dtype=complex)))]
 
@@ -412,22 +417,25 @@ def design_nested(
             f"at max_deflection {max_deflection:g} rad + friction "
             f"{abs(coulomb_cmd):.4g}; lower max_deflection"
         )
-    design = lambda g, **kw: design_inner_loop(  # noqa: E731
-        model,
-        dt,
-        delay + hub_delay,
-        dc_gain=g,
-        current_limit=limit,
-        step=step,
-        bending=max_deflection,
-        coupling_gain=c_hat,
-        coulomb=float(model.friction.coulomb),
-        band=inner_band,
-        horizon=horizon,
-        seed=seed,
-        min_root=min_root,
-        **kw,
-    )
+
+    def design(g, **kw):
+        return design_inner_loop(
+            model,
+            dt,
+            delay + hub_delay,
+            dc_gain=g,
+            current_limit=limit,
+            step=step,
+            bending=max_deflection,
+            coupling_gain=c_hat,
+            coulomb=float(model.friction.coulomb),
+            band=inner_band,
+            horizon=horizon,
+            seed=seed,
+            min_root=min_root,
+            **kw,
+        )
+
     if dc_gain is not None:
         g, inner = gain, design(gain)
     else:
@@ -708,7 +716,12 @@ def design_nested(
     return Design(
         method="nested",
         scenario=designed,
-        controller={"gcm1": inner.gcm1, "gcm2": inner.gcm2, "gcb": gcb_tf, "N": n},
+        controller={  # named as in FRB Figs. 4 and 5
+            "gcm1": _named(inner.gcm1, "G_cm1"),
+            "gcm2": _named(inner.gcm2, "G_cm2"),
+            "gcb": _named(gcb_tf, "G_cb"),
+            "N": _named(n, "N"),
+        },
         info=info,
         warnings=warnings,
     )

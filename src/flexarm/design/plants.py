@@ -291,7 +291,10 @@ def from_fit(
             nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
             for i, (nm, d) in enumerate(zip(names, defs, strict=True))
         }
-        first = lambda m: p.get(m, p.get(f"{m}[0]", 0.0))  # noqa: E731
+
+        def first(m):
+            return p.get(m, p.get(f"{m}[0]", 0.0))
+
         der = derived(
             {
                 m: first(m)

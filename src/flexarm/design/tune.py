@@ -212,6 +212,7 @@ def _linear_part(spec, dt: float):
         inputs=["reference", "motor_angle", "tip_deflection"],
         outputs=["u"],
         states=["motor_angle_prev", "tip_deflection_prev"],
+        name="tune",
     )
 
 

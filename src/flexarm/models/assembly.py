@@ -360,7 +360,10 @@ def multi_link_arm(spec) -> tuple[Arm, Any]:
     names = body.state_names + tuple(
         f"friction_z_{i + 1}" for i, fr in enumerate(frictions) for _ in range(fr.n_states)
     )
-    f = lambda v: jnp.asarray(np.asarray(v, dtype=float))  # noqa: E731
+
+    def f(v):
+        return jnp.asarray(np.asarray(v, dtype=float))
+
     arm = Arm(
         state_names=names,
         signal_names=body.signal_names + tuple(f"friction_torque_{i + 1}" for i in range(n)),

@@ -270,7 +270,10 @@ def _write_table(rows: list, out: Path) -> tuple[Path, Path]:
         "| quantity | unit | paper | ours | ours/paper | note |",
         "|---|---|---|---|---|---|",
     ]
-    cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
+
+    def cell(v):
+        return str(v).replace("|", "\\|")
+
     for r in rows:
         lines.append(
             f"| {cell(r['quantity'])} | {r['unit']} | {_fmt(r['paper'])} | "

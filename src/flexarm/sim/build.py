@@ -189,7 +189,9 @@ def _nested_from_spec(spec, dt: float, quanta: dict[str, float]) -> discrete.Con
 
     from flexarm.control.nested import nested_loops
 
-    tf = lambda num, den: control.tf(num, den, dt)  # noqa: E731
+    def tf(num, den):
+        return control.tf(num, den, dt)
+
     fc = spec.friction_compensation
     if fc is not None and fc.measured != "motor_angle":
         raise ValueError(

@@ -120,7 +120,9 @@ def integrate_law(
     first step h; it returns NaN (so the loop reports divergence) when it fails, e.g. when
     its step size collapses or it needs more than :data:`TSIT5_MAX_STEPS` steps."""
     if type(solver) is RK4:
-        f = lambda y, t: plant.rhs(y, command(y, t))  # noqa: E731
+
+        def f(y, t):
+            return plant.rhs(y, command(y, t))
 
         def body(i, y):
             t = t0 + i * h
@@ -195,7 +197,7 @@ def rk4_path(
 
     Not a closed-loop simulator (that is :mod:`flexarm.sim.sampled`, which runs continuous
     laws too, :func:`integrate_law`): a plain integrator of a given ẋ = f(x, t), e.g. free
-    motion (tests/test_properties_models.py). Stages as :func:`_rk4_stages`."""
+    motion (tests/test_models__properties.py). Stages as :func:`_rk4_stages`."""
 
     def step(k, carry):
         x, t = carry

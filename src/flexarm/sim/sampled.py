@@ -55,7 +55,7 @@ from jax.typing import ArrayLike
 
 from flexarm.control.continuous_law import ContinuousLaw
 from flexarm.control.discrete import Controller
-from flexarm.errors import SimulationDiverged  # noqa: F401 (re-exported)
+from flexarm.errors import SimulationDiverged  # re-exported
 from flexarm.models.plant import Plant
 from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
 
@@ -110,7 +110,10 @@ class Sensors(eqx.Module):
                         else " (name the signal a channel reads with signal = ...)"
                     )
                 )
-        get = lambda key, d: jnp.asarray([float(channels[n].get(key, d)) for n in names])  # noqa: E731
+
+        def get(key, d):
+            return jnp.asarray([float(channels[n].get(key, d)) for n in names])
+
         quantum = [
             float(channels[n]["quantum"])
             if float(channels[n].get("quantum", 0) or 0) > 0

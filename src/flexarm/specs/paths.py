@@ -74,7 +74,7 @@ def get(d: Any, path: str | Keys, what: str = "free parameter") -> Any:
     return d
 
 
-def set(d: Any, path: str | Keys, value: Any, what: str = "free parameter") -> None:  # noqa: A001
+def set(d: Any, path: str | Keys, value: Any, what: str = "free parameter") -> None:
     """Write ``value`` at ``path`` in the dumped scenario ``d`` (in place); the parent must
     exist (:func:`get`'s error otherwise)."""
     keys, text = _keys(path, what)

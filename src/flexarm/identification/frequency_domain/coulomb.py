@@ -47,7 +47,7 @@ from scipy.optimize import minimize_scalar
 
 from flexarm.identification.frequency_domain.harmonics import HarmonicAnalysis, _warn
 from flexarm.identification.frequency_domain.harmonics import (
-    ideal_friction_phasor as square_wave_phasor,  # noqa: F401 (eq. 2)
+    ideal_friction_phasor as square_wave_phasor,  # eq. 2
 )
 
 # Eq. (6) where C_f' vanishes (ln 0): (ln 1e-300)² ≈ 5e5, so 1e6 is worse than any real

@@ -110,6 +110,13 @@ def arm_parameters(
     }
 
 
+def _named(
+    g: control.TransferFunction, name: str, input: str, output: str
+) -> control.TransferFunction:
+    """``g`` (the same coefficients) with a name and signal names."""
+    return control.TransferFunction(g.num, g.den, g.dt, name=name, inputs=[input], outputs=[output])
+
+
 @dataclass
 class IdentificationResult:
     """Everything :func:`identify` found; see :meth:`to_dict` for the JSON layout."""
@@ -145,21 +152,24 @@ class IdentificationResult:
     def motor_tf(self) -> control.TransferFunction:
         """G_m(s) = θm/i (rad/A): the structured physical fit if ``structured=True``
         (:mod:`flexarm.identification.frequency_domain.physical`), else the fit to the corrected
-        data (raw if C_f is unknown)."""
+        data (raw if C_f is unknown); named ``G_m`` (input ``current``, output
+        ``motor_angle``)."""
         if self.use_physical:
             assert self.physical is not None  # use_physical is set with a physical fit
-            return self.physical.motor_tf
-        return self.motor_fit.tf
+            return _named(self.physical.motor_tf, "G_m", "current", "motor_angle")
+        return self.motor_tf_corrected_fit
 
     @property
     def motor_tf_corrected_fit(self) -> control.TransferFunction:
-        """G_m(s) fitted freely to the friction-corrected data (FRB eq. 7 and Sec. VI-B)."""
-        return self.motor_fit.tf
+        """G_m(s) fitted freely to the friction-corrected data (FRB eq. 7 and Sec. VI-B);
+        named ``G_m`` (input ``current``, output ``motor_angle``)."""
+        return _named(self.motor_fit.tf, "G_m", "current", "motor_angle")
 
     @property
     def beam_tf(self) -> control.TransferFunction:
-        """G_b(s) = θt/θm fitted to the data."""
-        return self.beam_fit.tf
+        """G_b(s) = θt/θm fitted to the data; named ``G_b`` (input ``motor_angle``, output
+        ``tip_angle``)."""
+        return _named(self.beam_fit.tf, "G_b", "motor_angle", "tip_angle")
 
     def motor_frd(self, corrected: bool = True) -> control.FrequencyResponseData:
         return self.response.frd("motor" if corrected else "motor_raw")

@@ -106,7 +106,10 @@ class PeriodicFRF:
                 d["total_std"] = self.total_std[j].tolist()
             if self.distortion is not None:
                 bands = self.distortion[name]
-                nan = lambda v: None if not math.isfinite(v) else float(v)  # noqa: E731
+
+                def nan(v):
+                    return None if not math.isfinite(v) else float(v)
+
                 d["distortion"] = {
                     "band_hz": [list(map(float, b.band_hz)) for b in bands],
                     "odd_db": [nan(b.odd_db) for b in bands],
@@ -162,7 +165,10 @@ class PeriodicFRF:
             )
             dist = None
             if all("distortion" in d["outputs"][n] for n in names):
-                fl = lambda v: math.nan if v is None else float(v)  # noqa: E731
+
+                def fl(v):
+                    return math.nan if v is None else float(v)
+
                 dist = {
                     n: [
                         Band(tuple(b), fl(o), fl(e), fl(z))
@@ -243,7 +249,10 @@ class PeriodicFRF:
             for j, name in enumerate(self.outputs):
                 mag = np.abs(self.response[j])
                 db = 20 * np.log10(np.maximum(mag, 1e-300))
-                rel = lambda sd, mag=mag: f"{100 * float(np.median(sd / mag)):.3g} %"  # noqa: E731
+
+                def rel(sd, mag=mag):
+                    return f"{100 * float(np.median(sd / mag)):.3g} %"
+
                 rows.append(
                     (
                         name,
@@ -485,14 +494,18 @@ def periodic_frf(
             noise_mean = var[1 + j] / M  # variance of the averaged spectrum per line
             bands = []
             for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-                sel = lambda ks, lo=lo, hi=hi: ks[(ks >= lo) & (ks < hi)]  # noqa: E731
+
+                def sel(ks, lo=lo, hi=hi):
+                    return ks[(ks >= lo) & (ks < hi)]
+
                 e, o, ev = sel(exc), sel(odd_det), sel(even_det)
                 if not e.size:
                     continue
                 refp = yy[e].mean()
-                db = lambda p, refp=refp: (  # noqa: E731
-                    10 * math.log10(p / refp) if p > 0 else -math.inf
-                )
+
+                def db(p, refp=refp):
+                    return 10 * math.log10(p / refp) if p > 0 else -math.inf
+
                 bands.append(
                     Band(
                         (lo * df, (hi - 1) * df),
@@ -794,7 +807,10 @@ def plot_distortion(res: PeriodicFRF, path=None):
     if not sp:  # LPM or several realisations: the FRF with its standard deviations
         fig = Figure(figsize=(8, 3.2 * len(res.outputs)))
         axes = fig.subplots(len(res.outputs), 1, squeeze=False)
-        db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
+
+        def db(a):
+            return 20 * np.log10(np.maximum(np.abs(a), 1e-300))
+
         for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs, strict=True)):
             ax.plot(res.frequency_hz, db(res.response[j]), "k+", label="FRF")
             ax.plot(res.frequency_hz, db(res.noise_std[j]), "g-", lw=0.8, label="noise std")
@@ -813,7 +829,10 @@ def plot_distortion(res: PeriodicFRF, path=None):
     for j, (ax, name) in enumerate(zip(axes[:, 0], res.outputs, strict=True)):
         y = sp["mean"][1 + j]
         n = np.sqrt(sp["var"][1 + j] / sp["M"])
-        db = lambda a: 20 * np.log10(np.maximum(np.abs(a), 1e-300))  # noqa: E731
+
+        def db(a):
+            return 20 * np.log10(np.maximum(np.abs(a), 1e-300))
+
         ax.plot(exc * df, db(y[exc]), "k+", label="output, excited lines")
         o = other[other % 2 == 1] if odd else other
         ax.plot(

@@ -88,7 +88,9 @@ def fit_physical(
     diff = np.polysub(db, nb)
     diff[-1] = 0.0
     den = np.polyadd(np.polymul([J, V, 0.0], db), C * diff)
-    gm = control.tf(K * db / den[0], den / den[0])
+    gm = control.tf(
+        K * db / den[0], den / den[0], name="G_m", inputs=["current"], outputs=["motor_angle"]
+    )
     return PhysicalFit(
         J,
         V,

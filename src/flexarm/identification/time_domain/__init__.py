@@ -52,4 +52,4 @@ __all__ = [
 # last, after __all__ (so that import sorting keeps it last): the submodules `fit` and
 # `predict` share these names, and importing a submodule binds its name on the package;
 # the servo-rig functions are what these names mean here
-from flexarm.identification.time_domain.fit import fit, predict  # noqa: E402
+from flexarm.identification.time_domain.fit import fit, predict

@@ -18,7 +18,7 @@ every substep a hub that crossed zero velocity, or entered the band |ω| < Δv, 
 the sample loop around it, for fitting: every log and parameter point at once (the batch
 (L, P) carried last in every array), sensor delays that are traced parameters, the
 logged per-sample gains, and the cost summed inside the scan; it equals
-:func:`flexarm.sim.sampled.simulate_loop` on the same rig to 1e-9 (tests/test_bench_fit.py).
+:func:`flexarm.sim.sampled.simulate_loop` on the same rig to 1e-9 (tests/test_time_domain_fit.py).
 
 Sensor low-pass filters (known cutoffs, not fitted; ``filters=(hub, tip)`` static flags,
 ω_θ = ``const["omega_th"]``, ω_d = ``const["omega_d"]`` in rad/s) are analog first-order
@@ -120,7 +120,10 @@ def single_link_arm(m: dict, const: dict) -> Arm:
     fr = Friction(
         model="coulomb", coulomb=m["Fc"], static=m["Fs"], velocity_tolerance=const["vel_tol"]
     )
-    vec = lambda v: (v * o)[None]  # noqa: E731  (one joint; the batch, if any, last)
+
+    def vec(v):  # one joint; the batch, if any, last
+        return (v * o)[None]
+
     return Arm(
         state_names=body.state_names,
         signal_names=SIGNALS,

@@ -92,7 +92,7 @@ def _computation_delay(logs, notes: list[str]) -> int:
             continue
         try:
             found.append(check_controller(g, use_regressed=True).delay)
-        except Exception as exc:  # noqa: BLE001 - a log the check cannot read: no vote
+        except Exception as exc:  # a log the check cannot read: no vote
             notes.append(f"{g.name}: controller check failed ({exc}); its delay not used")
     if not found:
         return 0

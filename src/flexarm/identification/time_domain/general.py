@@ -90,6 +90,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.build import Prepared, prepare, reference_signal
@@ -107,7 +108,7 @@ __all__ = [
 
 # ----------------------------------------------------------------------------- paths
 # the path language: flexarm.specs.paths
-from flexarm.specs.paths import expand_paths, parse_path, scenario_with  # noqa: E402,F401
+from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.paths import get as _path_get
 
 
@@ -259,8 +260,6 @@ def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
 
 
 # ----------------------------------------------------------------------------- result
-from flexarm.identification.time_domain.result import FitResult  # noqa: E402,F401
-
 #: Deprecated name of :class:`~flexarm.identification.time_domain.result.FitResult`.
 ScenarioFit = FitResult
 

@@ -116,7 +116,7 @@ def read_bench_log(
     )
 
 
-def BenchLog(path, time, columns, meta=None, controller=None, **kw) -> Log:  # noqa: N802
+def BenchLog(path, time, columns, meta=None, controller=None, **kw) -> Log:
     """Deprecated: a :class:`~flexarm.io.logs.Log` (``columns`` are its ``signals``)."""
     return Log(
         None if path is None else Path(path),

@@ -122,13 +122,19 @@ class Objective:
         L = len(logs)
         self.N, self.L, self.T = N, L, T
         self.skip = space.max_delay + comp_delay + 1
-        z = lambda: np.zeros((L, N))  # noqa: E731
+
+        def z():
+            return np.zeros((L, N))
+
         ref, yt, yd, wt, wd, volt = z(), z(), z(), z(), z(), z()
         K, tau = np.zeros((L, N, 4)), np.zeros(L)
         self.sst = np.zeros((L, 2))
         for i, g in enumerate(logs):
             n = min(len(g), N)
-            pad = lambda a, n=n: np.concatenate([a[:n], np.full(N - n, a[n - 1])])  # noqa: E731
+
+            def pad(a, n=n):
+                return np.concatenate([a[:n], np.full(N - n, a[n - 1])])
+
             ref[i] = pad(g.columns["reference"])
             if "voltage" in g.columns:
                 volt[i] = pad(g.columns["voltage"])
@@ -222,8 +228,13 @@ class Objective:
         sp = self.space
         P = U.shape[0]
         ses = self.sessions
-        per = lambda name: sp.session_values(U, name)[:, ses].T  # noqa: E731  (L, P)
-        glob = lambda name: np.broadcast_to(sp.value(U, name)[None], (self.L, P))  # noqa: E731
+
+        def per(name):  # (L, P)
+            return sp.session_values(U, name)[:, ses].T
+
+        def glob(name):
+            return np.broadcast_to(sp.value(U, name)[None], (self.L, P))
+
         sign = 2.0 * D[:, 2] - 1.0
         if sp.rigid:  # no link: an uncoupled (J_l = 0) dummy mode, read by no log
             wc, zeta = np.full((self.L, P), 10.0), np.full((self.L, P), 0.1)
@@ -295,7 +306,10 @@ class Objective:
         P = U.shape[0]
         c = self.chunk
         Pp = -(-P // c) * c
-        pad = lambda a: np.concatenate([a, np.repeat(a[-1:], Pp - P, axis=0)])  # noqa: E731
+
+        def pad(a):
+            return np.concatenate([a, np.repeat(a[-1:], Pp - P, axis=0)])
+
         U, D = pad(U), pad(D)
         offsets = None if offsets is None else pad(offsets)
         out_e, out_b = [], []

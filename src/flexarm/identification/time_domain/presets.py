@@ -124,7 +124,7 @@ def for_scenario(scenario) -> Preset:
             try:
                 if get(mine, path) == 0 and get(theirs, path) != 0:
                     starts[path] = get(theirs, path)
-            except Exception:  # noqa: BLE001 - a path the changed copy lacks: fitted as given
+            except Exception:  # a path the changed copy lacks: fitted as given
                 continue
         sc = scenario_with(scenario, starts) if starts else scenario
         return Preset(p.name, sc, p.free, p.options, p.engine, p.sheet)

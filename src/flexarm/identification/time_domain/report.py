@@ -114,7 +114,10 @@ class FitResult:
         sign = int(2 * D[2] - 1)
         if "tip_gain" in params:
             params["tip_gain"] *= sign
-        first = lambda n: params.get(n, params.get(f"{n}[0]", 0.0))  # noqa: E731
+
+        def first(n):
+            return params.get(n, params.get(f"{n}[0]", 0.0))
+
         der = derived(
             {
                 k: first(k)

@@ -1,7 +1,7 @@
 """The one fit's front door (flexarm.fit with presets), the one result (FitResult.to_dict /
 from_dict, the fitted scenario), the one prediction (flexarm.validate → Prediction) and the
 unique log keys, on a short synthetic log of the one-link two-mode arm of
-test_fit_scenario (a current drive with Coulomb friction, a sampled PD)."""
+test_time_domain_general (a current drive with Coulomb friction, a sampled PD)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.io.logs import Log, log_keys, write_log
 from flexarm.specs.paths import scenario_with
-from test_fit_scenario import staircase, two_mode_link
+from test_time_domain_general import staircase, two_mode_link
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -131,7 +131,7 @@ def test_cli_fit_builtin_without_free_runs_the_preset_and_json_is_to_dict(tmp_pa
     """Issue #23: ``flexarm fit quanser-two-link LOG --log-format ... --window a:b`` without
     ``--free`` runs the preset's free list and says so; its ``--json`` is exactly
     ``FitResult.to_dict()`` (read back by ``FitResult.from_dict``). A short window and a
-    small budget: this checks the path, not the fit's quality (test_two_link_fit does)."""
+    small budget: this checks the path, not the fit's quality (test_two_link does)."""
     import json
     import subprocess
     import sys

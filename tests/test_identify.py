@@ -140,6 +140,12 @@ def test_paper_arm_coulomb_and_corrected_fit_recover_eq12(paper):
     zb, pb = _root_errors(paper.beam_tf, EQ13_NUM, EQ13_DEN)
     assert pb.max() < 0.01
     assert abs(tf_response(paper.beam_tf, [1e-3])[0] - 1) < 0.01
+    # named python-control systems (issue #26), the same coefficients as the fits'
+    gm, gb = paper.motor_tf, paper.beam_tf
+    assert (gm.name, gm.input_labels, gm.output_labels) == ("G_m", ["current"], ["motor_angle"])
+    assert (gb.name, gb.input_labels, gb.output_labels) == ("G_b", ["motor_angle"], ["tip_angle"])
+    assert tf_coefficients(gm) == tf_coefficients(paper.motor_fit.tf)
+    assert tf_coefficients(gb) == tf_coefficients(paper.beam_fit.tf)
 
 
 def test_raw_data_fit_misses_the_resonance(paper):

@@ -280,7 +280,7 @@ def build_lqg_stair(tmp_path: Path) -> StairRun:
     """Design the shoulder LQG, write the controller (.mat struct + TOML), simulate the
     shared stair's setpoints under it and write the run as ten consecutive files in the
     stair's layout (with the plant state, FORMAT_EXTRA); checks the run follows the stair.
-    Shared by this module's acceptance test and tests/test_cli_continuous.py."""
+    Shared by this module's acceptance test and tests/test_cli_fit__continuous.py."""
     import scipy.io as sio
 
     from flexarm.io.logformat import load_log_format

@@ -36,8 +36,13 @@ def compare(got_coefs, true_tf):
     pt = roots(true_tf.den[0][0])
     zg = np.sort(np.abs(roots(got_coefs["num"])))
     pg = roots(got_coefs["den"])
-    pair = lambda p: np.abs(p[np.abs(p.imag) > 1e-9])  # noqa: E731
-    low = lambda p: np.sort(np.abs(p[(np.abs(p.imag) <= 1e-9) & (np.abs(p) > 1e-9)]))  # noqa: E731
+
+    def pair(p):
+        return np.abs(p[np.abs(p.imag) > 1e-9])
+
+    def low(p):
+        return np.sort(np.abs(p[(np.abs(p.imag) <= 1e-9) & (np.abs(p) > 1e-9)]))
+
     z_err = np.max(np.abs(zg / zt - 1)) if len(zg) == len(zt) else np.inf
     res_err = np.max(np.abs(pair(pg) / pair(pt)[0] - 1)) if len(pair(pg)) else np.inf
     lo_g, lo_t = low(pg), low(pt)

@@ -16,12 +16,12 @@ import tomllib
 
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+from flexarm.specs import builtin_scenarios, load_scenario
+from flexarm.specs.scenario import MultiLinkScenario, Scenario, ScenarioError, scenario_from_dict
 
-from flexarm.specs import builtin_scenarios, load_scenario  # noqa: E402
-from flexarm.specs.scenario import MultiLinkScenario, Scenario, ScenarioError, scenario_from_dict  # noqa: E402
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import given, settings  # noqa: E402 - optional: after importorskip
+from hypothesis import strategies as st  # noqa: E402 - optional: after importorskip
 
 BASES = {name: tomllib.loads(p.read_text()) for name, p in sorted(builtin_scenarios().items())}
 

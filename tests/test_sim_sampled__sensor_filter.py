@@ -200,7 +200,7 @@ def test_bad_bandwidths():
 def test_fast_bench_loop_equals_simulator_with_filters():
     """The bench fitter's batched loop (:mod:`flexarm.identification.time_domain.closed_loop`) with
     both channels filtered (hub 50 Hz, tip 20 Hz) equals :func:`simulate_loop` on the same arm, to
-    rounding, as without filters (tests/test_bench_fit.py): 1e-9 rad / m / V."""
+    rounding, as without filters (tests/test_time_domain_fit.py): 1e-9 rad / m / V."""
     fth, fd = 50.0, 20.0
     sc = _rotary()
     sensors = dict(sc.sensors)

@@ -50,7 +50,7 @@ def _named(exc: BaseException, path) -> None:
 def _read_or_named(read, path):
     try:
         return read(path)
-    except Exception as exc:  # noqa: BLE001 - the property: only FlexarmError is allowed
+    except Exception as exc:  # the property: only FlexarmError is allowed
         _named(exc, path)
         return None
 
@@ -408,5 +408,5 @@ def test_frf_json_is_valid_or_one_clear_error(data):
     src = "fuzz-frf.json"
     try:
         PeriodicFRF.from_json(d, src)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         _named(exc, src)

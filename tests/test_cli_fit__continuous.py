@@ -1,6 +1,6 @@
 """Issue #24 items 3 and 4 through the command line: ``flexarm validate SCENARIO FILES...
 --controller CTRL.toml --continuous`` (and ``simulate --log``), on the acceptance run of
-tests/test_continuous.py (an LQG at 10 ms on the shoulder beside the lab's elbow LQR at
+tests/test_sim_filters__continuous.py (an LQG at 10 ms on the shoulder beside the lab's elbow LQR at
 2 ms, the shared stair's setpoints simulated and written as ten consecutive files, the
 shoulder block a struct in a .mat with an 8-entry ``signals`` vector).
 
@@ -18,7 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 from flexarm.cli import app
-from test_continuous import STAIR, build_lqg_stair
+from test_sim_filters__continuous import STAIR, build_lqg_stair
 
 runner = CliRunner()
 
@@ -88,7 +88,7 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
     reproduces the simulated run. Without it: one warning per file naming 'shoulder LQG'
     and --continuous, on stderr and in the JSON, and the shoulder's rates fit worse.
 
-    Tolerances: those of the library replay (tests/test_continuous.py: median > 99.8 %,
+    Tolerances: those of the library replay (tests/test_sim_filters__continuous.py: median > 99.8 %,
     min > 99 % over the pieces) on the channels it checks. The one prediction (the general
     engine) starts each piece from the plant state read off the logged sensor channels of
     the joined run (the digital filters inverted, rates from a local polynomial over ±10
@@ -159,7 +159,8 @@ def test_validate_reproduces_the_lqg_stair_with_continuous(tmp_path, monkeypatch
 def test_simulate_log_replays_the_run_with_the_controller_file(tmp_path):
     """``simulate SCENARIO --log F1 ... --controller CTRL.toml --continuous``: the library
     replay (analysis.replay.replay_run), which starts each piece from the logged true state:
-    the tolerance of tests/test_continuous.py (median > 99.8 %, min > 99 % per channel)."""
+    the tolerance of tests/test_sim_filters__continuous.py (median > 99.8 %, min > 99 % per
+    channel)."""
     run = build_lqg_stair(tmp_path)
     out = tmp_path / "out"
     args = [

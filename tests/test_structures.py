@@ -1,6 +1,7 @@
 """Physical structures in the one structured frequency-domain fit (structures.py): FRB's
 single-mass arm (eqs. (12)–(13)) and the geared voltage-driven servo with a flexible link
-(the rotary rig), beside the two-mass drive (test_ident_tfest.py, test_ident_motor_bench.py)."""
+(the rotary rig), beside the two-mass drive (test_tfest.py,
+test_frequency_domain__motor_bench.py)."""
 
 import control
 import numpy as np

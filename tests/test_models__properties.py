@@ -14,18 +14,18 @@ from __future__ import annotations
 
 import math
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+from flexarm.models.single_link import SingleLinkModel
+from flexarm.sim.integrate import rk4_path
+from flexarm.specs.arm import SingleLinkArm
 
-from flexarm.models.single_link import SingleLinkModel  # noqa: E402
-from flexarm.sim.integrate import rk4_path  # noqa: E402
-from flexarm.specs.arm import SingleLinkArm  # noqa: E402
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import given, settings  # noqa: E402 - optional: after importorskip
+from hypothesis import strategies as st  # noqa: E402 - optional: after importorskip
 
 
 def logu(lo, hi):

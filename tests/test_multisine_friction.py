@@ -520,7 +520,7 @@ def rotary():
 @pytest.mark.slow
 def test_rotary_rig_bla_and_odd_distortion(rotary):
     """The BLA tends to the linear FRF (structures.voltage_servo_response at the scenario's
-    values, equal to flexarm.linearize of the arm: test_ident_structures) as C_f → 0, and
+    values, equal to flexarm.linearize of the arm: test_structures) as C_f → 0, and
     the odd distortion grows with C_f. Measured rms relative BLA error 0.05, 1.7, 5.2,
     10.3 % and mean odd level −77, −38, −28, −22 dB for C_f = 0, 5, 15, 30 mN·m."""
     from flexarm.identification.frequency_domain.structures import voltage_servo_response

@@ -105,7 +105,10 @@ def test_two_mass_noise_free_and_noisy():
     assert f.parameters["antiresonance_hz"]["value"] == pytest.approx(80 / np.sqrt(2.3), rel=1e-9)
     rng = np.random.default_rng(0)
     sm, sl = 0.01 * abs(Gm), 0.01 * abs(Gl)
-    noise = lambda: (rng.standard_normal(len(w)) + 1j * rng.standard_normal(len(w))) / np.sqrt(2)  # noqa: E731
+
+    def noise():
+        return (rng.standard_normal(len(w)) + 1j * rng.standard_normal(len(w))) / np.sqrt(2)
+
     f = fit_two_mass(w, Gm + sm * noise(), Gl + sl * noise(), motor_std=sm, load_std=sl)
     for k, v in p.items():  # within 4 standard deviations (one draw; P(fail) ~ 1e-4 each)
         assert abs(f.parameters[k]["value"] - v) < 4 * f.parameters[k]["std"], k
