@@ -28,13 +28,13 @@ MARKER = "<!-- scenario-reference -->"
 SECTIONS = [
     ("top level (single-link)", scenario.Scenario),
     ("[arm] (single-link)", arm.SingleLinkArm),
-    ("[arm.motor] drive = \"current\"", arm.CurrentMotor),
-    ("[arm.motor] drive = \"voltage\"", arm.VoltageMotor),
+    ('[arm.motor] drive = "current"', arm.CurrentMotor),
+    ('[arm.motor] drive = "voltage"', arm.VoltageMotor),
     ("[arm.friction]", arm.Friction),
-    ("[arm.beam] model = \"lumped\"", arm.LumpedBeam),
+    ('[arm.beam] model = "lumped"', arm.LumpedBeam),
     ("[[arm.beam.masses]]", arm.PointMass),
-    ("[arm.beam] model = \"transfer_function\"", arm.TransferFunctionBeam),
-    ("[arm.beam] model = \"rigid\"", arm.RigidBeam),
+    ('[arm.beam] model = "transfer_function"', arm.TransferFunctionBeam),
+    ('[arm.beam] model = "rigid"', arm.RigidBeam),
     ("[sampling]", experiment.Sampling),
     ("[sensors.<signal>]", experiment.Sensor),
     ("[sensors.<signal>.filter]", experiment.DigitalFilterSpec),
@@ -42,14 +42,14 @@ SECTIONS = [
     ("[simulation]", experiment.Simulation),
     ("[initial]", experiment.Initial),
     ("[reference]", experiment.Reference),
-    ("[controller] type = \"pd\"", experiment.PDController),
-    ("[controller] type = \"pid\"", experiment.PIDController),
-    ("[controller] type = \"lead\"", experiment.LeadController),
-    ("[controller] type = \"tf\"", experiment.TFController),
-    ("[controller] type = \"state_feedback\"", StateFeedbackController),
-    ("[controller] type = \"lti\"", experiment.LTIControllerSpec),
-    ("[controller] type = \"nested\"", NestedController),
-    ("top level (multi-link, arm.kind = \"multi_link\")", scenario.MultiLinkScenario),
+    ('[controller] type = "pd"', experiment.PDController),
+    ('[controller] type = "pid"', experiment.PIDController),
+    ('[controller] type = "lead"', experiment.LeadController),
+    ('[controller] type = "tf"', experiment.TFController),
+    ('[controller] type = "state_feedback"', StateFeedbackController),
+    ('[controller] type = "lti"', experiment.LTIControllerSpec),
+    ('[controller] type = "nested"', NestedController),
+    ('top level (multi-link, arm.kind = "multi_link")', scenario.MultiLinkScenario),
     ("[arm] (multi-link)", multilink.MultiLinkArm),
     ("[[arm.links]]", multilink.Link),
     ("[[arm.hubs]]", multilink.Hub),
@@ -103,13 +103,22 @@ def _default(field) -> str:
 
 
 def reference() -> str:
-    out = ["Quantities accept a bare number (SI) or a string with units, e.g. `\"7 in\"`, "
-           "`\"0.005529 lbf*in*s**2\"`, `\"55 g\"`, `\"400 mrad\"`; the unit column is "
-           "the SI unit stored (`1`: dimensionless, angles in rad).", ""]
+    out = [
+        'Quantities accept a bare number (SI) or a string with units, e.g. `"7 in"`, '
+        '`"0.005529 lbf*in*s**2"`, `"55 g"`, `"400 mrad"`; the unit column is '
+        "the SI unit stored (`1`: dimensionless, angles in rad).",
+        "",
+    ]
     for title, model in SECTIONS:
         doc = inspect.cleandoc(model.__doc__ or "").split("\n\n")[0].replace("\n", " ")
-        out += [f"#### {title}", "", doc, "", "| field | type | unit | bounds | default |",
-                "|---|---|---|---|---|"]
+        out += [
+            f"#### {title}",
+            "",
+            doc,
+            "",
+            "| field | type | unit | bounds | default |",
+            "|---|---|---|---|---|",
+        ]
         for name, f in model.model_fields.items():
             u = _unit(f)
             typ = "quantity" if u is not None and u.unit != "count" else _type_text(f.annotation)
@@ -124,8 +133,10 @@ def reference() -> str:
 
 if __name__ == "__main__":
     if "--write" in sys.argv:
-        print("nothing to write: the scenario reference is generated at docs build time "
-              f"(docs/hooks.py replaces {MARKER} in docs/scenarios.md); `make docs` builds it",
-              file=sys.stderr)
+        print(
+            "nothing to write: the scenario reference is generated at docs build time "
+            f"(docs/hooks.py replaces {MARKER} in docs/scenarios.md); `make docs` builds it",
+            file=sys.stderr,
+        )
     else:
         print(reference())
