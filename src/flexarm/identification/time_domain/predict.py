@@ -187,9 +187,9 @@ def _windowed(logs, opts):
 
 
 def _predict_scenario(sc, logs, keys, opts) -> Prediction:
-    from flexarm.identification.time_domain.general import FitOptions, predict_scenario
+    from flexarm.identification.time_domain.general import ScenarioFitOptions, predict_scenario
 
-    fo = FitOptions(
+    fo = ScenarioFitOptions(
         windows=list(opts.windows) if opts.windows is not None else None,
         continuous=bool(opts.continuous),
     )
