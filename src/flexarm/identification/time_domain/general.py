@@ -1345,35 +1345,13 @@ def predict_scenario(
         "warnings": state_warnings,
     }
     if plots is not None:
-        out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
+        # the one overlay figure (predict.write_overlays); file names NN_NAME_TAG.png
+        from flexarm.identification.time_domain.predict import Prediction, write_overlays
+
+        names = [
+            f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(n).name)}_{tag}.png"
+            for i, n in enumerate(traj)
+        ]
+        pred = Prediction(tag, {k: dict[str, float | None](v) for k, v in fp.items()}, traj)
+        out["plots"] = [str(p) for p in write_overlays(pred, plots, tag, names=names)]
     return out
-
-
-def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: str) -> list[Path]:
-    """Measured vs simulated, one PNG per log with one panel per channel."""
-    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
-
-    from flexarm.io.write import save_figure
-
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, (name, tr) in enumerate(traj.items()):
-        chans = list(tr["simulated"])
-        fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
-        ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)
-        for a, c in zip(ax[:, 0], chans, strict=True):
-            a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
-            a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
-            fpv = fit_percent.get(name, {}).get(c)
-            a.set_title(f"{c}: fit {fpv:.1f} %" if fpv is not None else c, fontsize=9)
-            a.grid(alpha=0.3)
-            a.legend(loc="best", fontsize=7)
-        ax[-1, 0].set_xlabel("time [s]")
-        fig.suptitle(f"{name} ({tag})", fontsize=10)
-        fig.tight_layout()
-        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name)
-        p = out / f"{i:02d}_{stem}_{tag}.png"
-        save_figure(fig, p, overwrite=True, dpi=90)
-        paths.append(p)
-    return paths
