@@ -155,8 +155,8 @@ NOTEBOOKS["fit-rotary-rig"] = [
     ("code", SETUP),
     (
         "code",
-        "from flexarm.identification.time_domain import FitOptions\n"
         "from flexarm.identification.time_domain.general import scenario_with\n"
+        "from flexarm.identification.time_domain.options import FitOptions, Local\n"
         "from flexarm.identification.time_domain.synthetic import scenario_log\n\n"
         'truth = shorter(flexarm.load_scenario("rotary-flexible-link"), 3.0)\n'
         "n = round(truth.simulation.duration / truth.sampling.period) + 1  # samples\n"
@@ -170,7 +170,8 @@ NOTEBOOKS["fit-rotary-rig"] = [
     ),
     (
         "code",
-        "res = flexarm.fit(template, [log], free=free, options=FitOptions(max_nfev=20))\n"
+        "res = flexarm.fit(template, [log], free=free,\n"
+        "                  options=FitOptions(local=Local(max_nfev=20)))\n"
         "for k, v in true.items():\n"
         '    print(f"{k}: fitted {res.params[k]:.4g} ± {res.std[k]:.2g}, true {v:.4g}")',
     ),
@@ -215,14 +216,15 @@ NOTEBOOKS["fit-two-link-rig"] = [
         "20 % off, on segments started from the logged state (multiple shooting). Where "
         "the lab's workspace is present, the same fit on its first 20 s.\n\n"
         "API note: today's `flexarm.fit(scenario, logs, free, options)`, "
-        "`flexarm.validate`, `flexarm.load_log`, `FitOptions(segment=...)` (issue #23 "
-        "may rename the options and the result).",
+        "`flexarm.validate`, `flexarm.load_log`, grouped options "
+        "`FitOptions(shooting=Shooting(segment=...))` (issue #23 may still change the "
+        "result).",
     ),
     ("code", SETUP),
     (
         "code",
-        "from flexarm.identification.time_domain import FitOptions\n"
         "from flexarm.identification.time_domain.general import scenario_with\n"
+        "from flexarm.identification.time_domain.options import FitOptions, Local, Shooting\n"
         "from flexarm.identification.time_domain.synthetic import scenario_log\n\n"
         'truth = shorter(flexarm.load_scenario("quanser-two-link"), 2.0)\n'
         "truth",
@@ -234,7 +236,8 @@ NOTEBOOKS["fit-two-link-rig"] = [
         'true = {free[0]: truth.model_dump()["arm"]["joints"][0]["friction"]["coulomb"]}\n'
         "template = scenario_with(truth, {p: 1.2 * v for p, v in true.items()})\n"
         "res = flexarm.fit(template, [log], free=free,\n"
-        "                  options=FitOptions(segment=1.0, max_nfev=6))\n"
+        "                  options=FitOptions(shooting=Shooting(segment=1.0),\n"
+        "                                     local=Local(max_nfev=6)))\n"
         'print(f"{free[0]}: fitted {res.params[free[0]]:.4g} ± {res.std[free[0]]:.2g}, "\n'
         '      f"true {true[free[0]]:.4g}")',
     ),
@@ -263,7 +266,8 @@ NOTEBOOKS["fit-two-link-rig"] = [
         '                            ROOT / "examples" / "two-link-workspace.toml")\n'
         '    fit = flexarm.fit("quanser-two-link", [real.window(0.0, 20.0)],\n'
         '                      free=["arm.joints[*].friction.coulomb"],\n'
-        "                      options=FitOptions(segment=3.0, max_nfev=10))\n"
+        "                      options=FitOptions(shooting=Shooting(segment=3.0),\n"
+        "                                         local=Local(max_nfev=10)))\n"
         "    print(fit.params)\n"
         '    print(flexarm.validate(fit.scenario, [real.window(50.0, 70.0)])["fit_percent"])',
     ),

@@ -41,6 +41,18 @@ def test_fit_says_which_form_it_needs():
         flexarm.fit(["log.csv"], free=["arm.hubs[0].inertia"])
 
 
+def test_fit_options_is_one_name():
+    """Issue #23: ``FitOptions`` is only the grouped options of flexarm.fit wherever it is
+    exported; the general engine's flat record is ``ScenarioFitOptions``."""
+    from flexarm.identification import time_domain
+    from flexarm.identification.time_domain import general, options
+
+    assert time_domain.FitOptions is options.FitOptions
+    assert time_domain.ScenarioFitOptions is general.ScenarioFitOptions
+    assert not hasattr(general, "FitOptions")
+    assert isinstance(options.FitOptions().engine_options(), general.ScenarioFitOptions)
+
+
 @pytest.mark.skipif(
     not DATA.is_dir(),
     reason=f"two-link rig data not found at {DATA} "

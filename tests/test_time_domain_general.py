@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import FitOptions, fit_scenario
+from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.scenario import load_scenario, scenario_from_dict
@@ -117,7 +117,7 @@ def test_two_mode_link_recovered_within_5_percent():
         "arm.joints[0].drive.torque_constant",
         "arm.links[0].damping_ratio",
     ]
-    res, err = _recover(truth, free, ref, FitOptions(segment=0.5, polish=True, max_nfev=60))
+    res, err = _recover(truth, free, ref, ScenarioFitOptions(segment=0.5, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # the whole-run prediction of the fitted model matches the log (noise only: > 97 %)
     assert res.fit_percent["synthetic"]["theta_1"] > 97
@@ -157,7 +157,7 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
         "arm.beam.youngs_modulus",
         "arm.beam.masses[0].mass",
     ]
-    res, err = _recover(truth, free, ref, FitOptions(segment=0.6, polish=True, max_nfev=60))
+    res, err = _recover(truth, free, ref, ScenarioFitOptions(segment=0.6, polish=True, max_nfev=60))
     assert all(abs(e) < 0.05 for e in err.values()), err
     # a pinned tip mass on a massless wire: only ω² = 3EI/(L³m) and the coupling C = 3EI/L
     # reach the hub, and the data barely separate EI from m: the fit must say so
@@ -173,23 +173,25 @@ def test_bad_input_names_the_field_and_value():
     )
     free = ["arm.hubs[0].inertia"]
     with pytest.raises(ValueError, match=r"bounds\['arm.hubs\[0\].inertia'\].*does not contain"):
-        fit_scenario(truth, [log], free, FitOptions(bounds={"arm.hubs[0].inertia": (0.03, 0.05)}))
+        fit_scenario(
+            truth, [log], free, ScenarioFitOptions(bounds={"arm.hubs[0].inertia": (0.03, 0.05)})
+        )
     with pytest.raises(ValueError, match="has a prior or bounds but is not free"):
-        fit_scenario(truth, [log], free, FitOptions(priors={"arm.joints[0].viscous": 0.3}))
+        fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.joints[0].viscous": 0.3}))
     with pytest.raises(ValueError, match="template value is 0.0"):
         fit_scenario(truth, [log], ["arm.payload.mass"] * 0 + ["arm.hubs[0].mass"])
     with pytest.raises(ValueError, match="no log holds channel 'theta_2'|not a sensor channel"):
-        fit_scenario(truth, [log], free, FitOptions(channels={"theta_2": 1.0}))
+        fit_scenario(truth, [log], free, ScenarioFitOptions(channels={"theta_2": 1.0}))
     slow = log.__class__(log.path, log.time * 2, log.signals)
     with pytest.raises(ValueError, match="sampled every 0.004 s.*samples every 0.002 s"):
         fit_scenario(truth, [slow], free)
     with pytest.raises(ValueError, match="relative standard deviation"):
-        fit_scenario(truth, [log], free, FitOptions(priors={"arm.hubs[0].inertia": 0.0}))
+        fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.hubs[0].inertia": 0.0}))
     blind = log.__class__(
         log.path, log.time, {k: v for k, v in log.signals.items() if k != "theta_1"}
     )
     with pytest.raises(ValueError, match="no column 'theta_1', which the controller"):
-        fit_scenario(truth, [blind], free, FitOptions(channels={"deflection_1": 1.0}))
+        fit_scenario(truth, [blind], free, ScenarioFitOptions(channels={"deflection_1": 1.0}))
 
 
 def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():
@@ -208,7 +210,7 @@ def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():
         truth,
         [log],
         ["sensors.deflection_1.gain"],
-        FitOptions(
+        ScenarioFitOptions(
             channels={"theta_1": 1.0},
             initial="scenario",
             priors={"sensors.deflection_1.gain": 0.25},
@@ -313,7 +315,7 @@ def test_two_link_rig_model_recovered_from_segments_started_on_the_log():
         template,
         [log],
         free,
-        FitOptions(
+        ScenarioFitOptions(
             segment=1.5,
             substeps=4,
             max_nfev=30,

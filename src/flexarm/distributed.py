@@ -1043,13 +1043,15 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
                 "fit_percent": held["fit_percent"],
             }
         return res, extra
-    from flexarm.identification.time_domain import FitOptions, fit_scenario
+    from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
     from flexarm.io.logformat import load_log
     from flexarm.specs import load_scenario
 
     assert row.scenario is not None  # a row without a preset names its scenario (read_manifest)
     logs = [load_log(p, row.log_format) for p in row.logs]
-    opts = FitOptions(windows=[row.window] * len(logs) if row.window else None, **row.options)
+    opts = ScenarioFitOptions(
+        windows=[row.window] * len(logs) if row.window else None, **row.options
+    )
     res = fit_scenario(
         load_scenario(row.scenario), logs, list(row.free) if row.free else None, opts
     )

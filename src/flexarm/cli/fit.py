@@ -711,7 +711,7 @@ def _validate_scenario_cli(
     :func:`flexarm.identification.time_domain.predict.predict`); ``sc`` already carries
     ``cfile``'s controllers (for ``--refit``), and the prediction is given it too, so that
     servo-rig logs with a declared law do not take the rig's replay."""
-    from flexarm.identification.time_domain import FitOptions, fit_scenario
+    from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
     from flexarm.identification.time_domain.general import friction_paths
     from flexarm.identification.time_domain.options import PredictOptions
     from flexarm.identification.time_domain.predict import predict
@@ -751,7 +751,11 @@ def _validate_scenario_cli(
                 status.update("re-estimating the joints' friction")
                 free = friction_paths(sc)  # DECISION: what --refit friction frees
                 res = fit_scenario(
-                    sc, glogs[:1], free, FitOptions(channels=ch, windows=[rwin]), predict=False
+                    sc,
+                    glogs[:1],
+                    free,
+                    ScenarioFitOptions(channels=ch, windows=[rwin]),
+                    predict=False,
                 )
                 after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
                 figs += after.plots

@@ -3,6 +3,9 @@
 kind (:mod:`~flexarm.identification.time_domain.presets`), one result
 (:class:`~flexarm.identification.time_domain.result.FitResult`), one prediction
 (:func:`~flexarm.identification.time_domain.predict.predict`, ``flexarm.validate``).
+``FitOptions`` is the one fit's grouped options
+(:class:`~flexarm.identification.time_domain.options.FitOptions`); ``ScenarioFitOptions``
+the general engine's flat record (:func:`fit_scenario`'s).
 
 Deprecated names kept until their callers move: ``fit`` / ``predict`` here are the rotary
 servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` its replay,
@@ -11,8 +14,8 @@ servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` 
 pipeline's result."""
 
 from flexarm.identification.time_domain.general import (
-    FitOptions,
     ScenarioFit,
+    ScenarioFitOptions,
     fit_scenario,
     predict_scenario,
 )
@@ -23,7 +26,7 @@ from flexarm.identification.time_domain.logs import (
     parse_controller,
     read_bench_log,
 )
-from flexarm.identification.time_domain.options import PredictOptions
+from flexarm.identification.time_domain.options import FitOptions, PredictOptions
 from flexarm.identification.time_domain.predict import Prediction, overlay_figure
 from flexarm.identification.time_domain.report import FitResult as RigFitResult
 from flexarm.identification.time_domain.result import FitResult
@@ -38,6 +41,7 @@ __all__ = [
     "Prediction",
     "RigFitResult",
     "ScenarioFit",
+    "ScenarioFitOptions",
     "fit",
     "fit_scenario",
     "load_rig_log",

@@ -7,8 +7,8 @@ or a :class:`~.presets.Preset`. Without ``free`` the preset's default free list 
 (:func:`~.presets.for_scenario`: the scenario's ``[notes.fit]``, the registered preset of a
 built-in, e.g. ``quanser-two-link``'s 15 parameters, or the joints' friction) and the result
 says which (:attr:`~.result.FitResult.free_source`). ``options`` is a grouped
-:class:`~.options.FitOptions` (or, deprecated, the general engine's flat options); its
-groups override the preset's.
+:class:`~.options.FitOptions` (or, deprecated, the general engine's flat
+:class:`~.general.ScenarioFitOptions`); its groups override the preset's.
 
 Engines: ``"scenario"`` — the general engine (multiple shooting from the logged state,
 priors, HAC std; :func:`~.general.fit_scenario`); ``"servo_rig"`` — the rotary servo's
@@ -53,7 +53,7 @@ def fit(
         return _servo_rig(preset, logs, options, progress)
     logs = load_logs(logs)
     grouped = options if isinstance(options, FitOptions) else None
-    if isinstance(options, general.FitOptions):
+    if isinstance(options, general.ScenarioFitOptions):
         flat = options
     else:
         base = preset.options if free is None else None

@@ -11,7 +11,8 @@ Parameters and cost
 -------------------
 Parameters are positive (or sign-fixed) physical numbers, estimated in log space:
 p_i = p0_i · exp(z_i), p0_i the template value, z_i ∈ [−ln f, ln f] (f =
-``FitOptions.bound_factor``; ``FitOptions.bounds`` gives absolute bounds per path).
+``ScenarioFitOptions.bound_factor``; ``ScenarioFitOptions.bounds`` gives absolute bounds per
+path).
 A candidate z becomes a scenario (``model_dump`` → set the paths → ``scenario_from_dict``),
 then a loop (:func:`flexarm.sim.build.prepare`); a population of candidates is stacked leaf
 by leaf into one batched loop and run by one ``vmap``-ed simulation.
@@ -97,7 +98,7 @@ from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
 __all__ = [
-    "FitOptions",
+    "ScenarioFitOptions",
     "ScenarioFit",
     "fit_scenario",
     "predict_scenario",
@@ -132,8 +133,12 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
 
 # ----------------------------------------------------------------------------- options
 @dataclass
-class FitOptions:
-    """Options of :func:`fit_scenario` (see the module docstring for the equations).
+class ScenarioFitOptions:
+    """Options of :func:`fit_scenario` (see the module docstring for the equations): the
+    general engine's flat record. Named for the function it configures (``fit_scenario`` →
+    :class:`ScenarioFit`), so that ``FitOptions`` is only the grouped options of
+    :func:`flexarm.fit` (:class:`~flexarm.identification.time_domain.options.FitOptions`,
+    whose ``engine_options()`` returns this record).
 
     channels: measured channel → weight (default: every sensor channel the logs hold, 1).
     bound_factor: default bounds p0/f … p0·f. bounds: path → (lo, hi) in SI (same sign as
@@ -198,15 +203,16 @@ class FitOptions:
     def check(self) -> None:
         if not self.bound_factor > 1:
             raise ValueError(
-                f"FitOptions.bound_factor = {self.bound_factor!r}: must be > 1 (bounds p0/f … p0·f)"
+                f"ScenarioFitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
+                "(bounds p0/f … p0·f)"
             )
         for name in ("residual_level", "correlation_time", "fd_step"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
-                raise ValueError(f"FitOptions.{name} = {v!r}: must be a finite number > 0")
+                raise ValueError(f"ScenarioFitOptions.{name} = {v!r}: must be a finite number > 0")
         if self.initial not in ("log", "scenario"):
             raise ValueError(
-                f"FitOptions.initial = {self.initial!r}: 'log' (segments start "
+                f"ScenarioFitOptions.initial = {self.initial!r}: 'log' (segments start "
                 "from the logged state) or 'scenario' (a log's first sample "
                 "starts from the scenario's [initial] state)"
             )
@@ -216,18 +222,18 @@ class FitOptions:
             and any(w is not None for w in self.windows)
         ):
             raise ValueError(
-                "FitOptions: continuous (consecutive pieces of one run) runs "
+                "ScenarioFitOptions: continuous (consecutive pieces of one run) runs "
                 "whole logs; leave out windows (--window)"
             )
         if self.segment is not None and not self.segment > 0:
             raise ValueError(
-                f"FitOptions.segment = {self.segment!r} s: give a length > 0 s "
+                f"ScenarioFitOptions.segment = {self.segment!r} s: give a length > 0 s "
                 "(e.g. 2–5 s) or None for whole logs"
             )
         for p, s in self.priors.items():
             if not (s > 0 and math.isfinite(s)):
                 raise ValueError(
-                    f"FitOptions.priors[{p!r}] = {s!r}: the relative standard "
+                    f"ScenarioFitOptions.priors[{p!r}] = {s!r}: the relative standard "
                     "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)"
                 )
 
@@ -304,7 +310,7 @@ class _Engine:
         scenario,
         logs: Sequence,
         free: Sequence[str],
-        options: FitOptions,
+        options: ScenarioFitOptions,
         segment: float | Literal["options"] | None = "options",
     ):
         options.check()
@@ -339,7 +345,7 @@ class _Engine:
         for p in list(options.priors) + list(options.bounds):
             if p not in self.free:
                 raise ValueError(
-                    f"FitOptions: {p!r} has a prior or bounds but is not free; "
+                    f"ScenarioFitOptions: {p!r} has a prior or bounds but is not free; "
                     f"free: {', '.join(self.free)}"
                 )
         lo = np.full(len(self.free), -math.log(options.bound_factor))
@@ -349,13 +355,13 @@ class _Engine:
                 a, b = (float(v) for v in options.bounds[p])
                 if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
                     raise ValueError(
-                        f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
+                        f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
                         f"must have the sign of the template value {self.p0[i]:g}"
                     )
                 za, zb = sorted((math.log(a / self.p0[i]), math.log(b / self.p0[i])))
                 if not za <= 0 <= zb:
                     raise ValueError(
-                        f"FitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
+                        f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
                         f"the template value {self.p0[i]:g}; move one of them"
                     )
                 lo[i], hi[i] = za, zb
@@ -365,7 +371,7 @@ class _Engine:
         for p, master in options.ties.items():
             if master not in self.free:
                 raise ValueError(
-                    f"FitOptions.ties: {p!r} follows {master!r}, which is not "
+                    f"ScenarioFitOptions.ties: {p!r} follows {master!r}, which is not "
                     f"free; free: {', '.join(self.free)}"
                 )
             self.tied[p] = (self.free.index(master), _template_value(self.dump, parse_path(p), p))
@@ -378,7 +384,9 @@ class _Engine:
         # ---- logs
         wins = options.windows or [None] * len(logs)
         if len(wins) != len(logs):
-            raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
+            raise ValueError(
+                f"ScenarioFitOptions.windows has {len(wins)} entries for {len(logs)} logs"
+            )
         self.notes: list[str] = []  # channels computed from logged ones (_read)
         from flexarm.io.logs import log_keys
 
@@ -409,12 +417,12 @@ class _Engine:
         for c in chans:
             if c not in self.names:
                 raise ValueError(
-                    f"FitOptions.channels: {c!r} is not a sensor channel of scenario "
+                    f"ScenarioFitOptions.channels: {c!r} is not a sensor channel of scenario "
                     f"{scenario.name!r}; channels: {', '.join(self.names)}"
                 )
             if not any(L.present[self.names.index(c)] for L in self.logs):
                 raise ValueError(
-                    f"FitOptions.channels: no log holds channel {c!r}; the logs hold "
+                    f"ScenarioFitOptions.channels: no log holds channel {c!r}; the logs hold "
                     f"{sorted({k for L in self.logs for k in _cols(L, self.names)})}"
                 )
         self.channels = dict(chans)
@@ -926,7 +934,7 @@ def fit_scenario(
     scenario,
     logs: Sequence,
     free: Sequence[str] | None = None,
-    options: FitOptions | None = None,
+    options: ScenarioFitOptions | None = None,
     *,
     progress=None,
     predict: bool = True,
@@ -939,7 +947,7 @@ def fit_scenario(
     values (fit % of the whole-run prediction; skip for long chaotic runs)."""
     from scipy.optimize import differential_evolution
 
-    options = options or FitOptions()
+    options = options or ScenarioFitOptions()
     fit_notes = scenario_fit_notes(scenario)
     free = list(free if free is not None else fit_notes.get("free", []))
     if not options.priors and fit_notes.get("priors"):
@@ -1055,7 +1063,7 @@ def fit_scenario(
             lo, hi = sorted((eng.p0[i] * math.exp(eng.lo[i]), eng.p0[i] * math.exp(eng.hi[i])))
             warnings.append(
                 f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
-                f"widen it with FitOptions.bounds={{{p!r}: (lo, hi)}}"
+                f"widen it with ScenarioFitOptions.bounds={{{p!r}: (lo, hi)}}"
             )
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
@@ -1089,7 +1097,7 @@ def fit_scenario(
 def _local(
     eng: _Engine,
     z0: np.ndarray,
-    options: FitOptions,
+    options: ScenarioFitOptions,
     states: bool = False,
     o0: np.ndarray | None = None,
     progress=None,
@@ -1292,7 +1300,7 @@ def _covariance(eng: _Engine, r: np.ndarray, J: np.ndarray) -> np.ndarray:
 def predict_scenario(
     scenario,
     logs: Sequence,
-    options: FitOptions | None = None,
+    options: ScenarioFitOptions | None = None,
     *,
     channels: Sequence[str] | None = None,
     plots: str | Path | None = None,
@@ -1302,7 +1310,7 @@ def predict_scenario(
     one simulation per log from the scenario's initial state (a window that does not start
     at the log's first sample: from the logged state there). Returns fit % per log and
     channel (100 (1 − ‖y − ŷ‖/‖y − ȳ‖)), and the simulated channels."""
-    opts = copy.copy(options) if options is not None else FitOptions()
+    opts = copy.copy(options) if options is not None else ScenarioFitOptions()
     opts.priors, opts.bounds, opts.ties, opts.quantise = {}, {}, {}, True
     opts.substeps = None  # the scenario's own integration step
     if channels is not None:
@@ -1336,35 +1344,13 @@ def predict_scenario(
         "warnings": state_warnings,
     }
     if plots is not None:
-        out["plots"] = [str(p) for p in overlay_figures(plots, traj, fp, tag)]
+        # the one overlay figure (predict.write_overlays); file names NN_NAME_TAG.png
+        from flexarm.identification.time_domain.predict import Prediction, write_overlays
+
+        names = [
+            f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(n).name)}_{tag}.png"
+            for i, n in enumerate(traj)
+        ]
+        pred = Prediction(tag, {k: dict[str, float | None](v) for k, v in fp.items()}, traj)
+        out["plots"] = [str(p) for p in write_overlays(pred, plots, tag, names=names)]
     return out
-
-
-def overlay_figures(directory: str | Path, traj: dict, fit_percent: dict, tag: str) -> list[Path]:
-    """Measured vs simulated, one PNG per log with one panel per channel."""
-    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
-
-    from flexarm.io.write import save_figure
-
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, (name, tr) in enumerate(traj.items()):
-        chans = list(tr["simulated"])
-        fig = Figure(figsize=(8, 2.2 * len(chans) + 0.6))
-        ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)
-        for a, c in zip(ax[:, 0], chans, strict=True):
-            a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
-            a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
-            fpv = fit_percent.get(name, {}).get(c)
-            a.set_title(f"{c}: fit {fpv:.1f} %" if fpv is not None else c, fontsize=9)
-            a.grid(alpha=0.3)
-            a.legend(loc="best", fontsize=7)
-        ax[-1, 0].set_xlabel("time [s]")
-        fig.suptitle(f"{name} ({tag})", fontsize=10)
-        fig.tight_layout()
-        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name)
-        p = out / f"{i:02d}_{stem}_{tag}.png"
-        save_figure(fig, p, overwrite=True, dpi=90)
-        paths.append(p)
-    return paths

@@ -170,11 +170,11 @@ class FitOptions:
     continuous: bool = False
 
     def engine_options(self, base=None):
-        """The general engine's flat options (:class:`general.FitOptions`), starting from
+        """The general engine's flat options (:class:`general.ScenarioFitOptions`), from
         ``base`` (a preset's) and overriding the groups given here."""
         import copy
 
-        from flexarm.identification.time_domain.general import FitOptions as Flat
+        from flexarm.identification.time_domain.general import ScenarioFitOptions as Flat
 
         flat = copy.deepcopy(base) if base is not None else Flat()
         groups = [self.cost, self.shooting, self.local, self.priors]

@@ -1,5 +1,8 @@
 """One prediction of logs by a model with its parameters fixed: :func:`predict` →
-:class:`Prediction`, and one overlay figure, :func:`overlay_figure`.
+:class:`Prediction`, and one overlay figure, :func:`overlay_figure` (as PNGs:
+:func:`write_overlays`): the only code that draws measured against predicted signals; the
+servo rig's fit and replay figures (:func:`~.report.overlay_plots`) and the general
+engine's (:func:`~.general.predict_scenario`'s ``plots``) are drawn by it.
 
 Each log (or its window, [t0, t1) s from its first sample) is simulated once with its own
 references and the controller it ran, and compared per measured signal by
@@ -44,14 +47,23 @@ import numpy as np
 
 from flexarm.identification.time_domain.options import PredictOptions
 
-__all__ = ["Prediction", "predict", "controller_file", "overlay_figure", "write_overlays"]
+__all__ = [
+    "Prediction",
+    "predict",
+    "controller_file",
+    "overlay_figure",
+    "write_overlays",
+    "rig_trace",
+]
 
 
 @dataclass
 class Prediction:
     """fit % per log key and signal (None where the log lacks the signal), the traces
     (per key: ``time`` s from the log's first sample, ``measured`` and ``simulated`` per
-    signal), warnings and notes, per-log divergence and any figures written."""
+    signal; optionally ``reference``, drawn in the first panel, and ``display``, signal →
+    (unit, factor) for the figure's axis), warnings and notes, per-log divergence and any
+    figures written."""
 
     scenario: str
     fit_percent: dict[str, dict[str, float | None]]
@@ -187,9 +199,9 @@ def _windowed(logs, opts):
 
 
 def _predict_scenario(sc, logs, keys, opts) -> Prediction:
-    from flexarm.identification.time_domain.general import FitOptions, predict_scenario
+    from flexarm.identification.time_domain.general import ScenarioFitOptions, predict_scenario
 
-    fo = FitOptions(
+    fo = ScenarioFitOptions(
         windows=list(opts.windows) if opts.windows is not None else None,
         continuous=bool(opts.continuous),
     )
@@ -254,15 +266,7 @@ def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
             fp[k], div[k] = got_fp[j], got_div[j]
             n = len(g)
             tr = out["traj"]
-            sim = {
-                "motor_angle": np.asarray(tr[0][j, :n]),
-                "tip_deflection": np.asarray(tr[1][j, :n]),
-                "command": np.asarray(tr[2][j, :n]),
-            }
-            meas = {c: g.signals[c] for c in ("motor_angle", "tip_deflection") if c in g.signals}
-            if "voltage" in g.signals:
-                meas["command"] = g.signals["voltage"]
-            traces[k] = {"time": g.time - g.time[0], "measured": meas, "simulated": sim}
+            traces[k] = rig_trace(g, [np.asarray(tr[r][j, :n]) for r in range(3)])
             i += 1
     pred = Prediction(
         "fitted rig",
@@ -277,22 +281,59 @@ def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
     return pred
 
 
+#: the servo rig's signals on the figure's axes (unit, factor): the tip deflection in mm
+RIG_DISPLAY: dict[str, tuple[str, float]] = {
+    "motor_angle": ("rad", 1.0),
+    "tip_deflection": ("mm", 1e3),
+    "command": ("", 1.0),
+}
+
+
+def rig_trace(log, simulated: Sequence[np.ndarray] | dict[str, np.ndarray]) -> dict:
+    """A servo-rig log's trace for :class:`Prediction`: ``simulated`` as the rig engines'
+    (hub angle, tip deflection, command) arrays, or a dict by signal; the measured hub
+    angle and tip deflection, the logged voltage as the command, the reference (drawn in
+    the first panel) and the axes' units (:data:`RIG_DISPLAY`)."""
+    names = ("motor_angle", "tip_deflection", "command")
+    if isinstance(simulated, dict):
+        sim = dict(simulated)
+    else:
+        sim = dict(zip(names, simulated, strict=True))
+    meas = {c: log.signals[c] for c in names[:2] if c in log.signals}
+    if "voltage" in log.signals:
+        meas["command"] = log.signals["voltage"]
+    tr: dict[str, Any] = {"time": log.time - log.time[0], "measured": meas, "simulated": sim}
+    if "reference" in log.signals:
+        tr["reference"] = log.signals["reference"]
+    tr["display"] = dict(RIG_DISPLAY)
+    return tr
+
+
 def overlay_figure(prediction: Prediction, key: str, fig=None):
     """Measured vs simulated, one panel per signal, for log ``key`` of ``prediction``, drawn
     on a :class:`matplotlib.figure.Figure` (a new one when ``fig`` is None; no pyplot, no
-    backend switched)."""
+    backend switched). A trace's ``reference`` is drawn dotted in the first panel; its
+    ``display`` (signal → (unit, factor); unit "" for none) scales and labels a panel's
+    axis."""
     from matplotlib.figure import Figure
 
     tr = prediction.traces[key]
     chans = list(tr["simulated"])
+    display = tr.get("display", {})
     fig = fig or Figure(figsize=(8, 2.2 * len(chans) + 0.6))
     ax = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
+    if tr.get("reference") is not None:
+        f = display.get(chans[0], ("", 1.0))[1]
+        ax[0].plot(tr["time"], f * np.asarray(tr["reference"]), "k:", lw=0.8, label="reference")
     for a, c in zip(ax, chans, strict=True):
+        unit, f = display.get(c, ("", 1.0))
         if c in tr["measured"]:
-            a.plot(tr["time"], tr["measured"][c], lw=0.8, label="measured")
-        a.plot(tr["time"], tr["simulated"][c], lw=0.8, label="simulated")
+            a.plot(tr["time"], f * np.asarray(tr["measured"][c]), lw=0.8, label="measured")
+        a.plot(tr["time"], f * np.asarray(tr["simulated"][c]), lw=0.8, label="simulated")
         fpv = prediction.fit_percent.get(key, {}).get(c)
         a.set_title(f"{c}: fit {fpv:.1f} %" if fpv is not None else c, fontsize=9)
+        if c in display:
+            a.set_ylabel(c.replace("_", " ") + (f" [{unit}]" if unit else ""))
         a.grid(alpha=0.3)
         a.legend(loc="best", fontsize=7)
     ax[-1].set_xlabel("time [s]")
@@ -302,21 +343,33 @@ def overlay_figure(prediction: Prediction, key: str, fig=None):
 
 
 def write_overlays(
-    prediction: Prediction, directory: str | Path, tag: str = "predict"
+    prediction: Prediction,
+    directory: str | Path,
+    tag: str = "predict",
+    *,
+    names: Sequence[str] | None = None,
 ) -> list[Path]:
     """:func:`overlay_figure` for every log, as PNGs in ``directory`` (written by
-    :func:`flexarm.io.write.save_figure`)."""
+    :func:`flexarm.io.write.save_figure`): ``names``, one file name per log in the order
+    of ``prediction.traces``, or else ``NN_KEY_TAG.png`` (NN the log's index, KEY its key
+    with anything but letters, digits and ``_.-`` as ``_``)."""
     import re
 
     from flexarm.io.write import save_figure
 
+    keys = list(prediction.traces)
+    if names is not None and len(names) != len(keys):
+        raise ValueError(f"write_overlays: {len(names)} file names for {len(keys)} logs")
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for i, key in enumerate(prediction.traces):
+    for i, key in enumerate(keys):
         fig = overlay_figure(prediction, key)
-        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", key)
-        p = out / f"{i:02d}_{stem}_{tag}.png"
+        if names is not None:
+            name = names[i]
+        else:
+            name = f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', key)}_{tag}.png"
+        p = out / name
         save_figure(fig, p, overwrite=True, dpi=90)
         paths.append(p)
     return paths

@@ -98,7 +98,7 @@ def for_scenario(scenario) -> Preset:
     """The preset of a scenario: its ``[notes.fit]`` (free, priors), else the one registered
     under its name, else its joints' friction levels (Coulomb, breakaway, viscous)."""
     from flexarm.identification.time_domain.general import (
-        FitOptions,
+        ScenarioFitOptions,
         friction_paths,
         scenario_fit_notes,
     )
@@ -109,7 +109,7 @@ def for_scenario(scenario) -> Preset:
             scenario.name,
             scenario,
             list(notes["free"]),
-            FitOptions(priors=dict(notes.get("priors", {}))),
+            ScenarioFitOptions(priors=dict(notes.get("priors", {}))),
         )
     if scenario.name in BUILTIN:
         p = BUILTIN[scenario.name]()
@@ -134,4 +134,4 @@ def for_scenario(scenario) -> Preset:
             "[regulation] law is simulated (flexarm.simulate), not fitted to "
             "logs; give a scenario with a sampled loop"
         )
-    return Preset(scenario.name, scenario, friction_paths(scenario), FitOptions())
+    return Preset(scenario.name, scenario, friction_paths(scenario), ScenarioFitOptions())

@@ -14,7 +14,7 @@ from flexarm.errors import OutputExistsError
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
 from flexarm.io.logs import log_keys
-from flexarm.io.write import save_figure, write_json, write_text
+from flexarm.io.write import write_json, write_text
 
 
 def check_physical(params: dict[str, float], source: str = "fit") -> None:
@@ -555,44 +555,23 @@ def toml_with_comments(d: dict, comments: dict, header: list[str]) -> str:
     return "\n".join(lines)
 
 
-def overlay_plots(directory, logs, traj, fit_percent, tag: str) -> list[Path]:
-    """Measured vs simulated θ, d and the command for each log; PNG per log."""
-    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
+def overlay_plots(directory, logs, traj, fit_percent, tag: str, label: str | None = None):
+    """Measured vs simulated hub angle, tip deflection (mm) and command, with the reference,
+    for each servo-rig log: one PNG per log, ``KEY_TAG.png`` (KEY the log's key without its
+    extension, ``/`` as ``__``), drawn by the one overlay figure
+    (:func:`~flexarm.identification.time_domain.predict.write_overlays`); ``traj`` the rig
+    engines' (hub angle, tip deflection, command) arrays, one row per log; ``label`` the
+    figures' title after the key (default: ``tag``)."""
+    from flexarm.identification.time_domain.predict import Prediction, rig_trace, write_overlays
 
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, (g, key) in enumerate(zip(logs, log_keys(logs), strict=True)):
-        n = len(g)
-        t = g.time - g.time[0]
-        fig = Figure(figsize=(8, 7))
-        ax = fig.subplots(3, 1, sharex=True)
-        ax[0].plot(t, g.columns["reference"], "k:", lw=0.8, label="reference")
-        for a, col, k, unit, sc in (
-            (ax[0], "motor_angle", 0, "rad", 1.0),
-            (ax[1], "tip_deflection", 1, "mm", 1e3),
-        ):
-            if col in g.columns:
-                a.plot(t, sc * g.columns[col], lw=0.9, label="measured")
-            a.plot(t, sc * traj[k][i, :n], lw=0.9, label="simulated")
-            fp = fit_percent.get(key, {}).get(col)
-            a.set_ylabel(f"{col.replace('_', ' ')} [{unit}]")
-            a.set_title(f"{col}: fit {fp:.1f} %" if fp is not None else col, fontsize=9)
-            a.legend(loc="best", fontsize=8)
-            a.grid(alpha=0.3)
-        if "voltage" in g.columns:
-            ax[2].plot(t, g.columns["voltage"], lw=0.8, label="logged")
-        ax[2].plot(t, traj[2][i, :n], lw=0.8, label="simulated")
-        ax[2].set_ylabel("command")
-        ax[2].legend(loc="best", fontsize=8)
-        ax[2].grid(alpha=0.3)
-        ax[2].set_xlabel("time [s]")
-        fig.suptitle(f"{key} ({tag})")
-        fig.tight_layout()
-        p = out / f"{key.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png"
-        save_figure(fig, p, overwrite=True, dpi=90)
-        paths.append(p)
-    return paths
+    keys = log_keys(logs)
+    traces = {
+        key: rig_trace(g, [np.asarray(traj[r][i, : len(g)]) for r in range(3)])
+        for i, (g, key) in enumerate(zip(logs, keys, strict=True))
+    }
+    pred = Prediction(label or tag, {k: fit_percent.get(k, {}) for k in keys}, traces)
+    names = [f"{k.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png" for k in keys]
+    return write_overlays(pred, directory, tag, names=names)
 
 
 def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:

@@ -37,8 +37,8 @@ from typing import Any, cast
 import numpy as np
 
 from flexarm.identification.time_domain.general import (
-    FitOptions,
     ScenarioFit,
+    ScenarioFitOptions,
     predict_scenario,
 )
 from flexarm.specs.paths import scenario_with
@@ -112,7 +112,7 @@ def template(friction: bool = True):
     return sc
 
 
-def default_options(**kw) -> FitOptions:
+def default_options(**kw) -> ScenarioFitOptions:
     base: dict[str, Any] = dict(
         channels={c: 1.0 for c in CHANNELS},
         priors=dict(PRIORS),
@@ -133,7 +133,7 @@ def default_options(**kw) -> FitOptions:
         },
     )
     base.update(kw)
-    return FitOptions(**base)
+    return ScenarioFitOptions(**base)
 
 
 def fit_two_link(
@@ -141,7 +141,7 @@ def fit_two_link(
     examples: str | Path,
     *,
     friction: bool = True,
-    options: FitOptions | None = None,
+    options: ScenarioFitOptions | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ScenarioFit:
     """The fit of the split (module docstring) through the one engine
@@ -184,7 +184,7 @@ def held_out_report(
     last = predict_scenario(
         scenario,
         [logs["run"]],
-        FitOptions(windows=[(50.0, 102.0)]),
+        ScenarioFitOptions(windows=[(50.0, 102.0)]),
         channels=ch,
         plots=plots,
         tag="last52s",
@@ -192,7 +192,7 @@ def held_out_report(
     steps = predict_scenario(
         scenario,
         list(logs["held_steps"].values()),
-        FitOptions(),
+        ScenarioFitOptions(),
         channels=ch,
         plots=plots,
         tag="steps",
