@@ -134,6 +134,7 @@ def test_multilink_regulation_joint_count_is_checked(tmp_path):
     assert r.exit_code == 2 and "kp has 1 entries; target has 2" in said(r)
 
 
+@pytest.mark.slow
 def test_fit_reports_with_and_without_friction(tmp_path):
     """`flexarm fit --compare-no-friction`: both fits in the table and the JSON, and the
     friction-free model fits the stick-slip log clearly worse."""
@@ -448,6 +449,7 @@ def test_scenario_valid_as_data_but_not_as_a_model_exits_2(tmp_path):
     assert "tip_num" in said(r) and "proper" in said(r)
 
 
+@pytest.mark.slow
 def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     """Ctrl-C (a real SIGINT) during `flexarm fit`: exit 130, a complete JSON marked
     interrupted with the best parameters so far, and no partial or temporary file left."""

@@ -100,7 +100,14 @@ class _Rows(HTMLParser):
             self._cell += data
 
 
-@pytest.mark.parametrize("name", NAMES)
+#: the notebook whose built-in run is a whole two-link fit (about a minute on 2 cores): a
+#: long end-to-end test, run by `make test` with the slow ones
+LONG = {"fit-two-link-rig"}
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n in LONG else n for n in NAMES]
+)
 def test_notebook_runs(name, monkeypatch):
     nb, seconds = execute(name, monkeypatch, real=False)
     print(f"{name}: executed in {seconds:.1f} s")

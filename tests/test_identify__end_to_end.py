@@ -99,6 +99,7 @@ def paper(tmp_path_factory):
     )
 
 
+@pytest.mark.slow
 def test_paper_arm_end_to_end(paper):
     out, sc = paper
     true = SingleLinkModel.from_spec(sc.arm).motor_tf()  # eq. (12) within 0.03 %
@@ -119,6 +120,7 @@ def test_paper_arm_end_to_end(paper):
     assert p["stiffness"] == pytest.approx(0.674 * LBF_IN, rel=0.05)
 
 
+@pytest.mark.slow
 def test_second_arm_end_to_end(tmp_path):
     """Every parameter differs from the paper's: J, V, C, K, C_f, beam frequency."""
     d = noisy(scenario_dict("feliu-single-mass-identified"))

@@ -24,7 +24,7 @@ from flexarm.sim.integrate import rk4_path
 from flexarm.specs.arm import SingleLinkArm
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import given, settings  # noqa: E402 - optional: after importorskip
+from hypothesis import Phase, given, settings  # noqa: E402 - optional: after importorskip
 from hypothesis import strategies as st  # noqa: E402 - optional: after importorskip
 
 
@@ -134,10 +134,14 @@ def _lin(plant, nx):
         "1e-11 of the largest one, so for a light hub (J = 1e-5 kg m^2) with a stiff short beam "
         "the s^4 coefficient of G_m's denominator is dropped and G_m loses its resonance "
         "(returned (0.0096 s^2 + 1.49e4)/s^2 instead of poles at +-3211j, zeros at +-1247j); "
-        "fix: trim on frequency-scaled coefficients"
+        "trimming on frequency-scaled coefficients (tried 2026-11-28) mends this case, but then "
+        "three 1 kg masses on a 0.14-0.17 m beam with EI = 1 N m^2 fail: the coefficient form "
+        "itself is ill-conditioned there"
     ),
 )
-@settings(max_examples=12)
+# a known failure (xfail above): finding a counter-example is the test; shrinking it took
+# about 80 s of the suite, so the shrink phase is left out
+@settings(max_examples=12, phases=(Phase.explicit, Phase.reuse, Phase.generate))
 @given(arms())
 def test_transfer_functions_match_the_linearised_plant(arm):
     """G_m = θm/u and G_b = θt/θm against C (jωI − A)⁻¹ B of the jacfwd linearisation at

@@ -37,6 +37,7 @@ def row(res, start):
     return rows[0]
 
 
+@pytest.mark.slow
 def test_files_and_table(result):
     for key in ("table_csv", "table_md", "fig2", "laws", "sweep"):
         path = result["files"][key]

@@ -656,6 +656,7 @@ def synthetic_log(rig):
     return sc, Log(None, np.asarray(p.time), sig)
 
 
+@pytest.mark.slow
 def test_replay_of_the_scenarios_own_log_is_exact(synthetic_log):
     """Replaying a log the scenario made (from rest) on the same scenario: setpoints, initial
     state and filter states taken from the log give back every channel (fit 100 % to 1e-6

@@ -68,6 +68,7 @@ def test_a_scenario_without_free_runs_its_preset_and_says_which():
         presets.for_scenario(flexarm.load_scenario("deluca-two-link"))
 
 
+@pytest.mark.slow
 def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
     """flexarm.fit(template, logs) with no free list: the preset (here the joint friction)
     runs and the result says so; the Coulomb level comes back within 5 % of the truth

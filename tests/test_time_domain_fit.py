@@ -151,6 +151,7 @@ def test_fast_loop_equals_flexarm_simulator():
     np.testing.assert_allclose(np.asarray(tr[2])[:, 0, 0], out["command"][:, 0], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_fit_two_logs_validate_third(fitted, logs, tmp_path):
     """Every physical parameter against the truth (scenario rotary-flexible-link).
 
@@ -268,6 +269,7 @@ def test_bad_inputs(tmp_path, logs):
         validate(sc, [logs[0]], controller="state_feedback K1=-6 K2=0 K3=0 K4=0")
 
 
+@pytest.mark.slow
 def test_acceptance_fit_two_10s_logs_validate_the_third():
     """The issue's acceptance, with the benchmark's experiment design (square waves of 0.5
     and 0.15 rad in turn, 1.5 s holds, 10 s at 1 kHz, three state-feedback gain sets, link
@@ -473,6 +475,7 @@ def test_open_loop_replay_recovers_the_parameters(logs):
     assert res.settings["mode"] == "open_loop"
 
 
+@pytest.mark.slow
 def test_two_sessions_share_mechanics_fit_friction_per_session(logs, tmp_path):
     """sessions=[0, 1]: log0 (Coulomb 0.03, breakaway 0.04 N·m) and a log recorded with the
     gear train stiffer, Coulomb 0.05 and breakaway 0.065 N·m (the second gain set, same
@@ -553,6 +556,7 @@ def test_two_sessions_share_mechanics_fit_friction_per_session(logs, tmp_path):
     assert "coulomb" not in res.params and set(res.std) == set(res.params)
 
 
+@pytest.mark.slow
 def test_open_loop_replay_of_one_log_finds_the_tip_delay(logs):
     """One 6 s log in open-loop replay: the default search stops at tip delay 4 (J −9 %, ζ
     −17 %, reported as converged); delay_search="both" with a 20-generation friction
@@ -584,6 +588,7 @@ def test_open_loop_replay_of_one_log_finds_the_tip_delay(logs):
         assert abs(e) < (20.0 if k == "link_damping" else 5.0), (k, e)
 
 
+@pytest.mark.slow
 def test_filtered_tip_sensor_known_cutoff(tmp_path):
     """Two 6 s logs whose strain gauge has an analog 15 Hz first-order low-pass (group
     delay 1/(2π 15 Hz) = 10.6 ms, five times the 2-sample tip delay), fitted with the

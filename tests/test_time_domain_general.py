@@ -124,6 +124,7 @@ def test_two_mode_link_recovered_within_5_percent():
     assert res.fit_percent["synthetic"]["deflection_1"] > 97
 
 
+@pytest.mark.slow
 def test_feliu_current_driven_arm_recovered_within_5_percent():
     """FRB's single-mass arm (current drive, Coulomb friction, lumped beam with the pinned
     tip mass), PD on the motor angle at 3 ms with one period of computation delay, the
