@@ -196,7 +196,8 @@ def design_cmd(
 @dataclass(frozen=True, kw_only=True)
 class DesignRequest:
     """The options of ``flexarm design`` as given on the command line, one field per option
-    (the command's help says what each means).
+    (the command's help says what each means; the defaults are the command's, so every
+    field is given).
 
     DECISION: a command-line record, not a library one: the library's
     :func:`flexarm.design.gate.design_checked` takes the method's own keyword arguments
@@ -205,29 +206,29 @@ class DesignRequest:
     (file paths, the spread as text, the scheduler) is the command's."""
 
     scenario: str
-    method: str = "lqr"
+    method: str
     out: Path
-    q: str | None = None
-    r: str | None = None
-    poles: str | None = None
-    observer_poles: str | None = None
-    pole_domain: str = "s"
-    integral: bool = False
-    disturbance: bool | None = None
-    friction_compensation: bool = True
-    max_deflection: float | None = None
-    distance: float | None = None
-    fit_json: Path | None = None
-    spread: str | None = None
-    plants: int = 200
-    seed: int = 0
-    encoder_counts: int | None = None
-    report: Path | None = None
-    accept_unstable: bool = False
-    max_unstable_share: float = 0.01
-    overwrite: bool = False
-    scheduler: str | None = None
-    workers: int | None = None
+    q: str | None
+    r: str | None
+    poles: str | None
+    observer_poles: str | None
+    pole_domain: str
+    integral: bool
+    disturbance: bool | None
+    friction_compensation: bool
+    max_deflection: float | None
+    distance: float | None
+    fit_json: Path | None
+    spread: str | None
+    plants: int
+    seed: int
+    encoder_counts: int | None
+    report: Path | None
+    accept_unstable: bool
+    max_unstable_share: float
+    overwrite: bool
+    scheduler: str | None
+    workers: int | None
 
     def method_options(self) -> dict[str, Any]:
         """The method's own keyword arguments of :func:`flexarm.design.design` (the pole

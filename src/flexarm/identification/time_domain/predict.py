@@ -289,16 +289,13 @@ RIG_DISPLAY: dict[str, tuple[str, float]] = {
 }
 
 
-def rig_trace(log, simulated: Sequence[np.ndarray] | dict[str, np.ndarray]) -> dict:
+def rig_trace(log, simulated: Sequence[np.ndarray]) -> dict:
     """A servo-rig log's trace for :class:`Prediction`: ``simulated`` as the rig engines'
-    (hub angle, tip deflection, command) arrays, or a dict by signal; the measured hub
-    angle and tip deflection, the logged voltage as the command, the reference (drawn in
-    the first panel) and the axes' units (:data:`RIG_DISPLAY`)."""
+    (hub angle, tip deflection, command) arrays; the measured hub angle and tip deflection,
+    the logged voltage as the command, the reference (drawn in the first panel) and the
+    axes' units (:data:`RIG_DISPLAY`)."""
     names = ("motor_angle", "tip_deflection", "command")
-    if isinstance(simulated, dict):
-        sim = dict(simulated)
-    else:
-        sim = dict(zip(names, simulated, strict=True))
+    sim = dict(zip(names, simulated, strict=True))
     meas = {c: log.signals[c] for c in names[:2] if c in log.signals}
     if "voltage" in log.signals:
         meas["command"] = log.signals["voltage"]
