@@ -677,6 +677,20 @@ def test_replay_of_the_scenarios_own_log_is_exact(synthetic_log):
     }
     for k, v in rep.fit_percent.items():
         assert v == pytest.approx(100.0, abs=1e-6), k
+    # drawn by the one overlay figure: a panel per compared channel, titled with its fit %,
+    # the logged and the simulated trace the replay's own arrays
+    from flexarm.analysis.replay import as_prediction
+    from flexarm.identification.time_domain.predict import overlay_figure
+
+    pred = as_prediction(rep, sc.name)
+    fig = overlay_figure(pred, next(iter(pred.traces)))
+    axes = fig.get_axes()
+    assert [a.get_title() for a in axes] == [
+        f"{k}: fit {v:.1f} %" for k, v in rep.fit_percent.items()
+    ]
+    line = axes[0].get_lines()
+    np.testing.assert_array_equal(line[0].get_ydata(), log["theta_1"])
+    np.testing.assert_array_equal(line[1].get_ydata(), rep.result.measured["theta_1"])
     # the log's step must be the scenario's sampling period
     from flexarm.io.logs import Log
 

@@ -159,24 +159,31 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
     return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts, strict=True)]
 
 
-def plot_replay(rep: Replay, path, *, overwrite: bool = False):
-    """Overlay figure: every compared channel, logged and simulated, with its fit %."""
-    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
-
-    from flexarm.io.write import save_figure
+def as_prediction(rep: Replay, scenario: str = "replay"):
+    """The replay as a :class:`~flexarm.identification.time_domain.predict.Prediction` of one
+    log (key: the log's name), so that it is drawn by the one overlay figure
+    (:func:`~flexarm.identification.time_domain.predict.overlay_figure`)."""
+    from flexarm.identification.time_domain.predict import Prediction
 
     names = list(rep.fit_percent)
-    fig = Figure(figsize=(10, 1.8 * len(names) + 0.5))
-    axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)
     time = rep.log.time
     assert time is not None  # replay() refuses a log without time
-    t = time - time[0]
-    for ax, k in zip(axes[:, 0], names, strict=True):
-        ax.plot(t, rep.log[k], "k", lw=0.8, label="log")
-        ax.plot(t, rep.result.measured[k], "C1", lw=0.8, label="simulated")
-        ax.set_ylabel(k, fontsize=8)
-        ax.set_title(f"{k}: fit {rep.fit_percent[k]:.1f} %", fontsize=8, loc="left")
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("t (s)")
-    fig.tight_layout()
+    trace = {
+        "time": time - time[0],
+        "measured": {k: np.asarray(rep.log[k]) for k in names},
+        "simulated": {k: np.asarray(rep.result.measured[k]) for k in names},
+    }
+    key = rep.log.name
+    return Prediction(scenario, {key: dict(rep.fit_percent)}, {key: trace}, notes=list(rep.notes))
+
+
+def plot_replay(rep: Replay, path, *, overwrite: bool = False, scenario: str = "replay"):
+    """Overlay figure of the replay (the one overlay figure,
+    :func:`~flexarm.identification.time_domain.predict.overlay_figure`): every compared
+    channel, logged and simulated, with its fit %."""
+    from flexarm.identification.time_domain.predict import overlay_figure
+    from flexarm.io.write import save_figure
+
+    pred = as_prediction(rep, scenario)
+    fig = overlay_figure(pred, next(iter(pred.traces)))
     save_figure(fig, path, overwrite=overwrite, dpi=100)

@@ -130,7 +130,7 @@ def replay_logs(
         for path, rep in zip(logs, reps, strict=True):
             results[str(path)] = {k: round(v, 2) for k, v in rep.fit_percent.items()}
             if rep.fit_percent:  # a log where no channel moves has no fit % and no figure
-                plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True)
+                plot_replay(rep, out / f"replay-{path.stem}.png", overwrite=True, scenario=sc.name)
     except (LogError, ScenarioError, ValueError, SimulationDiverged) as exc:
         fail(str(exc))
     write_json(out / "replay.json", replay_document(sc, window, results), overwrite=True)
