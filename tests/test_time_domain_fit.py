@@ -383,14 +383,13 @@ def test_fit_reports_hac_and_iid_std(fitted):
     where the residual is nearly the sensors' noise; 6-22× at the earlier, 15× costlier
     stop of least squares, whose model error persisted for hundreds of samples)."""
     res = fitted
-    d = res.to_dict()["parameters"]
+    d = res.to_dict()
     assert res.stages["local"]["rho"] > 0
     for k in res.params:
         assert np.isfinite(res.std[k]) and np.isfinite(res.std_iid[k]), k
         assert res.std[k] >= res.std_iid[k], (k, res.std[k], res.std_iid[k])
-        assert d[k]["std"] == pytest.approx(res.std[k]) and d[k]["std_iid"] == pytest.approx(
-            res.std_iid[k]
-        )
+        assert d["std"][k] == pytest.approx(res.std[k])
+        assert d["stages"]["servo_rig"]["std_iid"][k] == pytest.approx(res.std_iid[k])
     assert all(m > 1 for m in res.stages["local"]["hac_bandwidth_samples"].values())
     assert "std (HAC)" in res.summary()
 
