@@ -484,8 +484,12 @@ def validate(
         out = validate_document(out, with_plots=plots is not None)
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
     for name, d in out["fit_percent"].items():
-        t.add_row(
-            name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection"))
+        t.add_row(  # None: a signal the log or the scenario lacks (a rigid arm's tip)
+            name,
+            *(
+                f"{d[k]:.1f}" if d.get(k) is not None else "-"
+                for k in ("motor_angle", "tip_deflection")
+            ),
         )
     console.print(t)
     if json_out is not None:
