@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, cast
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.markup import escape
@@ -34,9 +34,6 @@ from flexarm.cli.common import (
     progress,
     write_report,
 )
-
-if TYPE_CHECKING:
-    from flexarm.identification.time_domain.result import FitResult
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
 ControllerOrFile = Annotated[
@@ -637,11 +634,8 @@ def _fit_scenario_cli(
             continuous=continuous,
         )
         with console.status("fitting") as status, _state_warnings_quiet():
-            # a scenario (not the servo-rig preset) runs the general engine: its FitResult
-            res = cast(
-                "FitResult",
-                fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m)),
-            )
+            # the one FitResult of every rig (a scenario here: the general engine)
+            res = fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m))
             status.update("predicting the logs with the fitted parameters")
             console.print(f"free parameters ({len(res.free)}): {res.free_source}", highlight=False)
             opts = opts.engine_options()

@@ -76,7 +76,9 @@ class FitResult:
         )
         return Table(
             f"FitResult of {name}: {len(self.free)} free parameters (SI)",
-            parameter_rows(self.params, self.std),
+            parameter_rows(
+                self.params, self.std, (self.stages.get("servo_rig") or {}).get("units")
+            ),
             header=("parameter", "value", "std (HAC)", "std %", "unit"),
             notes=notes,
         )
