@@ -376,15 +376,26 @@ def test_unwritable_output_folder_exits_2(tmp_path, monkeypatch):
         ro.chmod(0o700)
 
 
-class _FakeFit:
-    """The smallest object with the fit result's JSON method."""
+def _fake_fit():
+    """The smallest fit result (the one FitResult of every rig)."""
+    from flexarm.identification.time_domain.result import FitResult
 
-    def to_dict(self):
-        return {
-            "converged": False,
-            "message": "global stage, generation 3",
-            "parameters": {"J": {"value": 1.5e-3}},
-        }
+    return FitResult(
+        free=["J"],
+        params={"J": 1.5e-3},
+        template={"J": 1e-3},
+        std={"J": float("nan")},
+        correlation=np.full((1, 1), np.nan),
+        warnings=[],
+        fit_percent={},
+        segment_fit_percent={},
+        scenario=None,
+        converged=False,
+        message="global stage, generation 3",
+        nfev=3,
+        cost=1.0,
+        seconds=0.5,
+    )
 
 
 def _interrupting_fit(monkeypatch, result):
@@ -402,19 +413,22 @@ def _interrupting_fit(monkeypatch, result):
 
 
 def test_fit_interrupted_writes_best_result_marked_and_exits_130(tmp_path, monkeypatch):
-    _interrupting_fit(monkeypatch, _FakeFit())
+    from flexarm.identification.time_domain.result import FitResult
+
+    _interrupting_fit(monkeypatch, _fake_fit())
     j = tmp_path / "f.json"
     r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
     assert r.exit_code == 130, r.output
     assert "fit interrupted" in said(r) and str(j) in said(r)
     d = json.loads(j.read_text())
     assert d["interrupted"] is True and d["status"] == "interrupted"
-    assert d["parameters"]["J"]["value"] == 1.5e-3
+    assert d["params"]["J"] == 1.5e-3 and d["std"]["J"] is None
+    assert FitResult.from_dict(d).to_dict() == d  # the one document, read back
     assert _no_temp_files(tmp_path)
 
 
 def test_fit_interrupted_replaces_json_only_with_overwrite(tmp_path, monkeypatch):
-    _interrupting_fit(monkeypatch, _FakeFit())
+    _interrupting_fit(monkeypatch, _fake_fit())
     j = tmp_path / "f.json"
     j.write_text("old")
     r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
@@ -430,7 +444,8 @@ def test_plain_ctrl_c_in_fit_exits_130_writing_a_marked_stub(tmp_path, monkeypat
     r = runner.invoke(app, ["fit", "x.csv", "--json", str(j)])
     assert r.exit_code == 130, r.output
     d = json.loads(j.read_text())
-    assert d["status"] == "interrupted" and "parameters" not in d
+    assert d["status"] == "interrupted" and d["params"] == {}
+    assert d["message"] == "interrupted before any model was evaluated"
     r = runner.invoke(app, ["fit", "x.csv"])
     assert r.exit_code == 130 and "nothing written" in said(r)
 
@@ -520,6 +535,6 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     assert p.returncode == 130, (p.returncode, stderr.decode()[-2000:])
     d = json.loads(j.read_text())
     assert d["interrupted"] is True and d["status"] == "interrupted"
-    assert "hub_inertia" in d["parameters"] and "fit_percent" in d, d.keys()
+    assert "hub_inertia" in d["params"] and "fit_percent" in d, d.keys()
     assert d["message"].startswith("INTERRUPTED")
     assert sorted(x.name for x in out.iterdir()) == ["fit.json"]

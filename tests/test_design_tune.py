@@ -449,17 +449,20 @@ def test_scenario_spread_from_a_fit_json():
 
     sc = flexarm.load_scenario("rotary-flexible-link")
     L = sc.arm.beam.length
-    fit = {
-        "parameters": {
-            "hub_inertia": {"value": 2.08e-3, "std": 1e-4},
-            "viscous": {"value": 4e-3, "std": 4e-4},
-            "coulomb": {"value": 0.03, "std": 0.003},
-            "link_damping": {"value": 0.03, "std": 0.01},
-            "link_frequency": {"value": 18.5, "std": 0.37},
-            "link_inertia": {"value": 3.5e-3, "std": 3.5e-4},
-            "tip_gain": {"value": 1.0, "std": None},
-        }
+    table = {
+        "hub_inertia": (2.08e-3, 1e-4),
+        "viscous": (4e-3, 4e-4),
+        "coulomb": (0.03, 0.003),
+        "link_damping": (0.03, 0.01),
+        "link_frequency": (18.5, 0.37),
+        "link_inertia": (3.5e-3, 3.5e-4),
+        "tip_gain": (1.0, None),
     }
+    # the one FitResult document (params, std) and the older {name: {value, std}} table
+    fit = {"params": {k: v for k, (v, _) in table.items()}}
+    fit["std"] = {k: s for k, (_, s) in table.items()}
+    old = {"parameters": {k: {"value": v, "std": s} for k, (v, s) in table.items()}}
+    assert scenario_spread(old, sc) == scenario_spread(fit, sc)
     sp = scenario_spread(fit, sc)
     assert sp["arm.motor.inertia"] == (sc.arm.motor.inertia, 1e-4)
     assert sp["arm.friction.static"][1] == sp["arm.friction.coulomb"][1] == 0.003
@@ -469,5 +472,5 @@ def test_scenario_spread_from_a_fit_json():
         ei * math.hypot(2 * 0.02, 0.1), rel=1e-12
     )
     assert "sensors.tip_deflection.gain" not in sp  # no std: not drawn
-    with pytest.raises(Exception, match="no 'parameters'"):
+    with pytest.raises(Exception, match="no 'params' and 'std'.*re-run `flexarm fit"):
         scenario_spread({}, sc)

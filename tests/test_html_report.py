@@ -320,11 +320,11 @@ def test_fit_report_holds_the_fit_and_the_command(synthetic):
     text = (d / "fit.html").read_text()
     res = json.loads((d / "fit.json").read_text())
     # the tables carry the result's numbers: 5 significant digits for values, 2 for std
-    for name, p in res["parameters"].items():
-        c = _cells(text, name)
-        assert float(c[1]) == pytest.approx(p["value"], rel=1e-4)
-        assert float(c[2]) == pytest.approx(p["std"], rel=0.06)  # '.2g': half a unit in 10
-        assert float(c[4]) == pytest.approx(100 * p["std"] / abs(p["value"]), rel=1e-2)
+    for name, value in res["params"].items():
+        c, std = _cells(text, name), res["std"][name]
+        assert float(c[1]) == pytest.approx(value, rel=1e-4)
+        assert float(c[2]) == pytest.approx(std, rel=0.06)  # '.2g': half a unit in 10
+        assert float(c[4]) == pytest.approx(100 * std / abs(value), rel=1e-2)
     for sig, v in res["fit_percent"]["b.csv"].items():  # '.1f'
         assert float(
             _cells(text, "b.csv")[1 + list(res["fit_percent"]["b.csv"]).index(sig)]

@@ -374,7 +374,7 @@ def test_hac_standard_errors_match_the_spread_under_autocorrelated_residuals():
     assert np.all(ratio_iid < 0.2), ratio_iid
 
 
-def test_fit_reports_hac_and_iid_std(fitted):
+def test_fit_reports_hac_and_iid_std(fitted, tmp_path):
     """Both estimates reach the summary and the JSON. The residuals of a quantised hub
     that creeps or sticks are positively correlated (the encoder's rounding error of a
     slowly moving angle persists for many samples), so the lag-1 correlation must be
@@ -383,16 +383,32 @@ def test_fit_reports_hac_and_iid_std(fitted):
     where the residual is nearly the sensors' noise; 6-22× at the earlier, 15× costlier
     stop of least squares, whose model error persisted for hundreds of samples)."""
     res = fitted
-    d = res.to_dict()["parameters"]
+    d = res.to_dict()
     assert res.stages["local"]["rho"] > 0
     for k in res.params:
         assert np.isfinite(res.std[k]) and np.isfinite(res.std_iid[k]), k
         assert res.std[k] >= res.std_iid[k], (k, res.std[k], res.std_iid[k])
-        assert d[k]["std"] == pytest.approx(res.std[k]) and d[k]["std_iid"] == pytest.approx(
-            res.std_iid[k]
-        )
+        assert d["std"][k] == pytest.approx(res.std[k])
+        assert d["stages"]["servo_rig"]["std_iid"][k] == pytest.approx(res.std_iid[k])
     assert all(m > 1 for m in res.stages["local"]["hac_bandwidth_samples"].values())
     assert "std (HAC)" in res.summary()
+    # the one FitResult (issue #23): its document reads back unchanged after JSON, the
+    # correlation is the HAC covariance's, the template the start point, and the scenario
+    # it writes is the rig's commented TOML
+    import json
+
+    from flexarm.identification.time_domain.result import FitResult
+
+    one = res.result()
+    d = json.loads(json.dumps(d))
+    assert FitResult.from_dict(d).to_dict() == d and one.engine_result is res
+    assert d["free"] == list(res.params) and set(d["template"]) == set(res.params)
+    assert all(v is not None for v in d["template"].values()) and d["template"] != d["params"]
+    c = np.asarray(one.correlation)
+    assert c.shape == (len(res.params),) * 2 and np.allclose(np.diag(c), 1.0)
+    assert np.allclose(c, c.T) and np.all(np.abs(c) <= 1 + 1e-9)
+    a, b = one.write_scenario(tmp_path / "a.toml"), res.write_scenario(tmp_path / "b.toml")
+    assert a.read_text() == b.read_text() and a.read_text().startswith("# Fitted by")
 
 
 def test_open_loop_replay_recovers_the_parameters(logs):

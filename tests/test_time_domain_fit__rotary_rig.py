@@ -32,6 +32,7 @@ SHEET = dict(
 
 pytestmark = [
     pytest.mark.slow,
+    pytest.mark.rig,
     pytest.mark.skipif(
         not DATA.is_dir(),
         reason=f"real rig logs not found at {DATA} (../shared is absent in a "
@@ -98,20 +99,130 @@ def test_unit7_held_out(unit7):
     assert res.params["tip_gain"] > 0
 
 
-def test_rigid_session():
+#: the rigid session of 4/25: fitted on K1 = 6, 8 and K1K3 = 6, 8, validated on the others
+RIGID_FIT = ["rigidarm_K1_6", "rigidarm_K1_8", "rigidarm_k1k3_6", "rigidarm_k1k3_8"]
+RIGID_HELD = ["rigidarm_K1_7", "rigidarm_K1_9", "rigidarm_k1k3_7", "rigidarm_k1k3_9"]
+
+
+@pytest.fixture(scope="module")
+def rigid():
+    """The rigid session's fit through the front door, ``flexarm.fit`` of the servo-rig
+    preset (the same keywords as ``fit(logs, **SHEET)``): the one FitResult."""
+    import flexarm
+    from flexarm.identification.time_domain.options import FitOptions, ServoRig
+    from flexarm.identification.time_domain.presets import DataSheet, servo_rig
+
+    sheet = DataSheet(**{k: v for k, v in SHEET.items() if k != "computation_delay"})
+    opts = FitOptions(servo_rig=ServoRig(computation_delay=SHEET["computation_delay"]))
+    return flexarm.fit(servo_rig(sheet), [_log(n) for n in RIGID_FIT], options=opts)
+
+
+def test_rigid_session(rigid):
     """The eight rigid-arm runs of 4/25 are one session: fit on K1 = 6, 8 and K1K3 = 6, 8;
     validate on the other four. A rigid arm fits the hub inertia and friction only. The
     held-out threshold, 60 %, is what a model with the fitted friction must beat by far:
     without it the stuck hub's steady-state errors (a few mrad of a 0.2 rad swing) are
     missed on every run."""
-    fit_names = ["rigidarm_K1_6", "rigidarm_K1_8", "rigidarm_k1k3_6", "rigidarm_k1k3_8"]
-    held_names = ["rigidarm_K1_7", "rigidarm_K1_9", "rigidarm_k1k3_7", "rigidarm_k1k3_9"]
-    res = fit([_log(n) for n in fit_names], **SHEET)
-    held = predict(res, [_log(n) for n in held_names])
-    print(res.summary())
+    res = rigid
+    held = predict(res, [_log(n) for n in RIGID_HELD])  # the rig's own loop (engine_result)
+    print(res.engine_result.summary())
     print("held-out fit %:", held["fit_percent"])
     assert "link_frequency" not in res.params  # no tip channel: a rigid hub
     assert res.params["coulomb"] > 0
     for name, fp in {**res.fit_percent, **held["fit_percent"]}.items():
         assert fp["motor_angle"] >= 60.0, (name, fp)
         assert fp["tip_deflection"] is None
+
+
+def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tmp_path):
+    """Issue #23 item 4, one result, one document: ``flexarm fit`` on the rigid session
+    with ``--json`` and ``--scenario-out``, then ``flexarm validate`` of the written scenario
+    on the session's other four runs: no traceback; the JSON is ``FitResult.to_dict()``
+    (it reads back through ``FitResult.from_dict`` unchanged) and holds what the Python
+    call ``flexarm.fit`` gives with the same options (the fit is seeded: same parameters,
+    fit %, keys; only the seconds differ)."""
+    import json
+    import subprocess
+    import sys
+
+    from flexarm.identification.time_domain.result import FitResult
+    from flexarm.specs import load_scenario
+
+    j, toml, v = tmp_path / "fit.json", tmp_path / "arm.toml", tmp_path / "validate.json"
+    sheet = [
+        "--gear-ratio",
+        "48.4",
+        "--motor-constant",
+        "0.0107",
+        "--armature-resistance",
+        "3.29",
+        "--link-length",
+        "0.45",
+        "--computation-delay",
+        "1",
+        "--voltage-limit",
+        "10",
+    ]
+    fmt = ["--log-format", str(FORMAT)]
+    cli = [sys.executable, "-m", "flexarm"]
+    logs = [str(DATA / n) for n in RIGID_FIT]
+    r = subprocess.run(
+        [*cli, "fit", *logs, *fmt, *sheet, "--json", str(j), "--scenario-out", str(toml)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    d = json.loads(j.read_text())
+    assert FitResult.from_dict(json.loads(json.dumps(d))).to_dict() == d
+    py = json.loads(json.dumps(rigid.to_dict()))
+    assert set(d) == set(py) and set(d["stages"]) == set(py["stages"])
+    assert (
+        set(d["stages"]["servo_rig"])
+        == set(py["stages"]["servo_rig"])
+        >= {
+            "derived",
+            "delays_samples",
+            "initial_states",
+            "settings",
+            "std_iid",
+            "units",
+            "docs",
+            "uncertainty_note",
+        }
+    )
+    assert d["free"] == py["free"] == list(d["params"]) and set(d["std"]) == set(py["std"])
+    for k, x in py["params"].items():
+        assert d["params"][k] == pytest.approx(x, rel=1e-9, abs=1e-300), k
+    assert set(d["fit_percent"]) == set(py["fit_percent"]) == set(RIGID_FIT)
+    for log, fp in py["fit_percent"].items():
+        assert set(d["fit_percent"][log]) == set(fp)
+        for sig, x in fp.items():
+            assert (d["fit_percent"][log][sig] is None) == (x is None), (log, sig)
+            if x is not None:
+                assert d["fit_percent"][log][sig] == pytest.approx(x, abs=1e-6), (log, sig)
+    for key in ("converged", "message", "warnings", "free_source", "nfev", "template"):
+        assert d[key] == py[key], key
+    assert d["stages"]["servo_rig"]["delays_samples"] == py["stages"]["servo_rig"]["delays_samples"]
+    # the scenario written is the rig's commented TOML, and the Python result's
+    assert toml.read_text().startswith("# Fitted by flexarm.identification.time_domain from")
+    sc = load_scenario(toml)
+    assert sc.arm.motor.inertia == pytest.approx(rigid.params["hub_inertia"], rel=1e-9)
+    r = subprocess.run(
+        [
+            *cli,
+            "validate",
+            str(toml),
+            *(str(DATA / n) for n in RIGID_HELD),
+            *fmt,
+            "--json",
+            str(v),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    out = json.loads(v.read_text())
+    print("validate fit %:", out["fit_percent"])
+    assert set(out["fit_percent"]) == set(RIGID_HELD)
+    for name, fp in out["fit_percent"].items():
+        assert fp["motor_angle"] is not None and fp["motor_angle"] >= 60.0, (name, fp)

@@ -1142,10 +1142,11 @@ def summary_record(rid: str, d: dict, status: str = "done") -> dict:
         "n_warnings": len(d.get("warnings", [])),
         "warnings": " | ".join(d.get("warnings", [])),
     }
-    if "parameters" in d:  # the servo-rig fit
+    if "params" not in d and "parameters" in d:  # a servo-rig row written before the one
+        # FitResult document (its {name: {value, std}} table): a finished row read back
         for k, p in d["parameters"].items():
             rec[k], rec[f"{k}_std"] = p.get("value"), p.get("std")
-    else:
+    else:  # FitResult.to_dict of every rig
         for k, v in d.get("params", {}).items():
             rec[k], rec[f"{k}_std"] = v, d.get("std", {}).get(k)
     for tag, fp in (

@@ -291,15 +291,18 @@ def fit_report(
     fit_percent: Mapping[str, Mapping] | None = None,
     extra_fit_percent: Mapping[str, Mapping] | None = None,
 ) -> HtmlReport:
-    """The report of a time-domain fit: a bench fit
-    (:class:`~flexarm.identification.time_domain.report.FitResult`: parameters ± HAC std
-    with units, derived values, sensor delays, fit % per log and signal, status and
-    warnings) or a general fit (:class:`~flexarm.identification.time_domain.general.ScenarioFit`:
-    each free scenario path with its template value, fitted value ± std, fit %).
+    """The report of a time-domain fit (:class:`~flexarm.identification.time_domain.result.
+    FitResult`): the servo rig's (its ``stages["servo_rig"]``: parameters ± HAC std with
+    units, derived values, sensor delays, fit % per log and signal, status and warnings; the
+    rig engine's own result is taken too) or the general engine's (each free scenario path
+    with its template value, fitted value ± std, fit %).
     ``fit_percent``: the fit % to show instead of the result's own (the general fit's
     whole-log prediction when it was made separately); ``extra_fit_percent``: further fit %
     tables by title (held-out windows, the fit without friction)."""
-    if hasattr(result, "free"):  # ScenarioFit
+    if hasattr(result, "space") and hasattr(result, "result"):  # the servo rig engine's own
+        result = result.result()
+    rig = result.stages.get("servo_rig")  # the servo rig's record (report.as_fit_result)
+    if rig is None:  # the general engine's FitResult
         rep = HtmlReport(
             f"flexarm fit: {result.scenario.name}",
             command,
@@ -329,10 +332,13 @@ def fit_report(
         )
         fp = fit_percent or result.prediction.get("fit_percent") or result.fit_percent
         rep.fit_percent(fp, "Fit % (whole-log prediction)")
-    else:  # the bench FitResult
-        from flexarm.identification.time_domain.params import UNITS
-
-        logs = [getattr(g, "path", None) or g.name for g in result.logs]
+    else:  # the servo rig's FitResult
+        eng = result.engine_result
+        logs = (
+            [getattr(g, "path", None) or g.name for g in eng.logs]
+            if eng is not None
+            else list(result.fit_percent)
+        )
         rep = HtmlReport(
             "flexarm fit: " + ", ".join(Path(str(n)).name for n in logs),
             command,
@@ -341,17 +347,15 @@ def fit_report(
         )
         if not result.converged:
             rep.warnings.insert(0, result.message)
-        st = result.settings
+        st = rig.get("settings", {})
         rep.heading("Status").text(
             f"{result.message}. Mode {st.get('mode')}, joint friction "
             f"{'on' if st.get('friction') else 'off'}, {result.seconds:.1f} s."
         )
         rep.heading("Fitted parameters")
+        units = rig.get("units", {})
         rep.parameters(
-            (
-                (k, v, result.std.get(k), UNITS.get(k.split("[")[0], ""))
-                for k, v in result.params.items()
-            ),
+            ((k, v, result.std.get(k), units.get(k, "")) for k, v in result.params.items()),
             std_label="std (HAC)",
         )
         rep.text(
@@ -359,11 +363,11 @@ def fit_report(
             "autocorrelated); a local linearisation that ignores the jumps of "
             "stick-slip and any bias of the model structure."
         )
-        if result.derived:
+        if rig.get("derived"):
             rep.heading("Derived values")
-            rep.table(("quantity", "value [SI]"), list(result.derived.items()))
+            rep.table(("quantity", "value [SI]"), list(rig["derived"].items()))
         rep.heading("Sensor delays")
-        rep.table(("signal", "delay [samples]"), list(result.delays.items()))
+        rep.table(("signal", "delay [samples]"), list(rig.get("delays_samples", {}).items()))
         rep.fit_percent(fit_percent or result.fit_percent, "Fit % per log and signal")
     for title, fp in (extra_fit_percent or {}).items():
         rep.fit_percent(fp, title)

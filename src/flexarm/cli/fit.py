@@ -1,16 +1,18 @@
 """``flexarm fit`` and ``flexarm validate``: time-domain identification from lab logs and
 the prediction of logs by a (fitted) scenario.
 
-The JSON documents these commands write are assembled in the functions marked
-``JSON LAYOUT`` below; they move into the library's ``FitResult.to_dict()`` (issue #23
-item 4), which then replaces each of them by one call."""
+The JSON documents these commands write are the library's: ``fit --json`` is the one
+:meth:`~flexarm.identification.time_domain.result.FitResult.to_dict` of every rig (the
+servo rig's through :func:`~flexarm.identification.time_domain.report.as_fit_result`, an
+interrupted fit's through :func:`~flexarm.identification.time_domain.report.
+interrupted_result`), ``validate --json`` the prediction's dictionary."""
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, cast
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.markup import escape
@@ -32,10 +34,6 @@ from flexarm.cli.common import (
     progress,
     write_report,
 )
-
-if TYPE_CHECKING:
-    from flexarm.identification.time_domain.predict import Prediction
-    from flexarm.identification.time_domain.result import FitResult
 
 #: ``--controller`` of ``fit`` and ``validate``: a controller file, or the servo rig's law
 ControllerOrFile = Annotated[
@@ -309,10 +307,11 @@ def fit(
         _fit_interrupted(json_out, overwrite, res, None)
     console.print(escape(res.summary()))
     _print_bench_tables(res, res0, held, validate_window)
+    one = res.result(without_friction=res0, window=win, held_out=held, held_window=vwin)
     if json_out is not None:
-        write_json(json_out, bench_fit_document(res, res0, win, held, vwin), overwrite=overwrite)
+        write_json(json_out, one.to_dict(), overwrite=overwrite)
     if scenario_out is not None:
-        res.write_scenario(scenario_out, overwrite=overwrite)
+        one.write_scenario(scenario_out, overwrite=overwrite)
     with figure_folder(plots, report) as folder:
         if folder is not None:
             _bench_figures(
@@ -450,6 +449,7 @@ def validate(
     fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.identification.time_domain import FitInputError
     from flexarm.identification.time_domain import validate as run_validate
+    from flexarm.identification.time_domain.validate import document as validate_document
 
     check_file_option("--json", json_out, overwrite)
     check_file_option("--report", report, overwrite, "validate.html")
@@ -478,11 +478,15 @@ def validate(
                 report,
                 overwrite,
             )
-        out = bench_validate_document(out, plots is not None)
+        out = validate_document(out, with_plots=plots is not None)
     t = Table("log", "motor_angle fit %", "tip_deflection fit %")
     for name, d in out["fit_percent"].items():
-        t.add_row(
-            name, *(f"{d.get(k, float('nan')):.1f}" for k in ("motor_angle", "tip_deflection"))
+        t.add_row(  # None: a signal the log or the scenario lacks (a rigid arm's tip)
+            name,
+            *(
+                f"{d[k]:.1f}" if d.get(k) is not None else "-"
+                for k in ("motor_angle", "tip_deflection")
+            ),
         )
     console.print(t)
     if json_out is not None:
@@ -630,11 +634,8 @@ def _fit_scenario_cli(
             continuous=continuous,
         )
         with console.status("fitting") as status, _state_warnings_quiet():
-            # a scenario (not the servo-rig preset) runs the general engine: its FitResult
-            res = cast(
-                "FitResult",
-                fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m)),
-            )
+            # the one FitResult of every rig (a scenario here: the general engine)
+            res = fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m))
             status.update("predicting the logs with the fitted parameters")
             console.print(f"free parameters ({len(res.free)}): {res.free_source}", highlight=False)
             opts = opts.engine_options()
@@ -728,7 +729,7 @@ def _validate_scenario_cli(
         )
     win = parsing.window(window, "--window")
     rwin = parsing.window(refit_window, "--refit-window")
-    out: dict = {}  # the prediction's to_dict(); JSON LAYOUT: refit_document
+    out: dict = {}  # the prediction's to_dict(), the refit's entry (FitResult.refit_entry)
     figures = contextlib.ExitStack()
     plots = figures.enter_context(figure_folder(plots, report))
     figs: list = []
@@ -759,7 +760,7 @@ def _validate_scenario_cli(
                 )
                 after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
                 figs += after.plots
-                out["refit"] = refit_document(res, free, rwin, logs[0], after)
+                out["refit"] = res.refit_entry(free, rwin, logs[0], after)
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
@@ -820,9 +821,10 @@ def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> NoRet
     shell's code for SIGINT).  ``res``: the friction fit if it had finished (the
     interrupted one was then the --compare-no-friction fit), ``best``: the interrupted
     fit's best result (``None`` if none)."""
+    from flexarm.identification.time_domain.report import interrupted_result
     from flexarm.io.write import write_json
 
-    d = interrupted_document(res, best)
+    d = interrupted_result(res, best).to_dict()
     if json_out is None:
         err.print("[yellow]fit interrupted[/]: nothing written (no --json given)")
     else:
@@ -834,71 +836,3 @@ def _fit_interrupted(json_out: Path | None, overwrite: bool, res, best) -> NoRet
             highlight=False,
         )
     raise typer.Exit(130)
-
-
-# --- JSON LAYOUT -----------------------------------------------------------------------------
-# The documents `fit --json` and `validate --json` write, assembled here, one function each.
-# MERGE: the library's FitResult.to_dict() (the `fitcore` work, identification/time_domain/)
-# takes these keys; each function below then becomes `result.to_dict()`.
-
-
-def bench_fit_document(res, res0, win, held, vwin) -> dict:
-    """JSON LAYOUT of ``fit LOG... --json`` (the servo-rig fit): the fit's own dictionary
-    plus the fit without friction (``--compare-no-friction``), the fitted window
-    (``--window``) and the held-out prediction (``--validate-window``)."""
-    d = res.to_dict()
-    if res0 is not None:
-        d["without_friction"] = without_friction_document(res0)
-    if win:
-        d["window_s"] = list(win)
-    if held is not None:
-        d["held_out"] = {
-            "window_s": list(vwin),
-            "fit_percent": held["fit_percent"],
-            "diverged": held["diverged"],
-            "initial_state": "estimated from each window's own data",
-        }
-    return d
-
-
-def without_friction_document(res0) -> dict:
-    """JSON LAYOUT of the ``without_friction`` entry (``fit --compare-no-friction``)."""
-    return {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
-
-
-def interrupted_document(res, best) -> dict:
-    """JSON LAYOUT of an interrupted ``fit``: the best result so far, marked
-    ``"interrupted": true, "status": "interrupted"`` (``res``: the friction fit when it
-    had finished and the --compare-no-friction fit was interrupted; ``best``: the
-    interrupted fit's best result, ``None`` if none)."""
-    mark = {"interrupted": True, "status": "interrupted"}
-    if res is not None:
-        d = res.to_dict()
-        d["without_friction"] = (
-            {**without_friction_document(best), **mark} if best is not None else dict(mark)
-        )
-    elif best is not None:
-        d = best.to_dict()
-    else:
-        d = {"message": "interrupted before any model was evaluated"}
-    return {**mark, **d, **mark}
-
-
-def refit_document(res, free: list[str], rwin, log, after: Prediction) -> dict:
-    """JSON LAYOUT of the ``refit`` entry of ``validate --refit friction --json``."""
-    return {
-        "window_s": list(rwin),
-        "log": str(log),
-        "params": {p: res.params[p] for p in free},
-        "template": {p: res.template[p] for p in free},
-        "std": {p: res.std[p] for p in free},
-        "warnings": res.warnings,
-        "fit_percent": after["fit_percent"],
-    }
-
-
-def bench_validate_document(out: dict, with_plots: bool) -> dict:
-    """JSON LAYOUT of ``validate SCENARIO LOG... --json`` on a single-link rig: the
-    library's validation dictionary, its figure list emptied when no ``--plots`` was asked
-    (the figures then went to a report's temporary folder)."""
-    return {**out, "plots": out["plots"] if with_plots else []}

@@ -226,13 +226,16 @@ class PlantBatch:
 def from_fit(
     result, n: int = 200, *, seed: int = 0, undetermined: float = UNDETERMINED, max_rounds: int = 50
 ) -> PlantBatch:
-    """N plants drawn from a servo-rig fit's uncertainty, eq. (1) of the module doc."""
+    """N plants drawn from a servo-rig fit's uncertainty, eq. (1) of the module doc.
+    ``result``: the servo rig's result (:func:`flexarm.fit` of the servo-rig preset, whose
+    ``engine_result`` it uses, or the rig engine's own)."""
     from flexarm.identification.time_domain.params import derived
     from flexarm.identification.time_domain.report import scenario_from_fit
     from flexarm.specs.scenario import ScenarioError, scenario_from_dict
 
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
+    result = getattr(result, "engine_result", None) or result
     space, U = result.space, np.asarray(result.unit, float)
     if space is None or U is None:
         raise ValueError(

@@ -14,8 +14,9 @@ Engines: ``"scenario"`` — the general engine (multiple shooting from the logge
 priors, HAC std; :func:`~.general.fit_scenario`); ``"servo_rig"`` — the rotary servo's
 data-sheet pipeline (:func:`~.fit.fit`, its estimates, delay search, global stage and
 continuation), called through its keyword interface with the preset's data sheet and
-``options.servo_rig``; it returns that pipeline's result
-(:class:`~.report.FitResult`).
+``options.servo_rig``; its result (:class:`~.report.FitResult`) comes as the one
+:class:`~.result.FitResult` (:func:`~.report.as_fit_result`: the rig's own record under
+``stages["servo_rig"]``, the rig's result as ``engine_result``), as for every preset.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions
 from flexarm.identification.time_domain.presets import Preset, for_scenario
+from flexarm.identification.time_domain.result import FitResult
 
 __all__ = ["fit"]
 
@@ -37,7 +39,7 @@ def fit(
     options: Any = None,
     *,
     progress: Callable[[str], None] | None = None,
-):
+) -> FitResult:
     """Fit ``scenario``'s free parameters to ``logs`` (module docstring). Paths in ``logs``
     are read by :func:`flexarm.io.logformat.load_log` (exchange format)."""
     from flexarm.identification.time_domain import general
@@ -81,10 +83,13 @@ def fit(
 def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.fit import fit as rig_fit
     from flexarm.identification.time_domain.logs import as_bench_log
+    from flexarm.identification.time_domain.report import as_fit_result
 
     opts = options if isinstance(options, FitOptions) else FitOptions()
     kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
     logs = [as_bench_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
-    return rig_fit(logs, progress=progress, **kw)
+    return as_fit_result(
+        rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}"
+    )

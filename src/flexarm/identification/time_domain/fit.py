@@ -525,6 +525,11 @@ def fit(
         info,
         est,
     )
+    # the start point (SI, the gauge gain with the start's sign): the result's template
+    info["start"] = {
+        nm: float(d.to_phys(u0[i])) * (2 * int(d0[2]) - 1 if d.name == "tip_gain" else 1)
+        for i, (nm, d) in enumerate(zip(space.names, space.defs, strict=True))
+    }
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
@@ -1159,7 +1164,9 @@ def predict(
     tip deflection and rate at t = 0) from the log's own first samples and, with
     ``estimate_initial``, refined by least squares on the log itself (the link may be
     ringing and the hub moving at the window's start; the model is not refitted).
-    Returns ``{"fit_percent": {log: {signal: %}}, "traj": [...], "logs": [...]}``."""
+    Returns ``{"fit_percent": {log: {signal: %}}, "traj": [...], "logs": [...]}``.
+    ``result``: this engine's result, or the one result holding it (``engine_result``)."""
+    result = getattr(result, "engine_result", None) or result
     blogs = [as_bench_log(x, controller) for x in logs]
     T = result.logs[0].dt
     for g in blogs:

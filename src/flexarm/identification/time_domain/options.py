@@ -114,9 +114,13 @@ class ServoRig:
     filters: Mapping[str, float] | None = None
     controller: Any = None
     seed: int = 0
+    #: samples between a sample and its command; None: where the declared law best
+    #: explains the logged command (``flexarm fit --computation-delay``)
+    computation_delay: int | None = None
 
     def keywords(self) -> dict:
         return dict(
+            computation_delay=self.computation_delay,
             mode=self.mode,
             friction=self.friction,
             global_seconds=self.global_seconds,

@@ -149,6 +149,8 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
             )
     keys = log_keys(logs)
     cfile = controller_file(opts.controller)
+    if _is_rig_fit(getattr(model, "engine_result", None)):  # the one result of a rig fit
+        model = model.engine_result
     if _is_rig_fit(model):
         if cfile is not None or opts.continuous:
             raise ValueError(

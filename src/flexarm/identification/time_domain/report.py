@@ -225,38 +225,15 @@ class FitResult:
         )
 
     # ------------------------------------------------------------------ outputs
+    def result(self, **extras: Any):
+        """The one result of every rig (:class:`~flexarm.identification.time_domain.result.
+        FitResult`) holding this one (:func:`as_fit_result`; ``extras`` as there)."""
+        return as_fit_result(self, **extras)
+
     def to_dict(self) -> dict:
-        return _jsonable(
-            {
-                "converged": self.converged,
-                "message": self.message,
-                "warnings": self.warnings,
-                "parameters": {
-                    k: {
-                        "value": v,
-                        "std": self.std.get(k),
-                        "std_iid": self.std_iid.get(k),
-                        "unit": UNITS.get(k.split("[")[0], ""),
-                        "doc": DOCS.get(k.split("[")[0], ""),
-                    }
-                    for k, v in self.params.items()
-                },
-                "derived": self.derived,
-                "delays_samples": self.delays,
-                "fit_percent": self.fit_percent,
-                "initial_states": self.initial_states,
-                "settings": self.settings,
-                "stages": self.stages,
-                "seconds": self.seconds,
-                "uncertainty_note": "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from "
-                "the final Jacobian, S the Bartlett-weighted autocovariance "
-                "of the residual x Jacobian-row products per log, bandwidth "
-                "10 residual correlation times (stages.local."
-                "hac_bandwidth_samples); std_iid: s^2 (J^T J)^-1 assuming "
-                "independent residuals, too small when they are correlated. "
-                "Both ignore the jumps of stick-slip and structural bias",
-            }
-        )
+        """The ``--json`` document: the one result's (:meth:`result`), the rig's own record
+        under ``stages["servo_rig"]``."""
+        return self.result().to_dict()
 
     def document(
         self,
@@ -267,32 +244,14 @@ class FitResult:
         held_window: tuple[float, float] | None = None,
     ) -> dict:
         """The ``--json`` document ``flexarm fit LOG... --drive ...`` writes: :meth:`to_dict`
-        plus, when given, the fit without joint friction (``without_friction``: its fit %,
-        parameters, message), the fitted window (``window_s``, s from each log's first
-        sample) and the held-out prediction (``held_out``: a
-        :class:`~flexarm.identification.time_domain.predict.Prediction` or the rig's
-        ``predict`` dict, over ``held_window``)."""
-        d = self.to_dict()
-        if without_friction is not None:
-            d["without_friction"] = _jsonable(
-                {
-                    "fit_percent": without_friction.fit_percent,
-                    "params": without_friction.params,
-                    "message": without_friction.message,
-                }
-            )
-        if window is not None:
-            d["window_s"] = list(window)
-        if held_out is not None:
-            d["held_out"] = _jsonable(
-                {
-                    "window_s": list(held_window) if held_window is not None else None,
-                    "fit_percent": held_out["fit_percent"],
-                    "diverged": held_out["diverged"],
-                    "initial_state": "estimated from each window's own data",
-                }
-            )
-        return d
+        plus, when given, the fit without joint friction, the fitted window and the
+        held-out prediction (:func:`as_fit_result`)."""
+        return self.result(
+            without_friction=without_friction,
+            window=window,
+            held_out=held_out,
+            held_window=held_window,
+        ).to_dict()
 
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
@@ -420,6 +379,170 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, np.bool_):
         return bool(x)
     return x
+
+
+#: what the servo rig's std mean (``stages["servo_rig"]["uncertainty_note"]``)
+UNCERTAINTY_NOTE = (
+    "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from the final Jacobian, S the "
+    "Bartlett-weighted autocovariance of the residual x Jacobian-row products per log, "
+    "bandwidth 10 residual correlation times (stages.local.hac_bandwidth_samples); "
+    "std_iid: s^2 (J^T J)^-1 assuming independent residuals, too small when they are "
+    "correlated. Both ignore the jumps of stick-slip and structural bias"
+)
+
+
+def as_fit_result(
+    res: FitResult,
+    *,
+    without_friction: FitResult | None = None,
+    window: tuple[float, float] | None = None,
+    held_out: Any = None,
+    held_window: tuple[float, float] | None = None,
+    free_source: str = "preset rotary-servo",
+):
+    """The servo rig's result as the one :class:`~flexarm.identification.time_domain.
+    result.FitResult` of every rig (what :func:`flexarm.fit` returns for the servo rig).
+
+    ``free``/``params``/``std``: the rig's fitted parameters (SI; ``[s]`` per session);
+    ``template``: the start point of the global stage (``stages["guesses"]["start"]``,
+    from the data and the data sheet; null where an older result lacks it);
+    ``correlation``: of the HAC covariance of the search coordinates
+    (``stages["local"]["covariance_unit"]``; their map to the parameters is monotonic per
+    parameter, so to first order these are the parameters' correlations, signed for a
+    negative gauge gain), NaN without it; ``nfev``: the global and local stages'
+    evaluations; ``cost``: the local stage's; ``scenario``: the fitted scenario
+    (:func:`scenario_from_fit`). The rig's own stages (``global``, ``local``,
+    ``guesses``) are kept as they are, merged with ``stages["servo_rig"]``: ``derived``,
+    ``delays_samples``, ``initial_states``, ``settings``, ``std_iid``, ``units``, ``docs``
+    and ``uncertainty_note``. ``res`` itself is the result's ``engine_result``.
+
+    Extras (top-level keys of the document): ``without_friction`` (its fit %, parameters,
+    message: ``flexarm fit --compare-no-friction``), ``window_s`` (the fitted window, s
+    from each log's first sample) and ``held_out`` (the prediction ``held_out`` over
+    ``held_window``: a :class:`~flexarm.identification.time_domain.predict.Prediction` or
+    the rig's ``predict`` dict)."""
+    from flexarm.identification.time_domain.result import FitResult as One
+
+    nan = float("nan")
+    free = list(res.params)
+    start = (res.stages.get("guesses") or {}).get("start") or {}
+    loc, glob = res.stages.get("local") or {}, res.stages.get("global") or {}
+    warnings = list(res.warnings)
+    try:
+        scenario = res.scenario()
+    except Exception as exc:  # the fit stands without its scenario (e.g. interrupted early)
+        scenario = None
+        warnings.append(f"the fitted scenario could not be built: {exc}")
+    stages = {
+        **res.stages,
+        "servo_rig": {
+            "derived": res.derived,
+            "delays_samples": res.delays,
+            "initial_states": res.initial_states,
+            "settings": res.settings,
+            "std_iid": res.std_iid,
+            "units": {k: UNITS.get(k.split("[")[0], "") for k in free},
+            "docs": {k: DOCS.get(k.split("[")[0], "") for k in free},
+            "uncertainty_note": UNCERTAINTY_NOTE,
+        },
+    }
+    extras: dict[str, Any] = {}
+    if without_friction is not None:
+        extras["without_friction"] = without_friction_entry(without_friction)
+    if window is not None:
+        extras["window_s"] = list(window)
+    if held_out is not None:
+        extras["held_out"] = {
+            "window_s": list(held_window) if held_window is not None else None,
+            "fit_percent": held_out["fit_percent"],
+            "diverged": held_out["diverged"],
+            "initial_state": "estimated from each window's own data",
+        }
+    return One(
+        free=free,
+        params=dict(res.params),
+        template={k: float(start.get(k, nan)) for k in free},
+        std=dict(res.std),
+        correlation=_correlation(res, free),
+        warnings=warnings,
+        fit_percent=res.fit_percent,
+        segment_fit_percent={},
+        scenario=scenario,
+        converged=res.converged,
+        message=res.message,
+        nfev=int(glob.get("nfev") or 0) + int(loc.get("nfev") or 0),
+        cost=float(loc["cost"]) if loc.get("cost") is not None else nan,
+        seconds=float(res.seconds),
+        stages=_jsonable(stages),
+        free_source=free_source,
+        extras=_jsonable(extras),
+        engine_result=res,
+    )
+
+
+def _correlation(res: FitResult, free: list[str]) -> np.ndarray:
+    """The correlation matrix of the rig's HAC covariance (search coordinates; see
+    :func:`as_fit_result`), NaN where it has none."""
+    n = len(free)
+    cov = (res.stages.get("local") or {}).get("covariance_unit")
+    if cov is None or np.shape(cov) != (n, n):
+        return np.full((n, n), np.nan)
+    cov = np.asarray(cov, float)
+    s = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = cov / np.outer(s, s)
+    sign = np.array([-1.0 if res.params[k] < 0 else 1.0 for k in free])  # a negative gauge
+    return c * np.outer(sign, sign)
+
+
+def without_friction_entry(res0) -> dict:
+    """The ``without_friction`` entry of the document (``fit --compare-no-friction``): the
+    friction-free fit's fit %, parameters and message."""
+    return _jsonable(
+        {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
+    )
+
+
+def interrupted_result(res, best):
+    """The result ``flexarm fit`` writes when interrupted (Ctrl-C): the best so far, marked
+    ``"interrupted": true, "status": "interrupted"`` (extras). ``res``: the friction fit
+    when it had finished and the ``--compare-no-friction`` fit was interrupted (that one's
+    best, ``best``, then goes under ``without_friction``, marked); else ``best``: the
+    interrupted fit's best result; neither: an empty result saying so. Each a rig result
+    or already the one :class:`~flexarm.identification.time_domain.result.FitResult`."""
+    from flexarm.identification.time_domain.result import FitResult as One
+
+    mark = {"interrupted": True, "status": "interrupted"}
+
+    def one(x):
+        return x if isinstance(x, One) else as_fit_result(x)
+
+    if res is not None:
+        out = one(res)
+        out.extras["without_friction"] = (
+            {**without_friction_entry(best), **mark} if best is not None else dict(mark)
+        )
+    elif best is not None:
+        out = one(best)
+    else:
+        out = One(
+            free=[],
+            params={},
+            template={},
+            std={},
+            correlation=np.zeros((0, 0)),
+            warnings=[],
+            fit_percent={},
+            segment_fit_percent={},
+            scenario=None,
+            converged=False,
+            message="interrupted before any model was evaluated",
+            nfev=0,
+            cost=float("nan"),
+            seconds=0.0,
+        )
+    out.extras.update(mark)
+    return out
 
 
 def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
@@ -585,24 +708,23 @@ def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
     the tip mass J_l / L², and the stiffness C = ω_c² J_l → EI = C L / 3 with relative std
     √((2 σ_ω/ω)² + (σ_J/J_l)²). The parameters' correlations are not in the JSON: the draws
     are independent (wider or narrower than the fit's joint uncertainty where two parameters
-    trade off; the Python path :func:`flexarm.design.plants.from_fit` keeps them)."""
-    par = fit.get("parameters")
-    if not isinstance(par, dict):
-        raise FitInputError(
-            "the fit JSON has no 'parameters' table: give the file "
-            "`flexarm fit ... --json FIT.json` wrote"
-        )
+    trade off; the Python path :func:`flexarm.design.plants.from_fit` keeps them).
+
+    ``fit``: the document (``params``, ``std``; the older ``parameters`` table of
+    ``{value, std}`` written before the one result is read too)."""
+    vals, stds = _values_and_std(fit)
     d = scenario.model_dump(mode="json", exclude_none=True)
     arm = d["arm"]
 
+    def pick(table, name):
+        return table.get(name, table.get(f"{name}[0]"))
+
     def std(name):
-        v = par.get(name) or par.get(f"{name}[0]") or {}
-        s = v.get("std")
+        s = pick(stds, name)
         return float(s) if s is not None and math.isfinite(float(s)) else None
 
     def value(name):
-        v = par.get(name) or par.get(f"{name}[0]") or {}
-        return v.get("value")
+        return pick(vals, name)
 
     out: dict[str, tuple[float, float]] = {}
 
@@ -640,3 +762,20 @@ def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
             "uncertainty; give --spread PATH=STD instead"
         )
     return out
+
+
+def _values_and_std(fit: dict) -> tuple[dict, dict]:
+    """(name → value, name → std) of a servo-rig fit document: the one result's
+    (``params``, ``std``), or the older layout's ``parameters`` table."""
+    if isinstance(fit.get("params"), dict) and isinstance(fit.get("std"), dict):
+        return fit["params"], fit["std"]
+    par = fit.get("parameters")
+    if isinstance(par, dict):  # the layout before the one FitResult: {name: {value, std}}
+        return (
+            {k: (v or {}).get("value") for k, v in par.items()},
+            {k: (v or {}).get("std") for k, v in par.items()},
+        )
+    raise FitInputError(
+        "the fit JSON has no 'params' and 'std' tables: not a document flexarm fit "
+        "writes; re-run `flexarm fit ... --json FIT.json` and give that file"
+    )

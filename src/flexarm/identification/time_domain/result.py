@@ -9,9 +9,13 @@ and the optimiser's record.
 
 :meth:`FitResult.to_dict` is the ``--json`` document ``flexarm fit SCENARIO LOG...`` writes;
 :meth:`FitResult.from_dict` reads it back; :meth:`FitResult.write_scenario` writes the fitted
-scenario TOML (``--scenario-out``). Logs are keyed by :func:`flexarm.io.logs.log_keys`
-(paths relative to the logs' common folder, so logs of one name in different folders keep
-separate entries).
+scenario TOML (``--scenario-out``). The rotary servo rig's engine
+(:func:`flexarm.identification.time_domain.fit.fit`) gives the same result through
+:func:`flexarm.identification.time_domain.report.as_fit_result`: its own record (derived
+values, sensor delays, initial states, settings, units) under ``stages["servo_rig"]``, its
+live result as :attr:`FitResult.engine_result` (not in the document). Logs are keyed by
+:func:`flexarm.io.logs.log_keys` (paths relative to the logs' common folder, so logs of one
+name in different folders keep separate entries).
 """
 
 from __future__ import annotations
@@ -32,8 +36,12 @@ class FitResult:
 
     ``free_source`` says where the free list came from (``"given"``, ``"preset
     quanser-two-link"``, ``"scenario [notes.fit]"``); ``extras`` holds what a caller adds to
-    the document (``window_s``, ``held_out``, ``without_friction``), written by
-    :meth:`to_dict` as top-level keys."""
+    the document (``window_s``, ``held_out``, ``without_friction``, the interrupted marks),
+    written by :meth:`to_dict` as top-level keys. ``engine_result``: the engine's own live
+    result where it has one (the servo rig's
+    :class:`~flexarm.identification.time_domain.report.FitResult`: its loop, logs and
+    trajectories for figures and the prediction of other logs); not in the document, not
+    compared."""
 
     free: list[str]
     params: dict[str, float]
@@ -41,7 +49,7 @@ class FitResult:
     std: dict[str, float]
     correlation: np.ndarray
     warnings: list[str]
-    fit_percent: dict[str, dict[str, float]]
+    fit_percent: dict[str, dict[str, float | None]]  # None: not finite (a rig's absent tip)
     segment_fit_percent: dict[str, dict[str, float]]
     scenario: Any
     converged: bool
@@ -54,6 +62,7 @@ class FitResult:
     free_source: str = "given"
     plots: list[str] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
+    engine_result: Any = field(default=None, repr=False, compare=False)
 
     def _table(self):
         from flexarm.display import Table, fit_percent_lines, parameter_rows
@@ -67,7 +76,9 @@ class FitResult:
         )
         return Table(
             f"FitResult of {name}: {len(self.free)} free parameters (SI)",
-            parameter_rows(self.params, self.std),
+            parameter_rows(
+                self.params, self.std, (self.stages.get("servo_rig") or {}).get("units")
+            ),
             header=("parameter", "value", "std (HAC)", "std %", "unit"),
             notes=notes,
         )
@@ -79,8 +90,12 @@ class FitResult:
         return self._table().html()
 
     def write_scenario(self, path: str | Path, *, overwrite: bool = False) -> Path:
-        """Write the fitted scenario as TOML (SI values; it loads with load_scenario)."""
+        """Write the fitted scenario as TOML (SI values; it loads with load_scenario); the
+        engine's own writer where it has one (the servo rig's commented TOML)."""
         from flexarm.io.write import write_toml
+
+        if self.engine_result is not None and hasattr(self.engine_result, "write_scenario"):
+            return self.engine_result.write_scenario(path, overwrite=overwrite)
 
         return write_toml(path, drop_none(self.scenario.model_dump()), overwrite=overwrite)
 
@@ -107,6 +122,23 @@ class FitResult:
         }
         d.update(self.extras)
         return finite(d)
+
+    def refit_entry(self, free: list[str], window, log, prediction) -> dict:
+        """The ``refit`` entry of ``flexarm validate --refit friction --json``: this
+        (friction) refit's values, template, std and warnings on ``free``, the ``window``
+        (s) of ``log`` it used, and the fit % of ``prediction`` (the logs predicted with
+        the refitted scenario)."""
+        return finite(
+            {
+                "window_s": list(window),
+                "log": str(log),
+                "params": {p: self.params[p] for p in free},
+                "template": {p: self.template[p] for p in free},
+                "std": {p: self.std[p] for p in free},
+                "warnings": self.warnings,
+                "fit_percent": prediction["fit_percent"],
+            }
+        )
 
     @classmethod
     def from_dict(cls, d: dict, scenario: Any = None) -> FitResult:
