@@ -723,3 +723,27 @@ def test_parameter_at_a_bound_is_widened_and_refitted(logs):
     assert res.stages["guesses"]["widened"]
     assert abs(res.params["link_frequency"] / true - 1) < 0.05
     assert any("widened" in w for w in res.warnings)
+
+
+def test_one_prediction_keeps_logs_of_one_name_apart(fitted, logs, tmp_path):
+    """The one prediction (``flexarm.validate``) of a rig fit, on the held-out log copied
+    into two folders under one file name: two entries keyed by the folders (``a/...``,
+    ``b/...``), in one call of the rig's loop, each equal to the log's own prediction
+    (the same samples: the same fit %, to round-off)."""
+    import shutil
+    from pathlib import Path
+
+    import flexarm
+
+    paths = []
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        paths.append(Path(shutil.copy(logs[2], tmp_path / sub / "run.csv")))
+    both = flexarm.validate(fitted, paths)
+    one = flexarm.validate(fitted, paths[:1])
+    assert list(both.fit_percent) == ["a/run.csv", "b/run.csv"]
+    ref = next(iter(one.fit_percent.values()))
+    for fp in both.fit_percent.values():
+        for k, v in ref.items():
+            assert fp[k] == pytest.approx(v, abs=1e-9), (k, fp, ref)
+    assert set(both.traces) == set(both.fit_percent)

@@ -253,23 +253,21 @@ def _predict_rig_scenario(sc, logs, keys, opts) -> Prediction:
 def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
     from flexarm.identification.time_domain.fit import predict as rig_predict
 
-    ws = _windowed(logs, opts)
-    names = [g.name for g in ws]
-    groups = [ws] if len(set(names)) == len(names) else [[g] for g in ws]
-    fp, div, traces = {}, {}, {}
-    i = 0
-    for grp in groups:
-        out = rig_predict(
-            res, grp, estimate_initial=opts.estimate_initial, controller=opts.controller
-        )
-        got_fp, got_div = list(out["fit_percent"].values()), list(out["diverged"].values())
-        for j, g in enumerate(out["logs"]):
-            k = keys[i]
-            fp[k], div[k] = got_fp[j], got_div[j]
-            n = len(g)
-            tr = out["traj"]
-            traces[k] = rig_trace(g, [np.asarray(tr[r][j, :n]) for r in range(3)])
-            i += 1
+    # one call: the rig keys its results by log_keys, so logs of one name in other
+    # folders stay apart (the order is the logs' order)
+    out = rig_predict(
+        res,
+        _windowed(logs, opts),
+        estimate_initial=opts.estimate_initial,
+        controller=opts.controller,
+    )
+    fp = dict(zip(keys, out["fit_percent"].values(), strict=True))
+    div = dict(zip(keys, out["diverged"].values(), strict=True))
+    tr = out["traj"]
+    traces = {
+        k: rig_trace(g, [np.asarray(tr[r][j, : len(g)]) for r in range(3)])
+        for j, (k, g) in enumerate(zip(keys, out["logs"], strict=True))
+    }
     pred = Prediction(
         "fitted rig",
         fp,
