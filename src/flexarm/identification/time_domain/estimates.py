@@ -21,7 +21,9 @@ squares over (ω_c, ζ, g L, f_c) is solved with the model discretised by zero-o
 (θ_m is piecewise constant between samples to within its resolution); the best lag wins.
 Lag and cutoff trade off (both delay the tip), so the pair is reported together with
 the profile of fit % over the lags. Stick-slip does not disturb (1): the hub's motion is
-its input, whatever moved it.
+its input, whatever moved it. A log's initial link state (the link is often ringing at
+the first sample) is the free response of (1), eliminated per log by linear least squares
+(variable projection) with the tip sensor's rest offset.
 
 **Hub delay.** The hub obeys J θ̈ = k_u u − (k_ω + B) θ̇ + (J_l/L)(ω_c² w + 2ζω_c ẇ) − F.
 With the true hub θ(t) = θ_m(t + D T), integrated over windows [t_0, t_0 + W] (no second
@@ -116,6 +118,26 @@ def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
     return y
 
 
+def _free_removed(r: np.ndarray, p, dt: float, skip: int) -> np.ndarray:
+    """The residual r = model − d from ``skip`` on, less its least-squares projection on
+    the link's free response e^{−ζω_c t}(a cos ω_d t + b sin ω_d t) and a constant, per
+    log: the link is often already ringing at a log's first sample (and lightly damped,
+    it still rings seconds later), which no response to the hub's motion from rest
+    explains; a and b are that initial state, eliminated (variable projection)."""
+    wc, z = p[0], p[1]
+    t = np.arange(len(r)) * dt
+    wd = wc * np.sqrt(max(1.0 - z * z, 1e-6))
+    e = np.exp(-z * wc * t)
+    A = np.column_stack([np.ones_like(t), e * np.cos(wd * t), e * np.sin(wd * t)])[skip:]
+    rr = r[skip:]
+    G = A.T @ A
+    try:  # the normal equations (3 x 3): 10x quicker than an SVD of the tall A
+        c = np.linalg.solve(G + 1e-12 * np.trace(G) * np.eye(3), A.T @ rr)
+    except np.linalg.LinAlgError:
+        c, *_ = np.linalg.lstsq(A, rr, rcond=None)
+    return rr - A @ c
+
+
 def tip_model(
     logs: list[Log], length: float, *, max_lag: int | None = None, omega_guess: float | None = None
 ) -> TipModel | None:
@@ -143,10 +165,23 @@ def tip_model(
         )
         band = (f > 0.3) & (f < 10)
         omega_guess = 2 * np.pi * float(f[band][np.argmax(P[band])]) if band.any() else 10.0
+    # a second start: the link's ringing while the hub is stuck (its clamped frequency),
+    # which the whole signal's peak misses where a closed-loop mode or the drift dominates
+    from flexarm.identification.time_domain import guesses
+
+    stuck, how = guesses.link_frequency(logs)
+    omegas = [omega_guess] + (
+        [float(stuck)]
+        if how == "stuck" and stuck and 0.2 * omega_guess < stuck < 5 * omega_guess
+        else []
+    )
 
     def res(p, lag):
         return np.concatenate(
-            [(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:]) for th, d in pairs]
+            [
+                _free_removed(_tip_response(p, th, lag, dt) - d, p, dt, skip) / np.std(d[skip:])
+                for th, d in pairs
+            ]
         )
 
     def solve(lag, p0):
@@ -166,8 +201,9 @@ def tip_model(
     for lag in range(0, max_lag + 1, step):
         starts = [p_prev] if p_prev is not None else []
         if p_prev is None:
-            for s in (1.0, -1.0):
-                starts.append(np.array([omega_guess, 0.03, s * 0.2 * length, 20.0]))
+            for w0 in omegas:
+                for s in (1.0, -1.0):
+                    starts.append(np.array([w0, 0.03, s * 0.2 * length, 20.0]))
         cand = [solve(lag, p0) for p0 in starts]
         p, c = min(cand, key=lambda t: t[1])
         p_prev = p
@@ -185,7 +221,10 @@ def tip_model(
         if c < best[2]:
             best = (lag, p, c)
     lag, p, _ = best
-    fits = [_fitpct(d[skip:], _tip_response(p, th, lag, dt)[skip:]) for th, d in pairs]
+    fits = [
+        _fitpct(d[skip:], d[skip:] + _free_removed(_tip_response(p, th, lag, dt) - d, p, dt, skip))
+        for th, d in pairs
+    ]
     n = sum(len(d) - skip for _, d in pairs)
     prof_fit = {k: float(100 * (1 - np.sqrt(v / n))) for k, v in sorted(profile.items())}
     return TipModel(
