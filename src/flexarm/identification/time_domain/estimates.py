@@ -178,10 +178,7 @@ def tip_model(
 
     def res(p, lag):
         return np.concatenate(
-            [
-                _free_removed(_tip_response(p, th, lag, dt) - d, p, dt, skip) / np.std(d[skip:])
-                for th, d in pairs
-            ]
+            [(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:]) for th, d in pairs]
         )
 
     def solve(lag, p0):
@@ -221,10 +218,7 @@ def tip_model(
         if c < best[2]:
             best = (lag, p, c)
     lag, p, _ = best
-    fits = [
-        _fitpct(d[skip:], d[skip:] + _free_removed(_tip_response(p, th, lag, dt) - d, p, dt, skip))
-        for th, d in pairs
-    ]
+    fits = [_fitpct(d[skip:], _tip_response(p, th, lag, dt)[skip:]) for th, d in pairs]
     n = sum(len(d) - skip for _, d in pairs)
     prof_fit = {k: float(100 * (1 - np.sqrt(v / n))) for k, v in sorted(profile.items())}
     return TipModel(
