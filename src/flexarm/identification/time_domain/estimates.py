@@ -21,9 +21,10 @@ squares over (ω_c, ζ, g L, f_c) is solved with the model discretised by zero-o
 (θ_m is piecewise constant between samples to within its resolution); the best lag wins.
 Lag and cutoff trade off (both delay the tip), so the pair is reported together with
 the profile of fit % over the lags. Stick-slip does not disturb (1): the hub's motion is
-its input, whatever moved it. A log's initial link state (the link is often ringing at
-the first sample) is the free response of (1), eliminated per log by linear least squares
-(variable projection) with the tip sensor's rest offset.
+its input, whatever moved it. The search starts from the spectral peak of the whole tip
+signals and, where the hub sticks, from the peak of the stuck phases' ringing (the clamped
+frequency, :func:`~.guesses.link_frequency`), which the whole signal's peak misses where the
+drift or a closed-loop mode dominates (4/27: 0.3 Hz drift against 1.8 Hz ringing).
 
 **Hub delay.** The hub obeys J θ̈ = k_u u − (k_ω + B) θ̇ + (J_l/L)(ω_c² w + 2ζω_c ẇ) − F.
 With the true hub θ(t) = θ_m(t + D T), integrated over windows [t_0, t_0 + W] (no second
@@ -116,26 +117,6 @@ def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
     x = np.concatenate([np.full(lag, th[0]), th[: len(th) - lag]]) - th[0]
     y: Any = scipy.signal.lfilter(np.ravel(b), aa, x)
     return y
-
-
-def _free_removed(r: np.ndarray, p, dt: float, skip: int) -> np.ndarray:
-    """The residual r = model − d from ``skip`` on, less its least-squares projection on
-    the link's free response e^{−ζω_c t}(a cos ω_d t + b sin ω_d t) and a constant, per
-    log: the link is often already ringing at a log's first sample (and lightly damped,
-    it still rings seconds later), which no response to the hub's motion from rest
-    explains; a and b are that initial state, eliminated (variable projection)."""
-    wc, z = p[0], p[1]
-    t = np.arange(len(r)) * dt
-    wd = wc * np.sqrt(max(1.0 - z * z, 1e-6))
-    e = np.exp(-z * wc * t)
-    A = np.column_stack([np.ones_like(t), e * np.cos(wd * t), e * np.sin(wd * t)])[skip:]
-    rr = r[skip:]
-    G = A.T @ A
-    try:  # the normal equations (3 x 3): 10x quicker than an SVD of the tall A
-        c = np.linalg.solve(G + 1e-12 * np.trace(G) * np.eye(3), A.T @ rr)
-    except np.linalg.LinAlgError:
-        c, *_ = np.linalg.lstsq(A, rr, rcond=None)
-    return rr - A @ c
 
 
 def tip_model(
