@@ -226,3 +226,93 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     assert set(out["fit_percent"]) == set(RIGID_HELD)
     for name, fp in out["fit_percent"].items():
         assert fp["motor_angle"] is not None and fp["motor_angle"] >= 60.0, (name, fp)
+
+
+#: the 4/27 session's two runs (README of the data: a hard session), fitted together
+ROTARY_HARD = ("flexarm_K1_6", "flexarm_K1K2_6_-5")
+
+
+@pytest.fixture(scope="module")
+def hard_session():
+    """The servo-rig fit of the 4/27 session's two runs together, whole logs, default
+    options, the data sheet only (one fit for the module)."""
+    return fit([_log(n) for n in ROTARY_HARD], **SHEET)
+
+
+def _stuck_ring_hz(name: str) -> list[tuple[float, float]]:
+    """(mean command V, ringing frequency Hz) of each stuck phase (the hub within 3 mrad,
+    three counts, of its first reading for more than 0.8 s): the tip's mean period between
+    upward zero crossings (25-sample moving average); from the log alone, independent of
+    the fit and of its stuck-phase detection."""
+    g = _log(name)
+    th, d, v = (g.columns[k] for k in ("motor_angle", "tip_deflection", "voltage"))
+    out, i, n = [], 0, len(th)
+    while i < n:
+        j = i
+        while j + 1 < n and abs(th[j + 1] - th[i]) <= 0.003:
+            j += 1
+        if (j - i) * g.dt > 0.8:
+            x = np.convolve(d[i:j] - d[i:j].mean(), np.ones(25) / 25, mode="valid")
+            up = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
+            if up.size >= 3:
+                out.append((float(v[i:j].mean()), (up.size - 1) / ((up[-1] - up[0]) * g.dt)))
+        i = j + 1
+    return out
+
+
+def test_hard_session_stuck_phases():
+    """What makes 4/27 hard, from the logs alone: the hub sticks for seconds (stuck phases
+    found within three encoder counts, the hub dithering), the link rings in them at its
+    clamped frequency, about 1.8 Hz (data sheet: nominal 1.8 Hz), and faster (> 1.9 Hz)
+    where the controller pushes the stuck gear train with > 0.3 V (the K1K2 run's stops
+    60 mrad short of the reference)."""
+    light, push = [], []
+    for name in ROTARY_HARD:
+        for v, f in _stuck_ring_hz(name):
+            (push if abs(v) > 0.3 else light).append(f)
+    print("stuck-phase ringing, light push:", light, "pushed > 0.3 V:", push)
+    assert len(light) >= 3 and len(push) >= 2
+    assert all(1.7 < f < 1.85 for f in light), light
+    assert all(f > 1.9 for f in push), push
+
+
+def test_hard_session_training_fit(hard_session):
+    """Issue #23 item 3: the 4/27 session (heavy gear friction, a bias torque) fitted on its
+    two runs together, whole logs, default options, the data sheet only. Before the
+    stuck-phase detection tolerated the encoder's one-count dither, the link-frequency
+    bounds came from the drift (0.3 Hz) and the fit ended at tip 2-3 % with a link
+    frequency of 2.5 rad/s and a tip delay of 134 samples. Thresholds: the issue's hub 80 %
+    (an independent gray-box fit reached 83-84 %) and, on the K1 run, tip 55 % (61 %); the
+    fitted clamped frequency where the stuck phases ring (1.7-2.0 Hz, measured above)."""
+    res = hard_session
+    print(res.summary())
+    fp = res.fit_percent
+    for name in ROTARY_HARD:
+        assert fp[name]["motor_angle"] >= 80.0, (name, fp)
+    assert fp["flexarm_K1_6"]["tip_deflection"] >= 55.0, fp
+    wc = res.params["link_frequency"]
+    assert 2 * np.pi * 1.7 < wc < 2 * np.pi * 2.0, wc
+    assert res.params["bias"] < 0  # the up-moves stop short, the down-moves overshoot
+    assert res.params["coulomb"] > 0.02  # several times units 6 and 7's
+    # the tip channel lags the hub's on such rigs; where the fit says otherwise it says so
+    d = res.delays
+    assert d["tip_deflection"] > d["motor_angle"] or any(
+        "below the motor_angle delay" in w for w in res.warnings
+    ), (d, res.warnings)
+    # a poor signal is called poor
+    for name in ROTARY_HARD:
+        if fp[name]["tip_deflection"] < 70:
+            assert any(
+                w.startswith(f"{name}: fit") and "tip_deflection is low" in w for w in res.warnings
+            ), res.warnings
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue #23 item 3 not met: the K1K2 run's tip rings at 1.92-2.0 Hz in its pushed "
+    "stuck phases and 1.76-1.8 Hz in the others; the model's stuck hub clamps the link "
+    "rigidly, at one frequency",
+)
+def test_hard_session_tip_k1k2(hard_session):
+    fp = hard_session.fit_percent
+    assert fp["flexarm_K1K2_6_-5"]["tip_deflection"] >= 55.0, fp

@@ -21,7 +21,10 @@ squares over (ω_c, ζ, g L, f_c) is solved with the model discretised by zero-o
 (θ_m is piecewise constant between samples to within its resolution); the best lag wins.
 Lag and cutoff trade off (both delay the tip), so the pair is reported together with
 the profile of fit % over the lags. Stick-slip does not disturb (1): the hub's motion is
-its input, whatever moved it.
+its input, whatever moved it. The search starts from the spectral peak of the whole tip
+signals and, where the hub sticks, from the peak of the stuck phases' ringing (the clamped
+frequency, :func:`~.guesses.link_frequency`), which the whole signal's peak misses where the
+drift or a closed-loop mode dominates (4/27: 0.3 Hz drift against 1.8 Hz ringing).
 
 **Hub delay.** The hub obeys J θ̈ = k_u u − (k_ω + B) θ̇ + (J_l/L)(ω_c² w + 2ζω_c ẇ) − F.
 With the true hub θ(t) = θ_m(t + D T), integrated over windows [t_0, t_0 + W] (no second
@@ -143,6 +146,16 @@ def tip_model(
         )
         band = (f > 0.3) & (f < 10)
         omega_guess = 2 * np.pi * float(f[band][np.argmax(P[band])]) if band.any() else 10.0
+    # a second start: the link's ringing while the hub is stuck (its clamped frequency),
+    # which the whole signal's peak misses where a closed-loop mode or the drift dominates
+    from flexarm.identification.time_domain import guesses
+
+    stuck, how = guesses.link_frequency(logs)
+    omegas = [omega_guess] + (
+        [float(stuck)]
+        if how == "stuck" and stuck and 0.2 * omega_guess < stuck < 5 * omega_guess
+        else []
+    )
 
     def res(p, lag):
         return np.concatenate(
@@ -166,8 +179,9 @@ def tip_model(
     for lag in range(0, max_lag + 1, step):
         starts = [p_prev] if p_prev is not None else []
         if p_prev is None:
-            for s in (1.0, -1.0):
-                starts.append(np.array([omega_guess, 0.03, s * 0.2 * length, 20.0]))
+            for w0 in omegas:
+                for s in (1.0, -1.0):
+                    starts.append(np.array([w0, 0.03, s * 0.2 * length, 20.0]))
         cand = [solve(lag, p0) for p0 in starts]
         p, c = min(cand, key=lambda t: t[1])
         p_prev = p

@@ -1,6 +1,8 @@
 """Physically derived guesses and bounds from the logs themselves.
 
-* Stuck intervals: the measured hub angle does not change for >= ``min_stuck`` s.
+* Stuck intervals: the measured hub angle does not change (or, where those ranges are too
+  short to hold the link's ringing, stays within one encoder step: a stuck hub dithers
+  between two counts) for >= ``min_stuck`` s.
 * Link frequency ω_c: peak of the summed periodograms of the detrended tip deflection over
   the stuck intervals (the link rings at its hub-clamped frequency while the hub sticks);
   without stuck intervals, of the whole tip signal.
@@ -41,14 +43,43 @@ def controller_command(log: Log) -> np.ndarray:
     return c.k1 * (log.columns["reference"] - th) - c.k2 * d - c.k3 * dth - c.k4 * dd
 
 
-def stuck_intervals(log: Log, min_stuck: float = 0.25) -> list[tuple[int, int]]:
-    """Index ranges [i0, i1) where the measured hub angle stays constant."""
+def stuck_intervals(
+    log: Log, min_stuck: float = 0.25, dither: bool = False
+) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) where the measured hub angle stays constant (no change above
+    q/4 from one sample to the next, q the encoder's or converter's step) or, with
+    ``dither``, within one step: max − min ≤ q over the range. A stuck hub whose angle lies
+    near a count boundary dithers between two adjacent counts (vibration, the ringing link's
+    torque), so a range that stays exactly constant would cut a stuck phase into pieces
+    shorter than one period of the link (on a rig with heavy gear friction, 4/27: stuck
+    phases of 1-3 s cut into 0.26 s pieces, whose spectral peak was the drift's at 0.3 Hz
+    instead of the link's 1.8 Hz). The link-frequency
+    guess uses ``dither``; the friction guess and the rest reading keep the constant
+    ranges (with ``dither`` the synthetic open-loop acceptance fit moved, ζ −6 %)."""
     th = log.columns.get("motor_angle")
     if th is None:
         return []
     q = max(np.median(np.abs(np.diff(th)[np.diff(th) != 0])) if np.any(np.diff(th)) else 0, 0)
+    n_min = int(min_stuck / log.dt)
+    out, k = [], 0
+    if dither and q > 0:
+        th = np.asarray(th, float)
+        n = len(th)
+        while k < n - 1:
+            lo = hi = th[k]
+            j = k + 1
+            while j < n:
+                lo, hi = min(lo, th[j]), max(hi, th[j])
+                if hi - lo > 1.01 * q:
+                    break
+                j += 1
+            if j - k > n_min:
+                out.append((k, j))
+                k = j
+            else:
+                k += 1
+        return out
     still = np.abs(np.diff(th)) <= 0.25 * q if q > 0 else np.diff(th) == 0
-    out, n_min, k = [], int(min_stuck / log.dt), 0
     n = len(still)
     while k < n:
         if still[k]:
@@ -80,14 +111,23 @@ def tip_rest_reading(log: Log, settle: float = 0.5) -> tuple[float, float] | Non
     return float(np.median(np.concatenate(rest))), float(hi - lo)
 
 
-def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0):
-    """(ω_c estimate in rad/s, how: 'stuck' or 'whole') from the tip deflection spectra."""
+def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0, *, dither: bool = False):
+    """(ω_c estimate in rad/s, how: 'stuck' or 'whole') from the tip deflection spectra.
+
+    A stuck intervals' peak counts only where the longest interval holds at least
+    :data:`MIN_PERIODS` periods of it: a periodogram of pieces shorter than a period peaks
+    at the drift, not at the ringing. Where the hub's constant ranges are that short, the
+    stuck hub dithers between two counts and cuts its stuck phases into pieces (4/27:
+    1-3 s stuck phases cut into 0.26 s pieces, whose peak was the drift's 0.3 Hz instead of
+    the link's 1.8 Hz), so the intervals are taken again within one count (``dither``,
+    :func:`stuck_intervals`); where those do not hold the peak either, the whole signal's
+    peak is used."""
     segs, how = [], "stuck"
     for log in logs:
         d = log.columns.get("tip_deflection")
         if d is None or np.ptp(d) == 0:
             continue
-        for i0, i1 in stuck_intervals(log):
+        for i0, i1 in stuck_intervals(log, dither=dither):
             segs.append((scipy.signal.detrend(d[i0:i1]), log.dt))
     if not segs:
         how = "whole"
@@ -98,6 +138,27 @@ def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0):
         ]
     if not segs:
         return None, "none"
+    wc = _peak(segs, fmin, fmax)
+    longest = max(len(s) for s, _ in segs) * segs[0][1]
+    if how == "stuck" and longest * wc / (2 * np.pi) < MIN_PERIODS:
+        if not dither:
+            return link_frequency(logs, fmin, fmax, dither=True)
+        whole = [
+            (scipy.signal.detrend(log.columns["tip_deflection"]), log.dt)
+            for log in logs
+            if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0
+        ]
+        return _peak(whole, fmin, fmax), "whole"
+    return wc, how
+
+
+#: fewest periods of the ringing the longest stuck interval must hold for its peak to count
+MIN_PERIODS = 2.0
+
+
+def _peak(segs, fmin: float, fmax: float) -> float:
+    """The frequency (rad/s) of the peak of the summed Hann-windowed periodograms of
+    ``segs`` ((signal, dt) pairs) in [fmin, fmax] Hz (and below 0.4 / dt)."""
     T = segs[0][1]
     nfft = 1 << int(np.ceil(np.log2(max(16384, max(len(s) for s, _ in segs) * 4))))
     f = np.fft.rfftfreq(nfft, T)
@@ -106,7 +167,7 @@ def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0):
         P += np.abs(np.fft.rfft(s * np.hanning(len(s)), nfft)) ** 2
     band = (f >= fmin) & (f <= min(fmax, 0.4 / T))
     k = np.argmax(np.where(band, P, 0))
-    return 2 * np.pi * f[k], how
+    return float(2 * np.pi * f[k])
 
 
 def tip_gain(logs: list[Log], wc: float, length: float, zeta: float = 0.03):
