@@ -25,7 +25,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.io.logs import LogError, read_log
 from test_logformat import EXAMPLE
 
@@ -59,11 +59,11 @@ def _read(p):
 
 
 def _read_bench(p):
-    return read_bench_log(p, min_samples=2)
+    return load_rig_log(p, min_samples=2)
 
 
 def _read_rig(p):
-    return read_bench_log(p, log_format=EXAMPLE, min_samples=2)
+    return load_rig_log(p, log_format=EXAMPLE, min_samples=2)
 
 
 LOG_CHARS = st.sampled_from(list("0123456789.,;\t -+eE#%\r\nabcxyz_:\x0b\x0c\u2028\x85\ufeff"))
