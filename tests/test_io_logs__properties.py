@@ -58,7 +58,7 @@ def _read(p):
     return read_log(p, required=("time",), min_samples=2)
 
 
-def _read_bench(p):
+def _read_rig_no_format(p):
     return load_rig_log(p, min_samples=2)
 
 
@@ -76,7 +76,7 @@ def test_random_text(text):
         p = _file(text)
     except UnicodeEncodeError:  # lone surrogates cannot be written as UTF-8
         return
-    for read in (_read, _read_bench, _read_rig):
+    for read in (_read, _read_rig_no_format, _read_rig):
         _loads_or_names_file(read, p)
 
 
@@ -84,7 +84,7 @@ def test_random_text(text):
 @given(st.binary(max_size=300))
 def test_random_bytes(data):
     p = _file(data)
-    for read in (_read, _read_bench, _read_rig):
+    for read in (_read, _read_rig_no_format, _read_rig):
         _loads_or_names_file(read, p)
 
 
