@@ -104,11 +104,11 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
 def bench_compare(n: int, chunk: int, workers: int, option: dict) -> dict:
     from flexarm import distributed as fd
     from flexarm.design.compare import compare
-    from flexarm.identification.time_domain import fit, read_bench_log
+    from flexarm.identification.time_domain import fit, load_rig_log
 
     rows = fd.read_manifest(MANIFEST)
     row = next(r for r in rows if r.id == "unit6-flexible")
-    g = read_bench_log(row.logs[0], log_format=row.log_format).window(*row.window)
+    g = load_rig_log(row.logs[0], log_format=row.log_format).window(*row.window)
     t = time.perf_counter()
     res = fit([g], **row.data_sheet, **option)
     print(f"unit 6 fitted in {time.perf_counter() - t:.1f} s")

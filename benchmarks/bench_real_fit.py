@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from flexarm.identification.time_domain import fit, read_bench_log
+from flexarm.identification.time_domain import fit, load_rig_log
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rotary-rig"
@@ -32,7 +32,7 @@ SHEET = dict(
 
 
 def run(names, **kw):
-    logs = [read_bench_log(DATA / n, log_format=FORMAT) for n in names]
+    logs = [load_rig_log(DATA / n, log_format=FORMAT) for n in names]
     t = time.perf_counter()
     res = fit(logs, **SHEET, **kw)
     return time.perf_counter() - t, res

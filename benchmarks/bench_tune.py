@@ -37,10 +37,10 @@ SHEET = dict(
 
 def batch(n: int):
     if DATA.is_dir():
-        from flexarm.identification.time_domain import fit, read_bench_log
+        from flexarm.identification.time_domain import fit, load_rig_log
 
         t = time.perf_counter()
-        res = fit([read_bench_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)], **SHEET)
+        res = fit([load_rig_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)], **SHEET)
         print(f"unit 6 fitted on its whole log in {time.perf_counter() - t:.1f} s")
         return pl.from_fit(res, n, seed=0), 1e-3, "unit 6 fit"
     sc = flexarm.load_scenario("rotary-flexible-link")

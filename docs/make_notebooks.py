@@ -318,7 +318,7 @@ NOTEBOOKS["frequency-domain"] = [
         "if not REAL:\n"
         '    print("skipped: the motor-bench recording is not used here")\n'
         "else:\n"
-        "    from flexarm.io.matfile import read_recording\n\n"
+        "    from flexarm.io.logformat import read_recording\n\n"
         '    sig, fs = read_recording(DATA / "motor-bench" / "MultisineTypeB.mat",\n'
         '                             ROOT / "examples" / "motor-bench.toml")\n'
         '    outs = {n: sig[n] for n in ("motor_angle", "load_angle")}\n'

@@ -57,9 +57,9 @@ ROTARY_SHEET = dict(
 
 @functools.cache
 def _rotary_whole_fit(name: str):
-    from flexarm.identification.time_domain import fit, read_bench_log
+    from flexarm.identification.time_domain import fit, load_rig_log
 
-    return fit([read_bench_log(ROTARY_DATA / name, log_format=ROTARY_FORMAT)], **ROTARY_SHEET)
+    return fit([load_rig_log(ROTARY_DATA / name, log_format=ROTARY_FORMAT)], **ROTARY_SHEET)
 
 
 @pytest.fixture(scope="session")

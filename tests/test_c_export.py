@@ -715,9 +715,9 @@ def test_c_matches_python_on_the_real_unit6_log(tmp_path):
     rates filtered with the logger's τ = 3.3 ms from controller_check; ±5 V) with
     friction compensation, exported and compiled. Double: 1e-12 V and the derived bound;
     float: the derived bound (module docstring)."""
-    from flexarm.identification.time_domain.logs import read_bench_log
+    from flexarm.identification.time_domain.logs import load_rig_log
 
-    log = read_bench_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)
+    log = load_rig_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)
     k1, k2, k3, k4 = (float(g) for g in np.asarray(log.gains)[0])
     sc = _rig(
         {

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flexarm.identification.time_domain.controller_check import check_controller
-from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.io.logformat import load_log_format, log_format_from_dict
 from test_logformat import EXAMPLE, README_GAINS, RIG_FILES, needs_data
 
@@ -20,7 +20,7 @@ def test_every_rig_log_confirms_the_logged_law(path):
     R² > 0.999 (the worst file measures 0.99970 at the best delay; the bound leaves that
     margin and still means less than 0.1 % of the command unexplained). Each identifiable
     gain within the check's own 10 % of the README's table (+0.01 for gains declared 0)."""
-    log = read_bench_log(path, log_format=EXAMPLE)
+    log = load_rig_log(path, log_format=EXAMPLE)
     c = check_controller(log)
     print(
         f"\n{path.name}: R² {c.r2:.5f}, delay {c.delay}, by delay {c.r2_by_delay}, "
@@ -46,9 +46,9 @@ def test_every_rig_log_confirms_the_logged_law(path):
 @needs_data
 def test_saturation_detected_where_the_command_plateaus():
     by = {p.name: p for p in RIG_FILES}
-    c = check_controller(read_bench_log(by["Unit5_Rigid_trial1.csv"], log_format=EXAMPLE))
+    c = check_controller(load_rig_log(by["Unit5_Rigid_trial1.csv"], log_format=EXAMPLE))
     assert c.saturation_limit == pytest.approx(5.0, abs=0.01) and c.saturation_fraction > 0.005
-    c = check_controller(read_bench_log(by["rigidarm_K1_6"], log_format=EXAMPLE))
+    c = check_controller(load_rig_log(by["rigidarm_K1_6"], log_format=EXAMPLE))
     assert c.saturation_limit is None  # |u| < 1.2 V there
 
 
@@ -61,7 +61,7 @@ def test_wrong_k2_sign_is_rejected_naming_k2():
         "gains": {"K1": 8, "K2": 8.5, "K3": 1.5, "K4": 1.5},
     }  # K2 sign flipped
     wrong = log_format_from_dict(fmt, "wrong-k2.toml")
-    log = read_bench_log(by["4PM_Group37_FlexArm_Unit6"], log_format=wrong)
+    log = load_rig_log(by["4PM_Group37_FlexArm_Unit6"], log_format=wrong)
     with pytest.raises(FitInputError) as e:
         check_controller(log)
     msg = str(e.value)
@@ -98,7 +98,7 @@ def test_synthetic_log_gains_and_one_sample_delay_recovered(synthetic_delay1):
     """The simulator's law is exactly the regressed model at delay 1 (backward-difference
     rates, no glitch), so the gains come back to the file's 12 significant digits: rtol 1e-6
     leaves room for the written rounding; the other delays fit visibly worse."""
-    c = check_controller(read_bench_log(synthetic_delay1))
+    c = check_controller(load_rig_log(synthetic_delay1))
     assert c.delay == 1 and c.rates == "backward"
     np.testing.assert_allclose(c.regressed[0], [6.0, -3.0, 0.2, 0.05], rtol=1e-6)
     assert c.r2 > 1 - 1e-9 and c.r2_by_delay[0] < 0.99 and c.r2_by_delay[2] < 0.99
@@ -108,7 +108,7 @@ def test_gain_segments_regressed_separately(synthetic_delay1, tmp_path):
     """A log whose K1 column switches half way: each segment is checked against its own
     declared gains; declaring the first segment's K1 for the whole log is caught in the
     second segment only."""
-    log = read_bench_log(synthetic_delay1)
+    log = load_rig_log(synthetic_delay1)
     g = log.gains.copy()
     g[1000:, 0] = 7.0  # a declaration that changes although the simulated law did not
     from dataclasses import replace
@@ -122,7 +122,7 @@ def test_gain_segments_regressed_separately(synthetic_delay1, tmp_path):
 
 
 def test_check_needs_voltage_and_gains(synthetic_delay1):
-    log = read_bench_log(synthetic_delay1)
+    log = load_rig_log(synthetic_delay1)
     from dataclasses import replace
 
     with pytest.raises(FitInputError, match=r"d1\.csv: field 'voltage'"):

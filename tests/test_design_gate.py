@@ -181,7 +181,7 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     from flexarm.cli import app
     from flexarm.deploy.c_export import export_c
     from flexarm.design.plants import from_paths
-    from flexarm.identification.time_domain import fit, read_bench_log
+    from flexarm.identification.time_domain import fit, load_rig_log
     from flexarm.identification.time_domain.report import scenario_spread
     from flexarm.specs import load_scenario
 
@@ -241,7 +241,7 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     readme = chain(load_scenario(rig), json.loads(fj.read_text()), "readme")
     print("README chain:", readme.verdict, readme.gate)
     # what the fitted scenario must carry
-    blog = read_bench_log(log, log_format=ROTARY_FORMAT).window(0, 5)
+    blog = load_rig_log(log, log_format=ROTARY_FORMAT).window(0, 5)
     res = fit(
         [blog],
         drive="voltage",

@@ -213,6 +213,42 @@ def test_imports_follow_the_layer_order():
     assert not new, "imports against the layer order (docs/architecture.md):\n" + "\n".join(new)
 
 
+#: Modules that one direction of imports joins (importer, imported): the reverse would be an
+#: import circle. The log-format reader decodes ``.mat`` files through ``matfile``, which
+#: decodes only (issue #23: one loader, no circle between the two).
+ONE_WAY = [("flexarm.io.logformat", "flexarm.io.matfile")]
+
+
+def _imported_modules(module: str) -> set[str]:
+    """The flexarm modules ``module`` imports (at the top, in functions, or by name from a
+    package), and the modules named in ``importlib.import_module("...")`` calls."""
+    path = SRC.parent / Path(*module.split("."))
+    path = path / "__init__.py" if _is_pkg(module) else path.with_suffix(".py")
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = set()
+    for _, mod, names in _imports(tree, module):
+        out.add(mod)
+        out.update(f"{mod}.{n}" for n in names or [] if _is_module(f"{mod}.{n}"))
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "import_module"
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
+            out.add(str(node.args[0].value))
+    return out
+
+
+@pytest.mark.parametrize(("importer", "imported"), ONE_WAY)
+def test_imports_between_these_modules_go_one_way(importer, imported):
+    assert imported in _imported_modules(importer), f"{importer} no longer imports {imported}"
+    assert importer not in _imported_modules(imported), (
+        f"{imported} imports {importer}, which imports it: an import circle"
+    )
+
+
 def _key(finding: str) -> str:
     """A finding without its line number (lines move; the module and the name do not)."""
     mod, _, rest = finding.partition(":")

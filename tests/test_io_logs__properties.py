@@ -25,7 +25,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexarm.identification.time_domain.logs import FitInputError, read_bench_log
+from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.io.logs import LogError, read_log
 from test_logformat import EXAMPLE
 
@@ -58,12 +58,12 @@ def _read(p):
     return read_log(p, required=("time",), min_samples=2)
 
 
-def _read_bench(p):
-    return read_bench_log(p, min_samples=2)
+def _read_rig_no_format(p):
+    return load_rig_log(p, min_samples=2)
 
 
 def _read_rig(p):
-    return read_bench_log(p, log_format=EXAMPLE, min_samples=2)
+    return load_rig_log(p, log_format=EXAMPLE, min_samples=2)
 
 
 LOG_CHARS = st.sampled_from(list("0123456789.,;\t -+eE#%\r\nabcxyz_:\x0b\x0c\u2028\x85\ufeff"))
@@ -76,7 +76,7 @@ def test_random_text(text):
         p = _file(text)
     except UnicodeEncodeError:  # lone surrogates cannot be written as UTF-8
         return
-    for read in (_read, _read_bench, _read_rig):
+    for read in (_read, _read_rig_no_format, _read_rig):
         _loads_or_names_file(read, p)
 
 
@@ -84,7 +84,7 @@ def test_random_text(text):
 @given(st.binary(max_size=300))
 def test_random_bytes(data):
     p = _file(data)
-    for read in (_read, _read_bench, _read_rig):
+    for read in (_read, _read_rig_no_format, _read_rig):
         _loads_or_names_file(read, p)
 
 

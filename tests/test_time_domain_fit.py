@@ -10,13 +10,14 @@ import pytest
 from flexarm.identification.time_domain import (
     FitInputError,
     fit,
-    parse_controller,
-    read_bench_log,
+    load_rig_log,
     validate,
 )
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.identification.time_domain.report import check_physical
 from flexarm.identification.time_domain.synthetic import synthetic_log
+from flexarm.io.logformat import parse_controller
+from flexarm.io.logs import Log, LogError
 from flexarm.sim.build import prepare
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
@@ -226,10 +227,12 @@ def test_controller_declarations(logs):
     assert (c.k1, c.k2, c.k3, c.k4, c.rate) == (6, -3, 0.213, 0, "backward")
     c = parse_controller("pd KP=10 KD=0.3 rate=filtered tau=0.02")
     assert (c.k1, c.k3, c.k2, c.rate, c.rate_time_constant) == (10, 0.3, 0, "filtered", 0.02)
-    assert read_bench_log(logs[0]).controller.k1 == 6
-    assert read_bench_log(logs[0], controller="pd KP=3 KD=0.1").controller.k1 == 3
-    with pytest.raises(FitInputError, match="not known"):
+    assert load_rig_log(logs[0]).controller.k1 == 6
+    assert load_rig_log(logs[0], controller="pd KP=3 KD=0.1").controller.k1 == 3
+    with pytest.raises(LogError, match="not known"):
         parse_controller("lqr K=1")
+    with pytest.raises(FitInputError, match="not known"):
+        load_rig_log(logs[0], controller="lqr K=1")
 
 
 def _write(path, text):
@@ -241,7 +244,7 @@ def test_bad_inputs(tmp_path, logs):
     head = "time,reference,voltage,motor_angle,tip_deflection\n"
     rows = [f"{k * 1e-3:.3f},0,0,{0.001 * k},{0.0}" for k in range(100)]
     with pytest.raises(FitInputError, match="no usable output column"):
-        read_bench_log(
+        load_rig_log(
             _write(
                 tmp_path / "a.csv",
                 "time,reference,voltage,tip_deflection\n"
@@ -251,15 +254,15 @@ def test_bad_inputs(tmp_path, logs):
     bad = rows.copy()
     bad[50] = "0.049,0,0,0,0"
     with pytest.raises(FitInputError, match="b.csv.*time (repeats|decreases)"):
-        read_bench_log(_write(tmp_path / "b.csv", head + "\n".join(bad)))
+        load_rig_log(_write(tmp_path / "b.csv", head + "\n".join(bad)))
     bad = rows.copy()
     bad[50] = "0.0505,0,0,0,0"
     with pytest.raises(FitInputError, match="c.csv.*non-uniform"):
-        read_bench_log(_write(tmp_path / "c.csv", head + "\n".join(bad)))
+        load_rig_log(_write(tmp_path / "c.csv", head + "\n".join(bad)))
     bad = rows.copy()
     bad[50] = "0.050,0,0,nan,0"
     with pytest.raises(FitInputError, match="d.csv.*'motor_angle'.*NaN"):
-        read_bench_log(_write(tmp_path / "d.csv", head + "\n".join(bad)))
+        load_rig_log(_write(tmp_path / "d.csv", head + "\n".join(bad)))
     with pytest.raises(FitInputError, match="e.csv: field 'controller': no controller declared"):
         fit([_write(tmp_path / "e.csv", head + "\n".join(rows))], **RIG)
     with pytest.raises(FitInputError, match="non-physical.*hub inertia"):
@@ -420,7 +423,7 @@ def test_open_loop_replay_recovers_the_parameters(logs):
     :func:`test_fit_two_logs_validate_third` and for the same reasons (measured: J +0.01 %,
     J_l −0.5 %, ω_c +0.02 %, ζ +1.4 %, tip gain −0.5 %, F_c +0.5 %, F_s +1 %, B −13.5 %
     = −0.00054 N·m·s/rad, bias −3e-5 N·m; tip delay 2)."""
-    g = read_bench_log(logs[0])
+    g = load_rig_log(logs[0])
     n = len(g)
     L, m, EI = 0.42, 0.019841, 0.168
     wc2 = 3 * EI / L**3 / m
@@ -664,14 +667,11 @@ def test_initial_tip_through_the_filter():
     (a linear input is inside the parabola's span), while a parabola through y itself
     reads the rate as 0.036 (off by more than half)."""
     from flexarm.identification.time_domain.guesses import initial_tip_at
-    from flexarm.identification.time_domain.logs import BenchLog
 
     w = 2 * np.pi * 15.0
     t = np.arange(40) * 1e-3
     y = 0.01 + 0.2 * (t + np.expm1(-w * t) / w)
-    log = BenchLog(
-        None, np.arange(42) * 1e-3, {"tip_deflection": np.concatenate([[0.0, 0.0], y])}, {}, None
-    )
+    log = Log(None, np.arange(42) * 1e-3, {"tip_deflection": np.concatenate([[0.0, 0.0], y])})
     d0, v0 = initial_tip_at(log, 2, cutoff=15.0)
     assert abs(d0 - 0.01) < 1e-9 and abs(v0 - 0.2) < 1e-9, (d0, v0)
     d1, v1 = initial_tip_at(log, 2)
@@ -687,10 +687,9 @@ def test_tip_sensor_offset_is_warned(logs):
     import sys
 
     from flexarm.identification.time_domain import guesses
-    from flexarm.identification.time_domain.logs import BenchLog, read_bench_log
 
     fit_mod = sys.modules["flexarm.identification.time_domain.fit"]
-    clean = [read_bench_log(p) for p in logs]
+    clean = [load_rig_log(p) for p in logs]
     for g in clean:
         rest, span = guesses.tip_rest_reading(g)
         assert abs(rest) < 0.01 * span
@@ -698,7 +697,7 @@ def test_tip_sensor_offset_is_warned(logs):
     g = clean[0]
     cols = dict(g.columns)
     cols["tip_deflection"] = cols["tip_deflection"] + 2e-3
-    shifted = BenchLog(g.path, g.time, cols, g.meta, g.controller)
+    shifted = Log(g.path, g.time, cols, meta=dict(g.meta), controller=g.controller)
     rest, span = guesses.tip_rest_reading(shifted)
     assert rest == pytest.approx(2e-3, abs=0.01 * span)
     (msg,) = fit_mod._tip_offsets([shifted])

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import fit, predict, read_bench_log
+from flexarm.identification.time_domain import fit, load_rig_log, predict
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
@@ -42,7 +42,7 @@ pytestmark = [
 
 
 def _log(name: str):
-    return read_bench_log(DATA / name, log_format=FORMAT)
+    return load_rig_log(DATA / name, log_format=FORMAT)
 
 
 def _split(name: str):

@@ -1026,9 +1026,9 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
     the fit result and extras for its JSON (window, held-out fit %)."""
     extra: dict[str, Any] = {}
     if row.preset == "servo_rig":
-        from flexarm.identification.time_domain import fit, predict, read_bench_log
+        from flexarm.identification.time_domain import fit, load_rig_log, predict
 
-        full = [read_bench_log(p, log_format=row.log_format) for p in row.logs]
+        full = [load_rig_log(p, log_format=row.log_format) for p in row.logs]
         logs = [g.window(*row.window) for g in full] if row.window else full
         kw = {**row.data_sheet, **row.options}
         if row.sessions is not None:

@@ -512,13 +512,13 @@ def bench_logs(
     # step 2): the declared law is checked against the logged command, and replaced by
     # the regressed one with --use-regressed-law.
     from flexarm.identification.time_domain.controller_check import check_controller
-    from flexarm.identification.time_domain.logs import read_bench_log
+    from flexarm.identification.time_domain.logs import load_rig_log
 
     if not (max_jitter > 0):
         fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
     cols, units = parsing.pairs(column, "column") or None, parsing.pairs(unit, "unit") or None
     logs = [
-        read_bench_log(
+        load_rig_log(
             p,
             columns=cols,
             units=units,

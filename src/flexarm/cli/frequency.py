@@ -251,7 +251,7 @@ def frf(
         plot_bode,
         plot_distortion,
     )
-    from flexarm.io.matfile import read_recording
+    from flexarm.io.logformat import read_recording
 
     if method not in ("periodic", "lpm"):
         fail(f"--method {method!r}: choose periodic or lpm")

@@ -450,7 +450,6 @@ class LogFormat(Spec):
         then joined; the files must have the same number of samples and, where a file's
         own ``time`` is mapped, the same times as the log's (to 1e-6 of a step): an error
         names both files. ``path`` is the run's stem (module docstring)."""
-        from flexarm.io import matfile
 
         stem = str(path.with_suffix("")) if path.suffix else str(path)
         files: dict[Path, dict[str, int | str]] = {}

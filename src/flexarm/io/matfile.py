@@ -373,14 +373,3 @@ def _check_counter(path: Path, sig: dict[str, np.ndarray], notes: list[str]) -> 
         f"(step {step[first - 1]:g}, expected {good:g}): samples were lost; "
         "cut the recording there"
     )
-
-
-def __getattr__(name: str):
-    """Deprecated: ``read_recording`` moved to :func:`flexarm.io.logformat.read_recording`
-    (this module decodes ``.mat`` files only; the import is lazy so that no circle remains
-    at import time). Remove once the CLI imports it from logformat."""
-    if name == "read_recording":
-        import importlib
-
-        return importlib.import_module("flexarm.io.logformat").read_recording
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -10,8 +10,8 @@ the general engine's flat record (:func:`fit_scenario`'s).
 Deprecated names kept until their callers move: ``fit`` / ``predict`` here are the rotary
 servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` its replay,
 ``fit_scenario`` / ``predict_scenario`` / ``ScenarioFit`` the general engine's,
-``BenchLog`` / ``read_bench_log`` the old log type and reader, ``RigFitResult`` the servo
-pipeline's result."""
+``RigFitResult`` the servo pipeline's result. Logs are :class:`flexarm.io.logs.Log`, read by
+:func:`flexarm.io.logformat.load_log` (:func:`load_rig_log` adds the servo rig's check)."""
 
 from flexarm.identification.time_domain.general import (
     ScenarioFit,
@@ -19,13 +19,7 @@ from flexarm.identification.time_domain.general import (
     fit_scenario,
     predict_scenario,
 )
-from flexarm.identification.time_domain.logs import (
-    BenchLog,
-    FitInputError,
-    load_rig_log,
-    parse_controller,
-    read_bench_log,
-)
+from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.identification.time_domain.options import FitOptions, PredictOptions
 from flexarm.identification.time_domain.predict import Prediction, overlay_figure
 from flexarm.identification.time_domain.report import FitResult as RigFitResult
@@ -33,7 +27,6 @@ from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.validate import validate
 
 __all__ = [
-    "BenchLog",
     "FitInputError",
     "FitOptions",
     "FitResult",
@@ -46,10 +39,8 @@ __all__ = [
     "fit_scenario",
     "load_rig_log",
     "overlay_figure",
-    "parse_controller",
     "predict",
     "predict_scenario",
-    "read_bench_log",
     "validate",
 ]
 

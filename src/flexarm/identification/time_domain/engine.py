@@ -82,12 +82,12 @@ def fit(
 
 def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.fit import fit as rig_fit
-    from flexarm.identification.time_domain.logs import as_bench_log
+    from flexarm.identification.time_domain.logs import as_rig_log
     from flexarm.identification.time_domain.report import as_fit_result
 
     opts = options if isinstance(options, FitOptions) else FitOptions()
     kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
-    logs = [as_bench_log(g) if isinstance(g, (str, Path)) else g for g in logs]
+    logs = [as_rig_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
     return as_fit_result(

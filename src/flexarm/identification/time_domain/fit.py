@@ -53,7 +53,7 @@ from flexarm.identification.time_domain.global_stage import (
 from flexarm.identification.time_domain.logs import (
     PERIOD_TOL,
     FitInputError,
-    as_bench_log,
+    as_rig_log,
     check_closed_loop,
 )
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
@@ -420,7 +420,7 @@ def fit(
         raise FitInputError(f"fit: field 'mode' = {mode!r}: choose 'closed_loop' or 'open_loop'")
     if not logs:
         raise FitInputError("fit: no logs given")
-    blogs = [as_bench_log(x, controller) for x in logs]
+    blogs = [as_rig_log(x, controller) for x in logs]
     dts = [g.dt for g in blogs]
     for g in blogs:
         if abs(g.dt - dts[0]) > PERIOD_TOL * dts[0]:
@@ -1167,7 +1167,7 @@ def predict(
     Returns ``{"fit_percent": {log: {signal: %}}, "traj": [...], "logs": [...]}``.
     ``result``: this engine's result, or the one result holding it (``engine_result``)."""
     result = getattr(result, "engine_result", None) or result
-    blogs = [as_bench_log(x, controller) for x in logs]
+    blogs = [as_rig_log(x, controller) for x in logs]
     T = result.logs[0].dt
     for g in blogs:
         if abs(g.dt - T) > PERIOD_TOL * T:

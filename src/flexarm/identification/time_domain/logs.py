@@ -7,28 +7,19 @@ carries the controller the lab ran (``controller``, per-sample ``gains``, ``volt
 and at least one output, ``motor_angle`` (rad) or ``tip_deflection`` (m); ``voltage`` (V,
 the command) is needed for open-loop replay. :func:`load_rig_log` reads one and checks
 that (:func:`check_rig_log`); :func:`check_closed_loop` checks what a closed-loop replay
-needs (the law and the signals it reads).
-
-Deprecated names kept for the CLI and the servo-rig tests until they are re-pointed:
-``BenchLog`` (now :class:`~flexarm.io.logs.Log`; its positional constructor
-``BenchLog(path, time, columns, meta, controller)``), ``read_bench_log`` (now
-:func:`load_rig_log`), ``parse_controller`` (now
-:func:`flexarm.io.logformat.parse_controller`), ``write_bench_log`` (now
-:func:`flexarm.io.logs.write_log`).
+needs (the law and the signals it reads); :func:`as_rig_log` takes a path or a log.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from flexarm.errors import FlexarmError
 from flexarm.io import logformat as _lf
 from flexarm.io.logformat import GAIN_UNITS, LogFormat
-from flexarm.io.logs import MAX_JITTER, RIG_OUTPUTS, Log, LogError, write_log
+from flexarm.io.logs import MAX_JITTER, RIG_OUTPUTS, Log, LogError
 
 #: Relative difference of two sampling periods taken as the same period (a logger's
 #: rounding or time-stamp jitter, not another rate).
@@ -94,49 +85,6 @@ def load_rig_log(
     return check_rig_log(log)
 
 
-def read_bench_log(
-    path: str | Path,
-    *,
-    columns: Mapping[str, str | int] | None = None,
-    units: Mapping[str, str] | None = None,
-    controller: Any = None,
-    max_jitter: float = MAX_JITTER,
-    min_samples: int = MIN_BENCH_SAMPLES,
-    log_format: str | Path | LogFormat | None = None,
-) -> Log:
-    """Deprecated: :func:`load_rig_log` (the same log, the one :class:`Log` type)."""
-    return load_rig_log(
-        path,
-        log_format,
-        columns=columns,
-        units=units,
-        controller=controller,
-        max_jitter=max_jitter,
-        min_samples=min_samples,
-    )
-
-
-def BenchLog(path, time, columns, meta=None, controller=None, **kw) -> Log:
-    """Deprecated: a :class:`~flexarm.io.logs.Log` (``columns`` are its ``signals``)."""
-    return Log(
-        None if path is None else Path(path),
-        np.asarray(time, float),
-        dict(columns),
-        meta=dict(meta or {}),
-        controller=controller,
-        **kw,
-    )
-
-
-def parse_controller(text: str, source: str = "controller"):
-    """Deprecated: :func:`flexarm.io.logformat.parse_controller` (errors as
-    :class:`FitInputError`)."""
-    try:
-        return _lf.parse_controller(text, source)
-    except LogError as exc:
-        raise FitInputError(str(exc)) from None
-
-
 def controller_from_any(c: Any, source: str):
     """:func:`flexarm.io.logformat.controller_from_any` with errors as :class:`FitInputError`."""
     try:
@@ -145,7 +93,7 @@ def controller_from_any(c: Any, source: str):
         raise FitInputError(str(exc)) from None
 
 
-def as_bench_log(x: Any, controller: Any = None, **kw) -> Log:
+def as_rig_log(x: Any, controller: Any = None, **kw) -> Log:
     """A path or a :class:`Log` (with ``controller`` overriding its declaration and its
     gains); ``kw`` go to :func:`load_rig_log` (``log_format=``, ``columns=``, ...)."""
     if isinstance(x, Log):
@@ -184,27 +132,3 @@ def check_closed_loop(log: Log) -> None:
             f"uses the tip deflection (K2 = {c.k2:g}, K4 = {c.k4:g}) but the "
             "log has no tip_deflection column"
         )
-
-
-def write_bench_log(
-    path: str | Path,
-    time: np.ndarray,
-    columns: Mapping[str, np.ndarray],
-    *,
-    comments: Sequence[str] = (),
-    overwrite: bool = False,
-    fmt: str = "%.12g",
-) -> Path:
-    """Deprecated: :func:`flexarm.io.logs.write_log` (errors as :class:`FitInputError`)."""
-    try:
-        return write_log(
-            path,
-            time,
-            columns,
-            comments=list(comments),
-            overwrite=overwrite,
-            fmt=fmt,
-            required=("time",),
-        )
-    except LogError as exc:
-        raise FitInputError(str(exc)) from None

@@ -23,7 +23,7 @@ from flexarm.identification.time_domain import guesses
 from flexarm.identification.time_domain.logs import (
     PERIOD_TOL,
     FitInputError,
-    as_bench_log,
+    as_rig_log,
     check_closed_loop,
 )
 from flexarm.identification.time_domain.report import overlay_plots
@@ -50,7 +50,7 @@ def validate(
     result: dict[str, Any] = {"scenario": sc.name, "fit_percent": {}, "plots": []}
     blogs, trajs = [], []
     for x in logs:
-        log = as_bench_log(x, controller)
+        log = as_rig_log(x, controller)
         check_closed_loop(log)
         T = sc.sampling.period
         if abs(log.dt - T) > PERIOD_TOL * T:
@@ -127,7 +127,7 @@ def validate(
                 c: traj[j][0] for j, c in enumerate(("motor_angle", "tip_deflection")) if c in names
             }
             sim["command"] = traj[2][0]
-            assert log.time is not None  # a bench log has its time (as_bench_log)
+            assert log.time is not None  # a bench log has its time (as_rig_log)
             result.setdefault("traces", []).append(
                 {"time": log.time - log.time[0], "measured": meas, "simulated": sim}
             )
