@@ -170,3 +170,21 @@ def test_cli_fit_builtin_without_free_runs_the_preset_and_json_is_to_dict(tmp_pa
     assert d["free_source"] == "preset quanser-two-link" and len(d["free"]) == 15
     back = FitResult.from_dict(d)
     assert json.loads(json.dumps(back.to_dict())) == d
+
+
+def test_rig_trace_draws_only_what_the_log_measures():
+    """A rigid arm's log (its tip column all zeros): the rig engines' dummy link mode has
+    no panel, measured or simulated; a flexible log keeps the tip; the command always."""
+    from flexarm.identification.time_domain.predict import Prediction, overlay_figure, rig_trace
+
+    t = np.arange(200) * 1e-3
+    hub = np.sin(7 * t)
+    sim = [hub * 1.01, 0.02 * np.sin(30 * t), 0.5 * np.cos(7 * t)]
+    sig = {"motor_angle": hub, "reference": 0 * t, "voltage": 0.5 * np.cos(7 * t)}
+    rigid = rig_trace(Log(None, t, {**sig, "tip_deflection": 0 * t}), sim)
+    assert list(rigid["simulated"]) == ["motor_angle", "command"]
+    assert list(rigid["measured"]) == ["motor_angle", "command"]
+    flex = rig_trace(Log(None, t, {**sig, "tip_deflection": 0.01 * np.sin(30 * t)}), sim)
+    assert list(flex["simulated"]) == ["motor_angle", "tip_deflection", "command"]
+    fig = overlay_figure(Prediction("rig", {"r": {"motor_angle": 99.0}}, {"r": rigid}), "r")
+    assert len(fig.get_axes()) == 2

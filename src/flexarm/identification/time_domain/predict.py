@@ -293,10 +293,13 @@ def rig_trace(log, simulated: Sequence[np.ndarray]) -> dict:
     """A servo-rig log's trace for :class:`Prediction`: ``simulated`` as the rig engines'
     (hub angle, tip deflection, command) arrays; the measured hub angle and tip deflection,
     the logged voltage as the command, the reference (drawn in the first panel) and the
-    axes' units (:data:`RIG_DISPLAY`)."""
+    axes' units (:data:`RIG_DISPLAY`). A sensor the log does not measure (absent or
+    constant: a rigid arm's zero tip column) has no panel: the rig engines simulate a
+    rigid arm with an uncoupled dummy link mode, which no sensor reads."""
     names = ("motor_angle", "tip_deflection", "command")
-    sim = dict(zip(names, simulated, strict=True))
-    meas = {c: log.signals[c] for c in names[:2] if c in log.signals}
+    read = set(log.outputs) | {"command"}
+    sim = {c: y for c, y in zip(names, simulated, strict=True) if c in read}
+    meas = {c: log.signals[c] for c in names[:2] if c in read}
     if "voltage" in log.signals:
         meas["command"] = log.signals["voltage"]
     tr: dict[str, Any] = {"time": log.time - log.time[0], "measured": meas, "simulated": sim}
