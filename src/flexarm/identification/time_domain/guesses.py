@@ -122,34 +122,25 @@ def link_frequency(logs: list[Log], fmin: float = 0.3, fmax: float = 60.0, *, di
     the link's 1.8 Hz), so the intervals are taken again within one count (``dither``,
     :func:`stuck_intervals`); where those do not hold the peak either, the whole signal's
     peak is used."""
-    segs, how = [], "stuck"
-    for log in logs:
-        d = log.columns.get("tip_deflection")
-        if d is None or np.ptp(d) == 0:
-            continue
-        for i0, i1 in stuck_intervals(log, dither=dither):
-            segs.append((scipy.signal.detrend(d[i0:i1]), log.dt))
-    if not segs:
-        how = "whole"
-        segs = [
-            (scipy.signal.detrend(log.columns["tip_deflection"]), log.dt)
-            for log in logs
-            if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0
-        ]
-    if not segs:
+    tips = [
+        (log, d)
+        for log in logs
+        if (d := log.columns.get("tip_deflection")) is not None and np.ptp(d) > 0
+    ]
+    if not tips:
         return None, "none"
-    wc = _peak(segs, fmin, fmax)
-    longest = max(len(s) for s, _ in segs) * segs[0][1]
-    if how == "stuck" and longest * wc / (2 * np.pi) < MIN_PERIODS:
-        if not dither:
-            return link_frequency(logs, fmin, fmax, dither=True)
-        whole = [
-            (scipy.signal.detrend(log.columns["tip_deflection"]), log.dt)
-            for log in logs
-            if "tip_deflection" in log.columns and np.ptp(log.columns["tip_deflection"]) > 0
+    for dith in (True,) if dither else (False, True):
+        segs = [
+            (scipy.signal.detrend(d[i0:i1]), log.dt)
+            for log, d in tips
+            for i0, i1 in stuck_intervals(log, dither=dith)
         ]
-        return _peak(whole, fmin, fmax), "whole"
-    return wc, how
+        if not segs:
+            break
+        wc = _peak(segs, fmin, fmax)
+        if max(len(s) for s, _ in segs) * segs[0][1] * wc / (2 * np.pi) >= MIN_PERIODS:
+            return wc, "stuck"
+    return _peak([(scipy.signal.detrend(d), log.dt) for log, d in tips], fmin, fmax), "whole"
 
 
 #: fewest periods of the ringing the longest stuck interval must hold for its peak to count
