@@ -13,6 +13,7 @@ import tomli_w
 from flexarm.errors import OutputExistsError
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
+from flexarm.identification.time_domain.result import finite
 from flexarm.io.logs import log_keys
 from flexarm.io.write import write_json, write_text
 
@@ -367,20 +368,6 @@ def _r(v) -> float | None:
     return None if v is None or not np.isfinite(v) else round(float(v), 3)
 
 
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else float(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
-
-
 #: what the servo rig's std mean (``stages["servo_rig"]["uncertainty_note"]``)
 UNCERTAINTY_NOTE = (
     "std: Newey-West (HAC) sandwich (J^T J)^-1 S (J^T J)^-1 from the final Jacobian, S the "
@@ -473,9 +460,9 @@ def as_fit_result(
         nfev=int(glob.get("nfev") or 0) + int(loc.get("nfev") or 0),
         cost=float(loc["cost"]) if loc.get("cost") is not None else nan,
         seconds=float(res.seconds),
-        stages=_jsonable(stages),
+        stages=finite(stages),
         free_source=free_source,
-        extras=_jsonable(extras),
+        extras=finite(extras),
         engine_result=res,
     )
 
@@ -498,9 +485,7 @@ def _correlation(res: FitResult, free: list[str]) -> np.ndarray:
 def without_friction_entry(res0) -> dict:
     """The ``without_friction`` entry of the document (``fit --compare-no-friction``): the
     friction-free fit's fit %, parameters and message."""
-    return _jsonable(
-        {"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message}
-    )
+    return finite({"fit_percent": res0.fit_percent, "params": res0.params, "message": res0.message})
 
 
 def interrupted_result(res, best):

@@ -197,9 +197,10 @@ class FitResult:
 
 
 def finite(x: Any) -> Any:
-    """JSON-ready: non-finite floats as None, recursively."""
+    """JSON-ready: non-finite floats as None, NumPy scalars as Python's, keys as strings
+    (as JSON writes them: a document reads back equal), recursively."""
     if isinstance(x, dict):
-        return {k: finite(v) for k, v in x.items()}
+        return {str(k): finite(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [finite(v) for v in x]
     if isinstance(x, (float, np.floating)):
