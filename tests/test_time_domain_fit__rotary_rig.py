@@ -149,20 +149,8 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     from flexarm.specs import load_scenario
 
     j, toml, v = tmp_path / "fit.json", tmp_path / "arm.toml", tmp_path / "validate.json"
-    sheet = [
-        "--gear-ratio",
-        "48.4",
-        "--motor-constant",
-        "0.0107",
-        "--armature-resistance",
-        "3.29",
-        "--link-length",
-        "0.45",
-        "--computation-delay",
-        "1",
-        "--voltage-limit",
-        "10",
-    ]
+    # the module's data sheet as options: --drive voltage --gear-ratio 48.4 ...
+    sheet = [a for k, v in SHEET.items() for a in (f"--{k.replace('_', '-')}", str(v))]
     fmt = ["--log-format", str(FORMAT)]
     cli = [sys.executable, "-m", "flexarm"]
     logs = [str(DATA / n) for n in RIGID_FIT]
