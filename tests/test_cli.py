@@ -400,15 +400,15 @@ def _fake_fit():
 
 def _interrupting_fit(monkeypatch, result):
     import flexarm.cli.fit
-    import flexarm.identification.time_domain
     from flexarm.errors import FitInterrupted
+    from flexarm.identification.time_domain import engine
 
     def fake(*a, **k):
         if result is KeyboardInterrupt:
             raise KeyboardInterrupt
         raise FitInterrupted(result)
 
-    monkeypatch.setattr(flexarm.identification.time_domain, "fit", fake)
+    monkeypatch.setattr(engine, "fit", fake)  # the one fit the command calls
     monkeypatch.setattr(flexarm.cli.fit, "bench_logs", lambda *a, **k: [])
 
 

@@ -199,7 +199,7 @@ class DesignRequest:
     (the command's help says what each means; the defaults are the command's, so every
     field is given).
 
-    DECISION: a command-line record, not a library one: the library's
+    Why here: a command-line record, not a library one: the library's
     :func:`flexarm.design.gate.design_checked` takes the method's own keyword arguments
     (:meth:`method_options`), the drawn plants, the encoder count, a Dask client and its
     own record :class:`flexarm.design.gate.GateOptions` (:meth:`gate_options`); the rest
@@ -407,7 +407,7 @@ def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
 def _check_options(o: DesignRequest, methods) -> None:
     """The option combinations ``design`` accepts (refused before any work).
 
-    DECISION: the library's ``design()`` checks its own arguments too; these checks name
+    Why here: the library's ``design()`` checks its own arguments too; these checks name
     the command-line options."""
     method, poles, q, r = o.method, o.poles, o.q, o.r
     if method not in methods:

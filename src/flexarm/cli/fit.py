@@ -5,14 +5,22 @@ The JSON documents these commands write are the library's: ``fit --json`` is the
 :meth:`~flexarm.identification.time_domain.result.FitResult.to_dict` of every rig (the
 servo rig's through :func:`~flexarm.identification.time_domain.report.as_fit_result`, an
 interrupted fit's through :func:`~flexarm.identification.time_domain.report.
-interrupted_result`), ``validate --json`` the prediction's dictionary."""
+interrupted_result`), ``validate --json`` the prediction's dictionary.
+
+Both commands parse, call the library and print: ``fit`` calls the one fit
+(:func:`flexarm.fit`) on the scenario given first or on the rotary-servo preset built
+from the data-sheet options (:func:`~flexarm.identification.time_domain.presets.servo_rig`);
+``validate`` calls the one prediction (:func:`flexarm.validate`), and ``--refit friction``
+:func:`~flexarm.identification.time_domain.general.refit_friction`. Logs are read by
+:func:`flexarm.io.logformat.load_logs_with` and their declared laws checked by
+:func:`~flexarm.identification.time_domain.controller_check.checked_logs`."""
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
 from pathlib import Path
-from typing import Annotated, Any, NoReturn
+from typing import Annotated, NoReturn
 
 import typer
 from rich.markup import escape
@@ -209,8 +217,8 @@ def fit(
     enable_cache()
     from flexarm.specs.scenario import names_a_scenario
 
-    # DECISION (issue #23 item 6: moves to the library): which fit runs. A scenario first
-    # takes the general fit (fit_scenario), else the servo-rig data-sheet fit.
+    # the model the logs are fitted to: a scenario given first, else the rotary servo's
+    # preset built from the data-sheet options; either way the one fit (flexarm.fit)
     cfile = controller_option(controller)
     check_continuous(continuous, window)
     if logs and names_a_scenario(str(logs[0])):
@@ -248,8 +256,10 @@ def fit(
         fail("--log-format is given once for the bench fit (every log has one format)")
     fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.errors import FitInterrupted
-    from flexarm.identification.time_domain import FitInputError
-    from flexarm.identification.time_domain import fit as run_fit
+    from flexarm.identification.time_domain import FitInputError, engine, presets
+    from flexarm.identification.time_domain.options import FitOptions, PredictOptions, ServoRig
+    from flexarm.identification.time_domain.predict import predict
+    from flexarm.identification.time_domain.report import fit_extras
     from flexarm.io.write import write_json
 
     check_file_option("--json", json_out, overwrite)
@@ -258,25 +268,29 @@ def fit(
     check_dir_option("--plots", plots)
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
-    sess = parsing.int_list(sessions, "--sessions")
-    kw: dict[str, Any] = dict(
-        drive=drive,
-        gear_ratio=gear_ratio,
-        motor_constant=motor_constant,
-        armature_resistance=armature_resistance,
-        link_length=link_length,
-        gear_efficiency=gear_efficiency,
-        motor_efficiency=motor_efficiency,
-        voltage_limit=voltage_limit,
-        computation_delay=computation_delay,
+    preset = presets.servo_rig(
+        presets.DataSheet(
+            drive=drive,
+            gear_ratio=gear_ratio,
+            motor_constant=motor_constant,
+            armature_resistance=armature_resistance,
+            link_length=link_length,
+            gear_efficiency=gear_efficiency,
+            motor_efficiency=motor_efficiency,
+            voltage_limit=voltage_limit,
+        )
+    )
+    rig = ServoRig(
         mode=mode,
+        friction=not no_friction,
         global_seconds=seconds,
-        sessions=sess,
+        delay_search=delay_search,
+        polish_iter=polish_iter,
+        sessions=parsing.int_list(sessions, "--sessions"),
         tip_sign=tip_sign,
         encoder_counts=encoder_counts,
         filters=parsing.filters(filter),
-        delay_search=delay_search,
-        polish_iter=polish_iter,
+        computation_delay=computation_delay,
     )
     res = res0 = held = None
     win, vwin = (
@@ -284,21 +298,22 @@ def fit(
         parsing.window(validate_window, "--validate-window"),
     )
     try:
-        full = bench_logs(logs, column, unit, controller, max_jitter, fmt_file, use_regressed_law)
-        blogs = [g.window(*win) for g in full] if win else full
-        held_logs = [g.window(*vwin) for g in full] if vwin else []
+        full = bench_logs(
+            logs, column, unit, controller, max_jitter, fmt_file, use_regressed_law, rig=True
+        )
+        opts = FitOptions(servo_rig=rig, windows=[win] * len(full) if win else None)
         with console.status("fitting") as status:
-            res = run_fit(
-                blogs, friction=not no_friction, progress=lambda m: progress(status, m), **kw
-            )
+            one = engine.fit(preset, full, options=opts, progress=lambda m: progress(status, m))
+            res = one.engine_result
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
-                res0 = run_fit(blogs, friction=False, **kw)
-            if held_logs:
-                from flexarm.identification.time_domain.fit import predict
-
+                no_fr = dataclasses.replace(rig, friction=False)
+                res0 = engine.fit(
+                    preset, full, options=dataclasses.replace(opts, servo_rig=no_fr)
+                ).engine_result
+            if vwin:
                 status.update("predicting the held-out windows")
-                held = predict(res, held_logs)
+                held = predict(one, full, PredictOptions(windows=[vwin] * len(full)))
     except (FitInputError, ValueError) as exc:
         fail(str(exc))
     except FitInterrupted as exc:
@@ -307,7 +322,9 @@ def fit(
         _fit_interrupted(json_out, overwrite, res, None)
     console.print(escape(res.summary()))
     _print_bench_tables(res, res0, held, validate_window)
-    one = res.result(without_friction=res0, window=win, held_out=held, held_window=vwin)
+    one.extras.update(
+        fit_extras(without_friction=res0, window=win, held_out=held, held_window=vwin)
+    )
     if json_out is not None:
         write_json(json_out, one.to_dict(), overwrite=overwrite)
     if scenario_out is not None:
@@ -363,9 +380,12 @@ def _bench_figures(
     the HTML report from them (--report)."""
     figs = res.plots(folder)
     if held is not None:
-        from flexarm.identification.time_domain.report import overlay_plots
+        from flexarm.identification.time_domain.predict import write_overlays
+        from flexarm.identification.time_domain.report import figure_names
 
-        figs += overlay_plots(folder, held["logs"], held["traj"], held["fit_percent"], "held-out")
+        figs += write_overlays(
+            held, folder, "held-out", names=figure_names(list(held.traces), "held-out")
+        )
     if report is not None:
         from flexarm.analysis.html_report import fit_report
 
@@ -419,51 +439,82 @@ def validate(
 ) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
 
-    A multi-link scenario, or --refit, takes the general path (any arm, logs read by
-    --log-format, the prediction from each log's logged state)."""
+    The one prediction (flexarm.validate): any arm, each log with its own reference and
+    controller; a single-link scenario on servo-rig logs replays the rig's law."""
     enable_cache()
+    from flexarm.identification.time_domain.general import refit_friction
+    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.predict import predict
+    from flexarm.io.logs import LogError
+    from flexarm.io.write import write_json
+
     cfile = controller_option(controller)
     check_continuous(continuous, window)
-    sc0 = with_controller_file(load(scenario), cfile)
-    # DECISION (moves to the library's one predict): which prediction runs.
-    if sc0.arm.kind == "multi_link" or refit is not None or cfile is not None or continuous:
-        _validate_scenario_cli(
-            sc0,
-            logs,
-            log_format,
-            window,
-            refit,
-            refit_window,
-            channel,
-            json_out,
-            plots,
-            overwrite,
-            report,
-            ctx,
-            continuous=continuous,
-            cfile=cfile,
-        )
-        return
-    if log_format and len(log_format) > 1:
-        fail("--log-format is given once for a bench scenario's logs")
-    fmt_file = Path(log_format[0]) if log_format else None
-    from flexarm.identification.time_domain import FitInputError
-    from flexarm.identification.time_domain import validate as run_validate
-    from flexarm.identification.time_domain.validate import document as validate_document
-
+    sc = with_controller_file(load(scenario), cfile)
     check_file_option("--json", json_out, overwrite)
     check_file_option("--report", report, overwrite, "validate.html")
     check_dir_option("--plots", plots)
-    sc = load(scenario)
-    with figure_folder(plots, report) as folder:
-        try:
-            win = parsing.window(window, "--window")
-            blogs = bench_logs(
-                logs, column, unit, controller, max_jitter, fmt_file, use_regressed_law
+    if refit not in (None, "friction"):
+        fail(
+            f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
+            "viscous friction) can be re-estimated"
+        )
+    win = parsing.window(window, "--window")
+    rwin = parsing.window(refit_window, "--refit-window")
+    ch = parsing.channels(channel)
+    out: dict = {}  # the prediction's to_dict(), the refit's entry (FitResult.refit_entry)
+    figures = contextlib.ExitStack()
+    folder = figures.enter_context(figure_folder(plots, report))
+    figs: list = []
+    try:
+        glogs = bench_logs(
+            logs,
+            column,
+            unit,
+            None if cfile is not None else controller,
+            max_jitter,
+            log_format,
+            use_regressed_law,
+        )
+        popts = PredictOptions(
+            channels=list(ch) if ch else None,
+            windows=[win] * len(glogs) if win else None,
+            continuous=continuous,
+            controller=cfile,
+            plots=folder,
+            tag="validate",
+        )
+        with console.status("predicting") as status, _state_warnings_quiet():
+            before = predict(sc, glogs, popts)
+            out = before.to_dict()
+            figs += before.plots
+            if refit:
+                status.update("re-estimating the joints' friction")
+                res = refit_friction(sc, glogs[0], rwin, ch)
+                after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
+                figs += after.plots
+                out["refit"] = res.refit_entry(res.free, rwin, logs[0], after)
+    except (LogError, ValueError) as exc:
+        figures.close()
+        fail(str(exc))
+    if plots is None:  # the figures went to a report's temporary folder
+        out["plots"] = []
+    _print_warnings(out["warnings"])
+    _fit_table(out["fit_percent"], "scenario as given")
+    if refit:
+        t = Table("friction", "scenario", "refitted", "std")
+        for p in out["refit"]["params"]:
+            t.add_row(
+                p,
+                f"{out['refit']['template'][p]:.4g}",
+                f"{out['refit']['params'][p]:.4g}",
+                f"{out['refit']['std'][p]:.3g}",
             )
-            out = run_validate(sc, [g.window(*win) for g in blogs] if win else blogs, plots=folder)
-        except (FitInputError, ValueError) as exc:
-            fail(str(exc))
+        console.print(t)
+        _fit_table(out["refit"]["fit_percent"], f"friction refitted on {refit_window} s")
+    if json_out is not None:
+        write_json(json_out, out, overwrite=overwrite)
+    with figures:
         if report is not None:
             from flexarm.analysis.html_report import validate_report
 
@@ -471,28 +522,13 @@ def validate(
                 validate_report(
                     out,
                     scenario=scenario,
-                    figures=out["plots"],
+                    figures=figs,
                     command=command_line(ctx),
-                    inputs=[scenario, *logs, *([fmt_file] if fmt_file else [])],
+                    inputs=[scenario, *logs, *(log_format or [])],
                 ),
                 report,
                 overwrite,
             )
-        out = validate_document(out, with_plots=plots is not None)
-    t = Table("log", "motor_angle fit %", "tip_deflection fit %")
-    for name, d in out["fit_percent"].items():
-        t.add_row(  # None: a signal the log or the scenario lacks (a rigid arm's tip)
-            name,
-            *(
-                f"{d[k]:.1f}" if d.get(k) is not None else "-"
-                for k in ("motor_angle", "tip_deflection")
-            ),
-        )
-    console.print(t)
-    if json_out is not None:
-        from flexarm.io.write import write_json
-
-        write_json(json_out, out, overwrite=overwrite)
 
 
 def bench_logs(
@@ -501,89 +537,36 @@ def bench_logs(
     unit,
     controller,
     max_jitter: float,
-    log_format: Path | None = None,
+    log_format=None,
     use_regressed: bool = False,
+    *,
+    rig: bool = False,
 ):
-    """Bench logs read with the --column / --unit mappings (SI inside), --controller,
-    --max-jitter and --log-format; the declared law is checked against each log's command
-    (bench.controller_check) when it has one, and replaced by the regressed law with
-    --use-regressed-law."""
-    # DECISION (moves to the library: io.logformat.load_log plus a rig check, target map
-    # step 2): the declared law is checked against the logged command, and replaced by
-    # the regressed one with --use-regressed-law.
-    from flexarm.identification.time_domain.controller_check import check_controller
-    from flexarm.identification.time_domain.logs import load_rig_log
+    """The logs read with their --log-format (once for all, once per log, or
+    PATTERN=FILE; :func:`flexarm.io.logformat.load_logs_with`; with ``rig``, as servo-rig
+    logs: :func:`~flexarm.identification.time_domain.logs.load_rig_logs`), the --column /
+    --unit mappings (SI inside), the --controller text law and --max-jitter; each declared
+    law is checked against its log's command and replaced by the regressed one with
+    --use-regressed-law (:func:`~flexarm.identification.time_domain.controller_check.
+    checked_logs`); the checks are printed."""
+    from flexarm.identification.time_domain.controller_check import checked_logs
+    from flexarm.identification.time_domain.logs import load_rig_logs
+    from flexarm.io.logformat import load_logs_with
 
     if not (max_jitter > 0):
         fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
-    cols, units = parsing.pairs(column, "column") or None, parsing.pairs(unit, "unit") or None
-    logs = [
-        load_rig_log(
-            p,
-            columns=cols,
-            units=units,
-            controller=controller,
-            max_jitter=max_jitter,
-            log_format=log_format,
-        )
-        for p in paths
-    ]
-    out = []
-    for log in logs:
-        if log.gains is None or "voltage" not in log.columns or "motor_angle" not in log.columns:
-            out.append(log)
-            continue
-        chk = check_controller(log, use_regressed=use_regressed)
-        console.print(escape(chk.summary()), highlight=False)
-        out.append(chk.apply(log) if use_regressed else log)
-    return out
-
-
-def _general_logs(paths: list[Path], log_format: list[str] | None) -> list:
-    """Read each log with its format: --log-format once per log (in order), one for all,
-    or PATTERN=FILE (fnmatch on the file name; the first match wins)."""
-    import fnmatch
-
-    from flexarm.io.logformat import LogFormat, load_log_format
-
     if not paths:
-        fail("no logs given: flexarm fit SCENARIO LOG... (one or more log files)")
-    specs = list(log_format or [])
-    pats = [x.split("=", 1) for x in specs if "=" in x]
-    plain = [x for x in specs if "=" not in x]
-    if pats and plain:
-        fail(
-            "--log-format: give either one FILE per log (or one for all), or PATTERN=FILE "
-            f"entries, not both (got {specs})"
-        )
-    if plain and len(plain) not in (1, len(paths)):
-        fail(
-            f"--log-format given {len(plain)} times for {len(paths)} logs: give it once for "
-            "all, once per log in order, or as PATTERN=FILE"
-        )
-    cache: dict = {}
-
-    def fmt(f: str | None):
-        if f is None:
-            return LogFormat()
-        if f not in cache:
-            cache[f] = load_log_format(f)
-        return cache[f]
-
-    out = []
-    for i, p in enumerate(paths):
-        if pats:
-            hit = [f for pat, f in pats if fnmatch.fnmatch(Path(p).name, pat)]
-            if not hit:
-                fail(
-                    f"{p}: no --log-format PATTERN matches its name (patterns: "
-                    f"{', '.join(pat for pat, _ in pats)})"
-                )
-            f = hit[0]
-        else:
-            f = plain[0] if len(plain) == 1 else (plain[i] if plain else None)
-        out.append(fmt(f).read(p))
-    return out
+        fail("no logs given: give one or more log files")
+    cols, units = parsing.pairs(column, "column") or None, parsing.pairs(unit, "unit") or None
+    fmts = [str(log_format)] if isinstance(log_format, Path) else log_format
+    load = load_rig_logs if rig else load_logs_with
+    logs = load(
+        paths, fmts, columns=cols, units=units, controller=controller, max_jitter=max_jitter
+    )
+    logs, checks = checked_logs(logs, use_regressed=use_regressed)
+    for chk in checks:
+        console.print(escape(chk.summary()), highlight=False)
+    return logs
 
 
 def _fit_scenario_cli(
@@ -609,6 +592,7 @@ def _fit_scenario_cli(
     from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain.engine import fit as fit_engine
     from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
+    from flexarm.io.logformat import load_logs_with
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -622,7 +606,9 @@ def _fit_scenario_cli(
     figures = contextlib.ExitStack()
     folder = figures.enter_context(figure_folder(plots, report))
     try:
-        glogs = _general_logs(logs, log_format)
+        if not logs:
+            fail("no logs given: flexarm fit SCENARIO LOG... (one or more log files)")
+        glogs = load_logs_with(logs, log_format)
         # the options given; the rest (and, without --free, the free list) are the preset's
         opts = FitOptions(
             cost=Cost(channels=chans) if chans else None,
@@ -689,112 +675,6 @@ def _fit_table(fp: dict, title: str) -> None:
     for log, d in fp.items():
         t.add_row(Path(log).name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-" for k in names))
     console.print(t)
-
-
-def _validate_scenario_cli(
-    sc,
-    logs,
-    log_format,
-    window,
-    refit,
-    refit_window,
-    channel,
-    json_out,
-    plots,
-    overwrite,
-    report=None,
-    ctx=None,
-    *,
-    continuous: bool = False,
-    cfile=None,
-) -> None:
-    """The general path of ``validate`` (the one prediction,
-    :func:`flexarm.identification.time_domain.predict.predict`); ``sc`` already carries
-    ``cfile``'s controllers (for ``--refit``), and the prediction is given it too, so that
-    servo-rig logs with a declared law do not take the rig's replay."""
-    from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
-    from flexarm.identification.time_domain.general import friction_paths
-    from flexarm.identification.time_domain.options import PredictOptions
-    from flexarm.identification.time_domain.predict import predict
-    from flexarm.io.logs import LogError
-    from flexarm.io.write import write_json
-
-    check_file_option("--json", json_out, overwrite)
-    check_file_option("--report", report, overwrite, "validate.html")
-    check_dir_option("--plots", plots)
-    if refit not in (None, "friction"):
-        fail(
-            f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
-            "viscous friction) can be re-estimated"
-        )
-    win = parsing.window(window, "--window")
-    rwin = parsing.window(refit_window, "--refit-window")
-    out: dict = {}  # the prediction's to_dict(), the refit's entry (FitResult.refit_entry)
-    figures = contextlib.ExitStack()
-    plots = figures.enter_context(figure_folder(plots, report))
-    figs: list = []
-    ch = parsing.channels(channel)
-    try:
-        glogs = _general_logs(logs, log_format)
-        popts = PredictOptions(
-            channels=list(ch) if ch else None,
-            windows=[win] * len(glogs) if win else None,
-            continuous=continuous,
-            controller=cfile,
-            plots=plots,
-            tag="validate",
-        )
-        with console.status("predicting") as status, _state_warnings_quiet():
-            before = predict(sc, glogs, popts)
-            out = before.to_dict()
-            figs += before.plots
-            if refit:
-                status.update("re-estimating the joints' friction")
-                free = friction_paths(sc)  # DECISION: what --refit friction frees
-                res = fit_scenario(
-                    sc,
-                    glogs[:1],
-                    free,
-                    ScenarioFitOptions(channels=ch, windows=[rwin]),
-                    predict=False,
-                )
-                after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
-                figs += after.plots
-                out["refit"] = res.refit_entry(free, rwin, logs[0], after)
-    except (LogError, ValueError) as exc:
-        figures.close()
-        fail(str(exc))
-    _print_warnings(out["warnings"])
-    _fit_table(out["fit_percent"], "scenario as given")
-    if refit:
-        t = Table("friction", "scenario", "refitted", "std")
-        for p in out["refit"]["params"]:
-            t.add_row(
-                p,
-                f"{out['refit']['template'][p]:.4g}",
-                f"{out['refit']['params'][p]:.4g}",
-                f"{out['refit']['std'][p]:.3g}",
-            )
-        console.print(t)
-        _fit_table(out["refit"]["fit_percent"], f"friction refitted on {refit_window} s")
-    if json_out is not None:
-        write_json(json_out, out, overwrite=overwrite)
-    with figures:
-        if report is not None:
-            from flexarm.analysis.html_report import validate_report
-
-            assert ctx is not None  # the command passes its context
-            write_report(
-                validate_report(
-                    out,
-                    scenario=sc.name,
-                    figures=figs,
-                    command=command_line(ctx),
-                    inputs=[ctx.params["scenario"], *logs, *(log_format or [])],
-                ),
-                report,
-                overwrite,
-            )
 
 
 @contextlib.contextmanager

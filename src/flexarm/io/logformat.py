@@ -77,7 +77,7 @@ fix. ``examples/quanser-rotflex.toml`` is a documented example.
 from __future__ import annotations
 
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal, cast
 
@@ -626,6 +626,50 @@ def load_log(
 def load_logs(paths, log_format: str | Path | LogFormat | None = None, **kw) -> list[Log]:
     """:func:`load_log` for each path (logs already read pass through)."""
     return [p if isinstance(p, Log) else load_log(p, log_format, **kw) for p in paths]
+
+
+def load_logs_with(
+    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None, **kw
+) -> list[Log]:
+    """Each log read with its format (:func:`load_log`): ``formats`` one per log (in order),
+    one for all, none (the exchange format), or ``PATTERN=FILE`` entries (fnmatch on the
+    file name; the first match wins) — ``flexarm fit/validate --log-format``. ``kw`` passes
+    on to :func:`load_log` (``controller``, ``columns``, ``units``, ``max_jitter``, ...).
+    A mismatch is one :class:`LogError` line naming the log or the formats."""
+    import fnmatch
+
+    if not paths:
+        raise LogError("no logs given: give one or more log files")
+    specs = [str(f) for f in (formats or [])]
+    pats = [x.split("=", 1) for x in specs if "=" in x]
+    plain = [x for x in specs if "=" not in x]
+    if pats and plain:
+        raise LogError(
+            "log format: give either one FILE per log (or one for all), or PATTERN=FILE "
+            f"entries, not both (got {specs})"
+        )
+    if plain and len(plain) not in (1, len(paths)):
+        raise LogError(
+            f"log format given {len(plain)} times for {len(paths)} logs: give it once for "
+            "all, once per log in order, or as PATTERN=FILE"
+        )
+    cache: dict[str, LogFormat] = {}
+    out = []
+    for i, p in enumerate(paths):
+        if pats:
+            hit = [f for pat, f in pats if fnmatch.fnmatch(Path(p).name, pat)]
+            if not hit:
+                raise LogError(
+                    f"{p}: no log-format PATTERN matches its name (patterns: "
+                    f"{', '.join(pat for pat, _ in pats)})"
+                )
+            f: str | None = hit[0]
+        else:
+            f = plain[0] if len(plain) == 1 else (plain[i] if plain else None)
+        if f is not None and f not in cache:
+            cache[f] = load_log_format(f)
+        out.append(load_log(p, cache[f] if f is not None else None, **kw))
+    return out
 
 
 def sample_rate(log: Log) -> float:

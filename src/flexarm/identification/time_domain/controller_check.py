@@ -374,3 +374,22 @@ def check_controller(
             "the regressed law"
         )
     return out
+
+
+def checked_logs(
+    logs: list[Log], *, use_regressed: bool = False
+) -> tuple[list[Log], list[ControllerCheck]]:
+    """The declared law of every log that carries one, a ``voltage`` and a ``motor_angle``
+    column checked against its logged command (:func:`check_controller`); with
+    ``use_regressed`` each such log comes back with the regressed law
+    (:meth:`ControllerCheck.apply`). Logs without a law or those columns pass unchecked.
+    Returns the logs and the checks made (in the logs' order)."""
+    out, checks = [], []
+    for log in logs:
+        if log.gains is None or "voltage" not in log.columns or "motor_angle" not in log.columns:
+            out.append(log)
+            continue
+        chk = check_controller(log, use_regressed=use_regressed)
+        checks.append(chk)
+        out.append(chk.apply(log) if use_regressed else log)
+    return out, checks

@@ -102,6 +102,7 @@ __all__ = [
     "ScenarioFit",
     "fit_scenario",
     "predict_scenario",
+    "refit_friction",
     "expand_paths",
     "scenario_with",
 ]
@@ -1245,6 +1246,25 @@ def friction_paths(scenario) -> list[str]:
             "in the scenario"
         )
     return out
+
+
+def refit_friction(
+    scenario,
+    log,
+    window: tuple[float, float] | None = None,
+    channels: Mapping[str, float] | None = None,
+) -> ScenarioFit:
+    """Re-estimate only the joints' friction of ``scenario`` (:func:`friction_paths`:
+    Coulomb, breakaway and viscous levels) on ``log`` (its ``window``, s), everything else
+    fixed: the cost of eq. (1) on ``channels`` (None: every logged sensor channel), no
+    prediction (``flexarm validate --refit friction``). The free list is ``res.free``."""
+    return fit_scenario(
+        scenario,
+        [log],
+        friction_paths(scenario),
+        ScenarioFitOptions(channels=channels, windows=[window]),
+        predict=False,
+    )
 
 
 def scenario_fit_notes(scenario) -> dict:

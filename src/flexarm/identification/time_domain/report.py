@@ -433,18 +433,12 @@ def as_fit_result(
             "uncertainty_note": UNCERTAINTY_NOTE,
         },
     }
-    extras: dict[str, Any] = {}
-    if without_friction is not None:
-        extras["without_friction"] = without_friction_entry(without_friction)
-    if window is not None:
-        extras["window_s"] = list(window)
-    if held_out is not None:
-        extras["held_out"] = {
-            "window_s": list(held_window) if held_window is not None else None,
-            "fit_percent": held_out["fit_percent"],
-            "diverged": held_out["diverged"],
-            "initial_state": "estimated from each window's own data",
-        }
+    extras = fit_extras(
+        without_friction=without_friction,
+        window=window,
+        held_out=held_out,
+        held_window=held_window,
+    )
     return One(
         free=free,
         params=dict(res.params),
@@ -462,9 +456,37 @@ def as_fit_result(
         seconds=float(res.seconds),
         stages=finite(stages),
         free_source=free_source,
-        extras=finite(extras),
+        extras=extras,
         engine_result=res,
     )
+
+
+def fit_extras(
+    *,
+    without_friction: Any = None,
+    window: tuple[float, float] | None = None,
+    held_out: Any = None,
+    held_window: tuple[float, float] | None = None,
+) -> dict[str, Any]:
+    """The servo rig's extras of the one result (:func:`as_fit_result`), JSON-ready:
+    ``without_friction`` (a rig result or the one result holding it:
+    :func:`without_friction_entry`), ``window_s`` and ``held_out`` (a
+    :class:`~flexarm.identification.time_domain.predict.Prediction` or the rig's
+    ``predict`` dict, over ``held_window``)."""
+    extras: dict[str, Any] = {}
+    if without_friction is not None:
+        rig = getattr(without_friction, "engine_result", None) or without_friction
+        extras["without_friction"] = without_friction_entry(rig)
+    if window is not None:
+        extras["window_s"] = list(window)
+    if held_out is not None:
+        extras["held_out"] = {
+            "window_s": list(held_window) if held_window is not None else None,
+            "fit_percent": held_out["fit_percent"],
+            "diverged": held_out["diverged"],
+            "initial_state": "estimated from each window's own data",
+        }
+    return finite(extras)
 
 
 def _correlation(res: FitResult, free: list[str]) -> np.ndarray:
@@ -678,8 +700,13 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str, label: str | Non
         for i, (g, key) in enumerate(zip(logs, keys, strict=True))
     }
     pred = Prediction(label or tag, {k: fit_percent.get(k, {}) for k in keys}, traces)
-    names = [f"{k.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png" for k in keys]
-    return write_overlays(pred, directory, tag, names=names)
+    return write_overlays(pred, directory, tag, names=figure_names(keys, tag))
+
+
+def figure_names(keys, tag: str) -> list[str]:
+    """The servo rig's figure file names: ``KEY_TAG.png`` per log key (KEY without its
+    extension, ``/`` as ``__``, ``#`` as ``_``)."""
+    return [f"{k.rsplit('.', 1)[0].replace('/', '__').replace('#', '_')}_{tag}.png" for k in keys]
 
 
 def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:

@@ -140,9 +140,3 @@ def validate(
             ]
     return result
 
-
-def document(result: dict, *, with_plots: bool = True) -> dict:
-    """The ``--json`` document of ``flexarm validate SCENARIO LOG...`` on a single-link rig:
-    :func:`validate`'s dictionary, its figure list emptied when the figures were not asked
-    for (``with_plots`` False: they went to a report's temporary folder)."""
-    return {**result, "plots": result["plots"] if with_plots else []}
