@@ -17,6 +17,19 @@ continuation), called through its keyword interface with the preset's data sheet
 ``options.servo_rig``; its result (:class:`~.report.FitResult`) comes as the one
 :class:`~.result.FitResult` (:func:`~.report.as_fit_result`: the rig's own record under
 ``stages["servo_rig"]``, the rig's result as ``engine_result``), as for every preset.
+
+Which stage each engine offers (an option the engine lacks is not silently dropped: the
+servo rig reads only ``options.servo_rig`` and ``windows``):
+
+=============================  ======================  ===========================
+stage                          ``scenario``            ``servo_rig``
+=============================  ======================  ===========================
+global (differential evol.)    ``GlobalDE``            ``ServoRig.global_seconds``
+smooth-then-quantised          ``Cost(quantise=True)`` always
+multiple shooting              ``Shooting(segment)``   no (whole logs)
+priors (eq. (2))               ``Priors``              no
+sensor-delay search            no (delays as given)    ``ServoRig.delay_search``
+=============================  ======================  ===========================
 """
 
 from __future__ import annotations

@@ -78,6 +78,7 @@ H = J_dᵀ J_d + J_pᵀ J_p; std(p) = |p| std(z).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 import time
@@ -171,6 +172,9 @@ class ScenarioFitOptions:
     of the logs before (and the digital filters from their states there)
     (:func:`flexarm.sim.filters.continuous_starts`); without it they start each log from
     their ``initial_state``. Whole logs only (no ``windows``).
+    continuation: with ``quantise``, the local stage runs first on the loop without the
+    converters' rounding, then on the rounded loop from its optimum (the servo rig
+    engine's smooth-then-quantised continuation); without ``quantise`` it has no effect.
     """
 
     channels: Mapping[str, float] | None = None
@@ -200,6 +204,7 @@ class ScenarioFitOptions:
     substeps: int | None = None
     ties: Mapping[str, str] = field(default_factory=dict)
     continuous: bool = False
+    continuation: bool = True
 
     def check(self) -> None:
         if not self.bound_factor > 1:
@@ -1000,6 +1005,24 @@ def fit_scenario(
         say(f"global stage: cost {res.fun:.4g} after {res.nit} generations")
 
     z0 = np.clip(z0, eng.lo, eng.hi)
+    if options.quantise and options.continuation:
+        # smooth first: the quantised cost is piecewise constant at the scale of one count
+        # (finite differences stall on it); its optimum starts the quantised local stage
+        eng.options = dataclasses.replace(options, quantise=False)
+        res, r, J, info = _local(
+            eng,
+            z0,
+            options,
+            states=options.estimate_states and options.segment is not None,
+            progress=progress,
+        )
+        eng.options = options
+        stages["smooth"] = info
+        say(
+            f"smooth stage (no quantisation): cost {info['cost']:.4g} after "
+            f"{info['nfev']} evaluations"
+        )
+        z0 = np.clip(res.x, eng.lo, eng.hi)
     res, r, J, info = _local(
         eng,
         z0,

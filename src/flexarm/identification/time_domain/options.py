@@ -41,13 +41,16 @@ __all__ = [
 
 @dataclass
 class Cost:
-    """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s)."""
+    """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s);
+    ``quantise``: the converters' rounding in the fitted loop, reached by ``continuation``
+    (the local stage first without it, then with it from that optimum)."""
 
     channels: Mapping[str, float] | None = None
     residual_level: float = 0.05
     correlation_time: float = 0.05
     quantise: bool = False
     substeps: int | None = None
+    continuation: bool = True
 
 
 @dataclass
