@@ -188,3 +188,19 @@ def test_rig_trace_draws_only_what_the_log_measures():
     assert list(flex["simulated"]) == ["motor_angle", "tip_deflection", "command"]
     fig = overlay_figure(Prediction("rig", {"r": {"motor_angle": 99.0}}, {"r": rigid}), "r")
     assert len(fig.get_axes()) == 2
+
+
+@pytest.mark.parametrize(
+    "opts, named",
+    [
+        (FitOptions(shooting=Shooting(segment=2.0)), "shooting"),
+        (FitOptions(cost=Cost(quantise=True), local=Local(max_nfev=5)), "cost, local"),
+        (FitOptions(continuous=True), "continuous"),
+    ],
+)
+def test_servo_rig_preset_refuses_the_groups_its_engine_does_not_read(opts, named):
+    """The rotary servo's engine reads FitOptions.servo_rig and windows only: another group
+    is one ValueError naming it (before any log is read), not dropped silently."""
+    preset = presets.servo_rig(presets.DataSheet(gear_ratio=70.0))
+    with pytest.raises(ValueError, match=rf"FitOptions\.{named}: the rotary servo preset"):
+        flexarm.fit(preset, ["no-such-log.csv"], options=opts)

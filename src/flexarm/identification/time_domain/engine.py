@@ -18,8 +18,8 @@ continuation), called through its keyword interface with the preset's data sheet
 :class:`~.result.FitResult` (:func:`~.report.as_fit_result`: the rig's own record under
 ``stages["servo_rig"]``, the rig's result as ``engine_result``), as for every preset.
 
-Which stage each engine offers (an option the engine lacks is not silently dropped: the
-servo rig reads only ``options.servo_rig`` and ``windows``):
+Which stage each engine offers (the servo rig reads ``options.servo_rig`` and ``windows``;
+a group it does not read is a ``ValueError`` naming it, not dropped silently):
 
 =============================  ======================  ===========================
 stage                          ``scenario``            ``servo_rig``
@@ -99,6 +99,14 @@ def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.report import as_fit_result
 
     opts = options if isinstance(options, FitOptions) else FitOptions()
+    unread = [g for g in ("cost", "shooting", "local", "global_de", "priors") if getattr(opts, g)]
+    if unread or opts.continuous:
+        raise ValueError(
+            f"FitOptions.{', '.join(unread) or 'continuous'}: the rotary servo preset's engine "
+            "reads only FitOptions.servo_rig and windows (its global stage, delay search and "
+            "continuation: options.ServoRig); multiple shooting, priors and the other groups "
+            "belong to the scenario engine: fit a scenario (flexarm.fit(scenario, logs, ...))"
+        )
     kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
     logs = [as_rig_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
