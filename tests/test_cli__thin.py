@@ -96,3 +96,28 @@ def test_fit_on_a_data_sheet_is_the_one_fit_on_the_rotary_preset(tmp_path, monke
     assert isinstance(opts, FitOptions) and opts.servo_rig.delay_search == "both"
     assert opts.windows == [(0.0, 0.3)] and seen["free"] is None
     assert [g.name for g in seen["logs"]] == ["run.csv"]
+
+
+def test_validate_keeps_same_named_logs_apart_in_json_and_table(tmp_path):
+    """``flexarm validate`` of one servo-rig log given from two folders: the JSON is the one
+    prediction's ``to_dict()`` with two entries ``a/run.csv`` and ``b/run.csv``, equal to
+    each other (the same log, the same simulation: to 1e-9), both printed."""
+    import json
+    import shutil
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    src = _log(tmp_path / "a" / "run.csv", n=1000)
+    shutil.copy(src, tmp_path / "b" / "run.csv")
+    j = tmp_path / "v.json"
+    r = runner.invoke(
+        app,
+        ["validate", "rotary-flexible-link", str(src), str(tmp_path / "b" / "run.csv")]
+        + ["--json", str(j)],
+    )
+    assert r.exit_code == 0, r.output
+    d = json.loads(j.read_text())
+    assert set(d) == {"scenario", "fit_percent", "diverged", "warnings", "notes", "plots"}
+    a, b = d["fit_percent"]["a/run.csv"], d["fit_percent"]["b/run.csv"]
+    assert a["motor_angle"] == pytest.approx(b["motor_angle"], abs=1e-9)
+    assert "a/run.csv" in r.output and "b/run.csv" in r.output

@@ -673,7 +673,7 @@ def _fit_table(fp: dict, title: str) -> None:
     names = sorted({k for d in fp.values() for k in d})
     t = Table(f"fit % ({title})", *names)
     for log, d in fp.items():
-        t.add_row(Path(log).name, *(f"{d[k]:.1f}" if d.get(k) is not None else "-" for k in names))
+        t.add_row(str(log), *(f"{d[k]:.1f}" if d.get(k) is not None else "-" for k in names))
     console.print(t)
 
 
