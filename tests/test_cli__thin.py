@@ -93,7 +93,8 @@ def test_fit_on_a_data_sheet_is_the_one_fit_on_the_rotary_preset(tmp_path, monke
     p, opts = seen["model"], seen["options"]
     assert p.engine == "servo_rig" and p.sheet["gear_ratio"] == 70.0
     assert p.sheet["motor_constant"] == 0.00768 and p.sheet["link_length"] is None
-    assert isinstance(opts, FitOptions) and opts.servo_rig.delay_search == "both"
+    assert isinstance(opts, FitOptions) and opts.servo_rig is not None
+    assert opts.servo_rig.delay_search == "both"
     assert opts.windows == [(0.0, 0.3)] and seen["free"] is None
     assert [g.name for g in seen["logs"]] == ["run.csv"]
 
