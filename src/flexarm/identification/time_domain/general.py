@@ -1132,9 +1132,12 @@ def _local(
     simulation perturbing state i in every segment gives the S columns of state i (a
     block-sparse Jacobian, solved by LSMR). ``ftol`` None: :data:`COST_RESOLUTION` /
     :meth:`_Engine.expected_cost`."""
+    import inspect
+
     from scipy import sparse
     from scipy.optimize import least_squares
 
+    has_callback = "callback" in inspect.signature(least_squares).parameters
     n = len(eng.free)
     S = len(eng.seg)
     nx = eng.prep0.loop.plant.n_states if states else 0
@@ -1203,6 +1206,8 @@ def _local(
             raise StopIteration
         last.append(c)
 
+    # an older SciPy whose least_squares takes no callback: its own ftol test alone
+    stop: dict[str, Any] = {"callback": resolved} if options.ftol is None and has_callback else {}
     v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0)])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
@@ -1219,7 +1224,7 @@ def _local(
         ftol=ftol,
         xtol=options.xtol,
         gtol=1e-10,
-        **({"callback": resolved} if options.ftol is None else {}),
+        **stop,
     )
     if res.status == -2:  # resolved: a step lowered the cost by less than it resolves
         res.status = 2
