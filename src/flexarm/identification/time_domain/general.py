@@ -114,6 +114,16 @@ __all__ = [
 from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.paths import get as _path_get
 
+#: The least change of Σ r² (eqs. (1)–(2)) the fit resolves: Σ r² counts independent misfits
+#: in units of their expected size, so Δ(Σ r²) = 1 is a move of one standard deviation of
+#: one parameter and 0.01 a tenth of one; a decrease below it is not statistically meaningful
+#: (Press et al., Numerical Recipes, §15.5: stop when χ² falls by less than 0.01). With
+#: ``ScenarioFitOptions.ftol`` None, SciPy's relative ftol is it over E[Σ r²]
+#: (:meth:`_Engine.expected_cost`): the search stops when a step lowers Σ r² by less than
+#: 0.01 · Σ r² / E[Σ r²], i.e. by less than 0.01 in units of the misfit's realised variance
+#: (a misfit larger than λ assumes widens the parameters' spread in the same ratio).
+COST_RESOLUTION = 0.01
+
 
 def _template_value(dump: dict, keys: list, path: str) -> float:
     v = _path_get(dump, path)
@@ -149,6 +159,10 @@ class ScenarioFitOptions:
     burn_in: seconds at the start of each segment left out of the cost.
     windows: per log (t0, t1) in s from its first sample, or None for the whole log.
     residual_level, correlation_time: λ and τ of eq. (1). max_nfev: least-squares budget.
+    ftol, xtol: SciPy's relative tolerances on the cost and on the step; ``ftol`` None:
+    derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]
+    (:meth:`_Engine.expected_cost`: a step that lowers Σ r² by less than 0.01, a move of a
+    tenth of a standard deviation, ends the search).
     fd_step: finite-difference step in z (relative step of p). global_stage: run
     differential evolution first (popsize, maxiter, seed). derivative_half_width: samples
     each side of the local quadratic fit for ẏ at segment starts. corr_warn: |corr| above
@@ -195,7 +209,7 @@ class ScenarioFitOptions:
     derivative_half_width: int = 10
     corr_warn: float = 0.95
     max_batch: int = 64
-    ftol: float = 1e-6
+    ftol: float | None = 1e-6
     xtol: float = 1e-6
     polish: bool = False
     estimate_states: bool = True
@@ -802,6 +816,15 @@ class _Engine:
         m = self.seg_mask[..., self.cidx]
         return np.concatenate([[0], np.cumsum(m.reshape(m.shape[0], -1).sum(1))])
 
+    def expected_cost(self) -> float:
+        """E[Σ r²] when the misfit is its expected size: Σ_c w_c n_c T / τ over the data
+        rows (n_c rows of channel c, eq. (1)) plus one per prior (eq. (2))."""
+        m = self.seg_mask[..., self.cidx]
+        n_c = m.reshape(-1, m.shape[-1]).sum(0)
+        w = np.array(list(self.channels.values()), float)
+        data = float(w @ n_c) * self.dt / self.options.correlation_time
+        return data + float(np.isfinite(self.sigma).sum())
+
     def prior_residuals(self, Z: np.ndarray) -> np.ndarray:
         has = np.isfinite(self.sigma)
         return Z[:, has] / self.sigma[has]
@@ -1131,10 +1154,14 @@ def _local(
     segment's start state is estimated too (multiple shooting's node states): offsets
     (S, n_x) in units of :attr:`_Engine.state_scale`; the segments are independent, so one
     simulation perturbing state i in every segment gives the S columns of state i (a
-    block-sparse Jacobian, solved by LSMR)."""
+    block-sparse Jacobian, solved by LSMR). ``ftol`` None: :data:`COST_RESOLUTION` /
+    :meth:`_Engine.expected_cost`."""
+    import inspect
+
     from scipy import sparse
     from scipy.optimize import least_squares
 
+    has_callback = "callback" in inspect.signature(least_squares).parameters
     n = len(eng.free)
     S = len(eng.seg)
     nx = eng.prep0.loop.plant.n_states if states else 0
@@ -1192,6 +1219,19 @@ def _local(
     def batch(v):
         return point(v)["r"], jac(v)
 
+    ftol = options.ftol if options.ftol is not None else COST_RESOLUTION / eng.expected_cost()
+    last: list[float] = []
+
+    def resolved(intermediate_result):  # the name SciPy passes the OptimizeResult to
+        # SciPy's ftol test also asks the step's predicted reduction to be met (ratio > 1/4),
+        # which the finite-difference model misses near the optimum: the rule itself here
+        c = 2.0 * float(intermediate_result.cost)
+        if last and 0.0 < last[-1] - c < ftol * c:
+            raise StopIteration
+        last.append(c)
+
+    # an older SciPy whose least_squares takes no callback: its own ftol test alone
+    stop: dict[str, Any] = {"callback": resolved} if options.ftol is None and has_callback else {}
     v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0)])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
@@ -1205,10 +1245,14 @@ def _local(
         x_scale=1.0,
         tr_solver="lsmr" if nx else "exact",
         max_nfev=options.max_nfev,
-        ftol=options.ftol,
+        ftol=ftol,
         xtol=options.xtol,
         gtol=1e-10,
+        **stop,
     )
+    if res.status == -2:  # resolved: a step lowered the cost by less than it resolves
+        res.status = 2
+        res.message = f"Σ r² fell by less than ftol = {ftol:.3g} of itself (COST_RESOLUTION)"
     r, J = batch(res.x)
     J = J.toarray() if nx else J
     z, off = split(res.x)
@@ -1227,6 +1271,7 @@ def _local(
         "message": str(res.message),
         "segments": S,
         "state_offsets": S * nx,
+        "ftol": float(ftol),
         "seconds": round(time.perf_counter() - t0, 2),
     }
     res.x = z

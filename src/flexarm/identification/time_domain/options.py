@@ -69,10 +69,12 @@ class Shooting:
 
 @dataclass
 class Local:
-    """SciPy ``least_squares`` (trf): budget, tolerances, finite-difference step in z."""
+    """SciPy ``least_squares`` (trf): budget, tolerances, finite-difference step in z
+    (``ftol`` None: derived from the cost's scale, as in
+    :class:`~flexarm.identification.time_domain.general.ScenarioFitOptions`)."""
 
     max_nfev: int = 30
-    ftol: float = 1e-6
+    ftol: float | None = 1e-6
     xtol: float = 1e-6
     fd_step: float = 1e-2
     max_batch: int = 64

@@ -120,6 +120,9 @@ def default_options(**kw) -> ScenarioFitOptions:
         segment=3.0,
         substeps=2,
         max_nfev=25,
+        # stop when a step lowers Σ r² by less than general.COST_RESOLUTION (a tenth of a
+        # standard deviation), relative to the cost's expected size
+        ftol=None,
         bound_factor=4.0,
         residual_level=0.2,
         correlation_time=0.5,
