@@ -139,4 +139,3 @@ def validate(
                 str(q) for q in overlay_plots(plots, [log], tr, result["fit_percent"], "validate")
             ]
     return result
-
