@@ -26,15 +26,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run  # noqa: E402
-from flexarm.identification.time_domain.general import stack_loops  # noqa: E402
-from flexarm.sim.build import prepare  # noqa: E402
-from flexarm.sim.sampled import simulate_batch  # noqa: E402
-from flexarm.specs import load_scenario  # noqa: E402
-from flexarm.specs.paths import scenario_with  # noqa: E402
-
 
 def rig(seconds: float):
+    from flexarm.specs import load_scenario
+
     sc = load_scenario("rotary-flexible-link")
     sensors = {k: v.model_copy(update={"noise": 0.0}) for k, v in sc.sensors.items()}
     return sc.model_copy(
@@ -61,6 +56,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
+    from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
+    from flexarm.identification.time_domain.general import stack_loops
+    from flexarm.sim.build import prepare
+    from flexarm.sim.sampled import simulate_batch
+    from flexarm.specs.paths import scenario_with
+
     sc = rig(a.seconds)
     d = sc.model_dump()
     J0, C0 = d["arm"]["motor"]["inertia"], d["arm"]["friction"]["coulomb"]
