@@ -1028,10 +1028,15 @@ def fit_scenario(
         say(f"global stage: cost {res.fun:.4g} after {res.nit} generations")
 
     z0 = np.clip(z0, eng.lo, eng.hi)
+    # with quantise and continuation, smooth first: the quantised cost is piecewise
+    # constant at the scale of one count (finite differences stall on it); the smooth
+    # loop's optimum starts the quantised local stage
+    passes = [("local", "local stage", options)]
     if options.quantise and options.continuation:
-        # smooth first: the quantised cost is piecewise constant at the scale of one count
-        # (finite differences stall on it); its optimum starts the quantised local stage
-        eng.options = dataclasses.replace(options, quantise=False)
+        smooth = dataclasses.replace(options, quantise=False)
+        passes.insert(0, ("smooth", "smooth stage (no quantisation)", smooth))
+    for key, label, opts in passes:
+        eng.options = opts
         res, r, J, info = _local(
             eng,
             z0,
@@ -1039,24 +1044,11 @@ def fit_scenario(
             states=options.estimate_states and options.segment is not None,
             progress=progress,
         )
-        eng.options = options
-        stages["smooth"] = info
+        stages[key] = info
         say(
-            f"smooth stage (no quantisation): cost {info['cost']:.4g} after "
-            f"{info['nfev']} evaluations"
+            f"{label}: cost {info['cost']:.4g} after {info['nfev']} evaluations ({info['message']})"
         )
         z0 = np.clip(res.x, eng.lo, eng.hi)
-    res, r, J, info = _local(
-        eng,
-        z0,
-        options,
-        states=options.estimate_states and options.segment is not None,
-        progress=progress,
-    )
-    stages["local"] = info
-    say(
-        f"local stage: cost {info['cost']:.4g} after {info['nfev']} evaluations ({info['message']})"
-    )
     if options.polish and options.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
         # each log's start state stays a nuisance parameter (offsets to the logged state)
