@@ -84,22 +84,31 @@ def main() -> None:
     t0 = time.perf_counter()
     meas, cmd = sim()
     t_first_sim = time.perf_counter() - t0
-    # the servo rig's backend: the same arm as its parameter dict, one column per point
-    # (the built-in's values, as tests/test_sim_sampled__sensor_filter.py writes them)
-    Lb, mb, EI = 0.42, 0.019841, 0.168
-    wc2 = 3 * EI / Lb**3 / mb
-    ku = 0.9 * 0.69 * 70 * 7.68e-3 / 2.6
+    # the servo rig's backend: the same arm as its parameter dict, one column per point,
+    # read off the scenario (θ: hub angle, d: tip deflection)
+    arm, sens, ctl = d["arm"], d["sensors"], d["controller"]
+    mo, fr, beam = arm["motor"], arm["friction"], arm["beam"]
+    Lb, mb = beam["length"], beam["masses"][0]["mass"]
+    wc2 = 3 * beam["flexural_rigidity"] / Lb**3 / mb  # ω_c² of the pinned tip mass
+    # torque per volt (N·m/V) and back-emf torque per rad/s at the hub
+    ku = (
+        mo["gear_efficiency"]
+        * mo["motor_efficiency"]
+        * mo["gear_ratio"]
+        * mo["motor_constant"]
+        / mo["armature_resistance"]
+    )
     n = p0.n_samples
     const = as_jax(
         dict(
-            dt=1e-3,
+            dt=d["sampling"]["period"],
             length=Lb,
             k_u=ku,
-            k_omega=ku * 70 * 7.68e-3,
-            q_th=2 * np.pi / 4096,
+            k_omega=ku * mo["gear_ratio"] * mo["motor_constant"],
+            q_th=sens["motor_angle"]["range"] / 2 ** sens["motor_angle"]["bits"],
             q_d=0.0,
-            limit=10.0,
-            vel_tol=1e-3,
+            limit=mo["voltage_limit"],
+            vel_tol=fr["velocity_tolerance"],
             omega_th=0.0,
             omega_d=0.0,
         )
@@ -114,21 +123,21 @@ def main() -> None:
             w_th=z,
             w_d=z,
             volt=z,
-            K=np.array([[6.0, -40.0, 0.15, 0.0]]),
+            K=np.array([[ctl[k] for k in ("k1", "k2", "k3", "k4")]]),
             tau=np.zeros(1),
         )
     )
     P = len(grid)
     base = dict(
-        B=4e-3,
+        B=mo["viscous"],
         wc2=wc2,
-        c2z=0.06 * np.sqrt(wc2),
+        c2z=2 * beam["damping_ratio"] * np.sqrt(wc2),
         JlL=mb * Lb,
-        Fs=0.04,
-        bias=0.0,
-        gain=1.0,
-        dth=0,
-        dd=2,
+        Fs=fr["static"],
+        bias=fr["bias"],
+        gain=sens["tip_deflection"]["gain"],
+        dth=sens["motor_angle"]["delay"],
+        dd=sens["tip_deflection"]["delay"],
         th0=0.0,
         om0=0.0,
         w0=0.0,
