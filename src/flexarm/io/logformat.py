@@ -628,14 +628,13 @@ def load_logs(paths, log_format: str | Path | LogFormat | None = None, **kw) -> 
     return [p if isinstance(p, Log) else load_log(p, log_format, **kw) for p in paths]
 
 
-def load_logs_with(
-    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None, **kw
-) -> list[Log]:
-    """Each log read with its format (:func:`load_log`): ``formats`` one per log (in order),
-    one for all, none (the exchange format), or ``PATTERN=FILE`` entries (fnmatch on the
-    file name; the first match wins) — ``flexarm fit/validate --log-format``. ``kw`` passes
-    on to :func:`load_log` (``controller``, ``columns``, ``units``, ``max_jitter``, ...).
-    A mismatch is one :class:`LogError` line naming the log or the formats."""
+def formats_for(
+    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None
+) -> list[LogFormat | None]:
+    """Each log's format (``None``: the exchange format) — ``flexarm fit/validate
+    --log-format``: ``formats`` one per log (in order), one for all, none, or
+    ``PATTERN=FILE`` entries (fnmatch on the file name; the first match wins); each file
+    read once. A mismatch is one :class:`LogError` line naming the log or the formats."""
     import fnmatch
 
     if not paths:
@@ -654,7 +653,7 @@ def load_logs_with(
             "all, once per log in order, or as PATTERN=FILE"
         )
     cache: dict[str, LogFormat] = {}
-    out = []
+    out: list[LogFormat | None] = []
     for i, p in enumerate(paths):
         if pats:
             hit = [f for pat, f in pats if fnmatch.fnmatch(Path(p).name, pat)]
@@ -668,8 +667,16 @@ def load_logs_with(
             f = plain[0] if len(plain) == 1 else (plain[i] if plain else None)
         if f is not None and f not in cache:
             cache[f] = load_log_format(f)
-        out.append(load_log(p, cache[f] if f is not None else None, **kw))
+        out.append(cache[f] if f is not None else None)
     return out
+
+
+def load_logs_with(
+    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None, **kw
+) -> list[Log]:
+    """Each log read with its format (:func:`formats_for`) by :func:`load_log`; ``kw``
+    passes on to it (``controller``, ``columns``, ``units``, ``max_jitter``, ...)."""
+    return [load_log(p, f, **kw) for p, f in zip(paths, formats_for(paths, formats), strict=True)]
 
 
 def sample_rate(log: Log) -> float:

@@ -32,13 +32,6 @@ GAINS: dict[str, str] = GAIN_UNITS["state_feedback"]
 MIN_BENCH_SAMPLES = 64
 
 
-#: What a servo-rig log needs (the loader's hint when a column is missing).
-RIG_HINT = (
-    "A bench log needs time (s), reference (rad, the commanded hub angle) and "
-    "motor_angle and/or tip_deflection."
-)
-
-
 class FitInputError(FlexarmError, ValueError):
     """Input a fit or a validation cannot use; the message names the file, the field and
     what to do."""
@@ -84,32 +77,24 @@ def load_rig_log(
             required=("time", "reference"),
             min_samples=min_samples,
             max_jitter=max_jitter,
-            hint=RIG_HINT,
+            hint="A bench log needs time (s), reference (rad, the commanded "
+            "hub angle) and motor_angle and/or tip_deflection.",
         )
     except LogError as exc:
         raise FitInputError(str(exc)) from None
     return check_rig_log(log)
 
 
-def load_rig_logs(paths, formats=None, *, controller: Any = None, **kw) -> list[Log]:
-    """:func:`load_rig_log` for each path, each with its format as
-    :func:`flexarm.io.logformat.load_logs_with` chooses it (one for all, one per log, or
-    ``PATTERN=FILE``); ``kw``: ``columns``, ``units``, ``max_jitter``, ``min_samples``."""
+def load_rig_logs(paths, formats=None, **kw) -> list[Log]:
+    """:func:`load_rig_log` for each path with its format as
+    :func:`flexarm.io.logformat.formats_for` chooses it (one for all, one per log, or
+    ``PATTERN=FILE``); ``kw`` as there (``controller``, ``columns``, ``units``,
+    ``max_jitter``, ``min_samples``)."""
     try:
-        return [
-            check_rig_log(g)
-            for g in _lf.load_logs_with(
-                paths,
-                formats,
-                controller=controller,
-                required=("time", "reference"),
-                min_samples=kw.pop("min_samples", MIN_BENCH_SAMPLES),
-                hint=RIG_HINT,
-                **kw,
-            )
-        ]
+        fmts = _lf.formats_for(paths, formats)
     except LogError as exc:
         raise FitInputError(str(exc)) from None
+    return [load_rig_log(p, f, **kw) for p, f in zip(paths, fmts, strict=True)]
 
 
 def controller_from_any(c: Any, source: str):
