@@ -299,7 +299,7 @@ def fit(
     )
     try:
         full = bench_logs(
-            logs, column, unit, controller, max_jitter, fmt_file, use_regressed_law, rig=True
+            logs, column, unit, controller, max_jitter, log_format, use_regressed_law, rig=True
         )
         opts = FitOptions(servo_rig=rig, windows=[win] * len(full) if win else None)
         with console.status("fitting") as status:
@@ -558,10 +558,9 @@ def bench_logs(
     if not paths:
         fail("no logs given: give one or more log files")
     cols, units = parsing.pairs(column, "column") or None, parsing.pairs(unit, "unit") or None
-    fmts = [str(log_format)] if isinstance(log_format, Path) else log_format
     load = load_rig_logs if rig else load_logs_with
     logs = load(
-        paths, fmts, columns=cols, units=units, controller=controller, max_jitter=max_jitter
+        paths, log_format, columns=cols, units=units, controller=controller, max_jitter=max_jitter
     )
     logs, checks = checked_logs(logs, use_regressed=use_regressed)
     for chk in checks:
