@@ -204,3 +204,25 @@ def test_servo_rig_preset_refuses_the_groups_its_engine_does_not_read(opts, name
     preset = presets.servo_rig(presets.DataSheet(gear_ratio=70.0))
     with pytest.raises(ValueError, match=rf"FitOptions\.{named}: the rotary servo preset"):
         flexarm.fit(preset, ["no-such-log.csv"], options=opts)
+
+
+def test_fit_draws_its_prediction_into_options_plots(short_run, tmp_path):
+    """``FitOptions.plots``: the engine writes the whole-run prediction's overlay figures
+    (one PNG a log, named NN_FILE_fit.png, both same-named logs kept) and lists them in
+    ``FitResult.plots``; the fit % it reports is the one prediction's
+    (``flexarm.validate`` of the fitted result on the same logs, equal to 1e-9: the same
+    deterministic simulation)."""
+    _, template, paths = short_run
+    res = flexarm.fit(
+        template,
+        paths,
+        ["arm.joints[0].friction.coulomb"],
+        FitOptions(local=Local(max_nfev=2), plots=tmp_path / "figs"),
+    )
+    assert [Path(p).name for p in res.plots] == ["00_run.csv_fit.png", "01_run.csv_fit.png"]
+    assert all(Path(p).stat().st_size > 10_000 for p in res.plots)
+    again = flexarm.validate(res, paths)
+    for k in ("a/run.csv", "b/run.csv"):
+        assert res.fit_percent[k]["theta_1"] == pytest.approx(
+            again.fit_percent[k]["theta_1"], abs=1e-9
+        )

@@ -88,6 +88,7 @@ def fit(
         flat,
         progress=progress,
         predict=grouped.predict if grouped is not None else True,
+        plots=grouped.plots if grouped is not None else None,
     )
     res.free_source = source
     return res
@@ -111,6 +112,7 @@ def _servo_rig(preset: Preset, logs, options, progress):
     logs = [as_rig_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
-    return as_fit_result(
-        rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}"
-    )
+    res = as_fit_result(rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}")
+    if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
+        res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
+    return res

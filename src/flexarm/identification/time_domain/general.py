@@ -967,13 +967,16 @@ def fit_scenario(
     *,
     progress=None,
     predict: bool = True,
+    plots: str | Path | None = None,
 ) -> ScenarioFit:
     """Estimate the ``free`` parameters of ``scenario`` from closed-loop ``logs``
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
     columns, sampled at the scenario's period). See the module docstring. Without ``free``
     (and priors), the scenario's ``[notes.fit]`` table gives them (``free = [...]``,
     ``priors = {...}``). ``predict``: also simulate each whole log (window) with the fitted
-    values (fit % of the whole-run prediction; skip for long chaotic runs)."""
+    values (fit % of the whole-run prediction; skip for long chaotic runs); ``plots``: a
+    folder for that prediction's overlay figures (``NN_KEY_fit.png``, in the result's
+    ``plots``)."""
     from scipy.optimize import differential_evolution
 
     options = options or ScenarioFitOptions()
@@ -1107,9 +1110,9 @@ def fit_scenario(
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
     pred = (
-        predict_scenario(fitted, logs, options, channels=list(eng.channels))
+        predict_scenario(fitted, logs, options, channels=list(eng.channels), plots=plots, tag="fit")
         if predict
-        else {"fit_percent": {}}
+        else {"fit_percent": {}, "plots": []}
     )
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
@@ -1130,6 +1133,7 @@ def fit_scenario(
         time.perf_counter() - t_start,
         stages,
         pred,
+        plots=list(pred["plots"]),
     )
 
 

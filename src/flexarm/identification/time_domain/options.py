@@ -15,7 +15,8 @@
   delay search, global stage time budget, friction polish, sessions, tip sign, encoder
   counts, analog filters, mode), passed to that engine's keyword interface.
 
-``windows`` (per log, (t0, t1) s from its first sample, [t0, t1)) is common to all.
+``windows`` (per log, (t0, t1) s from its first sample, [t0, t1)) and ``plots`` (a folder for
+the fit's overlay figures) are common to all.
 
 :class:`PredictOptions` are the prediction's (:mod:`~flexarm.identification.time_domain.predict`).
 """
@@ -174,6 +175,11 @@ class FitOptions:
     servo_rig: ServoRig | None = None
     windows: Sequence[tuple[float, float] | None] | None = None
     predict: bool = True
+    #: a folder for the fit's overlay figures (the whole-run prediction with the fitted
+    #: values, one PNG a log, ``NN_KEY_fit.png``; the servo rig: its fit figures), listed in
+    #: :attr:`FitResult.plots <flexarm.identification.time_domain.result.FitResult.plots>`;
+    #: None: no figures
+    plots: Any = None
     #: the logs, in order, are consecutive pieces of one run: controller and digital-filter
     #: states carried from log to log (the general engine; whole logs only)
     continuous: bool = False
