@@ -35,21 +35,27 @@ def _log(path: Path, k1: float = 2.0, n: int = 400, dt: float = 1e-3, gain: floa
     )
 
 
-def test_load_logs_with_a_format_per_log_or_by_pattern(tmp_path):
+def test_load_logs_a_format_per_log_or_by_pattern(tmp_path):
     """One format for all, one per log, PATTERN=FILE; a mismatch is one line naming it."""
-    from flexarm.io.logformat import load_logs_with
+    from flexarm.io.logformat import load_logs
 
     a, b = _log(tmp_path / "a.csv"), _log(tmp_path / "b.csv", k1=3.0)
-    logs = load_logs_with([a, b])
+    logs = load_logs([a, b])
     assert [g.name for g in logs] == ["a.csv", "b.csv"]
     assert logs[1].controller.k1 == 3.0  # the declared law travels with each log
     fmt = tmp_path / "f.toml"
     fmt.write_text('[columns]\nmotor_angle = "motor_angle"\n')
-    assert len(load_logs_with([a, b], [str(fmt), str(fmt)])) == 2
+    assert len(load_logs([a, b], [str(fmt), str(fmt)])) == 2
     with pytest.raises(LogError, match=r"b\.csv: no log-format PATTERN matches"):
-        load_logs_with([a, b], [f"a*={fmt}"])
+        load_logs([a, b], [f"a*={fmt}"])
     with pytest.raises(LogError, match="given 3 times for 2 logs"):
-        load_logs_with([a, b], [str(fmt)] * 3)
+        load_logs([a, b], [str(fmt)] * 3)
+    # a format already read serves for all; a log already read passes through unchanged
+    from flexarm.io.logformat import load_log_format
+
+    read = load_logs([logs[0], b], load_log_format(fmt))
+    assert read[0] is logs[0] and read[1].controller.k1 == 3.0
+    assert np.array_equal(read[1].signals["motor_angle"], logs[1].signals["motor_angle"])
 
 
 def test_checked_logs_regress_the_declared_law_and_apply_it_on_request(tmp_path):
@@ -58,9 +64,9 @@ def test_checked_logs_regress_the_declared_law_and_apply_it_on_request(tmp_path)
     regression's precision: 1e-6 relative)."""
     from flexarm.identification.time_domain.controller_check import checked_logs
     from flexarm.identification.time_domain.logs import FitInputError
-    from flexarm.io.logformat import load_logs_with
+    from flexarm.io.logformat import load_logs
 
-    good, bad = load_logs_with([_log(tmp_path / "g.csv"), _log(tmp_path / "b.csv", gain=1.3)])
+    good, bad = load_logs([_log(tmp_path / "g.csv"), _log(tmp_path / "b.csv", gain=1.3)])
     out, checks = checked_logs([good])
     assert out == [good] and len(checks) == 1
     with pytest.raises(FitInputError, match="K1"):

@@ -12,7 +12,7 @@ Both commands parse, call the library and print: ``fit`` calls the one fit
 from the data-sheet options (:func:`~flexarm.identification.time_domain.presets.servo_rig`);
 ``validate`` calls the one prediction (:func:`flexarm.validate`), and ``--refit friction``
 :func:`~flexarm.identification.time_domain.general.refit_friction`. Logs are read by
-:func:`flexarm.io.logformat.load_logs_with` and their declared laws checked by
+:func:`flexarm.io.logformat.load_logs` and their declared laws checked by
 :func:`~flexarm.identification.time_domain.controller_check.checked_logs`."""
 
 from __future__ import annotations
@@ -543,7 +543,7 @@ def bench_logs(
     rig: bool = False,
 ):
     """The logs read with their --log-format (once for all, once per log, or
-    PATTERN=FILE; :func:`flexarm.io.logformat.load_logs_with`; with ``rig``, as servo-rig
+    PATTERN=FILE; :func:`flexarm.io.logformat.load_logs`; with ``rig``, as servo-rig
     logs: :func:`~flexarm.identification.time_domain.logs.load_rig_logs`), the --column /
     --unit mappings (SI inside), the --controller text law and --max-jitter; each declared
     law is checked against its log's command and replaced by the regressed one with
@@ -551,14 +551,14 @@ def bench_logs(
     checked_logs`); the checks are printed."""
     from flexarm.identification.time_domain.controller_check import checked_logs
     from flexarm.identification.time_domain.logs import load_rig_logs
-    from flexarm.io.logformat import load_logs_with
+    from flexarm.io.logformat import load_logs
 
     if not (max_jitter > 0):
         fail(f"--max-jitter {max_jitter}: must be > 0 (a relative deviation, e.g. 0.05)")
     if not paths:
         fail("no logs given: give one or more log files")
     cols, units = parsing.pairs(column, "column") or None, parsing.pairs(unit, "unit") or None
-    load = load_rig_logs if rig else load_logs_with
+    load = load_rig_logs if rig else load_logs
     logs = load(
         paths, log_format, columns=cols, units=units, controller=controller, max_jitter=max_jitter
     )
@@ -588,10 +588,9 @@ def _fit_scenario_cli(
     cfile=None,
     continuous: bool = False,
 ) -> None:
-    from flexarm.identification.time_domain import predict_scenario
     from flexarm.identification.time_domain.engine import fit as fit_engine
     from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
-    from flexarm.io.logformat import load_logs_with
+    from flexarm.io.logformat import load_logs
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
 
@@ -607,7 +606,7 @@ def _fit_scenario_cli(
     try:
         if not logs:
             fail("no logs given: flexarm fit SCENARIO LOG... (one or more log files)")
-        glogs = load_logs_with(logs, log_format)
+        glogs = load_logs(logs, log_format)
         # the options given; the rest (and, without --free, the free list) are the preset's
         opts = FitOptions(
             cost=Cost(channels=chans) if chans else None,
@@ -615,23 +614,14 @@ def _fit_scenario_cli(
             local=Local(max_nfev=max_nfev) if max_nfev is not None else None,
             priors=Priors(priors=priors) if priors else None,
             windows=[win] * len(glogs) if win else None,
-            predict=False,
+            plots=folder,
             continuous=continuous,
         )
         with console.status("fitting") as status, _state_warnings_quiet():
-            # the one FitResult of every rig (a scenario here: the general engine)
+            # the one FitResult of every rig (a scenario here: the general engine), with its
+            # whole-log prediction and that prediction's figures (FitOptions.plots)
             res = fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m))
-            status.update("predicting the logs with the fitted parameters")
             console.print(f"free parameters ({len(res.free)}): {res.free_source}", highlight=False)
-            opts = opts.engine_options()
-            pred = predict_scenario(
-                res.scenario,
-                glogs,
-                opts,
-                channels=list(opts.channels) if opts.channels else None,
-                plots=folder,
-                tag="fit",
-            )
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
@@ -642,10 +632,11 @@ def _fit_scenario_cli(
     console.print(escape(res.message))
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
-    _print_warnings(pred.get("warnings", []))
-    _fit_table(pred["fit_percent"], "whole-log prediction")
-    # the result carries the whole-log prediction and its figures: --json is res.to_dict()
-    res.fit_percent, res.plots = pred["fit_percent"], (pred["plots"] if plots is not None else [])
+    _print_warnings(res.prediction.get("warnings", []))
+    _fit_table(res.fit_percent, "whole-log prediction")
+    figs = list(res.plots)
+    if plots is None:  # the figures went to a report's temporary folder: not in --json
+        res.plots = []
     if json_out is not None:
         write_json(json_out, res.to_dict(), overwrite=overwrite)
     if scenario_out is not None:
@@ -658,10 +649,10 @@ def _fit_scenario_cli(
             write_report(
                 fit_report(
                     res,
-                    figures=pred["plots"],
+                    figures=figs,
                     command=command_line(ctx),
                     inputs=[scenario, *logs, *(log_format or [])],
-                    fit_percent=pred["fit_percent"],
+                    fit_percent=res.fit_percent,
                 ),
                 report,
                 overwrite,

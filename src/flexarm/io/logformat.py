@@ -623,29 +623,47 @@ def load_log(
     return fmt.read(path, controller=controller, columns=columns, units=units, **kw)
 
 
-def load_logs(paths, log_format: str | Path | LogFormat | None = None, **kw) -> list[Log]:
-    """:func:`load_log` for each path (logs already read pass through)."""
-    return [p if isinstance(p, Log) else load_log(p, log_format, **kw) for p in paths]
+def load_logs(
+    paths: Sequence[Any],
+    formats: str | Path | LogFormat | Sequence[str | Path | LogFormat] | None = None,
+    **kw,
+) -> list[Log]:
+    """:func:`load_log` for each path with its format (:func:`formats_for`: one for all,
+    one per log in order, ``PATTERN=FILE`` entries, or none: the exchange format); logs
+    already read (:class:`~flexarm.io.logs.Log`) pass through. ``kw`` passes on to
+    :func:`load_log` (``controller``, ``columns``, ``units``, ``max_jitter``, ...)."""
+    paths = list(paths)
+    files = [p for p in paths if not isinstance(p, Log)]
+    if not files:
+        return paths
+    fmts = iter(formats_for(files, formats))
+    return [p if isinstance(p, Log) else load_log(p, next(fmts), **kw) for p in paths]
 
 
 def formats_for(
-    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None
+    paths: Sequence[str | Path],
+    formats: str | Path | LogFormat | Sequence[str | Path | LogFormat] | None = None,
 ) -> list[LogFormat | None]:
     """Each log's format (``None``: the exchange format) — ``flexarm fit/validate
-    --log-format``: ``formats`` one per log (in order), one for all, none, or
-    ``PATTERN=FILE`` entries (fnmatch on the file name; the first match wins); each file
-    read once. A mismatch is one :class:`LogError` line naming the log or the formats."""
+    --log-format``: ``formats`` one per log (in order), one for all (a file or a
+    :class:`LogFormat`), none, or ``PATTERN=FILE`` entries (fnmatch on the file name; the
+    first match wins); each file read once. A mismatch is one :class:`LogError` line naming
+    the log or the formats."""
     import fnmatch
 
     if not paths:
         raise LogError("no logs given: give one or more log files")
-    specs = [str(f) for f in (formats or [])]
-    pats = [x.split("=", 1) for x in specs if "=" in x]
-    plain = [x for x in specs if "=" not in x]
+    if formats is None or isinstance(formats, (str, Path, LogFormat)):
+        formats = [] if formats is None else [formats]
+    entries = list(formats)
+    text = [str(f) for f in entries if not isinstance(f, LogFormat)]
+    pats = [x.split("=", 1) for x in text if "=" in x]
+    plain = [f if isinstance(f, LogFormat) else str(f) for f in entries]
+    plain = [f for f in plain if isinstance(f, LogFormat) or "=" not in f]
     if pats and plain:
         raise LogError(
             "log format: give either one FILE per log (or one for all), or PATTERN=FILE "
-            f"entries, not both (got {specs})"
+            f"entries, not both (got {text})"
         )
     if plain and len(plain) not in (1, len(paths)):
         raise LogError(
@@ -662,21 +680,13 @@ def formats_for(
                     f"{p}: no log-format PATTERN matches its name (patterns: "
                     f"{', '.join(pat for pat, _ in pats)})"
                 )
-            f: str | None = hit[0]
+            f: str | LogFormat | None = hit[0]
         else:
             f = plain[0] if len(plain) == 1 else (plain[i] if plain else None)
-        if f is not None and f not in cache:
+        if isinstance(f, str) and f not in cache:
             cache[f] = load_log_format(f)
-        out.append(cache[f] if f is not None else None)
+        out.append(cache[f] if isinstance(f, str) else f)
     return out
-
-
-def load_logs_with(
-    paths: Sequence[str | Path], formats: Sequence[str | Path] | None = None, **kw
-) -> list[Log]:
-    """Each log read with its format (:func:`formats_for`) by :func:`load_log`; ``kw``
-    passes on to it (``controller``, ``columns``, ``units``, ``max_jitter``, ...)."""
-    return [load_log(p, f, **kw) for p, f in zip(paths, formats_for(paths, formats), strict=True)]
 
 
 def sample_rate(log: Log) -> float:
