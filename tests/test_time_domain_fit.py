@@ -746,3 +746,25 @@ def test_one_prediction_keeps_logs_of_one_name_apart(fitted, logs, tmp_path):
         for k, v in ref.items():
             assert fp[k] == pytest.approx(v, abs=1e-9), (k, fp, ref)
     assert set(both.traces) == set(both.fit_percent)
+
+
+def test_priors_pull_a_parameter_and_bound_its_std(fitted, logs):
+    """Issue #23 item 2: eq. (2)'s priors in the rotary servo's engine
+    (``fit(priors=...)``, ``options.ServoRig.priors``). A prior 30 % off the truth on the
+    hub inertia with σ_p = 1e-4 (one percent off costs Σ r_p² ≈ 3, well above the data's
+    whole cost at its optimum, V ≈ 0.01-0.1 here) holds the fitted value within 1 % of the
+    prior's mean, where the fit without it lands within 5 % of the truth; the HAC std then
+    carries the prior's information (≤ 3 σ_p p: H ≥ J_pᵀJ_p bounds H⁻¹ by the prior's
+    variance). A prior on the signed bias, or one that is not (mean > 0, std > 0), is one
+    line naming the field."""
+    kw = {**RIG, "popsize": 8, "maxiter": 25, "global_seconds": 4.0}
+    assert fitted.params["hub_inertia"] == pytest.approx(TRUE["hub_inertia"], rel=0.05)
+    mean = 1.3 * TRUE["hub_inertia"]
+    res = fit(logs[:2], **kw, priors={"hub_inertia": (mean, 1e-4)})
+    assert res.params["hub_inertia"] == pytest.approx(mean, rel=0.01)
+    assert res.std["hub_inertia"] <= 3e-4 * res.params["hub_inertia"]
+    assert res.settings["priors"] == {"hub_inertia": [mean, 1e-4]}
+    with pytest.raises(FitInputError, match=r"'priors' names 'bias'.*hub_inertia"):
+        fit(logs[:1], **kw, priors={"bias": (0.01, 0.1)})
+    with pytest.raises(FitInputError, match=r"'priors\['coulomb'\]' = \(-0.03, 0.1\)"):
+        fit(logs[:1], **kw, priors={"coulomb": (-0.03, 0.1)})

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -159,6 +159,34 @@ def make_rig(
         motor = dict(drive="current", torque_constant=ku, current_limit=limit)
         return Rig("current", ku, 0.0, limit, link_length, motor, encoder_quantum, tip_quantum)
     raise FitInputError(f"fit: field 'drive' = {drive!r}: choose 'voltage' or 'current'")
+
+
+def _priors(space: ParamSpace, priors) -> dict[int, tuple[float, float]]:
+    """``fit(priors=...)`` checked and keyed by the parameter's index in ``space``."""
+    out: dict[int, tuple[float, float]] = {}
+    for name, spec in (priors or {}).items():
+        hit = [
+            i
+            for i, (n, d) in enumerate(zip(space.names, space.defs, strict=True))
+            if name in (n, d.name)
+        ]
+        ok = [n for n, d in zip(space.names, space.defs, strict=True) if d.lo >= 0]
+        if not hit or any(space.defs[i].lo < 0 for i in hit):
+            raise FitInputError(
+                f"fit: field 'priors' names {name!r}: not a positive fitted parameter of "
+                f"this rig; give one of {', '.join(ok)} (a session's as name[k])"
+            )
+        try:
+            mean, rel = (float(x) for x in spec)
+        except (TypeError, ValueError):
+            mean = rel = float("nan")
+        if not (math.isfinite(mean) and mean > 0 and math.isfinite(rel) and rel > 0):
+            raise FitInputError(
+                f"fit: field 'priors[{name!r}]' = {spec!r}: give (mean in SI > 0, relative "
+                "std > 0), e.g. (2.1e-3, 0.1) for within ±10 %"
+            )
+        out.update({i: (mean, rel) for i in hit})
+    return out
 
 
 def _space(
@@ -357,6 +385,7 @@ def fit(
     filters: dict[str, float] | None = None,
     delay_search: str = "neighbours",
     estimates: bool = True,
+    priors: Mapping[str, tuple[float, float]] | None = None,
 ) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
@@ -408,6 +437,12 @@ def fit(
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
     filters, e.g. ``{"tip_deflection": 50.0}``
     (:mod:`flexarm.identification.time_domain.closed_loop`).
+    ``priors``: parameter name (:data:`~.params.MECHANICS`, :data:`FRICTION` but ``bias``;
+    ``coulomb`` for every session, ``coulomb[1]`` for one) → (mean in SI, relative std):
+    r_p = (ln p − ln p̄) / σ_p, eq. (2) of the general engine, weighed against V as there
+    (:meth:`~.objective.Objective.prior_rows`), in every stage; their information joins
+    the HAC std. E.g. ``{"hub_inertia": (2.1e-3, 0.1)}``: the data sheet's hub inertia
+    within ±10 %.
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -525,6 +560,7 @@ def fit(
         info,
         est,
     )
+    space.priors = _priors(space, priors)
     # the start point (SI, the gauge gain with the start's sign): the result's template
     info["start"] = {
         nm: float(d.to_phys(u0[i])) * (2 * int(d0[2]) - 1 if d.name == "tip_gain" else 1)
@@ -625,6 +661,7 @@ def fit(
             global_samples=n_glob,
             seed=seed,
             filters=filt,
+            priors={space.names[i]: list(v) for i, v in sorted(space.priors.items())},
         ),
         seconds=time.perf_counter() - t_start,
         objective=obj,
@@ -1089,6 +1126,8 @@ def _local(
         R = (W[:, None] * (sim - y[:, None])).transpose(1, 0, 2, 3).reshape(nf + 1, -1)
         R = np.where(np.isfinite(R), R, 1e3)
         R[bad.any(-1)] = 1e3 * W.max()
+        if free_params:  # the priors' rows (eq. (2)) after the data's
+            R = np.concatenate([R, obj.prior_rows(U)], axis=1)
         cache.clear()
         cache[key] = (R[0], ((R[1:] - R[0]) / h[:, None]).T)
         return cache[key]
@@ -1108,6 +1147,9 @@ def _local(
     )
     r, Jac = batch(res.x)
     x = full(res.x)
+    m_data = mask.size
+    Jp = Jac[m_data:]  # the priors' rows: their information joins the covariance
+    r, Jac = r[:m_data], Jac[:m_data]
     keep = mask.ravel()
     r = np.where(keep, r, 0.0)
     Jac = np.where(keep[:, None], Jac, 0.0)
@@ -1119,7 +1161,14 @@ def _local(
     if free_params:
         try:
             cov_iid = iid_covariance(rr, Jac[keep])
-            cov, bw = hac_covariance(r.reshape(2, L, -1), Jac.reshape(2, L, -1, nz))
+            # in eq. (1)'s units (V's residuals / s) where priors weigh in: the data's own
+            # sandwich does not depend on the units, the prior's information does
+            s = obj.prior_scale() if Jp.size else 1.0
+            cov, bw = hac_covariance(
+                r.reshape(2, L, -1) / s,
+                Jac.reshape(2, L, -1, nz) / s,
+                prior_jac=Jp / s if Jp.size else None,
+            )
             std_u = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
             cov_u = cov[:n, :n]
             std_iid_u = np.sqrt(np.maximum(np.diag(cov_iid)[:n], 0.0))
@@ -1179,21 +1228,27 @@ def predict(
             check_closed_loop(g)
     st = result.settings
     space = result.space
-    obj = Objective(
-        blogs,
-        result.rig,
-        space,
-        [0] * len(blogs),
+    kw = dict(
+        rig=result.rig,
+        space=space,
+        sessions=[0],
         mode=st["mode"],
         substeps=st["substeps"],
         comp_delay=st["computation_delay"],
         wc_guess=float(result.params.get("link_frequency", 10.0)),
         filters=st["filters"],
     )
+    obj = Objective(blogs, **{**kw, "sessions": [0] * len(blogs)})
     U, D = result.unit, result.discrete
     off = np.zeros((len(blogs), 4))
     if estimate_initial:
-        off = _local(obj, U, D, nfev, off0=off, free_params=False)["off"]
+        # each log's initial state on its own (one least squares a log, one compiled shape:
+        # every log padded to the longest), so a log's prediction does not depend on the
+        # logs predicted with it (a joint least squares shares its trust region and its
+        # stop, which moved a log's fit % by 0.01 points)
+        for i, g in enumerate(blogs):
+            one = obj if len(blogs) == 1 else Objective([g], **{**kw, "n_samples": obj.N})
+            off[i] = _local(one, U, D, nfev, off0=off[i : i + 1], free_params=False)["off"][0]
     tr, e, bad = obj.run(U[None], D[None], off[None])
     fp = obj.fit_percent(e[0])
     keys = log_keys(blogs)  # one key per log (same names in other folders apart)

@@ -123,6 +123,9 @@ class ServoRig:
     #: samples between a sample and its command; None: where the declared law best
     #: explains the logged command (``flexarm fit --computation-delay``)
     computation_delay: int | None = None
+    #: parameter name (``hub_inertia``, ``coulomb``, ``coulomb[1]`` ...) → (mean in SI,
+    #: relative std): eq. (2)'s priors in this engine
+    priors: Mapping[str, tuple[float, float]] | None = None
 
     def keywords(self) -> dict:
         return dict(
@@ -138,6 +141,7 @@ class ServoRig:
             filters=dict(self.filters) if self.filters else None,
             controller=self.controller,
             seed=self.seed,
+            priors=dict(self.priors) if self.priors else None,
         )
 
 

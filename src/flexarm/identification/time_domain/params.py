@@ -106,6 +106,9 @@ class ParamSpace:
     extras: dict = field(default_factory=dict)
     #: search range (lo, hi) of each free delay (hub, tip), samples; None: 0 ... max_delay
     delay_ranges: tuple[tuple[int, int] | None, tuple[int, int] | None] = (None, None)
+    #: priors: index into :attr:`defs` → (mean p̄ in SI, relative std σ_p), as eq. (2) of
+    #: :mod:`~flexarm.identification.time_domain.general`: r_p = (ln p − ln p̄) / σ_p
+    priors: dict[int, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def rigid(self) -> bool:
@@ -158,6 +161,16 @@ class ParamSpace:
             ],
             axis=-1,
         )
+
+    def prior_residuals(self, u: np.ndarray) -> np.ndarray:
+        """(..., n_priors) r_p = (ln p − ln p̄) / σ_p of :attr:`priors` (eq. (2) of the
+        general engine; p floored at 1e-12 p̄ where a bound reaches 0)."""
+        u = np.asarray(u, float)
+        cols = [
+            (np.log(np.maximum(self.defs[i].to_phys(u[..., i]), 1e-12 * m)) - math.log(m)) / s
+            for i, (m, s) in sorted(self.priors.items())
+        ]
+        return np.stack(cols, -1) if cols else np.zeros((*u.shape[:-1], 0))
 
     def value(self, u: np.ndarray, name: str) -> np.ndarray:
         i = self.index(name)

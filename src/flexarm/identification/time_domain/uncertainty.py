@@ -97,17 +97,20 @@ def hac_covariance(
     *,
     factor: float = BANDWIDTH_FACTOR,
     max_fraction: float = MAX_FRACTION,
+    prior_jac: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[int]]:
     """Newey–West sandwich covariance (JᵀJ)⁺ Ŝ (JᵀJ)⁺ · m/(m − p) (see the module doc).
 
     ``r``: residuals (C, L, N) (channels, logs, samples), 0 where a sample is not used;
-    ``J``: their Jacobian (C, L, N, p). Returns the covariance (p, p) and the bandwidth
-    M_l (samples) used for each log."""
+    ``J``: their Jacobian (C, L, N, p); ``prior_jac``: the Jacobian (n_priors, p) of prior
+    rows, whose information joins both: H = JᵀJ + J_pᵀJ_p, cov = H⁺ (Ŝ + J_pᵀJ_p) H⁺.
+    Returns the covariance (p, p) and the bandwidth M_l (samples) used for each log."""
     C, L, N = r.shape
     p = J.shape[-1]
     Jf = J.reshape(-1, p)
-    A = np.linalg.pinv(Jf.T @ Jf)
-    S = np.zeros((p, p))
+    Ip = prior_jac.T @ prior_jac if prior_jac is not None else np.zeros((p, p))
+    A = np.linalg.pinv(Jf.T @ Jf + Ip)
+    S = Ip.copy()
     Ms = []
     for li in range(L):
         used = np.nonzero(np.any(r[:, li] != 0, axis=0) | np.any(J[:, li] != 0, axis=(0, 2)))[0]
