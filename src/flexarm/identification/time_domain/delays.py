@@ -41,10 +41,12 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+
+from flexarm.identification.time_domain.general import COST_RESOLUTION
 
 __all__ = ["DelayFound", "search_delays", "searched_channels"]
 
@@ -107,22 +109,21 @@ def _with_delays(scenario, delays: dict[str, int]):
 
 def search_delays(
     scenario,
-    logs: Sequence,
-    free: Sequence[str],
-    options,
     eng,
     z: np.ndarray,
     *,
+    engine: Callable[[Any], Any],
+    local: Callable[[Any, np.ndarray], tuple],
     progress=None,
 ) -> DelayFound:
     """Neighbours coordinate descent over the sensors' delays from ``scenario``'s and the
     local optimum ``z`` of ``eng`` (the fit's engine at those delays), the local stage
     again at the chosen delays, in rounds until the delays stay (module docstring).
-    ``options``: the fit's
-    :class:`~flexarm.identification.time_domain.general.ScenarioFitOptions`, whose
-    ``delay_search`` is the :class:`DelaySearch`."""
-    from flexarm.identification.time_domain.general import COST_RESOLUTION, _Engine, _local
-
+    ``eng.options.delay_search`` is the :class:`DelaySearch`; ``engine(scenario)`` builds
+    the fit's engine for a scenario (the same logs, free list and options) and ``local(eng,
+    z0)`` runs the fit's local stage on it from z0, returning (res, r, J, info)
+    (:func:`~flexarm.identification.time_domain.general.fit_scenario` passes both)."""
+    options = eng.options
     search = options.delay_search
     chans = searched_channels(search, eng)
     say = progress or (lambda msg: None)
@@ -130,24 +131,23 @@ def search_delays(
     names = list(eng.names)
     d0 = {c: int(d) for c, d in zip(names, eng.delays, strict=True)}
     engines: dict[tuple, Any] = {tuple(d0[c] for c in names): eng}
-    states = options.estimate_states and options.segment is not None
 
-    def engine(d: dict[str, int]):
+    def engine_at(d: dict[str, int]):
         key = tuple(d[c] for c in names)
         if key not in engines:
-            engines[key] = _Engine(_with_delays(scenario, d), logs, free, options)
+            engines[key] = engine(_with_delays(scenario, d))
         return engines[key]
 
     def cost(d: dict[str, int], z: np.ndarray, costs: dict[str, float]) -> float:
         """Σ r² (eqs. (1)–(2)) of the delays ``d`` at ``z``, node states off the log."""
         key = _label(d, names)
         if key not in costs:
-            r = engine(d).residuals(np.asarray(z)[None])[0]
+            r = engine_at(d).residuals(np.asarray(z)[None])[0]
             costs[key] = float(r @ r)
         return costs[key]
 
     resolution = COST_RESOLUTION / eng.expected_cost()  # relative, as the local stage's ftol
-    cur, moves, local = dict(d0), 0, None
+    cur, moves, found = dict(d0), 0, None
     rounds: list[dict[str, float]] = []
     while True:  # rounds: a descent at the optimum z, then the local stage at its delays
         costs: dict[str, float] = {}
@@ -169,10 +169,10 @@ def search_delays(
         rounds.append(costs)
         if cur == start:
             break
-        e = engine(cur)
-        local = _local(e, np.clip(z, e.lo, e.hi), options, states=states, progress=progress)
-        z = np.clip(local[0].x, e.lo, e.hi)
-        info = local[3]
+        e = engine_at(cur)
+        found = local(e, np.clip(z, e.lo, e.hi))
+        z = np.clip(found[0].x, e.lo, e.hi)
+        info = found[3]
         say(
             f"local stage at delays {_label(cur, chans)}: cost {info['cost']:.4g} after "
             f"{info['nfev']} evaluations ({info['message']})"
@@ -192,9 +192,9 @@ def search_delays(
         + (", ".join(f"{c} {d0[c]} → {cur[c]}" for c in moved) or "the scenario's delays kept")
         + f" samples after {record['evaluations']} evaluations in {len(rounds)} round(s)"
     )
-    if local is None:
+    if found is None:
         return DelayFound(record)
-    return DelayFound(record, _with_delays(scenario, cur), engine(cur), local)
+    return DelayFound(record, _with_delays(scenario, cur), engine_at(cur), found)
 
 
 def _label(d: dict[str, int], chans: Sequence[str]) -> str:

@@ -1061,7 +1061,15 @@ def fit_scenario(
     if options.delay_search is not None:  # the sensors' delays, then the local stage again
         from flexarm.identification.time_domain.delays import search_delays
 
-        found = search_delays(scenario, logs, free, options, eng, z0, progress=progress)
+        states = options.estimate_states and options.segment is not None
+        found = search_delays(
+            scenario,
+            eng,
+            z0,
+            engine=lambda sc: _Engine(sc, logs, free, options),
+            local=lambda e, z: _local(e, z, options, states=states, progress=progress),
+            progress=progress,
+        )
         stages["delay_search"] = found.record
         if found.local is not None:
             scenario, eng = found.scenario, found.engine
