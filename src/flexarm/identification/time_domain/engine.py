@@ -28,7 +28,7 @@ global (differential evol.)    ``GlobalDE``            ``ServoRig.global_seconds
 smooth-then-quantised          ``Cost(quantise=True)`` always
 multiple shooting              ``Shooting(segment)``   no (whole logs)
 priors (eq. (2))               ``Priors``              no
-sensor-delay search            no (delays as given)    ``ServoRig.delay_search``
+sensor-delay search            ``DelaySearch``         ``ServoRig.delay_search``
 =============================  ======================  ===========================
 """
 
@@ -100,7 +100,11 @@ def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.report import as_fit_result
 
     opts = options if isinstance(options, FitOptions) else FitOptions()
-    unread = [g for g in ("cost", "shooting", "local", "global_de", "priors") if getattr(opts, g)]
+    unread = [
+        g
+        for g in ("cost", "shooting", "local", "global_de", "priors", "delay_search")
+        if getattr(opts, g)
+    ]
     if unread or opts.continuous:
         raise ValueError(
             f"FitOptions.{', '.join(unread) or 'continuous'}: the rotary servo preset's engine "

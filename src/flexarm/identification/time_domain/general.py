@@ -189,6 +189,10 @@ class ScenarioFitOptions:
     continuation: with ``quantise``, the local stage runs first on the loop without the
     converters' rounding, then on the rounded loop from its optimum (the servo rig
     engine's smooth-then-quantised continuation); without ``quantise`` it has no effect.
+    delay_search: a :class:`~flexarm.identification.time_domain.options.DelaySearch`: after
+    the local stage, the sensors' pure delays (samples) are searched and the local stage is
+    run again at the chosen ones (:mod:`~flexarm.identification.time_domain.delays`); None:
+    the scenario's delays as given.
     """
 
     channels: Mapping[str, float] | None = None
@@ -219,6 +223,7 @@ class ScenarioFitOptions:
     ties: Mapping[str, str] = field(default_factory=dict)
     continuous: bool = False
     continuation: bool = True
+    delay_search: Any = None
 
     def check(self) -> None:
         if not self.bound_factor > 1:
@@ -992,6 +997,10 @@ def fit_scenario(
         )
     t_start = time.perf_counter()
     eng = _Engine(scenario, logs, free, options)
+    if options.delay_search is not None:  # bad input before the fit, not after it
+        from flexarm.identification.time_domain.delays import searched_channels
+
+        searched_channels(options.delay_search, eng)
     n = len(eng.free)
     say = progress or (lambda msg: None)
     z0 = np.zeros(n)
@@ -1052,6 +1061,22 @@ def fit_scenario(
             f"{label}: cost {info['cost']:.4g} after {info['nfev']} evaluations ({info['message']})"
         )
         z0 = np.clip(res.x, eng.lo, eng.hi)
+    if options.delay_search is not None:  # the sensors' delays, then the local stage again
+        from flexarm.identification.time_domain.delays import search_delays
+
+        states = options.estimate_states and options.segment is not None
+        found = search_delays(
+            scenario,
+            eng,
+            z0,
+            engine=lambda sc: _Engine(sc, logs, free, options),
+            local=lambda e, z: _local(e, z, options, states=states, progress=progress),
+            progress=progress,
+        )
+        stages["delay_search"] = found.record
+        if found.local is not None:
+            scenario, eng = found.scenario, found.engine
+            res, r, J, stages["delay_local"] = found.local
     if options.polish and options.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
         # each log's start state stays a nuisance parameter (offsets to the logged state)

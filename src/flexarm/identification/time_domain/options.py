@@ -9,6 +9,8 @@
   states, the start state (``"log"`` or ``"scenario"``), a polish on whole logs;
 * :class:`Local` — the least-squares budget and tolerances, the finite-difference step in z;
 * :class:`GlobalDE` — differential evolution first (population, generations, seed), or None;
+* :class:`DelaySearch` — the sensors' pure delays (samples) searched after the local stage
+  (:mod:`~flexarm.identification.time_domain.delays`), or None: the scenario's delays;
 * :class:`Priors` — bounds p0/f … p0·f, absolute bounds, priors (relative std, eq. (2)),
   tied paths;
 * :class:`ServoRig` — the options of the voltage-driven rotary servo's engine (its sensor
@@ -33,6 +35,7 @@ __all__ = [
     "Shooting",
     "Local",
     "GlobalDE",
+    "DelaySearch",
     "Priors",
     "ServoRig",
     "FitOptions",
@@ -89,6 +92,21 @@ class GlobalDE:
     popsize: int = 6
     maxiter: int = 8
     seed: int = 0
+
+
+@dataclass
+class DelaySearch:
+    """The sensor channels' pure delays (whole samples, ``sensors.NAME.delay``) searched
+    after the local stage (:mod:`~flexarm.identification.time_domain.delays`: neighbours
+    coordinate descent from the scenario's delays, d ± 1 on one channel at a time, compared
+    by the cost of eq. (1) at the local optimum; then the local stage again at the chosen
+    delays). ``channels``: the sensor channels whose delay is searched (None: every channel
+    the fit compares); ``max_delay``: the largest delay tried (samples); ``max_moves``: the
+    most moves of one sample, over all channels together."""
+
+    channels: Sequence[str] | None = None
+    max_delay: int = 20
+    max_moves: int = 10
 
 
 @dataclass
@@ -177,6 +195,8 @@ class FitOptions:
     global_de: GlobalDE | None = None
     priors: Priors | None = None
     servo_rig: ServoRig | None = None
+    #: the sensors' delays searched after the local stage (general engine); None: as given
+    delay_search: DelaySearch | None = None
     windows: Sequence[tuple[float, float] | None] | None = None
     predict: bool = True
     #: a folder for the fit's overlay figures (the whole-run prediction with the fitted
@@ -206,6 +226,8 @@ class FitOptions:
             flat.global_stage = True
             for k, v in _changed(self.global_de, base is not None):
                 setattr(flat, k, v)
+        if self.delay_search is not None:
+            flat.delay_search = self.delay_search
         if self.windows is not None:
             flat.windows = list(self.windows)
         if self.continuous:
