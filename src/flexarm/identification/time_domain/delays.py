@@ -30,7 +30,8 @@ coordinate descent — the general engine's form of the servo-rig engine's
    on (polish, covariance, prediction) with the scenario carrying the chosen delays.
 
 One engine per delay configuration, cached by the tuple of every channel's delay (a new
-configuration is a new compilation of the loop: ~1–2 s each). A descent from d to d + k
+configuration is a new compilation of the loop: 9–12 s each for the tests' two-mode link
+on this machine, most of the search's time). A descent from d to d + k
 costs about 2k + 2 evaluations per searched channel; the cost's neighbours need not be
 unimodal in the delay (an oscillating channel's cost has local minima a period apart), so
 start the scenario's delays within a few samples of the truth, or widen with ``max_delay``

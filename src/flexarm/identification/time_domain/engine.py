@@ -26,8 +26,8 @@ stage                          ``scenario``            ``servo_rig``
 =============================  ======================  ===========================
 global (differential evol.)    ``GlobalDE``            ``ServoRig.global_seconds``
 smooth-then-quantised          ``Cost(quantise=True)`` always
-multiple shooting              ``Shooting(segment)``   no (whole logs)
-priors (eq. (2))               ``Priors``              no
+multiple shooting              ``Shooting(segment)``   ``ServoRig.segment``
+priors (eq. (2))               ``Priors``              ``ServoRig.priors``
 sensor-delay search            ``DelaySearch``         ``ServoRig.delay_search``
 =============================  ======================  ===========================
 """
@@ -96,7 +96,9 @@ def fit(
 
 def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.fit import fit as rig_fit
-    from flexarm.identification.time_domain.logs import as_rig_log
+    from flexarm.identification.time_domain.fit import predict as rig_predict
+    from flexarm.identification.time_domain.logs import as_rig_log, pieces
+    from flexarm.identification.time_domain.options import ServoRig
     from flexarm.identification.time_domain.report import as_fit_result
 
     opts = options if isinstance(options, FitOptions) else FitOptions()
@@ -112,11 +114,48 @@ def _servo_rig(preset: Preset, logs, options, progress):
             "continuation: options.ServoRig); multiple shooting, priors and the other groups "
             "belong to the scenario engine: fit a scenario (flexarm.fit(scenario, logs, ...))"
         )
-    kw = {**preset.sheet, **(opts.servo_rig.keywords() if opts.servo_rig else {})}
+    rig = opts.servo_rig or ServoRig()
+    kw = {**preset.sheet, **rig.keywords()}
     logs = [as_rig_log(g) if isinstance(g, (str, Path)) else g for g in logs]
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
     res = as_fit_result(rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}")
+    if rig.segment is not None:  # multiple shooting: the rig's result holds the pieces
+        if progress:
+            progress("predicting the whole logs with the parameters fitted on their pieces")
+        _, owner = pieces(logs, rig.segment)
+        res.segment_fit_percent = _pieces_fit_percent(res.engine_result, logs, owner)
+        res.fit_percent = rig_predict(res.engine_result, logs)["fit_percent"]
+        res.stages["segments"] = len(owner)
     if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
     return res
+
+
+def _pieces_fit_percent(rig_res, whole, owner) -> dict[str, dict[str, float | None]]:
+    """fit % per whole log and signal over its pieces' samples together (each piece
+    simulated from its own start: the multiple-shooting fit, as the general engine's
+    ``segment_fit_percent``)."""
+    import numpy as np
+
+    from flexarm.io.logs import log_keys
+    from flexarm.metrics import fit_percent
+
+    skip = rig_res.space.max_delay + int(rig_res.settings["computation_delay"]) + 1
+    out: dict[str, dict[str, float | None]] = {}
+    for i, key in enumerate(log_keys(whole)):
+        rows = [k for k, o in enumerate(owner) if o == i]
+        d: dict[str, float | None] = {}
+        for c, name in enumerate(("motor_angle", "tip_deflection")):
+            if name not in rig_res.logs[rows[0]].columns:
+                continue
+            # the samples each piece's cost compares (after its first ``skip``)
+            y = [rig_res.logs[k].columns[name][skip:] for k in rows]
+            sim = [
+                np.asarray(rig_res.traj[c][k])[skip : skip + len(a)]
+                for k, a in zip(rows, y, strict=True)
+            ]
+            v = fit_percent(np.concatenate(y), np.concatenate(sim))
+            d[name] = round(v, 3) if np.isfinite(v) else None
+        out[key] = d
+    return out

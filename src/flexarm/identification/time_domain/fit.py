@@ -55,6 +55,7 @@ from flexarm.identification.time_domain.logs import (
     FitInputError,
     as_rig_log,
     check_closed_loop,
+    pieces,
 )
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
@@ -386,6 +387,7 @@ def fit(
     delay_search: str = "neighbours",
     estimates: bool = True,
     priors: Mapping[str, tuple[float, float]] | None = None,
+    segment: float | None = None,
 ) -> FitResult:
     """Fit the arm's physical parameters to closed-loop (or open-loop) logs.
 
@@ -443,6 +445,11 @@ def fit(
     (:meth:`~.objective.Objective.prior_rows`), in every stage; their information joins
     the HAC std. E.g. ``{"hub_inertia": (2.1e-3, 0.1)}``: the data sheet's hub inertia
     within ±10 %.
+    ``segment`` (s): multiple shooting: after the estimates (on the whole logs), each log
+    is cut into pieces of ``segment`` s (:func:`~.logs.pieces`), and the stages fit the
+    pieces as logs of their own (each its own start state, the session of its log); the
+    result's logs and fit % are the pieces' (``flexarm.fit`` adds the whole logs'
+    prediction). None: whole logs.
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
@@ -567,6 +574,12 @@ def fit(
         for i, (nm, d) in enumerate(zip(space.names, space.defs, strict=True))
     }
     wc_guess = float(np.sqrt(space.defs[1].lo * space.defs[1].hi))
+    if segment is not None:
+        # multiple shooting: the estimates and bounds above come from the whole logs; the
+        # stages fit the pieces, each from its own estimated start state
+        blogs, owner = pieces(blogs, segment)
+        sess = [sess[i] for i in owner]
+        say(f"multiple shooting: {len(blogs)} pieces of {segment:g} s")
     n_full = max(len(g) for g in blogs)
     n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
     common: dict[str, Any] = dict(
@@ -662,6 +675,7 @@ def fit(
             seed=seed,
             filters=filt,
             priors={space.names[i]: list(v) for i, v in sorted(space.priors.items())},
+            segment=segment,
         ),
         seconds=time.perf_counter() - t_start,
         objective=obj,

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from flexarm.errors import FlexarmError
 from flexarm.io import logformat as _lf
 from flexarm.io.logformat import GAIN_UNITS, LogFormat
@@ -144,3 +146,28 @@ def check_closed_loop(log: Log) -> None:
             f"uses the tip deflection (K2 = {c.k2:g}, K4 = {c.k4:g}) but the "
             "log has no tip_deflection column"
         )
+
+
+def pieces(logs, seconds: float) -> tuple[list[Log], list[int]]:
+    """Multiple shooting for the rotary servo's engine (``ServoRig.segment``): each log cut
+    into consecutive windows [k L, (k + 1) L) s of ``seconds`` = L from its first sample
+    (:meth:`flexarm.io.logs.Log.window`; a remainder shorter than L / 2 joins the piece
+    before it). Each piece is then fitted as a log of its own, started from its own
+    estimated state. Returns the pieces and, per piece, the index of its log."""
+    if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
+        raise FitInputError(
+            f"ServoRig.segment = {seconds!r}: give the multiple-shooting segment in s > 0 "
+            "(e.g. 2.5), or None for whole logs"
+        )
+    out: list[Log] = []
+    owner: list[int] = []
+    for i, g in enumerate(logs):
+        span = len(g) * g.dt
+        n = max(int(span // seconds), 1)
+        if span - n * seconds >= seconds / 2:
+            n += 1
+        for k in range(n):
+            t1 = (k + 1) * seconds if k < n - 1 else span + g.dt
+            out.append(g.window(k * seconds, t1))
+            owner.append(i)
+    return out, owner

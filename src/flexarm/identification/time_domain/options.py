@@ -144,6 +144,10 @@ class ServoRig:
     #: parameter name (``hub_inertia``, ``coulomb``, ``coulomb[1]`` ...) → (mean in SI,
     #: relative std): eq. (2)'s priors in this engine
     priors: Mapping[str, tuple[float, float]] | None = None
+    #: multiple shooting: each log cut into pieces of this many s, each fitted from its own
+    #: estimated start state (:func:`~.logs.pieces`); fit % is then the whole logs'
+    #: prediction and ``segment_fit_percent`` the pieces'; None: whole logs
+    segment: float | None = None
 
     def keywords(self) -> dict:
         return dict(
@@ -160,6 +164,7 @@ class ServoRig:
             controller=self.controller,
             seed=self.seed,
             priors=dict(self.priors) if self.priors else None,
+            segment=self.segment,
         )
 
 

@@ -50,7 +50,7 @@ class FitResult:
     correlation: np.ndarray
     warnings: list[str]
     fit_percent: dict[str, dict[str, float | None]]  # None: not finite (a rig's absent tip)
-    segment_fit_percent: dict[str, dict[str, float]]
+    segment_fit_percent: dict[str, dict[str, float | None]]
     scenario: Any
     converged: bool
     message: str
