@@ -834,11 +834,11 @@ class _Engine:
         has = np.isfinite(self.sigma)
         return Z[:, has] / self.sigma[has]
 
-    def fit_percent_segments(self, sim: np.ndarray) -> dict[str, dict[str, float]]:
-        out: dict[str, dict[str, float]] = {}
+    def fit_percent_segments(self, sim: np.ndarray) -> dict[str, dict[str, float | None]]:
+        out: dict[str, dict[str, float | None]] = {}
         for li, L in enumerate(self.logs):
             rows = np.nonzero(self.seg_log == li)[0]
-            d = {}
+            d: dict[str, float | None] = {}
             for j, c in zip(self.cidx, self.channels, strict=True):
                 m = self.seg_mask[rows, :, j]
                 if not m.any():
