@@ -215,10 +215,11 @@ NOTEBOOKS["fit-two-link-rig"] = [
         "for two seconds, then the shoulder's Coulomb friction fitted back from a template "
         "20 % off, on segments started from the logged state (multiple shooting). Where "
         "the lab's workspace is present, the same fit on its first 20 s.\n\n"
-        "API note: today's `flexarm.fit(scenario, logs, free, options)`, "
+        "API: `flexarm.fit(scenario, logs, free, options)` (the one fit engine), "
         "`flexarm.validate`, `flexarm.load_log`, grouped options "
-        "`FitOptions(shooting=Shooting(segment=...))` (issue #23 may still change the "
-        "result).",
+        "`FitOptions(shooting=Shooting(segment=...))`; `FitOptions(plots=folder)` draws "
+        "the fit's prediction, `FitOptions(delay_search=DelaySearch())` searches the "
+        "sensors' delays.",
     ),
     ("code", SETUP),
     (
