@@ -658,8 +658,11 @@ def formats_for(
     entries = list(formats)
     text = [str(f) for f in entries if not isinstance(f, LogFormat)]
     pats = [x.split("=", 1) for x in text if "=" in x]
-    plain = [f if isinstance(f, LogFormat) else str(f) for f in entries]
-    plain = [f for f in plain if isinstance(f, LogFormat) or "=" not in f]
+    plain = [
+        f if isinstance(f, LogFormat) else str(f)
+        for f in entries
+        if isinstance(f, LogFormat) or "=" not in str(f)
+    ]
     if pats and plain:
         raise LogError(
             "log format: give either one FILE per log (or one for all), or PATTERN=FILE "

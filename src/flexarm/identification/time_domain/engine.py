@@ -73,13 +73,7 @@ def fit(
     else:
         base = preset.options if free is None else None
         flat = (grouped or FitOptions()).engine_options(base)
-    source = (
-        "given"
-        if free is not None
-        else (
-            f"preset {preset.name}" if not isinstance(scenario, Preset) else f"preset {preset.name}"
-        )
-    )
+    source = "given" if free is not None else f"preset {preset.name}"
     free_list = list(free) if free is not None else list(preset.free)
     res = general.fit_scenario(
         preset.scenario,
