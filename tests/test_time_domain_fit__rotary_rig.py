@@ -119,18 +119,23 @@ def rigid():
 
 def test_rigid_session(rigid):
     """The eight rigid-arm runs of 4/25 are one session: fit on K1 = 6, 8 and K1K3 = 6, 8;
-    validate on the other four. A rigid arm fits the hub inertia and friction only. The
-    held-out threshold, 60 %, is what a model with the fitted friction must beat by far:
-    without it the stuck hub's steady-state errors (a few mrad of a 0.2 rad swing) are
-    missed on every run."""
+    validate on the other four. A rigid arm fits the hub inertia and friction only.
+    Thresholds: issue #23's 70 % on each held-out run, and 80 % on the training runs (a
+    model without friction misses the stuck hub's stops, tens of mrad of a 0.2 rad swing,
+    on every run). Measured with the global stage on the first 5 s of each log only (the
+    old default): held out 72.7 / 65.6 / 84.4 / 73.5 %; on whole logs, seeds 0-3: held out
+    81.5-87.2 %, training 84.0-91.7 %."""
     res = rigid
     held = predict(res, [_log(n) for n in RIGID_HELD])  # the rig's own loop (engine_result)
     print(res.engine_result.summary())
     print("held-out fit %:", held["fit_percent"])
     assert "link_frequency" not in res.params  # no tip channel: a rigid hub
     assert res.params["coulomb"] > 0
-    for name, fp in {**res.fit_percent, **held["fit_percent"]}.items():
-        assert fp["motor_angle"] >= 60.0, (name, fp)
+    for name, fp in res.fit_percent.items():
+        assert fp["motor_angle"] >= 80.0, (name, fp)
+        assert fp["tip_deflection"] is None
+    for name, fp in held["fit_percent"].items():
+        assert fp["motor_angle"] >= 70.0, (name, fp)
         assert fp["tip_deflection"] is None
 
 
@@ -213,7 +218,8 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     print("validate fit %:", out["fit_percent"])
     assert set(out["fit_percent"]) == set(RIGID_HELD)
     for name, fp in out["fit_percent"].items():
-        assert fp["motor_angle"] is not None and fp["motor_angle"] >= 60.0, (name, fp)
+        # issue #23's 70 % each (the one simulator; measured 83.9-87.3 %)
+        assert fp["motor_angle"] is not None and fp["motor_angle"] >= 70.0, (name, fp)
 
 
 #: the 4/27 session's two runs (README of the data: a hard session), fitted together

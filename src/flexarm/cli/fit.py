@@ -128,7 +128,14 @@ def fit(
     json_out: o.JsonOut = None,
     scenario_out: o.ScenarioOut = None,
     plots: o.Plots = None,
-    seconds: Annotated[float, typer.Option(help="time budget of the global stage, s")] = 5.0,
+    seconds: Annotated[
+        float | None,
+        typer.Option(
+            "--global-seconds",
+            "--seconds",
+            help="seconds of each log the global stage fits (default: the whole logs)",
+        ),
+    ] = None,
     compare_no_friction: Annotated[
         bool,
         typer.Option(
