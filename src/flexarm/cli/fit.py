@@ -133,9 +133,10 @@ def fit(
         typer.Option(
             "--global-seconds",
             "--seconds",
-            help="seconds of each log the global stage fits (default: the whole logs)",
+            help="seconds of each log the global stage fits (at least the log's length: "
+            "whole logs, better on stick-slip runs with few moves)",
         ),
-    ] = None,
+    ] = 5.0,
     compare_no_friction: Annotated[
         bool,
         typer.Option(

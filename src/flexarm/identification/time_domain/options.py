@@ -129,7 +129,7 @@ class ServoRig:
 
     mode: str = "closed_loop"
     friction: bool = True
-    global_seconds: float | None = None
+    global_seconds: float | None = 5.0
     delay_search: str = "neighbours"
     polish_iter: int = 8
     sessions: Sequence[int] | None = None
