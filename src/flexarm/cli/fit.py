@@ -129,7 +129,7 @@ def fit(
     scenario_out: o.ScenarioOut = None,
     plots: o.Plots = None,
     seconds: Annotated[
-        float | None,
+        float,
         typer.Option(
             "--global-seconds",
             "--seconds",
