@@ -265,6 +265,9 @@ def test_bad_inputs(tmp_path, logs):
         load_rig_log(_write(tmp_path / "d.csv", head + "\n".join(bad)))
     with pytest.raises(FitInputError, match="e.csv: field 'controller': no controller declared"):
         fit([_write(tmp_path / "e.csv", head + "\n".join(rows))], **RIG)
+    for bad_window in ("all", 0.0, -5.0):
+        with pytest.raises(FitInputError, match="field 'global_seconds' = .*None .whole logs"):
+            fit(logs[:1], **RIG, global_seconds=bad_window)
     with pytest.raises(FitInputError, match="non-physical.*hub inertia"):
         check_physical({"hub_inertia": -1e-3})
     sc = load_scenario("rotary-flexible-link")

@@ -129,14 +129,16 @@ def fit(
     scenario_out: o.ScenarioOut = None,
     plots: o.Plots = None,
     seconds: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--global-seconds",
             "--seconds",
             help="seconds of each log the global stage fits (at least the log's length: "
-            "whole logs, better on stick-slip runs with few moves)",
+            "whole logs, better on stick-slip runs with few moves) [default: 5 for a "
+            "flexible link, whole logs for a rigid arm]",
+            show_default=False,
         ),
-    ] = 5.0,
+    ] = None,
     compare_no_friction: Annotated[
         bool,
         typer.Option(
@@ -291,7 +293,7 @@ def fit(
     rig = ServoRig(
         mode=mode,
         friction=not no_friction,
-        global_seconds=seconds,
+        global_seconds="auto" if seconds is None else seconds,
         delay_search=delay_search,
         polish_iter=polish_iter,
         sessions=parsing.int_list(sessions, "--sessions"),

@@ -10,7 +10,8 @@ initial link state, by minimising the closed-loop simulation output error
 
 1. guesses and bounds from the data (:mod:`flexarm.identification.time_domain.guesses`);
 2. global stage: differential evolution, whole generations in one batched simulation,
-   on the first ``global_seconds`` of each log (None: whole logs)
+   on the first ``global_seconds`` of each log (None: whole logs; ``"auto"``: 5 s for
+   a flexible link, whole logs for a rigid arm)
    (:mod:`flexarm.identification.time_domain.global_stage`);
 3. local stage: ``scipy.optimize.least_squares`` (trust-region reflective) on the
    weighted residuals over the full logs, with a forward-difference Jacobian whose
@@ -350,6 +351,22 @@ def _delay_ranges(hub, tip, max_delay: int, fixed) -> tuple[tuple[int, int], tup
     return h, t
 
 
+#: the global stage's window on a flexible link's logs (s), ``global_seconds="auto"``
+GLOBAL_SECONDS = 5.0
+
+
+def _global_window(global_seconds: float | None | str, rigid: bool) -> float | None:
+    """The global stage's window (s; None: whole logs) for ``fit(global_seconds=...)``."""
+    if isinstance(global_seconds, str) and global_seconds == "auto":
+        return None if rigid else GLOBAL_SECONDS
+    if global_seconds is None or (isinstance(global_seconds, int | float) and global_seconds > 0):
+        return None if global_seconds is None else float(global_seconds)
+    raise FitInputError(
+        f"fit: field 'global_seconds' = {global_seconds!r}: give seconds > 0, None "
+        '(whole logs) or "auto" (5 s for a flexible link, whole logs for a rigid arm)'
+    )
+
+
 def fit(
     logs: Sequence[Any],
     *,
@@ -376,7 +393,7 @@ def fit(
     substeps: int = 2,
     popsize: int = 8,
     maxiter: int = 40,
-    global_seconds: float | None = 5.0,
+    global_seconds: float | None | str = "auto",
     local_nfev: int = 30,
     delay_nfev: int = 6,
     polish_iter: int = 8,
@@ -411,15 +428,17 @@ def fit(
     fits them (the logger's hub channel can lag the motion by tens of ms; with sensor noise
     feeding the loop a hub delay trades off against the hub inertia, so give
     ``angle_delay=0`` where the encoder is known to be latched at the sample instant).
-    The global stage uses the first ``global_seconds`` of each log (default 5 s; None: all),
-    ``popsize`` × dimension members for at most ``maxiter`` generations. With few moves in
-    that window a stick-slip run cannot tell inertia, delay and friction apart: on the rigid
-    session of 4/25 (four 10 s runs, a step every 2.5 s) the first 5 s led to a basin at 2.5
-    × the data sheet's inertia, whose held-out fit was 61-75 %; whole logs (None), 81.5-87 %
-    on every one of four seeds (``tests/test_time_domain_fit__rotary_rig.py``), at 1.5 × the
-    global stage's time. The default stays 5 s: on whole logs the units' 10 s fits move
-    (unit 6's hub delay 24 → 16 samples) and designs tuned on them miss targets met before
-    (``tests/test_design_tune.py``).
+    The global stage uses the first ``global_seconds`` of each log (None: all; ``"auto"``,
+    the default: :data:`GLOBAL_SECONDS` = 5 s for a flexible link, whole logs for a rigid
+    arm), ``popsize`` × dimension members for at most ``maxiter`` generations. With few
+    moves in that window a stick-slip run cannot tell inertia, delay and friction apart: on
+    the rigid session of 4/25 (four 10 s runs, a step every 2.5 s) the first 5 s led to a
+    basin at 2.5 × the data sheet's inertia, whose held-out fit was 61-75 %; whole logs,
+    81.5-87 % on every one of four seeds (``tests/test_time_domain_fit__rotary_rig.py``),
+    at 1.5 × the global stage's time. A flexible link keeps 5 s: its ringing and the hub →
+    tip estimates that start the search tie the inertia down within a move, and on whole
+    logs the units' 10 s fits move (unit 6's hub delay 24 → 16 samples) and designs tuned on
+    them miss targets met before (``tests/test_design_tune.py``).
     The local stage runs at most ``local_nfev`` evaluations
     from each of the starts that ``delay_search`` gives when the tip delay is fitted (on
     the global window): ``"neighbours"``: ``delay_nfev`` evaluations at the global stage's
@@ -461,6 +480,7 @@ def fit(
     """
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
+    _global_window(global_seconds, False)  # bad input: one line before any work
     if delay_search not in ("neighbours", "profile", "both"):
         raise FitInputError(
             f"fit: field 'delay_search' = {delay_search!r}: choose "
@@ -589,7 +609,8 @@ def fit(
         sess = [sess[i] for i in owner]
         say(f"multiple shooting: {len(blogs)} pieces of {segment:g} s")
     n_full = max(len(g) for g in blogs)
-    n_glob = n_full if global_seconds is None else min(n_full, int(round(global_seconds / dts[0])))
+    g_s = _global_window(global_seconds, space.rigid)
+    n_glob = n_full if g_s is None else min(n_full, int(round(g_s / dts[0])))
     common: dict[str, Any] = dict(
         mode=mode,
         substeps=substeps,

@@ -129,7 +129,9 @@ class ServoRig:
 
     mode: str = "closed_loop"
     friction: bool = True
-    global_seconds: float | None = 5.0
+    #: the global stage's window (s); None: whole logs; "auto": 5 s for a flexible link,
+    #: whole logs for a rigid arm (:func:`~flexarm.identification.time_domain.fit.fit`)
+    global_seconds: float | None | str = "auto"
     delay_search: str = "neighbours"
     polish_iter: int = 8
     sessions: Sequence[int] | None = None
