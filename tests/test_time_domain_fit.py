@@ -794,6 +794,7 @@ def test_multiple_shooting_on_the_servo_rig(logs):
 
     res = fit(logs[:2], **RIG, popsize=8, maxiter=25, global_seconds=4.0, segment=3.0)
     assert len(res.logs) == 4 and res.settings["segment"] == 3.0
+    assert res.settings["piece_owner"] == [0, 0, 1, 1]  # two pieces of each log
     for k, v in TRUE.items():
         assert res.params[k] == pytest.approx(v, rel=0.05), (k, res.params[k])
     sheet = presets.DataSheet(

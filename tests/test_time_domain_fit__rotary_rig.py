@@ -187,12 +187,15 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     )
     assert d["free"] == py["free"] == list(d["params"]) and set(d["std"]) == set(py["std"])
     for k, x in py["params"].items():
-        # the same seeded fit; a parameter the data do not determine (a breakaway excess
-        # at its bound, std 0, 9e-6 N*m) differed by 3e-7 of itself between the two
-        # processes: a millionth of its std, or of its value where the std is 0
+        # the same seeded fit in two processes, whose rounding can differ: each parameter
+        # agrees to the local stage's own resolution, ten times its step tolerance
+        # (xtol = 1e-6, relative in log-parameter space), 1e-5 of its value, or a
+        # millionth of its std where that is wider. A parameter the data do not determine
+        # (the breakaway excess near its bound, 9.3e-6 N*m, std 9.3e-9) differed by 3e-7
+        # and by 1.3e-6 of itself between the two processes in two clean-clone runs
         sd = py["std"].get(k)
         ok = sd is not None and np.isfinite(sd) and sd > 0
-        tol = 1e-6 * sd if ok else 1e-6 * abs(x)
+        tol = max(1e-5 * abs(x), 1e-6 * sd if ok else 0.0)
         assert d["params"][k] == pytest.approx(x, rel=1e-9, abs=tol), k
     assert set(d["fit_percent"]) == set(py["fit_percent"]) == set(RIGID_FIT)
     for log, fp in py["fit_percent"].items():

@@ -91,7 +91,7 @@ def fit(
 def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.fit import fit as rig_fit
     from flexarm.identification.time_domain.fit import predict as rig_predict
-    from flexarm.identification.time_domain.logs import as_rig_log, pieces
+    from flexarm.identification.time_domain.logs import as_rig_log
     from flexarm.identification.time_domain.options import ServoRig
     from flexarm.identification.time_domain.report import as_fit_result
 
@@ -117,7 +117,7 @@ def _servo_rig(preset: Preset, logs, options, progress):
     if rig.segment is not None:  # multiple shooting: the rig's result holds the pieces
         if progress:
             progress("predicting the whole logs with the parameters fitted on their pieces")
-        _, owner = pieces(logs, rig.segment)
+        owner = res.engine_result.settings["piece_owner"]  # the log of each piece
         res.segment_fit_percent = _pieces_fit_percent(res.engine_result, logs, owner)
         res.fit_percent = rig_predict(res.engine_result, logs)["fit_percent"]
         res.stages["segments"] = len(owner)

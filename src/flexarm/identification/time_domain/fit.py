@@ -705,6 +705,8 @@ def fit(
             filters=filt,
             priors={space.names[i]: list(v) for i, v in sorted(space.priors.items())},
             segment=segment,
+            # multiple shooting: the index of the log each piece was cut from
+            piece_owner=None if segment is None else [int(i) for i in owner],
         ),
         seconds=time.perf_counter() - t_start,
         objective=obj,
