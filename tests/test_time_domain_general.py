@@ -356,6 +356,7 @@ def test_quantised_fit_reached_by_continuation():
     assert abs(e["arm.hubs[0].inertia"]) < 0.10, e
 
 
+@pytest.mark.slow  # ~19 s: two fits
 def test_restart_goes_on_where_a_collapsed_trust_region_stopped():
     """``restarts``: a local stage that stopped early (here forced: ``xtol`` = 0.2, so trf
     ends as soon as its trust region shrinks to a fifth of |z|, far from the optimum) is
