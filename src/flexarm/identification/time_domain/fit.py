@@ -357,10 +357,12 @@ GLOBAL_SECONDS = 5.0
 
 def _global_window(global_seconds: float | None | str, rigid: bool) -> float | None:
     """The global stage's window (s; None: whole logs) for ``fit(global_seconds=...)``."""
-    if isinstance(global_seconds, str) and global_seconds == "auto":
+    if global_seconds is None:
+        return None
+    if global_seconds == "auto":
         return None if rigid else GLOBAL_SECONDS
-    if global_seconds is None or (isinstance(global_seconds, int | float) and global_seconds > 0):
-        return None if global_seconds is None else float(global_seconds)
+    if isinstance(global_seconds, int | float) and global_seconds > 0:
+        return float(global_seconds)
     raise FitInputError(
         f"fit: field 'global_seconds' = {global_seconds!r}: give seconds > 0, None "
         '(whole logs) or "auto" (5 s for a flexible link, whole logs for a rigid arm)'

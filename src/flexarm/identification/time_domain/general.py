@@ -1208,7 +1208,10 @@ def _local(
         key = v.tobytes()
         if key not in cache:
             z, off = split(v)
-            cache.clear()
+            # keep the last point whose Jacobian was simulated (a restart, and the result
+            # below, start from it) beside the newest point
+            for k in [k for k, c in cache.items() if "J" not in c]:
+                del cache[k]
             cache[key] = {"r": eng.residuals(z[None], off[None])[0]}
         return cache[key]
 
@@ -1242,6 +1245,8 @@ def _local(
             c["J"] = sparse.hstack([sparse.csr_matrix(Jp), Jo]).tocsr()
         else:
             c["J"] = Jp
+        for k in [k for k, e in cache.items() if "J" in e and e is not c]:
+            del cache[k]  # one Jacobian kept
         if progress is not None:
             progress(f"  cost {float(r0 @ r0):.6g}")
         return c["J"]
