@@ -342,6 +342,7 @@ def test_cli_fit_many_reports_a_failed_row_and_exits_1(tmp_path):
     assert r2.returncode == 2 and len(r2.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow  # ~19 s: two CLI designs; the 2-worker batch equality stays fast above
 def test_cli_design_on_a_scheduler_equals_in_process(client, tmp_path):
     """`flexarm design ... --scheduler ADDRESS` (the module's LocalCluster of 2 workers):
     the comparison's rows equal those of the in-process run, 1e-12 relative (the plants

@@ -328,6 +328,7 @@ def test_two_link_rig_model_recovered_from_segments_started_on_the_log():
     assert all(abs(e) < 0.05 for e in err.values()), err
 
 
+@pytest.mark.slow  # ~36 s: three fits of a quantised loop
 def test_quantised_fit_reached_by_continuation():
     """A coarse 9-bit encoder (12.3 mrad a count) in the loop: fitted with the converters'
     rounding (``quantise``), the local stage on the rounded loop alone stalls where it
