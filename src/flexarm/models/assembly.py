@@ -80,7 +80,15 @@ class SingleLinkBody(eqx.Module):
 
         J θ̈ = τ − C_t,   ż_b = A_b z_b + B_b (θ, θ̇),   (θ_t, C_t, w_tip) = C_b z_b + D_b (θ, θ̇)
 
-    (FRB eqs. 12–16; :mod:`flexarm.models.lumped_beam`). State (θm, θ̇m, z_b...)."""
+    (FRB eqs. 12–16; :mod:`flexarm.models.lumped_beam`). State (θm, θ̇m, z_b...).
+
+    ``pushed`` (static; off by default): a gear train that clamps the link more stiffly
+    while the motor pushes it stuck. Where the hub is at rest (θ̇m = 0 exactly: a stuck
+    Karnopp joint) and the drive torque |τ| exceeds ``push_threshold`` (N·m), the beam's
+    elastic terms (its position columns: z_b = (positions, velocities)) act
+    (1 + ``push_stiffening``) times, in ż_b and in the coupling torque C_t alike, so the
+    clamped link rings √(1 + s) times faster (:func:`flexarm.identification.time_domain.
+    guesses.pushed_ringing` estimates s and the threshold from the logs' stuck phases)."""
 
     J: Array | float
     Ab: Array
@@ -88,6 +96,9 @@ class SingleLinkBody(eqx.Module):
     Cb: Array
     Db: Array
     state_names: tuple[str, ...] = eqx.field(static=True)
+    push_stiffening: Array | float = 0.0
+    push_threshold: Array | float = float("inf")
+    pushed: bool = eqx.field(static=True, default=False)
 
     n_joints = 1
     signal_names = (
@@ -112,17 +123,32 @@ class SingleLinkBody(eqx.Module):
         """The holding torque τ_a = τ − C_t + b (N·m, shape (1,)) and what :meth:`derivative`
         reuses."""
         hub, zb, yb = self._beam(x)
-        tau_a = tau[0] - yb[1] + bias[0]
-        return tau_a[None], (hub, zb, yb, tau_a)
+        if not self.pushed:
+            tau_a = tau[0] - yb[1] + bias[0]
+            return tau_a[None], (hub, zb, yb, tau_a, None)
+        # the stiffened clamp (class docstring): the elastic part of C_t, s times more
+        nb = self.Ab.shape[0]
+        npos = nb // 2
+        ex = jnp.where(
+            (hub[1] == 0.0) & (jnp.abs(tau[0]) > self.push_threshold), self.push_stiffening, 0.0
+        )
+        ct = yb[1] + ex * (_mv(self.Cb[1:2, :npos], zb[:npos])[0] + self.Db[1, 0] * hub[0])
+        tau_a = tau[0] - ct + bias[0]
+        return tau_a[None], (hub, zb, yb, tau_a, ex)
 
     def derivative(self, x: Array, f: Array, aux) -> Array:
         """ẋ of the body under friction f (N·m, shape (1,))."""
-        hub, zb, yb, tau_a = aux
+        hub, zb, yb, tau_a, ex = aux
         zb_dot = _mv(self.Ab, zb) + _mv(self.Bb, hub)
+        if ex is not None:
+            nb = self.Ab.shape[0]
+            npos = nb // 2
+            elastic = _mv(self.Ab[npos:, :npos], zb[:npos]) + self.Bb[npos:, 0] * hub[0]
+            zb_dot = jnp.concatenate([zb_dot[:npos], zb_dot[npos:] + ex * elastic])
         return jnp.concatenate([jnp.stack([hub[1], (tau_a - f[0]) / self.J]), zb_dot])
 
     def signals(self, x: Array, aux) -> Array:
-        hub, zb, yb, tau_a = aux
+        hub, zb, yb, tau_a, _ = aux
         return jnp.stack([hub[0], hub[1], yb[0], yb[2], yb[1]])
 
     def stop(self, x: Array, stuck: Array, aux=None) -> Array:

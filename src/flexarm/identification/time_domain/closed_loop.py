@@ -89,7 +89,7 @@ def _quantise(x: Array, q: Array) -> Array:
     return jnp.where(q > 0, jnp.round(x / jnp.where(q > 0, q, 1.0)) * q, x)
 
 
-def single_link_arm(m: dict, const: dict) -> Arm:
+def single_link_arm(m: dict, const: dict, pushed: bool = False) -> Arm:
     """The rig as the one plant (:class:`flexarm.models.assembly.Arm`, one joint) for one
     parameter point: a hub of inertia J driving one pinned tip mode. In the beam block's
     absolute coordinates z_b = (y, ẏ), y = L θ + w the tip's position (m),
@@ -99,7 +99,9 @@ def single_link_arm(m: dict, const: dict) -> Arm:
 
     which is the module docstring's ẅ = −ω_c² w − 2ζω_c ẇ − L ω̇ with J ω̇ = τ_a − F,
     τ_a = k_u u − (k_ω + B) ω − C_t + τ_bias (FRB eq. 1; the beam block of
-    :mod:`flexarm.models.lumped_beam`); Karnopp friction (F_c, F_s) at the joint."""
+    :mod:`flexarm.models.lumped_beam`); Karnopp friction (F_c, F_s) at the joint. ``pushed``:
+    the stiffer clamp of a gear train pushed stuck (:class:`~flexarm.models.assembly.
+    SingleLinkBody`; ``const["push_s"]``, ``const["push_T"]`` N·m)."""
     L = const["length"]
     wc2, c2z, JlL = m["wc2"], m["c2z"], m["JlL"]
     z, o = jnp.zeros_like(wc2), jnp.ones_like(wc2)
@@ -116,6 +118,9 @@ def single_link_arm(m: dict, const: dict) -> Arm:
         Cb=Cb,
         Db=Db,
         state_names=("motor_angle", "motor_velocity", "beam_0", "beam_1"),
+        push_stiffening=const["push_s"] if pushed else 0.0,
+        push_threshold=const["push_T"] if pushed else float("inf"),
+        pushed=pushed,
     )
     fr = Friction(
         model="coulomb", coulomb=m["Fc"], static=m["Fs"], velocity_tolerance=const["vel_tol"]
@@ -154,6 +159,7 @@ def _scan(
     open_loop: bool,
     record: bool,
     filters: tuple[bool, bool] = (False, False),
+    pushed: bool = False,
 ):
     """The sampled-data loop over all samples; m: model numbers (L, P); data: per-log
     arrays (L, N) / (L, 4) / (L,); const: scalars (dt, L, k_u, k_om, q_th, q_d, limit, tol,
@@ -168,7 +174,7 @@ def _scan(
     shape = gain.shape
     tau = data["tau"][:, None]
     dth, ddl = m["dth"], m["dd"]
-    arm = single_link_arm(m, const)
+    arm = single_link_arm(m, const, pushed)
     filt_th, filt_d = filters
     index = ((_HUB,) if filt_th else ()) + ((_TIP,) if filt_d else ())
     plant = arm
@@ -253,7 +259,7 @@ def _scan(
     return carry[6], out  # the accumulators
 
 
-_STATIC = ("substeps", "n_buf", "comp_delay", "open_loop", "filters")
+_STATIC = ("substeps", "n_buf", "comp_delay", "open_loop", "filters", "pushed")
 
 
 @partial(jax.jit, static_argnames=_STATIC)
@@ -267,6 +273,7 @@ def closed_loop_cost(
     comp_delay: int = 0,
     open_loop: bool = False,
     filters: tuple[bool, bool] = (False, False),
+    pushed: bool = False,
 ):
     """Weighted sums of squared errors (L, P) of the measured hub angle and tip deflection,
     and a flag (L, P) for rollouts that diverged (|θ| or |w| beyond 1e3). ``filters``:
@@ -281,6 +288,7 @@ def closed_loop_cost(
         open_loop=open_loop,
         record=False,
         filters=filters,
+        pushed=pushed,
     )
     return acc
 
@@ -296,6 +304,7 @@ def closed_loop_run(
     comp_delay: int = 0,
     open_loop: bool = False,
     filters: tuple[bool, bool] = (False, False),
+    pushed: bool = False,
 ):
     """Trajectories, each (N, L, P): measured θ, measured d, command u, true θ, true w;
     and the accumulators of :func:`closed_loop_cost`."""
@@ -309,6 +318,7 @@ def closed_loop_run(
         open_loop=open_loop,
         record=True,
         filters=filters,
+        pushed=pushed,
     )
     return out, acc
 

@@ -462,7 +462,10 @@ def fit(
     frequency), which set
     the delay search ranges (± 6 samples around them, up to ``max_delay``, default
     150 ms), the bounds of ω_c, J and the tip gain, the gauge's sign and, unless
-    ``filters`` names the tip channel, its low-pass; False: the guesses of
+    ``filters`` names the tip channel, its low-pass, and the stiffer clamp of a gear train
+    pushed stuck where the stuck phases ring faster under a push
+    (:func:`~flexarm.identification.time_domain.guesses.pushed_ringing`: a rig constant,
+    not fitted; ``info["estimates"]["pushed_ringing"]``); False: the guesses of
     :mod:`flexarm.identification.time_domain.guesses` alone, every delay 0 ... ``max_delay``
     searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
@@ -574,6 +577,18 @@ def fit(
             "hub_delay": est["hub"].to_dict(),
             "link_frequency": est["frequency"],
         }
+        # a gear train that clamps the link more stiffly while the motor pushes it stuck
+        # (4/27: light stuck phases ring at 1.79 Hz, pushed ones at 1.91 Hz)
+        push = guesses.pushed_ringing(blogs, rig.k_u)
+        info["estimates"]["pushed_ringing"] = push
+        if push is not None:
+            rig = replace(rig, push_stiffening=push["stiffening"], push_threshold=push["threshold"])
+            say(
+                f"stuck phases ring {push['pushed_hz']:.3f} Hz where the motor pushes with "
+                f"> {push['threshold_command']:.3g} ({push['threshold']:.3g} N*m), "
+                f"{push['light_hz']:.3f} Hz below: the clamp stiffens x"
+                f"{1 + push['stiffening']:.3f} while pushed"
+            )
     else:  # bounds from the guesses alone, every delay 0 ... max_delay searched
         est = {}
         info["estimates"] = None
@@ -719,6 +734,7 @@ def fit(
         + _tip_offsets(blogs)
         + _delay_order(res, space)
         + [n for n in notes if n.startswith("no amplifier limit")]
+        + _pushed_note(rig)
     )
     if interrupted:
         from flexarm.errors import FitInterrupted
@@ -910,6 +926,21 @@ def _stages(
 #: a tip low-pass estimate is used as the channel's filter when its group delay is at
 #: least this many samples
 TIP_FILTER_MIN_SAMPLES = 3
+
+
+def _pushed_note(rig: Rig) -> list[str]:
+    """What the stiffer clamp of a gear train pushed stuck means for the result (a rig
+    constant estimated from the stuck phases, not a fitted parameter)."""
+    if not rig.push_stiffening > 0:
+        return []
+    return [
+        f"the stuck phases ring faster where the motor pushes the stuck gear train: the "
+        f"link's clamp is taken {1 + rig.push_stiffening:.3f} times stiffer while the hub "
+        f"is stuck and the drive torque exceeds {rig.push_threshold:.3g} N*m (estimated "
+        "from the logs, not fitted); this fit's predictions (predict, validate with this "
+        "result) use it, the fitted scenario (--scenario-out, scenario_from_fit) does not "
+        "carry it"
+    ]
 
 
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:

@@ -44,7 +44,7 @@ def controller_command(log: Log) -> np.ndarray:
 
 
 def stuck_intervals(
-    log: Log, min_stuck: float = 0.25, dither: bool = False
+    log: Log, min_stuck: float = 0.25, dither: bool = False, counts: int = 1
 ) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) where the measured hub angle stays constant (no change above
     q/4 from one sample to the next, q the encoder's or converter's step) or, with
@@ -55,7 +55,8 @@ def stuck_intervals(
     phases of 1-3 s cut into 0.26 s pieces, whose spectral peak was the drift's at 0.3 Hz
     instead of the link's 1.8 Hz). The link-frequency
     guess uses ``dither``; the friction guess and the rest reading keep the constant
-    ranges (with ``dither`` the synthetic open-loop acceptance fit moved, ζ −6 %)."""
+    ranges (with ``dither`` the synthetic open-loop acceptance fit moved, ζ −6 %).
+    ``counts``: with ``dither``, the range may span this many steps (max − min ≤ counts q)."""
     th = log.columns.get("motor_angle")
     if th is None:
         return []
@@ -70,7 +71,7 @@ def stuck_intervals(
             j = k + 1
             while j < n:
                 lo, hi = min(lo, th[j]), max(hi, th[j])
-                if hi - lo > 1.01 * q:
+                if hi - lo > (counts + 0.01) * q:
                     break
                 j += 1
             if j - k > n_min:
@@ -286,3 +287,74 @@ def initial_tip_at(log: Log, k: int, n: int = 21, cutoff: float = 0.0) -> tuple[
         return (float(c[2]), float(c[1]))
     c = np.linalg.lstsq(A, y, rcond=None)[0]
     return (float(c[0]), float(c[1]))
+
+
+#: shortest stuck phase (s) whose ringing frequency counts for :func:`pushed_ringing`
+PUSH_MIN_STUCK = 0.8
+#: smallest rise of the ringing frequency (pushed over light) that :func:`pushed_ringing`
+#: takes for a stiffening: a phase of 0.8 s holds about 4 periods at 1.8 Hz, whose
+#: mean period between zero crossings is good to about 1 %
+PUSH_MIN_RISE = 1.03
+
+
+def stuck_ringing(log: Log, min_stuck: float = PUSH_MIN_STUCK) -> list[tuple[float, float]]:
+    """(mean command, ringing frequency Hz) of each stuck phase of ``log`` at least
+    ``min_stuck`` s long (:func:`stuck_intervals` within three encoder steps: a hub pushed
+    against stuck gears creeps by a count or two while the link rings): the tip's mean
+    period between upward zero crossings of the 25-sample moving average of its detrended
+    deflection; phases with fewer than three such crossings are left out."""
+    d = log.columns.get("tip_deflection")
+    if d is None or np.ptp(d) == 0 or (log.controller is None and "voltage" not in log.columns):
+        return []
+    u = controller_command(log)
+    out = []
+    for i0, i1 in stuck_intervals(log, min_stuck, dither=True, counts=3):
+        x = np.convolve(scipy.signal.detrend(d[i0:i1]), np.ones(25) / 25, mode="valid")
+        up = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
+        if up.size >= 3:
+            out.append(
+                (float(np.mean(u[i0:i1])), float((up.size - 1) / ((up[-1] - up[0]) * log.dt)))
+            )
+    return out
+
+
+def pushed_ringing(logs: list[Log], k_u: float) -> dict | None:
+    """Where a stuck gear train rings faster while the motor pushes it: the stiffening
+    s = (f_pushed / f_light)² − 1 of the link's clamped stiffness and the push threshold
+    (N·m of motor torque k_u |u|) above which it holds, from the stuck phases' ringing
+    (:func:`stuck_ringing`). The phases sorted by |u| are split where every phase above
+    rings faster than every phase below and the medians differ by at least
+    :data:`PUSH_MIN_RISE`; the threshold is the middle of that gap in |u|. None where no
+    such split exists (no stuck phases, or their frequencies do not rise with the push).
+
+    Found on a rotary servo with heavy gear friction (4/27, rotary-rig README): light stuck
+    phases (|u| <= 0.14 V) ring at 1.78-1.80 Hz, phases where the controller pushes the
+    stuck gears with 0.32-0.36 V at 1.92-1.97 Hz; a hub clamped at one stiffness cannot do
+    this (a hub held by a spring rings lower than a clamped one, and the encoder shows no
+    hub motion in those phases)."""
+    phases = sorted(((abs(v), f) for g in logs for v, f in stuck_ringing(g)), key=lambda p: p[0])
+    best = None
+    for k in range(1, len(phases)):
+        lo, hi = phases[:k], phases[k:]
+        f_lo = float(np.median([f for _, f in lo]))
+        f_hi = float(np.median([f for _, f in hi]))
+        if (
+            min(f for _, f in hi) > max(f for _, f in lo)
+            and f_hi >= PUSH_MIN_RISE * f_lo
+            and hi[0][0] > lo[-1][0]
+        ):
+            gap = hi[0][0] - lo[-1][0]
+            if best is None or gap > best[0]:
+                best = (gap, k, f_lo, f_hi)
+    if best is None:
+        return None
+    _, k, f_lo, f_hi = best
+    u_mid = 0.5 * (phases[k - 1][0] + phases[k][0])
+    return {
+        "stiffening": float((f_hi / f_lo) ** 2 - 1.0),
+        "threshold": float(k_u * u_mid),
+        "threshold_command": float(u_mid),
+        "light_hz": f_lo,
+        "pushed_hz": f_hi,
+        "phases": [[round(float(v), 4), round(float(f), 4)] for v, f in phases],
+    }

@@ -56,6 +56,11 @@ class Rig:
     encoder_quantum: float
     tip_quantum: float = 0.0
     vel_tol: float = 1e-3
+    #: the stiffer clamp of a gear train pushed stuck (:func:`guesses.pushed_ringing`):
+    #: the link's elastic terms (1 + s) times while the hub is stuck and k_u |u| > threshold
+    #: (N·m); 0: none
+    push_stiffening: float = 0.0
+    push_threshold: float = float("inf")
 
 
 FILTER_CHANNELS = ("motor_angle", "tip_deflection")
@@ -181,6 +186,8 @@ class Objective:
                 q_d=rig.tip_quantum,
                 limit=rig.limit,
                 vel_tol=rig.vel_tol,
+                push_s=rig.push_stiffening,
+                push_T=rig.push_threshold if rig.push_stiffening > 0 else 0.0,
                 omega_th=2 * np.pi * self.filters["motor_angle"],
                 omega_d=2 * np.pi * self.filters["tip_deflection"],
             )
@@ -302,6 +309,7 @@ class Objective:
             comp_delay=self.comp_delay,
             open_loop=self.mode == "open_loop",
             filters=(self.filters["motor_angle"] > 0, self.filters["tip_deflection"] > 0),
+            pushed=self.rig.push_stiffening > 0,
         )
 
     # ------------------------------------------------------------------ evaluation
