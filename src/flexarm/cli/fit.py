@@ -135,7 +135,7 @@ def fit(
             "--seconds",
             help="seconds of each log the global stage fits (at least the log's length: "
             "whole logs, better on stick-slip runs with few moves) [default: 5 for a "
-            "flexible link, whole logs for a rigid arm]",
+            "flexible link whose hub-to-tip estimate is trusted, else whole logs]",
             show_default=False,
         ),
     ] = None,

@@ -131,8 +131,9 @@ class ServoRig:
 
     mode: str = "closed_loop"
     friction: bool = True
-    #: the global stage's window (s); None: whole logs; "auto": 5 s for a flexible link,
-    #: whole logs for a rigid arm (:func:`~flexarm.identification.time_domain.fit.fit`)
+    #: the global stage's window (s); None: whole logs; "auto": 5 s for a flexible link
+    #: whose hub → tip estimate is trusted, whole logs for a rigid arm or an untrusted one
+    #: (:func:`~flexarm.identification.time_domain.fit.fit`)
     global_seconds: float | None | str = "auto"
     delay_search: str = "neighbours"
     polish_iter: int = 8
