@@ -84,11 +84,12 @@ class SingleLinkBody(eqx.Module):
 
     ``pushed`` (static; off by default): a gear train that clamps the link more stiffly
     while the motor pushes it stuck. Where the hub is at rest (θ̇m = 0 exactly: a stuck
-    Karnopp joint) and the drive torque |τ| exceeds ``push_threshold`` (N·m), the beam's
-    elastic terms (its position columns: z_b = (positions, velocities)) act
-    (1 + ``push_stiffening``) times, in ż_b and in the coupling torque C_t alike, so the
-    clamped link rings √(1 + s) times faster (:func:`flexarm.identification.time_domain.
-    guesses.pushed_ringing` estimates s and the threshold from the logs' stuck phases)."""
+    Karnopp joint), the beam's elastic terms (its position columns: z_b = (positions,
+    velocities)) act (1 + s φ) times, in ż_b and in the coupling torque C_t alike, with
+    s = ``push_stiffening`` and φ = clip((|τ| − τ_0) / (τ_1 − τ_0), 0, 1) of the drive
+    torque |τ| between ``push_threshold`` τ_0 and ``push_full`` τ_1 (N·m; a step at τ_0
+    where τ_1 <= τ_0), so the clamped link rings √(1 + s φ) times faster (the servo rig's
+    ``guesses.pushed_ringing`` estimates s, τ_0 and τ_1 from the logs' stuck phases)."""
 
     J: Array | float
     Ab: Array
@@ -98,6 +99,7 @@ class SingleLinkBody(eqx.Module):
     state_names: tuple[str, ...] = eqx.field(static=True)
     push_stiffening: Array | float = 0.0
     push_threshold: Array | float = float("inf")
+    push_full: Array | float = float("inf")
     pushed: bool = eqx.field(static=True, default=False)
 
     n_joints = 1
@@ -129,9 +131,14 @@ class SingleLinkBody(eqx.Module):
         # the stiffened clamp (class docstring): the elastic part of C_t, s times more
         nb = self.Ab.shape[0]
         npos = nb // 2
-        ex = jnp.where(
-            (hub[1] == 0.0) & (jnp.abs(tau[0]) > self.push_threshold), self.push_stiffening, 0.0
+        width = self.push_full - self.push_threshold
+        over = jnp.abs(tau[0]) - self.push_threshold
+        frac = jnp.where(
+            width > 0,
+            jnp.clip(over / jnp.where(width > 0, width, 1.0), 0.0, 1.0),
+            (over > 0).astype(float),
         )
+        ex = jnp.where(hub[1] == 0.0, self.push_stiffening * frac, 0.0)
         ct = yb[1] + ex * (_mv(self.Cb[1:2, :npos], zb[:npos])[0] + self.Db[1, 0] * hub[0])
         tau_a = tau[0] - ct + bias[0]
         return tau_a[None], (hub, zb, yb, tau_a, ex)
@@ -372,6 +379,13 @@ def multi_link_arm(spec) -> tuple[Arm, Any]:
     from flexarm.models.multilink import build_multilink
 
     joints = spec.joint_specs
+    for i, j in enumerate(joints):
+        if j.friction.pushed_stiffening > 0:
+            raise ValueError(
+                f"joint {i + 1}: friction.pushed_stiffening = {j.friction.pushed_stiffening:g}"
+                ": the stiffer clamp of a pushed stuck gear train is modelled for a single "
+                "link only; set it to 0"
+            )
     nums = [joint_numbers(j) for j in joints]
     if any(n.added_inertia for n in nums):
         hubs = [

@@ -102,6 +102,14 @@ class SingleLinkModel:
             f"beam_{k}" for k in range(b.n_states)
         )
         names = body_names + (("friction_z",) if self.friction.n_states else ())
+        fr = self.arm.friction
+        pushed = fr.pushed_stiffening > 0
+        if pushed and b.xbar is None:
+            raise ValueError(
+                f"arm.friction.pushed_stiffening = {fr.pushed_stiffening:g}: the stiffer "
+                "clamp acts on a lumped beam's elastic terms; this beam "
+                f"({self.arm.beam.model}) has none: use a lumped beam or set it to 0"
+            )
         body = SingleLinkBody(
             J=self.J,
             Ab=jnp.asarray(b.A),
@@ -109,6 +117,12 @@ class SingleLinkModel:
             Cb=jnp.asarray(b.C),
             Db=jnp.asarray(b.D),
             state_names=body_names,
+            push_stiffening=float(fr.pushed_stiffening) if pushed else 0.0,
+            push_threshold=float(fr.push_threshold) if pushed else float("inf"),
+            push_full=float(fr.push_full if fr.push_full is not None else fr.push_threshold)
+            if pushed
+            else float("inf"),
+            pushed=pushed,
         )
 
         def vec(v) -> Any:  # plain numbers stay Python floats: constants in the compiled loop

@@ -61,6 +61,14 @@ class Friction(Spec):
     stuck while |applied torque| <= ``static``); ``stribeck`` (as coulomb, with the
     friction falling from ``static`` to ``coulomb`` as exp(-(ω/ω_s)²)); ``lugre``
     (bristle model with stiffness σ0 and damping σ1). Viscous friction is the motor's V.
+
+    ``pushed_stiffening`` s (coulomb/stribeck, single link with a lumped beam): a gear
+    train that clamps the link more stiffly while the motor pushes it stuck; while the
+    joint is stuck the beam's elastic terms act (1 + s φ) times, φ rising linearly from 0
+    to 1 as the drive torque goes from ``push_threshold`` to ``push_full`` (N·m; None: a
+    step at the threshold), so the clamped link rings √(1 + s φ) times faster
+    (:class:`flexarm.models.assembly.SingleLinkBody`; estimated by
+    :func:`flexarm.identification.time_domain.guesses.pushed_ringing`). 0: none.
     """
 
     model: Literal["none", "coulomb", "stribeck", "lugre"] = "coulomb"
@@ -71,6 +79,9 @@ class Friction(Spec):
     stiffness: Q("N*m/rad", gt=0) = 1e3
     damping: Q("N*m*s/rad", ge=0) = 1.0
     bias: Q("N*m") = 0.0
+    pushed_stiffening: Q("", ge=0) = 0.0
+    push_threshold: Q("N*m", ge=0) = 0.0
+    push_full: Q("N*m", ge=0) | None = None
 
     @property
     def breakaway(self) -> float:
@@ -82,6 +93,16 @@ class Friction(Spec):
             raise ValueError(
                 f"static (breakaway) friction {self.static:g} N*m is below the Coulomb "
                 f"level {self.coulomb:g} N*m; breakaway must be >= coulomb"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _pushed_needs_stick(self) -> Friction:
+        if self.pushed_stiffening > 0 and self.model not in ("coulomb", "stribeck"):
+            raise ValueError(
+                f"pushed_stiffening {self.pushed_stiffening:g} needs a joint that sticks: "
+                f"model {self.model!r} has no stuck state; use model 'coulomb' or "
+                "'stribeck', or set pushed_stiffening = 0"
             )
         return self
 

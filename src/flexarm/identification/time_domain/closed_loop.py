@@ -101,7 +101,7 @@ def single_link_arm(m: dict, const: dict, pushed: bool = False) -> Arm:
     τ_a = k_u u − (k_ω + B) ω − C_t + τ_bias (FRB eq. 1; the beam block of
     :mod:`flexarm.models.lumped_beam`); Karnopp friction (F_c, F_s) at the joint. ``pushed``:
     the stiffer clamp of a gear train pushed stuck (:class:`~flexarm.models.assembly.
-    SingleLinkBody`; ``const["push_s"]``, ``const["push_T"]`` N·m)."""
+    SingleLinkBody`; ``const["push_s"]``, ``const["push_T"]``, ``const["push_T1"]`` N·m)."""
     L = const["length"]
     wc2, c2z, JlL = m["wc2"], m["c2z"], m["JlL"]
     z, o = jnp.zeros_like(wc2), jnp.ones_like(wc2)
@@ -120,6 +120,7 @@ def single_link_arm(m: dict, const: dict, pushed: bool = False) -> Arm:
         state_names=("motor_angle", "motor_velocity", "beam_0", "beam_1"),
         push_stiffening=const["push_s"] if pushed else 0.0,
         push_threshold=const["push_T"] if pushed else float("inf"),
+        push_full=const["push_T1"] if pushed else float("inf"),
         pushed=pushed,
     )
     fr = Friction(

@@ -589,12 +589,17 @@ def fit(
         push = guesses.pushed_ringing(blogs, rig.k_u)
         info["estimates"]["pushed_ringing"] = push
         if push is not None:
-            rig = replace(rig, push_stiffening=push["stiffening"], push_threshold=push["threshold"])
+            rig = replace(
+                rig,
+                push_stiffening=push["stiffening"],
+                push_threshold=push["threshold"],
+                push_full=push["full"],
+            )
             say(
                 f"stuck phases ring {push['pushed_hz']:.3f} Hz where the motor pushes with "
-                f"> {push['threshold_command']:.3g} ({push['threshold']:.3g} N*m), "
-                f"{push['light_hz']:.3f} Hz below: the clamp stiffens x"
-                f"{1 + push['stiffening']:.3f} while pushed"
+                f">= {push['full_command']:.3g} ({push['full']:.3g} N*m), "
+                f"{push['light_hz']:.3f} Hz with <= {push['threshold_command']:.3g}: the "
+                f"clamp stiffens up to x{1 + push['stiffening']:.3f} while pushed"
             )
     else:  # bounds from the guesses alone, every delay 0 ... max_delay searched
         est = {}
@@ -946,11 +951,10 @@ def _pushed_note(rig: Rig) -> list[str]:
         return []
     return [
         f"the stuck phases ring faster where the motor pushes the stuck gear train: the "
-        f"link's clamp is taken {1 + rig.push_stiffening:.3f} times stiffer while the hub "
-        f"is stuck and the drive torque exceeds {rig.push_threshold:.3g} N*m (estimated "
-        "from the logs, not fitted); this fit's predictions (predict, validate with this "
-        "result) use it, the fitted scenario (--scenario-out, scenario_from_fit) does not "
-        "carry it"
+        f"link's clamp is taken up to {1 + rig.push_stiffening:.3f} times stiffer while the "
+        f"hub is stuck, rising from a drive torque of {rig.push_threshold:.3g} N*m to "
+        f"{rig.push_full:.3g} N*m (estimated from the logs, not fitted; the fitted scenario "
+        "carries it as arm.friction.pushed_stiffening, push_threshold and push_full)"
     ]
 
 

@@ -321,11 +321,14 @@ def stuck_ringing(log: Log, min_stuck: float = PUSH_MIN_STUCK) -> list[tuple[flo
 def pushed_ringing(logs: list[Log], k_u: float) -> dict | None:
     """Where a stuck gear train rings faster while the motor pushes it: the stiffening
     s = (f_pushed / f_light)² − 1 of the link's clamped stiffness and the push threshold
-    (N·m of motor torque k_u |u|) above which it holds, from the stuck phases' ringing
-    (:func:`stuck_ringing`). The phases sorted by |u| are split where every phase above
-    rings faster than every phase below and the medians differ by at least
-    :data:`PUSH_MIN_RISE`; the threshold is the middle of that gap in |u|. None where no
-    such split exists (no stuck phases, or their frequencies do not rise with the push).
+    (N·m of motor torque k_u |u|) where it starts and where it is full, from the stuck
+    phases' ringing (:func:`stuck_ringing`). The phases sorted by |u| are split where every
+    phase above rings faster than every phase below and the medians differ by at least
+    :data:`PUSH_MIN_RISE` (the widest such gap in |u|); the stiffening starts at the
+    largest light push and is full at the smallest pushed one, linear between (the logs say
+    nothing there; a step in the middle turned a model whose hub stopped 20 mrad short, its
+    controller pushing 0.22 V instead of 0.10 V, from tip 55 % to 11 %). None where no such
+    split exists (no stuck phases, or their frequencies do not rise with the push).
 
     Found on a rotary servo with heavy gear friction (4/27, rotary-rig README): light stuck
     phases (|u| <= 0.14 V) ring at 1.78-1.80 Hz, phases where the controller pushes the
@@ -349,11 +352,13 @@ def pushed_ringing(logs: list[Log], k_u: float) -> dict | None:
     if best is None:
         return None
     _, k, f_lo, f_hi = best
-    u_mid = 0.5 * (phases[k - 1][0] + phases[k][0])
+    u_lo, u_hi = phases[k - 1][0], phases[k][0]
     return {
         "stiffening": float((f_hi / f_lo) ** 2 - 1.0),
-        "threshold": float(k_u * u_mid),
-        "threshold_command": float(u_mid),
+        "threshold": float(k_u * u_lo),
+        "threshold_command": float(u_lo),
+        "full": float(k_u * u_hi),
+        "full_command": float(u_hi),
         "light_hz": f_lo,
         "pushed_hz": f_hi,
         "phases": [[round(float(v), 4), round(float(f), 4)] for v, f in phases],

@@ -57,10 +57,11 @@ class Rig:
     tip_quantum: float = 0.0
     vel_tol: float = 1e-3
     #: the stiffer clamp of a gear train pushed stuck (:func:`guesses.pushed_ringing`):
-    #: the link's elastic terms (1 + s) times while the hub is stuck and k_u |u| > threshold
-    #: (N·m); 0: none
+    #: the link's elastic terms (1 + s φ) times while the hub is stuck, φ rising from 0 to 1
+    #: as k_u |u| goes from the threshold to the full push (N·m); 0: none
     push_stiffening: float = 0.0
     push_threshold: float = float("inf")
+    push_full: float = float("inf")
 
 
 FILTER_CHANNELS = ("motor_angle", "tip_deflection")
@@ -188,6 +189,7 @@ class Objective:
                 vel_tol=rig.vel_tol,
                 push_s=rig.push_stiffening,
                 push_T=rig.push_threshold if rig.push_stiffening > 0 else 0.0,
+                push_T1=rig.push_full if rig.push_stiffening > 0 else 0.0,
                 omega_th=2 * np.pi * self.filters["motor_angle"],
                 omega_d=2 * np.pi * self.filters["tip_deflection"],
             )

@@ -565,6 +565,12 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
             "static": p["coulomb"] + p["static_excess"],
             "bias": p["bias"],
         }
+        if rig.push_stiffening > 0:  # estimated from the stuck phases (guesses.pushed_ringing)
+            fr.update(
+                pushed_stiffening=rig.push_stiffening,
+                push_threshold=rig.push_threshold,
+                push_full=rig.push_full,
+            )
     else:
         fr = {"model": "none"}
     log0 = res.logs[0]
@@ -630,6 +636,12 @@ def scenario_from_fit(res: FitResult) -> tuple[dict, dict]:
         "arm.friction.coulomb": "N*m, fitted Coulomb friction",
         "arm.friction.static": "N*m, fitted breakaway (static) friction",
         "arm.friction.bias": "N*m, fitted constant bias torque",
+        "arm.friction.pushed_stiffening": "the link's clamp (1 + this) times stiffer while the "
+        "hub is stuck and pushed (estimated from the stuck phases' ringing, not fitted)",
+        "arm.friction.push_threshold": "N*m of drive torque where the stiffening of a stuck "
+        "hub's clamp starts (the light stuck phases' largest push)",
+        "arm.friction.push_full": "N*m of drive torque where it is complete (the pushed stuck "
+        "phases' smallest push)",
         "arm.beam.damping_ratio": "fitted link damping ratio",
         "arm.beam.length": "m, link length (data sheet)",
         "sampling.period": "s",
