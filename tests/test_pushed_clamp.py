@@ -71,3 +71,23 @@ def test_clamped_link_rings_faster_while_pushed(u, pushed, ramp, factor):
     # RK4 at h = 0.5 ms on a 1.9 Hz oscillator: phase error ~ (w h)^4 / 120, far below
     # the 1e-4 that interpolated zero crossings over 9 periods resolve
     assert f == pytest.approx(WC / (2 * np.pi) * factor, rel=2e-4), (f, factor)
+
+
+def test_pushed_stiffening_refused_where_it_cannot_act():
+    """One line naming the field, the value and the fix: a joint that cannot stick (LuGre),
+    and a multi-link arm (the stiffening is modelled for a single link)."""
+    from pydantic import ValidationError
+
+    from flexarm.sim.build import prepare
+    from flexarm.specs import load_scenario
+    from flexarm.specs.arm import Friction
+
+    with pytest.raises(ValidationError, match="pushed_stiffening 0.1 needs a joint that sticks"):
+        Friction(model="lugre", coulomb=0.01, pushed_stiffening=0.1)
+    sc = load_scenario("quanser-two-link")
+    joints = list(sc.arm.joints)
+    fr = joints[0].friction.model_copy(update={"pushed_stiffening": 0.1, "model": "coulomb"})
+    joints[0] = joints[0].model_copy(update={"friction": fr})
+    sc = sc.model_copy(update={"arm": sc.arm.model_copy(update={"joints": joints})})
+    with pytest.raises(ValueError, match="joint 1: friction.pushed_stiffening = 0.1.*single"):
+        prepare(sc)

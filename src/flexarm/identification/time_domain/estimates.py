@@ -106,16 +106,25 @@ def _fitpct(y: np.ndarray, yh: np.ndarray) -> float:
     return float(100 * (1 - np.linalg.norm(y - yh) / den)) if den > 0 else float("nan")
 
 
-def _tip_response(p, th: np.ndarray, lag: int, dt: float) -> np.ndarray:
+def _tip_filter(p, dt: float):
+    """The model (1)'s ZOH discretisation (b, a) at the parameters p = (ω_c, ζ, g L, f_c)."""
     wc, z, gL, fc = p
     a = 2 * np.pi * fc
     num = [-gL * a, 0.0, 0.0]
     den = np.polymul([1.0, 2 * z * wc, wc * wc], [1.0, a])
-    # scipy's return types are inferred from its branches: (num, den, dt), and y alone here
+    # scipy's return types are inferred from its branches: (num, den, dt)
     tfd: Any = scipy.signal.cont2discrete((num, den), dt, method="zoh")
     b, aa, _ = tfd
+    return np.ravel(b), aa
+
+
+def _tip_response(p, th: np.ndarray, lag: int, dt: float, filt=None) -> np.ndarray:
+    """The model (1)'s tip response to the hub angle ``th`` delayed by ``lag`` samples;
+    ``filt``: :func:`_tip_filter` of p where it is already computed (one per residual
+    evaluation for all logs: the discretisation was 70 % of a log's response time)."""
+    b, aa = _tip_filter(p, dt) if filt is None else filt
     x = np.concatenate([np.full(lag, th[0]), th[: len(th) - lag]]) - th[0]
-    y: Any = scipy.signal.lfilter(np.ravel(b), aa, x)
+    y: Any = scipy.signal.lfilter(b, aa, x)
     return y
 
 
@@ -158,8 +167,12 @@ def tip_model(
     )
 
     def res(p, lag):
+        filt = _tip_filter(p, dt)
         return np.concatenate(
-            [(_tip_response(p, th, lag, dt) - d)[skip:] / np.std(d[skip:]) for th, d in pairs]
+            [
+                (_tip_response(p, th, lag, dt, filt) - d)[skip:] / np.std(d[skip:])
+                for th, d in pairs
+            ]
         )
 
     def solve(lag, p0):
