@@ -127,7 +127,7 @@ class SingleLinkBody(eqx.Module):
         hub, zb, yb = self._beam(x)
         if not self.pushed:
             tau_a = tau[0] - yb[1] + bias[0]
-            return tau_a[None], (hub, zb, yb, tau_a, None)
+            return tau_a[None], (hub, zb, yb, tau_a, None, yb[1])
         # the stiffened clamp (class docstring): the elastic part of C_t, s times more
         nb = self.Ab.shape[0]
         npos = nb // 2
@@ -141,11 +141,11 @@ class SingleLinkBody(eqx.Module):
         ex = jnp.where(hub[1] == 0.0, self.push_stiffening * frac, 0.0)
         ct = yb[1] + ex * (_mv(self.Cb[1:2, :npos], zb[:npos])[0] + self.Db[1, 0] * hub[0])
         tau_a = tau[0] - ct + bias[0]
-        return tau_a[None], (hub, zb, yb, tau_a, ex)
+        return tau_a[None], (hub, zb, yb, tau_a, ex, ct)
 
     def derivative(self, x: Array, f: Array, aux) -> Array:
         """ẋ of the body under friction f (N·m, shape (1,))."""
-        hub, zb, yb, tau_a, ex = aux
+        hub, zb, yb, tau_a, ex, _ = aux
         zb_dot = _mv(self.Ab, zb) + _mv(self.Bb, hub)
         if ex is not None:
             nb = self.Ab.shape[0]
@@ -155,8 +155,8 @@ class SingleLinkBody(eqx.Module):
         return jnp.concatenate([jnp.stack([hub[1], (tau_a - f[0]) / self.J]), zb_dot])
 
     def signals(self, x: Array, aux) -> Array:
-        hub, zb, yb, tau_a, _ = aux
-        return jnp.stack([hub[0], hub[1], yb[0], yb[2], yb[1]])
+        hub, zb, yb, tau_a, _, ct = aux  # C_t with the pushed clamp's stiffening, if any
+        return jnp.stack([hub[0], hub[1], yb[0], yb[2], ct])
 
     def stop(self, x: Array, stuck: Array, aux=None) -> Array:
         """Stop the stuck hub: θ̇m = 0; the beam's absolute coordinates are unchanged."""
