@@ -169,10 +169,7 @@ def tip_model(
     def res(p, lag):
         filt = _tip_filter(p, dt)
         return np.concatenate(
-            [
-                (_tip_response(p, th, lag, dt, filt) - d)[skip:] / np.std(d[skip:])
-                for th, d in pairs
-            ]
+            [(_tip_response(p, th, lag, dt, filt) - d)[skip:] / np.std(d[skip:]) for th, d in pairs]
         )
 
     def solve(lag, p0):
