@@ -38,6 +38,11 @@ lock:
 demo: $(STAMP)
 	$(BIN)/flexarm demo --out out/demo
 
+# The suite runs its files on TEST_WORKERS processes (pytest-xdist; --dist loadfile keeps
+# each file, and so its module-scoped shared fits, in one process). TEST_WORKERS=0: one
+# process, as plain `pytest` does.
+TEST_WORKERS ?= 2
+
 # The HTML report's browser test needs Chromium: in CI (CI=true, root, apt-get) it is
 # installed when missing; if that fails the test skips, saying why.
 test: $(STAMP)
@@ -46,7 +51,7 @@ test: $(STAMP)
 	    echo "installing chromium for the HTML report's browser test"; \
 	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) \
 	    >/dev/null 2>&1 || echo "chromium not installed: the browser test will skip"; fi
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 # The documentation site (mkdocs.yml: mkdocs-material, mkdocstrings, mkdocs-jupyter) into
 # site/, warnings as errors, the notebooks executed; docs/hooks.py generates the scenario
