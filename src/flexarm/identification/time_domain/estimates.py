@@ -41,8 +41,6 @@ delays.
 
 from __future__ import annotations
 
-import cmath
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -109,38 +107,9 @@ def _fitpct(y: np.ndarray, yh: np.ndarray) -> float:
 
 
 def _tip_filter(p, dt: float):
-    """The model (1)'s ZOH discretisation (b, a) at the parameters p = (ω_c, ζ, g L, f_c).
-
-    In closed form (the step-invariant transform): with H(s) = K s² / ((s − p₁)(s − p₂)
-    (s − p₃)), K = −g L a, a = 2π f_c, p₁,₂ = −ζω_c ± jω_c√(1 − ζ²), p₃ = −a, the step
-    response is Σ rᵢ e^{pᵢ t} with rᵢ = K pᵢ / Π_{j≠i}(pᵢ − pⱼ) (Σ rᵢ = 0), so
-
-        G(z) = (z − 1) Σᵢ rᵢ Π_{j≠i}(z − zⱼ) / Π(z − zᵢ),   zᵢ = e^{pᵢ dt},
-
-    a numerator (z − 1)(n₁ z + n₀). It equals ``scipy.signal.cont2discrete(...,
-    method="zoh")`` to 1e-11 (``tests/test_estimates.py``) in about 1/20 of its time (the
-    discretisation was 70 % of the hub → tip fit's time); near-repeated poles (ζ → 1,
-    a → ζω_c) take that general route."""
-    wc, z, gL, fc = (float(v) for v in p)
-    a = 2 * math.pi * fc
-    if (
-        z < 0.99
-        and wc > 0
-        and abs(complex(a - z * wc, wc * math.sqrt(1 - z * z))) > 1e-6 * (a + wc)
-    ):
-        K = -gL * a
-        p1 = complex(-z * wc, wc * math.sqrt(1 - z * z))
-        p3 = complex(-a, 0.0)
-        r1 = K * p1 / ((p1 - p1.conjugate()) * (p1 - p3))
-        r2 = r1.conjugate()
-        r3 = K * p3 / ((p3 - p1) * (p3 - p1.conjugate()))
-        z1 = cmath.exp(p1 * dt)
-        z2 = z1.conjugate()
-        z3 = math.exp(-a * dt)
-        n1 = -(r1 * (z2 + z3) + r2 * (z1 + z3) + r3 * (z1 + z2)).real
-        n0 = (r1 * z2 * z3 + r2 * z1 * z3 + r3 * z1 * z2).real
-        s, q = 2 * z1.real, abs(z1) ** 2
-        return np.array([0.0, n1, n0 - n1, -n0]), np.array([1.0, -(s + z3), q + s * z3, -q * z3])
+    """The model (1)'s ZOH discretisation (b, a) at the parameters p = (ω_c, ζ, g L, f_c)."""
+    wc, z, gL, fc = p
+    a = 2 * np.pi * fc
     num = [-gL * a, 0.0, 0.0]
     den = np.polymul([1.0, 2 * z * wc, wc * wc], [1.0, a])
     # scipy's return types are inferred from its branches: (num, den, dt)
