@@ -6,6 +6,7 @@ import pytest
 import scipy.signal
 
 from flexarm.identification.time_domain import estimates
+from flexarm.io.logs import Log
 
 
 def test_tip_model_recovers_a_simulated_link():
@@ -22,8 +23,6 @@ def test_tip_model_recovers_a_simulated_link():
     th = scipy.signal.lfilter([1 - np.exp(-dt * 15)], [1, -np.exp(-dt * 15)], steps)
     true = (11.3, 0.04, -0.7 * L, 8.0)
     d = estimates._tip_response(true, th, 40, dt)
-    from flexarm.io.logs import Log
-
     log = Log(path=None, time=t, signals={"motor_angle": th, "tip_deflection": d})
     m = estimates.tip_model([log], L, max_lag=45)
     assert m is not None
