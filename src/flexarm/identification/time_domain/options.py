@@ -76,13 +76,16 @@ class Local:
     """SciPy ``least_squares`` (trf): budget (``max_nfev``, restarts included), tolerances,
     finite-difference step in z (``ftol`` None: derived from the cost's scale, as in
     :class:`~flexarm.identification.time_domain.general.ScenarioFitOptions`), and at most
-    ``restarts`` restarts from the optimum with a fresh trust region."""
+    ``restarts`` restarts from the optimum with a fresh trust region; a batch of candidates
+    runs as chunks of at most ``max_batch`` on ``threads`` threads at once (None: the CPU
+    cores this process may use)."""
 
     max_nfev: int = 30
     ftol: float | None = 1e-6
     xtol: float = 1e-6
     fd_step: float = 1e-2
     max_batch: int = 64
+    threads: int | None = None
     restarts: int = 2
 
 
