@@ -80,11 +80,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import os
 import re
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -97,6 +95,7 @@ import numpy as np
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.metrics import fit_percent as _fitpct
+from flexarm.sim.batch import cpu_cores, run_chunks
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
@@ -760,19 +759,14 @@ class _Engine:
         None: the CPU cores this process may use)."""
         if self.options.threads is not None:
             return max(1, int(self.options.threads))
-        try:
-            return max(1, len(os.sched_getaffinity(0)))
-        except AttributeError:  # not Linux
-            return max(1, os.cpu_count() or 1)
+        return cpu_cores()
 
     def _simulate(self, Z: np.ndarray, scaled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(measured channels (P, S, M, C), the segments' log-derived plant start states
         before the offsets (P, S, n_x)) of the candidates ``Z`` with the start states
         offset by ``scaled`` (SI). The batch is cut into equal chunks (at most
         ``max_batch``, the last one padded, so that every chunk runs one compiled program),
-        run at once on :meth:`threads` threads: XLA runs one call on one core (measured on
-        the two-link split, 23 candidates: 4.2 s as one call, 1.8 s as two halves on two
-        threads of this project's 2-core machine)."""
+        run at once on :meth:`threads` threads (:func:`flexarm.sim.batch.run_chunks`)."""
         P = Z.shape[0]
         workers = self.threads()
         chunk = max(1, min(self.options.max_batch, -(-P // workers)))
@@ -801,11 +795,7 @@ class _Engine:
             meas, starts = _run_segments(loop, x0s, Oc, warm, shared, *common)
             return np.asarray(meas)[:k], np.asarray(starts)[:k]
 
-        if len(jobs) == 1:
-            outs = [go(jobs[0])]
-        else:
-            with ThreadPoolExecutor(min(workers, len(jobs))) as pool:
-                outs = list(pool.map(go, jobs))
+        outs = run_chunks(go, jobs, workers)
         return np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs])
 
     def _warm(self, loop):

@@ -1,0 +1,43 @@
+"""A batch of simulations (one per candidate parameter vector) run as equal chunks on the
+CPU's cores.
+
+Why. XLA on CPU runs one call of a batched simulation (a ``scan`` over samples, ``vmap``
+over candidates) on one core; JAX releases the GIL while it runs. Cutting the batch into
+equal chunks, each padded to one shape (so one compiled program serves them all), and
+running the chunks on threads uses every core. Measured on this project's 2-core AMD EPYC
+(the two-link split's finite-difference Jacobian, 23 candidates × 25 segments of 3 s): one
+call 4.2 s, two chunks of 12 on two threads 1.8 s; each candidate's results are the same
+to the last bit (the batch is elementwise over candidates).
+
+The fit engines use it: :class:`~flexarm.identification.time_domain.general` (the general
+engine's candidates) and :mod:`~flexarm.identification.time_domain.objective` (the servo
+rig engine's).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+__all__ = ["cpu_cores", "run_chunks"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def cpu_cores() -> int:
+    """The CPU cores this process may use (its affinity mask where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def run_chunks(fn: Callable[[T], R], chunks: Sequence[T], threads: int) -> list[R]:
+    """``[fn(c) for c in chunks]``, on at most ``threads`` threads at once (in order)."""
+    if threads <= 1 or len(chunks) <= 1:
+        return [fn(c) for c in chunks]
+    with ThreadPoolExecutor(min(threads, len(chunks))) as pool:
+        return list(pool.map(fn, chunks))
