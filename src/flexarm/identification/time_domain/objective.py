@@ -32,6 +32,7 @@ from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_c
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import ParamSpace
 from flexarm.io.logs import Log
+from flexarm.sim.batch import cpu_cores, run_chunks
 from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)
@@ -317,9 +318,13 @@ class Objective:
     # ------------------------------------------------------------------ evaluation
     def sse(self, U: np.ndarray, D: np.ndarray, offsets: np.ndarray | None = None):
         """Normalised squared errors (P, L, 2) and divergence flags (P, L), in chunks of
-        ``chunk`` parameter vectors (one compile for all chunks)."""
+        ``chunk`` parameter vectors shared over the CPU's cores (``chunk`` / cores each,
+        the last one padded: one compile for all chunks), run at once on as many threads
+        (:func:`flexarm.sim.batch.run_chunks`; each vector's result is the same to the last
+        bit as in one call)."""
         P = U.shape[0]
-        c = self.chunk
+        threads = cpu_cores()
+        c = max(1, self.chunk // threads)
         Pp = -(-P // c) * c
 
         def pad(a):
@@ -327,14 +332,18 @@ class Objective:
 
         U, D = pad(U), pad(D)
         offsets = None if offsets is None else pad(offsets)
-        out_e, out_b = [], []
-        for k in range(0, Pp, c):
-            m = self.model(
-                U[k : k + c], D[k : k + c], None if offsets is None else offsets[k : k + c]
-            )
-            et, ed, bad = closed_loop_cost(m, self.data, self.const, **self._kw())
-            out_e.append(np.stack([np.asarray(et), np.asarray(ed)], -1))
-            out_b.append(np.asarray(bad))
+        models = [
+            self.model(U[k : k + c], D[k : k + c], None if offsets is None else offsets[k : k + c])
+            for k in range(0, Pp, c)
+        ]
+        kw = self._kw()
+
+        def go(m):
+            et, ed, bad = closed_loop_cost(m, self.data, self.const, **kw)
+            return np.stack([np.asarray(et), np.asarray(ed)], -1), np.asarray(bad)
+
+        outs = run_chunks(go, models, threads)
+        out_e, out_b = [o[0] for o in outs], [o[1] for o in outs]
         e = np.concatenate(out_e, axis=1)[:, :P].transpose(1, 0, 2)
         b = np.concatenate(out_b, axis=1)[:, :P].T
         return e, b
