@@ -1,0 +1,53 @@
+"""flexarm.sim.batch: a batch's chunks on the CPU's cores, and the general fit engine's
+candidates through it (equal to one call to the last bit)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
+from flexarm.identification.time_domain.synthetic import scenario_log
+from flexarm.sim.batch import cpu_cores, run_chunks
+from flexarm.specs.paths import scenario_with
+from test_time_domain_general import staircase, two_mode_link
+
+
+def test_chunks_run_at_once_and_come_back_in_order():
+    """Two chunks that each wait for the other to have started finish only if they run at
+    the same time (one after the other, the first would time out)."""
+    started = [threading.Event(), threading.Event()]
+
+    def fn(i):
+        started[i].set()
+        ok = started[1 - i].wait(timeout=10.0)
+        return i, ok
+
+    assert run_chunks(fn, [0, 1], threads=2) == [(0, True), (1, True)]
+    assert run_chunks(lambda x: x * x, [3, 1, 2], threads=1) == [9, 1, 4]
+    assert cpu_cores() >= 1
+
+
+def test_fit_on_threads_equals_the_fit_in_one_call():
+    """The general fit's candidates (the finite-difference Jacobian's columns, with the
+    segments' start-state offsets) on two threads, as chunks padded to one shape, give the
+    fit of one call bit for bit: each candidate's simulation is elementwise in the batch."""
+    truth = two_mode_link()
+    t = np.arange(3001) * 0.002  # the scenario's 6 s
+    log = scenario_log(truth, {"reference": staircase(t, [0.0, 0.4, -0.1, 0.3], 1.5)}, seed=3)
+    free = ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous", "arm.hubs[0].inertia"]
+    template = scenario_with(truth, {"arm.hubs[0].inertia": 0.025})
+    res = {
+        threads: fit_scenario(
+            template,
+            [log],
+            free,
+            ScenarioFitOptions(segment=1.0, max_nfev=3, restarts=0, threads=threads),
+            predict=False,
+        )
+        for threads in (1, 2)
+    }
+    assert res[1].nfev == res[2].nfev == 3
+    assert res[1].params == res[2].params
+    assert res[1].cost == res[2].cost
