@@ -78,6 +78,7 @@ def test_client_for_defaults_and_bad_input(monkeypatch):
         assert fd.client_for(workers=2) is None
     env = fd.worker_environment()
     assert env["OMP_NUM_THREADS"] == "1" and "intra_op_parallelism_threads=1" in env["XLA_FLAGS"]
+    assert env["FLEXARM_THREADS"] == "1"  # flexarm's own batches: one thread a worker too
     assert fd.chunk_bounds(7, 3) == [(0, 3), (3, 6), (6, 7)]
     assert fd.chunk_seed(0, 1) != fd.chunk_seed(0, 2) == fd.chunk_seed(0, 2)
 

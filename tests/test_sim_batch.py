@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import pytest
 
 from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
 from flexarm.identification.time_domain.synthetic import scenario_log
@@ -27,6 +28,16 @@ def test_chunks_run_at_once_and_come_back_in_order():
     assert run_chunks(fn, [0, 1], threads=2) == [(0, True), (1, True)]
     assert run_chunks(lambda x: x * x, [3, 1, 2], threads=1) == [9, 1, 4]
     assert cpu_cores() >= 1
+
+
+def test_threads_capped_by_the_environment(monkeypatch):
+    """$FLEXARM_THREADS (a Dask worker's one thread) caps the threads; a bad value is
+    refused naming the variable, the value and the fix."""
+    monkeypatch.setenv("FLEXARM_THREADS", "1")
+    assert cpu_cores() == 1
+    monkeypatch.setenv("FLEXARM_THREADS", "two")
+    with pytest.raises(ValueError, match=r"FLEXARM_THREADS = 'two': give a whole number"):
+        cpu_cores()
 
 
 def test_fit_on_threads_equals_the_fit_in_one_call():

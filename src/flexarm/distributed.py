@@ -15,7 +15,7 @@ so a loop compiles once per machine and the other workers load it. The cache is 
 (:data:`CACHE_NOTE`). A local cluster's workers start with the
 environment of :func:`worker_environment`: one XLA / BLAS thread each
 (``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``,
-``OMP_NUM_THREADS=1`` ...), and on a GPU no preallocation
+``OMP_NUM_THREADS=1``, ``FLEXARM_THREADS=1`` ...), and on a GPU no preallocation
 (``XLA_PYTHON_CLIENT_PREALLOCATE=false``, ``XLA_PYTHON_CLIENT_MEM_FRACTION`` when set in
 :class:`ClusterOptions`); the nanny restarts a worker above its ``memory_limit``
 (``"auto"``: the machine's memory / workers).
@@ -91,6 +91,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from flexarm.errors import FlexarmError
+from flexarm.sim.batch import THREADS_ENV
 
 __all__ = [
     "client_for",
@@ -210,6 +211,7 @@ def worker_environment(options: ClusterOptions | None = None) -> dict[str, str]:
         "OMP_NUM_THREADS": threads,
         "OPENBLAS_NUM_THREADS": threads,
         "MKL_NUM_THREADS": threads,
+        THREADS_ENV: threads,  # flexarm's own batches (flexarm.sim.batch) too
         "XLA_PYTHON_CLIENT_PREALLOCATE": "false",
         "MPLBACKEND": "Agg",
     }

@@ -21,14 +21,28 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
-__all__ = ["cpu_cores", "run_chunks"]
+__all__ = ["THREADS_ENV", "cpu_cores", "run_chunks"]
 
 T = TypeVar("T")
 R = TypeVar("R")
 
+#: The environment variable that caps the threads a batch is shared over: a local Dask
+#: cluster's workers get 1 (:func:`flexarm.distributed.worker_environment`: one worker per
+#: core, one thread each); unset, every core this process may use.
+THREADS_ENV = "FLEXARM_THREADS"
+
 
 def cpu_cores() -> int:
-    """The CPU cores this process may use (its affinity mask where the OS has one)."""
+    """The threads a batch is shared over: ``$FLEXARM_THREADS`` where it is set, else the
+    CPU cores this process may use (its affinity mask where the OS has one)."""
+    given = os.environ.get(THREADS_ENV, "").strip()
+    if given:
+        if not given.isdigit() or int(given) < 1:
+            raise ValueError(
+                f"${THREADS_ENV} = {given!r}: give a whole number of threads >= 1, or unset "
+                "it to use every core"
+            )
+        return int(given)
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not Linux
