@@ -10,7 +10,7 @@ import pytest
 
 from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
 from flexarm.identification.time_domain.synthetic import scenario_log
-from flexarm.sim.batch import cpu_cores, run_chunks
+from flexarm.sim.batch import cpu_cores, one_blas_thread, run_chunks
 from flexarm.specs.paths import scenario_with
 from test_time_domain_general import staircase, two_mode_link
 
@@ -28,6 +28,39 @@ def test_chunks_run_at_once_and_come_back_in_order():
     assert run_chunks(fn, [0, 1], threads=2) == [(0, True), (1, True)]
     assert run_chunks(lambda x: x * x, [3, 1, 2], threads=1) == [9, 1, 4]
     assert cpu_cores() >= 1
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_blas_thread_inside_and_the_pool_restored_after():
+    """Inside a function under :func:`one_blas_thread` every BLAS library NumPy and SciPy
+    loaded runs one thread; on return, and on an exception, each gets its pool back; the
+    rotary rig's fit runs under it."""
+    import importlib
+
+    import scipy.linalg  # noqa: F401  (SciPy's own OpenBLAS, loaded)
+
+    rig = importlib.import_module("flexarm.identification.time_domain.fit")
+
+    before = _blas_threads()
+    assert before, "NumPy's BLAS is not visible to threadpoolctl"
+
+    @one_blas_thread
+    def inside(fail: bool) -> list[int]:
+        if fail:
+            raise RuntimeError("boom")
+        return _blas_threads()
+
+    assert inside(False) == [1] * len(before)
+    assert _blas_threads() == before
+    with pytest.raises(RuntimeError, match="boom"):
+        inside(True)
+    assert _blas_threads() == before
+    assert getattr(rig.fit, "__wrapped__", None) is not None  # the decorator's functools.wraps
 
 
 def test_threads_capped_by_the_environment(monkeypatch):

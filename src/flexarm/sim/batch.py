@@ -9,6 +9,16 @@ running the chunks on threads uses every core. Measured on this project's 2-core
 call 4.2 s, two chunks of 12 on two threads 1.8 s; each candidate's results are the same
 to the last bit (the batch is elementwise over candidates).
 
+The fits' own dense linear algebra (least squares' trust-region steps on Jacobians of a few
+columns, a 4 × 4 ``expm`` per discretised estimate) is the opposite case: NumPy / SciPy hand
+each small call to OpenBLAS, whose default pool of one thread per core costs more in
+hand-offs than it gains, and several times more when the cores are busy. Measured on the
+same machine (the rotary rig's hard session of 4/27, two 10 s logs, JIT compilation
+included): the hub → tip estimate 10.9 s on OpenBLAS's two threads, 3.2 s on one; the whole
+fit 36.6 s and 26.0 s. :func:`one_blas_thread` runs a fit on one BLAS thread
+(``threadpoolctl``); it also makes the fit's last bits independent of the machine's core
+count (a threaded BLAS sums in an order that depends on its threads).
+
 The fit engines use it: :class:`~flexarm.identification.time_domain.general` (the general
 engine's candidates) and :mod:`~flexarm.identification.time_domain.objective` (the servo
 rig engine's).
@@ -16,15 +26,19 @@ rig engine's).
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import ParamSpec, TypeVar
 
-__all__ = ["THREADS_ENV", "cpu_cores", "run_chunks"]
+from threadpoolctl import threadpool_limits
+
+__all__ = ["THREADS_ENV", "cpu_cores", "one_blas_thread", "run_chunks"]
 
 T = TypeVar("T")
 R = TypeVar("R")
+P = ParamSpec("P")
 
 #: The environment variable that caps the threads a batch is shared over: a local Dask
 #: cluster's workers get 1 (:func:`flexarm.distributed.worker_environment`: one worker per
@@ -55,3 +69,17 @@ def run_chunks(fn: Callable[[T], R], chunks: Sequence[T], threads: int) -> list[
         return [fn(c) for c in chunks]
     with ThreadPoolExecutor(min(threads, len(chunks))) as pool:
         return list(pool.map(fn, chunks))
+
+
+def one_blas_thread(fn: Callable[P, R]) -> Callable[P, R]:
+    """``fn`` run with NumPy's and SciPy's BLAS on one thread (module docstring), the
+    limit lifted on return. OpenBLAS lets only one Python thread set its pool at a time;
+    called from another thread while one holds the limit, ``fn`` runs on the pool as it
+    is (the same results to round-off)."""
+
+    @functools.wraps(fn)
+    def inner(*args: P.args, **kwargs: P.kwargs) -> R:
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return inner

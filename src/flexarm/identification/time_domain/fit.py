@@ -63,6 +63,7 @@ from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamS
 from flexarm.identification.time_domain.report import FitResult
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
 from flexarm.io.logs import log_keys
+from flexarm.sim.batch import one_blas_thread
 
 
 def detect_quantum(x: np.ndarray) -> float:
@@ -372,6 +373,7 @@ def _global_window(global_seconds: float | None | str, whole: bool) -> float | N
     )
 
 
+@one_blas_thread
 def fit(
     logs: Sequence[Any],
     *,
