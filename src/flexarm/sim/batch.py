@@ -16,8 +16,8 @@ hand-offs than it gains, and several times more when the cores are busy. Measure
 same machine (the rotary rig's hard session of 4/27, two 10 s logs, JIT compilation
 included): the hub → tip estimate 10.9 s on OpenBLAS's two threads, 3.2 s on one; the whole
 fit 36.6 s and 26.0 s. :func:`one_blas_thread` runs a fit on one BLAS thread
-(``threadpoolctl``); it also makes the fit's last bits independent of the machine's core
-count (a threaded BLAS sums in an order that depends on its threads).
+(``threadpoolctl``); it also makes the fit's last bits independent of OpenBLAS's thread count,
+one per core by default (a threaded BLAS sums in an order that depends on its threads).
 
 The fit engines use it: :class:`~flexarm.identification.time_domain.general` (the general
 engine's candidates) and :mod:`~flexarm.identification.time_domain.objective` (the servo
