@@ -42,7 +42,7 @@ def test_one_blas_thread_inside_and_the_pool_restored_after():
     rotary rig's fit runs under it."""
     import importlib
 
-    import scipy.linalg  # noqa: F401  (SciPy's own OpenBLAS, loaded)
+    import scipy.linalg  # noqa: F401 - loads SciPy's own OpenBLAS
 
     rig = importlib.import_module("flexarm.identification.time_domain.fit")
 
