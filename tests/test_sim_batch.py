@@ -39,7 +39,7 @@ def _blas_threads() -> list[int]:
 def test_one_blas_thread_inside_and_the_pool_restored_after():
     """Inside a function under :func:`one_blas_thread` every BLAS library NumPy and SciPy
     loaded runs one thread; on return, and on an exception, each gets its pool back; the
-    rotary rig's fit runs under it."""
+    rotary rig's estimates stage runs under it."""
     import importlib
 
     import scipy.linalg  # noqa: F401 - loads SciPy's own OpenBLAS
@@ -60,7 +60,8 @@ def test_one_blas_thread_inside_and_the_pool_restored_after():
     with pytest.raises(RuntimeError, match="boom"):
         inside(True)
     assert _blas_threads() == before
-    assert getattr(rig.fit, "__wrapped__", None) is not None  # the decorator's functools.wraps
+    # the servo rig's estimates stage runs under it (the decorator's functools.wraps)
+    assert getattr(rig._estimates, "__wrapped__", None) is not None
 
 
 def test_threads_capped_by_the_environment(monkeypatch):

@@ -373,7 +373,6 @@ def _global_window(global_seconds: float | None | str, whole: bool) -> float | N
     )
 
 
-@one_blas_thread
 def fit(
     logs: Sequence[Any],
     *,
@@ -960,6 +959,7 @@ def _pushed_note(rig: Rig) -> list[str]:
     ]
 
 
+@one_blas_thread
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
     """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model
     with the tip channel's lag relative to the hub, the hub delay, the link frequency), and the
