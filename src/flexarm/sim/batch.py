@@ -7,7 +7,9 @@ equal chunks, each padded to one shape (so one compiled program serves them all)
 running the chunks on threads uses every core. Measured on this project's 2-core AMD EPYC
 (the two-link split's finite-difference Jacobian, 23 candidates × 25 segments of 3 s): one
 call 4.2 s, two chunks of 12 on two threads 1.8 s; each candidate's results are the same
-to the last bit (the batch is elementwise over candidates).
+to the last bit (the batch is elementwise over candidates). The fit engines use it:
+:mod:`~flexarm.identification.time_domain.general` (the general engine's candidates) and
+:mod:`~flexarm.identification.time_domain.objective` (the servo rig engine's).
 
 The fits' own small dense linear algebra is the opposite case: NumPy / SciPy hand each
 call to OpenBLAS, whose default pool of one thread per core costs more in hand-offs than
@@ -70,9 +72,10 @@ def run_chunks(fn: Callable[[T], R], chunks: Sequence[T], threads: int) -> list[
 
 def one_blas_thread(fn: Callable[P, R]) -> Callable[P, R]:
     """``fn`` run with NumPy's and SciPy's BLAS on one thread (module docstring), the
-    limit lifted on return. OpenBLAS lets only one Python thread set its pool at a time;
-    called from another thread while one holds the limit, ``fn`` runs on the pool as it
-    is (the same results to round-off)."""
+    limit lifted on return (and on an exception). OpenBLAS lets only one Python thread set
+    its pool at a time: called from another thread while one holds the limit, ``fn`` runs
+    on the pool as it is, so its results may differ in round-off (enough to move a
+    stick-slip fit's path, module docstring)."""
 
     @functools.wraps(fn)
     def inner(*args: P.args, **kwargs: P.kwargs) -> R:
