@@ -91,6 +91,7 @@ CASES = [
     (LOG, ["fit", S, "{d}/bad.csv"]),
     (OPTION, ["fit", S, "{d}/bad.csv", "--prior", "arm.motor.inertia"]),
     (PARSER, ["fit", "{d}/bad.csv", "--gear-ratio", "seventy"]),
+    (PARSER, ["fit", "{d}/bad.csv", "--global-starts", "0"]),
     (MISSING, ["validate", R, "{d}/nope.csv"]),
     (LOG, ["validate", R, "{d}/bad.csv"]),
     (TOML, ["validate", "{d}/bad.toml", "{d}/bad.csv"]),

@@ -244,6 +244,27 @@ def test_not_converged_is_said(logs):
     assert res.fit_percent[logs[0].name]["motor_angle"] is not None
 
 
+def test_global_starts_keep_the_lowest_cost(logs):
+    """``global_starts=2``: the global stage, delay starts, local stage and polish from
+    seeds 0 and 1, the lower full-log cost wins. Each start's cost equals that of a fit
+    run alone with its seed (an independent run of the same computation: round-off only,
+    rel. 1e-9), and the result is the winner's."""
+    kw = {**RIG, "popsize": 4, "maxiter": 3, "local_nfev": 4, "global_seconds": 2.0}
+    both = fit(logs[:1], global_starts=2, **kw)
+    alone = [fit(logs[:1], seed=s, **kw) for s in (0, 1)]
+    starts = both.stages["guesses"]["global_starts"]
+    assert [s["seed"] for s in starts] == [0, 1]
+    for s, one in zip(starts, alone, strict=True):
+        assert s["cost"] == pytest.approx(one.stages["local"]["cost"], rel=1e-9)
+        assert s["delays"] == [one.delays["motor_angle"], one.delays["tip_deflection"]]
+    win = min(alone, key=lambda r: r.stages["local"]["cost"])
+    assert both.stages["local"]["cost"] == pytest.approx(win.stages["local"]["cost"], rel=1e-9)
+    assert both.params["hub_inertia"] == pytest.approx(win.params["hub_inertia"], rel=1e-9)
+    assert both.settings["global_starts"] == 2
+    with pytest.raises(FitInputError, match="global_starts"):
+        fit(logs[:1], global_starts=0, **kw)
+
+
 def test_controller_declarations(logs):
     c = parse_controller("state_feedback K1=6 K2=-3 K3=0.213 K4=0")
     assert (c.k1, c.k2, c.k3, c.k4, c.rate) == (6, -3, 0.213, 0, "backward")

@@ -176,6 +176,16 @@ def fit(
     polish_iter: Annotated[
         int, typer.Option(help="generations of the friction polish (20 with --delay-search both)")
     ] = 8,
+    global_starts: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="run the global stage from this many seeds (--seed, --seed + 1, ...) and "
+            "keep the lowest cost, at that many times the time: where the fit warns that "
+            "nothing ties the sensor delays down",
+        ),
+    ] = 1,
+    seed: Annotated[int, typer.Option(help="seed of the global stage")] = 0,
     overwrite: o.Overwrite = False,
     log_format: o.LogFormats = None,
     use_regressed_law: o.UseRegressedLaw = False,
@@ -296,6 +306,8 @@ def fit(
         global_seconds="auto" if seconds is None else seconds,
         delay_search=delay_search,
         polish_iter=polish_iter,
+        global_starts=global_starts,
+        seed=seed,
         sessions=parsing.int_list(sessions, "--sessions"),
         tip_sign=tip_sign,
         encoder_counts=encoder_counts,

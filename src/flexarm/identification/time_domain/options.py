@@ -146,6 +146,11 @@ class ServoRig:
     filters: Mapping[str, float] | None = None
     controller: Any = None
     seed: int = 0
+    #: the global stage (and the delay starts, local stage, polish after it) from this
+    #: many seeds, seed, seed + 1, ...: the lowest cost wins, at that many times the time
+    #: (where no estimate ties the sensor delays down, one start's outcome depends on its
+    #: seed: :func:`~flexarm.identification.time_domain.fit.fit`)
+    global_starts: int = 1
     #: samples between a sample and its command; None: where the declared law best
     #: explains the logged command (``flexarm fit --computation-delay``)
     computation_delay: int | None = None
@@ -171,6 +176,7 @@ class ServoRig:
             filters=dict(self.filters) if self.filters else None,
             controller=self.controller,
             seed=self.seed,
+            global_starts=self.global_starts,
             priors=dict(self.priors) if self.priors else None,
             segment=self.segment,
         )
