@@ -769,7 +769,7 @@ def fit(
         + _delay_order(res, space)
         + [n for n in notes if n.startswith("no amplifier limit")]
         + _pushed_note(rig)
-        + _seed_note(est, space, global_starts)
+        + (_seed_note(est.get("tip"), space) if untied and global_starts == 1 else [])
     )
     if interrupted:
         from flexarm.errors import FitInterrupted
@@ -859,20 +859,15 @@ def _stages(
     best,
     say,
     *,
-    popsize,
-    maxiter,
     seed,
     global_starts,
-    local_nfev,
-    delay_nfev,
-    polish_iter,
-    friction,
-    delay_search,
     info,
+    **search: Any,
 ):
     """``global_starts`` runs of :func:`_one_start` (the global stage from seeds ``seed``,
-    ``seed + 1``, ...; each with its tip-delay starts, local stage and friction polish); the
-    lowest full-log cost wins. ``best`` is kept current with the best point so far. More
+    ``seed + 1``, ...; each with its tip-delay starts, local stage and friction polish;
+    ``search``: :func:`_one_start`'s other settings, passed on as they are); the lowest
+    full-log cost wins. ``best`` is kept current with the best point so far. More
     than one start: ``info["global_starts"]`` lists each start's seed, global cost, delays
     and final cost, and a warning says when another start's delays differ by more than
     :data:`DELAY_HALF_WIDTH` samples at a cost within :data:`DELAY_FLAT` of the winner's."""
@@ -883,54 +878,38 @@ def _stages(
             say(f"global start {k + 1} of {global_starts} (seed {seed + k})")
         inf: dict[str, Any] = {}
         glob, loc, D, warnings = _one_start(
-            obj_g,
-            obj,
-            blogs,
-            space,
-            u0,
-            d0,
-            n_full,
-            best,
-            say,
-            popsize=popsize,
-            maxiter=maxiter,
-            seed=seed + k,
-            local_nfev=local_nfev,
-            delay_nfev=delay_nfev,
-            polish_iter=polish_iter,
-            friction=friction,
-            delay_search=delay_search,
-            info=inf,
+            obj_g, obj, blogs, space, u0, d0, n_full, best, say, seed=seed + k, info=inf, **search
         )
-        runs.append((loc["cost"], k, glob, loc, D, warnings, inf))
-    order = sorted(runs, key=lambda r: (r[0], r[1]))
-    _, k, glob, loc, D, warnings, inf = order[0]
-    info.update(inf)
+        runs.append(dict(k=k, glob=glob, loc=loc, D=D, warnings=warnings, info=inf))
+    order = sorted(runs, key=lambda r: (r["loc"]["cost"], r["k"]))
+    win = order[0]
+    glob, loc, D, warnings = win["glob"], win["loc"], win["D"], win["warnings"]
+    info.update(win["info"])
     if global_starts > 1:
         info["global_starts"] = [
             {
-                "seed": seed + j,
-                "global_cost": float(g.cost),
-                "delays": [int(d) for d in Dj[:2]],
-                "cost": float(c),
+                "seed": seed + r["k"],
+                "global_cost": float(r["glob"].cost),
+                "delays": [int(d) for d in r["D"][:2]],
+                "cost": float(r["loc"]["cost"]),
             }
-            for c, j, g, _, Dj, _, _ in runs
+            for r in runs
         ]
-        say(f"global start {k + 1} (seed {seed + k}) wins: {info['global_starts']}")
+        say(f"global start {win['k'] + 1} (seed {seed + win['k']}) wins: {info['global_starts']}")
         far = [
             r
             for r in order[1:]
-            if np.max(np.abs(np.asarray(r[4][:2]) - D[:2])) > DELAY_HALF_WIDTH
-            and r[0] < (1 + DELAY_FLAT) * loc["cost"]
+            if np.max(np.abs(np.asarray(r["D"][:2]) - D[:2])) > DELAY_HALF_WIDTH
+            and r["loc"]["cost"] < (1 + DELAY_FLAT) * loc["cost"]
         ]
         if far:
-            c, j, _, _, Dj, _, _ = far[0]
+            r = far[0]
             warnings = warnings + [
-                f"the sensor delays are poorly determined: global start {j + 1} (seed "
-                f"{seed + j}) ended at delays {int(Dj[0])} / {int(Dj[1])} samples (hub / tip) "
-                f"against {int(D[0])} / {int(D[1])}, costing only "
-                f"{100 * (c / loc['cost'] - 1):.1f} % more; give angle_delay= / tip_delay= "
-                "if they are known, or record longer logs"
+                f"the sensor delays are poorly determined: global start {r['k'] + 1} (seed "
+                f"{seed + r['k']}) ended at delays {int(r['D'][0])} / {int(r['D'][1])} "
+                f"samples (hub / tip) against {int(D[0])} / {int(D[1])}, costing only "
+                f"{100 * (r['loc']['cost'] / loc['cost'] - 1):.1f} % more; give "
+                "angle_delay= / tip_delay= if they are known, or record longer logs"
             ]
     return glob, loc, D, warnings, obj
 
@@ -1049,13 +1028,11 @@ def _one_start(
 TIP_FILTER_MIN_SAMPLES = 3
 
 
-def _seed_note(est: dict, space: ParamSpace, global_starts: int) -> list[str]:
-    """A warning where one global start chose the sensor delays with nothing to tie them
-    down: a flexible link whose hub → tip model is not trusted, both delays free."""
-    tip = est.get("tip") if est else None
-    if global_starts > 1 or space.rigid or not est or (tip is not None and tip.trusted):
-        return []
-    if space.fixed_delays[0] is not None and space.fixed_delays[1] is not None:
+def _seed_note(tip, space: ParamSpace) -> list[str]:
+    """A warning for a one-start fit whose estimates left the sensor delays untied (a
+    flexible link whose hub → tip model ``tip`` is not trusted, or none; the caller's
+    ``untied``): with a delay free, the global stage's seed chose it."""
+    if space.rigid or all(d is not None for d in space.fixed_delays):
         return []
     why = (
         f"the hub -> tip model explains {tip.fit_percent:.0f} % of the tip"
