@@ -263,6 +263,59 @@ def test_global_starts_keep_the_lowest_cost(logs):
     assert both.settings["global_starts"] == 2
     with pytest.raises(FitInputError, match="global_starts"):
         fit(logs[:1], global_starts=0, **kw)
+    with pytest.raises(FitInputError, match="field 'tip_after_hub' = 'yes'"):
+        fit(logs[:1], tip_after_hub="yes", **kw)
+
+
+class _DelayBowl:
+    """A stand-in objective for the global stage: one continuous coordinate and both
+    sensor delays free over 0 ... 20 samples, the cost a bowl (u − 0.3)² + ((h − 12)² +
+    (t − 5)²) / 100 whose minimum (hub 12, tip 5) has the tip before the hub; it records
+    every delay pair it is asked about."""
+
+    def __init__(self, ranges=((0, 20), (0, 20))):
+        self.space = type("S", (), {"n_cont": 1, "discrete_bounds": lambda _s: [*ranges, (1, 1)]})()
+        self.seen: set[tuple[int, int]] = set()
+
+    def cost(self, U, D, offsets=None):
+        U, D = np.atleast_2d(U), np.atleast_2d(D)
+        self.seen.update((int(h), int(t)) for h, t in D[:, :2])
+        return (U[:, 0] - 0.3) ** 2 + ((D[:, 0] - 12.0) ** 2 + (D[:, 1] - 5.0) ** 2) / 100
+
+
+def test_global_stage_searches_the_tip_delay_after_the_hub():
+    """``tip_after_hub``: with both delays free over the same range, the global stage draws
+    only tip >= hub (the tip as the hub plus a lag >= 0) and ends on that constraint's
+    edge nearest the bowl's minimum, hub = tip = 8 or 9 (the constrained minimum of
+    (h − 12)² + (t − 5)² is at h = t = 8.5); without it, at the minimum itself (12, 5).
+    Where a range already puts the tip after the hub (a trusted hub → tip lag), nothing
+    changes: the same population, seed and result as without the option."""
+    from flexarm.identification.time_domain.global_stage import (
+        differential_evolution_stage,
+        ordered_delays,
+    )
+
+    kw = dict(popsize=10, maxiter=60, seed=0)
+    free = _DelayBowl()
+    r = differential_evolution_stage(free, np.array([0.5]), np.array([0, 0, 1]), **kw)
+    assert (int(r.D[0]), int(r.D[1])) == (12, 5) and any(t < h for h, t in free.seen)
+    ordered = _DelayBowl()
+    r = differential_evolution_stage(
+        ordered, np.array([0.5]), np.array([0, 0, 1]), tip_after_hub=True, **kw
+    )
+    assert all(t >= h for h, t in ordered.seen), sorted(ordered.seen)
+    assert int(r.D[0]) == int(r.D[1]) and int(r.D[0]) in (8, 9), r.D
+    assert r.U[0] == pytest.approx(0.3, abs=0.05)
+    # a range the estimates placed after the hub's: searched as it is
+    later = ((6, 18), (10, 20))
+    assert ordered_delays(((0, 20), (0, 20))) and not ordered_delays(later)
+    a = differential_evolution_stage(
+        _DelayBowl(later), np.array([0.5]), np.array([12, 15, 1]), **kw
+    )
+    b = differential_evolution_stage(
+        _DelayBowl(later), np.array([0.5]), np.array([12, 15, 1]), tip_after_hub=True, **kw
+    )
+    assert np.array_equal(a.D, b.D) and a.cost == b.cost
 
 
 def test_controller_declarations(logs):

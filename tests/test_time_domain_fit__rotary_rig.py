@@ -286,36 +286,35 @@ def test_hard_session_stuck_phases():
 def test_hard_session_training_fit(hard_session):
     """Issue #23 item 3: the 4/27 session (heavy gear friction, a bias torque) fitted on its
     two runs together, whole logs, default options, the data sheet only. Measured on a
-    2-core EPYC: hub 83.1 / 78.8 %, tip 64.5 / 67.7 %, delays 89 / 65 samples; with one
-    clamp stiffness (before the pushed-clamp stiffening) 85.5 / 88.3 %, 58.2 / 48.5 %.
-    Before the stuck-phase detection tolerated the encoder's one-count dither, the
-    link-frequency bounds came from the drift (0.3 Hz) and the fit ended at tip 2-3 % with
-    a link frequency of 2.5 rad/s and a tip delay of 134 samples. Thresholds: the issue's
-    hub 80 % (an independent gray-box fit reached 83-84 %) and tip 55 % (61 %), except the
-    K1K2 run's hub: 78 %. The issue asks 80 there; the fit's delays are poorly determined
-    (the cost is flat between hub delays 72 and 89) and its K1K2 hub over four other
-    global-stage seeds and options was 81.9-85.9 % (seeds 1, 2; a 5 s global window; the
-    delay profile), 78.8 % with the default seed here: the floor is the lowest seen, less
-    a point for another machine's rounding. The fitted clamped frequency lies where the
-    stuck phases ring (1.7-2.0 Hz, measured above). Nothing ties the delays down (the hub
-    -> tip model 29 %), and the fit says its outcome depends on the global stage's seed
-    (``global_starts``: docs/tasks/fit-rotary-rig.md has the six seeds and limits)."""
+    2-core EPYC: hub 85.2 / 84.4 %, tip 56.7 / 66.3 %, delays 25 / 47 samples. Thresholds:
+    the issue's hub 80 % (an independent gray-box fit reached 83-84 %) and tip 55 % (61 %).
+    Nothing ties the delays down here (the hub -> tip model 29 %, the hub regression's R²
+    0.02), so the tip delay is searched at or above the hub's (``tip_after_hub``, the
+    default). Before, the delays came out in either order and the default seed ended at
+    89 / 65 samples, hub 83.1 / **78.8** %, tip 64.5 / 67.7 % (the late hub standing for
+    the stuck gear train's late start); over seeds 0-2 at 5 and 10 V four of six met the
+    floors, with the order five of six (lowest: tip 54.2 %, 10 V seed 2;
+    docs/tasks/fit-rotary-rig.md). With one clamp stiffness (before the pushed-clamp
+    stiffening) 85.5 / 88.3 %, 58.2 / 48.5 %; before the stuck-phase detection tolerated
+    the encoder's one-count dither, tip 2-3 % at a link frequency of 2.5 rad/s and a tip
+    delay of 134 samples. The fitted clamped frequency lies where the stuck phases ring
+    (1.7-2.0 Hz, measured above). The fit says its outcome depends on the global stage's
+    seed (``global_starts``)."""
     res = hard_session
     assert any("depends on its seed" in w and "global_starts=3" in w for w in res.warnings)
     print(res.summary())
     fp = res.fit_percent
     assert fp["flexarm_K1_6"]["motor_angle"] >= 80.0, fp
-    assert fp["flexarm_K1K2_6_-5"]["motor_angle"] >= 78.0, fp
+    assert fp["flexarm_K1K2_6_-5"]["motor_angle"] >= 80.0, fp
     assert fp["flexarm_K1_6"]["tip_deflection"] >= 55.0, fp
     wc = res.params["link_frequency"]
     assert 2 * np.pi * 1.7 < wc < 2 * np.pi * 2.0, wc
     assert res.params["bias"] < 0  # the up-moves stop short, the down-moves overshoot
     assert res.params["coulomb"] > 0.02  # several times units 6 and 7's
-    # the tip channel lags the hub's on such rigs; where the fit says otherwise it says so
+    # the tip channel lags the hub's on such rigs: searched so (tip_after_hub)
     d = res.delays
-    assert d["tip_deflection"] > d["motor_angle"] or any(
-        "below the motor_angle delay" in w for w in res.warnings
-    ), (d, res.warnings)
+    assert d["tip_deflection"] >= d["motor_angle"], d
+    assert res.settings["tip_after_hub"] is True
     # a poor signal is called poor
     for name in ROTARY_HARD:
         if fp[name]["tip_deflection"] < 70:
@@ -328,12 +327,16 @@ def test_hard_session_tip_k1k2(hard_session):
     """Issue #23 item 3 on the K1K2 run (tip feedback): its tip rings at 1.89-1.92 Hz in
     its pushed stuck phases and 1.78-1.81 Hz in the light ones. With one clamp stiffness
     the fit's tip stopped at 48.5 %; with the pushed-clamp stiffening estimated from those
-    phases (up to x1.13 from 0.10 to 0.32 V, not fitted) it reaches 67.7 % (floor: the
+    phases (up to x1.13 from 0.10 to 0.32 V, not fitted) it reaches 66.3 % (floor: the
     issue's 55 %). The fitted scenario carries the stiffening, so the one prediction
-    through the simulator (``validate``, each log's start state from its own data) keeps
-    the tips (measured 59.9 / 64.4 %; 50.2 / 45.3 % with it removed); a step at the middle
-    of the gap instead of the ramp had sent the K1 run's tip there to 10.7 %, its model
-    hub stopping where the controller pushed 0.22 V."""
+    through the simulator (``validate``, each log's start state read from the log, not
+    refined) keeps the K1K2 tip (measured 66.1 %) and stays within 3 points of the fit's
+    own figures on every signal (measured: 0.5-1.8; the fit refines each log's start
+    state, validate reads it). Before validate read the hub's start at the hub channel's
+    delay, as the fit does, it read it at sample 0: one encoder count off on the K1 run,
+    whose model hub then stayed stuck for the first 0.5 s where the fit's slid, and its
+    tip fell to 46.2 % against the fit's 56.7 %. A step at the middle of the gap instead
+    of the stiffening's ramp had sent the K1 run's tip there to 10.7 %."""
     from flexarm.identification.time_domain.report import scenario_from_fit
     from flexarm.identification.time_domain.validate import validate
     from flexarm.specs import scenario_from_dict
@@ -344,8 +347,10 @@ def test_hard_session_tip_k1k2(hard_session):
     assert d["arm"]["friction"]["pushed_stiffening"] > 0.1
     v = validate(scenario_from_dict(d), [_log(n) for n in ROTARY_HARD])["fit_percent"]
     print("validate through the fitted scenario:", v)
+    assert v["flexarm_K1K2_6_-5"]["tip_deflection"] >= 55.0, v
     for name in ROTARY_HARD:
-        assert v[name]["tip_deflection"] >= 55.0, v
+        for sig in ("motor_angle", "tip_deflection"):
+            assert abs(v[name][sig] - fp[name][sig]) <= 3.0, (v, fp)
     push = hard_session.stages["guesses"]["estimates"]["pushed_ringing"]
     assert push is not None, push
     assert 0.08 < push["threshold_command"] < 0.15 and 0.3 < push["full_command"] < 0.33, push

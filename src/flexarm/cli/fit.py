@@ -186,6 +186,15 @@ def fit(
         ),
     ] = 1,
     seed: Annotated[int, typer.Option(help="seed of the global stage")] = 0,
+    tip_after_hub: Annotated[
+        bool,
+        typer.Option(
+            "--tip-after-hub/--any-delay-order",
+            help="search the tip sensor's delay at or above the hub's (an encoder reads "
+            "at once, a strain gauge's conditioning only adds lag); --any-delay-order "
+            "searches both freely",
+        ),
+    ] = True,
     overwrite: o.Overwrite = False,
     log_format: o.LogFormats = None,
     use_regressed_law: o.UseRegressedLaw = False,
@@ -307,6 +316,7 @@ def fit(
         delay_search=delay_search,
         polish_iter=polish_iter,
         global_starts=global_starts,
+        tip_after_hub=tip_after_hub,
         seed=seed,
         sessions=parsing.int_list(sessions, "--sessions"),
         tip_sign=tip_sign,

@@ -50,6 +50,7 @@ from flexarm.identification.time_domain import guesses
 from flexarm.identification.time_domain.global_stage import (
     GlobalResult,
     differential_evolution_stage,
+    ordered_delays,
 )
 from flexarm.identification.time_domain.logs import (
     PERIOD_TOL,
@@ -405,6 +406,7 @@ def fit(
     polish_iter: int = 8,
     seed: int = 0,
     global_starts: int = 1,
+    tip_after_hub: bool = True,
     chunk: int = 64,
     progress: Callable[[str], None] | None = None,
     filters: dict[str, float] | None = None,
@@ -468,8 +470,19 @@ def fit(
     start with other delays costs within :data:`DELAY_FLAT` of the winner; at that many
     times the time. Where no estimate ties the delays down (a flexible link whose hub →
     tip model is not trusted, as on 4/27) one start's outcome depends on its seed, and the
-    result says so: on 4/27 (5 V) seeds 0, 1, 2 ended at costs 0.373, 0.347, 0.299 with
-    hub / tip delays 11 / 42, 63 / 50 and 86 / 60 samples.
+    result says so (on 4/27 the hub / tip delays of seeds 0, 1, 2 at 5 V: 36 / 47, 35 / 66,
+    16 / 43 samples, at costs 0.347, 0.344, 0.366).
+    ``tip_after_hub`` (default True): where both delays are free and their search ranges
+    leave the order open (the tip's starting no later than the hub's: no trusted hub → tip
+    estimate, or ``estimates=False``), the tip delay is
+    searched as the hub delay plus a lag ≥ 0 (global stage, neighbours, profile): an
+    encoder reads the hub at once and a strain gauge's conditioning only adds lag. Without
+    it the 4/27 session's delays came out in either order (three seeds at two amplifier
+    limits: the tip before the hub in three of six, e.g. 89 / 65 samples), each fit cheaper
+    by trading a late hub (a stuck gear train starting late) against the tip, and the
+    default seed missed #23's floors at either limit (K1 tip 54.6 % at 5 V, K1K2 hub
+    78.8 % at 10 V); with it, hub 83.0-89.7 % and tip 56.1-67.2 % in five of the six, the
+    sixth tip 54.2 % (``docs/tasks/fit-rotary-rig.md``). False searches the two independently.
     Least squares runs as a continuation (:func:`_local_continued`):
     on the rounded loop's cost alone it stopped in local minima that the last bits moved
     (on the acceptance logs a 1e-15 change of the sampling period moved the viscous B from
@@ -515,6 +528,11 @@ def fit(
         raise FitInputError(
             f"fit: field 'global_starts' = {global_starts!r}: give a whole number >= 1 "
             "(1: one global stage; 3: three seeds, the lowest cost wins)"
+        )
+    if not isinstance(tip_after_hub, bool):
+        raise FitInputError(
+            f"fit: field 'tip_after_hub' = {tip_after_hub!r}: give True (the tip sensor's "
+            "delay at least the hub's) or False (any order)"
         )
     if not logs:
         raise FitInputError("fit: no logs given")
@@ -692,6 +710,7 @@ def fit(
             maxiter=maxiter,
             seed=seed,
             global_starts=global_starts,
+            ordered=tip_after_hub and ordered_delays(space.discrete_bounds()),
             local_nfev=local_nfev,
             delay_nfev=delay_nfev,
             polish_iter=polish_iter,
@@ -753,6 +772,7 @@ def fit(
             global_samples=n_glob,
             seed=seed,
             global_starts=global_starts,
+            tip_after_hub=tip_after_hub,
             filters=filt,
             priors={space.names[i]: list(v) for i, v in sorted(space.priors.items())},
             segment=segment,
@@ -933,6 +953,7 @@ def _one_start(
     polish_iter,
     friction,
     delay_search,
+    ordered,
     info,
 ):
     """The global stage, the tip-delay starts, the local stage and the friction polish
@@ -946,6 +967,7 @@ def _one_start(
         seed=seed,
         progress=lambda k, c: say(f"  generation {k}: best cost {c:.4g}"),
         best=best,
+        tip_after_hub=ordered,
     )
     best["glob"] = glob
     if not np.isfinite(glob.cost) or glob.cost >= 1e3:
@@ -969,7 +991,9 @@ def _one_start(
             # the tip delay is an integer the local stage cannot move, and the global
             # stage's choice trades off against ζ and the initial tip rate: refine
             # briefly at the neighbouring delays too (on the global window), keep the best
-            near = _neighbour_refinement(obj_r, glob.U, D, min(delay_nfev, local_nfev))
+            near = _neighbour_refinement(
+                obj_r, glob.U, D, min(delay_nfev, local_nfev), lowest=int(D[0]) if ordered else 0
+            )
             info["tip_delay_trials"] = near.pop("trials")
             say(
                 f"tip delay {int(near['D'][1])} samples (short refinements: "
@@ -978,7 +1002,12 @@ def _one_start(
             starts.append(near)
         if delay_search in ("profile", "both"):
             prof = _tip_delay_profile(
-                obj_r, glob.U, D, min(2 * PROFILE_NFEV, local_nfev), min(PROFILE_NFEV, local_nfev)
+                obj_r,
+                glob.U,
+                D,
+                min(2 * PROFILE_NFEV, local_nfev),
+                min(PROFILE_NFEV, local_nfev),
+                lowest=int(D[0]) if ordered else 0,
             )
             info["tip_delay_profile"] = prof["profile"]
             say(
@@ -1093,9 +1122,9 @@ PROFILE_NFEV = 10
 
 
 def _tip_delay_profile(
-    obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev: int, nfev: int
+    obj: Objective, U: np.ndarray, D: np.ndarray, start_nfev: int, nfev: int, lowest: int = 0
 ) -> dict:
-    """Profile the cost over every tip delay 0 ... max_delay on ``obj``'s window: first a
+    """Profile the cost over every tip delay ``lowest`` ... max_delay on ``obj``'s window: first a
     refinement (``start_nfev`` evaluations) at the global stage's delay ``D[1]`` (the
     global stage runs without the per-log initial-state offsets and stops far from the
     optimum: short refinements from there land in different local minima at each delay,
@@ -1107,7 +1136,7 @@ def _tip_delay_profile(
     candidates (D, U, offsets), lowest cost first."""
     r0 = _local(obj, U, D, start_nfev)
     trials = []
-    for dd in range(obj.space.max_delay + 1):
+    for dd in range(lowest, obj.space.max_delay + 1):
         Dk = D.copy()
         Dk[1] = dd
         r = _local(obj, r0["U"], Dk, nfev, off0=r0["off"])
@@ -1120,13 +1149,16 @@ def _tip_delay_profile(
     }
 
 
-def _neighbour_refinement(obj: Objective, U: np.ndarray, D: np.ndarray, nfev: int) -> dict:
+def _neighbour_refinement(
+    obj: Objective, U: np.ndarray, D: np.ndarray, nfev: int, lowest: int = 0
+) -> dict:
     """Short refinements (``nfev``) from the global point ``U`` at the global stage's tip
-    delay D[1] and its two neighbours; the lowest cost as a start (D, U, offsets), with
-    the costs by delay (``trials``)."""
+    delay D[1] and its two neighbours (those ≥ ``lowest``, the hub delay where the tip
+    must not lead it); the lowest cost as a start (D, U, offsets), with the costs by delay
+    (``trials``)."""
     best, trials = None, {}
     for dd in (D[1] - 1, D[1], D[1] + 1):
-        if 0 <= dd <= obj.space.max_delay:
+        if max(lowest, 0) <= dd <= obj.space.max_delay or dd == D[1]:
             Dk = D.copy()
             Dk[1] = dd
             r = _local(obj, U, Dk, nfev)

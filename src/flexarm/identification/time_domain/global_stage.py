@@ -5,7 +5,10 @@ from nominal values stalls. Differential evolution (seeded, ``updating='deferred
 ``vectorized=True``) hands each whole generation to :meth:`Objective.cost`, which
 simulates it in one batched JAX call. Continuous parameters live in [0, 1] (see
 :mod:`flexarm.identification.time_domain.params`); the sensor delays and the tip-gain sign are
-integer coordinates (``integrality``).
+integer coordinates (``integrality``). Where both delays are free and their ranges leave the
+order open (nothing ties them down), the tip delay is searched as the hub's plus a lag
+≥ 0 (``tip_after_hub``): an encoder reads the hub at once, a strain gauge's conditioning
+only adds lag.
 """
 
 from __future__ import annotations
@@ -44,15 +47,25 @@ def differential_evolution_stage(
     tol: float = 1e-3,
     progress: Callable[[int, float], None] | None = None,
     best: dict | None = None,
+    tip_after_hub: bool = False,
 ) -> GlobalResult:
     """Minimise :meth:`Objective.cost` over the continuous unit coordinates and the free
     discrete coordinates; ``u0``, ``d0`` seed the initial population. ``best`` (a dict),
-    when given, holds the best point after every generation (U, D, cost)."""
+    when given, holds the best point after every generation (U, D, cost).
+
+    ``tip_after_hub``: where both delays are free and the tip range [t_lo, t_hi] starts
+    no later than the hub range [h_lo, h_hi] (:func:`ordered_delays`), the second
+    integer coordinate is a lag ℓ ∈ [0, t_hi − h_lo] and the tip delay is
+    clip(hub + ℓ, t_lo, t_hi) ≥ hub; elsewhere it changes nothing."""
     n = obj.space.n_cont
     dbounds = obj.space.discrete_bounds()
     free = [i for i, (lo, hi) in enumerate(dbounds) if hi > lo]
     fixed_d = np.array([lo for lo, _ in dbounds], float)
-    bounds = [(0.0, 1.0)] * n + [dbounds[i] for i in free]
+    lagged = tip_after_hub and ordered_delays(dbounds)
+    cbounds = list(dbounds)
+    if lagged:
+        cbounds[1] = (0, dbounds[1][1] - dbounds[0][0])  # ℓ ∈ [0, t_hi − h_lo]
+    bounds = [(0.0, 1.0)] * n + [cbounds[i] for i in free]
     integrality = np.array([False] * n + [True] * len(free))
 
     def split(x):  # x: (dim, S)
@@ -60,6 +73,8 @@ def differential_evolution_stage(
         U = np.clip(X[:, :n], 0.0, 1.0)
         D = np.tile(fixed_d, (X.shape[0], 1))
         D[:, free] = np.round(X[:, n:])
+        if lagged:
+            D[:, 1] = np.clip(D[:, 0] + D[:, 1], dbounds[1][0], dbounds[1][1])
         return U, D.astype(int)
 
     it = [0]
@@ -76,7 +91,10 @@ def differential_evolution_stage(
         if progress is not None:
             progress(it[0], float(intermediate_result.fun))
 
-    x0 = np.concatenate([np.clip(u0, 0, 1), np.asarray(d0, float)[free]])
+    c0 = np.asarray(d0, float).copy()
+    if lagged:  # the start's delays as hub and lag
+        c0[1] = np.clip(c0[1] - c0[0], *cbounds[1])
+    x0 = np.concatenate([np.clip(u0, 0, 1), c0[free]])
     t0 = time.perf_counter()
     res = differential_evolution(
         f,
@@ -108,3 +126,13 @@ def differential_evolution_stage(
         time.perf_counter() - t0,
         np.asarray(res.population_energies),
     )
+
+
+def ordered_delays(dbounds) -> bool:
+    """Whether ``tip_after_hub`` orders the search over the discrete bounds ``dbounds``
+    ((hub delay), (tip delay), (sign); samples): both delays free and the ranges leaving
+    their order open, the tip's starting no later than the hub's (no trusted hub → tip
+    lag placed it after: 0 ... max_delay for both, or ``estimates=False``). A range that
+    a trusted lag put after the hub's is searched as it is (units 6 and 7)."""
+    (h_lo, h_hi), (t_lo, t_hi) = dbounds[0], dbounds[1]
+    return h_hi > h_lo and t_hi > t_lo and t_lo <= h_lo

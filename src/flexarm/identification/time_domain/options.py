@@ -151,6 +151,9 @@ class ServoRig:
     #: (where no estimate ties the sensor delays down, one start's outcome depends on its
     #: seed: :func:`~flexarm.identification.time_domain.fit.fit`)
     global_starts: int = 1
+    #: the tip sensor's delay searched at or above the hub's where nothing else orders
+    #: them (``flexarm fit --tip-after-hub/--any-delay-order``)
+    tip_after_hub: bool = True
     #: samples between a sample and its command; None: where the declared law best
     #: explains the logged command (``flexarm fit --computation-delay``)
     computation_delay: int | None = None
@@ -177,6 +180,7 @@ class ServoRig:
             controller=self.controller,
             seed=self.seed,
             global_starts=self.global_starts,
+            tip_after_hub=self.tip_after_hub,
             priors=dict(self.priors) if self.priors else None,
             segment=self.segment,
         )

@@ -5,7 +5,8 @@ scenario's arm (flexarm's own sampled-data simulator) and report the fit
 
 per log and signal (measured hub angle and tip deflection; the first max-delay + 1
 samples are left out). Sensor noise is switched off. The initial state comes from the
-log itself: hub angle and rate from a line through its first samples, the link's tip
+log itself: hub angle and rate from a parabola through the hub samples just after the hub
+channel's delay, the link's tip
 deflection and rate from a parabola through the tip samples just after the tip channel's
 delay, divided by the sensor gain (a link ringing at t = 0 is normal).
 """
@@ -71,7 +72,10 @@ def validate(
             controller=from_spec(log.controller, T),
             references={"reference": log.columns["reference"][: len(range(n))]},
         )
-        th0, om0 = guesses.initial_hub(log)
+        # the state at t = 0 shows in each channel after its delay (as in the fit's
+        # objective: Objective.hub_initial, Objective.tip_initial)
+        hub = sc.sensors.get("motor_angle")
+        th0, om0 = guesses.initial_hub(log, k=hub.delay if hub is not None else 0)
         tip = sc.sensors.get("tip_deflection")
         gain = tip.gain if tip is not None else 1.0
         kd = tip.delay if tip is not None else 0
