@@ -474,8 +474,8 @@ def fit(
     16 / 43 samples, at costs 0.347, 0.344, 0.366).
     ``tip_after_hub`` (default True): where both delays are free and their search ranges
     leave the order open (the tip's starting no later than the hub's: no trusted hub → tip
-    estimate, or ``estimates=False``), the tip delay is
-    searched as the hub delay plus a lag ≥ 0 (global stage, neighbours, profile): an
+    estimate, or ``estimates=False``), the tip delay is searched as the hub delay plus a
+    lag ≥ 0 (global stage, neighbours, profile): an
     encoder reads the hub at once and a strain gauge's conditioning only adds lag. Without
     it the 4/27 session's delays came out in either order (three seeds at two amplifier
     limits: the tip before the hub in three of six, e.g. 89 / 65 samples), each fit cheaper
@@ -984,6 +984,7 @@ def _one_start(
     starts = [{"D": D, "U": U0, "off": off0}]
     if space.fixed_delays[1] is None and local_nfev > 1:
         starts = []
+        lowest = int(D[0]) if ordered else 0  # the smallest tip delay tried
         # the delays are compared by short refinements of the smooth (unrounded) cost:
         # on the rounded one, which jag each short refinement stops in decides the delay
         obj_r = obj_g.unquantised() if obj_g.quantised else obj_g
@@ -991,9 +992,7 @@ def _one_start(
             # the tip delay is an integer the local stage cannot move, and the global
             # stage's choice trades off against ζ and the initial tip rate: refine
             # briefly at the neighbouring delays too (on the global window), keep the best
-            near = _neighbour_refinement(
-                obj_r, glob.U, D, min(delay_nfev, local_nfev), lowest=int(D[0]) if ordered else 0
-            )
+            near = _neighbour_refinement(obj_r, glob.U, D, min(delay_nfev, local_nfev), lowest)
             info["tip_delay_trials"] = near.pop("trials")
             say(
                 f"tip delay {int(near['D'][1])} samples (short refinements: "
@@ -1007,7 +1006,7 @@ def _one_start(
                 D,
                 min(2 * PROFILE_NFEV, local_nfev),
                 min(PROFILE_NFEV, local_nfev),
-                lowest=int(D[0]) if ordered else 0,
+                lowest,
             )
             info["tip_delay_profile"] = prof["profile"]
             say(
