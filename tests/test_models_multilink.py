@@ -305,3 +305,65 @@ def test_energy_conserved_without_damping_and_input(gravity):
     drift = np.abs(E - E[0]).max() / Tkin.max()
     print(f"g = {gravity}: energy drift over 10 s {drift:.2e} of max T = {Tkin.max():.3g} J")
     assert drift < 1e-6
+
+
+# ------------------------------------------------------------------ cable springs
+def _with_cables(arm, k_c):
+    d = arm.model_dump()
+    d["joints"] = [{"cable_stiffness": k} for k in k_c]
+    return MultiLinkArm(**d)
+
+
+def test_cable_springs_in_the_emitted_program_equal_the_potential_s_gradient(bench):
+    """Joint cable springs (k_c = 3 and 1.5 N·m/rad on the benchmark's two flexible links):
+    the recorded right-hand side's q̈ equals B⁻¹ f with B by autodiff of T and f the
+    generalized forces, whose cable part is jax.grad of ½ Σ k_c a² (an independent
+    computation), at random states; the energy with the springs is conserved."""
+    model = build_multilink(_with_cables(benchmark_arm(gravity=G), [3.0, 1.5]))
+    P = model.plant
+    q, qd = random_states(model, 20, seed=3)
+    u = np.random.default_rng(4).normal(0.0, 2.0, (20, model.n_links))
+
+    @jax.jit
+    def both(q, qd, u):
+        x = jnp.concatenate([q, qd], axis=1)
+        acc = jax.vmap(P.acceleration)(x, u)
+        ref = jax.vmap(
+            lambda x, u: jnp.linalg.solve(
+                P.mass_matrix_autodiff(x[: P.n_q]), P.generalized_forces(x, u)
+            )
+        )(x, u)
+        return acc, ref
+
+    acc, ref = (np.asarray(a) for a in both(q, qd, u))
+    np.testing.assert_allclose(acc, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    zero = build_multilink(benchmark_arm(gravity=G)).plant
+    x = jnp.concatenate([q, qd], axis=1)
+    # the springs change the motion (the test is not vacuous)
+    assert (
+        np.abs(np.asarray(jax.vmap(zero.acceleration)(x, u)) - acc).max() > 1e-3 * np.abs(acc).max()
+    )
+    x0 = model.state(theta=[-1.0, 0.6], delta=[0.03, -0.002, 0.004, 0.0001])
+    run = simulate_continuous(model, law_zero, x0, 3.0, 5e-3, params=P, step=5e-5)
+    E = model.energy(run.state_array)
+    assert np.abs(E - E[0]).max() / np.abs(E).max() < 1e-6
+
+
+def test_cable_spring_holds_a_torsional_link_at_its_static_deflection():
+    """A torsional link on its spring K under a cable spring k_c, at rest at joint angle θ
+    with the drive holding it: the static deflection is α = −k_c θ / (K + k_c) (the
+    Joint docstring), where q̈ = 0 exactly; 10 % off it the link accelerates."""
+    from flexarm.specs.scenario import load_scenario
+
+    arm = load_scenario("quanser-two-link").arm
+    K1 = arm.links[0].torsional_stiffness
+    d = arm.model_dump()
+    d["joints"][0]["cable_stiffness"] = 0.09
+    model = build_multilink(MultiLinkArm(**d))
+    th = 0.4
+    alpha = -0.09 * th / (K1 + 0.09)
+    u = np.array([0.09 * (th + alpha), 0.0])  # the drive's holding torque
+    acc = model.rhs(model.state(theta=[th, 0.0], delta=[alpha, 0.0]), u)[model.n_q :]
+    np.testing.assert_allclose(acc, 0.0, atol=1e-12)
+    off = model.rhs(model.state(theta=[th, 0.0], delta=[1.1 * alpha, 0.0]), u)[model.n_q :]
+    assert np.abs(off).max() > 1e-3

@@ -170,3 +170,16 @@ def test_bad_regulation_input(model):
         simulate_continuous(model, R.law_pd_constant, np.zeros(4), 1.0, 1e-3, params=p)
     with pytest.raises(ValueError, match="NaN"):
         simulate_continuous(model, R.law_pd_constant, np.full(12, np.nan), 1.0, 1e-3, params=p)
+
+
+def test_regulation_refuses_cable_springs():
+    """DLS's eqs. (9) and (14) have no joint cable springs: one line naming the field."""
+    from flexarm.control.regulation import RegulationError, residual_deflection
+    from flexarm.models.multilink import build_multilink
+    from flexarm.specs.multilink import MultiLinkArm, benchmark_arm
+
+    d = benchmark_arm().model_dump()
+    d["joints"] = [{"cable_stiffness": 0.0}, {"cable_stiffness": 0.2}]
+    model = build_multilink(MultiLinkArm(**d))
+    with pytest.raises(RegulationError, match=r"arm.joints\[1\].cable_stiffness = 0.2"):
+        residual_deflection(model, [0.1, 0.2])

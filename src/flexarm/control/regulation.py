@@ -61,6 +61,20 @@ class RegulationError(FlexarmError, ValueError):
 
 
 # --------------------------------------------------------------------------- statics
+def _no_cable_springs(model: MultiLinkModel) -> None:
+    """DLS's arm has gravity and the links' own stiffness only: refuse joints' cable springs
+    (:class:`flexarm.specs.multilink.Joint` ``cable_stiffness``), which eqs. (6), (9) and
+    (14) leave out."""
+    k_c = np.asarray(model.plant.cable, float)
+    if np.any(k_c != 0):
+        i = int(np.flatnonzero(k_c)[0])
+        raise RegulationError(
+            f"arm.joints[{i}].cable_stiffness = {k_c[i]:g} N*m/rad: De Luca–Siciliano's "
+            "regulation (eqs. (6), (9), (14)) has no cable springs; set it to 0 for this "
+            "analysis, or simulate the arm with it (flexarm.simulate)"
+        )
+
+
 def _static_residual(plant: MultiLinkPlant, theta: Array, delta: Array) -> Array:
     """F(δ) = K δ + g_δ(θ, δ) (N)."""
     n = plant.n_links
@@ -99,6 +113,7 @@ def residual_deflection(
     Converged when ‖F‖ ≤ tol·(1 + ‖g_δ(θ_d, 0)‖) (N). Raises :class:`RegulationError` if the
     Jacobian K + ∂g_δ/∂δ is singular or Newton does not converge (gravity too strong for
     the stiffness)."""
+    _no_cable_springs(model)
     plant = model.plant
     theta = jnp.asarray(theta_d, float).reshape(plant.n_links)
     d = np.zeros(plant.n_delta) if delta0 is None else np.asarray(delta0, float)
@@ -381,6 +396,7 @@ class StabilityConditions:
 
 def stability_conditions(model: MultiLinkModel, KP, alpha: float) -> StabilityConditions:
     """Check the sufficient conditions (14)–(15) for the gains KP and the bound α."""
+    _no_cable_springs(model)
     n = model.n_links
     KPm = _gain(KP, n, "KP")
     lk = float(np.linalg.eigvalsh(model.K).min()) if model.n_delta else float("inf")

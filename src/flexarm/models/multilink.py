@@ -186,6 +186,7 @@ class MultiLinkPlant(Plant):
     K: Array
     D: Array
     gamma: Array
+    cable: Array
     torque_limit: Array
     rate_rows: Array
     tip_rows: Array
@@ -295,10 +296,24 @@ class MultiLinkPlant(Plant):
             )
         return -(self.gamma @ moment)
 
+    def cable_angles(self, q: Array) -> Array:
+        """a_i = θ_i + φ'_i(ℓ_i)ᵀδ_i (rad): the turn across joint i from its stator (the base,
+        or link i−1's tip) to link i's tip, which a joint's cable spring (``cable_stiffness``
+        k_c,i, :class:`flexarm.specs.multilink.Joint`) resists with the torque −k_c,i a_i."""
+        n = self.n_links
+        out = []
+        for i, sl in enumerate(self._slices()):
+            a = q[i]
+            if sl.stop > sl.start:
+                a = a + self.dphi_tip[sl] @ q[n + sl.start : n + sl.stop]
+            out.append(a)
+        return jnp.stack(out)
+
     def elastic_potential(self, q: Array) -> Array:
-        """U_e = ½ δᵀKδ (J)."""
+        """U_e = ½ δᵀKδ + ½ Σ_i k_c,i a_i² (J), a_i of :meth:`cable_angles`."""
         dl = q[self.n_links :]
-        return 0.5 * dl @ self.K @ dl
+        a = self.cable_angles(q)
+        return 0.5 * dl @ self.K @ dl + 0.5 * jnp.sum(self.cable * a * a)
 
     def energy(self, x: Array) -> Array:
         """Total energy T + U_g + U_e (J) of the state x."""
@@ -494,7 +509,11 @@ class MultiLinkPlant(Plant):
     def _forces(self, q: Array, qd: Array, u: Array, h: Array) -> Array:
         n = self.n_links
         elastic = self.K @ q[n:] + self.D @ qd[n:]
-        return jnp.concatenate([u, -elastic]) - h
+        return jnp.concatenate([u, -elastic]) - h - jax.grad(self._cable_potential)(q)
+
+    def _cable_potential(self, q: Array) -> Array:
+        a = self.cable_angles(q)
+        return 0.5 * jnp.sum(self.cable * a * a)
 
     def rhs(self, x: Array, u: Array) -> Array:
         """ẋ = (q̇, q̈), q̈ from :meth:`acceleration`; x may carry trailing batch dimensions."""
@@ -553,6 +572,7 @@ _PARAM_FIELDS = (
     "D",
     "B0",
     "gamma",
+    "cable",
 )
 _SHARE = 8
 _SOLVE_BLOCK = 3
@@ -578,6 +598,7 @@ class _SymbolicPlant:
     D: Any
     B0: Any
     gamma: Any
+    cable: Any
 
     def __init__(self, prog: layered.Program, n_modes: tuple[int, ...]):
         self.n_modes = n_modes
@@ -597,6 +618,7 @@ class _SymbolicPlant:
             "D": (nd, nd),
             "B0": (nq, nq),
             "gamma": (2,),
+            "cable": (n,),
         }
         for name in _PARAM_FIELDS:
             shape: tuple[int, ...] = shapes[name]
@@ -672,6 +694,16 @@ def _record(n_modes: tuple[int, ...], columns: bool) -> tuple[layered.Program, l
             for j in range(sl.start, sl.stop):  # K and D are block diagonal
                 el = el + sp.K[i, j] * q[n + j] + sp.D[i, j] * qd[n + j]
             f.append(-el - h[n + i])
+    # the joints' cable springs: −k_c,i a_i on θ_i and −k_c,i a_i φ'_ij(ℓ) on δ_ij
+    # (MultiLinkPlant.cable_angles); a spring of 0 subtracts exact zeros
+    for i, sl in enumerate(sp._slices()):
+        a = q[i]
+        for j in range(sl.start, sl.stop):
+            a = a + sp.dphi_tip[j] * q[n + j]
+        tq = sp.cable[i] * a
+        f[i] = f[i] - tq
+        for j in range(sl.start, sl.stop):
+            f[n + j] = f[n + j] - tq * sp.dphi_tip[j]
     out = layered.solve_spd(B, f, block=_SOLVE_BLOCK)
     if columns:
         for j in range(n):
@@ -956,6 +988,7 @@ def build_multilink(arm: MultiLinkArm) -> MultiLinkModel:
         K=f(blk(lambda m: m.K)),
         D=f(Dm),
         gamma=f([arm.gravity * gx, arm.gravity * gy]),
+        cable=f([j.cable_stiffness for j in arm.joint_specs]),
         torque_limit=f(lim),
         rate_rows=f(rate),
         tip_rows=f(tip_rows),

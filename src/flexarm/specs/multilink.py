@@ -173,12 +173,25 @@ JointDrive = Annotated[TorqueDrive | CurrentDrive | VoltageDrive, Field(discrimi
 
 
 class Joint(Spec):
-    """What acts at one joint: its drive, viscous friction V (N·m·s/rad) and joint friction
-    (Coulomb with stiction, Stribeck or LuGre, :class:`flexarm.specs.arm.Friction`)."""
+    """What acts at one joint: its drive, viscous friction V (N·m·s/rad), joint friction
+    (Coulomb with stiction, Stribeck or LuGre, :class:`flexarm.specs.arm.Friction`) and a
+    cable spring.
+
+    ``cable_stiffness`` k_c (N·m/rad, default 0): a spring across the joint from its stator
+    (the base, or the previous link's tip) to the far end of its link, parallel to the drive
+    and to the link's own spring, at rest with the joint at 0: the cables and hoses that run
+    along the link to the next joint's motor and sensors. It adds ½ k_c a² to the potential,
+    a = θ + φ'(ℓ)ᵀδ the turn from the stator to the link's tip
+    (:meth:`flexarm.models.multilink.MultiLinkPlant.cable_angles`). Its torque reaches the
+    link's tip, past the strain gauge at the root: at rest the gauge reads the static
+    deflection α = −k_c θ / (K + k_c) of a torsional link (K its stiffness), a reading that
+    follows the joint angle (../shared/data/two-link-rig: about −3 mrad per rad on the
+    shoulder link; ``flexarm.identification.time_domain.statics``)."""
 
     drive: JointDrive = TorqueDrive()
     viscous: Q("N*m*s/rad", ge=0) = 0.0
     friction: Friction = Friction(model="none")
+    cable_stiffness: Q("N*m/rad", ge=0) = 0.0
 
 
 class Hub(Spec):

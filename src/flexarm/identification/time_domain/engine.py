@@ -58,6 +58,7 @@ def fit(
     from flexarm.identification.time_domain import general
     from flexarm.io.logformat import load_logs
     from flexarm.specs import Scenario, load_scenario
+    from flexarm.specs.paths import scenario_with
 
     if isinstance(scenario, Preset):
         preset = scenario
@@ -75,8 +76,19 @@ def fit(
         flat = (grouped or FitOptions()).engine_options(base)
     source = "given" if free is not None else f"preset {preset.name}"
     free_list = list(free) if free is not None else list(preset.free)
+    template, estimates = preset.scenario, None
+    if free is None and preset.starts is not None:
+        wins = list(flat.windows or [])
+        wins += [None] * (len(logs) - len(wins))
+        fitted = [g if w is None else g.window(*w) for g, w in zip(logs, wins, strict=False)]
+        starts, estimates = preset.starts(template, fitted)
+        if starts:
+            template = scenario_with(template, starts)
+            free_list += [p for p in starts if p not in free_list]
+        if progress is not None:
+            progress(f"start estimates from the logs: {starts or 'none'}")
     res = general.fit_scenario(
-        preset.scenario,
+        template,
         logs,
         free_list,
         flat,
@@ -85,6 +97,8 @@ def fit(
         plots=grouped.plots if grouped is not None else None,
     )
     res.free_source = source
+    if estimates is not None:
+        res.stages["estimates"] = estimates
     return res
 
 

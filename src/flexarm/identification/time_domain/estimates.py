@@ -329,3 +329,134 @@ def frequency_bounds(est: dict, widen: float = 1.35) -> tuple[float, float] | No
     if not vals:
         return None
     return min(vals) / widen, max(vals) * widen
+
+
+#: rest windows of the cable-spring estimate (s), and the most a joint angle may move in one
+#: (rad, or 3 encoder counts where that is more)
+REST_WINDOW_S = 0.5
+REST_ANGLE_RANGE = 2e-4
+#: a rest window's gauge may move by at most this fraction of the gauge's spread in its log
+REST_GAUGE_RANGE = 0.1
+#: an estimated cable spring is kept when its slope is this many standard deviations from 0
+CABLE_T_MIN = 3.0
+
+
+@dataclass
+class CableSpring:
+    """The cable-spring estimate of one joint (:func:`cable_springs`): the static gauge
+    slope (reading per rad of the joint), its standard deviation, the holds it is read
+    from, k_c (N·m/rad; None: not estimated) and why not."""
+
+    joint: int
+    gauge: str | None
+    angle: str | None
+    slope: float | None = None
+    slope_std: float | None = None
+    holds: int = 0
+    stiffness: float | None = None
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _rest_holds(log: Log, angle_names: list[str], quanta: list[float], gauge: str) -> list:
+    """(mean joint angle of ``angle_names[0]``, mean gauge reading) of each hold: runs of
+    consecutive rest windows (every joint angle within max(3 counts, REST_ANGLE_RANGE),
+    the gauge within REST_GAUGE_RANGE of its spread)."""
+    if log.dt is None or any(n not in log.signals for n in angle_names + [gauge]):
+        return []
+    n = max(3, int(round(REST_WINDOW_S / log.dt)))
+    g = np.asarray(log.signals[gauge], float)
+    spread = float(np.nanstd(g))
+    if not spread > 0:
+        return []
+    holds, cur = [], []
+    for k in range(0, g.size - n + 1, n):
+        sl = slice(k, k + n)
+        still = (
+            all(
+                np.ptp(np.asarray(log.signals[a], float)[sl]) <= max(3 * q, REST_ANGLE_RANGE)
+                for a, q in zip(angle_names, quanta, strict=True)
+            )
+            and np.ptp(g[sl]) <= REST_GAUGE_RANGE * spread
+        )
+        if still:
+            cur.append((float(np.mean(log.signals[angle_names[0]][sl])), float(np.mean(g[sl]))))
+        elif cur:
+            holds.append(tuple(np.mean(cur, axis=0)))
+            cur = []
+    if cur:
+        holds.append(tuple(np.mean(cur, axis=0)))
+    return holds
+
+
+def cable_springs(scenario: Any, logs: list[Log]) -> list[CableSpring]:
+    """The joints' cable springs (:class:`flexarm.specs.multilink.Joint`,
+    ``cable_stiffness``) from the rests in the logs, for a multi-link arm with torsional
+    links and a strain gauge per link.
+
+    At rest (every joint still, the links not ringing) a torsional link i on the spring K_i
+    under a cable spring k_c,i stands at α_i = −k_c,i θ_i / (K_i + k_c,i); its gauge, gain
+    g_i, reads y_i = g_i α_i + c_i (c_i the logger's zero). Over the holds of all logs (runs
+    of rest windows of ``REST_WINDOW_S``, one point each), the least-squares line
+    y = c + s θ gives s and its standard deviation; then with σ = s / g_i
+
+        k_c,i = −σ K_i / (1 + σ)                                                   (1)
+
+    kept where s < 0 (a restoring spring) at ``CABLE_T_MIN`` standard deviations or more,
+    from 3 holds or more at 2 joint angles or more; otherwise ``stiffness`` None and
+    ``reason`` says why. K_i and g_i are the scenario's (the data sheet's): the fit refines
+    k_c with them. ../shared/data/two-link-rig: the shoulder gauge reads −2.7 mrad per rad
+    of the shoulder at rest (all nine staircase steps and the 102 s run's holds)."""
+    arm = scenario.arm
+    out: list[CableSpring] = []
+    if getattr(arm, "kind", None) != "multi_link":
+        return out
+    sensors = scenario.sensors or {}
+
+    def reading(signal: str, kinds: tuple) -> tuple[str | None, Any]:
+        for name, s in sensors.items():
+            if (s.signal or name) == signal and (s.filter is None or s.filter.kind in kinds):
+                return name, s
+        return None, None
+
+    angles = [reading(f"theta_{i + 1}", ()) for i in range(len(arm.links))]
+    for i, lk in enumerate(arm.links):
+        gname, gs = reading(f"deflection_angle_{i + 1}", ("lowpass2",))
+        aname = angles[i][0]
+        rec = CableSpring(joint=i, gauge=gname, angle=aname)
+        out.append(rec)
+        if lk.model != "torsional" or gs is None or gname is None or aname is None:
+            rec.reason = "needs a torsional link, its gauge and its joint angle as channels"
+            continue
+        if any(a[0] is None for a in angles):
+            rec.reason = "needs every joint angle as a channel (to find the rests)"
+            continue
+        names = [aname] + [str(a[0]) for j, a in enumerate(angles) if j != i]
+        quanta = [float(sensors[n].quantum or 0.0) for n in names]
+        holds = [h for log in logs for h in _rest_holds(log, names, quanta, gname)]
+        rec.holds = len(holds)
+        th = np.array([h[0] for h in holds])
+        y = np.array([h[1] for h in holds])
+        if len(holds) < 3 or np.ptp(th) < 0.05:
+            rec.reason = (
+                f"{len(holds)} rests at joint angles spanning "
+                f"{float(np.ptp(th)) if th.size else 0.0:.3g} rad: too few to read a slope"
+            )
+            continue
+        X = np.c_[np.ones_like(th), th]
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ coef
+        s2 = float(r @ r) / max(1, len(y) - 2)
+        sd = float(np.sqrt(s2 / float(np.sum((th - th.mean()) ** 2))))
+        rec.slope, rec.slope_std = float(coef[1]), sd
+        if not (coef[1] < 0 and abs(coef[1]) >= CABLE_T_MIN * sd):
+            rec.reason = (
+                f"slope {coef[1]:.3g} ± {sd:.2g} per rad: not a restoring spring at "
+                f"{CABLE_T_MIN:g} standard deviations"
+            )
+            continue
+        sig = float(coef[1]) / float(gs.gain)
+        rec.stiffness = -sig * float(lk.torsional_stiffness) / (1.0 + sig)
+    return out

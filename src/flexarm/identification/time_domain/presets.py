@@ -30,7 +30,11 @@ __all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUIL
 class Preset:
     """A rig kind's model and defaults. ``engine``: ``"scenario"`` (the general engine on
     ``scenario``) or ``"servo_rig"`` (the rotary servo pipeline on ``sheet``); ``options``:
-    the general engine's flat options (priors, bounds, ties, segments, channels)."""
+    the general engine's flat options (priors, bounds, ties, segments, channels).
+    ``starts``: the cheap estimates that start the search, ``starts(scenario, logs)`` on the
+    fitted logs (their windows applied) → (path → start value in SI, a report): the paths
+    are set to those values and added to the free list, the report goes to the result's
+    ``stages["estimates"]`` (run only with the preset's own free list)."""
 
     name: str
     scenario: Any
@@ -38,6 +42,22 @@ class Preset:
     options: Any = None
     engine: str = "scenario"
     sheet: dict[str, Any] = field(default_factory=dict)
+    starts: Callable[[Any, list], tuple[dict[str, float], dict]] | None = None
+
+
+def cable_spring_starts(scenario: Any, logs: list) -> tuple[dict[str, float], dict]:
+    """Start values of the joints' cable springs where the logs' rests show one
+    (:func:`~flexarm.identification.time_domain.estimates.cable_springs`): path → k_c
+    (N·m/rad), and the estimates per joint (``cable_springs``)."""
+    from flexarm.identification.time_domain.estimates import cable_springs
+
+    est = cable_springs(scenario, logs)
+    values = {
+        f"arm.joints[{e.joint}].cable_stiffness": e.stiffness
+        for e in est
+        if e.stiffness is not None
+    }
+    return values, {"cable_springs": [e.to_dict() for e in est]}
 
 
 @dataclass
@@ -63,7 +83,8 @@ class DataSheet:
 def two_link(friction: bool = True) -> Preset:
     """The current-driven two-link arm: ``quanser-two-link`` with link 1's damping started
     at 0.1 N·m·s/rad, the split's free list, priors, bounds and ties
-    (:func:`~flexarm.identification.time_domain.two_link.default_options`)."""
+    (:func:`~flexarm.identification.time_domain.two_link.default_options`), and the joints'
+    cable springs started where the logs' rests show one (:func:`cable_spring_starts`)."""
     from flexarm.identification.time_domain import two_link as tl
 
     opts = tl.default_options()
@@ -71,7 +92,7 @@ def two_link(friction: bool = True) -> Preset:
     if not friction:
         opts.priors = {k: v for k, v in opts.priors.items() if "friction" not in k}
         opts.bounds = {k: v for k, v in opts.bounds.items() if "friction" not in k}
-    return Preset("quanser-two-link", tl.template(friction), free, opts)
+    return Preset("quanser-two-link", tl.template(friction), free, opts, starts=cable_spring_starts)
 
 
 def servo_rig(sheet: DataSheet) -> Preset:
@@ -127,7 +148,7 @@ def for_scenario(scenario) -> Preset:
             except Exception:  # a path the changed copy lacks: fitted as given
                 continue
         sc = scenario_with(scenario, starts) if starts else scenario
-        return Preset(p.name, sc, p.free, p.options, p.engine, p.sheet)
+        return Preset(p.name, sc, p.free, p.options, p.engine, p.sheet, p.starts)
     if scenario.sampling is None:
         raise ValueError(
             f"scenario {scenario.name!r} has no [sampling]: a continuous-time "
