@@ -33,7 +33,7 @@ def test_tip_model_recovers_a_simulated_link():
     assert m.fit_percent > 99
 
 
-def _rests_log(k_c: float, angles, seed: int = 0, dt: float = 2e-3) -> Log:
+def _rests_log(k_c: float, angles, seed: int = 0, dt: float = 2e-3, noise: float = 2e-5) -> Log:
     """A two-link log of holds at the shoulder ``angles`` (2 s each, 0.5 s moves between,
     the gauge ringing at 3 Hz while moving), the elbow still, the shoulder gauge reading
     g α + c with α = −k_c θ / (K + k_c) at rest (the quanser-two-link sheet's K, g = 1,
@@ -57,7 +57,7 @@ def _rests_log(k_c: float, angles, seed: int = 0, dt: float = 2e-3) -> Log:
         t,
         {
             "theta_1": np.round((th + q * rng.integers(-1, 2, th.size)) / q) * q,
-            "alpha_f_1": gauge + rng.normal(0, 2e-5, th.size),
+            "alpha_f_1": gauge + rng.normal(0, noise, th.size),
             "theta_2": np.round(q * rng.integers(-1, 2, th.size) / q) * q,
             "alpha_f_2": rng.normal(0, 2e-5, th.size),
         },
@@ -68,7 +68,8 @@ def test_cable_springs_read_the_static_gauge_slope_at_rest():
     """Eq. (1) of :func:`estimates.cable_springs` inverts the static deflection of the
     Joint docstring: holds at five shoulder angles with k_c = 0.1 N·m/rad give k_c back to
     1 % (the holds' means carry ~1 µrad of noise against ~1 mrad of slope); no spring gives
-    none (with the reason); one hold gives none (too few rests)."""
+    none (with the reason), nor does a round-off slope; one hold gives none (too few
+    rests)."""
     from flexarm.specs.scenario import load_scenario
 
     sc = load_scenario("quanser-two-link")
@@ -80,5 +81,8 @@ def test_cable_springs_read_the_static_gauge_slope_at_rest():
     assert est[1].stiffness is None  # the elbow never moves: no slope to read
     none = estimates.cable_springs(sc, [_rests_log(0.0, angles, seed=1)])[0]
     assert none.stiffness is None and "not a restoring spring" in none.reason
+    # an exact log (no noise) of a spring of 1e-12 N·m/rad: significant, and nothing to fit
+    tiny = estimates.cable_springs(sc, [_rests_log(1e-12, angles, seed=3, noise=0.0)])[0]
+    assert tiny.stiffness is None and "nothing to fit" in tiny.reason, tiny
     one = estimates.cable_springs(sc, [_rests_log(0.1, [0.2, 0.2], seed=2)])[0]
     assert one.stiffness is None and "too few" in one.reason

@@ -339,6 +339,9 @@ REST_ANGLE_RANGE = 2e-4
 REST_GAUGE_RANGE = 0.1
 #: an estimated cable spring is kept when its slope is this many standard deviations from 0
 CABLE_T_MIN = 3.0
+#: ... and when it moves the gauge at rest, over the angles held, by this fraction of the
+#: gauge's spread over the logs at least (an exact model's round-off slope is no spring)
+CABLE_RESOLVED = 0.1
 
 
 @dataclass
@@ -405,7 +408,8 @@ def cable_springs(scenario: Any, logs: list[Log]) -> list[CableSpring]:
         k_c,i = −σ K_i / (1 + σ)                                                   (1)
 
     kept where s < 0 (a restoring spring) at ``CABLE_T_MIN`` standard deviations or more,
-    from 3 holds or more at 2 joint angles or more; otherwise ``stiffness`` None and
+    moving the gauge over the angles held by ``CABLE_RESOLVED`` of its spread or more, from
+    3 holds or more at 2 joint angles or more; otherwise ``stiffness`` None and
     ``reason`` says why. K_i and g_i are the scenario's (the data sheet's): the fit refines
     k_c with them. ../shared/data/two-link-rig: the shoulder gauge reads −2.7 mrad per rad
     of the shoulder at rest (all nine staircase steps and the 102 s run's holds)."""
@@ -455,6 +459,19 @@ def cable_springs(scenario: Any, logs: list[Log]) -> list[CableSpring]:
             rec.reason = (
                 f"slope {coef[1]:.3g} ± {sd:.2g} per rad: not a restoring spring at "
                 f"{CABLE_T_MIN:g} standard deviations"
+            )
+            continue
+        spread = float(
+            np.nanstd(
+                np.concatenate(
+                    [np.asarray(g.signals[gname], float) for g in logs if gname in g.signals]
+                )
+            )
+        )
+        if abs(coef[1]) * float(np.ptp(th)) < CABLE_RESOLVED * spread:
+            rec.reason = (
+                f"slope {coef[1]:.3g} per rad moves the gauge at rest by less than "
+                f"{CABLE_RESOLVED:g} of its spread over the logs: nothing to fit"
             )
             continue
         sig = float(coef[1]) / float(gs.gain)

@@ -14,7 +14,12 @@ engine) as one :class:`Preset`:
   global stage, continuation), called through its keyword interface;
 * :func:`for_scenario` — a built-in or user scenario: its ``[notes.fit]`` table, the
   preset registered under its name (:data:`BUILTIN`), or the joints' friction
-  (:func:`~flexarm.identification.time_domain.general.friction_paths`).
+  (:func:`~flexarm.identification.time_domain.general.friction_paths`) with the joints'
+  cable springs that the logs' rests show (:func:`cable_spring_starts`).
+
+A preset's ``starts`` are its cheap estimates from the fitted logs: start values that the
+one fit sets and frees before the search (the two-link arm's and the fallback's: the
+joints' cable springs).
 """
 
 from __future__ import annotations
@@ -117,7 +122,8 @@ BUILTIN: dict[str, Callable[[], Preset]] = {"quanser-two-link": two_link}
 
 def for_scenario(scenario) -> Preset:
     """The preset of a scenario: its ``[notes.fit]`` (free, priors), else the one registered
-    under its name, else its joints' friction levels (Coulomb, breakaway, viscous)."""
+    under its name, else its joints' friction levels (Coulomb, breakaway, viscous) and the
+    joints' cable springs where the logs' rests show one (:func:`cable_spring_starts`)."""
     from flexarm.identification.time_domain.general import (
         ScenarioFitOptions,
         friction_paths,
@@ -155,4 +161,10 @@ def for_scenario(scenario) -> Preset:
             "[regulation] law is simulated (flexarm.simulate), not fitted to "
             "logs; give a scenario with a sampled loop"
         )
-    return Preset(scenario.name, scenario, friction_paths(scenario), ScenarioFitOptions())
+    return Preset(
+        scenario.name,
+        scenario,
+        friction_paths(scenario),
+        ScenarioFitOptions(),
+        starts=cable_spring_starts,
+    )
