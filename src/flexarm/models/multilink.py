@@ -24,7 +24,9 @@ Gravity (acceleration vector γ = g ĝ, default g = 9.81 m/s² along −y):
 
     U_g = −γᵀ [ Σ_i (m_i p_i + R(α_i) [d_i, v_iᵀδ_i]ᵀ) + Σ_{i≥2} m_hi p_i + m_p p_{n+1} ],
 
-elastic energy U_e = ½ δᵀKδ, K = blockdiag(k_ij) (N/m), D modal damping (N·s/m).
+elastic energy U_e = ½ δᵀKδ, K = blockdiag(k_ij) (N/m), D modal damping (N·s/m), and the
+joints' cable springs U_c = ½ Σ_i k_c,i (θ_i + φ_i'(ℓ)ᵀδ_i)² (N·m/rad; the turn across joint
+i from its stator to link i's tip; 0 unless ``arm.joints[i].cable_stiffness`` is given).
 
 Derivation. T and U_g above are the Lagrangian's definitions; the dynamics follow from them
 by JAX automatic differentiation, once, for any number of links and modes:
@@ -312,8 +314,7 @@ class MultiLinkPlant(Plant):
     def elastic_potential(self, q: Array) -> Array:
         """U_e = ½ δᵀKδ + ½ Σ_i k_c,i a_i² (J), a_i of :meth:`cable_angles`."""
         dl = q[self.n_links :]
-        a = self.cable_angles(q)
-        return 0.5 * dl @ self.K @ dl + 0.5 * jnp.sum(self.cable * a * a)
+        return 0.5 * dl @ self.K @ dl + self._cable_potential(q)
 
     def energy(self, x: Array) -> Array:
         """Total energy T + U_g + U_e (J) of the state x."""
@@ -501,7 +502,8 @@ class MultiLinkPlant(Plant):
         return 0.5 * (J + J.T)
 
     def generalized_forces(self, x: Array, u: Array) -> Array:
-        """[u; −Kδ − Dδ̇] − c − g: what B q̈ equals."""
+        """[u; −Kδ − Dδ̇] − c − g − ∂U_c/∂q (U_c the joints' cable springs): what B q̈
+        equals."""
         nq = self.n_q
         q, qd = x[:nq], x[nq:]
         return self._forces(q, qd, u, self._terms(q, qd, self.gamma)[1])
@@ -512,6 +514,7 @@ class MultiLinkPlant(Plant):
         return jnp.concatenate([u, -elastic]) - h - jax.grad(self._cable_potential)(q)
 
     def _cable_potential(self, q: Array) -> Array:
+        """U_c = ½ Σ_i k_c,i a_i² (J), the joints' cable springs."""
         a = self.cable_angles(q)
         return 0.5 * jnp.sum(self.cable * a * a)
 
@@ -520,14 +523,13 @@ class MultiLinkPlant(Plant):
         return jnp.concatenate([x[self.n_q :], self.acceleration(x, u)])
 
     def acceleration(self, x: Array, u: Array) -> Array:
-        """q̈ solving B q̈ = [u; −Kδ − Dδ̇] − c − g. B, c + g and the forces are recorded once
-        per arm structure as a
-        :class:`flexarm.layered.Program` (the explicit particle form of
-        :meth:`_terms_lists`, scalar by scalar) with the solve of B q̈ = f by block LDLᵀ
-        elimination (:func:`flexarm.layered.solve_spd`, 3×3 pivot blocks in closed form),
-        and emitted as a few fused kernels that compute every shared value once. ``x`` may
-        carry trailing batch dimensions, (n_x, *batch) with u (n_u, *batch): one kernel per
-        layer then serves the whole batch."""
+        """q̈ solving B q̈ = [u; −Kδ − Dδ̇] − c − g − ∂U_c/∂q. B, c + g and the forces
+        are recorded once per arm structure as a :class:`flexarm.layered.Program` (the
+        explicit particle form of :meth:`_terms_lists`, scalar by scalar) with the solve
+        of B q̈ = f by block LDLᵀ elimination (:func:`flexarm.layered.solve_spd`, 3×3
+        pivot blocks in closed form), and emitted as a few fused kernels that compute
+        every shared value once. ``x`` may carry trailing batch dimensions, (n_x,
+        *batch) with u (n_u, *batch): one kernel per layer then serves the whole batch."""
         return _emitted(self, False, x, u)
 
     def acceleration_and_mobility(self, x: Array, u: Array) -> tuple[Array, Array]:
@@ -668,7 +670,8 @@ def _emitted_jit(n_modes: tuple[int, ...], columns: bool, params: tuple, x: Arra
 
 @functools.lru_cache(maxsize=64)
 def _rhs_program(n_modes: tuple[int, ...]) -> tuple[layered.Program, list]:
-    """q̈ = B⁻¹([u; −Kδ − Dδ̇] − c − g) recorded symbolically for an arm structure."""
+    """q̈ = B⁻¹([u; −Kδ − Dδ̇] − c − g − ∂U_c/∂q) recorded symbolically for an arm
+    structure (U_c the joints' cable springs, :meth:`MultiLinkPlant.cable_angles`)."""
     return _record(n_modes, columns=False)
 
 
