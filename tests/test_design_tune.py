@@ -313,7 +313,8 @@ KNOWN_MISSES = {"unit6": set(), "unit7": {("tuned", "hub")}}
 #: fits of the same log that differ in their last digits (the 2026-11-28 clean run: hub
 #: median 5.73 counts under the logged controller against 4.95) land it on one side or
 #: the other (measured: hub 1.18 counts and settling met; hub 0.72 counts and settling
-#: 3.11 s against 2.42 s). Either one of the two misses is accepted, never both, never
+#: 3.11 s against 2.42 s; on a 2-core EPYC with AVX-512, 2026-11-30: hub 0.67 counts and
+#: settling 1.45 s, both met). At most one of the two misses is accepted, never both, never
 #: stability or the limit; lqr must meet every target.
 EITHER_MISS = {"unit6": set(), "unit7": {("tuned", "hub"), ("tuned", "settling")}}
 NOT_CHECKED = {"unit6": set(), "unit7": {"nested"}}
@@ -343,7 +344,7 @@ def test_designs_meet_issue_targets(unit, request):
         missed |= {(name, k) for k, ok in checks.items() if not ok}
     why = (sorted(missed), {n: c.rows[n]["median"] for n in c.rows})
     if EITHER_MISS[unit]:
-        assert len(missed) == 1 and missed <= EITHER_MISS[unit], why
+        assert len(missed) <= 1 and missed <= EITHER_MISS[unit], why
     else:
         assert missed == KNOWN_MISSES[unit], why
 
