@@ -185,8 +185,8 @@ class Joint(Spec):
     (:meth:`flexarm.models.multilink.MultiLinkPlant.cable_angles`). Its torque reaches the
     link's tip, past the strain gauge at the root: at rest the gauge reads the static
     deflection α = −k_c θ / (K + k_c) of a torsional link (K its stiffness), a reading that
-    follows the joint angle (../shared/data/two-link-rig: about −3 mrad per rad on the
-    shoulder link; ``flexarm.identification.time_domain.statics``)."""
+    follows the joint angle (../shared/data/two-link-rig: −2.3 mrad per rad on the
+    shoulder link; estimated by ``flexarm.identification.time_domain.estimates.cable_springs``)."""
 
     drive: JointDrive = TorqueDrive()
     viscous: Q("N*m*s/rad", ge=0) = 0.0

@@ -374,18 +374,17 @@ def _rest_holds(log: Log, angle_names: list[str], quanta: list[float], gauge: st
     spread = float(np.nanstd(g))
     if not spread > 0:
         return []
+    angles = [np.asarray(log.signals[a], float) for a in angle_names]
+    still_range = [max(3 * q, REST_ANGLE_RANGE) for q in quanta]
     holds, cur = [], []
     for k in range(0, g.size - n + 1, n):
         sl = slice(k, k + n)
         still = (
-            all(
-                np.ptp(np.asarray(log.signals[a], float)[sl]) <= max(3 * q, REST_ANGLE_RANGE)
-                for a, q in zip(angle_names, quanta, strict=True)
-            )
+            all(np.ptp(a[sl]) <= r for a, r in zip(angles, still_range, strict=True))
             and np.ptp(g[sl]) <= REST_GAUGE_RANGE * spread
         )
         if still:
-            cur.append((float(np.mean(log.signals[angle_names[0]][sl])), float(np.mean(g[sl]))))
+            cur.append((float(np.mean(angles[0][sl])), float(np.mean(g[sl]))))
         elif cur:
             holds.append(tuple(np.mean(cur, axis=0)))
             cur = []
@@ -411,8 +410,9 @@ def cable_springs(scenario: Any, logs: list[Log]) -> list[CableSpring]:
     moving the gauge over the angles held by ``CABLE_RESOLVED`` of its spread or more, from
     3 holds or more at 2 joint angles or more; otherwise ``stiffness`` None and
     ``reason`` says why. K_i and g_i are the scenario's (the data sheet's): the fit refines
-    k_c with them. ../shared/data/two-link-rig: the shoulder gauge reads −2.7 mrad per rad
-    of the shoulder at rest (all nine staircase steps and the 102 s run's holds)."""
+    k_c with them. ../shared/data/two-link-rig: the shoulder gauge reads −2.26 ± 0.05 mrad
+    per rad of the shoulder over the ten holds of the split's fitted part (−2.28 ± 0.16 over
+    the held-out part's fourteen); the elbow gauge's slope is positive (no spring)."""
     arm = scenario.arm
     out: list[CableSpring] = []
     if getattr(arm, "kind", None) != "multi_link":
