@@ -233,6 +233,19 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     for name, fp in out["fit_percent"].items():
         # issue #23's 70 % each (the one simulator; measured 83.9-87.3 %)
         assert fp["motor_angle"] is not None and fp["motor_angle"] >= 70.0, (name, fp)
+    # issue #43 item 2: validate of the written scenario on the fitted runs gives what the
+    # fit reported, to 0.1 point (one computation: the one prediction of that scenario)
+    v2 = tmp_path / "validate-fitted.json"
+    r = subprocess.run(
+        [*cli, "validate", str(toml), *logs, *fmt, "--json", str(v2)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    again = json.loads(v2.read_text())["fit_percent"]
+    for log, fp in d["fit_percent"].items():
+        assert again[log]["motor_angle"] == pytest.approx(fp["motor_angle"], abs=0.1), (log, again)
+        assert again[log]["tip_deflection"] is None and fp["tip_deflection"] is None
 
 
 #: the 4/27 session's two runs (README of the data: a hard session), fitted together

@@ -366,7 +366,7 @@ def fit(
             _bench_figures(
                 ctx,
                 folder,
-                res,
+                one,
                 res0,
                 held,
                 validate_window,
@@ -408,13 +408,19 @@ def _print_bench_tables(res, res0, held, validate_window: str | None) -> None:
 def _bench_figures(
     ctx, folder: Path, res, res0, held, validate_window, report, overwrite, inputs: list
 ) -> None:
-    """The bench fit's overlay figures into ``folder`` (and the held-out windows'), and
-    the HTML report from them (--report)."""
-    figs = res.plots(folder)
-    if held is not None:
-        from flexarm.identification.time_domain.predict import write_overlays
-        from flexarm.identification.time_domain.report import figure_names
+    """The bench fit's overlay figures into ``folder`` (its prediction of the fitted logs
+    and of the held-out windows, both by the written scenario), and the HTML report from
+    them (--report)."""
+    from flexarm.identification.time_domain.predict import write_overlays
+    from flexarm.identification.time_domain.report import figure_names
 
+    one, res = res, res.engine_result
+    figs = list(
+        write_overlays(
+            one.prediction, folder, "fit", names=figure_names(list(one.prediction.traces), "fit")
+        )
+    )
+    if held is not None:
         figs += write_overlays(
             held, folder, "held-out", names=figure_names(list(held.traces), "held-out")
         )
@@ -468,11 +474,22 @@ def validate(
     ] = "0:5",
     channel: o.Channels = None,
     report: o.Report = None,
+    initial: Annotated[
+        str | None,
+        typer.Option(
+            "--initial",
+            help="where each log (window) starts: 'estimate' (the logged state refined by "
+            "least squares on the log), 'log' (as read off the log), 'rest' (the logged "
+            "positions, every rate zero); default: as the fit that wrote the scenario did "
+            "([notes.validate] initial; else estimate)",
+        ),
+    ] = None,
 ) -> None:
     """Replay logs on a scenario and report fit % = 100 (1 − ‖y − ŷ‖/‖y − mean y‖).
 
     The one prediction (flexarm.validate): any arm, each log with its own reference and
-    controller; a single-link scenario on servo-rig logs replays the rig's law."""
+    controller (servo-rig logs: the law each declares), from its start state estimated as
+    the fit estimates it (--initial); a fit's written scenario gives the fit's figures."""
     enable_cache()
     from flexarm.identification.time_domain.general import refit_friction
     from flexarm.identification.time_domain.options import PredictOptions
@@ -491,6 +508,8 @@ def validate(
             f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
             "viscous friction) can be re-estimated"
         )
+    if initial not in (None, "estimate", "log", "rest"):
+        fail(f"--initial {initial!r}: one of estimate, log, rest")
     win = parsing.window(window, "--window")
     rwin = parsing.window(refit_window, "--refit-window")
     ch = parsing.channels(channel)
@@ -515,6 +534,7 @@ def validate(
             controller=cfile,
             plots=folder,
             tag="validate",
+            initial=initial,
         )
         with console.status("predicting") as status, _state_warnings_quiet():
             before = predict(sc, glogs, popts)
@@ -532,6 +552,8 @@ def validate(
     if plots is None:  # the figures went to a report's temporary folder
         out["plots"] = []
     _print_warnings(out["warnings"])
+    for note in out.get("notes", []):
+        console.print(escape(note), highlight=False)
     _fit_table(out["fit_percent"], "scenario as given")
     if refit:
         t = Table("friction", "scenario", "refitted", "std")

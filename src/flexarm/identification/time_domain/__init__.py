@@ -7,8 +7,9 @@ kind (:mod:`~flexarm.identification.time_domain.presets`), one result
 (:class:`~flexarm.identification.time_domain.options.FitOptions`); ``ScenarioFitOptions``
 the general engine's flat record (:func:`fit_scenario`'s).
 
-Deprecated names kept until their callers move: ``fit`` / ``predict`` here are the rotary
-servo pipeline's (:mod:`~flexarm.identification.time_domain.fit`), ``validate`` its replay,
+Deprecated names kept until their callers move: ``fit`` here is the rotary servo
+pipeline's (:mod:`~flexarm.identification.time_domain.fit`); ``predict`` is the one
+prediction; ``validate`` a deprecated alias of it returning a dict;
 ``fit_scenario`` / ``predict_scenario`` / ``ScenarioFit`` the general engine's,
 ``RigFitResult`` the servo pipeline's result. Logs are :class:`flexarm.io.logs.Log`, read by
 :func:`flexarm.io.logformat.load_log` (:func:`load_rig_log` adds the servo rig's check)."""
@@ -46,5 +47,6 @@ __all__ = [
 
 # last, after __all__ (so that import sorting keeps it last): the submodules `fit` and
 # `predict` share these names, and importing a submodule binds its name on the package;
-# the servo-rig functions are what these names mean here
-from flexarm.identification.time_domain.fit import fit, predict
+# `fit` is the servo-rig pipeline's function, `predict` the one prediction
+from flexarm.identification.time_domain.fit import fit
+from flexarm.identification.time_domain.predict import predict

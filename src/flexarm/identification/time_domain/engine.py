@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions
+from flexarm.identification.time_domain.predict import Prediction
 from flexarm.identification.time_domain.presets import Preset, for_scenario
 from flexarm.identification.time_domain.result import FitResult
 
@@ -104,7 +105,6 @@ def fit(
 
 def _servo_rig(preset: Preset, logs, options, progress):
     from flexarm.identification.time_domain.fit import fit as rig_fit
-    from flexarm.identification.time_domain.fit import predict as rig_predict
     from flexarm.identification.time_domain.logs import as_rig_log
     from flexarm.identification.time_domain.options import ServoRig
     from flexarm.identification.time_domain.report import as_fit_result
@@ -125,16 +125,36 @@ def _servo_rig(preset: Preset, logs, options, progress):
     rig = opts.servo_rig or ServoRig()
     kw = {**preset.sheet, **rig.keywords()}
     logs = [as_rig_log(g) if isinstance(g, (str, Path)) else g for g in logs]
+    whole = list(logs)
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
     res = as_fit_result(rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}")
     if rig.segment is not None:  # multiple shooting: the rig's result holds the pieces
-        if progress:
-            progress("predicting the whole logs with the parameters fitted on their pieces")
         owner = res.engine_result.settings["piece_owner"]  # the log of each piece
         res.segment_fit_percent = _pieces_fit_percent(res.engine_result, logs, owner)
-        res.fit_percent = rig_predict(res.engine_result, logs)["fit_percent"]
         res.stages["segments"] = len(owner)
+    if res.scenario is not None:
+        # what the fit reports is what `flexarm validate` of its written scenario gives:
+        # the one prediction of the fitted logs (windows) by the fitted scenario, each
+        # log's start state estimated as the fit estimates it; the rig loop's own figures
+        # (its jointly estimated starts) stay in stages["servo_rig"]["loop_fit_percent"]
+        from flexarm.identification.time_domain.options import PredictOptions
+        from flexarm.identification.time_domain.predict import predict
+
+        if progress:
+            progress("predicting the fitted logs with the written scenario")
+        # the whole logs with the fit's windows, as `flexarm validate --window` reads them
+        pred = predict(res.scenario, whole, PredictOptions(windows=opts.windows))
+        res.stages.setdefault("servo_rig", {})["loop_fit_percent"] = res.fit_percent
+        res.stages["prediction"] = {"initial": "estimate", "notes": pred.notes}
+        res.fit_percent = res.engine_result.fit_percent = pred.fit_percent
+        res.prediction = pred
+        res.warnings = list(dict.fromkeys([*res.warnings, *pred.warnings]))
+    if opts.plots is not None and isinstance(res.prediction, Prediction):
+        from flexarm.identification.time_domain.predict import write_overlays
+
+        res.plots = [str(p) for p in write_overlays(res.prediction, opts.plots, "fit")]
+        return res
     if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
     return res

@@ -63,7 +63,6 @@ from flexarm.identification.time_domain.objective import Objective, Rig, check_f
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.identification.time_domain.report import FitResult
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
-from flexarm.io.logs import log_keys
 from flexarm.sim.batch import one_blas_thread
 
 
@@ -1427,73 +1426,4 @@ def _local(
     }
 
 
-def predict(
-    result: FitResult,
-    logs: Sequence[Any],
-    *,
-    estimate_initial: bool = True,
-    nfev: int = 15,
-    controller: Any = None,
-) -> dict:
-    """The fitted model's prediction of other logs (held-out data, e.g. another time
-    window of the same recording): the loop closed with each log's own reference and
-    controller, the parameters as fitted, each log's initial state (hub angle and rate,
-    tip deflection and rate at t = 0) from the log's own first samples and, with
-    ``estimate_initial``, refined by least squares on the log itself (the link may be
-    ringing and the hub moving at the window's start; the model is not refitted).
-    Returns ``{"fit_percent": {log: {signal: %}}, "traj": [...], "logs": [...]}``.
-    ``result``: this engine's result, or the one result holding it (``engine_result``)."""
-    result = getattr(result, "engine_result", None) or result
-    blogs = [as_rig_log(x, controller) for x in logs]
-    T = result.logs[0].dt
-    for g in blogs:
-        if abs(g.dt - T) > PERIOD_TOL * T:
-            raise FitInputError(
-                f"{g.path}: field 'time': sampling period {g.dt:g} s differs "
-                f"from the fitted logs' {T:g} s"
-            )
-        if result.settings["mode"] == "closed_loop":
-            check_closed_loop(g)
-    st = result.settings
-    space = result.space
-    kw = dict(
-        rig=result.rig,
-        space=space,
-        sessions=[0],
-        mode=st["mode"],
-        substeps=st["substeps"],
-        comp_delay=st["computation_delay"],
-        wc_guess=float(result.params.get("link_frequency", 10.0)),
-        filters=st["filters"],
-    )
-    obj = Objective(blogs, **{**kw, "sessions": [0] * len(blogs)})
-    U, D = result.unit, result.discrete
-    off = np.zeros((len(blogs), 4))
-    if estimate_initial:
-        # each log's initial state on its own (one least squares a log, one compiled shape:
-        # every log padded to the longest), so a log's prediction does not depend on the
-        # logs predicted with it (a joint least squares shares its trust region and its
-        # stop, which moved a log's fit % by 0.01 points)
-        for i, g in enumerate(blogs):
-            one = obj if len(blogs) == 1 else Objective([g], **{**kw, "n_samples": obj.N})
-            off[i] = _local(one, U, D, nfev, off0=off[i : i + 1], free_params=False)["off"][0]
-    tr, e, bad = obj.run(U[None], D[None], off[None])
-    fp = obj.fit_percent(e[0])
-    keys = log_keys(blogs)  # one key per log (same names in other folders apart)
-    out = {
-        "fit_percent": {
-            k: {"motor_angle": _pct(fp[i, 0]), "tip_deflection": _pct(fp[i, 1])}
-            for i, k in enumerate(keys)
-        },
-        "diverged": {k: bool(bad[0, i]) for i, k in enumerate(keys)},
-        "traj": [a[0] for a in tr],
-        "logs": blogs,
-    }
-    return out
-
-
-def _pct(v) -> float | None:
-    return None if not np.isfinite(v) else round(float(v), 3)
-
-
-__all__ = ["fit", "predict", "FitResult", "FRICTION", "derived"]
+__all__ = ["fit", "FitResult", "FRICTION", "derived"]

@@ -145,6 +145,12 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
 
 
 # ----------------------------------------------------------------------------- options
+#: where a prediction starts each log (window): :func:`predict_scenario`'s ``initial``
+INITIALS = ("estimate", "log", "rest")
+#: least-squares evaluations of a prediction's start-state estimate (``initial="estimate"``)
+INITIAL_NFEV = 15
+
+
 @dataclass
 class ScenarioFitOptions:
     """Options of :func:`fit_scenario` (see the module docstring for the equations): the
@@ -447,10 +453,17 @@ class _Engine:
                     "fit runs the controller on the logged channels from the log's "
                     "start: log them (or map them with a log format)"
                 )
+        # by default every channel a log measures: present, not computed from others, and
+        # not constant (a rigid arm's zero tip column measures nothing)
         chans = options.channels or {
             n: 1.0
             for n in self.names
-            if any(L.present[self.names.index(n)] and n not in L.computed for L in self.logs)
+            if any(
+                L.present[self.names.index(n)]
+                and n not in L.computed
+                and np.ptp(L.y[:, self.names.index(n)]) > 0
+                for L in self.logs
+            )
         }
         for c in chans:
             if c not in self.names:
@@ -879,7 +892,8 @@ class _Engine:
                 m = self.seg_mask[rows, :, j]
                 if not m.any():
                     continue
-                d[c] = round(_fitpct(self.seg_y[rows, :, j][m], sim[rows][:, :, j][m]), 2)
+                v = _fitpct(self.seg_y[rows, :, j][m], sim[rows][:, :, j][m])
+                d[c] = round(v, 3) if np.isfinite(v) else None
             out[L.name] = d
         return out
 
@@ -1132,6 +1146,10 @@ def fit_scenario(
     if det.any():
         cov[np.ix_(det, det)] = _covariance(eng, r, J[:, det])
     fitted = scenario_with(scenario, eng.values(z))
+    # the fit reports its whole-run prediction from each log's logged state: `validate` of
+    # the written scenario starts there too ([notes.validate] initial, predict's default)
+    notes = {**fitted.notes, "validate": {"initial": "log"}}
+    fitted = fitted.model_copy(update={"notes": notes})
     fd = fitted.model_dump()
     # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
     values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
@@ -1202,6 +1220,7 @@ def _local(
     states: bool = False,
     o0: np.ndarray | None = None,
     progress=None,
+    state_index: Sequence[int] | None = None,
 ):
     """least_squares (trf) on the stacked residuals; the finite-difference Jacobian's
     columns are simulated with the point itself as one batch. With ``states``, each
@@ -1218,14 +1237,18 @@ def _local(
     has_callback = "callback" in inspect.signature(least_squares).parameters
     n = len(eng.free)
     S = len(eng.seg)
-    nx = eng.prep0.loop.plant.n_states if states else 0
+    n_x = eng.prep0.loop.plant.n_states
+    idx = np.arange(n_x) if state_index is None else np.asarray(state_index, int)
+    nx = idx.size if states else 0
     step = options.fd_step
     rows = eng.segment_rows()
     cache: dict = {}
 
     def split(v):
         z = v[:n]
-        off = v[n:].reshape(S, nx) if nx else np.zeros((S, eng.prep0.loop.plant.n_states))
+        off = np.zeros((S, n_x))
+        if nx:
+            off[:, idx] = v[n:].reshape(S, nx)
         return z, off
 
     def point(v):
@@ -1249,7 +1272,7 @@ def _local(
         Z[np.arange(n), np.arange(n)] += h
         OO = np.tile(off, (n + nx, 1, 1))
         for i in range(nx):
-            OO[n + i, :, i] += step
+            OO[n + i, :, idx[i]] += step
         R = eng.residuals(Z, OO)
         r0 = c["r"]
         Jp = ((R[:n] - r0) / h[:, None]).T
@@ -1291,7 +1314,7 @@ def _local(
 
     # an older SciPy whose least_squares takes no callback: its own ftol test alone
     stop: dict[str, Any] = {"callback": resolved} if options.ftol is None and has_callback else {}
-    v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0)])
+    v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0[:, idx])])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
@@ -1475,20 +1498,56 @@ def predict_scenario(
     channels: Sequence[str] | None = None,
     plots: str | Path | None = None,
     tag: str = "predict",
+    initial: str = "log",
+    initial_nfev: int = INITIAL_NFEV,
 ) -> dict:
     """Whole-run prediction of each log (or window) with the scenario's parameters fixed:
-    one simulation per log from the scenario's initial state (a window that does not start
-    at the log's first sample: from the logged state there). Returns fit % per log and
-    channel (100 (1 − ‖y − ŷ‖/‖y − ȳ‖)), and the simulated channels."""
+    one simulation per log (window) and channel fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), and the
+    simulated channels. Where each starts (``initial``, :data:`INITIALS`):
+
+    - ``"estimate"``: the state read off the log at the window's first sample (values and
+      rates after each channel's delay, :func:`_state_from_log`), refined by least squares
+      on the window itself over every plant state (offsets in units of
+      :attr:`_Engine.state_scale`, at most ``initial_nfev`` evaluations; the parameters
+      stay fixed): the fit's own treatment of a segment's start state (multiple
+      shooting's node states), so that a scenario predicts a held-out window as its fit
+      did. A link ringing at the first sample is normal on a real rig.
+    - ``"log"``: the state read off the log, not refined (``options.initial =
+      "scenario"``: a log's first sample from the scenario's ``[initial]`` state).
+    - ``"rest"``: the positions read off the log, every rate zero.
+
+    The returned ``notes`` say which."""
+    if initial not in INITIALS:
+        raise ValueError(
+            f"initial = {initial!r}: one of {', '.join(map(repr, INITIALS))} (estimate: the "
+            "logged state refined on the log; log: as read off the log; rest: the logged "
+            "positions at rest)"
+        )
     opts = copy.copy(options) if options is not None else ScenarioFitOptions()
     opts.priors, opts.bounds, opts.ties, opts.quantise = {}, {}, {}, True
     opts.substeps = None  # the scenario's own integration step
+    opts.max_nfev = int(initial_nfev)
     if channels is not None:
         opts.channels = {c: 1.0 for c in channels}
     eng = _Engine(scenario, logs, [], opts, segment=None)
     state_warnings = eng.assumed_starts()
-    sim = eng.run(np.zeros((1, 0)))[0]
-    fp: dict[str, dict[str, float]] = {}
+    notes: list[str] = []
+    offsets = None
+    if initial == "rest":
+        eng.dy0 = np.zeros_like(eng.dy0)
+        notes.append("initial state: the logged positions at rest (every rate zero)")
+    elif initial == "estimate" and not eng.seg_scn.all():
+        res, *_ = _local(eng, np.zeros(0), opts, states=True)
+        offsets = res.offsets[None]
+        notes.append(
+            "initial state: read off each log (window) and refined by least squares on it "
+            f"(the fit's start-state estimate, {res.nfev} evaluations); "
+            "initial='log' (--initial log) takes it as read, 'rest' at rest"
+        )
+    else:
+        notes.append("initial state: as read off each log (window), not refined")
+    sim = eng.run(np.zeros((1, 0)), offsets)[0]
+    fp: dict[str, dict[str, float | None]] = {}
     traj: dict[str, dict[str, Any]] = {}  # time, and the simulated / measured channels
     for s, (li, k0, ln) in enumerate(eng.seg):
         L = eng.logs[li]
@@ -1497,7 +1556,9 @@ def predict_scenario(
             tr[c] = sim[s, :ln, j]
             m = eng.seg_mask[s, :ln, j]
             if m.any():
-                d[c] = round(_fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]), 2)
+                v = _fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m])
+                # a constant channel (a rigid arm's zero tip column) measures nothing: None
+                d[c] = round(v, 3) if np.isfinite(v) else None
         fp[L.name] = d
         traj[L.name] = {
             "time": L.t[k0 : k0 + ln],
@@ -1510,7 +1571,7 @@ def predict_scenario(
         "fit_percent": fp,
         "trajectories": traj,
         "plots": [],
-        "notes": list(eng.notes),
+        "notes": list(eng.notes) + notes,
         "warnings": state_warnings,
     }
     if plots is not None:

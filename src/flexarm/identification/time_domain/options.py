@@ -265,18 +265,37 @@ class PredictOptions:
 
     ``channels``: the measured channels compared (None: every logged sensor channel);
     ``windows``: per log (t0, t1) s from its first sample, [t0, t1), or None;
-    ``estimate_initial``: a servo-rig prediction refines each log's initial state on the
-    log itself (the model is not refitted); ``continuous``: the logs, in order, are
-    consecutive pieces of one run: controller and digital-filter states carried from piece
-    to piece (whole logs only); ``controller``: a controller file
+    ``initial``: where each log (window) starts: ``"estimate"`` the state read off the
+    log, refined by least squares on the log itself (the model is not refitted), ``"log"``
+    as read off the log, ``"rest"`` the logged positions with every rate zero
+    (:func:`~flexarm.identification.time_domain.general.predict_scenario`); None
+    (default): as the fit that wrote the scenario did, its ``[notes.validate] initial``
+    (the general engine's fits: ``"log"``), else ``"estimate"`` (the servo rig's);
+    ``estimate_initial`` (deprecated): False is ``initial="log"``; ``continuous``: the
+    logs, in order, are consecutive pieces of one run: controller and digital-filter
+    states carried from piece to piece (whole logs only); ``controller``: a controller file
     (:class:`~flexarm.specs.scenario.ControllerFile` or the path of its ``.toml``) replacing
     the scenario's controllers, or else a servo-rig text law overriding the logs' declared
     law; ``plots``: a folder for overlay PNGs, ``tag`` their name."""
 
     channels: Sequence[str] | None = None
     windows: Sequence[tuple[float, float] | None] | None = None
-    estimate_initial: bool = True
+    initial: str | None = None
+    estimate_initial: bool | None = None
     continuous: bool = False
     controller: Any = None
     plots: Any = None
     tag: str = "predict"
+
+    def __post_init__(self) -> None:
+        if self.estimate_initial is not None:
+            import warnings
+
+            warnings.warn(
+                "PredictOptions.estimate_initial is deprecated: use initial='estimate' "
+                "(default), 'log' or 'rest'",
+                DeprecationWarning,
+                stacklevel=3,
+            )
+            if not self.estimate_initial:
+                self.initial = "log"

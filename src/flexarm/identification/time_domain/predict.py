@@ -9,14 +9,17 @@ references and the controller it ran, and compared per measured signal by
 
     fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)                    (:func:`flexarm.metrics.fit_percent`)
 
-The model is a scenario (any arm: the one engine's whole-run prediction,
-:func:`flexarm.identification.time_domain.general.predict_scenario`, from the scenario's
-initial state or, for a window, the logged state), a :class:`~.result.FitResult` (its fitted
-scenario), or a rotary servo-rig fit (that engine's loop, each log's initial state
-estimated on the log itself; :func:`flexarm.identification.time_domain.fit.predict`). A
-single-link scenario predicting servo-rig logs (a declared state-feedback law, a
-``reference`` column) runs the rig's replay
-(:func:`flexarm.identification.time_domain.validate.validate`). Logs are keyed by
+The model is a scenario (its TOML path or built-in name) or a :class:`~.result.FitResult`
+(its fitted scenario, the file ``fit --scenario-out`` writes): every prediction is the one
+engine's whole-run prediction,
+:func:`flexarm.identification.time_domain.general.predict_scenario`, so that a fit's
+figures and ``flexarm validate`` of its written scenario are one computation. Where each
+log (window) starts (``PredictOptions.initial``): ``"estimate"``, the state read off it
+refined by least squares on it, as the servo rig's fit does; ``"log"``, as read off it,
+as the general engine's fit predicts; ``"rest"``, every rate zero; by default as the fit
+that wrote the scenario did (:func:`initial_of`). Servo-rig logs that declare the law
+they ran (a state-feedback law, a ``reference`` column) run with their own law on a
+single-link scenario. Logs are keyed by
 :func:`flexarm.io.logs.log_keys` (same file names in other folders stay apart).
 
 ``PredictOptions.controller`` as a controller file (a
@@ -31,9 +34,7 @@ filter) from the state reached over the pieces before
 log a dynamic controller starts from its assumed ``initial_state`` is a warning in
 :attr:`Prediction.warnings` naming the block and ``--continuous``.
 
-This replaces ``validate.validate``, ``fit.predict``, ``general.predict_scenario`` and
-``analysis.replay.replay`` as the one entry (those stay as the engines behind it, or as
-deprecated aliases).
+This is the one entry: the servo rig's own replay and its loop's prediction are gone.
 """
 
 from __future__ import annotations
@@ -116,10 +117,6 @@ class Prediction:
         raise KeyError(key)
 
 
-def _is_rig_fit(x) -> bool:
-    return hasattr(x, "rig") and hasattr(x, "space") and hasattr(x, "settings")
-
-
 def _rig_logs(logs, controller) -> bool:
     return all(
         getattr(g, "controller", None) is not None or controller is not None for g in logs
@@ -127,9 +124,9 @@ def _rig_logs(logs, controller) -> bool:
 
 
 def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = None) -> Prediction:
-    """Predict ``logs`` with ``model`` (a scenario, its TOML path or built-in name, a
-    :class:`~.result.FitResult`, or a rotary servo-rig fit) with its parameters fixed; see
-    the module docstring. Paths in ``logs`` are read by :func:`flexarm.io.logformat.load_log`
+    """Predict ``logs`` with ``model`` (a scenario, its TOML path or built-in name, or a
+    :class:`~.result.FitResult`: its fitted scenario) with its parameters fixed; see the
+    module docstring. Paths in ``logs`` are read by :func:`flexarm.io.logformat.load_log`
     (exchange format)."""
     from flexarm.io.logformat import load_logs
     from flexarm.io.logs import log_keys
@@ -149,29 +146,47 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
             )
     keys = log_keys(logs)
     cfile = controller_file(opts.controller)
-    if _is_rig_fit(getattr(model, "engine_result", None)):  # the one result of a rig fit
-        model = model.engine_result
-    if _is_rig_fit(model):
-        if cfile is not None or opts.continuous:
-            raise ValueError(
-                "a servo-rig fit predicts with its own loop: a controller file "
-                "and continuous need a scenario (flexarm validate SCENARIO ...)"
-            )
-        return _predict_rig_fit(model, logs, keys, opts)
     sc = getattr(model, "scenario", model)
+    if callable(sc) and not isinstance(sc, (Scenario, str, Path)):
+        sc = sc()  # the servo rig pipeline's own result: its fitted scenario
+    if sc is None:
+        raise ValueError(
+            "predict: this fit result has no fitted scenario (an interrupted fit); "
+            "predict with a scenario"
+        )
     sc = sc if isinstance(sc, Scenario) else load_scenario(sc)
     if cfile is not None:
         sc = sc.with_controllers(cfile)
         opts = replace(opts, controller=None)
-    elif opts.continuous and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
+    own_law = sc.arm.kind == "single_link" and cfile is None and _rig_logs(logs, opts.controller)
+    if own_law and opts.continuous:
         raise ValueError(
-            "continuous: the servo rig's replay runs each log alone; a "
+            "continuous: the logs' own declared laws run each log alone; a "
             "scenario's own controller (or --controller FILE.toml) runs them "
             "as one run"
         )
-    if cfile is None and sc.arm.kind == "single_link" and _rig_logs(logs, opts.controller):
-        return _predict_rig_scenario(sc, logs, keys, opts)
-    return _predict_scenario(sc, logs, keys, opts)
+    if opts.initial is None:
+        opts = replace(opts, initial=initial_of(sc))
+    return _predict_scenario(sc, logs, keys, opts, own_law)
+
+
+def initial_of(scenario) -> str:
+    """Where a prediction of ``scenario`` starts each log by default: its ``[notes.validate]
+    initial`` (written by the fit that made it: the general engine's ``"log"``), else
+    ``"estimate"`` (the logged state refined on the log, as the servo rig's fit does)."""
+    from flexarm.identification.time_domain.general import INITIALS
+
+    notes = getattr(scenario, "notes", None) or {}
+    table = notes.get("validate") if isinstance(notes, dict) else None
+    value = table.get("initial") if isinstance(table, dict) else None
+    if value is None:
+        return "estimate"
+    if value not in INITIALS:
+        raise ValueError(
+            f"scenario {scenario.name!r}: [notes.validate] initial = {value!r}: one of "
+            f"{', '.join(map(repr, INITIALS))}"
+        )
+    return str(value)
 
 
 def controller_file(value: Any):
@@ -194,88 +209,105 @@ def controller_file(value: Any):
     return None
 
 
-def _windowed(logs, opts):
-    if opts.windows is None:
-        return list(logs)
-    return [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=True)]
+def _gain_warning(key: str, log) -> list[str]:
+    segs = log.gain_segments
+    if len(segs) <= 1:
+        return []
+    t = [round(float(log.time[a] - log.time[0]), 3) for a, _ in segs[1:]]
+    return [
+        f"{key}: the logged gains change inside the log (at {', '.join(map(str, t))} s); "
+        "the prediction runs the law of its first sample throughout"
+    ]
 
 
-def _predict_scenario(sc, logs, keys, opts) -> Prediction:
+def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction:
+    """The one engine's whole-run prediction (:func:`~.general.predict_scenario`). With
+    ``own_law`` (servo-rig logs that declare the law they ran), each log runs with its own
+    declared controller in place of the scenario's (the lab's gains differ between runs)."""
     from flexarm.identification.time_domain.general import ScenarioFitOptions, predict_scenario
 
-    fo = ScenarioFitOptions(
-        windows=list(opts.windows) if opts.windows is not None else None,
-        continuous=bool(opts.continuous),
-    )
-    out = predict_scenario(sc, logs, fo, channels=list(opts.channels) if opts.channels else None)
-    # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
-    fp = dict(zip(keys, out["fit_percent"].values(), strict=False))
-    traces = {}
-    for k, tr in zip(keys, out["trajectories"].values(), strict=False):
-        t = np.asarray(tr["time"], float)
-        traces[k] = {
-            "time": t - t[0] if t.size else t,
-            "measured": tr["measured"],
-            "simulated": tr["simulated"],
-        }
+    wins = list(opts.windows) if opts.windows is not None else [None] * len(logs)
+    chans = list(opts.channels) if opts.channels else None
+    if own_law:
+        from flexarm.identification.time_domain.logs import as_rig_log, check_closed_loop
+
+        logs = [as_rig_log(g, opts.controller) for g in logs]
+        for g in logs:
+            check_closed_loop(g)
+        runs = []
+        for g, w in zip(logs, wins, strict=True):
+            law = g.controller.model_dump(mode="json", exclude_none=True)
+            one = sc.with_controllers({"controller": law}, source=f"{g.where}: declared law")
+            runs.append((one, [g], [w]))
+    else:
+        runs = [(sc, list(logs), wins)]
+    fp: dict[str, dict[str, float | None]] = {}
+    traces: dict[str, dict[str, Any]] = {}
+    diverged: dict[str, bool] = {}
+    warnings: list[str] = []
+    notes: list[str] = []
+    it = iter(keys)
+    for scn, group, gw in runs:
+        fo = ScenarioFitOptions(windows=gw, continuous=bool(opts.continuous))
+        out = predict_scenario(scn, group, fo, channels=chans, initial=opts.initial)
+        warnings += list(out.get("warnings", []))
+        notes += list(out.get("notes", []))
+        # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
+        for g, v, tr in zip(
+            group, out["fit_percent"].values(), out["trajectories"].values(), strict=True
+        ):
+            k = next(it)
+            # a sensor channel the log holds but does not measure (constant: a rigid
+            # arm's zero tip column) is listed, with no figure
+            fp[k] = {
+                **{
+                    c: None for c in scn.sensors if chans is None and c in getattr(g, "signals", {})
+                },
+                **dict(v),
+            }
+            t = np.asarray(tr["time"], float)
+            traces[k] = {
+                "time": t - t[0] if t.size else t,
+                "measured": tr["measured"],
+                "simulated": tr["simulated"],
+            }
+            sims = [np.asarray(x, float) for x in tr["simulated"].values()]
+            diverged[k] = not all(np.all(np.isfinite(x)) for x in sims)
+            runaway = (fp[k].get("motor_angle") or 0.0) < -100.0
+            if own_law and (diverged[k] or runaway):
+                from flexarm.identification.time_domain.logs import FitInputError
+
+                c = g.controller
+                raise FitInputError(
+                    f"{g.where}: field 'controller': with K1={c.k1:g} K2={c.k2:g} "
+                    f"K3={c.k3:g} K4={c.k4:g} the simulated loop on {sc.name} is unstable "
+                    f"({'it diverged' if diverged[k] else 'it runs away: hub-angle fit '}"
+                    f"{'' if diverged[k] else format(fp[k]['motor_angle'], '.0f') + ' %'}); "
+                    "check the gains and their signs and units (V/rad, V/m, V*s/rad, V*s/m) "
+                    "and the tip sensor's gain sign"
+                )
+            if own_law:
+                traces[k]["display"] = {
+                    c: RIG_DISPLAY[c] for c in tr["simulated"] if c in RIG_DISPLAY
+                }
+                w = gw[group.index(g)]
+                warnings += _gain_warning(k, g if w is None else g.window(*w))
     pred = Prediction(
         sc.name,
         fp,
         traces,
-        warnings=list(out.get("warnings", [])),
-        notes=list(dict.fromkeys(out.get("notes", []))),
-        diverged={k: False for k in keys},
+        warnings=warnings,
+        notes=list(dict.fromkeys(notes)),
+        diverged=diverged,
     )
+    warnings += [f"{k}: the simulated loop diverged" for k, bad in diverged.items() if bad]
+    if own_law:
+        pred.notes.append("each log ran with the law it declares (its logged gains)")
     if opts.continuous:
         pred.notes.append(
             f"continuous: the {len(keys)} logs replayed as consecutive pieces "
             "of one run (controller and filter states carried)"
         )
-    if opts.plots is not None:
-        pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
-    return pred
-
-
-def _predict_rig_scenario(sc, logs, keys, opts) -> Prediction:
-    from flexarm.identification.time_domain.validate import validate
-
-    fp, traces = {}, {}
-    for k, g in zip(keys, _windowed(logs, opts), strict=True):
-        out = validate(sc, [g], controller=opts.controller, traces=True)
-        fp[k] = next(iter(out["fit_percent"].values()))
-        traces[k] = out["traces"][0]
-    pred = Prediction(sc.name, fp, traces, diverged={k: False for k in keys})
-    if opts.plots is not None:
-        pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
-    return pred
-
-
-def _predict_rig_fit(res, logs, keys, opts) -> Prediction:
-    from flexarm.identification.time_domain.fit import predict as rig_predict
-
-    # one call: the rig keys its results by log_keys, so logs of one name in other
-    # folders stay apart (the order is the logs' order)
-    out = rig_predict(
-        res,
-        _windowed(logs, opts),
-        estimate_initial=opts.estimate_initial,
-        controller=opts.controller,
-    )
-    fp = dict(zip(keys, out["fit_percent"].values(), strict=True))
-    div = dict(zip(keys, out["diverged"].values(), strict=True))
-    tr = out["traj"]
-    traces = {
-        k: rig_trace(g, [np.asarray(tr[r][j, : len(g)]) for r in range(3)])
-        for j, (k, g) in enumerate(zip(keys, out["logs"], strict=True))
-    }
-    pred = Prediction(
-        "fitted rig",
-        fp,
-        traces,
-        diverged=div,
-        warnings=[f"{k}: the simulated loop diverged" for k, d in div.items() if d],
-        notes=["initial state estimated from each log's own data"] if opts.estimate_initial else [],
-    )
     if opts.plots is not None:
         pred.plots = [str(p) for p in write_overlays(pred, opts.plots, opts.tag)]
     return pred
