@@ -386,3 +386,51 @@ def test_restart_goes_on_where_a_collapsed_trust_region_stopped():
             assert gains and gains[0] > opts.ftol * costs[0], gains
     print("local cost without / with restarts:", costs)
     assert costs[2] < costs[0] * (1 - 1e-6), costs
+
+
+@pytest.mark.slow  # ~20 s: one fit of a 4 s log
+def test_signed_bias_fitted_in_linear_space_from_zero():
+    """Issue #44 item 4: a bias torque (a signed parameter) starts at 0 and ends with the
+    truth's sign and size, inside its reported 3 σ. It is fitted as p = p0 + s z with the
+    scale s from the joint's Coulomb level (0.02 N·m); the log-space form, p0·exp(z), could
+    neither leave 0 nor change sign. Moves of both signs make the bias (constant) and the
+    Coulomb torque (against the motion) separable; 3 σ is the usual coverage of a
+    Gaussian std estimate (99.7 %)."""
+    truth = scenario_with(two_mode_link(), {"arm.joints[0].friction.bias": -0.008})
+    truth = truth.model_copy(
+        update={"simulation": truth.simulation.model_copy(update={"duration": 4.0})}
+    )
+    t = np.arange(2001) * 0.002
+    log = scenario_log(
+        truth, {"reference": staircase(t, [0.0, 0.3, -0.2, 0.25, -0.3], 0.8)}, seed=4
+    )
+    free = ["arm.joints[0].friction.bias", "arm.joints[0].friction.coulomb"]
+    template = scenario_with(truth, {free[0]: 0.0, free[1]: 0.02 * 1.3})
+    res = fit_scenario(template, [log], free, ScenarioFitOptions(max_nfev=20))
+    bias, sd = res.params[free[0]], res.std[free[0]]
+    print("bias", bias, "+-", sd, "coulomb", res.params[free[1]], res.stages.get("linear"))
+    assert res.stages["linear"] == [free[0]]
+    assert bias < 0 and np.isfinite(sd) and sd > 0
+    assert abs(bias - (-0.008)) <= 3 * sd, (bias, sd)  # measured 9.8e-6 = 1.3 sd
+    assert res.params[free[1]] == pytest.approx(0.02, rel=0.1)
+
+
+def test_signed_parameter_at_zero_without_a_scale_names_the_bound_option():
+    truth = scenario_with(two_mode_link(), {"arm.joints[0].friction.coulomb": 0.0})
+    log = scenario_log(
+        truth.model_copy(
+            update={"simulation": truth.simulation.model_copy(update={"duration": 0.2})}
+        ),
+        {"reference": np.full(101, 0.1)},
+    )
+    with pytest.raises(ValueError, match=r"starts at 0 .*--bound arm\.joints\[0\]\.friction\.bias"):
+        fit_scenario(truth, [log], ["arm.joints[0].friction.bias"], ScenarioFitOptions(max_nfev=2))
+    # with a range it has its scale (half the range / bound_factor) and bounds that may
+    # change sign: one evaluation runs
+    res = fit_scenario(
+        truth,
+        [log],
+        ["arm.joints[0].friction.bias"],
+        ScenarioFitOptions(max_nfev=1, bounds={"arm.joints[0].friction.bias": (-0.03, 0.03)}),
+    )
+    assert res.stages["linear"] == ["arm.joints[0].friction.bias"]

@@ -217,6 +217,15 @@ def fit(
             "'arm.joints[0].drive.torque_constant=0.3'",
         ),
     ] = None,
+    bound: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--bound",
+            help="with SCENARIO: PATH=LO:HI, a free parameter's range in SI (repeat); a "
+            "signed one (a bias, an offset, one starting at 0) is fitted in linear space "
+            "and may change sign, e.g. 'arm.joints[0].friction.bias=-0.5:0.5'",
+        ),
+    ] = None,
     segment: Annotated[
         float | None,
         typer.Option("--segment", help="with SCENARIO: multiple-shooting segment length, s"),
@@ -257,6 +266,7 @@ def fit(
             log_format,
             free,
             prior,
+            bound,
             segment,
             channel,
             window,
@@ -276,9 +286,10 @@ def fit(
             "--controller FILE.toml and --continuous belong to the general fit: give the "
             "scenario first, flexarm fit SCENARIO LOG... --controller FILE.toml"
         )
-    if free or prior or segment is not None or channel:
+    if free or prior or bound or segment is not None or channel:
         fail(
-            "--free, --prior, --segment and --channel belong to the general fit: give the "
+            "--free, --prior, --bound, --segment and --channel belong to the general fit: "
+            "give the "
             "scenario first, flexarm fit SCENARIO LOG... --free PATH"
         )
     if log_format and len(log_format) > 1:
@@ -628,6 +639,7 @@ def _fit_scenario_cli(
     log_format,
     free,
     prior,
+    bound,
     segment,
     channel,
     window,
@@ -654,6 +666,7 @@ def _fit_scenario_cli(
     check_dir_option("--plots", plots)
     win = parsing.window(window, "--window")
     chans, priors = parsing.channels(channel), parsing.priors(prior)
+    bounds = _bounds(bound)
     sc = with_controller_file(load(scenario), cfile)
     figures = contextlib.ExitStack()
     folder = figures.enter_context(figure_folder(plots, report))
@@ -666,7 +679,7 @@ def _fit_scenario_cli(
             cost=Cost(channels=chans) if chans else None,
             shooting=Shooting(segment=segment) if segment is not None else None,
             local=Local(max_nfev=max_nfev) if max_nfev is not None else None,
-            priors=Priors(priors=priors) if priors else None,
+            priors=Priors(priors=priors, bounds=bounds) if priors or bounds else None,
             windows=[win] * len(glogs) if win else None,
             plots=folder,
             continuous=continuous,
@@ -711,6 +724,27 @@ def _fit_scenario_cli(
                 report,
                 overwrite,
             )
+
+
+def _bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    """``--bound PATH=LO:HI`` (repeated) → {path: (lo, hi)} in SI, finite, lo < hi."""
+    import math
+
+    out: dict[str, tuple[float, float]] = {}
+    for x in items or []:
+        path, _, rng = x.rpartition("=")
+        lo, _, hi = rng.partition(":")
+        try:
+            a, b = float(lo), float(hi)
+        except ValueError:
+            a = b = float("nan")
+        if not path.strip() or not (math.isfinite(a) and math.isfinite(b) and a < b):
+            fail(
+                f"--bound {x!r}: expected PATH=LO:HI with finite LO < HI in SI, e.g. "
+                "'arm.joints[0].friction.bias=-0.5:0.5'"
+            )
+        out[path.strip()] = (a, b)
+    return out
 
 
 def _fit_table(fp: dict, title: str) -> None:

@@ -12,7 +12,12 @@ Parameters and cost
 Parameters are positive (or sign-fixed) physical numbers, estimated in log space:
 p_i = p0_i · exp(z_i), p0_i the template value, z_i ∈ [−ln f, ln f] (f =
 ``ScenarioFitOptions.bound_factor``; ``ScenarioFitOptions.bounds`` gives absolute bounds per
-path).
+path). Signed parameters, which may be zero or change sign (a bias torque or force, an
+offset: fields named in :data:`SIGNED_FIELDS`, a template value of 0, or paths listed in
+``ScenarioFitOptions.linear``), are estimated in linear space, p_i = p0_i + s_i z_i, z_i ∈
+[−f, f] or their ``bounds``, with the scale s_i = |p0_i|, else half the width of their
+given bounds, else the Coulomb level beside a friction bias; a signed parameter starting
+at 0 without any of these is refused, naming ``--bound``.
 A candidate z becomes a scenario (``model_dump`` → set the paths → ``scenario_from_dict``),
 then a loop (:func:`flexarm.sim.build.prepare`); a population of candidates is stacked leaf
 by leaf into one batched loop and run by one ``vmap``-ed simulation.
@@ -135,13 +140,34 @@ def _template_value(dump: dict, keys: list, path: str) -> float:
             f"free parameter {path!r}: the scenario's value there is {v!r}, not "
             "a number; give it a number in the scenario (the template value)"
         )
-    if not math.isfinite(v) or v == 0.0:
+    if not math.isfinite(v):
         raise ValueError(
-            f"free parameter {path!r}: the template value is {v!r}; parameters "
-            "are fitted in log space (p = p0·exp(z)), so give a finite non-zero "
+            f"free parameter {path!r}: the template value is {v!r}; give a finite "
             "starting value in the scenario (e.g. the data-sheet value)"
         )
     return float(v)
+
+
+#: scenario fields that may be zero or change sign (fitted in linear space)
+SIGNED_FIELDS = frozenset({"bias", "offset"})
+
+
+def _linear_scale(dump: dict, keys: list, path: str, p0: float, bounds, factor: float) -> float:
+    """The scale s of a signed parameter, p = p0 + s z (module docstring)."""
+    if p0 != 0.0:
+        return abs(p0)
+    if bounds is not None:
+        a, b = (float(v) for v in bounds)
+        return max(abs(b - a) / 2.0 / factor, 1e-300)
+    if keys[-1] == "bias" and "friction" in keys:
+        c = _path_get(dump, keys[:-1]).get("coulomb") or 0.0
+        if c > 0:
+            return float(c)
+    raise ValueError(
+        f"free parameter {path!r} starts at 0 and nothing gives its scale: give its "
+        f"range, --bound {path}=LO:HI (ScenarioFitOptions.bounds / Priors.bounds "
+        "{path: (lo, hi)}), or a non-zero starting value in the scenario"
+    )
 
 
 # ----------------------------------------------------------------------------- options
@@ -185,6 +211,9 @@ class ScenarioFitOptions:
     substeps: integration substeps per sample while fitting (None: the scenario's).
     ties: path → free path: the first is not free but moves with the second by the same
     factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
+    linear: paths fitted in linear space besides the signed ones (:data:`SIGNED_FIELDS`, a
+    template value of 0): p = p0 + s z (module docstring); a linear parameter's prior is
+    its std in units of its scale s.
     initial: ``"log"``: every segment, the first of a log included, starts from the state
     read off the log; ``"scenario"``: a segment at a log's first sample starts from the
     scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
@@ -239,6 +268,7 @@ class ScenarioFitOptions:
     initial: str = "log"
     substeps: int | None = None
     ties: Mapping[str, str] = field(default_factory=dict)
+    linear: Sequence[str] = ()
     continuous: bool = False
     continuation: bool = True
     delay_search: Any = None
@@ -392,9 +422,38 @@ class _Engine:
                     f"ScenarioFitOptions: {p!r} has a prior or bounds but is not free; "
                     f"free: {', '.join(self.free)}"
                 )
+        lin = set(options.linear) | set(expand_paths(self.dump, list(options.linear)))
+        self.linear = np.array(
+            [
+                p in lin or self.p0[i] == 0.0 or k[-1] in SIGNED_FIELDS
+                for i, (p, k) in enumerate(zip(self.free, self.keys, strict=True))
+            ],
+            bool,
+        )
+        self.pscale = np.ones(len(self.free))
         lo = np.full(len(self.free), -math.log(options.bound_factor))
         hi = -lo
         for i, p in enumerate(self.free):
+            if self.linear[i]:
+                self.pscale[i] = _linear_scale(
+                    self.dump,
+                    self.keys[i],
+                    p,
+                    self.p0[i],
+                    options.bounds.get(p),
+                    options.bound_factor,
+                )
+                lo[i], hi[i] = -options.bound_factor, options.bound_factor
+                if p in options.bounds:
+                    a, b = sorted(float(v) for v in options.bounds[p])
+                    if not a <= self.p0[i] <= b:
+                        raise ValueError(
+                            f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not "
+                            f"contain the template value {self.p0[i]:g}; move one of them"
+                        )
+                    lo[i] = (a - self.p0[i]) / self.pscale[i]
+                    hi[i] = (b - self.p0[i]) / self.pscale[i]
+                continue
             if p in options.bounds:
                 a, b = (float(v) for v in options.bounds[p])
                 if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
@@ -417,6 +476,11 @@ class _Engine:
                 raise ValueError(
                     f"ScenarioFitOptions.ties: {p!r} follows {master!r}, which is not "
                     f"free; free: {', '.join(self.free)}"
+                )
+            if self.linear[self.free.index(master)]:
+                raise ValueError(
+                    f"ScenarioFitOptions.ties: {p!r} follows {master!r}, a signed parameter "
+                    "fitted in linear space; ties follow log-space (positive) parameters"
                 )
             self.tied[p] = (self.free.index(master), _template_value(self.dump, parse_path(p), p))
         self.prep0 = prepare(scenario)
@@ -735,10 +799,20 @@ class _Engine:
 
     # ------------------------------------------------------------------ candidates
     def values(self, z: np.ndarray) -> dict[str, float]:
-        out = {p: float(self.p0[i] * np.exp(z[i])) for i, p in enumerate(self.free)}
+        out = {p: self.value_of(i, z[i]) for i, p in enumerate(self.free)}
         for p, (i, v0) in self.tied.items():
             out[p] = float(v0 * np.exp(z[i]))
         return out
+
+    def value_of(self, i: int, zi: float) -> float:
+        """Parameter ``i`` at coordinate ``zi``: p0·exp(z), or p0 + s·z if signed."""
+        if self.linear[i]:
+            return float(self.p0[i] + self.pscale[i] * zi)
+        return float(self.p0[i] * np.exp(zi))
+
+    def std_of(self, i: int, value: float, std_z: float) -> float:
+        """Parameter ``i``'s std from its coordinate's: |p|·σ_z, or s·σ_z if signed."""
+        return float((self.pscale[i] if self.linear[i] else abs(value)) * std_z)
 
     def prepared(self, z: np.ndarray) -> Prepared:
         return prepare(scenario_with(self.template, self.values(z)))
@@ -1052,6 +1126,8 @@ def fit_scenario(
     say = progress or (lambda msg: None)
     z0 = np.zeros(n)
     stages: dict[str, Any] = {"segments": len(eng.seg), "segment_samples": eng.M}
+    if eng.linear.any():  # signed parameters, fitted as p0 + s·z (their std is s·σ_z)
+        stages["linear"] = [p for i, p in enumerate(eng.free) if eng.linear[i]]
     if eng.notes:
         stages["computed_channels"] = list(eng.notes)
     if options.global_stage:
@@ -1155,7 +1231,7 @@ def fit_scenario(
     values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
     std = {
-        p: float(abs(values[p]) * std_z[i]) if det[i] else float("inf")
+        p: eng.std_of(i, values[p], std_z[i]) if det[i] else float("inf")
         for i, p in enumerate(eng.free)
     }
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
@@ -1178,7 +1254,7 @@ def fit_scenario(
                 )
     for i, p in enumerate(eng.free):
         if z[i] <= eng.lo[i] + 1e-3 or z[i] >= eng.hi[i] - 1e-3:
-            lo, hi = sorted((eng.p0[i] * math.exp(eng.lo[i]), eng.p0[i] * math.exp(eng.hi[i])))
+            lo, hi = sorted((eng.value_of(i, eng.lo[i]), eng.value_of(i, eng.hi[i])))
             warnings.append(
                 f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
                 f"widen it with ScenarioFitOptions.bounds={{{p!r}: (lo, hi)}}"

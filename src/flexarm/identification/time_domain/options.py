@@ -118,12 +118,16 @@ class DelaySearch:
 class Priors:
     """Bounds and priors in log space: p = p0·exp(z), z ∈ [−ln f, ln f] (f =
     ``bound_factor``) or ``bounds`` (path → (lo, hi) SI); ``priors`` path → relative std
-    σ_p of eq. (2); ``ties`` path → free path moving by the same factor."""
+    σ_p of eq. (2); ``ties`` path → free path moving by the same factor; ``linear``: paths
+    fitted in linear space, p = p0 + s·z, besides the signed fields (bias, offset) and
+    those starting at 0, which always are
+    (:mod:`~flexarm.identification.time_domain.general`)."""
 
     bound_factor: float = 3.0
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     priors: Mapping[str, float] = field(default_factory=dict)
     ties: Mapping[str, str] = field(default_factory=dict)
+    linear: Sequence[str] = ()
     corr_warn: float = 0.95
 
 
