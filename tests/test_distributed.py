@@ -266,7 +266,7 @@ def test_fit_many_killed_worker_failed_row_and_resume(client, tmp_path):
     assert st["good"]["status"] == "done" and st["killer"]["status"] == "done", st
     assert st["bad"]["status"] == "failed" and "broken.csv" in st["bad"]["error"], st["bad"]
     # the killed row's fit equals the other's (same log, same seed: deterministic fit)
-    for k in ("hub_inertia", "coulomb", "link_frequency"):
+    for k in ("arm.motor.inertia", "arm.friction.coulomb", "arm.beam.flexural_rigidity"):
         assert st["killer"][k] == pytest.approx(st["good"][k], rel=1e-9)
     d = json.loads((out / "good" / "fit.json").read_text())
     assert d["flexarm_fit_many"]["status"] == "done" and (out / "good" / "fitted.toml").is_file()
@@ -274,7 +274,7 @@ def test_fit_many_killed_worker_failed_row_and_resume(client, tmp_path):
     with open(out / "summary.csv") as fh:
         summary = list(csv.DictReader(fh))
     assert [r["id"] for r in summary] == ["good", "bad", "killer"]
-    assert float(summary[0]["hub_inertia"]) == pytest.approx(st["good"]["hub_inertia"])
+    assert float(summary[0]["arm.motor.inertia"]) == pytest.approx(st["good"]["arm.motor.inertia"])
     assert any(k.startswith("fit%:a.csv:") for k in summary[0])
     # a rerun (in-process) skips the finished rows and tries the failed one again
     again = fd.fit_many(m, None, out, options=fd.FitManyOptions(figures=False, fit=_counting_fit))
@@ -284,7 +284,7 @@ def test_fit_many_killed_worker_failed_row_and_resume(client, tmp_path):
         "failed",
         "skipped (finished before)",
     ]
-    assert again[0]["hub_inertia"] == st["good"]["hub_inertia"]
+    assert again[0]["arm.motor.inertia"] == st["good"]["arm.motor.inertia"]
 
 
 def test_fit_many_in_process_without_dask(tmp_path, monkeypatch):

@@ -490,7 +490,7 @@ def test_fit_reports_hac_and_iid_std(fitted, tmp_path):
     for k in res.params:
         assert np.isfinite(res.std[k]) and np.isfinite(res.std_iid[k]), k
         assert res.std[k] >= res.std_iid[k], (k, res.std[k], res.std_iid[k])
-        assert d["std"][k] == pytest.approx(res.std[k])
+        assert d["stages"]["servo_rig"]["std"][k] == pytest.approx(res.std[k])
         assert d["stages"]["servo_rig"]["std_iid"][k] == pytest.approx(res.std_iid[k])
     assert all(m > 1 for m in res.stages["local"]["hac_bandwidth_samples"].values())
     assert "std (HAC)" in res.summary()
@@ -504,10 +504,15 @@ def test_fit_reports_hac_and_iid_std(fitted, tmp_path):
     one = res.result()
     d = json.loads(json.dumps(d))
     assert FitResult.from_dict(d).to_dict() == d and one.engine_result is res
-    assert d["free"] == list(res.params) and set(d["template"]) == set(res.params)
+    # keyed by the scenario's paths (#43: the scenario is the model), the rig's own names
+    # beside them; J's path holds J, its std the rig's (an identity map)
+    assert d["free"] == list(d["params"]) and set(d["template"]) == set(d["params"])
+    assert set(d["stages"]["servo_rig"]["params"]) == set(res.params)
+    assert d["params"]["arm.motor.inertia"] == res.params["hub_inertia"]
+    assert d["std"]["arm.motor.inertia"] == pytest.approx(res.std["hub_inertia"], rel=1e-6)
     assert all(v is not None for v in d["template"].values()) and d["template"] != d["params"]
     c = np.asarray(one.correlation)
-    assert c.shape == (len(res.params),) * 2 and np.allclose(np.diag(c), 1.0)
+    assert c.shape == (len(d["free"]),) * 2 and np.allclose(np.diag(c), 1.0)
     assert np.allclose(c, c.T) and np.all(np.abs(c) <= 1 + 1e-9)
     a, b = one.write_scenario(tmp_path / "a.toml"), res.write_scenario(tmp_path / "b.toml")
     assert a.read_text() == b.read_text() and a.read_text().startswith("# Fitted by")

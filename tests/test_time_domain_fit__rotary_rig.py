@@ -133,8 +133,8 @@ def test_rigid_session(rigid):
     held = predict(res, [_log(n) for n in RIGID_HELD])  # the rig's own loop (engine_result)
     print(res.engine_result.summary())
     print("held-out fit %:", held["fit_percent"])
-    assert "link_frequency" not in res.params  # no tip channel: a rigid hub
-    assert res.params["coulomb"] > 0
+    assert "arm.beam.flexural_rigidity" not in res.params  # no tip channel: a rigid hub
+    assert res.params["arm.friction.coulomb"] > 0
     for name, fp in res.fit_percent.items():
         assert fp["motor_angle"] >= 80.0, (name, fp)
         assert fp["tip_deflection"] is None
@@ -212,7 +212,7 @@ def test_rigid_session_cli_fit_json_is_the_python_result_and_validates(rigid, tm
     # the scenario written is the rig's commented TOML, and the Python result's
     assert toml.read_text().startswith("# Fitted by flexarm.identification.time_domain from")
     sc = load_scenario(toml)
-    assert sc.arm.motor.inertia == pytest.approx(rigid.params["hub_inertia"], rel=1e-9)
+    assert sc.arm.motor.inertia == pytest.approx(rigid.params["arm.motor.inertia"], rel=1e-9)
     r = subprocess.run(
         [
             *cli,

@@ -390,18 +390,21 @@ def as_fit_result(
     """The servo rig's result as the one :class:`~flexarm.identification.time_domain.
     result.FitResult` of every rig (what :func:`flexarm.fit` returns for the servo rig).
 
-    ``free``/``params``/``std``: the rig's fitted parameters (SI; ``[s]`` per session);
-    ``template``: the start point of the global stage (``stages["guesses"]["start"]``,
-    from the data and the data sheet; null where an older result lacks it);
-    ``correlation``: of the HAC covariance of the search coordinates
-    (``stages["local"]["covariance_unit"]``; their map to the parameters is monotonic per
-    parameter, so to first order these are the parameters' correlations, signed for a
-    negative gauge gain), NaN without it; ``nfev``: the global and local stages'
-    evaluations; ``cost``: the local stage's; ``scenario``: the fitted scenario
-    (:func:`scenario_from_fit`). The rig's own stages (``global``, ``local``,
-    ``guesses``) are kept as they are, merged with ``stages["servo_rig"]``: ``derived``,
-    ``delays_samples``, ``initial_states``, ``settings``, ``std_iid``, ``units``, ``docs``
-    and ``uncertainty_note``. ``res`` itself is the result's ``engine_result``.
+    ``free``/``params``/``std``/``correlation``: keyed by the scenario's paths (issue #43:
+    the scenario is the model), the rig's fitted parameters mapped as the written scenario
+    holds them (:func:`_path_values`; a session s > 0's own as ``sessions[s].PATH``) and
+    their HAC covariance carried by the map's Jacobian (:func:`scenario_covariance`; the
+    rig's correlation is that of its search coordinates, monotonic per parameter, so to
+    first order the parameters', signed for a negative gauge gain); the rig's own names and
+    std stay in ``stages["servo_rig"]["params"]`` / ``["std"]``, the paths' units in
+    ``stages["units"]``; ``template``: the start point of the global stage
+    (``stages["guesses"]["start"]``) on the same paths, NaN where an older result lacks it;
+    ``nfev``: the global and local stages' evaluations; ``cost``: the local stage's;
+    ``scenario``: the fitted scenario (:func:`scenario_from_fit`). The rig's own stages
+    (``global``, ``local``, ``guesses``) are kept as they are, merged with
+    ``stages["servo_rig"]``: ``derived``, ``delays_samples``, ``initial_states``,
+    ``settings``, ``std_iid``, ``units``, ``docs`` and ``uncertainty_note``. ``res`` itself
+    is the result's ``engine_result``.
 
     Extras (top-level keys of the document): ``without_friction`` (its fit %, parameters,
     message: ``flexarm fit --compare-no-friction``), ``window_s`` (the fitted window, s
@@ -411,7 +414,7 @@ def as_fit_result(
     from flexarm.identification.time_domain.result import FitResult as One
 
     nan = float("nan")
-    free = list(res.params)
+    free = list(res.params)  # the rig's own names (its search space)
     start = (res.stages.get("guesses") or {}).get("start") or {}
     loc, glob = res.stages.get("local") or {}, res.stages.get("global") or {}
     warnings = list(res.warnings)
@@ -431,8 +434,21 @@ def as_fit_result(
             "units": {k: UNITS.get(k.split("[")[0], "") for k in free},
             "docs": {k: DOCS.get(k.split("[")[0], "") for k in free},
             "uncertainty_note": UNCERTAINTY_NOTE,
+            # the rig's own parameters (its search space), as the engine fitted them
+            "params": dict(res.params),
+            "std": dict(res.std),
         },
     }
+    # the one result is keyed by scenario paths (the model the scenario file holds): the
+    # rig's parameters mapped by scenario_from_fit's map, their covariance by its Jacobian
+    corr = _correlation(res, free)
+    paths, values, std, pcorr = scenario_covariance(res, free, dict(res.params), res.std, corr)
+    tmpl = {k: float(start.get(k, nan)) for k in free}
+    try:
+        t_paths = _path_values(res, tmpl)
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        t_paths = {}
+    stages["units"] = {p: PATH_UNITS.get(_session_free(p), "") for p in paths}
     extras = fit_extras(
         without_friction=without_friction,
         window=window,
@@ -440,11 +456,11 @@ def as_fit_result(
         held_window=held_window,
     )
     return One(
-        free=free,
-        params=dict(res.params),
-        template={k: float(start.get(k, nan)) for k in free},
-        std=dict(res.std),
-        correlation=_correlation(res, free),
+        free=paths,
+        params=values,
+        template={p: float(t_paths.get(p, nan)) for p in paths},
+        std=std,
+        correlation=pcorr,
         warnings=warnings,
         fit_percent=res.fit_percent,
         segment_fit_percent={},
@@ -487,6 +503,110 @@ def fit_extras(
             "initial_state": "estimated from each window's own data",
         }
     return finite(extras)
+
+
+#: the scenario paths of the servo rig's parameters, their units (SI)
+PATH_UNITS = {
+    "arm.motor.inertia": "kg*m**2",
+    "arm.motor.viscous": "N*m*s/rad",
+    "arm.friction.coulomb": "N*m",
+    "arm.friction.static": "N*m",
+    "arm.friction.bias": "N*m",
+    "arm.beam.flexural_rigidity": "N*m**2",
+    "arm.beam.masses[0].mass": "kg",
+    "arm.beam.damping_ratio": "",
+    "sensors.tip_deflection.gain": "m/m",
+}
+
+
+def _session_free(path: str) -> str:
+    """``sessions[1].arm.friction.coulomb`` → ``arm.friction.coulomb``."""
+    return path.split("].", 1)[1] if path.startswith("sessions[") else path
+
+
+def _path_values(res: FitResult, params: dict[str, float]) -> dict[str, float]:
+    """Scenario path → value of the rig's ``params`` (names as the rig's, ``[s]`` per
+    session), as :func:`scenario_from_fit` writes them: J, B, C_f, the breakaway C_f + excess,
+    the bias, EI = ω_c² J_l L / 3 and the tip mass J_l / L² (:func:`derived`), ζ, the gauge
+    gain. A session s > 0's own values are ``sessions[s].PATH`` (session 0's are the
+    scenario's)."""
+    L = res.rig.length
+    sessions = sorted({int(k.split("[")[1].rstrip("]")) for k in params if "[" in k} | {0})
+    out: dict[str, float] = {}
+    for s_ in sessions:
+        p = {k.split("[")[0]: v for k, v in params.items() if "[" not in k}
+        p.update({k.split("[")[0]: v for k, v in params.items() if k.endswith(f"[{s_}]")})
+        own = {k.split("[")[0] for k in params if k.endswith(f"[{s_}]")}
+        d: dict[str, tuple[float, set]] = {}
+        d["arm.motor.inertia"] = (p["hub_inertia"], {"hub_inertia"})
+        d["arm.motor.viscous"] = (p["viscous"], {"viscous"})
+        if "coulomb" in p:
+            d["arm.friction.coulomb"] = (p["coulomb"], {"coulomb"})
+            if "static_excess" in p:
+                d["arm.friction.static"] = (
+                    p["coulomb"] + p["static_excess"],
+                    {"coulomb", "static_excess"},
+                )
+            if "bias" in p:
+                d["arm.friction.bias"] = (p["bias"], {"bias"})
+        if "link_frequency" in p:
+            der = derived(p, L)
+            d["arm.beam.flexural_rigidity"] = (
+                der["flexural_rigidity"],
+                {"link_frequency", "link_inertia"},
+            )
+            d["arm.beam.masses[0].mass"] = (der["tip_mass"], {"link_inertia"})
+            d["arm.beam.damping_ratio"] = (p["link_damping"], {"link_damping"})
+        if "tip_gain" in p:
+            d["sensors.tip_deflection.gain"] = (p["tip_gain"], {"tip_gain"})
+        for path, (v, uses) in d.items():
+            if s_ == 0:
+                out[path] = float(v)
+            elif uses & own:
+                out[f"sessions[{s_}].{path}"] = float(v)
+    return out
+
+
+def scenario_covariance(
+    res: FitResult,
+    free: list[str],
+    params: dict[str, float],
+    std: dict[str, float],
+    corr: np.ndarray,
+) -> tuple[list[str], dict[str, float], dict[str, float], np.ndarray]:
+    """(paths, values, std, correlation) of the rig's parameters mapped onto the scenario's
+    paths (:func:`_path_values`), the covariance carried by the map's Jacobian G (central
+    differences, relative step 1e-6): Σ_paths = G Σ Gᵀ with Σ = D R D (D the rig's HAC std,
+    R its correlation; R's NaN entries as 0 off the diagonal). A path that depends on an
+    undetermined parameter (non-finite std) has an infinite std and a NaN row."""
+    x = np.array([float(params[k]) for k in free])
+    base = _path_values(res, dict(zip(free, x, strict=True)))
+    paths = list(base)
+    g0 = np.array([base[p] for p in paths])
+    G = np.zeros((len(paths), len(free)))
+    for i in range(len(free)):
+        h = 1e-6 * max(abs(x[i]), 1e-12)
+        up, dn = x.copy(), x.copy()
+        up[i] += h
+        dn[i] -= h
+        a = _path_values(res, dict(zip(free, up, strict=True)))
+        b = _path_values(res, dict(zip(free, dn, strict=True)))
+        G[:, i] = [(a[p] - b[p]) / (2 * h) for p in paths]
+    sd = np.array([float(std.get(k, np.nan)) for k in free])
+    ok = np.isfinite(sd)
+    R = np.where(np.isfinite(corr), corr, 0.0) if np.shape(corr) == (len(free),) * 2 else None
+    R = np.eye(len(free)) if R is None else R.copy()
+    np.fill_diagonal(R, 1.0)
+    D = np.where(ok, sd, 0.0)
+    cov = G @ (D[:, None] * R * D[None, :]) @ G.T
+    bad = np.any((np.abs(G) > 0) & ~ok[None, :], axis=1)  # depends on an undetermined one
+    s = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = cov / np.outer(s, s)
+    c[bad, :] = np.nan
+    c[:, bad] = np.nan
+    out_std = {p: (float("inf") if bad[j] else float(s[j])) for j, p in enumerate(paths)}
+    return paths, dict(zip(paths, map(float, g0), strict=True)), out_std, c
 
 
 def _correlation(res: FitResult, free: list[str]) -> np.ndarray:
@@ -738,6 +858,20 @@ def scenario_spread(fit: dict, scenario) -> dict[str, tuple[float, float]]:
     ``{value, std}`` written before the one result is read too)."""
     vals, stds = _values_and_std(fit)
     d = scenario.model_dump(mode="json", exclude_none=True)
+    if any(k.startswith(("arm.", "sensors.")) for k in stds):
+        # the one result's document: keyed by the scenario's own paths already
+        from flexarm.specs.paths import get as path_get
+
+        got: dict[str, tuple[float, float]] = {}
+        for path, sd in stds.items():
+            if path.startswith("sessions[") or sd is None or not math.isfinite(float(sd)):
+                continue
+            try:
+                got[path] = (float(path_get(d, path)), float(sd))
+            except (KeyError, IndexError, TypeError, ValueError):
+                continue
+        if got:
+            return got
     arm = d["arm"]
 
     def pick(table, name):

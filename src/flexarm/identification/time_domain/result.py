@@ -76,9 +76,7 @@ class FitResult:
         )
         return Table(
             f"FitResult of {name}: {len(self.free)} free parameters (SI)",
-            parameter_rows(
-                self.params, self.std, (self.stages.get("servo_rig") or {}).get("units")
-            ),
+            parameter_rows(self.params, self.std, self.stages.get("units")),
             header=("parameter", "value", "std (HAC)", "std %", "unit"),
             notes=notes,
         )
