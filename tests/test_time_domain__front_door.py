@@ -226,3 +226,24 @@ def test_fit_draws_its_prediction_into_options_plots(short_run, tmp_path):
         assert res.fit_percent[k]["theta_1"] == pytest.approx(
             again.fit_percent[k]["theta_1"], abs=1e-9
         )
+
+
+def test_prediction_reports_rmse_in_si_and_nrmse(short_run):
+    """Issue #44 item 6: beside fit %, every prediction carries the RMSE in the signal's SI
+    unit and the NRMSE (RMSE over the signal's range), checked against their definitions
+    computed here from the returned traces (to round-off, 1e-12 relative), and fit % to 3
+    decimals (its own definition, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), to 5e-4 points: the
+    rounding). The truth predicting its own log from the logged start has a small RMSE."""
+    truth, _, paths = short_run
+    pred = flexarm.validate(truth, [paths[0]], PredictOptions(initial="log"))
+    key = next(iter(pred.fit_percent))
+    tr = pred.traces[key]
+    for c, fp in pred.fit_percent[key].items():
+        y, yh = np.asarray(tr["measured"][c]), np.asarray(tr["simulated"][c])
+        rmse = float(np.sqrt(np.mean((y - yh) ** 2)))
+        assert pred.rmse[key][c] == pytest.approx(rmse, rel=1e-12), c
+        assert pred.nrmse[key][c] == pytest.approx(rmse / np.ptp(y), rel=1e-12), c
+        fit = 100 * (1 - np.linalg.norm(y - yh) / np.linalg.norm(y - y.mean()))
+        assert fp == pytest.approx(fit, abs=5e-4), c
+        assert pred.to_dict()["rmse"][key][c] == pred.rmse[key][c]
+    assert pred.rmse[key]["theta_1"] < 1e-2  # rad: the truth's own log

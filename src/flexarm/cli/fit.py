@@ -565,7 +565,7 @@ def validate(
     _print_warnings(out["warnings"])
     for note in out.get("notes", []):
         console.print(escape(note), highlight=False)
-    _fit_table(out["fit_percent"], "scenario as given")
+    _fit_table(out["fit_percent"], "scenario as given", out.get("rmse"))
     if refit:
         t = Table("friction", "scenario", "refitted", "std")
         for p in out["refit"]["params"]:
@@ -700,7 +700,7 @@ def _fit_scenario_cli(
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _print_warnings(res.prediction.get("warnings", []))
-    _fit_table(res.fit_percent, "whole-log prediction")
+    _fit_table(res.fit_percent, "whole-log prediction", res.rmse)
     figs = list(res.plots)
     if plots is None:  # the figures went to a report's temporary folder: not in --json
         res.plots = []
@@ -747,11 +747,32 @@ def _bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _fit_table(fp: dict, title: str) -> None:
+def _fit_table(fp: dict, title: str, rmse: dict | None = None) -> None:
+    """fit % per log and signal to 3 decimals (99.997 and 99.991 are different fits); given
+    the RMSE, one row per log and signal with the RMSE in the signal's SI unit (3
+    significant digits)."""
+    from flexarm.io.logs import signal_unit
+
     names = sorted({k for d in fp.values() for k in d})
-    t = Table(f"fit % ({title})", *names)
+    if not rmse:
+        t = Table(f"fit % ({title})", *names)
+        for log, d in fp.items():
+            t.add_row(str(log), *(f"{d[k]:.3f}" if d.get(k) is not None else "-" for k in names))
+        console.print(t)
+        return
+    t = Table(f"prediction ({title})", "signal", "fit %", "RMSE", "unit")
     for log, d in fp.items():
-        t.add_row(str(log), *(f"{d[k]:.1f}" if d.get(k) is not None else "-" for k in names))
+        for k in names:
+            if k not in d:
+                continue
+            e = (rmse.get(log) or {}).get(k)
+            t.add_row(
+                f"{log}",
+                k,
+                f"{d[k]:.3f}" if d[k] is not None else "-",
+                f"{e:.3g}" if e is not None else "-",
+                signal_unit(k) or "SI",
+            )
     console.print(t)
 
 

@@ -148,6 +148,7 @@ def _servo_rig(preset: Preset, logs, options, progress):
         res.stages.setdefault("servo_rig", {})["loop_fit_percent"] = res.fit_percent
         res.stages["prediction"] = {"initial": "estimate", "notes": pred.notes}
         res.fit_percent = res.engine_result.fit_percent = pred.fit_percent
+        res.rmse, res.nrmse = pred.rmse, pred.nrmse
         res.prediction = pred
         res.warnings = list(dict.fromkeys([*res.warnings, *pred.warnings]))
     if opts.plots is not None and isinstance(res.prediction, Prediction):

@@ -1286,6 +1286,8 @@ def fit_scenario(
         stages,
         pred,
         plots=list(pred["plots"]),
+        rmse=dict(pred.get("rmse", {})),
+        nrmse=dict(pred.get("nrmse", {})),
     )
 
 
@@ -1578,8 +1580,10 @@ def predict_scenario(
     initial_nfev: int = INITIAL_NFEV,
 ) -> dict:
     """Whole-run prediction of each log (or window) with the scenario's parameters fixed:
-    one simulation per log (window) and channel fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), and the
-    simulated channels. Where each starts (``initial``, :data:`INITIALS`):
+    one simulation per log (window) and channel fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), the
+    RMSE √(mean (y − ŷ)²) in the channel's SI unit and the NRMSE, the RMSE over the
+    channel's range max y − min y (``rmse``, ``nrmse``), and the simulated channels.
+    Where each starts (``initial``, :data:`INITIALS`):
 
     - ``"estimate"``: the state read off the log at the window's first sample (values and
       rates after each channel's delay, :func:`_state_from_log`), refined by least squares
@@ -1624,18 +1628,26 @@ def predict_scenario(
         notes.append("initial state: as read off each log (window), not refined")
     sim = eng.run(np.zeros((1, 0)), offsets)[0]
     fp: dict[str, dict[str, float | None]] = {}
+    rmse: dict[str, dict[str, float]] = {}
+    nrmse: dict[str, dict[str, float | None]] = {}
     traj: dict[str, dict[str, Any]] = {}  # time, and the simulated / measured channels
     for s, (li, k0, ln) in enumerate(eng.seg):
         L = eng.logs[li]
-        d, tr = {}, {}
+        d, tr, e, ne = {}, {}, {}, {}
         for j, c in zip(eng.cidx, eng.channels, strict=True):
             tr[c] = sim[s, :ln, j]
             m = eng.seg_mask[s, :ln, j]
             if m.any():
-                v = _fitpct(eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m])
+                y, yh = eng.seg_y[s, :ln, j][m], sim[s, :ln, j][m]
+                v = _fitpct(y, yh)
                 # a constant channel (a rigid arm's zero tip column) measures nothing: None
                 d[c] = round(v, 3) if np.isfinite(v) else None
+                # the misfit in the channel's own unit, and over the channel's range
+                e[c] = float(np.sqrt(np.mean((y - yh) ** 2)))
+                span = float(np.ptp(y))
+                ne[c] = e[c] / span if span > 0 else None
         fp[L.name] = d
+        rmse[L.name], nrmse[L.name] = e, ne
         traj[L.name] = {
             "time": L.t[k0 : k0 + ln],
             "simulated": tr,
@@ -1645,6 +1657,8 @@ def predict_scenario(
         }
     out = {
         "fit_percent": fp,
+        "rmse": rmse,
+        "nrmse": nrmse,
         "trajectories": traj,
         "plots": [],
         "notes": list(eng.notes) + notes,

@@ -73,15 +73,21 @@ class Prediction:
     notes: list[str] = field(default_factory=list)
     diverged: dict[str, bool] = field(default_factory=dict)
     plots: list[str] = field(default_factory=list)
+    #: per log key and signal: RMSE in the signal's SI unit, and RMSE / (max − min)
+    rmse: dict[str, dict[str, float]] = field(default_factory=dict)
+    nrmse: dict[str, dict[str, float | None]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """JSON-ready: scenario, fit %, divergence, warnings, notes, figures (no traces)."""
+        """JSON-ready: scenario, fit %, RMSE (SI), NRMSE, divergence, warnings, notes,
+        figures (no traces)."""
         from flexarm.identification.time_domain.result import finite
 
         return finite(
             {
                 "scenario": self.scenario,
                 "fit_percent": self.fit_percent,
+                "rmse": self.rmse,
+                "nrmse": self.nrmse,
                 "diverged": self.diverged,
                 "warnings": self.warnings,
                 "notes": self.notes,
@@ -242,6 +248,8 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     else:
         runs = [(sc, list(logs), wins)]
     fp: dict[str, dict[str, float | None]] = {}
+    rmse: dict[str, dict[str, float]] = {}
+    nrmse: dict[str, dict[str, float | None]] = {}
     traces: dict[str, dict[str, Any]] = {}
     diverged: dict[str, bool] = {}
     warnings: list[str] = []
@@ -253,10 +261,16 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
         warnings += list(out.get("warnings", []))
         notes += list(out.get("notes", []))
         # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
-        for g, v, tr in zip(
-            group, out["fit_percent"].values(), out["trajectories"].values(), strict=True
+        for g, v, tr, e, ne in zip(
+            group,
+            out["fit_percent"].values(),
+            out["trajectories"].values(),
+            out["rmse"].values(),
+            out["nrmse"].values(),
+            strict=True,
         ):
             k = next(it)
+            rmse[k], nrmse[k] = dict(e), dict(ne)
             # a sensor channel the log holds but does not measure (constant: a rigid
             # arm's zero tip column) is listed, with no figure
             fp[k] = {
@@ -299,6 +313,8 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
         warnings=warnings,
         notes=list(dict.fromkeys(notes)),
         diverged=diverged,
+        rmse=rmse,
+        nrmse=nrmse,
     )
     warnings += [f"{k}: the simulated loop diverged" for k, bad in diverged.items() if bad]
     if own_law:

@@ -63,6 +63,10 @@ class FitResult:
     plots: list[str] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
     engine_result: Any = field(default=None, repr=False, compare=False)
+    #: per log and signal, beside ``fit_percent``: the RMSE in the signal's SI unit and the
+    #: NRMSE (RMSE over the signal's range), of the same prediction
+    rmse: dict[str, dict[str, float]] = field(default_factory=dict)
+    nrmse: dict[str, dict[str, float | None]] = field(default_factory=dict)
 
     def _table(self):
         from flexarm.display import Table, fit_percent_lines, parameter_rows
@@ -108,6 +112,8 @@ class FitResult:
             "correlation": np.round(np.asarray(self.correlation, float), 4).tolist(),
             "warnings": self.warnings,
             "fit_percent": self.fit_percent,
+            "rmse": self.rmse,
+            "nrmse": self.nrmse,
             "segment_fit_percent": self.segment_fit_percent,
             "converged": self.converged,
             "message": self.message,
@@ -160,6 +166,8 @@ class FitResult:
             "stages",
             "free_source",
             "plots",
+            "rmse",
+            "nrmse",
         }
         missing = [k for k in ("free", "params", "std") if k not in d]
         if missing:
@@ -191,6 +199,8 @@ class FitResult:
             str(d.get("free_source", "given")),
             list(d.get("plots", [])),
             {k: v for k, v in d.items() if k not in known},
+            rmse=dict(d.get("rmse", {})),
+            nrmse=dict(d.get("nrmse", {})),
         )
 
 
