@@ -150,7 +150,10 @@ def _servo_rig(preset: Preset, logs, options, progress):
         res.fit_percent = res.engine_result.fit_percent = pred.fit_percent
         res.rmse, res.nrmse = pred.rmse, pred.nrmse
         res.prediction = pred
-        res.warnings = list(dict.fromkeys([*res.warnings, *pred.warnings]))
+        # the rig loop's "is low" warnings spoke of its own figures: the reported ones now
+        kept = [w for w in res.warnings if not w.endswith(" is low")]
+        res.warnings = list(dict.fromkeys([*kept, *pred.warnings, *misfit_warnings(res)]))
+        res.engine_result.warnings = list(res.warnings)
     if opts.plots is not None and isinstance(res.prediction, Prediction):
         from flexarm.identification.time_domain.predict import write_overlays
 
@@ -159,6 +162,46 @@ def _servo_rig(preset: Preset, logs, options, progress):
     if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
     return res
+
+
+#: fit % under which a signal's prediction is called low / not described by the model
+LOW_FIT, POOR_FIT = 80.0, 50.0
+#: a parameter that ends further than this factor from its start (the data sheet and the
+#: logs' estimates) is named: the model may not be this rig's
+FAR_FACTOR = 10.0
+
+
+def misfit_warnings(res: FitResult) -> list[str]:
+    """Say plainly when a fit is poor (issue #44 item 7), from the reported prediction and
+    the parameters: a signal below :data:`LOW_FIT` % (below :data:`POOR_FIT` %: the model
+    does not describe it), with its RMSE in its unit; a parameter that moved more than
+    :data:`FAR_FACTOR` times from its start (a mass read as an inertia, a log in other
+    units, a data-sheet value off by a gear ratio)."""
+    import math
+
+    from flexarm.io.logs import signal_unit
+
+    out = []
+    for log, per in res.fit_percent.items():
+        for sig, v in per.items():
+            if v is None or v >= LOW_FIT:
+                continue
+            e = (res.rmse.get(log) or {}).get(sig)
+            rm = f"RMSE {e:.3g} {signal_unit(sig) or ''}".rstrip() if e is not None else ""
+            what = "; the model does not describe it" if v < POOR_FIT else ""
+            out.append(f"{log}: fit {v:.1f} % on {sig} is low ({rm}{what})")
+    for p, v in res.params.items():
+        t = res.template.get(p)
+        if t is None or not (math.isfinite(t) and math.isfinite(v)) or t == 0 or v == 0:
+            continue
+        r = abs(v / t)
+        if r > FAR_FACTOR or r < 1 / FAR_FACTOR:
+            out.append(
+                f"{p} ended at {v:.4g}, {r:.3g} times its start {t:.4g} (the data sheet and the "
+                "logs' estimates): the model may not describe this rig; check the data-sheet "
+                "options, the log's units and the rig's kind"
+            )
+    return out
 
 
 def _pieces_fit_percent(rig_res, whole, owner) -> dict[str, dict[str, float | None]]:
