@@ -88,7 +88,12 @@ def single_link_info(model: SingleLinkModel) -> dict:
                 **tf_dict(model.beam_tf()),
             },
             "coupling": {
-                "description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)",
+                "description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)"
+                + (
+                    "; a rigid link: 0 (tip angle = motor angle, its masses in the hub)"
+                    if model.arm.beam.model == "rigid"
+                    else ""
+                ),
                 **tf_dict(model.coupling_tf()),
             },
             "tip": {"description": f"tip angle [rad] / command [{u}]", **tf_dict(model.tip_tf())},

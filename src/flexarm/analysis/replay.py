@@ -24,7 +24,7 @@ import numpy as np
 
 from flexarm.io.logs import Log
 from flexarm.metrics import fit_percent
-from flexarm.sim.build import prepare, to_result
+from flexarm.sim.build import disturbance_inputs, prepare, to_result
 from flexarm.sim.filters import (
     PieceStart,
     computed_channels,
@@ -49,20 +49,28 @@ class Replay:
     notes: list[str] = field(default_factory=list)
 
 
-def _first(log: Log, names: list[str]) -> float:
+def _first(log: Log, names: list[str], default: float = 0.0) -> float:
     for n in names:
         if n in log.signals:
             return float(log[n][0])
-    return 0.0
+    return float(default)
 
 
 def initial_state_from_log(prepared, log: Log) -> np.ndarray:
-    """The plant state at the log's first sample (module docstring)."""
+    """The plant state at the log's first sample (module docstring). A single link: the
+    hub's ``motor_angle`` and ``motor_velocity`` and the ``tip_deflection`` where the log
+    holds them, else the scenario's ``[initial]`` values (the link at rest relative to the
+    hub, statically bent to the tip deflection)."""
     model, arm = prepared.model, prepared.loop.plant
     if getattr(model, "n_links", None) is None:
-        raise ValueError(
-            "replay reads the initial state of multi-link arms (theta_j, "
-            "alpha_j, ...); a single-link scenario takes it from [initial]"
+        ini = prepared.scenario.initial
+        return np.asarray(
+            model.initial_state(
+                _first(log, ["motor_angle"], ini.motor_angle),
+                _first(log, ["motor_velocity"], ini.motor_velocity),
+                _first(log, ["tip_deflection"], ini.tip_deflection),
+            ),
+            float,
         )
     n = model.n_links
     if any(m != 1 for m in model.n_modes):
@@ -118,8 +126,11 @@ def replay(
     duration = (n - 1) * dt
     sim = scenario.simulation.model_copy(update={"duration": duration})
     sc = scenario.model_copy(update={"simulation": sim})
-    used = set(sc.references) | sc.controller_references()
+    # the logged setpoints: the channels the scenario's controllers read, and the
+    # single link's ``reference`` column where the log holds it
+    used = set(sc.references) | sc.controller_references() | {"reference"}
     refs = {k: log[k] for k in sorted(used) if k in log.signals}
+    refs.update(disturbance_inputs(sc, log))
     p = prepare(sc, references=refs)
     assert p.n_samples == n, (p.n_samples, n)
     check_zeroing(p.loop.sensors, n, dt, log.name)
@@ -153,8 +164,9 @@ def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[R
     dt = scenario.sampling.period
     sim = scenario.simulation.model_copy(update={"duration": (len(logs[0]) - 1) * dt})
     sc = scenario.model_copy(update={"simulation": sim})
-    used = set(sc.references) | sc.controller_references()
-    p = prepare(sc, references={k: logs[0][k] for k in used if k in logs[0].signals})
+    used = set(sc.references) | sc.controller_references() | {"reference"}
+    refs = {k: logs[0][k] for k in used if k in logs[0].signals}
+    p = prepare(sc, references={**refs, **disturbance_inputs(sc, logs[0])})
     starts = continuous_starts(p.loop, sc.sensors, logs, dt)
     return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts, strict=True)]
 

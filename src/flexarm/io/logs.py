@@ -155,6 +155,7 @@ class Log:
     ``gains`` K1..K4 per sample (N, 4) in V/rad, V/m, V·s/rad, V·s/m (piecewise constant
     when the log changes them), ``voltage_limit`` (V, the amplifier's saturation) and
     ``rate`` (``"logged"``, ``"backward"``, ``"filtered"``: the rates the law used).
+    ``disturbances``: the signals its format maps as logged disturbances.
     """
 
     path: Path | None
@@ -169,6 +170,9 @@ class Log:
     voltage_limit: float | None = None
     rate: str | None = None
     log_format: Any = field(default=None, repr=False)
+    #: the signals the log's format maps as disturbances (its ``[disturbances]``): inputs
+    #: that enter the loop from the log (a scenario's ``[[disturbances]]``)
+    disturbances: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.path is not None and not isinstance(self.path, Path):

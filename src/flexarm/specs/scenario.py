@@ -24,6 +24,7 @@ from flexarm.specs.arm import SingleLinkArm
 from flexarm.specs.experiment import (
     Actuator,
     ControllerSpec,
+    Disturbance,
     Initial,
     Reference,
     Sampling,
@@ -34,10 +35,15 @@ from flexarm.specs.multilink import JointPDController, MultiLinkArm
 from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
+#: the drive's command as a measured channel (:class:`flexarm.sim.sampled.Sensors`): the
+#: controller's command after saturation and D/A (``current``, ``voltage``; ``torque_j``,
+#: ``current_j``, ``voltage_j`` on several joints), and with ``_applied`` the command the
+#: drive receives, the ``into = "command"`` disturbances added
+COMMAND_SIGNALS = ("current", "voltage", "current_applied", "voltage_applied")
 #: plant signals of a multi-link arm (:func:`flexarm.models.multilink.signal_names`)
 _MULTI_SIGNAL = re.compile(
     r"(theta|theta_dot|deflection|deflection_angle|delta|"
-    r"friction_torque)_\d+(_\d+)?|tip_x|tip_y"
+    r"friction_torque)_\d+(_\d+)?|tip_x|tip_y|(torque|current|voltage)_\d+(_applied)?"
 )
 
 
@@ -110,6 +116,7 @@ class Scenario(Spec):
         list[Annotated[ControllerSpec | JointPDController, Field(discriminator="type")]] | None
     ) = None
     regulation: RegulationSpec | None = None
+    disturbances: list[Disturbance] = Field(default_factory=list)
 
     @property
     def n_joints(self) -> int:
@@ -237,11 +244,11 @@ class Scenario(Spec):
                     "single-link arm takes a [controller]"
                 )
             for name, sensor in self.sensors.items():
-                if (sensor.signal or name) not in KNOWN_SENSORS:
+                if (sensor.signal or name) not in KNOWN_SENSORS + COMMAND_SIGNALS:
                     raise ValueError(
                         f"unknown sensor channel {name!r}"
                         + (f" (signal {sensor.signal!r})" if sensor.signal else "")
-                        + f"; known signals: {', '.join(KNOWN_SENSORS)}"
+                        + f"; known signals: {', '.join(KNOWN_SENSORS + COMMAND_SIGNALS)}"
                     )
             m = getattr(self.controller, "measured", None)
             if isinstance(m, str) and m not in KNOWN_SENSORS:
@@ -267,6 +274,38 @@ class Scenario(Spec):
             if v is not None and len(v) != n:
                 raise ValueError(f"initial.{name} has {len(v)} values; the arm has {n} joints")
         return self
+
+    @model_validator(mode="after")
+    def _check_disturbances(self) -> Scenario:
+        n = self.n_joints
+        taken = self.reference_channels() | set(self.sensors)
+        seen: set[str] = set()
+        for i, d in enumerate(self.disturbances):
+            where = f"disturbances[{i}] ({d.name})"
+            if d.name in seen:
+                raise ValueError(f"{where}: name {d.name!r} is given twice; give each its own")
+            seen.add(d.name)
+            if d.name in taken:
+                raise ValueError(
+                    f"{where}: name {d.name!r} is already a reference or sensor channel; "
+                    "give the disturbance its own name"
+                )
+            if d.joint is not None and d.joint > n:
+                raise ValueError(
+                    f"{where}: joint = {d.joint}, but the arm has {n} joint(s); give 1..{n}"
+                )
+            if d.joint is None and n > 1:
+                raise ValueError(f"{where}: the arm has {n} joints; say which with joint = 1..{n}")
+            if self.sampling is None:
+                raise ValueError(
+                    f"{where}: a disturbance enters the sampled-data loop; give [sampling] "
+                    "and [simulation]"
+                )
+        return self
+
+    def disturbance_names(self) -> list[str]:
+        """The names of the ``[[disturbances]]``, in order (the log columns they need)."""
+        return [d.name for d in self.disturbances]
 
     def __repr__(self) -> str:
         """A short table (name, arm, drive, beam, sampling, controller); the full
