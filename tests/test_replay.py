@@ -67,3 +67,25 @@ def test_a_single_link_log_replays_on_its_scenario():
     log.signals["pulse"] = np.zeros(501)
     worse = replay(_scenario(disturbances=[{"name": "pulse", "into": "command"}]), log)
     assert worse.fit_percent["motor_angle"] < 99.0
+
+
+@pytest.mark.filterwarnings("ignore::flexarm.sim.filters.ControllerStateWarning")
+def test_a_log_whose_clock_drifts_16_ppm_replays_on_the_scenarios_grid():
+    """Issue #44 item 5: the log's stamps run 16 ppm slow (the public benchmark's first
+    file): replayed on the scenario's grid at 100 % with a note saying so; at 250 ppm the
+    replay is refused in one line naming the figure and the option."""
+    from flexarm.io.logs import ClockError
+
+    sc = _scenario()
+    res = simulate(sc)
+    sig = {
+        "reference": res.references["reference"],
+        "motor_angle": res.measured["motor_angle"],
+    }
+    drift = Log(None, res.time * (1 + 16e-6), sig)
+    rep = replay(sc, drift)
+    assert rep.fit_percent["motor_angle"] == pytest.approx(100.0, abs=1e-6)
+    assert any("16 ppm off" in n for n in rep.notes)
+    with pytest.raises(ClockError, match="250 ppm.*period_tolerance = 0.0001"):
+        replay(sc, Log(None, res.time * (1 + 250e-6), sig))
+    assert replay(sc, Log(None, res.time * (1 + 250e-6), sig), period_tolerance=3e-4).notes

@@ -288,6 +288,79 @@ class Log:
         )
 
 
+#: Default largest relative difference of a log's sampling period (its median time step)
+#: from a scenario's period that :func:`on_sample_grid` reads on the scenario's grid: a
+#: logger's clock that drifts (16 ppm, 8 ppm on a public benchmark's 1 kHz files) or
+#: jitters, not another rate.
+PERIOD_TOLERANCE = 1e-4
+#: Below this relative difference the log's period is the scenario's (round-off of time
+#: stamps such as 718.708 s): the log is used as it is, without a note.
+SAME_PERIOD = 1e-6
+
+
+class ClockError(LogError):
+    """A log whose sampling period is too far from the scenario's (:func:`on_sample_grid`)."""
+
+
+def on_sample_grid(
+    log: Log,
+    period: float,
+    tol: float = PERIOD_TOLERANCE,
+    *,
+    option: str = "period_tolerance",
+    what: str = "the scenario's [sampling] period",
+) -> tuple[Log, str | None]:
+    """``log`` read on the sample grid of ``period`` (s): the one check of a log's clock
+    against a scenario's period (replay, fit, validate).
+
+    The log's period T_log is the slope of its time stamps against the sample number (least
+    squares: a drift measured over the whole log, stamp jitter averaged out, where a median
+    step is off by the jitter's spread over √N); its relative difference r = |T_log − T| / T
+    is the figure. r <= 1e-6 (:data:`SAME_PERIOD`, time-stamp round-off):
+    the log as it is, no note. 1e-6 < r <= ``tol`` (default 1e-4, :data:`PERIOD_TOLERANCE`):
+    a clock that drifts or jitters; the samples are taken as the scenario's, sample k at
+    t_0 + k T (re-stamped, not interpolated), and the note (also appended to the returned
+    log's ``notes``) says by how much the clock was off: r in ppm, T_log, and the largest
+    distance of a time stamp from the grid (s). r > ``tol``: a :class:`ClockError` line
+    naming the log, both periods, r and ``option`` (the option that widens ``tol``).
+    A log without time is returned as it is. Returns (log, note or None)."""
+    if log.time is None or len(log.time) < 2:
+        return log, None
+    if not (period > 0 and np.isfinite(period)):
+        raise ClockError(f"{log.where}: sampling period {period!r} s: give a period > 0 s")
+    if not (tol >= 0 and np.isfinite(tol)):
+        raise ClockError(f"{option} = {tol!r}: give a relative tolerance >= 0 (e.g. 1e-4)")
+    t = np.asarray(log.time, float)
+    k = np.arange(len(t)) - (len(t) - 1) / 2
+    step = float(np.dot(k, t - t.mean()) / np.dot(k, k))
+    r = abs(step - period) / period
+    if r <= SAME_PERIOD:
+        return log, None
+    if r > tol:
+        raise ClockError(
+            f"{log.where}: sampled every {step:.9g} s (its time stamps' slope), {what} is "
+            f"{period:g} s: "
+            f"{r:.3g} relative ({r * 1e6:.3g} ppm), beyond {option} = {tol:g}; if the "
+            f"logger's clock drifts and its samples are the scenario's, give {option} >= "
+            f"{_round_up(r):g}; else resample the log or change the period"
+        )
+    grid = t[0] + np.arange(len(t)) * period
+    off = float(np.max(np.abs(t - grid)))
+    note = (
+        f"{log.where}: its clock is {r * 1e6:.3g} ppm off {what} (a step of {step:.9g} s "
+        f"vs {period:g} s; the last time stamp {t[-1] - grid[-1]:+.3g} s from the grid, the "
+        f"farthest {off:.3g} s): read on the scenario's grid, sample k at t_0 + k·{period:g} s"
+    )
+    out = replace(log, time=grid, notes=[*log.notes, note])
+    return out, note
+
+
+def _round_up(r: float) -> float:
+    """r rounded up to 2 significant digits (a tolerance to suggest)."""
+    e = math.floor(math.log10(r)) - 1
+    return math.ceil(r / 10**e) * 10**e
+
+
 def log_keys(logs: Sequence[Log]) -> list[str]:
     """One unique key per log for results (fit %, traces, figures), by the one rule of
     :func:`flexarm.io.write.unique_keys`: the file names when all differ (``"a.csv"``),
