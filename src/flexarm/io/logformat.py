@@ -101,9 +101,11 @@ from pydantic import PrivateAttr, ValidationError, field_validator, model_valida
 from flexarm.io import matfile
 from flexarm.io.logs import (
     COMMENT_CHARS,
+    LINEAR_SI,
     STATE_FEEDBACK_GAINS,
     Log,
     LogError,
+    column_unit,
     known_names,
     read_log,
     signal_unit,
@@ -330,7 +332,7 @@ class LogFormat(Spec):
                         'e.g. "mV", "mA", or a force\'s, "N", "N*m")'
                     )
                 continue
-            si = signal_unit(k)
+            si = column_unit(k, u)
             if si is None:
                 raise ValueError(
                     f"{k!r} is not one of flexarm's column names; known: {known_names()}"
@@ -342,6 +344,7 @@ class LogFormat(Spec):
                     f"{k} = {u!r} does not convert to {si} ({exc}); give a unit "
                     f"of the same kind as {si}, e.g. {k} = "
                     f'"{ {"s": "ms", "rad": "deg", "m": "mm", "V": "mV"}.get(si, si) }"'
+                    + (f" (or, on a linear axis, {LINEAR_SI[si]})" if si in LINEAR_SI else "")
                 ) from None
         return v
 
@@ -398,7 +401,21 @@ class LogFormat(Spec):
             variables = matfile.load_mat(path)
             # a .mat log's gain columns are variable specs (strings), as its [columns]
             mat_cols = cast("dict[str, str]", {**cols, **gain_cols})
-            log = matfile.read_mat(path, mat_cols, uts, variables=variables, source=self.source)
+            # a linear axis's lengths and forces (motor_angle = "mm"): converted here
+            linear = {
+                k: u for k, u in uts.items() if column_unit(k, u) not in (signal_unit(k), None)
+            }
+            log = matfile.read_mat(
+                path,
+                mat_cols,
+                {k: u for k, u in uts.items() if k not in linear},
+                variables=variables,
+                source=self.source,
+            )
+            for k, u in linear.items():
+                si = column_unit(k, u)
+                assert si is not None  # a known name (linear)
+                log.signals[k] = log.signals[k] * float(ureg.parse_expression(u).to(si).magnitude)
             quanta = {
                 k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
                 if isinstance(q, str)
@@ -406,7 +423,7 @@ class LogFormat(Spec):
                 for k, q in self.checks.quantum.items()
             }
         else:
-            extra = {k: u for k in [*cols, *uts] if (u := signal_unit(k)) is not None}
+            extra = {k: si for k in [*cols, *uts] if (si := column_unit(k, uts.get(k))) is not None}
             extra.update(STATE_FEEDBACK_GAINS)
             extra.update({k: disturbance_unit(self.units.get(k)) or "" for k in self.disturbances})
             text: dict[str, Any] = dict(

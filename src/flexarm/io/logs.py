@@ -118,6 +118,41 @@ def signal_unit(name: str) -> str | None:
     return None
 
 
+#: The linear counterparts of the rotary SI units: a linear axis (a prismatic joint) logs
+#: its position in m (``motor_angle = "mm"``), its rate in m/s, its force in N.
+LINEAR_SI: dict[str, str] = {"rad": "m", "rad/s": "m/s", "rad/s**2": "m/s**2", "N*m": "N"}
+
+
+def column_unit(name: str, unit: str | None = None) -> str | None:
+    """The SI unit a column ``name`` given in the file's ``unit`` is read in: the signal's
+    own (:func:`signal_unit`), or its linear counterpart (:data:`LINEAR_SI`: m for an angle,
+    N for a torque) where ``unit`` is a length, a speed or a force (a linear axis);
+    ``None`` for a name flexarm does not know."""
+    si = signal_unit(name)
+    if si is None or unit is None:
+        return si
+    lin = LINEAR_SI.get(si)
+    if lin is not None and not _converts(unit, si) and _converts(unit, lin):
+        return lin
+    return si
+
+
+def _as_linear(known: Mapping[str, str], name: str, unit: str) -> Mapping[str, str]:
+    """``known`` with ``name``'s SI unit its linear counterpart where ``unit`` is linear."""
+    si = column_unit(name, unit)
+    if si is None or si == known.get(name) or known.get(name) not in LINEAR_SI:
+        return known
+    return {**known, name: si}
+
+
+def _converts(unit: str, si: str) -> bool:
+    try:
+        ureg.parse_expression(unit).to(si)
+    except Exception:  # pint raises several exception types
+        return False
+    return True
+
+
 def known_names() -> str:
     """The signal names a log may map, for messages."""
     return ", ".join([*KNOWN, *OTHER]) + "; per joint j: " + ", ".join(f"{b}_j" for b in PER_JOINT)
@@ -715,7 +750,9 @@ def read_log(
         if sign < 0:
             data[:, j] = -data[:, j]
     factors = {
-        name: unit_factor(path, name, units[name], known, source) for name in units if name in names
+        name: unit_factor(path, name, units[name], _as_linear(known, name, units[name]), source)
+        for name in units
+        if name in names
     }
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)

@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError, model_validator
 
 from flexarm.errors import FlexarmError
-from flexarm.specs.arm import SingleLinkArm
+from flexarm.specs.arm import SingleLinkArm, prismatic_values
 from flexarm.specs.experiment import (
     Actuator,
     ControllerSpec,
@@ -121,6 +121,30 @@ class Scenario(Spec):
     @property
     def n_joints(self) -> int:
         return 1 if self.arm.kind == "single_link" else len(self.arm.links)
+
+    @property
+    def prismatic(self) -> bool:
+        """Whether the arm is one linear axis (``arm.joint = "prismatic"``: m, N, kg)."""
+        return getattr(self.arm, "joint", "revolute") == "prismatic"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _linear_units(cls, data: Any) -> Any:
+        """A prismatic axis's ``[initial]`` and references in m (:data:`PRISMATIC_UNITS`)."""
+        arm = data.get("arm") if isinstance(data, dict) else None
+        joint = arm.get("joint") if isinstance(arm, dict) else getattr(arm, "joint", None)
+        if joint != "prismatic":
+            return data
+        data = dict(data)
+        if "initial" in data:
+            data["initial"] = prismatic_values(data["initial"], "initial")
+        if "reference" in data:
+            data["reference"] = prismatic_values(data["reference"], "reference")
+        if isinstance(data.get("references"), dict):
+            data["references"] = {
+                k: prismatic_values(v, "reference") for k, v in data["references"].items()
+            }
+        return data
 
     def controller_specs(self) -> list:
         """The controller blocks: ``[[controllers]]`` in order, or ``[controller]``, or none."""
