@@ -561,7 +561,8 @@ def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationRes
         pick(out["states"]),
         plant.state_names,
         title=p.scenario.name,
-        meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period},
+        meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period}
+        | ({"joint": "prismatic"} if getattr(p.scenario, "prismatic", False) else {}),
     )
 
 
