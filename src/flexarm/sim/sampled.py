@@ -96,6 +96,10 @@ class Sensors(eqx.Module):
     commands: tuple[int, ...] = eqx.field(static=True, default=())
     command_input: tuple[int, ...] = eqx.field(static=True, default=())
     command_applied: tuple[bool, ...] = eqx.field(static=True, default=())
+    #: the command channels' gains (``gain`` holds 0 there, and ``index`` 0: a consumer
+    #: that reads the channels as plant signals, e.g. a state estimate from a log's first
+    #: sample, sees no plant signal in them)
+    command_gain: Array | None = None
 
     @classmethod
     def make(
@@ -175,11 +179,17 @@ class Sensors(eqx.Module):
                 fx0=jnp.full((len(filts), k), jnp.nan),
             )
         zeroed, zero_n = zeroing_windows(channels, dt)
+        gain = get("gain", 1.0)
+        command_gain = None
+        if cmd:
+            pos = [i for i, n in enumerate(names) if n in cmd]
+            command_gain = gain[jnp.asarray(pos)]
+            gain = gain.at[jnp.asarray(pos)].set(0.0)
         return cls(
             names,
             tuple(0 if n in cmd else plant.signal_names.index(signal[n]) for n in names),
             tuple(int(channels[n].get("delay", 0)) for n in names),
-            get("gain", 1.0),
+            gain,
             get("noise", 0.0),
             jnp.asarray(quantum),
             filtered,
@@ -191,6 +201,7 @@ class Sensors(eqx.Module):
             commands=tuple(i for i, n in enumerate(names) if n in cmd),
             command_input=tuple(cmd[n][0] for n in names if n in cmd),
             command_applied=tuple(cmd[n][1] for n in names if n in cmd),
+            command_gain=command_gain,
         )
 
 
@@ -559,8 +570,9 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         s = _signals(plant, x, u_prev)
         raw = sens.gain * _pick(s, sens.index)
         if cpos:  # command channels: the command held over the period before
+            assert sens.command_gain is not None  # set with the command channels
             held = jnp.stack([u_prev[i] for i in sens.command_input])
-            raw = _put(raw, cpos, _pick(sens.gain, cpos) * held)
+            raw = _put(raw, cpos, sens.command_gain * held)
         if fplant is not None:
             yf = carry[5]
             slot = {c: j for j, c in enumerate(sens.filtered)}
@@ -601,7 +613,8 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
                     for i, ap in zip(sens.command_input, sens.command_applied, strict=True)
                 ]
             )
-            yc = _pick(sens.gain, cpos) * vals + _pick(sens.noise, cpos) * _pick(noise_k, cpos)
+            assert sens.command_gain is not None
+            yc = sens.command_gain * vals + _pick(sens.noise, cpos) * _pick(noise_k, cpos)
             meas_vec = _put(meas_vec, cpos, _quantise(yc, _pick(sens.quantum, cpos)))
         if forces:  # logged forces on the joints, beside the drives' torques
             f_ext = jnp.zeros((n_j,), u.dtype)
