@@ -292,8 +292,9 @@ def test_unit_that_does_not_fit_names_field_and_unit(tmp_path):
     msg = str(e.value)
     assert msg.startswith("u.toml: 1 problem(s) in the log format")
     assert "units: time = 'V' does not convert to s" in msg and 'e.g. time = "ms"' in msg
-    fmt["units"] = {"motor_angle": "mm"}
-    with pytest.raises(LogFormatError, match=r"units: motor_angle = 'mm' does not convert to rad"):
+    # (issue #44: "mm" is a linear axis's position, read in m; a mass is neither)
+    fmt["units"] = {"motor_angle": "kg"}
+    with pytest.raises(LogFormatError, match=r"units: motor_angle = 'kg' does not convert to rad"):
         log_format_from_dict(fmt, "u.toml")
     fmt["units"] = {}
     fmt["controller"]["gains"] = {"K4": "3 V/m"}

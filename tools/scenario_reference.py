@@ -42,6 +42,7 @@ SECTIONS = [
     ("[simulation]", experiment.Simulation),
     ("[initial]", experiment.Initial),
     ("[reference]", experiment.Reference),
+    ("[[disturbances]]", experiment.Disturbance),
     ('[controller] type = "pd"', experiment.PDController),
     ('[controller] type = "pid"', experiment.PIDController),
     ('[controller] type = "lead"', experiment.LeadController),

@@ -61,6 +61,8 @@ def single_link_info(model: SingleLinkModel) -> dict:
     """The linear model of a single-link arm (FRB eqs. 12-15)."""
     d = model.drive
     u = "A" if d.kind == "current" else "V"
+    if getattr(model.arm, "joint", "revolute") == "prismatic":
+        return _linear_axis_info(model, u)
     info = {
         "kind": "single_link",
         "drive": d.kind,
@@ -88,13 +90,49 @@ def single_link_info(model: SingleLinkModel) -> dict:
                 **tf_dict(model.beam_tf()),
             },
             "coupling": {
-                "description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)",
+                "description": "C_t(s) / (motor angle - tip angle) [N*m/rad] (FRB eqs. 15, 16)"
+                + (
+                    "; a rigid link: 0 (tip angle = motor angle, its masses in the hub)"
+                    if model.arm.beam.model == "rigid"
+                    else ""
+                ),
                 **tf_dict(model.coupling_tf()),
             },
             "tip": {"description": f"tip angle [rad] / command [{u}]", **tf_dict(model.tip_tf())},
         },
     }
     return info
+
+
+def _linear_axis_info(model: SingleLinkModel, u: str) -> dict:
+    """A linear axis (a prismatic joint, rigid carriage): mass, forces, position / command."""
+    d = model.drive
+    return {
+        "kind": "single_link",
+        "joint": "prismatic",
+        "drive": d.kind,
+        "axis": {
+            "mass_kg": model.J,
+            "viscous_N_s_per_m": model.V,
+            "force_per_command": float(d.k_u),
+            "back_emf_damping_N_s_per_m": float(d.k_omega),
+            "command_limit": float(d.limit),
+            "command_unit": u,
+        },
+        "friction": {
+            "model": model.friction.model,
+            "coulomb_N": float(model.friction.coulomb),
+            "breakaway_N": float(model.friction.static),
+            "offset_force_N": float(model.friction.bias),
+            "coulomb_command": float(model.friction.coulomb) / float(d.k_u),
+        },
+        "transfer_functions": {
+            "motor": {
+                "description": f"G_m(s) = position [m] / command [{u}] (mass m s² + (V + k_ω) s)",
+                **tf_dict(model.motor_tf()),
+            },
+        },
+    }
 
 
 def multilink_info(scenario) -> dict:

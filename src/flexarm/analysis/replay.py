@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexarm.io.logs import Log
+from flexarm.io.logs import PERIOD_TOLERANCE, Log, on_sample_grid
 from flexarm.metrics import fit_percent
-from flexarm.sim.build import prepare, to_result
+from flexarm.sim.build import disturbance_inputs, prepare, to_result
 from flexarm.sim.filters import (
     PieceStart,
     computed_channels,
@@ -49,20 +49,28 @@ class Replay:
     notes: list[str] = field(default_factory=list)
 
 
-def _first(log: Log, names: list[str]) -> float:
+def _first(log: Log, names: list[str], default: float = 0.0) -> float:
     for n in names:
         if n in log.signals:
             return float(log[n][0])
-    return 0.0
+    return float(default)
 
 
 def initial_state_from_log(prepared, log: Log) -> np.ndarray:
-    """The plant state at the log's first sample (module docstring)."""
+    """The plant state at the log's first sample (module docstring). A single link: the
+    hub's ``motor_angle`` and ``motor_velocity`` and the ``tip_deflection`` where the log
+    holds them, else the scenario's ``[initial]`` values (the link at rest relative to the
+    hub, statically bent to the tip deflection)."""
     model, arm = prepared.model, prepared.loop.plant
     if getattr(model, "n_links", None) is None:
-        raise ValueError(
-            "replay reads the initial state of multi-link arms (theta_j, "
-            "alpha_j, ...); a single-link scenario takes it from [initial]"
+        ini = prepared.scenario.initial
+        return np.asarray(
+            model.initial_state(
+                _first(log, ["motor_angle"], ini.motor_angle),
+                _first(log, ["motor_velocity"], ini.motor_velocity),
+                _first(log, ["tip_deflection"], ini.tip_deflection),
+            ),
+            float,
         )
     n = model.n_links
     if any(m != 1 for m in model.n_modes):
@@ -84,10 +92,14 @@ def replay(
     *,
     window: tuple[float, float] | None = None,
     start: PieceStart | None = None,
+    period_tolerance: float = PERIOD_TOLERANCE,
 ) -> Replay:
     """Simulate ``scenario`` over ``log`` (or its ``window`` [t0, t1) in s from the log's
     first sample) and compare every measured channel the log holds. ``start``: the
-    controllers' and filters' states at the log's first sample (:func:`replay_run`)."""
+    controllers' and filters' states at the log's first sample (:func:`replay_run`).
+    A log whose clock is off the scenario's period by at most ``period_tolerance``
+    (relative) is read on the scenario's grid, with a note
+    (:func:`flexarm.io.logs.on_sample_grid`); beyond it, a one-line error."""
     if log.time is None:
         raise ValueError(f"{log.name}: replay needs the log's time")
     extra, notes = computed_channels(scenario.sensors, log, scenario.sampling.period)
@@ -109,17 +121,18 @@ def replay(
         assert log.time is not None  # a window of a log with time
         k0 = int(np.searchsorted(full.time, log.time[0] - 1e-6 * full.dt))
     dt = scenario.sampling.period
-    if abs(log.dt - dt) > 1e-6 * dt:
-        raise ValueError(
-            f"{log.name}: the log's step {log.dt:g} s differs from the scenario's "
-            f"sampling period {dt:g} s; resample the log or change [sampling]"
-        )
+    log, clock = on_sample_grid(log, dt, period_tolerance)
+    if clock is not None:
+        notes = [*notes, clock]
     n = len(log)
     duration = (n - 1) * dt
     sim = scenario.simulation.model_copy(update={"duration": duration})
     sc = scenario.model_copy(update={"simulation": sim})
-    used = set(sc.references) | sc.controller_references()
+    # the logged setpoints: the channels the scenario's controllers read, and the
+    # single link's ``reference`` column where the log holds it
+    used = set(sc.references) | sc.controller_references() | {"reference"}
     refs = {k: log[k] for k in sorted(used) if k in log.signals}
+    refs.update(disturbance_inputs(sc, log))
     p = prepare(sc, references=refs)
     assert p.n_samples == n, (p.n_samples, n)
     check_zeroing(p.loop.sensors, n, dt, log.name)
@@ -142,21 +155,32 @@ def replay(
     return Replay(res, log, {k: v for k, v in fp.items() if not math.isnan(v)}, notes)
 
 
-def replay_run(scenario, logs: list[Log], *, continuous: bool = False) -> list[Replay]:
+def replay_run(
+    scenario,
+    logs: list[Log],
+    *,
+    continuous: bool = False,
+    period_tolerance: float = PERIOD_TOLERANCE,
+) -> list[Replay]:
     """Replay each of ``logs``; with ``continuous`` they are consecutive pieces of one run, in
     order: each piece's plant starts from its logged state and its dynamic controllers and
     digital filters from the states run over the pieces before
     (:func:`flexarm.sim.filters.continuous_starts`). Without it, a dynamic controller
     starting a log from its assumed state is a warning naming it."""
     if not continuous:
-        return [replay(scenario, lg) for lg in logs]
+        return [replay(scenario, lg, period_tolerance=period_tolerance) for lg in logs]
     dt = scenario.sampling.period
+    logs = [on_sample_grid(lg, dt, period_tolerance)[0] for lg in logs]
     sim = scenario.simulation.model_copy(update={"duration": (len(logs[0]) - 1) * dt})
     sc = scenario.model_copy(update={"simulation": sim})
-    used = set(sc.references) | sc.controller_references()
-    p = prepare(sc, references={k: logs[0][k] for k in used if k in logs[0].signals})
+    used = set(sc.references) | sc.controller_references() | {"reference"}
+    refs = {k: logs[0][k] for k in used if k in logs[0].signals}
+    p = prepare(sc, references={**refs, **disturbance_inputs(sc, logs[0])})
     starts = continuous_starts(p.loop, sc.sensors, logs, dt)
-    return [replay(scenario, lg, start=st) for lg, st in zip(logs, starts, strict=True)]
+    return [
+        replay(scenario, lg, start=st, period_tolerance=period_tolerance)
+        for lg, st in zip(logs, starts, strict=True)
+    ]
 
 
 def as_prediction(rep: Replay, scenario: str = "replay"):

@@ -49,6 +49,20 @@ without its suffix: ``read("runs/run01")`` reads ``runs/run01_th11.mat`` and
 log's number of samples, and a file's own ``time`` (optional) must equal the log's: an
 error names both files.
 
+A logged disturbance (an input that enters the loop from the log, not from the
+controller: a pulse added to the command after the saturation, a load force) is mapped by
+the name the scenario's ``[[disturbances]]`` gives it, in the same syntax as ``[columns]``;
+``[units]`` converts it to SI (the command's unit, or N / N·m for a force)::
+
+    [disturbances]
+    pulse = "Pulse (mV)"
+    [units]
+    pulse = "mV"
+
+The log then names them (:attr:`flexarm.io.logs.Log.disturbances`);
+:func:`flexarm.sim.build.disturbance_inputs` takes them off the log for a scenario and
+refuses a log without a declared one, or with one the scenario does not declare.
+
 ``[checks]`` guards against a mapping that names the wrong variable::
 
     [checks]
@@ -87,9 +101,11 @@ from pydantic import PrivateAttr, ValidationError, field_validator, model_valida
 from flexarm.io import matfile
 from flexarm.io.logs import (
     COMMENT_CHARS,
+    LINEAR_SI,
     STATE_FEEDBACK_GAINS,
     Log,
     LogError,
+    column_unit,
     known_names,
     read_log,
     signal_unit,
@@ -257,6 +273,7 @@ class LogFormat(Spec):
     comment: list[str] = list(COMMENT_CHARS)
     skip_rows: Count(what="lines skipped at the top") = 0
     columns: dict[str, int | str | ColumnInFile] = {}
+    disturbances: dict[str, int | str | ColumnInFile] = {}
     units: dict[str, str] = {}
     controller: ControllerFormat | None = None
     checks: Checks = Checks()
@@ -285,15 +302,37 @@ class LogFormat(Spec):
             raise ValueError(
                 f"{', '.join(map(repr, bad))} is not one of flexarm's column "
                 f"names; known: {known_names()} (gain columns go in "
-                "[controller] gain_columns)"
+                "[controller] gain_columns, a logged disturbance in [disturbances])"
             )
+        return {k: x if isinstance(x, ColumnInFile) else _column_ref(k, x) for k, x in v.items()}
+
+    @field_validator("disturbances")
+    @classmethod
+    def _disturbances(cls, v: dict, info) -> dict:
+        for k in v:
+            if signal_unit(k) is not None or not k.isidentifier():
+                why = "map that signal in [columns]" if signal_unit(k) else "letters, digits, _"
+                raise ValueError(
+                    f"{k!r}: a disturbance's name is the scenario's [[disturbances]] name, "
+                    "a plain name that is not one of flexarm's signal names "
+                    f"({why})"
+                )
+            if k in (info.data.get("columns") or {}):
+                raise ValueError(f"{k!r} is mapped in [columns] too; keep one")
         return {k: x if isinstance(x, ColumnInFile) else _column_ref(k, x) for k, x in v.items()}
 
     @field_validator("units")
     @classmethod
-    def _units(cls, v: dict) -> dict:
+    def _units(cls, v: dict, info) -> dict:
         for k, u in v.items():
-            si = signal_unit(k)
+            if k in (info.data.get("disturbances") or {}):
+                if disturbance_unit(u) is None:
+                    raise ValueError(
+                        f"{k} = {u!r} is not a unit (a disturbance's unit: the command's, "
+                        'e.g. "mV", "mA", or a force\'s, "N", "N*m")'
+                    )
+                continue
+            si = column_unit(k, u)
             if si is None:
                 raise ValueError(
                     f"{k!r} is not one of flexarm's column names; known: {known_names()}"
@@ -305,6 +344,7 @@ class LogFormat(Spec):
                     f"{k} = {u!r} does not convert to {si} ({exc}); give a unit "
                     f"of the same kind as {si}, e.g. {k} = "
                     f'"{ {"s": "ms", "rad": "deg", "m": "mm", "V": "mV"}.get(si, si) }"'
+                    + (f" (or, on a linear axis, {LINEAR_SI[si]})" if si in LINEAR_SI else "")
                 ) from None
         return v
 
@@ -335,10 +375,13 @@ class LogFormat(Spec):
         ``[checks]`` and the declared controller (:meth:`declared_controller`). The result
         is a :class:`flexarm.io.logs.Log` in SI units."""
         path = Path(path)
-        if any(isinstance(c, ColumnInFile) for c in self.columns.values()):
-            return self._read_files(path, required, **kw)
+        if any(
+            isinstance(c, ColumnInFile)
+            for c in [*self.columns.values(), *self.disturbances.values()]
+        ):
+            return self._marked(self._read_files(path, required, **kw))
         where = f"log format {self.source}"
-        cols = {**self.columns, **dict(columns or {})}
+        cols = {**self.columns, **self.disturbances, **dict(columns or {})}
         uts = {**self.units, **dict(units or {})}
         fc = self.controller if controller is None else None
         gain_cols = fc.columns() if fc is not None else {}
@@ -358,7 +401,21 @@ class LogFormat(Spec):
             variables = matfile.load_mat(path)
             # a .mat log's gain columns are variable specs (strings), as its [columns]
             mat_cols = cast("dict[str, str]", {**cols, **gain_cols})
-            log = matfile.read_mat(path, mat_cols, uts, variables=variables, source=self.source)
+            # a linear axis's lengths and forces (motor_angle = "mm"): converted here
+            linear = {
+                k: u for k, u in uts.items() if column_unit(k, u) not in (signal_unit(k), None)
+            }
+            log = matfile.read_mat(
+                path,
+                mat_cols,
+                {k: u for k, u in uts.items() if k not in linear},
+                variables=variables,
+                source=self.source,
+            )
+            for k, u in linear.items():
+                si = column_unit(k, u)
+                assert si is not None  # a known name (linear)
+                log.signals[k] = log.signals[k] * float(ureg.parse_expression(u).to(si).magnitude)
             quanta = {
                 k: matfile.scalar(path, variables, q, f"[checks] quantum.{k}")
                 if isinstance(q, str)
@@ -366,8 +423,9 @@ class LogFormat(Spec):
                 for k, q in self.checks.quantum.items()
             }
         else:
-            extra = {k: u for k in [*cols, *uts] if (u := signal_unit(k)) is not None}
+            extra = {k: si for k in [*cols, *uts] if (si := column_unit(k, uts.get(k))) is not None}
             extra.update(STATE_FEEDBACK_GAINS)
+            extra.update({k: disturbance_unit(self.units.get(k)) or "" for k in self.disturbances})
             text: dict[str, Any] = dict(
                 delimiter=self.delimiter_char,
                 comment=self.comment,
@@ -392,7 +450,13 @@ class LogFormat(Spec):
                     )
                 quanta[k] = float(q)
         self._check(log, quanta)
-        return self.declared_controller(log, controller)
+        return self._marked(self.declared_controller(log, controller))
+
+    def _marked(self, log: Log) -> Log:
+        """The log with its ``[disturbances]`` named (:attr:`flexarm.io.logs.Log.disturbances`)."""
+        if self.disturbances:
+            log.disturbances = tuple(self.disturbances)
+        return log
 
     def declared_controller(self, log: Log, controller: Any = None) -> Log:
         """The log with the law that produced its command: ``controller`` if given (a
@@ -454,7 +518,7 @@ class LogFormat(Spec):
         stem = str(path.with_suffix("")) if path.suffix else str(path)
         files: dict[Path, dict[str, int | str]] = {}
         own_time: dict[Path, tuple[str, int | str]] = {}
-        for name, ref in self.columns.items():
+        for name, ref in {**self.columns, **self.disturbances}.items():
             f = ref.path(stem, path.parent) if isinstance(ref, ColumnInFile) else path
             files.setdefault(f, {})[name] = ref.column if isinstance(ref, ColumnInFile) else ref
             if isinstance(ref, ColumnInFile) and ref.time is not None:
@@ -480,7 +544,8 @@ class LogFormat(Spec):
             sub = LogFormat.model_construct(
                 **{
                     **{k: getattr(self, k) for k in type(self).model_fields},
-                    "columns": cols,
+                    "columns": {k: c for k, c in cols.items() if k not in self.disturbances},
+                    "disturbances": {k: c for k, c in cols.items() if k in self.disturbances},
                     "checks": Checks(),
                     "controller": None,
                     "units": {k: u for k, u in self.units.items() if k in cols},
@@ -572,6 +637,17 @@ class LogFormat(Spec):
         """The delimiter for :func:`flexarm.io.logs.read_log` (``None``: sniffed, ``" "``: runs
         of whitespace)."""
         return DELIMITER_NAMES.get(self.delimiter.lower(), self.delimiter)
+
+
+def disturbance_unit(unit: str | None) -> str | None:
+    """The SI unit (pint's base units) a logged disturbance given in ``unit`` is converted
+    to (``"mV"`` → volts as base units); ``None`` when ``unit`` is not a unit."""
+    if unit is None:
+        return None
+    try:
+        return str(ureg.parse_expression(unit).to_base_units().units)
+    except Exception:  # pint raises several exception types
+        return None
 
 
 def log_format_from_dict(data: dict[str, Any], source: str = "log format") -> LogFormat:

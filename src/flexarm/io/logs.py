@@ -118,6 +118,41 @@ def signal_unit(name: str) -> str | None:
     return None
 
 
+#: The linear counterparts of the rotary SI units: a linear axis (a prismatic joint) logs
+#: its position in m (``motor_angle = "mm"``), its rate in m/s, its force in N.
+LINEAR_SI: dict[str, str] = {"rad": "m", "rad/s": "m/s", "rad/s**2": "m/s**2", "N*m": "N"}
+
+
+def column_unit(name: str, unit: str | None = None) -> str | None:
+    """The SI unit a column ``name`` given in the file's ``unit`` is read in: the signal's
+    own (:func:`signal_unit`), or its linear counterpart (:data:`LINEAR_SI`: m for an angle,
+    N for a torque) where ``unit`` is a length, a speed or a force (a linear axis);
+    ``None`` for a name flexarm does not know."""
+    si = signal_unit(name)
+    if si is None or unit is None:
+        return si
+    lin = LINEAR_SI.get(si)
+    if lin is not None and not _converts(unit, si) and _converts(unit, lin):
+        return lin
+    return si
+
+
+def _as_linear(known: Mapping[str, str], name: str, unit: str) -> Mapping[str, str]:
+    """``known`` with ``name``'s SI unit its linear counterpart where ``unit`` is linear."""
+    si = column_unit(name, unit)
+    if si is None or si == known.get(name) or known.get(name) not in LINEAR_SI:
+        return known
+    return {**known, name: si}
+
+
+def _converts(unit: str, si: str) -> bool:
+    try:
+        ureg.parse_expression(unit).to(si)
+    except Exception:  # pint raises several exception types
+        return False
+    return True
+
+
 def known_names() -> str:
     """The signal names a log may map, for messages."""
     return ", ".join([*KNOWN, *OTHER]) + "; per joint j: " + ", ".join(f"{b}_j" for b in PER_JOINT)
@@ -155,6 +190,7 @@ class Log:
     ``gains`` K1..K4 per sample (N, 4) in V/rad, V/m, V·s/rad, V·s/m (piecewise constant
     when the log changes them), ``voltage_limit`` (V, the amplifier's saturation) and
     ``rate`` (``"logged"``, ``"backward"``, ``"filtered"``: the rates the law used).
+    ``disturbances``: the signals its format maps as logged disturbances.
     """
 
     path: Path | None
@@ -169,6 +205,9 @@ class Log:
     voltage_limit: float | None = None
     rate: str | None = None
     log_format: Any = field(default=None, repr=False)
+    #: the signals the log's format maps as disturbances (its ``[disturbances]``): inputs
+    #: that enter the loop from the log (a scenario's ``[[disturbances]]``)
+    disturbances: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.path is not None and not isinstance(self.path, Path):
@@ -282,6 +321,79 @@ class Log:
             controller=ctrl,
             gains=gains,
         )
+
+
+#: Default largest relative difference of a log's sampling period (its median time step)
+#: from a scenario's period that :func:`on_sample_grid` reads on the scenario's grid: a
+#: logger's clock that drifts (16 ppm, 8 ppm on a public benchmark's 1 kHz files) or
+#: jitters, not another rate.
+PERIOD_TOLERANCE = 1e-4
+#: Below this relative difference the log's period is the scenario's (round-off of time
+#: stamps such as 718.708 s): the log is used as it is, without a note.
+SAME_PERIOD = 1e-6
+
+
+class ClockError(LogError):
+    """A log whose sampling period is too far from the scenario's (:func:`on_sample_grid`)."""
+
+
+def on_sample_grid(
+    log: Log,
+    period: float,
+    tol: float = PERIOD_TOLERANCE,
+    *,
+    option: str = "period_tolerance",
+    what: str = "the scenario's [sampling] period",
+) -> tuple[Log, str | None]:
+    """``log`` read on the sample grid of ``period`` (s): the one check of a log's clock
+    against a scenario's period (replay, fit, validate).
+
+    The log's period T_log is the slope of its time stamps against the sample number (least
+    squares: a drift measured over the whole log, stamp jitter averaged out, where a median
+    step is off by the jitter's spread over √N); its relative difference r = |T_log − T| / T
+    is the figure. r <= 1e-6 (:data:`SAME_PERIOD`, time-stamp round-off):
+    the log as it is, no note. 1e-6 < r <= ``tol`` (default 1e-4, :data:`PERIOD_TOLERANCE`):
+    a clock that drifts or jitters; the samples are taken as the scenario's, sample k at
+    t_0 + k T (re-stamped, not interpolated), and the note (also appended to the returned
+    log's ``notes``) says by how much the clock was off: r in ppm, T_log, and the largest
+    distance of a time stamp from the grid (s). r > ``tol``: a :class:`ClockError` line
+    naming the log, both periods, r and ``option`` (the option that widens ``tol``).
+    A log without time is returned as it is. Returns (log, note or None)."""
+    if log.time is None or len(log.time) < 2:
+        return log, None
+    if not (period > 0 and np.isfinite(period)):
+        raise ClockError(f"{log.where}: sampling period {period!r} s: give a period > 0 s")
+    if not (tol >= 0 and np.isfinite(tol)):
+        raise ClockError(f"{option} = {tol!r}: give a relative tolerance >= 0 (e.g. 1e-4)")
+    t = np.asarray(log.time, float)
+    k = np.arange(len(t)) - (len(t) - 1) / 2
+    step = float(np.dot(k, t - t.mean()) / np.dot(k, k))
+    r = abs(step - period) / period
+    if r <= SAME_PERIOD:
+        return log, None
+    if r > tol:
+        raise ClockError(
+            f"{log.where}: sampled every {step:.9g} s (its time stamps' slope), {what} is "
+            f"{period:g} s: "
+            f"{r:.3g} relative ({r * 1e6:.3g} ppm), beyond {option} = {tol:g}; if the "
+            f"logger's clock drifts and its samples are the scenario's, give {option} >= "
+            f"{_round_up(r):g}; else resample the log or change the period"
+        )
+    grid = t[0] + np.arange(len(t)) * period
+    off = float(np.max(np.abs(t - grid)))
+    note = (
+        f"{log.where}: its clock is {r * 1e6:.3g} ppm off {what} (a step of {step:.9g} s "
+        f"vs {period:g} s; the last time stamp {t[-1] - grid[-1]:+.3g} s from the grid, the "
+        f"farthest {off:.3g} s): read on the scenario's grid, sample k at t_0 + k·{period:g} s"
+    )
+    out = replace(log, time=grid, notes=[*log.notes, note])
+    return out, note
+
+
+def _round_up(r: float) -> float:
+    """r rounded up to 2 significant digits (a tolerance to suggest)."""
+    e = math.floor(math.log10(r)) - 1
+    return math.ceil(r / 10**e) * 10**e
 
 
 def log_keys(logs: Sequence[Log]) -> list[str]:
@@ -638,7 +750,9 @@ def read_log(
         if sign < 0:
             data[:, j] = -data[:, j]
     factors = {
-        name: unit_factor(path, name, units[name], known, source) for name in units if name in names
+        name: unit_factor(path, name, units[name], _as_linear(known, name, units[name]), source)
+        for name in units
+        if name in names
     }
     tj = names.index("time")
     time = data[:, tj] * factors.get("time", 1.0)

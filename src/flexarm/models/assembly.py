@@ -247,10 +247,11 @@ class Arm(Plant):
             return self.body.joint_velocity(xb)
         return xb[self.body.n_q : self.body.n_q + self.body.n_links]
 
-    def _drive(self, xb: Array, u: Array) -> Array:
+    def _drive(self, xb: Array, u: Array, tau_ext: Array | None = None) -> Array:
         om = self._omega(xb)
         f = jnp.asarray
-        return f(self.k_u) * u - f(self.k_omega) * om - f(self.viscous) * om
+        tau = f(self.k_u) * u - f(self.k_omega) * om - f(self.viscous) * om
+        return tau if tau_ext is None else tau + tau_ext
 
     def _balance(self, xb, tau, held):
         if self.kind == "single":
@@ -274,9 +275,9 @@ class Arm(Plant):
             return self.body.derivative(xb, f, aux)
         return _MultiBody.derivative(self.body, xb, f, aux)
 
-    def _forces(self, x: Array, u: Array, held: Array | None = None):
+    def _forces(self, x: Array, u: Array, held: Array | None = None, tau_ext: Array | None = None):
         xb, zs = self._split(x)
-        tau = self._drive(xb, u)
+        tau = self._drive(xb, u, tau_ext)
         om = self._omega(xb)
         tau_a, aux = self._balance(xb, tau, self._slow(om) if held is None else held)
         fs, zds = [], []
@@ -287,30 +288,34 @@ class Arm(Plant):
         return xb, tau, tau_a, aux, jnp.stack(fs), zds
 
     # ---------------------------------------------------------------- protocol
-    def rhs(self, x: Array, u: Array) -> Array:
+    def rhs(self, x: Array, u: Array, tau_ext: Array | None = None) -> Array:
+        """ẋ under the commands u and, optionally, external joint torques ``tau_ext``
+        (N·m per joint, beside the drives': a logged force disturbance)."""
         if self.kind == "multi" and self._frictionless:
             # no friction: one evaluation of the body, no mobility columns
             xb, _ = self._split(x)
-            return self.body.rhs(xb, self._drive(xb, u) + self.bias)
-        xb, tau, tau_a, aux, f, zds = self._forces(x, u)
+            return self.body.rhs(xb, self._drive(xb, u, tau_ext) + self.bias)
+        xb, tau, tau_a, aux, f, zds = self._forces(x, u, tau_ext=tau_ext)
         return jnp.concatenate([self._derivative(xb, f, aux)] + zds)
 
     @property
     def _frictionless(self) -> bool:
         return all(fr.model == "none" for fr in self.frictions)
 
-    def signals(self, x: Array, u: Array) -> Array:
+    def signals(self, x: Array, u: Array, tau_ext: Array | None = None) -> Array:
         if self.kind == "single":
-            xb, tau, tau_a, aux, f, _ = self._forces(x, u)
+            xb, tau, tau_a, aux, f, _ = self._forces(x, u, tau_ext=tau_ext)
             return jnp.concatenate([self.body.signals(xb, aux), f])
         xb, _ = self._split(x)
         if self._frictionless:
             f = jnp.zeros((self.n_joints,) + x.shape[1:])
         else:
-            f = self._forces(x, u)[4]
+            f = self._forces(x, u, tau_ext=tau_ext)[4]
         return jnp.concatenate([self.body.signals(xb, u), f])
 
-    def project(self, x_prev: Array, x_next: Array, u: Array) -> Array:
+    def project(
+        self, x_prev: Array, x_next: Array, u: Array, tau_ext: Array | None = None
+    ) -> Array:
         karnopp = self._karnopp()
         if not any(karnopp):
             return x_next
@@ -325,7 +330,7 @@ class Arm(Plant):
                 for j, fr in enumerate(self.frictions)
             ]
         )
-        xb, tau, tau_a, aux, _, _ = self._forces(x_next, u, held=cand)
+        xb, tau, tau_a, aux, _, _ = self._forces(x_next, u, held=cand, tau_ext=tau_ext)
         stuck = jnp.stack(
             [
                 fr.sticks(om_prev[j], om[j], tau_a[j])

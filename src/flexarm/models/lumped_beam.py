@@ -63,11 +63,15 @@ class BeamBlock:
         return _siso(self, 0), _siso(self, 1)
 
     def coupling_tf(self) -> control.TransferFunction:
-        """C_t(s)/(θm(s) − θt(s))."""
+        """C_t(s)/(θm(s) − θt(s)); 0 for a rigid link (θt = θm and C_t = 0: its masses are
+        the hub's inertia, no torque couples the two)."""
         if self.exact is not None:
             return self.exact[2]
         gb, ct = self.transfer_functions()
-        return _clean(control.minreal(ct / (1 - gb), tol=1e-6, verbose=False))
+        rel = _clean(control.minreal(1 - gb, tol=1e-6, verbose=False))
+        if not np.any(np.asarray(rel.num[0][0], float)):
+            return control.tf([0.0], [1.0])
+        return _clean(control.minreal(ct / rel, tol=1e-6, verbose=False))
 
     def held(self) -> BeamBlock:
         """The block with the tip translation held fixed (FRB Fig. 11 experiment)."""

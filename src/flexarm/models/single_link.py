@@ -12,6 +12,10 @@ Linear part (friction off), FRB eq. (12):
 
 State of the nonlinear plant: x = (θm, θ̇m, z_beam..., z_friction...); the plant is the
 one-link case of :class:`flexarm.models.assembly.Arm` (:meth:`SingleLinkModel.plant`).
+
+A linear axis (``arm.joint = "prismatic"``, a rigid carriage) is the same equations in
+linear units: m θ̈ = k_u u − k_ω θ̇ − V θ̇ + b − F with the position θ in m, the mass m in
+kg (``J``: the motor's ``inertia`` plus the carriage's masses), forces in N.
 """
 
 from __future__ import annotations
@@ -54,7 +58,12 @@ class SingleLinkModel:
     def from_spec(cls, arm: SingleLinkArm, *, hold_tip: bool = False) -> SingleLinkModel:
         J = arm.motor.inertia
         if isinstance(arm.beam, RigidBeam):
-            J += rigid_beam_inertia(arm.beam)
+            # a linear axis (prismatic joint): the carriage's masses move with it (kg)
+            J += (
+                sum(m.mass for m in arm.beam.masses)
+                if arm.joint == "prismatic"
+                else rigid_beam_inertia(arm.beam)
+            )
         block = beam_block(arm.beam)
         if hold_tip:
             block = block.held()

@@ -299,7 +299,90 @@ def _references(scenario: Scenario, t: np.ndarray, extra) -> dict[str, np.ndarra
     if getattr(scenario.controller, "type", None) == "nested":
         refs["feedforward"] = nested_feedforward(scenario.controller, scenario.reference, t)
     refs.update(extra or {})
+    for d in scenario.disturbances:  # no array given: the disturbance is 0
+        refs.setdefault(d.name, np.zeros_like(t))
     return refs
+
+
+class ReferenceLengthError(FlexarmError, ValueError):
+    """Reference arrays whose length does not fit the run."""
+
+
+def run_length(scenario: Scenario, t: np.ndarray, references) -> np.ndarray:
+    """The sample instants of a run given reference arrays ``references`` (channel →
+    values at the samples): the scenario's own ``t`` (from ``[simulation] duration``), or,
+    where every array has one length within one sample of it (a duration rounded to the
+    period: 24.84 s of a 24,841-sample log), that length. Arrays of other lengths are one
+    :class:`~flexarm.errors.FlexarmError` line naming the channel, both counts and the fix."""
+    dt = float(t[1] - t[0]) if len(t) > 1 else float(scenario.sampling.period)  # type: ignore[union-attr]
+    lengths = {k: int(np.shape(v)[0]) for k, v in (references or {}).items() if np.ndim(v) == 1}
+    for k, v in (references or {}).items():
+        if np.ndim(v) > 1:
+            raise ReferenceLengthError(
+                f"scenario {scenario.name!r}: reference {k!r} has shape {np.shape(v)}",
+                field=f"references[{k!r}]",
+                value=np.shape(v),
+                fix="give one value per sample (a 1-D array) or one number",
+            )
+    if not lengths:
+        return t
+    n = len(t)
+    sizes = set(lengths.values())
+    if len(sizes) == 1 and abs(next(iter(sizes)) - n) <= 1:
+        return np.arange(next(iter(sizes))) * dt
+    k, m = next((k, m) for k, m in lengths.items() if m != n)
+    raise ReferenceLengthError(
+        f"scenario {scenario.name!r}: reference {k!r} has {m} samples, but "
+        f"[simulation] duration = {(n - 1) * dt:.9g} s at the period {dt:g} s makes {n}"
+        + (f" (other arrays: {sorted(sizes)})" if len(sizes) > 1 else ""),
+        field="[simulation] duration (s)",
+        value=(n - 1) * dt,
+        fix=f"give arrays of {n} samples, or duration = {(m - 1) * dt:.9g} s for {m}",
+    )
+
+
+def loop_disturbances(scenario: Scenario) -> tuple[tuple[str, str, int], ...]:
+    """The scenario's ``[[disturbances]]`` as :attr:`SampledLoop.disturbances`: (name,
+    ``"command"`` / ``"force"``, the joint 0-based: the plant input of its drive, or the
+    joint the force acts on)."""
+    return tuple((d.name, d.into, (d.joint or 1) - 1) for d in scenario.disturbances)
+
+
+class DisturbanceError(FlexarmError, ValueError):
+    """A log and a scenario that disagree on the logged disturbances."""
+
+
+def disturbance_inputs(scenario: Scenario, log) -> dict[str, np.ndarray]:
+    """The arrays of the scenario's ``[[disturbances]]`` from ``log`` (a
+    :class:`flexarm.io.logs.Log`), to pass with the references (``references=`` of
+    :func:`prepare` / :func:`simulate`, or the reference inputs of the sampled loop): one
+    per declared name, taken from the log's column of that name. A declared disturbance the
+    log lacks, or a column the log's format maps as a disturbance
+    (:attr:`flexarm.io.logs.Log.disturbances`) that the scenario does not declare, is one
+    :class:`DisturbanceError` line naming the log, the name and the fix."""
+    where = getattr(log, "where", "<log>")
+    declared = scenario.disturbance_names()
+    sig = getattr(log, "signals", {})
+    for name in declared:
+        if name not in sig:
+            raise DisturbanceError(
+                f"{where}: no column {name!r}, which scenario {scenario.name!r} declares in "
+                f"[[disturbances]] (into = {_into(scenario, name)!r}); map it in the log "
+                f"format's [disturbances] ({name} = COLUMN), or drop it from the scenario"
+            )
+    for name in getattr(log, "disturbances", ()) or ():
+        if name not in declared:
+            raise DisturbanceError(
+                f"{where}: the log's format maps a disturbance {name!r} that scenario "
+                f"{scenario.name!r} does not declare; add [[disturbances]] name = {name!r} "
+                'with into = "command" or "force" to the scenario, or drop it from the '
+                "log format's [disturbances]"
+            )
+    return {name: np.asarray(sig[name], dtype=float) for name in declared}
+
+
+def _into(scenario: Scenario, name: str) -> str:
+    return next(d.into for d in scenario.disturbances if d.name == name)
 
 
 def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
@@ -318,6 +401,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
     arm, model = multi_link_arm(scenario.arm)
     dt = scenario.sampling.period
     t = sample_times(scenario, dt, arm.n_states + 2 * arm.n_joints + len(scenario.sensors) + 8)
+    t = run_length(scenario, t, references)
     spec = scenario.controller
     refs = _references(scenario, t, references)
     if controller is not None:
@@ -363,6 +447,7 @@ def _prepare_multi(scenario: Scenario, controller, references) -> Prepared:
         jnp.asarray(dt),
         scenario.simulation.substeps,
         scenario.sampling.delay,
+        disturbances=loop_disturbances(scenario),
     )
     ini = scenario.initial
     nj = arm.n_joints
@@ -394,6 +479,7 @@ def prepare(
     plant = model.plant()
     dt = scenario.sampling.period
     t = sample_times(scenario, dt, plant.n_states + len(scenario.sensors) + 8)
+    t = run_length(scenario, t, references)
     refs = _references(scenario, t, references)
     ctrl = (
         controller
@@ -422,6 +508,7 @@ def prepare(
         jnp.asarray(dt),
         scenario.simulation.substeps,
         scenario.sampling.delay,
+        disturbances=loop_disturbances(scenario),
     )
     ini = scenario.initial
     x0 = model.initial_state(ini.motor_angle, ini.motor_velocity, ini.tip_deflection)
@@ -474,7 +561,8 @@ def to_result(p: Prepared, out: dict, index: int | None = None) -> SimulationRes
         pick(out["states"]),
         plant.state_names,
         title=p.scenario.name,
-        meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period},
+        meta={"scenario": p.scenario.name, "sampling_period_s": p.scenario.sampling.period}
+        | ({"joint": "prismatic"} if getattr(p.scenario, "prismatic", False) else {}),
     )
 
 

@@ -400,6 +400,11 @@ def computed_channels(
       ~30 ms for the lab's 40 Hz derivative, ~0.5 s for a 2 Hz low-pass); the first
       samples of a log that starts in motion read the filter's start-up transient.
 
+    A rate channel (``lowpass2_rate``, ``derivative2``) need not share the zeroing of the
+    channel it is computed from: zeroing subtracts a constant, which a rate does not see
+    once the window and the filter's memory have passed; its window reads 0 in the zeroed
+    channel, so there the computed rate is 0 (the note says so).
+
     Channels neither rule defines are left out (the caller's own error names them)."""
     from flexarm.control.lti import FILTER_KINDS, digital_filter
 
@@ -424,7 +429,21 @@ def computed_channels(
         if not f or c in sig:
             continue
         fe = f.get("discretisation", "forward_euler") == "forward_euler"
-        if f["kind"] in FILTER_KINDS and FILTER_KINDS[f["kind"]] == 1 and fe:
+        rate = FILTER_KINDS.get(f["kind"]) == 1
+        # a rate does not see a constant: the zeroing need not match (docstring)
+        matched = ("gain", "delay") if rate else ("gain", "delay", "zeroing")
+
+        def zeroing_note(n: str, spec=spec, c=c) -> str:
+            zc, zn = float(spec.get("zeroing") or 0.0), float(chans[n].get("zeroing") or 0.0)
+            if zc == zn:
+                return ""
+            return (
+                f"; {n!r} is zeroed over {zn:g} s and {c!r} over {zc:g} s: zeroing subtracts "
+                "a constant, which leaves the rate as it is after the window (and the "
+                "filter's memory); inside the window the zeroed channel reads 0"
+            )
+
+        if rate and fe:
             sib = [
                 n
                 for n, o in chans.items()
@@ -434,7 +453,7 @@ def computed_channels(
                 and o["filter"]["kind"] == "lowpass2"
                 and same(o["filter"], f, ("cutoff", "damping"))
                 and o["filter"].get("discretisation", "forward_euler") == "forward_euler"
-                and same(o, spec, ("gain", "delay", "zeroing"))
+                and same(o, spec, matched)
             ]
             if sib:
                 x1 = np.asarray(sig[sib[0]], float)
@@ -446,7 +465,7 @@ def computed_channels(
                     notes.append(
                         f"{where}: {c!r} is not logged: computed from the logged "
                         f"{sib[0]!r} (the rate state of its {f['kind']} filter, "
-                        "ξ₂ = Δξ₁/T; the last sample extrapolated)"
+                        "ξ₂ = Δξ₁/T; the last sample extrapolated)" + zeroing_note(sib[0])
                     )
                     continue
         raw = [
@@ -455,7 +474,7 @@ def computed_channels(
             if n in sig
             and src[n] == src[c]
             and not o.get("filter")
-            and same(o, spec, ("zeroing",))
+            and (rate or same(o, spec, ("zeroing",)))
             and float(o.get("gain", 1.0)) != 0.0
         ]
         if not raw:
@@ -476,7 +495,10 @@ def computed_channels(
         notes.append(
             f"{where}: {c!r} is not logged: computed from the logged {raw[0]!r} "
             f"through its {f['kind']} filter (as the sensor stage runs it, from rest "
-            "on the log's first sample" + (f"; delay {shift:+d} samples" if shift else "") + ")"
+            "on the log's first sample"
+            + (f"; delay {shift:+d} samples" if shift else "")
+            + ")"
+            + zeroing_note(raw[0])
         )
     return out, notes
 

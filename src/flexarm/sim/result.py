@@ -29,7 +29,7 @@ import numpy as np
 
 from flexarm.display import Table
 from flexarm.io.logs import KNOWN as EXCHANGE_UNITS
-from flexarm.io.logs import write_log
+from flexarm.io.logs import LINEAR_SI, write_log
 
 
 def _unit(name: str) -> str:
@@ -247,7 +247,13 @@ class SimulationResult(control.TimeResponseData):
         path = Path(path)
         cols = self.exchange_columns()
         lines = [f"{k}: {v}" for k, v in {**self.meta, **(comments or {})}.items()]
-        lines.append("units: " + ", ".join(f"{k} [{_unit(k)}]" for k in cols))
+        linear = self.meta.get("joint") == "prismatic"  # a linear axis: m, m/s, N
+        lines.append(
+            "units: "
+            + ", ".join(
+                f"{k} [{LINEAR_SI.get(_unit(k), _unit(k)) if linear else _unit(k)}]" for k in cols
+            )
+        )
         path.parent.mkdir(parents=True, exist_ok=True)
         t = cols.pop("time")
         return write_log(

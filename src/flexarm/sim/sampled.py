@@ -90,6 +90,16 @@ class Sensors(eqx.Module):
     #: zeroed channel leaves the loop exactly as without)
     zeroed: tuple[int, ...] = eqx.field(static=True, default=())
     zero_n: tuple[int, ...] = eqx.field(static=True, default=())
+    #: positions of the channels that read the drive's command (:func:`command_signal`), the
+    #: plant input each reads, and whether it reads the applied command (``_applied``: with
+    #: the ``into = "command"`` disturbances); none leaves the loop exactly as without
+    commands: tuple[int, ...] = eqx.field(static=True, default=())
+    command_input: tuple[int, ...] = eqx.field(static=True, default=())
+    command_applied: tuple[bool, ...] = eqx.field(static=True, default=())
+    #: the command channels' gains (``gain`` holds 0 there, and ``index`` 0: a consumer
+    #: that reads the channels as plant signals, e.g. a state estimate from a log's first
+    #: sample, sees no plant signal in them)
+    command_gain: Array | None = None
 
     @classmethod
     def make(
@@ -99,11 +109,25 @@ class Sensors(eqx.Module):
         ``plant``; ``dt`` the sample period (needed by digital filters with a cutoff)."""
         names = tuple(channels)
         signal = {n: channels[n].get("signal") or n for n in names}
+        cmd = {n: c for n in names if (c := command_signal(plant, signal[n])) is not None}
+        for n in cmd:
+            bad = [
+                k
+                for k in ("bandwidth", "filter", "zeroing", "delay")
+                if channels[n].get(k) not in (None, 0, 0.0)
+            ]
+            if bad:
+                raise ValueError(
+                    f"sensor {n!r} reads the drive's command {signal[n]!r}, which has no "
+                    f"{', '.join(bad)}: set {bad[0]} = 0 (a command channel takes gain, "
+                    "noise and quantisation only)"
+                )
         for n in names:
-            if signal[n] not in plant.signal_names:
+            if n not in cmd and signal[n] not in plant.signal_names:
                 raise ValueError(
                     f"sensor {n!r}: the plant has no signal {signal[n]!r}; it has "
-                    f"{', '.join(plant.signal_names)}"
+                    f"{', '.join(plant.signal_names)} (and its commands "
+                    f"{', '.join(plant.input_names)}, with _applied)"
                     + (
                         ""
                         if channels[n].get("signal")
@@ -155,11 +179,17 @@ class Sensors(eqx.Module):
                 fx0=jnp.full((len(filts), k), jnp.nan),
             )
         zeroed, zero_n = zeroing_windows(channels, dt)
+        gain = get("gain", 1.0)
+        command_gain = None
+        if cmd:
+            pos = [i for i, n in enumerate(names) if n in cmd]
+            command_gain = gain[jnp.asarray(pos)]
+            gain = gain.at[jnp.asarray(pos)].set(0.0)
         return cls(
             names,
-            tuple(plant.signal_names.index(signal[n]) for n in names),
+            tuple(0 if n in cmd else plant.signal_names.index(signal[n]) for n in names),
             tuple(int(channels[n].get("delay", 0)) for n in names),
-            get("gain", 1.0),
+            gain,
             get("noise", 0.0),
             jnp.asarray(quantum),
             filtered,
@@ -168,7 +198,25 @@ class Sensors(eqx.Module):
             **mats,
             zeroed=zeroed,
             zero_n=zero_n,
+            commands=tuple(i for i, n in enumerate(names) if n in cmd),
+            command_input=tuple(cmd[n][0] for n in names if n in cmd),
+            command_applied=tuple(cmd[n][1] for n in names if n in cmd),
+            command_gain=command_gain,
         )
+
+
+def command_signal(plant: Plant, signal: str) -> tuple[int, bool] | None:
+    """The plant input a command channel reads and whether it reads the applied command:
+    ``signal`` a plant input name (``voltage``, ``current``, ``torque_1``, ...: the
+    controller's command after the computation delay, the saturation and the D/A, as a lab's
+    logger records its command) or that name + ``_applied`` (the command the drive receives:
+    the ``into = "command"`` disturbances added); ``None`` for any other signal. A command
+    channel records the command computed at the sample, y_k = gain·u_k + noise, quantised; a
+    controller reading it sees the command held over the period before."""
+    base = signal.removesuffix("_applied")
+    if signal in plant.signal_names or base not in plant.input_names:
+        return None
+    return plant.input_names.index(base), signal != base
 
 
 def zeroing_windows(
@@ -289,6 +337,43 @@ def _with_filters(plant: Plant, sens: Sensors) -> FilteredPlant:
     )
 
 
+class ForcedPlant(Plant):
+    """The plant with external joint torques appended to its input, for the integrator
+    only: u' = (u, τ_ext), ẋ = f(x, u, τ_ext) (``into = "force"`` disturbances; the plant
+    takes them as :meth:`flexarm.models.assembly.Arm.rhs`'s ``tau_ext``)."""
+
+    plant: Plant
+    n_u: int = eqx.field(static=True)
+
+    @classmethod
+    def around(cls, plant: Plant, n_joints: int) -> ForcedPlant:
+        return cls(
+            plant.state_names,
+            plant.signal_names,
+            plant.input_names + tuple(f"external_torque_{j + 1}" for j in range(n_joints)),
+            plant,
+            plant.n_inputs,
+        )
+
+    @property
+    def _arm(self) -> Any:
+        """The wrapped plant, whose methods take the torques (an Arm's ``tau_ext``)."""
+        return self.plant
+
+    def rhs(self, x: Array, u: Array) -> Array:
+        return self._arm.rhs(x, u[: self.n_u], u[self.n_u :])
+
+    def signals(self, x: Array, u: Array) -> Array:
+        return self._arm.signals(x, u[: self.n_u], u[self.n_u :])
+
+    def project(self, x_prev: Array, x_next: Array, u: Array) -> Array:
+        return self._arm.project(x_prev, x_next, u[: self.n_u], u[self.n_u :])
+
+
+def _n_joints(plant: Plant) -> int:
+    return len(getattr(plant, "frictions", ())) or 1
+
+
 class Actuator(eqx.Module):
     """Saturation at ±limit and D/A quantisation (2·limit / 2**bits; 0 = none)."""
 
@@ -309,6 +394,12 @@ class SampledLoop(eqx.Module):
     solver: str = eqx.field(static=True, default="rk4")
     #: (rtol, atol) of the adaptive ``solver = "tsit5"`` (continuous-time laws)
     tolerances: tuple[float, float] = eqx.field(static=True, default=(1e-8, 1e-10))
+    #: inputs from the log (``[[disturbances]]``): (name, ``"command"`` or ``"force"``,
+    #: the plant input or the joint, 0-based), read from the reference-like input arrays
+    #: by name each sample: a command disturbance is added to the command after the
+    #: saturation and the D/A, a force to the joint's torque; none leaves the loop exactly
+    #: as without
+    disturbances: tuple[tuple[str, str, int], ...] = eqx.field(static=True, default=())
 
 
 def _quantise(x: Array, q: Array) -> Array:
@@ -365,6 +456,12 @@ def zeroing_start(sens: Sensors, k: int | Array = 0, total: Array | None = None)
     the window so far), (0, 0) at a run's start."""
     acc = jnp.zeros((len(sens.zeroed),)) if total is None else jnp.asarray(total)
     return (jnp.asarray(k, jnp.int32), acc)
+
+
+def _put(y: Array, positions: tuple[int, ...], v: Array) -> Array:
+    """y with the entries at the static ``positions`` replaced by v (in order)."""
+    slot = {c: j for j, c in enumerate(positions)}
+    return jnp.stack([v[slot[c]] if c in slot else y[c] for c in range(y.shape[0])])
 
 
 def _zeroed_out(sens: Sensors, y: Array, v: Array) -> Array:
@@ -433,12 +530,23 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
     solver = solver_for(loop.solver)
     h = loop.dt / loop.substeps
     n_x = plant.n_states
-    fplant = _with_filters(plant, sens) if sens.filtered else None
     law = ctrl if isinstance(ctrl, ContinuousLaw) else None
+    if loop.disturbances and law is not None:
+        raise ValueError(
+            f"disturbances {', '.join(d[0] for d in loop.disturbances)}: a continuous-time "
+            "law cannot take logged disturbances; run them with a sampled controller"
+        )
+    pushes = tuple((d[0], d[2]) for d in loop.disturbances if d[1] == "command")
+    forces = tuple((d[0], d[2]) for d in loop.disturbances if d[1] == "force")
+    n_u = plant.n_inputs
+    n_j = _n_joints(plant)
+    base = ForcedPlant.around(plant, n_j) if forces else plant
+    fplant = _with_filters(base, sens) if sens.filtered else None
+    cpos = sens.commands
 
     def integrate(z, u, t_k):
         """Step 4 over one period from z (plant state, then any filter states)."""
-        P = plant if fplant is None else fplant
+        P = base if fplant is None else fplant
         if law is None:
             return integrate_hold(P, z, u, h, loop.substeps, solver), u
         # a continuous law: sat(u_held + law(x, t)) at every stage (control/continuous_law)
@@ -461,6 +569,10 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         # 1. sensors (a filtered channel reads its filter's output)
         s = _signals(plant, x, u_prev)
         raw = sens.gain * _pick(s, sens.index)
+        if cpos:  # command channels: the command held over the period before
+            assert sens.command_gain is not None  # set with the command channels
+            held = jnp.stack([u_prev[i] for i in sens.command_input])
+            raw = _put(raw, cpos, sens.command_gain * held)
         if fplant is not None:
             yf = carry[5]
             slot = {c: j for j, c in enumerate(sens.filtered)}
@@ -491,13 +603,33 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         cstate, u_c = ctrl.step(cstate, meas, ref_k)
         ubuf = jnp.concatenate([u_c[None], ubuf[:-1]], axis=0)
         u = _quantise(jnp.clip(ubuf[-1], -act.limit, act.limit), act.quantum)
+        u_ctrl = u
+        for name, i in pushes:  # logged disturbances into the command, after the D/A
+            u = u.at[i].add(ref_k[name])
+        if cpos:  # command channels record the command computed at this sample
+            vals = jnp.stack(
+                [
+                    (u if ap else u_ctrl)[i]
+                    for i, ap in zip(sens.command_input, sens.command_applied, strict=True)
+                ]
+            )
+            assert sens.command_gain is not None
+            yc = sens.command_gain * vals + _pick(sens.noise, cpos) * _pick(noise_k, cpos)
+            meas_vec = _put(meas_vec, cpos, _quantise(yc, _pick(sens.quantum, cpos)))
+        if forces:  # logged forces on the joints, beside the drives' torques
+            f_ext = jnp.zeros((n_j,), u.dtype)
+            for name, j in forces:
+                f_ext = f_ext.at[j].add(ref_k[name])
+            u = jnp.concatenate([u, f_ext])
         # 4. plant (and sensor filters) over one period, command held
         # (with a continuous law the record holds the command applied at t_k)
         if fplant is None:
             x_next, u_rec = integrate(x, u, t_k)
-            return (x_next, cstate, sbuf, ubuf, u_rec) + extra, (x, meas_vec, u_rec)
+            held = u_rec[:n_u] if forces else u_rec
+            return (x_next, cstate, sbuf, ubuf, held) + extra, (x, meas_vec, u_rec)
         z, u_rec = integrate(jnp.concatenate([x, yf]), u, t_k)
-        return (z[:n_x], cstate, sbuf, ubuf, u_rec, z[n_x:]) + extra, (x, meas_vec, u_rec)
+        held = u_rec[:n_u] if forces else u_rec
+        return (z[:n_x], cstate, sbuf, ubuf, held, z[n_x:]) + extra, (x, meas_vec, u_rec)
 
     def sample_if_valid(carry, inp):
         valid, inp = inp
@@ -520,7 +652,8 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             inp, body = (blocked(jnp.ones((n,), dtype=bool)), inp), sample_if_valid
         carry, recs = jax.lax.scan(lambda c, i: jax.lax.scan(body, c, i), carry, inp)
         xs, meas, us = (r.reshape((nb * block,) + r.shape[2:])[:n] for r in recs)
-    return carry, (xs, jax.vmap(lambda x, u: _signals(plant, x, u))(xs, us), meas, us)
+    sig = jax.vmap(lambda x, u: _signals(base, x, u))(xs, us)
+    return carry, (xs, sig, meas, us[:, :n_u] if forces else us)
 
 
 _run = eqx.filter_jit(_scan)

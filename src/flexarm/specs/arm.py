@@ -198,10 +198,87 @@ class RigidBeam(Spec):
 Beam = Annotated[LumpedBeam | TransferFunctionBeam | RigidBeam, Field(discriminator="model")]
 
 
+#: A prismatic joint's quantities, by section and field: their linear SI units (the rotary
+#: unit of the field otherwise). A prismatic axis is the rotary arm's equations with
+#: positions in m, velocities in m/s, forces in N, masses in kg, viscous friction in N·s/m;
+#: a rotary motor through a screw has ``gear_ratio`` in rad/m (2π / lead).
+PRISMATIC_UNITS: dict[str, dict[str, str]] = {
+    "motor": {
+        "inertia": "kg",
+        "viscous": "N*s/m",
+        "torque_constant": "N/A",
+        "gear_ratio": "rad/m",
+    },
+    "friction": {
+        "coulomb": "N",
+        "static": "N",
+        "stribeck_velocity": "m/s",
+        "velocity_tolerance": "m/s",
+        "stiffness": "N/m",
+        "damping": "N*s/m",
+        "bias": "N",
+        "push_threshold": "N",
+        "push_full": "N",
+    },
+    "initial": {"motor_angle": "m", "motor_velocity": "m/s"},
+    "reference": {"amplitude": "m", "offset": "m", "acceleration": "m/s**2", "snap": "m/s**4"},
+}
+
+
+def prismatic_values(table: object, section: str) -> object:
+    """``table`` (a section as read from TOML) with the quantities given as text in a
+    prismatic joint's units (:data:`PRISMATIC_UNITS`) turned into SI numbers, so that the
+    rotary fields (kg·m², N·m, rad) take them: ``inertia = "2.1 kg"``, ``coulomb = "20 N"``,
+    ``motor_angle = "5 mm"``. A value of another kind is a ValueError naming the field."""
+    from flexarm.units import UnitError, to_si
+
+    units = PRISMATIC_UNITS[section]
+    if not isinstance(table, dict):
+        return table
+    out = dict(table)
+    for k, unit in units.items():
+        v = out.get(k)
+        if isinstance(v, str):
+            try:
+                out[k] = to_si(v, unit, field=k)
+            except UnitError as exc:
+                raise ValueError(
+                    f"{section}.{k}: {exc} (a prismatic joint's {k} is in {unit})"
+                ) from None
+    return out
+
+
 class SingleLinkArm(Spec):
-    """One motor driving one flexible link (FRB Sec. II, VI)."""
+    """One motor driving one flexible link (FRB Sec. II, VI); or, with ``joint =
+    "prismatic"``, one linear axis: a rigid carriage (``beam.model = "rigid"``, its
+    ``masses`` added to the moving mass, its ``length`` unused) moved by the drive, positions
+    in m, forces in N, masses in kg, viscous N·s/m (:data:`PRISMATIC_UNITS`; the channels
+    keep their names: ``motor_angle`` is the position, m; ``motor_velocity`` m/s)."""
 
     kind: Literal["single_link"] = "single_link"
+    joint: Literal["revolute", "prismatic"] = "revolute"
     motor: Motor
     friction: Friction = Friction(model="none")
     beam: Beam
+
+    @model_validator(mode="before")
+    @classmethod
+    def _linear_units(cls, data: object) -> object:
+        if not isinstance(data, dict) or data.get("joint") != "prismatic":
+            return data
+        data = dict(data)
+        for section in ("motor", "friction"):
+            if section in data:
+                data[section] = prismatic_values(data[section], section)
+        data.setdefault("beam", {"model": "rigid", "length": 1.0})
+        return data
+
+    @model_validator(mode="after")
+    def _rigid_carriage(self) -> SingleLinkArm:
+        if self.joint == "prismatic" and self.beam.model != "rigid":
+            raise ValueError(
+                f'joint = "prismatic": a linear axis carries a rigid carriage; beam.model = '
+                f'{self.beam.model!r} is a flexible link: use beam.model = "rigid" (or '
+                "leave [arm.beam] out)"
+            )
+        return self

@@ -197,6 +197,30 @@ class Reference(Spec):
         return self
 
 
+class Disturbance(Spec):
+    """An input that enters the loop from the log (``[[disturbances]]``), not from the
+    controller: a logged pulse, a load force. ``name``: its channel (a log format maps it to
+    a column in its ``[disturbances]`` table; :func:`flexarm.sim.build.disturbance_inputs`
+    takes it from a log); ``into``: ``"command"`` adds it to the drive command after the
+    computation delay, the saturation and the D/A, in the command's unit (V for a voltage
+    drive, A for a current drive, N·m for a torque source), ``"force"`` adds it to the
+    joint's torque (N·m; N on a prismatic joint) beside the drive's. ``joint``: the joint
+    (1-based, as in ``theta_1``), needed on an arm of several joints. Without a log the
+    channel is 0, or the array given to :func:`flexarm.sim.build.simulate` as
+    ``references={name: ...}``."""
+
+    name: str
+    into: Literal["command", "force"]
+    joint: Count(ge=1, what="the joint, 1-based") | None = None
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        if not v.isidentifier():
+            raise ValueError(f'name = {v!r}: give a plain name (letters, digits, _), e.g. "pulse"')
+        return v
+
+
 class PDController(Spec):
     """u = kp·e + kd·(e_k − e_{k−1})/T with e = reference − measured (discrete PD)."""
 

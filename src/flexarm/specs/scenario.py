@@ -20,10 +20,11 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError, model_validator
 
 from flexarm.errors import FlexarmError
-from flexarm.specs.arm import SingleLinkArm
+from flexarm.specs.arm import SingleLinkArm, prismatic_values
 from flexarm.specs.experiment import (
     Actuator,
     ControllerSpec,
+    Disturbance,
     Initial,
     Reference,
     Sampling,
@@ -34,10 +35,15 @@ from flexarm.specs.multilink import JointPDController, MultiLinkArm
 from flexarm.specs.quantity import Q, Spec
 
 KNOWN_SENSORS = ("motor_angle", "tip_angle", "tip_deflection", "motor_velocity")
+#: the drive's command as a measured channel (:class:`flexarm.sim.sampled.Sensors`): the
+#: controller's command after saturation and D/A (``current``, ``voltage``; ``torque_j``,
+#: ``current_j``, ``voltage_j`` on several joints), and with ``_applied`` the command the
+#: drive receives, the ``into = "command"`` disturbances added
+COMMAND_SIGNALS = ("current", "voltage", "current_applied", "voltage_applied")
 #: plant signals of a multi-link arm (:func:`flexarm.models.multilink.signal_names`)
 _MULTI_SIGNAL = re.compile(
     r"(theta|theta_dot|deflection|deflection_angle|delta|"
-    r"friction_torque)_\d+(_\d+)?|tip_x|tip_y"
+    r"friction_torque)_\d+(_\d+)?|tip_x|tip_y|(torque|current|voltage)_\d+(_applied)?"
 )
 
 
@@ -110,10 +116,35 @@ class Scenario(Spec):
         list[Annotated[ControllerSpec | JointPDController, Field(discriminator="type")]] | None
     ) = None
     regulation: RegulationSpec | None = None
+    disturbances: list[Disturbance] = Field(default_factory=list)
 
     @property
     def n_joints(self) -> int:
         return 1 if self.arm.kind == "single_link" else len(self.arm.links)
+
+    @property
+    def prismatic(self) -> bool:
+        """Whether the arm is one linear axis (``arm.joint = "prismatic"``: m, N, kg)."""
+        return getattr(self.arm, "joint", "revolute") == "prismatic"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _linear_units(cls, data: Any) -> Any:
+        """A prismatic axis's ``[initial]`` and references in m (:data:`PRISMATIC_UNITS`)."""
+        arm = data.get("arm") if isinstance(data, dict) else None
+        joint = arm.get("joint") if isinstance(arm, dict) else getattr(arm, "joint", None)
+        if joint != "prismatic":
+            return data
+        data = dict(data)
+        if "initial" in data:
+            data["initial"] = prismatic_values(data["initial"], "initial")
+        if "reference" in data:
+            data["reference"] = prismatic_values(data["reference"], "reference")
+        if isinstance(data.get("references"), dict):
+            data["references"] = {
+                k: prismatic_values(v, "reference") for k, v in data["references"].items()
+            }
+        return data
 
     def controller_specs(self) -> list:
         """The controller blocks: ``[[controllers]]`` in order, or ``[controller]``, or none."""
@@ -237,11 +268,11 @@ class Scenario(Spec):
                     "single-link arm takes a [controller]"
                 )
             for name, sensor in self.sensors.items():
-                if (sensor.signal or name) not in KNOWN_SENSORS:
+                if (sensor.signal or name) not in KNOWN_SENSORS + COMMAND_SIGNALS:
                     raise ValueError(
                         f"unknown sensor channel {name!r}"
                         + (f" (signal {sensor.signal!r})" if sensor.signal else "")
-                        + f"; known signals: {', '.join(KNOWN_SENSORS)}"
+                        + f"; known signals: {', '.join(KNOWN_SENSORS + COMMAND_SIGNALS)}"
                     )
             m = getattr(self.controller, "measured", None)
             if isinstance(m, str) and m not in KNOWN_SENSORS:
@@ -267,6 +298,38 @@ class Scenario(Spec):
             if v is not None and len(v) != n:
                 raise ValueError(f"initial.{name} has {len(v)} values; the arm has {n} joints")
         return self
+
+    @model_validator(mode="after")
+    def _check_disturbances(self) -> Scenario:
+        n = self.n_joints
+        taken = self.reference_channels() | set(self.sensors)
+        seen: set[str] = set()
+        for i, d in enumerate(self.disturbances):
+            where = f"disturbances[{i}] ({d.name})"
+            if d.name in seen:
+                raise ValueError(f"{where}: name {d.name!r} is given twice; give each its own")
+            seen.add(d.name)
+            if d.name in taken:
+                raise ValueError(
+                    f"{where}: name {d.name!r} is already a reference or sensor channel; "
+                    "give the disturbance its own name"
+                )
+            if d.joint is not None and d.joint > n:
+                raise ValueError(
+                    f"{where}: joint = {d.joint}, but the arm has {n} joint(s); give 1..{n}"
+                )
+            if d.joint is None and n > 1:
+                raise ValueError(f"{where}: the arm has {n} joints; say which with joint = 1..{n}")
+            if self.sampling is None:
+                raise ValueError(
+                    f"{where}: a disturbance enters the sampled-data loop; give [sampling] "
+                    "and [simulation]"
+                )
+        return self
+
+    def disturbance_names(self) -> list[str]:
+        """The names of the ``[[disturbances]]``, in order (the log columns they need)."""
+        return [d.name for d in self.disturbances]
 
     def __repr__(self) -> str:
         """A short table (name, arm, drive, beam, sampling, controller); the full
