@@ -30,6 +30,9 @@ README_GAINS = {
     },
     "flexarm_K1_6": (6, 0, 0, 0),
     "flexarm_K1K2_6_-5": (6, -5, 0, 0),  # the 4/27 session
+    # the 5/2 session (README: K4 0.2 until 0.915 s, then 0.4: the first sample's law)
+    "flexarm_K1K2K3_6_-3_213": (6, -3, 0.213, 0),
+    "flexarm_K1K2K3k4_6_-3_213_4": (6, -3, 0.213, 0.2),
 }
 needs_data = pytest.mark.skipif(
     not RIG_FILES,
