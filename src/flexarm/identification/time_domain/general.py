@@ -211,6 +211,9 @@ class ScenarioFitOptions:
     substeps: integration substeps per sample while fitting (None: the scenario's).
     ties: path → free path: the first is not free but moves with the second by the same
     factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
+    period_tolerance: a log whose clock is off the scenario's period by at most this
+    (relative) is read on the scenario's grid, with a note
+    (:func:`flexarm.io.logs.on_sample_grid`); beyond it, one line naming the figure.
     linear: paths fitted in linear space besides the signed ones (:data:`SIGNED_FIELDS`, a
     template value of 0): p = p0 + s z (module docstring); a linear parameter's prior is
     its std in units of its scale s.
@@ -269,6 +272,7 @@ class ScenarioFitOptions:
     substeps: int | None = None
     ties: Mapping[str, str] = field(default_factory=dict)
     linear: Sequence[str] = ()
+    period_tolerance: float = 1e-4
     continuous: bool = False
     continuation: bool = True
     delay_search: Any = None
@@ -324,6 +328,26 @@ class _LogData:
     window: tuple[int, int]  # samples [k0, k1) fitted
     log: Any = None  # the whole log as a flexarm.io.logs.Log (time from 0)
     computed: tuple[str, ...] = ()  # channels computed from logged ones, not compared
+
+
+def _with_command_channels(scenario, channels: list[str]):
+    """``scenario`` with a sensor for every channel asked for that names the drive's
+    command (``voltage``, ``current``, ``torque_1``, ... or ``..._applied``:
+    :func:`flexarm.sim.sampled.command_signal`) and that it lacks, so that the command can
+    be fitted and scored like any sensor channel (``--channel current``)."""
+    from flexarm.sim.sampled import command_signal
+    from flexarm.specs.scenario import scenario_from_dict
+
+    missing = [c for c in channels if c not in scenario.sensors]
+    if not missing:
+        return scenario
+    plant = prepare(scenario).loop.plant
+    add = [c for c in missing if command_signal(plant, c) is not None]
+    if not add:
+        return scenario
+    d = scenario.model_dump(mode="json", exclude_none=True)
+    d.setdefault("sensors", {}).update({c: {} for c in add})
+    return scenario_from_dict(d, source=f"scenario {scenario.name!r} with {', '.join(add)}")
 
 
 def _log_arrays(log) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
@@ -483,6 +507,8 @@ class _Engine:
                     "fitted in linear space; ties follow log-space (positive) parameters"
                 )
             self.tied[p] = (self.free.index(master), _template_value(self.dump, parse_path(p), p))
+        scenario = _with_command_channels(scenario, list(options.channels or {}))
+        self.template = scenario
         self.prep0 = prepare(scenario)
         loop = self.prep0.loop
         self.dt = float(loop.dt)
@@ -618,12 +644,30 @@ class _Engine:
 
     # ------------------------------------------------------------------ logs, segments
     def _read(self, log, window, key: str | None = None) -> _LogData:
+        from flexarm.io.logs import Log as _Log
+        from flexarm.io.logs import on_sample_grid
+        from flexarm.sim.build import disturbance_inputs
+
+        if isinstance(log, _Log):
+            # the one clock check: within period_tolerance the log is read on the
+            # scenario's grid (a note says by how much its clock was off)
+            log, note = on_sample_grid(
+                log,
+                self.dt,
+                self.options.period_tolerance,
+                what=f"scenario {self.template.name!r}'s [sampling] period",
+            )
+            if note:
+                self.notes.append(note)
+            # the scenario's [[disturbances]] from the log's columns (one line when missing)
+            disturbance_inputs(self.template, log)
         name, t, sig = _log_arrays(log)
         name = key or name
         if t.size < 3:
             raise ValueError(f"{name}: {t.size} samples; a log needs at least 3")
         dt = float(np.median(np.diff(t)))
-        if abs(dt - self.dt) > 1e-6 * self.dt:
+        tol = max(1e-6, float(self.options.period_tolerance))
+        if abs(dt - self.dt) > tol * self.dt and not isinstance(log, _Log):
             raise ValueError(
                 f"{name}: sampled every {dt:g} s, but scenario "
                 f"{self.template.name!r} samples every {self.dt:g} s "
