@@ -303,7 +303,7 @@ def _design(ctx, o: DesignRequest) -> None:
             "controller on a reference step (nominal plant"
             f"{f' and {plants} drawn' if spread_d else ''})...",
         )
-        from flexarm.distributed import session
+        from flexarm.distributed import executor, session
 
         try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
             with session(o.scheduler, o.workers) as client:  # None: in-process
@@ -313,7 +313,7 @@ def _design(ctx, o: DesignRequest) -> None:
                     plants=drawn,
                     count=o.count,
                     gate=o.gate_options(),
-                    client=client,
+                    client=executor(client),  # the batches' executor (sim.batch protocol)
                     **opts,
                 )
         except FlexarmError:

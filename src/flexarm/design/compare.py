@@ -41,13 +41,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexarm.design.plants import BatchLoop, PlantBatch, Replace, diverged
+from flexarm.design.plants import (
+    BatchLoop,
+    PlantBatch,
+    PlantSource,
+    Replace,
+    chunk_plants,
+    diverged,
+    nominal_batch,
+)
 
-__all__ = ["compare", "Comparison", "batch_metrics", "METRICS", "experiment"]
+if TYPE_CHECKING:
+    from flexarm.sim.batch import BatchExecutor, ChunkOptions
+
+__all__ = ["compare", "compare_chunked", "Comparison", "batch_metrics", "METRICS", "experiment"]
 
 #: metric → (column title, unit, how the worst case is taken)
 METRICS = {
@@ -397,21 +408,20 @@ def compare(
     tail: float = 0.25,
     count: float | None = None,
     seed: int | None = None,
-    client: Any = None,
-    chunks: Any = None,
+    client: BatchExecutor | None = None,
+    chunks: ChunkOptions | None = None,
 ) -> Comparison:
     """Compare the nominal scenario's own controller (named ``logged``; None leaves it
     out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
     encoder count (rad) where the scenario's hub sensor has none (it then also quantises
     the simulated encoder); ``seed``: the sensor noise's (default the scenario's
-    ``simulation.seed``, as :func:`flexarm.simulate` uses). With a Dask ``client`` (or
-    ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, or ``plants`` a
-    :class:`flexarm.distributed.PlantSource`) the plants run in chunks, one task each, and
-    only per-plant metrics come back (:func:`flexarm.distributed.compare_chunked`)."""
+    ``simulation.seed``, as :func:`flexarm.simulate` uses). With ``client``, a
+    :class:`flexarm.sim.batch.BatchExecutor` (e.g. :class:`flexarm.distributed.DaskExecutor`;
+    or ``chunks``, a :class:`flexarm.sim.batch.ChunkOptions`, or ``plants`` a
+    :class:`~flexarm.design.plants.PlantSource`) the plants run in chunks, one task each,
+    and only per-plant metrics come back (:func:`compare_chunked`)."""
     if client is not None or chunks is not None or not isinstance(plants, PlantBatch):
-        from flexarm.distributed import compare_chunked  # orchestration, entered on request
-
         return compare_chunked(
             plants,
             designs,
@@ -505,3 +515,73 @@ def compare(
         "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()},
     }
     return Comparison(rows, per, traces, settings, list(plants.warnings))
+
+
+# ------------------------------------------------------------------ in chunks, on an executor
+def _compare_chunk(plants, j, a, b, *, designs, kwargs, with_traces):
+    cmp = compare(chunk_plants(plants, j, a, b), designs, **kwargs)
+    return (
+        {name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
+        cmp.traces if with_traces else None,
+        cmp.settings,
+        list(cmp.warnings),
+    )
+
+
+def _compare_chunk_any(arg, with_traces, *, designs, kwargs):
+    return _compare_chunk(*arg, designs=designs, kwargs=kwargs, with_traces=with_traces)
+
+
+def compare_chunked(
+    plants: PlantBatch | PlantSource,
+    designs: Mapping[str, Any] | None = None,
+    *,
+    client: BatchExecutor | None = None,
+    options: ChunkOptions | None = None,
+    **kwargs,
+) -> Comparison:
+    """:func:`compare` over chunks of the plants (a drawn :class:`PlantBatch` sliced, or a
+    :class:`PlantSource` drawn per chunk), each chunk a task on ``client``, a
+    :class:`~flexarm.sim.batch.BatchExecutor` (None: in-process). Each chunk runs the
+    comparison on its plants and the nominal one and returns only the per-plant metrics;
+    the rows (nominal, median, worst, unstable, limit) are summarised over all plants here,
+    the same as one batch would give. The figures' 5–95 % tip band is the first chunk's
+    plants' (a sample of ``options.chunk`` plants), unless ``options.trajectories`` (then
+    each chunk's traces come back; the band stays the first chunk's). ``kwargs``: compare's
+    keywords."""
+    from flexarm.sim.batch import ChunkOptions, chunk_bounds, map_chunks
+
+    o = options or ChunkOptions()
+    bounds = chunk_bounds(len(plants), o.chunk) or [(0, 0)]
+    src = plants if isinstance(plants, PlantSource) or len(plants) else nominal_batch(plants)
+    parts = map_chunks(
+        _compare_chunk_any,
+        [((src, j, a, b), j == 0 or o.trajectories) for j, (a, b) in enumerate(bounds)],
+        client,
+        retries=o.retries,
+        workers=o.workers,
+        shared=dict(designs=designs, kwargs=kwargs),
+    )
+    per: dict[str, dict[str, np.ndarray]] = {}
+    for name in parts[0][0]:
+        per[name] = {
+            k: np.concatenate([parts[0][0][name][k]] + [p[0][name][k][1:] for p in parts[1:]])
+            for k in parts[0][0][name]
+        }
+    settings = dict(parts[0][2])
+    limit = float(settings["limit_V"])
+    rows = {name: summarise(m, limit) for name, m in per.items()}
+    settings.update(
+        n_plants=len(plants),
+        seed=int(getattr(plants, "seed", 0)),
+        chunks=len(bounds),
+        chunk=o.chunk,
+        plants={
+            **getattr(plants, "info", {}),
+            "n": len(plants),
+            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants",
+        },
+        band_plants="the first chunk's plants",
+    )
+    warn = list(dict.fromkeys(w for p in parts for w in p[3]))
+    return Comparison(rows, per, parts[0][1], settings, warn)

@@ -34,8 +34,8 @@ Two sources:
   :func:`~flexarm.specs.paths.scenario_with` and validated.
 
 A :class:`PlantBatch` holds the nominal scenario and the N drawn ones; :meth:`PlantBatch.loop`
-prepares them (:func:`flexarm.sim.build.prepare`) and stacks their loops leaf by leaf (the
-general fit's :func:`~flexarm.identification.time_domain.general.stack_loops`) into one
+prepares them (:func:`flexarm.sim.build.prepare`) and stacks their loops leaf by leaf
+(:func:`flexarm.sim.batch.stack_loops`) into one
 :class:`BatchLoop` that :func:`flexarm.sim.sampled.simulate_batch` runs in one call, the
 nominal plant first (rollout 0) and the N draws after it.
 """
@@ -44,8 +44,9 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -54,7 +55,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["PlantBatch", "BatchLoop", "from_fit", "from_paths", "with_overrides", "UNDETERMINED"]
+__all__ = [
+    "PlantBatch",
+    "PlantSource",
+    "BatchLoop",
+    "chunk_plants",
+    "from_fit",
+    "from_paths",
+    "nominal_batch",
+    "with_overrides",
+    "UNDETERMINED",
+]
 
 #: std of a unit coordinate above which the data do not determine it (see module doc)
 UNDETERMINED = 0.5
@@ -203,7 +214,7 @@ class PlantBatch:
         """Prepare every plant (the nominal first) with ``controller`` (a
         :class:`~flexarm.control.discrete.Controller`; default the nominal scenario's
         ``[controller]``) and stack the loops."""
-        from flexarm.identification.time_domain.general import stack_loops
+        from flexarm.sim.batch import stack_loops
         from flexarm.sim.build import prepare
 
         scns = ([self.nominal] if include_nominal else []) + list(self.scenarios)
@@ -220,6 +231,81 @@ class PlantBatch:
         return BatchLoop(
             stack_loops([p.loop for p in preps]), x0s[0], p0.references, p0.time, p0, len(preps)
         )
+
+
+# ----------------------------------------------------------------------------- lazily drawn
+@dataclass(frozen=True, eq=False)
+class PlantSource:
+    """N plants drawn chunk by chunk where they run: chunk j (plants [a, b)) is
+    ``draw(b - a, seed=chunk_seed(seed, j))`` (a :class:`PlantBatch`;
+    :func:`flexarm.sim.batch.chunk_seed`), so 10^6 plants never exist on the client.
+    ``draw`` must be picklable (a module-level function or a ``functools.partial`` of one):
+    :meth:`from_fit` and :meth:`from_paths` build it."""
+
+    draw: Callable[..., Any]
+    n: int
+    seed: int = 0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_fit(cls, result, n: int, *, seed: int = 0) -> PlantSource:
+        """Plants drawn from a fit's covariance (:func:`from_fit`), chunk by chunk."""
+        return cls(
+            functools.partial(from_fit, result),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_fit, seeds per chunk"},
+        )
+
+    @classmethod
+    def from_paths(
+        cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *, seed: int = 0
+    ) -> PlantSource:
+        """Independent draws (:func:`from_paths`), chunk by chunk."""
+        return cls(
+            functools.partial(from_paths, scenario, dict(spread)),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_paths, seeds per chunk"},
+        )
+
+    def __len__(self) -> int:
+        return self.n
+
+    @functools.cached_property
+    def nominal(self):
+        """The nominal (fitted or given) scenario."""
+        from flexarm.sim.batch import chunk_seed
+
+        return self.draw(1, seed=chunk_seed(self.seed, 0)).nominal
+
+    @property
+    def warnings(self) -> list[str]:
+        from flexarm.sim.batch import chunk_seed
+
+        return list(self.draw(1, seed=chunk_seed(self.seed, 0)).warnings)
+
+
+def chunk_plants(plants: PlantBatch | PlantSource, j: int, a: int, b: int) -> PlantBatch:
+    """Chunk j's plants as a PlantBatch (the nominal plant and plants [a, b)): a
+    :class:`PlantSource` draws them with chunk j's seed, a :class:`PlantBatch` is sliced."""
+    if isinstance(plants, PlantSource):
+        from flexarm.sim.batch import chunk_seed
+
+        return plants.draw(b - a, seed=chunk_seed(plants.seed, j))
+    vals = {k: np.asarray(v)[a:b] for k, v in plants.values.items()}
+    coords = np.asarray(plants.coordinates)
+    return dataclasses.replace(
+        plants,
+        scenarios=list(plants.scenarios[a:b]),
+        values=vals,
+        coordinates=coords[a:b] if coords.shape[0] else coords,
+    )
+
+
+def nominal_batch(plants: PlantBatch | PlantSource) -> PlantBatch:
+    """The nominal plant alone (a source's first draw supplies it)."""
+    return PlantBatch.nominal_only(plants.nominal)
 
 
 # ----------------------------------------------------------------------------- from a fit
