@@ -297,7 +297,7 @@ def _simulate_chunk(
 
 
 def simulate_chunked(
-    run: Callable[..., dict],
+    run: Callable[..., Any],
     loop,
     x0,
     references: dict[str, Any],
