@@ -58,7 +58,16 @@ from flexarm.design.plants import (
 if TYPE_CHECKING:
     from flexarm.sim.batch import BatchExecutor, ChunkOptions
 
-__all__ = ["compare", "compare_chunked", "Comparison", "batch_metrics", "METRICS", "experiment"]
+__all__ = [
+    "compare",
+    "compare_chunked",
+    "Comparison",
+    "batch_metrics",
+    "METRICS",
+    "experiment",
+    "Probe",
+    "probe_for",
+]
 
 #: metric → (column title, unit, how the worst case is taken)
 METRICS = {
@@ -72,6 +81,68 @@ METRICS = {
 }
 
 
+@dataclass(frozen=True)
+class Probe:
+    """What the comparison steps and measures, by the plant's signal names: the ``hub``
+    angle (rad), the tip angle as the sum of the ``tip`` signals (rad), the link's tip
+    ``deflection`` (m), the ``command`` column, the stepped ``reference`` channel (the other
+    named ``references`` held at 0), the hub ``encoder`` sensor. A single link:
+    ``motor_angle``, ``tip_angle``, ``tip_deflection``, command 0, ``reference``; a
+    multi-link arm: joint j's ``theta_j``, ``theta_j + deflection_angle_j`` (link j's tip),
+    ``deflection_j``, drive j's command, its setpoint's reference (:func:`probe_for`)."""
+
+    hub: str = "motor_angle"
+    tip: tuple[str, ...] = ("tip_angle",)
+    deflection: str = "tip_deflection"
+    command: int = 0
+    reference: str = "reference"
+    references: tuple[str, ...] = ()
+    encoder: str = "motor_angle"
+    joint: int | None = None
+
+
+def probe_for(scenario, joint: int = 0) -> Probe:
+    """The :class:`Probe` of ``scenario``: a single link's, or joint ``joint`` (0: the
+    shoulder) of a multi-link arm, its reference the setpoint the scenario's controller
+    gives that joint's angle (an ``lti`` block's ``setpoints``), else ``theta_ref_<j+1>``."""
+    if scenario.arm.kind != "multi_link":
+        return Probe()
+    n = len(scenario.arm.joints)
+    if not 0 <= joint < n:
+        raise ValueError(f"joint = {joint}: the arm has joints 0..{n - 1}")
+    hub = f"theta_{joint + 1}"
+    sensors = scenario.sensors or {}
+    encoder = next((k for k, v in sensors.items() if (getattr(v, "signal", None) or k) == hub), hub)
+    ref = None
+    ctrl = scenario.controller
+    if getattr(ctrl, "setpoints", None) and getattr(ctrl, "inputs", None):
+        ref = next(
+            (
+                sp
+                for i, sp in zip(ctrl.inputs, ctrl.setpoints, strict=False)
+                if isinstance(sp, str) and i == encoder
+            ),
+            None,
+        )
+    refs = tuple(scenario.references or {})
+    ref = ref or f"theta_ref_{joint + 1}"
+    if ref not in refs:
+        raise ValueError(
+            f"scenario {scenario.name!r}: joint {joint + 1}'s setpoint {ref!r} is not one of "
+            f"its [references] ({', '.join(refs) or 'none'}); the comparison steps it"
+        )
+    return Probe(
+        hub,
+        (hub, f"deflection_angle_{joint + 1}"),
+        f"deflection_{joint + 1}",
+        joint,
+        ref,
+        refs,
+        encoder,
+        joint,
+    )
+
+
 def batch_metrics(
     out: dict,
     signal_names,
@@ -83,14 +154,19 @@ def batch_metrics(
     length: float,
     band: float = 0.02,
     tail: float = 0.25,
+    probe: Probe | None = None,
 ) -> dict[str, np.ndarray]:
     """The per-plant metrics of the module doc from :func:`simulate_batch` arrays
     (signals (B, N, S), command (B, N, m)); ``reference`` (N,) at the sample instants,
-    one step; ``length`` L (m) of the link; returns metric → (B,) arrays."""
+    one step; ``length`` L (m) of the link; ``probe`` the signals measured (default a
+    single link's); returns metric → (B,) arrays."""
+    pr = probe or Probe()
     sig = np.asarray(out["signals"])
     idx = {n: i for i, n in enumerate(signal_names)}
-    th, tip, d = (sig[..., idx[n]] for n in ("motor_angle", "tip_angle", "tip_deflection"))
-    u = np.abs(np.asarray(out["command"])[..., 0])
+    th, d = sig[..., idx[pr.hub]], sig[..., idx[pr.deflection]]
+    tip = sum(sig[..., idx[n]] for n in pr.tip)
+    ua = np.asarray(out["command"])[..., pr.command]
+    u = np.abs(ua)
     r = np.asarray(reference, float)
     jumps = np.nonzero(np.abs(np.diff(r)) > 0)[0]
     k0 = int(jumps[0] + 1) if jumps.size else 0
@@ -119,7 +195,6 @@ def batch_metrics(
         dt_tail = d[:, k_tail:]
         osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2, axis=1))
         peak = np.max(u, axis=1)
-        ua = np.asarray(out["command"])[..., 0]
         chatter = np.sqrt(np.mean(np.diff(ua, axis=1) ** 2, axis=1))
         at_lim = dt * np.sum(u >= limit * (1 - 1e-9), axis=1)
     m = {
@@ -145,32 +220,40 @@ def experiment(
     start: float = 0.1,
     duration: float = 3.0,
     quantum: float | None = None,
+    probe: Probe | None = None,
 ) -> dict:
     """The overrides (:func:`flexarm.design.plants.with_overrides`) of the comparison's
-    experiment: at rest, a step of ``step`` rad (default the scenario's reference
-    amplitude) at ``start`` s, ``duration`` s; ``quantum`` sets the hub encoder's count
+    experiment: at rest, a step of ``step`` rad (default the stepped reference's amplitude)
+    at ``start`` s on the probe's reference (a multi-link arm: that joint's setpoint, the
+    other joints' held at 0), ``duration`` s; ``quantum`` sets the hub encoder's count
     (rad) where the scenario has none."""
+    pr = probe or probe_for(scenario)
+    spec = scenario.reference if pr.reference == "reference" else None
+    spec = spec or (scenario.references or {}).get(pr.reference)
     if step is None:
-        step = float(scenario.reference.amplitude)
+        step = float(getattr(spec, "amplitude", 0.0) or 0.0)
         if step == 0.0:
             raise ValueError(
-                f"scenario {scenario.name!r}: reference.amplitude = 0; give the "
+                f"scenario {scenario.name!r}: {pr.reference}.amplitude = 0; give the "
                 "step size (rad) with step="
             )
     if not duration > start:
         raise ValueError(f"duration = {duration} s must exceed the step time start = {start} s")
+    move = {"type": "step", "offset": 0.0, "amplitude": float(step), "start": float(start)}
     over: dict[str, Any] = {
-        "reference": {
-            "type": "step",
-            "offset": 0.0,
-            "amplitude": float(step),
-            "start": float(start),
-        },
         "simulation": {"duration": float(duration)},
         "initial": {"motor_angle": 0.0, "motor_velocity": 0.0, "tip_deflection": 0.0},
     }
+    if pr.reference == "reference":
+        over["reference"] = move
+    else:
+        rest = {"type": "step", "offset": 0.0, "amplitude": 0.0, "start": 0.0}
+        over["references"] = {
+            r: Replace(move if r == pr.reference else rest) for r in pr.references
+        }
+        over["initial"] = {"joint_angles": None, "joint_velocities": None, "equilibrium": False}
     if quantum is not None:
-        over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None, "range": None}}
+        over["sensors"] = {pr.encoder: {"quantum": float(quantum), "bits": None, "range": None}}
     return over
 
 
@@ -191,26 +274,28 @@ def _own_move(design_scenario, exp: dict) -> dict:
     }
 
 
-def encoder_count(scenario, count: float | None = None) -> float:
-    """The hub encoder's count (rad): ``count`` if given, else the scenario's
-    ``sensors.motor_angle`` quantum (or range / 2**bits)."""
+def encoder_count(scenario, count: float | None = None, joint: int = 0) -> float:
+    """The hub encoder's count (rad): ``count`` if given, else the scenario's hub encoder's
+    quantum (``sensors.motor_angle``; a multi-link arm: joint ``joint``'s angle sensor; or
+    range / 2**bits)."""
     from flexarm.sim.build import sensor_quanta
 
     if count is not None:
         if not count > 0:
             raise ValueError(f"count = {count!r} rad: the encoder count must be > 0")
         return float(count)
-    q = sensor_quanta(scenario.sensors).get("motor_angle", 0.0)
+    enc = probe_for(scenario, joint).encoder
+    q = sensor_quanta(scenario.sensors).get(enc, 0.0)
     if not q > 0:  # a fitted rig whose controller read finer than the log: its resolution
         q = float(
             (getattr(scenario, "notes", None) or {}).get("rig", {}).get("encoder_count", 0.0) or 0.0
         )
     if not q > 0:
         raise ValueError(
-            f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
+            f"scenario {scenario.name!r}: sensors.{enc} has no quantum "
             "(or bits and range), so the hub error cannot be given in encoder "
             "counts; give count= (rad per count, e.g. 2*pi/4096) or "
-            "sensors.motor_angle.quantum"
+            f"sensors.{enc}.quantum"
         )
     return float(q)
 
@@ -408,6 +493,7 @@ def compare(
     tail: float = 0.25,
     count: float | None = None,
     seed: int | None = None,
+    joint: int = 0,
     client: BatchExecutor | None = None,
     chunks: ChunkOptions | None = None,
 ) -> Comparison:
@@ -416,7 +502,8 @@ def compare(
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
     encoder count (rad) where the scenario's hub sensor has none (it then also quantises
     the simulated encoder); ``seed``: the sensor noise's (default the scenario's
-    ``simulation.seed``, as :func:`flexarm.simulate` uses). With ``client``, a
+    ``simulation.seed``, as :func:`flexarm.simulate` uses); ``joint``: a multi-link
+    arm's stepped and measured joint (0: the shoulder; :func:`probe_for`). With ``client``, a
     :class:`flexarm.sim.batch.BatchExecutor` (e.g. :class:`flexarm.distributed.DaskExecutor`;
     or ``chunks``, a :class:`flexarm.sim.batch.ChunkOptions`, or ``plants`` a
     :class:`~flexarm.design.plants.PlantSource`) the plants run in chunks, one task each,
@@ -435,12 +522,14 @@ def compare(
             tail=tail,
             count=count,
             seed=seed,
+            joint=joint,
         )
     nominal = plants.nominal
-    q = encoder_count(nominal, count)
+    pr = probe_for(nominal, joint)
+    q = encoder_count(nominal, count, joint)
     has_q = count is None
     exp = experiment(
-        nominal, step=step, start=start, duration=duration, quantum=None if has_q else q
+        nominal, step=step, start=start, duration=duration, quantum=None if has_q else q, probe=pr
     )
     pb = plants.with_overrides(exp)
     base = pb.loop()
@@ -452,8 +541,8 @@ def compare(
         specs[logged] = scn.controller
     for name, d in (designs or {}).items():
         specs[name] = controller_spec(d)
-    limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[0])
-    length = float(scn.arm.beam.length)
+    limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[pr.command])
+    length = float(scn.arm.beam.length if pr.joint is None else scn.arm.links[pr.command].length)
     rows, per, traces = {}, {}, {}
     moves = {
         name: d.scenario
@@ -469,7 +558,7 @@ def compare(
         else:
             bl = base.with_controller(build_controller(base, spec, scn))
         out = bl.run(seed=seed)
-        ref = bl.references["reference"]
+        ref = bl.references[pr.reference]
         m = batch_metrics(
             out,
             bl.prepared.loop.plant.signal_names,
@@ -480,11 +569,12 @@ def compare(
             length=length,
             band=band,
             tail=tail,
+            probe=pr,
         )
         per[name] = m
         rows[name] = summarise(m, limit)
         sn = list(bl.prepared.loop.plant.signal_names)
-        tip = out["signals"][:, :, sn.index("tip_angle")]
+        tip = sum(out["signals"][:, :, sn.index(c)] for c in pr.tip)
         pct = (
             np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
             if tip.shape[0] > 1
@@ -494,14 +584,20 @@ def compare(
             "time": bl.time,
             "reference": ref,
             "tip_nominal": tip[0],
-            "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
-            "command_nominal": out["command"][0, :, 0],
+            "hub_nominal": out["signals"][0, :, sn.index(pr.hub)],
+            "command_nominal": out["command"][0, :, pr.command],
             "tip_p05": pct[0],
             "tip_p50": pct[1],
             "tip_p95": pct[2],
         }
     settings = {
-        "step_rad": float(scn.reference.amplitude),
+        "step_rad": float(
+            (
+                scn.reference if pr.reference == "reference" else scn.references[pr.reference]
+            ).amplitude
+        ),
+        "stepped": pr.reference,
+        "measured": {"hub": pr.hub, "tip": " + ".join(pr.tip), "command": pr.command},
         "start_s": start,
         "duration_s": duration,
         "band_fraction": band,
