@@ -338,6 +338,8 @@ def from_fit(
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
     scenario = getattr(result, "scenario", None)
+    if callable(scenario) and not hasattr(scenario, "model_dump"):
+        scenario = scenario()  # the servo pipeline's own result builds it (deprecated)
     if scenario is None or not hasattr(scenario, "model_dump"):
         raise ValueError(
             "the fit result holds no fitted scenario: read a fit document back with "
@@ -345,9 +347,9 @@ def from_fit(
             "fit wrote (--scenario-out)"
         )
     dump = scenario.model_dump()
-    names = list(result.free)
+    names = list(getattr(result, "free", None) or result.params)
     if not all(_is_path(dump, p) for p in names):
-        return _from_named_fit(result, n, seed)
+        return _from_named_fit(result, scenario, n, seed)
     tie = dict(ties if ties is not None else (result.stages or {}).get("ties", {}) or {})
     for t, m in tie.items():
         if m not in names or not _is_path(dump, t):
@@ -470,13 +472,13 @@ def _plant(scenario, values: dict[str, float], j: int):
     return sc.model_copy(update={"name": f"{scenario.name}-draw-{j}"})
 
 
-def _from_named_fit(result, n: int, seed: int) -> PlantBatch:
+def _from_named_fit(result, scenario, n: int, seed: int) -> PlantBatch:
     """A fit whose parameters are not scenario paths (the rotary servo pipeline's): its std
     on the fitted scenario's paths (``report.scenario_spread``), drawn independently."""
     from flexarm.identification.time_domain.report import scenario_spread
 
-    spread = scenario_spread(result.to_dict(), result.scenario)
-    b = from_paths(result.scenario, spread, n, seed=seed)
+    spread = scenario_spread(result.to_dict(), scenario)
+    b = from_paths(scenario, spread, n, seed=seed)
     b.warnings.append(
         "the fit's parameters are not scenario paths (the servo rig's names): drawn "
         "independently from their std on the scenario's paths, without their correlations"
