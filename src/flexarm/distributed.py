@@ -20,19 +20,22 @@ environment of :func:`worker_environment`: one XLA / BLAS thread each
 :class:`ClusterOptions`); the nanny restarts a worker above its ``memory_limit``
 (``"auto"``: the machine's memory / workers).
 
-**Large plant batches** (:func:`simulate_chunked`, :func:`compare_chunked`,
-:class:`ChunkedTuneCost`; entered from :func:`flexarm.sim.sampled.simulate_batch`,
-:func:`flexarm.design.compare.compare` and :func:`flexarm.design.tune.design_tune` with
-``client=``): the N plants are split into chunks of ``ChunkOptions.chunk`` plants, fixed by
-N and the chunk size only (never by the number of workers); each chunk is one ``vmap``
-batch on one worker, and only reductions come back (per-plant metrics, their quantiles,
-the unstable count; trajectories only with ``ChunkOptions.trajectories``): 10^6 plants
-never gather 10^6 trajectories. Seeds per chunk: chunk j of a lazily drawn batch
+**Large plant batches** (:func:`flexarm.sim.batch.simulate_chunked`,
+:func:`flexarm.design.compare.compare_chunked`,
+:class:`flexarm.design.tune.ChunkedTuneCost`, re-exported here; entered from
+:func:`flexarm.sim.sampled.simulate_batch`, :func:`flexarm.design.compare.compare` and
+:func:`flexarm.design.tune.design_tune` with ``client=`` an executor,
+:class:`flexarm.sim.batch.BatchExecutor`: :class:`DaskExecutor` here, :func:`executor` wraps
+a Dask client): the N plants are split into chunks of ``ChunkOptions.chunk`` plants, fixed
+by N and the chunk size only (never by the number of workers); each chunk is one ``vmap``
+batch on one worker, and only reductions come back (per-plant metrics, their quantiles, the
+unstable count; trajectories only with ``ChunkOptions.trajectories``): 10^6 plants never
+gather 10^6 trajectories. Seeds per chunk: chunk j of a lazily drawn batch
 (:class:`PlantSource`) draws its plants with the seed :func:`chunk_seed` (seed, j)
 (``numpy.random.SeedSequence([seed, j])``), the sensor noise keeps the batch's seed (one
 noise sequence shared by every rollout, as in :func:`~flexarm.sim.sampled.simulate_batch`).
-So the result is the same, bit for bit, in-process (``client=None``) and on 1 or 2 or
-any number of workers: the same chunks run the same compiled code on the same machine.
+So the result is the same, bit for bit, in-process (``client=None``) and on 1 or 2 or any
+number of workers: the same chunks run the same compiled code on the same machine.
 
 **Many fits** (:func:`read_manifest`, :func:`fit_many`): one fit per manifest row, each fit
 one task; under ``DIR/<row id>/``: ``fit.json`` (the fit's JSON, written last, atomically:
@@ -66,9 +69,10 @@ Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, err
 n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
 signal ``fit%:<log>:<signal>`` (and ``held-out%:<log>:<signal>`` with a validate window).
 
-Layering: this module is an orchestration layer above design and identification (beside
-the CLI); the hooks in ``sim.sampled``, ``design.compare`` and ``design.tune`` import it
-only inside the function, when a client is given.
+Layering: this module is the orchestration layer between reproduce and the CLI (issue
+#43): nothing below imports it. The batches below take an executor through the protocol
+defined low (:class:`flexarm.sim.batch.BatchExecutor`); this module provides the Dask one
+(:class:`DaskExecutor`), and the CLI wires it in (:func:`executor`).
 """
 
 from __future__ import annotations
