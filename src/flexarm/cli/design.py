@@ -292,7 +292,7 @@ def _design(ctx, o: DesignRequest) -> None:
 
     with console.status(f"designing ({method})...") as status:
         try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
-            if by_paths:  # any fit's document: its covariance on the scenario's paths
+            if fit_doc is not None and by_paths:  # any fit's document: its covariance
                 from flexarm.identification.time_domain.result import FitResult
 
                 drawn = from_fit(FitResult.from_dict(fit_doc, scenario=sc), plants, seed=o.seed)

@@ -164,7 +164,7 @@ def batch_metrics(
     sig = np.asarray(out["signals"])
     idx = {n: i for i, n in enumerate(signal_names)}
     th, d = sig[..., idx[pr.hub]], sig[..., idx[pr.deflection]]
-    tip = sum(sig[..., idx[n]] for n in pr.tip)
+    tip = np.sum([sig[..., idx[n]] for n in pr.tip], axis=0)
     ua = np.asarray(out["command"])[..., pr.command]
     u = np.abs(ua)
     r = np.asarray(reference, float)
@@ -574,7 +574,7 @@ def compare(
         per[name] = m
         rows[name] = summarise(m, limit)
         sn = list(bl.prepared.loop.plant.signal_names)
-        tip = sum(out["signals"][:, :, sn.index(c)] for c in pr.tip)
+        tip = np.sum([out["signals"][:, :, sn.index(c)] for c in pr.tip], axis=0)
         pct = (
             np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
             if tip.shape[0] > 1

@@ -337,7 +337,7 @@ def from_fit(
     independently (:func:`from_paths`), and a warning says so."""
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
-    scenario = getattr(result, "scenario", None)
+    scenario: Any = getattr(result, "scenario", None)
     if callable(scenario) and not hasattr(scenario, "model_dump"):
         scenario = scenario()  # the servo pipeline's own result builds it (deprecated)
     if scenario is None or not hasattr(scenario, "model_dump"):
