@@ -378,10 +378,14 @@ def from_fit(
     for i in held:
         if s[i] == 0.0:
             continue  # known exactly: nothing to say
+        why = (
+            f"std {std[i]:.3g}, {s[i]:.3g} in ln p, more than {undetermined}"
+            if np.isfinite(s[i])
+            else "the fit gives no finite std"
+        )
         warnings.append(
-            f"{names[i]} = {p_hat[i]:.4g} is not determined by the data (std "
-            f"{std[i]:.3g}, {s[i]:.3g} in ln p, more than {undetermined}): held at its "
-            "fitted value in every plant"
+            f"{names[i]} = {p_hat[i]:.4g} is not determined by the data ({why}): held at "
+            "its fitted value in every plant"
         )
     free = [i for i in range(k) if i not in held]
     Rf = R[np.ix_(free, free)]
