@@ -119,7 +119,7 @@ def bench_compare(n: int, chunk: int, workers: int, option: dict) -> dict:
         with fd.session(workers=w) as client:
             with PeakRSS() as mem:
                 t = time.perf_counter()
-                c = compare(src, duration=3.0, count=1e-3, client=client, chunks=opts)
+                c = compare(src, duration=3.0, count=1e-3, client=fd.executor(client), chunks=opts)
                 wall = time.perf_counter() - t
         out[label] = {"wall_s": wall, "peak_mb": mem.peak / 2**20, "cmp": c}
         row_ = c.rows["logged controller"]

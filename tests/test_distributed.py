@@ -102,10 +102,11 @@ def test_chunked_batch_is_bit_identical_in_process_1_and_2_workers(client):
     here = simulate_batch(*args, seed=3, chunks=opts)
     workers = sorted(client.scheduler_info()["workers"])
     assert len(workers) == 2
+    dask = fd.DaskExecutor(client)  # the batch's executor (sim.batch.BatchExecutor)
     one = simulate_batch(
-        *args, seed=3, client=client, chunks=fd.ChunkOptions(chunk=3, workers=(workers[0],))
+        *args, seed=3, client=dask, chunks=fd.ChunkOptions(chunk=3, workers=(workers[0],))
     )
-    two = simulate_batch(*args, seed=3, client=client, chunks=opts)
+    two = simulate_batch(*args, seed=3, client=dask, chunks=opts)
     assert here.chunks == two.chunks == 2 and here.trajectories is None
     for k, v in here.per_rollout.items():
         assert v.shape[0] == 6
@@ -118,7 +119,7 @@ def test_chunked_batch_is_bit_identical_in_process_1_and_2_workers(client):
     np.testing.assert_allclose(here.quantiles["peak_abs_signals"][0.5], med, rtol=1e-12)
     # trajectories only on request, then the same as the unchunked batch's
     full = simulate_batch(
-        *args, seed=3, client=client, chunks=fd.ChunkOptions(chunk=3, trajectories=True)
+        *args, seed=3, client=dask, chunks=fd.ChunkOptions(chunk=3, trajectories=True)
     )
     ref = simulate_batch(*args, seed=3, check=False)
     np.testing.assert_allclose(full.trajectories["signals"], ref["signals"], rtol=1e-12, atol=1e-15)

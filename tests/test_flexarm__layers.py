@@ -5,8 +5,8 @@ imported or executed.
    flexarm.x import _y`` and ``flexarm.x._y`` attribute use through an imported module are
    both found. A private name is private to its module.
 2. Imports flow one way: io / specs → models → control → sim → identification → design →
-   deploy → analysis → reproduce → cli. A module imports from its own layer or the layers
-   to its left; the root modules ``units``, ``errors``, ``metrics``, ``fastmath``,
+   deploy → analysis → reproduce → distributed → cli. A module imports from its own layer or
+   the layers to its left; the root modules ``units``, ``errors``, ``metrics``, ``fastmath``,
    ``layered`` are usable by all (and import only each other).
 
 Imports inside functions count as much as those at the top (a lazy import is still a
@@ -33,6 +33,7 @@ ORDER = [
     "deploy",
     "analysis",
     "reproduce",
+    "distributed",
     "cli",
 ]
 RANK = {"io": 0, "specs": 0, **{name: i for i, name in enumerate(ORDER) if i >= 2}}

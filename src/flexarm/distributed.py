@@ -20,19 +20,22 @@ environment of :func:`worker_environment`: one XLA / BLAS thread each
 :class:`ClusterOptions`); the nanny restarts a worker above its ``memory_limit``
 (``"auto"``: the machine's memory / workers).
 
-**Large plant batches** (:func:`simulate_chunked`, :func:`compare_chunked`,
-:class:`ChunkedTuneCost`; entered from :func:`flexarm.sim.sampled.simulate_batch`,
-:func:`flexarm.design.compare.compare` and :func:`flexarm.design.tune.design_tune` with
-``client=``): the N plants are split into chunks of ``ChunkOptions.chunk`` plants, fixed by
-N and the chunk size only (never by the number of workers); each chunk is one ``vmap``
-batch on one worker, and only reductions come back (per-plant metrics, their quantiles,
-the unstable count; trajectories only with ``ChunkOptions.trajectories``): 10^6 plants
-never gather 10^6 trajectories. Seeds per chunk: chunk j of a lazily drawn batch
+**Large plant batches** (:func:`flexarm.sim.batch.simulate_chunked`,
+:func:`flexarm.design.compare.compare_chunked`,
+:class:`flexarm.design.tune.ChunkedTuneCost`, re-exported here; entered from
+:func:`flexarm.sim.sampled.simulate_batch`, :func:`flexarm.design.compare.compare` and
+:func:`flexarm.design.tune.design_tune` with ``client=`` an executor,
+:class:`flexarm.sim.batch.BatchExecutor`: :class:`DaskExecutor` here, :func:`executor` wraps
+a Dask client): the N plants are split into chunks of ``ChunkOptions.chunk`` plants, fixed
+by N and the chunk size only (never by the number of workers); each chunk is one ``vmap``
+batch on one worker, and only reductions come back (per-plant metrics, their quantiles, the
+unstable count; trajectories only with ``ChunkOptions.trajectories``): 10^6 plants never
+gather 10^6 trajectories. Seeds per chunk: chunk j of a lazily drawn batch
 (:class:`PlantSource`) draws its plants with the seed :func:`chunk_seed` (seed, j)
 (``numpy.random.SeedSequence([seed, j])``), the sensor noise keeps the batch's seed (one
 noise sequence shared by every rollout, as in :func:`~flexarm.sim.sampled.simulate_batch`).
-So the result is the same, bit for bit, in-process (``client=None``) and on 1 or 2 or
-any number of workers: the same chunks run the same compiled code on the same machine.
+So the result is the same, bit for bit, in-process (``client=None``) and on 1 or 2 or any
+number of workers: the same chunks run the same compiled code on the same machine.
 
 **Many fits** (:func:`read_manifest`, :func:`fit_many`): one fit per manifest row, each fit
 one task; under ``DIR/<row id>/``: ``fit.json`` (the fit's JSON, written last, atomically:
@@ -66,16 +69,16 @@ Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, err
 n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
 signal ``fit%:<log>:<signal>`` (and ``held-out%:<log>:<signal>`` with a validate window).
 
-Layering: this module is an orchestration layer above design and identification (beside
-the CLI); the hooks in ``sim.sampled``, ``design.compare`` and ``design.tune`` import it
-only inside the function, when a client is given.
+Layering: this module is the orchestration layer between reproduce and the CLI (issue
+#43): nothing below imports it. The batches below take an executor through the protocol
+defined low (:class:`flexarm.sim.batch.BatchExecutor`); this module provides the Dask one
+(:class:`DaskExecutor`), and the CLI wires it in (:func:`executor`).
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
-import functools
 import json
 import math
 import os
@@ -86,12 +89,20 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from flexarm.errors import FlexarmError
-from flexarm.sim.batch import THREADS_ENV
+from flexarm.sim import batch as _batch
+from flexarm.sim.batch import (  # the chunked batches' pieces, defined low (issue #43)
+    THREADS_ENV,
+    BatchExecutor,
+    BatchSummary,
+    ChunkOptions,
+    chunk_bounds,
+    chunk_seed,
+)
 
 __all__ = [
     "client_for",
@@ -106,11 +117,12 @@ __all__ = [
     "chunk_bounds",
     "chunk_seed",
     "map_chunks",
+    "BatchExecutor",
+    "DaskExecutor",
+    "executor",
     "simulate_chunked",
     "BatchSummary",
-    "PlantSource",
     "compare_chunked",
-    "ChunkedTuneCost",
     "FitRow",
     "read_manifest",
     "fit_row",
@@ -334,17 +346,68 @@ def session(
 
 
 # =============================================================================== chunks
-def chunk_bounds(n: int, chunk: int) -> list[tuple[int, int]]:
-    """[a, b) of each chunk of at most ``chunk`` of n items, in order."""
-    if chunk < 1:
-        raise ValueError(f"chunk = {chunk}: give a chunk size >= 1")
-    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+class DaskExecutor:
+    """The Dask :class:`~flexarm.sim.batch.BatchExecutor`: each chunk one task on the
+    client's workers (``shared`` scattered once to every worker; ``workers``: only these
+    addresses; ``retries`` of a task that raised), the results gathered in order. The
+    batches (:func:`flexarm.sim.sampled.simulate_batch`, :func:`flexarm.design.compare.compare`,
+    :func:`flexarm.design.tune.design_tune`) take it as ``client=``; they do not import this
+    module (issue #43)."""
+
+    def __init__(self, client):
+        if client is None or not all(hasattr(client, m) for m in ("submit", "gather", "scatter")):
+            raise TypeError(
+                f"DaskExecutor({type(client).__name__}): give a dask.distributed Client "
+                "(flexarm.distributed.client_for(workers=N) or session(...))"
+            )
+        self.client = client
+
+    def __repr__(self) -> str:
+        return f"DaskExecutor({self.client!r})"
+
+    def map_chunks(
+        self,
+        fn: Callable,
+        args: Sequence[tuple],
+        *,
+        shared: Mapping[str, Any] | None = None,
+        retries: int = 1,
+        workers: Sequence[str] | None = None,
+    ) -> list:
+        client = self.client
+        shared = dict(shared or {})
+        where = list(workers) if workers else None
+        if shared:
+            # scattered as a list: each value gets a key of its own (a dict would be keyed by
+            # its names, 'seed', 'references', ..., shared with the next call's, whose
+            # release then cancels this call's tasks: "lost dependencies")
+            names = list(shared)
+            futs = client.scatter(
+                [shared[k] for k in names], broadcast=True, hash=False, workers=where
+            )
+            shared = dict(zip(names, futs, strict=True))
+        futures = [
+            client.submit(
+                fn,
+                *a,
+                **shared,
+                pure=False,
+                retries=retries,
+                workers=where,
+                allow_other_workers=False,
+            )
+            for a in args
+        ]
+        return client.gather(futures)
 
 
-def chunk_seed(seed: int, j: int) -> int:
-    """The seed of chunk j of a batch drawn with ``seed``: ``SeedSequence([seed, j])``'s
-    first 32-bit word (independent streams per chunk, the same on every worker)."""
-    return int(np.random.SeedSequence([int(seed), int(j)]).generate_state(1)[0])
+def executor(client) -> BatchExecutor | None:
+    """A batch's ``client=`` from what the user holds: None (in-process), a
+    :class:`~flexarm.sim.batch.BatchExecutor` as it is, a Dask client wrapped in
+    :class:`DaskExecutor`."""
+    if client is None or isinstance(client, BatchExecutor):
+        return client
+    return DaskExecutor(client)
 
 
 def map_chunks(
@@ -357,132 +420,19 @@ def map_chunks(
     workers: Sequence[str] | None = None,
 ) -> list:
     """``[fn(*a, **shared) for a in args]``, in-process (``client`` None) or as one task per
-    item on the client's workers (``shared`` sent once to every worker; ``workers``: only
-    these worker addresses), results in the order of ``args``."""
-    shared = dict(shared or {})
-    if client is None:
-        return [fn(*a, **shared) for a in args]
-    where = list(workers) if workers else None
-    if shared:
-        # scattered as a list: each value gets a key of its own (a dict would be keyed by
-        # its names, 'seed', 'references', ..., shared with the next call's, whose release
-        # then cancels this call's tasks: "lost dependencies")
-        names = list(shared)
-        futs = client.scatter([shared[k] for k in names], broadcast=True, hash=False, workers=where)
-        shared = dict(zip(names, futs, strict=True))
-    futures = [
-        client.submit(
-            fn, *a, **shared, pure=False, retries=retries, workers=where, allow_other_workers=False
-        )
-        for a in args
-    ]
-    return client.gather(futures)
-
-
-@dataclass(frozen=True)
-class ChunkOptions:
-    """``chunk``: plants (rollouts) per chunk, one vmap batch on one worker; ``trajectories``:
-    bring the trajectories back too (large: N × samples × signals); ``quantiles`` of the
-    per-plant reductions; ``retries`` of a chunk that raised; ``workers``: run the chunks
-    on these worker addresses only (e.g. the GPU workers; None: any)."""
-
-    chunk: int = 2000
-    trajectories: bool = False
-    quantiles: tuple[float, ...] = (0.05, 0.5, 0.95)
-    retries: int = 1
-    workers: tuple[str, ...] | None = None
-
-
-# ------------------------------------------------------------------ simulate_batch in chunks
-@dataclass
-class BatchSummary:
-    """What comes back from a chunked batch: ``per_rollout`` name → (N, ...) reductions
-    (:func:`rollout_summary` or the caller's ``reduce``), ``quantiles`` name → {q: value
-    over the finite rollouts}, ``unstable`` (rollouts that diverged), ``chunks``, and the
-    trajectories (as :func:`~flexarm.sim.sampled.simulate_batch` returns them) only when
-    asked for."""
-
-    per_rollout: dict[str, np.ndarray]
-    quantiles: dict[str, dict[float, np.ndarray]]
-    unstable: int
-    chunks: int
-    trajectories: dict[str, Any] | None = None
+    item on the client's workers (a Dask client or a
+    :class:`~flexarm.sim.batch.BatchExecutor`; :func:`flexarm.sim.batch.map_chunks`)."""
+    return _batch.map_chunks(
+        fn, args, executor(client), shared=shared, retries=retries, workers=workers
+    )
 
 
 def rollout_summary(out: dict) -> dict[str, np.ndarray]:
-    """Per rollout of a batch's output: ``diverged`` (non-finite or beyond ±1e6 SI),
-    ``final_signals`` (B, p), ``peak_abs_signals`` (B, p), ``rms_signals`` (B, p),
-    ``peak_abs_command`` (B, m)."""
+    """:func:`flexarm.sim.batch.rollout_summary` at the simulator's
+    :data:`~flexarm.sim.sampled.DIVERGENCE_LIMIT`."""
     from flexarm.sim.sampled import DIVERGENCE_LIMIT
 
-    s = np.asarray(out["signals"])
-    u = np.asarray(out["command"])
-    with np.errstate(invalid="ignore", over="ignore"):
-        return {
-            "diverged": ~np.all(np.isfinite(s) & (np.abs(s) <= DIVERGENCE_LIMIT), axis=(1, 2)),
-            "final_signals": s[:, -1, :],
-            "peak_abs_signals": np.max(np.abs(s), axis=1),
-            "rms_signals": np.sqrt(np.mean(s**2, axis=1)),
-            "peak_abs_command": np.max(np.abs(u), axis=1),
-        }
-
-
-def _batched_leaves(loop, in_axes):
-    """The loop's leaves, each one's batch axis (None: shared), the tree and the size."""
-    import equinox as eqx
-    import jax
-
-    def is_none(x):
-        return x is None
-
-    leaves, treedef = jax.tree.flatten(loop, is_leaf=is_none)
-    axes = jax.tree.leaves(jax.tree.broadcast(in_axes, loop, is_leaf=is_none), is_leaf=is_none)
-    axes = [
-        a if a is not None and eqx.is_array(x) else None for x, a in zip(leaves, axes, strict=False)
-    ]
-    sizes = {int(x.shape[a]) for x, a in zip(leaves, axes, strict=False) if a is not None}
-    if len(sizes) != 1:
-        raise ValueError(
-            f"the loop's batched leaves disagree on the batch size: {sorted(sizes)}"
-            if sizes
-            else "in_axes batches no leaf of the loop"
-        )
-    return leaves, axes, treedef, sizes.pop()
-
-
-def _loop_chunk(leaves, axes, treedef, a: int, b: int):
-    import jax
-
-    return jax.tree.unflatten(
-        treedef,
-        [
-            x if ax is None else np.take(np.asarray(x), np.arange(a, b), axis=ax)
-            for x, ax in zip(leaves, axes, strict=False)
-        ],
-    )
-
-
-def _simulate_chunk(
-    loop, x0, references, n_samples, seed, in_axes, batch_size, reduce, trajectories
-):
-    from flexarm.sim.sampled import simulate_batch
-
-    # no client or chunks: the arrays themselves
-    out = cast(
-        "dict[str, np.ndarray]",
-        simulate_batch(
-            loop,
-            x0,
-            references,
-            n_samples,
-            seed=seed,
-            in_axes=in_axes,
-            batch_size=batch_size,
-            check=False,
-        ),
-    )
-    red = (reduce or rollout_summary)(out)
-    return red, (out if trajectories else None)
+    return _batch.rollout_summary(out, DIVERGENCE_LIMIT)
 
 
 def simulate_chunked(
@@ -498,305 +448,47 @@ def simulate_chunked(
     options: ChunkOptions | None = None,
     reduce: Callable[[dict], dict[str, np.ndarray]] | None = None,
 ) -> BatchSummary:
-    """:func:`~flexarm.sim.sampled.simulate_batch` over chunks of ``options.chunk``
-    rollouts (the batched leaves of ``loop`` sliced), each chunk a task, only
-    ``reduce(out)`` (default :func:`rollout_summary`; a picklable function returning
-    per-rollout arrays) coming back; the sensor noise's ``seed`` is the batch's in every
-    chunk, so the result equals the unchunked batch's reductions. Diverged rollouts are
-    counted, not raised."""
-    o = options or ChunkOptions()
-    leaves, axes, treedef, size = _batched_leaves(loop, in_axes)
-    bounds = chunk_bounds(size, o.chunk)
-    x0 = np.asarray(x0, float)
-    refs = {k: np.asarray(v) for k, v in references.items()}
-    args = [(_loop_chunk(leaves, axes, treedef, a, b),) for a, b in bounds]
-    parts = map_chunks(
-        _simulate_chunk,
-        args,
-        client,
-        retries=o.retries,
-        workers=o.workers,
-        shared=dict(
-            x0=x0,
-            references=refs,
-            n_samples=int(n_samples),
-            seed=int(seed),
-            in_axes=in_axes,
-            batch_size=batch_size,
-            reduce=reduce,
-            trajectories=o.trajectories,
-        ),
-    )
-    per = {k: np.concatenate([p[0][k] for p in parts]) for k in parts[0][0]}
-    traj = None
-    if o.trajectories:
-        outs = [p[1] for p in parts]
-        traj = {k: np.concatenate([d[k] for d in outs]) for k in outs[0] if k != "references"}
-        traj["references"] = outs[0]["references"]
-    bad = np.asarray(per.get("diverged", np.zeros(size, bool)), bool)
-    return BatchSummary(per, _quantiles(per, bad, o.quantiles), int(bad.sum()), len(bounds), traj)
+    """:func:`flexarm.sim.batch.simulate_chunked` of
+    :func:`~flexarm.sim.sampled.simulate_batch` on ``client`` (a Dask client or a
+    :class:`~flexarm.sim.batch.BatchExecutor`; None: in-process)."""
+    from flexarm.sim.sampled import DIVERGENCE_LIMIT, simulate_batch
 
-
-def _quantiles(
-    per: dict[str, np.ndarray], bad: np.ndarray, qs: Sequence[float]
-) -> dict[str, dict[float, np.ndarray]]:
-    out = {}
-    for k, v in per.items():
-        v = np.asarray(v)
-        if k == "diverged" or v.dtype == bool or v.ndim == 0:
-            continue
-        good = v[~bad] if v.shape[0] == bad.shape[0] else v
-        with _warnings.catch_warnings():
-            _warnings.simplefilter("ignore", RuntimeWarning)
-            out[k] = {
-                float(q): (
-                    np.nanquantile(good.astype(float), q, axis=0)
-                    if good.size
-                    else np.full(v.shape[1:], np.nan)
-                )
-                for q in qs
-            }
-    return out
-
-
-# ------------------------------------------------------------------ plants, lazily drawn
-@dataclass(frozen=True, eq=False)
-class PlantSource:
-    """N plants drawn chunk by chunk where they run: chunk j (plants [a, b)) is
-    ``draw(b - a, seed=chunk_seed(seed, j))`` (a :class:`~flexarm.design.plants.PlantBatch`),
-    so 10^6 plants never exist on the client. ``draw`` must be picklable (a module-level
-    function or a ``functools.partial`` of one): :meth:`from_fit` and :meth:`from_paths`
-    build it."""
-
-    draw: Callable[..., Any]
-    n: int
-    seed: int = 0
-    info: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def from_fit(cls, result, n: int, *, seed: int = 0) -> PlantSource:
-        """Plants drawn from a servo-rig fit's covariance
-        (:func:`flexarm.design.plants.from_fit`), chunk by chunk."""
-        from flexarm.design.plants import from_fit
-
-        return cls(
-            functools.partial(from_fit, result),
-            int(n),
-            int(seed),
-            {"source": "flexarm.design.plants.from_fit, seeds per chunk"},
-        )
-
-    @classmethod
-    def from_paths(
-        cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *, seed: int = 0
-    ) -> PlantSource:
-        """Independent draws (:func:`flexarm.design.plants.from_paths`), chunk by chunk."""
-        from flexarm.design.plants import from_paths
-
-        return cls(
-            functools.partial(from_paths, scenario, dict(spread)),
-            int(n),
-            int(seed),
-            {"source": "flexarm.design.plants.from_paths, seeds per chunk"},
-        )
-
-    def __len__(self) -> int:
-        return self.n
-
-    @functools.cached_property
-    def nominal(self):
-        """The nominal (fitted or given) scenario."""
-        return self.draw(1, seed=chunk_seed(self.seed, 0)).nominal
-
-    @property
-    def warnings(self) -> list[str]:
-        return list(self.draw(1, seed=chunk_seed(self.seed, 0)).warnings)
-
-
-def _chunk_plants(plants, j: int, a: int, b: int):
-    """Chunk j's plants as a PlantBatch (the nominal plant and plants [a, b))."""
-    if isinstance(plants, PlantSource):
-        return plants.draw(b - a, seed=chunk_seed(plants.seed, j))
-    vals = {k: np.asarray(v)[a:b] for k, v in plants.values.items()}
-    coords = np.asarray(plants.coordinates)
-    return dataclasses.replace(
-        plants,
-        scenarios=list(plants.scenarios[a:b]),
-        values=vals,
-        coordinates=coords[a:b] if coords.shape[0] else coords,
+    return _batch.simulate_chunked(
+        simulate_batch,
+        loop,
+        x0,
+        references,
+        n_samples,
+        seed=seed,
+        in_axes=in_axes,
+        batch_size=batch_size,
+        executor=executor(client),
+        options=options,
+        reduce=reduce,
+        limit=DIVERGENCE_LIMIT,
     )
 
 
-def _nominal_batch(plants):
-    """The nominal plant alone (the source's first draw supplies it)."""
-    from flexarm.design.plants import PlantBatch
+def compare_chunked(plants, designs=None, *, client=None, options=None, **kwargs):
+    """:func:`flexarm.design.compare.compare_chunked` on ``client`` (a Dask client or a
+    :class:`~flexarm.sim.batch.BatchExecutor`; None: in-process)."""
+    from flexarm.design.compare import compare_chunked as _compare_chunked
 
-    return PlantBatch.nominal_only(plants.nominal)
-
-
-def _compare_chunk(plants, j, a, b, *, designs, kwargs, with_traces):
-    from flexarm.design.compare import compare
-
-    cmp = compare(_chunk_plants(plants, j, a, b), designs, **kwargs)
-    return (
-        {name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
-        cmp.traces if with_traces else None,
-        cmp.settings,
-        list(cmp.warnings),
-    )
+    return _compare_chunked(plants, designs, client=executor(client), options=options, **kwargs)
 
 
-def compare_chunked(
-    plants,
-    designs: Mapping[str, Any] | None = None,
-    *,
-    client=None,
-    options: ChunkOptions | None = None,
-    **kwargs,
-):
-    """:func:`flexarm.design.compare.compare` over chunks of the plants (a drawn
-    :class:`~flexarm.design.plants.PlantBatch` sliced, or a :class:`PlantSource` drawn per
-    chunk), each chunk a task on the client's workers (None: in-process). Each chunk runs
-    the comparison on its plants and the nominal one and returns only the per-plant
-    metrics; the rows (nominal, median, worst, unstable, limit) are summarised over all
-    plants here, the same as one batch would give. The figures' 5–95 % tip band is the
-    first chunk's plants' (a sample of ``options.chunk`` plants), unless
-    ``options.trajectories`` (then each chunk's traces come back; the band stays the first
-    chunk's). ``kwargs``: compare's keywords."""
-    from flexarm.design.compare import Comparison, summarise
+def __getattr__(name: str):
+    """The plant and tuning halves of the chunked batches, which moved down into design
+    (issue #43), still importable from here: ``PlantSource``, ``ChunkedTuneCost``."""
+    if name == "PlantSource":
+        from flexarm.design.plants import PlantSource
 
-    o = options or ChunkOptions()
-    bounds = chunk_bounds(len(plants), o.chunk) or [(0, 0)]
-    src = plants if isinstance(plants, PlantSource) or len(plants) else _nominal_batch(plants)
-    parts = map_chunks(
-        _compare_chunk_any,
-        [((src, j, a, b), j == 0 or o.trajectories) for j, (a, b) in enumerate(bounds)],
-        client,
-        retries=o.retries,
-        workers=o.workers,
-        shared=dict(designs=designs, kwargs=kwargs),
-    )
-    per: dict[str, dict[str, np.ndarray]] = {}
-    for name in parts[0][0]:
-        per[name] = {
-            k: np.concatenate([parts[0][0][name][k]] + [p[0][name][k][1:] for p in parts[1:]])
-            for k in parts[0][0][name]
-        }
-    settings = dict(parts[0][2])
-    limit = float(settings["limit_V"])
-    rows = {name: summarise(m, limit) for name, m in per.items()}
-    settings.update(
-        n_plants=len(plants),
-        seed=int(getattr(plants, "seed", 0)),
-        chunks=len(bounds),
-        chunk=o.chunk,
-        plants={
-            **getattr(plants, "info", {}),
-            "n": len(plants),
-            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants",
-        },
-        band_plants="the first chunk's plants",
-    )
-    warn = list(dict.fromkeys(w for p in parts for w in p[3]))
-    return Comparison(rows, per, parts[0][1], settings, warn)
+        return PlantSource
+    if name == "ChunkedTuneCost":
+        from flexarm.design.tune import ChunkedTuneCost
 
-
-def _compare_chunk_any(arg, with_traces, *, designs, kwargs):
-    return _compare_chunk(*arg, designs=designs, kwargs=kwargs, with_traces=with_traces)
-
-
-# ------------------------------------------------------------------ tuning over chunks
-_WORKER_COSTS: dict = {}
-
-
-def _tune_chunk(token, plants, j, a, b, p, *, scenario, paths, kwargs):
-    """Chunk j's per-plant costs at parameters p; the chunk's prepared plants are kept in
-    the worker between evaluations (keyed by ``token`` and j)."""
-    from flexarm.design.tune import TuneCost
-
-    key = (token, j)
-    cost = _WORKER_COSTS.get(key)
-    if cost is None:
-        cost = TuneCost(scenario, _chunk_plants(plants, j, a, b), paths, **kwargs)
-        _WORKER_COSTS.clear() if len(_WORKER_COSTS) > 64 else None
-        _WORKER_COSTS[key] = cost
-    _, c, m = cost.evaluate(p)
-    return c, {k: np.asarray(v) for k, v in m.items()}
-
-
-class ChunkedTuneCost:
-    """:class:`flexarm.design.tune.TuneCost` with the plants in chunks on a Dask client:
-    each evaluation is one task per chunk (its plants prepared once per worker and kept),
-    and the per-plant costs come back; the design cost is their ``quantile`` over the
-    nominal plant and all drawn plants, as with one batch."""
-
-    # copied from the nominal TuneCost in __init__
-    q: Any
-    scn: Any
-    limit: Any
-    length: Any
-    delta: Any
-    horizon: Any
-    w: Any
-    names: Any
-
-    def __init__(
-        self,
-        scenario,
-        plants,
-        paths: Sequence[str],
-        *,
-        client=None,
-        options: ChunkOptions | None = None,
-        **kwargs,
-    ):
-        from flexarm.design.tune import TuneCost
-
-        self.o = options or ChunkOptions()
-        self.client = client
-        self.nominal = TuneCost(scenario, _nominal_batch(plants), paths, **kwargs)
-        self.plants = plants
-        self.bounds = chunk_bounds(len(plants), self.o.chunk) or [(0, 0)]
-        self.token = f"{id(self)}-{_time.time_ns()}"
-        self.scenario_ = scenario
-        self.paths = list(paths)
-        self.kwargs = kwargs
-        self.quantile = kwargs["quantile"]
-        for k in ("q", "scn", "limit", "length", "delta", "horizon", "w", "names"):
-            setattr(self, k, getattr(self.nominal, k))
-        self.size = len(plants) + 1
-        self.nfev, self.seconds = 0, 0.0
-
-    @property
-    def base(self):  # the batch size, as TuneCost.base.size reports it
-        return dataclasses.make_dataclass("B", [("size", int)])(self.size)
-
-    def scenario(self, p):
-        return self.nominal.scenario(p)
-
-    def evaluate(self, p) -> tuple[float, np.ndarray, dict]:
-        t0 = _time.perf_counter()
-        self.scenario(p)  # a spec the schema refuses raises here, on the client
-        src = self.plants if len(self.plants) else _nominal_batch(self.plants)
-        parts = map_chunks(
-            _tune_chunk,
-            [
-                (self.token, src, j, a, b, np.asarray(p, float))
-                for j, (a, b) in enumerate(self.bounds)
-            ],
-            self.client,
-            retries=self.o.retries,
-            workers=self.o.workers,
-            shared=dict(scenario=self.scenario_, paths=self.paths, kwargs=self.kwargs),
-        )
-        c = np.concatenate([parts[0][0]] + [q[0][1:] for q in parts[1:]])
-        m = {
-            k: np.concatenate([parts[0][1][k]] + [q[1][k][1:] for q in parts[1:]])
-            for k in parts[0][1]
-        }
-        self.nfev += 1
-        self.seconds += _time.perf_counter() - t0
-        return float(np.quantile(c, self.quantile)), c, m
+        return ChunkedTuneCost
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # =============================================================================== many fits

@@ -283,14 +283,21 @@ def _design(ctx, o: DesignRequest) -> None:
     opts = o.method_options()  # each method's own keyword arguments
     check_file_option("--report", o.report, o.overwrite, "design.html")
     sc = load(o.scenario)
-    spread_d = plant_spread(sc, o.fit_json, o.spread)
+    fit_doc = parsing.json_file(o.fit_json, "--fit-json") if o.fit_json is not None else None
+    by_paths = fit_doc is not None and {"free", "params", "std"} <= set(fit_doc)
+    spread_d = None if by_paths else plant_spread(sc, o.fit_json, o.spread)
     out = outdir(o.out, o.overwrite)
     method, plants, overwrite = o.method, o.plants, o.overwrite
-    from flexarm.design.plants import from_paths
+    from flexarm.design.plants import from_fit, from_paths
 
     with console.status(f"designing ({method})...") as status:
         try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
-            drawn = from_paths(sc, spread_d, plants, seed=o.seed) if spread_d else None
+            if fit_doc is not None and by_paths:  # any fit's document: its covariance
+                from flexarm.identification.time_domain.result import FitResult
+
+                drawn = from_fit(FitResult.from_dict(fit_doc, scenario=sc), plants, seed=o.seed)
+            else:
+                drawn = from_paths(sc, spread_d, plants, seed=o.seed) if spread_d else None
         except ValueError as exc:
             fail(f"--fit-json/--spread: {exc}")
         if method == "tune":
@@ -301,9 +308,9 @@ def _design(ctx, o: DesignRequest) -> None:
             status,
             f"designing ({method}) and checking it with the scenario's "
             "controller on a reference step (nominal plant"
-            f"{f' and {plants} drawn' if spread_d else ''})...",
+            f"{f' and {plants} drawn' if drawn is not None else ''})...",
         )
-        from flexarm.distributed import session
+        from flexarm.distributed import executor, session
 
         try:  # the gate runs the comparison (flexarm.design.gate.design_checked)
             with session(o.scheduler, o.workers) as client:  # None: in-process
@@ -313,7 +320,7 @@ def _design(ctx, o: DesignRequest) -> None:
                     plants=drawn,
                     count=o.count,
                     gate=o.gate_options(),
-                    client=client,
+                    client=executor(client),  # the batches' executor (sim.batch protocol)
                     **opts,
                 )
         except FlexarmError:
@@ -368,8 +375,10 @@ def _design(ctx, o: DesignRequest) -> None:
 
 
 def plant_spread(sc, fit_json: Path | None, spread: str | None) -> dict | None:
-    """Scenario path → (mean, std) for the plant draws of ``design``: from the fit's JSON
-    (:func:`flexarm.identification.time_domain.report.scenario_spread`) or ``--spread``."""
+    """Scenario path → (mean, std) for the plant draws of ``design``: from ``--spread``, or
+    from a fit document written before the one result (its ``parameters`` table:
+    :func:`flexarm.identification.time_domain.report.scenario_spread`); a fit document with
+    ``free``/``params``/``std`` is drawn by :func:`flexarm.design.plants.from_fit`."""
     if fit_json is not None:
         from flexarm.identification.time_domain.logs import FitInputError
         from flexarm.identification.time_domain.report import scenario_spread

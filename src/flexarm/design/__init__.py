@@ -5,7 +5,7 @@ The front door :func:`design` dispatches on the method through :data:`METHODS` (
 the function that designs it, each ``f(scenario, **options) -> Design``); a new method adds
 one entry there.
 
-:func:`design_checked` (:mod:`flexarm.design.gate`) is what ``flexarm design`` calls: the
+:func:`flexarm.design.gate.design_checked` is what ``flexarm design`` calls: the
 design, compared with the scenario's own controller, with the gate's verdict (``"stable"``
 or what failed), refused unless accepted.
 
@@ -20,10 +20,11 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-from flexarm.design.gate import GateOptions, design_checked
 from flexarm.design.result import Design
 
-__all__ = ["Design", "METHODS", "design", "design_checked", "GateOptions"]
+# design_checked and GateOptions live in flexarm.design.gate, which imports design() from
+# here: re-exporting them here made the two modules import each other (issue #43)
+__all__ = ["Design", "METHODS", "design"]
 
 
 def _lqr(

@@ -41,13 +41,33 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexarm.design.plants import BatchLoop, PlantBatch, Replace, diverged
+from flexarm.design.plants import (
+    BatchLoop,
+    PlantBatch,
+    PlantSource,
+    Replace,
+    chunk_plants,
+    diverged,
+    nominal_batch,
+)
 
-__all__ = ["compare", "Comparison", "batch_metrics", "METRICS", "experiment"]
+if TYPE_CHECKING:
+    from flexarm.sim.batch import BatchExecutor, ChunkOptions
+
+__all__ = [
+    "compare",
+    "compare_chunked",
+    "Comparison",
+    "batch_metrics",
+    "METRICS",
+    "experiment",
+    "Probe",
+    "probe_for",
+]
 
 #: metric → (column title, unit, how the worst case is taken)
 METRICS = {
@@ -61,6 +81,68 @@ METRICS = {
 }
 
 
+@dataclass(frozen=True)
+class Probe:
+    """What the comparison steps and measures, by the plant's signal names: the ``hub``
+    angle (rad), the tip angle as the sum of the ``tip`` signals (rad), the link's tip
+    ``deflection`` (m), the ``command`` column, the stepped ``reference`` channel (the other
+    named ``references`` held at 0), the hub ``encoder`` sensor. A single link:
+    ``motor_angle``, ``tip_angle``, ``tip_deflection``, command 0, ``reference``; a
+    multi-link arm: joint j's ``theta_j``, ``theta_j + deflection_angle_j`` (link j's tip),
+    ``deflection_j``, drive j's command, its setpoint's reference (:func:`probe_for`)."""
+
+    hub: str = "motor_angle"
+    tip: tuple[str, ...] = ("tip_angle",)
+    deflection: str = "tip_deflection"
+    command: int = 0
+    reference: str = "reference"
+    references: tuple[str, ...] = ()
+    encoder: str = "motor_angle"
+    joint: int | None = None
+
+
+def probe_for(scenario, joint: int = 0) -> Probe:
+    """The :class:`Probe` of ``scenario``: a single link's, or joint ``joint`` (0: the
+    shoulder) of a multi-link arm, its reference the setpoint the scenario's controller
+    gives that joint's angle (an ``lti`` block's ``setpoints``), else ``theta_ref_<j+1>``."""
+    if scenario.arm.kind != "multi_link":
+        return Probe()
+    n = len(scenario.arm.joints)
+    if not 0 <= joint < n:
+        raise ValueError(f"joint = {joint}: the arm has joints 0..{n - 1}")
+    hub = f"theta_{joint + 1}"
+    sensors = scenario.sensors or {}
+    encoder = next((k for k, v in sensors.items() if (getattr(v, "signal", None) or k) == hub), hub)
+    ref = None
+    ctrl = scenario.controller
+    if getattr(ctrl, "setpoints", None) and getattr(ctrl, "inputs", None):
+        ref = next(
+            (
+                sp
+                for i, sp in zip(ctrl.inputs, ctrl.setpoints, strict=False)
+                if isinstance(sp, str) and i == encoder
+            ),
+            None,
+        )
+    refs = tuple(scenario.references or {})
+    ref = ref or f"theta_ref_{joint + 1}"
+    if ref not in refs:
+        raise ValueError(
+            f"scenario {scenario.name!r}: joint {joint + 1}'s setpoint {ref!r} is not one of "
+            f"its [references] ({', '.join(refs) or 'none'}); the comparison steps it"
+        )
+    return Probe(
+        hub,
+        (hub, f"deflection_angle_{joint + 1}"),
+        f"deflection_{joint + 1}",
+        joint,
+        ref,
+        refs,
+        encoder,
+        joint,
+    )
+
+
 def batch_metrics(
     out: dict,
     signal_names,
@@ -72,14 +154,19 @@ def batch_metrics(
     length: float,
     band: float = 0.02,
     tail: float = 0.25,
+    probe: Probe | None = None,
 ) -> dict[str, np.ndarray]:
     """The per-plant metrics of the module doc from :func:`simulate_batch` arrays
     (signals (B, N, S), command (B, N, m)); ``reference`` (N,) at the sample instants,
-    one step; ``length`` L (m) of the link; returns metric → (B,) arrays."""
+    one step; ``length`` L (m) of the link; ``probe`` the signals measured (default a
+    single link's); returns metric → (B,) arrays."""
+    pr = probe or Probe()
     sig = np.asarray(out["signals"])
     idx = {n: i for i, n in enumerate(signal_names)}
-    th, tip, d = (sig[..., idx[n]] for n in ("motor_angle", "tip_angle", "tip_deflection"))
-    u = np.abs(np.asarray(out["command"])[..., 0])
+    th, d = sig[..., idx[pr.hub]], sig[..., idx[pr.deflection]]
+    tip = np.sum([sig[..., idx[n]] for n in pr.tip], axis=0)
+    ua = np.asarray(out["command"])[..., pr.command]
+    u = np.abs(ua)
     r = np.asarray(reference, float)
     jumps = np.nonzero(np.abs(np.diff(r)) > 0)[0]
     k0 = int(jumps[0] + 1) if jumps.size else 0
@@ -108,7 +195,6 @@ def batch_metrics(
         dt_tail = d[:, k_tail:]
         osc = 1e3 * np.sqrt(np.mean((dt_tail - dt_tail.mean(axis=1, keepdims=True)) ** 2, axis=1))
         peak = np.max(u, axis=1)
-        ua = np.asarray(out["command"])[..., 0]
         chatter = np.sqrt(np.mean(np.diff(ua, axis=1) ** 2, axis=1))
         at_lim = dt * np.sum(u >= limit * (1 - 1e-9), axis=1)
     m = {
@@ -134,32 +220,40 @@ def experiment(
     start: float = 0.1,
     duration: float = 3.0,
     quantum: float | None = None,
+    probe: Probe | None = None,
 ) -> dict:
     """The overrides (:func:`flexarm.design.plants.with_overrides`) of the comparison's
-    experiment: at rest, a step of ``step`` rad (default the scenario's reference
-    amplitude) at ``start`` s, ``duration`` s; ``quantum`` sets the hub encoder's count
+    experiment: at rest, a step of ``step`` rad (default the stepped reference's amplitude)
+    at ``start`` s on the probe's reference (a multi-link arm: that joint's setpoint, the
+    other joints' held at 0), ``duration`` s; ``quantum`` sets the hub encoder's count
     (rad) where the scenario has none."""
+    pr = probe or probe_for(scenario)
+    spec = scenario.reference if pr.reference == "reference" else None
+    spec = spec or (scenario.references or {}).get(pr.reference)
     if step is None:
-        step = float(scenario.reference.amplitude)
+        step = float(getattr(spec, "amplitude", 0.0) or 0.0)
         if step == 0.0:
             raise ValueError(
-                f"scenario {scenario.name!r}: reference.amplitude = 0; give the "
+                f"scenario {scenario.name!r}: {pr.reference}.amplitude = 0; give the "
                 "step size (rad) with step="
             )
     if not duration > start:
         raise ValueError(f"duration = {duration} s must exceed the step time start = {start} s")
+    move = {"type": "step", "offset": 0.0, "amplitude": float(step), "start": float(start)}
     over: dict[str, Any] = {
-        "reference": {
-            "type": "step",
-            "offset": 0.0,
-            "amplitude": float(step),
-            "start": float(start),
-        },
         "simulation": {"duration": float(duration)},
         "initial": {"motor_angle": 0.0, "motor_velocity": 0.0, "tip_deflection": 0.0},
     }
+    if pr.reference == "reference":
+        over["reference"] = move
+    else:
+        rest = {"type": "step", "offset": 0.0, "amplitude": 0.0, "start": 0.0}
+        over["references"] = {
+            r: Replace(move if r == pr.reference else rest) for r in pr.references
+        }
+        over["initial"] = {"joint_angles": None, "joint_velocities": None, "equilibrium": False}
     if quantum is not None:
-        over["sensors"] = {"motor_angle": {"quantum": float(quantum), "bits": None, "range": None}}
+        over["sensors"] = {pr.encoder: {"quantum": float(quantum), "bits": None, "range": None}}
     return over
 
 
@@ -180,26 +274,28 @@ def _own_move(design_scenario, exp: dict) -> dict:
     }
 
 
-def encoder_count(scenario, count: float | None = None) -> float:
-    """The hub encoder's count (rad): ``count`` if given, else the scenario's
-    ``sensors.motor_angle`` quantum (or range / 2**bits)."""
+def encoder_count(scenario, count: float | None = None, joint: int = 0) -> float:
+    """The hub encoder's count (rad): ``count`` if given, else the scenario's hub encoder's
+    quantum (``sensors.motor_angle``; a multi-link arm: joint ``joint``'s angle sensor; or
+    range / 2**bits)."""
     from flexarm.sim.build import sensor_quanta
 
     if count is not None:
         if not count > 0:
             raise ValueError(f"count = {count!r} rad: the encoder count must be > 0")
         return float(count)
-    q = sensor_quanta(scenario.sensors).get("motor_angle", 0.0)
+    enc = probe_for(scenario, joint).encoder
+    q = sensor_quanta(scenario.sensors).get(enc, 0.0)
     if not q > 0:  # a fitted rig whose controller read finer than the log: its resolution
         q = float(
             (getattr(scenario, "notes", None) or {}).get("rig", {}).get("encoder_count", 0.0) or 0.0
         )
     if not q > 0:
         raise ValueError(
-            f"scenario {scenario.name!r}: sensors.motor_angle has no quantum "
+            f"scenario {scenario.name!r}: sensors.{enc} has no quantum "
             "(or bits and range), so the hub error cannot be given in encoder "
             "counts; give count= (rad per count, e.g. 2*pi/4096) or "
-            "sensors.motor_angle.quantum"
+            f"sensors.{enc}.quantum"
         )
     return float(q)
 
@@ -397,21 +493,22 @@ def compare(
     tail: float = 0.25,
     count: float | None = None,
     seed: int | None = None,
-    client: Any = None,
-    chunks: Any = None,
+    joint: int = 0,
+    client: BatchExecutor | None = None,
+    chunks: ChunkOptions | None = None,
 ) -> Comparison:
     """Compare the nominal scenario's own controller (named ``logged``; None leaves it
     out) and ``designs`` (name → :class:`~flexarm.design.result.Design`, scenario or
     controller spec) on the nominal plant and the batch (module doc). ``count``: the
     encoder count (rad) where the scenario's hub sensor has none (it then also quantises
     the simulated encoder); ``seed``: the sensor noise's (default the scenario's
-    ``simulation.seed``, as :func:`flexarm.simulate` uses). With a Dask ``client`` (or
-    ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, or ``plants`` a
-    :class:`flexarm.distributed.PlantSource`) the plants run in chunks, one task each, and
-    only per-plant metrics come back (:func:`flexarm.distributed.compare_chunked`)."""
+    ``simulation.seed``, as :func:`flexarm.simulate` uses); ``joint``: a multi-link
+    arm's stepped and measured joint (0: the shoulder; :func:`probe_for`). With ``client``, a
+    :class:`flexarm.sim.batch.BatchExecutor` (e.g. :class:`flexarm.distributed.DaskExecutor`;
+    or ``chunks``, a :class:`flexarm.sim.batch.ChunkOptions`, or ``plants`` a
+    :class:`~flexarm.design.plants.PlantSource`) the plants run in chunks, one task each,
+    and only per-plant metrics come back (:func:`compare_chunked`)."""
     if client is not None or chunks is not None or not isinstance(plants, PlantBatch):
-        from flexarm.distributed import compare_chunked  # orchestration, entered on request
-
         return compare_chunked(
             plants,
             designs,
@@ -425,12 +522,14 @@ def compare(
             tail=tail,
             count=count,
             seed=seed,
+            joint=joint,
         )
     nominal = plants.nominal
-    q = encoder_count(nominal, count)
+    pr = probe_for(nominal, joint)
+    q = encoder_count(nominal, count, joint)
     has_q = count is None
     exp = experiment(
-        nominal, step=step, start=start, duration=duration, quantum=None if has_q else q
+        nominal, step=step, start=start, duration=duration, quantum=None if has_q else q, probe=pr
     )
     pb = plants.with_overrides(exp)
     base = pb.loop()
@@ -442,8 +541,8 @@ def compare(
         specs[logged] = scn.controller
     for name, d in (designs or {}).items():
         specs[name] = controller_spec(d)
-    limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[0])
-    length = float(scn.arm.beam.length)
+    limit = float(np.ravel(np.asarray(base.loop.actuator.limit))[pr.command])
+    length = float(scn.arm.beam.length if pr.joint is None else scn.arm.links[pr.command].length)
     rows, per, traces = {}, {}, {}
     moves = {
         name: d.scenario
@@ -459,7 +558,7 @@ def compare(
         else:
             bl = base.with_controller(build_controller(base, spec, scn))
         out = bl.run(seed=seed)
-        ref = bl.references["reference"]
+        ref = bl.references[pr.reference]
         m = batch_metrics(
             out,
             bl.prepared.loop.plant.signal_names,
@@ -470,11 +569,12 @@ def compare(
             length=length,
             band=band,
             tail=tail,
+            probe=pr,
         )
         per[name] = m
         rows[name] = summarise(m, limit)
         sn = list(bl.prepared.loop.plant.signal_names)
-        tip = out["signals"][:, :, sn.index("tip_angle")]
+        tip = np.sum([out["signals"][:, :, sn.index(c)] for c in pr.tip], axis=0)
         pct = (
             np.nanpercentile(tip[1:], [5, 50, 95], axis=0)
             if tip.shape[0] > 1
@@ -484,14 +584,20 @@ def compare(
             "time": bl.time,
             "reference": ref,
             "tip_nominal": tip[0],
-            "hub_nominal": out["signals"][0, :, sn.index("motor_angle")],
-            "command_nominal": out["command"][0, :, 0],
+            "hub_nominal": out["signals"][0, :, sn.index(pr.hub)],
+            "command_nominal": out["command"][0, :, pr.command],
             "tip_p05": pct[0],
             "tip_p50": pct[1],
             "tip_p95": pct[2],
         }
     settings = {
-        "step_rad": float(scn.reference.amplitude),
+        "step_rad": float(
+            (
+                scn.reference if pr.reference == "reference" else scn.references[pr.reference]
+            ).amplitude
+        ),
+        "stepped": pr.reference,
+        "measured": {"hub": pr.hub, "tip": " + ".join(pr.tip), "command": pr.command},
         "start_s": start,
         "duration_s": duration,
         "band_fraction": band,
@@ -505,3 +611,73 @@ def compare(
         "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()},
     }
     return Comparison(rows, per, traces, settings, list(plants.warnings))
+
+
+# ------------------------------------------------------------------ in chunks, on an executor
+def _compare_chunk(plants, j, a, b, *, designs, kwargs, with_traces):
+    cmp = compare(chunk_plants(plants, j, a, b), designs, **kwargs)
+    return (
+        {name: {k: np.asarray(v) for k, v in m.items()} for name, m in cmp.per_plant.items()},
+        cmp.traces if with_traces else None,
+        cmp.settings,
+        list(cmp.warnings),
+    )
+
+
+def _compare_chunk_any(arg, with_traces, *, designs, kwargs):
+    return _compare_chunk(*arg, designs=designs, kwargs=kwargs, with_traces=with_traces)
+
+
+def compare_chunked(
+    plants: PlantBatch | PlantSource,
+    designs: Mapping[str, Any] | None = None,
+    *,
+    client: BatchExecutor | None = None,
+    options: ChunkOptions | None = None,
+    **kwargs,
+) -> Comparison:
+    """:func:`compare` over chunks of the plants (a drawn :class:`PlantBatch` sliced, or a
+    :class:`PlantSource` drawn per chunk), each chunk a task on ``client``, a
+    :class:`~flexarm.sim.batch.BatchExecutor` (None: in-process). Each chunk runs the
+    comparison on its plants and the nominal one and returns only the per-plant metrics;
+    the rows (nominal, median, worst, unstable, limit) are summarised over all plants here,
+    the same as one batch would give. The figures' 5–95 % tip band is the first chunk's
+    plants' (a sample of ``options.chunk`` plants), unless ``options.trajectories`` (then
+    each chunk's traces come back; the band stays the first chunk's). ``kwargs``: compare's
+    keywords."""
+    from flexarm.sim.batch import ChunkOptions, chunk_bounds, map_chunks
+
+    o = options or ChunkOptions()
+    bounds = chunk_bounds(len(plants), o.chunk) or [(0, 0)]
+    src = plants if isinstance(plants, PlantSource) or len(plants) else nominal_batch(plants)
+    parts = map_chunks(
+        _compare_chunk_any,
+        [((src, j, a, b), j == 0 or o.trajectories) for j, (a, b) in enumerate(bounds)],
+        client,
+        retries=o.retries,
+        workers=o.workers,
+        shared=dict(designs=designs, kwargs=kwargs),
+    )
+    per: dict[str, dict[str, np.ndarray]] = {}
+    for name in parts[0][0]:
+        per[name] = {
+            k: np.concatenate([parts[0][0][name][k]] + [p[0][name][k][1:] for p in parts[1:]])
+            for k in parts[0][0][name]
+        }
+    settings = dict(parts[0][2])
+    limit = float(settings["limit_V"])
+    rows = {name: summarise(m, limit) for name, m in per.items()}
+    settings.update(
+        n_plants=len(plants),
+        seed=int(getattr(plants, "seed", 0)),
+        chunks=len(bounds),
+        chunk=o.chunk,
+        plants={
+            **getattr(plants, "info", {}),
+            "n": len(plants),
+            "chunked": f"{len(bounds)} chunks of <= {o.chunk} plants",
+        },
+        band_plants="the first chunk's plants",
+    )
+    warn = list(dict.fromkeys(w for p in parts for w in p[3]))
+    return Comparison(rows, per, parts[0][1], settings, warn)

@@ -2,26 +2,21 @@
 
 Two sources:
 
-* :func:`from_fit`: a servo-rig fit (:class:`flexarm.identification.time_domain.FitResult`).
-  The fit searches each parameter p_i in a unit coordinate u_i (``log``: p = lo (hi/lo)^u;
-  ``loglin``: p = lo + (hi − lo)(e^{a u} − 1)/(e^a − 1); ``lin``; see
-  :mod:`flexarm.identification.time_domain.params`) and its Newey–West (HAC) covariance Σ_u
-  is linearised there (``stages['local']['covariance_unit']``). A draw is
+* :func:`from_fit`: any fit (:class:`flexarm.identification.time_domain.result.FitResult`,
+  every preset), whose ``params``, ``std`` and ``correlation`` are keyed by scenario paths
+  (``"arm.joints[0].friction.coulomb"``). The fit estimates each parameter in log space
+  (p = p0·e^z) and reports its std σ_i (SI) and the correlation R of the z_i, so the
+  covariance of ln p is Σ = D R D with D = diag(σ_i / |p̂_i|). A draw is
 
-      u⁽ʲ⁾ ~ N(û, Σ_u),   p⁽ʲ⁾ = p(u⁽ʲ⁾)                                          (1)
+      z⁽ʲ⁾ ~ N(0, Σ),   p⁽ʲ⁾_i = p̂_i · e^{z⁽ʲ⁾_i}                                      (1)
 
-  in those coordinates, so log-scaled parameters (inertias, link frequency, damping, gauge
-  gain) stay positive by construction; a draw with a negative friction level
-  (``loglin`` below its lower bound 0) or a value the scenario schema refuses (a link
-  damping ratio above 1) is rejected and drawn again (a truncated normal: the fraction
-  rejected is reported in ``info``). Without the full covariance (fits made
-  before it was kept) the coordinates are drawn independently with the fit's std_u =
-  std / |dp/du|. A coordinate whose std_u exceeds :data:`UNDETERMINED` (the normal then
-  spans the whole search box within ±2σ) is not determined by the data (a parameter at a
-  bound, e.g. a breakaway excess fitted at 0): it is held at its fitted value (the marginal
-  of the others, which keeps their std equal to the fit's) and a warning says so.
-  Each draw becomes the fitted scenario through the fit's own mapping
-  (:func:`flexarm.identification.time_domain.report.scenario_from_fit`).
+  (a log-normal with median p̂: a physical magnitude keeps its sign and never crosses
+  zero), set into the fitted scenario by :func:`~flexarm.specs.paths.scenario_with` (a
+  tied path, the fit's ``ties``, moves by its free parameter's factor). A draw the scenario
+  schema refuses (a damping ratio above 1) is drawn again (a truncated normal: the fraction
+  rejected is in ``info``). A parameter whose std in ln p exceeds :data:`UNDETERMINED`, or is
+  not finite (the fit could not determine it), is held at its fitted value (the marginal of
+  the others keeps their covariance) and a warning says so.
 
 * :func:`from_paths`: any scenario and ``{path: (mean, std)}`` (paths as in the general
   fit, ``"arm.friction.coulomb"``, ``"sensors.tip_deflection.gain"``), independent draws.
@@ -34,8 +29,8 @@ Two sources:
   :func:`~flexarm.specs.paths.scenario_with` and validated.
 
 A :class:`PlantBatch` holds the nominal scenario and the N drawn ones; :meth:`PlantBatch.loop`
-prepares them (:func:`flexarm.sim.build.prepare`) and stacks their loops leaf by leaf (the
-general fit's :func:`~flexarm.identification.time_domain.general.stack_loops`) into one
+prepares them (:func:`flexarm.sim.build.prepare`) and stacks their loops leaf by leaf
+(:func:`flexarm.sim.batch.stack_loops`) into one
 :class:`BatchLoop` that :func:`flexarm.sim.sampled.simulate_batch` runs in one call, the
 nominal plant first (rollout 0) and the N draws after it.
 """
@@ -44,8 +39,9 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -54,10 +50,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["PlantBatch", "BatchLoop", "from_fit", "from_paths", "with_overrides", "UNDETERMINED"]
+__all__ = [
+    "PlantBatch",
+    "PlantSource",
+    "BatchLoop",
+    "chunk_plants",
+    "from_fit",
+    "from_paths",
+    "nominal_batch",
+    "with_overrides",
+    "UNDETERMINED",
+]
 
-#: std of a unit coordinate above which the data do not determine it (see module doc)
-UNDETERMINED = 0.5
+#: std of ln p above which the data do not determine a parameter (module doc): its normal
+#: would span e^±2 ≈ ×0.14 … ×7.4 within ±2σ
+UNDETERMINED = 1.0
 
 
 class Replace(dict):
@@ -152,9 +159,9 @@ def diverged(out: dict) -> np.ndarray:
 class PlantBatch:
     """``nominal``: the fitted (or given) scenario; ``scenarios``: the N drawn ones;
     ``values``: parameter → (N,) drawn values (SI); ``coordinates``: (N, k) the draws in
-    the coordinates they were drawn in (:func:`from_fit`: the fit's unit coordinates of
-    ``names``; :func:`from_paths`: the SI values), ``center`` / ``scale`` their mean and
-    std; ``seed``; ``warnings``; ``info`` (rejections, held parameters)."""
+    the coordinates they were drawn in (:func:`from_fit`: ln |p| of ``names``;
+    :func:`from_paths`: the SI values), ``center`` / ``scale`` their centre (ln |p̂|, or the
+    mean) and std; ``seed``; ``warnings``; ``info`` (rejections, held parameters)."""
 
     nominal: Any
     scenarios: list
@@ -203,7 +210,7 @@ class PlantBatch:
         """Prepare every plant (the nominal first) with ``controller`` (a
         :class:`~flexarm.control.discrete.Controller`; default the nominal scenario's
         ``[controller]``) and stack the loops."""
-        from flexarm.identification.time_domain.general import stack_loops
+        from flexarm.sim.batch import stack_loops
         from flexarm.sim.build import prepare
 
         scns = ([self.nominal] if include_nominal else []) + list(self.scenarios)
@@ -222,135 +229,266 @@ class PlantBatch:
         )
 
 
-# ----------------------------------------------------------------------------- from a fit
-def from_fit(
-    result, n: int = 200, *, seed: int = 0, undetermined: float = UNDETERMINED, max_rounds: int = 50
-) -> PlantBatch:
-    """N plants drawn from a servo-rig fit's uncertainty, eq. (1) of the module doc.
-    ``result``: the servo rig's result (:func:`flexarm.fit` of the servo-rig preset, whose
-    ``engine_result`` it uses, or the rig engine's own)."""
-    from flexarm.identification.time_domain.params import derived
-    from flexarm.identification.time_domain.report import scenario_from_fit
-    from flexarm.specs.scenario import ScenarioError, scenario_from_dict
+# ----------------------------------------------------------------------------- lazily drawn
+@dataclass(frozen=True, eq=False)
+class PlantSource:
+    """N plants drawn chunk by chunk where they run: chunk j (plants [a, b)) is
+    ``draw(b - a, seed=chunk_seed(seed, j))`` (a :class:`PlantBatch`;
+    :func:`flexarm.sim.batch.chunk_seed`), so 10^6 plants never exist on the client.
+    ``draw`` must be picklable (a module-level function or a ``functools.partial`` of one):
+    :meth:`from_fit` and :meth:`from_paths` build it."""
 
+    draw: Callable[..., Any]
+    n: int
+    seed: int = 0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_fit(cls, result, n: int, *, seed: int = 0) -> PlantSource:
+        """Plants drawn from a fit's covariance (:func:`from_fit`), chunk by chunk."""
+        return cls(
+            functools.partial(from_fit, result),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_fit, seeds per chunk"},
+        )
+
+    @classmethod
+    def from_paths(
+        cls, scenario, spread: Mapping[str, tuple[float, float]], n: int, *, seed: int = 0
+    ) -> PlantSource:
+        """Independent draws (:func:`from_paths`), chunk by chunk."""
+        return cls(
+            functools.partial(from_paths, scenario, dict(spread)),
+            int(n),
+            int(seed),
+            {"source": "flexarm.design.plants.from_paths, seeds per chunk"},
+        )
+
+    def __len__(self) -> int:
+        return self.n
+
+    @functools.cached_property
+    def nominal(self):
+        """The nominal (fitted or given) scenario."""
+        from flexarm.sim.batch import chunk_seed
+
+        return self.draw(1, seed=chunk_seed(self.seed, 0)).nominal
+
+    @property
+    def warnings(self) -> list[str]:
+        from flexarm.sim.batch import chunk_seed
+
+        return list(self.draw(1, seed=chunk_seed(self.seed, 0)).warnings)
+
+
+def chunk_plants(plants: PlantBatch | PlantSource, j: int, a: int, b: int) -> PlantBatch:
+    """Chunk j's plants as a PlantBatch (the nominal plant and plants [a, b)): a
+    :class:`PlantSource` draws them with chunk j's seed, a :class:`PlantBatch` is sliced."""
+    if isinstance(plants, PlantSource):
+        from flexarm.sim.batch import chunk_seed
+
+        return plants.draw(b - a, seed=chunk_seed(plants.seed, j))
+    vals = {k: np.asarray(v)[a:b] for k, v in plants.values.items()}
+    coords = np.asarray(plants.coordinates)
+    return dataclasses.replace(
+        plants,
+        scenarios=list(plants.scenarios[a:b]),
+        values=vals,
+        coordinates=coords[a:b] if coords.shape[0] else coords,
+    )
+
+
+def nominal_batch(plants: PlantBatch | PlantSource) -> PlantBatch:
+    """The nominal plant alone (a source's first draw supplies it)."""
+    return PlantBatch.nominal_only(plants.nominal)
+
+
+# ----------------------------------------------------------------------------- from a fit
+def _is_path(dump: dict, path: str) -> bool:
+    from flexarm.specs.paths import get
+
+    try:
+        v = get(dump, path)
+    except (KeyError, IndexError, TypeError, ValueError):
+        return False
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def from_fit(
+    result,
+    n: int = 200,
+    *,
+    seed: int = 0,
+    undetermined: float = UNDETERMINED,
+    ties: Mapping[str, str] | None = None,
+    max_rounds: int = 50,
+) -> PlantBatch:
+    """N plants drawn from a fit's uncertainty, eq. (1) of the module doc: ``result`` is any
+    :class:`flexarm.identification.time_domain.result.FitResult` (or one read back with
+    ``FitResult.from_dict(document, scenario)``) whose ``free`` / ``params`` / ``std`` /
+    ``correlation`` are keyed by scenario paths, its ``scenario`` the fitted one.
+    ``ties``: path → free path, a parameter that moves with a free one by the same factor
+    (the fit's ``ties``; default ``result.stages["ties"]`` where the fit recorded them).
+
+    A result whose parameters are not scenario paths (the rotary servo pipeline's names,
+    ``hub_inertia``, ``coulomb[0]``) is drawn from its std mapped onto the fitted scenario's
+    paths (:func:`flexarm.identification.time_domain.report.scenario_spread`),
+    independently (:func:`from_paths`), and a warning says so."""
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
-    result = getattr(result, "engine_result", None) or result
-    space, U = result.space, np.asarray(result.unit, float)
-    if space is None or U is None:
+    scenario: Any = getattr(result, "scenario", None)
+    if callable(scenario) and not hasattr(scenario, "model_dump"):
+        scenario = scenario()  # the servo pipeline's own result builds it (deprecated)
+    if scenario is None or not hasattr(scenario, "model_dump"):
         raise ValueError(
-            "the fit result has no search space (space/unit): it was not made "
-            "by flexarm.identification.time_domain.fit; draw from_paths instead"
+            "the fit result holds no fitted scenario: read a fit document back with "
+            "FitResult.from_dict(document, load_scenario(SCENARIO_OUT)), the scenario its "
+            "fit wrote (--scenario-out)"
         )
-    names, defs = list(space.names), list(space.defs)
+    dump = scenario.model_dump()
+    names = list(getattr(result, "free", None) or result.params)
+    if not all(_is_path(dump, p) for p in names):
+        return _from_named_fit(result, scenario, n, seed)
+    tie = dict(ties if ties is not None else (result.stages or {}).get("ties", {}) or {})
+    for t, m in tie.items():
+        if m not in names or not _is_path(dump, t):
+            raise ValueError(
+                f"ties[{t!r}] = {m!r}: a tie names a scenario path and the free path it "
+                f"moves with; free: {', '.join(names)}"
+            )
     k = len(names)
-    std_u = np.asarray(
-        [
-            result.std[nm] / abs(float(d.dphys_du(U[i])))
-            if abs(float(d.dphys_du(U[i]))) > 0
-            else np.nan
-            for i, (nm, d) in enumerate(zip(names, defs, strict=True))
-        ]
-    )
-    cov = result.stages.get("local", {}).get("covariance_unit")
+    p_hat = np.array([float(result.params[p]) for p in names])
+    std = np.array([float(result.std.get(p, np.nan)) for p in names])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.abs(std / p_hat)  # the std of ln p: the fit's log-space std
+    R = np.asarray(result.correlation, float)
     warnings: list[str] = []
-    if cov is not None:
-        cov = np.asarray(cov, float)
-        std_u = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        source = "full HAC covariance of the fit (unit coordinates)"
-    else:
-        cov = np.diag(np.nan_to_num(std_u) ** 2)
-        source = "independent normals with the fit's HAC std (no covariance in the result)"
+    if R.shape != (k, k):
+        R = np.eye(k)
         warnings.append(
-            "the fit result holds no parameter covariance: parameters drawn "
-            "independently (correlations ignored); refit with this flexarm to "
-            "keep stages['local']['covariance_unit']"
+            "the fit result holds no correlation of its parameters: drawn independently "
+            "(correlations ignored)"
         )
-    bad = ~np.isfinite(std_u) | ~np.all(np.isfinite(cov), axis=1)
-    held = [i for i in range(k) if bad[i] or std_u[i] > undetermined]
+    held = [
+        i
+        for i in range(k)
+        if p_hat[i] == 0.0 or not np.isfinite(s[i]) or s[i] > undetermined or s[i] == 0.0
+    ]
     for i in held:
+        if s[i] == 0.0:
+            continue  # known exactly: nothing to say
+        why = (
+            f"std {std[i]:.3g}, {s[i]:.3g} in ln p, more than {undetermined}"
+            if np.isfinite(s[i])
+            else "the fit gives no finite std"
+        )
         warnings.append(
-            f"{names[i]} = {result.params[names[i]]:.4g} {defs[i].unit} is not determined by "
-            f"the data (std {std_u[i]:.3g} in its search coordinate, more than "
-            f"{undetermined} of the [0, 1] search box): held at its fitted value in every plant"
+            f"{names[i]} = {p_hat[i]:.4g} is not determined by the data ({why}): held at "
+            "its fitted value in every plant"
         )
     free = [i for i in range(k) if i not in held]
-    rng = np.random.default_rng(seed)
-    sign = {
-        nm: (-1.0 if result.params.get(nm, 1.0) < 0 else 1.0)
-        for nm in names
-        if nm.split("[")[0] == "tip_gain"
-    }
-    lower_ok = np.array([d.scale != "loglin" for d in defs])  # loglin: p >= lo needs u >= 0
-    sub = cov[np.ix_(free, free)]
-    length = result.rig.length
-
-    def plant(z, j):
-        """The scenario of draw z, or None where it is not physical: a friction level
-        below 0, or a value the scenario schema refuses (e.g. a damping ratio > 1)."""
-        if not np.all(lower_ok | (z >= 0.0)):
-            return None
-        p = {
-            nm: float(d.to_phys(z[i])) * sign.get(nm, 1.0)
-            for i, (nm, d) in enumerate(zip(names, defs, strict=True))
-        }
-
-        def first(m):
-            return p.get(m, p.get(f"{m}[0]", 0.0))
-
-        der = derived(
-            {
-                m: first(m)
-                for m in ("hub_inertia", "link_frequency", "link_inertia")
-                if m in p or f"{m}[0]" in p
-            },
-            length,
+    Rf = R[np.ix_(free, free)]
+    if not np.all(np.isfinite(Rf)):
+        raise ValueError(
+            "the fit's correlation matrix is not finite between determined parameters: "
+            "refit, or give the spreads with from_paths"
         )
-        d, _ = scenario_from_fit(dataclasses.replace(result, params=p, derived=der))
-        d["name"] = f"{d['name']}-draw-{j}"
-        try:
-            return scenario_from_dict(d, source=f"plant {j} drawn from the fit")
-        except ScenarioError:
-            return None
+    cov = Rf * np.outer(s[free], s[free])
+    w, V = np.linalg.eigh((cov + cov.T) / 2)
+    factor = V * np.sqrt(np.clip(w, 0.0, None))  # cov = factor factorᵀ (round-off clipped)
+    t_hat = {t: float(_get(dump, t)) for t in tie}
+    col = {p: i for i, p in enumerate(names)}
 
+    def values_of(z):
+        v = {p: float(p_hat[i] * math.exp(z[i])) for i, p in enumerate(names)}
+        v.update({t: t_hat[t] * math.exp(z[col[m]]) for t, m in tie.items()})
+        return v
+
+    rng = np.random.default_rng(seed)
     draws, scen, tried = [], [], 0
     for _ in range(max_rounds):
-        Z = np.tile(U, (n, 1))
-        if free:
-            Z[:, free] = rng.multivariate_normal(U[free], sub, size=n, method="eigh")
-        for z in Z:
+        # one row of standard normals per plant: plant j's draw does not depend on n
+        E = rng.standard_normal((n, len(free)))
+        for e in E:
+            z = np.zeros(k)
+            z[free] = factor @ e
             tried += 1
-            s = plant(z, len(scen))
-            if s is not None:
+            s_j = _plant(scenario, values_of(z), len(scen))
+            if s_j is not None:
                 draws.append(z)
-                scen.append(s)
+                scen.append(s_j)
                 if len(scen) == n:
                     break
         if len(scen) == n:
             break
     if len(scen) < n:
         raise ValueError(
-            f"only {len(scen)} of {tried} draws from the fit are physical "
-            "(friction levels >= 0, values the scenario schema accepts): its "
-            "uncertainty is too wide to sample; refit with more data or give "
-            "the spreads with from_paths"
+            f"only {len(scen)} of {tried} draws from the fit are valid scenarios: its "
+            "uncertainty is too wide to sample; refit with more data or give the spreads "
+            "with from_paths"
         )
     Z = np.asarray(draws)
-    values = {
-        nm: np.asarray(d.to_phys(Z[:, i])) * sign.get(nm, 1.0)
-        for i, (nm, d) in enumerate(zip(names, defs, strict=True))
-    }
-    nominal = result.scenario()
+    vals = {p: p_hat[i] * np.exp(Z[:, i]) for i, p in enumerate(names)}
+    vals.update({t: t_hat[t] * np.exp(Z[:, col[m]]) for t, m in tie.items()})
     info = {
-        "source": source,
+        "source": "the fit's covariance of ln p over scenario paths, eq. (1)",
         "n": n,
         "seed": seed,
         "drawn": tried,
         "rejected_fraction": 1.0 - n / tried if tried else 0.0,
         "held": [names[i] for i in held],
+        "ties": tie,
         "undetermined_threshold": undetermined,
     }
-    return PlantBatch(nominal, scen, values, names, Z, U.copy(), std_u, seed, warnings, info)
+    with np.errstate(divide="ignore"):
+        center = np.log(np.abs(p_hat))
+    return PlantBatch(
+        scenario,
+        scen,
+        vals,
+        names,
+        center + Z,
+        center,
+        np.where(np.isfinite(s), s, np.nan),
+        seed,
+        warnings,
+        info,
+    )
+
+
+def _get(dump: dict, path: str):
+    from flexarm.specs.paths import get
+
+    return get(dump, path)
+
+
+def _plant(scenario, values: dict[str, float], j: int):
+    """The scenario with ``values``, or None where the schema refuses it (e.g. a damping
+    ratio above 1)."""
+    from flexarm.specs.paths import scenario_with
+    from flexarm.specs.scenario import ScenarioError
+
+    try:
+        sc = scenario_with(scenario, values)
+    except (ScenarioError, ValueError):
+        return None
+    return sc.model_copy(update={"name": f"{scenario.name}-draw-{j}"})
+
+
+def _from_named_fit(result, scenario, n: int, seed: int) -> PlantBatch:
+    """A fit whose parameters are not scenario paths (the rotary servo pipeline's): its std
+    on the fitted scenario's paths (``report.scenario_spread``), drawn independently."""
+    from flexarm.identification.time_domain.report import scenario_spread
+
+    spread = scenario_spread(result.to_dict(), scenario)
+    b = from_paths(scenario, spread, n, seed=seed)
+    b.warnings.append(
+        "the fit's parameters are not scenario paths (the servo rig's names): drawn "
+        "independently from their std on the scenario's paths, without their correlations"
+    )
+    b.info["source"] = "the fit's std on scenario paths (scenario_spread), independent"
+    return b
 
 
 # ----------------------------------------------------------------------------- from paths

@@ -50,16 +50,19 @@ from __future__ import annotations
 import copy
 import time as _time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from flexarm.design.compare import batch_metrics, build_controller, encoder_count, experiment
-from flexarm.design.plants import PlantBatch
+from flexarm.design.plants import PlantBatch, chunk_plants, nominal_batch
 from flexarm.design.result import Design
 from flexarm.specs import paths as scenario_paths
 
-__all__ = ["design_tune", "TuneCost", "DEFAULT_WEIGHTS"]
+if TYPE_CHECKING:
+    from flexarm.sim.batch import BatchExecutor, ChunkOptions
+
+__all__ = ["design_tune", "TuneCost", "ChunkedTuneCost", "DEFAULT_WEIGHTS"]
 
 DEFAULT_WEIGHTS = {
     "overshoot": 1.0,
@@ -235,17 +238,18 @@ def design_tune(
     count: float | None = None,
     seed: int = 0,
     callback: Callable[[dict], Any] | None = None,
-    client: Any = None,
-    chunks: Any = None,
+    client: BatchExecutor | None = None,
+    chunks: ChunkOptions | None = None,
 ) -> Design:
     """Tune ``params`` (paths into ``scenario``, default K1..K4 and the friction
     compensation level) over ``plants`` (module doc); ``bounds``: path → (lo, hi) SI
     (default p0 ± 4|p0|, K1 in [p0/5, 5 p0], levels in [0, 5 c0]); ``callback`` receives
     {"nfev", "cost", "best", "params"} after every evaluation (progress). Returns a
     :class:`~flexarm.design.result.Design` whose scenario is ``scenario`` with the tuned
-    ``[controller]``. With a Dask ``client`` (or ``chunks``, a
-    :class:`flexarm.distributed.ChunkOptions`) each evaluation runs the plants in chunks,
-    one task each (:class:`flexarm.distributed.ChunkedTuneCost`)."""
+    ``[controller]``. With ``client``, a :class:`flexarm.sim.batch.BatchExecutor` (e.g.
+    :class:`flexarm.distributed.DaskExecutor`; or ``chunks``, a
+    :class:`flexarm.sim.batch.ChunkOptions`, in-process) each evaluation runs the plants in
+    chunks, one task each (:class:`ChunkedTuneCost`)."""
     from scipy.optimize import minimize
 
     from flexarm.models.single_link import SingleLinkModel
@@ -310,9 +314,7 @@ def design_tune(
         count=count,
         seed=seed,
     )
-    if client is not None or chunks is not None:  # orchestration layer, entered on request
-        from flexarm.distributed import ChunkedTuneCost
-
+    if client is not None or chunks is not None:  # in chunks, on the executor given
         cost = ChunkedTuneCost(scenario, plants, params, client=client, options=chunks, **cost_kw)
     else:
         cost = TuneCost(scenario, plants, params, **cost_kw)
@@ -424,3 +426,102 @@ def design_tune(
         info,
         warn + list(plants.warnings),
     )
+
+
+# ------------------------------------------------------------------ in chunks, on an executor
+#: a worker's prepared chunk costs, by (cost token, chunk), kept between evaluations
+_WORKER_COSTS: dict = {}
+
+
+def _tune_chunk(token, plants, j, a, b, p, *, scenario, paths, kwargs):
+    """Chunk j's per-plant costs at parameters p; the chunk's prepared plants are kept in
+    the worker between evaluations (keyed by ``token`` and j)."""
+    key = (token, j)
+    cost = _WORKER_COSTS.get(key)
+    if cost is None:
+        cost = TuneCost(scenario, chunk_plants(plants, j, a, b), paths, **kwargs)
+        _WORKER_COSTS.clear() if len(_WORKER_COSTS) > 64 else None
+        _WORKER_COSTS[key] = cost
+    _, c, m = cost.evaluate(p)
+    return c, {k: np.asarray(v) for k, v in m.items()}
+
+
+class ChunkedTuneCost:
+    """:class:`TuneCost` with the plants in chunks on ``client``, a
+    :class:`~flexarm.sim.batch.BatchExecutor` (None: in-process): each evaluation is one
+    task per chunk (its plants prepared once per worker and kept), and the per-plant costs
+    come back; the design cost is their ``quantile`` over the nominal plant and all drawn
+    plants, as with one batch."""
+
+    # copied from the nominal TuneCost in __init__
+    q: Any
+    scn: Any
+    limit: Any
+    length: Any
+    delta: Any
+    horizon: Any
+    w: Any
+    names: Any
+
+    def __init__(
+        self,
+        scenario,
+        plants,
+        paths: Sequence[str],
+        *,
+        client: BatchExecutor | None = None,
+        options: ChunkOptions | None = None,
+        **kwargs,
+    ):
+        import dataclasses
+
+        from flexarm.sim.batch import ChunkOptions, as_executor, chunk_bounds
+
+        self.o = options or ChunkOptions()
+        self.client = as_executor(client)
+        self.nominal = TuneCost(scenario, nominal_batch(plants), paths, **kwargs)
+        self.plants = plants
+        self.bounds = chunk_bounds(len(plants), self.o.chunk) or [(0, 0)]
+        self.token = f"{id(self)}-{_time.time_ns()}"
+        self.scenario_ = scenario
+        self.paths = list(paths)
+        self.kwargs = kwargs
+        self.quantile = kwargs["quantile"]
+        for k in ("q", "scn", "limit", "length", "delta", "horizon", "w", "names"):
+            setattr(self, k, getattr(self.nominal, k))
+        self.size = len(plants) + 1
+        self.nfev, self.seconds = 0, 0.0
+        self._base = dataclasses.make_dataclass("B", [("size", int)])(self.size)
+
+    @property
+    def base(self):  # the batch size, as TuneCost.base.size reports it
+        return self._base
+
+    def scenario(self, p):
+        return self.nominal.scenario(p)
+
+    def evaluate(self, p) -> tuple[float, np.ndarray, dict]:
+        from flexarm.sim.batch import map_chunks
+
+        t0 = _time.perf_counter()
+        self.scenario(p)  # a spec the schema refuses raises here, on the client
+        src = self.plants if len(self.plants) else nominal_batch(self.plants)
+        parts = map_chunks(
+            _tune_chunk,
+            [
+                (self.token, src, j, a, b, np.asarray(p, float))
+                for j, (a, b) in enumerate(self.bounds)
+            ],
+            self.client,
+            retries=self.o.retries,
+            workers=self.o.workers,
+            shared=dict(scenario=self.scenario_, paths=self.paths, kwargs=self.kwargs),
+        )
+        c = np.concatenate([parts[0][0]] + [q[0][1:] for q in parts[1:]])
+        m = {
+            k: np.concatenate([parts[0][1][k]] + [q[1][k][1:] for q in parts[1:]])
+            for k in parts[0][1]
+        }
+        self.nfev += 1
+        self.seconds += _time.perf_counter() - t0
+        return float(np.quantile(c, self.quantile)), c, m

@@ -60,7 +60,7 @@ from flexarm.models.plant import Plant
 from flexarm.sim.integrate import integrate_hold, integrate_law, solver_for
 
 if TYPE_CHECKING:
-    from flexarm.distributed import BatchSummary
+    from flexarm.sim.batch import BatchSummary
 
 
 class Sensors(eqx.Module):
@@ -770,16 +770,18 @@ def simulate_batch(
     (``None``: all rollouts at once); the results do not depend on it. ``check=False``
     returns diverged rollouts (non-finite or beyond ±:data:`DIVERGENCE_LIMIT`) as they are
     instead of raising :class:`SimulationDiverged` (a batch of uncertain plants flags them).
-    With a Dask ``client`` (or ``chunks``, a :class:`flexarm.distributed.ChunkOptions`, for
-    the same chunks in-process) the rollouts run in chunks, one task each, and only
-    per-rollout reductions come back (a :class:`flexarm.distributed.BatchSummary`, the
-    trajectories only with ``chunks.trajectories``;
-    :func:`flexarm.distributed.simulate_chunked`)."""
+    With ``client``, a :class:`flexarm.sim.batch.BatchExecutor` (e.g.
+    :class:`flexarm.distributed.DaskExecutor`; or ``chunks``, a
+    :class:`flexarm.sim.batch.ChunkOptions`, for the same chunks in-process) the rollouts
+    run in chunks, one task each, and only per-rollout reductions come back (a
+    :class:`flexarm.sim.batch.BatchSummary`, the trajectories only with
+    ``chunks.trajectories``; :func:`flexarm.sim.batch.simulate_chunked`)."""
     check_filter_step(loop.sensors, loop.dt, loop.substeps)
-    if client is not None or chunks is not None:  # orchestration layer, entered on request
-        from flexarm.distributed import simulate_chunked
+    if client is not None or chunks is not None:  # in chunks, on the executor given
+        from flexarm.sim.batch import simulate_chunked
 
         return simulate_chunked(
+            simulate_batch,
             loop,
             x0,
             references,
@@ -787,8 +789,9 @@ def simulate_batch(
             seed=seed,
             in_axes=in_axes,
             batch_size=batch_size,
-            client=client,
+            executor=client,
             options=chunks,
+            limit=DIVERGENCE_LIMIT,
         )
     refs = _prepare_refs(references, n_samples)
     fn = _batched(in_axes, batch_size)

@@ -14,6 +14,7 @@ prediction; ``validate`` a deprecated alias of it returning a dict;
 ``RigFitResult`` the servo pipeline's result. Logs are :class:`flexarm.io.logs.Log`, read by
 :func:`flexarm.io.logformat.load_log` (:func:`load_rig_log` adds the servo rig's check)."""
 
+from flexarm.identification.time_domain.figures import overlay_figure
 from flexarm.identification.time_domain.general import (
     ScenarioFit,
     ScenarioFitOptions,
@@ -22,7 +23,7 @@ from flexarm.identification.time_domain.general import (
 )
 from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
 from flexarm.identification.time_domain.options import FitOptions, PredictOptions
-from flexarm.identification.time_domain.predict import Prediction, overlay_figure
+from flexarm.identification.time_domain.predict import Prediction
 from flexarm.identification.time_domain.report import FitResult as RigFitResult
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.validate import validate

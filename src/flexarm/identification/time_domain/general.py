@@ -1710,7 +1710,8 @@ def predict_scenario(
     }
     if plots is not None:
         # the one overlay figure (predict.write_overlays); file names NN_NAME_TAG.png
-        from flexarm.identification.time_domain.predict import Prediction, write_overlays
+        from flexarm.identification.time_domain.figures import write_overlays
+        from flexarm.identification.time_domain.predict import Prediction
 
         names = [
             f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(n).name)}_{tag}.png"

@@ -824,7 +824,8 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str, label: str | Non
     (:func:`~flexarm.identification.time_domain.predict.write_overlays`); ``traj`` the rig
     engines' (hub angle, tip deflection, command) arrays, one row per log; ``label`` the
     figures' title after the key (default: ``tag``)."""
-    from flexarm.identification.time_domain.predict import Prediction, rig_trace, write_overlays
+    from flexarm.identification.time_domain.figures import rig_trace, write_overlays
+    from flexarm.identification.time_domain.predict import Prediction
 
     keys = log_keys(logs)
     traces = {
