@@ -1,5 +1,5 @@
-"""Time the general fit (fit_scenario) of the real two-link rig (issue #17's must-show split):
-fit on the first 50 s of the 102 s run with the staircase steps to 5°, −10°, 20°, −30°;
+"""Time the one fit (flexarm.fit on the two-link preset) of the real two-link rig
+(issue #17's must-show split): fit on the first 50 s of the 102 s run with the staircase steps to 5°, −10°, 20°, −30°;
 validate on the last 52 s and on the other steps (−5°, 10°, −20°, 30°, return to 0°).
 
     PYTHONPATH=src python benchmarks/bench_two_link_fit.py [--no-friction] [--json OUT]
@@ -17,7 +17,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from flexarm.identification.time_domain.two_link import fit_two_link, held_out_report  # noqa: E402 - after the sys.path entries above
+import flexarm  # noqa: E402 - after the sys.path entries above
+from flexarm.identification.time_domain import presets  # noqa: E402 - after the sys.path entries above
+from flexarm.identification.time_domain.two_link import (  # noqa: E402 - after the sys.path entries above
+    held_out_report,
+    split_fit_inputs,
+)
 
 DATA = ROOT.parents[0] / "shared" / "data" / "two-link-rig"
 EXAMPLES = ROOT / "examples"
@@ -42,7 +47,9 @@ def main() -> None:
     if not DATA.exists():
         sys.exit(f"no rig data at {DATA}")
     t0 = time.perf_counter()
-    res = fit_two_link(DATA, EXAMPLES, friction=not a.no_friction, progress=print)
+    logs, opts = split_fit_inputs(DATA, EXAMPLES)
+    preset = presets.two_link(not a.no_friction)
+    res = flexarm.fit(preset, logs, options=opts, progress=print)
     t_fit = time.perf_counter() - t0
     print(f"fit: {t_fit:.1f} s wall ({res.message}; {res.nfev} evaluations)")
     for p in res.free:

@@ -151,25 +151,6 @@ _TD = "flexarm.identification.time_domain."
 #: edge added to one of these), and on a listed edge no longer inside a cycle (then remove it
 #: here: the list only shrinks).
 ALLOWED_CYCLE_EDGES = {
-    # the rotary servo pipeline and the general engine behind the one prediction (issue #43
-    # items 1-3 remove the pipeline): predict is the front door and imports the engines,
-    # which import it back for Prediction; options imports general for the flat record
-    (_TD + "predict", _TD + "general"),  # predict._predict_scenario: predict_scenario
-    (_TD + "predict", _TD + "options"),  # PredictOptions
-    (_TD + "predict", _TD + "validate"),  # _predict_rig_scenario: validate
-    (_TD + "predict", _TD + "fit"),  # _predict_rig_fit: fit.predict
-    (_TD + "general", _TD + "predict"),  # predict_scenario: Prediction
-    (_TD + "general", _TD + "delays"),  # fit_scenario: search_delays
-    (_TD + "delays", _TD + "general"),  # the engine's pieces (_Engine, stack_loops, ...)
-    (_TD + "options", _TD + "general"),  # FitOptions -> ScenarioFitOptions
-    (_TD + "report", _TD + "predict"),  # overlay_plots: Prediction
-    (_TD + "validate", _TD + "report"),
-    (_TD + "fit", _TD + "report"),
-    # the two-link preset runs the one fit from inside the preset module
-    (_TD + "engine", _TD + "presets"),
-    (_TD + "presets", _TD + "two_link"),  # presets.two_link()
-    (_TD + "two_link", _TD + "engine"),  # fit_two_link: engine.fit
-    (_TD + "two_link", _TD + "presets"),
     # io: the readers' checks build the readers' errors (io/checks.py _log_error: LogError
     # from io.logs; MatFileError from io.matfile), and both readers import the checks
     ("flexarm.io.checks", "flexarm.io.logs"),

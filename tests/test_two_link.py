@@ -9,7 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain.two_link import CHANNELS, fit_two_link, held_out_report
+import flexarm
+from flexarm.identification.time_domain import presets
+from flexarm.identification.time_domain.two_link import (
+    CHANNELS,
+    held_out_report,
+    split_fit_inputs,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "two-link-rig"
@@ -38,7 +44,8 @@ TARGETS = {"theta_1": 98.0, "alpha_f_1": 83.0, "theta_2": 97.0, "alpha_f_2": 77.
 
 @pytest.fixture(scope="module")
 def fitted():
-    res = fit_two_link(DATA, EXAMPLES)
+    logs, opts = split_fit_inputs(DATA, EXAMPLES)
+    res = flexarm.fit(presets.two_link(), logs, options=opts)
     rep = held_out_report(res.scenario, DATA, EXAMPLES)
     print(
         f"\ntwo-link split ({res.free_source}, {res.seconds:.0f} s): last 52 s "
@@ -160,7 +167,6 @@ def test_validate_of_the_written_scenario_gives_the_held_out_figures(fitted, tmp
     prediction starts it: the general engine's fits note ``[notes.validate] initial =
     "log"``) gives the held-out report's figures on the last 52 s to 0.1 point (the
     issue's tolerance; one computation, so they agree to the TOML's round trip)."""
-    import flexarm
     from flexarm.identification.time_domain.options import PredictOptions
     from flexarm.identification.time_domain.two_link import load_split
 

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from flexarm.identification.time_domain.general import COST_RESOLUTION
+from flexarm.identification.time_domain.options import COST_RESOLUTION
 
 __all__ = ["DelayFound", "search_delays", "searched_channels"]
 

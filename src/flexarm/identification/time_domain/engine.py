@@ -39,9 +39,8 @@ from pathlib import Path
 from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions
-from flexarm.identification.time_domain.predict import Prediction
 from flexarm.identification.time_domain.presets import Preset, for_scenario
-from flexarm.identification.time_domain.result import FitResult
+from flexarm.identification.time_domain.result import FitResult, Prediction
 
 __all__ = ["fit"]
 
@@ -155,7 +154,7 @@ def _servo_rig(preset: Preset, logs, options, progress):
         res.warnings = list(dict.fromkeys([*kept, *pred.warnings, *misfit_warnings(res)]))
         res.engine_result.warnings = list(res.warnings)
     if opts.plots is not None and isinstance(res.prediction, Prediction):
-        from flexarm.identification.time_domain.predict import write_overlays
+        from flexarm.identification.time_domain.figures import write_overlays
 
         res.plots = [str(p) for p in write_overlays(res.prediction, opts.plots, "fit")]
         return res

@@ -26,11 +26,14 @@ the fit's overlay figures) are common to all.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = [
+    "COST_RESOLUTION",
+    "ScenarioFitOptions",
     "Cost",
     "Shooting",
     "Local",
@@ -240,7 +243,7 @@ class FitOptions:
         ``base`` (a preset's) and overriding the groups given here."""
         import copy
 
-        from flexarm.identification.time_domain.general import ScenarioFitOptions as Flat
+        Flat = ScenarioFitOptions
 
         flat = copy.deepcopy(base) if base is not None else Flat()
         groups = [self.cost, self.shooting, self.local, self.priors]
@@ -303,3 +306,160 @@ class PredictOptions:
             )
             if not self.estimate_initial:
                 self.initial = "log"
+
+
+# ------------------------------------------------------ the general engine's flat record
+#: The least change of Σ r² (eqs. (1)–(2)) the fit resolves: Σ r² counts independent misfits
+#: in units of their expected size, so Δ(Σ r²) = 1 is a move of one standard deviation of
+#: one parameter and 0.01 a tenth of one; a decrease below it is not statistically meaningful
+#: (Press et al., Numerical Recipes, §15.5: stop when χ² falls by less than 0.01). With
+#: ``ScenarioFitOptions.ftol`` None, SciPy's relative ftol is it over E[Σ r²]
+#: (:meth:`_Engine.expected_cost`): the search stops when a step lowers Σ r² by less than
+#: 0.01 · Σ r² / E[Σ r²], i.e. by less than 0.01 in units of the misfit's realised variance
+#: (a misfit larger than λ assumes widens the parameters' spread in the same ratio).
+COST_RESOLUTION = 0.01
+
+
+#: where a prediction starts each log (window): :func:`predict_scenario`'s ``initial``
+INITIALS = ("estimate", "log", "rest")
+#: least-squares evaluations of a prediction's start-state estimate (``initial="estimate"``)
+INITIAL_NFEV = 15
+
+
+@dataclass
+class ScenarioFitOptions:
+    """Options of :func:`fit_scenario` (see the module docstring for the equations): the
+    general engine's flat record. Named for the function it configures (``fit_scenario`` →
+    :class:`ScenarioFit`), so that ``FitOptions`` is only the grouped options of
+    :func:`flexarm.fit` (:class:`~flexarm.identification.time_domain.options.FitOptions`,
+    whose ``engine_options()`` returns this record).
+
+    channels: measured channel → weight (default: every sensor channel the logs hold, 1).
+    bound_factor: default bounds p0/f … p0·f. bounds: path → (lo, hi) in SI (same sign as
+    p0). priors: path → relative standard deviation (log space) about the template value.
+    segment: multiple-shooting segment length (s); None: each log (window) is one segment.
+    burn_in: seconds at the start of each segment left out of the cost.
+    windows: per log (t0, t1) in s from its first sample, or None for the whole log.
+    residual_level, correlation_time: λ and τ of eq. (1). max_nfev: least-squares budget.
+    ftol, xtol: SciPy's relative tolerances on the cost and on the step; ``ftol`` None:
+    derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]
+    (:meth:`_Engine.expected_cost`: a step that lowers Σ r² by less than 0.01, a move of a
+    tenth of a standard deviation, ends the search).
+    fd_step: finite-difference step in z (relative step of p). global_stage: run
+    differential evolution first (popsize, maxiter, seed). derivative_half_width: samples
+    each side of the local quadratic fit for ẏ at segment starts. corr_warn: |corr| above
+    which a pair is reported as not separable. max_batch: most candidates per vmapped call.
+    threads: a batch of candidates (a Jacobian's columns, a generation) is cut into this
+    many equal chunks run at once (None: the CPU cores this process may use; 1: one call).
+    estimate_states: with segments, estimate each segment's start state too (offsets to
+    the log-derived state; multiple shooting's node states).
+    quantise: keep the converters' quantisation in the fitted simulation. Off by default:
+    a quantiser inside the loop makes the cost piecewise constant in the parameters at the
+    scale of one count, which stalls finite differences; its effect on the loop is a
+    small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
+    substeps: integration substeps per sample while fitting (None: the scenario's).
+    ties: path → free path: the first is not free but moves with the second by the same
+    factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
+    period_tolerance: a log whose clock is off the scenario's period by at most this
+    (relative) is read on the scenario's grid, with a note
+    (:func:`flexarm.io.logs.on_sample_grid`); beyond it, one line naming the figure.
+    linear: paths fitted in linear space besides the signed ones (:data:`SIGNED_FIELDS`, a
+    template value of 0): p = p0 + s z (module docstring); a linear parameter's prior is
+    its std in units of its scale s.
+    initial: ``"log"``: every segment, the first of a log included, starts from the state
+    read off the log; ``"scenario"``: a segment at a log's first sample starts from the
+    scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
+    polish: after the segment fit, refine on whole logs (each one simulation from its start;
+    only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
+    continuous: the logs, in order, are consecutive pieces of one run: each log's dynamic
+    controller blocks start from the state reached by running them on the logged signals
+    of the logs before (and the digital filters from their states there)
+    (:func:`flexarm.sim.filters.continuous_starts`); without it they start each log from
+    their ``initial_state``. Whole logs only (no ``windows``).
+    continuation: with ``quantise``, the local stage runs first on the loop without the
+    converters' rounding, then on the rounded loop from its optimum (the servo rig
+    engine's smooth-then-quantised continuation); without ``quantise`` it has no effect.
+    restarts: after the local stage converges, at most this many restarts of it from its
+    optimum with a fresh trust region, while budget (``max_nfev``, all runs together) is
+    left; the search stops at the first restart that lowers Σ r² by less than ``ftol`` of
+    itself (whose result is not kept). Stick-slip friction makes the cost non-smooth: trf's
+    trust region can collapse on a kink (a step of Δ Σ r² ≈ 0.001, then ``xtol``) far from
+    the optimum. On the two-link split this happened on one machine (Σ r² 534 after 20
+    evaluations against 453 on others: rounding differs between CPUs); a restart went on
+    to 479 in five.
+    delay_search: a :class:`~flexarm.identification.time_domain.options.DelaySearch`: after
+    the local stage, the sensors' pure delays (samples) are searched and the local stage is
+    run again at the chosen ones (:mod:`~flexarm.identification.time_domain.delays`); None:
+    the scenario's delays as given.
+    """
+
+    channels: Mapping[str, float] | None = None
+    bound_factor: float = 3.0
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    priors: Mapping[str, float] = field(default_factory=dict)
+    segment: float | None = None
+    burn_in: float = 0.0
+    windows: Sequence[tuple[float, float] | None] | None = None
+    residual_level: float = 0.05
+    correlation_time: float = 0.05
+    max_nfev: int = 30
+    fd_step: float = 1e-2
+    global_stage: bool = False
+    popsize: int = 6
+    maxiter: int = 8
+    seed: int = 0
+    derivative_half_width: int = 10
+    corr_warn: float = 0.95
+    max_batch: int = 64
+    threads: int | None = None
+    ftol: float | None = 1e-6
+    xtol: float = 1e-6
+    polish: bool = False
+    estimate_states: bool = True
+    quantise: bool = False
+    initial: str = "log"
+    substeps: int | None = None
+    ties: Mapping[str, str] = field(default_factory=dict)
+    linear: Sequence[str] = ()
+    period_tolerance: float = 1e-4
+    continuous: bool = False
+    continuation: bool = True
+    delay_search: Any = None
+    restarts: int = 2
+
+    def check(self) -> None:
+        if not self.bound_factor > 1:
+            raise ValueError(
+                f"ScenarioFitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
+                "(bounds p0/f … p0·f)"
+            )
+        for name in ("residual_level", "correlation_time", "fd_step"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"ScenarioFitOptions.{name} = {v!r}: must be a finite number > 0")
+        if self.initial not in ("log", "scenario"):
+            raise ValueError(
+                f"ScenarioFitOptions.initial = {self.initial!r}: 'log' (segments start "
+                "from the logged state) or 'scenario' (a log's first sample "
+                "starts from the scenario's [initial] state)"
+            )
+        if (
+            self.continuous
+            and self.windows is not None
+            and any(w is not None for w in self.windows)
+        ):
+            raise ValueError(
+                "ScenarioFitOptions: continuous (consecutive pieces of one run) runs "
+                "whole logs; leave out windows (--window)"
+            )
+        if self.segment is not None and not self.segment > 0:
+            raise ValueError(
+                f"ScenarioFitOptions.segment = {self.segment!r} s: give a length > 0 s "
+                "(e.g. 2–5 s) or None for whole logs"
+            )
+        for p, s in self.priors.items():
+            if not (s > 0 and math.isfinite(s)):
+                raise ValueError(
+                    f"ScenarioFitOptions.priors[{p!r}] = {s!r}: the relative standard "
+                    "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)"
+                )

@@ -40,7 +40,7 @@ This is the one entry: the servo rig's own replay and its loop's prediction are 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +53,7 @@ from flexarm.identification.time_domain.figures import (  # re-exported (the fig
     write_overlays,
 )
 from flexarm.identification.time_domain.options import PredictOptions
+from flexarm.identification.time_domain.result import Prediction  # re-exported
 
 __all__ = [
     "Prediction",
@@ -63,71 +64,6 @@ __all__ = [
     "rig_trace",
     "RIG_DISPLAY",
 ]
-
-
-@dataclass
-class Prediction:
-    """fit % per log key and signal (None where the log lacks the signal), the traces
-    (per key: ``time`` s from the log's first sample, ``measured`` and ``simulated`` per
-    signal; optionally ``reference``, drawn in the first panel, and ``display``, signal →
-    (unit, factor) for the figure's axis), warnings and notes, per-log divergence and any
-    figures written."""
-
-    scenario: str
-    fit_percent: dict[str, dict[str, float | None]]
-    traces: dict[str, dict[str, Any]] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-    diverged: dict[str, bool] = field(default_factory=dict)
-    plots: list[str] = field(default_factory=list)
-    #: per log key and signal: RMSE in the signal's SI unit, and RMSE / (max − min)
-    rmse: dict[str, dict[str, float]] = field(default_factory=dict)
-    nrmse: dict[str, dict[str, float | None]] = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        """JSON-ready: scenario, fit %, RMSE (SI), NRMSE, divergence, warnings, notes,
-        figures (no traces)."""
-        from flexarm.identification.time_domain.result import finite
-
-        return finite(
-            {
-                "scenario": self.scenario,
-                "fit_percent": self.fit_percent,
-                "rmse": self.rmse,
-                "nrmse": self.nrmse,
-                "diverged": self.diverged,
-                "warnings": self.warnings,
-                "notes": self.notes,
-                "plots": [str(p) for p in self.plots],
-            }
-        )
-
-    def _table(self):
-        from flexarm.display import Table
-
-        sigs = list(dict.fromkeys(k for per in self.fit_percent.values() for k in per))
-        rows = [(key, *(per.get(s) for s in sigs)) for key, per in self.fit_percent.items()]
-        notes = [f"{k} diverged" for k, bad in self.diverged.items() if bad]
-        notes += [f"warning: {w}" for w in self.warnings] + list(self.notes)
-        return Table(
-            f"Prediction by {self.scenario}: fit % per log and signal",
-            rows,
-            header=("log", *sigs),
-            notes=notes,
-        )
-
-    def __repr__(self) -> str:
-        return self._table().text()
-
-    def _repr_html_(self) -> str:
-        return self._table().html()
-
-    def __getitem__(self, key: str):
-        """Deprecated dict access (``validate(...)["fit_percent"]``), as the old
-        validators returned dicts."""
-        if key in ("fit_percent", "diverged", "warnings", "notes", "plots", "scenario", "traces"):
-            return getattr(self, key)
-        raise KeyError(key)
 
 
 def _rig_logs(logs, controller) -> bool:

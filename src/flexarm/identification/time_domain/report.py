@@ -825,7 +825,7 @@ def overlay_plots(directory, logs, traj, fit_percent, tag: str, label: str | Non
     engines' (hub angle, tip deflection, command) arrays, one row per log; ``label`` the
     figures' title after the key (default: ``tag``)."""
     from flexarm.identification.time_domain.figures import rig_trace, write_overlays
-    from flexarm.identification.time_domain.predict import Prediction
+    from flexarm.identification.time_domain.result import Prediction
 
     keys = log_keys(logs)
     traces = {

@@ -38,14 +38,12 @@ for the held-out predictions).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from flexarm.identification.time_domain.general import (
-    ScenarioFit,
     ScenarioFitOptions,
     predict_scenario,
 )
@@ -148,41 +146,19 @@ def default_options(**kw) -> ScenarioFitOptions:
     return ScenarioFitOptions(**base)
 
 
-def fit_two_link(
-    data: str | Path,
-    examples: str | Path,
-    *,
-    friction: bool = True,
-    options: ScenarioFitOptions | None = None,
-    progress: Callable[[str], None] | None = None,
-) -> ScenarioFit:
-    """The fit of the split (module docstring) through the one engine
-    (:func:`flexarm.identification.time_domain.engine.fit` on
-    :func:`~flexarm.identification.time_domain.presets.two_link`); ``friction=False`` fits
-    the rig without joint friction (its friction parameters are then not free);
-    ``options``: the engine's flat options replacing the preset's."""
-    from flexarm.identification.time_domain import engine, presets
-    from flexarm.identification.time_domain.options import FitOptions as Grouped
+def split_fit_inputs(data: str | Path, examples: str | Path) -> tuple[list, Any]:
+    """The split's fit through the one front door: ``(logs, options)`` for
+    ``flexarm.fit(presets.two_link(), logs, options=options)`` (module docstring): the
+    102 s run (its first :data:`FIT_WINDOW`) and the fitted steps (whole), windows in
+    :class:`~flexarm.identification.time_domain.options.FitOptions`; no whole-run
+    prediction at the end (``held_out_report`` predicts the held-out data). Replaces
+    ``fit_two_link`` (the fit from inside the preset's module, an import circle)."""
+    from flexarm.identification.time_domain.options import FitOptions
 
     logs = load_split(data, examples)
-    preset = presets.two_link(friction)
-    if options is not None:
-        if not friction:
-            options.priors = {k: v for k, v in options.priors.items() if "friction" not in k}
-            options.bounds = {k: v for k, v in options.bounds.items() if "friction" not in k}
-        preset.options = options
+    fitted = [logs["run"], *logs["fit_steps"]]
     wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
-    # the two-link preset runs the general engine: a ScenarioFit (not the servo rig's result)
-    return cast(
-        ScenarioFit,
-        engine.fit(
-            preset,
-            [logs["run"]] + logs["fit_steps"],
-            None,
-            Grouped(windows=wins, predict=False),
-            progress=progress,
-        ),
-    )
+    return fitted, FitOptions(windows=wins, predict=False)
 
 
 def held_out_report(
