@@ -1,6 +1,7 @@
 """Time the one fit (flexarm.fit on the two-link preset) of the real two-link rig
 (issue #17's must-show split): fit on the first 50 s of the 102 s run with the staircase
-steps to 5°, −10°, 20°, −30°; validate on the last 52 s and on the other steps (−5°, 10°, −20°, 30°, return to 0°).
+steps to 5°, −10°, 20°, −30°; validate on the last 52 s and on the other steps (−5°, 10°,
+−20°, 30°, return to 0°).
 
     PYTHONPATH=src python benchmarks/bench_two_link_fit.py [--no-friction] [--json OUT]
 
