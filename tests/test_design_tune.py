@@ -233,41 +233,40 @@ def unit7(rotary_whole_fit):
 
 @pytest.mark.slow
 def test_plants_from_fit_moments(unit6):
-    """2000 draws from unit 6's fit, in the fit's unit coordinates (eq. (1)): mean within
-    3 σ/√N and std within 3 σ/√(2N) (normal) of the fit's, for every coordinate the data
-    determine; the held ones (a breakaway excess at its bound) equal the fit; the physical
-    medians equal the fitted values within 3 · 1.2533 σ/√N (a monotone map keeps the
-    median); every draw physical (check_physical, friction levels >= 0)."""
-    from flexarm.identification.time_domain.report import check_physical
-
+    """2000 draws from unit 6's fit, its one result keyed by the scenario's paths (#43: the
+    covariance carried onto the paths by the map's Jacobian): for every path the data
+    determine, ln p has mean within 3 σ/√N of the fitted ln p and std within 3 σ/√(2N) of
+    the fit's relative std σ (normal in ln p, eq. (1) of design.plants); the held ones (a
+    breakaway excess at its bound) equal the fit; the most correlated pair (|ρ| < 0.99)
+    keeps its correlation within 3 (1 − ρ²)/√N (the sample correlation's standard error);
+    every draw physical (friction levels >= 0, breakaway >= Coulomb)."""
     n = 2000
-    b = pl.from_fit(unit6, n, seed=5)
-    cov = np.asarray(unit6.stages["local"]["covariance_unit"])
-    su = np.sqrt(np.diag(cov))
-    U = np.asarray(unit6.unit)
+    one = unit6.result()
+    b = pl.from_fit(one, n, seed=5)
     held = set(b.info["held"])
     assert b.info["rejected_fraction"] < 0.01
-    for i, name in enumerate(b.names):
-        z = b.coordinates[:, i]
+    names = list(one.free)
+    assert "arm.motor.inertia" in names and "hub_inertia" not in names
+    for name in names:
+        v, p = np.asarray(b.values[name]), one.params[name]
         if name in held:
-            assert np.all(z == U[i]) and su[i] > pl.UNDETERMINED
+            assert np.all(v == p), name
             continue
-        assert abs(z.mean() - U[i]) <= 3 * su[i] / math.sqrt(n), name
-        assert abs(z.std(ddof=1) - su[i]) <= 3 * su[i] / math.sqrt(2 * n), name
-        med = float(np.median(b.values[name]))
-        sp = su[i] * abs(float(unit6.space.defs[i].dphys_du(U[i])))
-        assert abs(med - unit6.params[name]) <= 3 * 1.2533 * sp / math.sqrt(n) + 1e-15, name
-    # the covariance is used: the most correlated pair of drawn coordinates keeps its
-    # correlation within 3 (1 − ρ²)/√N (the sample correlation's standard error)
-    free = [i for i, nm in enumerate(b.names) if nm not in held]
-    R = cov[np.ix_(free, free)] / np.outer(su[free], su[free])
-    i, j = np.unravel_index(np.argmax(np.abs(R - np.eye(len(free)))), R.shape)
+        s = abs(one.std[name] / p)
+        z = np.log(v / p)
+        assert abs(z.mean()) <= 3 * s / math.sqrt(n), name
+        assert abs(z.std(ddof=1) - s) <= 3 * s / math.sqrt(2 * n), name
+    free = [i for i, nm in enumerate(names) if nm not in held]
+    R = np.asarray(one.correlation, float)[np.ix_(free, free)]
+    off = np.where(np.abs(R) < 0.99, np.abs(R - np.eye(len(free))), 0.0)
+    i, j = np.unravel_index(np.argmax(off), R.shape)
     rho = R[i, j]
-    r_hat = np.corrcoef(b.coordinates[:, free[i]], b.coordinates[:, free[j]])[0, 1]
+    zi = np.log(np.asarray(b.values[names[free[i]]]) / one.params[names[free[i]]])
+    zj = np.log(np.asarray(b.values[names[free[j]]]) / one.params[names[free[j]]])
+    r_hat = np.corrcoef(zi, zj)[0, 1]
     assert abs(rho) > 0.5 and abs(r_hat - rho) <= 3 * (1 - rho**2) / math.sqrt(n), (rho, r_hat)
-    for j in range(0, n, 97):
-        check_physical({k: float(v[j]) for k, v in b.values.items()}, source=f"draw {j}")
-        sc = b.scenarios[j]
+    for k in range(0, n, 97):
+        sc = b.scenarios[k]
         assert sc.arm.friction.coulomb >= 0 and sc.arm.friction.static >= sc.arm.friction.coulomb
 
 

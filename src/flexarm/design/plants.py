@@ -337,6 +337,8 @@ def from_fit(
     independently (:func:`from_paths`), and a warning says so."""
     if n < 1:
         raise ValueError(f"n = {n}: the number of plants must be >= 1")
+    if callable(getattr(result, "result", None)) and hasattr(result, "space"):
+        result = result.result()  # the servo pipeline's own result: its one FitResult
     scenario: Any = getattr(result, "scenario", None)
     if callable(scenario) and not hasattr(scenario, "model_dump"):
         scenario = scenario()  # the servo pipeline's own result builds it (deprecated)

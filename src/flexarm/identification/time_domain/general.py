@@ -1020,6 +1020,8 @@ def fit_scenario(
     say = progress or (lambda msg: None)
     z0 = np.zeros(n)
     stages: dict[str, Any] = {"segments": len(eng.seg), "segment_samples": eng.M}
+    if eng.tied:  # path -> the free path it moves with (design.plants.from_fit reads it)
+        stages["ties"] = {p: eng.free[i] for p, (i, _) in eng.tied.items()}
     if eng.linear.any():  # signed parameters, fitted as p0 + s·z (their std is s·σ_z)
         stages["linear"] = [p for i, p in enumerate(eng.free) if eng.linear[i]]
     if eng.notes:
