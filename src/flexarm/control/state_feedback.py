@@ -43,6 +43,9 @@ class StateFeedback(Controller):
     angle: str = eqx.field(static=True, default="motor_angle")
     deflection: str | None = eqx.field(static=True, default="tip_deflection")
     reference: str = eqx.field(static=True, default="reference")
+    #: reference-like input channels carrying K1..K4 at each sample (a logged gain
+    #: schedule); None: ``gains`` throughout
+    gain_signals: tuple[str, ...] | None = eqx.field(static=True, default=None)
 
     @property
     def measured_signals(self) -> tuple[str, ...]:
@@ -64,7 +67,10 @@ class StateFeedback(Controller):
         else:
             th_dot = (self.tau * state[2] + th - th_prev) / (self.tau + self.dt)
             d_dot = (self.tau * state[3] + d - d_prev) / (self.tau + self.dt)
-        k = self.gains
+        if self.gain_signals:  # the gains of this sample (a logged schedule)
+            k = jnp.stack([jnp.asarray(reference[n], th.dtype) for n in self.gain_signals])
+        else:
+            k = self.gains
         u = k[0] * (reference[self.reference] - th) - k[1] * d - k[2] * th_dot - k[3] * d_dot
         new = jnp.stack([th, d, th_dot, d_dot, jnp.ones_like(th)])
         return new, jnp.reshape(u, (1,))
@@ -129,8 +135,9 @@ def hub_pd(
 
 
 def from_spec(spec, dt: float) -> StateFeedback:
-    """The controller of a :class:`~flexarm.specs.controllers_bench.StateFeedbackController`."""
-    return state_feedback(
+    """The controller of a :class:`~flexarm.specs.controllers_bench.StateFeedbackController`
+    (with ``gain_signals``: K1..K4 read per sample from those input channels)."""
+    c = state_feedback(
         spec.k1,
         spec.k2,
         spec.k3,
@@ -139,3 +146,9 @@ def from_spec(spec, dt: float) -> StateFeedback:
         rate=spec.rate,
         rate_time_constant=spec.rate_time_constant,
     )
+    sig = getattr(spec, "gain_signals", None)
+    if sig:
+        c = StateFeedback(
+            c.gains, c.dt, c.tau, c.rate, c.angle, c.deflection, c.reference, tuple(sig)
+        )
+    return c

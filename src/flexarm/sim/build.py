@@ -298,6 +298,12 @@ def _references(scenario: Scenario, t: np.ndarray, extra) -> dict[str, np.ndarra
     refs.update({k: reference_signal(r, t) for k, r in scenario.references.items()})
     if getattr(scenario.controller, "type", None) == "nested":
         refs["feedforward"] = nested_feedforward(scenario.controller, scenario.reference, t)
+    c = scenario.controller
+    gs = getattr(c, "gain_signals", None)
+    if gs:  # a logged gain schedule: the declared gains where no array is given
+        ks = tuple(getattr(c, f"k{i}") for i in range(1, 5))
+        for name, k in zip(gs, ks, strict=True):
+            refs[name] = np.full_like(t, float(k), dtype=float)
     refs.update(extra or {})
     for d in scenario.disturbances:  # no array given: the disturbance is 0
         refs.setdefault(d.name, np.zeros_like(t))

@@ -35,6 +35,11 @@ class StateFeedbackController(Spec):
     k4: Q("", what="V*s/m on the tip-deflection rate") = 0.0
     rate: Literal["backward", "filtered"] = "backward"
     rate_time_constant: Q("s", ge=0, what="filter time constant of the filtered rate") = 0.0
+    #: names of four input channels (like references: arrays at the samples, e.g. a log's
+    #: gain columns) carrying K1..K4 per sample: a law whose gains change during the run
+    #: (a lab's logger records them); k1..k4 are then the gains at the first sample and the
+    #: channels default to them where no array is given. None: k1..k4 throughout
+    gain_signals: tuple[str, str, str, str] | None = None
 
     @property
     def measured(self) -> str:

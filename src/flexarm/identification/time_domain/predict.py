@@ -42,7 +42,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -103,7 +103,7 @@ def predict(model: Any, logs: Sequence[Any], options: PredictOptions | None = No
             "predict: this fit result has no fitted scenario (an interrupted fit); "
             "predict with a scenario"
         )
-    sc = sc if isinstance(sc, Scenario) else load_scenario(sc)
+    sc = sc if isinstance(sc, Scenario) else load_scenario(cast("str | Path", sc))
     if cfile is not None:
         sc = sc.with_controllers(cfile)
         opts = replace(opts, controller=None)
@@ -158,14 +158,14 @@ def controller_file(value: Any):
     return None
 
 
-def _gain_warning(key: str, log) -> list[str]:
+def _gain_note(key: str, log) -> list[str]:
     segs = log.gain_segments
     if len(segs) <= 1:
         return []
     t = [round(float(log.time[a] - log.time[0]), 3) for a, _ in segs[1:]]
     return [
         f"{key}: the logged gains change inside the log (at {', '.join(map(str, t))} s); "
-        "the prediction runs the law of its first sample throughout"
+        "the law ran with the logged gains of each sample"
     ]
 
 
@@ -186,6 +186,12 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
         runs = []
         for g, w in zip(logs, wins, strict=True):
             law = g.controller.model_dump(mode="json", exclude_none=True)
+            if g.gains is not None and len(g.gain_segments) > 1:  # a schedule in the log
+                names = tuple(f"gain_K{i}" for i in range(1, 5))
+                law["gain_signals"] = list(names)
+                sig = dict(g.signals)
+                sig.update({n: np.asarray(g.gains[:, i], float) for i, n in enumerate(names)})
+                g = replace(g, signals=sig)
             one = sc.with_controllers({"controller": law}, source=f"{g.where}: declared law")
             runs.append((one, [g], [w]))
     else:
@@ -247,8 +253,7 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
                 traces[k]["display"] = {
                     c: RIG_DISPLAY[c] for c in tr["simulated"] if c in RIG_DISPLAY
                 }
-                w = gw[group.index(g)]
-                warnings += _gain_warning(k, g if w is None else g.window(*w))
+
     pred = Prediction(
         sc.name,
         fp,
@@ -262,6 +267,8 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     warnings += [f"{k}: the simulated loop diverged" for k, bad in diverged.items() if bad]
     if own_law:
         pred.notes.append("each log ran with the law it declares (its logged gains)")
+        for k, g in zip(keys, logs, strict=True):
+            pred.notes += _gain_note(k, g)
     if opts.continuous:
         pred.notes.append(
             f"continuous: the {len(keys)} logs replayed as consecutive pieces "
