@@ -137,13 +137,13 @@ def _servo_rig(preset: Preset, logs, options, progress):
         # the one prediction of the fitted logs (windows) by the fitted scenario, each
         # log's start state estimated as the fit estimates it; the rig loop's own figures
         # (its jointly estimated starts) stay in stages["servo_rig"]["loop_fit_percent"]
-        from flexarm.identification.time_domain.options import PredictOptions
-        from flexarm.identification.time_domain.predict import predict
-
         if progress:
             progress("predicting the fitted logs with the written scenario")
-        # the whole logs with the fit's windows, as `flexarm validate --window` reads them
-        pred = predict(res.scenario, whole, PredictOptions(windows=opts.windows))
+        # the whole logs with the fit's windows, as `flexarm validate --window` reads them;
+        # several sessions: each log by its session's scenario (its friction and bias)
+        sess = list(rig.sessions) if rig.sessions is not None else [0] * len(whole)
+        res.session_scenarios = session_scenarios(res, max(sess) + 1)
+        pred = _predict_sessions(res.session_scenarios, whole, sess, opts.windows)
         res.stages.setdefault("servo_rig", {})["loop_fit_percent"] = res.fit_percent
         res.stages["prediction"] = {"initial": "estimate", "notes": pred.notes}
         res.fit_percent = res.engine_result.fit_percent = pred.fit_percent
@@ -161,6 +161,60 @@ def _servo_rig(preset: Preset, logs, options, progress):
     if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
     return res
+
+
+def session_scenarios(res: FitResult, n: int) -> list:
+    """The fitted scenario of each of ``n`` sessions: session 0's is the result's; a later
+    session's is it with that session's own values (``sessions[s].PATH`` in the result's
+    params: the servo rig's per-session friction and bias)."""
+    from flexarm.specs.paths import scenario_with
+
+    out = [res.scenario]
+    for s_ in range(1, n):
+        pre = f"sessions[{s_}]."
+        own = {p[len(pre) :]: v for p, v in res.params.items() if p.startswith(pre)}
+        out.append(scenario_with(res.scenario, own) if own else res.scenario)
+    if n > 1:
+        out = [
+            sc.model_copy(update={"name": f"{sc.name}-session{s_}" if s_ else sc.name})
+            for s_, sc in enumerate(out)
+        ]
+    return out
+
+
+def _predict_sessions(scenarios: list, logs: list, sess: list[int], windows):
+    """The one prediction of each log by its session's scenario, merged in the logs'
+    order (one prediction when there is one session)."""
+    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.predict import predict
+
+    wins = list(windows) if windows is not None else [None] * len(logs)
+    if len(set(sess)) <= 1:
+        return predict(scenarios[sess[0] if sess else 0], logs, PredictOptions(windows=wins))
+    from flexarm.io.logs import log_keys
+
+    keys = log_keys(logs)
+    parts = {}
+    for s_ in sorted(set(sess)):
+        idx = [i for i, x in enumerate(sess) if x == s_]
+        pr = predict(
+            scenarios[s_], [logs[i] for i in idx], PredictOptions(windows=[wins[i] for i in idx])
+        )
+        for i, k in zip(idx, pr.fit_percent, strict=True):
+            parts[i] = (pr, k)
+    first = parts[0][0]
+    merged = Prediction(
+        first.scenario,
+        {keys[i]: parts[i][0].fit_percent[parts[i][1]] for i in range(len(logs))},
+        {keys[i]: parts[i][0].traces[parts[i][1]] for i in range(len(logs))},
+        warnings=list(dict.fromkeys(w for p, _ in parts.values() for w in p.warnings)),
+        notes=list(dict.fromkeys(n for p, _ in parts.values() for n in p.notes))
+        + [f"session {s_}: its own friction and bias" for s_ in sorted(set(sess))],
+        diverged={keys[i]: parts[i][0].diverged.get(parts[i][1], False) for i in range(len(logs))},
+        rmse={keys[i]: parts[i][0].rmse[parts[i][1]] for i in range(len(logs))},
+        nrmse={keys[i]: parts[i][0].nrmse[parts[i][1]] for i in range(len(logs))},
+    )
+    return merged
 
 
 #: fit % under which a signal's prediction is called low / not described by the model

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -67,6 +67,9 @@ class FitResult:
     #: NRMSE (RMSE over the signal's range), of the same prediction
     rmse: dict[str, dict[str, float]] = field(default_factory=dict)
     nrmse: dict[str, dict[str, float | None]] = field(default_factory=dict)
+    #: a fit over several sessions of one rig: each session's fitted scenario (session 0's
+    #: is ``scenario``); :meth:`write_scenario` writes the later ones beside it
+    session_scenarios: list[Any] = field(default_factory=list, repr=False, compare=False)
 
     def _table(self):
         from flexarm.display import Table, fit_percent_lines, parameter_rows
@@ -96,10 +99,28 @@ class FitResult:
         engine's own writer where it has one (the servo rig's commented TOML)."""
         from flexarm.io.write import write_toml
 
-        if self.engine_result is not None and hasattr(self.engine_result, "write_scenario"):
-            return self.engine_result.write_scenario(path, overwrite=overwrite)
+        for q in self.session_paths(path)[1:]:  # every output checked before any is written
+            if Path(q).exists() and not overwrite:
+                from flexarm.errors import OutputExistsError
 
-        return write_toml(path, drop_none(self.scenario.model_dump()), overwrite=overwrite)
+                raise OutputExistsError(f"{q}: exists already; not overwritten (pass overwrite)")
+        if self.engine_result is not None and hasattr(self.engine_result, "write_scenario"):
+            out = self.engine_result.write_scenario(path, overwrite=overwrite)
+        else:
+            data = cast(dict, drop_none(self.scenario.model_dump()))
+            out = write_toml(path, data, overwrite=overwrite)
+        for q, sc in zip(self.session_paths(path)[1:], self.session_scenarios[1:], strict=True):
+            more = cast(dict, drop_none(sc.model_dump()))
+            write_toml(q, more, overwrite=overwrite)
+        return out
+
+    def session_paths(self, path: str | Path) -> list[Path]:
+        """Where :meth:`write_scenario` writes each session's scenario: ``path`` for session
+        0, ``STEM.session1.toml`` ... beside it for the later ones (one path without
+        sessions)."""
+        p = Path(path)
+        n = max(1, len(self.session_scenarios))
+        return [p] + [p.with_name(f"{p.stem}.session{s}{p.suffix}") for s in range(1, n)]
 
     def to_dict(self) -> dict:
         """The ``--json`` document (non-finite numbers, e.g. the std of an undetermined
