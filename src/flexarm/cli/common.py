@@ -142,12 +142,19 @@ def check_file_option(
 
 
 def outdir(out: Path, overwrite: bool, option: str = "--out") -> Path:
-    """An output folder, created; a non-empty one only with --overwrite."""
+    """An output folder, created; a non-empty one only with --overwrite; locked for this
+    command (:func:`flexarm.io.write.output_folder`): a second run writing into it at the
+    same time is refused."""
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import output_folder as _folder
+
     check_dir_option(option, out)
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    try:
+        return _folder(out, overwrite=overwrite)
+    except FlexarmError as exc:
+        if "holds files already" in str(exc):
+            fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
+        fail(f"{option} {exc}")
 
 
 def command_line(ctx: typer.Context) -> str:
@@ -237,7 +244,7 @@ def guarded(*paths):
         err.print(f"{name} again: finishing the writing of the result first", highlight=False)
 
     try:
-        with write.interruptible(on_repeat=again) as state, write.inputs(files):
+        with write.interruptible(on_repeat=again) as state, write.inputs(files), write.run_scope():
             yield state
     except Interrupted as exc:
         err.print(f"interrupted by {exc.signal}", highlight=False)

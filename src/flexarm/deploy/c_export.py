@@ -1278,7 +1278,7 @@ def export_c(
     code = generate_c(sc, name=name, precision=precision, method=method, source=label)
     failures = []
     if verdict is not None and verdict != "stable":
-        failures.append(f"design verdict: {verdict}")
+        failures.append(f"the design gate's verdict is not stable: {verdict}")
     if check:
         from flexarm.deploy.stability import nominal_check
 
@@ -1299,7 +1299,7 @@ def export_c(
             "#warning in the header",
         )
     for f in failures:
-        code = _with_warning(code, f"{what}: {f}")
+        code = _with_warning(code, f"{what}: {f}".replace("the design gate's verdict is not stable", "design verdict"))
     return code, code.write(out, overwrite=overwrite)
 
 
