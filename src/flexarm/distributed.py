@@ -292,6 +292,14 @@ def client_for(
                 dashboard_address=o.dashboard_address,  # pyright: ignore[reportArgumentType]
                 memory_limit=o.memory_limit,
                 env=worker_environment(o),
+                # dask's scheduler starts its HTTP server on :8787 even without a dashboard
+                # (dashboard_address None falls back to that port): bind it to a free port
+                # on the loopback host instead, with no dashboard (issue #45)
+                scheduler_kwargs=(
+                    {"dashboard": False, "dashboard_address": f"{o.host}:0"}
+                    if o.dashboard_address is None
+                    else None
+                ),
             )
         client = Client(cluster, set_as_default=False)
         # close() closes the cluster too (a flag of flexarm's on dask's Client)
