@@ -1220,8 +1220,7 @@ def fit_many_todo(rows, out: Path, manifest: Path | None, overwrite: bool = Fals
 
     summary = out / "summary.csv"
     if manifest is not None and (
-        summary.resolve() == manifest.resolve()
-        or (summary.exists() and summary.samefile(manifest))
+        summary.resolve() == manifest.resolve() or (summary.exists() and summary.samefile(manifest))
     ):
         raise InputOverwriteError(
             f"--out {out}: its summary.csv is the manifest {manifest}; fit-many writes "
@@ -1258,8 +1257,7 @@ def fit_many_todo(rows, out: Path, manifest: Path | None, overwrite: bool = Fals
                 f"{out / r.id / 'fit.json'}: a finished fit of another row (its logs, "
                 "scenario or options differ from the manifest's row id "
                 f"{r.id!r}); not written over",
-                fix="pass --overwrite (overwrite=True) to fit the row again, or give "
-                "another --out",
+                fix="pass --overwrite (overwrite=True) to fit the row again, or give another --out",
             )
         todo.append(r)
     return todo

@@ -270,6 +270,20 @@ def guarded_command(*names: str):
     return deco
 
 
+def distinct_outputs(*outputs: tuple[str, Path | None]) -> None:
+    """A command's output files (option, path) checked together before any work
+    (:func:`flexarm.io.write.check_outputs`): two options on one path (``--json o/a
+    --scenario-out o/a``) or an output that is an input of the run are refused as one line;
+    each file's own checks are :func:`check_file_option`'s."""
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import check_outputs
+
+    try:
+        check_outputs(outputs, overwrite=True)
+    except FlexarmError as exc:
+        fail(str(exc))
+
+
 def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | None:
     """A figure (or other output) folder, checked and created before any work by
     :func:`flexarm.io.write.output_folder`: a folder holding files only with --overwrite,

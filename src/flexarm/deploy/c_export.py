@@ -856,7 +856,9 @@ def c_comment(text: Any, limit: int = COMMENT_TEXT_MAX) -> str:
     spaces, ``*/`` and ``/*`` lose their meaning (``*_/``, ``/_*``), trigraph ``??``
     becomes ``?_?``, a trailing backslash is dropped; longer than ``limit`` characters:
     cut, ``...`` added."""
-    s = "".join(" " if (ch < " " or ch == "\x7f" or ch in "\u2028\u2029") else ch for ch in str(text))
+    s = "".join(
+        " " if (ch < " " or ch == "\x7f" or ch in "\u2028\u2029") else ch for ch in str(text)
+    )
     if len(s) > limit:
         s = s[:limit] + "..."
     while "*/" in s or "/*" in s or "??" in s:
@@ -1299,7 +1301,10 @@ def export_c(
             "#warning in the header",
         )
     for f in failures:
-        code = _with_warning(code, f"{what}: {f}".replace("the design gate's verdict is not stable", "design verdict"))
+        code = _with_warning(
+            code,
+            f"{what}: {f}".replace("the design gate's verdict is not stable", "design verdict"),
+        )
     return code, code.write(out, overwrite=overwrite)
 
 

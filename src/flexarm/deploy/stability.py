@@ -149,12 +149,15 @@ def loop_matrix(scenario, controller=None) -> tuple[np.ndarray, int]:
         if nd:
             ys = y[jnp.asarray(digital)]
             v = jnp.sum(jnp.asarray(sens.fC) * xd, axis=-1) + jnp.asarray(sens.fD) * ys
-            xd_new = jnp.einsum("ijk,ik->ij", jnp.asarray(sens.fA), xd) + jnp.asarray(
-                sens.fB
-            ) * ys[:, None]
+            xd_new = (
+                jnp.einsum("ijk,ik->ij", jnp.asarray(sens.fA), xd)
+                + jnp.asarray(sens.fB) * ys[:, None]
+            )
             y = y.at[jnp.asarray(digital)].set(v)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
-        meas = {nm: sbuf[d, c] for c, (nm, d) in enumerate(zip(sens.names, sens.delays, strict=True))}
+        meas = {
+            nm: sbuf[d, c] for c, (nm, d) in enumerate(zip(sens.names, sens.delays, strict=True))
+        }
         cstate, u_c = ctrl.step(eqx.combine(cf, cstatic), meas, refs0)
         cf_new, cstatic_new = eqx.partition(cstate, eqx.is_inexact_array)
         ubuf = jnp.concatenate([jnp.reshape(u_c, (1, m)), ubuf[:-1]], axis=0)
@@ -192,9 +195,7 @@ def nominal_check(scenario, controller=None, *, tolerance: float = 1e-6) -> Nomi
     if not np.isfinite(r):
         raise ValueError("the linearised loop has non-finite entries")
     stable = r <= 1.0 + tolerance
-    notes = [
-        "linear check at rest: saturation, quantisation, noise and Coulomb friction left out"
-    ]
+    notes = ["linear check at rest: saturation, quantisation, noise and Coulomb friction left out"]
     if stable:
         verdict = "stable"
     else:
