@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
+from flexarm.errors import FlexarmError, InputOverwriteError, Interrupted, OutputExistsError
 
 __all__ = [
     "atomic_open",
@@ -83,6 +83,9 @@ __all__ = [
     "run_scope",
     "lock_folder",
     "LOCK_NAME",
+    "read_input",
+    "InputFileError",
+    "MAX_TEXT_INPUT",
 ]
 
 
@@ -460,6 +463,44 @@ def lock_folder(folder: str | os.PathLike) -> Path | None:
         f.write(f"pid {os.getpid()}\n")
     held.append(lock)
     return lock
+
+
+# ------------------------------------------------------------------ bounded reading
+#: the largest text input (log, log format, manifest, JSON document) read, bytes
+MAX_TEXT_INPUT = 1 << 30
+
+
+def read_input(
+    path: str | os.PathLike, *, limit: int = MAX_TEXT_INPUT, what: str = "file"
+) -> bytes:
+    """The bytes of the input file ``path``, read only when it is a regular file (not
+    ``/dev/zero``, a pipe or a device, which could be read until memory runs out) of at
+    most ``limit`` bytes; otherwise :class:`flexarm.errors.FlexarmError` (a ``ValueError``)
+    naming the file. A missing file raises ``FileNotFoundError``."""
+    import stat
+
+    p = Path(path)
+    st = p.stat()  # FileNotFoundError for a missing file
+    if not stat.S_ISREG(st.st_mode):
+        raise InputFileError(
+            f"{p}: not a regular file (a device, pipe or folder); give the {what} itself",
+            file=p,
+        )
+    if st.st_size > limit:
+        raise InputFileError(
+            f"{p}: {st.st_size} bytes, more than the {limit} bytes a {what} may have",
+            file=p,
+            fix="split it, or check that it is the right file",
+        )
+    with open(p, "rb") as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:  # grew while read
+        raise InputFileError(f"{p}: more than {limit} bytes; not read", file=p)
+    return data
+
+
+class InputFileError(FlexarmError, ValueError):
+    """An input file that is not read (:func:`read_input`): not a regular file, or too large."""
 
 
 # ------------------------------------------------------------------ unique result keys
