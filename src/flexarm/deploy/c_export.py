@@ -852,12 +852,13 @@ def _c_name(name: str) -> str:
 
 def c_comment(text: Any, limit: int = COMMENT_TEXT_MAX) -> str:
     """``text`` (a scenario's name, a channel's, a file's) made safe inside a C ``/* */``
-    comment: the one escaper of the export. Control characters (newline, NUL, ...) become
-    spaces, ``*/`` and ``/*`` lose their meaning (``*_/``, ``/_*``), trigraph ``??``
-    becomes ``?_?``, a trailing backslash is dropped; longer than ``limit`` characters:
-    cut, ``...`` added."""
+    comment: the one escaper of the export. Control characters (newline, NUL, C1 controls
+    such as U+0085, the Unicode line separators) become spaces, ``*/`` and ``/*`` lose
+    their meaning (``*_/``, ``/_*``), trigraph ``??`` becomes ``?_?``, a trailing
+    backslash is dropped; longer than ``limit`` characters: cut, ``...`` added."""
     s = "".join(
-        " " if (ch < " " or ch == "\x7f" or ch in "\u2028\u2029") else ch for ch in str(text)
+        " " if (ch < " " or "\x7f" <= ch <= "\x9f" or ch in "\u2028\u2029") else ch
+        for ch in str(text)
     )
     if len(s) > limit:
         s = s[:limit] + "..."
