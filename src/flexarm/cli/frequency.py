@@ -4,7 +4,6 @@ arm), ``identify`` (G_m, G_b, Coulomb friction from them), ``excite`` (multisine
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import cast
 
@@ -424,11 +423,13 @@ def tfest(
 
     check_file_option("--json", json_out, overwrite, "tfest.json")
     plots = output_folder("--plots", plots, overwrite)
+    d = parsing.json_file(frf_json, "", "an FRF JSON from flexarm frf")
     try:
-        d = json.loads(frf_json.read_text())
         f = np.asarray(d["frequency_hz"], float)
         outs = d["outputs"]
-    except (OSError, ValueError, KeyError) as exc:
+        if not isinstance(outs, dict):
+            raise ValueError("'outputs' is not a table of output channels")
+    except (ValueError, KeyError, TypeError) as exc:
         fail(f"{frf_json}: not an FRF JSON from flexarm frf ({exc})")
     w = 2 * np.pi * f
 
@@ -601,10 +602,10 @@ def friction(
     given = structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
     frfs, fits = [], []
     for path in frf_json:
+        d = parsing.json_file(path, "", "an FRF JSON from flexarm frf")
         try:
-            d = json.loads(path.read_text())
             frf = PeriodicFRF.from_json(d, str(path))
-        except (OSError, ValueError, KeyError, IdentificationError) as exc:
+        except (ValueError, KeyError, TypeError, IdentificationError) as exc:
             fail(f"{path}: not an FRF JSON from flexarm frf ({exc})")
         if not frf.spectra:
             fail(

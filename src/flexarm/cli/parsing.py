@@ -158,15 +158,26 @@ def positive_floats(text: str, option: str, count: int, example: str) -> list[fl
     return vals
 
 
-def json_file(path, option: str) -> dict:
-    """A JSON file given on the command line → its data; unreadable or malformed is one line."""
+def json_file(path, option: str, what: str = "a JSON object") -> dict:
+    """A JSON file given on the command line → its data, a JSON object (``{...}``);
+    unreadable, not a regular file (``/dev/zero``), over 1 GiB, malformed, nested beyond
+    the recursion limit or another JSON value (a list) is one line naming the file."""
     import json
-    from pathlib import Path
+
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import read_input
 
     try:
-        return json.loads(Path(path).read_text())
+        d = json.loads(read_input(path, what="JSON file").decode("utf-8"))
+    except FlexarmError as exc:
+        fail(f"{option} {exc}" if option else str(exc))
+    except RecursionError:
+        fail(f"{option} {path}: nested too deeply to read; give {what}".strip())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        fail(f"{option} {path}: cannot read it as JSON ({exc})")
+        fail(f"{option} {path}: cannot read it as JSON ({exc})".strip())
+    if not isinstance(d, dict):
+        fail(f"{option} {path}: a JSON {type(d).__name__}, not {what}".strip())
+    return d
 
 
 def number(
