@@ -126,3 +126,16 @@ def test_any_float_for_excite_is_a_result_or_one_line(tmp_path_factory, fs, rms)
     assert "internal error" not in r.output
     if r.exit_code == 2:
         assert len([ln for ln in r.stderr.splitlines() if ln.strip()]) == 1
+
+
+@pytest.mark.parametrize("shape", [(0, 0), (0,), (1, 0)])
+def test_an_empty_mat_variable_is_named_not_an_internal_error(tmp_path, shape):
+    import numpy as np
+    import scipy.io as sio
+
+    from flexarm.io.matfile import MatFileError, read_mat
+
+    p = tmp_path / "rec.mat"
+    sio.savemat(p, {"t": np.arange(5) * 1e-3, "u": np.zeros(shape)})
+    with pytest.raises(MatFileError, match=r"\[columns\] voltage = 'u': u is empty"):
+        read_mat(p, {"time": "t", "voltage": "u"})
