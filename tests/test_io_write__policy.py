@@ -221,3 +221,20 @@ def test_fit_refuses_two_outputs_on_one_path_before_the_fit(tmp_path):
     r = runner.invoke(app, ["fit", str(log), "--json", str(a), "--scenario-out", str(a)])
     assert r.exit_code == 2, r.output
     assert "--scenario-out" in r.stderr and "the same path as --json" in r.stderr
+
+
+def test_scenario_from_mat_never_writes_over_its_input(tmp_path):
+    ws = tmp_path / "X.mat"
+    ws.write_bytes(b"MATLAB 5.0 MAT-file, not really")
+    before = ws.read_bytes()
+    r = runner.invoke(app, ["scenario-from-mat", str(ws), "--out", str(ws), "--overwrite"])
+    assert r.exit_code == 2, r.output
+    assert "is an input of this run" in r.stderr and "internal error" not in r.output
+    assert ws.read_bytes() == before
+
+
+def test_demo_refuses_a_folder_holding_files(tmp_path):
+    (tmp_path / "feliu-single-mass.csv").write_text("mine\n")
+    r = runner.invoke(app, ["demo", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "--overwrite" in r.stderr, r.output
+    assert (tmp_path / "feliu-single-mass.csv").read_text() == "mine\n"
