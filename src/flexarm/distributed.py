@@ -1282,8 +1282,7 @@ def fit_many(
     finished fit, only with ``overwrite``; the manifest is never written over."""
     o = options or FitManyOptions()
     manifest = Path(rows) if isinstance(rows, (str, Path)) else None
-    if manifest is not None:
-        rows = read_manifest(manifest)
+    rows = read_manifest(manifest) if manifest is not None else list(cast(Sequence[FitRow], rows))
     out = Path(out)
     todo = fit_many_todo(rows, out, manifest, overwrite)
     out.mkdir(parents=True, exist_ok=True)
@@ -1294,7 +1293,7 @@ def fit_many(
     for r in rows:
         if r not in todo:
             d = finished(out / r.id)
-            assert d is not None  # _check_out kept it as finished
+            assert d is not None  # fit_many_todo kept it as finished
             recs[r.id] = summary_record(r.id, d, status="skipped (finished before)")
     order = [r.id for r in rows]
 

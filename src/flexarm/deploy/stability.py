@@ -126,7 +126,7 @@ def loop_matrix(scenario, controller=None) -> tuple[np.ndarray, int]:
     cstate0 = ctrl.init()
     cfloat0, cstatic0 = eqx.partition(cstate0, eqx.is_inexact_array)
     nd = len(digital)
-    xd0 = jnp.zeros(np.shape(sens.fA)[:2]) if nd else jnp.zeros((0,))
+    xd0 = jnp.zeros(tuple(sens.fA.shape[:2])) if nd and sens.fA is not None else jnp.zeros((0,))
     z0 = (
         jnp.zeros(N),
         cfloat0,
