@@ -231,6 +231,8 @@ def guarded(*paths):
     first signal's name, for a command that catches the interruption itself and exits
     128 + its number).  An interruption that reaches here ends the command with exit
     128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM) and one line on stderr."""
+    import signal as signal_mod
+
     from flexarm.errors import Interrupted
     from flexarm.io import write
 
@@ -246,6 +248,10 @@ def guarded(*paths):
     try:
         with write.interruptible(on_repeat=again) as state, write.inputs(files), write.run_scope():
             yield state
+        name = state.signal or state.deferred
+        if name is not None:  # a signal the command ran through: never exit 0
+            err.print(f"interrupted by {name}", highlight=False)
+            raise typer.Exit(128 + int(getattr(signal_mod.Signals, name)))
     except Interrupted as exc:
         err.print(f"interrupted by {exc.signal}", highlight=False)
         raise typer.Exit(128 + int(exc.number)) from None

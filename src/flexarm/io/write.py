@@ -603,15 +603,43 @@ def save_or_rescue(
 # ------------------------------------------------------------------ signals
 class Interruptible:
     """The state of :func:`interruptible`: ``signal`` (the first signal's name, or None),
-    ``count`` (signals received)."""
+    ``count`` (signals received), ``deferred`` (a first signal delivered again, module
+    doc), ``active`` (the block still runs)."""
 
     def __init__(self):
         self.signal: str | None = None
         self.count = 0
+        #: a first signal that arrived where it could not be raised (module doc), and
+        #: whether the block still runs (a deferred signal is delivered again only then)
+        self.deferred: str | None = None
+        self.active = True
 
     @property
     def interrupted(self) -> bool:
         return self.count > 0
+
+
+_GC_DEPTH = [0]
+
+
+def _gc_phase(phase: str, info: dict) -> None:
+    _GC_DEPTH[0] += 1 if phase == "start" else -1 if _GC_DEPTH[0] > 0 else 0
+
+
+def _unraisable_here(frame) -> bool:
+    """Whether an exception raised at ``frame`` would be dropped by Python (printed as
+    "Exception ignored in ...", never propagated): inside a ``__del__``, a weakref or
+    ``weakref.finalize`` callback, or while the garbage collector runs."""
+    if _GC_DEPTH[0] > 0:
+        return True
+    f, k = frame, 0
+    while f is not None and k < 64:
+        if f.f_code.co_name in ("__del__", "_remove_dead_weakref") or (
+            f.f_code.co_name == "__call__" and "weakref" in f.f_code.co_filename
+        ):
+            return True
+        f, k = f.f_back, k + 1
+    return False
 
 
 @contextlib.contextmanager
@@ -625,8 +653,10 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
     calls ``on_repeat(name)`` (e.g. to print "saving the best result first"), so a second
     Ctrl-C cannot break the writing of the best result.  SIGKILL still ends the process.
     A SIGINT that was ignored when the block began (a job started with ``nohup ... &``)
-    stays ignored.  Outside the main thread nothing is installed.  The previous handlers
-    are restored when the block ends."""
+    stays ignored.  A first signal that arrives where Python would drop the exception (in a
+    ``__del__``, a weakref callback, a garbage collection: JAX frees its buffers there) is
+    delivered again 50 ms later, so it is never swallowed.  Outside the main thread
+    nothing is installed.  The previous handlers are restored when the block ends."""
     state = Interruptible()
     if threading.current_thread() is not threading.main_thread():
         yield state
@@ -634,6 +664,18 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
 
     def handler(signum, frame):
         name = signal.Signals(signum).name
+        if state.count == 0 and _unraisable_here(frame):
+            # a signal that arrives in a __del__ or a garbage-collector callback (JAX frees
+            # buffers there) would be raised where Python prints and drops the exception:
+            # delivered again a moment later, in the code that runs on (issue #45)
+            state.deferred = name
+
+            def again():
+                if state.active and state.count == 0:
+                    os.kill(os.getpid(), signum)
+
+            threading.Timer(0.05, again).start()
+            return
         state.count += 1
         if state.count > 1:
             if on_repeat is not None:
@@ -644,6 +686,9 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
             raise KeyboardInterrupt
         raise Interrupted(f"stopped by {name}", signal=name, number=int(signum))
 
+    import gc
+
+    gc.callbacks.append(_gc_phase)
     old = {}
     for sig in (signal.SIGINT, signal.SIGTERM):
         prev = signal.getsignal(sig)
@@ -654,5 +699,8 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
     try:
         yield state
     finally:
+        state.active = False
+        with contextlib.suppress(ValueError):
+            gc.callbacks.remove(_gc_phase)
         for sig, prev in old.items():
             signal.signal(sig, prev if prev is not None else signal.SIG_DFL)
