@@ -238,3 +238,17 @@ def test_demo_refuses_a_folder_holding_files(tmp_path):
     r = runner.invoke(app, ["demo", "--out", str(tmp_path)])
     assert r.exit_code == 2 and "--overwrite" in r.stderr, r.output
     assert (tmp_path / "feliu-single-mass.csv").read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("cmd", ["fit", "validate"])
+def test_plots_folders_holding_files_are_refused_before_the_work(tmp_path, cmd):
+    plots = tmp_path / "plots"
+    plots.mkdir()
+    (plots / "overlay.png").write_bytes(b"earlier figure")
+    log = tmp_path / "l.csv"
+    log.write_text("time,motor_angle\n")
+    head = ["validate", "feliu-single-mass"] if cmd == "validate" else ["fit"]
+    r = runner.invoke(app, [*head, str(log), "--plots", str(plots)])
+    assert r.exit_code == 2, r.output
+    assert "--plots" in r.stderr and "holds files already" in r.stderr
+    assert (plots / "overlay.png").read_bytes() == b"earlier figure"
