@@ -655,7 +655,8 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
     A SIGINT that was ignored when the block began (a job started with ``nohup ... &``)
     stays ignored.  A first signal that arrives where Python would drop the exception (in a
     ``__del__``, a weakref callback, a garbage collection: JAX frees its buffers there) is
-    delivered again 50 ms later, so it is never swallowed.  Outside the main thread
+    delivered again 50 ms later (once; it then raises wherever it lands), so it is never
+    swallowed.  Outside the main thread
     nothing is installed.  The previous handlers are restored when the block ends."""
     state = Interruptible()
     if threading.current_thread() is not threading.main_thread():
@@ -664,7 +665,7 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
 
     def handler(signum, frame):
         name = signal.Signals(signum).name
-        if state.count == 0 and _unraisable_here(frame):
+        if state.count == 0 and state.deferred is None and _unraisable_here(frame):
             # a signal that arrives in a __del__ or a garbage-collector callback (JAX frees
             # buffers there) would be raised where Python prints and drops the exception:
             # delivered again a moment later, in the code that runs on (issue #45)
@@ -702,5 +703,7 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
         state.active = False
         with contextlib.suppress(ValueError):
             gc.callbacks.remove(_gc_phase)
+        if _gc_phase not in gc.callbacks:  # no block left: no stale collection count
+            _GC_DEPTH[0] = 0
         for sig, prev in old.items():
             signal.signal(sig, prev if prev is not None else signal.SIG_DFL)
