@@ -36,7 +36,7 @@ lock:
 	    --generate-hashes --quiet --custom-compile-command 'make lock' $(LOCK_FLAGS) -o $(LOCK)
 
 demo: $(STAMP)
-	$(BIN)/flexarm demo --out out/demo
+	$(BIN)/flexarm demo --out out/demo --overwrite
 
 # The suite runs its files on TEST_WORKERS processes (pytest-xdist; --dist loadfile keeps
 # each file, and so its module-scoped shared fits, in one process). TEST_WORKERS=0: one

@@ -119,7 +119,7 @@ def test_an_unstable_design_is_refused_accepted_written_and_gated_in_c(wrong_gau
     for source in (out, des2):
         with pytest.raises(UnstableDesignError, match="verdict is not stable") as e:
             export_c(source, c_out, name="ctl")
-        assert isinstance(e.value, FlexarmError) and "--force" in e.value.fix
+        assert isinstance(e.value, FlexarmError) and "--accept-unstable" in e.value.fix
         assert not c_out.exists()
     code, paths = export_c(out, c_out, name="ctl", force=True)
     header = paths[0].read_text()
@@ -298,9 +298,9 @@ def test_the_cli_gates_the_design_and_the_export(tmp_path):
     r = runner.invoke(app, ["export-c", str(out), "--out", str(c)])
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert r.exit_code == 2 and len(lines) == 1, r.output
-    assert verdict in lines[0] and "--force" in lines[0]
+    assert verdict in lines[0] and "--accept-unstable" in lines[0]
     assert not c.exists() or not any(c.iterdir())
-    r = runner.invoke(app, ["export-c", str(out), "--out", str(c), "--force"])
+    r = runner.invoke(app, ["export-c", str(out), "--out", str(c), "--accept-unstable"])
     assert r.exit_code == 0, r.output
     assert "#warning" in (c / "controller.h").read_text()
     # the gate's share is an option; a share outside [0, 1] is refused before any work

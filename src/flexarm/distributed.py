@@ -106,6 +106,7 @@ from flexarm.sim.batch import (  # the chunked batches' pieces, defined low (iss
 
 __all__ = [
     "client_for",
+    "fit_many_todo",
     "session",
     "close",
     "have_dask",
@@ -303,6 +304,14 @@ def client_for(
                 dashboard_address=o.dashboard_address,  # pyright: ignore[reportArgumentType]
                 memory_limit=o.memory_limit,
                 env=worker_environment(o),
+                # dask's scheduler starts its HTTP server on :8787 even without a dashboard
+                # (dashboard_address None falls back to that port): bind it to a free port
+                # on the loopback host instead, with no dashboard (issue #45)
+                scheduler_kwargs=(
+                    {"dashboard": False, "dashboard_address": f"{o.host}:0"}
+                    if o.dashboard_address is None
+                    else None
+                ),
             )
         client = Client(cluster, set_as_default=False)
         # close() closes the cluster too (a flag of flexarm's on dask's Client)
@@ -613,17 +622,19 @@ def read_manifest(path: str | Path) -> list[FitRow]:
     for i, raw in enumerate(reader, start=2):
         r = {(k or "").strip(): (v or "").strip() for k, v in raw.items() if k is not None}
         rid = r.get("id", "")
-        if not re.fullmatch(r"[A-Za-z0-9._-]+", rid or ""):
+        if not _safe_id(rid):
             raise ManifestError(
-                f"{_where(path, i, 'id')} = {rid!r}: give a folder name of "
-                "letters, digits, '.', '_' or '-'"
+                f"{_where(path, i, 'id')} = {rid[:40]!r}: give a folder name of "
+                "letters, digits, '.', '_' or '-' (not starting with '.' or '-', at most "
+                "100 characters, not summary.csv)"
             )
-        if rid in seen:
+        rid_key = rid.lower()  # Rig and rig are one folder on some file systems
+        if rid_key in seen:
             raise ManifestError(
                 f"{_where(path, i, 'id')} = {rid!r}: used by an earlier row; "
                 "give each row its own id"
             )
-        seen.add(rid)
+        seen.add(rid_key)
         logs = tuple(_resolve(base, x.strip()) for x in r.get("logs", "").split(";") if x.strip())
         if not logs:
             raise ManifestError(
@@ -763,6 +774,20 @@ class FitManyOptions:
     fit: Callable[[FitRow], tuple[Any, dict]] | None = None
 
 
+def _safe_id(rid: str) -> bool:
+    """A row id that is a safe folder name in ``--out`` (:func:`flexarm.io.write.safe_name`
+    leaves it unchanged: no ``..``, no path, no hidden name) and not one of fit-many's own
+    files there."""
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import safe_name
+
+    try:
+        ok = bool(rid) and safe_name(rid, what="id") == rid
+    except FlexarmError:
+        return False
+    return ok and rid.lower() not in ("summary.csv", "summary.csv.part", ".flexarm.lock")
+
+
 def finished(directory: str | Path) -> dict | None:
     """A finished row's JSON (``fit.json`` there and valid), or None."""
     p = Path(directory) / "fit.json"
@@ -875,6 +900,61 @@ def _cell(v):
     return "" if v is None else v
 
 
+def fit_many_todo(rows, out: Path, manifest: Path | None, overwrite: bool = False) -> list:
+    """The output policy of :func:`fit_many`, before any fit: the rows to run. ``out``
+    must be a folder; a folder holding files is written into only when it is fit-many's
+    own (it holds ``summary.csv`` and only row folders) or with ``overwrite``; a finished
+    row is skipped only when its ``fit.json`` is a fit of the same row (same logs,
+    scenario, options): another row's finished fit there is refused unless ``overwrite``
+    (then it is fitted again); the manifest is never written over."""
+    from flexarm.errors import InputOverwriteError, OutputExistsError
+    from flexarm.io.write import LOCK_NAME, is_input
+
+    summary = out / "summary.csv"
+    if manifest is not None and (
+        summary.resolve() == manifest.resolve() or (summary.exists() and summary.samefile(manifest))
+    ):
+        raise InputOverwriteError(
+            f"--out {out}: its summary.csv is the manifest {manifest}; fit-many writes "
+            "summary.csv there",
+            fix="give another --out folder, or move the manifest",
+        )
+    if is_input(summary) is not None:
+        raise InputOverwriteError(f"{summary}: is an input of this run; give another --out")
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"--out {out}: is a file, not a folder; give a folder name")
+    ids = {r.id for r in rows}
+    if out.is_dir() and not overwrite:
+        entries = [p for p in out.iterdir() if p.name != LOCK_NAME]
+        ours = summary.is_file() and all(
+            p.name in ("summary.csv",) or (p.is_dir() and p.name in ids) for p in entries
+        )
+        if entries and not ours:
+            raise OutputExistsError(
+                f"--out {out}: the folder holds files that are not this manifest's fit-many "
+                "results; not written into",
+                fix="pass --overwrite (overwrite=True), or give an empty folder",
+            )
+    todo = []
+    for r in rows:
+        d = finished(out / r.id)
+        if d is None:
+            todo.append(r)
+            continue
+        own = d.get("flexarm_fit_many", {}).get("row")
+        if own == json.loads(json.dumps(dataclasses.asdict(r), default=str)):
+            continue
+        if not overwrite:
+            raise OutputExistsError(
+                f"{out / r.id / 'fit.json'}: a finished fit of another row (its logs, "
+                "scenario or options differ from the manifest's row id "
+                f"{r.id!r}); not written over",
+                fix="pass --overwrite (overwrite=True) to fit the row again, or give another --out",
+            )
+        todo.append(r)
+    return todo
+
+
 def fit_many(
     rows: Sequence[FitRow] | str | Path,
     client=None,
@@ -882,26 +962,31 @@ def fit_many(
     *,
     options: FitManyOptions | None = None,
     progress: Callable[[dict], None] | None = None,
+    overwrite: bool = False,
 ) -> list[dict]:
     """Fit every row (a manifest path or :func:`read_manifest`'s rows), each fit a task on
     ``client``'s workers (None: one after the other in-process); finished rows (their
     ``fit.json`` there and valid) are skipped, failed ones run again. Writes
     ``out/<id>/...`` and ``out/summary.csv`` (module doc; rewritten as rows finish, so an
     interrupted run leaves a summary of what finished); ``progress(record)`` after each
-    row. Returns the records in the manifest's order."""
+    row. Returns the records in the manifest's order.  The output policy
+    (:func:`fit_many_todo`, before any fit): a folder holding other files, or another row's
+    finished fit, only with ``overwrite``; the manifest is never written over."""
     o = options or FitManyOptions()
-    if isinstance(rows, (str, Path)):
-        rows = read_manifest(rows)
+    manifest = Path(rows) if isinstance(rows, (str, Path)) else None
+    rows = read_manifest(manifest) if manifest is not None else list(cast(Sequence[FitRow], rows))
     out = Path(out)
+    todo = fit_many_todo(rows, out, manifest, overwrite)
     out.mkdir(parents=True, exist_ok=True)
+    from flexarm.io.write import lock_folder
+
+    lock_folder(out)  # inside a command's run_scope: a second run into out is refused
     recs: dict[str, dict] = {}
-    todo = []
     for r in rows:
-        d = finished(out / r.id)
-        if d is not None:
+        if r not in todo:
+            d = finished(out / r.id)
+            assert d is not None  # fit_many_todo kept it as finished
             recs[r.id] = summary_record(r.id, d, status="skipped (finished before)")
-        else:
-            todo.append(r)
     order = [r.id for r in rows]
 
     def done(rec):

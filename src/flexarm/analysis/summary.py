@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from flexarm.analysis.model_info import single_link_info
-from flexarm.io.write import save_figure, write_json
+from flexarm.io.write import NAME_MAX, distinct_names, safe_name, save_figure, write_json
 from flexarm.metrics import step_metrics
 from flexarm.sim.build import prepare, to_result
 from flexarm.sim.sampled import simulate_loop
@@ -55,20 +55,36 @@ def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
     }
 
 
-def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> dict:
-    """Simulate and write ``<name>.csv``, ``<name>.png`` and ``<name>.summary.json``."""
+def _file_name(scenario: Scenario, name: str | None) -> str:
+    """The file stem of a scenario's outputs: ``name`` (already made safe and distinct by
+    the caller), else the scenario's name through :func:`flexarm.io.write.safe_name`."""
+    return name if name is not None else safe_name(scenario.name, what="scenario name")
+
+
+def write_simulation(
+    scenario: Scenario,
+    out: Path,
+    progress: bool = False,
+    *,
+    name: str | None = None,
+    overwrite: bool = False,
+) -> dict:
+    """Simulate and write ``<name>.csv``, ``<name>.png`` and ``<name>.summary.json`` into
+    ``out``; ``name``: the file stem (default the scenario's name made a safe file name,
+    :func:`flexarm.io.write.safe_name`: a name never leaves ``out``); existing files are
+    replaced only with ``overwrite``."""
     if getattr(scenario.arm, "kind", "single_link") == "multi_link":
         if scenario.sampling is None:
-            return write_regulation(scenario, out)
-        return write_multilink(scenario, out, progress)[0]
+            return write_regulation(scenario, out, name=name, overwrite=overwrite)
+        return write_multilink(scenario, out, progress, name=name, overwrite=overwrite)[0]
+    name = _file_name(scenario, name)
     res = simulate_with_progress(scenario, progress)
     assert scenario.sampling is not None  # a single-link scenario has one (validated)
-    name = scenario.name
-    res.to_csv(out / f"{name}.csv", overwrite=True)
+    res.to_csv(out / f"{name}.csv", overwrite=overwrite)
     fig = res.plot_arm()
     fig.suptitle(f"{name}: closed-loop response")
     fig.tight_layout()
-    save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
+    save_figure(fig, out / f"{name}.png", overwrite=overwrite, dpi=120)
     ctrl = _controlled_signal(scenario.controller)
     summary = {
         "scenario": name,
@@ -80,7 +96,7 @@ def write_simulation(scenario: Scenario, out: Path, progress: bool = False) -> d
         "command_unit": res.input_names[0],
         "files": [f"{name}.csv", f"{name}.png"],
     }
-    write_json(out / f"{name}.summary.json", summary, overwrite=True)
+    write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary
 
 
@@ -122,15 +138,23 @@ def _joint_errors(scenario: Scenario, res) -> tuple[np.ndarray, np.ndarray]:
     return target - res.theta, joint_counts(scenario, n)
 
 
-def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
+def write_multilink(
+    scenario: Scenario,
+    out: Path,
+    progress: bool = False,
+    *,
+    name: str | None = None,
+    overwrite: bool = False,
+):
     """A multi-link arm in the sampled-data loop (``[sampling]``): simulate, write
     ``<name>.csv`` (every state and command), ``<name>.png`` (:func:`plot_joints`) and
-    ``<name>.summary.json``; returns (summary, result)."""
+    ``<name>.summary.json`` (``name`` as :func:`write_simulation`); returns (summary,
+    result)."""
+    name = _file_name(scenario, name)
     res = simulate_with_progress(scenario, progress)
     assert scenario.sampling is not None  # simulated in the sampled-data loop
-    name = scenario.name
-    res.to_csv(out / f"{name}.csv", overwrite=True)
-    plot_joints({name: (scenario, res)}, out / f"{name}.png")
+    res.to_csv(out / f"{name}.csv", overwrite=overwrite)
+    plot_joints({name: (scenario, res)}, out / f"{name}.png", overwrite=overwrite)
     err, count = _joint_errors(scenario, res)
     summary = {
         "scenario": name,
@@ -148,11 +172,11 @@ def write_multilink(scenario: Scenario, out: Path, progress: bool = False):
         "command_names": list(res.input_names),
         "files": [f"{name}.csv", f"{name}.png"],
     }
-    write_json(out / f"{name}.summary.json", summary, overwrite=True)
+    write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary, res
 
 
-def plot_joints(runs: dict, path: Path) -> None:
+def plot_joints(runs: dict, path: Path, *, overwrite: bool = False) -> None:
     """Figure of multi-link runs overlaid (``runs``: label → (scenario, result)): per joint,
     the error θ_d − θ in encoder counts (symmetric-log axis, linear within ±1 count, that
     band shaded), the link's tip deflection w_j(ℓ_j) (mm) and the command."""
@@ -187,7 +211,7 @@ def plot_joints(runs: dict, path: Path) -> None:
             a.grid(True, alpha=0.3)
             a.legend(loc="best", fontsize=8)
     fig.suptitle(" vs ".join(runs) if len(runs) > 1 else f"{next(iter(runs))}: closed loop")
-    save_figure(fig, path, overwrite=True, dpi=110)
+    save_figure(fig, path, overwrite=overwrite, dpi=110)
 
 
 def _unit(name: str) -> str:
@@ -196,11 +220,28 @@ def _unit(name: str) -> str:
     return unit(name)
 
 
-def write_comparison(scenarios: list[Scenario], results: dict, out: Path) -> Path:
+def write_comparison(
+    scenarios: list[Scenario],
+    results: dict,
+    out: Path,
+    *,
+    names: list[str] | None = None,
+    overwrite: bool = False,
+) -> Path:
     """One figure of several multi-link runs overlaid (:func:`plot_joints`):
-    ``<name1>_vs_<name2>....png``."""
-    path = out / ("_vs_".join(sc.name for sc in scenarios) + ".png")
-    plot_joints({sc.name: (sc, results[sc.name]) for sc in scenarios}, path)
+    ``<name1>_vs_<name2>....png``; ``names``: the runs' file stems and keys of ``results``
+    (default the scenarios' names made distinct, :func:`flexarm.io.write.distinct_names`);
+    a stem longer than :data:`flexarm.io.write.NAME_MAX` becomes ``comparison.png``."""
+    names = names if names is not None else distinct_names([sc.name for sc in scenarios])
+    stem = "_vs_".join(names)
+    if len(stem) > NAME_MAX:
+        stem = "comparison"
+    path = out / (stem + ".png")
+    plot_joints(
+        {n: (sc, results[n]) for n, sc in zip(names, scenarios, strict=True)},
+        path,
+        overwrite=overwrite,
+    )
     return path
 
 
@@ -212,14 +253,17 @@ def run_regulation(scenario):
     return regulation_run(scenario)
 
 
-def write_regulation(scenario, out: Path) -> dict:
-    """Simulate a multi-link regulation; write CSV, the Fig. 2-style figure, summary."""
+def write_regulation(
+    scenario, out: Path, *, name: str | None = None, overwrite: bool = False
+) -> dict:
+    """Simulate a multi-link regulation; write CSV, the Fig. 2-style figure, summary
+    (``name``, ``overwrite`` as :func:`write_simulation`)."""
     from matplotlib.figure import Figure
 
+    name = _file_name(scenario, name)
     model, params, run = run_regulation(scenario)
-    name = scenario.name
     n = model.n_links
-    path = run.to_csv(out / f"{name}.csv", overwrite=True)
+    path = run.to_csv(out / f"{name}.csv", overwrite=overwrite)
     fig = Figure(figsize=(7, 8))
     ax = fig.subplots(3, 1, sharex=True)
     for k in range(n):
@@ -237,7 +281,7 @@ def write_regulation(scenario, out: Path) -> dict:
         a.grid(True, alpha=0.3)
     fig.suptitle(f"{name}: law {scenario.regulation.law}")
     fig.tight_layout()
-    save_figure(fig, out / f"{name}.png", overwrite=True, dpi=120)
+    save_figure(fig, out / f"{name}.png", overwrite=overwrite, dpi=120)
     th_err = np.degrees(np.abs(run.theta[-1] - np.asarray(params.theta_d)))
     dd = np.asarray(params.delta_d)
     summary = {
@@ -254,7 +298,7 @@ def write_regulation(scenario, out: Path) -> dict:
         "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
         "files": [path.name, f"{name}.png"],
     }
-    write_json(out / f"{name}.summary.json", summary, overwrite=True)
+    write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary
 
 
@@ -269,7 +313,7 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
         if sc.arm.kind == "single_link":
             info = single_link_info(SingleLinkModel.from_spec(sc.arm))
             write_json(out / f"{name}.model.json", info, overwrite=True)
-        s = write_simulation(sc, out)
+        s = write_simulation(sc, out, overwrite=True)
         results[name] = s
         if "step_metrics" in s:
             m = s["step_metrics"]

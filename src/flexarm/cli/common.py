@@ -142,12 +142,19 @@ def check_file_option(
 
 
 def outdir(out: Path, overwrite: bool, option: str = "--out") -> Path:
-    """An output folder, created; a non-empty one only with --overwrite."""
+    """An output folder, created; a non-empty one only with --overwrite; locked for this
+    command (:func:`flexarm.io.write.output_folder`): a second run writing into it at the
+    same time is refused."""
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import output_folder as _folder
+
     check_dir_option(option, out)
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    try:
+        return _folder(out, overwrite=overwrite)
+    except FlexarmError as exc:
+        if "holds files already" in str(exc):
+            fail(f"{option} {out}: exists and is not empty; pass --overwrite to write into it")
+        fail(f"{option} {exc}")
 
 
 def command_line(ctx: typer.Context) -> str:
@@ -224,6 +231,8 @@ def guarded(*paths):
     first signal's name, for a command that catches the interruption itself and exits
     128 + its number).  An interruption that reaches here ends the command with exit
     128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM) and one line on stderr."""
+    import signal as signal_mod
+
     from flexarm.errors import Interrupted
     from flexarm.io import write
 
@@ -237,8 +246,12 @@ def guarded(*paths):
         err.print(f"{name} again: finishing the writing of the result first", highlight=False)
 
     try:
-        with write.interruptible(on_repeat=again) as state, write.inputs(files):
+        with write.interruptible(on_repeat=again) as state, write.inputs(files), write.run_scope():
             yield state
+        name = state.signal or state.deferred
+        if name is not None:  # a signal the command ran through: never exit 0
+            err.print(f"interrupted by {name}", highlight=False)
+            raise typer.Exit(128 + int(getattr(signal_mod.Signals, name)))
     except Interrupted as exc:
         err.print(f"interrupted by {exc.signal}", highlight=False)
         raise typer.Exit(128 + int(exc.number)) from None
@@ -261,6 +274,20 @@ def guarded_command(*names: str):
         return run
 
     return deco
+
+
+def distinct_outputs(*outputs: tuple[str, Path | None]) -> None:
+    """A command's output files (option, path) checked together before any work
+    (:func:`flexarm.io.write.check_outputs`): two options on one path (``--json o/a
+    --scenario-out o/a``) or an output that is an input of the run are refused as one line;
+    each file's own checks are :func:`check_file_option`'s."""
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import check_outputs
+
+    try:
+        check_outputs(outputs, overwrite=True)
+    except FlexarmError as exc:
+        fail(str(exc))
 
 
 def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | None:

@@ -18,19 +18,22 @@ def export_c(
     precision: str = typer.Option("double", "--precision", help="double or float"),
     name: str = typer.Option("controller", "--name", help="C prefix and file name"),
     overwrite: bool = typer.Option(False, help="replace existing NAME.h / NAME.c"),
-    force: bool = typer.Option(
+    accept_unstable: bool = typer.Option(
         False,
-        "--force",
-        help="export a design whose gate verdict is not stable (the verdict goes "
-        "into NAME.h as a #warning)",
+        "--accept-unstable",
+        help="export a design or scenario that fails the gate (its verdict, or the nominal "
+        "check of the sampled loop) anyway; the reason goes into NAME.h as a #warning",
     ),
+    force: bool = typer.Option(False, "--force", hidden=True, help="old name of --accept-unstable"),
 ) -> None:
     """Write the [controller] of a design (or scenario) as C99 for a real-time target:
     NAME.h (state struct, NAME_init, NAME_step, channel order and units) and NAME.c (the
-    law, friction feedforward, saturation and D/A count); no dependencies.  A design whose
-    gate verdict (design.json) is not "stable" is refused (exit 2) unless --force."""
+    law, friction feedforward, saturation and D/A count); no dependencies.  Every export
+    is gated: a design whose stored verdict (design.json, whichever of its files is given)
+    is not "stable", or a loop that the nominal check finds unstable (the sampled loop with
+    its delays, linearised at rest), is refused (exit 2) unless --accept-unstable."""
     with guarded(design):
-        _export(design, out, precision, name, overwrite, force)
+        _export(design, out, precision, name, overwrite, accept_unstable or force)
 
 
 def _export(design, out, precision, name, overwrite, force) -> None:
@@ -41,14 +44,13 @@ def _export(design, out, precision, name, overwrite, force) -> None:
     check_dir_option("--out", out)
     try:
         code, paths = _export_c(
-            design, out, name=name, precision=precision, overwrite=overwrite, force=force
+            design, out, name=name, precision=precision, overwrite=overwrite, accept_unstable=force
         )
     except UnstableDesignError as exc:
-        v = exc.value if exc.value is not None else getattr(exc.design, "verdict", None)
         fail(
-            f"{design}: the design gate's verdict is not stable ({v}); not exported; "
-            "redesign (design.json and compare.md say why), or pass --force to export it "
-            "with the verdict as a #warning in the header"
+            f"{exc.args[0] if exc.args else exc}; redesign (a design's "
+            "design.json and compare.md say why), or pass --accept-unstable to export it "
+            "with the reason as a #warning in the header"
         )
     except (ExportError, OutputExistsError) as exc:
         fail(str(exc))

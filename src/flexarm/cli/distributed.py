@@ -10,9 +10,17 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from flexarm.cli.common import check_cluster, console, enable_cache, err
+from flexarm.cli.common import (
+    check_cluster,
+    check_dir_option,
+    console,
+    enable_cache,
+    err,
+    guarded_command,
+)
 
 
+@guarded_command("manifest")
 def fit_many(
     manifest: Annotated[
         Path, typer.Argument(help="manifest CSV: one fit a row (columns: docs/distributed.md)")
@@ -38,15 +46,27 @@ def fit_many(
     no_figures: Annotated[
         bool, typer.Option("--no-figures", help="skip each fit's overlay figures")
     ] = False,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="write into a folder holding other files, and fit again a row whose "
+            "folder holds another row's finished fit",
+        ),
+    ] = False,
 ) -> None:
     """Fit every row of MANIFEST (each row a task), write DIR/<id>/ and DIR/summary.csv;
     finished rows are skipped and failed ones retried when run again. Exit 1 when a row
-    failed (the others still run)."""
+    failed (the others still run).  A folder holding other files, or another row's
+    finished fit, is written into only with --overwrite; the manifest is never written
+    over."""
     import flexarm.distributed as fd
 
     check_cluster(scheduler, workers)
+    check_dir_option("--out", out)
     enable_cache()
     rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
+    fd.fit_many_todo(rows, out, manifest, overwrite)  # the output policy, before any work
 
     def progress(rec: dict) -> None:
         console.print(
@@ -68,6 +88,7 @@ def fit_many(
                 out,
                 options=fd.FitManyOptions(figures=not no_figures),
                 progress=progress,
+                overwrite=overwrite,
             )
     t = Table("row", "status", "seconds", title=f"fit-many: {out / 'summary.csv'}")
     for r in recs:

@@ -56,11 +56,61 @@ def log_dir() -> Path:
     return Path(os.environ.get("FLEXARM_LOG_DIR") or tempfile.gettempdir())
 
 
+#: modules whose RecursionError means a nested input, not a flexarm bug
+_PARSERS = ("tomllib", "tomli", "json", "tomli_w", "scipy/io", "h5py")
+
+
+def input_error(exc: BaseException) -> str | None:
+    """The one line for an exception that is a bad or oversized input rather than a
+    flexarm bug, or None (issue #45): a TOML or JSON document nested beyond Python's
+    recursion limit (the RecursionError raised inside the parser), a text file that is not
+    UTF-8 (a UTF-16 manifest), memory that ran out for the input's size (huge --plants,
+    --periods or files), a full disk or a read-only file system at a write."""
+    import errno
+
+    if isinstance(exc, RecursionError):
+        tb, frames = exc.__traceback__, []
+        while tb is not None:
+            frames.append(tb.tb_frame.f_code.co_filename.replace("\\", "/"))
+            tb = tb.tb_next
+        if any(any(f"/{m}" in f for m in _PARSERS) for f in frames[-50:]):
+            return (
+                "an input file is nested too deeply to read (arrays, tables or objects "
+                "inside each other beyond Python's recursion limit); flatten it"
+            )
+        return None
+    if isinstance(exc, UnicodeDecodeError):
+        return (
+            f"an input file is not UTF-8 text ({exc.reason} at byte {exc.start}, "
+            f"{exc.encoding}); save it as UTF-8 (e.g. a spreadsheet's 'CSV UTF-8')"
+        )
+    if isinstance(exc, MemoryError):
+        return (
+            "not enough memory for this input (a very large option value such as --plants "
+            "or --periods, or a very large file); give a smaller one"
+        )
+    if isinstance(exc, OSError) and exc.errno in (
+        errno.ENOSPC,
+        errno.EDQUOT,
+        errno.EROFS,
+        errno.ENAMETOOLONG,
+    ):
+        where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+        return f"cannot write{where}: {exc.strerror}; free space or choose another folder"
+    return None
+
+
 def internal_error(exc: BaseException, command: str = "") -> int:
     """Any other exception: its traceback into a log file
     (:func:`flexarm.errors.internal_error_report`), one line naming that file on stderr;
-    the exit code (1)."""
+    the exit code (1).  An exception that is a bad input (:func:`input_error`) is one
+    ``error:`` line and exit 2 instead."""
     from flexarm.errors import internal_error_report
+
+    line = input_error(exc)
+    if line is not None:
+        err.print(f"[bold red]error:[/] {escape(fold(line))}", highlight=False, soft_wrap=True)
+        return EXIT_BAD_INPUT
 
     try:
         where = str(internal_error_report(exc, log_dir()))

@@ -29,16 +29,17 @@ from rich.table import Table
 from flexarm.cli import options as o
 from flexarm.cli import parsing
 from flexarm.cli.common import (
-    check_dir_option,
     check_file_option,
     command_line,
     console,
+    distinct_outputs,
     enable_cache,
     err,
     fail,
     figure_folder,
     guarded_command,
     load,
+    output_folder,
     progress,
     write_report,
 )
@@ -159,7 +160,10 @@ def fit(
     ] = None,
     encoder_counts: Annotated[
         int | None,
-        typer.Option(help="hub encoder counts per revolution (default: detected from the steps)"),
+        typer.Option(
+            help="hub encoder counts per revolution (default: detected from the steps)",
+            callback=parsing.number(ge=2, le=2**40, example="4096"),
+        ),
     ] = None,
     filter: Annotated[
         list[str] | None,
@@ -305,7 +309,8 @@ def fit(
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     check_file_option("--report", report, overwrite, "fit.html")
-    check_dir_option("--plots", plots)
+    distinct_outputs(("--json", json_out), ("--scenario-out", scenario_out), ("--report", report))
+    output_folder("--plots", plots, overwrite)
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
     preset = presets.servo_rig(
@@ -513,7 +518,8 @@ def validate(
     sc = with_controller_file(load(scenario), cfile)
     check_file_option("--json", json_out, overwrite)
     check_file_option("--report", report, overwrite, "validate.html")
-    check_dir_option("--plots", plots)
+    distinct_outputs(("--json", json_out), ("--report", report))
+    output_folder("--plots", plots, overwrite)
     if refit not in (None, "friction"):
         fail(
             f"--refit {refit!r}: only 'friction' (the joints' Coulomb, breakaway and "
@@ -663,7 +669,8 @@ def _fit_scenario_cli(
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
     check_file_option("--report", report, overwrite, "fit.html")
-    check_dir_option("--plots", plots)
+    distinct_outputs(("--json", json_out), ("--scenario-out", scenario_out), ("--report", report))
+    output_folder("--plots", plots, overwrite)
     win = parsing.window(window, "--window")
     chans, priors = parsing.channels(channel), parsing.priors(prior)
     bounds = _bounds(bound)

@@ -4,7 +4,6 @@ arm), ``identify`` (G_m, G_b, Coulomb friction from them), ``excite`` (multisine
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import cast
 
@@ -16,6 +15,7 @@ from flexarm.cli.common import (
     check_dir_option,
     check_file_option,
     console,
+    distinct_outputs,
     enable_cache,
     err,
     fail,
@@ -26,6 +26,7 @@ from flexarm.cli.common import (
     save_result,
     warn,
 )
+from flexarm.cli.parsing import number
 
 
 @guarded_command("scenario")
@@ -37,7 +38,9 @@ def experiment(
         help="excitation frequencies in rad/s, comma separated; give ω0 "
         "and 3ω0 pairs (default: pairs chosen from the model)",
     ),
-    periods: int = typer.Option(20, help="whole periods recorded per experiment"),
+    periods: int = typer.Option(
+        20, help="whole periods recorded per experiment", callback=number(ge=1, le=100_000)
+    ),
     kp: float | None = typer.Option(None, help="PD gain, command units per rad"),
     kd: float | None = typer.Option(None, help="PD gain, command units*s/rad"),
     overwrite: bool = typer.Option(False, help="replace existing CSV files"),
@@ -105,6 +108,7 @@ def identify(
     bo = cast("tuple[int, int]", parsing.ints(beam_orders, "--beam-orders", 2, "0,2"))
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
+    distinct_outputs(("--json", json_out), ("--scenario-out", scenario_out))
     plots = output_folder("--plots", plots, overwrite)
     src = files[0] if len(files) == 1 else files
     try:
@@ -164,16 +168,25 @@ def scenario_file(res, current_limit) -> dict:
 @guarded_command()
 def excite(
     out: Path = typer.Argument(..., help="CSV to write (the signal a generator plays)"),
-    fs: float = typer.Option(..., "--fs", help="sampling rate, Hz"),
-    period: int = typer.Option(..., "--period", help="samples per period"),
-    f_min: float = typer.Option(..., "--f-min", help="lowest line, Hz"),
-    f_max: float = typer.Option(..., "--f-max", help="highest line, Hz"),
+    fs: float = typer.Option(
+        ..., "--fs", help="sampling rate, Hz", callback=number(gt=0, example="1000")
+    ),
+    period: int = typer.Option(
+        ...,
+        "--period",
+        help="samples per period",
+        callback=number(ge=2, le=100_000_000, example="1000"),
+    ),
+    f_min: float = typer.Option(..., "--f-min", help="lowest line, Hz", callback=number(ge=0)),
+    f_max: float = typer.Option(..., "--f-max", help="highest line, Hz", callback=number(gt=0)),
     kind: str = typer.Option("random-odd", help="full | odd | random-odd | prbs | sweep"),
     grid: str = typer.Option("linear", help="linear | log"),
     phases: str = typer.Option("random", help="schroeder | random | min-crest"),
-    rms: float = typer.Option(1.0, help="rms of the signal (multisine)"),
-    periods: int = typer.Option(2, help="periods to play"),
-    realisations: int = typer.Option(1, help="realisations (new random phases)"),
+    rms: float = typer.Option(1.0, help="rms of the signal (multisine)", callback=number(gt=0)),
+    periods: int = typer.Option(2, help="periods to play", callback=number(ge=1, le=1_000_000)),
+    realisations: int = typer.Option(
+        1, help="realisations (new random phases)", callback=number(ge=1, le=10_000)
+    ),
     seed: int = typer.Option(0),
     overwrite: bool = typer.Option(False, help="replace existing files"),
 ) -> None:
@@ -258,6 +271,8 @@ def frf(
     n_period = (
         None if period == "auto" else parsing.ints(period, "--period", 1, "1000 (or auto)")[0]
     )
+    if n_period is not None and n_period < 2:
+        fail(f"--period {period}: a period needs at least 2 samples; give e.g. 1000 (or auto)")
     check_file_option("--json", json_out, overwrite, "frf.json")
     plots = output_folder("--plots", plots, overwrite)
     from flexarm.io.logs import LogError
@@ -408,11 +423,13 @@ def tfest(
 
     check_file_option("--json", json_out, overwrite, "tfest.json")
     plots = output_folder("--plots", plots, overwrite)
+    d = parsing.json_file(frf_json, "", "an FRF JSON from flexarm frf")
     try:
-        d = json.loads(frf_json.read_text())
         f = np.asarray(d["frequency_hz"], float)
         outs = d["outputs"]
-    except (OSError, ValueError, KeyError) as exc:
+        if not isinstance(outs, dict):
+            raise ValueError("'outputs' is not a table of output channels")
+    except (ValueError, KeyError, TypeError) as exc:
         fail(f"{frf_json}: not an FRF JSON from flexarm frf ({exc})")
     w = 2 * np.pi * f
 
@@ -585,10 +602,10 @@ def friction(
     given = structure_given(st, motor_constant, resistance, gear_ratio, efficiency, length)
     frfs, fits = [], []
     for path in frf_json:
+        d = parsing.json_file(path, "", "an FRF JSON from flexarm frf")
         try:
-            d = json.loads(path.read_text())
             frf = PeriodicFRF.from_json(d, str(path))
-        except (OSError, ValueError, KeyError, IdentificationError) as exc:
+        except (ValueError, KeyError, TypeError, IdentificationError) as exc:
             fail(f"{path}: not an FRF JSON from flexarm frf ({exc})")
         if not frf.spectra:
             fail(

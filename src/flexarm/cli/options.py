@@ -11,25 +11,32 @@ from typing import Annotated
 
 import typer
 
+from flexarm.cli.parsing import number
+
 # --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
 Drive = Annotated[str, typer.Option(help="voltage or current")]
-GearRatio = Annotated[float, typer.Option(help="K_g")]
+GearRatio = Annotated[float, typer.Option(help="K_g", callback=number(gt=0, example="70"))]
 MotorConstant = Annotated[
-    float | None, typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)")
+    float | None,
+    typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)", callback=number(gt=0)),
 ]
-ArmatureResistance = Annotated[float | None, typer.Option(help="R, ohm")]
-LinkLength = Annotated[float | None, typer.Option(help="link length, m")]
-GearEfficiency = Annotated[float, typer.Option()]
-MotorEfficiency = Annotated[float, typer.Option()]
+ArmatureResistance = Annotated[float | None, typer.Option(help="R, ohm", callback=number(gt=0))]
+LinkLength = Annotated[float | None, typer.Option(help="link length, m", callback=number(gt=0))]
+GearEfficiency = Annotated[float, typer.Option(callback=number(gt=0, le=1))]
+MotorEfficiency = Annotated[float, typer.Option(callback=number(gt=0, le=1))]
 VoltageLimit = Annotated[
     float | None,
-    typer.Option(help="amplifier limit, V (default: the log format's [controller] limit, else 10)"),
+    typer.Option(
+        help="amplifier limit, V (default: the log format's [controller] limit, else 10)",
+        callback=number(gt=0, example="10"),
+    ),
 ]
 ComputationDelay = Annotated[
     int | None,
     typer.Option(
         help="samples between a sample and its command (default: where the declared law best "
-        "explains the logged command)"
+        "explains the logged command)",
+        callback=number(ge=0, le=1000, example="1"),
     ),
 ]
 
@@ -37,20 +44,33 @@ ComputationDelay = Annotated[
 StructMotorConstant = Annotated[
     float | None,
     typer.Option(
-        "--motor-constant", help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)"
+        "--motor-constant",
+        help="frb-single-mass: K (N·m/A); voltage-servo: K_m (V·s/rad)",
+        callback=number(gt=0),
     ),
 ]
 StructResistance = Annotated[
-    float | None, typer.Option("--resistance", help="voltage-servo: R_m (ohm)")
+    float | None,
+    typer.Option("--resistance", help="voltage-servo: R_m (ohm)", callback=number(gt=0)),
 ]
-StructGearRatio = Annotated[float | None, typer.Option("--gear-ratio", help="voltage-servo: K_g")]
+StructGearRatio = Annotated[
+    float | None, typer.Option("--gear-ratio", help="voltage-servo: K_g", callback=number(gt=0))
+]
 StructEfficiency = Annotated[
     float | None,
-    typer.Option("--efficiency", help="voltage-servo: η = η_g η_m (gear times motor efficiency)"),
+    typer.Option(
+        "--efficiency",
+        help="voltage-servo: η = η_g η_m (gear times motor efficiency)",
+        callback=number(gt=0, le=1),
+    ),
 ]
 StructLength = Annotated[
     float | None,
-    typer.Option("--length", help="voltage-servo: link length L (m), for a tip_deflection output"),
+    typer.Option(
+        "--length",
+        help="voltage-servo: link length L (m), for a tip_deflection output",
+        callback=number(gt=0),
+    ),
 ]
 
 # --- how a log is read ---------------------------------------------------------------------
@@ -80,7 +100,11 @@ Window = Annotated[
     ),
 ]
 MaxJitter = Annotated[
-    float, typer.Option(help="accepted relative deviation of a time step from the median step")
+    float,
+    typer.Option(
+        help="accepted relative deviation of a time step from the median step",
+        callback=number(ge=0, lt=1),
+    ),
 ]
 Controller = Annotated[
     str | None,

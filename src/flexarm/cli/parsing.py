@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+import typer
+
 from flexarm.cli.common import fail
 
 
@@ -156,12 +158,63 @@ def positive_floats(text: str, option: str, count: int, example: str) -> list[fl
     return vals
 
 
-def json_file(path, option: str) -> dict:
-    """A JSON file given on the command line → its data; unreadable or malformed is one line."""
+def json_file(path, option: str, what: str = "a JSON object") -> dict:
+    """A JSON file given on the command line → its data, a JSON object (``{...}``);
+    unreadable, not a regular file (``/dev/zero``), over 1 GiB, malformed, nested beyond
+    the recursion limit or another JSON value (a list) is one line naming the file."""
     import json
-    from pathlib import Path
+
+    from flexarm.errors import FlexarmError
+    from flexarm.io.write import read_input
 
     try:
-        return json.loads(Path(path).read_text())
+        d = json.loads(read_input(path, what="JSON file").decode("utf-8"))
+    except FlexarmError as exc:
+        fail(f"{option} {exc}" if option else str(exc))
+    except RecursionError:
+        fail(f"{option} {path}: nested too deeply to read; give {what}".strip())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        fail(f"{option} {path}: cannot read it as JSON ({exc})")
+        fail(f"{option} {path}: cannot read it as JSON ({exc})".strip())
+    if not isinstance(d, dict):
+        fail(f"{option} {path}: a JSON {type(d).__name__}, not {what}".strip())
+    return d
+
+
+def number(
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    lt: float | None = None,
+    le: float | None = None,
+    example: str | None = None,
+):
+    """A parse-time check of a numeric option (typer ``callback=``): the value (or each of
+    a repeated option's) must be finite and inside the bounds given (``gt``: > , ``ge``:
+    >=, ``lt``: <, ``le``: <=); ``None`` (not given) passes. A value outside is refused by
+    the parser as one line naming the option, the value and the range (exit 2), before
+    any work: ``--fs 0``, ``--rms nan``, ``--gear-ratio inf``, ``--computation-delay -1``."""
+    parts = []
+    if gt is not None:
+        parts.append(f"> {gt:g}")
+    if ge is not None:
+        parts.append(f">= {ge:g}")
+    if lt is not None:
+        parts.append(f"< {lt:g}")
+    if le is not None:
+        parts.append(f"<= {le:g}")
+    want = "a finite number" + (" " + " and ".join(parts) if parts else "")
+
+    def check(ctx: typer.Context, param: typer.CallbackParam, value):
+        if value is None or (ctx is not None and getattr(ctx, "resilient_parsing", False)):
+            return value
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            ok = isinstance(v, (int, float)) and math.isfinite(v)
+            ok = ok and (gt is None or v > gt) and (ge is None or v >= ge)
+            ok = ok and (lt is None or v < lt) and (le is None or v <= le)
+            if not ok:
+                opt = param.opts[0] if param is not None and param.opts else "the value"
+                eg = f", e.g. {opt} {example}" if example else ""
+                raise typer.BadParameter(f"{v!r}: give {want}{eg}")
+        return value
+
+    return check

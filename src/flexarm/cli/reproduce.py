@@ -9,12 +9,12 @@ import typer
 
 from flexarm.cli import parsing
 from flexarm.cli.common import (
-    check_dir_option,
     check_file_option,
     console,
     enable_cache,
     err,
     fail,
+    guarded_command,
     outdir,
 )
 
@@ -48,6 +48,7 @@ def run_reproduction(name: str, out: Path) -> dict:
         return run(out, progress=progress)
 
 
+@guarded_command()
 def reproduce(
     paper: str = typer.Argument(..., help=" | ".join(REPRODUCTIONS)),
     out: Path = typer.Option(..., "--out", help="folder for figures and the table"),
@@ -65,17 +66,17 @@ def reproduce(
     console.print(f"wrote {out}/ ({len(res.get('figures', []))} figures)")
 
 
+@guarded_command()
 def demo(
-    out: Path = typer.Option(
-        Path("out/demo"), "--out", help="output folder (flexarm's own; rewritten)"
-    ),
+    out: Path = typer.Option(Path("out/demo"), "--out", help="output folder"),
+    overwrite: bool = typer.Option(False, help="write into a non-empty --out folder"),
 ) -> None:
-    """The main job on the built-in default: model, simulations and figures into --out."""
+    """The main job on the built-in default: model, simulations and figures into --out
+    (a folder holding files only with --overwrite)."""
     enable_cache()
     from flexarm.analysis.summary import run_demo
 
-    check_dir_option("--out", out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = outdir(out, overwrite)
     import importlib.util
 
     reps = {
@@ -86,6 +87,7 @@ def demo(
     run_demo(out, console, reproductions=reps)
 
 
+@guarded_command("workspace")
 def scenario_from_mat(
     workspace: Path = typer.Argument(
         ..., help="the lab's MATLAB workspace (.mat) of a two-link flexible arm"

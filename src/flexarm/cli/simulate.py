@@ -61,6 +61,7 @@ def simulate(
     commands), e.g. flexarm simulate deluca-two-link-geared deluca-two-link-geared-fc."""
     enable_cache()
     from flexarm.analysis.summary import write_comparison, write_multilink, write_simulation
+    from flexarm.io.write import distinct_names
 
     scs = [load(s) for s in scenario]
     out = outdir(out, overwrite)
@@ -73,18 +74,32 @@ def simulate(
             scs[0], log, log_format, window, out, controller=controller, continuous=continuous
         )
         return
+    # names are data: each scenario's files are <key>.*, its name made a safe file name and
+    # distinct from the others' (a second "rig" becomes "rig-2"), said in the output
+    keys = distinct_names([sc.name for sc in scs], what="scenario name")
     if len(scs) == 1:
-        console.print_json(json.dumps(write_simulation(scs[0], out, progress=True)))
+        console.print_json(
+            json.dumps(
+                write_simulation(scs[0], out, progress=True, name=keys[0], overwrite=overwrite)
+            )
+        )
         return
-    summaries, results, multi = {}, {}, []
-    for sc in scs:
+    summaries, results, multi, mkeys = {}, {}, [], []
+    for key, sc in zip(keys, scs, strict=True):
         if sc.arm.kind == "multi_link" and sc.sampling is not None:
-            summaries[sc.name], results[sc.name] = write_multilink(sc, out, progress=True)
+            summaries[key], results[key] = write_multilink(
+                sc, out, progress=True, name=key, overwrite=overwrite
+            )
             multi.append(sc)
+            mkeys.append(key)
         else:
-            summaries[sc.name] = write_simulation(sc, out, progress=True)
+            summaries[key] = write_simulation(sc, out, progress=True, name=key, overwrite=overwrite)
+        if key != sc.name:
+            summaries[key]["file_name_from"] = sc.name
     if len(multi) > 1:
-        summaries["comparison_figure"] = write_comparison(multi, results, out).name
+        summaries["comparison_figure"] = write_comparison(
+            multi, results, out, names=mkeys, overwrite=overwrite
+        ).name
     console.print_json(json.dumps(summaries))
 
 

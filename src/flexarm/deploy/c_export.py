@@ -194,10 +194,10 @@ class _Ctx:
                 return "{" + ", ".join(self.lit(v) for v in x) + "}"
             return "{\n    " + ",\n    ".join(body(r) for r in x) + "}"
 
-        return [f"/* {what} */", f"static const {self.real} {cname}{dims} = {body(a)};"]
+        return [f"/* {c_comment(what)} */", f"static const {self.real} {cname}{dims} = {body(a)};"]
 
     def scalar(self, cname: str, v: float, what: str) -> list[str]:
-        return [f"static const {self.real} {cname} = {self.lit(v)};  /* {what} */"]
+        return [f"static const {self.real} {cname} = {self.lit(v)};  /* {c_comment(what)} */"]
 
 
 @dataclass
@@ -373,10 +373,10 @@ def _lti(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
                 else ctx.lit(v)
             )
             note = f"{kind} {v}" if kind != "constant" else "constant"
-            body.append(f"e[{j}] = {src};  /* {note} */")
+            body.append(f"e[{j}] = {src};  /* {c_comment(note)} */")
     for j, (inp, sp) in enumerate(zip(ctrl.inputs, ctrl.setpoints, strict=True)):
         r = ctx.ref(sp) if sp is not None else "0"
-        body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {sp or '0'} - {inp} */")
+        body.append(f"e[{j}] = {r} - {ctx.meas(inp)};  /* {c_comment(f'{sp or 0} - {inp}')} */")
     body.append(f"for (i = 0; i < {m}; ++i) {{")
     if n:
         body += [
@@ -713,7 +713,7 @@ def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     ):
         consts, ns[key] = _siso_ss(ctx, f"{P}{key}_", r, what)
         part.constants += consts
-        part.members.append(f"{R} {p}{key.lower()}[{ns[key]}];  /* {what} state */")
+        part.members.append(f"{R} {p}{key.lower()}[{ns[key]}];  /* {c_comment(what)} state */")
         part.init.append(f"for (i = 0; i < {ns[key]}; ++i) s->{p}{key.lower()}[i] = 0;")
     for cname, val, what in (
         ("K", ctrl.torque_constant, "K: torque per unit command"),
@@ -822,14 +822,55 @@ def _unit(name: str, scenario) -> str:
     return u
 
 
+#: the longest C prefix (``--name``) and the longest name text written into a comment
+C_NAME_MAX = 64
+COMMENT_TEXT_MAX = 200
+
+
 def _c_name(name: str) -> str:
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or "") or name in _C_RESERVED:
+    """``name`` as the C prefix and file name (``--name``): an identifier (letters, digits
+    and _, not starting with a digit, not a C keyword) of at most :data:`C_NAME_MAX`
+    characters, else :class:`ExportError`: the one check every generated identifier and
+    file name of the export goes through."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
         raise ExportError(
-            f"--name {name!r} is not a usable C identifier: give letters, "
+            f"--name {c_comment(repr(name))} is not a usable C identifier: give letters, "
             "digits and _ not starting with a digit, and not a C keyword "
             "(e.g. --name rotary_ctrl)"
         )
+    if name in _C_RESERVED:
+        raise ExportError(
+            f"--name {name!r}: a C keyword; give another prefix (e.g. --name rotary_ctrl)"
+        )
+    if len(name) > C_NAME_MAX:
+        raise ExportError(
+            f"--name {name[:20]}... ({len(name)} characters): longer than {C_NAME_MAX}; "
+            "give a shorter C prefix"
+        )
     return name
+
+
+def c_comment(text: Any, limit: int = COMMENT_TEXT_MAX) -> str:
+    """``text`` (a scenario's name, a channel's, a file's) made safe inside a C ``/* */``
+    comment: the one escaper of the export. Control characters (newline, NUL, C1 controls
+    such as U+0085, the Unicode line separators) become spaces, ``*/`` and ``/*`` lose
+    their meaning (``*_/``, ``/_*``), trigraph ``??`` becomes ``?_?``, a trailing
+    backslash is dropped; longer than ``limit`` characters: cut, ``...`` added."""
+    s = "".join(
+        " " if (ch < " " or "\x7f" <= ch <= "\x9f" or ch in "\u2028\u2029") else ch
+        for ch in str(text)
+    )
+    if len(s) > limit:
+        s = s[:limit] + "..."
+    while "*/" in s or "/*" in s or "??" in s:
+        s = s.replace("*/", "*_/").replace("/*", "/_*").replace("??", "?_?")
+    return s.rstrip("\\")
+
+
+def c_string(text: Any, limit: int = 4 * COMMENT_TEXT_MAX) -> str:
+    """``text`` made safe between the double quotes of a C string or ``#warning``: as
+    :func:`c_comment`, and backslashes and double quotes replaced by ``/`` and ``'``."""
+    return c_comment(str(text).replace("\\", "/").replace('"', "'"), limit)
 
 
 def generate_c(
@@ -948,7 +989,7 @@ def generate_c(
         if not items:
             return [" *   (none: pass NULL)"]
         return [
-            f" *   {arr}[{i}]  {n}  ({u}){(extra or {}).get(n, '')}"
+            f" *   {arr}[{i}]  {c_comment(f'{n}  ({u}){(extra or {}).get(n, str())}')}"
             for i, (n, u) in enumerate(items)
         ]
 
@@ -999,7 +1040,8 @@ def generate_c(
         else f" * Controller: {type(ctrl).__name__} (given in Python)",
         f" * Precision: {precision} ({R})",
     ]
-    law = [f" *   {line}" for line in part.law]
+    provenance = [" * " + c_comment(line[3:], 10 * COMMENT_TEXT_MAX) for line in provenance]
+    law = [f" *   {c_comment(line, 10 * COMMENT_TEXT_MAX)}" for line in part.law]
     act_text = []
     if np.all(np.isfinite(limit)):
         act_text.append(f" *   saturation at +-{', '.join(f'{v:g}' for v in limit)}")
@@ -1012,7 +1054,7 @@ def generate_c(
     guard = f"{N}_H"
     header = "\n".join(
         [
-            f"/* {name}.h: the {scenario.name} controller as C99, one call per sample.",
+            f"/* {name}.h: the {c_comment(scenario.name)} controller as C99, one call per sample.",
             " *",
             *provenance,
             " *",
@@ -1097,10 +1139,12 @@ def generate_c(
     decl_ij = "    int i" + (", j" if uses_j else "") + ";" if (uses_ij or uses_j) else None
     init_ij = any("(i =" in ln for ln in part.init)
     conv = [
-        f"    const {R} m_{i} = ({R})measured[{i}];  /* {n} */" for i, (n, _) in enumerate(meas)
+        f"    const {R} m_{i} = ({R})measured[{i}];  /* {c_comment(n)} */"
+        for i, (n, _) in enumerate(meas)
     ]
     conv += [
-        f"    const {R} r_{i} = ({R})reference[{i}];  /* {n} */" for i, (n, _) in enumerate(refs)
+        f"    const {R} r_{i} = ({R})reference[{i}];  /* {c_comment(n)} */"
+        for i, (n, _) in enumerate(refs)
     ]
     source = "\n".join(
         [
@@ -1148,28 +1192,42 @@ def generate_c(
 
 
 # ----------------------------------------------------------------------------- files
+def design_dir(design: str | Path) -> Path | None:
+    """The design directory ``design`` names: the folder itself (holding ``design.toml``),
+    or the folder of a ``design.toml`` / ``design.json`` given as a file; None for a
+    scenario file or name."""
+    p = Path(design)
+    if p.is_dir():
+        return p
+    if p.name in ("design.toml", "design.json") and p.is_file():
+        return p.parent
+    return None
+
+
 def load_design(design: str | Path) -> tuple[Any, str | None, str]:
-    """The scenario of ``design`` (a design directory holding ``design.toml``, or a scenario
-    file or built-in name), its design method (``design.json``, if any) and a source label
-    (the file's name, no folder)."""
+    """The scenario of ``design`` (a design directory holding ``design.toml``, that
+    ``design.toml`` or ``design.json`` itself, or a scenario file or built-in name), its
+    design method (``design.json``, if any) and a source label (the file's name, no
+    folder)."""
     from flexarm.specs import ScenarioError, load_scenario
 
     p = Path(design)
     method = None
-    if p.is_dir():
-        toml = p / "design.toml"
+    d = design_dir(p)
+    if d is not None:
+        toml = d / "design.toml"
         if not toml.is_file():
             raise ExportError(
-                f"{p}: a folder without design.toml; give a design directory "
+                f"{d}: a folder without design.toml; give a design directory "
                 "(written by flexarm design ... --out DIR) or a scenario file"
             )
-        js = p / "design.json"
+        js = d / "design.json"
         if js.is_file():
             try:
                 method = json.loads(js.read_text(encoding="utf-8")).get("method")
-            except (OSError, ValueError) as exc:
+            except (OSError, ValueError, AttributeError) as exc:
                 raise ExportError(f"{js}: not readable JSON ({exc})") from None
-        path, label = toml, f"{p.name}/design.toml"
+        path, label = toml, f"{d.name}/design.toml"
     else:
         path, label = design, p.name
     try:
@@ -1187,20 +1245,27 @@ def export_c(
     name: str = "controller",
     precision: str = "double",
     overwrite: bool = False,
+    accept_unstable: bool = False,
     force: bool = False,
+    check: bool = True,
 ) -> tuple[CCode, list[Path]]:
-    """``flexarm export-c``: the controller of ``design`` (a design directory, a scenario
-    file or name, a :class:`~flexarm.design.result.Design`) as ``out/NAME.h`` and
-    ``out/NAME.c``, or a scenario object. Returns the code and the paths written.
+    """``flexarm export-c``: the controller of ``design`` (a design directory or its
+    ``design.toml`` / ``design.json``, a scenario file or name, a
+    :class:`~flexarm.design.result.Design`, or a scenario object) as ``out/NAME.h`` and
+    ``out/NAME.c``. Returns the code and the paths written.
 
-    The design gate (:mod:`flexarm.design.gate`): a design whose verdict (``Design.verdict``,
-    or ``"verdict"`` in the directory's ``design.json``) is a failure is refused with
-    :class:`flexarm.errors.UnstableDesignError` unless ``force``; with ``force`` the header
-    carries the verdict as a ``#warning`` (every compiler says it on each build).  A
-    scenario (no design) and a design without a verdict (not checked, or written before the
-    gate) are exported as before."""
+    The gate on every export (issue #45): the design's stored verdict (``Design.verdict``,
+    or ``"verdict"`` in the design directory's ``design.json``, whichever of the design's
+    files is given) and the nominal check of the sampled loop with its delays
+    (:func:`flexarm.deploy.stability.nominal_check`, run on every design and scenario
+    unless ``check=False``).  A failure of either is refused with
+    :class:`flexarm.errors.UnstableDesignError` unless ``accept_unstable`` (``force`` is
+    its older name; ``--accept-unstable``); then the header carries the verdict as a
+    ``#warning`` (every compiler says it on each build)."""
     from flexarm.design.result import Design
+    from flexarm.errors import UnstableDesignError
 
+    name = _c_name(name)
     if isinstance(design, Design):
         sc, method, label = design.scenario, design.method, None
         verdict = design.verdict
@@ -1208,22 +1273,39 @@ def export_c(
         sc, method, label, verdict = design, None, None, None
     else:
         sc, method, label = load_design(design)
-        verdict = _design_verdict(design)
-    if verdict is not None and verdict != "stable":
-        if not force:
-            from flexarm.errors import UnstableDesignError
-
-            raise UnstableDesignError(
-                f"{label or method or 'design'}: the design gate's verdict is not stable: "
-                f"{verdict}; not exported",
-                field="verdict",
-                value=verdict,
-                fix="redesign (design.json and compare.md say why), or pass force=True "
-                "(--force) to export it with the verdict as a #warning in the header",
-            )
+        d = design_dir(design)
+        verdict = _design_verdict(d) if d is not None else None
+    what = label or method or (getattr(sc, "name", None) and f"scenario {sc.name!r}") or "design"
+    what = c_comment(what)
+    accept = accept_unstable or force
     code = generate_c(sc, name=name, precision=precision, method=method, source=label)
+    failures = []
     if verdict is not None and verdict != "stable":
-        code = _with_warning(code, f"{label or method}: design verdict: {verdict}")
+        failures.append(f"the design gate's verdict is not stable: {verdict}")
+    if check:
+        from flexarm.deploy.stability import nominal_check
+
+        try:
+            nc = nominal_check(sc)
+        except (ValueError, TypeError, NotImplementedError) as exc:
+            failures.append(f"the nominal stability check could not run ({exc})")
+        else:
+            if not nc.stable:
+                failures.append(nc.verdict)
+    if failures and not accept:
+        text = "; ".join(failures)
+        raise UnstableDesignError(
+            f"{what}: not exported: {text}",
+            value=verdict if verdict is not None and verdict != "stable" else None,
+            fix="redesign (a design's design.json and compare.md say why), or pass "
+            "accept_unstable=True (--accept-unstable) to export it with the verdict as a "
+            "#warning in the header",
+        )
+    for f in failures:
+        code = _with_warning(
+            code,
+            f"{what}: {f}".replace("the design gate's verdict is not stable", "design verdict"),
+        )
     return code, code.write(out, overwrite=overwrite)
 
 
@@ -1243,10 +1325,9 @@ def _with_warning(code: CCode, text: str) -> CCode:
     """``code`` with ``#warning "flexarm: <text>"`` after the header's include guard."""
     from dataclasses import replace
 
-    text = re.sub(r'[\\"\n\r]', " ", text)
     guard = f"#define {code.name.upper()}_H\n"
     head = code.header
     i = head.find(guard)
-    line = f'#warning "flexarm: {text}; exported with force"\n'
+    line = f'#warning "flexarm: {c_string(text)}; exported with --accept-unstable"\n'
     head = head[: i + len(guard)] + line + head[i + len(guard) :] if i >= 0 else line + head
     return replace(code, header=head)

@@ -667,16 +667,25 @@ def load_log_format(path: str | Path | LogFormat) -> LogFormat:
     if isinstance(path, LogFormat):
         return path
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
+    from flexarm.io.write import InputFileError, read_input
+
+    try:  # a regular file of at most 1 MiB (not /dev/zero)
+        text = read_input(path, limit=1 << 20, what="log-format file").decode("utf-8")
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such log-format file") from None
+    except InputFileError as exc:
+        raise LogFormatError(str(exc)) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise LogFormatError(f"{path}: cannot read the log-format file ({exc})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise LogFormatError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise LogFormatError(
+            f"{path}: nested too deeply to read (arrays or tables inside each other); "
+            "a log format is a few flat tables"
+        ) from None
     return log_format_from_dict(data, source=str(path))
 
 

@@ -438,6 +438,9 @@ def unit_factor(
         ) from None
 
 
+#: The longest line of a text log read, characters (a line is one sample's numbers, or a
+#: header or comment line)
+MAX_LINE = 100_000
 #: Characters that start a comment line (the exchange format writes ``#``; many loggers ``%``).
 COMMENT_CHARS = ("#", "%")
 #: Delimiters tried, in this order, on the first data row: tab, semicolon, comma, then runs
@@ -448,10 +451,14 @@ DELIMITERS = ("\t", ";", ",", None)
 def _decode(path: Path) -> str:
     """The file's text: UTF-8 (a byte-order mark dropped), else Latin-1 (loggers on Windows
     write ``°`` or ``µ`` in headers); line ends ``\\r\\n`` and ``\\r`` read as ``\\n``."""
+    from flexarm.io.write import InputFileError, read_input
+
     try:
-        raw = path.read_bytes()
+        raw = read_input(path, what="text log")  # a regular file, at most 1 GiB
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
+    except InputFileError as exc:
+        raise LogError(str(exc)) from None
     except OSError as exc:
         raise LogError(f"{path}: cannot read the file ({exc})") from None
     if b"\x00" in raw:
@@ -523,6 +530,12 @@ def _layout(
     comment character removed), or there is none (columns must then be given by number).
     """
     lines = text.split("\n")
+    for k, ln in enumerate(lines):  # a text log's line is numbers and names, not megabytes
+        if len(ln) > MAX_LINE:
+            raise LogError(
+                f"{path}: line {k + 1}: {len(ln)} characters, more than the {MAX_LINE} a "
+                "text log's line may have; is it a log (one sample per line)?"
+            )
     comments: list[str] = []
     comment_lines: list[int] = []
     sniff = delimiter == "auto" or delimiter is None

@@ -232,6 +232,11 @@ def resolve_variable(path: Path, variables: dict, name: str, spec: VarSpec) -> n
     if a.dtype.kind not in "iufb":
         raise MatFileError(f"{where}: {'.'.join(spec.path)} holds {a.dtype} data, not numbers")
     a = np.asarray(a, dtype=float)
+    if a.size == 0:
+        raise MatFileError(
+            f"{where}: {'.'.join(spec.path)} is empty ({' x '.join(map(str, a.shape)) or '0'}); "
+            "name the variable that holds the recording"
+        )
     if a.ndim <= 1:
         a2 = a.reshape(-1, 1)
     elif a.ndim == 2 and a.shape[0] == 1:  # a row vector

@@ -24,7 +24,15 @@ The output policy (issue #25), one for every writer:
 * a final write that fails (a full disk, a folder that vanished, a file that appeared
   meanwhile) saves the result next to the requested path and says where
   (:func:`save_or_rescue`);
-* SIGTERM and a second Ctrl-C do not lose the best result (:func:`interruptible`).
+* SIGTERM and a second Ctrl-C do not lose the best result (:func:`interruptible`);
+* names are data (issue #45): a scenario's ``name``, a manifest ``id`` or any other text
+  becomes a file name only through :func:`safe_name` (letters, digits, ``._-``; never
+  ``.``, ``..``, a path or an empty name; at most :data:`NAME_MAX` characters), and two
+  outputs of one run never share a name (:func:`distinct_names`, :func:`check_outputs`:
+  every output of a command checked before any work);
+* a concurrent writer into the same output folder is detected, not raced: the folder is
+  locked by a create-exclusive lock file (:func:`lock_folder`, released when the
+  command's :func:`run_scope` ends).
 
 Functions: :func:`atomic_open` (a file object), :func:`atomic_path` (a temporary path for
 writers that take a path), :func:`write_text`, :func:`write_bytes`, :func:`write_json`,
@@ -48,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from flexarm.errors import InputOverwriteError, Interrupted, OutputExistsError
+from flexarm.errors import FlexarmError, InputOverwriteError, Interrupted, OutputExistsError
 
 __all__ = [
     "atomic_open",
@@ -68,6 +76,16 @@ __all__ = [
     "Interruptible",
     "OutputExistsError",
     "InputOverwriteError",
+    "NAME_MAX",
+    "safe_name",
+    "distinct_names",
+    "check_outputs",
+    "run_scope",
+    "lock_folder",
+    "LOCK_NAME",
+    "read_input",
+    "InputFileError",
+    "MAX_TEXT_INPUT",
 ]
 
 
@@ -273,7 +291,8 @@ def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """The output folder ``path`` (figures, a design), created with its parents.  A folder
     that already holds files is used only with ``overwrite=True`` (then files of the same
     names are replaced; others stay); a file where the folder should be, or a folder inside
-    a declared input folder, is refused."""
+    a declared input folder, is refused.  Inside a command's :func:`run_scope` the folder is
+    locked (:func:`lock_folder`): a second run writing there at the same time is refused."""
     d = Path(path)
     src = is_input(d)
     if src is not None:
@@ -284,14 +303,204 @@ def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         raise OutputExistsError(
             f"{d}: is a file, not a folder; give a folder name", file=d, fix="give a folder name"
         )
-    if d.is_dir() and any(d.iterdir()) and not overwrite:
-        raise OutputExistsError(
-            f"{d}: the folder holds files already; not written into "
-            "(pass overwrite=True, on the command line --overwrite)",
-            file=d,
-        )
+    if d.is_dir():
+        mine = lock_folder(d)  # another run's lock: refused here, by name
+        if not overwrite and any(p.name != LOCK_NAME or mine is None for p in d.iterdir()):
+            raise OutputExistsError(
+                f"{d}: the folder holds files already; not written into "
+                "(pass overwrite=True, on the command line --overwrite)",
+                file=d,
+            )
+        return d
     d.mkdir(parents=True, exist_ok=True)
+    lock_folder(d)
     return d
+
+
+# ------------------------------------------------------------------ names are data
+#: the longest file name stem :func:`safe_name` makes (the file systems' limit is 255 bytes,
+#: with room for the extensions flexarm adds)
+NAME_MAX = 100
+
+
+def safe_name(name: Any, *, what: str = "name") -> str:
+    """``name`` as a file name stem that cannot leave its folder: every character but
+    letters, digits and ``._-`` becomes ``_`` (``/``, ``\\``, NUL, spaces, newlines,
+    non-ASCII), and a leading ``.`` or ``-`` becomes ``_`` (no hidden file, no option look-alike;
+    ``..`` and ``.`` cannot survive). Refused (:class:`flexarm.errors.FlexarmError`, one line naming
+    ``what``) when nothing is left that is a letter or digit, or the name is longer than
+    :data:`NAME_MAX` characters. The one sanitiser of every name that becomes a file."""
+    from flexarm.errors import FlexarmError
+
+    text = "" if name is None else str(name)
+    shown = text if len(text) <= 40 else text[:40] + "..."
+    if len(text) > NAME_MAX:
+        raise FlexarmError(
+            f"{what} is {len(text)} characters long; at most {NAME_MAX} become a file name",
+            value=shown,
+            fix=f"give a shorter {what}",
+        )
+    out = "".join(ch if (ch.isascii() and (ch.isalnum() or ch in "._-")) else "_" for ch in text)
+    k = 0
+    while k < len(out) and out[k] in ".-":
+        k += 1
+    out = "_" * k + out[k:]
+    if not any(ch.isalnum() for ch in out):
+        raise FlexarmError(
+            f"{what} cannot be made a safe file name (it needs a letter or digit)",
+            value=shown,
+            fix=f"give a {what} of letters, digits and ._-",
+        )
+    return out
+
+
+def distinct_names(names: Sequence[Any], *, what: str = "name") -> list[str]:
+    """:func:`safe_name` of each of ``names``, made distinct: a repeated one (the same
+    name, or names that sanitise alike, compared without case: ``Rig`` and ``rig`` share
+    a file on some file systems) gets ``-2``, ``-3``, ... (the caller states the names it
+    used)."""
+    out: list[str] = []
+    seen: set[str] = set()
+    for n in names:
+        base = safe_name(n, what=what)
+        cand, k = base, 1
+        while cand.lower() in seen:
+            k += 1
+            cand = f"{base}-{k}"
+        seen.add(cand.lower())
+        out.append(cand)
+    return out
+
+
+def check_outputs(
+    outputs: Iterable[tuple[str, str | os.PathLike | None]], *, overwrite: bool = False
+) -> None:
+    """Check all of a command's output files before any work: ``outputs`` pairs
+    (option or label, path; ``None`` skipped). Refused (:class:`flexarm.errors.FlexarmError`
+    subclasses, one line naming the option): two outputs on one path, an output that is an
+    input of the run (:func:`inputs`; never, even with ``overwrite``), an output that
+    exists (unless ``overwrite``), an output that is a folder."""
+    seen: dict[Path, str] = {}
+    for opt, p in outputs:
+        if p is None:
+            continue
+        q = Path(p).expanduser()
+        r = q.resolve()
+        if r in seen:
+            raise OutputExistsError(
+                f"{opt} {q}: the same path as {seen[r]}; two outputs of one run cannot "
+                "share a file",
+                file=q,
+                fix="give each output its own path",
+            )
+        seen[r] = f"{opt} {q}"
+        src = is_input(q)
+        if src is not None:
+            raise InputOverwriteError(
+                f"{opt} {q}: is an input of this run ({src}); flexarm never writes over an "
+                "input, even with --overwrite",
+                file=q,
+                fix="give another output path",
+            )
+        if q.is_dir():
+            raise OutputExistsError(f"{opt} {q}: is a folder; give a file name", file=q)
+        if q.exists() and not overwrite:
+            raise OutputExistsError(
+                f"{opt} {q}: exists already; not overwritten (pass --overwrite)", file=q
+            )
+
+
+# ------------------------------------------------------------------ one writer per folder
+#: the lock file a command keeps in each output folder while it writes there
+LOCK_NAME = ".flexarm.lock"
+
+_LOCKS: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar(
+    "flexarm_locks", default=None
+)
+
+
+@contextlib.contextmanager
+def run_scope() -> Iterator[None]:
+    """The lifetime of a command's folder locks (:func:`lock_folder`): released (the lock
+    files removed) when the block ends, however it ends."""
+    held: list[Path] = []
+    token = _LOCKS.set(held)
+    try:
+        yield
+    finally:
+        _LOCKS.reset(token)
+        for p in reversed(held):
+            with contextlib.suppress(OSError):
+                p.unlink()
+
+
+def lock_folder(folder: str | os.PathLike) -> Path | None:
+    """Take the output folder ``folder`` for this command: create ``folder/.flexarm.lock``
+    exclusively (``O_CREAT | O_EXCL``: of two runs, exactly one gets it). Another run's
+    lock there is refused (:class:`flexarm.errors.OutputExistsError`). The lock lasts until
+    the enclosing :func:`run_scope` ends; outside one, nothing is locked (None)."""
+    held = _LOCKS.get()
+    if held is None:
+        return None
+    lock = Path(folder) / LOCK_NAME
+    if lock in held:
+        return lock
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        try:
+            who = lock.read_text(encoding="utf-8", errors="replace").strip()[:80]
+        except OSError:
+            who = "?"
+        raise OutputExistsError(
+            f"{folder}: another flexarm run is writing into this folder (lock file {lock}: "
+            f"{who}); not written into",
+            file=folder,
+            fix="wait for that run, give another folder, or delete the lock file if no "
+            "run is going",
+        ) from None
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(f"pid {os.getpid()}\n")
+    held.append(lock)
+    return lock
+
+
+# ------------------------------------------------------------------ bounded reading
+#: the largest text input (log, log format, manifest, JSON document) read, bytes
+MAX_TEXT_INPUT = 1 << 30
+
+
+def read_input(
+    path: str | os.PathLike, *, limit: int = MAX_TEXT_INPUT, what: str = "file"
+) -> bytes:
+    """The bytes of the input file ``path``, read only when it is a regular file (not
+    ``/dev/zero``, a pipe or a device, which could be read until memory runs out) of at
+    most ``limit`` bytes; otherwise :class:`flexarm.errors.FlexarmError` (a ``ValueError``)
+    naming the file. A missing file raises ``FileNotFoundError``."""
+    import stat
+
+    p = Path(path)
+    st = p.stat()  # FileNotFoundError for a missing file
+    if not stat.S_ISREG(st.st_mode):
+        raise InputFileError(
+            f"{p}: not a regular file (a device, pipe or folder); give the {what} itself",
+            file=p,
+        )
+    if st.st_size > limit:
+        raise InputFileError(
+            f"{p}: {st.st_size} bytes, more than the {limit} bytes a {what} may have",
+            file=p,
+            fix="split it, or check that it is the right file",
+        )
+    with open(p, "rb") as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:  # grew while read
+        raise InputFileError(f"{p}: more than {limit} bytes; not read", file=p)
+    return data
+
+
+class InputFileError(FlexarmError, ValueError):
+    """An input file that is not read (:func:`read_input`): not a regular file, or too large."""
 
 
 # ------------------------------------------------------------------ unique result keys
@@ -394,15 +603,43 @@ def save_or_rescue(
 # ------------------------------------------------------------------ signals
 class Interruptible:
     """The state of :func:`interruptible`: ``signal`` (the first signal's name, or None),
-    ``count`` (signals received)."""
+    ``count`` (signals received), ``deferred`` (a first signal delivered again, module
+    doc), ``active`` (the block still runs)."""
 
     def __init__(self):
         self.signal: str | None = None
         self.count = 0
+        #: a first signal that arrived where it could not be raised (module doc), and
+        #: whether the block still runs (a deferred signal is delivered again only then)
+        self.deferred: str | None = None
+        self.active = True
 
     @property
     def interrupted(self) -> bool:
         return self.count > 0
+
+
+_GC_DEPTH = [0]
+
+
+def _gc_phase(phase: str, info: dict) -> None:
+    _GC_DEPTH[0] += 1 if phase == "start" else -1 if _GC_DEPTH[0] > 0 else 0
+
+
+def _unraisable_here(frame) -> bool:
+    """Whether an exception raised at ``frame`` would be dropped by Python (printed as
+    "Exception ignored in ...", never propagated): inside a ``__del__``, a weakref or
+    ``weakref.finalize`` callback, or while the garbage collector runs."""
+    if _GC_DEPTH[0] > 0:
+        return True
+    f, k = frame, 0
+    while f is not None and k < 64:
+        if f.f_code.co_name in ("__del__", "_remove_dead_weakref") or (
+            f.f_code.co_name == "__call__" and "weakref" in f.f_code.co_filename
+        ):
+            return True
+        f, k = f.f_back, k + 1
+    return False
 
 
 @contextlib.contextmanager
@@ -416,8 +653,11 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
     calls ``on_repeat(name)`` (e.g. to print "saving the best result first"), so a second
     Ctrl-C cannot break the writing of the best result.  SIGKILL still ends the process.
     A SIGINT that was ignored when the block began (a job started with ``nohup ... &``)
-    stays ignored.  Outside the main thread nothing is installed.  The previous handlers
-    are restored when the block ends."""
+    stays ignored.  A first signal that arrives where Python would drop the exception (in a
+    ``__del__``, a weakref callback, a garbage collection: JAX frees its buffers there) is
+    delivered again 50 ms later (once; it then raises wherever it lands), so it is never
+    swallowed.  Outside the main thread
+    nothing is installed.  The previous handlers are restored when the block ends."""
     state = Interruptible()
     if threading.current_thread() is not threading.main_thread():
         yield state
@@ -425,6 +665,18 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
 
     def handler(signum, frame):
         name = signal.Signals(signum).name
+        if state.count == 0 and state.deferred is None and _unraisable_here(frame):
+            # a signal that arrives in a __del__ or a garbage-collector callback (JAX frees
+            # buffers there) would be raised where Python prints and drops the exception:
+            # delivered again a moment later, in the code that runs on (issue #45)
+            state.deferred = name
+
+            def again():
+                if state.active and state.count == 0:
+                    os.kill(os.getpid(), signum)
+
+            threading.Timer(0.05, again).start()
+            return
         state.count += 1
         if state.count > 1:
             if on_repeat is not None:
@@ -435,6 +687,9 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
             raise KeyboardInterrupt
         raise Interrupted(f"stopped by {name}", signal=name, number=int(signum))
 
+    import gc
+
+    gc.callbacks.append(_gc_phase)
     old = {}
     for sig in (signal.SIGINT, signal.SIGTERM):
         prev = signal.getsignal(sig)
@@ -445,5 +700,10 @@ def interruptible(*, on_repeat: Callable[[str], None] | None = None) -> Iterator
     try:
         yield state
     finally:
+        state.active = False
+        with contextlib.suppress(ValueError):
+            gc.callbacks.remove(_gc_phase)
+        if _gc_phase not in gc.callbacks:  # no block left: no stale collection count
+            _GC_DEPTH[0] = 0
         for sig, prev in old.items():
             signal.signal(sig, prev if prev is not None else signal.SIG_DFL)
