@@ -677,6 +677,28 @@ def test_two_sessions_share_mechanics_fit_friction_per_session(logs, tmp_path):
         assert abs(fric[s]["viscous"] - 4e-3) < 3e-3, (s, fric[s])
         assert abs(fric[s]["bias"]) < 2e-3, (s, fric[s])
     assert "coulomb" not in res.params and set(res.std) == set(res.params)
+    # issue #47 item 1 through the one result: session 1's own values on the scenario's
+    # paths (sessions[1].PATH), a scenario per session written beside --scenario-out, and
+    # each log predicted by its session's scenario at the synthetic truth's level (>= 95 %,
+    # the held-out floor of the two-log acceptance test)
+    import flexarm
+    from flexarm.identification.time_domain.engine import session_scenarios
+
+    one = res.result()
+    assert one.params["sessions[1].arm.friction.coulomb"] == pytest.approx(
+        fric[1]["coulomb"], rel=1e-12
+    )
+    scs = session_scenarios(one, 2)
+    one.session_scenarios = scs
+    assert scs[1].arm.friction.coulomb == pytest.approx(fric[1]["coulomb"], rel=1e-12)
+    assert scs[0].arm.friction.coulomb == pytest.approx(fric[0]["coulomb"], rel=1e-12)
+    paths = one.session_paths(tmp_path / "rig.toml")
+    one.write_scenario(paths[0])
+    assert [q.name for q in paths] == ["rig.toml", "rig.session1.toml"]
+    for k, (g, q) in enumerate(zip([logs[0], log1], paths, strict=True)):
+        fp = next(iter(flexarm.validate(q, [g]).fit_percent.values()))
+        print(f"session {k}: validate of {q.name}:", fp)
+        assert fp["motor_angle"] >= 95 and fp["tip_deflection"] >= 95, (k, fp)
 
 
 @pytest.mark.slow
