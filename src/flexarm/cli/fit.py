@@ -377,6 +377,13 @@ def fit(
         write_json(json_out, one.to_dict(), overwrite=overwrite)
     if scenario_out is not None:
         one.write_scenario(scenario_out, overwrite=overwrite)
+        more = one.session_paths(scenario_out)[1:]
+        if more:  # several sessions: one scenario each (validate a run with its session's)
+            console.print(
+                f"scenarios per session: {scenario_out} (session 0), "
+                + ", ".join(f"{q} (session {k})" for k, q in enumerate(more, 1)),
+                highlight=False,
+            )
     with figure_folder(plots, report) as folder:
         if folder is not None:
             _bench_figures(
