@@ -106,7 +106,7 @@ from flexarm.identification.time_domain.options import (  # re-exported here
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.metrics import fit_percent as _fitpct
-from flexarm.sim.batch import cpu_cores, run_chunks
+from flexarm.sim.batch import cpu_cores, run_chunks, stack_loops
 from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
@@ -219,19 +219,6 @@ ScenarioFit = FitResult
 
 
 # ----------------------------------------------------------------------------- engine
-def stack_loops(loops: list):
-    """Prepared loops of one structure (e.g. one scenario with different numbers) stacked
-    leaf by leaf into one batched loop (leading axis: the loop), for one ``vmap``-ed run."""
-    try:
-        return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *loops)
-    except ValueError as exc:
-        raise ValueError(
-            "the free parameters change the structure of the loop (e.g. a "
-            "friction model, a filter switched on or off), which cannot be "
-            f"batched: {exc}"
-        ) from None
-
-
 def _savgol_derivative(y: np.ndarray, k: int, h: int, dt: float) -> np.ndarray:
     """ẏ at sample k by a least-squares quadratic over samples k−h … k+h; where the log
     ends within h samples of k, a straight line over the 2h + 1 samples at that end (an
