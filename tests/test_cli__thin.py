@@ -124,7 +124,15 @@ def test_validate_keeps_same_named_logs_apart_in_json_and_table(tmp_path):
     )
     assert r.exit_code == 0, r.output
     d = json.loads(j.read_text())
-    assert set(d) == {"scenario", "fit_percent", "diverged", "warnings", "notes", "plots"}
+    assert set(d) == {
+        "scenario",
+        "fit_percent",
+        "rmse",
+        "nrmse",
+        "diverged",
+        "warnings",
+        "notes",
+    } | {"plots"}
     a, b = d["fit_percent"]["a/run.csv"], d["fit_percent"]["b/run.csv"]
     assert a["motor_angle"] == pytest.approx(b["motor_angle"], abs=1e-9)
     assert "a/run.csv" in r.output and "b/run.csv" in r.output

@@ -369,17 +369,6 @@ class _Engine:
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
-        for L in self.logs:
-            missing = sorted(
-                n for n in read if n in self.names and not L.present[self.names.index(n)]
-            )
-            if missing:
-                raise ValueError(
-                    f"{L.name}: no column {', '.join(map(repr, missing))}, which "
-                    f"the controller of scenario {self.template.name!r} reads; the "
-                    "fit runs the controller on the logged channels from the log's "
-                    "start: log them (or map them with a log format)"
-                )
         # by default every channel a log measures: present, not computed from others, and
         # not constant (a rigid arm's zero tip column measures nothing)
         chans = options.channels or {
@@ -423,6 +412,21 @@ class _Engine:
             self._continuous()
         seg = options.segment if segment == "options" else segment
         self._segments(seg)
+        # a segment after a log's first sample starts its controller from the controller
+        # run over the logged channels before it: those channels must be logged (a log
+        # simulated from its first sample needs none: the controller starts there)
+        late = {li for li, k0, _ in self.seg if k0 > 0}
+        for li, L in enumerate(self.logs):
+            missing = sorted(
+                n for n in read if n in self.names and not L.present[self.names.index(n)]
+            )
+            if missing and li in late:
+                raise ValueError(
+                    f"{L.name}: no column {', '.join(map(repr, missing))}, which "
+                    f"the controller of scenario {self.template.name!r} reads; the "
+                    "fit runs the controller on the logged channels from the log's "
+                    "start: log them (or map them with a log format)"
+                )
 
     def _continuous(self) -> None:
         """The logs as consecutive pieces of one run: each log's controller start state
