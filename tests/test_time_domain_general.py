@@ -179,20 +179,30 @@ def test_bad_input_names_the_field_and_value():
         )
     with pytest.raises(ValueError, match="has a prior or bounds but is not free"):
         fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.joints[0].viscous": 0.3}))
-    with pytest.raises(ValueError, match="template value is 0.0"):
+    # a parameter at 0 is fitted in linear space and needs a scale (#44): named, with --bound
+    with pytest.raises(ValueError, match=r"arm.hubs\[0\].mass' starts at 0 .*--bound"):
         fit_scenario(truth, [log], ["arm.payload.mass"] * 0 + ["arm.hubs[0].mass"])
     with pytest.raises(ValueError, match="no log holds channel 'theta_2'|not a sensor channel"):
         fit_scenario(truth, [log], free, ScenarioFitOptions(channels={"theta_2": 1.0}))
     slow = log.__class__(log.path, log.time * 2, log.signals)
-    with pytest.raises(ValueError, match="sampled every 0.004 s.*samples every 0.002 s"):
+    with pytest.raises(ValueError, match="sampled every 0.004 s.*period is 0.002 s"):
         fit_scenario(truth, [slow], free)
     with pytest.raises(ValueError, match="relative standard deviation"):
         fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.hubs[0].inertia": 0.0}))
     blind = log.__class__(
         log.path, log.time, {k: v for k, v in log.signals.items() if k != "theta_1"}
     )
+    # a segment after the log's first sample starts the controller from its run over the
+    # logged channels: the ones it reads must be logged (from the first sample none are)
     with pytest.raises(ValueError, match="no column 'theta_1', which the controller"):
-        fit_scenario(truth, [blind], free, ScenarioFitOptions(channels={"deflection_1": 1.0}))
+        fit_scenario(
+            truth,
+            [blind],
+            free,
+            ScenarioFitOptions(channels={"deflection_1": 1.0}, segment=0.1, max_nfev=1),
+        )
+    with pytest.raises(ValueError, match="none of scenario .* sensor channels"):
+        fit_scenario(truth, [log.__class__(log.path, log.time, {"x": log.time})], free)
 
 
 def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():

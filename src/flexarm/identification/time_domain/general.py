@@ -369,6 +369,14 @@ class _Engine:
         from flexarm.sim.build import _measured_names
 
         read = _measured_names(loop.controller)
+        for L in self.logs:
+            if not L.present.any():
+                raise ValueError(
+                    f"{L.name}: none of scenario {self.template.name!r}'s sensor channels "
+                    f"({', '.join(self.names)}) is a column of this log; name its columns so "
+                    "(--column NAME=COLUMN, or a log format's [columns]) or give this rig's "
+                    "scenario"
+                )
         # by default every channel a log measures: present, not computed from others, and
         # not constant (a rigid arm's zero tip column measures nothing)
         chans = options.channels or {
