@@ -22,6 +22,7 @@ from flexarm.cli import (
     design,
     distributed,
     errors,
+    examples,
     fit,
     frequency,
     reproduce,
@@ -109,6 +110,7 @@ app.command("frf")(frequency.frf)
 app.command("tfest")(frequency.tfest)
 app.command("friction")(frequency.friction)
 app.command("fit-many")(distributed.fit_many)
+app.command("example-logs")(examples.example_logs)
 
 
 def main() -> None:  # pragma: no cover
