@@ -29,6 +29,7 @@ from flexarm.cli import (
     scenarios,
     simulate,
 )
+from flexarm.cli.options import PanelCommand
 
 
 class FlexarmGroup(TyperGroup):
@@ -102,8 +103,8 @@ app.command("reproduce")(reproduce.reproduce)
 app.command("demo")(reproduce.demo)
 app.command("experiment")(frequency.experiment)
 app.command("identify")(frequency.identify)
-app.command("fit")(fit.fit)
-app.command("validate")(fit.validate)
+app.command("fit", cls=PanelCommand)(fit.fit)
+app.command("validate", cls=PanelCommand)(fit.validate)
 app.command("export-c")(deploy.export_c)
 app.command("excite")(frequency.excite)
 app.command("frf")(frequency.frf)

@@ -12,24 +12,33 @@ from typing import Annotated
 import typer
 
 # --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
-Drive = Annotated[str, typer.Option(help="voltage or current")]
-GearRatio = Annotated[float, typer.Option(help="K_g")]
+Drive = Annotated[str, typer.Option(help="voltage or current", rich_help_panel="Data sheet")]
+GearRatio = Annotated[float, typer.Option(help="K_g", rich_help_panel="Data sheet")]
 MotorConstant = Annotated[
-    float | None, typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)")
+    float | None,
+    typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)", rich_help_panel="Data sheet"),
 ]
-ArmatureResistance = Annotated[float | None, typer.Option(help="R, ohm")]
-LinkLength = Annotated[float | None, typer.Option(help="link length, m")]
-GearEfficiency = Annotated[float, typer.Option()]
-MotorEfficiency = Annotated[float, typer.Option()]
+ArmatureResistance = Annotated[
+    float | None, typer.Option(help="R, ohm", rich_help_panel="Data sheet")
+]
+LinkLength = Annotated[
+    float | None, typer.Option(help="link length, m", rich_help_panel="Data sheet")
+]
+GearEfficiency = Annotated[float, typer.Option(rich_help_panel="Data sheet")]
+MotorEfficiency = Annotated[float, typer.Option(rich_help_panel="Data sheet")]
 VoltageLimit = Annotated[
     float | None,
-    typer.Option(help="amplifier limit, V (default: the log format's [controller] limit, else 10)"),
+    typer.Option(
+        help="amplifier limit, V (default: the log format's [controller] limit, else 10)",
+        rich_help_panel="Data sheet",
+    ),
 ]
 ComputationDelay = Annotated[
     int | None,
     typer.Option(
         help="samples between a sample and its command (default: where the declared law best "
-        "explains the logged command)"
+        "explains the logged command)",
+        rich_help_panel="Data sheet",
     ),
 ]
 
@@ -60,33 +69,47 @@ LogFormats = Annotated[
         "--log-format",
         help="the logger's log-format TOML (columns, units, gains); with a "
         "scenario: once per log, or PATTERN=FILE by file name",
+        rich_help_panel="Log",
     ),
 ]
 LogFormatFile = Annotated[
     Path | None,
-    typer.Option("--log-format", help="the logs' log-format TOML ([columns], [units]; examples/)"),
+    typer.Option(
+        "--log-format",
+        help="the logs' log-format TOML ([columns], [units]; examples/)",
+        rich_help_panel="Log",
+    ),
 ]
 Column = Annotated[
-    list[str] | None, typer.Option(help="map a column to the log's name: motor_angle=theta")
+    list[str] | None,
+    typer.Option(help="map a column to the log's name: motor_angle=theta", rich_help_panel="Log"),
 ]
 Unit = Annotated[
     list[str] | None,
-    typer.Option(help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm"),
+    typer.Option(
+        help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm", rich_help_panel="Log"
+    ),
 ]
 Window = Annotated[
     str | None,
     typer.Option(
-        help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5"
+        help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5",
+        rich_help_panel="Log",
     ),
 ]
 MaxJitter = Annotated[
-    float, typer.Option(help="accepted relative deviation of a time step from the median step")
+    float,
+    typer.Option(
+        help="accepted relative deviation of a time step from the median step",
+        rich_help_panel="Log",
+    ),
 ]
 Controller = Annotated[
     str | None,
     typer.Option(
         help="overrides the logs' '# controller:' line, e.g. "
-        "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"
+        "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'",
+        rich_help_panel="Log",
     ),
 ]
 UseRegressedLaw = Annotated[
@@ -94,6 +117,7 @@ UseRegressedLaw = Annotated[
     typer.Option(
         "--use-regressed-law",
         help="use the law regressed on the logged command where it disagrees with the declared one",
+        rich_help_panel="Log",
     ),
 ]
 Channels = Annotated[
@@ -102,25 +126,106 @@ Channels = Annotated[
         "--channel",
         help="a measured channel to fit or compare, NAME or NAME=WEIGHT (repeat; "
         "default: every logged sensor channel)",
+        rich_help_panel="Log",
     ),
 ]
 
 # --- outputs -------------------------------------------------------------------------------
-JsonOut = Annotated[Path | None, typer.Option("--json", help="write the result as JSON")]
-JsonRequired = Annotated[Path, typer.Option("--json", help="JSON result")]
-Plots = Annotated[Path | None, typer.Option(help="folder for figures")]
+JsonOut = Annotated[
+    Path | None, typer.Option("--json", help="write the result as JSON", rich_help_panel="Outputs")
+]
+JsonRequired = Annotated[
+    Path, typer.Option("--json", help="JSON result", rich_help_panel="Outputs")
+]
+Plots = Annotated[Path | None, typer.Option(help="folder for figures", rich_help_panel="Outputs")]
 Report = Annotated[
     Path | None,
     typer.Option(
-        "--report", help="write a self-contained HTML report (figures embedded), e.g. result.html"
+        "--report",
+        help="write a self-contained HTML report (figures embedded), e.g. result.html",
+        rich_help_panel="Outputs",
     ),
 ]
 ScenarioOut = Annotated[
-    Path | None, typer.Option("--scenario-out", help="write the fitted (identified) scenario TOML")
+    Path | None,
+    typer.Option(
+        "--scenario-out",
+        help="write the fitted (identified) scenario TOML",
+        rich_help_panel="Outputs",
+    ),
 ]
-Out = Annotated[Path, typer.Option("--out", help="output folder")]
-Overwrite = Annotated[bool, typer.Option(help="replace existing output files")]
-OverwriteOut = Annotated[bool, typer.Option(help="write into a non-empty --out folder")]
+Out = Annotated[Path, typer.Option("--out", help="output folder", rich_help_panel="Outputs")]
+Overwrite = Annotated[
+    bool, typer.Option(help="replace existing output files", rich_help_panel="Outputs")
+]
+OverwriteOut = Annotated[
+    bool, typer.Option(help="write into a non-empty --out folder", rich_help_panel="Outputs")
+]
 
 # --- inputs --------------------------------------------------------------------------------
 ScenarioArg = Annotated[str, typer.Argument(help="scenario TOML file or built-in name")]
+
+
+# --- help grouped by panel (issue #46: `fit --help` listed about 40 options flat) ---------
+#: the panel of options that no shared group above places, by parameter name
+PANELS_BY_NAME = {
+    "controller": "Log",
+    "continuous": "Log",
+    "sessions": "Log",
+    "validate_window": "Log",
+    "refit_window": "Log",
+    "mode": "Search",
+    "no_friction": "Search",
+    "seconds": "Search",
+    "compare_no_friction": "Search",
+    "tip_sign": "Search",
+    "encoder_counts": "Search",
+    "filter": "Search",
+    "delay_search": "Search",
+    "polish_iter": "Search",
+    "global_starts": "Search",
+    "seed": "Search",
+    "tip_after_hub": "Search",
+    "free": "Search",
+    "prior": "Search",
+    "segment": "Search",
+    "max_nfev": "Search",
+    "refit": "Search",
+    "overwrite": "Outputs",
+}
+#: the panels' titles, in the order shown (the routes each is for)
+PANEL_TITLES = {
+    "Data sheet": "Data sheet (LOG... alone, the servo route; needs --motor-constant, "
+    "--armature-resistance)",
+    "Log": "Log (how the logs are read, which part is used)",
+    "Search": "Search (what is fitted, how; --free, --prior, --segment: SCENARIO LOG...)",
+    "Outputs": "Outputs",
+    "Options": "Other options",
+}
+
+
+class PanelCommand(typer.core.TyperCommand):
+    """A command whose plain-text ``--help`` (the app has no rich markup) lists its options
+    in panels: each option's ``rich_help_panel`` (the shared groups above), else
+    :data:`PANELS_BY_NAME`, else "Other options"; titles from :data:`PANEL_TITLES`."""
+
+    def format_options(self, ctx, formatter) -> None:
+        args, groups = [], {k: [] for k in PANEL_TITLES}
+        for param in self.get_params(ctx):
+            rv = param.get_help_record(ctx)
+            if rv is None:
+                continue
+            if param.param_type_name == "argument":
+                args.append(rv)
+                continue
+            panel = getattr(param, "rich_help_panel", None) or PANELS_BY_NAME.get(
+                param.name or "", "Options"
+            )
+            groups.setdefault(panel, []).append(rv)
+        if args:
+            with formatter.section("Arguments"):
+                formatter.write_dl(args)
+        for panel, rows in groups.items():
+            if rows:
+                with formatter.section(PANEL_TITLES.get(panel, panel)):
+                    formatter.write_dl(rows)
