@@ -16,6 +16,7 @@ from flexarm.analysis.example_logs import (
     DATA_SHEET,
     ROTARY_FLEXIBLE,
     ROTARY_RIGID,
+    ExampleLogsError,
     write_example_logs,
 )
 from flexarm.errors import OutputExistsError
@@ -66,7 +67,7 @@ def test_nothing_is_overwritten_without_overwrite(logs):
     with pytest.raises(OutputExistsError, match="overwrite"):
         write_example_logs(logs.directory, which=("rotary-rigid",))
     assert logs.files["rotary-flexible"].read_bytes() == before
-    with pytest.raises(ValueError, match="rotary-flexible, rotary-rigid, two-link"):
+    with pytest.raises(ExampleLogsError, match="rotary-flexible, rotary-rigid, two-link"):
         write_example_logs(logs.directory, which=("motor",), overwrite=True)
 
 

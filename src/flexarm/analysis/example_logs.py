@@ -34,11 +34,14 @@ from typing import Any
 
 import numpy as np
 
+from flexarm.errors import FlexarmError
+
 __all__ = [
     "ROTARY_FLEXIBLE",
     "ROTARY_RIGID",
     "DATA_SHEET",
     "ExampleLogs",
+    "ExampleLogsError",
     "rotary_scenario",
     "reference",
     "simulate",
@@ -222,6 +225,10 @@ def write_lab_log(path: str | Path, log, true: dict[str, Any], *, overwrite: boo
     return write_text(path, "\r\n".join([LAB_HEADER, *rows]) + "\r\n", overwrite=overwrite)
 
 
+class ExampleLogsError(FlexarmError, ValueError):
+    """A bad argument of :func:`write_example_logs` (the message names it and the fix)."""
+
+
 @dataclass
 class ExampleLogs:
     """What :func:`write_example_logs` wrote: the folder and its files by role."""
@@ -317,14 +324,22 @@ def write_example_logs(
 
     unknown = sorted(set(which) - {"rotary-flexible", "rotary-rigid", "two-link"})
     if unknown:
-        raise ValueError(
-            f"example log(s) {', '.join(unknown)} not known; choose among "
-            "rotary-flexible, rotary-rigid, two-link"
+        raise ExampleLogsError(
+            "example log(s) not known",
+            field="which",
+            value=", ".join(unknown),
+            fix="choose among rotary-flexible, rotary-rigid, two-link",
         )
-    if not duration >= 3.0 or not two_link_seconds > 0:
-        raise ValueError(
-            f"duration = {duration!r} s must be >= 3 s (the first step comes at 0.5 s, "
-            f"the second at 2 s) and two_link_seconds = {two_link_seconds!r} s > 0"
+    if not duration >= 3.0:
+        raise ExampleLogsError(
+            "the rotary runs need >= 3 s (steps at 0.5 and 2 s)",
+            field="duration",
+            value=duration,
+            fix="give 3 s or more (on the command line --seconds)",
+        )
+    if not two_link_seconds > 0:
+        raise ExampleLogsError(
+            "must be > 0 s", field="two_link_seconds", value=two_link_seconds, fix="give e.g. 6"
         )
     names = {"rotary-flexible": "rotary-flexible", "rotary-rigid": "rotary-rigid"}
     names["two-link"] = "two-link.csv"
