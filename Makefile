@@ -1,6 +1,6 @@
 # Two entry points that work on a fresh machine with only Python >= 3.11:
 #   make demo   set up .venv, run the main job on the built-in default, write out/demo/
-#   make test   set up .venv, run the whole test suite (about 33 min on 2 cores)
+#   make test   set up .venv, run the whole test suite (about 38 min on 2 cores)
 #   make check  set up .venv, run the suite without the slow tests (-m "not slow", ~10 min)
 # Both install the exact versions of requirements/lock.txt (with hashes), then flexarm
 # itself without dependencies; only pip is needed. `make lock` regenerates the lock from
