@@ -190,11 +190,14 @@ def _filtered_rate(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
     return out
 
 
-def write_lab_log(path: str | Path, log, true: dict[str, Any], *, overwrite: bool = False):
+def write_lab_log(
+    path: str | Path, log, true: dict[str, Any], *, overwrite: bool = False, decimals: int = 3
+):
     """Write a simulated rotary log (:func:`flexarm.identification.time_domain.synthetic.
     scenario_log` of :func:`rotary_scenario`) as the lab's logger writes it (see the module
     docstring); the rate columns are the law's filtered derivatives of the logged-late
-    readings (rad/s, m/s), so the logged law reproduces the logged voltage (V)."""
+    readings (rad/s, m/s), so the logged law reproduces the logged voltage (V).
+    ``decimals``: the logger's rounding (3, as the lab's; more for a study of its effect)."""
     from flexarm.io.write import write_text
 
     t = np.asarray(log.time, float)
@@ -220,8 +223,8 @@ def write_lab_log(path: str | Path, log, true: dict[str, Any], *, overwrite: boo
         np.zeros(n),
         np.zeros(n),
     ]
-    table = np.round(np.column_stack(cols), 3) + 0.0  # no "-0.000"
-    rows = ["\t".join(f"{v:.3f}" for v in row) for row in table]
+    table = np.round(np.column_stack(cols), decimals) + 0.0  # no "-0.000"
+    rows = ["\t".join(f"{v:.{decimals}f}" for v in row) for row in table]
     return write_text(path, "\r\n".join([LAB_HEADER, *rows]) + "\r\n", overwrite=overwrite)
 
 

@@ -89,8 +89,20 @@ def _root(
             "--version", callback=_version, is_eager=True, help="print flexarm's version and exit"
         ),
     ] = False,
+    no_jax_cache: Annotated[
+        bool,
+        typer.Option(
+            "--no-jax-cache",
+            help="do not keep JAX's compiled loops on disk (default: kept in the user's "
+            "cache folder, or in $FLEXARM_JAX_CACHE; FLEXARM_JAX_CACHE=0 also turns it off)",
+        ),
+    ] = False,
 ) -> None:
     """Model, identify, simulate and control flexible-link arms with joint friction."""
+    if no_jax_cache:
+        import os
+
+        os.environ["FLEXARM_JAX_CACHE"] = "0"
 
 
 # the order of `flexarm --help`
