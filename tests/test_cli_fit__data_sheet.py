@@ -51,3 +51,24 @@ def test_a_current_drive_needs_no_resistance_and_one_value_missing_is_named_alon
          "--link-length", "0.4", "--gear-ratio", "0"]
     )  # fmt: skip
     assert code == 2 and "--gear-ratio > 0 (got 0)" in lines[0], lines
+
+
+def test_a_ms_clock_read_as_s_is_flagged_before_any_work(log, tmp_path):
+    """The lab logger's ms column read without the format's [units] time = "ms": the
+    loop looks like 1 Hz; the warning names the log, the step and --unit time=ms, before
+    the data sheet's refusal (and before the declared law's check)."""
+    import flexarm
+    from flexarm.cli.fit import slow_clock
+
+    fmt = tmp_path / "no-units.toml"
+    text = Path(FORMAT).read_text()
+    fmt.write_text(text.replace("[units]", "").replace('time = "ms"', ""))
+    slow = flexarm.load_log(log, fmt)
+    msg = slow_clock(slow)
+    assert msg is not None and "steps by 1 s" in msg and "--unit time=ms" in msg
+    assert slow_clock(flexarm.load_log(log, FORMAT)) is None  # 1 ms steps
+    code, lines, out = _error([str(log), "--log-format", str(fmt)])
+    text = " ".join(" ".join(lines).split())
+    assert code == 2 and text.startswith("warning: ") and "--unit time=ms" in text
+    assert text.index("--unit time=ms") < text.index("error: the rotary servo fit")
+    assert "controller check" not in out

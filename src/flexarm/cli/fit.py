@@ -41,6 +41,7 @@ from flexarm.cli.common import (
     guarded_command,
     load,
     progress,
+    warn,
     write_report,
 )
 
@@ -622,12 +623,40 @@ def bench_logs(
     logs = load(
         paths, log_format, columns=cols, units=units, controller=controller, max_jitter=max_jitter
     )
+    for lg in logs:
+        slow = slow_clock(lg)
+        if slow:
+            warn(slow)
     if before_check is not None:
         before_check()
     logs, checks = checked_logs(logs, use_regressed=use_regressed)
     for chk in checks:
         console.print(escape(chk.summary()), highlight=False)
     return logs
+
+
+#: the median time step (s) from which a closed-loop log's clock is suspect (a 2 Hz loop)
+SLOW_STEP_S = 0.5
+
+
+def slow_clock(log) -> str | None:
+    """A warning where a log's median time step (after its units) is SLOW_STEP_S or more:
+    a closed loop sampled at 2 Hz or slower is more likely a clock in ms read as s (the lab
+    logger's headers say "(s)" over a ms column), which later shows as a law that disagrees
+    with the logged command (#46); None otherwise."""
+    import numpy as np
+
+    t = None if log.time is None else np.asarray(log.time, float)
+    if t is None or t.size < 3:
+        return None
+    step = float(np.median(np.diff(t)))
+    if not step >= SLOW_STEP_S:
+        return None
+    return (
+        f"{log.path}: the time column steps by {step:g} s (median), a {1 / step:.3g} Hz loop; "
+        "if the logger writes ms (its header may say s), give --unit time=ms or a log "
+        'format with [units] time = "ms"'
+    )
 
 
 def _fit_scenario_cli(
