@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from typer.core import TyperCommand
 
 # --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
 Drive = Annotated[str, typer.Option(help="voltage or current", rich_help_panel="Data sheet")]
@@ -204,7 +205,7 @@ PANEL_TITLES = {
 }
 
 
-class PanelCommand(typer.core.TyperCommand):
+class PanelCommand(TyperCommand):
     """A command whose plain-text ``--help`` (the app has no rich markup) lists its options
     in panels: each option's ``rich_help_panel`` (the shared groups above), else
     :data:`PANELS_BY_NAME`, else "Other options"; titles from :data:`PANEL_TITLES`."""
