@@ -135,7 +135,7 @@ def assess(
     stability = False
     if not row["nominal_stable"]:
         reasons.append("unstable on the nominal plant")
-        fixes.append("redesign; --accept-unstable keeps it (export-c then needs --force)")
+        fixes.append("redesign (no option makes an unstable nominal loop acceptable)")
         stability = True
     share_fix = f"--max-unstable-share (now {s:g}) sets the share"
     if n and unstable / n > s and (lab is None or unstable > lab["unstable"]):
@@ -144,7 +144,7 @@ def assess(
             f"unstable on {unstable} of {n} drawn plants "
             f"({100 * unstable / n:.3g} % > {100 * s:g} %{tail})"
         )
-        fixes.append(f"{share_fix}; --accept-unstable keeps it")
+        fixes.append(share_fix)
         stability = True
     if options.check_limit:
         worse = lab is None or nom_t > lab["nominal_time_at_limit_s"] + 1e-12
@@ -187,12 +187,14 @@ def assess(
 
 def refusal(method: str, gate: dict[str, Any]) -> tuple[str, str]:
     """(message, fix) of a refused design: what failed, with its figure and threshold, and
-    for each failure the option that changes it (``--accept-unstable`` only for
-    instability)."""
-    what = "not safe to run" if gate.get("stability") else "refused by the gate"
-    return f"the {method} design is {what}: {gate['verdict']}", "; ".join(
-        dict.fromkeys(gate.get("fixes") or ["look at compare.md and design.json"])
-    )
+    for each failure the option that changes it, and ``--accept-unstable`` where a failure
+    is instability (only there)."""
+    stability = bool(gate.get("stability"))
+    what = "not safe to run" if stability else "refused by the gate"
+    fixes = list(dict.fromkeys(gate.get("fixes") or ["look at compare.md and design.json"]))
+    if stability:
+        fixes.append("--accept-unstable keeps it (export-c then needs --force)")
+    return f"the {method} design is {what}: {gate['verdict']}", "; ".join(fixes)
 
 
 def design_checked(
