@@ -300,8 +300,8 @@ chain runs without a rig. Real lab logs go where these are used (e.g.
   in the CSV exchange format.
 
 Data sheet of both rotary units: `--drive voltage --gear-ratio 48.4 --motor-constant 0.0107
---armature-resistance 3.29 --link-length 0.45` (no `--link-length` for the rigid arm); the
-amplifier saturates at 5 V. As on the real rigs: time in ms under a header that says "(s)",
+--armature-resistance 3.29 --link-length 0.45` (the rigid arm's too; its tip column is 0);
+the amplifier saturates at 5 V. As on the real rigs: time in ms under a header that says "(s)",
 values rounded to 3 decimals, a 4096-count encoder, a noisy strain gauge whose
 calibration is not 1, both read late (hub 10, tip 30 samples on the flexible unit).
 """
