@@ -4,6 +4,7 @@ in the lab logger's own format, that the README's data-sheet fit recovers."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -79,7 +80,9 @@ def _fit(tmp_path, log):
         "--armature-resistance", "3.29", "--link-length", "0.45",
         "--window", "0:4", "--validate-window", "4:6", "--json", str(out),
     ]  # fmt: skip
-    r = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=900)
+    env = dict(os.environ)  # this checkout's flexarm, also where PYTHONPATH is relative
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), env.get("PYTHONPATH", "")])
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=900, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
     return json.loads(out.read_text())
 
