@@ -13,33 +13,24 @@ import typer
 from typer.core import TyperCommand
 
 # --- the data sheet of a geared voltage (or current) servo (flexarm fit LOG...) -----------
-Drive = Annotated[str, typer.Option(help="voltage or current", rich_help_panel="Data sheet")]
-GearRatio = Annotated[float, typer.Option(help="K_g", rich_help_panel="Data sheet")]
+Drive = Annotated[str, typer.Option(help="voltage or current")]
+GearRatio = Annotated[float, typer.Option(help="K_g")]
 MotorConstant = Annotated[
-    float | None,
-    typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)", rich_help_panel="Data sheet"),
+    float | None, typer.Option(help="K_m, V*s/rad (voltage) or N*m/A (current)")
 ]
-ArmatureResistance = Annotated[
-    float | None, typer.Option(help="R, ohm", rich_help_panel="Data sheet")
-]
-LinkLength = Annotated[
-    float | None, typer.Option(help="link length, m", rich_help_panel="Data sheet")
-]
-GearEfficiency = Annotated[float, typer.Option(rich_help_panel="Data sheet")]
-MotorEfficiency = Annotated[float, typer.Option(rich_help_panel="Data sheet")]
+ArmatureResistance = Annotated[float | None, typer.Option(help="R, ohm")]
+LinkLength = Annotated[float | None, typer.Option(help="link length, m")]
+GearEfficiency = Annotated[float, typer.Option()]
+MotorEfficiency = Annotated[float, typer.Option()]
 VoltageLimit = Annotated[
     float | None,
-    typer.Option(
-        help="amplifier limit, V (default: the log format's [controller] limit, else 10)",
-        rich_help_panel="Data sheet",
-    ),
+    typer.Option(help="amplifier limit, V (default: the log format's [controller] limit, else 10)"),
 ]
 ComputationDelay = Annotated[
     int | None,
     typer.Option(
         help="samples between a sample and its command (default: where the declared law best "
-        "explains the logged command)",
-        rich_help_panel="Data sheet",
+        "explains the logged command)"
     ),
 ]
 
@@ -70,47 +61,33 @@ LogFormats = Annotated[
         "--log-format",
         help="the logger's log-format TOML (columns, units, gains); with a "
         "scenario: once per log, or PATTERN=FILE by file name",
-        rich_help_panel="Log",
     ),
 ]
 LogFormatFile = Annotated[
     Path | None,
-    typer.Option(
-        "--log-format",
-        help="the logs' log-format TOML ([columns], [units]; examples/)",
-        rich_help_panel="Log",
-    ),
+    typer.Option("--log-format", help="the logs' log-format TOML ([columns], [units]; examples/)"),
 ]
 Column = Annotated[
-    list[str] | None,
-    typer.Option(help="map a column to the log's name: motor_angle=theta", rich_help_panel="Log"),
+    list[str] | None, typer.Option(help="map a column to the log's name: motor_angle=theta")
 ]
 Unit = Annotated[
     list[str] | None,
-    typer.Option(
-        help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm", rich_help_panel="Log"
-    ),
+    typer.Option(help="unit of a column's numbers: motor_angle=deg, tip_deflection=mm"),
 ]
 Window = Annotated[
     str | None,
     typer.Option(
-        help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5",
-        rich_help_panel="Log",
+        help="use this part of every log only, START:STOP in s from its first sample, e.g. 0:5"
     ),
 ]
 MaxJitter = Annotated[
-    float,
-    typer.Option(
-        help="accepted relative deviation of a time step from the median step",
-        rich_help_panel="Log",
-    ),
+    float, typer.Option(help="accepted relative deviation of a time step from the median step")
 ]
 Controller = Annotated[
     str | None,
     typer.Option(
         help="overrides the logs' '# controller:' line, e.g. "
-        "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'",
-        rich_help_panel="Log",
+        "'state_feedback K1=6 K2=-3 K3=0.2 K4=0'"
     ),
 ]
 UseRegressedLaw = Annotated[
@@ -118,7 +95,6 @@ UseRegressedLaw = Annotated[
     typer.Option(
         "--use-regressed-law",
         help="use the law regressed on the logged command where it disagrees with the declared one",
-        rich_help_panel="Log",
     ),
 ]
 Channels = Annotated[
@@ -127,49 +103,54 @@ Channels = Annotated[
         "--channel",
         help="a measured channel to fit or compare, NAME or NAME=WEIGHT (repeat; "
         "default: every logged sensor channel)",
-        rich_help_panel="Log",
     ),
 ]
 
 # --- outputs -------------------------------------------------------------------------------
-JsonOut = Annotated[
-    Path | None, typer.Option("--json", help="write the result as JSON", rich_help_panel="Outputs")
-]
-JsonRequired = Annotated[
-    Path, typer.Option("--json", help="JSON result", rich_help_panel="Outputs")
-]
-Plots = Annotated[Path | None, typer.Option(help="folder for figures", rich_help_panel="Outputs")]
+JsonOut = Annotated[Path | None, typer.Option("--json", help="write the result as JSON")]
+JsonRequired = Annotated[Path, typer.Option("--json", help="JSON result")]
+Plots = Annotated[Path | None, typer.Option(help="folder for figures")]
 Report = Annotated[
     Path | None,
     typer.Option(
-        "--report",
-        help="write a self-contained HTML report (figures embedded), e.g. result.html",
-        rich_help_panel="Outputs",
+        "--report", help="write a self-contained HTML report (figures embedded), e.g. result.html"
     ),
 ]
 ScenarioOut = Annotated[
-    Path | None,
-    typer.Option(
-        "--scenario-out",
-        help="write the fitted (identified) scenario TOML",
-        rich_help_panel="Outputs",
-    ),
+    Path | None, typer.Option("--scenario-out", help="write the fitted (identified) scenario TOML")
 ]
-Out = Annotated[Path, typer.Option("--out", help="output folder", rich_help_panel="Outputs")]
-Overwrite = Annotated[
-    bool, typer.Option(help="replace existing output files", rich_help_panel="Outputs")
-]
-OverwriteOut = Annotated[
-    bool, typer.Option(help="write into a non-empty --out folder", rich_help_panel="Outputs")
-]
+Out = Annotated[Path, typer.Option("--out", help="output folder")]
+Overwrite = Annotated[bool, typer.Option(help="replace existing output files")]
+OverwriteOut = Annotated[bool, typer.Option(help="write into a non-empty --out folder")]
 
 # --- inputs --------------------------------------------------------------------------------
 ScenarioArg = Annotated[str, typer.Argument(help="scenario TOML file or built-in name")]
 
 
 # --- help grouped by panel (issue #46: `fit --help` listed about 40 options flat) ---------
-#: the panel of options that no shared group above places, by parameter name
+#: each option's panel in `fit --help` and `validate --help`, by parameter name (the
+#: shared groups above: data sheet, log, outputs; the fit's own: search)
 PANELS_BY_NAME = {
+    "drive": "Data sheet",
+    "gear_ratio": "Data sheet",
+    "motor_constant": "Data sheet",
+    "armature_resistance": "Data sheet",
+    "link_length": "Data sheet",
+    "gear_efficiency": "Data sheet",
+    "motor_efficiency": "Data sheet",
+    "voltage_limit": "Data sheet",
+    "computation_delay": "Data sheet",
+    "log_format": "Log",
+    "column": "Log",
+    "unit": "Log",
+    "window": "Log",
+    "max_jitter": "Log",
+    "use_regressed_law": "Log",
+    "channel": "Log",
+    "json_out": "Outputs",
+    "plots": "Outputs",
+    "report": "Outputs",
+    "scenario_out": "Outputs",
     "controller": "Log",
     "continuous": "Log",
     "sessions": "Log",
@@ -207,7 +188,7 @@ PANEL_TITLES = {
 
 class PanelCommand(TyperCommand):
     """A command whose plain-text ``--help`` (the app has no rich markup) lists its options
-    in panels: each option's ``rich_help_panel`` (the shared groups above), else
+    in panels: each option's ``rich_help_panel`` where it has one, else
     :data:`PANELS_BY_NAME`, else "Other options"; titles from :data:`PANEL_TITLES`."""
 
     def format_options(self, ctx, formatter) -> None:
