@@ -173,6 +173,7 @@ PANELS_BY_NAME = {
     "segment": "Search",
     "max_nfev": "Search",
     "refit": "Search",
+    "bound": "Search",
     "overwrite": "Outputs",
 }
 #: the panels' titles, in the order shown (the routes each is for)
