@@ -5,6 +5,9 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the CLI keeps JAX's compiled loops in the user's cache folder by default (issue #46); the
+# suite writes nothing there unless FLEXARM_JAX_CACHE names a folder
+os.environ.setdefault("FLEXARM_JAX_CACHE", "0")
 
 import jax
 

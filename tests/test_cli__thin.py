@@ -93,12 +93,13 @@ def test_fit_on_a_data_sheet_is_the_one_fit_on_the_rotary_preset(tmp_path, monke
     r = runner.invoke(
         app,
         ["fit", str(log), "--gear-ratio", "70", "--motor-constant", "0.00768"]
-        + ["--armature-resistance", "2.6", "--window", "0:0.3", "--delay-search", "both"],
+        + ["--armature-resistance", "2.6", "--link-length", "0.42"]
+        + ["--window", "0:0.3", "--delay-search", "both"],
     )
     assert r.exit_code == 130, r.output
     p, opts = seen["model"], seen["options"]
     assert p.engine == "servo_rig" and p.sheet["gear_ratio"] == 70.0
-    assert p.sheet["motor_constant"] == 0.00768 and p.sheet["link_length"] is None
+    assert p.sheet["motor_constant"] == 0.00768 and p.sheet["link_length"] == 0.42
     assert isinstance(opts, FitOptions) and opts.servo_rig is not None
     assert opts.servo_rig.delay_search == "both"
     assert opts.windows == [(0.0, 0.3)] and seen["free"] is None

@@ -73,6 +73,8 @@ CASES = [
     ),
     (CHOICE, ["reproduce", "nobody", "--out", "{o}/r"]),
     (OUTPUT, ["demo", "--out", "{d}/bad.csv"]),
+    (OUTPUT, ["example-logs", "{d}/bad.csv"]),
+    (OPTION, ["example-logs", "{o}/ex", "--seconds", "1"]),
     (OUTPUT, ["simulate", S, "--out", "{d}/bad.csv/sim"]),
     (OUTPUT, ["fit", "{d}/bad.csv", "--json", "{o}/missing/f.json"]),
     (MISSING, ["experiment", "{d}/nope.toml", "--out", "{o}/e"]),

@@ -150,7 +150,13 @@ def test_cli_fit_checks_the_law_before_fitting(tmp_path):
         )
     )
     res = CliRunner().invoke(
-        app, ["fit", str(by["Unit7_Flex_trial1.csv"]), "--log-format", str(wrong)]
+        app,
+        [
+            str(x)
+            for x in ["fit", by["Unit7_Flex_trial1.csv"], "--log-format", wrong, "--gear-ratio"]
+            + [48.4, "--motor-constant", 0.0107, "--armature-resistance", 3.29]
+            + ["--link-length", 0.45]
+        ],
     )
     out = res.output + (res.stderr if res.stderr_bytes is not None else "")
     assert res.exit_code != 0

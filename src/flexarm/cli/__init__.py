@@ -22,12 +22,14 @@ from flexarm.cli import (
     design,
     distributed,
     errors,
+    examples,
     fit,
     frequency,
     reproduce,
     scenarios,
     simulate,
 )
+from flexarm.cli.options import PanelCommand
 
 
 class FlexarmGroup(TyperGroup):
@@ -87,8 +89,20 @@ def _root(
             "--version", callback=_version, is_eager=True, help="print flexarm's version and exit"
         ),
     ] = False,
+    no_jax_cache: Annotated[
+        bool,
+        typer.Option(
+            "--no-jax-cache",
+            help="do not keep JAX's compiled loops on disk (default: kept in the user's "
+            "cache folder, or in $FLEXARM_JAX_CACHE; FLEXARM_JAX_CACHE=0 also turns it off)",
+        ),
+    ] = False,
 ) -> None:
     """Model, identify, simulate and control flexible-link arms with joint friction."""
+    if no_jax_cache:
+        import os
+
+        os.environ["FLEXARM_JAX_CACHE"] = "0"
 
 
 # the order of `flexarm --help`
@@ -101,14 +115,15 @@ app.command("reproduce")(reproduce.reproduce)
 app.command("demo")(reproduce.demo)
 app.command("experiment")(frequency.experiment)
 app.command("identify")(frequency.identify)
-app.command("fit")(fit.fit)
-app.command("validate")(fit.validate)
+app.command("fit", cls=PanelCommand)(fit.fit)
+app.command("validate", cls=PanelCommand)(fit.validate)
 app.command("export-c")(deploy.export_c)
 app.command("excite")(frequency.excite)
 app.command("frf")(frequency.frf)
 app.command("tfest")(frequency.tfest)
 app.command("friction")(frequency.friction)
 app.command("fit-many")(distributed.fit_many)
+app.command("example-logs")(examples.example_logs)
 
 
 def main() -> None:  # pragma: no cover

@@ -17,14 +17,50 @@ console = Console()
 err = Console(stderr=True)
 
 
+#: the values of ``$FLEXARM_JAX_CACHE`` that turn the compilation cache off
+CACHE_OFF = ("0", "off", "false", "no")
+
+
+def cache_folder() -> Path | None:
+    """Where the ``flexarm`` command keeps JAX's persistent compilation cache:
+    ``$FLEXARM_JAX_CACHE`` where it names a folder, None (no cache) where it is ``0`` /
+    ``off`` (or ``flexarm --no-jax-cache``), else ``jax/`` in the user's cache folder
+    (``platformdirs.user_cache_dir("flexarm")`` where platformdirs is installed, else
+    ``~/.cache/flexarm``)."""
+    value = os.environ.get("FLEXARM_JAX_CACHE", "").strip()
+    if value.lower() in CACHE_OFF:
+        return None
+    if value:
+        return Path(value).expanduser()
+    try:
+        import platformdirs
+
+        return Path(platformdirs.user_cache_dir("flexarm")) / "jax"
+    except ImportError:
+        return Path.home() / ".cache" / "flexarm" / "jax"
+
+
 def enable_cache() -> None:
-    """JAX's persistent compilation cache where ``$FLEXARM_JAX_CACHE`` names a folder, so
-    repeated CLI runs skip recompiling (one folder per machine, shared with Dask workers;
-    :func:`flexarm.distributed.enable_compilation_cache`); off otherwise
-    (:data:`flexarm.distributed.CACHE_NOTE` says why); float64 either way."""
+    """JAX's persistent compilation cache in :func:`cache_folder` (on by default, issue #46:
+    a repeated command loads its compiled loops instead of compiling them; every
+    compilation is stored), float64 either way; a folder that cannot be created leaves the
+    command uncached. :data:`flexarm.distributed.CACHE_NOTE` records an abort of jaxlib
+    0.10.2 while writing the two-link LQG replay (2026-11-28) that did not recur on
+    2026-12-05 (two runs of tests/test_lqg.py's two-link LQG with every compilation cached);
+    ``FLEXARM_JAX_CACHE=0`` or ``flexarm --no-jax-cache`` turn it off."""
     from flexarm.distributed import enable_compilation_cache
 
-    enable_compilation_cache()
+    folder = cache_folder()
+    if folder is not None:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            folder = None
+    if folder is None:
+        os.environ["FLEXARM_JAX_CACHE"] = "0"  # float64 only (and no cache for workers)
+        enable_compilation_cache()
+        return
+    enable_compilation_cache(folder, min_compile_seconds=0.0)
 
 
 def fold(text: str) -> str:

@@ -366,11 +366,11 @@ def _design(ctx, o: DesignRequest) -> None:
         colour = "yellow" if o.accept_unstable else "bold red"
         err.print(f"[{colour}]{escape(des.summary())}[/]", highlight=False, soft_wrap=True)
         if not o.accept_unstable:
+            from flexarm.design.gate import refusal
+
+            msg, fix = refusal(method, des.gate or {"verdict": des.verdict})
             fail(
-                f"the {method} design is not safe to run: {des.verdict}; written to {out} "
-                "with its verdict (design.json, compare.md say why); redesign, or pass "
-                "--accept-unstable to keep it (flexarm export-c then refuses it without "
-                "--force)"
+                f"{msg}; written to {out} with its verdict (design.json, compare.md say why); {fix}"
             )
 
 

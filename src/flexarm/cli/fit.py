@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, NoReturn
 
@@ -41,6 +42,7 @@ from flexarm.cli.common import (
     load,
     output_folder,
     progress,
+    warn,
     write_report,
 )
 
@@ -313,6 +315,23 @@ def fit(
     output_folder("--plots", plots, overwrite)
     if tip_sign not in (None, 1, -1):
         fail(f"--tip-sign {tip_sign}: expected +1 or -1 (or leave it out to fit it)")
+
+    def check_sheet() -> None:
+        """The data sheet, every missing value named by its option, once the logs are read
+        and before any work on them (the declared law's check, the fit; #46)."""
+        sheet = [("--motor-constant", motor_constant, "K_m, V*s/rad or N*m/A")]
+        if drive == "voltage":
+            sheet.append(("--armature-resistance", armature_resistance, "R, ohm"))
+        sheet.append(("--link-length", link_length, "m; a rigid arm's length too"))
+        bad = [f"{opt} ({what})" for opt, v, what in sheet if v is None or not v > 0]
+        if not gear_ratio > 0:
+            bad.append(f"--gear-ratio > 0 (got {gear_ratio:g})")
+        if bad:
+            fail(
+                "the rotary servo fit (LOG... without a scenario) needs the rig's data sheet: "
+                f"give {', '.join(bad)}; or give a scenario first (flexarm fit SCENARIO LOG...)"
+            )
+
     preset = presets.servo_rig(
         presets.DataSheet(
             drive=drive,
@@ -347,7 +366,15 @@ def fit(
     )
     try:
         full = bench_logs(
-            logs, column, unit, controller, max_jitter, log_format, use_regressed_law, rig=True
+            logs,
+            column,
+            unit,
+            controller,
+            max_jitter,
+            log_format,
+            use_regressed_law,
+            rig=True,
+            before_check=check_sheet,
         )
         opts = FitOptions(servo_rig=rig, windows=[win] * len(full) if win else None)
         with console.status("fitting") as status:
@@ -619,6 +646,7 @@ def bench_logs(
     use_regressed: bool = False,
     *,
     rig: bool = False,
+    before_check: Callable[[], None] | None = None,
 ):
     """The logs read with their --log-format (once for all, once per log, or
     PATTERN=FILE; :func:`flexarm.io.logformat.load_logs`; with ``rig``, as servo-rig
@@ -626,7 +654,8 @@ def bench_logs(
     --unit mappings (SI inside), the --controller text law and --max-jitter; each declared
     law is checked against its log's command and replaced by the regressed one with
     --use-regressed-law (:func:`~flexarm.identification.time_domain.controller_check.
-    checked_logs`); the checks are printed."""
+    checked_logs`); the checks are printed. ``before_check``: called once the logs are
+    read, before the checks (the options' own check, e.g. the fit's data sheet)."""
     from flexarm.identification.time_domain.controller_check import checked_logs
     from flexarm.identification.time_domain.logs import load_rig_logs
     from flexarm.io.logformat import load_logs
@@ -640,10 +669,40 @@ def bench_logs(
     logs = load(
         paths, log_format, columns=cols, units=units, controller=controller, max_jitter=max_jitter
     )
+    for lg in logs:
+        slow = slow_clock(lg)
+        if slow:
+            warn(slow)
+    if before_check is not None:
+        before_check()
     logs, checks = checked_logs(logs, use_regressed=use_regressed)
     for chk in checks:
         console.print(escape(chk.summary()), highlight=False)
     return logs
+
+
+#: the median time step (s) from which a closed-loop log's clock is suspect (a 2 Hz loop)
+SLOW_STEP_S = 0.5
+
+
+def slow_clock(log) -> str | None:
+    """A warning where a log's median time step (after its units) is SLOW_STEP_S or more:
+    a closed loop sampled at 2 Hz or slower is more likely a clock in ms read as s (the lab
+    logger's headers say "(s)" over a ms column), which later shows as a law that disagrees
+    with the logged command (#46); None otherwise."""
+    import numpy as np
+
+    t = None if log.time is None else np.asarray(log.time, float)
+    if t is None or t.size < 3:
+        return None
+    step = float(np.median(np.diff(t)))
+    if not step >= SLOW_STEP_S:
+        return None
+    return (
+        f"{log.path}: the time column steps by {step:g} s (median), a {1 / step:.3g} Hz loop; "
+        "if the logger writes ms (its header may say s), give --unit time=ms or a log "
+        'format with [units] time = "ms"'
+    )
 
 
 def _fit_scenario_cli(

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from typer.core import TyperCommand
 
 from flexarm.cli.parsing import number
 
@@ -148,3 +149,90 @@ OverwriteOut = Annotated[bool, typer.Option(help="write into a non-empty --out f
 
 # --- inputs --------------------------------------------------------------------------------
 ScenarioArg = Annotated[str, typer.Argument(help="scenario TOML file or built-in name")]
+
+
+# --- help grouped by panel (issue #46: `fit --help` listed about 40 options flat) ---------
+#: each option's panel in `fit --help` and `validate --help`, by parameter name (the
+#: shared groups above: data sheet, log, outputs; the fit's own: search)
+PANELS_BY_NAME = {
+    "drive": "Data sheet",
+    "gear_ratio": "Data sheet",
+    "motor_constant": "Data sheet",
+    "armature_resistance": "Data sheet",
+    "link_length": "Data sheet",
+    "gear_efficiency": "Data sheet",
+    "motor_efficiency": "Data sheet",
+    "voltage_limit": "Data sheet",
+    "computation_delay": "Data sheet",
+    "log_format": "Log",
+    "column": "Log",
+    "unit": "Log",
+    "window": "Log",
+    "max_jitter": "Log",
+    "use_regressed_law": "Log",
+    "channel": "Log",
+    "json_out": "Outputs",
+    "plots": "Outputs",
+    "report": "Outputs",
+    "scenario_out": "Outputs",
+    "controller": "Log",
+    "continuous": "Log",
+    "sessions": "Log",
+    "validate_window": "Log",
+    "refit_window": "Log",
+    "mode": "Search",
+    "no_friction": "Search",
+    "seconds": "Search",
+    "compare_no_friction": "Search",
+    "tip_sign": "Search",
+    "encoder_counts": "Search",
+    "filter": "Search",
+    "delay_search": "Search",
+    "polish_iter": "Search",
+    "global_starts": "Search",
+    "seed": "Search",
+    "tip_after_hub": "Search",
+    "free": "Search",
+    "prior": "Search",
+    "segment": "Search",
+    "max_nfev": "Search",
+    "refit": "Search",
+    "bound": "Search",
+    "overwrite": "Outputs",
+}
+#: the panels' titles, in the order shown (the routes each is for)
+PANEL_TITLES = {
+    "Data sheet": "Data sheet (LOG... alone, the servo route; needs --motor-constant, "
+    "--armature-resistance)",
+    "Log": "Log (how the logs are read, which part is used)",
+    "Search": "Search (what is fitted, how; --free, --prior, --segment: SCENARIO LOG...)",
+    "Outputs": "Outputs",
+    "Options": "Other options",
+}
+
+
+class PanelCommand(TyperCommand):
+    """A command whose plain-text ``--help`` (the app has no rich markup) lists its options
+    in panels: each option's ``rich_help_panel`` where it has one, else
+    :data:`PANELS_BY_NAME`, else "Other options"; titles from :data:`PANEL_TITLES`."""
+
+    def format_options(self, ctx, formatter) -> None:
+        args, groups = [], {k: [] for k in PANEL_TITLES}
+        for param in self.get_params(ctx):
+            rv = param.get_help_record(ctx)
+            if rv is None:
+                continue
+            if param.param_type_name == "argument":
+                args.append(rv)
+                continue
+            panel = getattr(param, "rich_help_panel", None) or PANELS_BY_NAME.get(
+                param.name or "", "Options"
+            )
+            groups.setdefault(panel, []).append(rv)
+        if args:
+            with formatter.section("Arguments"):
+                formatter.write_dl(args)
+        for panel, rows in groups.items():
+            if rows:
+                with formatter.section(PANEL_TITLES.get(panel, panel)):
+                    formatter.write_dl(rows)

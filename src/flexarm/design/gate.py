@@ -17,6 +17,14 @@ plants, and gets a verdict (:attr:`flexarm.design.result.Design.verdict`):
     of the drawn plants: the law then leans on the amplifier's clipping, which the linear
     design did not plan for.
 
+Against the lab's controller (the scenario's own, the comparison's ``logged`` row; issue
+#46): where the comparison holds it, a design is refused for the drawn plants only where
+it fails on more of them than the lab's controller does (and on more than the share), and
+for the limit on the nominal plant only where its command sits at the limit longer than the
+lab's: a design that beats the lab's controller on every figure passes. Each refusal names
+its figure and threshold, and the option that changes it (``fixes``;
+``--accept-unstable`` only for instability).
+
 :func:`design_checked` is what ``flexarm design`` calls: it designs, compares the design
 with the scenario's own controller, sets the verdict and the comparison, and raises
 :class:`flexarm.errors.UnstableDesignError` (the design attached, so it can still be
@@ -35,7 +43,7 @@ import numpy as np
 
 from flexarm.errors import FlexarmError, UnstableDesignError
 
-__all__ = ["GateOptions", "STABLE", "assess", "design_checked"]
+__all__ = ["GateOptions", "STABLE", "assess", "refusal", "design_checked"]
 
 #: the verdict of a design that passed the gate
 STABLE = "stable"
@@ -66,49 +74,127 @@ class GateOptions:
             )
 
 
-def assess(comparison, name: str, options: GateOptions = GateOptions()) -> dict[str, Any]:
+#: what changes the threshold of a limit refusal on the nominal plant, by design method
+LIMIT_OPTIONS = {
+    "lqr": "a larger --r (the command weight)",
+    "place": "slower --poles",
+    "nested": "a smaller --max-deflection or --distance",
+}
+
+
+def _lab(comparison, reference: str | None) -> dict[str, Any] | None:
+    """The lab's (the scenario's own) controller's figures in ``comparison``, or None."""
+    if reference is None or reference not in comparison.rows:
+        return None
+    row = comparison.rows[reference]
+    at = np.asarray(comparison.per_plant[reference]["time_at_limit_s"], float)
+    return {
+        "name": reference,
+        "nominal_stable": bool(row["nominal_stable"]),
+        "unstable": int(row["unstable"]),
+        "nominal_time_at_limit_s": float(at[0]),
+        "limit_reached": int(np.sum(at[1:] > 0)),
+    }
+
+
+def assess(
+    comparison,
+    name: str,
+    options: GateOptions = GateOptions(),
+    reference: str | None = None,
+) -> dict[str, Any]:
     """The gate of controller ``name`` in ``comparison`` (a
     :class:`~flexarm.design.compare.Comparison`): a dict with ``verdict`` (``"stable"`` or
-    the failures, module doc), ``reasons`` (the failures as a list), ``nominal_stable``,
-    ``unstable`` and ``n_plants`` (drawn plants), ``limit_reached`` (drawn plants whose
-    command reached the limit), ``nominal_limit_reached``, ``limit`` and
-    ``max_unstable_share``."""
+    the failures, module doc), ``reasons`` (the failures as a list), ``fixes`` (for each
+    reason, the option that changes its threshold), ``stability`` (whether a reason is
+    instability; only those are for ``--accept-unstable``), ``nominal_stable``, ``unstable``
+    and ``n_plants`` (drawn plants), ``limit_reached`` (drawn plants whose command reached
+    the limit), ``nominal_limit_reached``, ``nominal_time_at_limit_s``, ``limit``,
+    ``max_unstable_share`` and ``lab`` (the reference controller's figures, or None).
+
+    ``reference``: the row of the lab's own controller (the scenario's). With it, a design
+    is refused for the drawn plants only where it fails on more of them than the lab's
+    controller (and on more than ``max_unstable_share``), and for the limit on the nominal
+    plant only where its command sits at the limit longer than the lab's: a design that
+    beats the lab's controller on every figure passes. Without it, the shares and any time
+    at the limit on the nominal plant count (module doc)."""
     row = comparison.rows[name]
     per = comparison.per_plant[name]
     n = int(row["n_plants"])
     unstable = int(row["unstable"])
     at_lim = np.asarray(per["time_at_limit_s"], float)
-    nom_lim = bool(at_lim[0] > 0)
+    nom_t = float(at_lim[0])
+    nom_lim = bool(nom_t > 0)
     k_lim = int(np.sum(at_lim[1:] > 0))
     limit = comparison.settings.get("limit_V")
+    lim_txt = "the limit" if limit is None else f"the ±{limit:g} limit"
     s = options.max_unstable_share
-    reasons = []
+    lab = _lab(comparison, reference)
+    reasons: list[str] = []
+    fixes: list[str] = []
+    stability = False
     if not row["nominal_stable"]:
         reasons.append("unstable on the nominal plant")
-    if n and unstable / n > s:
+        fixes.append("redesign (no option makes an unstable nominal loop acceptable)")
+        stability = True
+    share_fix = f"--max-unstable-share (now {s:g}) sets the share"
+    if n and unstable / n > s and (lab is None or unstable > lab["unstable"]):
+        tail = "" if lab is None else f"; the lab's controller: {lab['unstable']} of {n}"
         reasons.append(
             f"unstable on {unstable} of {n} drawn plants "
-            f"({100 * unstable / n:.3g} % > {100 * s:g} %)"
+            f"({100 * unstable / n:.3g} % > {100 * s:g} %{tail})"
         )
+        fixes.append(share_fix)
+        stability = True
     if options.check_limit:
-        if nom_lim:
-            reasons.append(f"the command reaches the ±{limit:g} limit on the nominal plant")
-        if n and k_lim / n > s:
-            reasons.append(
-                f"the command reaches the ±{limit:g} limit on {k_lim} of {n} drawn "
-                f"plants ({100 * k_lim / n:.3g} % > {100 * s:g} %)"
+        worse = lab is None or nom_t > lab["nominal_time_at_limit_s"] + 1e-12
+        if nom_lim and worse:
+            if lab is None:
+                reasons.append(f"the command reaches {lim_txt} on the nominal plant")
+            else:
+                reasons.append(
+                    f"the command sits at {lim_txt} for {1000 * nom_t:.3g} ms on the nominal "
+                    f"plant, longer than the lab's controller "
+                    f"({1000 * lab['nominal_time_at_limit_s']:.3g} ms)"
+                )
+            fixes.append(
+                "a design that asks for less: "
+                + LIMIT_OPTIONS.get(name, "milder gains or a smaller step")
             )
+        if n and k_lim / n > s and (lab is None or k_lim > lab["limit_reached"]):
+            tail = "" if lab is None else f"; the lab's controller: {lab['limit_reached']} of {n}"
+            reasons.append(
+                f"the command reaches {lim_txt} on {k_lim} of {n} drawn "
+                f"plants ({100 * k_lim / n:.3g} % > {100 * s:g} %{tail})"
+            )
+            fixes.append(share_fix)
     return {
         "verdict": "; ".join(reasons) if reasons else STABLE,
         "reasons": reasons,
+        "fixes": fixes,
+        "stability": stability,
         "nominal_stable": bool(row["nominal_stable"]),
         "unstable": unstable,
         "n_plants": n,
         "nominal_limit_reached": nom_lim,
+        "nominal_time_at_limit_s": nom_t,
         "limit_reached": k_lim,
         "limit": None if limit is None else float(limit),
         "max_unstable_share": s,
+        "lab": lab,
     }
+
+
+def refusal(method: str, gate: dict[str, Any]) -> tuple[str, str]:
+    """(message, fix) of a refused design: what failed, with its figure and threshold, and
+    for each failure the option that changes it, and ``--accept-unstable`` where a failure
+    is instability (only there)."""
+    stability = bool(gate.get("stability"))
+    what = "not safe to run" if stability else "refused by the gate"
+    fixes = list(dict.fromkeys(gate.get("fixes") or ["look at compare.md and design.json"]))
+    if stability:
+        fixes.append("--accept-unstable keeps it (export-c then needs --force)")
+    return f"the {method} design is {what}: {gate['verdict']}", "; ".join(fixes)
 
 
 def design_checked(
@@ -169,15 +255,9 @@ def design_checked(
     des.comparison = c
     des.info["comparison"] = c.to_dict()["rows"]
     des.warnings.extend(w for w in c.warnings if w not in des.warnings)
-    des.gate = assess(c, method, gate)
+    des.gate = assess(c, method, gate, reference=logged)
     des.verdict = des.gate["verdict"]
     if des.verdict != STABLE and not gate.accept_unstable:
-        raise UnstableDesignError(
-            f"the {method} design is not safe to run: {des.verdict}",
-            design=des,
-            fix=(
-                "look at compare.md and design.json; pass "
-                "accept_unstable (--accept-unstable) to keep it anyway"
-            ),
-        )
+        msg, fix = refusal(method, des.gate)
+        raise UnstableDesignError(msg, design=des, fix=fix + " (accept_unstable=True in Python)")
     return des
