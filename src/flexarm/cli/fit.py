@@ -605,7 +605,7 @@ def validate(
     _print_warnings(out["warnings"])
     for note in out.get("notes", []):
         console.print(escape(note), highlight=False)
-    _fit_table(out["fit_percent"], "scenario as given", out.get("rmse"))
+    _fit_table(out["fit_percent"], "scenario as given", out.get("rmse"), _linear(sc))
     if refit:
         t = Table("friction", "scenario", "refitted", "std")
         for p in out["refit"]["params"]:
@@ -773,7 +773,11 @@ def _fit_scenario_cli(
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _print_warnings(res.prediction.get("warnings", []))
-    _fit_table(res.fit_percent, "whole-log prediction", res.rmse)
+    for note in dict.fromkeys(
+        [*res.stages.get("computed_channels", []), *res.prediction.get("notes", [])]
+    ):
+        console.print(escape(note), highlight=False)
+    _fit_table(res.fit_percent, "whole-log prediction", res.rmse, _linear(sc))
     figs = list(res.plots)
     if plots is None:  # the figures went to a report's temporary folder: not in --json
         res.plots = []
@@ -820,7 +824,14 @@ def _bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _fit_table(fp: dict, title: str, rmse: dict | None = None) -> None:
+def _linear(sc) -> dict[str, str]:
+    """A linear axis's channel units (its position is ``motor_angle``, in m)."""
+    if getattr(sc, "prismatic", False):
+        return {"motor_angle": "m", "motor_velocity": "m/s", "reference": "m"}
+    return {}
+
+
+def _fit_table(fp: dict, title: str, rmse: dict | None = None, units=None) -> None:
     """fit % per log and signal to 3 decimals (99.997 and 99.991 are different fits); given
     the RMSE, one row per log and signal with the RMSE in the signal's SI unit (3
     significant digits)."""
@@ -844,7 +855,7 @@ def _fit_table(fp: dict, title: str, rmse: dict | None = None) -> None:
                 k,
                 f"{d[k]:.3f}" if d[k] is not None else "-",
                 f"{e:.3g}" if e is not None else "-",
-                signal_unit(k) or "SI",
+                (units or {}).get(k) or signal_unit(k) or "SI",
             )
     console.print(t)
 
