@@ -172,7 +172,13 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     sensors = {k: v.model_dump() for k, v in scenario.sensors.items()}
     added: dict[str, dict] = {}
     if measured is None:
-        chans = [k for k, s in sensors.items() if not s.get("filter")]
+        # every sensor of a plant signal (not a digitally filtered one, not the drive's
+        # command recorded as a channel: a design reads the plant)
+        chans = [
+            k
+            for k, s in sensors.items()
+            if not s.get("filter") and (s.get("signal") or k) in arm.signal_names
+        ]
         if not chans:
             chans = [n for n in arm.signal_names[: arm.n_joints]]
             added = {c: {} for c in chans}
