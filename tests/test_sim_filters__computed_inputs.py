@@ -143,4 +143,7 @@ def test_scope_example_validates_with_computed_rates(scope_and_workspace):
     assert set(fp) == {"theta_1", "alpha_f_1", "theta_2", "alpha_f_2"}
     for k, v in {"theta_1": 98.5, "alpha_f_1": 58.4, "theta_2": 84.0, "alpha_f_2": 37.0}.items():
         assert fp[k] == pytest.approx(v, abs=1.0), (k, fp[k])
-    assert len(out["notes"]) == 4 and any("'theta_dot_f_1'" in x for x in out["notes"])
+    # the four computed channels' notes, and the prediction's start (read off the log)
+    computed = [x for x in out["notes"] if "is not logged: computed" in x]
+    assert len(computed) == 4 and any("'theta_dot_f_1'" in x for x in computed)
+    assert any(x.startswith("initial state:") for x in out["notes"])
