@@ -535,6 +535,6 @@ def test_sigint_during_fit_writes_best_result_marked_interrupted(tmp_path):
     assert p.returncode == 130, (p.returncode, stderr.decode()[-2000:])
     d = json.loads(j.read_text())
     assert d["interrupted"] is True and d["status"] == "interrupted"
-    assert "hub_inertia" in d["params"] and "fit_percent" in d, d.keys()
+    assert "arm.motor.inertia" in d["params"] and "fit_percent" in d, d.keys()
     assert d["message"].startswith("INTERRUPTED")
     assert sorted(x.name for x in out.iterdir()) == ["fit.json"]

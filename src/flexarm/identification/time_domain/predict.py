@@ -54,6 +54,7 @@ from flexarm.identification.time_domain.figures import (  # re-exported (the fig
 )
 from flexarm.identification.time_domain.options import PredictOptions
 from flexarm.identification.time_domain.result import Prediction  # re-exported
+from flexarm.io.logs import RIG_OUTPUTS
 
 __all__ = [
     "Prediction",
@@ -221,10 +222,14 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
             k = next(it)
             rmse[k], nrmse[k] = dict(e), dict(ne)
             # a sensor channel the log holds but does not measure (constant: a rigid
-            # arm's zero tip column) is listed, with no figure
+            # arm's zero tip column; a rig log's tip the scenario has no sensor for) is
+            # listed, with no figure
+            listed = set(scn.sensors) | (set(RIG_OUTPUTS) if own_law else set())
             fp[k] = {
                 **{
-                    c: None for c in scn.sensors if chans is None and c in getattr(g, "signals", {})
+                    c: None
+                    for c in sorted(listed)
+                    if chans is None and c in getattr(g, "signals", {})
                 },
                 **dict(v),
             }
