@@ -456,24 +456,19 @@ def _print_bench_tables(res, res0, held, validate_window: str | None) -> None:
 
 
 def _bench_figures(
-    ctx, folder: Path, res, res0, held, validate_window, report, overwrite, inputs: list
+    ctx, folder: Path, one, res0, held, validate_window, report, overwrite, inputs: list
 ) -> None:
-    """The bench fit's overlay figures into ``folder`` (its prediction of the fitted logs
-    and of the held-out windows, both by the written scenario), and the HTML report from
-    them (--report)."""
+    """The bench fit's overlay figures into ``folder`` (``one``'s prediction of the fitted
+    logs and ``held``, the held-out windows', both by the written scenario), and the HTML
+    report from them (--report)."""
     from flexarm.identification.time_domain.predict import write_overlays
     from flexarm.identification.time_domain.report import figure_names
 
-    one, res = res, res.engine_result
-    figs = list(
-        write_overlays(
-            one.prediction, folder, "fit", names=figure_names(list(one.prediction.traces), "fit")
-        )
-    )
-    if held is not None:
-        figs += write_overlays(
-            held, folder, "held-out", names=figure_names(list(held.traces), "held-out")
-        )
+    figs = []
+    for pred, tag in ((one.prediction, "fit"), (held, "held-out")):
+        if pred is not None:
+            names = figure_names(list(pred.traces), tag)
+            figs += write_overlays(pred, folder, tag, names=names)
     if report is not None:
         from flexarm.analysis.html_report import fit_report
 
@@ -484,7 +479,11 @@ def _bench_figures(
             extra["Fit % of the fit without joint friction"] = res0.fit_percent
         write_report(
             fit_report(
-                res, figures=figs, command=command_line(ctx), inputs=inputs, extra_fit_percent=extra
+                one.engine_result,
+                figures=figs,
+                command=command_line(ctx),
+                inputs=inputs,
+                extra_fit_percent=extra,
             ),
             report,
             overwrite,

@@ -167,12 +167,13 @@ def session_scenarios(res: FitResult, n: int) -> list:
     """The fitted scenario of each of ``n`` sessions: session 0's is the result's; a later
     session's is it with that session's own values (``sessions[s].PATH`` in the result's
     params: the servo rig's per-session friction and bias)."""
+    from flexarm.identification.time_domain.report import session_key
     from flexarm.specs.paths import scenario_with
 
     out = [res.scenario]
+    paths = [p for p in res.params if not p.startswith("sessions[")]
     for s_ in range(1, n):
-        pre = f"sessions[{s_}]."
-        own = {p[len(pre) :]: v for p, v in res.params.items() if p.startswith(pre)}
+        own = {p: res.params[session_key(s_, p)] for p in paths if session_key(s_, p) in res.params}
         out.append(scenario_with(res.scenario, own) if own else res.scenario)
     if n > 1:
         out = [

@@ -519,6 +519,12 @@ PATH_UNITS = {
 }
 
 
+def session_key(session: int, path: str) -> str:
+    """The result's key of a later session's own value at scenario ``path``:
+    ``sessions[1].arm.friction.coulomb`` (session 0's is the path itself)."""
+    return f"sessions[{session}].{path}" if session else path
+
+
 def _session_free(path: str) -> str:
     """``sessions[1].arm.friction.coulomb`` → ``arm.friction.coulomb``."""
     return path.split("].", 1)[1] if path.startswith("sessions[") else path
@@ -560,10 +566,8 @@ def _path_values(res: FitResult, params: dict[str, float]) -> dict[str, float]:
         if "tip_gain" in p:
             d["sensors.tip_deflection.gain"] = (p["tip_gain"], {"tip_gain"})
         for path, (v, uses) in d.items():
-            if s_ == 0:
-                out[path] = float(v)
-            elif uses & own:
-                out[f"sessions[{s_}].{path}"] = float(v)
+            if s_ == 0 or uses & own:
+                out[session_key(s_, path)] = float(v)
     return out
 
 
