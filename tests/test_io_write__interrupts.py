@@ -15,6 +15,15 @@ import typer
 from flexarm.io.write import interruptible
 
 
+@pytest.fixture(autouse=True)
+def _python_handles_sigint():
+    """Python's own Ctrl-C handler during each test: a background job of a
+    non-interactive shell inherits SIGINT ignored (``cmd &``), and these tests send it."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 class _SignalsInDel:
     """An object whose finaliser receives SIGINT (as a JAX buffer freed when Ctrl-C comes)."""
 
