@@ -609,9 +609,29 @@ def fit(
         "computation_delay": computation_delay,
         "notes": notes,
     }
+    # a gauge whose sign changed between sessions: the estimates read every session's tip
+    # with session 0's sign (the fit applies each session's sign, ParamSpace.session_signs)
+    signs, elogs = [1] * (max(sess) + 1), blogs
+    if max(sess) > 0 and link_length is not None:
+        signs, sign_est = guesses.session_signs(blogs, sess, None, float(link_length))
+        info["session_signs"] = {"signs": signs, "estimates": sign_est}
+        if any(x < 0 for x in signs):
+            flipped = [s_ for s_, x in enumerate(signs) if x < 0]
+            notes.append(
+                f"the tip gauge's sign differs between sessions: session(s) {flipped} read "
+                "with the sign opposite to session 0's (gauge estimates "
+                + ", ".join(
+                    f"{e['gain']:.3g} m/m (R² {e['r2']:.2f})"
+                    for e in sign_est
+                    if e["gain"] is not None
+                )
+                + "); the gauge's size is shared, its sign is per session"
+            )
+            say(notes[-1])
+            elogs = [_with_tip_sign(g, signs[k]) for g, k in zip(blogs, sess, strict=True)]
     if estimates:
         say("estimates: hub-to-tip model, hub delay, link frequency")
-        est = _estimates(blogs, rig, max_delay, filters)
+        est = _estimates(elogs, rig, max_delay, filters)
         info["estimates"] = {
             "tip_model": est["tip"].to_dict() if est["tip"] else None,
             "hub_delay": est["hub"].to_dict(),
@@ -619,7 +639,7 @@ def fit(
         }
         # a gear train that clamps the link more stiffly while the motor pushes it stuck
         # (4/27: light stuck phases ring at 1.79 Hz, pushed ones at 1.91 Hz)
-        push = guesses.pushed_ringing(blogs, rig.k_u)
+        push = guesses.pushed_ringing(elogs, rig.k_u)
         info["estimates"]["pushed_ringing"] = push
         if push is not None:
             rig = replace(
@@ -646,7 +666,7 @@ def fit(
             substeps,
         )
     space, u0, d0 = _space(
-        blogs,
+        elogs,
         rig,
         max(sess) + 1,
         friction,
@@ -658,6 +678,7 @@ def fit(
         est,
     )
     space.priors = _priors(space, priors)
+    space.session_signs = tuple(signs) if any(x < 0 for x in signs) else ()
     # the start point (SI, the gauge gain with the start's sign): the result's template
     info["start"] = {
         nm: float(d.to_phys(u0[i])) * (2 * int(d0[2]) - 1 if d.name == "tip_gain" else 1)
@@ -786,7 +807,7 @@ def fit(
         + _poorly_determined(res, rig, space)
         + _tip_offsets(blogs)
         + _delay_order(res, space)
-        + [n for n in notes if n.startswith("no amplifier limit")]
+        + [n for n in notes if n.startswith(("no amplifier limit", "the tip gauge's sign"))]
         + _pushed_note(rig)
         + (_seed_note(est.get("tip"), space) if untied and global_starts == 1 else [])
     )
@@ -1089,6 +1110,17 @@ def _pushed_note(rig: Rig) -> list[str]:
 
 
 @one_blas_thread
+def _with_tip_sign(log, sign: int):
+    """``log`` with its tip channels (deflection and rate) read with ``sign``: the cheap
+    estimates' view of a session whose gauge sign differs from session 0's."""
+    if sign > 0:
+        return log
+    sig = {
+        k: (-v if k in ("tip_deflection", "tip_velocity") else v) for k, v in log.signals.items()
+    }
+    return replace(log, signals=sig)
+
+
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
     """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model
     with the tip channel's lag relative to the hub, the hub delay, the link frequency), and the

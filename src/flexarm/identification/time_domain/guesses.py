@@ -186,6 +186,35 @@ def tip_gain(logs: list[Log], wc: float, length: float, zeta: float = 0.03):
     return g, (num * num / den) / ss
 
 
+def session_signs(
+    logs: list[Log], sessions: list[int], wc: float | None, length: float
+) -> tuple[list[int], list[dict]]:
+    """Each session's tip-gauge sign relative to session 0's (σ_0 = +1), from the signed
+    gauge estimate of :func:`tip_gain` on the session's own logs, d ≈ g H(s)(−L θ̈): σ_s =
+    sign(g_s g_0), which maximises the sessions' joint R², (Σ σ_s n_s)² / (Σ d_s Σ y_s)
+    with n_s, d_s, y_s the sums of :func:`tip_gain` per session (a gauge re-wired or
+    re-calibrated between days, as the rotary rig's 4/27 and 5/2 sessions: −0.33 and
+    +0.57 m/m estimated). A session whose estimate explains nothing (R² < 0.02) keeps +1.
+    Returns (σ per session, per-session ``{"gain", "r2"}``)."""
+    n = max(sessions) + 1 if sessions else 1
+    w = wc if wc else 2 * np.pi * 1.8
+    est = []
+    for s in range(n):
+        g, r2 = tip_gain([lg for lg, k in zip(logs, sessions, strict=True) if k == s], w, length)
+        est.append({"gain": None if g is None else float(g), "r2": float(r2)})
+    g0 = est[0]["gain"] if est and est[0]["r2"] >= SIGN_R2 else None
+    signs = [1] * n
+    for s in range(1, n):
+        gs = est[s]["gain"]
+        if g0 is not None and gs is not None and est[s]["r2"] >= SIGN_R2 and gs * g0 < 0:
+            signs[s] = -1
+    return signs, est
+
+
+#: the least R² of a session's gauge estimate that decides its sign
+SIGN_R2 = 0.02
+
+
 def hub_inertia(logs: list[Log], k_u: float, window: float = 0.025):
     """Median of J ≈ k_u ū / θ̈ over the reference steps (None when no step is usable)."""
     est = []

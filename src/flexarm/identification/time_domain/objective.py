@@ -258,6 +258,8 @@ class Objective:
             wc = glob("link_frequency")
             zeta = glob("link_damping")
             gain = glob("tip_gain") * sign[None]
+            if sp.session_signs:  # a gauge whose sign changed between sessions
+                gain = gain * np.asarray(sp.session_signs, float)[ses][:, None]
             JlL = glob("link_inertia") / self.rig.length
         d0, v0 = self.tip_initial(D[:, 1], offsets)
         th0, om0 = self.hub_initial(P, offsets, D[:, 0])

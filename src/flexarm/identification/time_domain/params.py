@@ -109,6 +109,11 @@ class ParamSpace:
     #: priors: index into :attr:`defs` → (mean p̄ in SI, relative std σ_p), as eq. (2) of
     #: :mod:`~flexarm.identification.time_domain.general`: r_p = (ln p − ln p̄) / σ_p
     priors: dict[int, tuple[float, float]] = field(default_factory=dict)
+    #: each session's tip-gauge sign relative to session 0's (+1 / −1; empty: all +1): a
+    #: gauge whose wiring or calibration changed between sessions
+    #: (:func:`~flexarm.identification.time_domain.guesses.session_signs`); the gauge's size
+    #: |g| is shared, its sign g / |g| for session s is ``sign · session_signs[s]``
+    session_signs: tuple[int, ...] = ()
 
     @property
     def rigid(self) -> bool:

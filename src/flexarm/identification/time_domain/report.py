@@ -534,10 +534,15 @@ def _path_values(res: FitResult, params: dict[str, float]) -> dict[str, float]:
     """Scenario path → value of the rig's ``params`` (names as the rig's, ``[s]`` per
     session), as :func:`scenario_from_fit` writes them: J, B, C_f, the breakaway C_f + excess,
     the bias, EI = ω_c² J_l L / 3 and the tip mass J_l / L² (:func:`derived`), ζ, the gauge
-    gain. A session s > 0's own values are ``sessions[s].PATH`` (session 0's are the
-    scenario's)."""
+    gain (its sign per session where the gauge's differs: ``space.session_signs``). A
+    session s > 0's own values are ``sessions[s].PATH`` (session 0's are the scenario's)."""
     L = res.rig.length
-    sessions = sorted({int(k.split("[")[1].rstrip("]")) for k in params if "[" in k} | {0})
+    signs = tuple(getattr(res.space, "session_signs", ()) or ())
+    sessions = sorted(
+        {int(k.split("[")[1].rstrip("]")) for k in params if "[" in k}
+        | {0}
+        | {s_ for s_, x in enumerate(signs) if x < 0}
+    )
     out: dict[str, float] = {}
     for s_ in sessions:
         p = {k.split("[")[0]: v for k, v in params.items() if "[" not in k}
@@ -563,10 +568,14 @@ def _path_values(res: FitResult, params: dict[str, float]) -> dict[str, float]:
             )
             d["arm.beam.masses[0].mass"] = (der["tip_mass"], {"link_inertia"})
             d["arm.beam.damping_ratio"] = (p["link_damping"], {"link_damping"})
+        flip = s_ < len(signs) and signs[s_] < 0  # this session's gauge reads the other way
         if "tip_gain" in p:
-            d["sensors.tip_deflection.gain"] = (p["tip_gain"], {"tip_gain"})
+            d["sensors.tip_deflection.gain"] = (
+                -p["tip_gain"] if flip else p["tip_gain"],
+                {"tip_gain"},
+            )
         for path, (v, uses) in d.items():
-            if s_ == 0 or uses & own:
+            if s_ == 0 or uses & own or (flip and path == "sensors.tip_deflection.gain"):
                 out[session_key(s_, path)] = float(v)
     return out
 

@@ -1,0 +1,99 @@
+"""Issue #47 item 1, several sessions of one rig in one fit: mechanics shared, friction and
+bias per session, and the tip gauge's sign per session (the rotary rig's 5/2 session reads
+its gauge with the sign opposite to 4/27's: README of ``../shared/data/rotary-rig``).
+
+* :func:`guesses.session_signs` on synthetic logs whose tip is exactly the estimate's own
+  model, d = g H(s)(−L θ̈) (so each session's gain comes back to rounding: 1e-9 relative);
+* the four training runs of both sessions through ``flexarm fit --sessions 0,0,1,1`` and
+  ``flexarm validate`` of each session's written scenario (slow, real data).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from flexarm.identification.time_domain import guesses
+from flexarm.io.logs import Log
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
+FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"
+SHEET = ["--drive", "voltage", "--gear-ratio", "48.4", "--motor-constant", "0.0107"]
+SHEET += ["--armature-resistance", "3.29", "--link-length", "0.45"]
+CLI = [sys.executable, "-m", "flexarm"]
+
+
+def _log(gain: float, seed: int, wc: float = 11.3, length: float = 0.45) -> Log:
+    dt, n = 1e-3, 4000
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(seed)
+    th = np.cumsum(np.cumsum(rng.normal(size=n))) * 1e-6  # a smooth random hub motion
+    acc = np.gradient(np.gradient(th, dt), dt)
+    sysd = scipy.signal.cont2discrete(([1.0], [1.0, 2 * 0.03 * wc, wc**2]), dt, "bilinear")
+    d = gain * scipy.signal.lfilter(np.ravel(sysd[0]), sysd[1], -length * acc)
+    return Log(path=None, time=t, signals={"motor_angle": th, "tip_deflection": d})
+
+
+def test_session_signs_finds_a_gauge_read_the_other_way():
+    logs = [_log(-0.7, 0), _log(-0.7, 1), _log(0.7, 2), _log(0.7, 3), _log(-0.7, 4)]
+    signs, est = guesses.session_signs(logs, [0, 0, 1, 1, 2], 11.3, 0.45)
+    assert signs == [1, -1, 1]
+    for e, g in zip(est, (-0.7, 0.7, -0.7), strict=True):
+        assert e["gain"] == pytest.approx(g, rel=1e-9)
+        assert e["r2"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_a_session_without_tip_information_keeps_its_sign():
+    quiet = _log(0.7, 2)
+    quiet.signals["tip_deflection"] = np.zeros_like(quiet.signals["tip_deflection"])
+    signs, est = guesses.session_signs([_log(-0.7, 0), quiet], [0, 1], 11.3, 0.45)
+    assert signs == [1, 1] and est[1]["gain"] is None
+
+
+def _run(args: list[str]) -> None:
+    r = subprocess.run([*CLI, *args], capture_output=True, text=True)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, (r.stdout[-2000:], r.stderr[-3000:])
+
+
+@pytest.mark.slow
+@pytest.mark.rig
+@pytest.mark.skipif(not DATA.is_dir(), reason=f"real rig logs not found at {DATA}")
+def test_two_sessions_fitted_together(tmp_path):
+    """The 4/27 and 5/2 training runs, ``--sessions 0,0,1,1`` (the data sheet, default
+    options). Measured on 2 cores: 4/27 83.0 / 55.5 and 85.3 / 65.0, 5/2 90.5 / 62.2 and
+    90.6 / 64.7 (hub / tip %); before the per-session gauge sign, 54.6 / 3.6, 63.2 / 1.2,
+    89.5 / 61.6, 88.7 / 63.0 (the joint hub -> tip estimate explained 5 % of the tips).
+    Floors 3 points under the measured figures (the 4/27 session alone moves by 1-2 points
+    between seeds), the reference's training figures not being published. Each session's
+    written scenario, validated on its own runs, gives the fit's figures to 0.1 point."""
+    a = [DATA / "flexarm_K1_6", DATA / "flexarm_K1K2_6_-5"]
+    b = [DATA / "flexarm_K1K2K3_6_-3_213", DATA / "flexarm_K1K2K3k4_6_-3_213_4"]
+    toml, fit_json = tmp_path / "rig.toml", tmp_path / "fit.json"
+    _run(
+        ["fit", *map(str, a + b), "--sessions", "0,0,1,1", "--log-format", str(FORMAT), *SHEET]
+        + ["--scenario-out", str(toml), "--json", str(fit_json)]
+    )
+    fit = json.loads(fit_json.read_text())
+    fp = fit["fit_percent"]
+    floors = {a[0].name: (80, 52), a[1].name: (82, 62), b[0].name: (87, 59), b[1].name: (87, 61)}
+    for name, (hub, tip) in floors.items():
+        assert fp[name]["motor_angle"] >= hub and fp[name]["tip_deflection"] >= tip, (name, fp)
+    g0 = fit["params"]["sensors.tip_deflection.gain"]
+    g1 = fit["params"]["sessions[1].sensors.tip_deflection.gain"]
+    assert g1 == pytest.approx(-g0, rel=1e-12)  # one size, the sign per session
+    assert any("sign differs between sessions" in w for w in fit["warnings"])
+    for sc, logs in ((toml, a), (tmp_path / "rig.session1.toml", b)):
+        out = tmp_path / f"{sc.stem}.v.json"
+        _run(
+            ["validate", str(sc), *map(str, logs), "--log-format", str(FORMAT), "--json", str(out)]
+        )
+        val = json.loads(out.read_text())["fit_percent"]
+        for g in logs:
+            for sig, v in fp[g.name].items():
+                assert val[g.name][sig] == pytest.approx(v, abs=0.1), (g.name, sig, val, fp)
