@@ -97,3 +97,43 @@ def test_two_sessions_fitted_together(tmp_path):
         for g in logs:
             for sig, v in fp[g.name].items():
                 assert val[g.name][sig] == pytest.approx(v, abs=0.1), (g.name, sig, val, fp)
+
+
+def _result(params: dict, template: dict, fit_percent: dict):
+    from flexarm.identification.time_domain.result import FitResult
+
+    return FitResult(
+        free=list(params),
+        params=params,
+        template=template,
+        std={k: 0.0 for k in params},
+        correlation=np.eye(len(params)),
+        warnings=[],
+        fit_percent=fit_percent,
+        segment_fit_percent={},
+        scenario=None,
+        converged=True,
+        message="",
+        nfev=0,
+        cost=0.0,
+        seconds=0.0,
+        rmse={"run": {"tip_deflection": 0.0027}},
+    )
+
+
+def test_misfit_warnings_name_what_is_poor_and_not_a_friction_level_that_vanishes():
+    """The rule of :func:`engine.misfit_warnings`: a signal under 80 % (under 50 %: "does
+    not describe it"), a parameter 10 times from its start; a viscous level that falls
+    to 4e-6 of its start (the 4/27 + 5/2 fit: the back-EMF damping carries it) is not one."""
+    from flexarm.identification.time_domain.engine import misfit_warnings
+
+    res = _result(
+        {"arm.motor.inertia": 0.9, "arm.motor.viscous": 8e-8, "arm.beam.masses[0].mass": 0.0002},
+        {"arm.motor.inertia": 0.002, "arm.motor.viscous": 0.0197, "arm.beam.masses[0].mass": 0.05},
+        {"run": {"motor_angle": 83.0, "tip_deflection": 41.0}},
+    )
+    w = misfit_warnings(res)
+    assert len(w) == 3, w
+    assert "fit 41.0 % on tip_deflection is low (RMSE 0.0027 m; the model does not describe" in w[0]
+    assert w[1].startswith("arm.motor.inertia ended at 0.9, 450 times its start")
+    assert w[2].startswith("arm.beam.masses[0].mass ended at 0.0002, 0.004 times its start")

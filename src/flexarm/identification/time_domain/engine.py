@@ -230,7 +230,8 @@ def misfit_warnings(res: FitResult) -> list[str]:
     the parameters: a signal below :data:`LOW_FIT` % (below :data:`POOR_FIT` %: the model
     does not describe it), with its RMSE in its unit; a parameter that moved more than
     :data:`FAR_FACTOR` times from its start (a mass read as an inertia, a log in other
-    units, a data-sheet value off by a gear ratio)."""
+    units, a data-sheet value off by a gear ratio); a friction level or damping only when
+    it grows (one that falls towards 0 is left to the poorly-determined warnings)."""
     import math
 
     from flexarm.io.logs import signal_unit
@@ -249,7 +250,10 @@ def misfit_warnings(res: FitResult) -> list[str]:
         if t is None or not (math.isfinite(t) and math.isfinite(v)) or t == 0 or v == 0:
             continue
         r = abs(v / t)
-        if r > FAR_FACTOR or r < 1 / FAR_FACTOR:
+        # a friction level that falls towards 0 is a finding (the back-EMF damping or the
+        # Coulomb level carries it), not a sign of the wrong model; one that grows is
+        shrinks_freely = any(k in p for k in ("viscous", "friction.", "damping"))
+        if r > FAR_FACTOR or (r < 1 / FAR_FACTOR and not shrinks_freely):
             out.append(
                 f"{p} ended at {v:.4g}, {r:.3g} times its start {t:.4g} (the data sheet and the "
                 "logs' estimates): the model may not describe this rig; check the data-sheet "
