@@ -43,7 +43,6 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import differential_evolution, least_squares
 
 from flexarm.identification.time_domain import estimates as _est
 from flexarm.identification.time_domain import guesses
@@ -62,6 +61,7 @@ from flexarm.identification.time_domain.logs import (
 from flexarm.identification.time_domain.objective import Objective, Rig, check_filters
 from flexarm.identification.time_domain.params import FRICTION, ParamDef, ParamSpace, derived
 from flexarm.identification.time_domain.report import FitResult
+from flexarm.identification.time_domain.solvers import evolve, trust_region
 from flexarm.identification.time_domain.uncertainty import hac_covariance, iid_covariance
 from flexarm.sim.batch import one_blas_thread
 
@@ -1289,20 +1289,7 @@ def _friction_polish(
         return obj.cost(Us, np.tile(D, (X.shape[0], 1)), np.tile(off, (X.shape[0], 1, 1)))
 
     c0 = float(f(U[idx][:, None])[0])
-    res = differential_evolution(
-        f,
-        bounds,
-        popsize=8,
-        maxiter=maxiter,
-        tol=0.0,
-        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-        updating="deferred",
-        vectorized=True,
-        polish=False,
-        x0=U[idx],
-        mutation=(0.5, 1.0),
-        recombination=0.7,
-    )
+    res = evolve(f, bounds, x0=U[idx], popsize=8, maxiter=maxiter, seed=seed, tol=0.0)
     if res.fun >= c0:
         return loc
     U1 = U.copy()
@@ -1392,13 +1379,12 @@ def _local(
         return cache[key]
 
     t0 = time.perf_counter()
-    res = least_squares(
+    res = trust_region(
         lambda z: batch(z)[0],
+        lambda z: batch(z)[1],
         z0[free],
-        jac=lambda z: batch(z)[1],  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-        bounds=(lo[free], hi[free]),
-        method="trf",
-        x_scale=1.0,
+        lo[free],
+        hi[free],
         max_nfev=max_nfev,
         ftol=1e-6,
         xtol=1e-6,

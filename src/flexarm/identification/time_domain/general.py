@@ -996,7 +996,7 @@ def fit_scenario(
     values (fit % of the whole-run prediction; skip for long chaotic runs); ``plots``: a
     folder for that prediction's overlay figures (``NN_KEY_fit.png``, in the result's
     ``plots``)."""
-    from scipy.optimize import differential_evolution
+    from flexarm.identification.time_domain.solvers import evolve
 
     options = options or ScenarioFitOptions()
     fit_notes = scenario_fit_notes(scenario)
@@ -1033,20 +1033,14 @@ def fit_scenario(
             R = eng.residuals(X)
             return np.sum(R * R, axis=1)
 
-        res = differential_evolution(
+        res = evolve(
             f,
             list(zip(eng.lo, eng.hi, strict=True)),
+            x0=z0,
             popsize=options.popsize,
             maxiter=options.maxiter,
-            seed=options.seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
+            seed=options.seed,
             tol=1e-3,
-            updating="deferred",
-            vectorized=True,
-            polish=False,
-            init="latinhypercube",
-            x0=z0,
-            mutation=(0.5, 1.0),
-            recombination=0.7,
         )
         z0 = np.asarray(res.x)
         stages["global"] = {
@@ -1202,12 +1196,10 @@ def _local(
     simulation perturbing state i in every segment gives the S columns of state i (a
     block-sparse Jacobian, solved by LSMR). ``ftol`` None: :data:`COST_RESOLUTION` /
     :meth:`_Engine.expected_cost`."""
-    import inspect
-
     from scipy import sparse
-    from scipy.optimize import least_squares
 
-    has_callback = "callback" in inspect.signature(least_squares).parameters
+    from flexarm.identification.time_domain.solvers import trust_region
+
     n = len(eng.free)
     S = len(eng.seg)
     n_x = eng.prep0.loop.plant.n_states
@@ -1275,61 +1267,26 @@ def _local(
         return point(v)["r"], jac(v)
 
     ftol = options.ftol if options.ftol is not None else COST_RESOLUTION / eng.expected_cost()
-    last: list[float] = []
-
-    def resolved(intermediate_result):  # the name SciPy passes the OptimizeResult to
-        # SciPy's ftol test also asks the step's predicted reduction to be met (ratio > 1/4),
-        # which the finite-difference model misses near the optimum: the rule itself here
-        c = 2.0 * float(intermediate_result.cost)
-        if last and 0.0 < last[-1] - c < ftol * c:
-            raise StopIteration
-        last.append(c)
-
-    # an older SciPy whose least_squares takes no callback: its own ftol test alone
-    stop: dict[str, Any] = {"callback": resolved} if options.ftol is None and has_callback else {}
     v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0[:, idx])])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
     t0 = time.perf_counter()
-
-    def solve(v_start, budget):
-        last.clear()
-        out = least_squares(
-            lambda v: point(v)["r"],
-            v_start,
-            jac=jac,  # pyright: ignore[reportArgumentType]  (scipy: jac is typed from its '2-point' default)
-            bounds=(lo, hi),
-            method="trf",
-            x_scale=1.0,
-            tr_solver="lsmr" if nx else "exact",
-            max_nfev=budget,
-            ftol=ftol,
-            xtol=options.xtol,
-            gtol=1e-10,
-            **stop,
-        )
-        if out.status == -2:  # resolved: a step lowered the cost by less than it resolves
-            out.status = 2
-            out.message = f"Σ r² fell by less than ftol = {ftol:.3g} of itself (COST_RESOLUTION)"
-        return out
-
-    res = solve(v0, options.max_nfev)
-    nfev, restarts = int(res.nfev), []
-    # restarts: a trust region that collapsed on a kink of the cost (stick-slip friction
-    # makes it non-smooth) ends the search where a fresh region goes on; restart from the
-    # optimum while budget is left and a restart lowers Σ r² by more than it resolves
-    for _ in range(options.restarts):
-        if res.status <= 0 or nfev >= options.max_nfev:
-            break
-        c_before = 2.0 * float(res.cost)
-        again = solve(res.x, options.max_nfev - nfev)
-        nfev += int(again.nfev)
-        gain = c_before - 2.0 * float(again.cost)
-        restarts.append(round(gain, 6))
-        if gain <= ftol * c_before:  # not resolved: the optimum stays
-            break
-        res = again
-    res.nfev = nfev
+    res = trust_region(
+        lambda v: point(v)["r"],
+        jac,
+        v0,
+        lo,
+        hi,
+        max_nfev=options.max_nfev,
+        ftol=ftol,
+        xtol=options.xtol,
+        gtol=1e-10,
+        tr_solver="lsmr" if nx else "exact",
+        # the stop rule "Σ r² fell by less than it resolves" where ftol is the engine's own
+        resolution=options.ftol is None,
+        restarts=options.restarts,
+    )
+    restarts = list(res.restarts)
     r, J = batch(res.x)
     J = J.toarray() if nx else J
     z, off = split(res.x)

@@ -1,4 +1,5 @@
-"""Global, derivative-free stage: SciPy's differential evolution over the unit box.
+"""Global, derivative-free stage: SciPy's differential evolution over the unit box (the one
+global stage, :func:`~flexarm.identification.time_domain.solvers.evolve`).
 
 Stick-slip makes the output-error cost piecewise and jumpy, so a gradient method started
 from nominal values stalls. Differential evolution (seeded, ``updating='deferred'``,
@@ -18,9 +19,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import differential_evolution
 
 from flexarm.identification.time_domain.objective import Objective
+from flexarm.identification.time_domain.solvers import evolve
 
 
 @dataclass
@@ -96,22 +97,15 @@ def differential_evolution_stage(
         c0[1] = np.clip(c0[1] - c0[0], *cbounds[1])
     x0 = np.concatenate([np.clip(u0, 0, 1), c0[free]])
     t0 = time.perf_counter()
-    res = differential_evolution(
+    res = evolve(
         f,
         bounds,
+        x0=x0,
         popsize=popsize,
         maxiter=maxiter,
+        seed=seed,
         tol=tol,
-        atol=0.0,
-        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-        updating="deferred",
-        vectorized=True,
-        polish=False,
-        init="latinhypercube",
         integrality=integrality,
-        x0=x0,
-        mutation=(0.5, 1.0),
-        recombination=0.7,
         callback=cb,
     )
     U, D = split(res.x[:, None])
