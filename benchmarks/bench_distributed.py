@@ -104,7 +104,8 @@ def bench_fits(rows, out: Path, workers: int) -> dict:
 def bench_compare(n: int, chunk: int, workers: int, option: dict) -> dict:
     from flexarm import distributed as fd
     from flexarm.design.compare import compare
-    from flexarm.identification.time_domain import fit, load_rig_log
+    from flexarm.identification.time_domain import load_rig_log
+    from flexarm.identification.time_domain.fit import fit
 
     rows = fd.read_manifest(MANIFEST)
     row = next(r for r in rows if r.id == "unit6-flexible")

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from flexarm.identification.time_domain import fit, validate
+from flexarm.identification.time_domain import validate
+from flexarm.identification.time_domain.fit import fit
 from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.specs import load_scenario
 

@@ -16,7 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-from flexarm.identification.time_domain import fit, load_rig_log
+from flexarm.identification.time_domain import load_rig_log
+from flexarm.identification.time_domain.fit import fit
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "rotary-rig"

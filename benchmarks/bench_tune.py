@@ -37,7 +37,8 @@ SHEET = dict(
 
 def batch(n: int):
     if DATA.is_dir():
-        from flexarm.identification.time_domain import fit, load_rig_log
+        from flexarm.identification.time_domain import load_rig_log
+        from flexarm.identification.time_domain.fit import fit
 
         t = time.perf_counter()
         res = fit([load_rig_log(DATA / "4PM_Group37_FlexArm_Unit6", log_format=FORMAT)], **SHEET)

@@ -60,7 +60,8 @@ ROTARY_SHEET = dict(
 
 @functools.cache
 def _rotary_whole_fit(name: str):
-    from flexarm.identification.time_domain import fit, load_rig_log
+    from flexarm.identification.time_domain import load_rig_log
+    from flexarm.identification.time_domain.fit import fit
 
     return fit([load_rig_log(ROTARY_DATA / name, log_format=ROTARY_FORMAT)], **ROTARY_SHEET)
 

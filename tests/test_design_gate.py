@@ -181,7 +181,8 @@ def test_unit6_readme_chain_is_gated_and_the_right_rig_exports(tmp_path):
     from flexarm.cli import app
     from flexarm.deploy.c_export import export_c
     from flexarm.design.plants import from_paths
-    from flexarm.identification.time_domain import fit, load_rig_log
+    from flexarm.identification.time_domain import load_rig_log
+    from flexarm.identification.time_domain.fit import fit
     from flexarm.identification.time_domain.report import scenario_spread
     from flexarm.specs import load_scenario
 

@@ -8,7 +8,8 @@ import threading
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
+from flexarm.identification.time_domain import ScenarioFitOptions
+from flexarm.identification.time_domain.general import fit_scenario
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.sim.batch import cpu_cores, one_blas_thread, run_chunks
 from flexarm.specs.paths import scenario_with

@@ -280,7 +280,8 @@ def test_fast_bench_loop_equals_simulator_with_filters():
 
 
 def test_fit_filters_keyword_is_checked(tmp_path):
-    from flexarm.identification.time_domain import FitInputError, fit
+    from flexarm.identification.time_domain import FitInputError
+    from flexarm.identification.time_domain.fit import fit
     from flexarm.identification.time_domain.objective import check_filters
 
     assert check_filters({"tip_deflection": 50}, 1e-3, 2) == {

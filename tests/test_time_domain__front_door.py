@@ -275,3 +275,27 @@ def test_the_drive_command_is_scored_like_a_sensor_channel(short_run):
     print("fit %", fp, "RMSE", e)
     assert fp["current_1"] > 90.0 and fp["theta_1"] > 95.0, fp
     assert 0 < e["current_1"] < 0.1 * np.ptp(sig["current_1"])
+
+
+def test_the_old_fit_names_are_deprecated_aliases(monkeypatch):
+    """Issue #43 item 4: ``time_domain.fit``, ``time_domain.fit_scenario`` and
+    ``general.refit_friction`` warn (DeprecationWarning naming ``flexarm.fit``) and call
+    the engine they always called (here a stand-in that records the call)."""
+    import importlib
+
+    import flexarm.identification.time_domain as td
+    from flexarm.identification.time_domain import general
+
+    # the module (the package's attribute ``fit`` is the alias)
+    rig_module = importlib.import_module("flexarm.identification.time_domain.fit")
+
+    calls = []
+    monkeypatch.setattr(rig_module, "fit", lambda logs, **kw: calls.append(("rig", kw)) or 1)
+    monkeypatch.setattr(
+        general, "fit_scenario", lambda *a, **kw: calls.append(("scenario", a[2])) or 2
+    )
+    with pytest.warns(DeprecationWarning, match=r"flexarm\.fit\(presets\.servo_rig"):
+        assert td.fit(["log"], gear_ratio=48.4) == 1
+    with pytest.warns(DeprecationWarning, match=r"use flexarm\.fit\(scenario, logs, free"):
+        assert td.fit_scenario("sc", ["log"], ["a.b"]) == 2
+    assert calls == [("rig", {"gear_ratio": 48.4}), ("scenario", ["a.b"])]

@@ -9,11 +9,11 @@ import pytest
 
 from flexarm.identification.time_domain import (
     FitInputError,
-    fit,
     load_rig_log,
     validate,
 )
 from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
+from flexarm.identification.time_domain.fit import fit
 from flexarm.identification.time_domain.report import check_physical
 from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.io.logformat import parse_controller
@@ -392,7 +392,8 @@ def test_acceptance_fit_two_10s_logs_validate_the_third():
 
     from bench_fit import GAINS, RIG, TRUE
 
-    from flexarm.identification.time_domain import fit, validate
+    from flexarm.identification.time_domain import validate
+    from flexarm.identification.time_domain.fit import fit
     from flexarm.identification.time_domain.synthetic import synthetic_log
     from flexarm.specs import load_scenario
 

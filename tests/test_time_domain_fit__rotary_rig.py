@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import fit, load_rig_log, predict
+from flexarm.identification.time_domain import load_rig_log, predict
+from flexarm.identification.time_domain.fit import fit
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rotary-rig"
 FORMAT = Path(__file__).resolve().parents[1] / "examples" / "quanser-rotflex.toml"

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
+from flexarm.identification.time_domain import ScenarioFitOptions
+from flexarm.identification.time_domain.general import fit_scenario
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.scenario import load_scenario, scenario_from_dict

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import flexarm
-from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario, presets
+from flexarm.identification.time_domain import ScenarioFitOptions, presets
+from flexarm.identification.time_domain.general import fit_scenario
 from flexarm.identification.time_domain.options import DelaySearch, FitOptions, Shooting
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.specs.paths import scenario_with

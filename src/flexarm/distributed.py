@@ -49,14 +49,15 @@ The manifest (CSV, one header line; ``#`` lines are comments; paths resolve agai
 manifest's folder; lists are ``;``-separated):
 
 * ``id``: the row's name and output folder (letters, digits, ``._-``);
-* ``preset``: ``servo_rig``, the data-sheet fit of a single-link servo rig
-  (:func:`flexarm.identification.time_domain.fit.fit`; the default without ``scenario``);
-* ``scenario``: a scenario (TOML path or built-in name) for the general fit
-  (:func:`~flexarm.identification.time_domain.general.fit_scenario`);
+* ``preset``: ``servo_rig``, the data-sheet fit of a single-link servo rig (the one fit,
+  :func:`flexarm.identification.fit`, with ``presets.servo_rig``; the default without
+  ``scenario``);
+* ``scenario``: a scenario (TOML path or built-in name) for the one fit of its free list;
 * ``logs``: the run's log files (one session), ``a.txt;b.txt``;
 * ``log_format``: the logger's log-format TOML (columns, units, gains);
 * ``window``: the fit window ``START:STOP`` (s from each log's first sample);
-* ``validate_window``: a held-out window ``START:STOP`` predicted after the fit (servo rig);
+* ``validate_window``: a held-out window ``START:STOP`` predicted after the fit (the one
+  prediction of the fitted result, every row);
 * ``sessions``: servo rig, a session index per log, ``0;0;1`` (default one session);
 * ``free``: general fit, the free parameters (paths into the scenario);
 * the servo rig's data sheet (SI): ``drive`` (``voltage`` or ``current``), ``gear_ratio``
@@ -727,39 +728,58 @@ def read_manifest(path: str | Path) -> list[FitRow]:
 
 
 def fit_row(row: FitRow) -> tuple[Any, dict]:
-    """The one row → fit call (the merge with the one fit front door re-points it here):
-    the fit result and extras for its JSON (window, held-out fit %)."""
+    """One row → the one fit (:func:`flexarm.identification.fit`), as the command line runs
+    it: a ``servo_rig`` row through the preset of its data sheet (the row's options that
+    are :class:`~flexarm.identification.time_domain.options.ServoRig` fields go there, the
+    pipeline's other keywords, e.g. ``popsize``, with the data sheet), a scenario row
+    through its scenario; the result is the one
+    :class:`~flexarm.identification.time_domain.result.FitResult` for every row. Extras for
+    its JSON: the window and the held-out prediction (:func:`~flexarm.identification.
+    predict` of the result on ``validate_window``)."""
+    import dataclasses as dc
+
+    from flexarm.identification import fit, predict
+    from flexarm.identification.time_domain.options import FitOptions, PredictOptions, ServoRig
+
     extra: dict[str, Any] = {}
     if row.preset == "servo_rig":
-        from flexarm.identification.time_domain import fit, load_rig_log, predict
+        from flexarm.identification.time_domain.logs import load_rig_log
+        from flexarm.identification.time_domain.presets import DataSheet, servo_rig
 
         full = [load_rig_log(p, log_format=row.log_format) for p in row.logs]
-        logs = [g.window(*row.window) for g in full] if row.window else full
         kw = {**row.data_sheet, **row.options}
         if row.sessions is not None:
             kw["sessions"] = list(row.sessions)
-        res = fit(logs, **kw)
-        if row.window:
-            extra["window_s"] = list(row.window)
-        if row.validate_window:
-            held = predict(res, [g.window(*row.validate_window) for g in full])
-            extra["held_out"] = {
-                "window_s": list(row.validate_window),
-                "fit_percent": held["fit_percent"],
-            }
-        return res, extra
-    from flexarm.identification.time_domain import ScenarioFitOptions, fit_scenario
-    from flexarm.io.logformat import load_log
-    from flexarm.specs import load_scenario
+        rig_fields = {f.name for f in dc.fields(ServoRig)}
+        sheet_fields = {f.name for f in dc.fields(DataSheet)}
+        preset = servo_rig(DataSheet(**{k: v for k, v in kw.items() if k in sheet_fields}))
+        preset.sheet.update(
+            {k: v for k, v in kw.items() if k not in rig_fields and k not in sheet_fields}
+        )
+        opts = FitOptions(
+            servo_rig=ServoRig(**{k: v for k, v in kw.items() if k in rig_fields}),
+            windows=[row.window] * len(full) if row.window else None,
+        )
+        res = fit(preset, full, options=opts)
+    else:
+        from flexarm.identification.time_domain.general import ScenarioFitOptions
+        from flexarm.io.logformat import load_log
+        from flexarm.specs import load_scenario
 
-    assert row.scenario is not None  # a row without a preset names its scenario (read_manifest)
-    logs = [load_log(p, row.log_format) for p in row.logs]
-    opts = ScenarioFitOptions(
-        windows=[row.window] * len(logs) if row.window else None, **row.options
-    )
-    res = fit_scenario(
-        load_scenario(row.scenario), logs, list(row.free) if row.free else None, opts
-    )
+        assert row.scenario is not None  # a row without a preset names its scenario
+        full = [load_log(p, row.log_format) for p in row.logs]
+        opts = ScenarioFitOptions(
+            windows=[row.window] * len(full) if row.window else None, **row.options
+        )
+        res = fit(load_scenario(row.scenario), full, list(row.free) if row.free else None, opts)
+    if row.window:
+        extra["window_s"] = list(row.window)
+    if row.validate_window:
+        held = predict(res, full, PredictOptions(windows=[row.validate_window] * len(full)))
+        extra["held_out"] = {
+            "window_s": list(row.validate_window),
+            "fit_percent": held.fit_percent,
+        }
     return res, extra
 
 
@@ -826,9 +846,11 @@ def _run_fit_task(row: FitRow, out: str, *, figures: bool, fit: Callable | None)
         res.write_scenario(folder / "fitted.toml", overwrite=True)
     except Exception as exc:
         notes.append(f"fitted scenario not written: {_first_line(exc)}")
-    if figures and hasattr(res, "plots"):
-        try:
-            res.plots(folder / "plots")
+    if figures and hasattr(getattr(res, "prediction", None), "traces"):
+        try:  # the fit's prediction, overlaid on each fitted log (as fit --plots draws it)
+            from flexarm.identification.time_domain.figures import write_overlays
+
+            write_overlays(res.prediction, folder / "plots", "fit")
         except Exception as exc:
             notes.append(f"figures not written: {_first_line(exc)}")
     d["warnings"] = list(d.get("warnings") or []) + notes

@@ -11,7 +11,8 @@ Both commands parse, call the library and print: ``fit`` calls the one fit
 (:func:`flexarm.fit`) on the scenario given first or on the rotary-servo preset built
 from the data-sheet options (:func:`~flexarm.identification.time_domain.presets.servo_rig`);
 ``validate`` calls the one prediction (:func:`flexarm.validate`), and ``--refit friction``
-:func:`~flexarm.identification.time_domain.general.refit_friction`. Logs are read by
+the one fit of the joints' friction (:func:`flexarm.fit` with ``general.friction_paths``).
+Logs are read by
 :func:`flexarm.io.logformat.load_logs` and their declared laws checked by
 :func:`~flexarm.identification.time_domain.controller_check.checked_logs`."""
 
@@ -540,8 +541,9 @@ def validate(
     controller (servo-rig logs: the law each declares), from its start state estimated as
     the fit estimates it (--initial); a fit's written scenario gives the fit's figures."""
     enable_cache()
-    from flexarm.identification.time_domain.general import refit_friction
-    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification import fit as one_fit
+    from flexarm.identification.time_domain.general import friction_paths
+    from flexarm.identification.time_domain.options import Cost, FitOptions, PredictOptions
     from flexarm.identification.time_domain.predict import predict
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_json
@@ -592,7 +594,12 @@ def validate(
             figs += before.plots
             if refit:
                 status.update("re-estimating the joints' friction")
-                res = refit_friction(sc, glogs[0], rwin, ch)
+                res = one_fit(
+                    sc,
+                    [glogs[0]],
+                    friction_paths(sc),
+                    FitOptions(cost=Cost(channels=ch), windows=[rwin], predict=False),
+                )
                 after = predict(res.scenario, glogs, dataclasses.replace(popts, tag="refit"))
                 figs += after.plots
                 out["refit"] = res.refit_entry(res.free, rwin, logs[0], after)

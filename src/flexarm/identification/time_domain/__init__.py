@@ -7,18 +7,21 @@ kind (:mod:`~flexarm.identification.time_domain.presets`), one result
 (:class:`~flexarm.identification.time_domain.options.FitOptions`); ``ScenarioFitOptions``
 the general engine's flat record (:func:`fit_scenario`'s).
 
-Deprecated names kept until their callers move: ``fit`` here is the rotary servo
-pipeline's (:mod:`~flexarm.identification.time_domain.fit`); ``predict`` is the one
-prediction; ``validate`` a deprecated alias of it returning a dict;
-``fit_scenario`` / ``predict_scenario`` / ``ScenarioFit`` the general engine's,
-``RigFitResult`` the servo pipeline's result. Logs are :class:`flexarm.io.logs.Log`, read by
-:func:`flexarm.io.logformat.load_log` (:func:`load_rig_log` adds the servo rig's check)."""
+Deprecated aliases (a ``DeprecationWarning`` naming the replacement): ``fit`` here (the rotary
+servo pipeline's keyword interface) and ``fit_scenario`` (the general engine's entry), both
+replaced by ``flexarm.fit``; ``validate``, an alias of the one prediction returning a dict;
+``general.refit_friction`` (``flexarm.fit(scenario, [log], general.friction_paths(scenario),
+FitOptions(...))``). Kept: ``predict_scenario`` / ``ScenarioFit`` (the general engine's
+prediction and the one result's old name), ``RigFitResult`` (the servo pipeline's result).
+Logs are :class:`flexarm.io.logs.Log`, read by :func:`flexarm.io.logformat.load_log`
+(:func:`load_rig_log` adds the servo rig's check)."""
+
+from importlib import import_module
 
 from flexarm.identification.time_domain.figures import overlay_figure
 from flexarm.identification.time_domain.general import (
     ScenarioFit,
     ScenarioFitOptions,
-    fit_scenario,
     predict_scenario,
 )
 from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
@@ -48,6 +51,44 @@ __all__ = [
 
 # last, after __all__ (so that import sorting keeps it last): the submodules `fit` and
 # `predict` share these names, and importing a submodule binds its name on the package;
-# `fit` is the servo-rig pipeline's function, `predict` the one prediction
-from flexarm.identification.time_domain.fit import fit
+# `fit` is then rebound to the deprecated alias below, `predict` is the one prediction
 from flexarm.identification.time_domain.predict import predict
+
+# the submodule `fit` imported now, so that importing it later cannot rebind the package's
+# name `fit` from the deprecated alias below to the module
+import_module(f"{__name__}.fit")
+
+
+def fit(logs, **sheet_and_options):
+    """Deprecated: the rotary servo pipeline's keyword interface. Use the one fit,
+    ``flexarm.fit(presets.servo_rig(presets.DataSheet(...)), logs,
+    options=FitOptions(servo_rig=ServoRig(...)))``, whose result is the one
+    :class:`FitResult`; this alias returns the pipeline's own result (:class:`RigFitResult`)."""
+    import warnings
+
+    from flexarm.identification.time_domain.fit import fit as rig_fit
+
+    warnings.warn(
+        "flexarm.identification.time_domain.fit(logs, drive=..., ...) is deprecated: use "
+        "flexarm.fit(presets.servo_rig(presets.DataSheet(...)), logs, options=FitOptions("
+        "servo_rig=ServoRig(...)))",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return rig_fit(logs, **sheet_and_options)
+
+
+def fit_scenario(scenario, logs, free=None, options=None, **kw):
+    """Deprecated: the general engine's entry point. Use the one fit, ``flexarm.fit(scenario,
+    logs, free, FitOptions(...))`` (a :class:`ScenarioFitOptions` is still accepted there)."""
+    import warnings
+
+    from flexarm.identification.time_domain import general
+
+    warnings.warn(
+        "flexarm.identification.time_domain.fit_scenario is deprecated: use "
+        "flexarm.fit(scenario, logs, free, FitOptions(...))",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return general.fit_scenario(scenario, logs, free, options, **kw)

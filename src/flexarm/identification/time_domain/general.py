@@ -1360,7 +1360,19 @@ def refit_friction(
     """Re-estimate only the joints' friction of ``scenario`` (:func:`friction_paths`:
     Coulomb, breakaway and viscous levels) on ``log`` (its ``window``, s), everything else
     fixed: the cost of eq. (1) on ``channels`` (None: every logged sensor channel), no
-    prediction (``flexarm validate --refit friction``). The free list is ``res.free``."""
+    prediction (``flexarm validate --refit friction``). The free list is ``res.free``.
+
+    Deprecated: ``flexarm.fit(scenario, [log], friction_paths(scenario),
+    FitOptions(cost=Cost(channels=...), windows=[window], predict=False))``."""
+    import warnings
+
+    warnings.warn(
+        "refit_friction is deprecated: use flexarm.fit(scenario, [log], "
+        "friction_paths(scenario), FitOptions(cost=Cost(channels=...), windows=[window], "
+        "predict=False))",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     return fit_scenario(
         scenario,
         [log],
