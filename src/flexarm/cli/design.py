@@ -283,6 +283,12 @@ def _design(ctx, o: DesignRequest) -> None:
     opts = o.method_options()  # each method's own keyword arguments
     check_file_option("--report", o.report, o.overwrite, "design.html")
     sc = load(o.scenario)
+    if o.encoder_counts is not None and getattr(sc, "prismatic", False):
+        fail(
+            f"--encoder-counts {o.encoder_counts}: counts per turn of a rotary encoder, but "
+            f"{o.scenario} is a linear axis (m); give its scale as quantum = <m per count> "
+            "under [sensors.motor_angle] (e.g. 1e-6 for 1 µm)"
+        )
     fit_doc = parsing.json_file(o.fit_json, "--fit-json") if o.fit_json is not None else None
     by_paths = fit_doc is not None and {"free", "params", "std"} <= set(fit_doc)
     spread_d = None if by_paths else plant_spread(sc, o.fit_json, o.spread)
@@ -340,10 +346,13 @@ def _design(ctx, o: DesignRequest) -> None:
         _print_comparison(side, plants)
     info = des.info
     if "model" in info:
+        from flexarm.design.compare import units_of
+
+        cmd_unit = units_of(sc)["command"]
         console.print(
             f"augmented model: {info['model']['n_augmented']} states "
             f"(arm {info['model']['n_arm']}); linear peak command "
-            f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])}"
+            f"{', '.join(f'{v:.3g}' for v in info['step']['peak_command'])} {cmd_unit}"
         )
     for w in des.warnings:
         warn(w)
@@ -476,16 +485,17 @@ def _print_comparison(side, plants: int) -> None:
     """The step comparison as a table within the terminal's width (one row per metric, one
     column per controller: nominal / median / worst; stacked, never cut, where the columns
     do not fit: :class:`flexarm.display.Table`)."""
-    from flexarm.design.compare import METRICS, format_metric
+    from flexarm.design.compare import format_metric, metric_titles
     from flexarm.display import Table as TextTable
 
     drawn = side.settings["n_plants"] > 0
     cols = ("nominal", "median", "worst") if drawn else ("nominal",)
+    unit = (side.settings.get("units") or {}).get("position", "rad")  # m on a linear axis
+    step = f"a {side.settings['step_rad']:g} {unit} step"
     title = (
-        f"a {side.settings['step_rad']:g} rad step: nominal / median / worst "
-        f"over {plants} drawn plants"
+        f"{step}: nominal / median / worst over {plants} drawn plants"
         if drawn
-        else f"a {side.settings['step_rad']:g} rad step on the nominal plant"
+        else f"{step} on the nominal plant"
     )
     names = list(side.rows)
     rows: list[tuple] = [
@@ -493,7 +503,7 @@ def _print_comparison(side, plants: int) -> None:
             f"{t} [{u}]",
             *(" / ".join(format_metric(side.rows[n][k][m]) for k in cols) for n in names),
         )
-        for m, (t, u, _) in METRICS.items()
+        for m, (t, u) in metric_titles(side.settings).items()
     ]
     if drawn:
         rows.append(

@@ -145,6 +145,8 @@ class _Ctx:
         #: angle formed from other channels): name → C expression, not inputs
         self.computed_measured: dict[str, str] = {}
         self.computed_references: dict[str, str] = {}
+        #: the unit of a position: rad, or m on a linear axis (a prismatic joint)
+        self.position = "rad"
 
     @staticmethod
     def _input(channel: str, computed: dict[str, str], inputs: list[str], prefix: str) -> str:
@@ -516,7 +518,9 @@ def _friction(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         f"{P}LEVEL", _np(ctrl.level).ravel(), "c: Coulomb level per command, command units (V or A)"
     )
     part.constants += ctx.array(
-        f"{P}VDB", _np(ctrl.velocity_deadband).ravel(), "velocity deadband, rad/s: at rest below it"
+        f"{P}VDB",
+        _np(ctrl.velocity_deadband).ravel(),
+        f"velocity deadband, {ctx.position}/s: at rest below it",
     )
     part.constants += ctx.array(
         f"{P}UDB",
@@ -525,7 +529,7 @@ def _friction(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
     )
     part.constants += ctx.scalar(f"{P}DT", float(_np(ctrl.dt)), "T: sample period, s")
     part.members += [
-        f"{R} {p}prev[{m}];  /* angles at k-1, rad */",
+        f"{R} {p}prev[{m}];  /* positions at k-1, {ctx.position} */",
         f"int {p}started;  /* 0 before the first sample */",
     ]
     part.init += [f"for (i = 0; i < {m}; ++i) s->{p}prev[i] = 0;", f"s->{p}started = 0;"]
@@ -720,13 +724,13 @@ def _inner_loop(ctrl, ctx: _Ctx, p: str, out: str) -> Part:
         ("CF", ctrl.coulomb, "C_f: Coulomb level (torque units)"),
         ("ON_F", ctrl.friction_on, "friction compensation on (1) / off"),
         ("ON_C", ctrl.coupling_on, "coupling compensation on (1) / off"),
-        ("VDB", ctrl.velocity_deadband, "velocity deadband, rad/s"),
+        ("VDB", ctrl.velocity_deadband, f"velocity deadband, {ctx.position}/s"),
         ("UDB", ctrl.rest_deadband, "rest deadband, command units"),
         ("DT", ctrl.dt, "T: sample period, s"),
-        ("TH0", ctrl.initial_motor_angle, "motor angle before t = 0, rad"),
+        ("TH0", ctrl.initial_motor_angle, f"motor angle before t = 0, {ctx.position}"),
     ):
         part.constants += ctx.scalar(f"{P}{cname}", float(_np(val)), what)
-    part.members.append(f"{R} {p}th_prev;  /* motor angle at k-1, rad */")
+    part.members.append(f"{R} {p}th_prev;  /* motor angle at k-1, {ctx.position} */")
     part.init.append(f"s->{p}th_prev = {P}TH0;")
     th, tip, ref = ctx.meas("motor_angle"), ctx.meas("tip_angle"), ctx.ref(ctrl.reference)
     sv = f"s->{p}"
@@ -807,12 +811,13 @@ def _unit(name: str, scenario) -> str:
 
     u = signal_unit(name)
     if u is not None:
-        return u or "1"
+        return _linear_unit(u or "1", scenario)
     sens = (getattr(scenario, "sensors", {}) or {}).get(name)
     sig = sens.signal if sens is not None and sens.signal else name
     u = signal_unit(sig) or {"tip_deflection": "m", "coupling_torque": "N*m"}.get(sig)
     if u is None:
         return f"the unit of the plant signal {sig}"
+    u = _linear_unit(u, scenario)
     if (
         sens is not None
         and sens.filter is not None
@@ -820,6 +825,14 @@ def _unit(name: str, scenario) -> str:
     ):
         return f"{u}/s"
     return u
+
+
+def _linear_unit(unit: str, scenario) -> str:
+    """``unit`` on a linear axis (a prismatic joint: m for rad, m/s for rad/s, N for N·m,
+    :data:`flexarm.io.logs.LINEAR_SI`); unchanged on a rotary arm."""
+    from flexarm.io.logs import LINEAR_SI
+
+    return LINEAR_SI.get(unit, unit) if getattr(scenario, "prismatic", False) else unit
 
 
 #: the longest C prefix (``--name``) and the longest name text written into a comment
@@ -911,6 +924,8 @@ def generate_c(
     n_u = int(loop.plant.n_inputs)
     input_names = list(loop.plant.input_names)
     ctx = _Ctx(name, precision, n_u)
+    if getattr(scenario, "prismatic", False):
+        ctx.position = "m"  # a linear axis: positions m, rates m/s, forces N
     N = name.upper()
     R = ctx.real
     try:
@@ -964,10 +979,11 @@ def generate_c(
 
     sc_sens = scenario.sensors or {}
     meas = [(c, _unit(c, scenario)) for c in ctx.measured]
-    # reference channels: a scenario's [reference] / [references.X] are angles (rad), as is
-    # the nested loops' feedforward; a known signal name keeps its own unit
+    # reference channels: a scenario's [reference] / [references.X] are angles (rad; m on a
+    # linear axis), as is the nested loops' feedforward; a known signal name keeps its unit
     refs = [
-        (r, _unit(r, scenario) if signal_unit(r) is not None else "rad") for r in ctx.references
+        (r, _unit(r, scenario) if signal_unit(r) is not None else ctx.position)
+        for r in ctx.references
     ]
     outs = [
         (
@@ -976,7 +992,7 @@ def generate_c(
             if nm.startswith("voltage")
             else "A"
             if nm.startswith("current")
-            else "N*m"
+            else _linear_unit("N*m", scenario)
             if nm.startswith("torque")
             else "command units",
         )

@@ -2,11 +2,13 @@
 (fitted) plant and on a batch of plants drawn from the fit's uncertainty
 (:mod:`flexarm.design.plants`), one ``vmap``-ed batch per controller.
 
-The experiment: the plants at rest, a reference step of ``step`` rad at ``start`` s
-(default the scenario's own step size), ``duration`` s, through the one sampled-data loop
-with everything the scenario has: friction (Karnopp stick), sensor and computation
-delays, encoder quantisation, saturation. Per plant, from the plant's true signals (not
-the delayed sensors), with Δ = the reference step, k ≥ the step's sample:
+The experiment: the plants at rest, a reference step of ``step`` rad (m on a linear axis,
+``arm.joint = "prismatic"``: every angle below is then the carriage's position in m, the
+tip the carriage itself) at ``start`` s (default the scenario's own step size),
+``duration`` s, through the one sampled-data loop with everything the scenario has:
+friction (Karnopp stick), sensor and computation delays, encoder quantisation, saturation.
+Per plant, from the plant's true signals (not the delayed sensors), with Δ = the reference
+step, k ≥ the step's sample:
 
 * ``hub_error_counts``: the mean of |r_end − θ| / q over the last 5 % of the run, q the
   encoder count (rad; the scenario's ``sensors.motor_angle`` quantum, or ``count=``): a
@@ -18,7 +20,8 @@ the delayed sensors), with Δ = the reference step, k ≥ the step's sample:
   last sample is still outside (never settles);
 * ``tip_overshoot_pct``: 100 max_k (θ_t − r_end) sgn Δ / |Δ|, at least 0;
 * ``tip_oscillation_mm``: rms of d − d̄ over the last ``tail`` (25 %) of the run, mm;
-* ``peak_command_V``: max |u| of the applied (saturated) command; ``time_at_limit_s``:
+* ``peak_command_V``: max |u| of the applied (saturated) command (in the drive's unit, V or
+  A: ``settings["units"]``, :func:`units_of`; the key keeps its name); ``time_at_limit_s``:
   T · #{k : |u_k| ≥ limit (1 − 1e-9)};
 * ``command_chatter_V``: rms of the command's change per sample, √(mean (u_k − u_{k−1})²),
   V: the sign switching of a friction compensation and the backward-difference rate of a
@@ -64,6 +67,8 @@ __all__ = [
     "Comparison",
     "batch_metrics",
     "METRICS",
+    "metric_titles",
+    "units_of",
     "experiment",
     "Probe",
     "probe_for",
@@ -79,6 +84,46 @@ METRICS = {
     "time_at_limit_s": ("time at limit", "s", "max"),
     "command_chatter_V": ("command chatter", "V", "max"),
 }
+
+#: a linear axis's column titles (a prismatic joint: the carriage's position in m is both
+#: the "hub" and the "tip"; a rigid carriage has no deflection)
+LINEAR_TITLES = {
+    "hub_error_counts": "position ss error",
+    "tip_settling_s": "settling",
+    "tip_overshoot_pct": "overshoot",
+    "tip_oscillation_mm": "deflection rms",
+}
+
+
+def units_of(scenario, command: int = 0) -> dict[str, str]:
+    """The units the comparison's figures are in: ``position`` (rad, or m on a linear
+    axis, ``arm.joint = "prismatic"``) and ``command`` (the drive's: V for a voltage
+    drive, A for a current drive, N·m (N on a linear axis) for a torque drive;
+    ``command`` the drive's index on a multi-link arm)."""
+    linear = bool(getattr(scenario, "prismatic", False))
+    arm = scenario.arm
+    if hasattr(arm, "motor"):
+        drive = arm.motor.drive
+    else:
+        joints = getattr(arm, "joints", None) or []
+        drive = joints[command].drive.drive if command < len(joints) else "torque"
+    cmd = {"voltage": "V", "current": "A"}.get(drive, "N" if linear else "N*m")
+    return {"position": "m" if linear else "rad", "command": cmd}
+
+
+def metric_titles(settings: Mapping[str, Any] | None = None) -> dict[str, tuple[str, str]]:
+    """metric → (column title, unit) for a comparison's ``settings``: :data:`METRICS`'s, the
+    commands in the drive's unit (``settings["units"]``, :func:`units_of`) and a linear
+    axis's titles (:data:`LINEAR_TITLES`); the keys stay :data:`METRICS`'s."""
+    units = (settings or {}).get("units") or {}
+    cmd = units.get("command", "V")
+    linear = units.get("position") == "m"
+    out = {}
+    for k, (t, u, _) in METRICS.items():
+        if linear:
+            t = LINEAR_TITLES.get(k, t)
+        out[k] = (t, cmd if u == "V" else u)
+    return out
 
 
 @dataclass(frozen=True)
@@ -173,7 +218,8 @@ def batch_metrics(
     delta = float(r[-1] - r[k0 - 1]) if k0 > 0 else float(r[-1] - r[0])
     if delta == 0.0:
         raise ValueError(
-            "the reference has no step: the comparison needs a step of the hub angle (step= rad)"
+            "the reference has no step: the comparison needs a step of the hub angle (step= rad, "
+            "m on a linear axis)"
         )
     n = r.size
     dt = float(time[1] - time[0])
@@ -235,7 +281,7 @@ def experiment(
         if step == 0.0:
             raise ValueError(
                 f"scenario {scenario.name!r}: {pr.reference}.amplitude = 0; give the "
-                "step size (rad) with step="
+                "step size (rad, m on a linear axis) with step= or [reference] amplitude"
             )
     if not duration > start:
         raise ValueError(f"duration = {duration} s must exceed the step time start = {start} s")
@@ -294,7 +340,8 @@ def encoder_count(scenario, count: float | None = None, joint: int = 0) -> float
         raise ValueError(
             f"scenario {scenario.name!r}: sensors.{enc} has no quantum "
             "(or bits and range), so the hub error cannot be given in encoder "
-            "counts; give count= (rad per count, e.g. 2*pi/4096) or "
+            "counts; give count= (rad per count, e.g. 2*pi/4096; m per count on a linear "
+            "axis, e.g. 1e-6) or "
             f"sensors.{enc}.quantum"
         )
     return float(q)
@@ -365,7 +412,8 @@ class Comparison:
     def table(self, fmt: str = "markdown") -> str:
         """One row per controller: each metric as nominal / median / worst, the unstable
         count and whether the voltage limit held; ``fmt`` ``markdown`` or ``text``."""
-        head = ["controller"] + [f"{t} [{u}] nom / med / worst" for t, u, _ in METRICS.values()]
+        titles = metric_titles(self.settings).values()
+        head = ["controller"] + [f"{t} [{u}] nom / med / worst" for t, u in titles]
         head += ["unstable", "limit ok"]
         body = []
         for name, row in self.rows.items():
@@ -419,7 +467,9 @@ class Comparison:
         tr0 = next(iter(self.traces.values()))
         ax.plot(tr0["time"], tr0["reference"], "k:", lw=0.8, label="reference")
         ax.set_xlabel("time [s]")
-        ax.set_ylabel("tip angle θ + d/L [rad]")
+        units = self.settings.get("units") or {}
+        pos = units.get("position", "rad")
+        ax.set_ylabel("position [m]" if pos == "m" else "tip angle θ + d/L [rad]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
@@ -433,8 +483,8 @@ class Comparison:
         lim = self.settings["limit_V"]
         for s in (-1, 1):
             ax[1].axhline(s * lim, color="k", ls="--", lw=0.6)
-        ax[0].set_ylabel("hub angle [rad]")
-        ax[1].set_ylabel("command [V]")
+        ax[0].set_ylabel("position [m]" if pos == "m" else "hub angle [rad]")
+        ax[1].set_ylabel(f"command [{units.get('command', 'V')}]")
         ax[1].set_xlabel("time [s]")
         for a in ax:
             a.grid(alpha=0.3)
@@ -590,12 +640,16 @@ def compare(
             "tip_p50": pct[1],
             "tip_p95": pct[2],
         }
+    step_size = float(
+        (scn.reference if pr.reference == "reference" else scn.references[pr.reference]).amplitude
+    )
+    units = units_of(scn, pr.command)
     settings = {
-        "step_rad": float(
-            (
-                scn.reference if pr.reference == "reference" else scn.references[pr.reference]
-            ).amplitude
-        ),
+        # step_rad, count_rad, limit_V: the keys of a rotary arm's figures, kept; their
+        # units are ``units`` (a linear axis: m; a current drive: A)
+        "step_rad": step_size,
+        "step": step_size,
+        "units": units,
         "stepped": pr.reference,
         "measured": {"hub": pr.hub, "tip": " + ".join(pr.tip), "command": pr.command},
         "start_s": start,
@@ -608,7 +662,7 @@ def compare(
         "seed": plants.seed,
         "noise_seed": seed,
         "plants": plants.info,
-        "definitions": {k: f"{t} [{u}]" for k, (t, u, _) in METRICS.items()},
+        "definitions": {k: f"{t} [{u}]" for k, (t, u) in metric_titles({"units": units}).items()},
     }
     return Comparison(rows, per, traces, settings, list(plants.warnings))
 

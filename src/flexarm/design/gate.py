@@ -127,7 +127,14 @@ def assess(
     nom_lim = bool(nom_t > 0)
     k_lim = int(np.sum(at_lim[1:] > 0))
     limit = comparison.settings.get("limit_V")
-    lim_txt = "the limit" if limit is None else f"the ±{limit:g} limit"
+    unit = (comparison.settings.get("units") or {}).get("command")
+    lim_txt = (
+        "the limit"
+        if limit is None
+        else f"the ±{limit:g} limit"
+        if unit is None
+        else f"the ±{limit:g} {unit} limit"
+    )
     s = options.max_unstable_share
     lab = _lab(comparison, reference)
     reasons: list[str] = []
@@ -180,6 +187,7 @@ def assess(
         "nominal_time_at_limit_s": nom_t,
         "limit_reached": k_lim,
         "limit": None if limit is None else float(limit),
+        "limit_unit": unit,
         "max_unstable_share": s,
         "lab": lab,
     }
@@ -230,6 +238,14 @@ def design_checked(
     try:
         q = encoder_count(scenario, count)
     except ValueError:
+        if getattr(scenario, "prismatic", False):  # a linear axis: a linear encoder, m
+            raise FlexarmError(
+                "the position encoder's count is not known, so the design cannot be checked "
+                "against the axis's quantisation",
+                field="sensors.motor_angle.quantum",
+                fix="add quantum = <m per count> under [sensors.motor_angle] of the scenario "
+                "(e.g. quantum = 1e-6 for a 1 µm linear scale: the axis is in m)",
+            ) from None
         raise FlexarmError(
             "the hub encoder's count is not known, so the design cannot be checked against "
             "the rig's quantisation",

@@ -328,6 +328,12 @@ def design_nested(
             f"scenario {sc.name!r}: design_nested is Feliu's single-link scheme; "
             f"this arm has {len(sc.arm.links)} links"
         )
+    if getattr(sc, "prismatic", False):
+        raise ValueError(
+            f"scenario {sc.name!r}: design_nested is Feliu's tip loop around a flexible "
+            'link; this arm is a linear axis (arm.joint = "prismatic", a rigid carriage) '
+            "with no tip to loop on: design it with method 'lqr' or 'place'"
+        )
     # a single-link scenario has [sampling] and [simulation] (validated)
     assert sc.sampling is not None and sc.simulation is not None
     dt, delay = float(sc.sampling.period), int(sc.sampling.delay)

@@ -66,7 +66,8 @@ class Design:
         lines = [f"{self.method} design of {self.scenario.name}: verdict {v}"]
         g = self.gate
         if g is not None:
-            lim = "" if g.get("limit") is None else f" ±{g['limit']:g}"
+            unit = f" {g['limit_unit']}" if g.get("limit_unit") else ""  # V or A
+            lim = "" if g.get("limit") is None else f" ±{g['limit']:g}{unit}"
             lines.append(
                 f"  nominal plant {'stable' if g['nominal_stable'] else 'UNSTABLE'}"
                 + (f"{', reaches the' + lim + ' limit' if g['nominal_limit_reached'] else ''}")

@@ -54,7 +54,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flexarm.design.compare import batch_metrics, build_controller, encoder_count, experiment
+from flexarm.design.compare import (
+    batch_metrics,
+    build_controller,
+    encoder_count,
+    experiment,
+    units_of,
+)
 from flexarm.design.plants import PlantBatch, chunk_plants, nominal_batch
 from flexarm.design.result import Design
 from flexarm.specs import paths as scenario_paths
@@ -278,10 +284,12 @@ def design_tune(
         k1 = abs(float(ctrl.get("k1", ctrl.get("kp", 0.0)) or 0.0))
         q = encoder_count(plants.nominal, count)
         ctrl["friction_compensation"] = {"level": c0, "rest_deadband": k1 * q}
+        u = units_of(plants.nominal)["command"]
+        force = "force" if getattr(plants.nominal, "prismatic", False) else "torque"
         warn.append(
             f"friction compensation added: level starts at the fitted Coulomb "
-            f"torque / k_u = {c0:.4g} V, rest deadband at one encoder count's "
-            f"feedback K1 q = {k1 * q:.4g} V"
+            f"{force} / k_u = {c0:.4g} {u}, rest deadband at one encoder count's "
+            f"feedback K1 q = {k1 * q:.4g} {u}"
         )
     scenario = scenario_from_dict(d, source=f"scenario {scenario.name!r} to tune")
     d = scenario.model_dump(mode="json", exclude_none=True)
