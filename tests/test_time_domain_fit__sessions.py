@@ -121,19 +121,21 @@ def _result(params: dict, template: dict, fit_percent: dict):
     )
 
 
-def test_misfit_warnings_name_what_is_poor_and_not_a_friction_level_that_vanishes():
-    """The rule of :func:`engine.misfit_warnings`: a signal under 80 % (under 50 %: "does
-    not describe it"), a parameter 10 times from its start; a viscous level that falls
-    to 4e-6 of its start (the 4/27 + 5/2 fit: the back-EMF damping carries it) is not one."""
-    from flexarm.identification.time_domain.engine import misfit_warnings
+def test_fit_quality_does_not_call_a_friction_level_that_vanishes_the_wrong_model():
+    """The one poor-fit rule (:func:`flexarm.identification.fit_quality.fit_quality`, which
+    the one fit runs on every preset's result): a signal under 50 % is "not described", a
+    parameter 10 times from its start is named; a viscous level that falls to 4e-6 of its
+    start (the 4/27 + 5/2 fit: the back-EMF damping carries it) is not."""
+    from flexarm.identification.fit_quality import fit_quality
 
     res = _result(
         {"arm.motor.inertia": 0.9, "arm.motor.viscous": 8e-8, "arm.beam.masses[0].mass": 0.0002},
         {"arm.motor.inertia": 0.002, "arm.motor.viscous": 0.0197, "arm.beam.masses[0].mass": 0.05},
         {"run": {"motor_angle": 83.0, "tip_deflection": 41.0}},
     )
-    w = misfit_warnings(res)
+    w = fit_quality(res)
     assert len(w) == 3, w
-    assert "fit 41.0 % on tip_deflection is low (RMSE 0.0027 m; the model does not describe" in w[0]
+    assert w[0].startswith("run: fit 41.000 % on tip_deflection (below 50 %: the model does not")
+    assert "RMSE 0.0027 m" in w[0]
     assert w[1].startswith("arm.motor.inertia ended at 0.9, 450 times its start")
     assert w[2].startswith("arm.beam.masses[0].mass ended at 0.0002, 0.004 times its start")

@@ -397,8 +397,9 @@ def fit(
     except KeyboardInterrupt:
         _fit_interrupted(json_out, overwrite, res, None)
     console.print(escape(res.summary()))
-    for w in _poor_fit_warnings(one):  # those the rig's summary has not printed
-        console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+    for w in one.warnings:  # the one result's (the fit's findings) the rig's summary lacks
+        if w not in res.warnings:
+            console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _print_bench_tables(res, res0, held, validate_window)
     one.extras.update(
         fit_extras(without_friction=res0, window=win, held_out=held, held_window=vwin)
@@ -778,7 +779,6 @@ def _fit_scenario_cli(
         t.add_row(p, f"{res.template[p]:.5g}", f"{res.params[p]:.5g}", f"{res.std[p]:.3g}")
     console.print(t)
     console.print(escape(res.message))
-    _poor_fit_warnings(res, bounds)
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
     _print_warnings(res.prediction.get("warnings", []))
@@ -810,18 +810,6 @@ def _fit_scenario_cli(
                 report,
                 overwrite,
             )
-
-
-def _poor_fit_warnings(res, bounds=None) -> list[str]:
-    """The poor-fit findings (:func:`flexarm.identification.fit_quality.fit_quality`: fit %
-    under its floor, residuals far above the noise, a parameter at a bound, a std above its
-    value, far from its start, a delay at the search's edge) the engine has not already
-    written, added to ``res.warnings`` (printed and in --json); returns those added."""
-    from flexarm.identification.fit_quality import fit_quality
-
-    new = fit_quality(res, bounds=bounds)
-    res.warnings = [*res.warnings, *new]
-    return new
 
 
 def _bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:

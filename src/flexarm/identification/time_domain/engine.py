@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from flexarm.identification.fit_quality import fit_quality
 from flexarm.identification.time_domain.options import FitOptions
 from flexarm.identification.time_domain.presets import Preset, for_scenario
 from flexarm.identification.time_domain.result import FitResult, Prediction
@@ -99,6 +100,15 @@ def fit(
     res.free_source = source
     if estimates is not None:
         res.stages["estimates"] = estimates
+    # a poor fit said plainly (the one rule, every preset), with the fit's own bounds
+    ds = flat.delay_search
+    res.warnings += fit_quality(
+        res,
+        bounds=flat.bounds,
+        bound_factor=flat.bound_factor,
+        max_delay=getattr(ds, "max_delay", None),
+        max_moves=getattr(ds, "max_moves", None),
+    )
     return res
 
 
@@ -151,7 +161,8 @@ def _servo_rig(preset: Preset, logs, options, progress):
         res.prediction = pred
         # the rig loop's "is low" warnings spoke of its own figures: the reported ones now
         kept = [w for w in res.warnings if not w.endswith(" is low")]
-        res.warnings = list(dict.fromkeys([*kept, *pred.warnings, *misfit_warnings(res)]))
+        res.warnings = list(dict.fromkeys([*kept, *pred.warnings]))
+        res.warnings += fit_quality(res)  # a poor fit said plainly (the one rule, every preset)
         res.engine_result.warnings = list(res.warnings)
     if opts.plots is not None and isinstance(res.prediction, Prediction):
         from flexarm.identification.time_domain.figures import write_overlays
@@ -216,50 +227,6 @@ def _predict_sessions(scenarios: list, logs: list, sess: list[int], windows):
         nrmse={keys[i]: parts[i][0].nrmse[parts[i][1]] for i in range(len(logs))},
     )
     return merged
-
-
-#: fit % under which a signal's prediction is called low / not described by the model
-LOW_FIT, POOR_FIT = 80.0, 50.0
-#: a parameter that ends further than this factor from its start (the data sheet and the
-#: logs' estimates) is named: the model may not be this rig's
-FAR_FACTOR = 10.0
-
-
-def misfit_warnings(res: FitResult) -> list[str]:
-    """Say plainly when a fit is poor (issue #44 item 7), from the reported prediction and
-    the parameters: a signal below :data:`LOW_FIT` % (below :data:`POOR_FIT` %: the model
-    does not describe it), with its RMSE in its unit; a parameter that moved more than
-    :data:`FAR_FACTOR` times from its start (a mass read as an inertia, a log in other
-    units, a data-sheet value off by a gear ratio); a friction level or damping only when
-    it grows (one that falls towards 0 is left to the poorly-determined warnings)."""
-    import math
-
-    from flexarm.io.logs import signal_unit
-
-    out = []
-    for log, per in res.fit_percent.items():
-        for sig, v in per.items():
-            if v is None or v >= LOW_FIT:
-                continue
-            e = (res.rmse.get(log) or {}).get(sig)
-            rm = f"RMSE {e:.3g} {signal_unit(sig) or ''}".rstrip() if e is not None else ""
-            what = "; the model does not describe it" if v < POOR_FIT else ""
-            out.append(f"{log}: fit {v:.1f} % on {sig} is low ({rm}{what})")
-    for p, v in res.params.items():
-        t = res.template.get(p)
-        if t is None or not (math.isfinite(t) and math.isfinite(v)) or t == 0 or v == 0:
-            continue
-        r = abs(v / t)
-        # a friction level that falls towards 0 is a finding (the back-EMF damping or the
-        # Coulomb level carries it), not a sign of the wrong model; one that grows is
-        shrinks_freely = any(k in p for k in ("viscous", "friction.", "damping"))
-        if r > FAR_FACTOR or (r < 1 / FAR_FACTOR and not shrinks_freely):
-            out.append(
-                f"{p} ended at {v:.4g}, {r:.3g} times its start {t:.4g} (the data sheet and the "
-                "logs' estimates): the model may not describe this rig; check the data-sheet "
-                "options, the log's units and the rig's kind"
-            )
-    return out
 
 
 def _pieces_fit_percent(rig_res, whole, owner) -> dict[str, dict[str, float | None]]:
