@@ -18,6 +18,7 @@ from flexarm.cli.common import (
     err,
     guarded_command,
 )
+from flexarm.cli.parsing import number
 
 
 @guarded_command("manifest")
@@ -40,7 +41,8 @@ def fit_many(
         int | None,
         typer.Option(
             help="start a local Dask cluster of N worker processes (default: run "
-            "in-process, one fit after the other)"
+            "in-process, one fit after the other)",
+            callback=number(ge=1, le=1024, example="4"),
         ),
     ] = None,
     no_figures: Annotated[

@@ -92,6 +92,8 @@ __all__ = [
     "MAX_TEXT_INPUT",
     "WriteFailedError",
     "rescue_path",
+    "OutputFolderError",
+    "OutputIsFolderError",
 ]
 
 
@@ -161,15 +163,25 @@ def _check_target(path: Path, overwrite: bool) -> None:
             fix="give another output path",
         )
     if path.is_dir():
-        raise IsADirectoryError(f"{path}: is a folder; give a file name to write")
+        raise OutputIsFolderError(f"{path}: is a folder; give a file name to write", file=path)
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path}: exists already; not overwritten (pass overwrite=True)")
     parent = path.parent
     if not parent.is_dir():
         what = "is a file, not a folder" if parent.exists() else "does not exist"
-        raise FileNotFoundError(
-            f"{path}: cannot write: the folder {parent} {what}; create the folder first"
+        raise OutputFolderError(
+            f"{path}: cannot write: the folder {parent} {what}; create the folder first",
+            file=path,
         )
+
+
+class OutputIsFolderError(FlexarmError, IsADirectoryError):
+    """An output file path that is a folder (a project error: one line, exit 2)."""
+
+
+class OutputFolderError(FlexarmError, FileNotFoundError):
+    """An output file whose folder does not exist or is a file (a project error: one
+    line, exit 2; issue #45: ``excite`` into a missing folder was an internal error)."""
 
 
 def _commit(tmp: Path, path: Path, overwrite: bool) -> None:
