@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the flexarm source the probe runs (--src: e.g. an older commit's, for a before/after)
+SRC = [str(ROOT / "src")]
 LAW = "state_feedback K1=6 K2=-40 K3=0.15 K4=0"
 FS = 1000.0
 N = 500  # samples per period
@@ -269,7 +271,7 @@ def run_case(cls, argv, kind, timeout=600):
         args = [a.replace("{d}", str(d)).replace("{o}", str(o)) for a in argv]
         env = {
             **os.environ,
-            "PYTHONPATH": str(ROOT / "src"),
+            "PYTHONPATH": SRC[0],
             "FLEXARM_LOG_DIR": str(Path(tmp) / "logs"),
             "PROBE_FULL": str(o),
         }
@@ -323,7 +325,10 @@ def main():
     ap.add_argument("-k", default=None, help="only the classes whose name contains this")
     ap.add_argument("-j", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("--src", default=None, help="the flexarm src folder to run (default ours)")
     a = ap.parse_args()
+    if a.src:
+        SRC[0] = str(Path(a.src).resolve())
     cases = [c for c in CASES if a.k is None or a.k.lower() in c[0].lower()]
     rows = []
     with cf.ThreadPoolExecutor(a.j) as ex:
