@@ -16,6 +16,7 @@ from flexarm.cli.common import (
     console,
     enable_cache,
     err,
+    fail,
     guarded_command,
 )
 from flexarm.cli.parsing import number
@@ -67,7 +68,13 @@ def fit_many(
     check_cluster(scheduler, workers)
     check_dir_option("--out", out)
     enable_cache()
-    rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
+    try:  # a bad manifest: one line naming row and column
+        rows = fd.read_manifest(manifest)
+    except UnicodeDecodeError as exc:  # issue #45: a UTF-16 manifest named by its file
+        fail(
+            f"{manifest}: not UTF-8 text ({exc.reason} at byte {exc.start}); save the "
+            "manifest as UTF-8 (a spreadsheet's 'CSV UTF-8')"
+        )
     fd.fit_many_todo(rows, out, manifest, overwrite)  # the output policy, before any work
 
     def progress(rec: dict) -> None:
