@@ -159,11 +159,7 @@ def fit(
         ),
     ] = None,
     tip_sign: Annotated[
-        int | None,
-        typer.Option(
-            help="sign of the strain gauge, +1 or -1, if known",
-            callback=parsing.number(ge=-1, le=1, example="-1"),
-        ),
+        int | None, typer.Option(help="sign of the strain gauge, +1 or -1, if known")
     ] = None,
     encoder_counts: Annotated[
         int | None,
