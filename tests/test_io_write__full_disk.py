@@ -8,7 +8,7 @@ current folder, else in the system's temporary folder, and raises ``WriteFailedE
 naming the copy; the command line ends in one ``error:`` line naming it, exit 2.  Where
 no copy can be made, the text is printed on stdout.  Before this, the writer raised a
 plain ``OSError``: the content was lost ("internal error" for ``frf --json``, a bare
-"cannot write" line for ``excite`` and ``design``).
+"cannot write" line for ``excite``, ``design`` and ``fit --json``, the issue's lost fit).
 """
 
 from __future__ import annotations
@@ -159,3 +159,31 @@ def test_the_command_line_names_the_saved_copy_and_exits_2(full, tmp_path, cmd):
         assert json.loads(saved[0].read_text())["frequency_hz"]
     else:
         assert len(saved[0].read_text().splitlines()) > 64
+
+
+def test_a_fit_whose_json_meets_a_full_disk_is_kept_and_named(full, tmp_path):
+    """The issue's case: `flexarm fit --json` onto a full disk lost the fit. A 1 s
+    simulated run of the rotary rig, fitted with its data sheet: exit 2, one error line
+    naming the copy in the current folder, which holds the whole fit document."""
+    import tomli_w
+
+    from flexarm.specs import load_scenario
+
+    disk, cwd, _ = full
+    d = load_scenario("rotary-flexible-link").model_dump(mode="json", exclude_none=True)
+    d["simulation"]["duration"] = 1.0
+    (tmp_path / "rig.toml").write_text(tomli_w.dumps(d))
+    r = runner.invoke(app, ["simulate", str(tmp_path / "rig.toml"), "--out", str(tmp_path / "s")])
+    assert r.exit_code == 0, r.output
+    log = tmp_path / "s" / "rotary-flexible-link.csv"
+    ds = ["--gear-ratio", "70", "--motor-constant", "7.68e-3", "--armature-resistance", "2.6"]
+    ds += ["--link-length", "0.42", "--gear-efficiency", "0.9", "--motor-efficiency", "0.69"]
+    ds += ["--controller", "state_feedback K1=6 K2=-40 K3=0.15 K4=0", "--seconds", "2"]
+    r = runner.invoke(app, ["fit", str(log), *ds, "--json", str(disk / "fit.json")])
+    assert r.exit_code == 2, r.output
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith(("error", "internal"))]
+    assert len(errors) == 1 and "No space left on device" in errors[0], r.stderr
+    saved = [p for p in cwd.iterdir() if p.name.startswith("fit.rescued-")]
+    assert len(saved) == 1 and str(saved[0]) in errors[0]
+    doc = json.loads(saved[0].read_text())
+    assert doc["fit_percent"] and not (disk / "fit.json").exists()
