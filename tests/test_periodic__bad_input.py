@@ -72,3 +72,9 @@ def test_frf_command_refuses_a_dead_channel_in_one_line(tmp_path, dead):
         len(lines) == 1 and lines[0].startswith("error: ") and f"{dead!r} is constant" in lines[0]
     )
     assert not (tmp_path / "f.json").exists()
+
+
+def test_a_constant_reference_of_the_indirect_lpm_is_named_the_reference():
+    _, u, y = _record()
+    with pytest.raises(IdentificationError, match=r"r.mat: the reference 'reference' is constant"):
+        lpm_frf(u, {"y": y}, FS, source="r.mat", reference=np.zeros_like(u))

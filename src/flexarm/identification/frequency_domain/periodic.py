@@ -360,12 +360,12 @@ def check_live_channels(
             continue
         lo, hi = float(v.min()), float(v.max())
         if hi - lo <= 1e-12 * max(abs(lo), abs(hi)):
-            role = "input" if k == input_name else "output"
+            role = "input" if k == input_name else "reference" if k == "reference" else "output"
             why = (
                 "it carries no excitation, so no frequency response can be estimated; "
                 "record the run with the excitation on, or map the column that holds the "
                 "excitation"
-                if role == "input"
+                if role != "output"
                 else "a dead sensor or a wrong column: its FRF would be 0 with no noise and "
                 "no distortion; check the sensor, or the mapping (--output, [columns])"
             )
