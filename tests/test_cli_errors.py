@@ -541,8 +541,8 @@ def test_guarded_declares_the_inputs_and_ends_an_interrupt_with_128_plus_the_sig
 
 def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_path, monkeypatch):
     """`tfest --json`: the final write fails (a full disk, simulated: OSError ENOSPC for
-    the path asked for); the result is saved as <stem>.rescued-<UTC>.json beside it, a
-    warning line names it, exit 0."""
+    the path asked for); the result is saved as <stem>.rescued-<UTC>.json beside it, one
+    error line names it, exit 2 (the command did not write where asked; issue #45)."""
     import errno
     import json
 
@@ -561,7 +561,8 @@ def test_a_failed_final_write_is_rescued_next_to_the_path_and_said(inputs, tmp_p
         app,
         ["tfest", str(inputs / "frf.json"), "--poles", "2", "--zeros", "0", "--json", str(target)],
     )
-    assert r.exit_code == 0, r.output
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith("error: --json: could not write")
     saved = list(tmp_path.glob("t.rescued-*.json"))
     assert not target.exists() and len(saved) == 1
     assert "No space left on device" in r.stderr and saved[0].name in r.stderr.replace("\n", "")

@@ -349,14 +349,16 @@ def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | Non
 
 def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> None:
     """The command's final write (:func:`flexarm.io.write.save_or_rescue`): written where
-    asked, or, when that fails (a full disk, a vanished folder), next to it and said so;
-    an input of the run is never written over (the rescue copy goes beside it)."""
+    asked, or, when that fails (a full disk, a vanished folder), next to it and said so in
+    one ``error:`` line, exit 2 (the command did not do what was asked, but the result is
+    kept); an input of the run is never written over (the rescue copy goes beside it)."""
     from flexarm.io.write import save_or_rescue
 
     saved = save_or_rescue(path, data, overwrite=overwrite, writer=writer)
-    if saved.rescued:  # one line (not wrapped): the path must be copyable
+    if saved.rescued:  # one line (not wrapped): the path must be copyable; not done: exit 2
         err.print(
-            f"[yellow]warning:[/] {escape(option + ': ' + saved.message())}",
+            f"[bold red]error:[/] {escape(option + ': ' + saved.message())}",
             highlight=False,
             soft_wrap=True,
         )
+        raise typer.Exit(2)

@@ -83,11 +83,13 @@ def design_cmd(
         None,
         "--max-deflection",
         help="nested: limit of the link deflection |θm − θt| during the move, rad (default 0.1)",
+        callback=parsing.number(gt=0, example="0.1"),
     ),
     distance: float | None = typer.Option(
         None,
         "--distance",
         help="nested: the tip move, rad (default the scenario's reference amplitude)",
+        callback=parsing.number(),
     ),
     fit_json: Path | None = typer.Option(
         None,
@@ -103,13 +105,21 @@ def design_cmd(
         "the scenario's value), e.g. "
         "'arm.motor.inertia=10%,arm.friction.coulomb=0.005'",
     ),
-    plants: int = typer.Option(200, "--plants", help="number of plants drawn"),
-    seed: int = typer.Option(0, "--seed", help="seed of the plant draws"),
+    plants: int = typer.Option(
+        200,
+        "--plants",
+        help="number of plants drawn",
+        callback=parsing.number(ge=1, le=1_000_000, example="200"),
+    ),
+    seed: int = typer.Option(
+        0, "--seed", help="seed of the plant draws", callback=parsing.number(ge=0, le=2**32 - 1)
+    ),
     encoder_counts: int | None = typer.Option(
         None,
         "--encoder-counts",
         help="counts per turn of the hub encoder, where the "
         "scenario's hub sensor has no quantum (errors in counts)",
+        callback=parsing.number(ge=2, le=2**40, example="4096"),
     ),
     report: Path | None = typer.Option(
         None,
@@ -129,6 +139,7 @@ def design_cmd(
         "--max-unstable-share",
         help="the largest share (0..1) of drawn plants that may be unstable or reach "
         "the limit before the design is refused",
+        callback=parsing.number(ge=0, le=1, example="0.01"),
     ),
     scheduler: str | None = typer.Option(
         None,
@@ -141,6 +152,7 @@ def design_cmd(
         "--workers",
         help="run the drawn plants on a local Dask cluster of N "
         "worker processes (default: in-process)",
+        callback=parsing.number(ge=1, le=1024, example="4"),
     ),
     overwrite: bool = typer.Option(False, help="write into a non-empty --out folder"),
 ) -> None:
@@ -470,6 +482,11 @@ def _check_options(o: DesignRequest, methods) -> None:
         fail("--fit-json and --spread both give the plants' spread; choose one")
     if o.plants < 1:
         fail(f"--plants {o.plants}: give at least 1 plant (200 for the issue's comparison)")
+    if o.plants > 1_000_000:  # issue #45: 1e12 plants ran out of memory after the design
+        fail(
+            f"--plants {o.plants}: at most 1000000 plants are drawn (each one is simulated); "
+            "give e.g. 200"
+        )
     if o.encoder_counts is not None and o.encoder_counts < 2:
         fail(f"--encoder-counts {o.encoder_counts}: give the counts per turn (e.g. 4096)")
     if o.integral and o.disturbance:

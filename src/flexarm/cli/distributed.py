@@ -16,8 +16,10 @@ from flexarm.cli.common import (
     console,
     enable_cache,
     err,
+    fail,
     guarded_command,
 )
+from flexarm.cli.parsing import number
 
 
 @guarded_command("manifest")
@@ -40,7 +42,8 @@ def fit_many(
         int | None,
         typer.Option(
             help="start a local Dask cluster of N worker processes (default: run "
-            "in-process, one fit after the other)"
+            "in-process, one fit after the other)",
+            callback=number(ge=1, le=1024, example="4"),
         ),
     ] = None,
     no_figures: Annotated[
@@ -65,7 +68,13 @@ def fit_many(
     check_cluster(scheduler, workers)
     check_dir_option("--out", out)
     enable_cache()
-    rows = fd.read_manifest(manifest)  # a bad manifest: one line naming row and column
+    try:  # a bad manifest: one line naming row and column
+        rows = fd.read_manifest(manifest)
+    except UnicodeDecodeError as exc:  # issue #45: a UTF-16 manifest named by its file
+        fail(
+            f"{manifest}: not UTF-8 text ({exc.reason} at byte {exc.start}); save the "
+            "manifest as UTF-8 (a spreadsheet's 'CSV UTF-8')"
+        )
     fd.fit_many_todo(rows, out, manifest, overwrite)  # the output policy, before any work
 
     def progress(rec: dict) -> None:

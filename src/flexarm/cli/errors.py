@@ -46,7 +46,15 @@ def one_line(exc: BaseException) -> str:
 
 
 def bad_input(exc: BaseException) -> int:
-    """Print a project error as ``error: ...`` on one line; the exit code (2)."""
+    """Print a project error as ``error: ...`` on one line; the exit code (2).  A write
+    that failed with no copy saved anywhere (:class:`flexarm.io.write.WriteFailedError`
+    with text ``content``) prints that text on stdout first: the result is not lost."""
+    content = getattr(exc, "content", None)
+    if isinstance(content, str) and getattr(exc, "rescued", True) is None:
+        import sys
+
+        sys.stdout.write(content if content.endswith("\n") else content + "\n")
+        sys.stdout.flush()
     err.print(f"[bold red]error:[/] {escape(one_line(exc))}", highlight=False, soft_wrap=True)
     return EXIT_BAD_INPUT
 

@@ -9,14 +9,19 @@ from pathlib import Path
 import typer
 
 from flexarm.cli.common import check_dir_option, console, enable_cache, fail
+from flexarm.cli.parsing import number
 
 
 def example_logs(
     directory: Path = typer.Argument(..., help="folder to write the logs into (created)"),
     overwrite: bool = typer.Option(False, help="replace example files already in DIRECTORY"),
-    seed: int = typer.Option(0, help="seed of the sensor noise"),
+    seed: int = typer.Option(
+        0, help="seed of the sensor noise", callback=number(ge=0, le=2**32 - 1)
+    ),
     seconds: float = typer.Option(
-        6.0, help="length of each rotary run, s (>= 3; steps at 0.5, 2, 3.5, 5 s)"
+        6.0,
+        help="length of each rotary run, s (>= 3; steps at 0.5, 2, 3.5, 5 s)",
+        callback=number(ge=3, le=3600, example="6"),
     ),
 ) -> None:
     """Write simulated logs of the built-in rigs with known "true" parameters, as the labs'

@@ -141,6 +141,7 @@ def fit(
             "whole logs, better on stick-slip runs with few moves) [default: 5 for a "
             "flexible link whose hub-to-tip estimate is trusted, else whole logs]",
             show_default=False,
+            callback=parsing.number(gt=0, example="5"),
         ),
     ] = None,
     compare_no_friction: Annotated[
@@ -181,7 +182,11 @@ def fit(
         ),
     ] = "neighbours",
     polish_iter: Annotated[
-        int, typer.Option(help="generations of the friction polish (20 with --delay-search both)")
+        int,
+        typer.Option(
+            help="generations of the friction polish (20 with --delay-search both)",
+            callback=parsing.number(ge=0, le=10_000),
+        ),
     ] = 8,
     global_starts: Annotated[
         int,
@@ -190,9 +195,13 @@ def fit(
             help="run the global stage from this many seeds (--seed, --seed + 1, ...) and "
             "keep the lowest cost, at that many times the time: where the fit warns that "
             "nothing ties the sensor delays down",
+            callback=parsing.number(ge=1, le=1000),
         ),
     ] = 1,
-    seed: Annotated[int, typer.Option(help="seed of the global stage")] = 0,
+    seed: Annotated[
+        int,
+        typer.Option(help="seed of the global stage", callback=parsing.number(ge=0, le=2**32 - 1)),
+    ] = 0,
     tip_after_hub: Annotated[
         bool,
         typer.Option(
@@ -235,7 +244,11 @@ def fit(
     ] = None,
     segment: Annotated[
         float | None,
-        typer.Option("--segment", help="with SCENARIO: multiple-shooting segment length, s"),
+        typer.Option(
+            "--segment",
+            help="with SCENARIO: multiple-shooting segment length, s",
+            callback=parsing.number(gt=0, example="0.5"),
+        ),
     ] = None,
     channel: o.Channels = None,
     max_nfev: Annotated[
@@ -243,6 +256,7 @@ def fit(
         typer.Option(
             "--max-nfev",
             help="with SCENARIO: least-squares budget (default: the preset's, else 30)",
+            callback=parsing.number(ge=1, le=10_000_000),
         ),
     ] = None,
     validate_window: Annotated[

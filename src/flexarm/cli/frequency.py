@@ -41,8 +41,12 @@ def experiment(
     periods: int = typer.Option(
         20, help="whole periods recorded per experiment", callback=number(ge=1, le=100_000)
     ),
-    kp: float | None = typer.Option(None, help="PD gain, command units per rad"),
-    kd: float | None = typer.Option(None, help="PD gain, command units*s/rad"),
+    kp: float | None = typer.Option(
+        None, help="PD gain, command units per rad", callback=number(example="10")
+    ),
+    kd: float | None = typer.Option(
+        None, help="PD gain, command units*s/rad", callback=number(example="0.2")
+    ),
     overwrite: bool = typer.Option(False, help="replace existing CSV files"),
 ) -> None:
     """Sine experiments on the simulated arm, as FRB Sec. II-A: one CSV per frequency."""
@@ -187,7 +191,7 @@ def excite(
     realisations: int = typer.Option(
         1, help="realisations (new random phases)", callback=number(ge=1, le=10_000)
     ),
-    seed: int = typer.Option(0),
+    seed: int = typer.Option(0, callback=number(ge=0, le=2**32 - 1)),
     overwrite: bool = typer.Option(False, help="replace existing files"),
 ) -> None:
     """Design an excitation: writes OUT and OUT-lines.csv (excited and detection lines)."""
@@ -370,9 +374,9 @@ def structure_given(st, motor_constant, resistance, gear_ratio, efficiency, leng
 @guarded_command("frf_json")
 def tfest(
     frf_json: Path = typer.Argument(..., help="JSON written by flexarm frf"),
-    poles: int | None = typer.Option(None, "--poles"),
-    zeros: int | None = typer.Option(None, "--zeros"),
-    integrators: int = typer.Option(0, "--integrators"),
+    poles: int | None = typer.Option(None, "--poles", callback=number(ge=0, le=100)),
+    zeros: int | None = typer.Option(None, "--zeros", callback=number(ge=0, le=100)),
+    integrators: int = typer.Option(0, "--integrators", callback=number(ge=0, le=10)),
     delay: bool = typer.Option(False, "--delay", help="estimate a delay"),
     structure: str | None = typer.Option(
         None,
@@ -569,7 +573,10 @@ def friction(
     efficiency: o.StructEfficiency = None,
     length: o.StructLength = None,
     iterations: int = typer.Option(
-        3, "--iterations", help="simulator corrections of the Bussgang start (0: none)"
+        3,
+        "--iterations",
+        help="simulator corrections of the Bussgang start (0: none)",
+        callback=number(ge=0, le=1000),
     ),
     json_out: o.JsonRequired = ...,  # pyright: ignore[reportArgumentType]  (typer: ... = a required option)
     overwrite: o.Overwrite = False,

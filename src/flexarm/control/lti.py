@@ -376,7 +376,7 @@ def read_lti_file(
     elif suffix == ".json":
         try:
             raw = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, RecursionError) as exc:  # nested too deeply: one line
             raise ScenarioError(f"{where} = {str(path)!r}: not readable JSON ({exc})") from None
         if not isinstance(raw, dict):
             raise ScenarioError(

@@ -132,6 +132,40 @@ def _amplitude(scenario, ref: str | None) -> float:
     return a if a > 0 else 0.1
 
 
+#: the largest command limit a design takes (V or A): its weights and noise scale with the
+#: limit squared; an amplifier's limit is far below (issue #45: 1e300 V overflowed)
+MAX_LIMIT = 1e6
+
+
+def check_drive(name: str, limit, k_u, coulomb) -> None:
+    """The drive's numbers a design can work with (issue #45), each refused as one
+    ``ValueError`` line naming the field: a command limit above :data:`MAX_LIMIT`, and a
+    joint whose Coulomb friction (N·m, or N for a linear axis) needs more command than
+    the limit (C_f / k_u ≥ limit: the drive could never move it; 1e4 N·m was a unit
+    slip)."""
+    limit = np.asarray(limit, float).reshape(-1)
+    for j, lim in enumerate(limit):
+        if lim > MAX_LIMIT:
+            raise ValueError(
+                f"scenario {name!r}: the command limit {lim:g} (V or A) of joint {j + 1} is "
+                f"beyond any amplifier (a design takes at most {MAX_LIMIT:g}); give the "
+                "amplifier's limit ([arm.motor] voltage_limit / current_limit, or [actuator] "
+                "limit)"
+            )
+    k_u = np.asarray(k_u, float).reshape(-1)
+    coulomb = np.asarray(coulomb, float).reshape(-1)
+    if coulomb.size != limit.size or k_u.size != limit.size:
+        return
+    for j, (c, k, lim) in enumerate(zip(coulomb, k_u, limit, strict=True)):
+        if c > 0 and k > 0 and c / k >= lim:
+            raise ValueError(
+                f"scenario {name!r}: joint {j + 1}'s Coulomb friction {c:g} (N*m, or N for a "
+                f"linear axis) needs {c / k:g} of command to overcome, at or beyond the "
+                f"limit {lim:g} (V or A): the drive could never move the joint; check "
+                "arm.friction.coulomb and its unit, or the limit"
+            )
+
+
 def design_model(scenario, measured=None, setpoints: dict[str, str] | None = None) -> DesignModel:
     """The design model of ``scenario`` (module docstring).
 
@@ -326,6 +360,7 @@ def design_model(scenario, measured=None, setpoints: dict[str, str] | None = Non
     coulomb = np.asarray(
         [float(np.asarray(f.coulomb)) if f.model != "none" else 0.0 for f in arm.frictions]
     )
+    check_drive(scenario.name, limit, k_u, coulomb)
     return DesignModel(
         chans,
         signals,

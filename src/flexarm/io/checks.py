@@ -9,7 +9,11 @@ hands its arrays, in SI units, to :func:`check_signals`, which
    not mapped to a clock), strictly increasing (a repeated stamp, a decrease; two
    neighbouring samples out of order are named as swapped), and uniform within
    ``max_jitter`` (relative deviation |Δt_k − median Δt| / median Δt);
-3. refuses finite but absurd values (:func:`check_ranges`): |x| beyond the physical range
+3. checks the sampling rate 1 / median step against :data:`RATE_RANGE` (:func:`check_rate`):
+   where the time's unit is stated ([units] time, --unit time=): a log's clock read in
+   the wrong unit (a ``.mat`` time in s where the format says µs) is refused with the
+   unit that makes the rate a rig's;
+4. refuses finite but absurd values (:func:`check_ranges`): |x| beyond the physical range
    of the signal's kind (:data:`RANGES`, by SI unit: an angle beyond 1e3 rad, a voltage
    beyond 1e5 V, anything beyond 1e15), naming the column and the row: such a number
    (1e308) would overflow the fit's squares or break an SVD far from the file.
@@ -34,6 +38,8 @@ __all__ = [
     "readable",
     "check_signals",
     "check_time",
+    "check_rate",
+    "RATE_RANGE",
     "check_ranges",
     "unwrap_counter",
     "signal_range",
@@ -55,6 +61,12 @@ RANGES: dict[str, float] = {
 }
 #: largest |value| for a signal of unknown kind (gains, extra columns)
 DEFAULT_RANGE = 1e15
+#: the sampling rates (Hz) of a rig's log: a median time step outside (5 µs to 0.5 s) is
+#: a wrong time unit (issue #45: a ``.mat`` clock in s read as µs gave FRF lines at MHz),
+#: refused by :func:`check_rate` with the unit that fits
+RATE_RANGE = (2.0, 200e3)
+#: the time units :func:`check_rate` proposes, in pint's spelling
+TIME_UNITS = ("s", "ms", "us", "ns", "min")
 #: the jitter accepted in a ``.mat`` log's time stamps (a text log's default,
 #: :data:`flexarm.io.logs.MAX_JITTER`; a logger's clock repeats its period exactly)
 MAT_MAX_JITTER = 1e-3
@@ -189,6 +201,60 @@ def check_time(
         )
 
 
+def check_rate(
+    t: np.ndarray, *, file: str | Path, column: str = "time", unit: str | None = None
+) -> None:
+    """The sampling rate of the time stamps ``t`` (s, already converted from the file's
+    stated ``unit``) within :data:`RATE_RANGE`: a median step below 5 µs or above 0.5 s is
+    no rig's controller log but a time read in the wrong unit; refused (a
+    :class:`flexarm.io.logs.LogError`, one line) naming the rate, the unit it was read in
+    and the unit that gives a rig's rate, e.g. time in s where the format says ``us``:
+    1 kHz read as 1 GHz.  A refusal, not a warning: every result downstream
+    (FRF lines, delays, periods) would be off by the same factor of 1000.  Checked only
+    where a unit is stated (``unit`` None: the file's numbers are seconds as written,
+    e.g. the exchange format, whose generic logs may have any step)."""
+    t = np.asarray(t, float)
+    if unit is None or t.size < 2:
+        return
+    d = np.diff(t)
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size == 0:
+        return
+    step = float(np.median(d))
+    fs = 1.0 / step
+    lo, hi = RATE_RANGE
+    if lo <= fs <= hi:
+        return
+    stated = unit or "s"
+    try:
+        from flexarm.units import ureg
+
+        per = {u: float(ureg.Quantity(1.0, u).to("s").magnitude) for u in TIME_UNITS}
+        here = float(ureg.Quantity(1.0, stated).to("s").magnitude)
+    except Exception:  # a unit pint does not know was refused before; no proposal then
+        per, here = {}, 1.0
+    fits = []
+    for u, f in per.items():
+        rate = fs * here / f  # the same numbers read in unit u
+        if lo <= rate <= hi:
+            fits.append((abs(np.log10(rate / 1e3)), u, rate))
+    how = "fast" if fs > hi else "slowly"
+    told = f"[units] time = {stated!r}"
+    if fits:
+        _, u, rate = min(fits)  # the proposal nearest 1 kHz
+        fix = f"if the numbers are {u}, set [units] time = '{u}' (--unit time={u}): {rate:.6g} Hz"
+    else:
+        fix = "map the column that holds the time, or set [units] time to its unit"
+    raise _log_error(
+        f"{Path(file)}: time, column {column}: the median step is {step:.6g} s, a sampling "
+        f"rate of {fs:.6g} Hz with the numbers read as {told}; no rig's controller logs "
+        f"that {how} (a log's rate lies in {lo:g} Hz to {hi:g} Hz): the time unit is wrong; "
+        f"{fix}",
+        file=file,
+        field=column,
+    )
+
+
 def check_ranges(
     signals: Mapping[str, np.ndarray],
     *,
@@ -231,10 +297,12 @@ def check_signals(
     lines: Sequence[int] | None = None,
     max_jitter: float | None = None,
     columns: Mapping[str, str] | None = None,
+    time_unit: str | None = None,
 ) -> dict[str, np.ndarray]:
     """The readers' hook (module doc): unwrap ``signals[COUNTER]`` in place, then
     :func:`check_time` on ``time`` (default ``signals["time"]``, if any; ``time_column`` its
-    name in messages) and :func:`check_ranges` on all.  Returns ``signals``."""
+    name in messages), :func:`check_rate` (``time_unit``: the unit the file's time was
+    read in, None for seconds) and :func:`check_ranges` on all.  Returns ``signals``."""
     if COUNTER in signals:
         signals[COUNTER] = unwrap_counter(signals[COUNTER])
     t = signals.get("time") if time is None else time
@@ -243,6 +311,7 @@ def check_signals(
             f"time ({columns['time']!r})" if columns and "time" in columns else "time"
         )
         check_time(t, file=file, column=col, lines=lines, max_jitter=max_jitter)
+        check_rate(t, file=file, column=col, unit=time_unit)
         check_ranges({"time": t}, file=file, lines=lines, columns=columns)
     check_ranges(signals, file=file, lines=lines, columns=columns)
     return signals

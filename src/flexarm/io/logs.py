@@ -784,6 +784,7 @@ def read_log(
         time_column=_describe(names, lay, tj),
         lines=[ln for ln, _ in lay.rows],
         max_jitter=max_jitter,
+        time_unit=units["time"] if "time" in factors else None,
     )
     return Log(path=path, time=time.copy(), signals=signals, comments=comments, meta=meta)
 

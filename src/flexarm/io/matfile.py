@@ -346,7 +346,13 @@ def read_mat(
             sig[COUNTER]
         )  # a 16-bit counter's wrap is no lost sample
         _check_counter(path, sig, notes)
-    _checks.check_signals(path, sig, columns=columns, max_jitter=_checks.MAT_MAX_JITTER)
+    _checks.check_signals(
+        path,
+        sig,
+        columns=columns,
+        max_jitter=_checks.MAT_MAX_JITTER,
+        time_unit=units.get("time"),
+    )
     t = sig.pop("time", None)
     skipped = [k for k, v in variables.items() if isinstance(v, _Opaque)]
     return Log(path, t, sig, skipped=skipped, notes=notes)

@@ -21,9 +21,13 @@ The output policy (issue #25), one for every writer:
 * result keys are unique per input (:func:`unique_keys`): the file names without
   extension where they differ, else every input's path relative to the inputs' common
   folder; the same file given twice is numbered (``name#2``);
-* a final write that fails (a full disk, a folder that vanished, a file that appeared
-  meanwhile) saves the result next to the requested path and says where
-  (:func:`save_or_rescue`);
+* a write that fails after these checks (a full disk, a quota, an I/O error) keeps what
+  it was to write: every writer here goes through one (``_write_kept``) that saves the
+  content beside the target, else in the current folder, else in the system's temporary
+  folder, and raises :class:`WriteFailedError` naming the copy (the command line: one
+  ``error:`` line, exit 2; where no copy could be made, text is printed on stdout);
+  :func:`save_or_rescue` also saves a result whose path the policy refuses (a file that
+  appeared meanwhile, a folder that vanished) next to it and says where;
 * SIGTERM and a second Ctrl-C do not lose the best result (:func:`interruptible`);
 * names are data (issue #45): a scenario's ``name``, a manifest ``id`` or any other text
   becomes a file name only through :func:`safe_name` (letters, digits, ``._-``; never
@@ -86,6 +90,10 @@ __all__ = [
     "read_input",
     "InputFileError",
     "MAX_TEXT_INPUT",
+    "WriteFailedError",
+    "rescue_path",
+    "OutputFolderError",
+    "OutputIsFolderError",
 ]
 
 
@@ -155,15 +163,25 @@ def _check_target(path: Path, overwrite: bool) -> None:
             fix="give another output path",
         )
     if path.is_dir():
-        raise IsADirectoryError(f"{path}: is a folder; give a file name to write")
+        raise OutputIsFolderError(f"{path}: is a folder; give a file name to write", file=path)
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path}: exists already; not overwritten (pass overwrite=True)")
     parent = path.parent
     if not parent.is_dir():
         what = "is a file, not a folder" if parent.exists() else "does not exist"
-        raise FileNotFoundError(
-            f"{path}: cannot write: the folder {parent} {what}; create the folder first"
+        raise OutputFolderError(
+            f"{path}: cannot write: the folder {parent} {what}; create the folder first",
+            file=path,
         )
+
+
+class OutputIsFolderError(FlexarmError, IsADirectoryError):
+    """An output file path that is a folder (a project error: one line, exit 2)."""
+
+
+class OutputFolderError(FlexarmError, FileNotFoundError):
+    """An output file whose folder does not exist or is a file (a project error: one
+    line, exit 2; issue #45: ``excite`` into a missing folder was an internal error)."""
 
 
 def _commit(tmp: Path, path: Path, overwrite: bool) -> None:
@@ -224,31 +242,156 @@ def atomic_open(
     newline: str | None = None,
 ) -> Iterator[IO]:
     """``open(path, mode)`` for writing (``"w"`` or ``"wb"``), atomically: the file
-    appears complete when the block ends, or not at all."""
+    appears complete when the block ends, or not at all.  The target is checked when the
+    block begins (the output policy); what the block writes is kept in memory and
+    written when it ends, through the one writer (:func:`write_text`, :func:`write_bytes`),
+    so a write that fails then (a full disk) keeps it (:class:`WriteFailedError`)."""
+    import io
+
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: mode {mode!r}; use 'w' or 'wb'")
-    if mode == "w" and encoding is None:
-        encoding = "utf-8"
+    path = Path(path)
+    _check_target(path, overwrite)
+    if mode == "w":
+        text = io.StringIO()
+        yield text
+        write_text(
+            path,
+            text.getvalue(),
+            overwrite=overwrite,
+            encoding=encoding or "utf-8",
+            newline=newline,
+        )
+    else:
+        data = io.BytesIO()
+        yield data
+        write_bytes(path, data.getvalue(), overwrite=overwrite)
+
+
+class WriteFailedError(FlexarmError, OSError):
+    """A write that failed after the output policy's checks passed: a full disk (ENOSPC), a
+    quota, an I/O error, a folder that vanished.  The content is not lost: it was written
+    to :attr:`rescued` (beside the target, else in the current folder, else in the
+    system's temporary folder; :func:`rescue_path`), or, when every one of those failed
+    too, :attr:`rescued` is None and :attr:`content` holds it (text: the command line
+    prints it on stdout).  :attr:`reason`: the failed write's own line; :attr:`path`: the
+    target."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: Path,
+        reason: str,
+        rescued: Path | None,
+        content: str | bytes | None = None,
+        errno_: int | None = None,
+    ):
+        super().__init__(message, file=path)
+        self.path = path
+        self.reason = reason
+        self.rescued = rescued
+        self.content = content
+        self.errno = errno_
+
+
+def rescue_path(path: Path, folder: Path, stamp: str) -> Path:
+    """``<stem>.rescued-<UTC stamp>[-k]<suffix>`` in ``folder``: a name no file has yet."""
+    cand = folder / f"{path.stem}.rescued-{stamp}{path.suffix}"
+    k = 1
+    while cand.exists() or cand.is_symlink():
+        k += 1
+        cand = folder / f"{path.stem}.rescued-{stamp}-{k}{path.suffix}"
+    return cand
+
+
+def _produce(path: Path, overwrite: bool, produce: Callable[[Path], Any]) -> None:
     with atomic_path(path, overwrite=overwrite) as tmp:
-        with open(tmp, mode, encoding=encoding, newline=newline) as f:
-            yield f
-            f.flush()
+        produce(tmp)
+
+
+def _write_kept(
+    path: str | Path,
+    overwrite: bool,
+    produce: Callable[[Path], Any],
+    content: str | bytes | None,
+) -> Path:
+    """The one writer under every other (issue #45): the output policy's checks
+    (:func:`_check_target`: their errors are raised as they are), then ``produce(tmp)``
+    atomically onto ``path``.  When that fails with an ``OSError`` (a full disk at the
+    final write), the content is produced again under a fresh name beside ``path``, else
+    in the current folder, else in the system's temporary folder, and
+    :class:`WriteFailedError` says where (it is a :class:`flexarm.errors.FlexarmError`:
+    the command line ends with one ``error:`` line naming the saved copy, exit 2)."""
+    path = Path(path)
+    _check_target(path, overwrite)
+    try:
+        _produce(path, overwrite, produce)
+        return path
+    except FlexarmError:
+        raise  # the policy (a file that appeared meanwhile), not the disk
+    except OSError as exc:
+        first = exc
+    reason = " ".join(str(first).split()) or type(first).__name__
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    tried = []
+    for folder in dict.fromkeys((path.parent, Path.cwd(), Path(tempfile.gettempdir()))):
+        try:
+            cand = rescue_path(path, folder, stamp)
+            _produce(cand, False, produce)
+        except OSError as exc2:
+            tried.append(f"{folder}: {' '.join(str(exc2).split())}")
+            continue
+        raise WriteFailedError(
+            f"{path}: could not write it ({reason}); what it holds is saved to {cand}: "
+            "free space or choose another folder, then move it there",
+            path=path,
+            reason=reason,
+            rescued=cand,
+            errno_=first.errno,
+        ) from None
+    shown = "; it follows on stdout" if isinstance(content, str) else ""
+    raise WriteFailedError(
+        f"{path}: could not write it ({reason}), nor a copy anywhere else ("
+        + "; ".join(tried)
+        + f"){shown}; free space and run again",
+        path=path,
+        reason=reason,
+        rescued=None,
+        content=content,
+        errno_=first.errno,
+    ) from None
 
 
 def write_text(
-    path: str | Path, text: str, *, overwrite: bool = False, encoding: str = "utf-8"
+    path: str | Path,
+    text: str,
+    *,
+    overwrite: bool = False,
+    encoding: str = "utf-8",
+    newline: str | None = None,
 ) -> Path:
-    """Write ``text`` to ``path`` atomically."""
-    with atomic_open(path, "w", overwrite=overwrite, encoding=encoding) as f:
-        f.write(text)
-    return Path(path)
+    """Write ``text`` to ``path`` atomically; a write that fails keeps it
+    (:class:`WriteFailedError` names the copy)."""
+
+    def produce(tmp: Path) -> None:
+        with open(tmp, "w", encoding=encoding, newline=newline) as f:
+            f.write(text)
+            f.flush()
+
+    return _write_kept(path, overwrite, produce, text)
 
 
 def write_bytes(path: str | Path, data: bytes, *, overwrite: bool = False) -> Path:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_open(path, "wb", overwrite=overwrite) as f:
-        f.write(data)
-    return Path(path)
+    """Write ``data`` to ``path`` atomically; a write that fails keeps it
+    (:class:`WriteFailedError` names the copy)."""
+
+    def produce(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+
+    return _write_kept(path, overwrite, produce, data)
 
 
 def write_json(
@@ -282,9 +425,7 @@ def save_figure(fig, path: str | Path, *, overwrite: bool = False, **savefig_kw)
     path = Path(path)
     if "format" not in savefig_kw and path.suffix:
         savefig_kw["format"] = path.suffix[1:].lower()
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        fig.savefig(tmp, **savefig_kw)
-    return path
+    return _write_kept(path, overwrite, lambda tmp: fig.savefig(tmp, **savefig_kw), None)
 
 
 def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -581,23 +722,40 @@ def save_or_rescue(
     try:
         write(path, overwrite)
         return Saved(path)
-    except OSError as exc:
+    except WriteFailedError as exc:  # the one writer kept it already (a full disk)
+        if exc.rescued is None:
+            raise
+        return Saved(exc.rescued, True, exc.reason)
+    except OSError as exc:  # the policy refused the path: exists, no folder, an input
         reason = " ".join(str(exc).split()) or type(exc).__name__
+        first = exc
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    name = f"{path.stem}.rescued-{stamp}{path.suffix}"
     tried = []
     for folder in (path.parent, Path.cwd(), Path(tempfile.gettempdir())):
-        cand = folder / name
-        k = 1
-        while cand.exists():
-            k += 1
-            cand = folder / f"{path.stem}.rescued-{stamp}-{k}{path.suffix}"
+        cand = rescue_path(path, folder, stamp)
         try:
             write(cand, False)
             return Saved(cand, True, reason)
+        except WriteFailedError as exc:
+            if exc.rescued is not None:
+                return Saved(exc.rescued, True, reason)
+            tried.append(f"{cand}: {exc.reason}")
         except OSError as exc:
             tried.append(f"{cand}: {exc}")
-    raise OSError(f"{path}: {reason}; the rescue copies failed too: " + "; ".join(tried))
+    content = data if isinstance(data, str) else None
+    if content is None and writer is None and not isinstance(data, (bytes, bytearray)):
+        with contextlib.suppress(Exception):
+            content = json.dumps(data, indent=2) + "\n"
+    raise WriteFailedError(
+        f"{path}: {reason}; the rescue copies failed too: "
+        + "; ".join(tried)
+        + ("; it follows on stdout" if content is not None else ""),
+        path=path,
+        reason=reason,
+        rescued=None,
+        content=content,
+        errno_=getattr(first, "errno", None),
+    )
 
 
 # ------------------------------------------------------------------ signals

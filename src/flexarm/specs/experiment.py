@@ -334,6 +334,13 @@ class LTIControllerSpec(Spec):
             raise ValueError("give num and den together")
         if given == ["A..D"] and self.D is None:
             raise ValueError("D is missing (outputs × inputs); A, B, C are optional together")
+        for k in "ABCD":  # rectangular matrices (issue #45: a ragged D was a numpy error)
+            rows = getattr(self, k)
+            if rows is not None and len({len(r) for r in rows}) > 1:
+                raise ValueError(
+                    f"{k} is ragged: its rows have {', '.join(str(len(r)) for r in rows)} "
+                    f"entries; give every row of {k} the same number of columns"
+                )
         if self.variable is not None and self.file is None:
             raise ValueError(
                 f"variable = {self.variable!r} selects a struct in a file: give "

@@ -451,6 +451,11 @@ def _read_toml(path: Path, what: str) -> dict[str, Any]:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:  # issue #45: arrays or tables nested thousands deep
+        raise ScenarioError(
+            f"{path}: nested too deeply to read (arrays or tables inside each other beyond "
+            f"Python's recursion limit); a {what} is a few flat tables"
+        ) from None
     except UnicodeDecodeError as exc:
         raise ScenarioError(
             f"{path}: not a text file in UTF-8 (byte {exc.start}: "

@@ -345,6 +345,35 @@ def _dft_periods(x: np.ndarray, P: int, M0: int) -> np.ndarray:
     return np.fft.rfft(x[..., : M0 * P].reshape(*x.shape[:-1], M0, P), axis=-1) / P
 
 
+def check_live_channels(
+    chans: Mapping[str, np.ndarray], input_name: str, source: str = "<data>"
+) -> None:
+    """Refuse a channel that does not change (issue #45): every sample of it the same
+    value (to 1e-12 of its size).  A constant input carries no excitation (its spectrum is
+    zero: no line, no period, G = Y/0); a constant output is a dead sensor or a wrong
+    mapping (G = 0 at every line with a noise of 0, its distortion NaN, judged "no
+    distortion").  One :class:`IdentificationError` naming the channel, its value and the
+    fix."""
+    for k, v in chans.items():
+        v = np.asarray(v, float)
+        if v.size < 2:
+            continue
+        lo, hi = float(v.min()), float(v.max())
+        if hi - lo <= 1e-12 * max(abs(lo), abs(hi)):
+            role = "input" if k == input_name else "reference" if k == "reference" else "output"
+            why = (
+                "it carries no excitation, so no frequency response can be estimated; "
+                "record the run with the excitation on, or map the column that holds the "
+                "excitation"
+                if role != "output"
+                else "a dead sensor or a wrong column: its FRF would be 0 with no noise and "
+                "no distortion; check the sensor, or the mapping (--output, [columns])"
+            )
+            raise IdentificationError(
+                f"{source}: the {role} {k!r} is constant (all {v.size} samples are {lo:.6g}): {why}"
+            )
+
+
 def periodic_frf(
     u: np.ndarray,
     y: Mapping[str, np.ndarray],
@@ -385,6 +414,7 @@ def periodic_frf(
             f"{source}: channels of different lengths: "
             + ", ".join(f"{k} {n}" for k, n in lens.items())
         )
+    check_live_channels(chans, input_name, source)
     N = lens[input_name]
     notes: list[str] = []
     P = (
@@ -599,6 +629,7 @@ def lpm_frf(
             f"{source}: channels of different lengths: "
             + ", ".join(f"{k} {n}" for k, n in lens.items())
         )
+    check_live_channels(chans, input_name, source)
     R, n = int(order), int(half_width)
     q = 2 * n + 1 - 2 * (R + 1)
     if R < 0 or q < 1:
