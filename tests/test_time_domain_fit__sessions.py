@@ -88,6 +88,10 @@ def test_two_sessions_fitted_together(tmp_path):
     g1 = fit["params"]["sessions[1].sensors.tip_deflection.gain"]
     assert g1 == pytest.approx(-g0, rel=1e-12)  # one size, the sign per session
     assert any("sign differs between sessions" in w for w in fit["warnings"])
+    ses = fit["stages"]["sessions"]
+    assert ses["of_log"] == [0, 0, 1, 1] and ses["tip_gauge_signs"] == [1, -1]
+    assert "arm.friction.coulomb" in ses["per_session"] and "arm.motor.inertia" in ses["shared"]
+    assert "sensors.tip_deflection.gain" in ses["per_session"]
     for sc, logs in ((toml, a), (tmp_path / "rig.session1.toml", b)):
         out = tmp_path / f"{sc.stem}.v.json"
         _run(

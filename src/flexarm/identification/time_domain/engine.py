@@ -153,6 +153,15 @@ def _servo_rig(preset: Preset, logs, options, progress):
         # several sessions: each log by its session's scenario (its friction and bias)
         sess = list(rig.sessions) if rig.sessions is not None else [0] * len(whole)
         res.session_scenarios = session_scenarios(res, max(sess) + 1)
+        if max(sess) > 0:  # the result says which parameters are per session (#47)
+            own = sorted({p.split("].", 1)[1] for p in res.params if p.startswith("sessions[")})
+            signs = getattr(res.engine_result.space, "session_signs", ()) or ()
+            res.stages["sessions"] = {
+                "of_log": sess,
+                "per_session": own,
+                "shared": [p for p in res.params if "sessions[" not in p and p not in own],
+                "tip_gauge_signs": list(signs) or [1] * (max(sess) + 1),
+            }
         pred = _predict_sessions(res.session_scenarios, whole, sess, opts.windows)
         res.stages.setdefault("servo_rig", {})["loop_fit_percent"] = res.fit_percent
         res.stages["prediction"] = {"initial": "estimate", "notes": pred.notes}
