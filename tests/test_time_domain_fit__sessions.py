@@ -66,12 +66,14 @@ def _run(args: list[str]) -> None:
 @pytest.mark.skipif(not DATA.is_dir(), reason=f"real rig logs not found at {DATA}")
 def test_two_sessions_fitted_together(tmp_path):
     """The 4/27 and 5/2 training runs, ``--sessions 0,0,1,1`` (the data sheet, default
-    options). Measured on 2 cores: 4/27 83.0 / 55.5 and 85.3 / 65.0, 5/2 90.5 / 62.2 and
-    90.6 / 64.7 (hub / tip %); before the per-session gauge sign, 54.6 / 3.6, 63.2 / 1.2,
-    89.5 / 61.6, 88.7 / 63.0 (the joint hub -> tip estimate explained 5 % of the tips).
-    Floors 3 points under the measured figures (the 4/27 session alone moves by 1-2 points
-    between seeds), the reference's training figures not being published. Each session's
-    written scenario, validated on its own runs, gives the fit's figures to 0.1 point."""
+    options: three global starts, as nothing ties the delays of these sessions down).
+    Measured on 2 cores: 4/27 85.2 / 54.2 and 87.4 / 65.0, 5/2 90.3 / 64.6 and 90.3 / 69.5
+    (hub / tip %; means 88.3 / 63.3); one start gave 83.0 / 55.5, 85.3 / 65.0, 90.5 / 62.2,
+    90.6 / 64.7; before the per-session gauge sign, 54.6 / 3.6, 63.2 / 1.2, 89.5 / 61.6,
+    88.7 / 63.0 (the joint hub -> tip estimate explained 5 % of the tips). Floors: the
+    issue's, mean hub 85 and mean tip 62, no run under 80 / 50 (a start's outcome moves the
+    runs by 1-5 points; the means by about 1.5). Each session's written scenario, validated
+    on its own runs, gives the fit's figures to 0.1 point."""
     a = [DATA / "flexarm_K1_6", DATA / "flexarm_K1K2_6_-5"]
     b = [DATA / "flexarm_K1K2K3_6_-3_213", DATA / "flexarm_K1K2K3k4_6_-3_213_4"]
     toml, fit_json = tmp_path / "rig.toml", tmp_path / "fit.json"
@@ -81,9 +83,10 @@ def test_two_sessions_fitted_together(tmp_path):
     )
     fit = json.loads(fit_json.read_text())
     fp = fit["fit_percent"]
-    floors = {a[0].name: (80, 52), a[1].name: (82, 62), b[0].name: (87, 59), b[1].name: (87, 61)}
-    for name, (hub, tip) in floors.items():
-        assert fp[name]["motor_angle"] >= hub and fp[name]["tip_deflection"] >= tip, (name, fp)
+    hubs = [fp[g.name]["motor_angle"] for g in a + b]
+    tips = [fp[g.name]["tip_deflection"] for g in a + b]
+    assert min(hubs) >= 80 and min(tips) >= 50, fp
+    assert sum(hubs) / 4 >= 85 and sum(tips) / 4 >= 62, fp
     g0 = fit["params"]["sensors.tip_deflection.gain"]
     g1 = fit["params"]["sessions[1].sensors.tip_deflection.gain"]
     assert g1 == pytest.approx(-g0, rel=1e-12)  # one size, the sign per session

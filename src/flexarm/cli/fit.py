@@ -189,15 +189,16 @@ def fit(
         ),
     ] = 8,
     global_starts: Annotated[
-        int,
+        int | None,
         typer.Option(
             min=1,
             help="run the global stage from this many seeds (--seed, --seed + 1, ...) and "
             "keep the lowest cost, at that many times the time: where the fit warns that "
-            "nothing ties the sensor delays down",
+            "nothing ties the sensor delays down (default: 3 for several sessions whose "
+            "delays nothing ties down, else 1)",
             callback=parsing.number(ge=1, le=1000),
         ),
-    ] = 1,
+    ] = None,
     seed: Annotated[
         int,
         typer.Option(help="seed of the global stage", callback=parsing.number(ge=0, le=2**32 - 1)),
@@ -365,7 +366,7 @@ def fit(
         global_seconds="auto" if seconds is None else seconds,
         delay_search=delay_search,
         polish_iter=polish_iter,
-        global_starts=global_starts,
+        global_starts="auto" if global_starts is None else global_starts,
         tip_after_hub=tip_after_hub,
         seed=seed,
         sessions=parsing.int_list(sessions, "--sessions"),

@@ -157,7 +157,7 @@ class ServoRig:
     #: many seeds, seed, seed + 1, ...: the lowest cost wins, at that many times the time
     #: (where no estimate ties the sensor delays down, one start's outcome depends on its
     #: seed: :func:`~flexarm.identification.time_domain.fit.fit`)
-    global_starts: int = 1
+    global_starts: int | str = "auto"
     #: the tip sensor's delay searched at or above the hub's where nothing else orders
     #: them (``flexarm fit --tip-after-hub/--any-delay-order``)
     tip_after_hub: bool = True
