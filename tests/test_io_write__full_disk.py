@@ -164,7 +164,8 @@ def test_the_command_line_names_the_saved_copy_and_exits_2(full, tmp_path, cmd):
 def test_a_fit_whose_json_meets_a_full_disk_is_kept_and_named(full, tmp_path):
     """The issue's case: `flexarm fit --json` onto a full disk lost the fit. A 1 s
     simulated run of the rotary rig, fitted with its data sheet: exit 2, one error line
-    naming the copy in the current folder, which holds the whole fit document."""
+    naming the copy in the current folder, which holds the whole fit document; the
+    `--scenario-out` on another disk is written all the same."""
     import tomli_w
 
     from flexarm.specs import load_scenario
@@ -179,8 +180,11 @@ def test_a_fit_whose_json_meets_a_full_disk_is_kept_and_named(full, tmp_path):
     ds = ["--gear-ratio", "70", "--motor-constant", "7.68e-3", "--armature-resistance", "2.6"]
     ds += ["--link-length", "0.42", "--gear-efficiency", "0.9", "--motor-efficiency", "0.69"]
     ds += ["--controller", "state_feedback K1=6 K2=-40 K3=0.15 K4=0", "--seconds", "2"]
-    r = runner.invoke(app, ["fit", str(log), *ds, "--json", str(disk / "fit.json")])
+    out = ["--json", str(disk / "fit.json"), "--scenario-out", str(tmp_path / "fitted.toml")]
+    r = runner.invoke(app, ["fit", str(log), *ds, *out])
     assert r.exit_code == 2, r.output
+    # the scenario, on a disk with room, is written although the JSON before it failed
+    assert load_scenario(tmp_path / "fitted.toml").arm is not None
     errors = [ln for ln in r.stderr.splitlines() if ln.startswith(("error", "internal"))]
     assert len(errors) == 1 and "No space left on device" in errors[0], r.stderr
     saved = [p for p in cwd.iterdir() if p.name.startswith("fit.rescued-")]

@@ -35,6 +35,7 @@ from flexarm.cli.common import (
     command_line,
     console,
     distinct_outputs,
+    each_write,
     enable_cache,
     err,
     fail,
@@ -419,10 +420,11 @@ def fit(
     one.extras.update(
         fit_extras(without_friction=res0, window=win, held_out=held, held_window=vwin)
     )
-    if json_out is not None:
-        write_json(json_out, one.to_dict(), overwrite=overwrite)
+    each_write(
+        *([lambda: write_json(json_out, one.to_dict(), overwrite=overwrite)] if json_out else []),
+        *([lambda: one.write_scenario(scenario_out, overwrite=overwrite)] if scenario_out else []),
+    )
     if scenario_out is not None:
-        one.write_scenario(scenario_out, overwrite=overwrite)
         more = one.session_paths(scenario_out)[1:]
         if more:  # several sessions: one scenario each (validate a run with its session's)
             console.print(
@@ -805,10 +807,10 @@ def _fit_scenario_cli(
     figs = list(res.plots)
     if plots is None:  # the figures went to a report's temporary folder: not in --json
         res.plots = []
-    if json_out is not None:
-        write_json(json_out, res.to_dict(), overwrite=overwrite)
-    if scenario_out is not None:
-        res.write_scenario(scenario_out, overwrite=overwrite)
+    each_write(
+        *([lambda: write_json(json_out, res.to_dict(), overwrite=overwrite)] if json_out else []),
+        *([lambda: res.write_scenario(scenario_out, overwrite=overwrite)] if scenario_out else []),
+    )
     with figures:
         if report is not None:
             from flexarm.analysis.html_report import fit_report
