@@ -191,3 +191,20 @@ def test_a_fit_whose_json_meets_a_full_disk_is_kept_and_named(full, tmp_path):
     assert len(saved) == 1 and str(saved[0]) in errors[0]
     doc = json.loads(saved[0].read_text())
     assert doc["fit_percent"] and not (disk / "fit.json").exists()
+
+
+def test_write_each_tries_every_write_and_raises_the_first_failure(tmp_path):
+    """``io.write.write_each``: a design's ``design.toml`` meeting a full disk does not stop
+    its ``design.json`` (and a fit's ``--json`` not its ``--scenario-out``)."""
+    from flexarm.io.write import WriteFailedError, write_each, write_text
+
+    def full():
+        raise WriteFailedError(
+            "error: a.toml: No space left on device", path=tmp_path / "a.toml",
+            reason="No space left on device", rescued=tmp_path / "a.rescued.toml",
+        )  # fmt: skip
+
+    with pytest.raises(WriteFailedError, match="a.toml") as info:
+        write_each(full, lambda: write_text(tmp_path / "b.json", "{}"), full)
+    assert (tmp_path / "b.json").read_text() == "{}" and info.value.path.name == "a.toml"
+    assert write_each(lambda: 1, lambda: 2) == [1, 2]

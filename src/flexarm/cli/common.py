@@ -347,23 +347,6 @@ def output_folder(option: str, path: Path | None, overwrite: bool) -> Path | Non
         )
 
 
-def each_write(*writes) -> None:
-    """Run every one of a command's final writes (callables), each even where one before it
-    failed on a full disk: a :class:`~flexarm.io.write.WriteFailedError` keeps its own
-    content (rescued beside its target) and the first is raised once all have run, so a
-    fit's ``--scenario-out`` is written even where its ``--json`` met a full disk."""
-    from flexarm.io.write import WriteFailedError
-
-    failed: list[WriteFailedError] = []
-    for w in writes:
-        try:
-            w()
-        except WriteFailedError as exc:
-            failed.append(exc)
-    if failed:
-        raise failed[0]
-
-
 def save_result(option: str, path: Path, data, overwrite: bool, writer=None) -> None:
     """The command's final write (:func:`flexarm.io.write.save_or_rescue`): written where
     asked, or, when that fails (a full disk, a vanished folder), next to it and said so in

@@ -35,7 +35,6 @@ from flexarm.cli.common import (
     command_line,
     console,
     distinct_outputs,
-    each_write,
     enable_cache,
     err,
     fail,
@@ -323,7 +322,7 @@ def fit(
     from flexarm.identification.time_domain.options import FitOptions, PredictOptions, ServoRig
     from flexarm.identification.time_domain.predict import predict
     from flexarm.identification.time_domain.report import fit_extras
-    from flexarm.io.write import write_json
+    from flexarm.io.write import write_each, write_json
 
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
@@ -420,7 +419,7 @@ def fit(
     one.extras.update(
         fit_extras(without_friction=res0, window=win, held_out=held, held_window=vwin)
     )
-    each_write(
+    write_each(
         *([lambda: write_json(json_out, one.to_dict(), overwrite=overwrite)] if json_out else []),
         *([lambda: one.write_scenario(scenario_out, overwrite=overwrite)] if scenario_out else []),
     )
@@ -756,7 +755,7 @@ def _fit_scenario_cli(
     from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
     from flexarm.io.logformat import load_logs
     from flexarm.io.logs import LogError
-    from flexarm.io.write import write_json
+    from flexarm.io.write import write_each, write_json
 
     check_file_option("--json", json_out, overwrite)
     check_file_option("--scenario-out", scenario_out, overwrite, "arm.toml")
@@ -807,7 +806,7 @@ def _fit_scenario_cli(
     figs = list(res.plots)
     if plots is None:  # the figures went to a report's temporary folder: not in --json
         res.plots = []
-    each_write(
+    write_each(
         *([lambda: write_json(json_out, res.to_dict(), overwrite=overwrite)] if json_out else []),
         *([lambda: res.write_scenario(scenario_out, overwrite=overwrite)] if scenario_out else []),
     )

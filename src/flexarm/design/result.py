@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from flexarm.io.write import write_json, write_toml
+from flexarm.io.write import write_each, write_json, write_toml
 
 __all__ = ["Design"]
 
@@ -135,7 +135,7 @@ class Design:
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
         data = self.scenario.model_dump(mode="json", exclude_none=True)
-        return [
-            write_toml(d / "design.toml", data, overwrite=overwrite),
-            write_json(d / "design.json", self.to_dict(), overwrite=overwrite),
-        ]
+        return write_each(  # both tried: a full disk at one keeps the other (rescued)
+            lambda: write_toml(d / "design.toml", data, overwrite=overwrite),
+            lambda: write_json(d / "design.json", self.to_dict(), overwrite=overwrite),
+        )

@@ -69,6 +69,7 @@ __all__ = [
     "write_bytes",
     "write_json",
     "write_toml",
+    "write_each",
     "save_figure",
     "output_folder",
     "inputs",
@@ -293,6 +294,24 @@ class WriteFailedError(FlexarmError, OSError):
         self.rescued = rescued
         self.content = content
         self.errno = errno_
+
+
+def write_each(*writes):
+    """Run every one of a job's final writes (callables) even where one before it failed on
+    a full disk: each :class:`WriteFailedError` keeps its own content (rescued beside its
+    target); the first is raised once all have run. Returns the writes' results. So a
+    fit's ``--scenario-out`` is written where its ``--json`` met a full disk, and a
+    design's ``design.json`` where its ``design.toml`` did."""
+    failed: list[WriteFailedError] = []
+    out = []
+    for w in writes:
+        try:
+            out.append(w())
+        except WriteFailedError as exc:
+            failed.append(exc)
+    if failed:
+        raise failed[0]
+    return out
 
 
 def rescue_path(path: Path, folder: Path, stamp: str) -> Path:
