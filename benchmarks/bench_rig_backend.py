@@ -1,4 +1,4 @@
-"""The servo-rig engine's sample loop (``identification/time_domain/closed_loop.py``) against
+"""The servo-rig engine's sample loop (``sim/rig_loop.py``) against
 the one simulator (``sim.sampled.simulate_batch``) on the same rig and the same parameter
 points: is the fast backend (issue #23 item 2: "only where measurably faster and equal to
 the simulator") faster, and equal?
@@ -56,9 +56,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
-    from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
     from flexarm.identification.time_domain.general import stack_loops
     from flexarm.sim.build import prepare
+    from flexarm.sim.rig_loop import as_jax, closed_loop_run
     from flexarm.sim.sampled import simulate_batch
     from flexarm.specs.paths import scenario_with
 

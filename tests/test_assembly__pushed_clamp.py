@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain.closed_loop import single_link_arm
 from flexarm.sim.integrate import integrate_hold, solver_for
+from flexarm.sim.rig_loop import single_link_arm
 
 jax.config.update("jax_enable_x64", True)
 

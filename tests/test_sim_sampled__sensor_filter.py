@@ -10,9 +10,9 @@ from pydantic import ValidationError
 from scipy import signal as sps
 
 from flexarm.control import discrete
-from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.models.plant import Plant
 from flexarm.sim.build import prepare
+from flexarm.sim.rig_loop import as_jax, closed_loop_run
 from flexarm.sim.sampled import Actuator, SampledLoop, Sensors, simulate_loop
 from flexarm.specs import load_scenario
 from flexarm.specs.experiment import Sensor
@@ -198,7 +198,7 @@ def test_bad_bandwidths():
 
 
 def test_fast_bench_loop_equals_simulator_with_filters():
-    """The bench fitter's batched loop (:mod:`flexarm.identification.time_domain.closed_loop`) with
+    """The bench fitter's batched loop (:mod:`flexarm.sim.rig_loop`) with
     both channels filtered (hub 50 Hz, tip 20 Hz) equals :func:`simulate_loop` on the same arm, to
     rounding, as without filters (tests/test_time_domain_fit.py): 1e-9 rad / m / V."""
     fth, fd = 50.0, 20.0

@@ -12,13 +12,13 @@ from flexarm.identification.time_domain import (
     load_rig_log,
     validate,
 )
-from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_run
 from flexarm.identification.time_domain.fit import fit
 from flexarm.identification.time_domain.report import check_physical
 from flexarm.identification.time_domain.synthetic import synthetic_log
 from flexarm.io.logformat import parse_controller
 from flexarm.io.logs import Log, LogError
 from flexarm.sim.build import prepare
+from flexarm.sim.rig_loop import as_jax, closed_loop_run
 from flexarm.sim.sampled import simulate_loop
 from flexarm.specs import load_scenario
 

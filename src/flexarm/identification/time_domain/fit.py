@@ -503,7 +503,7 @@ def fit(
     searched.
     ``filters``: known low-pass cutoffs (Hz, not fitted) of the sensors' analog first-order
     filters, e.g. ``{"tip_deflection": 50.0}``
-    (:mod:`flexarm.identification.time_domain.closed_loop`).
+    (:mod:`flexarm.sim.rig_loop`).
     ``priors``: parameter name (:data:`~.params.MECHANICS`, :data:`FRICTION` but ``bias``;
     ``coulomb`` for every session, ``coulomb[1]`` for one) → (mean in SI, relative std):
     r_p = (ln p − ln p̄) / σ_p, eq. (2) of the general engine, weighed against V as there

@@ -1,7 +1,7 @@
 """The output-error objective of a bench fit, evaluated for a whole population at once.
 
 For parameters p the log's loop is closed in simulation
-(:mod:`flexarm.identification.time_domain.closed_loop`)
+(:mod:`flexarm.sim.rig_loop`)
 and compared with the log on the measured hub angle θ and tip deflection d:
 
     V(p) = Σ_logs Σ_{y ∈ {θ, d}} ‖y − ŷ(p)‖² / ‖y − mean(y)‖²  = Σ (1 − fit_y/100)²
@@ -10,7 +10,7 @@ and compared with the log on the measured hub angle θ and tip deflection d:
 sensor delay lines still hold the initial value, are left out). fit % per log and signal
 is 100 (1 − ‖y − ŷ‖/‖y − mean y‖). Sensor low-pass filters of known cutoff (``filters``,
 Hz) are simulated in front of the converters
-(:mod:`flexarm.identification.time_domain.closed_loop`).
+(:mod:`flexarm.sim.rig_loop`).
 
 Each log's initial state: hub angle and rate from its first samples; the link's tip
 deflection and rate (measured units) at t = 0 are those the log shows at sample k = (tip
@@ -28,11 +28,11 @@ from typing import Any
 import numpy as np
 
 from flexarm.identification.time_domain import guesses
-from flexarm.identification.time_domain.closed_loop import as_jax, closed_loop_cost, closed_loop_run
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import ParamSpace
 from flexarm.io.logs import Log
 from flexarm.sim.batch import cpu_cores, run_chunks
+from flexarm.sim.rig_loop import as_jax, closed_loop_cost, closed_loop_run
 from flexarm.sim.sampled import FILTER_STEP_LIMIT, filter_substeps
 
 BIG = 1e3  # cost of a diverged rollout (per log; a perfect fit scores 0, a zero model ~2)

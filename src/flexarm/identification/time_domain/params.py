@@ -1,5 +1,5 @@
 """The physical parameter vector of a bench fit: names, units, bounds, scales, and its
-mapping to the model numbers of :mod:`flexarm.identification.time_domain.closed_loop` and to a
+mapping to the model numbers of :mod:`flexarm.sim.rig_loop` and to a
 scenario.
 
 Estimated (SI): hub inertia J (kg·m², equivalent at the output shaft), hub-clamped link

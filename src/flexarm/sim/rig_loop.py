@@ -1,4 +1,6 @@
-"""Batched closed-loop (or open-loop replay) simulation of bench logs, for fitting.
+"""Batched closed-loop (or open-loop replay) simulation of bench logs, for fitting: the one
+simulator's fast kernel for one plant kind, the rotary servo rig (issue #43: a faster kernel
+lives inside the simulator and equals it; the servo preset's objective runs it).
 
 The plant is the one plant of every arm, :class:`flexarm.models.assembly.Arm`, in its
 one-link case: a hub of inertia J driving one pinned tip mode (the classic 2-DOF rotary
