@@ -146,3 +146,15 @@ def test_fit_quality_does_not_call_a_friction_level_that_vanishes_the_wrong_mode
     assert "RMSE 0.0027 m" in w[0]
     assert w[1].startswith("arm.motor.inertia ended at 0.9, 450 times its start")
     assert w[2].startswith("arm.beam.masses[0].mass ended at 0.0002, 0.004 times its start")
+
+
+def test_a_session_whose_gauge_estimate_explains_little_keeps_its_sign():
+    """Under :data:`guesses.SIGN_R2` (0.1) a session's estimate does not flip its sign: an
+    opposite gain buried in noise (R² about 0.03 here) is not taken as a re-wired gauge."""
+    weak = _log(0.7, 2)
+    d = weak.signals["tip_deflection"]
+    noise = np.random.default_rng(9).normal(size=d.size)
+    weak.signals["tip_deflection"] = d + 5.5 * np.std(d) * noise
+    signs, est = guesses.session_signs([_log(-0.7, 0), weak], [0, 1], 11.3, 0.45)
+    assert est[1]["gain"] > 0 and 0.005 < est[1]["r2"] < guesses.SIGN_R2, est
+    assert signs == [1, 1]

@@ -194,7 +194,8 @@ def session_signs(
     sign(g_s g_0), which maximises the sessions' joint R², (Σ σ_s n_s)² / (Σ d_s Σ y_s)
     with n_s, d_s, y_s the sums of :func:`tip_gain` per session (a gauge re-wired or
     re-calibrated between days, as the rotary rig's 4/27 and 5/2 sessions: −0.33 and
-    +0.57 m/m estimated). A session whose estimate explains nothing (R² < 0.02) keeps +1.
+    +0.57 m/m estimated). A session whose estimate explains little (R² < :data:`SIGN_R2`)
+    keeps +1.
     Returns (σ per session, per-session ``{"gain", "r2"}``)."""
     n = max(sessions) + 1 if sessions else 1
     w = wc if wc else 2 * np.pi * 1.8
@@ -211,8 +212,10 @@ def session_signs(
     return signs, est
 
 
-#: the least R² of a session's gauge estimate that decides its sign
-SIGN_R2 = 0.02
+#: the least R² of a session's gauge estimate (and of session 0's) that decides its sign:
+#: below it the estimate's sign is not trusted and the session keeps session 0's (the
+#: 4/27 and 5/2 sessions' estimates explain 44 % and 52 % of their tips)
+SIGN_R2 = 0.1
 
 
 def hub_inertia(logs: list[Log], k_u: float, window: float = 0.025):
