@@ -329,7 +329,10 @@ def motor_bench_record(true: dict[str, Any] | None = None, *, seed: int = 0) -> 
     th_m = np.round((3.571 + periodic(Gm * Cur) + sa * rng.standard_normal(n)) / q) * q
     th_l = np.round((4.138 + periodic(Gl * Cur) + sa * rng.standard_normal(n)) / q) * q
     cur = periodic(Cur) + t["current_offset"] + t["current_noise"] * rng.standard_normal(n)
-    col = lambda a, dt="float64": np.asarray(a, dt).reshape(-1, 1)  # noqa: E731
+
+    def col(a, dt="float64"):
+        return np.asarray(a, dt).reshape(-1, 1)
+
     msr = np.arange(2, n + 2)
     msr[-1] = msr[-2]  # the logger's irregular last row: its counter repeats
     return {
