@@ -261,12 +261,15 @@ class Working:
     (:meth:`update`) as a line ``[  12.3 s] stage`` (on stderr where that is not a
     terminal; in a terminal above the status line, whose text ticks the seconds), and
     while one stage lasts, a line ``[  17.3 s] still: stage`` every :data:`HEARTBEAT_S`
-    seconds, from a daemon thread."""
+    seconds, from a daemon thread. A job that ends (or fails) within :data:`HEARTBEAT_S`
+    prints none of them: its lines are held until the job has run that long (a bad input
+    stays one line)."""
 
     def __init__(self, status, label: str, every: float | None = None):
         self.status, self.message, self.label = status, label, label
         self.every = HEARTBEAT_S if every is None else every
         self.t0 = self.last = time.perf_counter()
+        self._held: list[str] | None = []  # None once the lines go out as they come
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._beat, daemon=True)
@@ -274,12 +277,18 @@ class Working:
     def elapsed(self) -> float:
         return time.perf_counter() - self.t0
 
-    def _line(self, text: str) -> None:
-        line = f"[{self.elapsed():7.1f} s] {text}"
+    def _print(self, line: str) -> None:
         if err.is_terminal:
             self.status.console.print(escape(line), highlight=False)
         else:
             err.print(escape(line), highlight=False)
+
+    def _line(self, text: str) -> None:
+        line = f"[{self.elapsed():7.1f} s] {text}"
+        if self._held is not None:
+            self._held.append(line)
+        else:
+            self._print(line)
 
     def update(self, message: str) -> None:
         with self._lock:
@@ -291,6 +300,10 @@ class Working:
         while not self._stop.wait(min(1.0, self.every)):
             with self._lock:
                 self.status.update(f"{self.message} ({self.elapsed():.0f} s)")
+                if self._held is not None and self.elapsed() >= self.every:
+                    for line in self._held:
+                        self._print(line)
+                    self._held = None
                 if time.perf_counter() - self.last >= self.every:
                     self.last = time.perf_counter()
                     self._line(f"still: {self.message}")
@@ -303,7 +316,7 @@ class Working:
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join()
-        if exc[0] is None:
+        if exc[0] is None and self._held is None:
             self._line(f"done: {self.label}")
 
 
