@@ -3,14 +3,15 @@ flexible rotary rigs of ``../shared/data/rotary-rig`` (issue #25: the design tab
 reproducible from the README's commands).
 
 For each rig: ``flexarm fit LOG --log-format examples/quanser-rotflex.toml <data sheet>
---json fit.json --scenario-out rig.toml`` (whole log, every default: the amplifier limit
+--window 0:5 --validate-window 5:10 --json fit.json --scenario-out rig.toml`` (the README's
+window; ``--window whole``: the whole log; every other default: the amplifier limit
 from the log format, the computation delay from the controller check, the encoder count
 from the log), then ``flexarm design rig.toml --method M --out out/M --fit-json fit.json
 --plants 200`` for M in lqr, nested, tune, then ``flexarm export-c out/M`` for each. Prints
 each step's exit code, each design's verdict and unstable count, and the README's table
 (median over the 200 plants, worst in brackets) as Markdown.
 
-    .venv/bin/python benchmarks/readme_design_chain.py [--out DIR] [--plants N]
+    .venv/bin/python benchmarks/readme_design_chain.py [--out DIR] [--plants N] [--window 0:5]
 
 Takes about 15-25 min on 2 cores (two fits, six designs of 200 plants).
 """
@@ -61,7 +62,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "readme-chain")
     ap.add_argument("--plants", type=int, default=200)
+    ap.add_argument(
+        "--window",
+        default="0:5",
+        help="the fit's --window, as the README's (0:5, held out 5:10); 'whole': whole logs",
+    )
     a = ap.parse_args()
+    win = [] if a.window == "whole" else ["--window", a.window]
+    if a.window == "0:5":
+        win += ["--validate-window", "5:10"]
     if not DATA.is_dir():
         print(f"the rotary-rig logs are not at {DATA} (set FLEXARM_DATA)")
         return 1
@@ -76,6 +85,7 @@ def main() -> int:
             "--log-format",
             str(ROOT / "examples" / "quanser-rotflex.toml"),
             *SHEET,
+            *win,
             "--json",
             "fit.json",
             "--scenario-out",

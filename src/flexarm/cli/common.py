@@ -6,6 +6,8 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import threading
+import time
 from pathlib import Path
 from typing import NoReturn
 
@@ -240,10 +242,90 @@ def write_report(rep, path: Path | None, overwrite: bool) -> None:
 
 def progress(status, message: str) -> None:
     """A long job's stage: on the status line, and as a plain line on stderr when that is
-    not a terminal (a log file or a pipe: the status line is not drawn there)."""
+    not a terminal (a log file or a pipe: the status line is not drawn there); under
+    :func:`working`, with the seconds since the job began."""
+    if isinstance(status, Working):
+        status.update(message)
+        return
     status.update(message)
     if not err.is_terminal:
         err.print(message, highlight=False)
+
+
+#: Seconds of work between two progress lines of a long job (issue #46 item 5).
+HEARTBEAT_S = 5.0
+
+
+class Working:
+    """A long job's progress with its elapsed time (s since it began): each stage
+    (:meth:`update`) as a line ``[  12.3 s] stage`` (on stderr where that is not a
+    terminal; in a terminal above the status line, whose text ticks the seconds), and
+    while one stage lasts, a line ``[  17.3 s] still: stage`` every :data:`HEARTBEAT_S`
+    seconds, from a daemon thread. A job that ends (or fails) within :data:`HEARTBEAT_S`
+    prints none of them: its lines are held until the job has run that long (a bad input
+    stays one line)."""
+
+    def __init__(self, status, label: str, every: float | None = None):
+        self.status, self.message, self.label = status, label, label
+        self.every = HEARTBEAT_S if every is None else every
+        self.t0 = self.last = time.perf_counter()
+        self._held: list[str] | None = []  # None once the lines go out as they come
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._beat, daemon=True)
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def _print(self, line: str) -> None:
+        if err.is_terminal:
+            self.status.console.print(escape(line), highlight=False)
+        else:
+            err.print(escape(line), highlight=False)
+
+    def _line(self, text: str) -> None:
+        line = f"[{self.elapsed():7.1f} s] {text}"
+        if self._held is not None:
+            self._held.append(line)
+        else:
+            self._print(line)
+
+    def update(self, message: str) -> None:
+        with self._lock:
+            self.message, self.last = message, time.perf_counter()
+            self.status.update(f"{message} ({self.elapsed():.0f} s)")
+            self._line(message)
+
+    def _beat(self) -> None:
+        while not self._stop.wait(min(1.0, self.every)):
+            with self._lock:
+                self.status.update(f"{self.message} ({self.elapsed():.0f} s)")
+                if self._held is not None and self.elapsed() >= self.every:
+                    for line in self._held:
+                        self._print(line)
+                    self._held = None
+                if time.perf_counter() - self.last >= self.every:
+                    self.last = time.perf_counter()
+                    self._line(f"still: {self.message}")
+
+    def __enter__(self) -> Working:
+        self._line(self.message)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        if exc[0] is None and self._held is None:
+            self._line(f"done: {self.label}")
+
+
+@contextlib.contextmanager
+def working(label: str):
+    """``console.status(label)`` as a :class:`Working`: the job's stages and, every
+    :data:`HEARTBEAT_S` s of one stage, a line with the elapsed seconds."""
+    with console.status(label) as status, Working(status, label) as w:
+        yield w
 
 
 def warn(message: str) -> None:

@@ -25,6 +25,7 @@ from flexarm.cli.common import (
     outdir,
     progress,
     warn,
+    working,
     write_report,
 )
 
@@ -308,7 +309,7 @@ def _design(ctx, o: DesignRequest) -> None:
     method, plants, overwrite = o.method, o.plants, o.overwrite
     from flexarm.design.plants import from_fit, from_paths
 
-    with console.status(f"designing ({method})...") as status:
+    with working(f"designing ({method})...") as status:
         try:  # the plants, drawn once: tuned over (tune), made robust over (lqr), compared on
             if fit_doc is not None and by_paths:  # any fit's document: its covariance
                 from flexarm.identification.time_domain.result import FitResult

@@ -18,6 +18,7 @@ from flexarm.cli.common import (
     err,
     fail,
     guarded_command,
+    working,
 )
 from flexarm.cli.parsing import number
 
@@ -77,7 +78,11 @@ def fit_many(
         )
     fd.fit_many_todo(rows, out, manifest, overwrite)  # the output policy, before any work
 
+    beat: list = []  # the Working of the run, once it starts
+
     def progress(rec: dict) -> None:
+        if beat:  # the elapsed time on stderr (each row, and every 5 s of work)
+            beat[0].update(f"fit-many: {rec['id']} {rec['status']}")
         console.print(
             f"{rec['id']}: {rec['status']}"
             + (f" ({rec['seconds']:.1f} s)" if rec.get("seconds") else "")
@@ -91,14 +96,16 @@ def fit_many(
             for w in caught:
                 if str(w.message) == fd.NO_DASK:
                     err.print(str(w.message), highlight=False)
-            recs = fd.fit_many(
-                rows,
-                client,
-                out,
-                options=fd.FitManyOptions(figures=not no_figures),
-                progress=progress,
-                overwrite=overwrite,
-            )
+            with working(f"fit-many: {len(rows)} row(s)") as w:
+                beat.append(w)
+                recs = fd.fit_many(
+                    rows,
+                    client,
+                    out,
+                    options=fd.FitManyOptions(figures=not no_figures),
+                    progress=progress,
+                    overwrite=overwrite,
+                )
     t = Table("row", "status", "seconds", title=f"fit-many: {out / 'summary.csv'}")
     for r in recs:
         t.add_row(r["id"], r["status"], "" if not r.get("seconds") else f"{r['seconds']:.1f}")

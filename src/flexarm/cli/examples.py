@@ -27,7 +27,9 @@ def example_logs(
     """Write simulated logs of the built-in rigs with known "true" parameters, as the labs'
     loggers write them: a rotary servo with a flexible link and one with a rigid arm (the
     lab logger's tab-separated format, read with --log-format examples/quanser-rotflex.toml),
-    a two-link run (CSV exchange format), true-parameters.toml and a README.md."""
+    a two-link run (CSV exchange format), a motor bench's odd multisine (motor-bench.mat, the
+    lab's MATLAB layout: flexarm frf --log-format examples/motor-bench.toml),
+    true-parameters.toml and a README.md."""
     from flexarm.analysis.example_logs import write_example_logs
     from flexarm.errors import OutputExistsError
 

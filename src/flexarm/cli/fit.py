@@ -44,6 +44,7 @@ from flexarm.cli.common import (
     output_folder,
     progress,
     warn,
+    working,
     write_report,
 )
 
@@ -393,7 +394,7 @@ def fit(
             before_check=check_sheet,
         )
         opts = FitOptions(servo_rig=rig, windows=[win] * len(full) if win else None)
-        with console.status("fitting") as status:
+        with working("fitting") as status:
             one = engine.fit(preset, full, options=opts, progress=lambda m: progress(status, m))
             res = one.engine_result
             if compare_no_friction and not no_friction:
@@ -607,7 +608,7 @@ def validate(
             tag="validate",
             initial=initial,
         )
-        with console.status("predicting") as status, _state_warnings_quiet():
+        with working("predicting") as status, _state_warnings_quiet():
             before = predict(sc, glogs, popts)
             out = before.to_dict()
             figs += before.plots
@@ -782,7 +783,7 @@ def _fit_scenario_cli(
             plots=folder,
             continuous=continuous,
         )
-        with console.status("fitting") as status, _state_warnings_quiet():
+        with working("fitting") as status, _state_warnings_quiet():
             # the one FitResult of every rig (a scenario here: the general engine), with its
             # whole-log prediction and that prediction's figures (FitOptions.plots)
             res = fit_engine(sc, glogs, free or None, opts, progress=lambda m: progress(status, m))
