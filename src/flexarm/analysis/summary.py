@@ -179,7 +179,8 @@ def write_multilink(
 def plot_joints(runs: dict, path: Path, *, overwrite: bool = False) -> None:
     """Figure of multi-link runs overlaid (``runs``: label → (scenario, result)): per joint,
     the error θ_d − θ in encoder counts (symmetric-log axis, linear within ±1 count, that
-    band shaded), the link's tip deflection w_j(ℓ_j) (mm) and the command."""
+    band shaded; in mrad, without a band, where the scenario has no encoder), the link's
+    tip deflection w_j(ℓ_j) (mm) and the command."""
     from matplotlib.figure import Figure
 
     first = next(iter(runs.values()))[1]
@@ -200,7 +201,8 @@ def plot_joints(runs: dict, path: Path, *, overwrite: bool = False) -> None:
             else "mrad"
         )
         ax[0, j].set_yscale("symlog", linthresh=1.0, linscale=0.6)
-        ax[0, j].axhspan(-1, 1, color="0.85", zorder=0, label="±1 count")
+        if unit == "encoder counts":  # without an encoder there is no count to shade
+            ax[0, j].axhspan(-1, 1, color="0.85", zorder=0, label="±1 count")
         ax[0, j].axhline(0.0, c="k", lw=0.6)
         ax[0, j].set_ylabel(f"θ_d,{j + 1} − θ_{j + 1} [{unit}]")
         ax[0, j].set_title(f"joint {j + 1}")

@@ -1019,7 +1019,10 @@ def generate_c(
             continue
         bits = []
         if s.gain != 1.0:
-            bits.append(f"sensor gain {s.gain:g} applied")
+            bits.append(
+                f"pass the reading as the sensor gives it, its gain {s.gain:g} (the "
+                "scenario's) included: this code does not rescale it"
+            )
         q = quanta[c]
         if q:
             bits.append(f"quantum {q:.6g}")
