@@ -1125,7 +1125,6 @@ def _pushed_note(rig: Rig) -> list[str]:
     ]
 
 
-@one_blas_thread
 def _with_tip_sign(log, sign: int):
     """``log`` with its tip channels (deflection and rate) read with ``sign``: the cheap
     estimates' view of a session whose gauge sign differs from session 0's."""
@@ -1137,6 +1136,7 @@ def _with_tip_sign(log, sign: int):
     return replace(log, signals=sig)
 
 
+@one_blas_thread
 def _estimates(blogs, rig: Rig, max_delay: int, filters) -> dict:
     """The cheap estimates of :mod:`flexarm.identification.time_domain.estimates` (hub → tip model
     with the tip channel's lag relative to the hub, the hub delay, the link frequency), and the
