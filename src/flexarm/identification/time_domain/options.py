@@ -46,6 +46,35 @@ __all__ = [
 ]
 
 
+def channel_weights(value: Any, field_name: str) -> dict[str, float] | None:
+    """``channels`` given as weights (name → w_c) or as names alone (a list: w_c = 1);
+    anything else is one line naming the field, the value and the fix."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        value = [value]
+    if isinstance(value, Mapping):
+        items = list(value.items())
+    elif isinstance(value, (list, tuple, set, frozenset)):
+        items = [(c, 1.0) for c in value]
+    else:
+        items = None
+    ok = all(
+        isinstance(c, str)
+        and isinstance(w, (int, float))
+        and not isinstance(w, bool)
+        and math.isfinite(w)
+        and w >= 0
+        for c, w in items or [(None, None)]
+    )
+    if items is None or not ok:
+        raise ValueError(
+            f"{field_name} = {value!r}: give channel names (['motor_angle', 'current']) or "
+            "name -> weight ({'motor_angle': 1.0, 'current': 0.5}), weights finite and >= 0"
+        )
+    return {c: float(w) for c, w in items}
+
+
 @dataclass
 class Cost:
     """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s);
@@ -58,6 +87,9 @@ class Cost:
     quantise: bool = False
     substeps: int | None = None
     continuation: bool = True
+
+    def __post_init__(self) -> None:
+        self.channels = channel_weights(self.channels, "Cost.channels")
 
 
 @dataclass
@@ -428,6 +460,7 @@ class ScenarioFitOptions:
     restarts: int = 2
 
     def check(self) -> None:
+        self.channels = channel_weights(self.channels, "ScenarioFitOptions.channels")
         if not self.bound_factor > 1:
             raise ValueError(
                 f"ScenarioFitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
