@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -61,7 +62,7 @@ def channel_weights(value: Any, field_name: str) -> dict[str, float] | None:
         items = None
     ok = all(
         isinstance(c, str)
-        and isinstance(w, (int, float))
+        and isinstance(w, numbers.Real)
         and not isinstance(w, bool)
         and math.isfinite(w)
         and w >= 0
