@@ -64,8 +64,8 @@ def channel_weights(value: Any, field_name: str) -> dict[str, float] | None:
         isinstance(c, str)
         and isinstance(w, numbers.Real)
         and not isinstance(w, bool)
-        and math.isfinite(w)
-        and w >= 0
+        and math.isfinite(float(w))
+        and float(w) >= 0
         for c, w in items or [(None, None)]
     )
     if items is None or not ok:
