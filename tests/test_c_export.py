@@ -43,7 +43,6 @@ Bounds.
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -54,18 +53,17 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
+from _helpers import CC, CFLAGS, run_c
 from flexarm.control.friction_compensation import FrictionCompensated, friction_sign
 from flexarm.deploy import ExportError, export_c, generate_c
 from flexarm.sim.build import prepare, simulate
 from flexarm.specs import load_scenario
 from flexarm.specs.scenario import scenario_from_dict
 
-CC = next((c for c in ("cc", "gcc", "clang") if shutil.which(c)), None)
 needs_cc = pytest.mark.skipif(
     CC is None,
     reason="no C compiler (cc, gcc or clang) on PATH: the generated C cannot be compiled here",
 )
-CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
 
 #: the rotary rig's Coulomb level in volts: C_f / (η_g η_m K_g K_m / R_m)
 #: = 0.03 / (0.9·0.69·70·7.68e-3 / 2.6) = 0.2337 V
@@ -384,49 +382,6 @@ def _reference(case: str) -> dict:
 
 
 # ----------------------------------------------------------------------------- C side
-DRIVER = r"""
-#include <stdio.h>
-#include "ctl.h"
-int main(int argc, char **argv)
-{
-    double m[CTL_N_MEASURED + 1], r[CTL_N_REFERENCE + 1], u[CTL_N_U];
-    long n, k;
-    int i;
-    ctl_state s;
-    FILE *f;
-    if (argc != 2 || !(f = fopen(argv[1], "r"))) return 2;
-    if (fscanf(f, "%ld", &n) != 1) return 3;
-    ctl_init(&s);
-    for (k = 0; k < n; ++k) {
-        for (i = 0; i < CTL_N_MEASURED; ++i) if (fscanf(f, "%lf", &m[i]) != 1) return 4;
-        for (i = 0; i < CTL_N_REFERENCE; ++i) if (fscanf(f, "%lf", &r[i]) != 1) return 4;
-        ctl_step(&s, m, r, u);
-        for (i = 0; i < CTL_N_U; ++i) printf("%.17g%c", u[i], i + 1 < CTL_N_U ? ' ' : '\n');
-    }
-    fclose(f);
-    return 0;
-}
-"""
-
-
-def _run_c(folder: Path, meas: dict, refs: dict) -> np.ndarray:
-    """Compile ``folder``/ctl.c with the driver and run it on the sequence: u (N, n_u)."""
-    (folder / "driver.c").write_text(DRIVER)
-    cols = [np.asarray(v) for v in meas.values()] + [np.asarray(v) for v in refs.values()]
-    n = len(cols[0])
-    rows = "\n".join(" ".join(repr(float(c[k])) for c in cols) for k in range(n))
-    (folder / "input.txt").write_text(f"{n}\n{rows}\n")
-    exe = folder / "driver"
-    cp = subprocess.run(
-        [CC, *CFLAGS, "-o", str(exe), str(folder / "driver.c"), str(folder / "ctl.c")],
-        capture_output=True,
-        text=True,
-    )
-    assert cp.returncode == 0, f"the generated C does not compile:\n{cp.stderr}"
-    run = subprocess.run(
-        [str(exe), str(folder / "input.txt")], capture_output=True, text=True, check=True
-    )
-    return np.loadtxt(run.stdout.splitlines(), ndmin=2)
 
 
 def _allowed(ref: dict, unit: float) -> tuple[np.ndarray, np.ndarray]:
@@ -478,7 +433,7 @@ def test_c_matches_python(case, precision, tmp_path):
     code = generate_c(sc, name="ctl", precision=precision, controller=ref["given"])
     paths = code.write(tmp_path)
     assert [p.name for p in paths] == ["ctl.h", "ctl.c"]
-    u_c = _run_c(tmp_path, ref["meas"], ref["refs"])
+    u_c = run_c(tmp_path, ref["meas"], ref["refs"])
     u_py = ref["u"]
     assert u_c.shape == u_py.shape
     diff = np.abs(u_c - u_py)
@@ -578,7 +533,7 @@ def test_cli_exports_the_lqg_design_and_the_rig_state_feedback(tmp_path):
         ref = _reference(case)  # state_feedback: the same law, gains, limit (0.8 s run)
         if case == "state_feedback":
             assert "StateFeedback" in header and "Design method: none" in header
-        u_c = _run_c(out, ref["meas"], ref["refs"])
+        u_c = run_c(out, ref["meas"], ref["refs"])
         assert np.max(np.abs(u_c - ref["u"])) <= 1e-12
     # --precision float through the CLI: the same channels, float arithmetic
     out = tmp_path / "c_float"
@@ -589,7 +544,7 @@ def test_cli_exports_the_lqg_design_and_the_rig_state_feedback(tmp_path):
     assert "typedef float ctl_real;" in (out / "ctl.h").read_text()
     ref = _reference("lti_lqg_fc")
     bound, jump = _allowed(ref, 2.0**-24)
-    assert np.all(np.abs(_run_c(out, ref["meas"], ref["refs"]) - ref["u"]) <= bound + jump)
+    assert np.all(np.abs(run_c(out, ref["meas"], ref["refs"]) - ref["u"]) <= bound + jump)
 
 
 def test_export_is_reproducible(tmp_path):
@@ -763,7 +718,7 @@ def test_c_matches_python_on_the_real_unit6_log(tmp_path):
     for precision, unit in (("double", 2.0**-53), ("float", 2.0**-24)):
         out = tmp_path / precision
         generate_c(sc, name="ctl", precision=precision).write(out)
-        u_c = _run_c(out, meas, refs)
+        u_c = run_c(out, meas, refs)
         bound, jump = _allowed(ref, unit)
         diff = np.abs(u_c - u_py)
         assert np.all(diff <= bound + jump), precision

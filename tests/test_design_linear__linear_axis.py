@@ -29,7 +29,6 @@ What is checked against what:
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -40,6 +39,7 @@ import numpy as np
 import pytest
 
 import flexarm
+from _helpers import CC, run_c
 from flexarm.identification.time_domain.result import drop_none
 from flexarm.io.write import write_toml
 from flexarm.sim.build import prepare
@@ -47,7 +47,6 @@ from flexarm.specs import load_scenario
 from flexarm.specs.scenario import scenario_from_dict
 
 CLI = [sys.executable, "-m", "flexarm"]
-CC = next((c for c in ("cc", "gcc", "clang") if shutil.which(c)), None)
 M, VISCOUS, KF, T = 2.5, 20.0, 30.0, 1e-3
 STEP = 0.05  # m
 
@@ -161,31 +160,6 @@ def test_lqr_design_of_a_linear_axis_is_its_linear_loop_in_metres(designed):
     assert lqr["peak_command_V"] < 3.0 and lqr["time_at_limit_s"] == 0.0  # A
 
 
-C_DRIVER = r"""
-#include <stdio.h>
-#include "ctl.h"
-int main(int argc, char **argv)
-{
-    double m[CTL_N_MEASURED], r[CTL_N_REFERENCE], u[CTL_N_U];
-    long n, k;
-    int i;
-    ctl_state s;
-    FILE *f;
-    if (argc != 2 || !(f = fopen(argv[1], "r"))) return 2;
-    if (fscanf(f, "%ld", &n) != 1) return 3;
-    ctl_init(&s);
-    for (k = 0; k < n; ++k) {
-        for (i = 0; i < CTL_N_MEASURED; ++i) if (fscanf(f, "%lf", &m[i]) != 1) return 4;
-        for (i = 0; i < CTL_N_REFERENCE; ++i) if (fscanf(f, "%lf", &r[i]) != 1) return 4;
-        ctl_step(&s, m, r, u);
-        printf("%.17g\n", u[0]);
-    }
-    fclose(f);
-    return 0;
-}
-"""
-
-
 @pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH")
 def test_exported_c_of_the_linear_axis_design_steps_as_the_python_loop(designed, tmp_path):
     r = _cli("export-c", designed, "--out", tmp_path, "--name", "ctl")
@@ -211,19 +185,7 @@ def test_exported_c_of_the_linear_axis_design_steps_as_the_python_loop(designed,
     _, y = jax.jit(lambda c: jax.lax.scan(body, c, (meas, ref)))(ctrl.init())
     u_py = np.clip(np.asarray(y).ravel(), -3.0, 3.0)
 
-    (tmp_path / "driver.c").write_text(C_DRIVER)
-    rows = "\n".join(f"{a!r} {b!r}" for a, b in zip(meas.tolist(), ref.tolist(), strict=True))
-    (tmp_path / "input.txt").write_text(f"{meas.size}\n{rows}\n")
-    exe = tmp_path / "driver"
-    cp = subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-o", str(exe),
-         str(tmp_path / "driver.c"), str(tmp_path / "ctl.c")],
-        capture_output=True, text=True,
-    )  # fmt: skip
-    assert cp.returncode == 0, cp.stderr
-    run = subprocess.run([str(exe), str(tmp_path / "input.txt")], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    u_c = np.loadtxt(run.stdout.splitlines())
+    u_c = run_c(tmp_path, {"motor_angle": meas}, {"reference": ref}).ravel()
     applied = np.asarray(res.command).ravel()
     print(
         f"C vs Python step: max |du| = {np.abs(u_c - u_py).max():.3g} A; C vs the simulator's "
