@@ -154,7 +154,9 @@ def _servo_rig(preset: Preset, logs, options, progress):
         sess = list(rig.sessions) if rig.sessions is not None else [0] * len(whole)
         res.session_scenarios = session_scenarios(res, max(sess) + 1)
         if max(sess) > 0:  # the result says which parameters are per session (#47)
-            own = sorted({p.split("].", 1)[1] for p in res.params if p.startswith("sessions[")})
+            from flexarm.identification.time_domain.report import session_path
+
+            own = sorted({session_path(p) for p in res.params if p.startswith("sessions[")})
             signs = getattr(res.engine_result.space, "session_signs", ()) or ()
             res.stages["sessions"] = {
                 "of_log": sess,

@@ -448,7 +448,7 @@ def as_fit_result(
         t_paths = _path_values(res, tmpl)
     except (KeyError, TypeError, ValueError, ZeroDivisionError):
         t_paths = {}
-    stages["units"] = {p: PATH_UNITS.get(_session_free(p), "") for p in paths}
+    stages["units"] = {p: PATH_UNITS.get(session_path(p), "") for p in paths}
     extras = fit_extras(
         without_friction=without_friction,
         window=window,
@@ -525,7 +525,7 @@ def session_key(session: int, path: str) -> str:
     return f"sessions[{session}].{path}" if session else path
 
 
-def _session_free(path: str) -> str:
+def session_path(path: str) -> str:
     """``sessions[1].arm.friction.coulomb`` → ``arm.friction.coulomb``."""
     return path.split("].", 1)[1] if path.startswith("sessions[") else path
 
