@@ -762,13 +762,14 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
         )
         res = fit(preset, full, options=opts)
     else:
-        from flexarm.identification.time_domain.general import ScenarioFitOptions
         from flexarm.io.logformat import load_log
         from flexarm.specs import load_scenario
 
         assert row.scenario is not None  # a row without a preset names its scenario
         full = [load_log(p, row.log_format) for p in row.logs]
-        opts = ScenarioFitOptions(
+        # the row's options by the fit's field names (max_nfev, segment, ...), each to its
+        # group; over the preset's options where the row lists no free parameters
+        opts = FitOptions.from_fields(
             windows=[row.window] * len(full) if row.window else None, **row.options
         )
         res = fit(load_scenario(row.scenario), full, list(row.free) if row.free else None, opts)
