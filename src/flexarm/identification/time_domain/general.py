@@ -113,7 +113,6 @@ from flexarm.sim.build import Prepared, prepare, reference_signal
 from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
 
 __all__ = [
-    "FitOptions",
     "ScenarioFitOptions",
     "ScenarioFit",
     "fit_scenario",
