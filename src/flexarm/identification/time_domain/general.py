@@ -102,6 +102,7 @@ from flexarm.identification.time_domain.options import (  # re-exported here
     INITIALS,
     Cost,
     FitOptions,
+    ResolvedOptions,
     ScenarioFitOptions,
     as_fit_options,
 )
@@ -247,7 +248,7 @@ class _Engine:
         scenario,
         logs: Sequence,
         free: Sequence[str],
-        options: FitOptions,
+        options: ResolvedOptions,
         segment: float | Literal["options"] | None = "options",
     ):
         options.check()  # resolved options (FitOptions.resolved): every engine group given
@@ -1185,7 +1186,7 @@ def fit_scenario(
 def _local(
     eng: _Engine,
     z0: np.ndarray,
-    options: FitOptions,
+    options: ResolvedOptions,
     states: bool = False,
     o0: np.ndarray | None = None,
     progress=None,

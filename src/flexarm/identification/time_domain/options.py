@@ -52,6 +52,7 @@ __all__ = [
     "Priors",
     "ServoRig",
     "FitOptions",
+    "ResolvedOptions",
     "PredictOptions",
 ]
 
@@ -351,9 +352,10 @@ class FitOptions:
     #: one line naming the figure
     period_tolerance: float = 1e-4
 
-    def resolved(self, base: FitOptions | None = None) -> FitOptions:
-        """These options with every engine group filled (:data:`ENGINE_GROUPS`: the
-        engine reads ``options.<group>.<field>`` without None checks): ``base`` (a preset's
+    def resolved(self, base: FitOptions | None = None) -> ResolvedOptions:
+        """These options with every engine group filled (:class:`ResolvedOptions`, a
+        FitOptions whose :data:`ENGINE_GROUPS` are never None: the engine reads
+        ``options.<group>.<field>`` without None checks): ``base`` (a preset's
         options, copied) or the defaults, the groups given here overriding them; over a
         ``base`` only the fields changed from their group's defaults override (``_changed``:
         ``Local(max_nfev=60)`` keeps the preset's tolerances). ``global_de`` given over a
@@ -362,9 +364,10 @@ class FitOptions:
         ``predict`` and ``plots`` are these options'. Groups are fresh objects (field values
         shared), so the result can be changed without changing ``self`` or ``base``."""
         over = base is not None
-        out = copy.deepcopy(base) if base is not None else FitOptions()
+        start = copy.deepcopy(base) if base is not None else FitOptions()
+        out = {f.name: getattr(start, f.name) for f in dataclasses.fields(FitOptions)}
         for name, cls in {**ENGINE_GROUPS, "global_de": GlobalDE}.items():
-            mine, theirs = getattr(self, name), getattr(out, name)
+            mine, theirs = getattr(self, name), out[name]
             if theirs is None and (mine is not None or name in ENGINE_GROUPS):
                 theirs = cls()
             elif theirs is not None:
@@ -372,19 +375,19 @@ class FitOptions:
             if mine is not None:
                 for k, v in _changed(mine, over):
                     setattr(theirs, k, v)
-            setattr(out, name, theirs)
+            out[name] = theirs
         if self.delay_search is not None:
-            out.delay_search = self.delay_search
+            out["delay_search"] = self.delay_search
         if self.servo_rig is not None:
-            out.servo_rig = self.servo_rig
+            out["servo_rig"] = self.servo_rig
         if self.windows is not None:
-            out.windows = list(self.windows)
+            out["windows"] = list(self.windows)
         if self.continuous:
-            out.continuous = True
+            out["continuous"] = True
         if not over or self.period_tolerance != FitOptions.period_tolerance:
-            out.period_tolerance = self.period_tolerance
-        out.predict, out.plots = self.predict, self.plots
-        return out
+            out["period_tolerance"] = self.period_tolerance
+        out["predict"], out["plots"] = self.predict, self.plots
+        return ResolvedOptions(**out)
 
     def check(self) -> None:
         """One line naming the grouped field (``FitOptions.shooting.segment = -1 s: ...``),
@@ -443,6 +446,19 @@ class FitOptions:
         return cls.from_fields(
             **{f.name: getattr(flat, f.name) for f in dataclasses.fields(ScenarioFitOptions)}
         )
+
+
+@dataclass
+class ResolvedOptions(FitOptions):
+    """:class:`FitOptions` with every engine group present (:meth:`FitOptions.resolved`):
+    what the general engine reads (``options.cost``, ``options.shooting``, ``options.local``,
+    ``options.priors`` never None; ``global_de`` and ``delay_search`` None: that stage does
+    not run)."""
+
+    cost: Cost = field(default_factory=Cost)
+    shooting: Shooting = field(default_factory=Shooting)
+    local: Local = field(default_factory=Local)
+    priors: Priors = field(default_factory=Priors)
 
 
 def as_fit_options(options: Any, where: str) -> FitOptions:

@@ -24,6 +24,7 @@ joints' cable springs).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -99,9 +100,12 @@ def two_link(friction: bool = True) -> Preset:
     opts = tl.default_options()
     free = list(tl.FREE) if friction else [p for p in tl.FREE if "friction" not in p]
     if not friction:
-        pri = opts.priors
-        pri.priors = {k: v for k, v in pri.priors.items() if "friction" not in k}
-        pri.bounds = {k: v for k, v in pri.bounds.items() if "friction" not in k}
+        pri = opts.priors or Priors()
+        opts.priors = dataclasses.replace(
+            pri,
+            priors={k: v for k, v in pri.priors.items() if "friction" not in k},
+            bounds={k: v for k, v in pri.bounds.items() if "friction" not in k},
+        )
     return Preset("quanser-two-link", tl.template(friction), free, opts, starts=cable_spring_starts)
 
 
