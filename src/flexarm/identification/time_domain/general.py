@@ -992,7 +992,12 @@ def fit_scenario(
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
     columns, sampled at the scenario's period). See the module docstring. Without ``free``
     (and priors), the scenario's ``[notes.fit]`` table gives them (``free = [...]``,
-    ``priors = {...}``). ``predict``: also simulate each whole log (window) with the fitted
+    ``priors = {...}``). ``options``: :class:`FitOptions` (None: the defaults), resolved
+    (:meth:`FitOptions.resolved`: every group filled) and read group by group by the engine
+    (``options.cost``, ``options.shooting``, ``options.local``, ``options.global_de``,
+    ``options.priors``, ``options.delay_search``); a deprecated
+    :class:`ScenarioFitOptions` is converted (:meth:`FitOptions.from_flat`, with a
+    ``DeprecationWarning``). ``predict``: also simulate each whole log (window) with the fitted
     values (fit % of the whole-run prediction; skip for long chaotic runs); ``plots``: a
     folder for that prediction's overlay figures (``NN_KEY_fit.png``, in the result's
     ``plots``)."""

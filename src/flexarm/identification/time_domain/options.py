@@ -96,9 +96,17 @@ def _positive(group, name: str, fields: Sequence[str]) -> None:
 
 @dataclass
 class Cost:
-    """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s);
-    ``quantise``: the converters' rounding in the fitted loop, reached by ``continuation``
-    (the local stage first without it, then with it from that optimum)."""
+    """Eq. (1): ``channels`` measured channel → weight w_c (names alone: 1 each; None: every
+    sensor channel the logs measure, 1); ``residual_level`` λ, the expected misfit as a
+    fraction of each channel's spread; ``correlation_time`` τ (s), the residuals'
+    correlation time. ``quantise``: keep the converters' quantisation in the fitted loop.
+    Off by default: a quantiser inside the loop makes the cost piecewise constant in the
+    parameters at the scale of one count, which stalls finite differences; its effect on
+    the loop is a small noise-like error (the whole-run prediction keeps it).
+    ``continuation``: with ``quantise``, the local stage runs first on the loop without the
+    rounding, then on the rounded loop from its optimum (the servo rig engine's
+    smooth-then-quantised continuation); without ``quantise`` it has no effect.
+    ``substeps``: integration substeps per sample while fitting (None: the scenario's)."""
 
     channels: Mapping[str, float] | None = None
     residual_level: float = 0.05
@@ -117,9 +125,16 @@ class Cost:
 
 @dataclass
 class Shooting:
-    """Multiple shooting: ``segment`` s (None: whole logs), ``burn_in`` s left out of the cost
-    at each segment start, node states estimated, start state from the log or the
-    scenario, then a polish on whole logs."""
+    """Multiple shooting: ``segment`` length (s; None: each log or window is one segment);
+    ``burn_in`` s at the start of each segment left out of the cost; ``estimate_states``:
+    with segments, each segment's start state estimated too (offsets to the state read off
+    the log: the node states); ``initial``: ``"log"``, every segment, a log's first
+    included, starts from the state read off the log, ``"scenario"``, a segment at a log's
+    first sample from the scenario's ``[initial]`` state (a synthetic log that starts where
+    the scenario does); ``polish``: after the segment fit, refine on whole logs (one
+    simulation per log from its start; not for stick-slip runs, whose whole-run cost is
+    chaotic); ``derivative_half_width``: samples each side of the local quadratic fit
+    for ẏ at segment starts."""
 
     segment: float | None = None
     burn_in: float = 0.0
@@ -144,13 +159,19 @@ class Shooting:
 
 @dataclass
 class Local:
-    """SciPy ``least_squares`` (trf): budget (``max_nfev``, restarts included), tolerances,
-    finite-difference step in z (``ftol`` None: derived from the cost's scale,
-    :data:`COST_RESOLUTION` / E[Σ r²], a step lowering Σ r² by less than a tenth of a
-    standard deviation ends the search), and at most
-    ``restarts`` restarts from the optimum with a fresh trust region; a batch of candidates
-    runs as chunks of at most ``max_batch`` on ``threads`` threads at once (None: the CPU
-    cores this process may use)."""
+    """SciPy ``least_squares`` (trf): ``max_nfev`` the budget of evaluations (restarts
+    included); ``ftol``, ``xtol`` relative tolerances on the cost and on the step (``ftol``
+    None: derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]: a step that
+    lowers Σ r² by less than 0.01, a tenth of a standard deviation, ends the search);
+    ``fd_step`` the finite-difference step in z (a relative step of p); ``restarts``: after
+    the local stage converges, at most this many restarts from its optimum with a fresh
+    trust region while budget is left, stopping at the first that lowers Σ r² by less than
+    ``ftol`` of itself (stick-slip friction makes the cost non-smooth: trf's trust region
+    can collapse on a kink far from the optimum; on the two-link split one machine stopped
+    at Σ r² 534 against 453 on others, a restart went on to 479 in five). A batch of
+    candidates (a Jacobian's columns, a generation) runs as chunks of at most ``max_batch``
+    on ``threads`` threads at once (None: the CPU cores this process may use; 1: one
+    call)."""
 
     max_nfev: int = 30
     ftol: float | None = 1e-6
@@ -166,8 +187,9 @@ class Local:
 
 @dataclass
 class GlobalDE:
-    """SciPy ``differential_evolution`` before the local stage (whole generations as one
-    batch)."""
+    """Differential evolution before the local stage (whole generations as one batch):
+    ``popsize`` (× the free parameters), ``maxiter`` generations, ``seed``. Given: the
+    global stage runs; None (``FitOptions.global_de``): it does not."""
 
     popsize: int = 6
     maxiter: int = 8
@@ -192,11 +214,14 @@ class DelaySearch:
 @dataclass
 class Priors:
     """Bounds and priors in log space: p = p0·exp(z), z ∈ [−ln f, ln f] (f =
-    ``bound_factor``) or ``bounds`` (path → (lo, hi) SI); ``priors`` path → relative std
-    σ_p of eq. (2); ``ties`` path → free path moving by the same factor; ``linear``: paths
-    fitted in linear space, p = p0 + s·z, besides the signed fields (bias, offset) and
-    those starting at 0, which always are
-    (:mod:`~flexarm.identification.time_domain.general`)."""
+    ``bound_factor``) or ``bounds`` (path → (lo, hi) in SI, same sign as p0); ``priors``
+    path → relative std σ_p of eq. (2) about the template value (log space); ``ties`` path
+    → free path: the first is not free but moves with the second by the same factor (two
+    channels reading one strain gauge share its gain); ``linear``: paths fitted in linear
+    space, p = p0 + s·z (a linear parameter's prior is its std in units of s), besides the
+    signed fields (bias, offset) and those starting at 0, which always are
+    (:mod:`~flexarm.identification.time_domain.general`); ``corr_warn``: |correlation|
+    above which a pair is reported as not separable. Paths may hold ``[*]``."""
 
     bound_factor: float = 3.0
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
@@ -557,67 +582,11 @@ class ScenarioFitOptions:
     :func:`~flexarm.identification.time_domain.general.fit_scenario` (and
     ``predict_scenario``) convert it with :meth:`FitOptions.from_flat` and a
     ``DeprecationWarning`` naming :class:`FitOptions`; nothing in flexarm builds one. Each
-    field is a field of one of :class:`FitOptions`' groups (:data:`FLAT_FIELDS`;
-    ``global_stage`` is ``FitOptions.global_de`` given), where the validation lives.
-
-    channels: measured channel → weight (default: every sensor channel the logs hold, 1).
-    bound_factor: default bounds p0/f … p0·f. bounds: path → (lo, hi) in SI (same sign as
-    p0). priors: path → relative standard deviation (log space) about the template value.
-    segment: multiple-shooting segment length (s); None: each log (window) is one segment.
-    burn_in: seconds at the start of each segment left out of the cost.
-    windows: per log (t0, t1) in s from its first sample, or None for the whole log.
-    residual_level, correlation_time: λ and τ of eq. (1). max_nfev: least-squares budget.
-    ftol, xtol: SciPy's relative tolerances on the cost and on the step; ``ftol`` None:
-    derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]
-    (:meth:`_Engine.expected_cost`: a step that lowers Σ r² by less than 0.01, a move of a
-    tenth of a standard deviation, ends the search).
-    fd_step: finite-difference step in z (relative step of p). global_stage: run
-    differential evolution first (popsize, maxiter, seed). derivative_half_width: samples
-    each side of the local quadratic fit for ẏ at segment starts. corr_warn: |corr| above
-    which a pair is reported as not separable. max_batch: most candidates per vmapped call.
-    threads: a batch of candidates (a Jacobian's columns, a generation) is cut into this
-    many equal chunks run at once (None: the CPU cores this process may use; 1: one call).
-    estimate_states: with segments, estimate each segment's start state too (offsets to
-    the log-derived state; multiple shooting's node states).
-    quantise: keep the converters' quantisation in the fitted simulation. Off by default:
-    a quantiser inside the loop makes the cost piecewise constant in the parameters at the
-    scale of one count, which stalls finite differences; its effect on the loop is a
-    small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
-    substeps: integration substeps per sample while fitting (None: the scenario's).
-    ties: path → free path: the first is not free but moves with the second by the same
-    factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
-    period_tolerance: a log whose clock is off the scenario's period by at most this
-    (relative) is read on the scenario's grid, with a note
-    (:func:`flexarm.io.logs.on_sample_grid`); beyond it, one line naming the figure.
-    linear: paths fitted in linear space besides the signed ones (:data:`SIGNED_FIELDS`, a
-    template value of 0): p = p0 + s z (module docstring); a linear parameter's prior is
-    its std in units of its scale s.
-    initial: ``"log"``: every segment, the first of a log included, starts from the state
-    read off the log; ``"scenario"``: a segment at a log's first sample starts from the
-    scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
-    polish: after the segment fit, refine on whole logs (each one simulation from its start;
-    only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
-    continuous: the logs, in order, are consecutive pieces of one run: each log's dynamic
-    controller blocks start from the state reached by running them on the logged signals
-    of the logs before (and the digital filters from their states there)
-    (:func:`flexarm.sim.filters.continuous_starts`); without it they start each log from
-    their ``initial_state``. Whole logs only (no ``windows``).
-    continuation: with ``quantise``, the local stage runs first on the loop without the
-    converters' rounding, then on the rounded loop from its optimum (the servo rig
-    engine's smooth-then-quantised continuation); without ``quantise`` it has no effect.
-    restarts: after the local stage converges, at most this many restarts of it from its
-    optimum with a fresh trust region, while budget (``max_nfev``, all runs together) is
-    left; the search stops at the first restart that lowers Σ r² by less than ``ftol`` of
-    itself (whose result is not kept). Stick-slip friction makes the cost non-smooth: trf's
-    trust region can collapse on a kink (a step of Δ Σ r² ≈ 0.001, then ``xtol``) far from
-    the optimum. On the two-link split this happened on one machine (Σ r² 534 after 20
-    evaluations against 453 on others: rounding differs between CPUs); a restart went on
-    to 479 in five.
-    delay_search: a :class:`~flexarm.identification.time_domain.options.DelaySearch`: after
-    the local stage, the sensors' pure delays (samples) are searched and the local stage is
-    run again at the chosen ones (:mod:`~flexarm.identification.time_domain.delays`); None:
-    the scenario's delays as given.
-    """
+    field is a field of one of :class:`FitOptions`' groups, documented and checked there
+    (:data:`FLAT_FIELDS`: ``segment`` → ``FitOptions.shooting.segment``, ``max_nfev`` →
+    ``FitOptions.local.max_nfev``, ``bounds`` → ``FitOptions.priors.bounds``, ...);
+    ``global_stage`` is ``FitOptions.global_de`` given, ``popsize``, ``maxiter``, ``seed``
+    its fields."""
 
     channels: Mapping[str, float] | None = None
     bound_factor: float = 3.0
