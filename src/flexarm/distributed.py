@@ -64,7 +64,12 @@ manifest's folder; lists are ``;``-separated):
   K_g, ``motor_constant`` K_m (V·s/rad or N·m/A), ``armature_resistance`` R (Ω),
   ``link_length`` L (m), ``voltage_limit`` (V), ``computation_delay`` (samples),
   ``tip_sign`` (+1 or -1 when known), ``encoder_counts`` (per revolution when known);
-* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``).
+* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``): a
+  servo rig row's go to its engine; a scenario row's are the fit options' field names
+  (``max_nfev``, ``segment``, ``residual_level``, ``global_stage``, ...), each to its
+  group of :class:`~flexarm.identification.time_domain.options.FitOptions`
+  (``FitOptions.from_fields``), over the preset's options when the row lists no free
+  parameters.
 
 Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, error,
 n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
