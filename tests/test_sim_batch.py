@@ -8,8 +8,8 @@ import threading
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import ScenarioFitOptions
 from flexarm.identification.time_domain.general import fit_scenario
+from flexarm.identification.time_domain.options import FitOptions, Local, Shooting
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.sim.batch import cpu_cores, one_blas_thread, run_chunks
 from flexarm.specs.paths import scenario_with
@@ -89,7 +89,10 @@ def test_fit_on_threads_equals_the_fit_in_one_call():
             template,
             [log],
             free,
-            ScenarioFitOptions(segment=1.0, max_nfev=3, restarts=0, threads=threads),
+            FitOptions(
+                shooting=Shooting(segment=1.0),
+                local=Local(max_nfev=3, restarts=0, threads=threads),
+            ),
             predict=False,
         )
         for threads in (1, 2)

@@ -417,12 +417,13 @@ def test_lqg_stair_replayed_from_ten_files_with_and_without_continuous(tmp_path,
 def test_continuous_predicts_whole_logs_only():
     """continuous runs whole logs as one run: a window is refused in one line, in the one
     prediction and in the general engine's options."""
-    from flexarm.identification.time_domain.general import ScenarioFitOptions
-    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.options import FitOptions, PredictOptions
     from flexarm.identification.time_domain.predict import predict
 
     lg = Log(Path("a.mat"), np.arange(5) * 2e-3, {"theta_1": np.zeros(5)})
     with pytest.raises(ValueError, match=r"continuous .* whole logs; leave out windows"):
         predict("quanser-two-link", [lg], PredictOptions(continuous=True, windows=[(0, 1)]))
-    with pytest.raises(ValueError, match=r"continuous .* whole logs; leave out windows"):
-        ScenarioFitOptions(continuous=True, windows=[(0.0, 1.0)]).check()
+    with pytest.raises(
+        ValueError, match=r"FitOptions\.continuous: .* whole logs; leave out windows"
+    ):
+        FitOptions(continuous=True, windows=[(0.0, 1.0)]).check()

@@ -142,7 +142,8 @@ def test_replay_and_predict_apply_the_zeroing():
     the same loop, numpy round-off); the same scenario without it misses the shoulder
     gauge (it reads the ringing in the window and keeps the offset)."""
     from flexarm.analysis.replay import replay
-    from flexarm.identification.time_domain import ScenarioFitOptions, predict_scenario
+    from flexarm.identification.time_domain import predict_scenario
+    from flexarm.identification.time_domain.options import FitOptions, Shooting
     from flexarm.io.logs import Log
     from flexarm.sim.build import prepare, to_result
     from flexarm.sim.sampled import simulate_loop
@@ -170,7 +171,7 @@ def test_replay_and_predict_apply_the_zeroing():
     )
     rep = replay(scz, log)
     assert min(rep.fit_percent.values()) > 99.999, rep.fit_percent
-    opts = ScenarioFitOptions(initial="scenario")
+    opts = FitOptions(shooting=Shooting(initial="scenario"))
     with_z = predict_scenario(scz, [log], opts)["fit_percent"]["zeroed.csv"]
     assert min(with_z.values()) > 99.999, with_z
     without = predict_scenario(sc.model_copy(update={"simulation": scz.simulation}), [log], opts)[

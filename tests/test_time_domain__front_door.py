@@ -5,6 +5,8 @@ test_time_domain_general (a current drive with Coulomb friction, a sampled PD)."
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,10 +16,14 @@ import pytest
 import flexarm
 from flexarm.identification.time_domain import presets
 from flexarm.identification.time_domain.options import (
+    FLAT_FIELDS,
     Cost,
     FitOptions,
+    GlobalDE,
     Local,
     PredictOptions,
+    Priors,
+    ScenarioFitOptions,
     Shooting,
 )
 from flexarm.identification.time_domain.result import FitResult
@@ -61,7 +67,7 @@ def test_log_keys_keep_same_names_in_other_folders_apart(tmp_path):
 def test_a_scenario_without_free_runs_its_preset_and_says_which():
     two = presets.for_scenario(flexarm.load_scenario("quanser-two-link"))
     assert two.free == presets.two_link().free and len(two.free) == 9  # 15 after [*]
-    assert two.options.priors["arm.hubs[1].inertia"] == 0.3
+    assert two.options.priors.priors["arm.hubs[1].inertia"] == 0.3
     feliu = presets.for_scenario(flexarm.load_scenario("feliu-single-mass"))
     assert feliu.free == ["arm.friction.coulomb", "arm.friction.static", "arm.motor.viscous"]
     with pytest.raises(ValueError, match="deluca-two-link.*no \\[sampling\\]"):
@@ -115,16 +121,128 @@ def test_fit_result_document_round_trip_and_default_free(short_run, tmp_path):
     assert "arm.joints[0].friction.coulomb" in repr(res) and "a/run.csv" in repr(pred)
 
 
-def test_grouped_options_map_onto_the_engine():
-    flat = FitOptions(
+def test_grouped_options_resolve_for_the_engine():
+    """The engine reads ``options.<group>.<field>`` of resolved options: every engine group
+    filled (the defaults where none is given), the given fields kept, no global stage or
+    delay search unless given."""
+    opts = FitOptions(
         cost=Cost(residual_level=0.2), shooting=Shooting(segment=3.0), windows=[(0.0, 5.0)]
-    ).engine_options()
-    assert (flat.residual_level, flat.segment, flat.windows, flat.global_stage) == (
+    ).resolved()
+    assert (opts.cost.residual_level, opts.shooting.segment, opts.windows) == (
         0.2,
         3.0,
         [(0.0, 5.0)],
-        False,
     )
+    assert opts.cost.correlation_time == Cost().correlation_time
+    assert (opts.local, opts.priors) == (Local(), Priors())
+    assert (opts.global_de, opts.delay_search) == (None, None)
+    assert FitOptions(global_de=GlobalDE(popsize=4)).resolved().global_de == GlobalDE(popsize=4)
+
+
+def test_given_groups_override_only_their_changed_fields_over_a_preset():
+    """Over a preset's options (the two-link arm's) only the fields a given group changes
+    from its defaults override: ``Local(max_nfev=60)`` keeps the preset's ``ftol`` None,
+    ``Priors(priors=...)`` keeps its bounds, ties and bound factor; the preset's options
+    themselves are left as they were (the resolved groups are fresh objects)."""
+    base = presets.two_link().options
+    before = copy.deepcopy(base)
+    mine = FitOptions(
+        local=Local(max_nfev=60),
+        priors=Priors(priors={"arm.hubs[1].inertia": 0.1}),
+        global_de=GlobalDE(seed=3),
+        period_tolerance=1e-3,
+    )
+    opts = mine.resolved(base)
+    assert (opts.local.max_nfev, opts.local.ftol) == (60, None)
+    assert opts.priors.priors == {"arm.hubs[1].inertia": 0.1}
+    assert (opts.priors.bounds, opts.priors.ties) == (base.priors.bounds, base.priors.ties)
+    assert opts.priors.bound_factor == 4.0
+    assert (opts.cost, opts.shooting) == (base.cost, base.shooting)
+    assert opts.global_de == GlobalDE(seed=3) and opts.period_tolerance == 1e-3
+    opts.cost.substeps = 99
+    opts.priors.priors["x"] = 1.0
+    assert base == before
+    assert mine.priors.priors == {"arm.hubs[1].inertia": 0.1, "x": 1.0}  # values shared
+
+
+@pytest.mark.parametrize(
+    "opts, named",
+    [
+        (FitOptions(shooting=Shooting(segment=-1.0)), r"FitOptions\.shooting\.segment = -1.0 s"),
+        (FitOptions(shooting=Shooting(initial="rest")), r"FitOptions\.shooting\.initial = 'rest'"),
+        (FitOptions(cost=Cost(residual_level=0.0)), r"FitOptions\.cost\.residual_level = 0.0"),
+        (FitOptions(local=Local(fd_step=float("nan"))), r"FitOptions\.local\.fd_step = nan"),
+        (FitOptions(priors=Priors(bound_factor=1.0)), r"FitOptions\.priors\.bound_factor = 1.0"),
+        (FitOptions(period_tolerance=-1.0), r"FitOptions\.period_tolerance = -1.0"),
+    ],
+)
+def test_bad_options_name_the_grouped_field(opts, named):
+    with pytest.raises(ValueError, match=named):
+        opts.resolved().check()
+
+
+def test_flat_fields_map_to_groups_and_back():
+    """``FitOptions.from_flat`` is the exact inverse of the old flat mapping: every one of
+    the flat record's fields lands on one grouped field with its value (``global_stage``:
+    ``global_de`` given); ``from_fields`` (fit-many's row options) gives only the groups
+    named, and an unknown name is one line listing the known ones."""
+    flat = ScenarioFitOptions(
+        segment=2.0,
+        max_nfev=7,
+        priors={"a": 0.3},
+        residual_level=0.3,
+        global_stage=True,
+        popsize=4,
+        windows=[(0.0, 1.0)],
+        period_tolerance=1e-3,
+        corr_warn=0.9,
+        threads=1,
+    )
+    opts = FitOptions.from_flat(flat)
+    for name, (group, field) in FLAT_FIELDS.items():
+        got = getattr(opts, field) if not group else getattr(getattr(opts, group), field)
+        assert got == getattr(flat, name), name
+    assert len(FLAT_FIELDS) + 1 == len(dataclasses.fields(ScenarioFitOptions))  # global_stage
+    assert FitOptions.from_flat(ScenarioFitOptions()).global_de is None
+    row = FitOptions.from_fields(max_nfev=10, segment=3.0)
+    assert (row.local, row.shooting) == (Local(max_nfev=10), Shooting(segment=3.0))
+    assert (row.cost, row.priors, row.global_de) == (None, None, None)
+    with pytest.raises(ValueError, match=r"fit option 'max_iter': not an option of the fit"):
+        FitOptions.from_fields(max_iter=3)
+
+
+def test_deprecated_flat_record_warns_and_fits_as_the_grouped_options():
+    """The old flat record is still accepted by ``fit_scenario`` and ``flexarm.fit``, with
+    a ``DeprecationWarning`` naming ``FitOptions``, and gives the grouped options' fit bit
+    for bit (the same resolved options); its bad values are named by the grouped field."""
+    from flexarm.identification.time_domain.general import fit_scenario
+
+    truth = two_mode_link()
+    short = truth.model_copy(
+        update={"simulation": truth.simulation.model_copy(update={"duration": 0.5})}
+    )
+    t = np.arange(251) * 0.002
+    log = scenario_log(short, {"reference": staircase(t, [0.0, 0.3], 0.25)}, seed=5)
+    free = ["arm.hubs[0].inertia"]
+    template = scenario_with(short, {free[0]: 0.024})
+    grouped = fit_scenario(
+        template,
+        [log],
+        free,
+        FitOptions(shooting=Shooting(segment=0.25), local=Local(max_nfev=2)),
+        predict=False,
+    )
+    with pytest.warns(DeprecationWarning, match="ScenarioFitOptions .* deprecated.*FitOptions"):
+        flat = fit_scenario(
+            template, [log], free, ScenarioFitOptions(segment=0.25, max_nfev=2), predict=False
+        )
+    assert flat.params == grouped.params and flat.cost == grouped.cost
+    assert grouped.params[free[0]] != 0.024  # it moved: the comparison is not vacuous
+    with (
+        pytest.warns(DeprecationWarning, match="flexarm.fit: ScenarioFitOptions"),
+        pytest.raises(ValueError, match=r"FitOptions\.shooting\.segment = -1.0 s"),
+    ):
+        flexarm.fit(template, [log], free, ScenarioFitOptions(segment=-1.0))
 
 
 @pytest.mark.slow

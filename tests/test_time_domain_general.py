@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexarm.identification.time_domain import ScenarioFitOptions
 from flexarm.identification.time_domain.general import fit_scenario
+from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
 from flexarm.identification.time_domain.synthetic import scenario_log
 from flexarm.specs.paths import expand_paths, parse_path, scenario_with
 from flexarm.specs.scenario import load_scenario, scenario_from_dict
@@ -118,7 +118,8 @@ def test_two_mode_link_recovered_within_5_percent():
         "arm.joints[0].drive.torque_constant",
         "arm.links[0].damping_ratio",
     ]
-    res, err = _recover(truth, free, ref, ScenarioFitOptions(segment=0.5, polish=True, max_nfev=60))
+    opts = FitOptions(shooting=Shooting(segment=0.5, polish=True), local=Local(max_nfev=60))
+    res, err = _recover(truth, free, ref, opts)
     assert all(abs(e) < 0.05 for e in err.values()), err
     # the whole-run prediction of the fitted model matches the log (noise only: > 97 %)
     assert res.fit_percent["synthetic"]["theta_1"] > 97
@@ -159,7 +160,8 @@ def test_feliu_current_driven_arm_recovered_within_5_percent():
         "arm.beam.youngs_modulus",
         "arm.beam.masses[0].mass",
     ]
-    res, err = _recover(truth, free, ref, ScenarioFitOptions(segment=0.6, polish=True, max_nfev=60))
+    opts = FitOptions(shooting=Shooting(segment=0.6, polish=True), local=Local(max_nfev=60))
+    res, err = _recover(truth, free, ref, opts)
     assert all(abs(e) < 0.05 for e in err.values()), err
     # a pinned tip mass on a massless wire: only ω² = 3EI/(L³m) and the coupling C = 3EI/L
     # reach the hub, and the data barely separate EI from m: the fit must say so
@@ -176,20 +178,30 @@ def test_bad_input_names_the_field_and_value():
     free = ["arm.hubs[0].inertia"]
     with pytest.raises(ValueError, match=r"bounds\['arm.hubs\[0\].inertia'\].*does not contain"):
         fit_scenario(
-            truth, [log], free, ScenarioFitOptions(bounds={"arm.hubs[0].inertia": (0.03, 0.05)})
+            truth,
+            [log],
+            free,
+            FitOptions(priors=Priors(bounds={"arm.hubs[0].inertia": (0.03, 0.05)})),
         )
     with pytest.raises(ValueError, match="has a prior or bounds but is not free"):
-        fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.joints[0].viscous": 0.3}))
+        fit_scenario(
+            truth, [log], free, FitOptions(priors=Priors(priors={"arm.joints[0].viscous": 0.3}))
+        )
     # a parameter at 0 is fitted in linear space and needs a scale (#44): named, with --bound
     with pytest.raises(ValueError, match=r"arm.hubs\[0\].mass' starts at 0 .*--bound"):
         fit_scenario(truth, [log], ["arm.payload.mass"] * 0 + ["arm.hubs[0].mass"])
     with pytest.raises(ValueError, match="no log holds channel 'theta_2'|not a sensor channel"):
-        fit_scenario(truth, [log], free, ScenarioFitOptions(channels={"theta_2": 1.0}))
+        fit_scenario(truth, [log], free, FitOptions(cost=Cost(channels={"theta_2": 1.0})))
     slow = log.__class__(log.path, log.time * 2, log.signals)
     with pytest.raises(ValueError, match="sampled every 0.004 s.*period is 0.002 s"):
         fit_scenario(truth, [slow], free)
-    with pytest.raises(ValueError, match="relative standard deviation"):
-        fit_scenario(truth, [log], free, ScenarioFitOptions(priors={"arm.hubs[0].inertia": 0.0}))
+    with pytest.raises(
+        ValueError,
+        match=r"FitOptions\.priors\.priors\['arm.hubs\[0\].inertia'\] = 0.0: the relative standard",
+    ):
+        fit_scenario(
+            truth, [log], free, FitOptions(priors=Priors(priors={"arm.hubs[0].inertia": 0.0}))
+        )
     blind = log.__class__(
         log.path, log.time, {k: v for k, v in log.signals.items() if k != "theta_1"}
     )
@@ -200,7 +212,11 @@ def test_bad_input_names_the_field_and_value():
             truth,
             [blind],
             free,
-            ScenarioFitOptions(channels={"deflection_1": 1.0}, segment=0.1, max_nfev=1),
+            FitOptions(
+                cost=Cost(channels={"deflection_1": 1.0}),
+                shooting=Shooting(segment=0.1),
+                local=Local(max_nfev=1),
+            ),
         )
     with pytest.raises(ValueError, match="none of scenario .* sensor channels"):
         fit_scenario(truth, [log.__class__(log.path, log.time, {"x": log.time})], free)
@@ -222,11 +238,11 @@ def test_prior_pulls_an_unidentifiable_parameter_to_its_data_sheet_value():
         truth,
         [log],
         ["sensors.deflection_1.gain"],
-        ScenarioFitOptions(
-            channels={"theta_1": 1.0},
-            initial="scenario",
-            priors={"sensors.deflection_1.gain": 0.25},
-            max_nfev=5,
+        FitOptions(
+            cost=Cost(channels={"theta_1": 1.0}),
+            shooting=Shooting(initial="scenario"),
+            priors=Priors(priors={"sensors.deflection_1.gain": 0.25}),
+            local=Local(max_nfev=5),
         ),
     )
     assert res.params["sensors.deflection_1.gain"] == pytest.approx(1.0, abs=1e-9)
@@ -327,11 +343,13 @@ def test_two_link_rig_model_recovered_from_segments_started_on_the_log():
         template,
         [log],
         free,
-        ScenarioFitOptions(
-            segment=1.5,
-            substeps=4,
-            max_nfev=30,
-            channels={c: 1.0 for c in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")},
+        FitOptions(
+            cost=Cost(
+                channels={c: 1.0 for c in ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")},
+                substeps=4,
+            ),
+            shooting=Shooting(segment=1.5),
+            local=Local(max_nfev=30),
         ),
         predict=False,
     )
@@ -358,7 +376,9 @@ def test_quantised_fit_reached_by_continuation():
     free = ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous", "arm.hubs[0].inertia"]
     errs = {}
     for cont in (False, True):
-        opts = ScenarioFitOptions(quantise=True, continuation=cont, segment=0.5)
+        opts = FitOptions(
+            cost=Cost(quantise=True, continuation=cont), shooting=Shooting(segment=0.5)
+        )
         res, errs[cont] = _recover(truth, free, ref, opts)
         assert ("smooth" in res.stages) is cont
     assert abs(errs[False]["arm.joints[0].friction.coulomb"]) >= 0.15, errs[False]
@@ -387,14 +407,17 @@ def test_restart_goes_on_where_a_collapsed_trust_region_stopped():
     template = scenario_with(short, {p: float(_get(d, p)) * 1.3 for p in free})
     costs = {}
     for k in (0, 2):
-        opts = ScenarioFitOptions(xtol=0.2, max_nfev=30, restarts=k, estimate_states=False)
+        opts = FitOptions(
+            local=Local(xtol=0.2, max_nfev=30, restarts=k),
+            shooting=Shooting(estimate_states=False),
+        )
         res = fit_scenario(template, [log], free, opts, predict=False)
         costs[k] = res.stages["local"]["cost"]
         gains = res.stages["local"]["restarts"]
         if k == 0:
             assert gains == []
         else:
-            assert gains and gains[0] > opts.ftol * costs[0], gains
+            assert gains and gains[0] > Local().ftol * costs[0], gains
     print("local cost without / with restarts:", costs)
     assert costs[2] < costs[0] * (1 - 1e-6), costs
 
@@ -417,7 +440,7 @@ def test_signed_bias_fitted_in_linear_space_from_zero():
     )
     free = ["arm.joints[0].friction.bias", "arm.joints[0].friction.coulomb"]
     template = scenario_with(truth, {free[0]: 0.0, free[1]: 0.02 * 1.3})
-    res = fit_scenario(template, [log], free, ScenarioFitOptions(max_nfev=20))
+    res = fit_scenario(template, [log], free, FitOptions(local=Local(max_nfev=20)))
     bias, sd = res.params[free[0]], res.std[free[0]]
     print("bias", bias, "+-", sd, "coulomb", res.params[free[1]], res.stages.get("linear"))
     assert res.stages["linear"] == [free[0]]
@@ -435,13 +458,18 @@ def test_signed_parameter_at_zero_without_a_scale_names_the_bound_option():
         {"reference": np.full(101, 0.1)},
     )
     with pytest.raises(ValueError, match=r"starts at 0 .*--bound arm\.joints\[0\]\.friction\.bias"):
-        fit_scenario(truth, [log], ["arm.joints[0].friction.bias"], ScenarioFitOptions(max_nfev=2))
+        fit_scenario(
+            truth, [log], ["arm.joints[0].friction.bias"], FitOptions(local=Local(max_nfev=2))
+        )
     # with a range it has its scale (half the range / bound_factor) and bounds that may
     # change sign: one evaluation runs
     res = fit_scenario(
         truth,
         [log],
         ["arm.joints[0].friction.bias"],
-        ScenarioFitOptions(max_nfev=1, bounds={"arm.joints[0].friction.bias": (-0.03, 0.03)}),
+        FitOptions(
+            local=Local(max_nfev=1),
+            priors=Priors(bounds={"arm.joints[0].friction.bias": (-0.03, 0.03)}),
+        ),
     )
     assert res.stages["linear"] == ["arm.joints[0].friction.bias"]

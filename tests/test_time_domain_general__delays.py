@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import flexarm
-from flexarm.identification.time_domain import ScenarioFitOptions, presets
+from flexarm.identification.time_domain import presets
 from flexarm.identification.time_domain.general import fit_scenario
 from flexarm.identification.time_domain.options import DelaySearch, FitOptions, Shooting
 from flexarm.identification.time_domain.synthetic import scenario_log
@@ -80,7 +80,7 @@ def test_delay_search_recovers_the_tip_sensor_delay_and_the_parameters():
 
     # without the search the delay is taken as given and the friction is biased by the lag
     plain = fit_scenario(
-        template, [log], FREE, ScenarioFitOptions(initial="scenario"), predict=False
+        template, [log], FREE, FitOptions(shooting=Shooting(initial="scenario")), predict=False
     )
     assert "delay_search" not in plain.stages
     assert plain.scenario.sensors["deflection_1"].delay == 0
@@ -101,24 +101,29 @@ def test_delay_search_bad_input_names_the_field_value_and_channels():
         match=r"DelaySearch\.channels: 'nope' is not a sensor channel of scenario "
         r"'two-mode-link'; channels: theta_1, deflection_1",
     ):
-        fit_scenario(truth, [log], free, ScenarioFitOptions(delay_search=DelaySearch(["nope"])))
+        fit_scenario(truth, [log], free, FitOptions(delay_search=DelaySearch(["nope"])))
     with pytest.raises(ValueError, match=r"DelaySearch\.max_delay = -1: give a whole number"):
-        fit_scenario(truth, [log], free, ScenarioFitOptions(delay_search=DelaySearch(max_delay=-1)))
+        fit_scenario(truth, [log], free, FitOptions(delay_search=DelaySearch(max_delay=-1)))
     with pytest.raises(ValueError, match=r"DelaySearch\.channels = 'theta_1': give a list"):
         fit_scenario(
             truth,
             [log],
             free,
-            ScenarioFitOptions(delay_search=DelaySearch("theta_1")),  # type: ignore[arg-type]
+            FitOptions(delay_search=DelaySearch("theta_1")),  # type: ignore[arg-type]
         )
 
 
 def test_delay_search_reaches_the_engine_and_the_servo_rig_refuses_it():
-    """``FitOptions.delay_search`` is carried to the general engine's flat options; the
-    servo rig's engine, which has its own (``ServoRig.delay_search``), refuses the group."""
+    """``FitOptions.delay_search`` is what the general engine reads (the resolved options
+    keep the very object; None: no search); the servo rig's engine, which has its own
+    (``ServoRig.delay_search``), refuses the group."""
     search = DelaySearch(channels=["deflection_1"], max_delay=5)
-    assert FitOptions(delay_search=search).engine_options().delay_search is search
-    assert FitOptions().engine_options().delay_search is None
+    assert FitOptions(delay_search=search).resolved().delay_search is search
+    assert FitOptions().resolved().delay_search is None
+    # a preset's search stays under options that do not give one, and a given one replaces it
+    base = FitOptions(delay_search=DelaySearch(max_moves=3))
+    assert FitOptions().resolved(base).delay_search == DelaySearch(max_moves=3)
+    assert FitOptions(delay_search=search).resolved(base).delay_search is search
     preset = presets.servo_rig(presets.DataSheet(gear_ratio=70.0))
     with pytest.raises(ValueError, match=r"FitOptions\.delay_search: the rotary servo preset"):
         flexarm.fit(preset, ["no-such-log.csv"], options=FitOptions(delay_search=search))

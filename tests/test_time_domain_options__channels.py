@@ -17,12 +17,10 @@ def test_channel_names_weigh_one_each_and_weights_are_kept():
         "motor_angle": 2.0,
         "current": 0.5,
     }
-    assert FitOptions(cost=Cost(channels="current")).engine_options(None).channels == {
-        "current": 1.0
-    }
+    assert FitOptions(cost=Cost(channels="current")).resolved().cost.channels == {"current": 1.0}
+    # the deprecated flat record's names become weights on conversion (FitOptions.from_flat)
     flat = ScenarioFitOptions(channels=["tip_deflection"])
-    flat.check()
-    assert flat.channels == {"tip_deflection": 1.0}
+    assert FitOptions.from_flat(flat).cost.channels == {"tip_deflection": 1.0}
 
 
 @pytest.mark.parametrize("bad", [[1, 2], {"a": -1.0}, {"a": float("nan")}, 3.0, {"a": True}])

@@ -114,15 +114,14 @@ def test_prediction_from_the_logged_state_equals_replay():
     ±10 samples; replay: the logged 40 Hz-filtered rate, which lags by 2ζ/ω = 7 ms);
     measured differences 0.00–0.07 points."""
     from flexarm.analysis.replay import replay
-    from flexarm.identification.time_domain.general import ScenarioFitOptions, predict_scenario
+    from flexarm.identification.time_domain.general import predict_scenario
+    from flexarm.identification.time_domain.options import FitOptions
     from flexarm.identification.time_domain.two_link import load_split
     from flexarm.specs.scenario import load_scenario
 
     sc = load_scenario("quanser-two-link")
     run = load_split(DATA, EXAMPLES)["run"]
-    ours = predict_scenario(
-        sc, [run], ScenarioFitOptions(windows=[(50.0, 102.0)]), channels=list(CHANNELS)
-    )
+    ours = predict_scenario(sc, [run], FitOptions(windows=[(50.0, 102.0)]), channels=list(CHANNELS))
     theirs = replay(sc, run, window=(50.0, run.time[-1]))
     got = next(iter(ours["fit_percent"].values()))
     for c in CHANNELS:

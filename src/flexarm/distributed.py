@@ -64,7 +64,12 @@ manifest's folder; lists are ``;``-separated):
   K_g, ``motor_constant`` K_m (V·s/rad or N·m/A), ``armature_resistance`` R (Ω),
   ``link_length`` L (m), ``voltage_limit`` (V), ``computation_delay`` (samples),
   ``tip_sign`` (+1 or -1 when known), ``encoder_counts`` (per revolution when known);
-* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``).
+* ``options``: further fit keywords, ``key=value;...`` (e.g. ``seed=0;popsize=8``): a
+  servo rig row's go to its engine; a scenario row's are the fit options' field names
+  (``max_nfev``, ``segment``, ``residual_level``, ``global_stage``, ...), each to its
+  group of :class:`~flexarm.identification.time_domain.options.FitOptions`
+  (``FitOptions.from_fields``), over the preset's options when the row lists no free
+  parameters.
 
 Empty cells take the fit's defaults. ``summary.csv``: ``id, status, seconds, error,
 n_warnings, warnings``, then per parameter ``<name>`` and ``<name>_std``, and per log and
@@ -762,13 +767,14 @@ def fit_row(row: FitRow) -> tuple[Any, dict]:
         )
         res = fit(preset, full, options=opts)
     else:
-        from flexarm.identification.time_domain.general import ScenarioFitOptions
         from flexarm.io.logformat import load_log
         from flexarm.specs import load_scenario
 
         assert row.scenario is not None  # a row without a preset names its scenario
         full = [load_log(p, row.log_format) for p in row.logs]
-        opts = ScenarioFitOptions(
+        # the row's options by the fit's field names (max_nfev, segment, ...), each to its
+        # group; over the preset's options where the row lists no free parameters
+        opts = FitOptions.from_fields(
             windows=[row.window] * len(full) if row.window else None, **row.options
         )
         res = fit(load_scenario(row.scenario), full, list(row.free) if row.free else None, opts)

@@ -4,8 +4,9 @@ kind (:mod:`~flexarm.identification.time_domain.presets`), one result
 (:class:`~flexarm.identification.time_domain.result.FitResult`), one prediction
 (:func:`~flexarm.identification.time_domain.predict.predict`, ``flexarm.validate``).
 ``FitOptions`` is the one fit's grouped options
-(:class:`~flexarm.identification.time_domain.options.FitOptions`); ``ScenarioFitOptions``
-the general engine's flat record (:func:`fit_scenario`'s).
+(:class:`~flexarm.identification.time_domain.options.FitOptions`), which the general engine
+reads itself; ``ScenarioFitOptions``, the old flat record, is a deprecated input
+(converted by ``FitOptions.from_flat`` with a ``DeprecationWarning``).
 
 Deprecated aliases (a ``DeprecationWarning`` naming the replacement): ``fit`` here (the rotary
 servo pipeline's keyword interface) and ``fit_scenario`` (the general engine's entry), both
@@ -19,13 +20,13 @@ Logs are :class:`flexarm.io.logs.Log`, read by :func:`flexarm.io.logformat.load_
 from importlib import import_module
 
 from flexarm.identification.time_domain.figures import overlay_figure
-from flexarm.identification.time_domain.general import (
-    ScenarioFit,
-    ScenarioFitOptions,
-    predict_scenario,
-)
+from flexarm.identification.time_domain.general import ScenarioFit, predict_scenario
 from flexarm.identification.time_domain.logs import FitInputError, load_rig_log
-from flexarm.identification.time_domain.options import FitOptions, PredictOptions
+from flexarm.identification.time_domain.options import (
+    FitOptions,
+    PredictOptions,
+    ScenarioFitOptions,
+)
 from flexarm.identification.time_domain.predict import Prediction
 from flexarm.identification.time_domain.report import FitResult as RigFitResult
 from flexarm.identification.time_domain.result import FitResult
@@ -80,7 +81,8 @@ def fit(logs, **sheet_and_options):
 
 def fit_scenario(scenario, logs, free=None, options=None, **kw):
     """Deprecated: the general engine's entry point. Use the one fit, ``flexarm.fit(scenario,
-    logs, free, FitOptions(...))`` (a :class:`ScenarioFitOptions` is still accepted there)."""
+    logs, free, FitOptions(...))`` (a :class:`ScenarioFitOptions` is still accepted there,
+    deprecated: converted by ``FitOptions.from_flat``)."""
     import warnings
 
     from flexarm.identification.time_domain import general

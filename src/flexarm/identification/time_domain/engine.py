@@ -7,8 +7,12 @@ or a :class:`~.presets.Preset`. Without ``free`` the preset's default free list 
 (:func:`~.presets.for_scenario`: the scenario's ``[notes.fit]``, the registered preset of a
 built-in, e.g. ``quanser-two-link``'s 15 parameters, or the joints' friction) and the result
 says which (:attr:`~.result.FitResult.free_source`). ``options`` is a grouped
-:class:`~.options.FitOptions` (or, deprecated, the general engine's flat
-:class:`~.general.ScenarioFitOptions`); its groups override the preset's.
+:class:`~.options.FitOptions`; its groups override the preset's
+(:meth:`~.options.FitOptions.resolved`: only the fields a group changes from its defaults),
+and the general engine reads the resolved groups itself. The old flat
+:class:`~.options.ScenarioFitOptions` is still accepted, deprecated: converted by
+:meth:`~.options.FitOptions.from_flat` with a ``DeprecationWarning``, and used whole (no
+preset options under it, as before).
 
 Engines: ``"scenario"`` — the general engine (multiple shooting from the logged state,
 priors, HAC std; :func:`~.general.fit_scenario`); ``"servo_rig"`` — the rotary servo's
@@ -39,7 +43,11 @@ from pathlib import Path
 from typing import Any
 
 from flexarm.identification.fit_quality import fit_quality
-from flexarm.identification.time_domain.options import FitOptions
+from flexarm.identification.time_domain.options import (
+    FitOptions,
+    ScenarioFitOptions,
+    as_fit_options,
+)
 from flexarm.identification.time_domain.presets import Preset, for_scenario
 from flexarm.identification.time_domain.result import FitResult, Prediction
 
@@ -69,17 +77,14 @@ def fit(
     if preset.engine == "servo_rig":
         return _servo_rig(preset, logs, options, progress)
     logs = load_logs(logs)
-    grouped = options if isinstance(options, FitOptions) else None
-    if isinstance(options, general.ScenarioFitOptions):
-        flat = options
-    else:
-        base = preset.options if free is None else None
-        flat = (grouped or FitOptions()).engine_options(base)
+    # the preset's options under the given groups (a deprecated flat record: whole)
+    base = preset.options if free is None and not isinstance(options, ScenarioFitOptions) else None
+    opts = as_fit_options(options, "flexarm.fit").resolved(base)
     source = "given" if free is not None else f"preset {preset.name}"
     free_list = list(free) if free is not None else list(preset.free)
     template, estimates = preset.scenario, None
     if free is None and preset.starts is not None:
-        wins = list(flat.windows or [])
+        wins = list(opts.windows or [])
         wins += [None] * (len(logs) - len(wins))
         fitted = [g if w is None else g.window(*w) for g, w in zip(logs, wins, strict=False)]
         starts, estimates = preset.starts(template, fitted)
@@ -89,23 +94,17 @@ def fit(
         if progress is not None:
             progress(f"start estimates from the logs: {starts or 'none'}")
     res = general.fit_scenario(
-        template,
-        logs,
-        free_list,
-        flat,
-        progress=progress,
-        predict=grouped.predict if grouped is not None else True,
-        plots=grouped.plots if grouped is not None else None,
+        template, logs, free_list, opts, progress=progress, predict=opts.predict, plots=opts.plots
     )
     res.free_source = source
     if estimates is not None:
         res.stages["estimates"] = estimates
     # a poor fit said plainly (the one rule, every preset), with the fit's own bounds
-    ds = flat.delay_search
+    ds = opts.delay_search
     res.warnings += fit_quality(
         res,
-        bounds=flat.bounds,
-        bound_factor=flat.bound_factor,
+        bounds=opts.priors.bounds,
+        bound_factor=opts.priors.bound_factor,
         max_delay=getattr(ds, "max_delay", None),
         max_moves=getattr(ds, "max_moves", None),
     )

@@ -11,10 +11,10 @@ Parameters and cost
 -------------------
 Parameters are positive (or sign-fixed) physical numbers, estimated in log space:
 p_i = p0_i · exp(z_i), p0_i the template value, z_i ∈ [−ln f, ln f] (f =
-``ScenarioFitOptions.bound_factor``; ``ScenarioFitOptions.bounds`` gives absolute bounds per
+``FitOptions.priors.bound_factor``; ``FitOptions.priors.bounds`` gives absolute bounds per
 path). Signed parameters, which may be zero or change sign (a bias torque or force, an
 offset: fields named in :data:`SIGNED_FIELDS`, a template value of 0, or paths listed in
-``ScenarioFitOptions.linear``), are estimated in linear space, p_i = p0_i + s_i z_i, z_i ∈
+``FitOptions.priors.linear``), are estimated in linear space, p_i = p0_i + s_i z_i, z_i ∈
 [−f, f] or their ``bounds``, with the scale s_i = |p0_i|, else half the width of their
 given bounds, else the Coulomb level beside a friction bias; a signed parameter starting
 at 0 without any of these is refused, naming ``--bound``.
@@ -22,7 +22,7 @@ A candidate z becomes a scenario (``model_dump`` → set the paths → ``scenari
 then a loop (:func:`flexarm.sim.build.prepare`); a population of candidates is stacked leaf
 by leaf into one batched loop and run by one ``vmap``-ed simulation.
 
-The residuals stacked for least squares are, per measured channel c of ``options.channels``
+The residuals stacked for least squares are, per measured channel c of ``options.cost.channels``
 (weight w_c), segment s and sample k,
 
     r_c,s,k = √w_c · (ŷ_c,s,k − y_c,s,k) / (λ · σ_c) · √(T / τ)                       (1)
@@ -32,7 +32,7 @@ with σ_c the logged channel's spread (standard deviation over all fitted logs),
 ``correlation_time`` the residuals' correlation time (s), so that Σ r² counts independent
 misfits in units of their expected size (fit % is :func:`flexarm.metrics.fit_percent`,
 100 (1 − ‖y − ŷ‖/‖y − ȳ‖)); and per prior (path → relative std σ_p,
-``options.priors``; the mean is the template value, the data-sheet value)
+``options.priors.priors``; the mean is the template value, the data-sheet value)
 
     r_p = (ln p − ln p0) / σ_p                                                        (2)
 
@@ -41,7 +41,7 @@ depends on λ and τ; the fitted values without priors do not.
 
 Multiple shooting
 -----------------
-With ``options.segment`` = L seconds, each log (or its window) is cut into segments of L s,
+With ``options.shooting.segment`` = L seconds, each log (or its window) is cut into segments of L s,
 each simulated from the logged state at its start, so that a stick-slip run, chaotic in the
 parameters over 100 s (issue #17), yields a cost that is smooth enough for finite
 differences. At a segment start k0 the loop's state is taken from the log:
@@ -82,7 +82,6 @@ H = J_dᵀ J_d + J_pᵀ J_p; std(p) = |p| std(z).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import re
@@ -101,7 +100,11 @@ from flexarm.identification.time_domain.options import (  # re-exported here
     COST_RESOLUTION,
     INITIAL_NFEV,
     INITIALS,
+    Cost,
+    FitOptions,
+    ResolvedOptions,
     ScenarioFitOptions,
+    as_fit_options,
 )
 from flexarm.identification.time_domain.result import FitResult
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
@@ -161,7 +164,7 @@ def _linear_scale(dump: dict, keys: list, path: str, p0: float, bounds, factor: 
             return float(c)
     raise ValueError(
         f"free parameter {path!r} starts at 0 and nothing gives its scale: give its "
-        f"range, --bound {path}=LO:HI (ScenarioFitOptions.bounds / Priors.bounds "
+        f"range, --bound {path}=LO:HI (FitOptions.priors.bounds "
         "{path: (lo, hi)}), or a non-zero starting value in the scenario"
     )
 
@@ -245,16 +248,15 @@ class _Engine:
         scenario,
         logs: Sequence,
         free: Sequence[str],
-        options: ScenarioFitOptions,
+        options: ResolvedOptions,
         segment: float | Literal["options"] | None = "options",
     ):
-        options.check()
-        if options.substeps is not None and scenario.simulation is not None:
+        options.check()  # resolved options (FitOptions.resolved): every engine group given
+        substeps = options.cost.substeps
+        if substeps is not None and scenario.simulation is not None:
             scenario = scenario.model_copy(
                 update={
-                    "simulation": scenario.simulation.model_copy(
-                        update={"substeps": int(options.substeps)}
-                    )
+                    "simulation": scenario.simulation.model_copy(update={"substeps": int(substeps)})
                 }
             )
         self.template = scenario
@@ -268,22 +270,22 @@ class _Engine:
             [_template_value(self.dump, k, p) for k, p in zip(self.keys, self.free, strict=True)]
         )
         # priors and bounds may name paths with [*] too: one entry per element
-        if any("[*]" in p for p in list(options.priors) + list(options.bounds)):
-            options = copy.copy(options)
-            options.priors = {
-                q: v for p, v in options.priors.items() for q in expand_paths(self.dump, [p])
-            }
-            options.bounds = {
-                q: v for p, v in options.bounds.items() for q in expand_paths(self.dump, [p])
-            }
+        pri = options.priors
+        if any("[*]" in p for p in list(pri.priors) + list(pri.bounds)):
+            pri = dataclasses.replace(
+                pri,
+                priors={q: v for p, v in pri.priors.items() for q in expand_paths(self.dump, [p])},
+                bounds={q: v for p, v in pri.bounds.items() for q in expand_paths(self.dump, [p])},
+            )
+            options = dataclasses.replace(options, priors=pri)
             self.options = options
-        for p in list(options.priors) + list(options.bounds):
+        for p in list(pri.priors) + list(pri.bounds):
             if p not in self.free:
                 raise ValueError(
-                    f"ScenarioFitOptions: {p!r} has a prior or bounds but is not free; "
+                    f"FitOptions.priors: {p!r} has a prior or bounds but is not free; "
                     f"free: {', '.join(self.free)}"
                 )
-        lin = set(options.linear) | set(expand_paths(self.dump, list(options.linear)))
+        lin = set(pri.linear) | set(expand_paths(self.dump, list(pri.linear)))
         self.linear = np.array(
             [
                 p in lin or self.p0[i] == 0.0 or k[-1] in SIGNED_FIELDS
@@ -292,7 +294,7 @@ class _Engine:
             bool,
         )
         self.pscale = np.ones(len(self.free))
-        lo = np.full(len(self.free), -math.log(options.bound_factor))
+        lo = np.full(len(self.free), -math.log(pri.bound_factor))
         hi = -lo
         for i, p in enumerate(self.free):
             if self.linear[i]:
@@ -301,50 +303,50 @@ class _Engine:
                     self.keys[i],
                     p,
                     self.p0[i],
-                    options.bounds.get(p),
-                    options.bound_factor,
+                    pri.bounds.get(p),
+                    pri.bound_factor,
                 )
-                lo[i], hi[i] = -options.bound_factor, options.bound_factor
-                if p in options.bounds:
-                    a, b = sorted(float(v) for v in options.bounds[p])
+                lo[i], hi[i] = -pri.bound_factor, pri.bound_factor
+                if p in pri.bounds:
+                    a, b = sorted(float(v) for v in pri.bounds[p])
                     if not a <= self.p0[i] <= b:
                         raise ValueError(
-                            f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not "
+                            f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not "
                             f"contain the template value {self.p0[i]:g}; move one of them"
                         )
                     lo[i] = (a - self.p0[i]) / self.pscale[i]
                     hi[i] = (b - self.p0[i]) / self.pscale[i]
                 continue
-            if p in options.bounds:
-                a, b = (float(v) for v in options.bounds[p])
+            if p in pri.bounds:
+                a, b = (float(v) for v in pri.bounds[p])
                 if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
                     raise ValueError(
-                        f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
+                        f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
                         f"must have the sign of the template value {self.p0[i]:g}"
                     )
                 za, zb = sorted((math.log(a / self.p0[i]), math.log(b / self.p0[i])))
                 if not za <= 0 <= zb:
                     raise ValueError(
-                        f"ScenarioFitOptions.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
+                        f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
                         f"the template value {self.p0[i]:g}; move one of them"
                     )
                 lo[i], hi[i] = za, zb
         self.lo, self.hi = lo, hi
-        self.sigma = np.array([options.priors.get(p, np.inf) for p in self.free])
+        self.sigma = np.array([pri.priors.get(p, np.inf) for p in self.free])
         self.tied = {}
-        for p, master in options.ties.items():
+        for p, master in pri.ties.items():
             if master not in self.free:
                 raise ValueError(
-                    f"ScenarioFitOptions.ties: {p!r} follows {master!r}, which is not "
+                    f"FitOptions.priors.ties: {p!r} follows {master!r}, which is not "
                     f"free; free: {', '.join(self.free)}"
                 )
             if self.linear[self.free.index(master)]:
                 raise ValueError(
-                    f"ScenarioFitOptions.ties: {p!r} follows {master!r}, a signed parameter "
+                    f"FitOptions.priors.ties: {p!r} follows {master!r}, a signed parameter "
                     "fitted in linear space; ties follow log-space (positive) parameters"
                 )
             self.tied[p] = (self.free.index(master), _template_value(self.dump, parse_path(p), p))
-        scenario = _with_command_channels(scenario, list(options.channels or {}))
+        scenario = _with_command_channels(scenario, list(options.cost.channels or {}))
         self.template = scenario
         self.prep0 = prepare(scenario)
         loop = self.prep0.loop
@@ -355,9 +357,7 @@ class _Engine:
         # ---- logs
         wins = options.windows or [None] * len(logs)
         if len(wins) != len(logs):
-            raise ValueError(
-                f"ScenarioFitOptions.windows has {len(wins)} entries for {len(logs)} logs"
-            )
+            raise ValueError(f"FitOptions.windows has {len(wins)} entries for {len(logs)} logs")
         self.notes: list[str] = []  # channels computed from logged ones (_read)
         from flexarm.io.logs import log_keys
 
@@ -379,7 +379,7 @@ class _Engine:
                 )
         # by default every channel a log measures: present, not computed from others, and
         # not constant (a rigid arm's zero tip column measures nothing)
-        chans = options.channels or {
+        chans = options.cost.channels or {
             n: 1.0
             for n in self.names
             if any(
@@ -392,12 +392,12 @@ class _Engine:
         for c in chans:
             if c not in self.names:
                 raise ValueError(
-                    f"ScenarioFitOptions.channels: {c!r} is not a sensor channel of scenario "
+                    f"FitOptions.cost.channels: {c!r} is not a sensor channel of scenario "
                     f"{scenario.name!r}; channels: {', '.join(self.names)}"
                 )
             if not any(L.present[self.names.index(c)] for L in self.logs):
                 raise ValueError(
-                    f"ScenarioFitOptions.channels: no log holds channel {c!r}; the logs hold "
+                    f"FitOptions.cost.channels: no log holds channel {c!r}; the logs hold "
                     f"{sorted({k for L in self.logs for k in _cols(L, self.names)})}"
                 )
         self.channels = dict(chans)
@@ -411,14 +411,14 @@ class _Engine:
         self.spread = np.array([max(float(np.nanstd(allv[c])), 1e-300) for c in self.channels])
         self.scale = (
             np.sqrt(np.array(list(self.channels.values()), float))
-            / (options.residual_level * self.spread)
-            * math.sqrt(self.dt / options.correlation_time)
+            / (options.cost.residual_level * self.spread)
+            * math.sqrt(self.dt / options.cost.correlation_time)
         )
         self.ctrl_inits = None  # per-log controller start states (continuous)
         self.starts = None
         if options.continuous:
             self._continuous()
-        seg = options.segment if segment == "options" else segment
+        seg = options.shooting.segment if segment == "options" else segment
         self._segments(seg)
         # a segment after a log's first sample starts its controller from the controller
         # run over the logged channels before it: those channels must be logged (a log
@@ -565,7 +565,7 @@ class _Engine:
             y,
             refs,
             present,
-            k0 == 0 and self.options.initial == "scenario",
+            k0 == 0 and self.options.shooting.initial == "scenario",
             (k0, k1),
             whole,
             tuple(extra),
@@ -587,7 +587,7 @@ class _Engine:
         M = max(r[2] for r in rows)
         self.M = M
         C = len(self.names)
-        burn = int(round(self.options.burn_in / self.dt))
+        burn = int(round(self.options.shooting.burn_in / self.dt))
         y = np.zeros((S, M, C))
         mask = np.zeros((S, M, C), bool)
         refs = {k: np.zeros((S, M)) for k in self.prep0.references}
@@ -612,7 +612,7 @@ class _Engine:
         buffers, and the whole logs (padded) for the controller warm-up."""
         S, C = len(self.seg), len(self.names)
         dmax = int(self.delays.max()) if C else 0
-        h = self.options.derivative_half_width
+        h = self.options.shooting.derivative_half_width
         y0 = np.zeros((S, C))
         dy0 = np.zeros((S, C))
         sbuf = np.zeros((S, dmax + 1, C))
@@ -659,7 +659,7 @@ class _Engine:
         sens = self.prep0.loop.sensors
         A, B = np.asarray(sens.fA), np.asarray(sens.fB)
         kmax = A.shape[-1]
-        h = self.options.derivative_half_width
+        h = self.options.shooting.derivative_half_width
         S = len(self.seg)
         xd = np.full((S, len(sens.digital), kmax), np.nan)
         for s_, (li, kl, _) in enumerate(self.seg):
@@ -713,7 +713,7 @@ class _Engine:
     def loops(self, Z: np.ndarray):
         preps = [self.prepared(z) for z in Z]
         loop = stack_loops([p.loop for p in preps])
-        if not self.options.quantise:
+        if not self.options.cost.quantise:
             loop = eqx.tree_at(
                 lambda lp: (lp.sensors.quantum, lp.actuator.quantum),
                 loop,
@@ -735,10 +735,10 @@ class _Engine:
         return self._simulate(Z, scaled)[0]
 
     def threads(self) -> int:
-        """Threads a batch of candidates is shared over (``ScenarioFitOptions.threads``;
+        """Threads a batch of candidates is shared over (``FitOptions.local.threads``;
         None: the CPU cores this process may use)."""
-        if self.options.threads is not None:
-            return max(1, int(self.options.threads))
+        if self.options.local.threads is not None:
+            return max(1, int(self.options.local.threads))
         return cpu_cores()
 
     def _simulate(self, Z: np.ndarray, scaled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -749,7 +749,7 @@ class _Engine:
         run at once on :meth:`threads` threads (:func:`flexarm.sim.batch.run_chunks`)."""
         P = Z.shape[0]
         workers = self.threads()
-        chunk = max(1, min(self.options.max_batch, -(-P // workers)))
+        chunk = max(1, min(self.options.local.max_batch, -(-P // workers)))
         common = (
             {k: jnp.asarray(v) for k, v in self.seg_refs.items()},
             jnp.asarray(self.y0),
@@ -843,7 +843,7 @@ class _Engine:
         m = self.seg_mask[..., self.cidx]
         n_c = m.reshape(-1, m.shape[-1]).sum(0)
         w = np.array(list(self.channels.values()), float)
-        data = float(w @ n_c) * self.dt / self.options.correlation_time
+        data = float(w @ n_c) * self.dt / self.options.cost.correlation_time
         return data + float(np.isfinite(self.sigma).sum())
 
     def prior_residuals(self, Z: np.ndarray) -> np.ndarray:
@@ -982,7 +982,7 @@ def fit_scenario(
     scenario,
     logs: Sequence,
     free: Sequence[str] | None = None,
-    options: ScenarioFitOptions | None = None,
+    options: FitOptions | None = None,
     *,
     progress=None,
     predict: bool = True,
@@ -992,18 +992,24 @@ def fit_scenario(
     (:class:`flexarm.io.logs.Log` with the scenario's sensor channels and references as
     columns, sampled at the scenario's period). See the module docstring. Without ``free``
     (and priors), the scenario's ``[notes.fit]`` table gives them (``free = [...]``,
-    ``priors = {...}``). ``predict``: also simulate each whole log (window) with the fitted
+    ``priors = {...}``). ``options``: :class:`FitOptions` (None: the defaults), resolved
+    (:meth:`FitOptions.resolved`: every group filled) and read group by group by the engine
+    (``options.cost``, ``options.shooting``, ``options.local``, ``options.global_de``,
+    ``options.priors``, ``options.delay_search``); a deprecated
+    :class:`ScenarioFitOptions` is converted (:meth:`FitOptions.from_flat`, with a
+    ``DeprecationWarning``). ``predict``: also simulate each whole log (window) with the fitted
     values (fit % of the whole-run prediction; skip for long chaotic runs); ``plots``: a
     folder for that prediction's overlay figures (``NN_KEY_fit.png``, in the result's
     ``plots``)."""
     from flexarm.identification.time_domain.solvers import evolve
 
-    options = options or ScenarioFitOptions()
+    # the engine reads the groups itself: every one filled (a deprecated flat record
+    # converted, with a DeprecationWarning)
+    options = as_fit_options(options, "fit_scenario").resolved()
     fit_notes = scenario_fit_notes(scenario)
     free = list(free if free is not None else fit_notes.get("free", []))
-    if not options.priors and fit_notes.get("priors"):
-        options = copy.copy(options)
-        options.priors = dict(fit_notes["priors"])
+    if not options.priors.priors and fit_notes.get("priors"):
+        options.priors.priors = dict(fit_notes["priors"])
     if not free:
         raise ValueError(
             "fit_scenario: no free parameters; list them (free=[...]) as paths "
@@ -1025,7 +1031,7 @@ def fit_scenario(
         stages["linear"] = [p for i, p in enumerate(eng.free) if eng.linear[i]]
     if eng.notes:
         stages["computed_channels"] = list(eng.notes)
-    if options.global_stage:
+    if options.global_de is not None:
         t0 = time.perf_counter()
 
         def f(x):
@@ -1037,9 +1043,9 @@ def fit_scenario(
             f,
             list(zip(eng.lo, eng.hi, strict=True)),
             x0=z0,
-            popsize=options.popsize,
-            maxiter=options.maxiter,
-            seed=options.seed,
+            popsize=options.global_de.popsize,
+            maxiter=options.global_de.maxiter,
+            seed=options.global_de.seed,
             tol=1e-3,
         )
         z0 = np.asarray(res.x)
@@ -1056,8 +1062,10 @@ def fit_scenario(
     # constant at the scale of one count (finite differences stall on it); the smooth
     # loop's optimum starts the quantised local stage
     passes = [("local", "local stage", options)]
-    if options.quantise and options.continuation:
-        smooth = dataclasses.replace(options, quantise=False)
+    if options.cost.quantise and options.cost.continuation:
+        smooth = dataclasses.replace(
+            options, cost=dataclasses.replace(options.cost, quantise=False)
+        )
         passes.insert(0, ("smooth", "smooth stage (no quantisation)", smooth))
     for key, label, opts in passes:
         eng.options = opts
@@ -1065,7 +1073,7 @@ def fit_scenario(
             eng,
             z0,
             options,
-            states=options.estimate_states and options.segment is not None,
+            states=options.shooting.estimate_states and options.shooting.segment is not None,
             progress=progress,
         )
         stages[key] = info
@@ -1076,7 +1084,7 @@ def fit_scenario(
     if options.delay_search is not None:  # the sensors' delays, then the local stage again
         from flexarm.identification.time_domain.delays import search_delays
 
-        states = options.estimate_states and options.segment is not None
+        states = options.shooting.estimate_states and options.shooting.segment is not None
         found = search_delays(
             scenario,
             eng,
@@ -1089,7 +1097,7 @@ def fit_scenario(
         if found.local is not None:
             scenario, eng = found.scenario, found.engine
             res, r, J, stages["delay_local"] = found.local
-    if options.polish and options.segment is not None:
+    if options.shooting.polish and options.shooting.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
         # each log's start state stays a nuisance parameter (offsets to the logged state)
         res, r, J, info = _local(
@@ -1097,7 +1105,7 @@ def fit_scenario(
             res.x,
             options,
             progress=progress,
-            states=options.estimate_states and not eng.seg_scn.all(),
+            states=options.shooting.estimate_states and not eng.seg_scn.all(),
         )
         stages["polish"] = info
         say(
@@ -1135,7 +1143,7 @@ def fit_scenario(
             )
     for i in range(n):
         for j in range(i + 1, n):
-            if det[i] and det[j] and abs(corr[i, j]) > options.corr_warn:
+            if det[i] and det[j] and abs(corr[i, j]) > options.priors.corr_warn:
                 warnings.append(
                     f"the data cannot tell {eng.free[i]} from {eng.free[j]} "
                     f"(correlation {corr[i, j]:+.3f}): fix one, give a prior, or "
@@ -1146,7 +1154,7 @@ def fit_scenario(
             lo, hi = sorted((eng.value_of(i, eng.lo[i]), eng.value_of(i, eng.hi[i])))
             warnings.append(
                 f"{p} = {values[p]:.4g} lies at a bound of [{lo:.4g}, {hi:.4g}]; "
-                f"widen it with ScenarioFitOptions.bounds={{{p!r}: (lo, hi)}}"
+                f"widen it with FitOptions.priors.bounds={{{p!r}: (lo, hi)}}"
             )
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
@@ -1183,7 +1191,7 @@ def fit_scenario(
 def _local(
     eng: _Engine,
     z0: np.ndarray,
-    options: ScenarioFitOptions,
+    options: ResolvedOptions,
     states: bool = False,
     o0: np.ndarray | None = None,
     progress=None,
@@ -1205,7 +1213,8 @@ def _local(
     n_x = eng.prep0.loop.plant.n_states
     idx = np.arange(n_x) if state_index is None else np.asarray(state_index, int)
     nx = idx.size if states else 0
-    step = options.fd_step
+    local = options.local
+    step = local.fd_step
     rows = eng.segment_rows()
     cache: dict = {}
 
@@ -1266,7 +1275,7 @@ def _local(
     def batch(v):
         return point(v)["r"], jac(v)
 
-    ftol = options.ftol if options.ftol is not None else COST_RESOLUTION / eng.expected_cost()
+    ftol = local.ftol if local.ftol is not None else COST_RESOLUTION / eng.expected_cost()
     v0 = np.concatenate([z0, np.zeros(S * nx) if o0 is None or not nx else np.ravel(o0[:, idx])])
     lo = np.concatenate([eng.lo, np.full(S * nx, -np.inf)])
     hi = np.concatenate([eng.hi, np.full(S * nx, np.inf)])
@@ -1277,14 +1286,14 @@ def _local(
         v0,
         lo,
         hi,
-        max_nfev=options.max_nfev,
+        max_nfev=local.max_nfev,
         ftol=ftol,
-        xtol=options.xtol,
+        xtol=local.xtol,
         gtol=1e-10,
         tr_solver="lsmr" if nx else "exact",
         # the stop rule "Σ r² fell by less than it resolves" where ftol is the engine's own
-        resolution=options.ftol is None,
-        restarts=options.restarts,
+        resolution=local.ftol is None,
+        restarts=local.restarts,
     )
     restarts = list(res.restarts)
     r, J = batch(res.x)
@@ -1377,7 +1386,7 @@ def refit_friction(
         scenario,
         [log],
         friction_paths(scenario),
-        ScenarioFitOptions(channels=channels, windows=[window]),
+        FitOptions(cost=Cost(channels=channels), windows=[window]),
         predict=False,
     )
 
@@ -1435,7 +1444,7 @@ def _covariance(eng: _Engine, r: np.ndarray, J: np.ndarray) -> np.ndarray:
 def predict_scenario(
     scenario,
     logs: Sequence,
-    options: ScenarioFitOptions | None = None,
+    options: FitOptions | None = None,
     *,
     channels: Sequence[str] | None = None,
     plots: str | Path | None = None,
@@ -1456,7 +1465,7 @@ def predict_scenario(
       stay fixed): the fit's own treatment of a segment's start state (multiple
       shooting's node states), so that a scenario predicts a held-out window as its fit
       did. A link ringing at the first sample is normal on a real rig.
-    - ``"log"``: the state read off the log, not refined (``options.initial =
+    - ``"log"``: the state read off the log, not refined (``options.shooting.initial =
       "scenario"``: a log's first sample from the scenario's ``[initial]`` state).
     - ``"rest"``: the positions read off the log, every rate zero.
 
@@ -1467,12 +1476,14 @@ def predict_scenario(
             "logged state refined on the log; log: as read off the log; rest: the logged "
             "positions at rest)"
         )
-    opts = copy.copy(options) if options is not None else ScenarioFitOptions()
-    opts.priors, opts.bounds, opts.ties, opts.quantise = {}, {}, {}, True
-    opts.substeps = None  # the scenario's own integration step
-    opts.max_nfev = int(initial_nfev)
+    # fresh groups (FitOptions.resolved): changing them leaves the caller's options alone
+    opts = as_fit_options(options, "predict_scenario").resolved()
+    opts.priors.priors, opts.priors.bounds, opts.priors.ties = {}, {}, {}
+    opts.cost.quantise = True
+    opts.cost.substeps = None  # the scenario's own integration step
+    opts.local.max_nfev = int(initial_nfev)
     if channels is not None:
-        opts.channels = {c: 1.0 for c in channels}
+        opts.cost.channels = {c: 1.0 for c in channels}
     eng = _Engine(scenario, logs, [], opts, segment=None)
     state_warnings = eng.assumed_starts()
     notes: list[str] = []

@@ -1,7 +1,11 @@
 """Typed, grouped options of the one fit and the one prediction.
 
 :class:`FitOptions` groups what the general engine
-(:mod:`flexarm.identification.time_domain.general`, eqs. (1)–(2) there) reads as flat fields:
+(:mod:`flexarm.identification.time_domain.general`, eqs. (1)–(2) there) reads, and the
+engine reads them itself (``options.cost.channels``, ``options.shooting.segment``,
+``options.local.max_nfev``, ...) from :meth:`FitOptions.resolved` options, in which every
+group is filled (a preset's groups overridden by the given ones); each group checks its own
+fields (``FitOptions.shooting.segment = -1 s: ...``):
 
 * :class:`Cost` — channels and weights w_c, residual level λ and correlation time τ of
   eq. (1), quantisation in the fitted loop, integration substeps;
@@ -17,14 +21,17 @@
   delay search, global stage time budget, friction polish, sessions, tip sign, encoder
   counts, analog filters, mode), passed to that engine's keyword interface.
 
-``windows`` (per log, (t0, t1) s from its first sample, [t0, t1)) and ``plots`` (a folder for
-the fit's overlay figures) are common to all.
+``windows`` (per log, (t0, t1) s from its first sample, [t0, t1)), ``continuous``,
+``period_tolerance`` and ``plots`` (a folder for the fit's overlay figures) are common to all.
+The old flat record :class:`ScenarioFitOptions` is a deprecated input only
+(:meth:`FitOptions.from_flat`).
 
 :class:`PredictOptions` are the prediction's (:mod:`~flexarm.identification.time_domain.predict`).
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import numbers
@@ -35,6 +42,8 @@ from typing import Any
 __all__ = [
     "COST_RESOLUTION",
     "ScenarioFitOptions",
+    "FLAT_FIELDS",
+    "as_fit_options",
     "Cost",
     "Shooting",
     "Local",
@@ -43,6 +52,7 @@ __all__ = [
     "Priors",
     "ServoRig",
     "FitOptions",
+    "ResolvedOptions",
     "PredictOptions",
 ]
 
@@ -76,11 +86,27 @@ def channel_weights(value: Any, field_name: str) -> dict[str, float] | None:
     return {c: float(w) for c, w in items}
 
 
+def _positive(group, name: str, fields: Sequence[str]) -> None:
+    """Each of ``fields`` of ``group`` (``FitOptions.<name>``) a finite number > 0."""
+    for f in fields:
+        v = getattr(group, f)
+        if not (v > 0 and math.isfinite(v)):
+            raise ValueError(f"FitOptions.{name}.{f} = {v!r}: must be a finite number > 0")
+
+
 @dataclass
 class Cost:
-    """Eq. (1): channel → weight w_c (None: every logged sensor channel, 1), λ, τ (s);
-    ``quantise``: the converters' rounding in the fitted loop, reached by ``continuation``
-    (the local stage first without it, then with it from that optimum)."""
+    """Eq. (1): ``channels`` measured channel → weight w_c (names alone: 1 each; None: every
+    sensor channel the logs measure, 1); ``residual_level`` λ, the expected misfit as a
+    fraction of each channel's spread; ``correlation_time`` τ (s), the residuals'
+    correlation time. ``quantise``: keep the converters' quantisation in the fitted loop.
+    Off by default: a quantiser inside the loop makes the cost piecewise constant in the
+    parameters at the scale of one count, which stalls finite differences; its effect on
+    the loop is a small noise-like error (the whole-run prediction keeps it).
+    ``continuation``: with ``quantise``, the local stage runs first on the loop without the
+    rounding, then on the rounded loop from its optimum (the servo rig engine's
+    smooth-then-quantised continuation); without ``quantise`` it has no effect.
+    ``substeps``: integration substeps per sample while fitting (None: the scenario's)."""
 
     channels: Mapping[str, float] | None = None
     residual_level: float = 0.05
@@ -92,12 +118,23 @@ class Cost:
     def __post_init__(self) -> None:
         self.channels = channel_weights(self.channels, "Cost.channels")
 
+    def check(self) -> None:
+        self.channels = channel_weights(self.channels, "FitOptions.cost.channels")
+        _positive(self, "cost", ("residual_level", "correlation_time"))
+
 
 @dataclass
 class Shooting:
-    """Multiple shooting: ``segment`` s (None: whole logs), ``burn_in`` s left out of the cost
-    at each segment start, node states estimated, start state from the log or the
-    scenario, then a polish on whole logs."""
+    """Multiple shooting: ``segment`` length (s; None: each log or window is one segment);
+    ``burn_in`` s at the start of each segment left out of the cost; ``estimate_states``:
+    with segments, each segment's start state estimated too (offsets to the state read off
+    the log: the node states); ``initial``: ``"log"``, every segment, a log's first
+    included, starts from the state read off the log, ``"scenario"``, a segment at a log's
+    first sample from the scenario's ``[initial]`` state (a synthetic log that starts where
+    the scenario does); ``polish``: after the segment fit, refine on whole logs (one
+    simulation per log from its start; not for stick-slip runs, whose whole-run cost is
+    chaotic); ``derivative_half_width``: samples each side of the local quadratic fit
+    for ẏ at segment starts."""
 
     segment: float | None = None
     burn_in: float = 0.0
@@ -106,15 +143,35 @@ class Shooting:
     polish: bool = False
     derivative_half_width: int = 10
 
+    def check(self) -> None:
+        if self.initial not in ("log", "scenario"):
+            raise ValueError(
+                f"FitOptions.shooting.initial = {self.initial!r}: 'log' (segments start "
+                "from the logged state) or 'scenario' (a log's first sample "
+                "starts from the scenario's [initial] state)"
+            )
+        if self.segment is not None and not self.segment > 0:
+            raise ValueError(
+                f"FitOptions.shooting.segment = {self.segment!r} s: give a length > 0 s "
+                "(e.g. 2–5 s) or None for whole logs"
+            )
+
 
 @dataclass
 class Local:
-    """SciPy ``least_squares`` (trf): budget (``max_nfev``, restarts included), tolerances,
-    finite-difference step in z (``ftol`` None: derived from the cost's scale, as in
-    :class:`~flexarm.identification.time_domain.general.ScenarioFitOptions`), and at most
-    ``restarts`` restarts from the optimum with a fresh trust region; a batch of candidates
-    runs as chunks of at most ``max_batch`` on ``threads`` threads at once (None: the CPU
-    cores this process may use)."""
+    """SciPy ``least_squares`` (trf): ``max_nfev`` the budget of evaluations (restarts
+    included); ``ftol``, ``xtol`` relative tolerances on the cost and on the step (``ftol``
+    None: derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]: a step that
+    lowers Σ r² by less than 0.01, a tenth of a standard deviation, ends the search);
+    ``fd_step`` the finite-difference step in z (a relative step of p); ``restarts``: after
+    the local stage converges, at most this many restarts from its optimum with a fresh
+    trust region while budget is left, stopping at the first that lowers Σ r² by less than
+    ``ftol`` of itself (stick-slip friction makes the cost non-smooth: trf's trust region
+    can collapse on a kink far from the optimum; on the two-link split one machine stopped
+    at Σ r² 534 against 453 on others, a restart went on to 479 in five). A batch of
+    candidates (a Jacobian's columns, a generation) runs as chunks of at most ``max_batch``
+    on ``threads`` threads at once (None: the CPU cores this process may use; 1: one
+    call)."""
 
     max_nfev: int = 30
     ftol: float | None = 1e-6
@@ -124,11 +181,15 @@ class Local:
     threads: int | None = None
     restarts: int = 2
 
+    def check(self) -> None:
+        _positive(self, "local", ("fd_step",))
+
 
 @dataclass
 class GlobalDE:
-    """SciPy ``differential_evolution`` before the local stage (whole generations as one
-    batch)."""
+    """Differential evolution before the local stage (whole generations as one batch):
+    ``popsize`` (× the free parameters), ``maxiter`` generations, ``seed``. Given: the
+    global stage runs; None (``FitOptions.global_de``): it does not."""
 
     popsize: int = 6
     maxiter: int = 8
@@ -153,11 +214,14 @@ class DelaySearch:
 @dataclass
 class Priors:
     """Bounds and priors in log space: p = p0·exp(z), z ∈ [−ln f, ln f] (f =
-    ``bound_factor``) or ``bounds`` (path → (lo, hi) SI); ``priors`` path → relative std
-    σ_p of eq. (2); ``ties`` path → free path moving by the same factor; ``linear``: paths
-    fitted in linear space, p = p0 + s·z, besides the signed fields (bias, offset) and
-    those starting at 0, which always are
-    (:mod:`~flexarm.identification.time_domain.general`)."""
+    ``bound_factor``) or ``bounds`` (path → (lo, hi) in SI, same sign as p0); ``priors``
+    path → relative std σ_p of eq. (2) about the template value (log space); ``ties`` path
+    → free path: the first is not free but moves with the second by the same factor (two
+    channels reading one strain gauge share its gain); ``linear``: paths fitted in linear
+    space, p = p0 + s·z (a linear parameter's prior is its std in units of s), besides the
+    signed fields (bias, offset) and those starting at 0, which always are
+    (:mod:`~flexarm.identification.time_domain.general`); ``corr_warn``: |correlation|
+    above which a pair is reported as not separable. Paths may hold ``[*]``."""
 
     bound_factor: float = 3.0
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
@@ -165,6 +229,19 @@ class Priors:
     ties: Mapping[str, str] = field(default_factory=dict)
     linear: Sequence[str] = ()
     corr_warn: float = 0.95
+
+    def check(self) -> None:
+        if not self.bound_factor > 1:
+            raise ValueError(
+                f"FitOptions.priors.bound_factor = {self.bound_factor!r}: must be > 1 "
+                "(bounds p0/f … p0·f)"
+            )
+        for p, s in self.priors.items():
+            if not (s > 0 and math.isfinite(s)):
+                raise ValueError(
+                    f"FitOptions.priors.priors[{p!r}] = {s!r}: the relative standard "
+                    "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)"
+                )
 
 
 @dataclass
@@ -227,7 +304,7 @@ class ServoRig:
 
 
 def _changed(group, over_base: bool):
-    """The (field, value) pairs of ``group`` to set on the engine's options: every field,
+    """The (field, value) pairs of ``group`` to set on the resolved options: every field,
     or, over a preset's options (``over_base``), only those changed from the group's
     defaults, so ``Local(max_nfev=60)`` keeps the preset's tolerances."""
     for f in dataclasses.fields(group):
@@ -246,11 +323,36 @@ def _changed(group, over_base: bool):
             yield f.name, v
 
 
+#: the groups the general engine reads, each always present in resolved options
+#: (:meth:`FitOptions.resolved`)
+ENGINE_GROUPS = {"cost": Cost, "shooting": Shooting, "local": Local, "priors": Priors}
+#: the stages that run only when given (None: off)
+OPTIONAL_GROUPS = {"global_de": GlobalDE, "delay_search": DelaySearch}
+
+#: the deprecated flat record's fields (:class:`ScenarioFitOptions`) → (group, field) of
+#: :class:`FitOptions` (group "": a field of FitOptions itself); ``global_stage`` is
+#: ``global_de`` given or not
+FLAT_FIELDS: dict[str, tuple[str, str]] = {
+    **{
+        f.name: (g, f.name)
+        for g, cls in {**ENGINE_GROUPS, "global_de": GlobalDE}.items()
+        for f in dataclasses.fields(cls)
+    },
+    "windows": ("", "windows"),
+    "continuous": ("", "continuous"),
+    "period_tolerance": ("", "period_tolerance"),
+    "delay_search": ("", "delay_search"),
+}
+
+
 @dataclass
 class FitOptions:
-    """Options of :func:`flexarm.fit`, grouped (module docstring). ``None`` groups take the
-    preset's (or the defaults); over a preset, a group's fields left at their defaults
-    take the preset's too."""
+    """Options of :func:`flexarm.fit`, grouped (module docstring), read by the general
+    engine itself (:func:`~flexarm.identification.time_domain.general.fit_scenario` reads
+    ``options.cost.channels``, ``options.shooting.segment``, ``options.local.max_nfev`` ...
+    of :meth:`resolved` options). ``None`` groups take the preset's (or the defaults); over a
+    preset, a group's fields left at their defaults take the preset's too. ``global_de`` and
+    ``delay_search`` None: that stage does not run."""
 
     cost: Cost | None = None
     shooting: Shooting | None = None
@@ -270,32 +372,143 @@ class FitOptions:
     #: the logs, in order, are consecutive pieces of one run: controller and digital-filter
     #: states carried from log to log (the general engine; whole logs only)
     continuous: bool = False
+    #: a log whose clock is off the scenario's period by at most this (relative) is read on
+    #: the scenario's grid, with a note (:func:`flexarm.io.logs.on_sample_grid`); beyond it,
+    #: one line naming the figure
+    period_tolerance: float = 1e-4
 
-    def engine_options(self, base=None):
-        """The general engine's flat options (:class:`general.ScenarioFitOptions`), from
-        ``base`` (a preset's) and overriding the groups given here."""
-        import copy
-
-        Flat = ScenarioFitOptions
-
-        flat = copy.deepcopy(base) if base is not None else Flat()
-        groups = [self.cost, self.shooting, self.local, self.priors]
-        for g in groups:
-            if g is None:
-                continue
-            for k, v in _changed(g, base is not None):
-                setattr(flat, k, v)
-        if self.global_de is not None:
-            flat.global_stage = True
-            for k, v in _changed(self.global_de, base is not None):
-                setattr(flat, k, v)
+    def resolved(self, base: FitOptions | None = None) -> ResolvedOptions:
+        """These options with every engine group filled (:class:`ResolvedOptions`, a
+        FitOptions whose :data:`ENGINE_GROUPS` are never None: the engine reads
+        ``options.<group>.<field>`` without None checks): ``base`` (a preset's
+        options, copied) or the defaults, the groups given here overriding them; over a
+        ``base`` only the fields changed from their group's defaults override (``_changed``:
+        ``Local(max_nfev=60)`` keeps the preset's tolerances). ``global_de`` given over a
+        base without one: the global stage runs with this group's settings. ``delay_search``,
+        ``windows``, ``servo_rig`` given replace the base's; ``continuous`` True sets it;
+        ``predict`` and ``plots`` are these options'. Groups are fresh objects (field values
+        shared), so the result can be changed without changing ``self`` or ``base``."""
+        over = base is not None
+        start = copy.deepcopy(base) if base is not None else FitOptions()
+        out = {f.name: getattr(start, f.name) for f in dataclasses.fields(FitOptions)}
+        for name, cls in {**ENGINE_GROUPS, "global_de": GlobalDE}.items():
+            mine, theirs = getattr(self, name), out[name]
+            if theirs is None and (mine is not None or name in ENGINE_GROUPS):
+                theirs = cls()
+            elif theirs is not None:
+                theirs = copy.copy(theirs)  # a fresh object, values shared
+            if mine is not None:
+                for k, v in _changed(mine, over):
+                    setattr(theirs, k, v)
+            out[name] = theirs
         if self.delay_search is not None:
-            flat.delay_search = self.delay_search
+            out["delay_search"] = self.delay_search
+        if self.servo_rig is not None:
+            out["servo_rig"] = self.servo_rig
         if self.windows is not None:
-            flat.windows = list(self.windows)
+            out["windows"] = list(self.windows)
         if self.continuous:
-            flat.continuous = True
-        return flat
+            out["continuous"] = True
+        if not over or self.period_tolerance != FitOptions.period_tolerance:
+            out["period_tolerance"] = self.period_tolerance
+        out["predict"], out["plots"] = self.predict, self.plots
+        return ResolvedOptions(**out)
+
+    def check(self) -> None:
+        """One line naming the grouped field (``FitOptions.shooting.segment = -1 s: ...``),
+        its value and the fix, for each group given and for the options together."""
+        for name in ENGINE_GROUPS:
+            g = getattr(self, name)
+            if g is not None:
+                g.check()
+        if (
+            self.continuous
+            and self.windows is not None
+            and any(w is not None for w in self.windows)
+        ):
+            raise ValueError(
+                "FitOptions.continuous: consecutive pieces of one run are fitted as "
+                "whole logs; leave out windows (FitOptions.windows, --window)"
+            )
+        pt = self.period_tolerance
+        if not (isinstance(pt, numbers.Real) and pt >= 0 and math.isfinite(pt)):
+            raise ValueError(
+                f"FitOptions.period_tolerance = {pt!r}: give a finite relative tolerance "
+                ">= 0 (e.g. 1e-4)"
+            )
+
+    @classmethod
+    def from_fields(cls, **fields: Any) -> FitOptions:
+        """Options from the deprecated flat record's field names (:data:`FLAT_FIELDS`,
+        e.g. ``max_nfev=10, segment=3.0``: ``fit-many``'s row options): each name to its
+        group, only the groups named are given; ``popsize``, ``maxiter``, ``seed`` set the
+        global stage's settings, which runs only with ``global_stage=True``. An unknown name
+        is one line naming it and the known ones."""
+        unknown = sorted(k for k in fields if k not in FLAT_FIELDS and k != "global_stage")
+        if unknown:
+            raise ValueError(
+                f"fit option {', '.join(map(repr, unknown))}: not an option of the fit; "
+                f"options: {', '.join(sorted([*FLAT_FIELDS, 'global_stage']))}"
+            )
+        global_stage = bool(fields.pop("global_stage", False))
+        groups: dict[str, dict[str, Any]] = {}
+        top: dict[str, Any] = {}
+        for k, v in fields.items():
+            g, f = FLAT_FIELDS[k]
+            if g:
+                groups.setdefault(g, {})[f] = v
+            else:
+                top[f] = v
+        de = groups.pop("global_de", {})
+        made = {g: ENGINE_GROUPS[g](**kw) for g, kw in groups.items()}
+        return cls(**made, global_de=GlobalDE(**de) if global_stage else None, **top)
+
+    @classmethod
+    def from_flat(cls, flat: ScenarioFitOptions) -> FitOptions:
+        """The grouped options of a deprecated flat record: every group given (so that
+        :meth:`resolved` without a base gives back exactly the record's values); its
+        ``global_stage`` is ``global_de`` given or None."""
+        return cls.from_fields(
+            **{f.name: getattr(flat, f.name) for f in dataclasses.fields(ScenarioFitOptions)}
+        )
+
+
+@dataclass
+class ResolvedOptions(FitOptions):
+    """:class:`FitOptions` with every engine group present (:meth:`FitOptions.resolved`):
+    what the general engine reads (``options.cost``, ``options.shooting``, ``options.local``,
+    ``options.priors`` never None; ``global_de`` and ``delay_search`` None: that stage does
+    not run)."""
+
+    cost: Cost = field(default_factory=Cost)
+    shooting: Shooting = field(default_factory=Shooting)
+    local: Local = field(default_factory=Local)
+    priors: Priors = field(default_factory=Priors)
+
+
+def as_fit_options(options: Any, where: str) -> FitOptions:
+    """``options`` as :class:`FitOptions`: None → the defaults; a deprecated
+    :class:`ScenarioFitOptions` → :meth:`FitOptions.from_flat` with a
+    ``DeprecationWarning`` naming ``FitOptions``; anything else one line naming ``where``."""
+    if options is None:
+        return FitOptions()
+    if isinstance(options, FitOptions):
+        return options
+    if isinstance(options, ScenarioFitOptions):
+        import warnings
+
+        warnings.warn(
+            f"{where}: ScenarioFitOptions (the flat record) is deprecated: give the grouped "
+            "FitOptions (cost=Cost(...), shooting=Shooting(...), local=Local(...), "
+            "priors=Priors(...), global_de=GlobalDE(...); FitOptions.from_flat converts)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        return FitOptions.from_flat(options)
+    raise ValueError(
+        f"{where}: options = {type(options).__name__} {options!r}: give FitOptions(...) "
+        "(flexarm.identification.time_domain.options.FitOptions)"
+    )
 
 
 @dataclass
@@ -341,12 +554,12 @@ class PredictOptions:
                 self.initial = "log"
 
 
-# ------------------------------------------------------ the general engine's flat record
+# ------------------------------------------------------ the engine's constants
 #: The least change of Σ r² (eqs. (1)–(2)) the fit resolves: Σ r² counts independent misfits
 #: in units of their expected size, so Δ(Σ r²) = 1 is a move of one standard deviation of
 #: one parameter and 0.01 a tenth of one; a decrease below it is not statistically meaningful
 #: (Press et al., Numerical Recipes, §15.5: stop when χ² falls by less than 0.01). With
-#: ``ScenarioFitOptions.ftol`` None, SciPy's relative ftol is it over E[Σ r²]
+#: ``Local.ftol`` None, SciPy's relative ftol is it over E[Σ r²]
 #: (:meth:`_Engine.expected_cost`): the search stops when a step lowers Σ r² by less than
 #: 0.01 · Σ r² / E[Σ r²], i.e. by less than 0.01 in units of the misfit's realised variance
 #: (a misfit larger than λ assumes widens the parameters' spread in the same ratio).
@@ -359,72 +572,21 @@ INITIALS = ("estimate", "log", "rest")
 INITIAL_NFEV = 15
 
 
+# ------------------------------------------------------ the deprecated flat record
+
+
 @dataclass
 class ScenarioFitOptions:
-    """Options of :func:`fit_scenario` (see the module docstring for the equations): the
-    general engine's flat record. Named for the function it configures (``fit_scenario`` →
-    :class:`ScenarioFit`), so that ``FitOptions`` is only the grouped options of
-    :func:`flexarm.fit` (:class:`~flexarm.identification.time_domain.options.FitOptions`,
-    whose ``engine_options()`` returns this record).
-
-    channels: measured channel → weight (default: every sensor channel the logs hold, 1).
-    bound_factor: default bounds p0/f … p0·f. bounds: path → (lo, hi) in SI (same sign as
-    p0). priors: path → relative standard deviation (log space) about the template value.
-    segment: multiple-shooting segment length (s); None: each log (window) is one segment.
-    burn_in: seconds at the start of each segment left out of the cost.
-    windows: per log (t0, t1) in s from its first sample, or None for the whole log.
-    residual_level, correlation_time: λ and τ of eq. (1). max_nfev: least-squares budget.
-    ftol, xtol: SciPy's relative tolerances on the cost and on the step; ``ftol`` None:
-    derived from the cost's own scale, :data:`COST_RESOLUTION` / E[Σ r²]
-    (:meth:`_Engine.expected_cost`: a step that lowers Σ r² by less than 0.01, a move of a
-    tenth of a standard deviation, ends the search).
-    fd_step: finite-difference step in z (relative step of p). global_stage: run
-    differential evolution first (popsize, maxiter, seed). derivative_half_width: samples
-    each side of the local quadratic fit for ẏ at segment starts. corr_warn: |corr| above
-    which a pair is reported as not separable. max_batch: most candidates per vmapped call.
-    threads: a batch of candidates (a Jacobian's columns, a generation) is cut into this
-    many equal chunks run at once (None: the CPU cores this process may use; 1: one call).
-    estimate_states: with segments, estimate each segment's start state too (offsets to
-    the log-derived state; multiple shooting's node states).
-    quantise: keep the converters' quantisation in the fitted simulation. Off by default:
-    a quantiser inside the loop makes the cost piecewise constant in the parameters at the
-    scale of one count, which stalls finite differences; its effect on the loop is a
-    small noise-like error. The whole-run prediction (:func:`predict_scenario`) keeps it.
-    substeps: integration substeps per sample while fitting (None: the scenario's).
-    ties: path → free path: the first is not free but moves with the second by the same
-    factor, p = p0·exp(z_free) (e.g. two channels reading one strain gauge share its gain).
-    period_tolerance: a log whose clock is off the scenario's period by at most this
-    (relative) is read on the scenario's grid, with a note
-    (:func:`flexarm.io.logs.on_sample_grid`); beyond it, one line naming the figure.
-    linear: paths fitted in linear space besides the signed ones (:data:`SIGNED_FIELDS`, a
-    template value of 0): p = p0 + s z (module docstring); a linear parameter's prior is
-    its std in units of its scale s.
-    initial: ``"log"``: every segment, the first of a log included, starts from the state
-    read off the log; ``"scenario"``: a segment at a log's first sample starts from the
-    scenario's ``[initial]`` state (a synthetic log that starts where the scenario does).
-    polish: after the segment fit, refine on whole logs (each one simulation from its start;
-    only where the whole-run cost is not chaotic, i.e. not for stick-slip runs).
-    continuous: the logs, in order, are consecutive pieces of one run: each log's dynamic
-    controller blocks start from the state reached by running them on the logged signals
-    of the logs before (and the digital filters from their states there)
-    (:func:`flexarm.sim.filters.continuous_starts`); without it they start each log from
-    their ``initial_state``. Whole logs only (no ``windows``).
-    continuation: with ``quantise``, the local stage runs first on the loop without the
-    converters' rounding, then on the rounded loop from its optimum (the servo rig
-    engine's smooth-then-quantised continuation); without ``quantise`` it has no effect.
-    restarts: after the local stage converges, at most this many restarts of it from its
-    optimum with a fresh trust region, while budget (``max_nfev``, all runs together) is
-    left; the search stops at the first restart that lowers Σ r² by less than ``ftol`` of
-    itself (whose result is not kept). Stick-slip friction makes the cost non-smooth: trf's
-    trust region can collapse on a kink (a step of Δ Σ r² ≈ 0.001, then ``xtol``) far from
-    the optimum. On the two-link split this happened on one machine (Σ r² 534 after 20
-    evaluations against 453 on others: rounding differs between CPUs); a restart went on
-    to 479 in five.
-    delay_search: a :class:`~flexarm.identification.time_domain.options.DelaySearch`: after
-    the local stage, the sensors' pure delays (samples) are searched and the local stage is
-    run again at the chosen ones (:mod:`~flexarm.identification.time_domain.delays`); None:
-    the scenario's delays as given.
-    """
+    """Deprecated: the general engine's old flat record, still accepted as input only.
+    :func:`flexarm.fit` and
+    :func:`~flexarm.identification.time_domain.general.fit_scenario` (and
+    ``predict_scenario``) convert it with :meth:`FitOptions.from_flat` and a
+    ``DeprecationWarning`` naming :class:`FitOptions`; nothing in flexarm builds one. Each
+    field is a field of one of :class:`FitOptions`' groups, documented and checked there
+    (:data:`FLAT_FIELDS`: ``segment`` → ``FitOptions.shooting.segment``, ``max_nfev`` →
+    ``FitOptions.local.max_nfev``, ``bounds`` → ``FitOptions.priors.bounds``, ...);
+    ``global_stage`` is ``FitOptions.global_de`` given, ``popsize``, ``maxiter``, ``seed``
+    its fields."""
 
     channels: Mapping[str, float] | None = None
     bound_factor: float = 3.0
@@ -459,41 +621,3 @@ class ScenarioFitOptions:
     continuation: bool = True
     delay_search: Any = None
     restarts: int = 2
-
-    def check(self) -> None:
-        self.channels = channel_weights(self.channels, "ScenarioFitOptions.channels")
-        if not self.bound_factor > 1:
-            raise ValueError(
-                f"ScenarioFitOptions.bound_factor = {self.bound_factor!r}: must be > 1 "
-                "(bounds p0/f … p0·f)"
-            )
-        for name in ("residual_level", "correlation_time", "fd_step"):
-            v = getattr(self, name)
-            if not (v > 0 and math.isfinite(v)):
-                raise ValueError(f"ScenarioFitOptions.{name} = {v!r}: must be a finite number > 0")
-        if self.initial not in ("log", "scenario"):
-            raise ValueError(
-                f"ScenarioFitOptions.initial = {self.initial!r}: 'log' (segments start "
-                "from the logged state) or 'scenario' (a log's first sample "
-                "starts from the scenario's [initial] state)"
-            )
-        if (
-            self.continuous
-            and self.windows is not None
-            and any(w is not None for w in self.windows)
-        ):
-            raise ValueError(
-                "ScenarioFitOptions: continuous (consecutive pieces of one run) runs "
-                "whole logs; leave out windows (--window)"
-            )
-        if self.segment is not None and not self.segment > 0:
-            raise ValueError(
-                f"ScenarioFitOptions.segment = {self.segment!r} s: give a length > 0 s "
-                "(e.g. 2–5 s) or None for whole logs"
-            )
-        for p, s in self.priors.items():
-            if not (s > 0 and math.isfinite(s)):
-                raise ValueError(
-                    f"ScenarioFitOptions.priors[{p!r}] = {s!r}: the relative standard "
-                    "deviation must be a finite number > 0 (e.g. 0.3 for ±30 %)"
-                )

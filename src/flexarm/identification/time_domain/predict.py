@@ -52,7 +52,7 @@ from flexarm.identification.time_domain.figures import (  # re-exported (the fig
     rig_trace,
     write_overlays,
 )
-from flexarm.identification.time_domain.options import PredictOptions
+from flexarm.identification.time_domain.options import FitOptions, PredictOptions
 from flexarm.identification.time_domain.result import Prediction  # re-exported
 from flexarm.io.logs import RIG_OUTPUTS
 
@@ -174,7 +174,7 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     """The one engine's whole-run prediction (:func:`~.general.predict_scenario`). With
     ``own_law`` (servo-rig logs that declare the law they ran), each log runs with its own
     declared controller in place of the scenario's (the lab's gains differ between runs)."""
-    from flexarm.identification.time_domain.general import ScenarioFitOptions, predict_scenario
+    from flexarm.identification.time_domain.general import predict_scenario
 
     wins = list(opts.windows) if opts.windows is not None else [None] * len(logs)
     chans = list(opts.channels) if opts.channels else None
@@ -206,7 +206,7 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     notes: list[str] = []
     it = iter(keys)
     for scn, group, gw in runs:
-        fo = ScenarioFitOptions(windows=gw, continuous=bool(opts.continuous))
+        fo = FitOptions(windows=gw, continuous=bool(opts.continuous))
         out = predict_scenario(scn, group, fo, channels=chans, initial=opts.initial)
         warnings += list(out.get("warnings", []))
         notes += list(out.get("notes", []))

@@ -24,9 +24,12 @@ joints' cable springs).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+from flexarm.identification.time_domain.options import FitOptions, Priors
 
 __all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUILTIN"]
 
@@ -35,7 +38,9 @@ __all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUIL
 class Preset:
     """A rig kind's model and defaults. ``engine``: ``"scenario"`` (the general engine on
     ``scenario``) or ``"servo_rig"`` (the rotary servo pipeline on ``sheet``); ``options``:
-    the general engine's flat options (priors, bounds, ties, segments, channels).
+    the preset's :class:`~flexarm.identification.time_domain.options.FitOptions` (priors,
+    bounds, ties, segments, channels), under the options a fit is given
+    (:meth:`~flexarm.identification.time_domain.options.FitOptions.resolved`).
     ``starts``: the cheap estimates that start the search, ``starts(scenario, logs)`` on the
     fitted logs (their windows applied) → (path → start value in SI, a report): the paths
     are set to those values and added to the free list, the report goes to the result's
@@ -44,7 +49,7 @@ class Preset:
     name: str
     scenario: Any
     free: list[str]
-    options: Any = None
+    options: FitOptions | None = None
     engine: str = "scenario"
     sheet: dict[str, Any] = field(default_factory=dict)
     starts: Callable[[Any, list], tuple[dict[str, float], dict]] | None = None
@@ -95,8 +100,12 @@ def two_link(friction: bool = True) -> Preset:
     opts = tl.default_options()
     free = list(tl.FREE) if friction else [p for p in tl.FREE if "friction" not in p]
     if not friction:
-        opts.priors = {k: v for k, v in opts.priors.items() if "friction" not in k}
-        opts.bounds = {k: v for k, v in opts.bounds.items() if "friction" not in k}
+        pri = opts.priors or Priors()
+        opts.priors = dataclasses.replace(
+            pri,
+            priors={k: v for k, v in pri.priors.items() if "friction" not in k},
+            bounds={k: v for k, v in pri.bounds.items() if "friction" not in k},
+        )
     return Preset("quanser-two-link", tl.template(friction), free, opts, starts=cable_spring_starts)
 
 
@@ -124,11 +133,7 @@ def for_scenario(scenario) -> Preset:
     """The preset of a scenario: its ``[notes.fit]`` (free, priors), else the one registered
     under its name, else its joints' friction levels (Coulomb, breakaway, viscous) and the
     joints' cable springs where the logs' rests show one (:func:`cable_spring_starts`)."""
-    from flexarm.identification.time_domain.general import (
-        ScenarioFitOptions,
-        friction_paths,
-        scenario_fit_notes,
-    )
+    from flexarm.identification.time_domain.general import friction_paths, scenario_fit_notes
 
     notes = scenario_fit_notes(scenario)
     if notes.get("free"):
@@ -136,7 +141,7 @@ def for_scenario(scenario) -> Preset:
             scenario.name,
             scenario,
             list(notes["free"]),
-            ScenarioFitOptions(priors=dict(notes.get("priors", {}))),
+            FitOptions(priors=Priors(priors=dict(notes.get("priors", {})))),
         )
     if scenario.name in BUILTIN:
         p = BUILTIN[scenario.name]()
@@ -165,6 +170,6 @@ def for_scenario(scenario) -> Preset:
         scenario.name,
         scenario,
         friction_paths(scenario),
-        ScenarioFitOptions(),
+        FitOptions(),
         starts=cable_spring_starts,
     )

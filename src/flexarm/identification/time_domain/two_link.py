@@ -43,10 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from flexarm.identification.time_domain.general import (
-    ScenarioFitOptions,
-    predict_scenario,
-)
+from flexarm.identification.time_domain.general import predict_scenario
+from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
 from flexarm.specs.paths import scenario_with
 
 CHANNELS = ("theta_1", "alpha_f_1", "theta_2", "alpha_f_2")
@@ -118,32 +116,36 @@ def template(friction: bool = True):
     return sc
 
 
-def default_options(**kw) -> ScenarioFitOptions:
-    base: dict[str, Any] = dict(
-        channels={c: 1.0 for c in CHANNELS},
-        priors=dict(PRIORS),
-        ties=dict(TIES),
-        segment=3.0,
-        substeps=2,
-        # the default path converges (Σ r² resolved) after 42 evaluations (2026-11-30)
-        max_nfev=45,
-        # stop when a step lowers Σ r² by less than general.COST_RESOLUTION (a tenth of a
-        # standard deviation), relative to the cost's expected size
-        ftol=None,
-        bound_factor=4.0,
-        residual_level=0.2,
-        correlation_time=0.5,
-        bounds={
-            "arm.links[0].torsional_damping": (1e-3, 10.0),
-            "arm.links[1].torsional_damping": (1e-3, 10.0),
-            "arm.joints[0].friction.coulomb": (0.01, 5.0),
-            "arm.joints[0].friction.static": (0.01, 5.0),
-            "arm.joints[1].friction.coulomb": (1e-3, 0.5),
-            "arm.joints[1].friction.static": (1e-3, 0.5),
-        },
+#: the split's bounds (SI): link damping, joint friction levels
+BOUNDS = {
+    "arm.links[0].torsional_damping": (1e-3, 10.0),
+    "arm.links[1].torsional_damping": (1e-3, 10.0),
+    "arm.joints[0].friction.coulomb": (0.01, 5.0),
+    "arm.joints[0].friction.static": (0.01, 5.0),
+    "arm.joints[1].friction.coulomb": (1e-3, 0.5),
+    "arm.joints[1].friction.static": (1e-3, 0.5),
+}
+
+
+def default_options() -> FitOptions:
+    """The preset's :class:`~flexarm.identification.time_domain.options.FitOptions` (module
+    docstring): the four channels, λ = 0.2 and τ = 0.5 s, 2 integration substeps; 3 s
+    segments; 45 evaluations with ``ftol`` from the cost's resolution; bounds p0/4 … 4·p0 or
+    :data:`BOUNDS`, :data:`PRIORS`, :data:`TIES`. A fresh object each call."""
+    return FitOptions(
+        cost=Cost(
+            channels={c: 1.0 for c in CHANNELS},
+            residual_level=0.2,
+            correlation_time=0.5,
+            substeps=2,
+        ),
+        shooting=Shooting(segment=3.0),
+        # the default path converges (Σ r² resolved) after 42 evaluations (2026-11-30);
+        # ftol None: stop when a step lowers Σ r² by less than general.COST_RESOLUTION (a
+        # tenth of a standard deviation), relative to the cost's expected size
+        local=Local(max_nfev=45, ftol=None),
+        priors=Priors(bound_factor=4.0, bounds=dict(BOUNDS), priors=dict(PRIORS), ties=dict(TIES)),
     )
-    base.update(kw)
-    return ScenarioFitOptions(**base)
 
 
 def split_fit_inputs(data: str | Path, examples: str | Path) -> tuple[list, Any]:
@@ -153,8 +155,6 @@ def split_fit_inputs(data: str | Path, examples: str | Path) -> tuple[list, Any]
     :class:`~flexarm.identification.time_domain.options.FitOptions`; no whole-run
     prediction at the end (``held_out_report`` predicts the held-out data). Replaces
     ``fit_two_link`` (the fit from inside the preset's module, an import circle)."""
-    from flexarm.identification.time_domain.options import FitOptions
-
     logs = load_split(data, examples)
     fitted = [logs["run"], *logs["fit_steps"]]
     wins = [FIT_WINDOW] + [None] * len(logs["fit_steps"])
@@ -172,7 +172,7 @@ def held_out_report(
     last = predict_scenario(
         scenario,
         [logs["run"]],
-        ScenarioFitOptions(windows=[(50.0, 102.0)]),
+        FitOptions(windows=[(50.0, 102.0)]),
         channels=ch,
         plots=plots,
         tag="last52s",
@@ -180,7 +180,7 @@ def held_out_report(
     steps = predict_scenario(
         scenario,
         list(logs["held_steps"].values()),
-        ScenarioFitOptions(),
+        FitOptions(),
         channels=ch,
         plots=plots,
         tag="steps",
