@@ -17,7 +17,7 @@ LOCKVENV   := .venv-lock
 UV_VERSION := 0.13.9
 LOCK_FLAGS ?=
 
-.PHONY: demo test check bench lock docs clean
+.PHONY: demo test check bench lock docs notebooks clean
 
 $(STAMP): pyproject.toml $(LOCK)
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "flexarm needs Python >= 3.11, found " + sys.version.split()[0]'
@@ -64,6 +64,13 @@ check: $(STAMP)
 # reference and the API pages at build time. tests/test_docs__site.py builds it too.
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 FLEXARM_DOCS_EXECUTE=true $(BIN)/python -m mkdocs build --strict --site-dir site
+
+# The notebooks of docs/notebooks/ executed and written with their outputs, so that GitHub
+# shows their figures (docs/make_notebooks.py --execute; about 2.5 min on 2 cores, the
+# real-log cells where ../shared/data is present). Not part of `make test`, which executes
+# them without keeping the outputs (tests/test_docs__notebooks.py).
+notebooks: $(STAMP)
+	$(BIN)/python docs/make_notebooks.py --execute
 
 bench: $(STAMP)
 	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done

@@ -1,6 +1,9 @@
-"""Write the notebooks of docs/notebooks/ (plain nbformat 4 JSON, no outputs) from the cells
-below: ``python docs/make_notebooks.py``. tests/test_docs__notebooks.py executes every notebook
-and fails when a notebook differs from what this script writes.
+"""Write the notebooks of docs/notebooks/ (plain nbformat 4 JSON) from the cells below:
+``python docs/make_notebooks.py`` writes them without outputs; ``--execute`` (``make
+notebooks``) runs each in a fresh kernel from the repository root (nbclient, the real-log
+cells where the logs are present) and writes it with its outputs, so that GitHub shows the
+figures and tables (issue #46). tests/test_docs__notebooks.py executes every notebook and
+fails when a notebook's cells differ from what this script writes (outputs aside).
 
 Every notebook runs on the built-in scenarios with short durations; cells that need the
 real lab logs run where ``FLEXARM_DATA`` (default ``../shared/data`` beside the repository)
@@ -406,10 +409,96 @@ def text(name: str) -> str:
     return json.dumps(notebook(name, NOTEBOOKS[name]), indent=1, ensure_ascii=False) + "\n"
 
 
-def main() -> None:
+def stripped(text_: str) -> str:
+    """A notebook's JSON text as :func:`text` writes it: outputs, execution counts, cell
+    and notebook metadata dropped (what an executed notebook shares with its source)."""
+    nb = json.loads(text_)
+    cells = []
+    for c in nb["cells"]:
+        src = c["source"]
+        lines = src.splitlines(keepends=True) if isinstance(src, str) else src
+        cells.append(("code" if c["cell_type"] == "code" else "md", "".join(lines)))
+    ids = [c.get("id", "") for c in nb["cells"]]
+    out = notebook("", cells)
+    for c, cid in zip(out["cells"], ids, strict=True):
+        c["id"] = cid
+    return json.dumps(out, indent=1, ensure_ascii=False) + "\n"
+
+
+def _clean(nb: dict, root: Path) -> dict:
+    """An executed notebook without what differs from machine to machine: the cells'
+    execution timestamps, the kernel's version details, and the absolute paths in printed
+    text: the repository's made relative to it (``/home/u/flexarm/src/...`` → ``src/...``),
+    the folder above it's to ``..`` (``/home/u/shared/data`` → ``../shared/data``)."""
+    here, above = (str(p).rstrip("/") + "/" for p in (root, root.parent))
+
+    def rel(t: str) -> str:
+        return t.replace(here, "").replace(above, "../")
+
+    for c in nb["cells"]:
+        c.get("metadata", {}).pop("execution", None)
+        for o in c.get("outputs", []):
+            if "text" in o:
+                t = o["text"] if isinstance(o["text"], str) else "".join(o["text"])
+                o["text"] = rel(t)
+            for mime in ("text/plain", "text/html", "text/markdown"):
+                d = o.get("data", {}).get(mime)
+                if d is not None:
+                    d = d if isinstance(d, str) else "".join(d)
+                    o["data"][mime] = rel(d)
+    nb["metadata"] = notebook("", [])["metadata"]
+    return nb
+
+
+def execute(name: str, *, real: bool = True, timeout: int = 900) -> tuple[str, float]:
+    """Notebook ``name`` (from :data:`NOTEBOOKS`) run in a fresh ``python3`` kernel from the
+    repository root, with ``src`` first on its path and the real-log cells on where
+    ``real`` and the logs are present: (its JSON text with outputs, seconds)."""
+    import os
+    import time
+
+    import nbclient
+    import nbformat
+
+    root = HERE.parent.parent
+    nb = nbformat.reads(text(name), as_version=4)
+    keep = {k: os.environ.get(k) for k in ("FLEXARM_NOTEBOOK_REAL", "PYTHONPATH")}
+    os.environ["FLEXARM_NOTEBOOK_REAL"] = "1" if real else "0"
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        [str(root / "src"), *[p for p in (keep["PYTHONPATH"] or "").split(os.pathsep) if p]]
+    )
+    t0 = time.perf_counter()
+    try:
+        nbclient.NotebookClient(
+            nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": str(root)}}
+        ).execute()
+    finally:
+        for k, v in keep.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    seconds = time.perf_counter() - t0
+    return json.dumps(_clean(nb, root), indent=1, ensure_ascii=False) + "\n", seconds
+
+
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--execute", action="store_true", help="run each and keep its outputs")
+    ap.add_argument("names", nargs="*", help="notebooks (default: all)")
+    args = ap.parse_args(argv)
     HERE.mkdir(exist_ok=True)
-    for name in NOTEBOOKS:
-        (HERE / f"{name}.ipynb").write_text(text(name))
+    for name in args.names or list(NOTEBOOKS):
+        if name not in NOTEBOOKS:
+            ap.error(f"{name!r}: no such notebook; known: {', '.join(NOTEBOOKS)}")
+        if not args.execute:
+            (HERE / f"{name}.ipynb").write_text(text(name))
+            continue
+        out, seconds = execute(name)
+        (HERE / f"{name}.ipynb").write_text(out)
+        print(f"{name}: executed in {seconds:.0f} s, {len(out.encode()) / 1e6:.2f} MB")
 
 
 if __name__ == "__main__":

@@ -57,20 +57,23 @@ def test_a_current_drive_needs_no_resistance_and_one_value_missing_is_named_alon
 
 def test_a_ms_clock_read_as_s_is_flagged_before_any_work(log, tmp_path):
     """The lab logger's ms column read without the format's [units] time = "ms": the
-    loop looks like 1 Hz; the warning names the log, the step and --unit time=ms, before
-    the data sheet's refusal (and before the declared law's check)."""
+    loop looks like 1 Hz; the reader refuses it (io.checks.check_rate, no unit stated) in
+    one line naming the log, the step and --unit time=ms, before the data sheet's refusal
+    (and before the declared law's check).  slow_clock still warns on such a Log."""
+    from dataclasses import replace
+
     import flexarm
     from flexarm.cli.fit import slow_clock
 
     fmt = tmp_path / "no-units.toml"
     text = Path(FORMAT).read_text()
     fmt.write_text(text.replace("[units]", "").replace('time = "ms"', ""))
-    slow = flexarm.load_log(log, fmt)
-    msg = slow_clock(slow)
+    good = flexarm.load_log(log, FORMAT)
+    assert slow_clock(good) is None  # 1 ms steps
+    msg = slow_clock(replace(good, time=good.time * 1e3))
     assert msg is not None and "steps by 1 s" in msg and "--unit time=ms" in msg
-    assert slow_clock(flexarm.load_log(log, FORMAT)) is None  # 1 ms steps
     code, lines, out = _error([str(log), "--log-format", str(fmt)])
-    text = " ".join(" ".join(lines).split())
-    assert code == 2 and text.startswith("warning: ") and "--unit time=ms" in text
-    assert text.index("--unit time=ms") < text.index("error: the rotary servo fit")
+    assert code == 2 and len(lines) == 1, lines
+    assert lines[0].startswith("error: ") and "--unit time=ms" in lines[0]
+    assert "a sampling rate of 1 Hz" in lines[0] and "no time unit stated" in lines[0]
     assert "controller check" not in out

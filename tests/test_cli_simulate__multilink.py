@@ -38,14 +38,17 @@ def test_files_and_overlay_figure(written):
 
 def test_summary_errors_in_counts_follow_from_the_csv(written):
     # The summary's final errors, (θ_d − θ(4 s)) / count, recomputed from the CSV's joint
-    # angles (written with 10 significant digits: 4e-10 rad, 4e-6 counts) and the target.
+    # angles (written with 10 significant digits: 4e-10 rad, 4e-6 counts) and the target;
+    # the summary keeps 4 significant digits (relative 5e-4, issue #46).
     out, summary = written
     for name in NAMES:
         sc = load_scenario(name)
         log = read_log(out / f"{name}.csv", required=("time",), min_samples=2)
         th = np.array([log["theta_1"][-1], log["theta_2"][-1]])
         counts = (np.asarray(sc.controller.target) - th) / COUNT
-        np.testing.assert_allclose(summary[name]["final_joint_error_counts"], counts, atol=1e-5)
+        np.testing.assert_allclose(
+            summary[name]["final_joint_error_counts"], counts, rtol=5e-4, atol=1e-5
+        )
         assert log["time"][-1] == pytest.approx(4.0)
     # the must-show: stiction stops law (8) short by more than ten counts; with the
     # friction compensation the error is below one count (tests/test_assembly.py checks

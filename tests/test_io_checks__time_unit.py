@@ -2,8 +2,9 @@
 
 Before: a ``.mat`` time in s where the log format says ``us`` was read as a 1 GHz clock
 and ``flexarm frf`` wrote FRF lines at MHz, exit 0.  Now, where the time's unit is stated
-([units] time, --unit time=), a sampling rate outside ``RATE_RANGE`` (2 Hz to 200 kHz:
-no rig's controller logs faster than every 5 µs or slower than every 0.5 s) is one
+([units] time, --unit time=) and where it is not (seconds assumed, see
+test_io_checks__unstated_time_unit.py), a sampling rate outside ``RATE_RANGE`` (2 Hz to
+200 kHz: no rig's controller logs faster than every 5 µs or slower than every 0.5 s) is one
 ``LogError`` line naming the rate, the stated unit and the unit that fits (exit 2)."""
 
 from __future__ import annotations
@@ -61,14 +62,6 @@ def test_a_time_in_its_stated_unit_is_read(tmp_path, numbers, stated):
     want = 1 / (numbers * ureg.Quantity(1.0, stated).to("s").magnitude)
     assert RATE_RANGE[0] <= want <= RATE_RANGE[1]
     assert sample_rate(load_log(p, tmp_path / "f.toml")) == pytest.approx(want, rel=1e-9)
-
-
-def test_a_time_without_a_stated_unit_is_seconds_as_written(tmp_path):
-    """No [units] time: the numbers are seconds, whatever the step (the exchange format's
-    generic logs): a 1 s step is read, not refused."""
-    p = _mat(tmp_path, np.arange(100) * 1.0)
-    (tmp_path / "f.toml").write_text(FMT)
-    assert sample_rate(load_log(p, tmp_path / "f.toml")) == 1.0
 
 
 def test_a_text_log_with_a_unit_on_the_command_line_is_checked_too(tmp_path):

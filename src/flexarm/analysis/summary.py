@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,12 +37,64 @@ def simulate_with_progress(scenario: Scenario, progress: bool = False):
     return to_result(p, out)
 
 
+#: significant digits of a summary's numbers (``<name>.summary.json``, the demo's
+#: ``summary.json`` and printed lines): what a figure resolves; machine-read documents
+#: (``--json``, ``to_dict()``) keep full precision
+DIGITS = 4
+
+
+def rounded(obj: Any, digits: int = DIGITS) -> Any:
+    """``obj`` (dicts, lists, tuples, NumPy scalars and arrays inside) with every float
+    rounded to ``digits`` significant digits (0.28800000000000003 → 0.288, 153.38674875720403
+    → 153.4) and every non-finite float as ``None`` (JSON has no NaN); ints, bools and
+    strings as they are."""
+    if isinstance(obj, dict):
+        return {k: rounded(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [rounded(v, digits) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return rounded(obj.tolist(), digits)
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        x = float(obj)
+        return float(f"{x:.{digits}g}") if np.isfinite(x) else None
+    return obj
+
+
+def _tip_summary(res, ctrl: str) -> dict:
+    """The tip of a single-link step run, as its figure shows it: the tip angle's range
+    (rad), the largest deflection angle |tip − motor| (rad), the tip's settling time in
+    the 2 % band of the step (s), or a sentence where it does not settle within the
+    record; with a ``tip_deflection`` channel its peak (m) too."""
+    tip, motor = np.asarray(res["tip_angle"]), np.asarray(res[ctrl])
+    m = step_metrics(res.time, tip, res["reference"])
+    out = {
+        "tip_angle_range_rad": [float(tip.min()), float(tip.max())],
+        "peak_deflection_angle_rad": float(np.max(np.abs(tip - motor))),
+        "settling_time_s": (
+            m.settling_time
+            if m.settling_time is not None
+            else f"not within the {float(res.time[-1] - res.time[0]):.3g} s record"
+        ),
+        "overshoot": m.overshoot,
+    }
+    if "tip_deflection" in res.signals:
+        out["peak_tip_deflection_m"] = float(np.max(np.abs(res["tip_deflection"])))
+    return out
+
+
 def _response_metrics(scenario: Scenario, res, ctrl: str) -> dict:
-    """Step metrics for a step reference; tracking errors for other references."""
+    """Step metrics for a step reference (the controlled signal's, the tip angle's, and
+    the tip as its figure shows it: :func:`_tip_summary`); tracking errors for other
+    references."""
     if scenario.reference.type == "step":
         return {
             "step_metrics": step_metrics(res.time, res[ctrl], res["reference"]).to_dict(),
             "tip_metrics": step_metrics(res.time, res["tip_angle"], res["reference"]).to_dict(),
+            "tip": _tip_summary(res, ctrl),
         }
     e = res["reference"] - res[ctrl]
     return {
@@ -93,9 +146,11 @@ def write_simulation(
         "controlled_signal": ctrl,
         **_response_metrics(scenario, res, ctrl),
         "peak_command": float(np.max(np.abs(res.command))),
-        "command_unit": res.input_names[0],
+        "command": res.input_names[0],
+        "command_unit": _unit(res.input_names[0]),
         "files": [f"{name}.csv", f"{name}.png"],
     }
+    summary = rounded(summary)
     write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary
 
@@ -161,10 +216,7 @@ def write_multilink(
         "samples": len(res.time),
         "sampling_period_s": scenario.sampling.period,
         "final_joint_error_rad": err[-1].tolist(),
-        "final_joint_error_counts": [
-            None if not np.isfinite(c) else float(e / c)
-            for e, c in zip(err[-1], count, strict=True)
-        ],
+        **_counts(err[-1], count),
         "final_link_deflection_m": [
             float(res[f"deflection_{j + 1}"][-1]) for j in range(res.n_links)
         ],
@@ -172,8 +224,29 @@ def write_multilink(
         "command_names": list(res.input_names),
         "files": [f"{name}.csv", f"{name}.png"],
     }
+    summary = rounded(summary)
     write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary, res
+
+
+def _counts(err: np.ndarray, count: np.ndarray) -> dict:
+    """The final joint errors in encoder counts: a list where every joint has an encoder;
+    a dict by joint (``theta_j``) of those that have one, and ``no_encoder`` naming the
+    others, where some have none (no ``[None, None]``: an error in counts is not logged
+    without a quantised sensor)."""
+    has = np.isfinite(count)
+    if has.all():
+        return {"final_joint_error_counts": [float(e / c) for e, c in zip(err, count, strict=True)]}
+    out: dict = {}
+    if has.any():
+        out["final_joint_error_counts"] = {
+            f"theta_{j + 1}": float(err[j] / count[j]) for j in np.flatnonzero(has)
+        }
+    out["no_encoder"] = (
+        f"{', '.join(f'theta_{j + 1}' for j in np.flatnonzero(~has))}: no quantised "
+        "sensor in the scenario, errors in counts not logged (see final_joint_error_rad)"
+    )
+    return out
 
 
 def plot_joints(runs: dict, path: Path, *, overwrite: bool = False) -> None:
@@ -300,6 +373,7 @@ def write_regulation(
         "gravity_torque_at_target_N_m": np.asarray(params.g_d).tolist(),
         "files": [path.name, f"{name}.png"],
     }
+    summary = rounded(summary)
     write_json(out / f"{name}.summary.json", summary, overwrite=overwrite)
     return summary
 
@@ -317,37 +391,63 @@ def run_demo(out: Path, console, reproductions: dict | None = None) -> dict:
             write_json(out / f"{name}.model.json", info, overwrite=True)
         s = write_simulation(sc, out, overwrite=True)
         results[name] = s
-        if "step_metrics" in s:
-            m = s["step_metrics"]
-            ts = m["settling_time"]
-            settle = "never (within the record)" if ts is None else f"{ts:.3g} s"
-            console.print(
-                f"[bold]{name}[/]: step {m['step']:.3g} rad, settling "
-                f"{settle}, steady-state error {m['steady_state_error']:.3g} "
-                f"rad, peak command {s['peak_command']:.3g} {s['command_unit']}"
-            )
-        elif "tracking" in s:
-            tr = s["tracking"]
-            console.print(
-                f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
-                f"{tr['rms_error']:.3g} rad, peak tip deflection "
-                f"{tr['peak_tip_deflection']:.3g} m, peak command {s['peak_command']:.3g} "
-                f"{s['command_unit']}"
-            )
-        elif "final_joint_error_counts" in s:
-            console.print(
-                f"[bold]{name}[/]: final joint errors {s['final_joint_error_counts']} "
-                f"counts, peak commands {np.round(s['peak_command'], 2)} "
-                f"({', '.join(s['command_names'])})"
-            )
-        else:
-            console.print(
-                f"[bold]{name}[/]: final joint errors {np.round(s['final_theta_error_deg'], 3)} "
-                f"deg, initial torques {np.round(s['initial_torque_N_m'], 2)} N*m"
-            )
+        console.print(demo_line(name, s))
     for rname, run in (reproductions or {}).items():
         console.print(f"[bold]reproducing {rname}[/] ...")
         results[f"reproduce_{rname}"] = run(out / rname)
-    write_json(out / "summary.json", results, overwrite=True, default=str)
+    write_json(out / "summary.json", rounded(results), overwrite=True, default=str)
     console.print(f"wrote {out}/")
     return results
+
+
+def _mrad(x) -> str:
+    return f"{1e3 * x:.3g} mrad"
+
+
+def demo_line(name: str, s: dict) -> str:
+    """The demo's printed line of one scenario's summary (:func:`write_simulation`,
+    :func:`write_multilink`, :func:`write_regulation`), 3 significant digits; a step run
+    names the tip as its figure shows it (range, peak deflection, settling)."""
+    if "step_metrics" in s:
+        m = s["step_metrics"]
+        ts = m["settling_time"]
+        settle = "never (within the record)" if ts is None else f"{ts:.3g} s"
+        line = (
+            f"[bold]{name}[/]: step {m['step']:.3g} rad, settling {settle}, steady-state "
+            f"error {m['steady_state_error']:.3g} rad, peak command {s['peak_command']:.3g} "
+            f"{s['command_unit']} ({s['command']})"
+        )
+        tip = s.get("tip")
+        if tip:
+            lo, hi = tip["tip_angle_range_rad"]
+            ts = tip["settling_time_s"]
+            line += (
+                f"; tip {1e3 * lo:.0f} to {1e3 * hi:.0f} mrad, peak deflection "
+                f"{_mrad(tip['peak_deflection_angle_rad'])} from the motor, settling "
+                + (f"{ts:.3g} s" if isinstance(ts, (int, float)) else ts)
+            )
+        return line
+    if "tracking" in s:
+        tr = s["tracking"]
+        return (
+            f"[bold]{name}[/]: {tr['reference']} reference, rms tracking error "
+            f"{tr['rms_error']:.3g} rad, peak tip deflection {tr['peak_tip_deflection']:.3g} m, "
+            f"peak command {s['peak_command']:.3g} {s['command_unit']} ({s['command']})"
+        )
+    if "final_joint_error_rad" in s:
+        counts = s.get("final_joint_error_counts")
+        if isinstance(counts, list):
+            err = f"{', '.join(f'{c:.3g}' for c in counts)} counts"
+        else:
+            err = ", ".join(_mrad(e) for e in s["final_joint_error_rad"])
+            err += f" (no encoder on {s['no_encoder'].split(':')[0]}: not in counts)"
+        cmds = ", ".join(
+            f"{c:.3g} {_unit(n)} ({n})"
+            for c, n in zip(s["peak_command"], s["command_names"], strict=True)
+        )
+        return f"[bold]{name}[/]: final joint errors {err}, peak commands {cmds}"
+    return (
+        f"[bold]{name}[/]: final joint errors "
+        f"{', '.join(f'{e:.3g}' for e in s['final_theta_error_deg'])} deg, initial torques "
+        f"{', '.join(f'{u:.3g}' for u in s['initial_torque_N_m'])} N*m"
+    )

@@ -10,8 +10,8 @@ hands its arrays, in SI units, to :func:`check_signals`, which
    neighbouring samples out of order are named as swapped), and uniform within
    ``max_jitter`` (relative deviation |Δt_k − median Δt| / median Δt);
 3. checks the sampling rate 1 / median step against :data:`RATE_RANGE` (:func:`check_rate`):
-   where the time's unit is stated ([units] time, --unit time=): a log's clock read in
-   the wrong unit (a ``.mat`` time in s where the format says µs) is refused with the
+   a log's clock read in the wrong unit (a ``.mat`` time in s where the format says µs;
+   the lab logger's ms column read as s where no unit is stated) is refused with the
    unit that makes the rate a rig's;
 4. refuses finite but absurd values (:func:`check_ranges`): |x| beyond the physical range
    of the signal's kind (:data:`RANGES`, by SI unit: an angle beyond 1e3 rad, a voltage
@@ -210,11 +210,13 @@ def check_rate(
     :class:`flexarm.io.logs.LogError`, one line) naming the rate, the unit it was read in
     and the unit that gives a rig's rate, e.g. time in s where the format says ``us``:
     1 kHz read as 1 GHz.  A refusal, not a warning: every result downstream
-    (FRF lines, delays, periods) would be off by the same factor of 1000.  Checked only
-    where a unit is stated (``unit`` None: the file's numbers are seconds as written,
-    e.g. the exchange format, whose generic logs may have any step)."""
+    (FRF lines, delays, periods) would be off by the same factor of 1000.  Where no unit
+    is stated (``unit`` None: the log format and the options say nothing, the numbers are
+    taken as seconds) the same range holds (issue #45/#46: the lab logger's ms column under
+    a header that says "(s)" read as a 1 Hz loop); the line then says the unit was not
+    stated and names the field that states it (``[units] time``, ``--unit time=``)."""
     t = np.asarray(t, float)
-    if unit is None or t.size < 2:
+    if t.size < 2:
         return
     d = np.diff(t)
     d = d[np.isfinite(d) & (d > 0)]
@@ -239,10 +241,17 @@ def check_rate(
         if lo <= rate <= hi:
             fits.append((abs(np.log10(rate / 1e3)), u, rate))
     how = "fast" if fs > hi else "slowly"
-    told = f"[units] time = {stated!r}"
+    told = (
+        f"[units] time = {stated!r}"
+        if unit is not None
+        else "seconds (no time unit stated: no [units] time, no --unit time=)"
+    )
+    verb = "set" if unit is not None else "state it:"
     if fits:
         _, u, rate = min(fits)  # the proposal nearest 1 kHz
-        fix = f"if the numbers are {u}, set [units] time = '{u}' (--unit time={u}): {rate:.6g} Hz"
+        fix = (
+            f"if the numbers are {u}, {verb} [units] time = '{u}' (--unit time={u}): {rate:.6g} Hz"
+        )
     else:
         fix = "map the column that holds the time, or set [units] time to its unit"
     raise _log_error(
@@ -302,7 +311,8 @@ def check_signals(
     """The readers' hook (module doc): unwrap ``signals[COUNTER]`` in place, then
     :func:`check_time` on ``time`` (default ``signals["time"]``, if any; ``time_column`` its
     name in messages), :func:`check_rate` (``time_unit``: the unit the file's time was
-    read in, None for seconds) and :func:`check_ranges` on all.  Returns ``signals``."""
+    read in, None where none is stated: seconds assumed, checked too) and
+    :func:`check_ranges` on all.  Returns ``signals``."""
     if COUNTER in signals:
         signals[COUNTER] = unwrap_counter(signals[COUNTER])
     t = signals.get("time") if time is None else time
