@@ -46,6 +46,39 @@ def test_design_evaluator_matches_python_control():
     np.testing.assert_allclose(d.response[::sub][:n], np.ravel(y), atol=1e-9)
 
 
+@pytest.mark.parametrize("delay", [0, 3, 40])
+def test_step_evaluator_equals_python_control_at_long_delays(delay):
+    """The search's step response (its own recursion, the delay a line of past commands)
+    equals python-control's closed loop of Fig. 4 with ``delay`` samples of delay, for
+    compensators drawn at random (stable loops: their responses stay bounded), at every
+    sample: θm to 1e-9 of the unit step and the command to 1e-9 A per rad (the exact same
+    linear recursion in another form; rounding only)."""
+    from flexarm.control.inner_loop import _comp, _plant_tf, _StepEvaluator, motor_design_model
+
+    m = model()
+    J, V, K = motor_design_model(m)
+    # a longer delay admits a lower gain: with these, 8, 35 and 40 of the 40 draws are stable
+    n, gain = 400, {0: 2.0, 3: 0.2, 40: 0.02}[delay]
+    ev = _StepEvaluator(J, V, K, DT, delay, n)
+    rng = np.random.default_rng(1)
+    p = rng.uniform(0.0, 0.95, (4, 40))
+    theta, cs = ev.run(p, gain)
+    plant, t = _plant_tf(m, DT, delay), np.arange(n) * DT
+    checked = 0
+    for i in range(p.shape[1]):
+        a1, b1, a2, b2 = p[:, i]
+        g1, g2 = _comp(a1, b1, gain, DT), _comp(a2, b2, 1.0, DT)
+        cl = control.feedback(g1 * plant, g2)
+        if np.max(np.abs(cl.poles())) >= 1.0:
+            continue
+        y = np.ravel(control.step_response(cl, T=t).outputs)
+        u = np.ravel(control.step_response(control.feedback(g1, plant * g2), T=t).outputs)
+        np.testing.assert_allclose(theta[:: ev.sub, i], y, atol=1e-9)
+        np.testing.assert_allclose(cs[:, i], u, atol=1e-9)
+        checked += 1
+    assert checked >= 3
+
+
 def _sim(p, ctrl):
     p.loop = eqx.tree_at(lambda lp: lp.controller, p.loop, ctrl)
     return run_prepared(p)

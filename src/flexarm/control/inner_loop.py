@@ -336,6 +336,11 @@ def _comp(a: float, b: float, gain_at_1: float, dt: float) -> control.TransferFu
     return control.tf([k, -k * a], [1.0, -b], dt)
 
 
+#: from this many samples of delay on, :class:`_StepEvaluator` runs a block of ``delay``
+#: samples at a time (below, sample by sample is quicker)
+BLOCK_DELAY = 8
+
+
 class _StepEvaluator:
     """Linear step response of Fig. 4 on eq. (9), sampled with ZOH, with ``delay``
     samples of delay; θm also between samples (``sub`` points per period)."""
@@ -356,64 +361,103 @@ class _StepEvaluator:
         self.Gam = np.array([f[1][0] for f in fine])  # (sub,)
         self.delay, self.n, self.sub, self.dt = delay, n, sub, dt
         self.time = np.arange(n * sub) * dt / sub
+        # a block of d samples (d the delay) has its motor inputs u_{k−d} from the block
+        # before: the motor over the block is x_k = A_d^k x_0 + Σ_{j<k} A_d^{k−1−j} B_d u_a,j
+        # (k = 0 ... d), these powers once for all candidates
+        if delay >= BLOCK_DELAY:
+            pw = [np.eye(2)]
+            for _ in range(delay):
+                pw.append(self.Ad @ pw[-1])
+            self._M0 = np.array(pw)  # (d + 1, 2, 2)
+            Mu = np.zeros((delay + 1, delay, 2))
+            for k in range(delay + 1):
+                for j in range(k):
+                    Mu[k, j] = pw[k - 1 - j] @ self.Bd
+            self._Mu = Mu
+            kk, jj = np.meshgrid(np.arange(delay + 1), np.arange(delay), indexing="ij")
+            self._E = np.where(jj < kk, kk - 1 - jj, 0)  # exponents k − 1 − j (j < k)
+            self._lower = jj < kk
+
+    def _blocks(self, X: np.ndarray, U: np.ndarray, c: tuple) -> None:
+        """The recursion of :meth:`run` a block of d samples at a time (d >= 1 the delay):
+        within a block the motor's inputs u_{k−d} are known (the block before's commands,
+        0 before the first sample), so the motor's states over the block follow at once,
+        and so do the compensators' s2 (a first-order filter of θm) and s1 (of e) and the
+        commands. n / d steps of O(P d²) work instead of n steps."""
+        c_th, c_s1, c_s2, k1, k2, e_s2, b1, b2 = c
+        d, n, P = self.delay, self.n, X.shape[-1]
+        # per candidate, b^(k−1−j) for j < k (0 elsewhere)
+        ks = np.arange(d + 1)
+        p1, p2 = b1[:, None] ** ks, b2[:, None] ** ks  # (P, d + 1): b^0 ... b^d
+        pow1 = np.where(self._lower, p1[:, self._E], 0.0)  # (P, d + 1, d)
+        pow2 = np.where(self._lower, p2[:, self._E], 0.0)
+        x0, s1, s2 = np.zeros((2, P)), np.zeros(P), np.zeros(P)
+        for k0 in range(0, n, d):
+            m = min(d, n - k0)
+            ua = U[k0 - d : k0 - d + m] if k0 >= d else np.zeros((m, P))
+            # (θm, ω) at k0 + k, k = 0 ... m
+            x = np.einsum("kab,bp->kap", self._M0[: m + 1], x0) + np.einsum(
+                "kja,jp->kap", self._Mu[: m + 1, :m], ua
+            )
+            th = x[:, 0]
+            sv2 = p2[:, : m + 1].T * s2 + (pow2[:, : m + 1, :m] @ th[:m].T[:, :, None])[..., 0].T
+            e = -k2 * th[:m] + e_s2 * sv2[:m] + 1.0
+            sv1 = p1[:, : m + 1].T * s1 + (pow1[:, : m + 1, :m] @ e.T[:, :, None])[..., 0].T
+            X[k0 : k0 + m, 0:2] = x[:m]
+            X[k0 : k0 + m, 2] = sv1[:m]
+            X[k0 : k0 + m, 3] = sv2[:m]
+            U[k0 : k0 + m] = c_th * th[:m] + c_s1 * sv1[:m] + c_s2 * sv2[:m] + k1
+            x0, s1, s2 = x[m], sv1[m], sv2[m]
 
     def run(self, p: np.ndarray, gain: float):
         """θm per unit step on the fine grid (n·sub, ...) and the feedback current per
         unit step at the samples (n, ...), for p = (a1, b1, a2, b2) of shape (4,) or
-        (4, P). The loop is one linear recursion x⁺ = A_cl x + b_cl in
-        x = (θm, ω, s1, s2, u_{k−d}, ..., u_{k−1}); s1, s2 the compensators' states."""
+        (4, P). The loop, sample by sample: u_k = k1 (b1 − a1) s1 + k1 e_k with
+        e_k = 1 − k2 (b2 − a2) s2 − k2 θm (the compensators' states s1, s2:
+        s1⁺ = b1 s1 + e_k, s2⁺ = b2 s2 + θm), the motor (θm, ω)⁺ = A_d (θm, ω) + B_d u_{k−d}
+        (ZOH of eq. (9); u = 0 before the first sample)."""
         p = np.asarray(p, float)
         single = p.ndim == 1
         a1, b1, a2, b2 = p[:, None] if single else p
-        P = a1.size
         k1 = gain * (1 - b1) / (1 - a1)
         k2 = (1 - b2) / (1 - a2)
-        d = self.delay
-        m = 4 + d
-        # u = k1 (b1 − a1) s1 + k1 e,  e = r − k2 (b2 − a2) s2 − k2 θ  (r = 1)
-        cu = np.zeros((P, m))
-        cu[:, 0] = -k1 * k2
-        cu[:, 2] = k1 * (b1 - a1)
-        cu[:, 3] = -k1 * k2 * (b2 - a2)
-        du = k1
-        ce = np.zeros((P, m))  # e = ce · x + 1
-        ce[:, 0] = -k2
-        ce[:, 3] = -k2 * (b2 - a2)
-        # the applied current: the oldest buffered command (d > 0), else u itself
-        if d:
-            ca, da = np.zeros((P, m)), np.zeros(P)
-            ca[:, 4] = 1.0
+        d, n = self.delay, self.n
+        # u = k1 (b1 − a1) s1 + k1 e,  e = r − k2 (b2 − a2) s2 − k2 θ  (r = 1):
+        # u = c_th θ + c_s1 s1 + c_s2 s2 + k1 and e = −k2 θ − k2 (b2 − a2) s2 + 1
+        c_th, c_s1, c_s2 = -k1 * k2, k1 * (b1 - a1), -k1 * k2 * (b2 - a2)
+        e_s2 = -k2 * (b2 - a2)
+        (a00, a01), (a10, a11) = self.Ad
+        g0, g1 = self.Bd
+        # the recursion in its own variables, the delay line as the command history: per
+        # sample O(P) work whatever the delay (the companion form's x⁺ = A_cl x + b_cl in
+        # x = (θm, ω, s1, s2, u_{k−d}, ..., u_{k−1}) costs O(P (4 + d)²) a sample, which on a
+        # fitted rig with an 86-sample loop delay made one design minutes long)
+        X = np.empty((n, 4, a1.size))  # θm, ω, s1, s2 at each sample, before its update
+        U = np.empty((n, a1.size))  # the command computed at each sample
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            if d >= BLOCK_DELAY:
+                self._blocks(X, U, (c_th, c_s1, c_s2, k1, k2, e_s2, b1, b2))
+            else:  # sample by sample
+                th, om, s1, s2 = (np.zeros(a1.size) for _ in range(4))
+                for k in range(n):
+                    X[k, 0], X[k, 1], X[k, 2], X[k, 3] = th, om, s1, s2
+                    u = c_th * th + c_s1 * s1 + c_s2 * s2 + k1
+                    U[k] = u
+                    ua = (U[k - d] if k >= d else 0.0) if d else u
+                    e = -k2 * th + e_s2 * s2 + 1.0
+                    th, om = a00 * th + a01 * om + g0 * ua, a10 * th + a11 * om + g1 * ua
+                    s1, s2 = b1 * s1 + e, X[k, 0] + b2 * s2
+        X = np.nan_to_num(X, nan=1e6, posinf=1e6, neginf=-1e6)
+        U = np.nan_to_num(U, nan=1e6, posinf=1e6, neginf=-1e6)
+        cs = c_th * X[:, 0] + c_s1 * X[:, 2] + c_s2 * X[:, 3] + k1
+        if d:  # the applied command: the one computed d samples before (0 before that)
+            ua = np.concatenate([np.zeros((min(d, n), a1.size)), U[: max(n - d, 0)]])
         else:
-            ca, da = cu, du
-        A = np.zeros((P, m, m))
-        b = np.zeros((P, m))
-        A[:, 0:2, 0:2] = self.Ad
-        A[:, 0:2, :] += self.Bd[None, :, None] * ca[:, None, :]
-        b[:, 0:2] = self.Bd[None, :] * np.reshape(da, (-1, 1))
-        A[:, 2, :] = ce
-        A[:, 2, 2] += b1
-        b[:, 2] = 1.0
-        A[:, 3, 0] = 1.0
-        A[:, 3, 3] = b2
-        for j in range(d - 1):
-            A[:, 4 + j, 5 + j] = 1.0
-        if d:
-            A[:, 3 + d, :] = cu
-            b[:, 3 + d] = du
-        xs = np.empty((self.n, P, m, 1))
-        x = np.zeros((P, m, 1))
-        b = b[:, :, None]
-        with np.errstate(over="ignore", invalid="ignore"):
-            for k in range(self.n):
-                xs[k] = x
-                x = A @ x + b
-        xs = np.nan_to_num(xs[..., 0], nan=1e6, posinf=1e6, neginf=-1e6)
-        cs = np.einsum("kpm,pm->kp", xs, cu) + du
-        ua = np.einsum("kpm,pm->kp", xs, ca) + da
+            ua = cs
         # θ(t_k + j T/sub) = Φ_j[0] (θ_k, ω_k) + Γ_j[0] u_a,k, all fine points at once
         theta = (
-            np.einsum("jc,kpc->kjp", self.Phi, xs[:, :, :2]) + np.einsum("j,kp->kjp", self.Gam, ua)
-        ).reshape(self.n * self.sub, P)
+            np.einsum("jc,kcp->kjp", self.Phi, X[:, :2]) + np.einsum("j,kp->kjp", self.Gam, ua)
+        ).reshape(n * self.sub, a1.size)
         if single:
             return theta[:, 0], cs[:, 0]
         return theta, cs
