@@ -288,8 +288,9 @@ def test_global_stage_searches_the_tip_delay_after_the_hub():
     only tip >= hub (the tip as the hub plus a lag >= 0) and ends on that constraint's
     edge nearest the bowl's minimum, hub = tip = 8 or 9 (the constrained minimum of
     (h − 12)² + (t − 5)² is at h = t = 8.5); without it, at the minimum itself (12, 5).
-    Where a range already puts the tip after the hub (a trusted hub → tip lag), nothing
-    changes: the same population, seed and result as without the option."""
+    A tip range that starts later but overlaps the hub's (a trusted hub → tip lag over an
+    untrusted hub's wide range) is ordered too; only a tip range wholly after the hub's is
+    searched as it is: the same population, seed and result as without the option."""
     from flexarm.identification.time_domain.global_stage import (
         differential_evolution_stage,
         ordered_delays,
@@ -306,9 +307,25 @@ def test_global_stage_searches_the_tip_delay_after_the_hub():
     assert all(t >= h for h, t in ordered.seen), sorted(ordered.seen)
     assert int(r.D[0]) == int(r.D[1]) and int(r.D[0]) in (8, 9), r.D
     assert r.U[0] == pytest.approx(0.3, abs=0.05)
-    # a range the estimates placed after the hub's: searched as it is
-    later = ((6, 18), (10, 20))
-    assert ordered_delays(((0, 20), (0, 20))) and not ordered_delays(later)
+    # a tip range a trusted hub -> tip lag started later than the hub's but overlapping it
+    # (an untrusted hub searched over 0 ... 30, the tip from 10 on: unit 7): still ordered,
+    # so the search ends at hub = tip = 10 (the constrained minimum, cost 29 / 100) and not
+    # at the bowl's minimum within the ranges, hub 12 > tip 10 (25 / 100)
+    overlap = ((0, 30), (10, 30))
+    assert ordered_delays(overlap)
+    bowl = _DelayBowl(overlap)
+    r = differential_evolution_stage(
+        bowl, np.array([0.5]), np.array([12, 10, 1]), tip_after_hub=True, **kw
+    )
+    assert all(t >= h for h, t in bowl.seen) and (int(r.D[0]), int(r.D[1])) == (10, 10), r.D
+    r = differential_evolution_stage(
+        _DelayBowl(overlap), np.array([0.5]), np.array([12, 10, 1]), **kw
+    )
+    assert (int(r.D[0]), int(r.D[1])) == (12, 10), r.D
+    # a tip range wholly after the hub's (a trusted lag beyond both ranges' widths): the
+    # order cannot break, so it is searched as it is: the same result as without the option
+    later = ((6, 12), (14, 20))
+    assert not ordered_delays(later)
     a = differential_evolution_stage(
         _DelayBowl(later), np.array([0.5]), np.array([12, 15, 1]), **kw
     )

@@ -475,8 +475,9 @@ def fit(
     result says so (on 4/27 the hub / tip delays of seeds 0, 1, 2 at 5 V: 36 / 47, 35 / 66,
     16 / 43 samples, at costs 0.347, 0.344, 0.366).
     ``tip_after_hub`` (default True): where both delays are free and their search ranges
-    leave the order open (the tip's starting no later than the hub's: no trusted hub → tip
-    estimate, or ``estimates=False``), the tip delay is searched as the hub delay plus a
+    leave the order open (the tip's starting before the hub's ends: no trusted hub → tip
+    estimate, ``estimates=False``, or a trusted lag over an untrusted hub's wide range,
+    :func:`~.global_stage.ordered_delays`), the tip delay is searched as the hub delay plus a
     lag ≥ 0 (global stage, neighbours, profile): an
     encoder reads the hub at once and a strain gauge's conditioning only adds lag. Without
     it the 4/27 session's delays came out in either order (three seeds at two amplifier
