@@ -108,7 +108,7 @@ def ar1_noise(std: float, rho: float, n: int, rng: np.random.Generator) -> np.nd
     from scipy.signal import lfilter
 
     w[1:] *= math.sqrt(1.0 - rho * rho)
-    return float(std) * lfilter([1.0], [1.0, -rho], w)
+    return float(std) * np.asarray(lfilter([1.0], [1.0, -rho], w), float)
 
 
 def residual_noise(measured: Any, simulated: Any) -> tuple[float, float]:
@@ -189,11 +189,11 @@ def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> lis
 
 def _refit(k: int, seed: int, *, model, logs, sims, free, options, result, noise):
     """One replicate (a task of the executor): its logs, its refit; (k, values, error)."""
-    import flexarm
+    from flexarm.identification.time_domain.engine import fit
 
     try:
         reps = replicate_logs(result, logs, sims, noise, seed)
-        res = flexarm.fit(model, reps, free, options)
+        res = fit(model, reps, free, options)
         return k, {p: float(v) for p, v in res.params.items()}, None
     except Exception as e:  # a failed replicate is counted and named, not fatal
         return k, None, f"replicate {k}: {type(e).__name__}: {e}"

@@ -123,6 +123,8 @@ def with_bootstrap(res: FitResult, logs, opts: FitOptions, model, progress) -> F
     from flexarm.identification.time_domain.bootstrap import bootstrap
 
     b = opts.bootstrap
+    if b is None:
+        return res
     b.check()
     if res.scenario is None:
         return res
