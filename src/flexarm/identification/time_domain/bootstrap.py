@@ -13,9 +13,10 @@ For each of ``n`` replicates k = 0 … n−1 (seed :func:`flexarm.sim.batch.chun
 2. noise is added to each measured channel the prediction simulates:
    ``noise="residuals"``: a Gaussian AR(1) series e_k = ρ e_{k−1} + σ √(1−ρ²) w_k
    (:func:`ar1_noise`) with the fit's residual std σ and lag-1 autocorrelation ρ of that
-   log and channel (residual = logged − predicted over the fitted window); ``"declared"``:
-   white Gaussian noise of the scenario's ``sensors.X.noise`` (SI), rounded to its
-   ``quantum`` where it declares one;
+   log and channel (residual = logged − predicted over the fitted window; on a channel the
+   scenario quantises, σ² less the rounding's q²/12); ``"declared"``: white Gaussian noise
+   of the scenario's ``sensors.X.noise`` (SI); either rounded to the channel's quantisation
+   step (``quantum``, or ``range / 2**bits``) where it declares one, as the sensor reads;
 3. the replicate is the same :class:`flexarm.io.logs.Log` with those channels replaced
    (same time stamps, references, command, disturbances; same windows), and it is refitted
    by the one fit, :func:`flexarm.fit`, with the original free list and options
@@ -158,11 +159,17 @@ def _predictions(result, logs: list, windows: list) -> list[tuple[dict, dict]]:
 
 
 def _declared(scenario, channel: str) -> tuple[float, float | None]:
+    """(noise std, quantisation step or None) the scenario declares for ``channel``
+    (``quantum``, else ``range / 2**bits``), in the channel's SI unit."""
     sens = getattr(scenario, "sensors", {}) or {}
     s = sens.get(channel) if isinstance(sens, dict) else getattr(sens, channel, None)
     if s is None:
         return 0.0, None
-    return float(getattr(s, "noise", 0.0) or 0.0), getattr(s, "quantum", None)
+    q = float(getattr(s, "quantum", 0.0) or 0.0)
+    bits = int(getattr(s, "bits", 0) or 0)
+    if q <= 0 and bits > 0:
+        q = float(s.range) / 2**bits
+    return float(getattr(s, "noise", 0.0) or 0.0), (q if q > 0 else None)
 
 
 def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> list:
@@ -173,16 +180,20 @@ def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> lis
     out = []
     for i, (g, (sim, stats)) in enumerate(zip(logs, sims, strict=True)):
         sig = dict(g.signals)
+        sc = _scenario_of(result, sess[i])
         for c, y in sim.items():
             if c not in sig or len(y) != len(sig[c]):
                 continue
+            s, q = _declared(sc, c)
             if noise == "residuals":
+                # a quantised channel: its residual holds the rounding (q²/12), which the
+                # re-quantisation below adds back; the noise before it is the rest
                 s, rho = stats.get(c, (0.0, 0.0))
-                sig[c] = y + ar1_noise(s, rho, len(y), rng)
+                s = math.sqrt(max(s * s - (q * q / 12.0 if q else 0.0), 0.0))
+                v = y + ar1_noise(s, rho, len(y), rng)
             else:
-                s, q = _declared(_scenario_of(result, sess[i]), c)
                 v = y + s * rng.standard_normal(len(y))
-                sig[c] = np.round(v / q) * q if q else v
+            sig[c] = np.round(v / q) * q if q else v
         out.append(replace(g, signals=sig))
     return out
 
