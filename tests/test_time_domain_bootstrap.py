@@ -293,7 +293,7 @@ def test_example_rotary_log_truth_within_3_bootstrap_std(tmp_path):
     log (the strict xfail of tests/test_analysis_example_logs.py: six parameters within 3
     HAC std; the HAC std are 10-30x too small there): the truth of each of the six lies
     within 3 bootstrap std (the link inertia as the tip mass m L², L = 0.45 m). Measured
-    2026-12-05 (seed 0, 8 refits, 7 min on 2 cores): |error| / bootstrap std 0.05 (J),
+    2026-12-05 (seed 0, 8 refits, 4-6 min on 2 shared cores): |error| / bootstrap std 0.05 (J),
     0.01 (B), 0.08 (F_c), 0.72 (bias), 0.29 (ζ), ~0.01 (J_l), where the HAC ones are 3.9,
     3.6, 8.3, 14.7, 5.2. The bootstrap std: J 1.9 %, B 18 %, F_c 4.8 %, bias 2.5 %, ζ 1.2 %,
     gauge gain 0.7 %; over noise seeds 0-2 the errors reach 0.9 % (J), 7 % (B), 5 % (bias)."""
