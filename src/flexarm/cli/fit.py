@@ -270,6 +270,16 @@ def fit(
         ),
     ] = None,
     report: o.Report = None,
+    bootstrap: Annotated[
+        int | None,
+        typer.Option(
+            "--bootstrap",
+            help="then refit N replicates simulated by the fitted model with noise like the "
+            "fit's residuals: the reported std and correlation are their spread (the HAC std "
+            "kept in --json's stages.hac); N=20 takes about 20 refits' time",
+            callback=parsing.number(ge=2, le=10_000),
+        ),
+    ] = None,
 ) -> None:
     """Fit a physical model with joint friction to closed-loop logs (time domain).
 
@@ -302,6 +312,7 @@ def fit(
             ctx,
             cfile=cfile,
             continuous=continuous,
+            bootstrap=bootstrap,
         )
         return
     if cfile is not None or continuous:
@@ -320,7 +331,12 @@ def fit(
     fmt_file = Path(log_format[0]) if log_format else None
     from flexarm.errors import FitInterrupted
     from flexarm.identification.time_domain import FitInputError, engine, presets
-    from flexarm.identification.time_domain.options import FitOptions, PredictOptions, ServoRig
+    from flexarm.identification.time_domain.options import (
+        Bootstrap,
+        FitOptions,
+        PredictOptions,
+        ServoRig,
+    )
     from flexarm.identification.time_domain.predict import predict
     from flexarm.identification.time_domain.report import fit_extras
     from flexarm.io.write import write_each, write_json
@@ -393,7 +409,11 @@ def fit(
             rig=True,
             before_check=check_sheet,
         )
-        opts = FitOptions(servo_rig=rig, windows=[win] * len(full) if win else None)
+        opts = FitOptions(
+            servo_rig=rig,
+            windows=[win] * len(full) if win else None,
+            bootstrap=Bootstrap(n=bootstrap) if bootstrap else None,
+        )
         with working("fitting") as status:
             one = engine.fit(preset, full, options=opts, progress=lambda m: progress(status, m))
             res = one.engine_result
@@ -401,7 +421,7 @@ def fit(
                 status.update("fitting again without joint friction")
                 no_fr = dataclasses.replace(rig, friction=False)
                 res0 = engine.fit(
-                    preset, full, options=dataclasses.replace(opts, servo_rig=no_fr)
+                    preset, full, options=dataclasses.replace(opts, servo_rig=no_fr, bootstrap=None)
                 ).engine_result
             if vwin:
                 status.update("predicting the held-out windows")
@@ -416,6 +436,8 @@ def fit(
     for w in one.warnings:  # the one result's (the fit's findings) the rig's summary lacks
         if w not in res.warnings:
             console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+    if "bootstrap" in one.stages:  # the rig's summary above gives its HAC std
+        _print_bootstrap(one)
     _print_bench_tables(res, res0, held, validate_window)
     one.extras.update(
         fit_extras(without_friction=res0, window=win, held_out=held, held_window=vwin)
@@ -751,9 +773,17 @@ def _fit_scenario_cli(
     *,
     cfile=None,
     continuous: bool = False,
+    bootstrap: int | None = None,
 ) -> None:
     from flexarm.identification.time_domain.engine import fit as fit_engine
-    from flexarm.identification.time_domain.options import Cost, FitOptions, Local, Priors, Shooting
+    from flexarm.identification.time_domain.options import (
+        Bootstrap,
+        Cost,
+        FitOptions,
+        Local,
+        Priors,
+        Shooting,
+    )
     from flexarm.io.logformat import load_logs
     from flexarm.io.logs import LogError
     from flexarm.io.write import write_each, write_json
@@ -782,6 +812,7 @@ def _fit_scenario_cli(
             windows=[win] * len(glogs) if win else None,
             plots=folder,
             continuous=continuous,
+            bootstrap=Bootstrap(n=bootstrap) if bootstrap else None,
         )
         with working("fitting") as status, _state_warnings_quiet():
             # the one FitResult of every rig (a scenario here: the general engine), with its
@@ -791,10 +822,13 @@ def _fit_scenario_cli(
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
-    t = Table("parameter", "template", "fitted", "std")
+    boot = "bootstrap" in res.stages
+    t = Table("parameter", "template", "fitted", "std (bootstrap)" if boot else "std")
     for p in res.free:
         t.add_row(p, f"{res.template[p]:.5g}", f"{res.params[p]:.5g}", f"{res.std[p]:.3g}")
     console.print(t)
+    if boot:
+        console.print(escape(res.stages["std_source"]), highlight=False)
     console.print(escape(res.message))
     for w in res.warnings:
         console.print(f"[yellow]warning:[/yellow] {escape(w)}")
@@ -827,6 +861,15 @@ def _fit_scenario_cli(
                 report,
                 overwrite,
             )
+
+
+def _print_bootstrap(res) -> None:
+    t = Table("parameter", "fitted", "std (bootstrap)", "std (HAC)")
+    hac = res.stages["hac"]["std"]
+    for p in res.free:
+        t.add_row(p, f"{res.params[p]:.5g}", f"{res.std[p]:.3g}", f"{hac.get(p, float('nan')):.3g}")
+    console.print(t)
+    console.print(escape(res.stages["std_source"]), highlight=False)
 
 
 def _bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:

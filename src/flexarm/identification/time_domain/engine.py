@@ -108,6 +108,45 @@ def fit(
         max_delay=getattr(ds, "max_delay", None),
         max_moves=getattr(ds, "max_moves", None),
     )
+    if opts.bootstrap is not None:
+        with_bootstrap(res, logs, opts, None, progress)
+    return res
+
+
+def with_bootstrap(res: FitResult, logs, opts: FitOptions, model, progress) -> FitResult:
+    """``FitOptions.bootstrap`` after the fit: the result's ``std`` and ``correlation``
+    become the parametric bootstrap's (:func:`~.bootstrap.bootstrap`), the HAC ones kept
+    in ``stages["hac"]``, the spread in ``stages["bootstrap"]`` and which std the result
+    carries in ``stages["std_source"]``."""
+    import numpy as np
+
+    from flexarm.identification.time_domain.bootstrap import bootstrap
+
+    b = opts.bootstrap
+    if b is None:
+        return res
+    b.check()
+    if res.scenario is None:
+        return res
+    spread = bootstrap(
+        res, logs, b.n, seed=b.seed, noise=b.noise, progress=progress, options=opts, model=model
+    )
+    res.stages["hac"] = {
+        "std": dict(res.std),
+        "correlation": np.round(np.asarray(res.correlation, float), 4).tolist(),
+    }
+    res.stages["bootstrap"] = spread.to_dict()
+    res.std = {p: spread.std.get(p, float("nan")) for p in res.std}
+    res.correlation = spread.correlation
+    res.stages["std_source"] = (
+        f"parametric bootstrap: {spread.n_ok} of {spread.n} refits ({b.noise} noise, added "
+        "to the simulated measurements, not in the loop); the HAC std in stages['hac']"
+    )
+    if spread.failed:
+        res.warnings.append(
+            f"bootstrap: {len(spread.failed)} of {spread.n} refits failed "
+            f"(first: {spread.failed[0]}); the std is the spread of the {spread.n_ok} others"
+        )
     return res
 
 
@@ -178,9 +217,10 @@ def _servo_rig(preset: Preset, logs, options, progress):
         from flexarm.identification.time_domain.figures import write_overlays
 
         res.plots = [str(p) for p in write_overlays(res.prediction, opts.plots, "fit")]
-        return res
-    if opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
+    elif opts.plots is not None:  # the rig's fit figures (FitOptions.plots)
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
+    if opts.bootstrap is not None:  # the refits: the preset again, its servo_rig options
+        with_bootstrap(res, whole, opts, preset, progress)
     return res
 
 

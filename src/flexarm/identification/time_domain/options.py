@@ -51,6 +51,7 @@ __all__ = [
     "DelaySearch",
     "Priors",
     "ServoRig",
+    "Bootstrap",
     "FitOptions",
     "ResolvedOptions",
     "PredictOptions",
@@ -303,6 +304,37 @@ class ServoRig:
         )
 
 
+BOOTSTRAP_NOISES = ("residuals", "declared")
+
+
+@dataclass
+class Bootstrap:
+    """A parametric bootstrap of the fit's uncertainty after the fit
+    (:func:`~flexarm.identification.time_domain.bootstrap.bootstrap`): ``n`` replicates of
+    the fitted logs simulated by the fitted scenario with fresh noise, each refitted; the
+    result's ``std`` and ``correlation`` become the spread of the refits (the HAC ones kept
+    in ``stages["hac"]``). ``noise``: ``"residuals"`` (a Gaussian AR(1) series per log and
+    channel with the fit's residual std and lag-1 autocorrelation) or ``"declared"`` (the
+    scenario's ``sensors.X.noise``, white). ``seed``: the replicates' seeds are
+    :func:`flexarm.sim.batch.chunk_seed` ``(seed, k)``."""
+
+    n: int = 20
+    seed: int = 0
+    noise: str = "residuals"
+
+    def check(self) -> None:
+        if isinstance(self.n, bool) or not isinstance(self.n, numbers.Integral) or self.n < 2:
+            raise ValueError(
+                f"FitOptions.bootstrap.n = {self.n!r}: give a whole number of replicates "
+                ">= 2 (e.g. 20; --bootstrap N)"
+            )
+        if self.noise not in BOOTSTRAP_NOISES:
+            raise ValueError(
+                f"FitOptions.bootstrap.noise = {self.noise!r}: one of "
+                f"{', '.join(map(repr, BOOTSTRAP_NOISES))}"
+            )
+
+
 def _changed(group, over_base: bool):
     """The (field, value) pairs of ``group`` to set on the resolved options: every field,
     or, over a preset's options (``over_base``), only those changed from the group's
@@ -376,6 +408,9 @@ class FitOptions:
     #: the scenario's grid, with a note (:func:`flexarm.io.logs.on_sample_grid`); beyond it,
     #: one line naming the figure
     period_tolerance: float = 1e-4
+    #: a parametric bootstrap after the fit (:class:`Bootstrap`): the result's std and
+    #: correlation are the refits' spread; None: the HAC ones
+    bootstrap: Bootstrap | None = None
 
     def resolved(self, base: FitOptions | None = None) -> ResolvedOptions:
         """These options with every engine group filled (:class:`ResolvedOptions`, a
@@ -405,6 +440,8 @@ class FitOptions:
             out["delay_search"] = self.delay_search
         if self.servo_rig is not None:
             out["servo_rig"] = self.servo_rig
+        if self.bootstrap is not None:
+            out["bootstrap"] = self.bootstrap
         if self.windows is not None:
             out["windows"] = list(self.windows)
         if self.continuous:
@@ -421,6 +458,8 @@ class FitOptions:
             g = getattr(self, name)
             if g is not None:
                 g.check()
+        if self.bootstrap is not None:
+            self.bootstrap.check()
         if (
             self.continuous
             and self.windows is not None

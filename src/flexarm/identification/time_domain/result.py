@@ -81,10 +81,13 @@ class FitResult:
         notes.append(
             f"free list: {self.free_source}; {self.nfev} evaluations, {self.seconds:.1f} s"
         )
+        std_head = "std (bootstrap)" if "bootstrap" in self.stages else "std (HAC)"
+        if "std_source" in self.stages:
+            notes.append(f"std: {self.stages['std_source']}")
         return Table(
             f"FitResult of {name}: {len(self.free)} free parameters (SI)",
             parameter_rows(self.params, self.std, self.stages.get("units")),
-            header=("parameter", "value", "std (HAC)", "std %", "unit"),
+            header=("parameter", "value", std_head, "std %", "unit"),
             notes=notes,
         )
 
