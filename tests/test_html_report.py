@@ -507,3 +507,21 @@ def test_unit6_fit_report_shows_its_figures_in_chromium(unit6, tmp_path):
     if _chromium() is None:
         pytest.skip("no headless Chromium found (apt-get install chromium)")
     _check_in_browser(page, tmp_path, 1)
+
+
+def test_fit_report_names_the_std_the_result_carries(synthetic):
+    """A fit whose std came from the parametric bootstrap (``FitOptions.bootstrap``) is
+    reported as such: the column says "std (bootstrap)" and the note is the result's own
+    ``stages["std_source"]``; without it the column stays "std (HAC)"."""
+    from flexarm.analysis.html_report import fit_report
+    from flexarm.identification.time_domain.result import FitResult
+
+    d, _ = synthetic
+    doc = json.loads((d / "fit.json").read_text())
+    res = FitResult.from_dict(doc)
+    page = fit_report(res).html()
+    assert "std (HAC)" in page and "std (bootstrap)" not in page
+    res.stages["bootstrap"] = {"n": 8}
+    res.stages["std_source"] = "parametric bootstrap: 8 of 8 refits"
+    page = fit_report(res).html()
+    assert "std (bootstrap)" in page and "std: parametric bootstrap: 8 of 8 refits." in page

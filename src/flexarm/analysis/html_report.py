@@ -316,6 +316,8 @@ def fit_report(
             )
         rep.heading("Status").text(result.message)
         rep.heading("Fitted parameters (SI units of the scenario)")
+        if "std_source" in result.stages:
+            rep.text(f"std: {result.stages['std_source']}.")
         rep.table(
             ("parameter", "template", "fitted", "± std", "relative std [%]"),
             [
@@ -356,10 +358,12 @@ def fit_report(
         units = rig.get("units", {})
         rep.parameters(
             ((k, v, result.std.get(k), units.get(k, "")) for k, v in result.params.items()),
-            std_label="std (HAC)",
+            std_label="std (bootstrap)" if "bootstrap" in result.stages else "std (HAC)",
         )
         rep.text(
-            "std: Newey–West (HAC) sandwich standard deviations (the residuals are "
+            f"std: {result.stages['std_source']}."
+            if "std_source" in result.stages
+            else "std: Newey–West (HAC) sandwich standard deviations (the residuals are "
             "autocorrelated); a local linearisation that ignores the jumps of "
             "stick-slip and any bias of the model structure."
         )
