@@ -24,6 +24,7 @@ import pytest
 
 import flexarm
 from flexarm.identification.time_domain.bootstrap import ar1_noise, bootstrap, residual_noise
+from flexarm.identification.time_domain.engine import fit as flexarm_fit
 from flexarm.identification.time_domain.options import Bootstrap, FitOptions
 from flexarm.identification.time_domain.result import drop_none
 from flexarm.identification.time_domain.synthetic import scenario_log
@@ -120,7 +121,7 @@ def test_bootstrap_std_matches_the_spread_of_independent_noise_fits(truth, fitte
             g = scenario_log(truth, {"reference": reference()}, seed=100 + s)
             r = flexarm.fit(truth, [g], FREE, FitOptions(predict=False))
             vals.append([r.params[p] for p in FREE])
-        bs = bootstrap(res, [log], 20, seed=0)
+        bs = bootstrap(res, [log], 20, seed=0, refit=flexarm_fit)
     mc = np.std(vals, axis=0, ddof=1)
     assert bs.n_ok == 20 and not bs.failed
     boot = np.array([bs.std[p] for p in FREE]) / mc
@@ -146,18 +147,18 @@ def test_bootstrap_is_reproducible_from_its_seed_and_declared_noise_runs(fitted)
     log, res = fitted
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the P/D filter's assumed start (one log)
-        a = bootstrap(res, [log], 3, seed=5)
-        b = bootstrap(res, [log], 3, seed=5)
-        c = bootstrap(res, [log], 3, seed=6)
-        d = bootstrap(res, [log], 3, seed=5, noise="declared")
+        a = bootstrap(res, [log], 3, seed=5, refit=flexarm_fit)
+        b = bootstrap(res, [log], 3, seed=5, refit=flexarm_fit)
+        c = bootstrap(res, [log], 3, seed=6, refit=flexarm_fit)
+        d = bootstrap(res, [log], 3, seed=5, noise="declared", refit=flexarm_fit)
     m = "arm.motor.inertia"
     assert a.values[m] == pytest.approx(b.values[m], rel=1e-9)
     assert a.values[m] != pytest.approx(c.values[m], rel=1e-9)
     assert d.n_ok == 3 and d.values[m] != pytest.approx(a.values[m], rel=1e-9)
     with pytest.raises(ValueError, match="noise = 'white'"):
-        bootstrap(res, [log], 3, noise="white")
+        bootstrap(res, [log], 3, noise="white", refit=flexarm_fit)
     with pytest.raises(ValueError, match="n = 1"):
-        bootstrap(res, [log], 1)
+        bootstrap(res, [log], 1, refit=flexarm_fit)
 
 
 # ============================================================================== front door
@@ -234,9 +235,11 @@ def test_replicates_run_through_a_batch_executor_as_in_process(fitted):
     lines = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the P/D filter's assumed start (one log)
-        a = bootstrap(res, [log], 3, seed=2, executor=ex, progress=lines.append)
-        b = bootstrap(res, [log], 3, seed=2)
-    assert ex.calls == [(3, ["free", "logs", "model", "noise", "options", "result", "sims"])]
+        a = bootstrap(res, [log], 3, seed=2, executor=ex, progress=lines.append, refit=flexarm_fit)
+        b = bootstrap(res, [log], 3, seed=2, refit=flexarm_fit)
+    assert ex.calls == [
+        (3, ["free", "logs", "model", "noise", "options", "refit", "result", "sims"])
+    ]
     assert lines[-1] == "bootstrap 3 of 3"
     for p in FREE:
         assert a.values[p] == pytest.approx(b.values[p], rel=1e-9)

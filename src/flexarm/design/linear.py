@@ -605,7 +605,9 @@ def _regulator(dm: DesignModel, Ar, Br, idx, method, q, r, poles, pole_domain, r
         for j, i in enumerate(idx):
             Q[na + j, na + j] = wi[f"int_{dm.channels[i]}"]
         R = rho * _weights_matrix(1.0 / dm.limit**2 if r is None else r, m, "r")
-        K, _, _ = control.dlqr(Ar, Br, Q, R)
+        # Cᵀ W C is symmetric; its rounding need not be (python-control checks it), so
+        # take the symmetric part
+        K, _, _ = control.dlqr(Ar, Br, 0.5 * (Q + Q.T), R)
         return (
             np.asarray(K),
             {

@@ -198,13 +198,11 @@ def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> lis
     return out
 
 
-def _refit(k: int, seed: int, *, model, logs, sims, free, options, result, noise):
+def _refit(k: int, seed: int, *, refit, model, logs, sims, free, options, result, noise):
     """One replicate (a task of the executor): its logs, its refit; (k, values, error)."""
-    from flexarm.identification.time_domain.engine import fit
-
     try:
         reps = replicate_logs(result, logs, sims, noise, seed)
-        res = fit(model, reps, free, options)
+        res = refit(model, reps, free, options)
         return k, {p: float(v) for p, v in res.params.items()}, None
     except Exception as e:  # a failed replicate is counted and named, not fatal
         return k, None, f"replicate {k}: {type(e).__name__}: {e}"
@@ -221,13 +219,16 @@ def bootstrap(
     progress: Callable[[str], None] | None = None,
     options: FitOptions | None = None,
     model: Any = None,
+    refit: Callable[..., Any],
 ) -> BootstrapSpread:
     """Refit ``n`` replicates of ``logs`` simulated by ``result``'s fitted scenario with
     fresh noise (module docstring) and return their spread. ``options``: the original
     fit's :class:`~.options.FitOptions` (its windows are the fitted windows); ``model``:
     what each replicate refits, None: the fitted scenario with ``result.free`` given (started
     from the fitted values); a :class:`~.presets.Preset` refits with its own free list and
-    starts (the servo rig). ``executor``: None (in-process) or a
+    starts (the servo rig). ``refit``: the one fit, ``refit(model, logs, free, options)``
+    (:func:`flexarm.fit`; the front door passes itself, so that this module, which the
+    front door calls, does not import it back). ``executor``: None (in-process) or a
     :class:`flexarm.sim.batch.BatchExecutor`; ``progress`` gets "bootstrap k of n"."""
     from flexarm.io.logformat import load_logs
 
@@ -253,6 +254,7 @@ def bootstrap(
     free = None if isinstance(model, Preset) else list(result.free)
     target = model if model is not None else result.scenario
     shared = dict(
+        refit=refit,
         model=target,
         logs=logs,
         sims=sims,

@@ -129,7 +129,15 @@ def with_bootstrap(res: FitResult, logs, opts: FitOptions, model, progress) -> F
     if res.scenario is None:
         return res
     spread = bootstrap(
-        res, logs, b.n, seed=b.seed, noise=b.noise, progress=progress, options=opts, model=model
+        res,
+        logs,
+        b.n,
+        seed=b.seed,
+        noise=b.noise,
+        progress=progress,
+        options=opts,
+        model=model,
+        refit=fit,
     )
     res.stages["hac"] = {
         "std": dict(res.std),

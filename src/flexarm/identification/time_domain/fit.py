@@ -50,6 +50,7 @@ from flexarm.identification.time_domain.global_stage import (
     GlobalResult,
     differential_evolution_stage,
     ordered_delays,
+    overlapping_delays,
 )
 from flexarm.identification.time_domain.logs import (
     PERIOD_TOL,
@@ -726,31 +727,46 @@ def fit(
     )
     best = {"U": u0, "D": d0, "off": None, "cost": float("inf")}
     try:
-        glob, loc, D, warnings, obj = _stages(
-            obj_g,
-            blogs,
-            rig,
-            space,
-            sess,
-            common,
-            u0,
-            d0,
-            n_glob,
-            n_full,
-            best,
-            say,
-            popsize=popsize,
-            maxiter=maxiter,
-            seed=seed,
-            global_starts=global_starts,
-            ordered=tip_after_hub and ordered_delays(space.discrete_bounds()),
-            local_nfev=local_nfev,
-            delay_nfev=delay_nfev,
-            polish_iter=polish_iter,
-            friction=friction,
-            delay_search=delay_search,
-            info=info,
-        )
+        dbounds = space.discrete_bounds()
+
+        def run_stages(ordered: bool):
+            return _stages(
+                obj_g,
+                blogs,
+                rig,
+                space,
+                sess,
+                common,
+                u0,
+                d0,
+                n_glob,
+                n_full,
+                best,
+                say,
+                popsize=popsize,
+                maxiter=maxiter,
+                seed=seed,
+                global_starts=global_starts,
+                ordered=ordered,
+                local_nfev=local_nfev,
+                delay_nfev=delay_nfev,
+                polish_iter=polish_iter,
+                friction=friction,
+                delay_search=delay_search,
+                info=info,
+            )
+
+        glob, loc, D, warnings, obj = run_stages(tip_after_hub and ordered_delays(dbounds))
+        if tip_after_hub and overlapping_delays(dbounds) and int(D[1]) < int(D[0]):
+            # a tip range that a trusted lag started later than an untrusted hub's wide one
+            # (unit 7): searched freely, and the tip came out before the hub (85 / 64 samples,
+            # an encoder read 85 ms late): searched again with the tip at or after the hub
+            say(
+                f"tip delay {int(D[1])} < hub delay {int(D[0])} samples: searched again "
+                "with the tip at or after the hub (tip_after_hub)"
+            )
+            info["reordered"] = {"hub": int(D[0]), "tip": int(D[1])}
+            glob, loc, D, warnings, obj = run_stages(True)
         interrupted = False
     except KeyboardInterrupt:
         # Ctrl-C: the best point so far, marked interrupted (flexarm.errors.FitInterrupted)
