@@ -160,16 +160,16 @@ def _predictions(result, logs: list, windows: list) -> list[tuple[dict, dict]]:
 
 def _declared(scenario, channel: str) -> tuple[float, float | None]:
     """(noise std, quantisation step or None) the scenario declares for ``channel``
-    (``quantum``, else ``range / 2**bits``), in the channel's SI unit."""
-    sens = getattr(scenario, "sensors", {}) or {}
-    s = sens.get(channel) if isinstance(sens, dict) else getattr(sens, channel, None)
+    (:func:`flexarm.sim.build.sensor_quanta`: ``quantum``, else ``range / 2**bits``), in the
+    channel's SI unit."""
+    from flexarm.sim.build import sensor_quanta
+
+    sens = getattr(scenario, "sensors", None) or {}
+    s = sens.get(channel)
     if s is None:
         return 0.0, None
-    q = float(getattr(s, "quantum", 0.0) or 0.0)
-    bits = int(getattr(s, "bits", 0) or 0)
-    if q <= 0 and bits > 0:
-        q = float(s.range) / 2**bits
-    return float(getattr(s, "noise", 0.0) or 0.0), (q if q > 0 else None)
+    q = sensor_quanta({channel: s})[channel]
+    return float(s.noise or 0.0), (q if q > 0 else None)
 
 
 def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> list:
