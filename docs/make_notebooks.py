@@ -429,10 +429,15 @@ def _clean(nb: dict, root: Path) -> dict:
     """An executed notebook without what differs from machine to machine: the cells'
     execution timestamps, the kernel's version details, and the absolute paths in printed
     text: the repository's made relative to it (``/home/u/flexarm/src/...`` → ``src/...``),
-    the folder above it's to ``..`` (``/home/u/shared/data`` → ``../shared/data``)."""
+    the folder above it's to ``..`` (``/home/u/shared/data`` → ``../shared/data``), and the
+    kernel's file of a cell in a warning's location (``/tmp/ipykernel_20977/2474714312.py:9``)
+    as ``<cell>:9``."""
+    import re
+
     here, above = (str(p).rstrip("/") + "/" for p in (root, root.parent))
 
     def rel(t: str) -> str:
+        t = re.sub(r"[^\s\"']*/ipykernel_\d+/\d+\.py", "<cell>", t)
         return t.replace(here, "").replace(above, "../")
 
     for c in nb["cells"]:

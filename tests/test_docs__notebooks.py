@@ -51,6 +51,23 @@ def test_notebooks_are_generated_and_committed_with_outputs():
         assert len(text.encode()) < 1.5e6, f"{name}: {len(text.encode()) / 1e6:.2f} MB"
 
 
+def test_cleaning_makes_printed_paths_machine_independent(tmp_path):
+    """An executed notebook's printed paths, as ``make notebooks`` commits them: the
+    repository's relative, the folder above it as ``..``, and the kernel's file of a cell
+    in a warning's location (a temporary folder: ``/tmp/ipykernel_20977/2474714312.py:9``)
+    as ``<cell>:9``, so that no clone's own folder shows in the committed outputs."""
+    root = tmp_path / "flexarm"
+    text = (
+        f"{root}/src/flexarm/io/logs.py:3: W\n{tmp_path}/shared/data/x.mat\n"
+        "/tmp/ipykernel_20977/2474714312.py:9: IdentificationWarning: w\n"
+    )
+    nb = {"cells": [{"metadata": {}, "outputs": [{"name": "stderr", "text": text}]}]}
+    out = make_notebooks._clean(nb, root)["cells"][0]["outputs"][0]["text"]
+    assert out == (
+        "src/flexarm/io/logs.py:3: W\n../shared/data/x.mat\n<cell>:9: IdentificationWarning: w\n"
+    )
+
+
 def test_stripping_an_executed_notebook_gives_its_source():
     """What the comparison above relies on: outputs, counts and metadata are all that
     ``stripped`` drops; a changed source line is still a difference."""
