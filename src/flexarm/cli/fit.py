@@ -157,7 +157,9 @@ def fit(
     sessions: Annotated[
         str | None,
         typer.Option(
-            help="recording session of each log, e.g. 0,0,1: mechanics shared, friction per session"
+            help="recording session of each log, e.g. 0,0,1: mechanics shared, friction "
+            "(and a scenario's free bias / offset paths) per session; --scenario-out then "
+            "writes one scenario per session"
         ),
     ] = None,
     tip_sign: Annotated[
@@ -313,6 +315,7 @@ def fit(
             cfile=cfile,
             continuous=continuous,
             bootstrap=bootstrap,
+            sessions=sessions,
         )
         return
     if cfile is not None or continuous:
@@ -774,6 +777,7 @@ def _fit_scenario_cli(
     cfile=None,
     continuous: bool = False,
     bootstrap: int | None = None,
+    sessions: str | None = None,
 ) -> None:
     from flexarm.identification.time_domain.engine import fit as fit_engine
     from flexarm.identification.time_domain.options import (
@@ -782,6 +786,7 @@ def _fit_scenario_cli(
         FitOptions,
         Local,
         Priors,
+        Sessions,
         Shooting,
     )
     from flexarm.io.logformat import load_logs
@@ -794,6 +799,7 @@ def _fit_scenario_cli(
     distinct_outputs(("--json", json_out), ("--scenario-out", scenario_out), ("--report", report))
     output_folder("--plots", plots, overwrite)
     win = parsing.window(window, "--window")
+    of_log = parsing.int_list(sessions, "--sessions")
     chans, priors = parsing.channels(channel), parsing.priors(prior)
     bounds = _bounds(bound)
     sc = with_controller_file(load(scenario), cfile)
@@ -803,6 +809,8 @@ def _fit_scenario_cli(
         if not logs:
             fail("no logs given: flexarm fit SCENARIO LOG... (one or more log files)")
         glogs = load_logs(logs, log_format)
+        if cfile is not None:  # the given controller runs every log, not their declared laws
+            glogs = [dataclasses.replace(g, controller=None, gains=None) for g in glogs]
         # the options given; the rest (and, without --free, the free list) are the preset's
         opts = FitOptions(
             cost=Cost(channels=chans) if chans else None,
@@ -813,6 +821,7 @@ def _fit_scenario_cli(
             plots=folder,
             continuous=continuous,
             bootstrap=Bootstrap(n=bootstrap) if bootstrap else None,
+            sessions=Sessions(of_log) if of_log else None,
         )
         with working("fitting") as status, _state_warnings_quiet():
             # the one FitResult of every rig (a scenario here: the general engine), with its
@@ -845,6 +854,13 @@ def _fit_scenario_cli(
         *([lambda: write_json(json_out, res.to_dict(), overwrite=overwrite)] if json_out else []),
         *([lambda: res.write_scenario(scenario_out, overwrite=overwrite)] if scenario_out else []),
     )
+    if scenario_out is not None and len(res.session_paths(scenario_out)) > 1:
+        more = res.session_paths(scenario_out)[1:]
+        console.print(
+            f"scenarios per session: {scenario_out} (session 0), "
+            + ", ".join(f"{q} (session {k})" for k, q in enumerate(more, 1)),
+            highlight=False,
+        )
     with figures:
         if report is not None:
             from flexarm.analysis.html_report import fit_report

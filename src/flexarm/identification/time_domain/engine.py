@@ -93,9 +93,17 @@ def fit(
             free_list += [p for p in starts if p not in free_list]
         if progress is not None:
             progress(f"start estimates from the logs: {starts or 'none'}")
+    own = _declared_laws(template, logs)  # servo-rig logs: each with the law it ran
+    if own is not None:
+        lab_law, (template, logs) = template, own
     res = general.fit_scenario(
         template, logs, free_list, opts, progress=progress, predict=opts.predict, plots=opts.plots
     )
+    if own is not None:  # the scenario written keeps its own [controller] (design's start)
+        _keep_controller(res, lab_law)
+        res.stages["declared_laws"] = (
+            "each log ran with the law it declares (its logged gains), as validate runs it"
+        )
     res.free_source = source
     if estimates is not None:
         res.stages["estimates"] = estimates
@@ -111,6 +119,38 @@ def fit(
     if opts.bootstrap is not None:
         with_bootstrap(res, logs, opts, None, progress)
     return res
+
+
+def _declared_laws(scenario, logs) -> tuple | None:
+    """Servo-rig logs that each declare the law they ran, on a single-link scenario: the
+    scenario reading each log's gains per sample and the logs carrying them
+    (:func:`~.logs.declared_laws`), as :func:`~.predict.predict` runs them, so the fit's
+    figures are validate's; None for any other logs (the scenario's own controller)."""
+    from flexarm.identification.time_domain.logs import declared_laws
+
+    if scenario.arm.kind != "single_link" or not logs:
+        return None
+    if not all(
+        getattr(g, "controller", None) is not None and "reference" in getattr(g, "signals", {})
+        for g in logs
+    ):
+        return None
+    out = declared_laws(scenario, list(logs))
+    if out is None:
+        raise ValueError(
+            "the logs declare laws that differ in more than their gains (their rate "
+            "filter): fit the logs of one law together, or give the scenario's own "
+            "controller to every log (--controller FILE.toml)"
+        )
+    return out
+
+
+def _keep_controller(res: FitResult, lab: Any) -> None:
+    """The fitted scenarios with ``lab``'s controllers in place of the declared laws'
+    per-sample gains (which read the logs' gain channels)."""
+    ctl = {"controller": lab.controller, "controllers": lab.controllers}
+    res.scenario = res.scenario.model_copy(update=ctl)
+    res.session_scenarios = [sc.model_copy(update=ctl) for sc in res.session_scenarios]
 
 
 def with_bootstrap(res: FitResult, logs, opts: FitOptions, model, progress) -> FitResult:
@@ -200,7 +240,7 @@ def _servo_rig(preset: Preset, logs, options, progress):
         sess = list(rig.sessions) if rig.sessions is not None else [0] * len(whole)
         res.session_scenarios = session_scenarios(res, max(sess) + 1)
         if max(sess) > 0:  # the result says which parameters are per session (#47)
-            from flexarm.identification.time_domain.report import session_path
+            from flexarm.identification.time_domain.result import session_path
 
             own = sorted({session_path(p) for p in res.params if p.startswith("sessions[")})
             signs = getattr(res.engine_result.space, "session_signs", ()) or ()
@@ -236,7 +276,7 @@ def session_scenarios(res: FitResult, n: int) -> list:
     """The fitted scenario of each of ``n`` sessions: session 0's is the result's; a later
     session's is it with that session's own values (``sessions[s].PATH`` in the result's
     params: the servo rig's per-session friction and bias)."""
-    from flexarm.identification.time_domain.report import session_key
+    from flexarm.identification.time_domain.result import session_key
     from flexarm.specs.paths import scenario_with
 
     out = [res.scenario]

@@ -106,7 +106,7 @@ from flexarm.identification.time_domain.options import (  # re-exported here
     ScenarioFitOptions,
     as_fit_options,
 )
-from flexarm.identification.time_domain.result import FitResult
+from flexarm.identification.time_domain.result import FitResult, session_key, session_path
 from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_meat
 from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.batch import cpu_cores, run_chunks, stack_loops
@@ -294,45 +294,14 @@ class _Engine:
             bool,
         )
         self.pscale = np.ones(len(self.free))
-        lo = np.full(len(self.free), -math.log(pri.bound_factor))
-        hi = -lo
+        self.lo = np.zeros(len(self.free))
+        self.hi = np.zeros(len(self.free))
         for i, p in enumerate(self.free):
-            if self.linear[i]:
-                self.pscale[i] = _linear_scale(
-                    self.dump,
-                    self.keys[i],
-                    p,
-                    self.p0[i],
-                    pri.bounds.get(p),
-                    pri.bound_factor,
-                )
-                lo[i], hi[i] = -pri.bound_factor, pri.bound_factor
-                if p in pri.bounds:
-                    a, b = sorted(float(v) for v in pri.bounds[p])
-                    if not a <= self.p0[i] <= b:
-                        raise ValueError(
-                            f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not "
-                            f"contain the template value {self.p0[i]:g}; move one of them"
-                        )
-                    lo[i] = (a - self.p0[i]) / self.pscale[i]
-                    hi[i] = (b - self.p0[i]) / self.pscale[i]
-                continue
-            if p in pri.bounds:
-                a, b = (float(v) for v in pri.bounds[p])
-                if not (a / self.p0[i] > 0 and b / self.p0[i] > 0):
-                    raise ValueError(
-                        f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
-                        f"must have the sign of the template value {self.p0[i]:g}"
-                    )
-                za, zb = sorted((math.log(a / self.p0[i]), math.log(b / self.p0[i])))
-                if not za <= 0 <= zb:
-                    raise ValueError(
-                        f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
-                        f"the template value {self.p0[i]:g}; move one of them"
-                    )
-                lo[i], hi[i] = za, zb
-        self.lo, self.hi = lo, hi
+            self.pscale[i], self.lo[i], self.hi[i] = self._coordinate(
+                p, self.keys[i], self.p0[i], bool(self.linear[i]), pri
+            )
         self.sigma = np.array([pri.priors.get(p, np.inf) for p in self.free])
+        self._sessions(scenario, logs, options)
         self.tied = {}
         for p, master in pri.ties.items():
             if master not in self.free:
@@ -435,6 +404,115 @@ class _Engine:
                     "fit runs the controller on the logged channels from the log's "
                     "start: log them (or map them with a log format)"
                 )
+
+    def _coordinate(self, p: str, key: list, p0: float, linear: bool, pri) -> tuple:
+        """(scale, lower, upper) of parameter ``p``'s coordinate z: p = p0 + s·z if
+        ``linear`` (signed), else p = p0·exp(z); its bounds from ``pri.bounds`` (absolute
+        values) or ±``pri.bound_factor`` (x bound_factor in log space)."""
+        if linear:
+            scale = _linear_scale(self.dump, key, p, p0, pri.bounds.get(p), pri.bound_factor)
+            lo, hi = -pri.bound_factor, pri.bound_factor
+            if p in pri.bounds:
+                a, b = sorted(float(v) for v in pri.bounds[p])
+                if not a <= p0 <= b:
+                    raise ValueError(
+                        f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not "
+                        f"contain the template value {p0:g}; move one of them"
+                    )
+                lo, hi = (a - p0) / scale, (b - p0) / scale
+            return scale, lo, hi
+        lo, hi = -math.log(pri.bound_factor), math.log(pri.bound_factor)
+        if p in pri.bounds:
+            a, b = (float(v) for v in pri.bounds[p])
+            if not (a / p0 > 0 and b / p0 > 0):
+                raise ValueError(
+                    f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}): both bounds "
+                    f"must have the sign of the template value {p0:g}"
+                )
+            za, zb = sorted((math.log(a / p0), math.log(b / p0)))
+            if not za <= 0 <= zb:
+                raise ValueError(
+                    f"FitOptions.priors.bounds[{p!r}] = ({a:g}, {b:g}) does not contain "
+                    f"the template value {p0:g}; move one of them"
+                )
+            lo, hi = za, zb
+        return 1.0, lo, hi
+
+    def _sessions(self, scenario, logs: Sequence, options) -> None:
+        """Several sessions (``options.sessions``, :class:`Sessions`): each per-session
+        path gets one more coordinate per later session s, named ``sessions[s].PATH``
+        (:func:`~.result.session_key`), with the path's scale, bounds and prior, started
+        at session 0's start or ``Sessions.starts[s][PATH]``. ``session_of[i]``: the session
+        of coordinate i (0: shared or session 0's), ``base_of[i]``: its path's coordinate."""
+        self.session_of = [0] * len(self.free)
+        self.base_of = list(range(len(self.free)))
+        self.n_sessions = 1
+        self.log_session = np.zeros(len(logs), int)
+        self.per_session: list[str] = []
+        ses = options.sessions
+        if ses is None:
+            return
+        ses.check(len(logs))
+        if ses.per_session is not None:
+            per = expand_paths(self.dump, list(ses.per_session))
+        else:
+            try:
+                fr = set(friction_paths(scenario))
+            except ValueError:  # no joint friction: only the signed paths
+                fr = set()
+            per = [p for p, k in zip(self.free, self.keys, strict=True) if p in fr]
+            per += [p for p, k in zip(self.free, self.keys, strict=True) if k[-1] in SIGNED_FIELDS]
+        bad = [p for p in per if p not in self.free]
+        if bad:
+            raise ValueError(
+                f"FitOptions.sessions.per_session: {', '.join(map(repr, bad))} not free; "
+                f"free: {', '.join(self.free)}"
+            )
+        K = ses.count
+        if K > 1 and not per:
+            raise ValueError(
+                "FitOptions.sessions: several sessions but no free parameter per session "
+                "(the free joint friction levels, bias and offset paths by default); list "
+                "them in FitOptions.sessions.per_session"
+            )
+        pri = self.options.priors
+        for s_ in range(1, K):
+            starts = dict((ses.starts or {}).get(s_, {}))
+            unknown = [p for p in starts if p not in per]
+            if unknown:
+                raise ValueError(
+                    f"FitOptions.sessions.starts[{s_}]: {', '.join(map(repr, unknown))} not "
+                    f"per session; per session: {', '.join(per)}"
+                )
+            for p in per:
+                i = self.free.index(p)
+                p0 = float(starts.get(p, self.p0[i]))
+                if not self.linear[i] and p0 == 0.0:
+                    raise ValueError(
+                        f"FitOptions.sessions.starts[{s_}][{p!r}] = 0: a parameter fitted in "
+                        "log space cannot start at 0; give a non-zero start"
+                    )
+                sc, lo, hi = self._coordinate(p, self.keys[i], p0, bool(self.linear[i]), pri)
+                self.free.append(session_key(s_, p))
+                self.keys.append(self.keys[i])
+                self.p0 = np.append(self.p0, p0)
+                self.linear = np.append(self.linear, self.linear[i])
+                self.pscale = np.append(self.pscale, sc)
+                self.lo, self.hi = np.append(self.lo, lo), np.append(self.hi, hi)
+                self.sigma = np.append(self.sigma, self.sigma[i])
+                self.session_of.append(s_)
+                self.base_of.append(i)
+        self.n_sessions = K
+        self.per_session = per
+        self.log_session = np.asarray(list(ses.of_log), int)
+
+    def coordinate_of(self, i: int, session: int) -> int:
+        """The coordinate that holds base coordinate ``i``'s value in ``session``."""
+        if session:
+            for j, (s_, b) in enumerate(zip(self.session_of, self.base_of, strict=True)):
+                if s_ == session and b == i:
+                    return j
+        return i
 
     def _continuous(self) -> None:
         """The logs as consecutive pieces of one run: each log's controller start state
@@ -692,9 +770,30 @@ class _Engine:
 
     # ------------------------------------------------------------------ candidates
     def values(self, z: np.ndarray) -> dict[str, float]:
+        """Every free value at ``z`` by its result key (a later session's own values as
+        ``sessions[s].PATH``) and the tied paths."""
         out = {p: self.value_of(i, z[i]) for i, p in enumerate(self.free)}
+        for s_ in range(self.n_sessions):
+            for p, (i, v0) in self.tied.items():
+                j = self.coordinate_of(i, s_)
+                if s_ == 0 or j != i:
+                    out[session_key(s_, p)] = float(v0 * np.exp(z[j]))
+        return out
+
+    def session_values(self, z: np.ndarray, session: int = 0) -> dict[str, float]:
+        """Scenario path → value at ``z`` in ``session``: the shared values, the session's
+        own per-session values, the tied paths following their master's session value."""
+        out = {
+            self.free[i]: self.value_of(i, z[i])
+            for i in range(len(self.free))
+            if self.session_of[i] == 0
+        }
+        if session:
+            for i, (s_, b) in enumerate(zip(self.session_of, self.base_of, strict=True)):
+                if s_ == session:
+                    out[self.free[b]] = self.value_of(i, z[i])
         for p, (i, v0) in self.tied.items():
-            out[p] = float(v0 * np.exp(z[i]))
+            out[p] = float(v0 * np.exp(z[self.coordinate_of(i, session)]))
         return out
 
     def value_of(self, i: int, zi: float) -> float:
@@ -707,11 +806,14 @@ class _Engine:
         """Parameter ``i``'s std from its coordinate's: |p|·σ_z, or s·σ_z if signed."""
         return float((self.pscale[i] if self.linear[i] else abs(value)) * std_z)
 
-    def prepared(self, z: np.ndarray) -> Prepared:
-        return prepare(scenario_with(self.template, self.values(z)))
+    def prepared(self, z: np.ndarray, session: int = 0) -> Prepared:
+        return prepare(scenario_with(self.template, self.session_values(z, session)))
 
     def loops(self, Z: np.ndarray):
-        preps = [self.prepared(z) for z in Z]
+        """The candidates' loops stacked (P, ...) and start states (P, n_x); with several
+        sessions one loop per candidate and session, (P, K, ...) and (P, K, n_x)."""
+        K = self.n_sessions
+        preps = [self.prepared(z, s_) for z in Z for s_ in range(K)]
         loop = stack_loops([p.loop for p in preps])
         if not self.options.cost.quantise:
             loop = eqx.tree_at(
@@ -722,7 +824,14 @@ class _Engine:
                     jnp.zeros_like(loop.actuator.quantum),
                 ),
             )
-        return loop, np.stack([p.x0 for p in preps])
+        x0 = np.stack([p.x0 for p in preps])
+        if K > 1:
+            P = Z.shape[0]
+            loop = jax.tree.map(
+                lambda a: a.reshape((P, K) + a.shape[1:]) if eqx.is_array(a) else a, loop
+            )
+            x0 = x0.reshape((P, K) + x0.shape[1:])
+        return loop, x0
 
     def run(self, Z: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         """Simulated measured channels (P, S, M, C) of the candidates ``Z`` (P, n), with the
@@ -758,6 +867,7 @@ class _Engine:
             jnp.asarray(self.seg_xd),
             jnp.asarray(self.seg_scn),
             jnp.asarray(self.seg_k0, jnp.int32),
+            jnp.asarray(self.log_session[self.seg_log], jnp.int32) if self.n_sessions > 1 else None,
         )
         jobs = []
         for a in range(0, P, chunk):
@@ -791,9 +901,13 @@ class _Engine:
             self.ctrl_inits,
         )
         leaves = [np.asarray(x) for x in jax.tree.leaves(eqx.filter(loop.controller, eqx.is_array))]
+        K = self.n_sessions
+        if K > 1:  # (P, K, ...): one controller per candidate and session
+            leaves = [x.reshape((-1,) + x.shape[2:]) for x in leaves]
         same = all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in leaves)
         if same:
-            ctrl0 = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, loop.controller)
+            first = (lambda x: x[0, 0]) if K > 1 else (lambda x: x[0])
+            ctrl0 = jax.tree.map(lambda x: first(x) if eqx.is_array(x) else x, loop.controller)
             key = "warm"
             if key not in self._cache or not all(
                 np.array_equal(a, b) for a, b in zip(self._cache[key][0], leaves, strict=False)
@@ -803,6 +917,13 @@ class _Engine:
                     _warm_jit(ctrl0, self.names, nd, *args),
                 )
             return self._cache[key][1], True
+        if K > 1:  # per candidate and session, then each segment's session's
+            w = eqx.filter_vmap(eqx.filter_vmap(lambda c: _warm(c, self.names, nd, *args)))(
+                loop.controller
+            )
+            sel = jnp.asarray(self.log_session[self.seg_log])
+            idx = jnp.arange(len(self.seg))
+            return jax.tree.map(lambda a: a[:, sel, idx], w), False
         return eqx.filter_vmap(lambda c: _warm(c, self.names, nd, *args))(loop.controller), False
 
     @property
@@ -927,7 +1048,13 @@ def _warm(ctrl, names: tuple, nd: int, log_y, log_refs, seg_log, seg_k0, inits=N
 _warm_jit = eqx.filter_jit(_warm)
 
 
-def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0):
+def _one_candidate(
+    loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess=None
+):
+    if seg_sess is not None:  # several sessions: each segment run by its session's loop
+        return _by_session(
+            loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+        )
     act, sens = loop.actuator, loop.sensors
     M = next(iter(seg_refs.values())).shape[1]
     C = len(sens.names)
@@ -965,12 +1092,58 @@ def _one_candidate(loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd
     return jax.vmap(one_seg)(carries, seg_refs), starts
 
 
+def _by_session(
+    loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+):
+    """:func:`_one_candidate` with one loop per session (leaves (K, ...), start states
+    (K, n_x)): each segment alone through its session's loop (``seg_sess``, (S,))."""
+
+    def one(s_, cs, ub, refs, y0s, dy0s, sb, xd, use_scn, off, k0):
+        lp = jax.tree.map(lambda a: a[s_] if eqx.is_array(a) else a, loop)
+        cs1, ub1, refs1, y01, dy01, sb1, xd1 = jax.tree.map(
+            lambda a: a[None], (cs, ub, refs, y0s, dy0s, sb, xd)
+        )
+        meas, start = _one_candidate(
+            lp,
+            x0_scn[s_],
+            off[None],
+            (cs1, ub1),
+            refs1,
+            y01,
+            dy01,
+            sb1,
+            xd1,
+            use_scn[None],
+            k0[None],
+        )
+        return meas[0], start[0]
+
+    cs_seg, ub_seg = warm
+    return jax.vmap(one)(
+        seg_sess, cs_seg, ub_seg, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, offsets, seg_k0
+    )
+
+
 @eqx.filter_jit
 def _run_segments(
-    loop, x0s, offsets, warm, shared_warm: bool, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0
+    loop,
+    x0s,
+    offsets,
+    warm,
+    shared_warm: bool,
+    seg_refs,
+    y0,
+    dy0,
+    sbuf0,
+    seg_xd,
+    seg_scn,
+    seg_k0,
+    seg_sess=None,
 ):
     def f(lp, x0, off, w):
-        return _one_candidate(lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0)
+        return _one_candidate(
+            lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+        )
 
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
         loop, x0s, offsets, warm
@@ -1118,14 +1291,21 @@ def fit_scenario(
     cov = np.full((n, n), np.nan)
     if det.any():
         cov[np.ix_(det, det)] = _covariance(eng, r, J[:, det])
-    fitted = scenario_with(scenario, eng.values(z))
     # the fit reports its whole-run prediction from each log's logged state: `validate` of
-    # the written scenario starts there too ([notes.validate] initial, predict's default)
-    notes = {**fitted.notes, "validate": {"initial": "log"}}
-    fitted = fitted.model_copy(update={"notes": notes})
-    fd = fitted.model_dump()
+    # the written scenario starts there too ([notes.validate] initial, predict's default);
+    # several sessions: one scenario each (session 0's is the result's scenario)
+    K = eng.n_sessions
+    per_session = []
+    for s_ in range(K):
+        sc = scenario_with(scenario, eng.session_values(z, s_))
+        upd: dict[str, Any] = {"notes": {**sc.notes, "validate": {"initial": "log"}}}
+        if K > 1 and s_:
+            upd["name"] = f"{sc.name}-session{s_}"
+        per_session.append(sc.model_copy(update=upd))
+    fitted = per_session[0]
+    dumps = [sc.model_dump() for sc in per_session]
     # the values in the fitted scenario (a breakaway below its Coulomb level is raised to it)
-    values = {p: float(_path_get(fd, p)) for p in eng.values(z)}
+    values = {p: float(_path_get(dumps[_key_session(p)], session_path(p))) for p in eng.values(z)}
     std_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
     std = {
         p: eng.std_of(i, values[p], std_z[i]) if det[i] else float("inf")
@@ -1158,11 +1338,24 @@ def fit_scenario(
             )
     sim = eng.run(z[None], res.offsets[None])[0]
     seg_fp = eng.fit_percent_segments(sim)
-    pred = (
-        predict_scenario(fitted, logs, options, channels=list(eng.channels), plots=plots, tag="fit")
-        if predict
-        else {"fit_percent": {}, "plots": []}
-    )
+    if not predict:
+        pred: dict[str, Any] = {"fit_percent": {}, "plots": []}
+    elif K == 1:
+        pred = predict_scenario(
+            fitted, logs, options, channels=list(eng.channels), plots=plots, tag="fit"
+        )
+    else:
+        pred = _predict_by_session(eng, per_session, logs, options, plots)
+    if K > 1:  # the result says which parameters are per session (#47)
+        stages["sessions"] = {
+            "of_log": [int(k) for k in eng.log_session],
+            "per_session": list(eng.per_session),
+            "shared": [
+                p
+                for i, p in enumerate(eng.free)
+                if p not in eng.per_session and not eng.session_of[i]
+            ],
+        }
     converged = res.status > 0
     msg = ("converged" if converged else "NOT CONVERGED") + f" ({res.message})"
     return ScenarioFit(
@@ -1185,7 +1378,47 @@ def fit_scenario(
         plots=list(pred["plots"]),
         rmse=dict(pred.get("rmse", {})),
         nrmse=dict(pred.get("nrmse", {})),
+        session_scenarios=per_session if K > 1 else [],
     )
+
+
+def _key_session(key: str) -> int:
+    """The session of a result key: ``sessions[2].PATH`` → 2, a path → 0."""
+    return int(key[len("sessions[") : key.index("]")]) if key.startswith("sessions[") else 0
+
+
+def _predict_by_session(eng: _Engine, scenarios: list, logs: Sequence, options, plots) -> dict:
+    """:func:`predict_scenario` of each session's logs by its session's scenario, merged
+    in the logs' order under the fit's log names."""
+    wins = list(options.windows or [None] * len(logs))
+    out: dict[str, Any] = {}
+    for s_, sc in enumerate(scenarios):
+        idx = [i for i, k in enumerate(eng.log_session) if k == s_]
+        opts = dataclasses.replace(options, windows=[wins[i] for i in idx], sessions=None)
+        part = predict_scenario(
+            sc,
+            [logs[i] for i in idx],
+            opts,
+            channels=list(eng.channels),
+            plots=plots,
+            tag=f"fit-session{s_}",
+        )
+        for key in ("fit_percent", "rmse", "nrmse", "trajectories"):
+            got = list(part.get(key, {}).values())
+            out.setdefault(key, {}).update(
+                {eng.logs[i].name: v for i, v in zip(idx, got, strict=True)}
+            )
+        out.setdefault("plots", []).extend(part["plots"])
+        out.setdefault("warnings", []).extend(part.get("warnings", []))
+        out.setdefault("notes", []).extend(part.get("notes", []))
+    order = [L.name for L in eng.logs]
+    for key in ("fit_percent", "rmse", "nrmse", "trajectories"):
+        out[key] = {k: out[key][k] for k in order if k in out.get(key, {})}
+    out["notes"] = list(dict.fromkeys(out["notes"])) + [
+        f"session {s_}: its own {', '.join(eng.per_session)}" for s_ in range(len(scenarios))
+    ]
+    out["warnings"] = list(dict.fromkeys(out["warnings"]))
+    return out
 
 
 def _local(

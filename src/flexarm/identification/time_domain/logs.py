@@ -171,3 +171,42 @@ def pieces(logs, seconds: float) -> tuple[list[Log], list[int]]:
             out.append(g.window(k * seconds, t1))
             owner.append(i)
     return out, owner
+
+
+#: the input channels a declared state-feedback law's per-sample gains are read from
+GAIN_SIGNALS = tuple(f"gain_K{i}" for i in range(1, 5))
+
+
+def declared_laws(scenario, logs: list[Log]) -> tuple[Any, list[Log]] | None:
+    """Servo-rig logs that each declare the law they ran (their own K1..K4, constant or
+    a schedule in the file) as ONE closed loop: ``scenario`` with a state-feedback
+    controller that reads its gains per sample from the input channels
+    :data:`GAIN_SIGNALS`, and the logs carrying their gains in those channels (u =
+    K1(r − θ) − K2 d − K3 θ̇ − K4 ḋ with each log's K of each sample). So a fit and a
+    prediction run every log in one batch with the law it ran (the lab's gains differ
+    between runs). None where the laws differ in more than their gains (the rate filter):
+    each log then runs alone (:func:`flexarm.identification.time_domain.predict.predict`)."""
+    from dataclasses import replace
+
+    laws = []
+    for g in logs:
+        law = g.controller.model_dump(mode="json", exclude_none=True)
+        for k in ("k1", "k2", "k3", "k4", "gain_signals"):
+            law.pop(k, None)
+        laws.append(law)
+    if any(law != laws[0] for law in laws[1:]):
+        return None
+    out = []
+    for g in logs:
+        c = g.controller
+        k = (
+            np.asarray(g.gains, float)
+            if g.gains is not None
+            else np.tile(np.array([c.k1, c.k2, c.k3, c.k4], float), (len(g.time), 1))
+        )
+        sig = dict(g.signals)
+        sig.update({n: k[:, i].copy() for i, n in enumerate(GAIN_SIGNALS)})
+        out.append(replace(g, signals=sig))
+    law = logs[0].controller.model_dump(mode="json", exclude_none=True)
+    law["gain_signals"] = list(GAIN_SIGNALS)
+    return scenario.with_controllers({"controller": law}, source="the logs' declared laws"), out

@@ -52,6 +52,7 @@ __all__ = [
     "Priors",
     "ServoRig",
     "Bootstrap",
+    "Sessions",
     "FitOptions",
     "ResolvedOptions",
     "PredictOptions",
@@ -335,6 +336,54 @@ class Bootstrap:
             )
 
 
+@dataclass
+class Sessions:
+    """Several recording sessions of one rig in one fit (issue #47): ``of_log`` gives each
+    log's session (0, 1, ...); the mechanics, sensor gains and delays are shared and the
+    ``per_session`` paths are fitted once per session: session 0's value at the path
+    itself, a later session s's at ``sessions[s].PATH`` in the result
+    (:func:`~flexarm.identification.time_domain.result.session_key`). ``per_session`` None:
+    the free joint-friction levels (:func:`~.general.friction_paths`) and the free signed
+    paths (``bias``, ``offset``). ``starts``: session → {path: start value} where a session
+    starts elsewhere than session 0 (e.g. a gauge's sign flipped: its gain's start
+    negated)."""
+
+    of_log: Sequence[int]
+    per_session: Sequence[str] | None = None
+    starts: Mapping[int, Mapping[str, float]] | None = None
+
+    @property
+    def count(self) -> int:
+        return max(self.of_log) + 1 if len(self.of_log) else 1
+
+    def check(self, n_logs: int | None = None) -> None:
+        s = list(self.of_log)
+        if not s or any(
+            isinstance(k, bool) or not isinstance(k, numbers.Integral) or k < 0 for k in s
+        ):
+            raise ValueError(
+                f"FitOptions.sessions.of_log = {s!r}: give each log's session as a whole "
+                "number >= 0 (e.g. [0, 0, 1, 1]; --sessions 0,0,1,1)"
+            )
+        missing = sorted(set(range(max(s) + 1)) - set(s))
+        if missing:
+            raise ValueError(
+                f"FitOptions.sessions.of_log = {s!r}: session(s) {missing} have no log; "
+                "number the sessions 0, 1, ... without gaps"
+            )
+        if n_logs is not None and len(s) != n_logs:
+            raise ValueError(
+                f"FitOptions.sessions.of_log has {len(s)} entries for {n_logs} logs: give "
+                "one session per log"
+            )
+        for k in self.starts or {}:
+            if k not in set(s) or k == 0:
+                raise ValueError(
+                    f"FitOptions.sessions.starts[{k!r}]: not a later session of the logs "
+                    f"(sessions 1..{max(s)}); session 0 starts from the scenario"
+                )
+
+
 def _changed(group, over_base: bool):
     """The (field, value) pairs of ``group`` to set on the resolved options: every field,
     or, over a preset's options (``over_base``), only those changed from the group's
@@ -411,6 +460,9 @@ class FitOptions:
     #: a parametric bootstrap after the fit (:class:`Bootstrap`): the result's std and
     #: correlation are the refits' spread; None: the HAC ones
     bootstrap: Bootstrap | None = None
+    #: several recording sessions of one rig (:class:`Sessions`): friction and the signed
+    #: paths per session, the rest shared; None: one session
+    sessions: Sessions | None = None
 
     def resolved(self, base: FitOptions | None = None) -> ResolvedOptions:
         """These options with every engine group filled (:class:`ResolvedOptions`, a
@@ -442,6 +494,8 @@ class FitOptions:
             out["servo_rig"] = self.servo_rig
         if self.bootstrap is not None:
             out["bootstrap"] = self.bootstrap
+        if self.sessions is not None:
+            out["sessions"] = self.sessions
         if self.windows is not None:
             out["windows"] = list(self.windows)
         if self.continuous:
@@ -460,6 +514,8 @@ class FitOptions:
                 g.check()
         if self.bootstrap is not None:
             self.bootstrap.check()
+        if self.sessions is not None:
+            self.sessions.check(len(self.windows) if self.windows is not None else None)
         if (
             self.continuous
             and self.windows is not None

@@ -179,22 +179,21 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     wins = list(opts.windows) if opts.windows is not None else [None] * len(logs)
     chans = list(opts.channels) if opts.channels else None
     if own_law:
-        from flexarm.identification.time_domain.logs import as_rig_log, check_closed_loop
+        from flexarm.identification.time_domain.logs import (
+            as_rig_log,
+            check_closed_loop,
+            declared_laws,
+        )
 
         logs = [as_rig_log(g, opts.controller) for g in logs]
         for g in logs:
             check_closed_loop(g)
+        # each log alone with its own gains (of each sample): a log's figure does not
+        # depend on the logs predicted beside it (its start state is refined on it alone)
         runs = []
         for g, w in zip(logs, wins, strict=True):
-            law = g.controller.model_dump(mode="json", exclude_none=True)
-            if g.gains is not None and len(g.gain_segments) > 1:  # a schedule in the log
-                names = tuple(f"gain_K{i}" for i in range(1, 5))
-                law["gain_signals"] = list(names)
-                sig = dict(g.signals)
-                sig.update({n: np.asarray(g.gains[:, i], float) for i, n in enumerate(names)})
-                g = replace(g, signals=sig)
-            one = sc.with_controllers({"controller": law}, source=f"{g.where}: declared law")
-            runs.append((one, [g], [w]))
+            one, (g1,) = cast("tuple", declared_laws(sc, [g]))
+            runs.append((one, [g1], [w]))
     else:
         runs = [(sc, list(logs), wins)]
     fp: dict[str, dict[str, float | None]] = {}

@@ -13,7 +13,7 @@ import tomli_w
 from flexarm.errors import OutputExistsError
 from flexarm.identification.time_domain.logs import FitInputError
 from flexarm.identification.time_domain.params import DOCS, UNITS, derived
-from flexarm.identification.time_domain.result import finite
+from flexarm.identification.time_domain.result import finite, session_key, session_path
 from flexarm.io.logs import log_keys
 from flexarm.io.write import write_json, write_text
 
@@ -517,17 +517,6 @@ PATH_UNITS = {
     "arm.beam.damping_ratio": "",
     "sensors.tip_deflection.gain": "m/m",
 }
-
-
-def session_key(session: int, path: str) -> str:
-    """The result's key of a later session's own value at scenario ``path``:
-    ``sessions[1].arm.friction.coulomb`` (session 0's is the path itself)."""
-    return f"sessions[{session}].{path}" if session else path
-
-
-def session_path(path: str) -> str:
-    """``sessions[1].arm.friction.coulomb`` → ``arm.friction.coulomb``."""
-    return path.split("].", 1)[1] if path.startswith("sessions[") else path
 
 
 def _path_values(res: FitResult, params: dict[str, float]) -> dict[str, float]:

@@ -27,7 +27,18 @@ from typing import Any, cast
 
 import numpy as np
 
-__all__ = ["FitResult", "Prediction", "finite", "drop_none"]
+__all__ = ["FitResult", "Prediction", "finite", "drop_none", "session_key", "session_path"]
+
+
+def session_key(session: int, path: str) -> str:
+    """The result's key of a later session's own value at scenario ``path``:
+    ``sessions[1].arm.friction.coulomb`` (session 0's is the path itself)."""
+    return f"sessions[{session}].{path}" if session else path
+
+
+def session_path(path: str) -> str:
+    """``sessions[1].arm.friction.coulomb`` → ``arm.friction.coulomb``."""
+    return path.split("].", 1)[1] if path.startswith("sessions[") else path
 
 
 @dataclass
