@@ -89,13 +89,12 @@ class Sensor(Spec):
     ``bandwidth`` f_c > 0 puts an analog first-order low-pass in front of the A/D,
     y_f' = 2π f_c (gain·x − y_f) integrated with the plant between samples (y_f = gain·x
     at t = 0), and y = y_f + offset + noise (0: no filter); in Hz (angular units are
-    refused), with 2π f_c T / simulation.substeps <= 0.5.
-
-    ``offset``: the channel's constant zero offset (a strain-gauge bridge's or an encoder's
-    zero, different per recording session), signed, in the channel's unit (the unit of
-    gain·x: rad for an encoder, m for a gauge calibrated to tip deflection), added after the
-    analog low-pass and before quantisation; a ``zeroing`` window removes it as the lab's
-    logger does (its mean over the window includes it). 0 (the default): no offset.
+    refused), with 2π f_c T / simulation.substeps <= 0.5. ``offset``: the channel's constant
+    zero offset (a strain-gauge bridge's or an encoder's zero, different per recording
+    session), signed, in the channel's SI unit (that of gain·x: rad for an encoder, m for a
+    gauge calibrated to tip deflection; an angle may carry its unit, "0.5 deg"), added after
+    the analog low-pass and before quantisation; a ``zeroing`` window removes it as the
+    lab's logger does (the window's mean includes it); 0 (the default): none.
 
     ``signal``: the plant signal the channel reads (default: the channel's own name), so
     several channels may read one signal (an angle, and its filtered rate). ``filter``: a
