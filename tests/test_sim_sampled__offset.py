@@ -206,3 +206,57 @@ def test_offset_bad_input_names_the_field(tmp_path):
 
     with pytest.raises(ValueError, match=r"sensors\.g\.offset = nan: give the channel's zero"):
         Sensors.make(One(("p",), ("s",), ("u",)), {"g": {"signal": "s", "offset": float("nan")}})
+
+
+def test_logged_offset_after_the_digital_filter():
+    """What each channel's output carries of its offset: the offset on a plain channel, 0 on
+    a zeroed one, the offset through a lowpass2 (DC gain 1, 1e-12) and 0 through a rate
+    filter (derivative2, lowpass2_rate: DC gain 0); before the filter, the offset."""
+    import jax.numpy as jnp
+
+    from flexarm.models.plant import Plant
+    from flexarm.sim.sampled import Sensors, logged_offset
+
+    class One(Plant):
+        def rhs(self, x, u):
+            return jnp.zeros(1)
+
+        def signals(self, x, u):
+            return x[:1]
+
+    f2 = {"kind": "lowpass2", "cutoff": 2.0, "damping": 0.9}
+    chans = {
+        "a": {"signal": "s", "offset": 0.25},
+        "z": {"signal": "s", "offset": 0.25, "zeroing": 0.01},
+        "lp": {"signal": "s", "offset": -0.5, "filter": f2},
+        "lpr": {"signal": "s", "offset": -0.5, "filter": {**f2, "kind": "lowpass2_rate"}},
+        "d": {"signal": "s", "offset": 0.75, "filter": {"kind": "derivative2", "cutoff": 40.0}},
+    }
+    sens = Sensors.make(One(("p",), ("s",), ("u",)), chans, 2e-3)
+    np.testing.assert_array_equal(np.asarray(logged_offset(sens)), [0.25, 0, -0.5, -0.5, 0.75])
+    after = np.asarray(logged_offset(sens, filtered=True))
+    np.testing.assert_allclose(after, [0.25, 0.0, -0.5, 0.0, 0.0], rtol=0, atol=1e-12)
+
+
+def test_replay_initial_state_subtracts_the_offsets():
+    """analysis.replay reads the rig's start off a log's first sample: with offsets on the
+    hub encoder (2°) and the gauge (1.5 mm) it subtracts them, and gives the state of the
+    log without offsets (1e-15)."""
+    from flexarm.analysis.replay import initial_state_from_log
+    from flexarm.io.logs import Log
+    from flexarm.sim.build import prepare
+    from flexarm.specs.scenario import Scenario
+
+    c_th, c_d = math.radians(2.0), 1.5e-3
+    d = _rig()
+    d["sensors"]["motor_angle"]["offset"] = c_th
+    d["sensors"]["tip_deflection"]["offset"] = c_d
+    p = prepare(Scenario.model_validate(d))
+    p0 = prepare(Scenario.model_validate(_rig()))
+    t = np.arange(3) * 1e-3
+    th, w = np.array([0.3, 0.3, 0.3]), np.array([2e-3, 2e-3, 2e-3])
+    log = Log(None, t, {"motor_angle": th + c_th, "tip_deflection": w + c_d})
+    log0 = Log(None, t, {"motor_angle": th, "tip_deflection": w})
+    x, x0 = initial_state_from_log(p, log), initial_state_from_log(p0, log0)
+    assert abs(x0[0] - 0.3) < 1e-15  # the hub angle is read
+    np.testing.assert_allclose(x, x0, rtol=0, atol=1e-15)

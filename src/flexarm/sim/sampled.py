@@ -487,14 +487,26 @@ def _with_offset(sens: Sensors, raw: Array) -> Array:
     return raw + off
 
 
-def logged_offset(sens: Sensors) -> Array:
-    """Each channel's offset as its logged (or simulated) reading carries it: the sensor's
-    ``offset``, 0 on the zeroed channels (the logger's tare removed it). A reading y of a
-    channel maps back to gain·s as y − logged_offset (what a state read off a log
-    subtracts)."""
-    if not sens.zeroed:
-        return sens.offset
-    return sens.offset.at[jnp.asarray(sens.zeroed)].set(0.0)
+def logged_offset(sens: Sensors, filtered: bool = False) -> Array:
+    """Each channel's offset as its logged (or simulated) reading carries it, in the
+    channel's unit: the sensor's ``offset``, 0 on the zeroed channels (the logger's tare
+    removed it). A reading y of a channel, before its digital filter, maps back to gain·s
+    as y − logged_offset (what a state read off a log subtracts). ``filtered``: the offset
+    the channel's output carries after its digital filter, the reading's times the filter's
+    DC gain C (I − A)⁻¹ B + D (1 for ``lowpass2``, 0 for the rate kinds)."""
+    off = sens.offset
+    if sens.zeroed:
+        off = off.at[jnp.asarray(sens.zeroed)].set(0.0)
+    if filtered and sens.digital:
+        assert sens.fA is not None and sens.fB is not None
+        assert sens.fC is not None and sens.fD is not None
+        eye = jnp.eye(sens.fA.shape[-1])
+        dc = jax.vmap(lambda A, B, C, D: C @ jnp.linalg.solve(eye - A, B) + D)(
+            sens.fA, sens.fB, sens.fC, sens.fD
+        )
+        od = _pick(off, sens.digital)
+        off = _put(off, sens.digital, jnp.where(od == 0, 0.0, od * dc))
+    return off
 
 
 def _put(y: Array, positions: tuple[int, ...], v: Array) -> Array:
