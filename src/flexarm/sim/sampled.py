@@ -226,8 +226,7 @@ def command_signal(plant: Plant, signal: str) -> tuple[int, bool] | None:
     logger records its command) or that name + ``_applied`` (the command the drive receives:
     the ``into = "command"`` disturbances added); ``None`` for any other signal. A command
     channel records the command computed at the sample, y_k = gain·u_k + offset + noise,
-    quantised; a
-    controller reading it sees the command held over the period before."""
+    quantised; a controller reading it sees the command held over the period before."""
     base = signal.removesuffix("_applied")
     if signal in plant.signal_names or base not in plant.input_names:
         return None
