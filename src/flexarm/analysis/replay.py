@@ -35,7 +35,7 @@ from flexarm.sim.filters import (
     with_filter_state,
 )
 from flexarm.sim.result import SimulationResult
-from flexarm.sim.sampled import check_zeroing, simulate_loop
+from flexarm.sim.sampled import check_zeroing, logged_offset, simulate_loop
 
 
 @dataclass
@@ -49,10 +49,12 @@ class Replay:
     notes: list[str] = field(default_factory=list)
 
 
-def _first(log: Log, names: list[str], default: float = 0.0) -> float:
+def _first(log: Log, names: list[str], default: float = 0.0, off: dict | None = None) -> float:
+    """The first logged value of the first of ``names`` the log holds, less the channel's
+    zero offset (``off``: channel → the offset its reading carries), else ``default``."""
     for n in names:
         if n in log.signals:
-            return float(log[n][0])
+            return float(log[n][0]) - (off or {}).get(n, 0.0)
     return float(default)
 
 
@@ -60,15 +62,19 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
     """The plant state at the log's first sample (module docstring). A single link: the
     hub's ``motor_angle`` and ``motor_velocity`` and the ``tip_deflection`` where the log
     holds them, else the scenario's ``[initial]`` values (the link at rest relative to the
-    hub, statically bent to the tip deflection)."""
+    hub, statically bent to the tip deflection). The zero offset a channel's output carries
+    (its ``offset``; 0 on a zeroed channel, times the DC gain of a digital filter: 0 for a
+    rate: :func:`flexarm.sim.sampled.logged_offset`) is subtracted."""
     model, arm = prepared.model, prepared.loop.plant
+    sens = prepared.loop.sensors
+    off = dict(zip(sens.names, np.asarray(logged_offset(sens, True), float).tolist(), strict=True))
     if getattr(model, "n_links", None) is None:
         ini = prepared.scenario.initial
         return np.asarray(
             model.initial_state(
-                _first(log, ["motor_angle"], ini.motor_angle),
-                _first(log, ["motor_velocity"], ini.motor_velocity),
-                _first(log, ["tip_deflection"], ini.tip_deflection),
+                _first(log, ["motor_angle"], ini.motor_angle, off),
+                _first(log, ["motor_velocity"], ini.motor_velocity, off),
+                _first(log, ["tip_deflection"], ini.tip_deflection, off),
             ),
             float,
         )
@@ -78,10 +84,10 @@ def initial_state_from_log(prepared, log: Log) -> np.ndarray:
             "replay: the initial deflection is read as one angle α_j per link "
             f"(torsional links); this arm has modes {model.n_modes}"
         )
-    th = [_first(log, [f"theta_{j}"]) for j in range(1, n + 1)]
-    al = [_first(log, [f"alpha_{j}", f"alpha_f_{j}"]) for j in range(1, n + 1)]
-    thd = [_first(log, [f"theta_dot_{j}", f"theta_dot_f_{j}"]) for j in range(1, n + 1)]
-    ald = [_first(log, [f"alpha_dot_{j}", f"alpha_dot_f_{j}"]) for j in range(1, n + 1)]
+    th = [_first(log, [f"theta_{j}"], 0.0, off) for j in range(1, n + 1)]
+    al = [_first(log, [f"alpha_{j}", f"alpha_f_{j}"], 0.0, off) for j in range(1, n + 1)]
+    thd = [_first(log, [f"theta_dot_{j}", f"theta_dot_f_{j}"], 0.0, off) for j in range(1, n + 1)]
+    ald = [_first(log, [f"alpha_dot_{j}", f"alpha_dot_f_{j}"], 0.0, off) for j in range(1, n + 1)]
     x = model.state(theta=th, delta=al, theta_dot=thd, delta_dot=ald)
     return np.concatenate([x, np.zeros(arm.n_states - len(x))])
 

@@ -92,6 +92,15 @@ def _spec(sensors: dict, name: str) -> dict:
     return s.model_dump() if hasattr(s, "model_dump") else dict(s)
 
 
+def _logged_offset(spec: dict) -> float:
+    """The zero offset a channel's logged reading carries, in its unit: ``offset``, 0 where
+    the logger zeroes the channel (its tare removed it;
+    :func:`flexarm.sim.sampled.logged_offset`)."""
+    if float(spec.get("zeroing") or 0.0) > 0:
+        return 0.0
+    return float(spec.get("offset") or 0.0)
+
+
 def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np.ndarray]:
     """States ξ_k of every digitally filtered channel of ``sensors`` (a scenario's
     ``[sensors]``: channel → :class:`flexarm.specs.experiment.Sensor`) that the log holds,
@@ -143,8 +152,9 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
             out[name] = np.array([x1, x2])
             continue
         x2 = y[k]
-        if sibs:
-            out[name] = np.array([log[sibs[0]][k], x2])
+        if sibs:  # the sibling's low-passed reading, moved from its offset to this one's
+            x1 = log[sibs[0]][k] + (_logged_offset(c) - _logged_offset(chans[sibs[0]]))
+            out[name] = np.array([x1, x2])
             continue
         raw = [
             n
@@ -163,7 +173,8 @@ def filter_state_from_log(sensors: dict, log, k: int, dt: float) -> dict[str, np
         filt = digital_filter(f, dt, where=f"sensor {name!r}: filter")
         rho = float(np.max(np.abs(np.linalg.eigvals(filt.A))))
         back = int(math.ceil(math.log(1e-12) / math.log(rho))) if 0 < rho < 1 else k + 1
-        u = log[raw[0]]
+        # the reading behind the filter carries this channel's offset, the log the raw one's
+        u = np.asarray(log[raw[0]], float) + (_logged_offset(c) - _logged_offset(chans[raw[0]]))
         if k >= back:  # enough history: the filter's own state, its start forgotten
             _, xs = filt.run(u[k - back : k + 1])
             out[name] = np.array([xs[-1][0], x2])
@@ -394,7 +405,8 @@ def computed_channels(
       delay, zeroing): ξ₂,k = (ξ₁,k+1 − ξ₁,k) / T exactly (ξ₁⁺ = ξ₁ + T ξ₂); the last
       sample extrapolated linearly;
     * the raw reading's rule: the log holds an unfiltered channel r of s with the same
-      zeroing: c = F run on (g_c / g_r) r quantised to c's count, from rest on its first
+      zeroing: c = F run on (g_c / g_r)(r − o_r) + o_c quantised to c's count (o the
+      channels' offsets, 0 on a zeroed channel), from rest on its first
       sample (the simulator's start, (I − A) ξ₀ = B y₀), shifted by c's delay minus r's
       (samples; the ends held). Exact where the filter's start is forgotten (|z|ⁿ, e.g.
       ~30 ms for the lab's 40 Hz derivative, ~0.5 s for a 2 Hz low-pass); the first
@@ -480,9 +492,9 @@ def computed_channels(
         if not raw:
             continue
         r = chans[raw[0]]
-        u = np.asarray(sig[raw[0]], float) * (
+        u = (np.asarray(sig[raw[0]], float) - _logged_offset(r)) * (
             float(spec.get("gain", 1.0)) / float(r.get("gain", 1.0))
-        )
+        ) + _logged_offset(spec)
         q = float(spec.get("quantum", 0.0) or 0.0)
         if q <= 0 and int(spec.get("bits", 0) or 0) > 0:
             q = float(spec["range"]) / 2 ** int(spec["bits"])

@@ -2,10 +2,12 @@
 
 At each sample instant t_k = k T:
 
-1. the plant's signals s_k are read by the sensors: y = gain·s + noise (seeded Gaussian),
-   quantised to the A/D count (range / 2**bits), delayed by the channel's delay (samples).
-   A channel with a low-pass cutoff f_c > 0 reads y = y_f + noise instead, y_f the output
-   of an analog first-order filter in front of the A/D,
+1. the plant's signals s_k are read by the sensors: y = gain·s + offset + noise (seeded
+   Gaussian; ``offset`` the channel's constant zero offset, in its unit), quantised to the
+   A/D count (range / 2**bits), delayed by the channel's delay (samples).
+   A channel with a low-pass cutoff f_c > 0 reads y = y_f + offset + noise instead, y_f the
+   output of an analog first-order filter in front of the A/D (its state in gain·s units,
+   the offset added at its output),
 
        y_f' = ω_f (gain·s(x(t), u) − y_f),   ω_f = 2π f_c,   y_f(0) = gain·s(x_0, 0),
 
@@ -22,7 +24,8 @@ At each sample instant t_k = k T:
    (I − A) ξ_0 = B y_0, or as set (:func:`flexarm.sim.filters.with_filter_state`).
    A channel with a ``zeroing`` window of n samples (the logger's tare) reads, after
    quantisation and before its digital filter, 0 for k < n and y_k − (1/n) Σ_{i<n} y_i
-   afterwards (:func:`_zeroing_step`; the window's sum is carried in the loop);
+   afterwards (:func:`_zeroing_step`; the window's sum is carried in the loop), which
+   removes the channel's offset as the lab's logger does;
 2. the controller steps on the measured signals and the references at t_k;
 3. the command is delayed by the computation delay (samples), saturated at the
    actuator limit and quantised to the D/A count (2·limit / 2**bits);
@@ -72,6 +75,9 @@ class Sensors(eqx.Module):
     gain: Array
     noise: Array
     quantum: Array  # 0 = no quantisation
+    #: the channels' constant zero offsets (in each channel's unit), y = gain·s + offset;
+    #: an array like ``gain`` (zeros: the loop as without), so loops stack and trace it
+    offset: Array
     #: positions (in ``names``) of the channels with a low-pass filter, and their ω_f
     #: (rad/s); no filtered channel leaves the loop exactly as without filters
     filtered: tuple[int, ...] = eqx.field(static=True, default=())
@@ -120,7 +126,7 @@ class Sensors(eqx.Module):
                 raise ValueError(
                     f"sensor {n!r} reads the drive's command {signal[n]!r}, which has no "
                     f"{', '.join(bad)}: set {bad[0]} = 0 (a command channel takes gain, "
-                    "noise and quantisation only)"
+                    "offset, noise and quantisation only)"
                 )
         for n in names:
             if n not in cmd and signal[n] not in plant.signal_names:
@@ -185,6 +191,13 @@ class Sensors(eqx.Module):
             pos = [i for i, n in enumerate(names) if n in cmd]
             command_gain = gain[jnp.asarray(pos)]
             gain = gain.at[jnp.asarray(pos)].set(0.0)
+        offset = get("offset", 0.0)
+        bad_off = [n for n, o in zip(names, np.asarray(offset), strict=True) if not np.isfinite(o)]
+        if bad_off:
+            raise ValueError(
+                f"sensors.{bad_off[0]}.offset = {channels[bad_off[0]]['offset']!r}: give the "
+                "channel's zero offset as a finite number in its unit (0 = none)"
+            )
         return cls(
             names,
             tuple(0 if n in cmd else plant.signal_names.index(signal[n]) for n in names),
@@ -192,6 +205,7 @@ class Sensors(eqx.Module):
             gain,
             get("noise", 0.0),
             jnp.asarray(quantum),
+            offset,
             filtered,
             omega,
             digital,
@@ -211,8 +225,8 @@ def command_signal(plant: Plant, signal: str) -> tuple[int, bool] | None:
     controller's command after the computation delay, the saturation and the D/A, as a lab's
     logger records its command) or that name + ``_applied`` (the command the drive receives:
     the ``into = "command"`` disturbances added); ``None`` for any other signal. A command
-    channel records the command computed at the sample, y_k = gain·u_k + noise, quantised; a
-    controller reading it sees the command held over the period before."""
+    channel records the command computed at the sample, y_k = gain·u_k + offset + noise,
+    quantised; a controller reading it sees the command held over the period before."""
     base = signal.removesuffix("_applied")
     if signal in plant.signal_names or base not in plant.input_names:
         return None
@@ -429,7 +443,7 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     u0 = jnp.zeros((n_u,) + x0.shape[1:])  # x0 (n_x, B): a batch carried batch-last
     dmax = max(sens.delays) if sens.delays else 0
     raw = sens.gain * _pick(_signals(plant, x0, u0), sens.index)
-    y0 = _quantise(raw, sens.quantum)
+    y0 = _quantise(_with_offset(sens, raw), sens.quantum)
     if sens.zeroed:  # the first sample lies in the window: it reads 0
         y0 = _zeroed_out(sens, y0, jnp.zeros((len(sens.zeroed),), y0.dtype))
     xd0 = None
@@ -453,9 +467,45 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
 
 def zeroing_start(sens: Sensors, k: int | Array = 0, total: Array | None = None) -> tuple:
     """The zeroing stage's state at sample k: (k, Σ of the zeroed channels' readings over
-    the window so far), (0, 0) at a run's start."""
-    acc = jnp.zeros((len(sens.zeroed),)) if total is None else jnp.asarray(total)
+    the window so far), (0, 0) at a run's start. Without ``total`` the sum is the channels'
+    offsets' part alone, offset · min(k, n) (the plant's part taken as 0: a segment that
+    starts after the window then reads gain·s, the offset removed, as the log's zeroed
+    values do)."""
+    if total is None:
+        n = jnp.asarray(sens.zero_n, jnp.int32)
+        acc = _pick(sens.offset, sens.zeroed) * jnp.minimum(jnp.asarray(k, jnp.int32), n)
+    else:
+        acc = jnp.asarray(total)
     return (jnp.asarray(k, jnp.int32), acc)
+
+
+def _with_offset(sens: Sensors, raw: Array) -> Array:
+    """The readings gain·s (channels first; a batch carried batch-last) plus each channel's
+    offset."""
+    off = sens.offset.reshape(sens.offset.shape + (1,) * (raw.ndim - 1))
+    return raw + off
+
+
+def logged_offset(sens: Sensors, filtered: bool = False) -> Array:
+    """Each channel's offset as its logged (or simulated) reading carries it, in the
+    channel's unit: the sensor's ``offset``, 0 on the zeroed channels (the logger's tare
+    removed it). A reading y of a channel, before its digital filter, maps back to gain·s
+    as y − logged_offset (what a state read off a log subtracts). ``filtered``: the offset
+    the channel's output carries after its digital filter, the reading's times the filter's
+    DC gain C (I − A)⁻¹ B + D (1 for ``lowpass2``, 0 for the rate kinds)."""
+    off = sens.offset
+    if sens.zeroed:
+        off = off.at[jnp.asarray(sens.zeroed)].set(0.0)
+    if filtered and sens.digital:
+        assert sens.fA is not None and sens.fB is not None
+        assert sens.fC is not None and sens.fD is not None
+        eye = jnp.eye(sens.fA.shape[-1])
+        dc = jax.vmap(lambda A, B, C, D: C @ jnp.linalg.solve(eye - A, B) + D)(
+            sens.fA, sens.fB, sens.fC, sens.fD
+        )
+        od = _pick(off, sens.digital)
+        off = _put(off, sens.digital, jnp.where(od == 0, 0.0, od * dc))
+    return off
 
 
 def _put(y: Array, positions: tuple[int, ...], v: Array) -> Array:
@@ -577,7 +627,8 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
             yf = carry[5]
             slot = {c: j for j, c in enumerate(sens.filtered)}
             raw = jnp.stack([yf[slot[c]] if c in slot else raw[c] for c in range(len(sens.names))])
-        y = _quantise(raw + sens.noise * noise_k, sens.quantum)
+        # the offset after the analog filters, before the noise and the A/D
+        y = _quantise(raw + sens.offset + sens.noise * noise_k, sens.quantum)
         extra = ()
         pos = 6 if fplant is not None else 5  # the optional parts of the carry
         zpos = pos + (1 if sens.digital else 0)
@@ -614,7 +665,11 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
                 ]
             )
             assert sens.command_gain is not None
-            yc = sens.command_gain * vals + _pick(sens.noise, cpos) * _pick(noise_k, cpos)
+            yc = (
+                sens.command_gain * vals
+                + _pick(sens.offset, cpos)
+                + _pick(sens.noise, cpos) * _pick(noise_k, cpos)
+            )
             meas_vec = _put(meas_vec, cpos, _quantise(yc, _pick(sens.quantum, cpos)))
         if forces:  # logged forces on the joints, beside the drives' torques
             f_ext = jnp.zeros((n_j,), u.dtype)

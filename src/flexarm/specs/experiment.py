@@ -81,15 +81,20 @@ class DigitalFilterSpec(Spec):
 
 
 class Sensor(Spec):
-    """One measured channel: y = gain·x + noise, then A/D quantisation, optional pure
-    delay (samples). ``bits = 0`` means no quantisation; ``range`` is the full span
+    """One measured channel: y = gain·x + offset + noise, then A/D quantisation, optional
+    pure delay (samples). ``bits = 0`` means no quantisation; ``range`` is the full span
     of the converter (the count is range / 2**bits); ``quantum`` > 0 gives the count
     directly (an encoder's 2π / counts per turn, in the signal's unit) instead of
     range / 2**bits; ``noise`` is a standard deviation.
     ``bandwidth`` f_c > 0 puts an analog first-order low-pass in front of the A/D,
     y_f' = 2π f_c (gain·x − y_f) integrated with the plant between samples (y_f = gain·x
-    at t = 0), and y = y_f + noise (0: no filter); in Hz (angular units are refused), with
-    2π f_c T / simulation.substeps <= 0.5.
+    at t = 0), and y = y_f + offset + noise (0: no filter); in Hz (angular units are
+    refused), with 2π f_c T / simulation.substeps <= 0.5. ``offset``: the channel's constant
+    zero offset (a strain-gauge bridge's or an encoder's zero, different per recording
+    session), signed, in the channel's SI unit (that of gain·x: rad for an encoder, m for a
+    gauge calibrated to tip deflection; an angle may carry its unit, "0.5 deg"), added after
+    the analog low-pass and before quantisation; a ``zeroing`` window removes it as the
+    lab's logger does (the window's mean includes it); 0 (the default): none.
 
     ``signal``: the plant signal the channel reads (default: the channel's own name), so
     several channels may read one signal (an angle, and its filtered rate). ``filter``: a
@@ -108,6 +113,7 @@ class Sensor(Spec):
     quantum: Q("", ge=0, what="quantisation step; 0 = from bits and range") = 0.0
     noise: Q("", ge=0) = 0.0
     gain: Q("") = 1.0
+    offset: Q("", what="constant added to the measured value, in the channel's unit") = 0.0
     delay: Count(ge=0, le=1000, what="sensor delay in samples") = 0
     bandwidth: Q("Hz", ge=0, what="first-order low-pass cutoff; 0 = no filter") = 0.0
     signal: str | None = None

@@ -111,7 +111,14 @@ from flexarm.identification.time_domain.uncertainty import bandwidth, bartlett_m
 from flexarm.metrics import fit_percent as _fitpct
 from flexarm.sim.batch import cpu_cores, run_chunks, stack_loops
 from flexarm.sim.build import Prepared, prepare, reference_signal
-from flexarm.sim.sampled import _quantise, _scan, check_zeroing, initial_carry, zeroing_start
+from flexarm.sim.sampled import (
+    _quantise,
+    _scan,
+    check_zeroing,
+    initial_carry,
+    logged_offset,
+    zeroing_start,
+)
 
 __all__ = [
     "ScenarioFitOptions",
@@ -1001,11 +1008,11 @@ def _state_from_log(loop, y0, dy0):
     Sj = jax.jacfwd(lambda xx: plant.signals(xx, u0))(x)
     F = jax.jacfwd(lambda xx: plant.rhs(xx, u0))(x)
     rows = jnp.stack([sens.gain[c] * Sj[i] for c, i in enumerate(sens.index)])  # (C, n)
-    b_pos = y0
+    b_pos = y0 - logged_offset(sens)  # the readings' zero offsets (none on zeroed channels)
     vel_ok = jnp.ones_like(y0)
     if sens.filtered:
         for j, c in enumerate(sens.filtered):
-            b_pos = b_pos.at[c].set(y0[c] + dy0[c] / sens.omega[j])
+            b_pos = b_pos.at[c].add(dy0[c] / sens.omega[j])
             vel_ok = vel_ok.at[c].set(0.0)
     A = jnp.concatenate([rows, (rows @ F) * vel_ok[:, None]])
     b = jnp.concatenate([b_pos, dy0 * vel_ok])
@@ -1065,12 +1072,14 @@ def _one_candidate(
         up = _quantise(jnp.clip(ub[-1], -act.limit, act.limit), act.quantum)
         x0 = _state_from_log(loop, y0s, dy0s)
         carry = (x0, cs, sb, ub, up)
-        if sens.filtered:
-            carry += (jnp.stack([y0s[c] for c in sens.filtered]),)
+        if sens.filtered:  # the analog filters' states, in gain·s units (offset removed)
+            y0f = y0s - logged_offset(sens)
+            carry += (jnp.stack([y0f[c] for c in sens.filtered]),)
         if sens.digital:
             carry += (xd,)
         if sens.zeroed:  # the logger's zeroing: a segment after its window reads the
-            carry += (zeroing_start(sens, k0),)  # logged (zeroed) values, offset 0
+            # logged (zeroed) values: the window's sum holds the offsets' part alone
+            carry += (zeroing_start(sens, k0),)
         if len(carry) != len(scn_carry):
             raise RuntimeError(
                 f"the sampled loop's carry has {len(scn_carry)} parts; the fit "
