@@ -14,9 +14,15 @@ coordinate descent — the general engine's form of the servo-rig engine's
    the engine of the scenario with that one delay changed (its segments' start states,
    rates and delay buffers read off the logs with that delay, ``_Engine._init_data``) and
    its cost Σ r² of eqs. (1)–(2) at z* (``_Engine.residuals``, the local stage's own
-   residuals). Every configuration, the current one included, is evaluated with the node
-   states read off the log (no estimated offsets: those are fitted to one delay; a start
-   state absorbs an error of the start, not a shift of a whole segment in time).
+   residuals). Every configuration, the current one included, is evaluated from the same
+   start states: on whole logs (and segments without estimated node states) those read
+   off the log; where the local stage estimated the segments' node states, the optimum's
+   offsets with each segment's residuals projected off the span of its state Jacobian
+   (:func:`profiled`: each delay with its own best start states, to first order). The
+   states read off a real log are far off (unit 6, 1 s segments: cost 11,900 against 319
+   at the local optimum), so that a comparison from them drifted the tip delay 56 → 46
+   samples; the optimum's offsets held as they are favour the current delays (a start
+   state absorbs part of a segment's shift in time).
 3. Move to the lowest neighbour when it lowers the current cost C by more than the cost's
    resolution, ``COST_RESOLUTION`` · C / E[Σ r²] (the local stage's own stopping rule,
    :data:`~flexarm.identification.time_domain.general.COST_RESOLUTION`: a tenth of a
@@ -26,8 +32,13 @@ coordinate descent — the general engine's form of the servo-rig engine's
    estimated as before) and steps 2–4 repeat at its optimum (a round): z* fitted at wrong
    delays is biased (e.g. a viscous friction that shifts the phase to make up for a
    sensor's lag) and its cost can prefer a delay short of the truth; the rounds end when a
-   round moves no delay, or after ``max_moves`` moves of one sample in all. The fit goes
-   on (polish, covariance, prediction) with the scenario carrying the chosen delays.
+   round moves no delay, or after ``max_moves`` moves of one sample in all.
+5. Node states estimated: each moved channel's last move is checked by the local stage
+   one sample back, kept back while that lowers the local stage's cost (a z fitted at the
+   current delays can carry a compensating move of another channel: on the tests' two-mode
+   link the hub's delay went 0 → 1 with the tip's 0 → 3 and came back to 0, the truth).
+   The fit goes on (polish, covariance, prediction) with the scenario carrying the chosen
+   delays.
 
 One engine per delay configuration, cached by the tuple of every channel's delay (a new
 configuration is a new compilation of the loop: 9–12 s each for the tests' two-mode link
@@ -116,6 +127,8 @@ def search_delays(
     engine: Callable[[Any], Any],
     local: Callable[[Any, np.ndarray], tuple],
     progress=None,
+    offsets: np.ndarray | None = None,
+    state_blocks: list | None = None,
 ) -> DelayFound:
     """Neighbours coordinate descent over the sensors' delays from ``scenario``'s and the
     local optimum ``z`` of ``eng`` (the fit's engine at those delays), the local stage
@@ -123,7 +136,15 @@ def search_delays(
     ``eng.options.delay_search`` is the :class:`DelaySearch`; ``engine(scenario)`` builds
     the fit's engine for a scenario (the same logs, free list and options) and ``local(eng,
     z0)`` runs the fit's local stage on it from z0, returning (res, r, J, info)
-    (:func:`~flexarm.identification.time_domain.general.fit_scenario` passes both)."""
+    (:func:`~flexarm.identification.time_domain.general.fit_scenario` passes both).
+    ``offsets``, ``state_blocks``: the segments' start-state offsets at ``z`` (multiple
+    shooting with node states estimated, in units of ``eng.state_scale``) and, per segment,
+    (first row, last row, Q) of its state Jacobian's orthonormal basis (``_local``'s
+    ``res.state_blocks``): each delay is then compared with the start states profiled out
+    (:func:`profiled`), not with the states read off the log, whose error on a real log
+    outweighs a delay's (unit 6, 1 s segments: cost 11,900 against 319 at the local
+    optimum, and the tip delay drifted 56 → 46 samples).
+    """
     options = eng.options
     search = options.delay_search
     chans = searched_channels(search, eng)
@@ -139,13 +160,32 @@ def search_delays(
             engines[key] = engine(_with_delays(scenario, d))
         return engines[key]
 
+    # node states estimated (multiple shooting): each delay compared with the segments'
+    # start states profiled out to first order around the local optimum's (``blocks``)
+    held = [None if offsets is None or not np.any(offsets) else np.asarray(offsets), eng]
+
     def cost(d: dict[str, int], z: np.ndarray, costs: dict[str, float]) -> float:
-        """Σ r² (eqs. (1)–(2)) of the delays ``d`` at ``z``, node states off the log."""
+        """Σ r² (eqs. (1)–(2)) of the delays ``d`` at ``z``: from the states read off the
+        log, or (node states estimated) from the local optimum's offsets to that reading
+        with the part of r that a change of the start states explains removed, segment
+        by segment (r − Q_s Q_sᵀ r, Q_s an orthonormal basis of the optimum's state
+        Jacobian's columns): the cost with each delay's own best start states, to first
+        order."""
         key = _label(d, names)
         if key not in costs:
-            r = engine_at(d).residuals(np.asarray(z)[None])[0]
+            e = engine_at(d)
+            off, ref = held
+            if off is None:
+                r = e.residuals(np.asarray(z)[None])[0]
+            else:
+                r = e.residuals(np.asarray(z)[None], (off * ref.state_scale / e.state_scale)[None])[
+                    0
+                ]
+                r = profiled(r, blocks[0])
             costs[key] = float(r @ r)
         return costs[key]
+
+    blocks = [state_blocks]
 
     resolution = COST_RESOLUTION / eng.expected_cost()  # relative, as the local stage's ftol
     cur, moves, found = dict(d0), 0, None
@@ -173,6 +213,9 @@ def search_delays(
         e = engine_at(cur)
         found = local(e, np.clip(z, e.lo, e.hi))
         z = np.clip(found[0].x, e.lo, e.hi)
+        if held[0] is not None:
+            held[:] = [np.asarray(found[0].offsets), e]
+            blocks[0] = getattr(found[0], "state_blocks", None)
         info = found[3]
         say(
             f"local stage at delays {_label(cur, chans)}: cost {info['cost']:.4g} after "
@@ -180,12 +223,32 @@ def search_delays(
         )
         if moves >= search.max_moves:
             break
+    # node states estimated: each moved channel's last move checked by the local stage
+    # one sample back (z then fitted at that delay too): the descent compares delays at a
+    # z fitted to the current ones, which can carry a compensating move of another channel
+    # (the tests' two-mode link: the hub's delay 0 → 1 while its tip's went 0 → 3)
+    confirmed: list[dict[str, Any]] = []
+    if found is not None and held[0] is not None:
+        for c in chans:
+            back = -1 if cur[c] > d0[c] else 1
+            while cur[c] != d0[c]:
+                cand = {**cur, c: cur[c] + back}
+                e = engine_at(cand)
+                trial = local(e, np.clip(z, e.lo, e.hi))
+                c_old, c_new = found[3]["cost"], trial[3]["cost"]
+                confirmed.append({"delays": _label(cand, chans), "cost": c_new, "kept": c_old})
+                if c_new >= c_old * (1 - resolution):
+                    break
+                cur, found = cand, trial
+                z = np.clip(trial[0].x, e.lo, e.hi)
+                say(f"local stage at delays {_label(cur, chans)}: cost {c_new:.4g}, lower")
     moved = [c for c in chans if cur[c] != d0[c]]
     record = {
         "channels": {c: {"from": d0[c], "to": cur[c]} for c in chans},
         "evaluations": sum(len(c) for c in rounds),
         "moves": moves,
         "costs": rounds,
+        "confirmed": confirmed,
         "seconds": round(time.perf_counter() - t0, 2),
     }
     say(
@@ -196,6 +259,18 @@ def search_delays(
     if found is None:
         return DelayFound(record)
     return DelayFound(record, _with_delays(scenario, cur), engine_at(cur), found)
+
+
+def profiled(r: np.ndarray, blocks: list | None) -> np.ndarray:
+    """Residuals ``r`` with each segment's rows [a, b) projected off the span of its start
+    states' Jacobian, Q (orthonormal): r − Q (Qᵀ r), the Gauss–Newton step on the states
+    taken (their first-order best); ``blocks`` None or rows that no longer line up: ``r``."""
+    if not blocks or blocks[-1][1] > r.shape[0]:
+        return r
+    r = r.copy()
+    for a, b, Q in blocks:
+        r[a:b] -= Q @ (Q.T @ r[a:b])
+    return r
 
 
 def _label(d: dict[str, int], chans: Sequence[str]) -> str:

@@ -1274,6 +1274,8 @@ def fit_scenario(
             engine=lambda sc: _Engine(sc, logs, free, options),
             local=lambda e, z: _local(e, z, options, states=states, progress=progress),
             progress=progress,
+            offsets=res.offsets if states else None,
+            state_blocks=getattr(res, "state_blocks", None) if states else None,
         )
         stages["delay_search"] = found.record
         if found.local is not None:
@@ -1542,6 +1544,7 @@ def _local(
     J = J.toarray() if nx else J
     z, off = split(res.x)
     Jz = J[:, :n]
+    blocks = []  # per segment: rows and an orthonormal basis of its state Jacobian
     if nx:  # profile the state offsets out (Frisch–Waugh), segment by segment
         Jz = Jz.copy()
         for s_ in range(S):
@@ -1549,6 +1552,9 @@ def _local(
             Jo = J[a_:b_, n + s_ * nx : n + (s_ + 1) * nx]
             coef, *_ = np.linalg.lstsq(Jo, Jz[a_:b_], rcond=1e-10)
             Jz[a_:b_] -= Jo @ coef
+            U, sv, _ = np.linalg.svd(Jo, full_matrices=False)
+            keep = sv > 1e-10 * max(float(sv.max(initial=0.0)), 1e-300)
+            blocks.append((a_, b_, U[:, keep]))
     info = {
         "cost": float(2 * res.cost),
         "nfev": int(res.nfev),
@@ -1562,6 +1568,7 @@ def _local(
     }
     res.x = z
     res.offsets = off
+    res.state_blocks = blocks
     return res, r, Jz, info
 
 
