@@ -48,6 +48,7 @@ import numpy as np
 
 from flexarm.control.inner_loop import design_inner_loop, motor_design_model
 from flexarm.control.outer_loop import size_parabolic
+from flexarm.control.response import linear_response
 from flexarm.control.trajectories import peak_deflection, quasi_parabolic
 from flexarm.control.wiener import wiener_feedforward
 from flexarm.design.result import Design
@@ -109,9 +110,9 @@ def _move_profile(
     dt = float(t_inner.dt)
     t = np.arange(0.0, traj.duration + 1.0, dt)  # the move and 1 s of ringing after it
     th_mr = trajectory_references(n, traj, t)["feedforward"]
-    th_meas = np.asarray(control.forced_response(t_inner, t, th_mr).outputs, float)
+    th_meas = linear_response(t_inner, t, th_mr)
     th_m = np.concatenate([th_meas[hub_delay:], np.full(hub_delay, th_meas[-1])])
-    th_t = np.asarray(control.forced_response(gb, t, th_m).outputs, float)
+    th_t = linear_response(gb, t, th_m)
     vel = np.gradient(th_m, dt)
     acc = np.gradient(vel, dt)
     u = (J * acc + V * vel + coupling * (th_m - th_t)) / k_u

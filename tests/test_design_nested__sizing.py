@@ -1,0 +1,89 @@
+"""The nested design's move sizing (design.nested._size_quasi_parabolic, issue #46) gives
+the same move whether the loops are simulated by control.response (converted once, no
+per-sample Python loop) or, as before, by ``control.forced_response`` on every trial.
+
+The inner closed loop here is a P loop on the rotary rig's motor model with 0, 3 and 40
+samples of delay (a discrete transfer function of order 2 + delay; the designed inner loop
+costs minutes to search at long delays, and the sizing only needs a stable T_in).
+
+Tolerances: each trial's peak deflection and command agree to 1e-9 relative (the profiles
+do, tests/test_control_response.py), far from any trial's margin to its limits here
+(> 1e-6), so the bisection takes the same steps and returns the same A: to 1e-12
+relative (measured: bit for bit).
+"""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+
+import flexarm.control.wiener as wiener
+import flexarm.design.nested as nested
+from flexarm.control.inner_loop import motor_design_model
+from flexarm.models.single_link import SingleLinkModel
+from flexarm.specs import load_scenario
+
+DT = 1e-3  # s
+GAIN = {0: 20.0, 3: 10.0, 40: 3.0}  # V/rad: 17 %, 6 %, 0 % overshoot; settled in 0.25-0.45 s
+
+
+@pytest.fixture(scope="module")
+def rig():
+    model = SingleLinkModel.from_spec(load_scenario("rotary-flexible-link").arm)
+    return model, model.beam_tf()
+
+
+def _inner(model, delay: int) -> control.TransferFunction:
+    j, v, k = motor_design_model(model)
+    plant = control.sample_system(control.tf([k], [j, v, 0.0]), DT, method="zoh")
+    plant = plant * control.tf([1.0], [1.0] + [0.0] * delay, DT)
+    return control.feedback(GAIN[delay] * plant, 1)
+
+
+def _old_response(sys, t, u):
+    """The simulation before issue #46: python-control's own loop, every call."""
+    return np.asarray(control.forced_response(sys, t, u).outputs, float)
+
+
+def _size(model, gb, delay):
+    j, v, k_u = motor_design_model(model)
+    trials = []
+    profile = nested._move_profile
+
+    def recorded(*a, **kw):
+        out = profile(*a, **kw)
+        trials.append(out)
+        return out
+
+    nested._move_profile = recorded
+    try:
+        tr, n, defl, u = nested._size_quasi_parabolic(
+            model,
+            gb,
+            0.5,  # rad, the rig's move
+            0.05,  # rad, design deflection
+            5.0,  # V, half the limit
+            float(np.real(control.dcgain(model.coupling_tf()))),
+            float(model.friction.coulomb) / k_u,
+            0.3,  # s, corner time
+            _inner(model, delay),
+            delay,
+        )
+    finally:
+        nested._move_profile = profile
+    return float(tr.max_acceleration), defl, u, np.array(trials)
+
+
+@pytest.mark.parametrize("delay", [0, 3, 40])
+def test_sizing_gives_the_same_move_as_forced_response(rig, delay, monkeypatch):
+    model, gb = rig
+    a_new, d_new, u_new, t_new = _size(model, gb, delay)
+    monkeypatch.setattr(nested, "linear_response", _old_response)
+    monkeypatch.setattr(wiener, "linear_response", _old_response)
+    a_old, d_old, u_old, t_old = _size(model, gb, delay)
+    assert t_new.shape == t_old.shape and t_new.shape[0] >= 3  # the same trials, several
+    np.testing.assert_allclose(t_new, t_old, rtol=1e-9)
+    assert a_new == pytest.approx(a_old, rel=1e-12)
+    assert (d_new, u_new) == pytest.approx((d_old, u_old), rel=1e-9)
+    assert d_new <= 0.05 and u_new <= 5.0  # the sized move meets both limits
