@@ -134,7 +134,8 @@ def _size_quasi_parabolic(
     """Largest A (rad/s², within 1 %) of a quasi-parabolic move with corner time
     ``rounding_time`` whose peak deflection through the designed loops
     (:func:`_move_profile`) is <= ``design_deflection`` and whose command is
-    <= ``max_command``; bisection in log A (both grow with A)."""
+    <= ``max_command``; bisection in log A (both grow with A). Raises ValueError at the
+    first trial whose linear profile is not finite (an unstable T_in)."""
 
     def trial(a):
         try:
@@ -143,6 +144,15 @@ def _size_quasi_parabolic(
             return None
         n = wiener_feedforward(gb, tr.laplace_model())
         d, u = _move_profile(model, n, tr, gb, t_inner, hub_delay, coupling, coulomb_cmd)
+        if not (math.isfinite(d) and math.isfinite(u)):
+            # a diverging linear loop fails every A: halving A would lengthen the move
+            # without end (issue #46)
+            raise ValueError(
+                f"the move of A = {a:.4g} rad/s² through the designed loops (linear) "
+                f"diverges (peak deflection {d!r} rad): the closed inner loop T_in of "
+                f"order {len(t_inner.den[0][0]) - 1} is unstable as simulated; give "
+                "acceleration= to skip the sizing"
+            )
         return (d <= design_deflection and u <= max_command), tr, n, d, u
 
     w1 = float(np.min(np.abs(gb.poles())))
