@@ -87,3 +87,16 @@ def test_sizing_gives_the_same_move_as_forced_response(rig, delay, monkeypatch):
     assert a_new == pytest.approx(a_old, rel=1e-12)
     assert (d_new, u_new) == pytest.approx((d_old, u_old), rel=1e-9)
     assert d_new <= 0.05 and u_new <= 5.0  # the sized move meets both limits
+
+
+def test_unstable_inner_loop_is_refused_at_once(rig):
+    """An unstable T_in (the P loop at 40 samples with 10 times the gain: a pole at
+    |z| > 1) fails every trial; the sizing says so in one line instead of halving A
+    without end (each halving lengthens the move by 41 %)."""
+    model, gb = rig
+    j, v, k = motor_design_model(model)
+    plant = control.sample_system(control.tf([k], [j, v, 0.0]), DT, method="zoh")
+    t_inner = control.feedback(30.0 * plant * control.tf([1.0], [1.0] + [0.0] * 40, DT), 1)
+    assert np.max(np.abs(np.roots(t_inner.den[0][0]))) > 1.0
+    with pytest.raises(ValueError, match=r"T_in \(order 42\) has a pole at \|z\| = 1\.0"):
+        nested._size_quasi_parabolic(model, gb, 0.5, 0.05, 5.0, 1.2, 0.2, 0.3, t_inner, 40)

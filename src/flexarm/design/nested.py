@@ -134,8 +134,17 @@ def _size_quasi_parabolic(
     """Largest A (rad/s², within 1 %) of a quasi-parabolic move with corner time
     ``rounding_time`` whose peak deflection through the designed loops
     (:func:`_move_profile`) is <= ``design_deflection`` and whose command is
-    <= ``max_command``; bisection in log A (both grow with A). Raises ValueError at the
-    first trial whose linear profile is not finite (an unstable T_in)."""
+    <= ``max_command``; bisection in log A (both grow with A). Raises ValueError for an
+    unstable T_in (a pole at |z| >= 1) or a trial whose linear profile is not finite."""
+
+    den = np.trim_zeros(np.asarray(t_inner.den[0][0], float), "f")
+    radius = float(np.max(np.abs(np.roots(den)), initial=0.0))
+    if not radius < 1.0:  # every trial would fail and A be halved without end (issue #46)
+        raise ValueError(
+            f"the closed inner loop T_in (order {den.size - 1}) has a pole at |z| = "
+            f"{radius:.6g} >= 1: no move can be sized through it; give acceleration= "
+            "to skip the sizing"
+        )
 
     def trial(a):
         try:
@@ -149,8 +158,7 @@ def _size_quasi_parabolic(
             # without end (issue #46)
             raise ValueError(
                 f"the move of A = {a:.4g} rad/s² through the designed loops (linear) "
-                f"diverges (peak deflection {d!r} rad): the closed inner loop T_in of "
-                f"order {len(t_inner.den[0][0]) - 1} is unstable as simulated; give "
+                f"diverges (peak deflection {d!r} rad, peak command {u!r}); give "
                 "acceleration= to skip the sizing"
             )
         return (d <= design_deflection and u <= max_command), tr, n, d, u
