@@ -310,9 +310,10 @@ class InnerLoopDesign:
         """θm/θ_mr of the linear design loop (discrete, delay included), its cancelling
         pole-zero pairs removed (``control.minreal``). With a long delay (60 samples and
         more) minreal's rebuild of the closed loop's polynomials from their roots puts
-        poles outside the unit circle (the fitted 60-sample loop: |z| 1.07, where the loop's
-        own are within 0.987; issue #46): there the pairs are removed from G_cm1·plant
-        before the loop is closed (the delay's poles at z = 0 exact)."""
+        poles outside the unit circle (the rotary rig's loop at 60 / 86 samples: |z| 1.03 /
+        1.45, where the loop's own are within 0.987 / 0.994; issue #46): there the pairs
+        are removed from G_cm1·plant before the loop is closed (the delay's poles at z = 0
+        exact)."""
         plant = _plant_tf(model, self.dt, self.delay)
         full = control.feedback(self.gcm1 * plant, self.gcm2)
         reduced = control.minreal(full, tol=1e-9, verbose=False)
