@@ -99,11 +99,14 @@ def response_function(sys, dt: float) -> Callable[[np.ndarray], np.ndarray]:
     dt = float(dt)
     if not dt > 0:
         raise ValueError(f"response_function: dt = {dt!r} s; give a positive step")
-    discrete = control.isdtime(sys, strict=True)
-    if discrete and not np.isclose(dt, float(sys.dt), rtol=1e-9, atol=0.0):
+    # as forced_response: continuous only for dt = 0; an unspecified period (None, True)
+    # is the grid's
+    discrete = not control.isctime(sys, strict=True)
+    period = sys.dt if sys.dt not in (None, True) else dt
+    if discrete and not np.isclose(dt, float(period), rtol=1e-9, atol=0.0):
         raise ValueError(
             f"response_function: the grid's step {dt:g} s differs from the system's "
-            f"period {float(sys.dt):g} s; resample the input to the period"
+            f"period {float(period):g} s; resample the input to the period"
         )
     if discrete and isinstance(sys, control.TransferFunction):
         num = np.atleast_1d(np.asarray(sys.num[0][0], float))
