@@ -307,10 +307,20 @@ class InnerLoopDesign:
         return float(np.sum(1.0 - self.response) * h)
 
     def closed_loop(self, model) -> control.TransferFunction:
-        """θm/θ_mr of the linear design loop (discrete, delay included)."""
+        """θm/θ_mr of the linear design loop (discrete, delay included), its cancelling
+        pole-zero pairs removed (``control.minreal``). With a long delay (60 samples and
+        more) minreal's rebuild of the closed loop's polynomials from their roots puts
+        poles outside the unit circle (the rotary rig's loop at 60 / 86 samples: |z| 1.03 /
+        1.45, where the loop's own are within 0.987 / 0.994; issue #46): there the pairs
+        are removed from G_cm1·plant before the loop is closed (the delay's poles at z = 0
+        exact)."""
         plant = _plant_tf(model, self.dt, self.delay)
-        return control.minreal(
-            control.feedback(self.gcm1 * plant, self.gcm2), tol=1e-9, verbose=False
+        full = control.feedback(self.gcm1 * plant, self.gcm2)
+        reduced = control.minreal(full, tol=1e-9, verbose=False)
+        if _radius(reduced) <= _radius(full) * (1 + 1e-6) + 1e-12:
+            return reduced
+        return control.feedback(
+            control.minreal(self.gcm1 * plant, tol=1e-9, verbose=False), self.gcm2
         )
 
     def controller(self, model, **kw) -> InnerLoop:
@@ -320,6 +330,14 @@ class InnerLoopDesign:
         kw.setdefault("coupling", float(np.real(control.dcgain(model.coupling_tf()))))
         kw.setdefault("coulomb", float(model.friction.coulomb))
         return inner_loop(self.gcm1, self.gcm2, dt=self.dt, torque_constant=k, **kw)
+
+
+def _radius(g: control.TransferFunction) -> float:
+    """max |pole| of a SISO transfer function: the roots of its denominator's coefficients
+    (``TransferFunction.poles`` goes through a common denominator rebuilt from roots, which
+    at a long delay misplaces them as minreal does)."""
+    den = np.trim_zeros(np.asarray(g.den[0][0], float), "f")
+    return float(np.max(np.abs(np.roots(den)), initial=0.0))
 
 
 def _plant_tf(model, dt: float, delay: int) -> control.TransferFunction:

@@ -60,9 +60,11 @@ python-control TransferFunction holds it. It acts on the trajectory as a polynom
 
 * :func:`feedforward_signal` — preferred: the polynomial part uses the trajectory's
   analytic derivatives (e.g. :class:`flexarm.control.trajectories.PointToPointTrajectory`),
-  the proper part is simulated with ``control.forced_response``. A reference without the
-  needed bounded derivatives (a parabolic one with a non-minimum-phase G_b) gives a
-  clear error instead of an impulsive, sampling-dependent signal.
+  the proper part is simulated as ``control.forced_response`` does
+  (:func:`flexarm.control.response.linear_response`, without its per-sample loop). A
+  reference without the needed bounded derivatives (a parabolic one with a
+  non-minimum-phase G_b) gives a clear error instead of an impulsive, sampling-dependent
+  signal.
 * :func:`discretize_feedforward` — a causal discrete filter N(s) F(s), F a unity-gain
   low-pass of just enough relative degree, for use on a running sample stream; it adds
   the lag of F.
@@ -76,6 +78,8 @@ from collections.abc import Callable
 
 import control
 import numpy as np
+
+from flexarm.control.response import linear_response
 
 __all__ = [
     "wiener_feedforward",
@@ -430,8 +434,8 @@ def feedforward_signal(n: control.TransferFunction, reference: object, t: np.nda
     r"""θ̂_mr(t) = N applied to the reference trajectory, N possibly improper (rad).
 
     N(s) = Σ_k π_k s^k + N_p(s) (:func:`split_improper`); the result is
-    Σ_k π_k u^{(k)}(t) + (N_p * u)(t), the second term by ``control.forced_response``
-    from rest at t[0].
+    Σ_k π_k u^{(k)}(t) + (N_p * u)(t), the second term as ``control.forced_response``
+    gives it from rest at t[0] (:func:`~flexarm.control.response.linear_response`).
 
     Parameters
     ----------
@@ -470,7 +474,7 @@ def feedforward_signal(n: control.TransferFunction, reference: object, t: np.nda
             ) from exc
     if np.any(proper.num[0][0]):
         u0 = get(0)
-        out += np.asarray(control.forced_response(proper, t, u0).outputs, dtype=float)
+        out += linear_response(proper, t, u0)
     return out
 
 

@@ -48,6 +48,7 @@ import numpy as np
 
 from flexarm.control.inner_loop import design_inner_loop, motor_design_model
 from flexarm.control.outer_loop import size_parabolic
+from flexarm.control.response import linear_response
 from flexarm.control.trajectories import peak_deflection, quasi_parabolic
 from flexarm.control.wiener import wiener_feedforward
 from flexarm.design.result import Design
@@ -109,9 +110,9 @@ def _move_profile(
     dt = float(t_inner.dt)
     t = np.arange(0.0, traj.duration + 1.0, dt)  # the move and 1 s of ringing after it
     th_mr = trajectory_references(n, traj, t)["feedforward"]
-    th_meas = np.asarray(control.forced_response(t_inner, t, th_mr).outputs, float)
+    th_meas = linear_response(t_inner, t, th_mr)
     th_m = np.concatenate([th_meas[hub_delay:], np.full(hub_delay, th_meas[-1])])
-    th_t = np.asarray(control.forced_response(gb, t, th_m).outputs, float)
+    th_t = linear_response(gb, t, th_m)
     vel = np.gradient(th_m, dt)
     acc = np.gradient(vel, dt)
     u = (J * acc + V * vel + coupling * (th_m - th_t)) / k_u
@@ -133,7 +134,17 @@ def _size_quasi_parabolic(
     """Largest A (rad/s², within 1 %) of a quasi-parabolic move with corner time
     ``rounding_time`` whose peak deflection through the designed loops
     (:func:`_move_profile`) is <= ``design_deflection`` and whose command is
-    <= ``max_command``; bisection in log A (both grow with A)."""
+    <= ``max_command``; bisection in log A (both grow with A). Raises ValueError for an
+    unstable T_in (a pole at |z| >= 1) or a trial whose linear profile is not finite."""
+
+    den = np.trim_zeros(np.asarray(t_inner.den[0][0], float), "f")
+    radius = float(np.max(np.abs(np.roots(den)), initial=0.0))
+    if not radius < 1.0:  # every trial would fail and A be halved without end (issue #46)
+        raise ValueError(
+            f"the closed inner loop T_in (order {den.size - 1}) has a pole at |z| = "
+            f"{radius:.6g} >= 1: no move can be sized through it; give acceleration= "
+            "to skip the sizing"
+        )
 
     def trial(a):
         try:
@@ -142,6 +153,14 @@ def _size_quasi_parabolic(
             return None
         n = wiener_feedforward(gb, tr.laplace_model())
         d, u = _move_profile(model, n, tr, gb, t_inner, hub_delay, coupling, coulomb_cmd)
+        if not (math.isfinite(d) and math.isfinite(u)):
+            # a diverging linear loop fails every A: halving A would lengthen the move
+            # without end (issue #46)
+            raise ValueError(
+                f"the move of A = {a:.4g} rad/s² through the designed loops (linear) "
+                f"diverges (peak deflection {d!r} rad, peak command {u!r}); give "
+                "acceleration= to skip the sizing"
+            )
         return (d <= design_deflection and u <= max_command), tr, n, d, u
 
     w1 = float(np.min(np.abs(gb.poles())))
