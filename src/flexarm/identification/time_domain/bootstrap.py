@@ -10,7 +10,7 @@ For each of ``n`` replicates k = 0 … n−1 (seed :func:`flexarm.sim.batch.chun
    references, controller (or logged gain schedule), disturbances and length: the one
    prediction, :func:`~.predict.predict` (whole logs; the fit's windows are applied again
    by the refit);
-2. noise is added to each measured channel the prediction simulates:
+2. noise for each measured channel the prediction simulates:
    ``noise="residuals"``: a Gaussian AR(1) series e_k = ρ e_{k−1} + σ √(1−ρ²) w_k
    (:func:`ar1_noise`) with the fit's residual std σ and lag-1 autocorrelation ρ of that
    log and channel (residual = logged − predicted over the fitted window; on a channel the
@@ -24,11 +24,14 @@ For each of ``n`` replicates k = 0 … n−1 (seed :func:`flexarm.sim.batch.chun
    (the fitted scenario with the free list given) or, for a preset whose engine starts
    from its own data sheet (the servo rig), as the original.
 
-The noise is added to the simulated measurements, NOT fed through the closed loop: the
-prediction path simulates the loop noise-free (the controller reads the noise-free
-measurement). The replicates therefore carry the measurement noise, but not the loop's
-response to it; where the logged controller amplifies sensor noise into the plant (issue
-#44's linear axis, the rotary unit's gauge) that part of the spread is missing.
+Where the noise goes: ``"declared"`` noise is fed through the closed loop (each replicate
+is simulated again with it, :func:`_in_loop`: the controller reads the noisy measurement,
+as in the scenario's own noisy simulation and on the rig), so the replicates carry the
+loop's response to the sensor noise too (where the logged controller amplifies it into
+the plant: issue #44's linear axis, the rotary unit's gauge). ``"residuals"`` noise is
+added to the noise-free prediction: the residuals already hold the loop's response to
+the rig's noise (their AR(1) correlation), which feeding them through the loop again
+would count twice.
 
 The spread (:class:`BootstrapSpread`): per parameter path the refitted values, their std
 (ddof 1) and the correlation of the refits' log-values (signed parameters: the values),
@@ -89,7 +92,12 @@ class BootstrapSpread:
                 k: {c: [float(s), float(r)] for c, (s, r) in v.items()}
                 for k, v in self.noise_model.items()
             },
-            "loop": "noise added to the simulated measurements, not fed through the loop",
+            "loop": (
+                "declared noise fed through the loop (the controller reads it)"
+                if self.noise == "declared"
+                else "residual noise added to the simulated measurements (the residuals "
+                "hold the loop's response to the noise already)"
+            ),
             "std": dict(self.std),
             "values": {p: [float(x) for x in v] for p, v in self.values.items()},
             "correlation": np.round(np.asarray(self.correlation, float), 4).tolist(),
@@ -174,13 +182,17 @@ def _declared(scenario, channel: str) -> tuple[float, float | None]:
 
 def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> list:
     """The logs of one replicate: each log with its simulated channels plus fresh noise
-    (module docstring), drawn from ``numpy.random.default_rng(seed)``."""
+    (module docstring), drawn from ``numpy.random.default_rng(seed)``: ``"residuals"``
+    added to the noise-free prediction, ``"declared"`` fed through the loop."""
     rng = np.random.default_rng(int(seed))
     sess = _session_of(result, len(logs))
     out = []
     for i, (g, (sim, stats)) in enumerate(zip(logs, sims, strict=True)):
         sig = dict(g.signals)
         sc = _scenario_of(result, sess[i])
+        if noise == "declared":
+            out.append(replace(g, signals={**sig, **_in_loop(sc, g, sim, rng)}))
+            continue
         for c, y in sim.items():
             if c not in sig or len(y) != len(sig[c]):
                 continue
@@ -196,6 +208,29 @@ def replicate_logs(result, logs: list, sims: list, noise: str, seed: int) -> lis
             sig[c] = np.round(v / q) * q if q else v
         out.append(replace(g, signals=sig))
     return out
+
+
+def _in_loop(scenario, log, sim: dict, rng: np.random.Generator) -> dict:
+    """The log's channels simulated by ``scenario`` with white noise of each sensor's
+    declared std (``sensors.X.noise``, SI) added where the sensor reads, in the loop (the
+    controller reads it; the sensor's A/D rounds it): the replicate's measured channels,
+    as :func:`flexarm.sim.build.simulate` makes a noisy run."""
+    from flexarm.identification.time_domain.options import PredictOptions
+    from flexarm.identification.time_domain.predict import predict
+
+    n = len(log.time)
+    nz = {}
+    for c in sim:  # the channels the noise-free prediction simulated, in its order
+        s, _ = _declared(scenario, c)
+        if s > 0:
+            nz[c] = s * rng.standard_normal(n)
+    pred = predict(scenario, [log], PredictOptions(windows=[None], noise=[nz]))
+    tr = next(iter(pred.traces.values()))
+    return {
+        c: np.asarray(v, float)
+        for c, v in tr["simulated"].items()
+        if c in log.signals and len(v) == len(log.signals[c])
+    }
 
 
 def _refit(k: int, seed: int, *, refit, model, logs, sims, free, options, result, noise):

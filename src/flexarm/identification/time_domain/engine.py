@@ -187,8 +187,13 @@ def with_bootstrap(res: FitResult, logs, opts: FitOptions, model, progress) -> F
     res.std = {p: spread.std.get(p, float("nan")) for p in res.std}
     res.correlation = spread.correlation
     res.stages["std_source"] = (
-        f"parametric bootstrap: {spread.n_ok} of {spread.n} refits ({b.noise} noise, added "
-        "to the simulated measurements, not in the loop); the HAC std in stages['hac']"
+        f"parametric bootstrap: {spread.n_ok} of {spread.n} refits ({b.noise} noise, "
+        + (
+            "fed through the loop"
+            if b.noise == "declared"
+            else "added to the simulated measurements"
+        )
+        + "); the HAC std in stages['hac']"
     )
     if spread.failed:
         res.warnings.append(

@@ -390,6 +390,9 @@ class _Engine:
             / (options.cost.residual_level * self.spread)
             * math.sqrt(self.dt / options.cost.correlation_time)
         )
+        #: measurement noise (SI) in the loop per segment (S, M, C) (a prediction's
+        #: ``noise``: the controller reads it); None: noise-free
+        self.seg_noise: np.ndarray | None = None
         self.ctrl_inits = None  # per-log controller start states (continuous)
         self.starts = None
         if options.continuous:
@@ -831,6 +834,10 @@ class _Engine:
                     jnp.zeros_like(loop.actuator.quantum),
                 ),
             )
+        if self.seg_noise is not None:  # the given noise in SI: the sensors' scale is 1
+            loop = eqx.tree_at(
+                lambda lp: lp.sensors.noise, loop, replace=jnp.ones_like(loop.sensors.noise)
+            )
         x0 = np.stack([p.x0 for p in preps])
         if K > 1:
             P = Z.shape[0]
@@ -875,6 +882,7 @@ class _Engine:
             jnp.asarray(self.seg_scn),
             jnp.asarray(self.seg_k0, jnp.int32),
             jnp.asarray(self.log_session[self.seg_log], jnp.int32) if self.n_sessions > 1 else None,
+            None if self.seg_noise is None else jnp.asarray(self.seg_noise),
         )
         jobs = []
         for a in range(0, P, chunk):
@@ -1056,11 +1064,35 @@ _warm_jit = eqx.filter_jit(_warm)
 
 
 def _one_candidate(
-    loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess=None
+    loop,
+    x0_scn,
+    offsets,
+    warm,
+    seg_refs,
+    y0,
+    dy0,
+    sbuf0,
+    seg_xd,
+    seg_scn,
+    seg_k0,
+    seg_sess=None,
+    seg_noise=None,
 ):
     if seg_sess is not None:  # several sessions: each segment run by its session's loop
         return _by_session(
-            loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+            loop,
+            x0_scn,
+            offsets,
+            warm,
+            seg_refs,
+            y0,
+            dy0,
+            sbuf0,
+            seg_xd,
+            seg_scn,
+            seg_k0,
+            seg_sess,
+            seg_noise,
         )
     act, sens = loop.actuator, loop.sensors
     M = next(iter(seg_refs.values())).shape[1]
@@ -1092,25 +1124,38 @@ def _one_candidate(
     carries, starts = jax.vmap(seg_carry)(
         cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets, seg_k0
     )
-    noise = jnp.zeros((M, C))
+    if seg_noise is None:  # noise-free (the fit; a prediction)
+        seg_noise = jnp.zeros((len(seg_k0), M, C))
 
-    def one_seg(carry, refs):
+    def one_seg(carry, refs, noise):
         _, (xs, sig, meas, us) = _scan(loop, carry, refs, noise, 1)
         return meas
 
-    return jax.vmap(one_seg)(carries, seg_refs), starts
+    return jax.vmap(one_seg)(carries, seg_refs, seg_noise), starts
 
 
 def _by_session(
-    loop, x0_scn, offsets, warm, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+    loop,
+    x0_scn,
+    offsets,
+    warm,
+    seg_refs,
+    y0,
+    dy0,
+    sbuf0,
+    seg_xd,
+    seg_scn,
+    seg_k0,
+    seg_sess,
+    seg_noise=None,
 ):
     """:func:`_one_candidate` with one loop per session (leaves (K, ...), start states
     (K, n_x)): each segment alone through its session's loop (``seg_sess``, (S,))."""
 
-    def one(s_, cs, ub, refs, y0s, dy0s, sb, xd, use_scn, off, k0):
+    def one(s_, cs, ub, refs, y0s, dy0s, sb, xd, use_scn, off, k0, nz):
         lp = jax.tree.map(lambda a: a[s_] if eqx.is_array(a) else a, loop)
-        cs1, ub1, refs1, y01, dy01, sb1, xd1 = jax.tree.map(
-            lambda a: a[None], (cs, ub, refs, y0s, dy0s, sb, xd)
+        cs1, ub1, refs1, y01, dy01, sb1, xd1, nz1 = jax.tree.map(
+            lambda a: a[None], (cs, ub, refs, y0s, dy0s, sb, xd, nz)
         )
         meas, start = _one_candidate(
             lp,
@@ -1124,12 +1169,28 @@ def _by_session(
             xd1,
             use_scn[None],
             k0[None],
+            None,
+            nz1,
         )
         return meas[0], start[0]
 
     cs_seg, ub_seg = warm
+    if seg_noise is None:
+        M = next(iter(seg_refs.values())).shape[1]
+        seg_noise = jnp.zeros((len(seg_k0), M, y0.shape[-1]))
     return jax.vmap(one)(
-        seg_sess, cs_seg, ub_seg, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, offsets, seg_k0
+        seg_sess,
+        cs_seg,
+        ub_seg,
+        seg_refs,
+        y0,
+        dy0,
+        sbuf0,
+        seg_xd,
+        seg_scn,
+        offsets,
+        seg_k0,
+        seg_noise,
     )
 
 
@@ -1148,10 +1209,11 @@ def _run_segments(
     seg_scn,
     seg_k0,
     seg_sess=None,
+    seg_noise=None,
 ):
     def f(lp, x0, off, w):
         return _one_candidate(
-            lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess
+            lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess, seg_noise
         )
 
     return eqx.filter_vmap(f, in_axes=(0, 0, 0, None if shared_warm else 0))(
@@ -1391,6 +1453,32 @@ def fit_scenario(
         nrmse=dict(pred.get("nrmse", {})),
         session_scenarios=per_session if K > 1 else [],
     )
+
+
+def _segment_noise(eng: _Engine, noise: Sequence) -> np.ndarray:
+    """(S, M, C) noise per segment from ``noise``: per log a mapping channel → samples over
+    the log's window (at least its length); channels not given are noise-free."""
+    if len(noise) != len(eng.logs):
+        raise ValueError(f"noise has {len(noise)} entries for {len(eng.logs)} logs")
+    S = len(eng.seg)
+    out = np.zeros((S, eng.M, len(eng.names)))
+    for s_, (li, k0, ln) in enumerate(eng.seg):
+        given = noise[li] or {}
+        start = k0 - eng.seg[[i for i, (l2, _, _) in enumerate(eng.seg) if l2 == li][0]][1]
+        for c, v in given.items():
+            if c not in eng.names:
+                raise ValueError(
+                    f"noise: {c!r} is not a sensor channel of scenario "
+                    f"{eng.template.name!r}; channels: {', '.join(eng.names)}"
+                )
+            v = np.asarray(v, float)
+            if v.shape[0] < start + ln:
+                raise ValueError(
+                    f"noise[{li}][{c!r}] has {v.shape[0]} samples; the log (window) "
+                    f"{eng.logs[li].name} has {start + ln}"
+                )
+            out[s_, :ln, eng.names.index(c)] = v[start : start + ln]
+    return out
 
 
 def _key_session(key: str) -> int:
@@ -1700,6 +1788,7 @@ def predict_scenario(
     tag: str = "predict",
     initial: str = "log",
     initial_nfev: int = INITIAL_NFEV,
+    noise: Sequence[Mapping[str, np.ndarray] | None] | None = None,
 ) -> dict:
     """Whole-run prediction of each log (or window) with the scenario's parameters fixed:
     one simulation per log (window) and channel fit % = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), the
@@ -1718,7 +1807,11 @@ def predict_scenario(
       "scenario"``: a log's first sample from the scenario's ``[initial]`` state).
     - ``"rest"``: the positions read off the log, every rate zero.
 
-    The returned ``notes`` say which."""
+    The returned ``notes`` say which. ``noise``: per log, channel → measurement noise in the
+    channel's SI unit over the log (window), added where the sensor reads (before its A/D
+    and delay) and read by the controller: the closed loop's response to it is simulated
+    (a parametric bootstrap's replicate, :mod:`~.bootstrap`); None: noise-free. The start
+    state is estimated (``"estimate"``) on the noise-free loop."""
     if initial not in INITIALS:
         raise ValueError(
             f"initial = {initial!r}: one of {', '.join(map(repr, INITIALS))} (estimate: the "
@@ -1750,6 +1843,9 @@ def predict_scenario(
         )
     else:
         notes.append("initial state: as read off each log (window), not refined")
+    if noise is not None:
+        eng.seg_noise = _segment_noise(eng, noise)
+        notes.append("measurement noise given: added where each sensor reads, in the loop")
     sim = eng.run(np.zeros((1, 0)), offsets)[0]
     fp: dict[str, dict[str, float | None]] = {}
     rmse: dict[str, dict[str, float]] = {}

@@ -634,6 +634,10 @@ class PredictOptions:
     controller: Any = None
     plots: Any = None
     tag: str = "predict"
+    #: per log, channel → measurement noise (SI) over the log (window), read by the
+    #: controller: the loop's response to it simulated (a bootstrap replicate); None:
+    #: noise-free
+    noise: Sequence[Mapping[str, Any] | None] | None = None
 
     def __post_init__(self) -> None:
         if self.estimate_initial is not None:

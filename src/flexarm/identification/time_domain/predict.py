@@ -196,6 +196,9 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
             runs.append((one, [g1], [w]))
     else:
         runs = [(sc, list(logs), wins)]
+    noise = list(opts.noise) if opts.noise is not None else None
+    if noise is not None and len(noise) != len(logs):
+        raise ValueError(f"PredictOptions.noise has {len(noise)} entries for {len(logs)} logs")
     fp: dict[str, dict[str, float | None]] = {}
     rmse: dict[str, dict[str, float]] = {}
     nrmse: dict[str, dict[str, float | None]] = {}
@@ -204,9 +207,12 @@ def _predict_scenario(sc, logs, keys, opts, own_law: bool = False) -> Prediction
     warnings: list[str] = []
     notes: list[str] = []
     it = iter(keys)
+    first = 0  # the index of each run's first log
     for scn, group, gw in runs:
         fo = FitOptions(windows=gw, continuous=bool(opts.continuous))
-        out = predict_scenario(scn, group, fo, channels=chans, initial=opts.initial)
+        nz = None if noise is None else noise[first : first + len(group)]
+        first += len(group)
+        out = predict_scenario(scn, group, fo, channels=chans, initial=opts.initial, noise=nz)
         warnings += list(out.get("warnings", []))
         notes += list(out.get("notes", []))
         # predict_scenario keys logs by log_keys (with a window suffix): back to plain keys
