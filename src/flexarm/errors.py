@@ -30,6 +30,8 @@ __all__ = [
     "FitInterrupted",
     "Interrupted",
     "UnstableDesignError",
+    "LogError",
+    "MatFileError",
     "one_line",
     "internal_error_report",
 ]
@@ -85,6 +87,16 @@ class UnstableDesignError(FlexarmError, ValueError):
     def __init__(self, *args: Any, design: Any = None, **kw: Any):
         super().__init__(*args, **kw)
         self.design = design
+
+
+class LogError(FlexarmError, ValueError):
+    """A log file that cannot be used; the message names the file and the problem
+    (raised by the log readers, :mod:`flexarm.io.logs`, and their checks)."""
+
+
+class MatFileError(LogError):
+    """A ``.mat`` file, or a spec into it, that cannot be used; names the file and the
+    field (:mod:`flexarm.io.matfile`)."""
 
 
 class Interrupted(KeyboardInterrupt):

@@ -30,6 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from flexarm.errors import FlexarmError, LogError, MatFileError
+from flexarm.io.signals import signal_unit
+
 __all__ = [
     "RANGES",
     "DEFAULT_RANGE",
@@ -73,16 +76,12 @@ MAT_MAX_JITTER = 1e-3
 
 
 def _log_error(*args, **kw):
-    from flexarm.io.logs import LogError
-
     return LogError(*args, **kw)
 
 
 def signal_range(name: str) -> float:
     """The largest |value| accepted for signal ``name`` (:data:`RANGES` by its SI unit,
     :data:`DEFAULT_RANGE` for names flexarm does not know)."""
-    from flexarm.io.logs import signal_unit
-
     unit = signal_unit(name)
     return RANGES.get(unit, DEFAULT_RANGE) if unit is not None else DEFAULT_RANGE
 
@@ -332,9 +331,6 @@ def readable(path: str | Path, load, what: str = "MATLAB v7.3 (HDF5) .mat file")
     ``OSError`` "truncated file", ``KeyError``/``ValueError``/``RuntimeError`` of a broken
     object header) turned into one :class:`flexarm.io.matfile.MatFileError` naming the file;
     a :class:`flexarm.errors.FlexarmError` passes through."""
-    from flexarm.errors import FlexarmError
-    from flexarm.io.matfile import MatFileError
-
     try:
         return load(Path(path))
     except FlexarmError:

@@ -49,73 +49,22 @@ from typing import Any, cast
 
 import numpy as np
 
-from flexarm.errors import FlexarmError, OutputExistsError
+from flexarm.errors import LogError, OutputExistsError
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
+from flexarm.io.signals import KNOWN as KNOWN  # re-exported: the signal names, SI units
+from flexarm.io.signals import OPTIONAL as OPTIONAL
+from flexarm.io.signals import OTHER as OTHER
+from flexarm.io.signals import PER_JOINT as PER_JOINT
+from flexarm.io.signals import REQUIRED as REQUIRED
+from flexarm.io.signals import known_names as known_names
+from flexarm.io.signals import signal_unit as signal_unit
 from flexarm.io.write import atomic_open
 from flexarm.units import ureg
-
-#: Required columns and their SI units.
-REQUIRED: dict[str, str] = {
-    "time": "s",
-    "reference": "rad",
-    "current": "A",
-    "motor_angle": "rad",
-    "tip_angle": "rad",
-}
-#: Optional columns the format knows, with their SI units.
-OPTIONAL: dict[str, str] = {
-    "voltage": "V",
-    "tip_deflection": "m",
-    "motor_velocity": "rad/s",
-    "tip_velocity": "m/s",
-}
-KNOWN: dict[str, str] = {**REQUIRED, **OPTIONAL}
-#: Further named signals a log-format file may map, with their SI units.
-OTHER: dict[str, str] = {
-    "sample_counter": "",  # a logger's sample counter (dropped after the check)
-    "load_angle": "rad",
-    "load_velocity": "rad/s",
-    "tip_x": "m",
-    "tip_y": "m",
-}
-#: Per-joint signals of a multi-link arm, named ``<base>_<joint>`` (``theta_1``,
-#: ``alpha_f_2``, ...), with their SI units: joint angle θ, setpoint, rates, the link's
-#: deflection angle α (raw, or ``_f`` filtered as a controller logs it) and its rate, the
-#: drive's command (current, voltage, torque) and the measured current.
-PER_JOINT: dict[str, str] = {
-    "theta": "rad",
-    "theta_ref": "rad",
-    "theta_dot": "rad/s",
-    "theta_dot_f": "rad/s",
-    "alpha": "rad",
-    "alpha_f": "rad",
-    "alpha_dot": "rad/s",
-    "alpha_dot_f": "rad/s",
-    "deflection": "m",
-    "deflection_angle": "rad",
-    "current": "A",
-    "current_measured": "A",
-    "voltage": "V",
-    "torque": "N*m",
-}
 
 #: Largest accepted relative deviation of a time step from the median step.
 MAX_JITTER = 1e-3
 #: Fewest samples accepted in a log.
 MIN_SAMPLES = 16
-
-
-def signal_unit(name: str) -> str | None:
-    """The SI unit of a flexarm signal name (:data:`KNOWN`, :data:`OTHER`, or a per-joint
-    name ``<base>_<j>`` of :data:`PER_JOINT`); ``None`` for a name flexarm does not know."""
-    if name in KNOWN:
-        return KNOWN[name]
-    if name in OTHER:
-        return OTHER[name]
-    base, sep, j = name.rpartition("_")
-    if sep and j.isdigit() and int(j) >= 1 and base in PER_JOINT:
-        return PER_JOINT[base]
-    return None
 
 
 #: The linear counterparts of the rotary SI units: a linear axis (a prismatic joint) logs
@@ -151,15 +100,6 @@ def _converts(unit: str, si: str) -> bool:
     except Exception:  # pint raises several exception types
         return False
     return True
-
-
-def known_names() -> str:
-    """The signal names a log may map, for messages."""
-    return ", ".join([*KNOWN, *OTHER]) + "; per joint j: " + ", ".join(f"{b}_j" for b in PER_JOINT)
-
-
-class LogError(FlexarmError, ValueError):
-    """A log file that cannot be used; the message names the file and the problem."""
 
 
 class LogExistsError(LogError, OutputExistsError):

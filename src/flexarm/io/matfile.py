@@ -38,8 +38,10 @@ from typing import Any, cast
 
 import numpy as np
 
+from flexarm.errors import MatFileError  # re-exported (flexarm.io.matfile.MatFileError)
 from flexarm.io import checks as _checks  # the readers' checks (issue #25)
-from flexarm.io.logs import Log, LogError, known_names, signal_unit, unit_factor
+from flexarm.io.logs import Log, unit_factor
+from flexarm.io.signals import known_names, signal_unit
 from flexarm.units import ureg
 
 _SPEC = re.compile(
@@ -54,10 +56,6 @@ COUNTER = "sample_counter"
 
 class MatFileWarning(UserWarning):
     """Something in a recording was dropped (e.g. an irregular last row)."""
-
-
-class MatFileError(LogError):
-    """A ``.mat`` file, or a spec into it, that cannot be used; names the file and the field."""
 
 
 @dataclass(frozen=True)

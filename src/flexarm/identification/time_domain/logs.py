@@ -202,7 +202,9 @@ def declared_laws(scenario, logs: list[Log]) -> tuple[Any, list[Log]] | None:
         k = (
             np.asarray(g.gains, float)
             if g.gains is not None
-            else np.tile(np.array([c.k1, c.k2, c.k3, c.k4], float), (len(g.time), 1))
+            else np.tile(
+                np.array([c.k1, c.k2, c.k3, c.k4], float), (len(g.signals["reference"]), 1)
+            )
         )
         sig = dict(g.signals)
         sig.update({n: k[:, i].copy() for i, n in enumerate(GAIN_SIGNALS)})
