@@ -94,7 +94,7 @@ def test_bad_sessions_name_the_field():
         (Sessions([0, 2]), "session(s) [1] have no log"),
         (Sessions([0, 1], per_session=[J + "x"]), "FitOptions.sessions.per_session"),
         (Sessions([0, 1], starts={0: {C: 0.01}}), "FitOptions.sessions.starts[0]"),
-        (Sessions([0, 1], starts={1: {J: 0.01}}), "not per session"),
+        (Sessions([0, 1], per_session=[C], starts={1: {J: 0.01}}), "not per session"),
         (Sessions([0, 1], per_session=[]), "no free parameter per session"),
     ]
     for ses, text in cases:

@@ -237,6 +237,15 @@ def fit(
             "'arm.joints[0].drive.torque_constant=0.3'",
         ),
     ] = None,
+    session_start: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--session-start",
+            help="with SCENARIO and --sessions: S:PATH=VALUE, where a later session's own "
+            "value of a per-session path starts (repeat), e.g. "
+            "'1:sensors.tip_deflection.gain=0.655' for a gauge read with the other sign",
+        ),
+    ] = None,
     bound: Annotated[
         list[str] | None,
         typer.Option(
@@ -316,6 +325,7 @@ def fit(
             continuous=continuous,
             bootstrap=bootstrap,
             sessions=sessions,
+            session_start=session_start,
         )
         return
     if cfile is not None or continuous:
@@ -323,11 +333,10 @@ def fit(
             "--controller FILE.toml and --continuous belong to the general fit: give the "
             "scenario first, flexarm fit SCENARIO LOG... --controller FILE.toml"
         )
-    if free or prior or bound or segment is not None or channel:
+    if free or prior or bound or segment is not None or channel or session_start:
         fail(
-            "--free, --prior, --bound, --segment and --channel belong to the general fit: "
-            "give the "
-            "scenario first, flexarm fit SCENARIO LOG... --free PATH"
+            "--free, --prior, --bound, --segment, --channel and --session-start belong to "
+            "the general fit: give the scenario first, flexarm fit SCENARIO LOG... --free PATH"
         )
     if log_format and len(log_format) > 1:
         fail("--log-format is given once for the bench fit (every log has one format)")
@@ -778,6 +787,7 @@ def _fit_scenario_cli(
     continuous: bool = False,
     bootstrap: int | None = None,
     sessions: str | None = None,
+    session_start: list[str] | None = None,
 ) -> None:
     from flexarm.identification.time_domain.engine import fit as fit_engine
     from flexarm.identification.time_domain.options import (
@@ -800,6 +810,9 @@ def _fit_scenario_cli(
     output_folder("--plots", plots, overwrite)
     win = parsing.window(window, "--window")
     of_log = parsing.int_list(sessions, "--sessions")
+    starts = parsing.session_starts(session_start)
+    if starts and not of_log:
+        fail("--session-start needs --sessions (each log's session, e.g. 0,0,1,1)")
     chans, priors = parsing.channels(channel), parsing.priors(prior)
     bounds = _bounds(bound)
     sc = with_controller_file(load(scenario), cfile)
@@ -821,7 +834,7 @@ def _fit_scenario_cli(
             plots=folder,
             continuous=continuous,
             bootstrap=Bootstrap(n=bootstrap) if bootstrap else None,
-            sessions=Sessions(of_log) if of_log else None,
+            sessions=Sessions(of_log, starts=starts or None) if of_log else None,
         )
         with working("fitting") as status, _state_warnings_quiet():
             # the one FitResult of every rig (a scenario here: the general engine), with its

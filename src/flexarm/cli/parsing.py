@@ -147,6 +147,26 @@ def priors(prior: list[str] | None) -> dict:
     return out
 
 
+def session_starts(items: list[str] | None) -> dict[int, dict[str, float]]:
+    """``--session-start S:PATH=VALUE`` (repeated) → {session: {path: start value (SI)}}."""
+    out: dict[int, dict[str, float]] = {}
+    for x in items or []:
+        head, _, v = x.rpartition("=")
+        s_, _, path = head.partition(":")
+        try:
+            k, val = int(s_), float(v)
+        except ValueError:
+            k, val, path = -1, math.nan, ""
+        if k < 1 or not path.strip() or not math.isfinite(val):
+            fail(
+                f"--session-start {x!r}: expected S:PATH=VALUE, a later session (1, 2, ...), "
+                "a per-session path and its start in SI, e.g. "
+                "'1:sensors.tip_deflection.gain=0.655' (a gauge read with the other sign)"
+            )
+        out.setdefault(k, {})[path.strip()] = val
+    return out
+
+
 def positive_floats(text: str, option: str, count: int, example: str) -> list[float]:
     """``"0.94,1.2"`` → [0.94, 1.2]: ``count`` numbers > 0."""
     try:

@@ -472,6 +472,9 @@ class _Engine:
                 fr = set()
             per = [p for p, k in zip(self.free, self.keys, strict=True) if p in fr]
             per += [p for p, k in zip(self.free, self.keys, strict=True) if k[-1] in SIGNED_FIELDS]
+            # a free path a later session starts elsewhere is per session too
+            given = {p for st in (ses.starts or {}).values() for p in st}
+            per += [p for p in self.free if p in given and p not in per]
         bad = [p for p in per if p not in self.free]
         if bad:
             raise ValueError(

@@ -343,10 +343,11 @@ class Sessions:
     ``per_session`` paths are fitted once per session: session 0's value at the path
     itself, a later session s's at ``sessions[s].PATH`` in the result
     (:func:`~flexarm.identification.time_domain.result.session_key`). ``per_session`` None:
-    the free joint-friction levels (:func:`~.general.friction_paths`) and the free signed
-    paths (``bias``, ``offset``). ``starts``: session → {path: start value} where a session
-    starts elsewhere than session 0 (e.g. a gauge's sign flipped: its gain's start
-    negated)."""
+    the free joint-friction levels (:func:`~.general.friction_paths`), the free signed
+    paths (``bias``, ``offset``) and the free paths ``starts`` names. ``starts``: session →
+    {path: start value} where a session starts elsewhere than session 0 (e.g. a gauge's
+    sign flipped: its gain's start negated; ``flexarm fit --session-start
+    1:sensors.tip_deflection.gain=0.655``)."""
 
     of_log: Sequence[int]
     per_session: Sequence[str] | None = None
