@@ -3,11 +3,12 @@ candidate compensators equals the evaluator of commit 1ee883f (tests/_inner_loop
 verbatim), and the search designs the same compensators on short-delay rigs.
 
 The new evaluation does the same arithmetic in another order (a block's motor states one
-matrix product instead of an einsum, the fine grid one product, the integral squared error
-one dot product per candidate): rounding only, ~1e-15 of each value, grown by the loop's
-recursion over up to 1230 samples (measured: at most 3e-14 relative on the objective). 1e-9
-relative leaves that margin and still catches any change of the recursion (a wrong sample
-of delay moves the objective by far more than 1e-6).
+matrix product instead of an einsum, the compensators' filters a doubling scan, the fine
+grid one product, the integral squared error one dot product per candidate): rounding
+only, ~1e-15 of each value, grown by the loop's recursion over up to 1230 samples
+(measured: at most 3e-14 relative on the objective). 1e-9 relative leaves that margin and
+still catches any change of the recursion (a wrong sample of delay moves the objective by
+far more than 1e-6).
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ import pytest
 
 from _inner_loop_before import OldStepEvaluator, old_cost
 from flexarm.control.inner_loop import (
-    _lower_powers,
     _objective,
+    _scan,
     _StepEvaluator,
     design_inner_loop,
     motor_design_model,
@@ -36,18 +37,20 @@ def rotary():
     return SingleLinkModel.from_spec(load_scenario("rotary-flexible-link").arm)
 
 
-def test_lower_powers_are_the_shifted_powers():
-    """[p, k, j] = b_p^(k − 1 − j) for j < k, 0 on and above the diagonal."""
+def test_scan_is_the_first_order_recursion():
+    """y_k = b y_{k−1} + x_k (y_0 the start) per column, by doubling, equals the recursion
+    sample by sample to 1e-14 (rounding of 7 levels of sums of bounded terms, |b| < 1)."""
+    rng = np.random.default_rng(3)
     b = np.array([-0.5, 0.0, 0.3, 0.99])
-    d = 5
-    pk = b[:, None] ** np.arange(d + 1)
-    got = _lower_powers(pk)
-    want = np.zeros((b.size, d + 1, d))
-    for p in range(b.size):
-        for k in range(d + 1):
-            for j in range(k):
-                want[p, k, j] = pk[p, k - 1 - j]
-    np.testing.assert_array_equal(got, want)
+    for length in (1, 2, 5, 82):
+        x = rng.normal(size=(length, b.size))
+        want = x.copy()
+        for k in range(1, length):
+            want[k] = b * want[k - 1] + x[k]
+        shifts = [1 << i for i in range(7)]
+        got = x.copy()
+        _scan(got, shifts, [b**s for s in shifts])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-14 * np.abs(want).max())
 
 
 @pytest.mark.parametrize("delay", [0, 3, 40])

@@ -405,12 +405,13 @@ class _StepEvaluator:
         commands. n / d steps of O(P d²) work instead of n steps."""
         c_th, c_s1, c_s2, k1, k2, e_s2, b1, b2 = c
         d, n, P = self.delay, self.n, X.shape[-1]
-        # per candidate, b^(k−1−j) for j < k (0 elsewhere)
-        ks = np.arange(d + 1)
-        p1, p2 = b1[:, None] ** ks, b2[:, None] ** ks  # (P, d + 1): b^0 ... b^d
-        pow1, pow2 = _lower_powers(p1), _lower_powers(p2)  # (P, d + 1, d)
+        # per candidate, b^s for the scan's shifts s = 1, 2, 4, ... < d + 1
+        shifts = [1 << i for i in range(d.bit_length()) if (1 << i) <= d]
+        q1 = [b1**sh for sh in shifts]
+        q2 = [b2**sh for sh in shifts]
         s1, s2 = np.zeros(P), np.zeros(P)
         z = np.zeros((2 + d, P))  # (θm, ω) at the block's start, then its inputs u_a
+        sv1, sv2 = np.empty((d + 1, P)), np.empty((d + 1, P))
         for k0 in range(0, n, d):
             m = min(d, n - k0)
             if k0 >= d:
@@ -418,14 +419,17 @@ class _StepEvaluator:
             # (θm, ω) at k0 + k, k = 0 ... m
             x = (self._W[: 2 * (m + 1), : 2 + m] @ z[: 2 + m]).reshape(m + 1, 2, P)
             th = x[:, 0]
-            sv2 = p2[:, : m + 1].T * s2 + (pow2[:, : m + 1, :m] @ th[:m].T[:, :, None])[..., 0].T
+            # s2 at k = 0 ... m: s2⁺ = b2 s2 + θm, a first-order scan over the block
+            sv2[0], sv2[1 : m + 1] = s2, th[:m]
+            _scan(sv2[: m + 1], shifts, q2)
             e = -k2 * th[:m] + e_s2 * sv2[:m] + 1.0
-            sv1 = p1[:, : m + 1].T * s1 + (pow1[:, : m + 1, :m] @ e.T[:, :, None])[..., 0].T
+            sv1[0], sv1[1 : m + 1] = s1, e
+            _scan(sv1[: m + 1], shifts, q1)
             X[k0 : k0 + m, 0:2] = x[:m]
             X[k0 : k0 + m, 2] = sv1[:m]
             X[k0 : k0 + m, 3] = sv2[:m]
             U[k0 : k0 + m] = c_th * th[:m] + c_s1 * sv1[:m] + c_s2 * sv2[:m] + k1
-            z[:2], s1, s2 = x[m], sv1[m], sv2[m]
+            z[:2], s1, s2 = x[m], sv1[m].copy(), sv2[m].copy()
 
     def run(self, p: np.ndarray, gain: float):
         """θm per unit step on the fine grid (n·sub, ...) and the feedback current per
@@ -490,14 +494,16 @@ class _StepEvaluator:
         return theta, cs
 
 
-def _lower_powers(pk: np.ndarray) -> np.ndarray:
-    """(P, d + 1, d) with [p, k, j] = b_p^(k − 1 − j) for j < k and 0 elsewhere, from
-    pk = b_p^0 ... b_p^d (P, d + 1): a strided window over [0 ... 0, pk], copied once."""
-    P, d = pk.shape[0], pk.shape[1] - 1
-    v = np.zeros((P, 2 * d + 1))
-    v[:, d:] = pk
-    win = np.lib.stride_tricks.sliding_window_view(v, d, axis=1)  # [p, s, t] = v[p, s + t]
-    return np.ascontiguousarray(win[:, : d + 1, ::-1])
+def _scan(y: np.ndarray, shifts: list[int], powers: list[np.ndarray]) -> None:
+    """y[k] ← Σ_{j<=k} b^(k−j) y[j] in place (y of shape (L, P), b one per column): the
+    first-order recursion y_k = b y_{k−1} + x_k with y_0 the start, by doubling (y[s:] +=
+    b^s y[:−s] for s = 1, 2, 4, ... < L; ``powers`` the b^s): log2 L array operations
+    instead of L, or a (P, L, L) matrix of powers per candidate."""
+    n = y.shape[0]
+    for sh, q in zip(shifts, powers, strict=True):
+        if sh >= n:
+            break
+        y[sh:] = y[sh:] + q * y[:-sh]
 
 
 def _settling(t: np.ndarray, y: np.ndarray, band: float) -> np.ndarray:
