@@ -55,6 +55,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 from jax import Array
+from threadpoolctl import threadpool_limits
 
 from flexarm.control.discrete import Controller, Signals, from_transfer_function
 from flexarm.control.friction_compensation import friction_sign
@@ -386,15 +387,15 @@ class _StepEvaluator:
             pw = [np.eye(2)]
             for _ in range(delay):
                 pw.append(self.Ad @ pw[-1])
-            self._M0 = np.array(pw)  # (d + 1, 2, 2)
-            Mu = np.zeros((delay + 1, delay, 2))
+            Mu = np.zeros((delay + 1, 2, delay))
             for k in range(delay + 1):
                 for j in range(k):
-                    Mu[k, j] = pw[k - 1 - j] @ self.Bd
-            self._Mu = Mu
-            kk, jj = np.meshgrid(np.arange(delay + 1), np.arange(delay), indexing="ij")
-            self._E = np.where(jj < kk, kk - 1 - jj, 0)  # exponents k − 1 − j (j < k)
-            self._lower = jj < kk
+                    Mu[k, :, j] = pw[k - 1 - j] @ self.Bd
+            # one matrix: rows (k, θ | ω), columns (θ0, ω0, u_a,0 ... u_a,d−1), so a block's
+            # states are one BLAS product (an einsum here was most of a design's time)
+            self._W = np.concatenate([np.array(pw), Mu], axis=2).reshape(2 * (delay + 1), -1)
+        # θ at the fine points from (θ_k, ω_k, u_a,k): one (sub × 3) matrix
+        self._C = np.concatenate([self.Phi, self.Gam[:, None]], axis=1)
 
     def _blocks(self, X: np.ndarray, U: np.ndarray, c: tuple) -> None:
         """The recursion of :meth:`run` a block of d samples at a time (d >= 1 the delay):
@@ -404,39 +405,51 @@ class _StepEvaluator:
         commands. n / d steps of O(P d²) work instead of n steps."""
         c_th, c_s1, c_s2, k1, k2, e_s2, b1, b2 = c
         d, n, P = self.delay, self.n, X.shape[-1]
-        # per candidate, b^(k−1−j) for j < k (0 elsewhere)
-        ks = np.arange(d + 1)
-        p1, p2 = b1[:, None] ** ks, b2[:, None] ** ks  # (P, d + 1): b^0 ... b^d
-        pow1 = np.where(self._lower, p1[:, self._E], 0.0)  # (P, d + 1, d)
-        pow2 = np.where(self._lower, p2[:, self._E], 0.0)
-        x0, s1, s2 = np.zeros((2, P)), np.zeros(P), np.zeros(P)
+        # per candidate, b^s for the scan's shifts s = 1, 2, 4, ... < d + 1
+        shifts = [1 << i for i in range(d.bit_length()) if (1 << i) <= d]
+        q1 = [b1**sh for sh in shifts]
+        q2 = [b2**sh for sh in shifts]
+        s1, s2 = np.zeros(P), np.zeros(P)
+        z = np.zeros((2 + d, P))  # (θm, ω) at the block's start, then its inputs u_a
+        sv1, sv2 = np.empty((d + 1, P)), np.empty((d + 1, P))
         for k0 in range(0, n, d):
             m = min(d, n - k0)
-            ua = U[k0 - d : k0 - d + m] if k0 >= d else np.zeros((m, P))
+            if k0 >= d:
+                z[2 : 2 + m] = U[k0 - d : k0 - d + m]
             # (θm, ω) at k0 + k, k = 0 ... m
-            x = np.einsum("kab,bp->kap", self._M0[: m + 1], x0) + np.einsum(
-                "kja,jp->kap", self._Mu[: m + 1, :m], ua
-            )
+            x = (self._W[: 2 * (m + 1), : 2 + m] @ z[: 2 + m]).reshape(m + 1, 2, P)
             th = x[:, 0]
-            sv2 = p2[:, : m + 1].T * s2 + (pow2[:, : m + 1, :m] @ th[:m].T[:, :, None])[..., 0].T
+            # s2 at k = 0 ... m: s2⁺ = b2 s2 + θm, a first-order scan over the block
+            sv2[0], sv2[1 : m + 1] = s2, th[:m]
+            _scan(sv2[: m + 1], shifts, q2)
             e = -k2 * th[:m] + e_s2 * sv2[:m] + 1.0
-            sv1 = p1[:, : m + 1].T * s1 + (pow1[:, : m + 1, :m] @ e.T[:, :, None])[..., 0].T
+            sv1[0], sv1[1 : m + 1] = s1, e
+            _scan(sv1[: m + 1], shifts, q1)
             X[k0 : k0 + m, 0:2] = x[:m]
             X[k0 : k0 + m, 2] = sv1[:m]
             X[k0 : k0 + m, 3] = sv2[:m]
             U[k0 : k0 + m] = c_th * th[:m] + c_s1 * sv1[:m] + c_s2 * sv2[:m] + k1
-            x0, s1, s2 = x[m], sv1[m], sv2[m]
+            z[:2], s1, s2 = x[m], sv1[m].copy(), sv2[m].copy()
 
     def run(self, p: np.ndarray, gain: float):
         """θm per unit step on the fine grid (n·sub, ...) and the feedback current per
         unit step at the samples (n, ...), for p = (a1, b1, a2, b2) of shape (4,) or
-        (4, P). The loop, sample by sample: u_k = k1 (b1 − a1) s1 + k1 e_k with
+        (4, P) (:meth:`run_rows`, θm transposed)."""
+        p = np.asarray(p, float)
+        theta, cs = self.run_rows(p if p.ndim == 2 else p[:, None], gain)
+        if p.ndim == 1:
+            return theta[0], cs[:, 0]
+        return theta.T, cs
+
+    def run_rows(self, p: np.ndarray, gain: float):
+        """θm per unit step on the fine grid, a row per candidate (P, n·sub), and the
+        feedback current per unit step at the samples (n, P), for p = (a1, b1, a2, b2) of
+        shape (4, P) (the candidate's fine points contiguous: what the objective reduces
+        over). The loop, sample by sample: u_k = k1 (b1 − a1) s1 + k1 e_k with
         e_k = 1 − k2 (b2 − a2) s2 − k2 θm (the compensators' states s1, s2:
         s1⁺ = b1 s1 + e_k, s2⁺ = b2 s2 + θm), the motor (θm, ω)⁺ = A_d (θm, ω) + B_d u_{k−d}
         (ZOH of eq. (9); u = 0 before the first sample)."""
-        p = np.asarray(p, float)
-        single = p.ndim == 1
-        a1, b1, a2, b2 = p[:, None] if single else p
+        a1, b1, a2, b2 = np.asarray(p, float)
         k1 = gain * (1 - b1) / (1 - a1)
         k2 = (1 - b2) / (1 - a2)
         d, n = self.delay, self.n
@@ -473,31 +486,96 @@ class _StepEvaluator:
         else:
             ua = cs
         # θ(t_k + j T/sub) = Φ_j[0] (θ_k, ω_k) + Γ_j[0] u_a,k, all fine points at once
-        theta = (
-            np.einsum("jc,kcp->kjp", self.Phi, X[:, :2]) + np.einsum("j,kp->kjp", self.Gam, ua)
-        ).reshape(n * self.sub, a1.size)
-        if single:
-            return theta[:, 0], cs[:, 0]
+        P = a1.size
+        z = np.empty((P, n, 3))
+        z[:, :, :2] = X[:, :2].transpose(2, 0, 1)
+        z[:, :, 2] = ua.T
+        theta = (z.reshape(P * n, 3) @ self._C.T).reshape(P, n * self.sub)
         return theta, cs
+
+
+def _scan(y: np.ndarray, shifts: list[int], powers: list[np.ndarray]) -> None:
+    """y[k] ← Σ_{j<=k} b^(k−j) y[j] in place (y of shape (L, P), b one per column): the
+    first-order recursion y_k = b y_{k−1} + x_k with y_0 the start, by doubling (y[s:] +=
+    b^s y[:−s] for s = 1, 2, 4, ... < L; ``powers`` the b^s): log2 L array operations
+    instead of L, or a (P, L, L) matrix of powers per candidate."""
+    n = y.shape[0]
+    for sh, q in zip(shifts, powers, strict=True):
+        if sh >= n:
+            break
+        y[sh:] = y[sh:] + q * y[:-sh]
 
 
 def _settling(t: np.ndarray, y: np.ndarray, band: float) -> np.ndarray:
     """Last time |y − 1| leaves the band (y of shape (n,) or (n, P)), linearly
     interpolated between grid points; inf where it never settles."""
-    err = np.abs(y - 1.0)
-    if err.ndim == 1:
-        return _settling(t, y[:, None], band)[0]
-    n = err.shape[0]
-    outside = err > band
-    any_out = outside.any(axis=0)
-    last = n - 1 - np.argmax(outside[::-1], axis=0)
+    y = np.asarray(y, float)
+    if y.ndim == 1:
+        return _settling_rows(t, y[None, :] - 1.0, band)[0]
+    return _settling_rows(t, np.ascontiguousarray(y.T) - 1.0, band)
+
+
+def _settling_rows(t: np.ndarray, dev: np.ndarray, band: float) -> np.ndarray:
+    """:func:`_settling` of the deviations dev = y − 1, a row per candidate (P, n): the
+    last time |dev| leaves the band, linearly interpolated; inf where it never settles,
+    0 where it never leaves."""
+    n = dev.shape[1]
+    outside = (dev > band) | (dev < -band)  # |dev| > band, without |dev| in memory
+    any_out = outside.any(axis=1)
+    last = n - 1 - np.argmax(outside[:, ::-1], axis=1)
     nxt = np.minimum(last + 1, n - 1)
-    cols = np.arange(err.shape[1])
-    e0, e1 = err[last, cols], err[nxt, cols]
+    rows = np.arange(dev.shape[0])
+    e0, e1 = np.abs(dev[rows, last]), np.abs(dev[rows, nxt])
     frac = np.clip((e0 - band) / np.where(e0 > e1, e0 - e1, 1.0), 0.0, 1.0)
     ts = t[last] + frac * (t[nxt] - t[last])
     ts = np.where(last == n - 1, np.inf, ts)
     return np.where(any_out, ts, 0.0)
+
+
+def _objective(
+    ev: _StepEvaluator,
+    p: np.ndarray,
+    dc_gain: float,
+    band: float,
+    horizon: float,
+    max_overshoot: float,
+) -> np.ndarray:
+    """The search's cost of candidates p = (a1, b1, a2, b2), shape (4, P): settling time
+    (s) plus penalties for the peak-current excess and the overshoot (each weighted by
+    10 × ``horizon`` s per unit), plus 1e-3 × the step's integral squared error (s,
+    capped at 1), 100 × ``horizon`` where not finite (see :func:`design_inner_loop`)."""
+    theta, cs = ev.run_rows(p, dc_gain)
+    dev = theta - 1.0
+    ts = _settling_rows(ev.time, dev, band)
+    ts = np.where(np.isfinite(ts), ts, horizon * (1.0 + np.abs(dev[:, -1])))
+    excess = np.maximum(0.0, np.max(np.abs(cs), axis=0) / dc_gain - 1.0)
+    over = np.maximum(0.0, np.max(dev, axis=1) - max_overshoot)
+    ise = np.einsum("pn,pn->p", dev, dev) / dev.shape[1] * horizon
+    c = ts + horizon * 10.0 * (excess + over) + 1e-3 * np.minimum(ise, 1.0)
+    return np.where(np.isfinite(c), c, 100.0 * horizon)
+
+
+def _search(cost, bounds, lo: float, popsize: int, maxiter: int, seed: int):
+    """Differential evolution over ``bounds`` (vectorised ``cost``), then the Nelder–Mead
+    polish from its best (the roots clipped to [``lo``, 0.99]): both results."""
+    best = scipy.optimize.differential_evolution(
+        cost,
+        bounds,
+        popsize=popsize,
+        maxiter=maxiter,
+        tol=1e-8,
+        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
+        vectorized=True,
+        updating="deferred",
+        polish=False,
+    )
+    polish = scipy.optimize.minimize(
+        lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]),
+        best.x,
+        method="Nelder-Mead",
+        options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200},
+    )
+    return best, polish
 
 
 def design_inner_loop(
@@ -593,36 +671,17 @@ def design_inner_loop(
 
     def cost(p):
         """Vectorised over candidates p (4, P): settling time plus penalties."""
-        theta, cs = ev.run(p, dc_gain)
-        ts = _settling(ev.time, theta, band)
-        ts = np.where(np.isfinite(ts), ts, horizon * (1.0 + np.abs(theta[-1] - 1.0)))
-        excess = np.maximum(0.0, np.max(np.abs(cs), axis=0) / dc_gain - 1.0)
-        over = np.maximum(0.0, np.max(theta, axis=0) - 1.0 - max_overshoot)
-        ise = np.mean((theta - 1.0) ** 2, axis=0) * horizon
-        c = ts + horizon * 10.0 * (excess + over) + 1e-3 * np.minimum(ise, 1.0)
-        return np.where(np.isfinite(c), c, 100.0 * horizon)
+        return _objective(ev, p, dc_gain, band, horizon, max_overshoot)
 
     lo = float(min_root)
     if not -0.99 <= lo < 0.99:
         raise ValueError(f"min_root must be in [-0.99, 0.99); got {min_root!r}")
     bounds = [(lo, 0.99)] * 4
-    best = scipy.optimize.differential_evolution(
-        cost,
-        bounds,
-        popsize=popsize,
-        maxiter=maxiter,
-        tol=1e-8,
-        seed=seed,  # pyright: ignore[reportCallIssue]  (scipy: seed, still accepted, is hidden by its rng decorator)
-        vectorized=True,
-        updating="deferred",
-        polish=False,
-    )
-    polish = scipy.optimize.minimize(
-        lambda p: float(cost(np.clip(p, lo, 0.99)[:, None])[0]),
-        best.x,
-        method="Nelder-Mead",
-        options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 200},
-    )
+    # the evaluator's products are small (a block's states, the fine grid): on OpenBLAS's
+    # pool of a thread per core they cost more in hand-offs than they gain, several times
+    # more on busy cores (as flexarm.sim.batch.one_blas_thread finds for the fit)
+    with threadpool_limits(limits=1, user_api="blas"):
+        best, polish = _search(cost, bounds, lo, popsize, maxiter, seed)
     search_message = (
         f"differential evolution: {best.message} "
         f"({'converged' if best.success else 'not converged'}); Nelder–Mead "
