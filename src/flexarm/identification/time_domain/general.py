@@ -1078,8 +1078,8 @@ def _one_candidate(
     seg_xd,
     seg_scn,
     seg_k0,
-    seg_sess=None,
-    seg_noise=None,
+    seg_sess,
+    seg_noise,
 ):
     if seg_sess is not None:  # several sessions: each segment run by its session's loop
         return _by_session(
@@ -1098,8 +1098,6 @@ def _one_candidate(
             seg_noise,
         )
     act, sens = loop.actuator, loop.sensors
-    M = next(iter(seg_refs.values())).shape[1]
-    C = len(sens.names)
     cs_seg, ub_seg = warm
     scn_carry = initial_carry(loop, x0_scn)
 
@@ -1127,8 +1125,6 @@ def _one_candidate(
     carries, starts = jax.vmap(seg_carry)(
         cs_seg, ub_seg, y0, dy0, sbuf0, seg_xd, seg_scn, offsets, seg_k0
     )
-    if seg_noise is None:  # noise-free (the fit; a prediction)
-        seg_noise = jnp.zeros((len(seg_k0), M, C))
 
     def one_seg(carry, refs, noise):
         _, (xs, sig, meas, us) = _scan(loop, carry, refs, noise, 1)
@@ -1150,7 +1146,7 @@ def _by_session(
     seg_scn,
     seg_k0,
     seg_sess,
-    seg_noise=None,
+    seg_noise,
 ):
     """:func:`_one_candidate` with one loop per session (leaves (K, ...), start states
     (K, n_x)): each segment alone through its session's loop (``seg_sess``, (S,))."""
@@ -1178,9 +1174,6 @@ def _by_session(
         return meas[0], start[0]
 
     cs_seg, ub_seg = warm
-    if seg_noise is None:
-        M = next(iter(seg_refs.values())).shape[1]
-        seg_noise = jnp.zeros((len(seg_k0), M, y0.shape[-1]))
     return jax.vmap(one)(
         seg_sess,
         cs_seg,
@@ -1214,6 +1207,10 @@ def _run_segments(
     seg_sess=None,
     seg_noise=None,
 ):
+    if seg_noise is None:  # noise-free (the fit; a prediction): (S, M, C) zeros, once
+        M = next(iter(seg_refs.values())).shape[1]
+        seg_noise = jnp.zeros((len(seg_k0), M, y0.shape[-1]))
+
     def f(lp, x0, off, w):
         return _one_candidate(
             lp, x0, off, w, seg_refs, y0, dy0, sbuf0, seg_xd, seg_scn, seg_k0, seg_sess, seg_noise
