@@ -212,7 +212,15 @@ def _servo_rig(preset: Preset, logs, options, progress):
     opts = options if isinstance(options, FitOptions) else FitOptions()
     unread = [
         g
-        for g in ("cost", "shooting", "local", "global_de", "priors", "delay_search")
+        for g in (
+            "cost",
+            "shooting",
+            "local",
+            "global_de",
+            "priors",
+            "delay_search",
+            "subset_search",
+        )
         if getattr(opts, g)
     ]
     if unread or opts.continuous:

@@ -1343,6 +1343,23 @@ def fit_scenario(
         if found.local is not None:
             scenario, eng = found.scenario, found.engine
             res, r, J, stages["delay_local"] = found.local
+    if options.subset_search is not None:  # friction (or other) coordinates re-searched
+        from flexarm.identification.time_domain.subset import search_subset
+
+        states = options.shooting.estimate_states and options.shooting.segment is not None
+        paths = _subset_paths(eng, scenario, options.subset_search.paths)
+        if paths:
+            rec, loc = search_subset(
+                eng,
+                res.x,
+                res.offsets if states else None,
+                lambda z_, o_: _local(eng, z_, options, states=states, o0=o_, progress=progress),
+                paths,
+                progress=progress,
+            )
+            stages["subset_search"] = rec
+            if loc is not None:
+                res, r, J, stages["subset_local"] = loc
     if options.shooting.polish and options.shooting.segment is not None:
         eng = _Engine(scenario, logs, free, options, segment=None)
         # each log's start state stays a nuisance parameter (offsets to the logged state)
@@ -1453,6 +1470,26 @@ def fit_scenario(
         nrmse=dict(pred.get("nrmse", {})),
         session_scenarios=per_session if K > 1 else [],
     )
+
+
+def _subset_paths(eng: _Engine, scenario, given: Sequence[str] | None) -> list[str]:
+    """The coordinates :class:`SubsetSearch` searches: ``given`` paths (each must be free),
+    or the free joint-friction paths (:func:`friction_paths`; none: nothing searched), each
+    with its later sessions' coordinates."""
+    if given is not None:
+        bad = [p for p in given if p not in eng.free]
+        if bad:
+            raise ValueError(
+                f"FitOptions.subset_search.paths: {', '.join(map(repr, bad))} not free; "
+                f"free: {', '.join(eng.free)}"
+            )
+        base = set(given)
+    else:
+        try:
+            base = set(friction_paths(scenario))
+        except ValueError:
+            base = set()
+    return [p for i, p in enumerate(eng.free) if eng.free[eng.base_of[i]] in base]
 
 
 def _segment_noise(eng: _Engine, noise: Sequence) -> np.ndarray:

@@ -49,6 +49,7 @@ __all__ = [
     "Local",
     "GlobalDE",
     "DelaySearch",
+    "SubsetSearch",
     "Priors",
     "ServoRig",
     "Bootstrap",
@@ -211,6 +212,40 @@ class DelaySearch:
     channels: Sequence[str] | None = None
     max_delay: int = 20
     max_moves: int = 10
+
+
+@dataclass
+class SubsetSearch:
+    """Differential evolution over a subset of the free coordinates around the local
+    optimum, after the delay search (:mod:`~flexarm.identification.time_domain.subset`):
+    stick-slip makes the cost jump where a simulated stop lands on another encoder count,
+    so the finite-difference Jacobian of the friction levels is unreliable and least squares
+    stalls there (the rotary servo's "friction polish"). ``paths``: the free paths searched
+    (None: the free joint-friction paths, :func:`~.general.friction_paths`); ``width``: the
+    box's half width as a fraction of each coordinate's bound range; ``popsize`` (× the
+    paths), ``maxiter`` generations, ``seed``. The other coordinates and the segments' node
+    states are held; the local stage runs again from the best point when it lowers the
+    cost. None (``FitOptions.subset_search``): not run."""
+
+    paths: Sequence[str] | None = None
+    width: float = 0.12
+    popsize: int = 8
+    maxiter: int = 8
+    seed: int = 0
+
+    def check(self) -> None:
+        w = self.width
+        if not (isinstance(w, numbers.Real) and 0 < w <= 1):
+            raise ValueError(
+                f"FitOptions.subset_search.width = {w!r}: give the box's half width as a "
+                "fraction of each coordinate's bound range, 0 < width <= 1 (e.g. 0.12)"
+            )
+        for name in ("popsize", "maxiter"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
+                raise ValueError(
+                    f"FitOptions.subset_search.{name} = {v!r}: give a whole number >= 1"
+                )
 
 
 @dataclass
@@ -464,6 +499,9 @@ class FitOptions:
     #: several recording sessions of one rig (:class:`Sessions`): friction and the signed
     #: paths per session, the rest shared; None: one session
     sessions: Sessions | None = None
+    #: differential evolution over the friction (or other) coordinates around the local
+    #: optimum (:class:`SubsetSearch`); None: not run
+    subset_search: SubsetSearch | None = None
 
     def resolved(self, base: FitOptions | None = None) -> ResolvedOptions:
         """These options with every engine group filled (:class:`ResolvedOptions`, a
@@ -497,6 +535,8 @@ class FitOptions:
             out["bootstrap"] = self.bootstrap
         if self.sessions is not None:
             out["sessions"] = self.sessions
+        if self.subset_search is not None:
+            out["subset_search"] = self.subset_search
         if self.windows is not None:
             out["windows"] = list(self.windows)
         if self.continuous:
@@ -515,6 +555,8 @@ class FitOptions:
                 g.check()
         if self.bootstrap is not None:
             self.bootstrap.check()
+        if self.subset_search is not None:
+            self.subset_search.check()
         if self.sessions is not None:
             self.sessions.check(len(self.windows) if self.windows is not None else None)
         if (

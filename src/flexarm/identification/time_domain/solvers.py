@@ -8,12 +8,14 @@
   generations handed to the cost as one batch (``updating="deferred"``,
   ``vectorized=True``), no polish, the mutation / recombination every stage uses.
 
-The general engine (:mod:`~flexarm.identification.time_domain.general`: its local and global
-stages), the rotary servo preset's stages (:mod:`~flexarm.identification.time_domain.fit`:
-local, friction re-search; :mod:`~flexarm.identification.time_domain.global_stage`) and the
-delay searches call these; nothing else in ``src/`` runs a least-squares fit of a model or
-a differential evolution (the cheap estimates' small regressions aside:
-``estimates.tip_model``, ``controller_check``).
+The general engine (:mod:`~flexarm.identification.time_domain.general`: its local and
+global stages; :mod:`~flexarm.identification.time_domain.subset`: its friction
+re-search), the rotary servo preset's stages
+(:mod:`~flexarm.identification.time_domain.fit`: local, friction re-search;
+:mod:`~flexarm.identification.time_domain.global_stage`) and the delay searches call
+these; nothing else in ``src/`` runs a least-squares fit of a model or a differential
+evolution (the cheap estimates' small regressions aside: ``estimates.tip_model``,
+``controller_check``).
 """
 
 from __future__ import annotations
