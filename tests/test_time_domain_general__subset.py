@@ -66,3 +66,47 @@ def test_friction_re_search_moves_a_stalled_quantised_fit():
     # measured: Coulomb +27.6 % -> +12.5 %, Σ r² 204 -> 198 (evolution) -> 130 (local)
     assert abs(errs[True][C]) < 0.5 * abs(errs[False][C]), errs
     assert rec["local_cost"] < 0.8 * rec["cost"], rec
+
+
+def test_cost_spread_per_log_weighs_each_log_by_its_own_spread():
+    """``Cost(spread="log")``: eq. (1) with each log's own σ_c,l, so that Σ r² is
+    Σ_l Σ_c N_l,c (T / τ) (1 − fit %_l,c / 100)² / λ² (fit % = 100 (1 − ‖y − ŷ‖ / (√N σ)),
+    :func:`flexarm.metrics.fit_percent`): the engine's cost checked against the fit % it
+    reports per log (rounded to 0.001 point: the tolerance is that rounding's effect).
+    Two logs whose moves differ fivefold: with the pooled spread the small log's misfit
+    counts (σ_l / σ)² less, so the same check fails there by far more than the rounding."""
+    from flexarm.identification.time_domain.general import fit_scenario
+    from flexarm.identification.time_domain.options import Local
+    from flexarm.identification.time_domain.synthetic import scenario_log
+    from flexarm.specs.paths import scenario_with
+
+    base = two_mode_link()
+    base = base.model_copy(
+        update={"simulation": base.simulation.model_copy(update={"duration": 2.0})}
+    )
+    t = np.arange(1001) * 0.002
+    ref = staircase(t, [0.0, 0.3, -0.2, 0.25], 0.5)
+    logs = [scenario_log(base, {"reference": a * ref}, seed=k) for k, a in enumerate((1.0, 0.2))]
+    template = scenario_with(base, {J: 0.02 * 1.1, C: 0.02 * 1.3})
+    dt, tau, lam = 0.002, Cost().correlation_time, Cost().residual_level
+    for spread in ("log", "pooled"):
+        opts = FitOptions(
+            cost=Cost(spread=spread),
+            local=Local(max_nfev=2),
+            shooting=Shooting(estimate_states=False),
+        )
+        res = fit_scenario(template, logs, [J], opts, predict=False)
+        expect, tol = 0.0, 0.0
+        assert len(res.segment_fit_percent) == 2  # keyed "synthetic", "synthetic#2"
+        for log, fps in zip(logs, res.segment_fit_percent.values(), strict=True):
+            for fp in fps.values():
+                e = 1 - fp / 100
+                expect += log.time.size * dt / tau * e**2 / lam**2
+                tol += log.time.size * dt / tau * 2 * e * 0.0005 / 100 / lam**2
+        cost = res.stages["local"]["cost"]
+        if spread == "log":
+            assert cost == pytest.approx(expect, abs=tol + 1e-9 * expect), (cost, expect, tol)
+        else:
+            assert abs(cost - expect) > 10 * tol, (cost, expect, tol)
+    with pytest.raises(ValueError, match=r"FitOptions\.cost\.spread = 'each'"):
+        FitOptions(cost=Cost(spread="each")).check()

@@ -184,6 +184,15 @@ def fit(
             "about twice the time: when it may be far off)"
         ),
     ] = "neighbours",
+    local: Annotated[
+        str,
+        typer.Option(
+            help="after the servo route's estimates and global stage: 'servo', its own "
+            "local stage and friction polish; 'general', the one general engine (the "
+            "servo's bounds, each log's start state estimated, the delay search and "
+            "friction re-search; the result and printing of SCENARIO LOG...)",
+        ),
+    ] = "servo",
     polish_iter: Annotated[
         int,
         typer.Option(
@@ -395,6 +404,7 @@ def fit(
         global_seconds="auto" if seconds is None else seconds,
         delay_search=delay_search,
         polish_iter=polish_iter,
+        local=local,
         global_starts="auto" if global_starts is None else global_starts,
         tip_after_hub=tip_after_hub,
         seed=seed,
@@ -428,13 +438,15 @@ def fit(
         )
         with working("fitting") as status:
             one = engine.fit(preset, full, options=opts, progress=lambda m: progress(status, m))
-            res = one.engine_result
+            # the servo pipeline's own result, or the one FitResult (--local general)
+            res = one.engine_result if local == "servo" else one
             if compare_no_friction and not no_friction:
                 status.update("fitting again without joint friction")
                 no_fr = dataclasses.replace(rig, friction=False)
                 res0 = engine.fit(
                     preset, full, options=dataclasses.replace(opts, servo_rig=no_fr, bootstrap=None)
-                ).engine_result
+                )
+                res0 = res0.engine_result if local == "servo" else res0
             if vwin:
                 status.update("predicting the held-out windows")
                 held = predict(one, full, PredictOptions(windows=[vwin] * len(full)))
@@ -444,7 +456,12 @@ def fit(
         _fit_interrupted(json_out, overwrite, res, exc.result)
     except KeyboardInterrupt:
         _fit_interrupted(json_out, overwrite, res, None)
-    console.print(escape(res.summary()))
+    if local == "servo":
+        console.print(escape(one.engine_result.summary()))
+    else:
+        console.print(f"free parameters ({len(one.free)}): {one.free_source}", highlight=False)
+        _print_general(one)
+        _fit_table(one.fit_percent, "the fitted logs by the written scenario", one.rmse)
     for w in one.warnings:  # the one result's (the fit's findings) the rig's summary lacks
         if w not in res.warnings:
             console.print(f"[yellow]warning:[/yellow] {escape(w)}")
@@ -534,7 +551,7 @@ def _bench_figures(
             extra["Fit % of the fit without joint friction"] = res0.fit_percent
         write_report(
             fit_report(
-                one.engine_result,
+                one.engine_result if one.stages.get("servo_rig") else one,
                 figures=figs,
                 command=command_line(ctx),
                 inputs=inputs,
@@ -844,21 +861,7 @@ def _fit_scenario_cli(
     except (LogError, ValueError) as exc:
         figures.close()
         fail(str(exc))
-    boot = "bootstrap" in res.stages
-    t = Table("parameter", "template", "fitted", "std (bootstrap)" if boot else "std")
-    for p in res.free:
-        t.add_row(p, f"{res.template[p]:.5g}", f"{res.params[p]:.5g}", f"{res.std[p]:.3g}")
-    console.print(t)
-    if boot:
-        console.print(escape(res.stages["std_source"]), highlight=False)
-    console.print(escape(res.message))
-    for w in res.warnings:
-        console.print(f"[yellow]warning:[/yellow] {escape(w)}")
-    _print_warnings(res.prediction.get("warnings", []))
-    for note in dict.fromkeys(
-        [*res.stages.get("computed_channels", []), *res.prediction.get("notes", [])]
-    ):
-        console.print(escape(note), highlight=False)
+    _print_general(res)
     _fit_table(res.fit_percent, "whole-log prediction", res.rmse, _linear(sc))
     figs = list(res.plots)
     if plots is None:  # the figures went to a report's temporary folder: not in --json
@@ -890,6 +893,26 @@ def _fit_scenario_cli(
                 report,
                 overwrite,
             )
+
+
+def _print_general(res) -> None:
+    """A general-engine fit's parameters (template, fitted, std), message, warnings and the
+    prediction's warnings and notes."""
+    boot = "bootstrap" in res.stages
+    t = Table("parameter", "template", "fitted", "std (bootstrap)" if boot else "std")
+    for p in res.free:
+        t.add_row(p, f"{res.template[p]:.5g}", f"{res.params[p]:.5g}", f"{res.std[p]:.3g}")
+    console.print(t)
+    if boot:
+        console.print(escape(res.stages["std_source"]), highlight=False)
+    console.print(escape(res.message))
+    for w in res.warnings:
+        console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+    _print_warnings(res.prediction.get("warnings", []))
+    for note in dict.fromkeys(
+        [*res.stages.get("computed_channels", []), *res.prediction.get("notes", [])]
+    ):
+        console.print(escape(note), highlight=False)
 
 
 def _print_bootstrap(res) -> None:

@@ -189,6 +189,7 @@ PANELS_BY_NAME = {
     "filter": "Search",
     "delay_search": "Search",
     "polish_iter": "Search",
+    "local": "Search",
     "bootstrap": "Search",
     "global_starts": "Search",
     "seed": "Search",

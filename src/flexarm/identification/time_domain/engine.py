@@ -236,6 +236,9 @@ def _servo_rig(preset: Preset, logs, options, progress):
     whole = list(logs)
     if opts.windows is not None:
         logs = [g if w is None else g.window(*w) for g, w in zip(logs, opts.windows, strict=False)]
+    rig.check()
+    if rig.local == "general":
+        return _servo_general(preset, whole, logs, opts, kw, progress)
     res = as_fit_result(rig_fit(logs, progress=progress, **kw), free_source=f"preset {preset.name}")
     if rig.segment is not None:  # multiple shooting: the rig's result holds the pieces
         owner = res.engine_result.settings["piece_owner"]  # the log of each piece
@@ -282,6 +285,68 @@ def _servo_rig(preset: Preset, logs, options, progress):
         res.plots = [str(p) for p in res.engine_result.plots(opts.plots)]
     if opts.bootstrap is not None:  # the refits: the preset again, its servo_rig options
         with_bootstrap(res, whole, opts, preset, progress)
+    return res
+
+
+def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, progress):
+    """``ServoRig(local="general")``: the servo pipeline's estimates and global stage
+    (:func:`~.fit.fit` with one local evaluation and no polish) start the one general
+    engine (:func:`fit` on the global stage's scenario, every log with its declared law):
+    the pipeline's data-derived box as bounds (:func:`~.presets.servo_bounds`), one
+    segment per fitted log (window) with its start state estimated (so the written
+    scenario's ``[notes.validate] initial`` is ``"estimate"``), each log weighed by its own
+    spread (``Cost(spread="log")``, the pipeline's weighting), the smooth-then-quantised
+    continuation, the sensor-delay search from the global stage's delays up to the
+    pipeline's largest, and the friction re-search (:class:`~.options.SubsetSearch`).
+    Several sessions (``ServoRig.sessions``): the general engine's, friction and bias per
+    session. The pipeline's record goes to ``stages["servo_rig_start"]``."""
+    from flexarm.identification.time_domain.fit import fit as rig_fit
+    from flexarm.identification.time_domain.options import (
+        Cost,
+        DelaySearch,
+        Local,
+        Priors,
+        Sessions,
+        Shooting,
+        SubsetSearch,
+    )
+    from flexarm.identification.time_domain.presets import servo_bounds
+    from flexarm.identification.time_domain.report import as_fit_result
+
+    if progress:
+        progress("the servo rig's estimates and global stage")
+    start = as_fit_result(
+        rig_fit(fitted, progress=progress, **{**kw, "local_nfev": 1, "polish_iter": 0}),
+        free_source=f"preset {preset.name}",
+    )
+    space = start.engine_result.space
+    bounds = servo_bounds(space, start.scenario)
+    longest = max(float(g.time[-1] - g.time[0]) for g in fitted)
+    dt = float(start.scenario.sampling.period)
+    sess = kw.get("sessions")
+    general = FitOptions(
+        windows=opts.windows,
+        shooting=Shooting(segment=longest + 2 * dt),
+        cost=Cost(quantise=True, spread="log"),
+        local=Local(max_nfev=100),
+        priors=Priors(bounds=bounds),
+        delay_search=DelaySearch(max_delay=int(space.max_delay)),
+        subset_search=SubsetSearch() if kw.get("friction", True) else None,
+        sessions=Sessions(list(sess)) if sess is not None and max(sess) > 0 else None,
+        plots=opts.plots,
+        predict=opts.predict,
+        bootstrap=opts.bootstrap,  # each refit: the general engine with these options
+    )
+    res = fit(start.scenario, whole, list(bounds), general, progress=progress)
+    res.free_source = (
+        f"preset {preset.name} (its estimates and global stage, then the general engine)"
+    )
+    er = start.engine_result
+    res.stages["servo_rig_start"] = {
+        "delays": dict(er.delays),
+        "loop_fit_percent": er.fit_percent,
+        "seconds": round(float(er.seconds), 2),
+    }
     return res
 
 

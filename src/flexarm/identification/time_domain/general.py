@@ -724,6 +724,15 @@ class _Engine:
         self.seg_log = np.array([r[0] for r in self.seg])
         self.seg_k0 = np.array([r[1] for r in self.seg])
         self.seg_scn = np.array([r[1] == 0 and self.logs[r[0]].from_scenario for r in self.seg])
+        # eq. (1)'s 1 / (λ σ_c) per segment: pooled, or each log's own spread (Cost.spread)
+        self.seg_scale = np.tile(self.scale, (S, 1))
+        if self.options.cost.spread == "log":
+            for li, L in enumerate(self.logs):
+                for j, c in enumerate(self.channels):
+                    col = self.names.index(c)
+                    if L.present[col]:
+                        sd = max(float(np.nanstd(L.y[:, col])), 1e-300)
+                        self.seg_scale[self.seg_log == li, j] *= self.spread[j] / sd
         self._cache: dict = {}
         Nmax = max(1, int(self.seg_k0.max()) + 1)
 
@@ -964,7 +973,7 @@ class _Engine:
         sim = self.run(Z, offsets)[..., self.cidx]
         y = self.seg_y[..., self.cidx]
         m = self.seg_mask[..., self.cidx]
-        r = np.where(m[None], (sim - y[None]) * self.scale, 0.0)
+        r = np.where(m[None], (sim - y[None]) * self.seg_scale[None, :, None, :], 0.0)
         bad = ~np.isfinite(r)
         r = np.where(bad | (np.abs(r) > 1e6), 1e6, r)
         data = r[:, m].reshape(Z.shape[0], -1)
@@ -1381,14 +1390,20 @@ def fit_scenario(
     cov = np.full((n, n), np.nan)
     if det.any():
         cov[np.ix_(det, det)] = _covariance(eng, r, J[:, det])
-    # the fit reports its whole-run prediction from each log's logged state: `validate` of
-    # the written scenario starts there too ([notes.validate] initial, predict's default);
-    # several sessions: one scenario each (session 0's is the result's scenario)
+    # the fit reports its whole-run prediction from each log's logged state, or, where
+    # each log (window) was one segment whose start state the fit estimated, from that
+    # state estimated on the log: `validate` of the written scenario starts there too
+    # ([notes.validate] initial, predict's default); several sessions: one scenario each
+    # (session 0's is the result's scenario)
+    one_each = len(eng.seg) == len(eng.logs) and bool(
+        options.shooting.estimate_states and options.shooting.segment is not None
+    )
+    initial = "estimate" if one_each else "log"
     K = eng.n_sessions
     per_session = []
     for s_ in range(K):
         sc = scenario_with(scenario, eng.session_values(z, s_))
-        upd: dict[str, Any] = {"notes": {**sc.notes, "validate": {"initial": "log"}}}
+        upd: dict[str, Any] = {"notes": {**sc.notes, "validate": {"initial": initial}}}
         if K > 1 and s_:
             upd["name"] = f"{sc.name}-session{s_}"
         per_session.append(sc.model_copy(update=upd))
@@ -1432,10 +1447,16 @@ def fit_scenario(
         pred: dict[str, Any] = {"fit_percent": {}, "plots": []}
     elif K == 1:
         pred = predict_scenario(
-            fitted, logs, options, channels=list(eng.channels), plots=plots, tag="fit"
+            fitted,
+            logs,
+            options,
+            channels=list(eng.channels),
+            plots=plots,
+            tag="fit",
+            initial=initial,
         )
     else:
-        pred = _predict_by_session(eng, per_session, logs, options, plots)
+        pred = _predict_by_session(eng, per_session, logs, options, plots, initial)
     if K > 1:  # the result says which parameters are per session (#47)
         stages["sessions"] = {
             "of_log": [int(k) for k in eng.log_session],
@@ -1523,7 +1544,9 @@ def _key_session(key: str) -> int:
     return int(key[len("sessions[") : key.index("]")]) if key.startswith("sessions[") else 0
 
 
-def _predict_by_session(eng: _Engine, scenarios: list, logs: Sequence, options, plots) -> dict:
+def _predict_by_session(
+    eng: _Engine, scenarios: list, logs: Sequence, options, plots, initial: str = "log"
+) -> dict:
     """:func:`predict_scenario` of each session's logs by its session's scenario, merged
     in the logs' order under the fit's log names."""
     wins = list(options.windows or [None] * len(logs))
@@ -1538,6 +1561,7 @@ def _predict_by_session(eng: _Engine, scenarios: list, logs: Sequence, options, 
             channels=list(eng.channels),
             plots=plots,
             tag=f"fit-session{s_}",
+            initial=initial,
         )
         for key in ("fit_percent", "rmse", "nrmse", "trajectories"):
             got = list(part.get(key, {}).values())
@@ -1864,6 +1888,32 @@ def predict_scenario(
     if channels is not None:
         opts.cost.channels = {c: 1.0 for c in channels}
     eng = _Engine(scenario, logs, [], opts, segment=None)
+    if initial == "estimate" and len(logs) > 1 and not opts.continuous and not eng.seg_scn.all():
+        # each log's start state estimated on that log alone (a least-squares budget spent
+        # on several logs together ends elsewhere): a log's figure does not depend on the
+        # logs predicted beside it, and a fit's report is `validate` of each log
+        wins = list(opts.windows or [None] * len(logs))
+        parts = [
+            predict_scenario(
+                scenario,
+                [log],
+                dataclasses.replace(opts, windows=[wins[i]], sessions=None),
+                channels=channels,
+                tag=tag,
+                initial=initial,
+                initial_nfev=initial_nfev,
+                noise=None if noise is None else [noise[i]],
+            )
+            for i, log in enumerate(logs)
+        ]
+        out: dict[str, Any] = {"plots": [], "notes": list(parts[0]["notes"]), "warnings": []}
+        for key in ("fit_percent", "rmse", "nrmse", "trajectories"):
+            out[key] = {
+                L.name: next(iter(part[key].values()))
+                for L, part in zip(eng.logs, parts, strict=True)
+            }
+        out["warnings"] = list(dict.fromkeys(w for part in parts for w in part["warnings"]))
+        return _with_overlays(out, plots, tag)
     state_warnings = eng.assumed_starts()
     notes: list[str] = []
     offsets = None
@@ -1921,15 +1971,23 @@ def predict_scenario(
         "notes": list(eng.notes) + notes,
         "warnings": state_warnings,
     }
-    if plots is not None:
-        # the one overlay figure (predict.write_overlays); file names NN_NAME_TAG.png
-        from flexarm.identification.time_domain.figures import write_overlays
-        from flexarm.identification.time_domain.result import Prediction
+    return _with_overlays(out, plots, tag)
 
-        names = [
-            f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(n).name)}_{tag}.png"
-            for i, n in enumerate(traj)
-        ]
-        pred = Prediction(tag, {k: dict[str, float | None](v) for k, v in fp.items()}, traj)
-        out["plots"] = [str(p) for p in write_overlays(pred, plots, tag, names=names)]
+
+def _with_overlays(out: dict, plots: str | Path | None, tag: str) -> dict:
+    """``out`` (a :func:`predict_scenario` result) with its overlay figures drawn into the
+    folder ``plots`` (the one overlay figure, :func:`~.figures.write_overlays`; file names
+    ``NN_NAME_TAG.png``) and listed in ``out["plots"]``; None: none drawn."""
+    if plots is None:
+        return out
+    from flexarm.identification.time_domain.figures import write_overlays
+    from flexarm.identification.time_domain.result import Prediction
+
+    fp, traj = out["fit_percent"], out["trajectories"]
+    names = [
+        f"{i:02d}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(n).name)}_{tag}.png"
+        for i, n in enumerate(traj)
+    ]
+    pred = Prediction(tag, {k: dict[str, float | None](v) for k, v in fp.items()}, traj)
+    out["plots"] = [str(p) for p in write_overlays(pred, plots, tag, names=names)]
     return out

@@ -109,7 +109,11 @@ class Cost:
     ``continuation``: with ``quantise``, the local stage runs first on the loop without the
     rounding, then on the rounded loop from its optimum (the servo rig engine's
     smooth-then-quantised continuation); without ``quantise`` it has no effect.
-    ``substeps``: integration substeps per sample while fitting (None: the scenario's)."""
+    ``substeps``: integration substeps per sample while fitting (None: the scenario's).
+    ``spread``: σ_c of eq. (1), ``"pooled"`` one per channel over all fitted logs, or
+    ``"log"`` one per channel and log (each log's channel weighed by its own spread, so
+    that Σ r² is Σ over logs and channels of (1 − fit %)² in units of λ: a log with small
+    moves counts as much as one with large ones; the rotary servo's weighting)."""
 
     channels: Mapping[str, float] | None = None
     residual_level: float = 0.05
@@ -117,6 +121,7 @@ class Cost:
     quantise: bool = False
     substeps: int | None = None
     continuation: bool = True
+    spread: str = "pooled"
 
     def __post_init__(self) -> None:
         self.channels = channel_weights(self.channels, "Cost.channels")
@@ -124,6 +129,11 @@ class Cost:
     def check(self) -> None:
         self.channels = channel_weights(self.channels, "FitOptions.cost.channels")
         _positive(self, "cost", ("residual_level", "correlation_time"))
+        if self.spread not in ("pooled", "log"):
+            raise ValueError(
+                f"FitOptions.cost.spread = {self.spread!r}: 'pooled' (one spread per channel "
+                "over all logs) or 'log' (one per channel and log)"
+            )
 
 
 @dataclass
@@ -318,6 +328,20 @@ class ServoRig:
     #: estimated start state (:func:`~.logs.pieces`); fit % is then the whole logs'
     #: prediction and ``segment_fit_percent`` the pieces'; None: whole logs
     segment: float | None = None
+    #: what follows the pipeline's estimates and global stage: ``"servo"``, its own local
+    #: stage, continuation and friction polish; ``"general"``, the one general engine
+    #: (:func:`~flexarm.identification.time_domain.engine.fit` on the global stage's
+    #: scenario: the pipeline's data-derived bounds, one segment per log with its start
+    #: state estimated, each log weighed by its own spread, the smooth-then-quantised
+    #: continuation, the delay search and the friction re-search; issue #43)
+    local: str = "servo"
+
+    def check(self) -> None:
+        if self.local not in ("servo", "general"):
+            raise ValueError(
+                f"FitOptions.servo_rig.local = {self.local!r}: 'servo' (the pipeline's own "
+                "local stage) or 'general' (the general engine from its global stage)"
+            )
 
     def keywords(self) -> dict:
         return dict(
@@ -449,11 +473,14 @@ OPTIONAL_GROUPS = {"global_de": GlobalDE, "delay_search": DelaySearch}
 #: the deprecated flat record's fields (:class:`ScenarioFitOptions`) → (group, field) of
 #: :class:`FitOptions` (group "": a field of FitOptions itself); ``global_stage`` is
 #: ``global_de`` given or not
+#: the groups' fields newer than the deprecated flat record (set through the groups only)
+NOT_FLAT = frozenset({"spread"})
 FLAT_FIELDS: dict[str, tuple[str, str]] = {
     **{
         f.name: (g, f.name)
         for g, cls in {**ENGINE_GROUPS, "global_de": GlobalDE}.items()
         for f in dataclasses.fields(cls)
+        if f.name not in NOT_FLAT
     },
     "windows": ("", "windows"),
     "continuous": ("", "continuous"),
@@ -557,6 +584,8 @@ class FitOptions:
             self.bootstrap.check()
         if self.subset_search is not None:
             self.subset_search.check()
+        if self.servo_rig is not None:
+            self.servo_rig.check()
         if self.sessions is not None:
             self.sessions.check(len(self.windows) if self.windows is not None else None)
         if (

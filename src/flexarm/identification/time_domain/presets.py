@@ -31,7 +31,16 @@ from typing import Any
 
 from flexarm.identification.time_domain.options import FitOptions, Priors
 
-__all__ = ["Preset", "DataSheet", "two_link", "servo_rig", "for_scenario", "BUILTIN"]
+__all__ = [
+    "Preset",
+    "DataSheet",
+    "two_link",
+    "servo_rig",
+    "servo_bounds",
+    "for_scenario",
+    "BUILTIN",
+    "SERVO_PATHS",
+]
 
 
 @dataclass
@@ -123,6 +132,67 @@ def servo_rig(sheet: DataSheet) -> Preset:
     return Preset(
         "rotary-servo", None, list(dict.fromkeys(free)), None, "servo_rig", sheet.keywords()
     )
+
+
+#: the rotary servo pipeline's parameters → the scenario paths they set (one each; the link's
+#: frequency and inertia set the lumped beam's EI and mass together: :func:`servo_bounds`)
+SERVO_PATHS = {
+    "hub_inertia": "arm.motor.inertia",
+    "viscous": "arm.motor.viscous",
+    "coulomb": "arm.friction.coulomb",
+    "static_excess": "arm.friction.static",
+    "bias": "arm.friction.bias",
+    "link_damping": "arm.beam.damping_ratio",
+    "tip_gain": "sensors.tip_deflection.gain",
+}
+#: a bound at 0 of the pipeline's (its friction levels' log-linear coordinates) becomes
+#: this fraction of the upper bound: the general engine fits them in log space
+SERVO_FLOOR = 1e-3
+
+
+def servo_bounds(space: Any, scenario: Any) -> dict[str, tuple[float, float]]:
+    """The rotary servo pipeline's data-derived search box (its
+    :class:`~flexarm.identification.time_domain.params.ParamSpace`, session 0's
+    parameters) as the general engine's ``Priors.bounds`` over the paths of ``scenario``
+    (the pipeline's written scenario, whose values each box holds): :data:`SERVO_PATHS`;
+    the breakaway from the Coulomb level's lower bound to the sum of the Coulomb level's and
+    the excess's upper bounds; the lumped link's mass J_l / L² and rigidity EI = ω² J_l L / 3
+    over the boxes of the link inertia J_l and frequency ω; the gauge gain with the
+    scenario's sign. A bound at 0 is raised to :data:`SERVO_FLOOR` of the upper one. The
+    free list is the keys (a rigid arm: the hub and friction paths)."""
+    from flexarm.specs.paths import expand_paths, get
+
+    defs = {d.name: d for d in space.defs if not d.session}
+    dump = scenario.model_dump()
+    out: dict[str, tuple[float, float]] = {}
+    for name, path in SERVO_PATHS.items():
+        if name not in defs:
+            continue
+        d = defs[name]
+        lo, hi = float(d.lo), float(d.hi)
+        if name == "static_excess":
+            c = defs["coulomb"]
+            lo, hi = float(c.lo), float(c.hi) + hi
+        if name != "bias":
+            lo = max(lo, SERVO_FLOOR * hi)
+        if name == "tip_gain" and get(dump, path) < 0:
+            lo, hi = -hi, -lo
+        out[path] = (lo, hi)
+    if "link_frequency" in defs and "link_inertia" in defs:
+        length = float(get(dump, "arm.beam.length"))
+        (w_lo, w_hi), (j_lo, j_hi) = (
+            (float(defs[k].lo), float(defs[k].hi)) for k in ("link_frequency", "link_inertia")
+        )
+        (mass,) = expand_paths(dump, ["arm.beam.masses[0].mass"])
+        out[mass] = (j_lo / length**2, j_hi / length**2)
+        out["arm.beam.flexural_rigidity"] = (
+            w_lo**2 * j_lo * length / 3,
+            w_hi**2 * j_hi * length / 3,
+        )
+    for path, (lo, hi) in list(out.items()):  # each box holds the start (its rounding)
+        v = float(get(dump, path))
+        out[path] = (min(lo, v), max(hi, v))
+    return out
 
 
 #: Built-in scenario name → its preset.
