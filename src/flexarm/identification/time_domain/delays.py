@@ -32,7 +32,11 @@ coordinate descent — the general engine's form of the servo-rig engine's
    estimated as before) and steps 2–4 repeat at its optimum (a round): z* fitted at wrong
    delays is biased (e.g. a viscous friction that shifts the phase to make up for a
    sensor's lag) and its cost can prefer a delay short of the truth; the rounds end when a
-   round moves no delay, or after ``max_moves`` moves of one sample in all.
+   round moves no delay, or after ``max_moves`` moves of one sample in all. A round whose
+   local stage ends no lower than the lowest so far (the fit's own optimum first) is
+   undone, and the rounds end at those delays (``record["undone"]``): the comparison at a
+   fixed z* can favour a delay that the refit does not (the 4/27 rotary session: tip 55 →
+   54 samples raised the refitted cost 30,320 → 33,330).
 5. Node states estimated: each moved channel's last move is checked by the local stage
    one sample back, kept back while that lowers the local stage's cost (a z fitted at the
    current delays can carry a compensating move of another channel: on the tests' two-mode
@@ -115,6 +119,14 @@ def _with_delays(scenario, delays: dict[str, int]):
     """``scenario`` with the sensors' ``delay`` (samples) set from ``delays``."""
     sensors = dict(scenario.sensors)
     for c, d in delays.items():
+        if c not in sensors:  # a channel of the loop the scenario leaves at its defaults
+            if int(d) == 0:
+                continue
+            raise ValueError(
+                f"DelaySearch: channel {c!r} has no [sensors.{c}] table in scenario "
+                f"{scenario.name!r} to carry a delay of {int(d)} samples; add the table, or "
+                "leave the channel out of DelaySearch.channels"
+            )
         sensors[c] = sensors[c].model_copy(update={"delay": int(d)})
     return scenario.model_copy(update={"sensors": sensors})
 
@@ -190,6 +202,13 @@ def search_delays(
     resolution = COST_RESOLUTION / eng.expected_cost()  # relative, as the local stage's ftol
     cur, moves, found = dict(d0), 0, None
     rounds: list[dict[str, float]] = []
+    # the lowest local-stage cost so far (first: the fit's own optimum at the scenario's
+    # delays): a round whose local stage ends higher is undone and the rounds end (the
+    # descent at a fixed z can favour a delay that the refit does not)
+    r0 = eng.residuals(np.asarray(z)[None], None if offsets is None else offsets[None])[0]
+    kept: dict[str, Any] = {"cost": float(r0 @ r0), "cur": dict(d0), "found": None, "z": z}
+    kept.update(held=list(held), blocks=state_blocks)
+    undone: dict[str, Any] | None = None
     while True:  # rounds: a descent at the optimum z, then the local stage at its delays
         costs: dict[str, float] = {}
         start = dict(cur)
@@ -221,6 +240,17 @@ def search_delays(
             f"local stage at delays {_label(cur, chans)}: cost {info['cost']:.4g} after "
             f"{info['nfev']} evaluations ({info['message']})"
         )
+        if info["cost"] >= kept["cost"] * (1 - resolution):
+            undone = {"delays": _label(cur, chans), "cost": float(info["cost"])}
+            say(
+                f"  undone: higher than {kept['cost']:.4g} at delays "
+                f"{_label(kept['cur'], chans)}, where the search ends"
+            )
+            cur, found, z = dict(kept["cur"]), kept["found"], kept["z"]
+            held[:], blocks[0] = kept["held"], kept["blocks"]
+            break
+        kept = {"cost": float(info["cost"]), "cur": dict(cur), "found": found, "z": z}
+        kept.update(held=list(held), blocks=blocks[0])
         if moves >= search.max_moves:
             break
     # node states estimated: each moved channel's last move checked by the local stage
@@ -249,6 +279,7 @@ def search_delays(
         "moves": moves,
         "costs": rounds,
         "confirmed": confirmed,
+        "undone": undone,
         "seconds": round(time.perf_counter() - t0, 2),
     }
     say(

@@ -321,6 +321,7 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
     )
     space = start.engine_result.space
     bounds = servo_bounds(space, start.scenario)
+    flexible = any(d.name == "link_frequency" for d in space.defs)
     longest = max(float(g.time[-1] - g.time[0]) for g in fitted)
     dt = float(start.scenario.sampling.period)
     sess = kw.get("sessions")
@@ -330,7 +331,11 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
         cost=Cost(quantise=True, spread="log"),
         local=Local(max_nfev=100),
         priors=Priors(bounds=bounds),
-        delay_search=DelaySearch(max_delay=int(space.max_delay)),
+        # the tip's delay where there is a link to read (a rigid arm's tip column is empty)
+        delay_search=DelaySearch(
+            channels=["motor_angle"] + (["tip_deflection"] if flexible else []),
+            max_delay=int(space.max_delay),
+        ),
         subset_search=SubsetSearch() if kw.get("friction", True) else None,
         sessions=Sessions(list(sess)) if sess is not None and max(sess) > 0 else None,
         plots=opts.plots,
