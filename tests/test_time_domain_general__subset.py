@@ -110,3 +110,90 @@ def test_cost_spread_per_log_weighs_each_log_by_its_own_spread():
             assert abs(cost - expect) > 10 * tol, (cost, expect, tol)
     with pytest.raises(ValueError, match=r"FitOptions\.cost\.spread = 'each'"):
         FitOptions(cost=Cost(spread="each")).check()
+
+
+ARM_TOML = """
+name = "servo-arm"
+[arm]
+kind = "single_link"
+[arm.motor]
+drive = "voltage"
+inertia = 0.005
+viscous = 0.004
+motor_constant = 0.0107
+armature_resistance = 3.29
+gear_ratio = 48.4
+voltage_limit = 5.0
+[arm.friction]
+model = "coulomb"
+coulomb = 0.005
+static = 0.03
+bias = -0.002
+[arm.beam]
+model = "lumped"
+length = 0.45
+flexural_rigidity = 0.03
+damping_ratio = 0.09
+masses = [{ mass = 0.014, joint = "pinned" }]
+[sampling]
+period = 0.001
+[sensors.motor_angle]
+delay = 34
+[sensors.tip_deflection]
+gain = -0.59
+delay = 67
+[simulation]
+duration = 1.0
+[reference]
+type = "step"
+amplitude = 0.2
+[controller]
+type = "state_feedback"
+k1 = 6.0
+"""
+
+
+def test_servo_bounds_are_the_pipelines_box_over_scenario_paths(tmp_path):
+    """:func:`~flexarm.identification.time_domain.presets.servo_bounds`: the rotary servo
+    pipeline's box as the general engine's bounds, by hand: the lumped link's mass J_l / L²
+    and rigidity ω² J_l L / 3 at the corners of the (ω, J_l) box (the pipeline's own
+    link stiffness C = ω² J_l and EI = C L / 3, ``params.derived``), the breakaway from the
+    Coulomb level's lower bound to the sum of the Coulomb's and the excess's upper bounds,
+    zero lower bounds raised to 1e-3 of the upper, the gauge gain's box with its sign, and
+    each box widened to hold the scenario's value (the hub inertia here)."""
+    from types import SimpleNamespace
+
+    from flexarm.identification.time_domain.params import ParamDef
+    from flexarm.identification.time_domain.presets import servo_bounds
+    from flexarm.specs import load_scenario
+
+    path = tmp_path / "arm.toml"
+    path.write_text(ARM_TOML)
+    sc = load_scenario(path)
+    defs = [
+        ParamDef("hub_inertia", "kg*m**2", 0.001, 0.004, "log"),  # the value 0.005 beyond
+        ParamDef("link_frequency", "rad/s", 10.0, 20.0, "log"),
+        ParamDef("link_inertia", "kg*m**2", 0.002, 0.05, "log"),
+        ParamDef("link_damping", "", 0.002, 0.3, "log"),
+        ParamDef("tip_gain", "m/m", 0.2, 1.5, "log"),
+        ParamDef("viscous", "N*m*s/rad", 0.0, 0.4, "loglin", 0),
+        ParamDef("coulomb", "N*m", 0.0, 0.12, "loglin", 0),
+        ParamDef("static_excess", "N*m", 0.0, 0.1, "loglin", 0),
+        ParamDef("bias", "N*m", -0.06, 0.06, "lin", 0),
+    ]
+    b = servo_bounds(SimpleNamespace(defs=defs), sc)
+    L = 0.45
+    want = {
+        "arm.motor.inertia": (0.001, 0.005),
+        "arm.motor.viscous": (4e-4, 0.4),
+        "arm.friction.coulomb": (1.2e-4, 0.12),
+        "arm.friction.static": (1.2e-4, 0.22),
+        "arm.friction.bias": (-0.06, 0.06),
+        "arm.beam.damping_ratio": (0.002, 0.3),
+        "sensors.tip_deflection.gain": (-1.5, -0.2),
+        "arm.beam.masses[0].mass": (0.002 / L**2, 0.05 / L**2),
+        "arm.beam.flexural_rigidity": (100 * 0.002 * L / 3, 400 * 0.05 * L / 3),
+    }
+    assert set(b) == set(want)
+    for p, (lo, hi) in want.items():
+        assert b[p] == pytest.approx((lo, hi), rel=1e-12), p

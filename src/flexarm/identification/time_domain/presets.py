@@ -170,11 +170,10 @@ def servo_bounds(space: Any, scenario: Any) -> dict[str, tuple[float, float]]:
             continue
         d = defs[name]
         lo, hi = float(d.lo), float(d.hi)
-        if name == "static_excess":
-            c = defs["coulomb"]
-            lo, hi = float(c.lo), float(c.hi) + hi
         if name != "bias":
             lo = max(lo, SERVO_FLOOR * hi)
+        if name == "static_excess":  # the breakaway: from the Coulomb level's box up
+            lo, hi = out[SERVO_PATHS["coulomb"]][0], float(defs["coulomb"].hi) + hi
         if name == "tip_gain" and get(dump, path) < 0:
             lo, hi = -hi, -lo
         out[path] = (lo, hi)
