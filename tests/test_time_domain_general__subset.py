@@ -156,11 +156,12 @@ k1 = 6.0
 def test_servo_bounds_are_the_pipelines_box_over_scenario_paths(tmp_path):
     """:func:`~flexarm.identification.time_domain.presets.servo_bounds`: the rotary servo
     pipeline's box as the general engine's bounds, by hand: the lumped link's mass J_l / L²
-    and rigidity ω² J_l L / 3 at the corners of the (ω, J_l) box (the pipeline's own
-    link stiffness C = ω² J_l and EI = C L / 3, ``params.derived``), the breakaway from the
-    Coulomb level's lower bound to the sum of the Coulomb's and the excess's upper bounds,
-    zero lower bounds raised to 1e-3 of the upper, the gauge gain's box with its sign, and
-    each box widened to hold the scenario's value (the hub inertia here)."""
+    and rigidity ω² J_l L / 3 at the corners of the (ω, J_l) box (the pipeline's own link
+    stiffness C = ω² J_l and EI = C L / 3, ``params.derived``), the breakaway up to the sum
+    of the Coulomb's and the excess's upper bounds, zero lower bounds raised to 1e-3 of the
+    upper (unit 7's held-out hub moved 84.2 -> 82.5 % when the breakaway's lower bound was
+    the Coulomb level's 1.2e-4 N·m instead of 2.2e-4: pinned here), the gauge gain's box
+    with its sign, and each box widened to hold the scenario's value (the hub inertia here)."""
     from types import SimpleNamespace
 
     from flexarm.identification.time_domain.params import ParamDef
@@ -187,7 +188,7 @@ def test_servo_bounds_are_the_pipelines_box_over_scenario_paths(tmp_path):
         "arm.motor.inertia": (0.001, 0.005),
         "arm.motor.viscous": (4e-4, 0.4),
         "arm.friction.coulomb": (1.2e-4, 0.12),
-        "arm.friction.static": (1.2e-4, 0.22),
+        "arm.friction.static": (2.2e-4, 0.22),
         "arm.friction.bias": (-0.06, 0.06),
         "arm.beam.damping_ratio": (0.002, 0.3),
         "sensors.tip_deflection.gain": (-1.5, -0.2),

@@ -73,7 +73,8 @@ def _validate(toml: Path, log: Path, window: str, out: Path) -> dict:
         ("4PM_Group37_FlexArm_Unit6", (97.0, 83.5), "servo"),
         ("Unit7_Flex_trial1.csv", (83.0, 56.0), "servo"),
         # --local general: the servo's estimates and global stage, then the one general
-        # engine (#43 item 1); the issue's floors (measured 97.7 / 84.3 and 84.9 / 60.4)
+        # engine (#43 item 1); the issue's floors (measured 97.7 / 84.5 and 84.2 / 61.6; unit
+        # 7's held-out hub is fragile: 82.5 with the breakaway's lower bound 1e-4 N*m lower)
         ("4PM_Group37_FlexArm_Unit6", (97.0, 84.0), "general"),
         ("Unit7_Flex_trial1.csv", (83.0, 56.0), "general"),
     ],

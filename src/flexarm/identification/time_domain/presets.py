@@ -152,14 +152,14 @@ SERVO_FLOOR = 1e-3
 
 def servo_bounds(space: Any, scenario: Any) -> dict[str, tuple[float, float]]:
     """The rotary servo pipeline's data-derived search box (its
-    :class:`~flexarm.identification.time_domain.params.ParamSpace`, session 0's
-    parameters) as the general engine's ``Priors.bounds`` over the paths of ``scenario``
-    (the pipeline's written scenario, whose values each box holds): :data:`SERVO_PATHS`;
-    the breakaway from the Coulomb level's lower bound to the sum of the Coulomb level's and
-    the excess's upper bounds; the lumped link's mass J_l / L² and rigidity EI = ω² J_l L / 3
-    over the boxes of the link inertia J_l and frequency ω; the gauge gain with the
-    scenario's sign. A bound at 0 is raised to :data:`SERVO_FLOOR` of the upper one. The
-    free list is the keys (a rigid arm: the hub and friction paths)."""
+    :class:`~flexarm.identification.time_domain.params.ParamSpace`, session 0's parameters)
+    as the general engine's ``Priors.bounds`` over the paths of ``scenario`` (the pipeline's
+    written scenario, whose values each box holds): :data:`SERVO_PATHS`; the breakaway up to
+    the sum of the Coulomb level's and the excess's upper bounds; the lumped link's mass J_l
+    / L² and rigidity EI = ω² J_l L / 3 over the boxes of the link inertia J_l and frequency
+    ω; the gauge gain with the scenario's sign. A bound at 0 is raised to
+    :data:`SERVO_FLOOR` of the upper one. The free list is the keys (a rigid arm: the hub
+    and friction paths)."""
     from flexarm.specs.paths import expand_paths, get
 
     defs = {d.name: d for d in space.defs if not d.session}
@@ -170,10 +170,10 @@ def servo_bounds(space: Any, scenario: Any) -> dict[str, tuple[float, float]]:
             continue
         d = defs[name]
         lo, hi = float(d.lo), float(d.hi)
+        if name == "static_excess":  # the breakaway: the Coulomb level's box and the excess
+            lo, hi = float(defs["coulomb"].lo), float(defs["coulomb"].hi) + hi
         if name != "bias":
             lo = max(lo, SERVO_FLOOR * hi)
-        if name == "static_excess":  # the breakaway: from the Coulomb level's box up
-            lo, hi = out[SERVO_PATHS["coulomb"]][0], float(defs["coulomb"].hi) + hi
         if name == "tip_gain" and get(dump, path) < 0:
             lo, hi = -hi, -lo
         out[path] = (lo, hi)
