@@ -95,15 +95,7 @@ def test_two_sessions_fitted_together(tmp_path):
     assert ses["of_log"] == [0, 0, 1, 1] and ses["tip_gauge_signs"] == [1, -1]
     assert "arm.friction.coulomb" in ses["per_session"] and "arm.motor.inertia" in ses["shared"]
     assert "sensors.tip_deflection.gain" in ses["per_session"]
-    for sc, logs in ((toml, a), (tmp_path / "rig.session1.toml", b)):
-        out = tmp_path / f"{sc.stem}.v.json"
-        _run(
-            ["validate", str(sc), *map(str, logs), "--log-format", str(FORMAT), "--json", str(out)]
-        )
-        val = json.loads(out.read_text())["fit_percent"]
-        for g in logs:
-            for sig, v in fp[g.name].items():
-                assert val[g.name][sig] == pytest.approx(v, abs=0.1), (g.name, sig, val, fp)
+    _each_session_validates_to(tmp_path, ((toml, a), (tmp_path / "rig.session1.toml", b)), fp)
     # the general engine on these rig logs, from the written scenarios (a scenario first:
     # each log with the law it declares, as validate runs it; the sessions with their own
     # friction, bias and gauge gain, session 1 started at its written values). Before,
@@ -128,15 +120,23 @@ def test_two_sessions_fitted_together(tmp_path):
     assert "declared_laws" in g_fit["stages"]
     assert g_fit["stages"]["sessions"]["per_session"] == free[1:6]
     assert g_fit["params"]["sessions[1].sensors.tip_deflection.gain"] * g0 < 0  # its own sign
-    for sc, logs in ((g_toml, a), (tmp_path / "g.session1.toml", b)):
+    _each_session_validates_to(
+        tmp_path, ((g_toml, a), (tmp_path / "g.session1.toml", b)), g_fit["fit_percent"]
+    )
+
+
+def _each_session_validates_to(tmp_path, pairs, fp: dict) -> None:
+    """``flexarm validate`` of each (session scenario, its logs) in ``pairs`` gives the fit's
+    figures ``fp`` (log -> signal -> fit %) to 0.1 point."""
+    for sc, logs in pairs:
         out = tmp_path / f"{sc.stem}.v.json"
         _run(
             ["validate", str(sc), *map(str, logs), "--log-format", str(FORMAT), "--json", str(out)]
         )
         val = json.loads(out.read_text())["fit_percent"]
         for g in logs:
-            for sig, v in g_fit["fit_percent"][g.name].items():
-                assert val[g.name][sig] == pytest.approx(v, abs=0.1), (g.name, sig, val, g_fit)
+            for sig, v in fp[g.name].items():
+                assert val[g.name][sig] == pytest.approx(v, abs=0.1), (g.name, sig, val, fp)
 
 
 def _result(params: dict, template: dict, fit_percent: dict):
