@@ -191,3 +191,32 @@ def test_a_session_whose_gauge_estimate_explains_little_keeps_its_sign():
     signs, est = guesses.session_signs([_log(-0.7, 0), weak], [0, 1], 11.3, 0.45)
     assert est[1]["gain"] > 0 and 0.005 < est[1]["r2"] < guesses.SIGN_R2, est
     assert signs == [1, 1]
+
+
+@pytest.mark.slow
+@pytest.mark.rig
+@pytest.mark.skipif(not DATA.is_dir(), reason=f"real rig logs not found at {DATA}")
+def test_two_sessions_through_the_general_route(tmp_path):
+    """``--local general --sessions 0,0,1,1`` (#43 with #47): the servo's estimates and
+    global stage, then the general engine with the sessions' friction, bias and (read the
+    other way on 5/2) gauge gain per session, each started at the global stage's own. Each
+    session's written scenario validates to the fit's figures (0.1 point: one computation),
+    and session 1's gauge gain keeps its opposite sign. Measured on 2 cores (130 s):
+    82.1 / 50.5, 79.1 / 57.8, 92.0 / 61.0, 92.5 / 62.7 (the servo route: means 88.3 / 63.3;
+    the issue's mean floors 85 / 62 are not met this way, said in the closing note)."""
+    a = [DATA / "flexarm_K1_6", DATA / "flexarm_K1K2_6_-5"]
+    b = [DATA / "flexarm_K1K2K3_6_-3_213", DATA / "flexarm_K1K2K3k4_6_-3_213_4"]
+    toml, fit_json = tmp_path / "rig.toml", tmp_path / "fit.json"
+    _run(
+        ["fit", *map(str, a + b), "--sessions", "0,0,1,1", "--log-format", str(FORMAT), *SHEET]
+        + ["--local", "general", "--scenario-out", str(toml), "--json", str(fit_json)]
+    )
+    fit = json.loads(fit_json.read_text())
+    print("general route, sessions:", fit["fit_percent"])
+    g0 = fit["params"]["sensors.tip_deflection.gain"]
+    g1 = fit["params"]["sessions[1].sensors.tip_deflection.gain"]
+    assert g0 * g1 < 0, (g0, g1)
+    assert "sensors.tip_deflection.gain" in fit["stages"]["sessions"]["per_session"]
+    _each_session_validates_to(
+        tmp_path, ((toml, a), (tmp_path / "rig.session1.toml", b)), fit["fit_percent"]
+    )

@@ -298,15 +298,15 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
     spread (``Cost(spread="log")``, the pipeline's weighting), the smooth-then-quantised
     continuation, the sensor-delay search from the global stage's delays up to the
     pipeline's largest, and the friction re-search (:class:`~.options.SubsetSearch`).
-    Several sessions (``ServoRig.sessions``): the general engine's, friction and bias per
-    session. The pipeline's record goes to ``stages["servo_rig_start"]``."""
+    Several sessions (``ServoRig.sessions``): the general engine's, friction and bias (and
+    a gauge read the other way) per session, each started at the global stage's own
+    (:func:`_start_sessions`). The pipeline's record goes to ``stages["servo_rig_start"]``."""
     from flexarm.identification.time_domain.fit import fit as rig_fit
     from flexarm.identification.time_domain.options import (
         Cost,
         DelaySearch,
         Local,
         Priors,
-        Sessions,
         Shooting,
         SubsetSearch,
     )
@@ -321,10 +321,11 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
     )
     space = start.engine_result.space
     bounds = servo_bounds(space, start.scenario)
+    free = list(bounds)
+    sessions = _start_sessions(start, kw.get("sessions"), bounds)  # may drop the gain's box
     flexible = any(d.name == "link_frequency" for d in space.defs)
     longest = max(float(g.time[-1] - g.time[0]) for g in fitted)
     dt = float(start.scenario.sampling.period)
-    sess = kw.get("sessions")
     general = FitOptions(
         windows=opts.windows,
         shooting=Shooting(segment=longest + 2 * dt),
@@ -337,12 +338,12 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
             max_delay=int(space.max_delay),
         ),
         subset_search=SubsetSearch() if kw.get("friction", True) else None,
-        sessions=Sessions(list(sess)) if sess is not None and max(sess) > 0 else None,
+        sessions=sessions,
         plots=opts.plots,
         predict=opts.predict,
         bootstrap=opts.bootstrap,  # each refit: the general engine with these options
     )
-    res = fit(start.scenario, whole, list(bounds), general, progress=progress)
+    res = fit(start.scenario, whole, free, general, progress=progress)
     res.free_source = (
         f"preset {preset.name} (its estimates and global stage, then the general engine)"
     )
@@ -353,6 +354,33 @@ def _servo_general(preset: Preset, whole, fitted, opts: FitOptions, kw: dict, pr
         "seconds": round(float(er.seconds), 2),
     }
     return res
+
+
+def _start_sessions(start: FitResult, sess, bounds: dict):
+    """The general engine's :class:`~.options.Sessions` of the servo route's sessions
+    (None: one session): each later session started at the servo global stage's own values
+    (``sessions[s].PATH`` of its result: friction, bias, and the gauge gain where the
+    session reads the gauge the other way, which makes the gain per session too; its box
+    then is the engine's default around each session's start, as one signed box cannot
+    hold both signs; ``bounds`` is changed so)."""
+    from flexarm.identification.time_domain.options import Sessions
+    from flexarm.identification.time_domain.result import session_key
+
+    if sess is None or max(sess) == 0:
+        return None
+    starts: dict[int, dict[str, float]] = {}
+    for s_ in range(1, max(sess) + 1):
+        own = {
+            p: start.params[session_key(s_, p)]
+            for p in bounds
+            if session_key(s_, p) in start.params
+        }
+        if own:
+            starts[s_] = own
+    gain = "sensors.tip_deflection.gain"
+    if any(gain in own for own in starts.values()):
+        bounds.pop(gain, None)
+    return Sessions(list(sess), starts=starts or None)
 
 
 def session_scenarios(res: FitResult, n: int) -> list:
