@@ -118,7 +118,8 @@ def loop_matrix(scenario, controller=None) -> tuple[np.ndarray, int]:
     Ad, Bd = jnp.asarray(E[:N, :N]), jnp.asarray(E[:N, N:])
     Sx, Su, gainj = jnp.asarray(Sx), jnp.asarray(Su), jnp.asarray(gain)
     digital = list(sens.digital)
-    dmax = max(sens.delays) if sens.delays else 0
+    delays = [int(d) for d in np.asarray(sens.delays)]
+    dmax = sens.depth
     n_ch = len(sens.names)
     refs0 = {k: jnp.asarray(0.0) for k in prep.references}
     refs0.setdefault("reference", jnp.asarray(0.0))
@@ -155,9 +156,7 @@ def loop_matrix(scenario, controller=None) -> tuple[np.ndarray, int]:
             )
             y = y.at[jnp.asarray(digital)].set(v)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
-        meas = {
-            nm: sbuf[d, c] for c, (nm, d) in enumerate(zip(sens.names, sens.delays, strict=True))
-        }
+        meas = {nm: sbuf[d, c] for c, (nm, d) in enumerate(zip(sens.names, delays, strict=True))}
         cstate, u_c = ctrl.step(eqx.combine(cf, cstatic), meas, refs0)
         cf_new, cstatic_new = eqx.partition(cstate, eqx.is_inexact_array)
         ubuf = jnp.concatenate([jnp.reshape(u_c, (1, m)), ubuf[:-1]], axis=0)

@@ -46,6 +46,7 @@ any batched leaves of the loop (parameter or gain variations).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -71,7 +72,10 @@ class Sensors(eqx.Module):
 
     names: tuple[str, ...] = eqx.field(static=True)
     index: tuple[int, ...] = eqx.field(static=True)
-    delays: tuple[int, ...] = eqx.field(static=True)
+    #: each channel's delay (whole samples, int32 (C,)): an array, so that loops that
+    #: differ only in their delays run one compiled program (a delay search); the reading
+    #: buffer holds ``depth`` + 1 samples, ``depth`` >= every delay (:func:`with_depth`)
+    delays: Array
     gain: Array
     noise: Array
     quantum: Array  # 0 = no quantisation
@@ -106,6 +110,8 @@ class Sensors(eqx.Module):
     #: that reads the channels as plant signals, e.g. a state estimate from a log's first
     #: sample, sees no plant signal in them)
     command_gain: Array | None = None
+    #: samples the reading buffer holds beyond the newest (>= the largest delay)
+    depth: int = eqx.field(static=True, default=0)
 
     @classmethod
     def make(
@@ -201,7 +207,7 @@ class Sensors(eqx.Module):
         return cls(
             names,
             tuple(0 if n in cmd else plant.signal_names.index(signal[n]) for n in names),
-            tuple(int(channels[n].get("delay", 0)) for n in names),
+            jnp.asarray([int(channels[n].get("delay", 0)) for n in names], jnp.int32),
             gain,
             get("noise", 0.0),
             jnp.asarray(quantum),
@@ -212,6 +218,7 @@ class Sensors(eqx.Module):
             **mats,
             zeroed=zeroed,
             zero_n=zero_n,
+            depth=max((int(channels[n].get("delay", 0)) for n in names), default=0),
             commands=tuple(i for i, n in enumerate(names) if n in cmd),
             command_input=tuple(cmd[n][0] for n in names if n in cmd),
             command_applied=tuple(cmd[n][1] for n in names if n in cmd),
@@ -434,6 +441,18 @@ def _signals(plant: Plant, x: Array, u: Array) -> Array:
     return jax.vmap(plant.signals, in_axes=(-1, -1), out_axes=-1)(x, u)
 
 
+def with_depth(loop: SampledLoop, depth: int) -> SampledLoop:
+    """``loop`` with its sensors' reading buffer ``depth`` + 1 samples long (at least its
+    largest delay + 1): loops that differ only in their delays then share one compiled
+    program (a search over the delays). Readings are the same for any depth that holds
+    the delays."""
+    sens = loop.sensors
+    need = int(np.max(np.asarray(sens.delays))) if len(sens.names) else 0
+    if depth < need:
+        raise ValueError(f"with_depth: depth {depth} below the largest delay, {need} samples")
+    return eqx.tree_at(lambda lp: lp.sensors, loop, replace=dataclasses.replace(sens, depth=depth))
+
+
 def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     """The loop's state at t = 0: plant state, controller state, sensor and command
     buffers (sensors read the initial state; no command before t = 0), and with sensor
@@ -441,7 +460,7 @@ def initial_carry(loop: SampledLoop, x0: Array) -> tuple:
     plant, sens = loop.plant, loop.sensors
     n_u = plant.n_inputs
     u0 = jnp.zeros((n_u,) + x0.shape[1:])  # x0 (n_x, B): a batch carried batch-last
-    dmax = max(sens.delays) if sens.delays else 0
+    dmax = sens.depth
     raw = sens.gain * _pick(_signals(plant, x0, u0), sens.index)
     y0 = _quantise(_with_offset(sens, raw), sens.quantum)
     if sens.zeroed:  # the first sample lies in the window: it reads 0
@@ -643,11 +662,7 @@ def _scan(loop: SampledLoop, carry: tuple, refs: dict[str, Array], noise: Array,
         if sens.zeroed:
             extra += (z_next,)
         sbuf = jnp.concatenate([y[None], sbuf[:-1]], axis=0)
-        meas_vec = (
-            jnp.stack([sbuf[d, c] for c, d in enumerate(sens.delays)])
-            if sens.delays
-            else jnp.zeros((0,))
-        )
+        meas_vec = sbuf[sens.delays, jnp.arange(len(sens.names))]
         meas = {n: meas_vec[i] for i, n in enumerate(sens.names)}
         # 2. controller, 3. computation delay, saturation, D/A
         t_k = law.time(cstate) if law is not None else None

@@ -117,6 +117,7 @@ from flexarm.sim.sampled import (
     check_zeroing,
     initial_carry,
     logged_offset,
+    with_depth,
     zeroing_start,
 )
 
@@ -329,6 +330,10 @@ class _Engine:
         self.dt = float(loop.dt)
         self.names = loop.sensors.names
         self.delays = np.asarray(loop.sensors.delays, int)
+        # the reading buffer's depth: with a delay search, its largest delay, so that every
+        # delay configuration runs one compiled program (sim.sampled.with_depth)
+        ds = options.delay_search
+        self.depth = max(int(self.delays.max(initial=0)), int(ds.max_delay) if ds else 0)
         self.delay = int(loop.delay)
         # ---- logs
         wins = options.windows or [None] * len(logs)
@@ -702,7 +707,7 @@ class _Engine:
         """Per segment: the delay-corrected logged values y(k0) and ẏ(k0), the sensor delay
         buffers, and the whole logs (padded) for the controller warm-up."""
         S, C = len(self.seg), len(self.names)
-        dmax = int(self.delays.max()) if C else 0
+        dmax = self.depth
         h = self.options.shooting.derivative_half_width
         y0 = np.zeros((S, C))
         dy0 = np.zeros((S, C))
@@ -836,7 +841,7 @@ class _Engine:
         sessions one loop per candidate and session, (P, K, ...) and (P, K, n_x)."""
         K = self.n_sessions
         preps = [self.prepared(z, s_) for z in Z for s_ in range(K)]
-        loop = stack_loops([p.loop for p in preps])
+        loop = with_depth(stack_loops([p.loop for p in preps]), self.depth)
         if not self.options.cost.quantise:
             loop = eqx.tree_at(
                 lambda lp: (lp.sensors.quantum, lp.actuator.quantum),
