@@ -82,11 +82,16 @@ def _validate(toml: Path, log: Path, window: str, out: Path) -> dict:
 def test_fit_figures_are_validate_of_the_written_scenario(name, floor, local, tmp_path):
     log = DATA / name
     fit_json, toml = tmp_path / "fit.json", tmp_path / "rig.toml"
+    figs = tmp_path / "figs"  # the general route's figures and report (the bench's options)
+    figs.mkdir()
+    extra = ["--plots", str(figs), "--report", str(figs / "fit.html")] if local == "general" else []
     _run(
         ["fit", str(log), "--log-format", str(FORMAT), *SHEET, "--local", local]
         + ["--window", "0:5", "--validate-window", "5:10"]
-        + ["--scenario-out", str(toml), "--json", str(fit_json)]
+        + ["--scenario-out", str(toml), "--json", str(fit_json), *extra]
     )
+    if extra:  # the fitted and held-out windows' overlays, and the report
+        assert len(list(figs.glob("*.png"))) == 2 and (figs / "fit.html").stat().st_size > 0
     fit = json.loads(fit_json.read_text())
     held = _validate(toml, log, "5:10", tmp_path / "held.json")
     train = _validate(toml, log, "0:5", tmp_path / "train.json")

@@ -535,10 +535,13 @@ def _bench_figures(
     report from them (--report)."""
     from flexarm.identification.time_domain.predict import write_overlays
     from flexarm.identification.time_domain.report import figure_names
+    from flexarm.identification.time_domain.result import Prediction
 
     figs = []
     for pred, tag in ((one.prediction, "fit"), (held, "held-out")):
-        if pred is not None:
+        if isinstance(pred, dict) and pred.get("trajectories"):  # the general engine's record
+            pred = Prediction(tag, pred["fit_percent"], pred["trajectories"])
+        if isinstance(pred, Prediction):
             names = figure_names(list(pred.traces), tag)
             figs += write_overlays(pred, folder, tag, names=names)
     if report is not None:
