@@ -201,8 +201,8 @@ def test_two_sessions_through_the_general_route(tmp_path):
     global stage, then the general engine with the sessions' friction, bias and (read the
     other way on 5/2) gauge gain per session, each started at the global stage's own. Each
     session's written scenario validates to the fit's figures (0.1 point: one computation),
-    and session 1's gauge gain keeps its opposite sign. Measured on 2 cores (130 s):
-    82.1 / 50.5, 79.1 / 57.8, 92.0 / 61.0, 92.5 / 62.7 (the servo route: means 88.3 / 63.3;
+    and session 1's gauge gain keeps its opposite sign. Measured on 2 cores (82 s):
+    82.1 / 50.5, 79.1 / 57.8, 92.0 / 61.0, 92.5 / 62.6 (the servo route: means 88.3 / 63.3;
     the issue's mean floors 85 / 62 are not met this way, said in the closing note)."""
     a = [DATA / "flexarm_K1_6", DATA / "flexarm_K1K2_6_-5"]
     b = [DATA / "flexarm_K1K2K3_6_-3_213", DATA / "flexarm_K1K2K3k4_6_-3_213_4"]

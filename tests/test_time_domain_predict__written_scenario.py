@@ -9,8 +9,8 @@ fit estimates it), so they agree to the TOML file's round trip: the tolerance, 0
 is the issue's. Before (the servo rig's loop for the fit, the scenario's replay from the
 logged start state for ``validate``) unit 6 gave held-out tip 84.0 % in the fit and 73.5 %
 through ``validate``. One CLI fit per unit and route (``--local servo``: the pipeline's own
-local stage, about 10-90 s; ``--local general``: the general engine after its global
-stage, about 1-2 min, on 2 cores); marked slow.
+local stage, about 10-20 s; ``--local general``: the general engine after its global
+stage, 15-35 s, on 2 cores); marked slow.
 """
 
 from __future__ import annotations
