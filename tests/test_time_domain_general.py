@@ -64,6 +64,16 @@ def two_mode_link():
     )
 
 
+def quantised_link():
+    """The two-mode link behind a coarse 9-bit hub encoder (12.3 mrad a count), 4 s, and its
+    staircase reference: a loop whose quantised cost stalls finite differences."""
+    d = two_mode_link().model_dump()
+    d["sensors"]["theta_1"]["bits"] = 9
+    d["simulation"]["duration"] = 4.0
+    t = np.arange(2001) * 0.002
+    return scenario_from_dict(d), staircase(t, [0.3, -0.2, 0.5, 0.1], 1.0)
+
+
 def _recover(truth, free, ref, options, seed=1):
     log = scenario_log(truth, {"reference": ref}, seed=seed)
     d = truth.model_dump()
@@ -367,12 +377,7 @@ def test_quantised_fit_reached_by_continuation():
     optimum, as the servo rig engine does) brings Coulomb and viscous friction within 5 %
     (#13's acceptance; measured 0.2 % and 1.0 %) and the hub inertia within 10 %
     (measured 4.3 %: the count hides small accelerations)."""
-    d = two_mode_link().model_dump()
-    d["sensors"]["theta_1"]["bits"] = 9
-    d["simulation"]["duration"] = 4.0
-    truth = scenario_from_dict(d)
-    t = np.arange(2001) * 0.002
-    ref = staircase(t, [0.3, -0.2, 0.5, 0.1], 1.0)
+    truth, ref = quantised_link()
     free = ["arm.joints[0].friction.coulomb", "arm.joints[0].viscous", "arm.hubs[0].inertia"]
     errs = {}
     for cont in (False, True):

@@ -13,8 +13,7 @@ from flexarm.identification.time_domain.options import (
     Shooting,
     SubsetSearch,
 )
-from flexarm.specs import scenario_from_dict
-from test_time_domain_general import _recover, staircase, two_mode_link
+from test_time_domain_general import _recover, quantised_link, staircase, two_mode_link
 
 C, B, J = "arm.joints[0].friction.coulomb", "arm.joints[0].viscous", "arm.hubs[0].inertia"
 
@@ -42,12 +41,7 @@ def test_friction_re_search_moves_a_stalled_quantised_fit():
     more than a fifth and the Coulomb error by more than half (the search unsticks the
     friction levels; the continuation of the test above, smooth loop first, is what brings
     them within 5 %). The result's cost is that last local stage's."""
-    d = two_mode_link().model_dump()
-    d["sensors"]["theta_1"]["bits"] = 9
-    d["simulation"]["duration"] = 4.0
-    truth = scenario_from_dict(d)
-    t = np.arange(2001) * 0.002
-    ref = staircase(t, [0.3, -0.2, 0.5, 0.1], 1.0)
+    truth, ref = quantised_link()
     free = [C, B, J]
     errs, recs = {}, {}
     for search in (None, SubsetSearch(width=0.2)):

@@ -471,10 +471,7 @@ class _Engine:
         if ses.per_session is not None:
             per = expand_paths(self.dump, list(ses.per_session))
         else:
-            try:
-                fr = set(friction_paths(scenario))
-            except ValueError:  # no joint friction: only the signed paths
-                fr = set()
+            fr = _friction_set(scenario)  # none: only the signed paths
             per = [p for p, k in zip(self.free, self.keys, strict=True) if p in fr]
             per += [p for p, k in zip(self.free, self.keys, strict=True) if k[-1] in SIGNED_FIELDS]
             # a free path a later session starts elsewhere is per session too
@@ -1511,11 +1508,17 @@ def _subset_paths(eng: _Engine, scenario, given: Sequence[str] | None) -> list[s
             )
         base = set(given)
     else:
-        try:
-            base = set(friction_paths(scenario))
-        except ValueError:
-            base = set()
+        base = _friction_set(scenario)
     return [p for i, p in enumerate(eng.free) if eng.free[eng.base_of[i]] in base]
+
+
+def _friction_set(scenario) -> set[str]:
+    """:func:`friction_paths` of ``scenario`` as a set, empty where it has no joint friction
+    (the defaults of ``Sessions.per_session`` and ``SubsetSearch.paths``)."""
+    try:
+        return set(friction_paths(scenario))
+    except ValueError:
+        return set()
 
 
 def _segment_noise(eng: _Engine, noise: Sequence) -> np.ndarray:
